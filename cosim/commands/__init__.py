@@ -1,0 +1,1 @@
+"""One module per `cosim` sub-command; each defines `register(subparsers)`."""

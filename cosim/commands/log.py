@@ -1,0 +1,12 @@
+"""`cosim log`: placeholder until its issue lands (owned by the helper building it)."""
+
+from cosim.errors import CosimError
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser("log", help="(not built yet)")
+    parser.set_defaults(handler=_handler)
+
+
+def _handler(args) -> int:
+    raise CosimError("'cosim log' is not built yet")
