@@ -1,0 +1,327 @@
+"""Grid A* benchmark on the Moving AI maps: this planner against tcod and pyastar2d, in one run.
+
+Run: `python3 -m benchmarks.bench_planner [--maps NAME ...] [--limit N] [--skip-startup]`
+(or `python3 benchmarks/bench_planner.py ...`). Not a test: it prints tables, it asserts nothing.
+
+For every query of every `.scen` file in `<repo>/../shared/data/movingai`:
+- ours: `planner.plan(grid, start, goal, connectivity=8, heuristic="octile", corner_cutting=False)`;
+- tcod: a `tcod.path.CustomGraph` with 8 edges whose diagonal edges carry a no-corner-cut condition
+  array, octile integer costs (1e5 / 141421) and a matching A* heuristic; per query a new
+  `Pathfinder`, `add_root(start)` and `path_to(goal)` (what a user calls for each query);
+- pyastar2d: `astar_path(weights, start, goal, allow_diagonal=True)`. It cuts corners and charges a
+  diagonal step like a straight one, so its paths are measured with octile costs and are often not
+  optimal for the Moving AI rule; the table reports that fraction as it is.
+Per map, the objects a user builds once per map (our OccupancyGrid, tcod's graph, pyastar2d's
+weights) are built outside the timed call; their build time is printed separately. Each planner
+runs once before timing (our JIT compile, the peers' first-call costs), then every query is timed once
+per planner, planners interleaved per query so they see the same machine state.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import statistics
+import subprocess
+import sys
+import textwrap
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parent.parent
+if str(REPO) not in sys.path:  # `python3 benchmarks/bench_planner.py` from anywhere
+    sys.path.insert(0, str(REPO))
+
+DATA = REPO.parent / "shared" / "data" / "movingai"
+OPTIMAL_TOLERANCE = 1e-6  # relative error vs the .scen optimal length
+TCOD_CARDINAL = 100_000  # tcod costs are integers: octile costs scaled by 1e5
+TCOD_DIAGONAL = 141_421
+LARGE_MAP = "orz900d"  # the 656 x 1491 map of the startup/memory report
+
+
+@dataclass(frozen=True)
+class Query:
+    start: tuple[int, int]  # (row, col)
+    goal: tuple[int, int]
+    optimal_length: float  # cells
+
+
+@dataclass
+class PlannerStats:
+    times: list[float] = field(default_factory=list)  # s per query
+    optimal: int = 0
+    answered: int = 0
+
+    def record(self, elapsed: float, length: float | None, optimal_length: float) -> None:
+        self.times.append(elapsed)
+        if length is not None:
+            self.answered += 1
+            if abs(length - optimal_length) <= OPTIMAL_TOLERANCE * max(optimal_length, 1.0):
+                self.optimal += 1
+
+
+def read_scenarios(path: Path, limit: int | None) -> list[Query]:
+    """Queries of a Moving AI `.scen` file (x = column, y = row, 0-based from the top-left)."""
+    queries = []
+    for line in path.read_text().splitlines()[1:]:
+        fields = line.split("\t")
+        if len(fields) < 9:
+            continue
+        sx, sy, gx, gy = (int(value) for value in fields[4:8])
+        queries.append(Query((sy, sx), (gy, gx), float(fields[8])))
+        if limit is not None and len(queries) >= limit:
+            break
+    return queries
+
+
+def octile_length(cells: np.ndarray) -> float:
+    """Length of a cell path [cells] with straight steps 1 and diagonal steps sqrt(2)."""
+    if len(cells) < 2:
+        return 0.0
+    steps = np.abs(np.diff(np.asarray(cells, dtype=np.int64), axis=0))
+    return float(np.hypot(steps[:, 0], steps[:, 1]).sum())
+
+
+def corner_cut_steps(cells: np.ndarray, occupied: np.ndarray) -> int:
+    """Number of diagonal steps of a path that squeeze past an occupied orthogonal neighbour."""
+    cells = np.asarray(cells, dtype=np.int64)
+    if len(cells) < 2:
+        return 0
+    before, after = cells[:-1], cells[1:]
+    diagonal = (before[:, 0] != after[:, 0]) & (before[:, 1] != after[:, 1])
+    side_a = occupied[before[:, 0], after[:, 1]]
+    side_b = occupied[after[:, 0], before[:, 1]]
+    return int((diagonal & (side_a | side_b)).sum())
+
+
+# -- the three planners, each as: build once per map -> callable(start, goal) -> path cells | None --
+def ours_factory(occupied: np.ndarray):
+    import planner
+
+    grid = planner.OccupancyGrid(occupied, resolution=1.0)
+
+    def run(start: tuple[int, int], goal: tuple[int, int]):
+        try:
+            result = planner.plan(
+                grid,
+                grid.cell_to_world(start),
+                grid.cell_to_world(goal),
+                connectivity=8,
+                heuristic="octile",
+                corner_cutting=False,
+            )
+        except planner.PlannerError:
+            return None
+        return result.cells
+
+    return run
+
+
+def tcod_factory(occupied: np.ndarray):
+    import tcod.path
+
+    free = ~occupied
+    graph = tcod.path.CustomGraph(occupied.shape)
+    cost = free.astype(np.int8)
+    for d_row, d_col in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+        graph.add_edge((d_row, d_col), TCOD_CARDINAL, cost=cost)
+    # A diagonal edge (d_row, d_col) leaves a node only when both orthogonal neighbours it passes
+    # are free: condition[r, c] = free[r + d_row, c] & free[r, c + d_col] (False off the map).
+    padded = np.pad(free, 1, constant_values=False)
+    rows, cols = occupied.shape
+    for d_row in (-1, 1):
+        for d_col in (-1, 1):
+            vertical = padded[1 + d_row : 1 + d_row + rows, 1 : 1 + cols]
+            horizontal = padded[1 : 1 + rows, 1 + d_col : 1 + d_col + cols]
+            condition = (vertical & horizontal).astype(np.int8)
+            graph.add_edge((d_row, d_col), TCOD_DIAGONAL, cost=cost, condition=condition)
+    graph.set_heuristic(cardinal=TCOD_CARDINAL, diagonal=TCOD_DIAGONAL)
+
+    def run(start: tuple[int, int], goal: tuple[int, int]):
+        pathfinder = tcod.path.Pathfinder(graph)
+        pathfinder.add_root(start)
+        path = pathfinder.path_to(goal)
+        return path if len(path) and tuple(path[-1]) == goal and tuple(path[0]) == start else None
+
+    return run
+
+
+def pyastar2d_factory(occupied: np.ndarray):
+    import pyastar2d
+
+    weights = np.where(occupied, np.inf, 1.0).astype(np.float32)
+
+    def run(start: tuple[int, int], goal: tuple[int, int]):
+        return pyastar2d.astar_path(weights, start, goal, allow_diagonal=True)
+
+    return run
+
+
+FACTORIES = {"ours": ours_factory, "tcod": tcod_factory, "pyastar2d": pyastar2d_factory}
+
+
+def load_occupancy(map_path: Path) -> np.ndarray:
+    import planner
+
+    return planner.OccupancyGrid.from_file(map_path).occupied
+
+
+def bench_map(map_path: Path, queries: list[Query]) -> tuple[dict[str, PlannerStats], dict[str, float], int]:
+    """Time every planner on every query; returns stats, build time per planner [s], pyastar2d corner cuts."""
+    occupied = load_occupancy(map_path)
+    runners, build_times = {}, {}
+    for name, factory in FACTORIES.items():
+        begin = time.perf_counter()
+        runners[name] = factory(occupied)
+        build_times[name] = time.perf_counter() - begin
+    for run in runners.values():  # first call outside the timing: JIT compile, caches
+        run(queries[0].start, queries[0].goal)
+    stats = {name: PlannerStats() for name in runners}
+    pyastar_cuts = 0
+    for query in queries:
+        for name, run in runners.items():
+            begin = time.perf_counter()
+            cells = run(query.start, query.goal)
+            elapsed = time.perf_counter() - begin
+            length = None if cells is None else octile_length(cells)
+            stats[name].record(elapsed, length, query.optimal_length)
+            if name == "pyastar2d" and cells is not None and corner_cut_steps(cells, occupied):
+                pyastar_cuts += 1
+    return stats, build_times, pyastar_cuts
+
+
+def print_table(rows: list[tuple[str, int, dict[str, PlannerStats], dict[str, float], int]]) -> None:
+    header = (
+        f"{'map':<26}{'queries':>8}{'ours ms':>10}{'tcod ms':>10}{'pyastar ms':>11}"
+        f"{'ours/tcod':>10}{'ours/pya':>10}{'opt ours':>10}{'opt tcod':>10}{'opt pya':>9}{'pya cuts':>9}"
+    )
+    print(header)
+    print("-" * len(header))
+    for name, count, stats, _build, cuts in rows:
+        median = {key: statistics.median(value.times) for key, value in stats.items()}
+        fraction = {key: value.optimal / count for key, value in stats.items()}
+        print(
+            f"{name:<26}{count:>8}{median['ours'] * 1e3:>10.3f}{median['tcod'] * 1e3:>10.3f}"
+            f"{median['pyastar2d'] * 1e3:>11.3f}{median['ours'] / median['tcod']:>10.2f}"
+            f"{median['ours'] / median['pyastar2d']:>10.2f}{fraction['ours']:>10.1%}{fraction['tcod']:>10.1%}"
+            f"{fraction['pyastar2d']:>9.1%}{cuts / count:>9.1%}"
+        )
+    print()
+    print("Per-map build time outside the timed calls [ms]:")
+    for name, _count, _stats, build, _cuts in rows:
+        print(f"  {name:<24} " + "  ".join(f"{key} {value * 1e3:.1f}" for key, value in build.items()))
+
+
+LEGEND = """\
+Legend: median wall time per query [ms] of the call a user makes per query, after one untimed warm-up
+call per planner and map. Included: ours = planner.plan(grid, start_xy, goal_xy, connectivity=8,
+heuristic="octile", corner_cutting=False) (input checks, search, path and PlanResult); tcod = new
+Pathfinder(graph) + add_root + path_to; pyastar2d = astar_path(weights, ...) (it copies the weights per
+call). Not included: building OccupancyGrid / tcod CustomGraph (+ no-corner-cut condition arrays) /
+pyastar2d weights once per map (printed below). opt = fraction of queries whose octile path length
+equals the .scen optimum (relative error <= 1e-6, Moving AI rule: no corner cutting). pya cuts =
+fraction of pyastar2d paths with at least one corner-cutting diagonal step (pyastar2d allows them and
+charges diagonals as straight steps, so it does not solve the Moving AI problem)."""
+
+
+# -- first-call compile time and peak memory on the large map, in fresh processes ------------------
+STARTUP_SCRIPT = textwrap.dedent(
+    """
+    import json, resource, sys, time, tracemalloc
+    begin = time.perf_counter()
+    import planner
+    import_time = time.perf_counter() - begin
+    grid = planner.OccupancyGrid.from_file(sys.argv[1])
+    start, goal = (int(sys.argv[2]), int(sys.argv[3])), (int(sys.argv[4]), int(sys.argv[5]))
+    options = dict(connectivity=8, heuristic="octile", corner_cutting=False)
+    rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    begin = time.perf_counter()
+    planner.plan(grid, grid.cell_to_world(start), grid.cell_to_world(goal), **options)
+    first = time.perf_counter() - begin
+    rss_after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    tracemalloc.start()
+    begin = time.perf_counter()
+    planner.plan(grid, grid.cell_to_world(start), grid.cell_to_world(goal), **options)
+    second = time.perf_counter() - begin
+    traced_peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    print(json.dumps(dict(import_time=import_time, first=first, second=second, rss_before=rss_before,
+                          rss_after=rss_after, traced_peak=traced_peak)))
+    """
+)
+
+
+def startup_report(map_path: Path, query: Query) -> None:
+    """First plan() call in a fresh process with an empty numba cache, then with a warm one; memory."""
+    import json
+    import tempfile
+
+    print(f"\nFirst-call time and memory on {map_path.name} (fresh process each; query {query}):")
+    with tempfile.TemporaryDirectory(prefix="navcosim-numba-cache-") as cache_dir:
+        # A private NUMBA_CACHE_DIR gives a cleared cache without touching the project's __pycache__.
+        environment = dict(os.environ, NUMBA_CACHE_DIR=cache_dir)
+        arguments = [str(map_path), *map(str, query.start), *map(str, query.goal)]
+        for label in ("cold numba cache", "warm numba cache"):
+            completed = subprocess.run(
+                [sys.executable, "-c", STARTUP_SCRIPT, *arguments],
+                env=environment,
+                capture_output=True,
+                text=True,
+                cwd=REPO,
+                check=False,
+            )
+            if completed.returncode != 0:
+                print(f"  {label}: failed: {completed.stderr.strip().splitlines()[-1:]}")
+                continue
+            numbers = json.loads(completed.stdout.strip().splitlines()[-1])
+            print(
+                f"  {label:<17} import planner {numbers['import_time']:.2f} s, first plan() "
+                f"{numbers['first']:.2f} s, second plan() {numbers['second'] * 1e3:.1f} ms, "
+                f"max RSS {numbers['rss_before'] / 1024:.0f} MiB before / {numbers['rss_after'] / 1024:.0f} MiB "
+                f"after the first plan(), tracemalloc peak of one plan() {numbers['traced_peak'] / 2**20:.1f} MiB"
+            )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="bench_planner", description=__doc__.splitlines()[0])
+    parser.add_argument("--maps", nargs="+", metavar="NAME", help="map names (stems), default: all")
+    parser.add_argument("--limit", type=int, metavar="N", help="at most N queries per map")
+    parser.add_argument("--skip-startup", action="store_true", help="skip the compile-time/memory report")
+    parser.add_argument("--data", type=Path, default=DATA, help=f"Moving AI folder (default {DATA})")
+    args = parser.parse_args(argv)
+    if not args.data.is_dir():
+        print(f"bench_planner: {args.data} not found; nothing to benchmark (skipped)")
+        return 0
+    scenario_files = sorted(args.data.glob("*.scen"))
+    rows = []
+    for scenario_file in scenario_files:
+        map_name = scenario_file.name.split("-random-")[0].removesuffix(".scen")
+        if args.maps and map_name not in args.maps:
+            continue
+        map_path = args.data / f"{map_name}.map"
+        queries = read_scenarios(scenario_file, args.limit)
+        if not map_path.is_file() or not queries:
+            print(f"bench_planner: {scenario_file.name}: map or queries missing, skipped")
+            continue
+        stats, build, cuts = bench_map(map_path, queries)
+        rows.append((map_name, len(queries), stats, build, cuts))
+        print(f"  {map_name}: {len(queries)} queries done", file=sys.stderr)
+    print()
+    print_table(rows)
+    print()
+    print(LEGEND)
+    large = args.data / f"{LARGE_MAP}.map"
+    large_scen = next(iter(sorted(args.data.glob(f"{LARGE_MAP}*.scen"))), None)
+    if not args.skip_startup and large.is_file() and large_scen is not None:
+        queries = read_scenarios(large_scen, None)
+        longest = max(queries, key=lambda query: query.optimal_length)
+        startup_report(large, longest)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
