@@ -1,0 +1,432 @@
+"""The master algorithm: a system of components and connections stepped on an integer time base.
+
+Time base
+---------
+The macro step h is held as an integer number of nanoseconds; step k starts at
+t_k = start + k * h exactly (`Master.time_ns`), and the float time handed to components is that
+integer divided once by 1e9, so time never accumulates rounding: 2,000,000 steps of 1 ms end at
+exactly 2000.0 s. A component's `period` is an integer multiple P of h (0 = every step); it is
+stepped at the steps k with k % P == 0, by `do_step(t_k, P * h)`. Between its steps its outputs
+hold their last values (sample and hold).
+
+Connections
+-----------
+`System.connect("pure_pursuit.v", "mixer.v_in", scale)` copies `scale * source output` into the
+target input before the target steps. An input takes at most one connection; unconnected inputs
+keep their start values (or what the user set).
+
+Ordering (which values a component sees at step k)
+--------------------------------------------------
+An output `P.o` is *direct* when it depends directly on at least one of P's inputs (its entry in
+`P.feedthrough` is non-empty); otherwise it is a *state* output, fixed by P's past alone.
+
+* **Gauss-Seidel** (default). The components are stepped one after the other in an order that is
+  a topological order of the *direct* connections (P before C for every connection P.o -> C.i
+  with P.o direct); components that this leaves unordered keep the order in which they were
+  added to the system. Connections from state outputs put no constraint on the order; they break
+  feedback cycles. At step k a due component C first gathers its inputs: from a producer P
+  earlier in the order, C sees P's outputs after P's most recent step (that is P's step at k if
+  P was due at k); from a producer later in the order, C sees P's outputs as they were before
+  step k (P's step at k has not run yet). Then C steps and its outputs are read.
+  A cycle of direct connections through direct outputs (P.o direct on P.i, P.i fed by a direct
+  output ... back to P.o) is an algebraic loop: `System.order()` raises `CosimError` naming it.
+* **Jacobi**. Every due component gathers its inputs first, all from the outputs as they were
+  before step k (after each producer's most recent step before k); then all due components
+  step. The order only fixes the sequence of calls. A loop of direct outputs is allowed (the
+  one-step delay breaks it).
+
+Initialisation runs in an order where a producer comes before a consumer whose input feeds one of
+the consumer's outputs directly (so a controller's initial outputs see the vehicle's initial
+pose); each component gathers its inputs, initialises and has its outputs read. Jacobi mode uses
+the same initialisation.
+
+Failures
+--------
+A component that raises `CosimError` while stepping stops the master: `step()`/`run()` re-raise
+it, further steps are refused, and `close()` terminates the healthy components and frees all
+(a failed FMU is not terminated; freeing it is safe).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from fractions import Fraction
+
+import numpy as np
+
+from cosim.component import Component, State, closest_names
+from cosim.errors import CosimError
+
+NS_PER_S = 1_000_000_000
+MODES = ("gauss-seidel", "jacobi")
+# Below this many values from one producer, per-value ctypes copies beat one NumPy fancy-index copy.
+_SCALAR_COPY_LIMIT = 4
+
+
+def seconds_to_ns(seconds: float | Fraction | int, what: str) -> int:
+    """Convert a duration [s] to integer nanoseconds; `CosimError` if not a whole number of ns."""
+    if isinstance(seconds, bool) or not isinstance(seconds, int | float | Fraction):
+        raise CosimError(f"{what} must be a number of seconds, got {seconds!r}")
+    if isinstance(seconds, float) and not math.isfinite(seconds):
+        raise CosimError(f"{what} must be finite, got {seconds}")
+    exact = Fraction(seconds) * NS_PER_S if not isinstance(seconds, float) else None
+    nanoseconds = round(seconds * NS_PER_S) if exact is None else round(exact)
+    # A float such as 0.001 is not exactly 1e6 ns; accept it when it is the nearest float.
+    if exact is not None and exact != nanoseconds:
+        raise CosimError(f"{what} {seconds} s is not a whole number of nanoseconds")
+    if exact is None and abs(nanoseconds - seconds * NS_PER_S) > 1e-6 * max(1.0, abs(seconds * NS_PER_S)):
+        raise CosimError(f"{what} {seconds} s is not a whole number of nanoseconds")
+    return nanoseconds
+
+
+@dataclass(frozen=True)
+class Connection:
+    """`source` output -> `target` input, value multiplied by `scale` on the way."""
+
+    source: str  # "component.port"
+    target: str
+    scale: float = 1.0
+
+    @property
+    def source_component(self) -> str:
+        return self.source.split(".", 1)[0]
+
+    @property
+    def target_component(self) -> str:
+        return self.target.split(".", 1)[0]
+
+
+class System:
+    """Components, connections, the macro step [s] and the master algorithm (`mode`)."""
+
+    def __init__(self, macro_step: float | Fraction, mode: str = "gauss-seidel") -> None:
+        self.macro_step_ns = seconds_to_ns(macro_step, "macro step")
+        if self.macro_step_ns <= 0:
+            raise CosimError(f"macro step must be > 0 s, got {macro_step}")
+        if mode not in MODES:
+            raise CosimError(f"master mode '{mode}' is not one of {', '.join(MODES)}")
+        self.mode = mode
+        self.components: dict[str, Component] = {}
+        self.connections: list[Connection] = []
+
+    @property
+    def macro_step(self) -> float:
+        return self.macro_step_ns / NS_PER_S
+
+    def add(self, component: Component) -> Component:
+        if component.name in self.components:
+            raise CosimError(f"component '{component.name}' added twice")
+        self.components[component.name] = component
+        return component
+
+    def component(self, name: str) -> Component:
+        if name not in self.components:
+            raise CosimError(
+                f"no component '{name}'; components: {closest_names(name, self.components) or 'none'}"
+            )
+        return self.components[name]
+
+    def resolve(self, reference: str, direction: str) -> tuple[Component, int]:
+        """'component.port' -> (component, index of the port in its inputs or outputs)."""
+        name, dot, port = reference.partition(".")
+        if not dot or not port:
+            raise CosimError(f"connection end '{reference}' must be 'component.port'")
+        component = self.component(name)
+        ports = component.outputs if direction == "output" else component.inputs
+        index = component.output_index if direction == "output" else component.input_index
+        if port not in index:
+            raise CosimError(
+                f"component '{name}' has no {direction} '{port}'; {direction}s: "
+                f"{closest_names(port, [p.name for p in ports]) or 'none'}"
+            )
+        return component, index[port]
+
+    def connect(self, source: str, target: str, scale: float = 1.0) -> Connection:
+        """Connect output `source` ("comp.port") to input `target`, multiplying by `scale`."""
+        self.resolve(source, "output")
+        self.resolve(target, "input")
+        if any(c.target == target for c in self.connections):
+            raise CosimError(f"input '{target}' is already connected")
+        if not math.isfinite(scale):
+            raise CosimError(f"connection {source} -> {target}: scale must be finite")
+        connection = Connection(source, target, float(scale))
+        self.connections.append(connection)
+        return connection
+
+    def period_steps(self, component: Component) -> int:
+        """The component's period as a whole number of macro steps (>= 1)."""
+        if component.period == 0:
+            return 1
+        period_ns = seconds_to_ns(component.period, f"period of '{component.name}'")
+        steps, remainder = divmod(period_ns, self.macro_step_ns)
+        if remainder or steps == 0:
+            raise CosimError(
+                f"period {component.period} s of '{component.name}' is not a multiple of the "
+                f"macro step {self.macro_step} s"
+            )
+        return steps
+
+    # ---- ordering ----------------------------------------------------------------------------
+
+    def _is_direct(self, reference: str) -> bool:
+        component, index = self.resolve(reference, "output")
+        return bool(component.feedthrough[component.outputs[index].name])
+
+    def _feeds_output(self, reference: str) -> bool:
+        component, index = self.resolve(reference, "input")
+        port = component.inputs[index].name
+        return any(port in depends for depends in component.feedthrough.values())
+
+    def _topological(self, edges: set[tuple[str, str]]) -> list[str]:
+        """Kahn's algorithm; ready components are taken in the order they were added."""
+        names = list(self.components)
+        indegree = dict.fromkeys(names, 0)
+        for _, consumer in edges:
+            indegree[consumer] += 1
+        order: list[str] = []
+        remaining = list(names)
+        while remaining:
+            ready = next((n for n in remaining if indegree[n] == 0), remaining[0])
+            remaining.remove(ready)
+            order.append(ready)
+            for producer, consumer in edges:
+                if producer == ready and consumer in remaining:
+                    indegree[consumer] -= 1
+        return order
+
+    def check_algebraic_loops(self) -> None:
+        """Raise `CosimError` naming a cycle of direct dependencies between ports, if any."""
+        graph: dict[str, list[str]] = {}
+        for connection in self.connections:
+            graph.setdefault(connection.source, []).append(connection.target)
+        for component in self.components.values():
+            for output, depends in component.feedthrough.items():
+                for name in depends:
+                    graph.setdefault(f"{component.name}.{name}", []).append(f"{component.name}.{output}")
+        colour: dict[str, int] = {}  # 1 = on the current path, 2 = finished
+        for start in list(graph):
+            if colour.get(start):
+                continue
+            path = [start]
+            iterators = [iter(graph.get(start, []))]
+            colour[start] = 1
+            while iterators:
+                node = next(iterators[-1], None)
+                if node is None:
+                    colour[path.pop()] = 2
+                    iterators.pop()
+                elif colour.get(node) == 1:
+                    loop = path[path.index(node) :] + [node]
+                    raise CosimError("algebraic loop (direct feedthrough only): " + " -> ".join(loop))
+                elif not colour.get(node):
+                    colour[node] = 1
+                    path.append(node)
+                    iterators.append(iter(graph.get(node, [])))
+
+    def order(self) -> list[Component]:
+        """Step order (see the module docstring); checks algebraic loops in Gauss-Seidel mode."""
+        if self.mode == "gauss-seidel":
+            self.check_algebraic_loops()
+        edges = {
+            (c.source_component, c.target_component)
+            for c in self.connections
+            if c.source_component != c.target_component and self._is_direct(c.source)
+        }
+        return [self.components[name] for name in self._topological(edges)]
+
+    def initialization_order(self) -> list[Component]:
+        """Producers before consumers whose input feeds a consumer output directly."""
+        edges = {
+            (c.source_component, c.target_component)
+            for c in self.connections
+            if c.source_component != c.target_component and self._feeds_output(c.target)
+        }
+        return [self.components[name] for name in self._topological(edges)]
+
+
+class _Gather:
+    """Copies a consumer's connected inputs from its producers' output buffers."""
+
+    def __init__(self, system: System, consumer: Component) -> None:
+        groups: dict[str, list[tuple[int, int, float]]] = {}
+        for connection in system.connections:
+            if connection.target_component != consumer.name:
+                continue
+            producer, source_index = system.resolve(connection.source, "output")
+            _, target_index = system.resolve(connection.target, "input")
+            groups.setdefault(producer.name, []).append((source_index, target_index, connection.scale))
+        self.scalar: list[tuple[object, int, int, float]] = []
+        self.vector: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]] = []
+        for producer_name, links in groups.items():
+            producer = system.components[producer_name]
+            if len(links) <= _SCALAR_COPY_LIMIT:
+                for source_index, target_index, scale in links:
+                    self.scalar.append((producer.output_cbuffer, source_index, target_index, scale))
+            else:
+                sources = np.array([s for s, _, _ in links], dtype=np.intp)
+                targets = np.array([t for _, t, _ in links], dtype=np.intp)
+                scales = np.array([k for _, _, k in links])
+                self.vector.append(
+                    (producer.output_buffer, sources, targets, None if np.all(scales == 1.0) else scales)
+                )
+        self.target_c = consumer.input_cbuffer
+        self.target = consumer.input_buffer
+        self.empty = not self.scalar and not self.vector
+
+    def __call__(self) -> None:
+        target_c = self.target_c
+        for source, source_index, target_index, scale in self.scalar:
+            target_c[target_index] = source[source_index] * scale
+        for source, sources, targets, scales in self.vector:
+            if scales is None:
+                self.target[targets] = source[sources]
+            else:
+                self.target[targets] = source[sources] * scales
+
+
+class Master:
+    """Runs a `System`: initialise, step (one macro step per call) or run many, close.
+
+    Use as a context manager, or call `close()` in a `finally`.
+    """
+
+    def __init__(
+        self,
+        system: System,
+        start_time: float = 0.0,
+        parameters: Mapping[str, Mapping[str, float]] | None = None,
+    ) -> None:
+        self.system = system
+        self.start_time_ns = seconds_to_ns(start_time, "start time")
+        self.parameters = {name: dict(values) for name, values in (parameters or {}).items()}
+        for name in self.parameters:
+            system.component(name)
+        self.order = system.order()
+        self.step_index = 0
+        self.failure: CosimError | None = None
+        self._initialized = False
+        self._closed = False
+        self._plan = [
+            (component, system.period_steps(component), _Gather(system, component))
+            for component in self.order
+        ]
+
+    # ---- time --------------------------------------------------------------------------------
+
+    @property
+    def time_ns(self) -> int:
+        """Start of the next step (the current simulation time) in integer nanoseconds."""
+        return self.start_time_ns + self.step_index * self.system.macro_step_ns
+
+    @property
+    def time(self) -> float:
+        """Current simulation time [s], exact up to one float rounding of `time_ns`."""
+        return self.time_ns / NS_PER_S
+
+    # ---- lifecycle ---------------------------------------------------------------------------
+
+    def initialize(self) -> None:
+        """Instantiate, set up (parameters), and initialise every component (see module doc)."""
+        if self._initialized:
+            raise CosimError("the master is already initialised")
+        t0 = self.start_time_ns / NS_PER_S
+        try:
+            for component in self.order:
+                component.instantiate()
+            for component in self.order:
+                component.setup(t0, self.parameters.get(component.name, {}))
+            gathers = {component.name: gather for component, _, gather in self._plan}
+            for component in self.system.initialization_order():
+                gathers[component.name]()
+                component.push_inputs()
+                component.initialize()
+                component.get_outputs()
+        except BaseException:
+            self.close()
+            raise
+        self._initialized = True
+
+    def _check_running(self) -> None:
+        if self.failure is not None:
+            raise CosimError(f"the master stopped after a failure: {self.failure}")
+        if not self._initialized or self._closed:
+            raise CosimError("the master is not running (call initialize() first; not after close())")
+
+    def step(self) -> None:
+        """Advance one macro step, from `time` to `time + macro_step`."""
+        self._check_running()
+        self._advance(1)
+
+    def run(self, steps: int, callback: Callable[[Master], bool | None] | None = None) -> int:
+        """Advance `steps` macro steps; return the number done.
+
+        With `callback`, it is called after every step and a true return stops early. Without
+        it the loop has no per-step Python callback (the fast path for benchmarks).
+        """
+        self._check_running()
+        if steps < 0:
+            raise CosimError(f"number of steps must be >= 0, got {steps}")
+        if callback is None:
+            self._advance(steps)
+            return steps
+        for done in range(1, steps + 1):
+            self._advance(1)
+            if callback(self):
+                return done
+        return steps
+
+    def _advance(self, steps: int) -> None:
+        plan = self._plan
+        h_ns = self.system.macro_step_ns
+        start_ns = self.start_time_ns
+        jacobi = self.system.mode == "jacobi"
+        k = self.step_index
+        try:
+            for k in range(self.step_index, self.step_index + steps):
+                t_ns = start_ns + k * h_ns
+                if jacobi:
+                    due = [entry for entry in plan if k % entry[1] == 0]
+                    for component, _, gather in due:
+                        gather()
+                        component.push_inputs()
+                    for component, period, _ in due:
+                        component.do_step(t_ns / NS_PER_S, period * h_ns / NS_PER_S)
+                        component.get_outputs()
+                    continue
+                for component, period, gather in plan:
+                    if period == 1 or k % period == 0:
+                        if not gather.empty:
+                            gather()
+                            component.push_inputs()
+                        component.do_step(t_ns / NS_PER_S, period * h_ns / NS_PER_S)
+                        component.get_outputs()
+        except CosimError as error:
+            self.step_index = k
+            self.failure = error
+            raise
+        self.step_index = k + 1 if steps else self.step_index
+
+    def close(self) -> None:
+        """Terminate healthy components and free all; idempotent. Raises the first terminate error."""
+        if self._closed:
+            return
+        self._closed = True
+        first_error: CosimError | None = None
+        for component in self.order:
+            if component.state in (State.SET_UP, State.STEPPING):
+                try:
+                    component.terminate()
+                except CosimError as error:
+                    first_error = first_error or error
+        for component in self.order:
+            component.free()
+        if first_error is not None and self.failure is None:
+            raise first_error
+
+    def __enter__(self) -> Master:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
