@@ -1,0 +1,78 @@
+"""Expansion distance (the thesis's third improvement): inflation and a nav2-style cost gradient.
+
+Rule: a free cell is *inflated* when the Euclidean distance between its centre and the centre of
+the nearest occupied cell is <= the radius [m]. Distances come from scipy's exact Euclidean
+distance transform, so the rule is exact (no chamfer approximation) at every resolution.
+Consequence: a path through cell centres of the inflated grid keeps more than `radius` from every
+obstacle *centre*, i.e. more than `radius - resolution / 2` from an obstacle cell's edge.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.ndimage import distance_transform_edt
+
+from planner.errors import PlannerError
+from planner.grid import OccupancyGrid
+
+
+def obstacle_distance(grid: OccupancyGrid) -> np.ndarray:
+    """Distance [m] from every cell centre to the nearest occupied cell centre (0 on obstacles).
+
+    With no obstacle at all the distance is inf everywhere. Cached on the grid.
+    """
+    cached = grid._cache.get("obstacle_distance")
+    if cached is not None:
+        return cached
+    if not grid.occupied.any():
+        distance = np.full(grid.shape, np.inf)
+    else:
+        distance = distance_transform_edt(~grid.occupied) * grid.resolution
+    distance.flags.writeable = False
+    grid._cache["obstacle_distance"] = distance
+    return distance
+
+
+def _check_radius(radius_m: float, name: str = "expansion_distance") -> float:
+    try:
+        radius = float(radius_m)
+    except (TypeError, ValueError):
+        raise PlannerError(f"{name} must be a number of metres, got {radius_m!r}") from None
+    if not math.isfinite(radius) or radius < 0.0:
+        raise PlannerError(f"{name} must be >= 0 m, got {radius_m!r}")
+    return radius
+
+
+def inflation_mask(grid: OccupancyGrid, radius_m: float) -> np.ndarray:
+    """Bool mask of the cells added by inflating `grid` by `radius_m` [m] (occupied cells excluded)."""
+    radius = _check_radius(radius_m)
+    if radius == 0.0:
+        return np.zeros(grid.shape, dtype=bool)
+    # A tiny tolerance so a distance of exactly `radius` (e.g. 2 cells at 0.5 m) counts as inside
+    # despite the square root's rounding.
+    return (obstacle_distance(grid) <= radius * (1.0 + 1e-12)) & ~grid.occupied
+
+
+def inflate(grid: OccupancyGrid, radius_m: float) -> OccupancyGrid:
+    """A new grid whose occupied cells are the obstacles plus every cell within `radius_m` [m] of one."""
+    mask = inflation_mask(grid, radius_m)
+    return OccupancyGrid(grid.occupied | mask, grid.resolution, grid.origin)
+
+
+def cost_gradient(
+    grid: OccupancyGrid, expansion_distance: float = 0.0, cost_scaling_factor: float = 1.0
+) -> np.ndarray:
+    """nav2-style inflation cost in [0, 1] per cell: 1 at or inside `expansion_distance` [m] of an
+    obstacle, exp(-cost_scaling_factor * (d - expansion_distance)) farther out (d: obstacle distance
+    [m], cost_scaling_factor [1/m]); obstacles are 1. The search multiplies a step's length by
+    (1 + cost_weight * cost of the cell it enters), which pulls paths away from walls.
+    """
+    radius = _check_radius(expansion_distance)
+    scaling = _check_radius(cost_scaling_factor, "cost_scaling_factor")
+    distance = obstacle_distance(grid)
+    with np.errstate(over="ignore", invalid="ignore"):
+        cost = np.exp(-scaling * np.maximum(distance - radius, 0.0))
+    cost[~np.isfinite(distance)] = 0.0
+    return cost
