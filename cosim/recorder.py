@@ -25,8 +25,8 @@ from cosim.errors import CosimError
 
 # bytes of uncompressed messages per chunk; the wall-clock flush usually ends a chunk first
 CHUNK_SIZE = 512 * 1024
-MAP_FRAME = "map"
-ROBOT_FRAME = "base_link"
+MAP_FRAME = rosmsg.MAP_FRAME
+ROBOT_FRAME = rosmsg.ROBOT_FRAME
 OBSTACLE_HEIGHT = 0.5  # [m], only for the 3D view
 LINE_WIDTH = 0.05  # [m] of polygon outlines
 SCAN_ANGLE_TOLERANCE = 1e-6  # [rad] below which beam angles count as exactly on the ROS angle grid
@@ -173,39 +173,14 @@ class Recorder:
 
     def write_pose(self, t_ns: int, x: float, y: float, theta: float, v: float, omega: float) -> None:
         """Robot pose [m, m, rad] and body velocities [m/s, rad/s] on /odom, /tf and /pose."""
-        x, y, theta = float(x), float(y), float(theta)
-        odometry = rosmsg.make(
-            "nav_msgs/msg/Odometry",
-            header=rosmsg.header(t_ns, MAP_FRAME),
-            child_frame_id=ROBOT_FRAME,
-            pose=rosmsg.make(
-                "geometry_msgs/msg/PoseWithCovariance",
-                pose=rosmsg.pose(x, y, theta),
-                covariance=np.zeros(36),
-            ),
-            twist=rosmsg.make(
-                "geometry_msgs/msg/TwistWithCovariance",
-                twist=rosmsg.twist(float(v), float(omega)),
-                covariance=np.zeros(36),
-            ),
-        )
-        self._write_message("/odom", t_ns, odometry)
-        transform = rosmsg.make(
-            "geometry_msgs/msg/TransformStamped",
-            header=rosmsg.header(t_ns, MAP_FRAME),
-            child_frame_id=ROBOT_FRAME,
-            transform=rosmsg.make(
-                "geometry_msgs/msg/Transform",
-                translation=rosmsg.vector3(x, y),
-                rotation=rosmsg.quaternion(theta),
-            ),
-        )
-        self._write_message("/tf", t_ns, rosmsg.make("tf2_msgs/msg/TFMessage", transforms=[transform]))
-        self._write_message("/pose", t_ns, rosmsg.pose_stamped(t_ns, x, y, theta))
+        x, y, theta, v, omega = float(x), float(y), float(theta), float(v), float(omega)
+        self._write(self._channel("/odom"), t_ns, rosmsg.odometry_cdr(t_ns, x, y, theta, v, omega))
+        self._write(self._channel("/tf"), t_ns, rosmsg.tf_cdr(t_ns, x, y, theta))
+        self._write(self._channel("/pose"), t_ns, rosmsg.pose_stamped_cdr(t_ns, x, y, theta))
 
     def write_cmd_vel(self, t_ns: int, v: float, omega: float) -> None:
         """The commanded body velocities [m/s, rad/s] on /cmd_vel (Twist has no stamp: log time only)."""
-        self._write_message("/cmd_vel", t_ns, rosmsg.twist(float(v), float(omega)))
+        self._write(self._channel("/cmd_vel"), t_ns, rosmsg.twist_cdr(float(v), float(omega)))
 
     def write_goal(self, t_ns: int, x: float, y: float, theta: float | None) -> None:
         """The goal [m] on /goal; without a heading the orientation is the identity."""

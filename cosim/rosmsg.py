@@ -174,6 +174,49 @@ def serialize(message, typename: str) -> bytes:
     return bytes(TYPESTORE.serialize_cdr(message, typename))
 
 
+# --- hot paths: fixed-layout messages packed directly --------------------------------------
+# The run loop writes poses and velocity commands at every control step; building rosbags
+# dataclasses for them costs ~40 us per pose. Their CDR layout is fixed (the frame names are
+# constants), so they are packed with precomputed structs; tests compare the bytes with rosbags.
+# CDR aligns each primitive to its size, counted from the end of the 4-byte encapsulation header.
+MAP_FRAME = "map"
+ROBOT_FRAME = "base_link"
+_MAP = b"map\0"
+_ROBOT = b"base_link\0"
+_pose_stamped = struct.Struct("<iII4s7d")  # stamp, frame_id "map", Pose (8-aligned at 16)
+_twist = struct.Struct("<6d")
+_tf_message = struct.Struct("<IiII4sI10s6x7d")  # 1 transform: stamp, "map", "base_link", pad to 40
+_odometry_head = struct.Struct("<iII4sI10s2x7d")  # stamp, "map", "base_link", pad to 32, Pose
+_zero_covariance = bytes(36 * 8)
+
+
+def pose_stamped_cdr(t_ns: int, x: float, y: float, yaw: float) -> bytes:
+    """geometry_msgs/PoseStamped in frame "map" at the planar pose (x, y [m], yaw [rad])."""
+    sec, nanosec = split_time(t_ns)
+    qz, qw = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
+    return CDR_HEADER + _pose_stamped.pack(sec, nanosec, 4, _MAP, x, y, 0.0, 0.0, 0.0, qz, qw)
+
+
+def twist_cdr(v: float, omega: float) -> bytes:
+    """geometry_msgs/Twist: v [m/s] along body x, omega [rad/s] about z."""
+    return CDR_HEADER + _twist.pack(v, 0.0, 0.0, 0.0, 0.0, omega)
+
+
+def tf_cdr(t_ns: int, x: float, y: float, yaw: float) -> bytes:
+    """tf2_msgs/TFMessage with the one transform map -> base_link."""
+    sec, nanosec = split_time(t_ns)
+    qz, qw = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
+    return CDR_HEADER + _tf_message.pack(1, sec, nanosec, 4, _MAP, 10, _ROBOT, x, y, 0.0, 0.0, 0.0, qz, qw)
+
+
+def odometry_cdr(t_ns: int, x: float, y: float, yaw: float, v: float, omega: float) -> bytes:
+    """nav_msgs/Odometry: pose in "map", twist in "base_link", zero covariances."""
+    sec, nanosec = split_time(t_ns)
+    qz, qw = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
+    head = _odometry_head.pack(sec, nanosec, 4, _MAP, 10, _ROBOT, x, y, 0.0, 0.0, 0.0, qz, qw)
+    return CDR_HEADER + head + _zero_covariance + _twist.pack(v, 0.0, 0.0, 0.0, 0.0, omega) + _zero_covariance
+
+
 def signals_payload(t_ns: int, values: np.ndarray) -> bytes:
     """CDR bytes of a signals struct: header, stamp, then the float64 values packed (8-aligned)."""
     return CDR_HEADER + _stamp.pack(*split_time(t_ns)) + values.tobytes()
