@@ -1,0 +1,46 @@
+/*
+ * Exact planar motion of a rigid body over one step with constant body-frame velocity.
+ *
+ * A point moving at constant speed with a constant angle `heading_offset` to the body axis,
+ * while the body turns at a constant yaw rate, follows a circular arc (a straight line when the
+ * yaw rate is zero). The chord of that arc is
+ *     dx = speed*h*cos(theta + offset + dtheta/2) * sinc(dtheta/2),   dtheta = yaw_rate*h
+ *     dy = speed*h*sin(theta + offset + dtheta/2) * sinc(dtheta/2)
+ * which is the closed form v/omega*(sin(theta+dtheta) - sin(theta)), ... written so it stays
+ * accurate as the yaw rate goes to zero (no division by omega).
+ */
+#ifndef NAVCOSIM_PLANAR_MOTION_H
+#define NAVCOSIM_PLANAR_MOTION_H
+
+#include <math.h>
+
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
+/* sin(a)/a; the Taylor series below |a| = 1e-4 has a truncation error under 1e-20. */
+static inline double planar_sinc(double a) {
+    return fabs(a) < 1e-4 ? 1.0 - a * a / 6.0 : sin(a) / a;
+}
+
+/* Wrap an angle [rad] into (-pi, pi]. */
+static inline double planar_wrap_angle(double angle) {
+    double wrapped = fmod(angle + M_PI, 2.0 * M_PI);
+    if (wrapped <= 0.0) {
+        wrapped += 2.0 * M_PI;
+    }
+    return wrapped - M_PI;
+}
+
+/* Advance pose (x [m], y [m], theta [rad]) by h [s]; speed [m/s] of the tracked point, signed. */
+static inline void planar_advance(double *x, double *y, double *theta, double speed, double heading_offset,
+                                  double yaw_rate, double h) {
+    double turn = yaw_rate * h;
+    double chord = speed * h * planar_sinc(0.5 * turn);
+    double direction = *theta + heading_offset + 0.5 * turn;
+    *x += chord * cos(direction);
+    *y += chord * sin(direction);
+    *theta = planar_wrap_angle(*theta + turn);
+}
+
+#endif
