@@ -1,0 +1,281 @@
+"""Index an MCAP file record by record, complete or cut short, and pull message payloads in bulk.
+
+Why not `mcap`'s readers: the indexed reader needs the summary that a killed run never wrote, and
+the streaming readers decode every message into a Python object (too slow for signals). This walk
+reads the top-level records in file order like `mcap.stream_reader.NonSeekingReader`, skips over
+chunk bodies (they are decompressed only when asked for), and stops at the first record that is
+cut short or malformed: everything before it is a complete, usable part of the log. Record bodies
+other than chunks and message indexes are parsed with `mcap`'s own record classes.
+
+MCAP layout used here (https://mcap.dev/spec): magic, then records `opcode u8 | length u64 |
+body`; a Chunk body is `start u64 | end u64 | uncompressed_size u64 | crc u32 | compression str |
+records_length u64 | records`; each chunk is followed by one MessageIndex per channel
+(`channel u16 | byte_length u32 | (log_time u64, offset u64)*`), offsets into the uncompressed
+records; a Message record is `channel u16 | sequence u32 | log_time u64 | publish_time u64 | data`.
+"""
+
+from __future__ import annotations
+
+import io
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import lz4.frame
+import numpy as np
+import zstandard
+from mcap.data_stream import ReadDataStream
+from mcap.records import Attachment, Channel, Header, Metadata, Schema
+
+from cosim.errors import CosimError
+
+MAGIC = b"\x89MCAP0\r\n"
+OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_MESSAGE_INDEX = 1, 2, 3, 4, 5, 6, 7
+OP_ATTACHMENT, OP_METADATA, OP_DATA_END = 9, 12, 15
+MESSAGE_HEADER_BYTES = 1 + 8 + 2 + 4 + 8 + 8  # opcode, length, channel, sequence, log time, publish time
+_record_head = struct.Struct("<BQ")
+_chunk_head = struct.Struct("<QQQII")  # start, end, uncompressed size, crc, compression string length
+_message_head = struct.Struct("<HIQQ")
+
+
+@dataclass
+class Block:
+    """A run of messages: a chunk (compressed records) or top-level messages of an unchunked file."""
+
+    data_offset: int  # file offset of the records
+    data_size: int  # bytes in the file
+    uncompressed_size: int
+    compression: str  # "zstd", "lz4" or "" (stored)
+    index: dict[int, np.ndarray] = field(default_factory=dict)  # channel -> (n, 2) uint64 (time, offset)
+    indexed: bool = False  # True once the message indexes after the chunk were read completely
+
+
+@dataclass
+class LogIndex:
+    path: Path
+    header: Header | None = None
+    schemas: dict[int, Schema] = field(default_factory=dict)
+    channels: dict[int, Channel] = field(default_factory=dict)
+    blocks: list[Block] = field(default_factory=list)
+    metadata: list[Metadata] = field(default_factory=list)
+    attachments: list[Attachment] = field(default_factory=list)
+    complete: bool = False  # the footer was read
+    problem: str | None = None  # why the walk stopped early
+
+
+def _parse(record_class, body: bytes):
+    return record_class.read(ReadDataStream(io.BytesIO(body)))
+
+
+def read_index(path: Path) -> LogIndex:
+    """Walk `path`; raises CosimError when it is not an MCAP file at all."""
+    path = Path(path)
+    try:
+        handle = open(path, "rb")  # noqa: SIM115 - closed below
+    except OSError as error:
+        raise CosimError(f"{path}: cannot open the log ({error.strerror})") from None
+    with handle:
+        file_size = path.stat().st_size
+        magic = handle.read(len(MAGIC))
+        if file_size == 0:
+            raise CosimError(f"{path}: empty file, not an MCAP log (the run wrote nothing)")
+        if magic != MAGIC:
+            raise CosimError(f"{path}: not an MCAP file (bad magic bytes)")
+        log = LogIndex(path)
+        try:
+            _walk(handle, file_size, log)
+        except (struct.error, ValueError, UnicodeDecodeError, EOFError) as error:
+            log.problem = f"malformed record ({error})"
+        if log.blocks and not log.blocks[-1].indexed:
+            _reindex_last(handle, log)
+    return log
+
+
+def _walk(handle, file_size: int, log: LogIndex) -> None:
+    position = len(MAGIC)
+    raw_messages: list[tuple[int, int, int]] = []  # (channel, time, offset) of top-level messages
+    raw_block: Block | None = None
+    while True:
+        head = handle.read(_record_head.size)
+        if len(head) < _record_head.size:
+            log.problem = "the file ends without a footer"
+            break
+        opcode, length = _record_head.unpack(head)
+        body_start = position + _record_head.size
+        if body_start + length > file_size:
+            log.problem = "the last record is cut short"
+            break
+        if log.blocks and opcode != OP_MESSAGE_INDEX:
+            log.blocks[-1].indexed = True
+        if opcode == OP_CHUNK:
+            log.blocks.append(_read_chunk_head(handle, body_start, length))
+        elif opcode == OP_MESSAGE:
+            channel, _, log_time, _ = _message_head.unpack(handle.read(_message_head.size))
+            if raw_block is None or raw_block.data_offset + raw_block.data_size != position:
+                raw_block = _finish_raw(log, raw_block, raw_messages)
+                raw_block = Block(position, 0, 0, "")
+            raw_messages.append((channel, log_time, position - raw_block.data_offset))
+            raw_block.data_size = body_start + length - raw_block.data_offset
+            raw_block.uncompressed_size = raw_block.data_size
+        elif opcode == OP_MESSAGE_INDEX and log.blocks:
+            body = handle.read(length)
+            channel, byte_length = struct.unpack_from("<HI", body)
+            entries = np.frombuffer(body, dtype="<u8", count=byte_length // 8, offset=6).reshape(-1, 2)
+            log.blocks[-1].index[channel] = entries
+        elif opcode == OP_FOOTER:
+            log.complete = True
+            log.problem = None
+            break
+        else:
+            body = handle.read(length)
+            if opcode == OP_SCHEMA:
+                schema = _parse(Schema, body)
+                log.schemas[schema.id] = schema
+            elif opcode == OP_CHANNEL:
+                channel_record = _parse(Channel, body)
+                log.channels[channel_record.id] = channel_record
+            elif opcode == OP_METADATA:
+                log.metadata.append(_parse(Metadata, body))
+            elif opcode == OP_ATTACHMENT:
+                log.attachments.append(_parse(Attachment, body))
+            elif opcode == OP_HEADER:
+                log.header = _parse(Header, body)
+            elif opcode == OP_DATA_END and raw_block is not None:
+                raw_block = _finish_raw(log, raw_block, raw_messages)
+        position = body_start + length
+        handle.seek(position)
+    _finish_raw(log, raw_block, raw_messages)
+
+
+def _read_chunk_head(handle, body_start: int, length: int) -> Block:
+    start, end, uncompressed_size, _crc, name_length = _chunk_head.unpack(handle.read(_chunk_head.size))
+    compression = handle.read(name_length).decode()
+    (records_length,) = struct.unpack("<Q", handle.read(8))
+    data_offset = body_start + _chunk_head.size + name_length + 8
+    if data_offset + records_length > body_start + length:
+        raise ValueError("chunk records overrun the chunk record")
+    return Block(data_offset, records_length, uncompressed_size, compression)
+
+
+def _finish_raw(log: LogIndex, block: Block | None, messages: list[tuple[int, int, int]]) -> None:
+    """Close a run of top-level messages as one stored block with its own index."""
+    if block is None or not messages:
+        return None
+    entries = np.array(messages, dtype=np.uint64)
+    for channel in np.unique(entries[:, 0]):
+        block.index[int(channel)] = entries[entries[:, 0] == channel][:, 1:]
+    block.indexed = True
+    log.blocks.append(block)
+    messages.clear()
+    return None
+
+
+def _reindex_last(handle, log: LogIndex) -> None:
+    """The last chunk of a cut file may lack (some of) its message indexes: rebuild them by
+    walking its records; drop the chunk when it does not decompress."""
+    block = log.blocks[-1]
+    try:
+        records = block_bytes(handle, block)
+    except (zstandard.ZstdError, RuntimeError, ValueError) as error:
+        log.blocks.pop()
+        log.problem = f"{log.problem or 'cut file'}; the last chunk is unreadable ({error})"
+        return
+    index: dict[int, list[tuple[int, int]]] = {}
+    offset = 0
+    while offset + _record_head.size <= len(records):
+        opcode, length = _record_head.unpack_from(records, offset)
+        if opcode == OP_MESSAGE:
+            channel, _, log_time, _ = _message_head.unpack_from(records, offset + _record_head.size)
+            index.setdefault(channel, []).append((log_time, offset))
+        elif opcode == OP_CHANNEL:
+            channel_record = _parse(Channel, records[offset + 9 : offset + 9 + length])
+            log.channels.setdefault(channel_record.id, channel_record)
+        elif opcode == OP_SCHEMA:
+            schema = _parse(Schema, records[offset + 9 : offset + 9 + length])
+            log.schemas.setdefault(schema.id, schema)
+        offset += _record_head.size + length
+    block.index = {channel: np.array(entries, dtype=np.uint64) for channel, entries in index.items()}
+    block.indexed = True
+
+
+def block_bytes(handle, block: Block) -> bytes:
+    """The uncompressed records of a block."""
+    handle.seek(block.data_offset)
+    data = handle.read(block.data_size)
+    if len(data) != block.data_size:
+        raise ValueError("block is cut short")
+    if block.compression == "zstd":
+        return zstandard.ZstdDecompressor().decompress(data, max_output_size=block.uncompressed_size)
+    if block.compression == "lz4":
+        return lz4.frame.decompress(data)
+    if block.compression == "":
+        return data
+    raise ValueError(f"unsupported chunk compression {block.compression!r}")
+
+
+def discover_channels_in_blocks(handle, log: LogIndex) -> None:
+    """A cut file has no summary: channels and schemas live only inside the chunks. Walk the
+    records of each chunk that holds messages of a channel not seen yet."""
+    for block in log.blocks:
+        if all(channel in log.channels for channel in block.index):
+            continue
+        records = block_bytes(handle, block)
+        offset = 0
+        while offset + _record_head.size <= len(records):
+            opcode, length = _record_head.unpack_from(records, offset)
+            body = records[offset + _record_head.size : offset + _record_head.size + length]
+            if opcode == OP_SCHEMA:
+                schema = _parse(Schema, body)
+                log.schemas.setdefault(schema.id, schema)
+            elif opcode == OP_CHANNEL:
+                channel_record = _parse(Channel, body)
+                log.channels.setdefault(channel_record.id, channel_record)
+            offset += _record_head.size + length
+
+
+def fixed_payloads(
+    handle, log: LogIndex, channel: int, skip: int, width: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Log times [ns] (int64, n) and bytes `skip:skip+width` of every payload of `channel` as an
+    (n, width) uint8 array, in time order. Every record must carry at least skip+width bytes.
+    Vectorised per chunk: the message index gives record offsets, a sliding-window view of the
+    decompressed chunk turns the gather into one fancy-indexing copy."""
+    times, rows = [], []
+    for block in log.blocks:
+        entries = block.index.get(channel)
+        if entries is None or len(entries) == 0:
+            continue
+        records = np.frombuffer(block_bytes(handle, block), dtype=np.uint8)
+        offsets = entries[:, 1].astype(np.int64)
+        lengths = np.lib.stride_tricks.sliding_window_view(records, 8)[offsets + 1].view("<u8")[:, 0]
+        if np.any(
+            lengths < MESSAGE_HEADER_BYTES - 9 + skip + width
+        ) or offsets.max() + 9 + lengths.max() > len(records):
+            raise CosimError(f"{log.path}: messages of channel {channel} are shorter than their schema")
+        windows = np.lib.stride_tricks.sliding_window_view(records, width)
+        rows.append(windows[offsets + MESSAGE_HEADER_BYTES + skip])
+        times.append(entries[:, 0].astype(np.int64))
+    if not rows:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, width), dtype=np.uint8)
+    all_times = np.concatenate(times)
+    all_rows = np.concatenate(rows)
+    if np.any(np.diff(all_times) < 0):
+        order = np.argsort(all_times, kind="stable")
+        all_times, all_rows = all_times[order], all_rows[order]
+    return all_times, all_rows
+
+
+def iter_payloads(handle, log: LogIndex, channels: set[int]):
+    """(channel, log time [ns], payload bytes) of the given channels, block by block, in time
+    order within each block."""
+    for block in log.blocks:
+        wanted = [entries for channel, entries in block.index.items() if channel in channels and len(entries)]
+        if not wanted:
+            continue
+        records = block_bytes(handle, block)
+        entries = np.concatenate(wanted)
+        entries = entries[np.argsort(entries[:, 0], kind="stable")]
+        for log_time, offset in entries.tolist():
+            (length,) = struct.unpack_from("<Q", records, offset + 1)
+            channel = struct.unpack_from("<H", records, offset + 9)[0]
+            yield channel, log_time, records[offset + MESSAGE_HEADER_BYTES : offset + 9 + length]
