@@ -180,7 +180,6 @@ def _build(
     raw: dict, source: str, base_dir: Path, text: str, path: Path | None, overrides: tuple
 ) -> Scenario:
     top = TableReader(source, "", raw)
-    top.where = "scenario file"
     scenario_table = TableReader(source, "[scenario]", top.raw("scenario"))
     name = scenario_table.string("name")
     if not name or any(char in name for char in "/\\\0"):
@@ -286,7 +285,7 @@ def _build(
 def _list(top: TableReader, key: str) -> list:
     value = top.raw(key, [])
     if not isinstance(value, list):
-        raise top.error(None, f"[[{key}]] must be an array of tables, got {describe(value)}")
+        raise top.error(key, f"must be an array of tables [[{key}]], got {describe(value)}")
     return value
 
 

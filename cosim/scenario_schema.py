@@ -50,6 +50,8 @@ class TableReader:
         self.used: set[str] = set()
 
     def error(self, key: str | None, problem: str) -> CosimError:
+        if not self.where:  # the top level: its keys are the sections
+            return CosimError(f"{self.source}: [{key}]: {problem}")
         where = f"{self.where}.{key}" if key else self.where
         return CosimError(f"{self.source}: {where}: {problem}")
 
@@ -144,7 +146,8 @@ class TableReader:
         for key in self.table:
             if key in self.used or (extra_allowed is not None and extra_allowed(key)):
                 continue
-            raise self.error(key, f"unknown key{did_you_mean(key, self.used)}")
+            kind = "unknown section" if not self.where else "unknown key"
+            raise self.error(key, f"{kind}{did_you_mean(key, self.used)}")
 
     def _check_range(
         self, key: str, value: float, minimum: float | None, maximum: float | None, exclusive_minimum: bool
