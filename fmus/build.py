@@ -30,6 +30,7 @@ LINK_FLAGS = ["-lm", "-Wl,--no-undefined"]
 GENERATION_TOOL = "navcosim fmus/build.py"
 
 ACCESS_UNKNOWN, ACCESS_READ_ONLY, ACCESS_FIXED, ACCESS_ANY_TIME = 0, 1, 2, 3
+TYPE_TAGS = ("Real", "Integer", "Boolean", "String", "Enumeration")
 ACCESS_NAMES = ("ACCESS_UNKNOWN", "ACCESS_READ_ONLY", "ACCESS_FIXED", "ACCESS_ANY_TIME")
 
 
@@ -55,9 +56,8 @@ def find_compiler() -> str:
         found = shutil.which(candidate)
         if found:
             return found
-    raise FmuBuildError(
-        "no C compiler found (tried " + ", ".join(candidates) + "): install gcc (apt-get install gcc) or set CC"
-    )
+    tried = ", ".join(candidates)
+    raise FmuBuildError(f"no C compiler found (tried {tried}): install gcc (apt-get install gcc) or set CC")
 
 
 def fmi2_header_dir(common_dir: Path) -> Path:
@@ -103,7 +103,7 @@ def _variables(root: ElementTree.Element) -> list[tuple[str, int, str, str, str]
     """(name, value reference, type, causality, variability) of every ScalarVariable."""
     variables = []
     for element in root.iter("ScalarVariable"):
-        kinds = [child.tag for child in element if child.tag in ("Real", "Integer", "Boolean", "String", "Enumeration")]
+        kinds = [child.tag for child in element if child.tag in TYPE_TAGS]
         if len(kinds) != 1:
             raise FmuBuildError(f"variable {element.get('name')!r} has no single type element")
         variables.append(
@@ -137,12 +137,13 @@ def variable_table(model_description: Path) -> str:
             if kind != type_name:
                 continue
             if vr < 0 or vr > 1_000_000:
-                raise FmuBuildError(f"{model_description}: variable {name!r} has value reference {vr} out of range")
+                raise FmuBuildError(f"{model_description}: {name!r} has value reference {vr} out of range")
             if vr in table:
-                raise FmuBuildError(f"{model_description}: {type_name} value reference {vr} used twice ({name!r})")
+                raise FmuBuildError(f"{model_description}: {type_name} value reference {vr} used twice")
             table[vr] = _access(causality, variability)
         size = max(table, default=-1) + 1
-        entries = ", ".join(ACCESS_NAMES[table.get(vr, ACCESS_UNKNOWN)] for vr in range(size)) or "ACCESS_UNKNOWN"
+        entries = ", ".join(ACCESS_NAMES[table.get(vr, ACCESS_UNKNOWN)] for vr in range(size))
+        entries = entries or "ACCESS_UNKNOWN"  # C forbids an empty array
         upper = type_name.upper()
         lines.append(f"#define {upper}_TABLE_SIZE {size}u")
         lines.append(f"static const unsigned char {type_name.lower()}_access[] = {{{entries}}};")
@@ -164,7 +165,8 @@ def _read_identity(model_dir: Path) -> tuple[str, str, str]:
     for macro, expected in (("MODEL_IDENTIFIER", identifier), ("MODEL_GUID", guid)):
         match = re.search(rf'#define\s+{macro}\s+"([^"]*)"', config)
         if match is None or match.group(1) != expected:
-            raise FmuBuildError(f"{model_dir / 'config.h'}: {macro} must be \"{expected}\" as in modelDescription.xml")
+            config_path = model_dir / "config.h"
+            raise FmuBuildError(f'{config_path}: {macro} must be "{expected}" as in modelDescription.xml')
     return root.get("modelName", identifier), identifier, guid
 
 
@@ -202,14 +204,17 @@ def build_fmu(model_dir: Path, out_dir: Path, header_dir: Path | None = None) ->
         (generated / "variable_table.h").write_text(variable_table(model_dir / "modelDescription.xml"))
         sources = sorted(common_dir.glob("*.c")) + sorted(model_dir.glob("*.c"))
         binary = Path(temp) / f"{identifier}{suffix}"
-        command = [compiler, *COMPILE_FLAGS, f"-I{generated}", f"-I{model_dir}", f"-I{common_dir}", f"-I{header_dir}"]
+        includes = [f"-I{include_dir}" for include_dir in (generated, model_dir, common_dir, header_dir)]
+        command = [compiler, *COMPILE_FLAGS, *includes]
         command += [str(s) for s in sources] + ["-o", str(binary), *LINK_FLAGS]
         result = subprocess.run(command, capture_output=True, text=True)
         if result.returncode != 0:
-            first = next((line for line in result.stderr.splitlines() if "error" in line), result.stderr.strip())
+            errors = [line for line in result.stderr.splitlines() if "error" in line]
+            first = errors[0] if errors else result.stderr.strip()
             raise FmuBuildError(f"compiling {model_dir.name} failed: {first}")
         packed: dict[str, Path] = {}
-        headers = sorted(common_dir.glob("*.h")) + sorted(model_dir.glob("*.h")) + sorted(header_dir.glob("fmi2*.h"))
+        headers = [*sorted(common_dir.glob("*.h")), *sorted(model_dir.glob("*.h"))]
+        headers += sorted(header_dir.glob("fmi2*.h"))
         for path in [*sources, *headers, generated / "variable_table.h"]:
             if path.name in packed:
                 raise FmuBuildError(f"{model_dir.name}: two source files named {path.name!r}")
