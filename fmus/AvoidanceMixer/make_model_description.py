@@ -1,0 +1,75 @@
+"""Generate `modelDescription.xml` of the AvoidanceMixer FMU.
+
+Run `python3 fmus/AvoidanceMixer/make_model_description.py` after changing the table and commit
+both; the XML writer is shared with PurePursuit's generator.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import sys
+from pathlib import Path
+
+
+def _writer():
+    """PurePursuit's generator module, which holds the shared XML writer."""
+    path = Path(__file__).resolve().parent.parent / "PurePursuit" / "make_model_description.py"
+    spec = importlib.util.spec_from_file_location("navcosim_pure_pursuit_description", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+def variables(writer) -> list:
+    """AvoidanceMixer's variables; value references as in config.h."""
+    Variable = writer.Variable
+    return [
+        Variable("vehicle_type", 0, "Integer", "parameter",
+                 "0: differential drive (outputs v, omega); 1: bicycle (outputs v, steering_angle)", None, 0),
+        Variable("wheelbase", 0, "Real", "parameter", "Bicycle wheelbase L", "m", 1.0),
+        Variable("max_steering_angle", 1, "Real", "parameter", "Bicycle steering lock, in (0, pi/2)", "rad",
+                 math.pi / 4),
+        Variable("direction_tolerance", 2, "Real", "parameter",
+                 "Avoid when |steering_dir - target_dir| exceeds this", "rad", 0.1),
+        Variable("avoid_gain", 3, "Real", "parameter", "While avoiding, omega = avoid_gain * steering_dir", "1/s",
+                 0.5),
+        Variable("avoid_speed_factor", 4, "Real", "parameter",
+                 "While avoiding, v = avoid_speed_factor * v_in (1 keeps v, as MATLAB's example)", None, 1.0),
+        Variable("recovery_angular_velocity", 5, "Real", "parameter",
+                 "Differential drive recovery: turn on the spot at this rate toward the side last free", "rad/s",
+                 0.5),
+        Variable("recovery_linear_velocity", 6, "Real", "parameter",
+                 "Bicycle recovery: reverse at this speed with full lock, nose swinging toward the side last free",
+                 "m/s", 0.1),
+        Variable("v_in", 10, "Real", "input", "Linear velocity of the path follower", "m/s", 0.0),
+        Variable("omega_in", 11, "Real", "input", "Angular velocity of the path follower", "rad/s", 0.0),
+        Variable("target_dir", 12, "Real", "input", "Target direction of the path follower, vehicle frame", "rad",
+                 0.0),
+        Variable("steering_dir", 13, "Real", "input", "VFH steering direction (NaN: nothing free)", "rad", 0.0),
+        Variable("goal_reached", 0, "Boolean", "input", "The path follower reached the goal: stop", None, False),
+        Variable("v", 20, "Real", "output", "Linear velocity command", "m/s"),
+        Variable("omega", 21, "Real", "output",
+                 "Angular velocity command (bicycle: the yaw rate of steering_angle at v)", "rad/s"),
+        Variable("steering_angle", 22, "Real", "output", "Bicycle steering angle command (0 for the differential drive)",
+                 "rad"),
+        Variable("mode", 10, "Integer", "output", "0 follow, 1 avoid, 2 recover, 3 stopped at the goal"),
+    ]
+
+
+def generate() -> str:
+    """The modelDescription.xml text of AvoidanceMixer."""
+    writer = _writer()
+    return writer.model_description(
+        "AvoidanceMixer",
+        "{5d0c7a2e-7f0b-4c59-9d8e-2f1a6b3c4d03}",
+        "Fuses the pure-pursuit command with the VFH steering direction: follow, avoid, recover "
+        "(thesis section 4.3.3, Figure 4.12), for a differential drive or a bicycle",
+        variables(writer),
+        0.05,
+    )
+
+
+if __name__ == "__main__":
+    _writer().write_model_description(Path(__file__).with_name("modelDescription.xml"), generate())

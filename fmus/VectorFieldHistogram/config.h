@@ -1,0 +1,65 @@
+/* VectorFieldHistogram: VFH+ obstacle avoidance as MATLAB's controllerVFH computes it. */
+#ifndef VFH_CONFIG_H
+#define VFH_CONFIG_H
+
+#include <stdbool.h>
+
+#define MODEL_IDENTIFIER "VectorFieldHistogram"
+#define MODEL_GUID "{5d0c7a2e-7f0b-4c59-9d8e-2f1a6b3c4d02}"
+
+#define VFH_MAX_READINGS 720 /* capacity of the NaN-padded ranges/angles inputs */
+#define VFH_MAX_SECTORS 720  /* largest num_angular_sectors (0.5 degree sectors) */
+/* At most ceil(N/2) valleys of <= 2 candidates each, plus target, 0 and previous. */
+#define VFH_MAX_CANDIDATES (VFH_MAX_SECTORS + 4)
+
+/* Value references, unique per type. ranges[k] has VR_RANGES + k - 1. */
+enum {
+    VR_DISTANCE_LIMIT_MIN = 0,
+    VR_DISTANCE_LIMIT_MAX = 1,
+    VR_ROBOT_RADIUS = 2,
+    VR_SAFETY_DISTANCE = 3,
+    VR_MIN_TURNING_RADIUS = 4,
+    VR_TARGET_DIRECTION_WEIGHT = 5,
+    VR_CURRENT_DIRECTION_WEIGHT = 6,
+    VR_PREVIOUS_DIRECTION_WEIGHT = 7,
+    VR_HISTOGRAM_THRESHOLD_LOW = 8,
+    VR_HISTOGRAM_THRESHOLD_HIGH = 9,
+    VR_NARROW_OPENING_THRESHOLD = 10,
+    VR_TARGET_DIR = 20,
+    VR_STEERING_DIR = 30,
+    VR_RANGES = 1000,
+    VR_ANGLES = 2000
+};
+enum { VR_NUM_ANGULAR_SECTORS = 0, VR_FREE_SECTORS = 10, VR_NUM_VALLEYS = 11 }; /* Integer */
+enum { VR_TARGET_DIR_FREE = 0 };                                                /* Boolean */
+
+struct ModelData {
+    /* parameters */
+    int num_angular_sectors;
+    double distance_limit_min, distance_limit_max;     /* m */
+    double robot_radius, safety_distance;              /* m */
+    double min_turning_radius;                         /* m */
+    double target_direction_weight, current_direction_weight, previous_direction_weight;
+    double histogram_threshold_low, histogram_threshold_high;
+    double narrow_opening_threshold;                   /* rad */
+    /* inputs */
+    double ranges[VFH_MAX_READINGS], angles[VFH_MAX_READINGS]; /* m, rad; NaN = no reading */
+    double target_dir;                                         /* rad */
+    /* outputs */
+    double steering_dir; /* rad, NaN when no sector is free */
+    int free_sectors, num_valleys;
+    bool target_dir_free;
+    /* state carried between steps */
+    bool initialized;
+    bool binary_histogram[VFH_MAX_SECTORS]; /* true = occupied; hysteresis memory */
+    double previous_direction;              /* rad; NaN after a step with nothing free */
+    /* derived at initialisation, scratch reused every step */
+    double sector_midpoints[VFH_MAX_SECTORS]; /* rad */
+    double sector_width;                      /* rad */
+    double obstacle_density[VFH_MAX_SECTORS];
+    bool masked_histogram[VFH_MAX_SECTORS];   /* true = blocked */
+    double candidates[VFH_MAX_CANDIDATES];
+    double candidate_costs[VFH_MAX_CANDIDATES];
+};
+
+#endif

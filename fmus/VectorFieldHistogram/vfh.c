@@ -1,0 +1,196 @@
+/*
+ * VFH+ as MATLAB's controllerVFH computes it (shared/reference/matlab-blocks.md section 1.2):
+ * polar obstacle density with the enlargement angle, binary histogram with hysteresis,
+ * masked histogram with the turning circles, valley candidates and the three-weight cost.
+ *
+ * Deliberate differences from MATLAB: readings are matched to sectors by an index range computed
+ * from the enlargement angle (same sectors as MATLAB's cross-product test, without testing every
+ * sector); with robot_radius + safety_distance = 0 readings beyond the outer mid-points fall into
+ * the end sectors (MATLAB's histc would index sector 0 and fail); MATLAB zeroes the whole density
+ * when no reading was dropped by the distance limits, which we do not copy; a NaN target
+ * direction counts as 0 (straight ahead).
+ */
+#include "vfh.h"
+
+#include <float.h>
+#include <math.h>
+
+static double wrap_to_pi(double angle) {
+    if (fabs(angle) <= M_PI) return angle;
+    double shifted = fmod(angle + M_PI, 2.0 * M_PI);
+    if (shifted < 0.0) shifted += 2.0 * M_PI;
+    if (shifted == 0.0 && angle + M_PI > 0.0) shifted = 2.0 * M_PI; /* +pi stays +pi */
+    return shifted - M_PI;
+}
+
+/* MATLAB's tolerance for "the same" angle or cost. */
+static double tolerance(void) { return sqrt(DBL_EPSILON); }
+
+void vfh_prepare_sectors(ModelData *data) {
+    const int sectors = data->num_angular_sectors;
+    data->sector_width = 2.0 * M_PI / sectors;
+    for (int k = 0; k < sectors; k++) data->sector_midpoints[k] = -M_PI + data->sector_width * (k + 0.5);
+}
+
+/* A reading counts when its range lies inside the distance limits (NaN fails the test). */
+static bool reading_is_valid(const ModelData *data, int i) {
+    double range = data->ranges[i];
+    return range >= data->distance_limit_min && range <= data->distance_limit_max && isfinite(data->angles[i]);
+}
+
+static int wrap_sector(int k, int sectors) { return k < 0 ? k + sectors : (k >= sectors ? k - sectors : k); }
+
+/* Eqs (4)-(6) of VFH+: each reading adds a - d to every sector whose mid-point lies within the
+ * enlargement angle gamma = asin((R + d_safe) / d) of its direction. */
+static void build_obstacle_density(ModelData *data) {
+    const int sectors = data->num_angular_sectors;
+    const double width = data->sector_width, first_midpoint = data->sector_midpoints[0];
+    const double enlargement_radius = data->robot_radius + data->safety_distance;
+    double *density = data->obstacle_density;
+    for (int k = 0; k < sectors; k++) density[k] = 0.0;
+    for (int i = 0; i < VFH_MAX_READINGS; i++) {
+        if (!reading_is_valid(data, i)) continue;
+        const double range = data->ranges[i], angle = wrap_to_pi(data->angles[i]);
+        const double weight = data->distance_limit_max - range;
+        if (sectors == 1) {
+            density[0] += weight;
+        } else if (enlargement_radius == 0.0) {
+            /* histc on the mid-points: sector k covers [mid_k, mid_k+1). */
+            int k = (int)floor((angle - first_midpoint) / width);
+            density[k < 0 ? 0 : (k >= sectors ? sectors - 1 : k)] += weight;
+        } else {
+            double sine = enlargement_radius / range;
+            if (sine >= 1.0) sine = 1.0 - DBL_EPSILON; /* inside the robot: just under pi/2 */
+            const double enlargement = asin(sine);
+            int lowest = (int)ceil((angle - enlargement - first_midpoint) / width);
+            int highest = (int)floor((angle + enlargement - first_midpoint) / width);
+            for (int k = lowest; k <= highest; k++) density[wrap_sector(k, sectors)] += weight;
+        }
+    }
+}
+
+/* Eq (7): above the high threshold occupied, below the low one free, in between unchanged. */
+static void build_binary_histogram(ModelData *data) {
+    for (int k = 0; k < data->num_angular_sectors; k++) {
+        if (data->obstacle_density[k] > data->histogram_threshold_high) data->binary_histogram[k] = true;
+        else if (data->obstacle_density[k] < data->histogram_threshold_low) data->binary_histogram[k] = false;
+    }
+}
+
+/* Eqs (8)-(11): a reading inside the right (left) turning circle, enlarged by R + d_safe, blocks
+ * every direction right (left) of it. The circles are centred at (0, -/+ r_min). */
+static void build_masked_histogram(ModelData *data) {
+    const int sectors = data->num_angular_sectors;
+    const double *midpoints = data->sector_midpoints;
+    const double turning_radius = data->min_turning_radius;
+    const double blocking_radius = turning_radius + data->robot_radius + data->safety_distance;
+    bool right_blocked = false, left_blocked = false;
+    double limit_right = midpoints[0], limit_left = midpoints[sectors - 1];
+    for (int i = 0; i < VFH_MAX_READINGS; i++) {
+        if (!reading_is_valid(data, i)) continue;
+        const double range = data->ranges[i];
+        /* |reading - centre| >= range - r_min, so far readings cannot block: skip the sine. */
+        if (range - turning_radius >= blocking_radius) continue;
+        const double angle = wrap_to_pi(data->angles[i]);
+        /* Squared distance to the centre (0, -/+ r): d^2 + r^2 +/- 2 r d sin(angle). */
+        const double common = range * range + turning_radius * turning_radius;
+        const double cross = 2.0 * turning_radius * range * sin(angle);
+        const double blocking_squared = blocking_radius * blocking_radius;
+        if (angle <= 0.0 && common + cross < blocking_squared) {
+            limit_right = angle; /* the last right-blocking reading in scan order */
+            right_blocked = true;
+        }
+        if (angle >= 0.0 && !left_blocked && common - cross < blocking_squared) {
+            limit_left = angle; /* the first left-blocking reading in scan order */
+            left_blocked = true;
+        }
+    }
+    /* A blocking reading inside an end sector closes that sector too. */
+    const int second = sectors > 1 ? 1 : 0;
+    if (right_blocked && limit_right <= midpoints[0]) limit_right = midpoints[second];
+    if (left_blocked && limit_left >= midpoints[sectors - 1]) limit_left = midpoints[sectors - 1 - second];
+    for (int k = 0; k < sectors; k++)
+        data->masked_histogram[k] = data->binary_histogram[k] || midpoints[k] < limit_right ||
+                                    midpoints[k] > limit_left;
+}
+
+/* A direction is free when its nearest sector is free (both sectors when it lies on a border). */
+static bool direction_is_free(const ModelData *data, double direction) {
+    const int sectors = data->num_angular_sectors;
+    const double position = (direction - data->sector_midpoints[0]) / data->sector_width;
+    const double below = floor(position), fraction = position - below;
+    const int lower = wrap_sector((int)below % sectors, sectors), upper = wrap_sector(lower + 1, sectors);
+    if (fabs(1.0 - 2.0 * fraction) * data->sector_width < tolerance())
+        return !data->masked_histogram[lower] && !data->masked_histogram[upper];
+    return !data->masked_histogram[fraction < 0.5 ? lower : upper];
+}
+
+/* Eq (15), with MATLAB's scale factor (mu1 + mu2 + mu3) / 3, which does not change the winner. */
+static double direction_cost(const ModelData *data, double candidate, double target, double previous) {
+    const double total = data->target_direction_weight + data->current_direction_weight +
+                         data->previous_direction_weight;
+    const double weighted = data->target_direction_weight * fabs(wrap_to_pi(target - candidate)) +
+                            data->current_direction_weight * fabs(wrap_to_pi(0.0 - candidate)) +
+                            data->previous_direction_weight * fabs(wrap_to_pi(previous - candidate));
+    return weighted / 3.0 * total;
+}
+
+/* Eqs (12)-(14): candidates from the valleys of the masked histogram (not circular), plus the
+ * target, the current (0) and the previous direction. Returns how many. */
+static int collect_candidates(ModelData *data, double target, double previous) {
+    const int sectors = data->num_angular_sectors;
+    const double *midpoints = data->sector_midpoints;
+    const double half_opening = data->narrow_opening_threshold / 2.0;
+    int count = 0, valleys = 0, free_sectors = 0;
+    for (int start = 0; start < sectors;) {
+        if (data->masked_histogram[start]) { start++; continue; }
+        int end = start;
+        while (end + 1 < sectors && !data->masked_histogram[end + 1]) end++;
+        valleys++;
+        free_sectors += end - start + 1;
+        if (data->sector_width * (end - start) < data->narrow_opening_threshold) {
+            data->candidates[count++] = 0.5 * (midpoints[start] + midpoints[end]);
+        } else {
+            data->candidates[count++] = midpoints[start] + half_opening;
+            data->candidates[count++] = midpoints[end] - half_opening;
+        }
+        start = end + 1;
+    }
+    data->num_valleys = valleys;
+    data->free_sectors = free_sectors;
+    data->candidates[count++] = target;
+    data->candidates[count++] = 0.0;
+    data->candidates[count++] = previous;
+    return count;
+}
+
+void vfh_step(ModelData *data) {
+    build_obstacle_density(data);
+    build_binary_histogram(data);
+    build_masked_histogram(data);
+
+    const double target = isnan(data->target_dir) ? 0.0 : wrap_to_pi(data->target_dir);
+    const double previous = isnan(data->previous_direction) ? 0.0 : data->previous_direction;
+    const int count = collect_candidates(data, target, previous);
+    data->target_dir_free = data->free_sectors > 0 && direction_is_free(data, target);
+    if (data->free_sectors == 0) {
+        data->steering_dir = data->previous_direction = NAN;
+        return;
+    }
+
+    double lowest_cost = INFINITY;
+    for (int c = 0; c < count; c++) {
+        double cost = INFINITY;
+        if (direction_is_free(data, data->candidates[c]))
+            cost = direction_cost(data, data->candidates[c], target, previous);
+        data->candidate_costs[c] = cost;
+        if (cost < lowest_cost) lowest_cost = cost;
+    }
+    /* Among (nearly) equal costs the smallest angle wins. */
+    double steering = NAN;
+    for (int c = 0; c < count; c++) {
+        if (!(data->candidate_costs[c] - lowest_cost < tolerance())) continue;
+        if (isnan(steering) || data->candidates[c] < steering) steering = data->candidates[c];
+    }
+    data->steering_dir = data->previous_direction = steering;
+}

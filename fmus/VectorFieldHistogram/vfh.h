@@ -1,0 +1,19 @@
+/* VFH+ (Ulrich & Borenstein 1998) in the variant of MATLAB's controllerVFH, free of FMI. */
+#ifndef VFH_H
+#define VFH_H
+
+#include "model.h"
+#include "config.h"
+
+#ifndef M_PI /* not declared by <math.h> under -std=c99 */
+#define M_PI 3.14159265358979323846
+#endif
+
+/* Sector mid-points linspace(-pi + pi/N, pi - pi/N, N); call once the parameters are fixed. */
+void vfh_prepare_sectors(ModelData *data);
+
+/* One VFH+ evaluation of the current inputs: updates the binary histogram and the previous
+ * direction in `data` and writes steering_dir, free_sectors, num_valleys, target_dir_free. */
+void vfh_step(ModelData *data);
+
+#endif
