@@ -20,7 +20,6 @@ per planner, planners interleaved per query so they see the same machine state.
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import statistics
 import subprocess
@@ -281,8 +280,9 @@ def startup_report(map_path: Path, query: Query) -> None:
             print(
                 f"  {label:<17} import planner {numbers['import_time']:.2f} s, first plan() "
                 f"{numbers['first']:.2f} s, second plan() {numbers['second'] * 1e3:.1f} ms, "
-                f"max RSS {numbers['rss_before'] / 1024:.0f} MiB before / {numbers['rss_after'] / 1024:.0f} MiB "
-                f"after the first plan(), tracemalloc peak of one plan() {numbers['traced_peak'] / 2**20:.1f} MiB"
+                f"max RSS {numbers['rss_before'] / 1024:.0f} MiB before / "
+                f"{numbers['rss_after'] / 1024:.0f} MiB after the first plan(), "
+                f"tracemalloc peak of one plan() {numbers['traced_peak'] / 2**20:.1f} MiB"
             )
 
 
