@@ -54,14 +54,16 @@ def _variable_xml(index: int, variable: Variable) -> str:
     if variable.start is not None:
         attributes += f' start="{_format_start(variable.start)}"'
     return (
-        f'    <!-- {index} --><ScalarVariable name={quoteattr(variable.name)} '
+        f"    <!-- {index} --><ScalarVariable name={quoteattr(variable.name)} "
         f'valueReference="{variable.value_reference}" causality="{variable.causality}" '
         f'variability="{variable.variability}" description={quoteattr(variable.description)}>'
         f"<{variable.type}{attributes}/></ScalarVariable>"
     )
 
 
-def model_description(name: str, guid: str, description: str, variables: list[Variable], step_size: float) -> str:
+def model_description(
+    name: str, guid: str, description: str, variables: list[Variable], step_size: float
+) -> str:
     """The text of an FMI 2.0 co-simulation modelDescription.xml for `variables`."""
     units = sorted({v.unit for v in variables if v.unit})
     outputs = [i for i, v in enumerate(variables, start=1) if v.causality == "output"]
@@ -123,17 +125,51 @@ def write_model_description(path: Path, text: str) -> None:
 def variables() -> list[Variable]:
     """PurePursuit's variables; value references as in config.h."""
     parameters = [
-        Variable("desired_linear_velocity", 0, "Real", "parameter",
-                 "Constant linear velocity v (MATLAB DesiredLinearVelocity)", "m/s", 0.1),
-        Variable("max_angular_velocity", 1, "Real", "parameter",
-                 "|omega| is clipped to this (MATLAB MaxAngularVelocity)", "rad/s", 1.0),
-        Variable("lookahead_distance", 2, "Real", "parameter",
-                 "Arc length from the projection point to the lookahead point (MATLAB LookaheadDistance)", "m", 1.0),
-        Variable("goal_tolerance", 3, "Real", "parameter",
-                 "goal_reached when the distance to the last waypoint is at most this; then v = omega = 0", "m", 0.1),
-        Variable("angular_velocity_law", 0, "Integer", "parameter",
-                 "0: omega = 2 sin(alpha)/L as MATLAB (rad/s, independent of v); 1: nav2 omega = v * 2 sin(alpha)/L",
-                 None, 0),
+        Variable(
+            "desired_linear_velocity",
+            0,
+            "Real",
+            "parameter",
+            "Constant linear velocity v (MATLAB DesiredLinearVelocity)",
+            "m/s",
+            0.1,
+        ),
+        Variable(
+            "max_angular_velocity",
+            1,
+            "Real",
+            "parameter",
+            "|omega| is clipped to this (MATLAB MaxAngularVelocity)",
+            "rad/s",
+            1.0,
+        ),
+        Variable(
+            "lookahead_distance",
+            2,
+            "Real",
+            "parameter",
+            "Arc length from the projection point to the lookahead point (MATLAB LookaheadDistance)",
+            "m",
+            1.0,
+        ),
+        Variable(
+            "goal_tolerance",
+            3,
+            "Real",
+            "parameter",
+            "goal_reached when the distance to the last waypoint is at most this; then v = omega = 0",
+            "m",
+            0.1,
+        ),
+        Variable(
+            "angular_velocity_law",
+            0,
+            "Integer",
+            "parameter",
+            "0: omega = 2 sin(alpha)/L as MATLAB (independent of v); 1: nav2 omega = v * 2 sin(alpha)/L",
+            None,
+            0,
+        ),
     ]
     inputs = [
         Variable("x", 10, "Real", "input", "Vehicle x in the map frame", "m", 0.0),
@@ -142,19 +178,44 @@ def variables() -> list[Variable]:
     ]
     for column, axis, first in ((1, "x", 1000), (2, "y", 2000)):
         inputs += [
-            Variable(f"waypoints[{k},{column}]", first + k - 1, "Real", "input",
-                     f"Waypoint {k} {axis} (rows with NaN are ignored)", "m", math.nan)
+            Variable(
+                f"waypoints[{k},{column}]",
+                first + k - 1,
+                "Real",
+                "input",
+                f"Waypoint {k} {axis} (rows with NaN are ignored)",
+                "m",
+                math.nan,
+            )
             for k in range(1, MAX_WAYPOINTS + 1)
         ]
     outputs = [
-        Variable("v", 20, "Real", "output", "Linear velocity command (0 without waypoints or at the goal)", "m/s"),
+        Variable(
+            "v", 20, "Real", "output", "Linear velocity command (0 without waypoints or at the goal)", "m/s"
+        ),
         Variable("omega", 21, "Real", "output", "Angular velocity command, counter-clockwise", "rad/s"),
-        Variable("target_dir", 22, "Real", "output",
-                 "Bearing alpha of the lookahead point in the vehicle frame (MATLAB TargetDir)", "rad"),
-        Variable("lookahead_x", 23, "Real", "output", "x of the lookahead point (the pose without waypoints)", "m"),
-        Variable("lookahead_y", 24, "Real", "output", "y of the lookahead point (the pose without waypoints)", "m"),
-        Variable("goal_distance", 25, "Real", "output",
-                 "Distance from the pose to the last waypoint (NaN without waypoints)", "m"),
+        Variable(
+            "target_dir",
+            22,
+            "Real",
+            "output",
+            "Bearing alpha of the lookahead point in the vehicle frame (MATLAB TargetDir)",
+            "rad",
+        ),
+        Variable(
+            "lookahead_x", 23, "Real", "output", "x of the lookahead point (the pose without waypoints)", "m"
+        ),
+        Variable(
+            "lookahead_y", 24, "Real", "output", "y of the lookahead point (the pose without waypoints)", "m"
+        ),
+        Variable(
+            "goal_distance",
+            25,
+            "Real",
+            "output",
+            "Distance from the pose to the last waypoint (NaN without waypoints)",
+            "m",
+        ),
         Variable("goal_reached", 0, "Boolean", "output", "goal_distance <= goal_tolerance"),
     ]
     return parameters + inputs + outputs
