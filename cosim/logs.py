@@ -211,6 +211,13 @@ class Log:
         """Components with a signal channel, in the order they were registered."""
         return list(self._signal_channels)
 
+    def signal_names(self, component: str) -> list[str]:
+        """The original variable names of a component's signals (from the channel metadata)."""
+        channel_id = self._signal_channels.get(component)
+        if channel_id is None:
+            raise CosimError(f"{self.path}: no signals of component {component!r}")
+        return list(json.loads(self._index.channels[channel_id].metadata[SIGNAL_NAMES_KEY]))
+
     # --- signals -------------------------------------------------------------------------
 
     def signals(self, component: str) -> Signals:
