@@ -1,0 +1,211 @@
+"""PurePursuit FMU against hand-computed geometry (MATLAB controllerPurePursuit semantics)."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy.fmi1 import FMICallException
+from fmu_helpers import FmuInstance, array_inputs
+
+CAPACITY = 1000
+FMU_DIR = Path(__file__).resolve().parent.parent / "fmus"
+
+
+def follower(waypoints, parameters=None, pose=(0.0, 0.0, 0.0)) -> FmuInstance:
+    """An initialised PurePursuit with the waypoints (N x 2, NaN-padded to the capacity) and pose."""
+    inputs = {**array_inputs("waypoints", np.asarray(waypoints, dtype=float), CAPACITY)}
+    inputs.update(x=pose[0], y=pose[1], theta=pose[2])
+    parameters = {"max_angular_velocity": 100.0, **(parameters or {})}
+    return FmuInstance("PurePursuit", parameters=parameters, inputs=inputs)
+
+
+def drive_to(fmu: FmuInstance, pose) -> dict:
+    fmu.set({"x": pose[0], "y": pose[1], "theta": pose[2]})
+    fmu.step()
+    return fmu.outputs()
+
+
+def bearing(pose, point) -> float:
+    """Angle of `point` seen from `pose`, wrapped to (-pi, pi]."""
+    angle = math.atan2(point[1] - pose[1], point[0] - pose[0]) - pose[2]
+    return math.atan2(math.sin(angle), math.cos(angle))
+
+
+def test_straight_line_lookahead_and_omega():
+    pose = (2.0, 0.5, 0.3)
+    lookahead = 1.5
+    parameters = {"lookahead_distance": lookahead, "desired_linear_velocity": 0.4}
+    with follower([[0, 0], [10, 0]], parameters) as fmu:
+        out = drive_to(fmu, pose)
+    # Projection (2, 0); 1.5 m further along the line.
+    assert out["lookahead_x"] == pytest.approx(3.5, abs=1e-12)
+    assert out["lookahead_y"] == pytest.approx(0.0, abs=1e-12)
+    alpha = math.atan2(-0.5, 1.5) - 0.3
+    assert out["target_dir"] == pytest.approx(alpha, abs=1e-12)
+    assert out["omega"] == pytest.approx(2 * math.sin(alpha) / lookahead, abs=1e-12)
+    assert out["v"] == pytest.approx(0.4)
+    assert out["goal_distance"] == pytest.approx(math.hypot(8.0, 0.5))
+    assert not out["goal_reached"]
+
+
+def test_nav2_law_scales_omega_by_speed():
+    pose = (2.0, 0.5, 0.3)
+    parameters = {"lookahead_distance": 1.5, "desired_linear_velocity": 0.4, "angular_velocity_law": 1}
+    with follower([[0, 0], [10, 0]], parameters) as fmu:
+        out = drive_to(fmu, pose)
+    alpha = math.atan2(-0.5, 1.5) - 0.3
+    assert out["omega"] == pytest.approx(0.4 * 2 * math.sin(alpha) / 1.5, abs=1e-12)
+
+
+def test_l_shaped_path_lookahead_turns_the_corner_and_projection_only_moves_forward():
+    corner_path = [[0, 0], [4, 0], [4, 4]]
+    with follower(corner_path, {"lookahead_distance": 2.0}) as fmu:
+        # Projection (3, 0): 1 m to the corner, the remaining 1 m up the second leg.
+        out = drive_to(fmu, (3.0, 0.2, 0.0))
+        assert (out["lookahead_x"], out["lookahead_y"]) == pytest.approx((4.0, 1.0), abs=1e-12)
+        alpha = bearing((3.0, 0.2, 0.0), (4.0, 1.0))
+        assert out["omega"] == pytest.approx(2 * math.sin(alpha) / 2.0, abs=1e-12)
+
+        # Past the corner: projection (4, 1.5) on the second leg.
+        out = drive_to(fmu, (3.9, 1.5, math.pi / 2))
+        assert (out["lookahead_x"], out["lookahead_y"]) == pytest.approx((4.0, 3.5), abs=1e-12)
+
+        # Back near the start: the projection does not go back to the first leg.
+        out = drive_to(fmu, (1.0, 0.0, 0.0))
+        assert (out["lookahead_x"], out["lookahead_y"]) == pytest.approx((4.0, 3.5), abs=1e-12)
+
+
+def polyline_lookahead(path: np.ndarray, point: np.ndarray, lookahead: float) -> np.ndarray:
+    """A second implementation: global closest point on the polyline, then arc length + L."""
+    starts, ends = path[:-1], path[1:]
+    directions = ends - starts
+    lengths = np.linalg.norm(directions, axis=1)
+    t = np.clip(np.einsum("ij,ij->i", point - starts, directions) / lengths**2, 0.0, 1.0)
+    closest = starts + t[:, None] * directions
+    segment = int(np.argmin(np.linalg.norm(closest - point, axis=1)))
+    cumulative = np.concatenate([[0.0], np.cumsum(lengths)])
+    target_arc = cumulative[segment] + t[segment] * lengths[segment] + lookahead
+    if target_arc >= cumulative[-1]:
+        return path[-1]
+    k = int(np.searchsorted(cumulative, target_arc, side="right")) - 1
+    return path[k] + (target_arc - cumulative[k]) / lengths[k] * directions[k]
+
+
+def test_circle_against_second_implementation_and_analytic_curvature():
+    radius, lookahead = 5.0, 1.0
+    angles = np.linspace(0.0, 1.5 * math.pi, 301)
+    path = radius * np.column_stack([np.cos(angles), np.sin(angles)])
+    with follower(path, {"lookahead_distance": lookahead, "desired_linear_velocity": 1.0}) as fmu:
+        # Steps of 0.5 m of arc: the projection may advance only about one lookahead per call.
+        phases = np.arange(0.1, 4.0, 0.1)
+        offsets = np.resize([0.0, 0.1, -0.2, 0.05], phases.size)  # on, outside and inside the circle
+        for phase, offset in zip(phases, offsets, strict=True):
+            position = (radius + offset) * np.array([math.cos(phase), math.sin(phase)])
+            pose = (*position, phase + math.pi / 2)
+            out = drive_to(fmu, pose)
+            expected = polyline_lookahead(path, position, lookahead)
+            assert (out["lookahead_x"], out["lookahead_y"]) == pytest.approx(tuple(expected), abs=1e-9)
+            alpha = bearing(pose, expected)
+            assert out["omega"] == pytest.approx(2 * math.sin(alpha) / lookahead, abs=1e-9)
+            if offset == 0.0:
+                # On the circle, heading tangent: the pure-pursuit arc is the circle, omega = v / R.
+                assert out["omega"] == pytest.approx(1.0 / radius, rel=2e-3)
+
+
+def test_nan_rows_are_ignored():
+    compact = np.array([[0, 0], [3, 1], [6, 0], [9, 2]], dtype=float)
+    padded = np.array(
+        [[0, 0], [math.nan, math.nan], [3, 1], [math.nan, 5.0], [6, 0], [7.0, math.nan], [9, 2]], dtype=float
+    )
+    pose = (2.5, 0.2, 0.1)
+    parameters = {"lookahead_distance": 2.5}
+    with follower(compact, parameters) as reference, follower(padded, parameters) as fmu:
+        assert drive_to(fmu, pose) == drive_to(reference, pose)
+
+
+def test_no_waypoints_gives_zero_command_and_the_pose_as_lookahead():
+    with follower(np.empty((0, 2)), {"desired_linear_velocity": 0.5}) as fmu:
+        out = drive_to(fmu, (1.5, -2.0, 0.7))
+    assert out["v"] == 0.0 and out["omega"] == 0.0 and out["target_dir"] == 0.0
+    assert (out["lookahead_x"], out["lookahead_y"]) == (1.5, -2.0)
+    assert not out["goal_reached"] and math.isnan(out["goal_distance"])
+
+
+def test_goal_reached_stops_the_vehicle():
+    parameters = {"goal_tolerance": 0.2, "desired_linear_velocity": 0.5}
+    with follower([[0, 0], [5, 0]], parameters) as fmu:
+        out = drive_to(fmu, (4.7, 0.1, 0.0))
+        assert out["goal_distance"] == pytest.approx(math.hypot(0.3, 0.1))
+        assert not out["goal_reached"] and out["v"] == 0.5
+        out = drive_to(fmu, (4.9, 0.1, 0.0))
+        assert out["goal_distance"] == pytest.approx(math.hypot(0.1, 0.1))
+        assert out["goal_reached"] and out["v"] == 0.0 and out["omega"] == 0.0
+
+
+def test_omega_is_clipped_and_a_target_behind_turns_at_one_rad_per_second():
+    with follower([[0, 0], [0, 10]], {"max_angular_velocity": 0.3}) as fmu:
+        out = drive_to(fmu, (0.0, 0.0, 0.0))  # lookahead straight to the left: 2 sin(pi/2)/1 = 2
+    assert out["omega"] == pytest.approx(0.3)
+    with follower([[0, 0], [-10, 0]], {"max_angular_velocity": 5.0}) as fmu:
+        out = drive_to(fmu, (0.0, 0.0, 0.0))  # alpha = pi: MATLAB replaces 2 sin(pi)/L by sign = 1
+    assert abs(out["target_dir"]) == pytest.approx(math.pi)
+    assert abs(out["omega"]) == 1.0
+
+
+def test_a_new_plan_restarts_the_projection_search():
+    with follower([[0, 0], [10, 0]], {"lookahead_distance": 1.0}) as fmu:
+        drive_to(fmu, (8.0, 0.0, 0.0))
+        # New plan along y, starting far behind the old projection: searched from its waypoint 1.
+        fmu.set(array_inputs("waypoints", [[8, -5], [8, 5]], CAPACITY))
+        out = drive_to(fmu, (8.0, 0.0, math.pi / 2))
+    assert (out["lookahead_x"], out["lookahead_y"]) == pytest.approx((8.0, 1.0), abs=1e-12)
+    assert out["goal_distance"] == pytest.approx(5.0)
+
+
+@pytest.mark.parametrize(
+    ("name", "value"),
+    [
+        ("lookahead_distance", 0.0),
+        ("lookahead_distance", -1.0),
+        ("max_angular_velocity", -0.1),
+        ("goal_tolerance", -0.5),
+        ("angular_velocity_law", 2),
+    ],
+)
+def test_bad_parameter_fails_initialisation_naming_it(name, value):
+    fmu = FmuInstance("PurePursuit", parameters={name: value}, initialize=False)
+    try:
+        with pytest.raises(FMICallException):
+            fmu.exit_initialization()
+        assert any(name in message for message in fmu.messages), fmu.messages
+    finally:
+        fmu.close()
+
+
+def test_waypoint_capacity_is_exactly_1000_rows():
+    with FmuInstance("PurePursuit") as fmu:
+        assert "waypoints[1000,2]" in fmu.variables
+        assert "waypoints[1001,1]" not in fmu.variables
+        with pytest.raises(FMICallException):
+            fmu.fmu.setReal([3000], [1.0])  # one past waypoints[1000,2]
+        assert any("3000" in message for message in fmu.messages)
+
+
+def load_generator(model: str):
+    path = FMU_DIR / model / "make_model_description.py"
+    spec = importlib.util.spec_from_file_location(f"generator_{model}", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("model", ["PurePursuit", "VectorFieldHistogram", "AvoidanceMixer"])
+def test_committed_model_description_is_the_generators_output(model):
+    committed = (FMU_DIR / model / "modelDescription.xml").read_text()
+    assert committed == load_generator(model).generate()
