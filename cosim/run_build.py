@@ -83,11 +83,30 @@ def _fmu_component(scenario: Scenario, spec: ComponentSpec):
     where = _where(scenario, spec.role)
     try:
         path = builtin_fmu(spec.fmu) if spec.is_builtin else spec.fmu
-        port_map = {role: (mapping.variable, mapping.scale) for role, mapping in spec.ports.items()}
+        port_map = {role: {"name": m.variable, "scale": m.scale} for role, m in spec.ports.items()}
         period = 0.0 if spec.rate is None else 1.0 / spec.rate
         return FmuComponent(path, spec.role, port_map=port_map, period=period)
     except CosimError as error:
         raise CosimError(f"{where}.fmu: {error}") from None
+
+
+def _pose_is_state(vehicle) -> None:
+    """Treat the vehicle's x, y, theta as states when its FMU does not declare their dependencies.
+
+    FMI reads a missing `dependencies` attribute as "depends on every input", which would make the
+    closed loop vehicle -> controllers -> vehicle an algebraic loop. A kinematic vehicle integrates
+    its inputs, so its pose at the end of a step never depends on the inputs of the next one; an FMU
+    that declares its dependencies explicitly is taken at its word.
+    """
+    declared = {
+        unknown.variable.name
+        for unknown in vehicle.model_description.outputs
+        if unknown.dependencies is not None
+    }
+    for port in ("x", "y", "theta"):
+        variable = vehicle._variables[port][0]
+        if variable.name not in declared:
+            vehicle.feedthrough[port] = []
 
 
 def _check_ports(scenario: Scenario, component, role: str, names, kind: str) -> None:
@@ -156,6 +175,7 @@ def build_run(scenario: Scenario) -> BuiltRun:
         _check_ports(scenario, fmus[role], role, names, "input")
     for role, names in ROLE_OUTPUTS.items():
         _check_ports(scenario, fmus[role], role, names, "output")
+    _pose_is_state(fmus["vehicle"])
     for component in (planner, fmus["pure_pursuit"], lidar, fmus["vfh"], fmus["mixer"], fmus["vehicle"]):
         system.add(component)
     _connect(scenario, system, planner, lidar, fmus)

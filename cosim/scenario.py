@@ -34,7 +34,11 @@ SECTIONS = (
 
 @dataclass(frozen=True)
 class PortMapping:
-    """Where a role port lives in the FMU: its variable name and the scale (role value = scale * FMU value)."""
+    """Where a role port lives in the FMU: its variable name and a scale.
+
+    The scale multiplies along the data flow: FMU input = scale * port value, port output = scale *
+    FMU output, FMU parameter = scale * given value (`cosim.fmu_component`).
+    """
 
     variable: str
     scale: float = 1.0

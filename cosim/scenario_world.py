@@ -104,7 +104,7 @@ class WorldDistance:
             return 0.0
         row, col = self.grid.world_to_cell((x, y))
         # The nearest occupied square is at least (centre distance - |p - cell centre| - half diagonal) away.
-        bound = self.centre_field[row, col] - 2.0 * math.sqrt(2.0) * self.half
+        bound = min(self.centre_field[row, col] - 2.0 * math.sqrt(2.0) * self.half, self.distance_to_edge(x, y))
         for cx, cy, radius in self.bounds:
             bound = min(bound, math.hypot(x - cx, y - cy) - radius)
         return max(0.0, bound)
