@@ -29,7 +29,7 @@ DEFAULT_COMPARE_EXPANSION = 0.8  # m: the thesis's differential-drive robot (rad
 
 USAGE = (
     "cosim plan [compare] MAP (--start X,Y --goal X,Y | --query NAME) [options] [--png OUT]\n"
-    "       X,Y in metres; X,Y,THETA (THETA in rad) for --planner hybrid"
+    "       X,Y in metres; X,Y,THETA (THETA in rad) for --planner hybrid; negative values as --start=-5,6"
 )
 
 
