@@ -67,7 +67,8 @@ def _title(log: Log) -> str:
     if outcome is None:
         result = "no outcome recorded" + ("" if log.is_complete else " (log cut short)")
     elif outcome.get("reached") == "true":
-        result = f"goal reached at t = {float(outcome.get('time', 'nan')):.1f} s"
+        time = outcome.get("time")
+        result = f"goal reached at t = {float(time):.1f} s" if time else "goal reached"
     else:
         result = f"goal NOT reached ({outcome.get('reason', 'unknown reason')})"
     distance = outcome.get("distance") if outcome else None
@@ -80,6 +81,7 @@ def _title(log: Log) -> str:
 
 def _draw_map(axes, log: Log, modes: tuple[np.ndarray, np.ndarray] | None) -> None:
     handles = []
+    bounds: list[np.ndarray] = []  # points that must be inside the view [m]
     grid, inflated = log.map("/map"), log.map("/map_inflated")
     if grid is not None:
         extent = _extent(grid)
@@ -101,8 +103,7 @@ def _draw_map(axes, log: Log, modes: tuple[np.ndarray, np.ndarray] | None) -> No
             zorder=0,
         )
         handles.append(patches.Patch(color="0.15", label="map: occupied"))
-        axes.set_xlim(extent[0], extent[1])
-        axes.set_ylim(extent[2], extent[3])
+        bounds.append(np.array([[extent[0], extent[2]], [extent[1], extent[3]]]))
     obstacles = log.obstacles()
     for obstacle in obstacles:
         axes.add_patch(
@@ -122,6 +123,7 @@ def _draw_map(axes, log: Log, modes: tuple[np.ndarray, np.ndarray] | None) -> No
             trajectory.x, trajectory.y, "-", color="#111111", lw=1.4, label="driven trajectory", zorder=5
         )
         handles.append(line)
+        bounds.append(np.column_stack((trajectory.x, trajectory.y)))
         handles += _mark_interventions(axes, trajectory, modes)
     start, goal = log.start(), log.goal()
     if start is not None:
@@ -146,6 +148,16 @@ def _draw_map(axes, log: Log, modes: tuple[np.ndarray, np.ndarray] | None) -> No
         handles.append(
             Line2D([], [], marker="*", color="#e76f51", ls="none", ms=13, label="goal (tolerance circle)")
         )
+    for point in (start, goal):
+        if point is not None:
+            bounds.append(np.array([point[:2]]))
+    if plan is not None and len(plan):
+        bounds.append(plan)
+    if bounds:
+        low, high = np.min(np.vstack(bounds), axis=0), np.max(np.vstack(bounds), axis=0)
+        margin = 0.03 * max(float(np.max(high - low)), 1.0)
+        axes.set_xlim(low[0] - margin, high[0] + margin)
+        axes.set_ylim(low[1] - margin, high[1] + margin)
     if grid is None and trajectory is None:
         axes.text(
             0.5,
