@@ -111,10 +111,15 @@ class Written:
 
 
 def write_log(
-    path: Path, steps: int = STEPS, outcome: dict | None = None, change: dict | None = None
+    path: Path,
+    steps: int = STEPS,
+    outcome: dict | None = None,
+    change: dict | None = None,
+    flush_every: int = 0,
 ) -> Written:
     """Write the synthetic run to `path`. `change` = {component: delta} adds delta to every value
-    of that component (a 'run with one parameter changed')."""
+    of that component (a 'run with one parameter changed'); `flush_every` > 0 ends a chunk every
+    that many steps."""
     change = change or {}
     written = Written(Path(path), t_ns=np.arange(steps, dtype=np.int64) * STEP_NS)
     with Recorder(path) as recorder:
@@ -139,6 +144,8 @@ def write_log(
             recorder.write_cmd_vel(t_ns, SPEED, SPEED / RADIUS)
             if k % SCAN_EVERY == 0:
                 recorder.write_scan(t_ns, ANGLES, scan_at(k), RANGE_MIN, RANGE_MAX)
+            if flush_every and k % flush_every == flush_every - 1:
+                recorder.flush()
         recorder.close(OUTCOME if outcome is None else outcome)
     written.signals = {name: np.array(rows) for name, rows in records.items()}
     return written
