@@ -117,6 +117,8 @@ class FmuComponent(Component):
         parameters: default parameter values by port name (overridden by `setup`).
         port_map: port name -> FMU variable name or {"name": ..., "scale": ...}.
         period: seconds between steps (0 = every macro step).
+        feedthrough_override: output port -> input ports it depends on directly, overriding the FMU's
+            <ModelStructure> (where an output without `dependencies` depends on every input).
     """
 
     def __init__(
@@ -126,6 +128,7 @@ class FmuComponent(Component):
         parameters: Mapping[str, float] | None = None,
         port_map: Mapping[str, object] | None = None,
         period: float = 0.0,
+        feedthrough_override: Mapping[str, list[str]] | None = None,
     ) -> None:
         super().__init__(name, period=period)
         self.path = Path(path)
@@ -166,6 +169,7 @@ class FmuComponent(Component):
                     for d in unknown.dependencies
                     if d.causality == "input" and d.name in port_of
                 ]
+        feedthrough.update(feedthrough_override or {})
         self._set_ports(ports["input"], ports["output"], ports["parameter"], feedthrough)
         self._plan_transfers()
         self._slave = None
@@ -236,8 +240,8 @@ class FmuComponent(Component):
             step = ["def do_step(t, h):", "    status = raw(handle, t, h, True, *flags)"]
         step.append(f"    if status > 1: fail(status, 'fmi{self.fmi_version}DoStep', t)")
         if self.fmi_version == 3:
-            step.append("    if terminate_requested.value: asked_to_terminate(t)")
-            names.update(flags=self._do_step_flags, terminate_requested=self._terminate_requested)
+            step.append("    if step_flags[1]: asked_to_terminate(t)")
+            names.update(flags=self._do_step_flags, step_flags=self._step_flags)
             names["asked_to_terminate"] = self._asked_to_terminate
         names["raw"] = self._raw_do_step
         exec("\n".join(push + pull + step), names)  # noqa: S102 - generated from our own templates
@@ -353,12 +357,12 @@ class FmuComponent(Component):
                 c_int, c_void_p, c_double, c_double, ctypes.c_bool, flag, flag, flag, ctypes.POINTER(c_double)
             )
             self._raw_do_step = prototype(("fmi3DoStep", dll))
-            self._terminate_requested = ctypes.c_bool()
-            self._do_step_flags = (
-                ctypes.pointer(ctypes.c_bool()),
-                ctypes.pointer(self._terminate_requested),
-                ctypes.pointer(ctypes.c_bool()),
-                ctypes.pointer(ctypes.c_double()),
+            # eventHandlingNeeded, terminateSimulation, earlyReturn: contiguous for the compiled loop.
+            self._step_flags = (ctypes.c_bool * 3)()
+            self._last_successful_time = ctypes.c_double()
+            first = ctypes.addressof(self._step_flags)
+            self._do_step_flags = tuple(ctypes.cast(first + i, flag) for i in range(3)) + (
+                ctypes.pointer(self._last_successful_time),
             )
 
     def _call_lifecycle(self, function: str, *args) -> None:

@@ -37,8 +37,9 @@ An output `P.o` is *direct* when it depends directly on at least one of P's inpu
 
 Initialisation runs in an order where a producer comes before a consumer whose input feeds one of
 the consumer's outputs directly (so a controller's initial outputs see the vehicle's initial
-pose); each component gathers its inputs, initialises and has its outputs read. Jacobi mode uses
-the same initialisation.
+pose); each component gathers its inputs from the producers already initialised (other inputs
+keep their start values), initialises, and has its outputs read. Jacobi mode uses the same
+initialisation.
 
 Failures
 --------
@@ -56,6 +57,7 @@ from fractions import Fraction
 
 import numpy as np
 
+from cosim import fast_loop
 from cosim.component import Component, State, closest_names
 from cosim.errors import CosimError
 
@@ -63,6 +65,8 @@ NS_PER_S = 1_000_000_000
 MODES = ("gauss-seidel", "jacobi")
 # Below this many values from one producer, per-value ctypes copies beat one NumPy fancy-index copy.
 _SCALAR_COPY_LIMIT = 4
+# Compiling the loop of an FMU-only system costs about a second; worth it for long runs only.
+COMPILED_MIN_STEPS = 200_000
 
 
 def seconds_to_ns(seconds: float | Fraction | int, what: str) -> int:
@@ -219,7 +223,11 @@ class System:
                     iterators.pop()
                 elif colour.get(node) == 1:
                     loop = path[path.index(node) :] + [node]
-                    raise CosimError("algebraic loop (direct feedthrough only): " + " -> ".join(loop))
+                    raise CosimError(
+                        "algebraic loop (direct feedthrough only): "
+                        + " -> ".join(loop)
+                        + "; an FMU output without declared dependencies depends on every input"
+                    )
                 elif not colour.get(node):
                     colour[node] = 1
                     path.append(node)
@@ -249,10 +257,12 @@ class System:
 class _Gather:
     """Copies a consumer's connected inputs from its producers' output buffers."""
 
-    def __init__(self, system: System, consumer: Component) -> None:
+    def __init__(self, system: System, consumer: Component, producers: set[str] | None = None) -> None:
         groups: dict[str, list[tuple[int, int, float]]] = {}
         for connection in system.connections:
             if connection.target_component != consumer.name:
+                continue
+            if producers is not None and connection.source_component not in producers:
                 continue
             producer, source_index = system.resolve(connection.source, "output")
             _, target_index = system.resolve(connection.target, "input")
@@ -308,6 +318,7 @@ class Master:
         self.failure: CosimError | None = None
         self._initialized = False
         self._closed = False
+        self._compiled_loop = None
         self._plan = [
             (component, system.period_steps(component), _Gather(system, component))
             for component in self.order
@@ -337,12 +348,13 @@ class Master:
                 component.instantiate()
             for component in self.order:
                 component.setup(t0, self.parameters.get(component.name, {}))
-            gathers = {component.name: gather for component, _, gather in self._plan}
+            ready: set[str] = set()
             for component in self.system.initialization_order():
-                gathers[component.name]()
+                _Gather(self.system, component, producers=ready)()
                 component.push_inputs()
                 component.initialize()
                 component.get_outputs()
+                ready.add(component.name)
         except BaseException:
             self.close()
             raise
@@ -359,23 +371,56 @@ class Master:
         self._check_running()
         self._advance(1)
 
-    def run(self, steps: int, callback: Callable[[Master], bool | None] | None = None) -> int:
+    def run(
+        self,
+        steps: int,
+        callback: Callable[[Master], bool | None] | None = None,
+        compiled: bool | None = None,
+    ) -> int:
         """Advance `steps` macro steps; return the number done.
 
         With `callback`, it is called after every step and a true return stops early. Without
-        it the loop has no per-step Python callback (the fast path for benchmarks).
+        it the loop has no per-step Python callback, and a system made only of FMUs with plain
+        real ports runs in a compiled loop (`cosim.fast_loop`): `compiled=None` chooses it for
+        runs of at least `COMPILED_MIN_STEPS`, True forces it where possible, False never.
         """
         self._check_running()
         if steps < 0:
             raise CosimError(f"number of steps must be >= 0, got {steps}")
         if callback is None:
-            self._advance(steps)
+            wanted = steps >= COMPILED_MIN_STEPS if compiled is None else compiled
+            if wanted and fast_loop.eligible(self):
+                self._run_compiled(steps)
+            else:
+                self._advance(steps)
             return steps
         for done in range(1, steps + 1):
             self._advance(1)
             if callback(self):
                 return done
         return steps
+
+    def _run_compiled(self, steps: int) -> None:
+        if self._compiled_loop is None:
+            self._compiled_loop = fast_loop.compile_loop(self)
+        next_step, failed, call, status = self._compiled_loop(self.step_index, steps)
+        self.step_index = next_step
+        if failed < 0:
+            return
+        component = self.order[failed]
+        try:
+            if call == 3:
+                component._asked_to_terminate(self.time)
+            function = ("Set", "DoStep", "Get")[call]
+            function = f"fmi{component.fmi_version}{function}{'Real' if call != 1 else ''}"
+            component._fail(
+                status,
+                function.replace("3SetReal", "3SetFloat64").replace("3GetReal", "3GetFloat64"),
+                self.time,
+            )
+        except CosimError as error:
+            self.failure = error
+            raise
 
     def _advance(self, steps: int) -> None:
         plan = self._plan
