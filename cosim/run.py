@@ -103,7 +103,13 @@ class _Recording:
                 continue
             channel = recorder.signal_channel(component.name, names)
             self.entries.append(
-                (component, system.period_steps(component), channel, np.array(inputs), np.array(outputs))
+                (
+                    component,
+                    system.period_steps(component),
+                    channel,
+                    np.array(inputs, dtype=np.intp),
+                    np.array(outputs, dtype=np.intp),
+                )
             )
         vehicle = system.components["vehicle"]
         self.vehicle_out = vehicle.output_buffer

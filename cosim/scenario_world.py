@@ -12,7 +12,6 @@ import math
 
 import numpy as np
 from scipy.ndimage import distance_transform_edt
-from scipy.spatial import cKDTree
 
 from cosim.errors import CosimError
 from cosim.world import Circle, Obstacle
@@ -49,7 +48,102 @@ def distance_to_obstacle(x: float, y: float, obstacle: Obstacle) -> float:
     """Exact distance [m] from (x, y) to the shape; 0 inside it."""
     if isinstance(obstacle, Circle):
         return max(0.0, math.hypot(x - obstacle.center[0], y - obstacle.center[1]) - obstacle.radius)
-    vertices = obstacle.polygon()
+    return _polygon_distance(x, y, [(float(vx), float(vy)) for vx, vy in obstacle.polygon()])
+
+
+class WorldDistance:
+    """Exact distance [m] from a point to the nearest true obstacle (grid cells + unknown shapes).
+
+    Speed: a per-cell field of the distance from each cell centre to the nearest occupied cell
+    centre bounds the search. `lower_bound` is cheap; `distance` looks only at the occupied cells
+    of a small window that must contain the nearest one, as exact point-to-square distances.
+    """
+
+    def __init__(self, grid: OccupancyGrid, obstacles: tuple[Obstacle, ...] = ()):
+        self.grid = grid
+        self.resolution = grid.resolution
+        self.half = grid.resolution / 2.0
+        rows, cols = grid.shape
+        self.rows, self.cols = rows, cols
+        self.occupied = grid.occupied
+        # Distance [m] from each cell centre to the nearest occupied cell centre (0 on occupied cells).
+        if grid.occupied.any():
+            self.centre_field = distance_transform_edt(~grid.occupied) * grid.resolution
+        else:
+            self.centre_field = np.full(grid.shape, np.inf)
+        self.x_min, self.y_min = grid.origin
+        self.x_max = self.x_min + cols * grid.resolution
+        self.y_max = self.y_min + rows * grid.resolution
+        self.obstacles = obstacles
+        self.circles = [(o.center[0], o.center[1], o.radius) for o in obstacles if isinstance(o, Circle)]
+        self.polygons = [
+            [(float(x), float(y)) for x, y in o.polygon()] for o in obstacles if not isinstance(o, Circle)
+        ]
+        # Bounding circles (centre, radius) of the polygons give cheap lower bounds.
+        self.bounds = list(self.circles)
+        for vertices in self.polygons:
+            cx = sum(x for x, _ in vertices) / len(vertices)
+            cy = sum(y for _, y in vertices) / len(vertices)
+            self.bounds.append((cx, cy, max(math.hypot(x - cx, y - cy) for x, y in vertices)))
+
+    def _cell(self, x: float, y: float) -> tuple[int, int, float]:
+        """(row, col) of the cell holding (x, y) and the distance [m] from (x, y) to its centre."""
+        col = int((x - self.x_min) / self.resolution)
+        row = self.rows - 1 - int((y - self.y_min) / self.resolution)
+        centre_x = self.x_min + (col + 0.5) * self.resolution
+        centre_y = self.y_min + (self.rows - 1 - row + 0.5) * self.resolution
+        return row, col, math.hypot(x - centre_x, y - centre_y)
+
+    def inside_map(self, x: float, y: float) -> bool:
+        return self.x_min <= x < self.x_max and self.y_min <= y < self.y_max
+
+    def lower_bound(self, x: float, y: float) -> float:
+        """A cheap lower bound of `distance(x, y)` [m]."""
+        if not self.inside_map(x, y):
+            return 0.0
+        row, col, offset = self._cell(x, y)
+        # Nearest occupied centre >= field - offset; its square's boundary is at most a half diagonal closer.
+        bound = min(
+            self.centre_field[row, col] - offset - math.sqrt(2.0) * self.half, self.distance_to_edge(x, y)
+        )
+        for cx, cy, radius in self.bounds:
+            bound = min(bound, math.hypot(x - cx, y - cy) - radius)
+        return max(0.0, bound)
+
+    def distance(self, x: float, y: float) -> float:
+        """Exact distance [m] from (x, y) to the nearest true obstacle; 0 inside one or off the map."""
+        if not self.inside_map(x, y):
+            return 0.0
+        best = self.distance_to_edge(x, y)
+        row, col, offset = self._cell(x, y)
+        field = self.centre_field[row, col]
+        if math.isfinite(field):
+            # The nearest centre's square is within field + offset; any square that close has its
+            # centre within that plus a half diagonal, so a window of that reach holds the nearest one.
+            reach = min(best, field + offset) + math.sqrt(2.0) * self.half
+            k = int(math.ceil(reach / self.resolution))
+            top, left = max(row - k, 0), max(col - k, 0)
+            window = self.occupied[top : row + k + 1, left : col + k + 1]
+            cells = np.argwhere(window)
+            if len(cells):
+                centre_x = self.x_min + (cells[:, 1] + left + 0.5) * self.resolution
+                centre_y = self.y_min + (self.rows - 1 - (cells[:, 0] + top) + 0.5) * self.resolution
+                dx = np.maximum(np.abs(centre_x - x) - self.half, 0.0)
+                dy = np.maximum(np.abs(centre_y - y) - self.half, 0.0)
+                best = min(best, float(np.sqrt(np.min(dx * dx + dy * dy))))
+        for cx, cy, radius in self.circles:
+            best = min(best, max(0.0, math.hypot(x - cx, y - cy) - radius))
+        for vertices in self.polygons:
+            best = min(best, _polygon_distance(x, y, vertices))
+        return best
+
+    def distance_to_edge(self, x: float, y: float) -> float:
+        """Distance [m] to the edge of the map (beyond it counts as obstacle)."""
+        return min(x - self.x_min, self.x_max - x, y - self.y_min, self.y_max - y)
+
+
+def _polygon_distance(x: float, y: float, vertices) -> float:
+    """Exact distance [m] from (x, y) to a polygon given as a list of (x, y); 0 inside."""
     if point_in_polygon(x, y, vertices):
         return 0.0
     best = math.inf
@@ -62,74 +156,6 @@ def distance_to_obstacle(x: float, y: float, obstacle: Obstacle) -> float:
         t = 0.0 if length_sq == 0 else min(1.0, max(0.0, ((x - ax) * dx + (y - ay) * dy) / length_sq))
         best = min(best, math.hypot(x - ax - t * dx, y - ay - t * dy))
     return best
-
-
-class WorldDistance:
-    """Exact distance [m] from a point to the nearest true obstacle (grid cells + unknown shapes).
-
-    Speed: a per-cell distance field gives a cheap lower bound; the exact computation (KD-tree of
-    occupied cell centres, then point-to-square distances of the candidates) runs only when that
-    bound is below `exact_below`, so a run pays for exactness only near obstacles.
-    """
-
-    def __init__(self, grid: OccupancyGrid, obstacles: tuple[Obstacle, ...] = ()):
-        self.grid = grid
-        self.half = grid.resolution / 2.0
-        rows, cols = grid.shape
-        occupied_cells = np.argwhere(grid.occupied)
-        self.centres = grid.cells_to_world(occupied_cells) if len(occupied_cells) else np.empty((0, 2))
-        self.tree = cKDTree(self.centres) if len(self.centres) else None
-        # Distance [m] from each cell centre to the nearest occupied cell centre (0 on occupied cells).
-        if grid.occupied.any():
-            self.centre_field = distance_transform_edt(~grid.occupied) * grid.resolution
-        else:
-            self.centre_field = np.full(grid.shape, np.inf)
-        self.x_min, self.y_min = grid.origin
-        self.x_max = self.x_min + cols * grid.resolution
-        self.y_max = self.y_min + rows * grid.resolution
-        self.obstacles = obstacles
-        # Bounding circles (centre, radius) give lower bounds for the unknown shapes.
-        self.bounds = []
-        for obstacle in obstacles:
-            vertices = obstacle.polygon()
-            centre = vertices.mean(axis=0)
-            radius = float(np.max(np.hypot(*(vertices - centre).T)))
-            if isinstance(obstacle, Circle):
-                centre, radius = np.asarray(obstacle.center), obstacle.radius
-            self.bounds.append((float(centre[0]), float(centre[1]), radius))
-
-    def lower_bound(self, x: float, y: float) -> float:
-        """A cheap lower bound of `distance(x, y)` [m]."""
-        if not (self.x_min <= x < self.x_max and self.y_min <= y < self.y_max):
-            return 0.0
-        row, col = self.grid.world_to_cell((x, y))
-        # The nearest occupied square is at least (centre distance - |p - cell centre| - half diagonal) away.
-        bound = min(self.centre_field[row, col] - 2.0 * math.sqrt(2.0) * self.half, self.distance_to_edge(x, y))
-        for cx, cy, radius in self.bounds:
-            bound = min(bound, math.hypot(x - cx, y - cy) - radius)
-        return max(0.0, bound)
-
-    def distance(self, x: float, y: float) -> float:
-        """Exact distance [m] from (x, y) to the nearest true obstacle; 0 inside one or off the map."""
-        if not (self.x_min <= x < self.x_max and self.y_min <= y < self.y_max):
-            return 0.0
-        best = self.distance_to_edge(x, y)
-        if self.tree is not None:
-            centre_distance, _ = self.tree.query((x, y))
-            # Every square within reach has its centre within best + half diagonal.
-            best = min(best, centre_distance)
-            candidates = self.centres[self.tree.query_ball_point((x, y), best + math.sqrt(2.0) * self.half)]
-            if len(candidates):
-                dx = np.maximum(np.abs(candidates[:, 0] - x) - self.half, 0.0)
-                dy = np.maximum(np.abs(candidates[:, 1] - y) - self.half, 0.0)
-                best = min(best, float(np.min(np.hypot(dx, dy))))
-        for obstacle in self.obstacles:
-            best = min(best, distance_to_obstacle(x, y, obstacle))
-        return best
-
-    def distance_to_edge(self, x: float, y: float) -> float:
-        """Distance [m] to the edge of the map (beyond it counts as obstacle)."""
-        return min(x - self.x_min, self.x_max - x, y - self.y_min, self.y_max - y)
 
 
 def check_start_goal(scenario) -> None:
