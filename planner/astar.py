@@ -3,19 +3,19 @@
 Data layout (why it is fast): the map is flattened to 1-D with a one-cell blocked border, so a
 neighbour is `node + offset` with no bounds test. `blocked` holds 0 = free, 1 = obstacle /
 inflated / border, 2 = *untrusted point* (a free cell with an obstacle among its 8 neighbours).
-g, parent, heap position and a per-cell `stamp` live in arrays that are reused from query to
-query: `stamp[n] == generation` means n is in OPEN, `generation + 1` means CLOSED, anything else
-means unseen, so a new query costs no clearing of grid-size arrays.
+g, parent and a per-cell `stamp` live in arrays that are reused from query to query:
+`stamp[n] == generation` means n is in OPEN, `generation + 1` means CLOSED, anything else means
+unseen, so a new query costs no clearing of grid-size arrays.
 
-OPEN is an indexed binary heap (node, key, secondary key, and each node's heap position) with
-keys f = g + h. The thesis's second improvement ("OPEN-list replacement") is a decrease-key: a
-node reached again with a lower g gets the new g, parent and key in place. Without it the node
-keeps its old key, as in plannerAStarGrid (g, f and parent change, the heap does not).
+OPEN is a binary heap of (int64 key, node); the key packs f = g + h (rounded to 2^-24 cell) over h
+(quarter cells), so one integer comparison orders by f and, among equal f, by smaller h (the
+"low_h" tie breaker, which keeps optimality; rounding f puts ties that octile costs make equal in
+exact arithmetic on the same key). The thesis's second improvement, OPEN-list replacement, is a
+decrease-key done lazily: a node reached again with a lower g gets the new g and parent and is
+pushed again with its lower key; the stale entry is skipped when popped. Without it
+(`decrease_key=False`) g, f and parent change but the key in OPEN does not, as in plannerAStarGrid.
 
 Costs are in cells here (straight 1, diagonal sqrt 2); the caller multiplies by the resolution.
-f is rounded to 2^-30 cell before comparison so that equal-f ties (frequent with octile costs, but
-split by rounding noise) are broken by the secondary key; the rounding costs at most ~1e-9 cell per
-node of optimality.
 """
 
 from __future__ import annotations
@@ -30,15 +30,19 @@ TIE_BREAKERS = {"none": 0, "matlab": 1, "low_h": 2}
 FREE, BLOCKED, UNTRUSTED = 0, 1, 2
 
 SQRT2 = math.sqrt(2.0)
-_QUANTUM = 1073741824.0  # 2^30: f is compared on a 2^-30 cell grid
+# Heap keys pack f (2^-24 cell steps, up to 2^23 cells) over h (quarter cells, saturating at 2^14).
+_H_BITS = 16
+_F_SCALE = float(2**24)
+_H_SCALE = 4.0
+_H_MAX = 2**16 - 1
 
 
 @njit(cache=True, inline="always")
-def heuristic_cells(node, goal_row, goal_col, width, kind):
-    """h in cells between padded node and goal: 3.1 Manhattan, 3.2 Euclid, 3.3 Chebyshev,
-    3.4 octile (diagonal), 3.6 the thesis's Euclid + 2 Chebyshev, or 0."""
-    dr = abs(node // width - goal_row)
-    dc = abs(node % width - goal_col)
+def heuristic_cells(row_offset, col_offset, kind):
+    """h in cells for a (row, col) offset to the goal: 3.1 Manhattan, 3.2 Euclid, 3.3 Chebyshev,
+    3.4 octile (diagonal distance), 3.6 the thesis's Euclid + 2 Chebyshev, or 0."""
+    dr = abs(row_offset)
+    dc = abs(col_offset)
     if kind == 3:
         if dr > dc:
             return dr + (SQRT2 - 1.0) * dc
@@ -55,81 +59,66 @@ def heuristic_cells(node, goal_row, goal_col, width, kind):
 
 
 @njit(cache=True, inline="always")
-def _less(key_a, second_a, key_b, second_b):
-    return key_a < key_b or (key_a == key_b and second_a < second_b)
-
-
-@njit(cache=True)
-def heap_sift_up(heap_node, heap_key, heap_second, heap_pos, index):
-    node = heap_node[index]
-    key = heap_key[index]
-    second = heap_second[index]
+def heap_push(heap_key, heap_node, size, key, node):
+    """Push (key, node) on the binary min-heap (the caller checks the capacity); returns the new size."""
+    index = size
     while index > 0:
         parent = (index - 1) >> 1
-        if not _less(key, second, heap_key[parent], heap_second[parent]):
+        if heap_key[parent] <= key:
             break
-        heap_node[index] = heap_node[parent]
         heap_key[index] = heap_key[parent]
-        heap_second[index] = heap_second[parent]
-        heap_pos[heap_node[index]] = index
+        heap_node[index] = heap_node[parent]
         index = parent
-    heap_node[index] = node
     heap_key[index] = key
-    heap_second[index] = second
-    heap_pos[node] = index
-
-
-@njit(cache=True)
-def heap_push(heap_node, heap_key, heap_second, heap_pos, size, node, key, second):
-    heap_node[size] = node
-    heap_key[size] = key
-    heap_second[size] = second
-    heap_sift_up(heap_node, heap_key, heap_second, heap_pos, size)
+    heap_node[index] = node
     return size + 1
 
 
-@njit(cache=True)
-def heap_pop(heap_node, heap_key, heap_second, heap_pos, size):
-    """Remove the top; returns (node, new size)."""
+@njit(cache=True, inline="always")
+def heap_pop(heap_key, heap_node, size):
+    """Remove the top of the heap; returns (node, new size)."""
     top = heap_node[0]
     size -= 1
-    if size == 0:
-        return top, size
-    node = heap_node[size]
     key = heap_key[size]
-    second = heap_second[size]
+    node = heap_node[size]
     index = 0
     while True:
         child = 2 * index + 1
         if child >= size:
             break
-        right = child + 1
-        if right < size and _less(heap_key[right], heap_second[right], heap_key[child], heap_second[child]):
-            child = right
-        if not _less(heap_key[child], heap_second[child], key, second):
+        if child + 1 < size and heap_key[child + 1] < heap_key[child]:
+            child += 1
+        if heap_key[child] >= key:
             break
-        heap_node[index] = heap_node[child]
         heap_key[index] = heap_key[child]
-        heap_second[index] = heap_second[child]
-        heap_pos[heap_node[index]] = index
+        heap_node[index] = heap_node[child]
         index = child
-    heap_node[index] = node
     heap_key[index] = key
-    heap_second[index] = second
-    heap_pos[node] = index
+    heap_node[index] = node
     return top, size
+
+
+@njit(cache=True, inline="always")
+def heap_key_of(f, h, tie_breaker):
+    """One int64 key: f on a 2^-24 cell grid in the high bits, h (quarter cells) below for low_h ties."""
+    key = np.int64(f * _F_SCALE + 0.5) << _H_BITS
+    if tie_breaker == 2:
+        key += min(np.int64(h * _H_SCALE + 0.5), _H_MAX)
+    return key
 
 
 @njit(cache=True)
 def neighbour_tables(width):
-    """Offsets, step lengths [cells] and the two orthogonal offsets of each diagonal move.
+    """Offsets, row/col steps, lengths [cells] and the two orthogonal offsets of each move.
 
-    Order: the 4 straight moves first, so 4-connectivity uses the first 4 entries."""
+    The 4 straight moves come first, so 4-connectivity uses the first 4 entries."""
     offsets = np.array([-width, width, -1, 1, -width - 1, -width + 1, width - 1, width + 1], dtype=np.int64)
+    row_steps = np.array([-1, 1, 0, 0, -1, -1, 1, 1], dtype=np.int64)
+    col_steps = np.array([0, 0, -1, 1, -1, 1, -1, 1], dtype=np.int64)
     steps = np.array([1.0, 1.0, 1.0, 1.0, SQRT2, SQRT2, SQRT2, SQRT2])
     side_a = np.array([0, 0, 0, 0, -width, -width, width, width], dtype=np.int64)
     side_b = np.array([0, 0, 0, 0, -1, 1, -1, 1], dtype=np.int64)
-    return offsets, steps, side_a, side_b
+    return offsets, row_steps, col_steps, steps, side_a, side_b
 
 
 @njit(cache=True)
@@ -148,21 +137,22 @@ def astar_search(
     cost,
     cost_weight,
     g,
-    parent,
-    stamp,
+    nodes,
     generation,
-    heap_node,
     heap_key,
-    heap_second,
-    heap_pos,
-    expanded,
+    heap_node,
 ):
     """A* (or Dijkstra with heuristic 5 and goal -1) on a padded flat grid.
 
-    Fills g [cells], parent, stamp and `expanded` (nodes in the order they were closed). Returns
-    (goal reached, number of expanded nodes). With goal == -1 the search runs until OPEN is empty.
+    nodes: int32 [3, size] = parent, stamp, and the expanded nodes in the order they were closed.
+    Returns (status, number of expanded nodes): status 1 = goal reached, 0 = OPEN ran empty (no
+    path; with goal == -1, the Dijkstra mode, this is the normal end), -1 = the heap arrays are
+    full: give larger ones and search again (growing them here would slow every push down).
     """
-    offsets, steps, side_a, side_b = neighbour_tables(width)
+    parent = nodes[0]
+    stamp = nodes[1]
+    expanded = nodes[2]
+    offsets, row_steps, col_steps, steps, side_a, side_b = neighbour_tables(width)
     directions = 8 if connectivity == 8 else 4
     goal_row = goal // width if goal >= 0 else 0
     goal_col = goal % width if goal >= 0 else 0
@@ -173,24 +163,28 @@ def astar_search(
     g[start] = 0.0
     parent[start] = start
     stamp[start] = generation
-    h0 = heuristic_cells(start, goal_row, goal_col, width, heuristic) * h_scale
-    size = heap_push(heap_node, heap_key, heap_second, heap_pos, 0, start, math.floor(h0 * _QUANTUM + 0.5), 0.0)
+    h_start = heuristic_cells(start // width - goal_row, start % width - goal_col, heuristic) * h_scale
+    capacity = len(heap_key)
+    size = heap_push(heap_key, heap_node, 0, heap_key_of(h_start, h_start, tie_breaker), start)
     searched = 0
     while size > 0:
-        node, size = heap_pop(heap_node, heap_key, heap_second, heap_pos, size)
+        node, size = heap_pop(heap_key, heap_node, size)
+        if stamp[node] == closed:
+            continue  # a stale entry left behind by a decrease-key
         stamp[node] = closed
         expanded[searched] = node
         searched += 1
         if node == goal:
-            return True, searched
+            return 1, searched
         g_node = g[node]
+        row_offset = node // width - goal_row
+        col_offset = node % width - goal_col
         for k in range(directions):
             neighbour = node + offsets[k]
             state = blocked[neighbour]
-            if state == 1:
-                continue
-            if state == 2 and untrusted and neighbour != goal:
-                continue
+            if state != 0:  # one predictable test for the common free cell
+                if state == 1 or (untrusted and neighbour != goal):
+                    continue
             seen = stamp[neighbour]
             if seen == closed:
                 continue
@@ -202,61 +196,60 @@ def astar_search(
                 step *= 1.0 + cost_weight * cost[neighbour]
             g_new = g_node + step
             if seen == generation:
-                if g_new < g[neighbour]:
-                    g[neighbour] = g_new
-                    parent[neighbour] = node
-                    if decrease_key:
-                        h = heuristic_cells(neighbour, goal_row, goal_col, width, heuristic) * h_scale
-                        index = heap_pos[neighbour]
-                        heap_key[index] = math.floor((g_new + h) * _QUANTUM + 0.5)
-                        heap_second[index] = h if tie_breaker == 2 else 0.0
-                        heap_sift_up(heap_node, heap_key, heap_second, heap_pos, index)
+                if g_new >= g[neighbour]:
+                    continue
+                g[neighbour] = g_new
+                parent[neighbour] = node
+                if not decrease_key:
+                    continue  # plannerAStarGrid: g, f and parent change, the key in OPEN does not
             else:
                 stamp[neighbour] = generation
                 g[neighbour] = g_new
                 parent[neighbour] = node
-                h = heuristic_cells(neighbour, goal_row, goal_col, width, heuristic) * h_scale
-                size = heap_push(
-                    heap_node,
-                    heap_key,
-                    heap_second,
-                    heap_pos,
-                    size,
-                    neighbour,
-                    math.floor((g_new + h) * _QUANTUM + 0.5),
-                    h if tie_breaker == 2 else 0.0,
-                )
-    return False, searched
+            if size == capacity:
+                return -1, searched
+            h = heuristic_cells(row_offset + row_steps[k], col_offset + col_steps[k], heuristic) * h_scale
+            size = heap_push(heap_key, heap_node, size, heap_key_of(g_new + h, h, tie_breaker), neighbour)
+    return 0, searched
 
 
 @njit(cache=True)
-def trace_path(parent, start, goal, width, cols):
-    """Cells (row, col) from start to goal by following parents, and their length [cells]."""
-    count = 1
-    node = goal
-    while node != start:
-        node = parent[node]
-        count += 1
+def finish(nodes, start, goal, found, searched, width, rows, cols, resolution, origin_x, origin_y):
+    """The path of a finished search and the explored mask.
+
+    Returns (cells N x 2 row/col, path N x 2 x/y [m] of cell centres, length [m], explored bool
+    [rows, cols]); with found False the cells and path are empty.
+    """
+    parent = nodes[0]
+    expanded = nodes[2]
+    explored = np.zeros((rows, cols), dtype=np.bool_)
+    for index in range(searched):
+        node = expanded[index]
+        explored[node // width - 1, node % width - 1] = True
+    count = 0
+    if found:
+        count = 1
+        node = goal
+        while node != start:
+            node = parent[node]
+            count += 1
     cells = np.empty((count, 2), dtype=np.int64)
-    node = goal
+    path = np.empty((count, 2))
     length = 0.0
+    node = goal
     for index in range(count - 1, -1, -1):
-        cells[index, 0] = node // width - 1
-        cells[index, 1] = node % width - 1
+        row = node // width - 1
+        col = node % width - 1
+        cells[index, 0] = row
+        cells[index, 1] = col
+        path[index, 0] = origin_x + (col + 0.5) * resolution
+        path[index, 1] = origin_y + (rows - 1 - row + 0.5) * resolution
         previous = parent[node]
         if node != start:
             difference = abs(previous - node)
-            length += 1.0 if difference == 1 or difference == width else SQRT2
+            length += resolution if difference == 1 or difference == width else SQRT2 * resolution
         node = previous
-    return cells, length
-
-
-@njit(cache=True)
-def mark_explored(expanded, count, width, cols, explored_flat):
-    """Set explored_flat[row * cols + col] for the first `count` padded nodes of `expanded`."""
-    for index in range(count):
-        node = expanded[index]
-        explored_flat[(node // width - 1) * cols + node % width - 1] = True
+    return cells, path, length, explored
 
 
 @njit(cache=True)
@@ -270,3 +263,67 @@ def unpad_distances(g, stamp, closed, rows, cols, resolution):
             if stamp[base + col] == closed:
                 result[row, col] = g[base + col] * resolution
     return result
+
+
+@njit(cache=True)
+def astar_plan(
+    blocked,
+    width,
+    start,
+    goal,
+    connectivity,
+    corner_cutting,
+    heuristic,
+    heuristic_weight,
+    tie_breaker,
+    decrease_key,
+    untrusted,
+    cost,
+    cost_weight,
+    g,
+    nodes,
+    generation,
+    heap_key,
+    heap_node,
+    rows,
+    cols,
+    resolution,
+    origin_x,
+    origin_y,
+):
+    """astar_search then finish in one compiled call (one dispatch: small maps answer in microseconds).
+
+    Returns (status, searched, cells, path [m], length [m], explored)."""
+    status, searched = astar_search(
+        blocked,
+        width,
+        start,
+        goal,
+        connectivity,
+        corner_cutting,
+        heuristic,
+        heuristic_weight,
+        tie_breaker,
+        decrease_key,
+        untrusted,
+        cost,
+        cost_weight,
+        g,
+        nodes,
+        generation,
+        heap_key,
+        heap_node,
+    )
+    if status < 0:
+        return (
+            status,
+            searched,
+            np.empty((0, 2), dtype=np.int64),
+            np.empty((0, 2)),
+            0.0,
+            np.zeros((0, 0), np.bool_),
+        )
+    cells, path, length, explored = finish(
+        nodes, start, goal, status == 1, searched, width, rows, cols, resolution, origin_x, origin_y
+    )
+    return status, searched, cells, path, length, explored

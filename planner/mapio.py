@@ -44,7 +44,9 @@ def load_map(path: str | Path, **options) -> OccupancyGrid:
         return OccupancyGrid(read_image_occupancy(path, **options), resolution, origin)
     if suffix == ".npy":
         _reject_options(path, options, ("resolution", "origin"))
-        return OccupancyGrid(read_npy(path), options.get("resolution", 1.0), options.get("origin", (0.0, 0.0)))
+        return OccupancyGrid(
+            read_npy(path), options.get("resolution", 1.0), options.get("origin", (0.0, 0.0))
+        )
     raise PlannerError(f"{path}: unknown map format {suffix!r} (use .yaml, .map, .png, .pgm or .npy)")
 
 
@@ -52,7 +54,9 @@ def _reject_options(path: Path, options: dict, allowed: tuple[str, ...]) -> None
     unknown = sorted(set(options) - set(allowed))
     if unknown:
         what = ", ".join(allowed) if allowed else "none"
-        raise PlannerError(f"{path}: option(s) {', '.join(unknown)} not valid for this format (valid: {what})")
+        raise PlannerError(
+            f"{path}: option(s) {', '.join(unknown)} not valid for this format (valid: {what})"
+        )
 
 
 # -- Moving AI ------------------------------------------------------------------------------------
@@ -121,7 +125,9 @@ def read_image_occupancy(
     occupied_thresh = _probability(path, "occupied_thresh", occupied_thresh)
     free_thresh = _probability(path, "free_thresh", free_thresh)
     if free_thresh > occupied_thresh:
-        raise PlannerError(f"{path}: free_thresh {free_thresh} must not exceed occupied_thresh {occupied_thresh}")
+        raise PlannerError(
+            f"{path}: free_thresh {free_thresh} must not exceed occupied_thresh {occupied_thresh}"
+        )
     gray = _image_gray(path)
     probability = gray / 255.0 if negate else (255.0 - gray) / 255.0
     return ~(probability < free_thresh)
@@ -145,7 +151,9 @@ def read_npy(path: Path) -> np.ndarray:
         raise PlannerError(f"{path}: unreadable .npy ({error})") from None
     if array.ndim != 2:
         raise PlannerError(f"{path}: .npy map must be 2-D, got shape {array.shape}")
-    if array.dtype != np.bool_ and not (np.issubdtype(array.dtype, np.number) and np.isin(array, (0, 1)).all()):
+    if array.dtype != np.bool_ and not (
+        np.issubdtype(array.dtype, np.number) and np.isin(array, (0, 1)).all()
+    ):
         raise PlannerError(f"{path}: .npy map must hold bool or 0/1 values (1 = occupied)")
     return array.astype(bool)
 

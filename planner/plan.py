@@ -47,7 +47,7 @@ import time
 
 import numpy as np
 
-from planner.astar import HEURISTICS, TIE_BREAKERS, astar_search, mark_explored, trace_path, unpad_distances
+from planner.astar import HEURISTICS, TIE_BREAKERS, astar_plan, astar_search, unpad_distances
 from planner.errors import PlannerError
 from planner.grid import OccupancyGrid
 from planner.result import PlanResult
@@ -110,14 +110,39 @@ def _number(name: str, value, minimum: float = 0.0, strict: bool = False) -> flo
         number = float(value)
     except (TypeError, ValueError):
         raise PlannerError(f"option {name} must be a number, got {value!r}") from None
-    if isinstance(value, bool) or not math.isfinite(number) or number < minimum or (strict and number == minimum):
+    if (
+        isinstance(value, bool)
+        or not math.isfinite(number)
+        or number < minimum
+        or (strict and number == minimum)
+    ):
         bound = ">" if strict else ">="
         raise PlannerError(f"option {name} must be a finite number {bound} {minimum}, got {value!r}")
     return number
 
 
+_resolved_cache: dict[tuple, dict] = {}
+
+
 def resolve_options(options: dict) -> dict:
-    """Defaults, then the preset, then explicit options; every name and value checked."""
+    """Defaults, then the preset, then explicit options; every name and value checked.
+
+    The result is cached per option set (queries in a loop repeat them); do not modify it.
+    """
+    try:
+        key = tuple(sorted((name, type(value), value) for name, value in options.items()))
+        cached = _resolved_cache.get(key)
+    except TypeError:  # an unhashable value: check it the slow way
+        key, cached = None, None
+    if cached is not None:
+        return cached
+    resolved = _resolve(options)
+    if key is not None and len(_resolved_cache) < 256:
+        _resolved_cache[key] = resolved
+    return resolved
+
+
+def _resolve(options: dict) -> dict:
     unknown = [name for name in options if name not in DEFAULTS]
     if unknown:
         name = unknown[0]
@@ -203,23 +228,19 @@ def plan(grid: OccupancyGrid, start, goal, **options) -> PlanResult:
     if settings["planner"] == "bidirectional":
         from planner.bidirectional import search_bidirectional
 
-        found, cells, length_cells, searched, elapsed, explored = search_bidirectional(
+        found, cells, path, length, searched, elapsed, explored = search_bidirectional(
             space, start_node, goal_node, settings
         )
-        name = "bidirectional"
     else:
-        found, cells, length_cells, searched, elapsed, explored = _search_astar(
+        found, cells, path, length, searched, elapsed, explored = _search_astar(
             space, start_node, goal_node, settings
         )
-        name = "astar"
     if not found:
         raise PlannerError(
             f"no path from start {tuple(start[:2])} m to goal {tuple(goal[:2])} m "
             f"({searched} cells searched{_settings_note(settings)})"
         )
-    path = grid.cells_to_world(cells)
-    length = length_cells * grid.resolution
-    info = {"configuration": settings["configuration"] or "default", "options": settings}
+    info = {"configuration": settings["configuration"] or "default", "options": dict(settings)}
     if settings["smoothing"] is not None:
         from planner.smoothing import smooth_path
 
@@ -236,7 +257,7 @@ def plan(grid: OccupancyGrid, start, goal, **options) -> PlanResult:
         searched_nodes=searched,
         elapsed=elapsed,
         explored=explored,
-        planner=name,
+        planner=settings["planner"],
         info=info,
     )
 
@@ -252,45 +273,94 @@ def _settings_note(settings: dict) -> str:
     return "; " + ", ".join(notes) if notes else ""
 
 
-def _search_astar(space: SearchMap, start_node: int, goal_node: int, settings: dict):
-    """Run the compiled A*; returns (found, cells, length [cells], searched, elapsed [s], explored)."""
+def run_astar(space: SearchMap, start_node: int, goal_node: int, settings: dict) -> tuple[int, float]:
+    """Run the compiled A* into the shared workspace; returns (status, searched, elapsed [s])."""
     work = workspace(len(space.blocked))
-    generation = work.next_generation()
     cost_weight = settings["cost_weight"]
     cost = space.costs(settings["cost_scaling_factor"]) if cost_weight > 0.0 else no_cost()
-    began = time.perf_counter()
-    found, searched = astar_search(
-        space.blocked,
-        space.width,
-        start_node,
-        goal_node,
-        settings["connectivity"],
-        settings["corner_cutting"],
-        HEURISTICS[settings["heuristic"]],
-        settings["heuristic_weight"],
-        TIE_BREAKERS[settings["tie_breaker"]],
-        settings["decrease_key"],
-        settings["untrusted_points"],
-        cost,
-        cost_weight,
-        work.g,
-        work.parent,
-        work.stamp,
-        generation,
-        work.heap_node,
-        work.heap_key,
-        work.heap_second,
-        work.heap_pos,
-        work.expanded,
-    )
-    elapsed = time.perf_counter() - began
-    explored = np.zeros(space.rows * space.cols, dtype=bool)
-    mark_explored(work.expanded, searched, space.width, space.cols, explored)
-    explored = explored.reshape(space.rows, space.cols)
-    if not found:
-        return False, None, 0.0, searched, elapsed, explored
-    cells, length = trace_path(work.parent, start_node, goal_node, space.width, space.cols)
-    return True, cells, length, searched, elapsed, explored
+    while True:
+        generation = work.next_generation()
+        began = time.perf_counter()
+        status, searched = astar_search(
+            space.blocked,
+            space.width,
+            start_node,
+            goal_node,
+            settings["connectivity"],
+            settings["corner_cutting"],
+            HEURISTICS[settings["heuristic"]],
+            settings["heuristic_weight"],
+            TIE_BREAKERS[settings["tie_breaker"]],
+            settings["decrease_key"],
+            settings["untrusted_points"],
+            cost,
+            cost_weight,
+            work.g,
+            work.nodes,
+            generation,
+            work.heap_key,
+            work.heap_node,
+        )
+        elapsed = time.perf_counter() - began
+        if status >= 0:
+            return status, searched, elapsed
+        work.grow_heap()
+
+
+def _search_astar(space: SearchMap, start_node: int, goal_node: int, settings: dict):
+    """A* and its path; returns (found, cells, path [m], length [m], searched, elapsed [s], explored).
+
+    elapsed covers the search and the path reconstruction (Algorithm 3.1, lines 3-15), which run
+    in one compiled call."""
+    work = workspace(len(space.blocked))
+    cost_weight = settings["cost_weight"]
+    cost = space.costs(settings["cost_scaling_factor"]) if cost_weight > 0.0 else no_cost()
+    grid = space.grid
+    while True:
+        generation = work.next_generation()
+        began = time.perf_counter()
+        status, searched, cells, path, length, explored = astar_plan(
+            space.blocked,
+            space.width,
+            start_node,
+            goal_node,
+            settings["connectivity"],
+            settings["corner_cutting"],
+            HEURISTICS[settings["heuristic"]],
+            settings["heuristic_weight"],
+            TIE_BREAKERS[settings["tie_breaker"]],
+            settings["decrease_key"],
+            settings["untrusted_points"],
+            cost,
+            cost_weight,
+            work.g,
+            work.nodes,
+            generation,
+            work.heap_key,
+            work.heap_node,
+            space.rows,
+            space.cols,
+            grid.resolution,
+            grid.origin[0],
+            grid.origin[1],
+        )
+        elapsed = time.perf_counter() - began
+        if status >= 0:
+            return status == 1, cells, path, length, searched, elapsed, explored
+        work.grow_heap()
+
+
+_DIJKSTRA = {
+    "connectivity": 8,
+    "corner_cutting": False,
+    "heuristic": "zero",
+    "heuristic_weight": 1.0,
+    "tie_breaker": "none",
+    "decrease_key": True,
+    "untrusted_points": False,
+    "cost_weight": 0.0,
+    "cost_scaling_factor": 1.0,
+}
 
 
 def distance_to_goal(
@@ -310,30 +380,9 @@ def distance_to_goal(
         raise PlannerError(f"goal cell (row {row}, col {col}) is outside the {space.rows}x{space.cols} map")
     if grid.occupied[row, col]:
         return np.full(grid.shape, np.inf)
+    settings = dict(_DIJKSTRA, connectivity=connectivity, corner_cutting=corner_cutting)
+    run_astar(space, space.node(row, col), -1, settings)
     work = workspace(len(space.blocked))
-    generation = work.next_generation()
-    astar_search(
-        space.blocked,
-        space.width,
-        space.node(row, col),
-        -1,
-        connectivity,
-        corner_cutting,
-        HEURISTICS["zero"],
-        1.0,
-        TIE_BREAKERS["none"],
-        True,
-        False,
-        no_cost(),
-        0.0,
-        work.g,
-        work.parent,
-        work.stamp,
-        generation,
-        work.heap_node,
-        work.heap_key,
-        work.heap_second,
-        work.heap_pos,
-        work.expanded,
+    return unpad_distances(
+        work.g, work.nodes[1], work.generation + 1, space.rows, space.cols, grid.resolution
     )
-    return unpad_distances(work.g, work.stamp, generation + 1, space.rows, space.cols, grid.resolution)

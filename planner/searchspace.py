@@ -67,27 +67,32 @@ def search_map(grid: OccupancyGrid, expansion_distance: float) -> SearchMap:
 
 
 class Workspace:
-    """Reusable arrays of one search direction over a padded map of `size` cells."""
+    """Reusable arrays of one search direction over a padded map of `size` cells.
 
-    __slots__ = ("g", "parent", "stamp", "generation", "heap_node", "heap_key", "heap_second", "heap_pos",
-                 "expanded")
+    g [cells] per node; nodes int32 [3, size]: parent, stamp, expanded nodes in closing order;
+    heap arrays of one entry per cell, doubled if OPEN ever outgrows them (decrease-keys push a node
+    again, so OPEN can in theory hold up to 8 entries per cell).
+    """
+
+    __slots__ = ("g", "nodes", "generation", "heap_key", "heap_node")
 
     def __init__(self, size: int) -> None:
         self.g = np.empty(size)
-        self.parent = np.empty(size, dtype=np.int64)
-        self.stamp = np.zeros(size, dtype=np.int32)
+        self.nodes = np.zeros((3, size), dtype=np.int32)
         self.generation = 0
-        self.heap_node = np.empty(size, dtype=np.int64)
-        self.heap_key = np.empty(size)
-        self.heap_second = np.empty(size)
-        self.heap_pos = np.empty(size, dtype=np.int64)
-        self.expanded = np.empty(size, dtype=np.int64)
+        self.heap_key = np.empty(size, dtype=np.int64)
+        self.heap_node = np.empty(size, dtype=np.int32)
+
+    def grow_heap(self) -> None:
+        """Double the heap arrays (a search returned status -1: OPEN outgrew them)."""
+        self.heap_key = np.empty(2 * len(self.heap_key), dtype=np.int64)
+        self.heap_node = np.empty(2 * len(self.heap_node), dtype=np.int32)
 
     def next_generation(self) -> int:
         """A fresh generation (OPEN = generation, CLOSED = generation + 1) with no stale stamps."""
         self.generation += 2
         if self.generation >= _STAMP_LIMIT:
-            self.stamp[:] = 0
+            self.nodes[1] = 0
             self.generation = 2
         return self.generation
 
