@@ -59,7 +59,7 @@ def diff_logs(log_a: Log, log_b: Log, tolerance: float) -> DiffReport:
         common = [name for name in a.names if name in b.names]
         same_times = np.array_equal(a.t_ns, b.t_ns)
         for name in common:
-            deviation, at_time = _max_deviation(a.t, a[name], b.t, b[name], same_times)
+            deviation, at_time = _max_deviation(a.t_ns, a[name], b.t_ns, b[name], same_times)
             report.deviations.append(SignalDeviation(component, name, deviation, at_time, not same_times))
     for component in log_b.components:
         if component not in log_a.components:
@@ -76,25 +76,33 @@ def _sort_key(value: float) -> float:
 def _max_deviation(
     t_a: np.ndarray, a: np.ndarray, t_b: np.ndarray, b: np.ndarray, same_times: bool
 ) -> tuple[float, float]:
+    """Largest |a - b| and the time [s] where it occurs; times are int64 ns."""
     if not same_times:
         inside = (t_a >= t_b[0]) & (t_a <= t_b[-1]) if len(t_b) else np.zeros(len(t_a), dtype=bool)
         t_a, a = t_a[inside], a[inside]
         b = _interpolate(t_b, b, t_a)
     if len(a) == 0:
         return math.nan, math.nan
-    both_nan = np.isnan(a) & np.isnan(b)
+    equal = (a == b) | (np.isnan(a) & np.isnan(b))  # inf == inf and NaN/NaN count as equal
     with np.errstate(invalid="ignore"):
-        deviation = np.where(both_nan, 0.0, np.abs(a - b))
+        deviation = np.where(equal, 0.0, np.abs(a - b))
     deviation = np.where(np.isnan(deviation), np.inf, deviation)
     worst = int(np.argmax(deviation))
-    return float(deviation[worst]), float(t_a[worst])
+    return float(deviation[worst]), float(t_a[worst]) / 1e9
 
 
-def _interpolate(t: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.ndarray:
-    """Linear interpolation that keeps NaN samples NaN (np.interp would smear them)."""
-    result = np.interp(at, t, np.nan_to_num(values))
-    is_nan = np.interp(at, t, np.isnan(values).astype(float)) > 0
-    result[is_nan] = np.nan
+def _interpolate(t_ns: np.ndarray, values: np.ndarray, at_ns: np.ndarray) -> np.ndarray:
+    """Linear interpolation at `at_ns`; a time that equals a sample takes that sample exactly
+    (so NaN and inf survive), between samples a non-finite neighbour gives NaN."""
+    last = len(t_ns) - 1
+    right = np.clip(np.searchsorted(t_ns, at_ns), 0, last)
+    left = np.clip(right - 1, 0, last)
+    exact = t_ns[right] == at_ns
+    span = (t_ns[right] - t_ns[left]).astype(float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        weight = np.where(span > 0, (at_ns - t_ns[left]) / np.where(span > 0, span, 1.0), 0.0)
+        result = values[left] + weight * (values[right] - values[left])
+    result[exact] = values[right[exact]]
     return result
 
 
