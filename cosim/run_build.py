@@ -124,7 +124,7 @@ def _check_ports(scenario: Scenario, component, role: str, names, kind: str) -> 
 
 def build_run(scenario: Scenario) -> BuiltRun:
     """Build every component and connection of `scenario` (see the module docstring)."""
-    from cosim.lidar import LidarComponent
+    from cosim.lidar import Lidar
 
     grid = load_known_map(scenario)
     expansion = scenario.planner.expansion_distance
@@ -161,14 +161,16 @@ def build_run(scenario: Scenario) -> BuiltRun:
             )
         parameters[role] = values
         fmus[role] = component
-    lidar = LidarComponent(
+    lidar = Lidar(
         "lidar",
-        grid,
-        scenario.obstacles,
+        occupied=grid.occupied,
+        resolution=grid.resolution,
+        origin=grid.origin,
+        obstacles=scenario.obstacles,
         angles=scenario.lidar.angles,
         range_min=scenario.lidar.range_min,
         range_max=scenario.lidar.range_max,
-        noise=scenario.lidar.noise,
+        range_noise=scenario.lidar.noise,
         seed=scenario.lidar.seed,
         period=1.0 / scenario.lidar.rate,
     )
