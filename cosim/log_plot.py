@@ -289,10 +289,15 @@ def _draw_series(figure, grid, series: list[Series], modes) -> None:
         first_axes = first_axes or axes
         for item in items:
             axes.plot(item.t, item.values, lw=1.2, label=item.label)
-        _shade_modes(axes, modes)
+        shaded = _shade_modes(axes, modes)
         unit = items[0].unit
         axes.set_ylabel(f"[{unit}]" if unit else "value")
-        axes.legend(loc="upper right", fontsize=8, framealpha=0.85)
+        handles = axes.get_legend_handles_labels()[0]
+        if row == 0:  # explain the shading once
+            handles += [
+                patches.Patch(color=MODE_COLORS[mode], alpha=0.3, label=MODE_NAMES[mode]) for mode in shaded
+            ]
+        axes.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.85)
         axes.grid(alpha=0.3)
         if row < len(panels) - 1:
             axes.tick_params(labelbottom=False)
@@ -306,10 +311,11 @@ def _draw_series(figure, grid, series: list[Series], modes) -> None:
         axes.set_axis_off()
 
 
-def _shade_modes(axes, modes) -> None:
-    """Shade the time intervals in which the mixer avoided (orange) or recovered (red)."""
+def _shade_modes(axes, modes) -> list[int]:
+    """Shade the time intervals in which the mixer avoided (orange) or recovered (red); returns
+    the modes that occur."""
     if modes is None:
-        return
+        return []
     mode_t, mode_values = modes
     for mode, colour in MODE_COLORS.items():
         active = np.concatenate(([False], mode_values == mode, [False])).astype(int)
@@ -318,3 +324,4 @@ def _shade_modes(axes, modes) -> None:
         for start, end in zip(starts, ends, strict=True):
             stop = mode_t[end] if end < len(mode_t) else mode_t[-1]
             axes.axvspan(mode_t[start], stop, color=colour, alpha=0.15, lw=0)
+    return [mode for mode in MODE_COLORS if np.any(mode_values == mode)]
