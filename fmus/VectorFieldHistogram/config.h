@@ -55,8 +55,18 @@ struct ModelData {
     double previous_direction;              /* rad; NaN after a step with nothing free */
     /* derived at initialisation, scratch reused every step */
     double sector_midpoints[VFH_MAX_SECTORS]; /* rad */
+    double sector_cos[VFH_MAX_SECTORS], sector_sin[VFH_MAX_SECTORS];
     double sector_width;                      /* rad */
+    /* Reading angles wrapped to [-pi, pi] with their cosine and sine, recomputed only when an
+     * angle input changes (a lidar's angles rarely do), so a step needs no trigonometry. */
+    bool angles_changed;
+    double reading_angle[VFH_MAX_READINGS], reading_cos[VFH_MAX_READINGS], reading_sin[VFH_MAX_READINGS];
     double obstacle_density[VFH_MAX_SECTORS];
+    /* Density changes from sector k-1 to k in fixed point (exact sums, O(1) per reading). */
+    long long density_change[VFH_MAX_SECTORS + 1];
+    double density_scale; /* fixed-point units per unit of weight */
+    int valid_readings[VFH_MAX_READINGS]; /* indices of the readings inside the distance limits */
+    int valid_count;
     bool masked_histogram[VFH_MAX_SECTORS];   /* true = blocked */
     double candidates[VFH_MAX_CANDIDATES];
     double candidate_costs[VFH_MAX_CANDIDATES];

@@ -28,6 +28,7 @@ void model_set_start_values(ModelData *data) {
     data->initialized = false;
     memset(data->binary_histogram, 0, sizeof data->binary_histogram);
     data->previous_direction = 0.0;
+    data->angles_changed = true;
 }
 
 /* Logs and fails when `ok` is false; the message names the parameter. */
@@ -127,8 +128,11 @@ ModelStatus model_set_real(ModelInstance *comp, ModelData *data, unsigned vr, do
         }
         *parameter = value;
     } else if (is_reading(vr, VR_RANGES)) data->ranges[vr - VR_RANGES] = value;
-    else if (is_reading(vr, VR_ANGLES)) data->angles[vr - VR_ANGLES] = value;
-    else if (vr == VR_TARGET_DIR) data->target_dir = value;
+    else if (is_reading(vr, VR_ANGLES)) {
+        double *angle = &data->angles[vr - VR_ANGLES];
+        if (!(*angle == value || (isnan(*angle) && isnan(value)))) data->angles_changed = true;
+        *angle = value;
+    } else if (vr == VR_TARGET_DIR) data->target_dir = value;
     else {
         model_log_error(comp, "Real value reference %u is unknown or not settable", vr);
         return MODEL_ERROR;

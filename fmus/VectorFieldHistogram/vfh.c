@@ -3,9 +3,9 @@
  * polar obstacle density with the enlargement angle, binary histogram with hysteresis,
  * masked histogram with the turning circles, valley candidates and the three-weight cost.
  *
- * Deliberate differences from MATLAB: readings are matched to sectors by an index range computed
- * from the enlargement angle (same sectors as MATLAB's cross-product test, without testing every
- * sector); with robot_radius + safety_distance = 0 readings beyond the outer mid-points fall into
+ * Deliberate differences from MATLAB: readings are matched to sectors by an index range around
+ * the reading (the same sectors as MATLAB's cross-product test, without testing every sector:
+ * a polynomial guess of gamma, corrected by the exact test cos(mid - angle) >= cos(gamma)); with robot_radius + safety_distance = 0 readings beyond the outer mid-points fall into
  * the end sectors (MATLAB's histc would index sector 0 and fail); MATLAB zeroes the whole density
  * when no reading was dropped by the distance limits, which we do not copy; a NaN target
  * direction counts as 0 (straight ahead).
@@ -29,7 +29,24 @@ static double tolerance(void) { return sqrt(DBL_EPSILON); }
 void vfh_prepare_sectors(ModelData *data) {
     const int sectors = data->num_angular_sectors;
     data->sector_width = 2.0 * M_PI / sectors;
-    for (int k = 0; k < sectors; k++) data->sector_midpoints[k] = -M_PI + data->sector_width * (k + 0.5);
+    for (int k = 0; k < sectors; k++) {
+        data->sector_midpoints[k] = -M_PI + data->sector_width * (k + 0.5);
+        data->sector_cos[k] = cos(data->sector_midpoints[k]);
+        data->sector_sin[k] = sin(data->sector_midpoints[k]);
+    }
+    /* A weight is at most distance_limit_max: 2^52 units keep 720 of them below 2^62. */
+    data->density_scale = 4503599627370496.0 / data->distance_limit_max;
+    data->angles_changed = true;
+}
+
+static void update_reading_angles(ModelData *data) {
+    for (int i = 0; i < VFH_MAX_READINGS; i++) {
+        const double angle = wrap_to_pi(data->angles[i]);
+        data->reading_angle[i] = angle;
+        data->reading_cos[i] = cos(angle);
+        data->reading_sin[i] = sin(angle);
+    }
+    data->angles_changed = false;
 }
 
 /* A reading counts when its range lies inside the distance limits (NaN fails the test). */
@@ -40,32 +57,98 @@ static bool reading_is_valid(const ModelData *data, int i) {
 
 static int wrap_sector(int k, int sectors) { return k < 0 ? k + sectors : (k >= sectors ? k - sectors : k); }
 
+static int floor_to_int(double x) {
+    int truncated = (int)x;
+    return truncated - (x < truncated);
+}
+
+/* asin within 7e-5 rad (Abramowitz & Stegun 4.4.45), for x in [0, 1]: a first guess of the sector
+ * range, checked by the exact test where a range end lies this close to a sector mid-point. */
+#define ASIN_ESTIMATE_ERROR 1e-4
+static double asin_estimate(double x) {
+    return M_PI / 2 - sqrt(1.0 - x) * (1.5707288 + x * (-0.2121144 + x * (0.0742610 - 0.0187293 * x)));
+}
+
+/* Sector k (any integer, wrapped) lies within the enlargement angle of reading i:
+ * cos(mid_k - angle_i) >= cos(gamma), exact for gamma < pi/2. */
+static bool sector_in_reach(const ModelData *data, int k, int i, double cos_enlargement) {
+    const int s = wrap_sector(k, data->num_angular_sectors);
+    return data->sector_cos[s] * data->reading_cos[i] + data->sector_sin[s] * data->reading_sin[i] >=
+           cos_enlargement;
+}
+
+/* Add `weight` (fixed point) to sectors lowest..highest, wrapped: a change at each end. */
+static void add_to_sectors(long long *change, int lowest, int highest, int sectors, long long weight) {
+    const int first = wrap_sector(lowest, sectors), last = wrap_sector(highest, sectors);
+    change[first] += weight;
+    change[last + 1] -= weight;
+    if (first > last) change[0] += weight; /* the range crosses +-pi */
+}
+
+static void collect_valid_readings(ModelData *data) {
+    int count = 0;
+    for (int i = 0; i < VFH_MAX_READINGS; i++)
+        if (reading_is_valid(data, i)) data->valid_readings[count++] = i;
+    data->valid_count = count;
+}
+
+/* Integer bound of the enlargement range of reading i: the exact test decides only when the guess
+ * `edge` (in sector widths) lies within the estimate's error of a sector mid-point. */
+static int exact_lowest(const ModelData *data, double edge, double margin, int i, double cos_enlargement) {
+    int lowest = floor_to_int(edge) + 1;
+    const double fraction = edge - (lowest - 1);
+    if (fraction < margin || fraction > 1.0 - margin) {
+        while (sector_in_reach(data, lowest - 1, i, cos_enlargement)) lowest--;
+        while (!sector_in_reach(data, lowest, i, cos_enlargement)) lowest++;
+    }
+    return lowest;
+}
+
+static int exact_highest(const ModelData *data, double edge, double margin, int i, double cos_enlargement) {
+    int highest = floor_to_int(edge);
+    const double fraction = edge - highest;
+    if (fraction < margin || fraction > 1.0 - margin) {
+        while (sector_in_reach(data, highest + 1, i, cos_enlargement)) highest++;
+        while (!sector_in_reach(data, highest, i, cos_enlargement)) highest--;
+    }
+    return highest;
+}
+
 /* Eqs (4)-(6) of VFH+: each reading adds a - d to every sector whose mid-point lies within the
  * enlargement angle gamma = asin((R + d_safe) / d) of its direction. */
 static void build_obstacle_density(ModelData *data) {
     const int sectors = data->num_angular_sectors;
     const double width = data->sector_width, first_midpoint = data->sector_midpoints[0];
     const double enlargement_radius = data->robot_radius + data->safety_distance;
-    double *density = data->obstacle_density;
-    for (int k = 0; k < sectors; k++) density[k] = 0.0;
-    for (int i = 0; i < VFH_MAX_READINGS; i++) {
-        if (!reading_is_valid(data, i)) continue;
-        const double range = data->ranges[i], angle = wrap_to_pi(data->angles[i]);
-        const double weight = data->distance_limit_max - range;
+    const double margin = ASIN_ESTIMATE_ERROR / width;
+    long long *change = data->density_change;
+    for (int k = 0; k <= sectors; k++) change[k] = 0;
+    for (int v = 0; v < data->valid_count; v++) {
+        const int i = data->valid_readings[v];
+        const double range = data->ranges[i];
+        const long long weight = (long long)((data->distance_limit_max - range) * data->density_scale + 0.5);
+        const double position = (data->reading_angle[i] - first_midpoint) / width; /* in sector widths */
         if (sectors == 1) {
-            density[0] += weight;
+            add_to_sectors(change, 0, 0, sectors, weight);
         } else if (enlargement_radius == 0.0) {
             /* histc on the mid-points: sector k covers [mid_k, mid_k+1). */
-            int k = (int)floor((angle - first_midpoint) / width);
-            density[k < 0 ? 0 : (k >= sectors ? sectors - 1 : k)] += weight;
+            int k = floor_to_int(position);
+            k = k < 0 ? 0 : (k >= sectors ? sectors - 1 : k);
+            add_to_sectors(change, k, k, sectors, weight);
         } else {
             double sine = enlargement_radius / range;
             if (sine >= 1.0) sine = 1.0 - DBL_EPSILON; /* inside the robot: just under pi/2 */
-            const double enlargement = asin(sine);
-            int lowest = (int)ceil((angle - enlargement - first_midpoint) / width);
-            int highest = (int)floor((angle + enlargement - first_midpoint) / width);
-            for (int k = lowest; k <= highest; k++) density[wrap_sector(k, sectors)] += weight;
+            const double cos_enlargement = sqrt(1.0 - sine * sine);
+            const double reach = asin_estimate(sine) / width;
+            const int lowest = exact_lowest(data, position - reach, margin, i, cos_enlargement);
+            const int highest = exact_highest(data, position + reach, margin, i, cos_enlargement);
+            if (lowest <= highest) add_to_sectors(change, lowest, highest, sectors, weight);
         }
+    }
+    long long sum = 0;
+    for (int k = 0; k < sectors; k++) {
+        sum += change[k];
+        data->obstacle_density[k] = (double)sum / data->density_scale;
     }
 }
 
@@ -86,15 +169,15 @@ static void build_masked_histogram(ModelData *data) {
     const double blocking_radius = turning_radius + data->robot_radius + data->safety_distance;
     bool right_blocked = false, left_blocked = false;
     double limit_right = midpoints[0], limit_left = midpoints[sectors - 1];
-    for (int i = 0; i < VFH_MAX_READINGS; i++) {
-        if (!reading_is_valid(data, i)) continue;
+    for (int v = 0; v < data->valid_count; v++) {
+        const int i = data->valid_readings[v];
         const double range = data->ranges[i];
         /* |reading - centre| >= range - r_min, so far readings cannot block: skip the sine. */
         if (range - turning_radius >= blocking_radius) continue;
-        const double angle = wrap_to_pi(data->angles[i]);
+        const double angle = data->reading_angle[i];
         /* Squared distance to the centre (0, -/+ r): d^2 + r^2 +/- 2 r d sin(angle). */
         const double common = range * range + turning_radius * turning_radius;
-        const double cross = 2.0 * turning_radius * range * sin(angle);
+        const double cross = 2.0 * turning_radius * range * data->reading_sin[i];
         const double blocking_squared = blocking_radius * blocking_radius;
         if (angle <= 0.0 && common + cross < blocking_squared) {
             limit_right = angle; /* the last right-blocking reading in scan order */
@@ -165,6 +248,8 @@ static int collect_candidates(ModelData *data, double target, double previous) {
 }
 
 void vfh_step(ModelData *data) {
+    if (data->angles_changed) update_reading_angles(data);
+    collect_valid_readings(data);
     build_obstacle_density(data);
     build_binary_histogram(data);
     build_masked_histogram(data);
