@@ -26,9 +26,11 @@ import ctypes
 import os
 import shutil
 import tempfile
+import weakref
 import zipfile
 from collections import deque
 from collections.abc import Mapping
+from functools import cache
 from pathlib import Path
 
 import fmpy
@@ -271,7 +273,7 @@ class FmuComponent(Component):
         )
 
     def _log(self, *args) -> None:
-        # FMI 2.0 passes (environment, instance, status, category, message), FMI 3.0 drops instance.
+        # FMI 3.0 passes (environment, status, category, message); FMI 2.0 comes via the dispatcher.
         status, category, message = args[-3:]
         if status >= 1:
             text = message.decode(errors="replace") if isinstance(message, bytes) else str(message)
@@ -316,14 +318,16 @@ class FmuComponent(Component):
             fmi2CallbackAllocateMemoryTYPE,
             fmi2CallbackFreeMemoryTYPE,
             fmi2CallbackFunctions,
-            fmi2CallbackLoggerTYPE,
         )
 
         callbacks = fmi2CallbackFunctions()
-        callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
+        callbacks.logger = _fmi2_logger()
         callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
         callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(fmpy.free)
-        try:  # formats the variadic message in C, as fmpy does for its default callbacks
+        # The FMU hands componentEnvironment back to the logger: it selects this component.
+        callbacks.componentEnvironment = id(self)
+        _LOG_TARGETS[id(self)] = weakref.ref(self)
+        try:  # fmpy's C proxy formats the variadic message; it keeps one logger process-wide
             from fmpy.logging import addLoggerProxy
 
             addLoggerProxy(ctypes.byref(callbacks))
@@ -449,6 +453,7 @@ class FmuComponent(Component):
                 except Exception:  # a broken FMU must not prevent freeing the others
                     pass
         self.state = State.FREED
+        _LOG_TARGETS.pop(id(self), None)
         self._discard_files()
 
     def _discard_files(self) -> None:
@@ -466,6 +471,23 @@ class FmuComponent(Component):
             "generation_tool": description.generationTool or "",
             "generation_date": description.generationDateAndTime or "",
         }
+
+
+_LOG_TARGETS: dict[int, weakref.ref] = {}
+
+
+@cache
+def _fmi2_logger():
+    """One FMI 2.0 logger for all instances, dispatching on componentEnvironment."""
+    from fmpy.fmi2 import fmi2CallbackLoggerTYPE
+
+    def dispatch(environment, instance, status, category, message):
+        target = _LOG_TARGETS.get(environment or 0)
+        component = target() if target is not None else None
+        if component is not None:
+            component._log(status, category, message)
+
+    return fmi2CallbackLoggerTYPE(dispatch)
 
 
 def _copy_lines(direction: str, group: int, kind: str, slots: list[int], scales: list[float]) -> list[str]:
