@@ -1,0 +1,307 @@
+"""Bidirectional A*: one search from the start towards the goal and one from the goal towards the
+start, each with the heuristic to its own target, expanding the side whose OPEN list is smaller.
+
+Every relaxed edge u -> v where v has been reached by the other side offers a path of cost
+g_forward + step + g_backward; the best one is kept as mu. The search stops when either side's
+smallest f in OPEN is >= mu: any path not yet seen must leave that side's OPEN through a node with
+at least that f, so with an admissible, consistent heuristic (octile, Manhattan with 4 neighbours)
+mu is the optimal cost. Options and costs are those of planner.astar; with the cost gradient the
+cost of an edge is charged on the cell it enters in the start -> goal direction, on both sides.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from numba import njit
+
+from planner.astar import (
+    _F_SCALE,
+    _H_BITS,
+    HEURISTICS,
+    TIE_BREAKERS,
+    heap_key_of,
+    heap_pop,
+    heap_push,
+    heuristic_cells,
+    neighbour_tables,
+)
+from planner.searchspace import SearchMap, no_cost, workspace
+
+
+@njit(cache=True)
+def _expand(
+    blocked,
+    width,
+    target,
+    backward,
+    directions,
+    corner_cutting,
+    heuristic,
+    h_scale,
+    tie_breaker,
+    decrease_key,
+    untrusted,
+    cost,
+    cost_weight,
+    g,
+    nodes,
+    generation,
+    heap_key,
+    heap_node,
+    size,
+    searched,
+    other_g,
+    other_stamp,
+    other_generation,
+    best,
+    mine,
+):
+    """Pop and expand one node of one side. best = [mu, forward meet node, backward meet node];
+    mine is this side's index in best (1 forward, 2 backward).
+
+    Returns (new heap size, new searched count, status): status -1 = heap full, 0 = popped a stale
+    entry or expanded, 1 = heap empty."""
+    parent = nodes[0]
+    stamp = nodes[1]
+    expanded = nodes[2]
+    offsets, row_steps, col_steps, steps, side_a, side_b = neighbour_tables(width)
+    closed = generation + 1
+    capacity = len(heap_key)
+    if size == 0:
+        return size, searched, 1
+    node, size = heap_pop(heap_key, heap_node, size)
+    if stamp[node] == closed:
+        return size, searched, 0
+    stamp[node] = closed
+    expanded[searched] = node
+    searched += 1
+    g_node = g[node]
+    row_offset = node // width - target // width
+    col_offset = node % width - target % width
+    for k in range(directions):
+        neighbour = node + offsets[k]
+        state = blocked[neighbour]
+        if state != 0:
+            if state == 1 or (untrusted and neighbour != target):
+                continue
+        seen = stamp[neighbour]
+        if seen == closed:
+            continue
+        if k >= 4 and not corner_cutting:
+            if blocked[node + side_a[k]] == 1 or blocked[node + side_b[k]] == 1:
+                continue
+        step = steps[k]
+        if cost_weight > 0.0:
+            step *= 1.0 + cost_weight * cost[node if backward else neighbour]
+        g_new = g_node + step
+        other = other_stamp[neighbour]
+        if (other == other_generation or other == other_generation + 1) and g_new + other_g[neighbour] < best[
+            0
+        ]:
+            best[0] = g_new + other_g[neighbour]
+            best[mine] = node
+            best[3 - mine] = neighbour
+        if seen == generation:
+            if g_new >= g[neighbour]:
+                continue
+            g[neighbour] = g_new
+            parent[neighbour] = node
+            if not decrease_key:
+                continue
+        else:
+            stamp[neighbour] = generation
+            g[neighbour] = g_new
+            parent[neighbour] = node
+        if size == capacity:
+            return size, searched, -1
+        h = heuristic_cells(row_offset + row_steps[k], col_offset + col_steps[k], heuristic) * h_scale
+        size = heap_push(heap_key, heap_node, size, heap_key_of(g_new + h, h, tie_breaker), neighbour)
+    return size, searched, 0
+
+
+@njit(cache=True)
+def bidirectional_search(
+    blocked,
+    width,
+    start,
+    goal,
+    connectivity,
+    corner_cutting,
+    heuristic,
+    heuristic_weight,
+    tie_breaker,
+    decrease_key,
+    untrusted,
+    cost,
+    cost_weight,
+    g_forward,
+    nodes_forward,
+    generation_forward,
+    heap_key_forward,
+    heap_node_forward,
+    g_backward,
+    nodes_backward,
+    generation_backward,
+    heap_key_backward,
+    heap_node_backward,
+):
+    """Returns (status, searched forward, searched backward, mu [cells], meet forward, meet backward).
+
+    status 1 = path found, 0 = none, -1 = a heap is full (enlarge both and search again)."""
+    directions = 8 if connectivity == 8 else 4
+    h_scale = heuristic_weight * (1.07 if tie_breaker == 1 else 1.0)
+    best = np.array([np.inf, -1.0, -1.0])
+    searched_forward = 0
+    searched_backward = 0
+    for root, target, g, nodes, generation, heap_key, heap_node in (
+        (start, goal, g_forward, nodes_forward, generation_forward, heap_key_forward, heap_node_forward),
+        (goal, start, g_backward, nodes_backward, generation_backward, heap_key_backward, heap_node_backward),
+    ):
+        g[root] = 0.0
+        nodes[0, root] = root
+        nodes[1, root] = generation
+        h = (
+            heuristic_cells(root // width - target // width, root % width - target % width, heuristic)
+            * h_scale
+        )
+        heap_push(heap_key, heap_node, 0, heap_key_of(h, h, tie_breaker), root)
+    if start == goal:
+        nodes_forward[2, 0] = start
+        return 1, 1, 0, 0.0, start, start
+    size_forward = 1
+    size_backward = 1
+    while size_forward > 0 and size_backward > 0:
+        top_forward = (heap_key_forward[0] >> _H_BITS) / _F_SCALE
+        top_backward = (heap_key_backward[0] >> _H_BITS) / _F_SCALE
+        if top_forward >= best[0] or top_backward >= best[0]:
+            break
+        if size_forward <= size_backward:
+            size_forward, searched_forward, status = _expand(
+                blocked, width, goal, False, directions, corner_cutting, heuristic, h_scale, tie_breaker,
+                decrease_key, untrusted, cost, cost_weight, g_forward, nodes_forward, generation_forward,
+                heap_key_forward, heap_node_forward, size_forward, searched_forward,
+                g_backward, nodes_backward[1], generation_backward, best, 1,
+            )  # fmt: skip
+        else:
+            size_backward, searched_backward, status = _expand(
+                blocked, width, start, True, directions, corner_cutting, heuristic, h_scale, tie_breaker,
+                decrease_key, untrusted, cost, cost_weight, g_backward, nodes_backward, generation_backward,
+                heap_key_backward, heap_node_backward, size_backward, searched_backward,
+                g_forward, nodes_forward[1], generation_forward, best, 2,
+            )  # fmt: skip
+        if status < 0:
+            return -1, searched_forward, searched_backward, 0.0, -1, -1
+    if best[0] == np.inf:
+        return 0, searched_forward, searched_backward, 0.0, -1, -1
+    return 1, searched_forward, searched_backward, best[0], np.int64(best[1]), np.int64(best[2])
+
+
+@njit(cache=True)
+def join_paths(nodes_forward, nodes_backward, start, goal, meet_forward, meet_backward, searched_forward,
+               searched_backward, width, rows, cols, resolution, origin_x, origin_y):  # fmt: skip
+    """Cells, path [m], length [m] through the meeting edge, and the union of both explored sets."""
+    explored = np.zeros((rows, cols), dtype=np.bool_)
+    for nodes, count in ((nodes_forward, searched_forward), (nodes_backward, searched_backward)):
+        for index in range(count):
+            node = nodes[2, index]
+            explored[node // width - 1, node % width - 1] = True
+    forward_count = 1
+    node = meet_forward
+    while node != start:
+        node = nodes_forward[0, node]
+        forward_count += 1
+    backward_count = 0
+    if meet_backward >= 0:
+        backward_count = 1
+        node = meet_backward
+        while node != goal:
+            node = nodes_backward[0, node]
+            backward_count += 1
+    count = forward_count + backward_count
+    sequence = np.empty(count, dtype=np.int64)
+    node = meet_forward
+    for index in range(forward_count - 1, -1, -1):
+        sequence[index] = node
+        node = nodes_forward[0, node]
+    node = meet_backward
+    for index in range(forward_count, count):
+        sequence[index] = node
+        node = nodes_backward[0, node]
+    cells = np.empty((count, 2), dtype=np.int64)
+    path = np.empty((count, 2))
+    length = 0.0
+    for index in range(count):
+        node = sequence[index]
+        row = node // width - 1
+        col = node % width - 1
+        cells[index, 0] = row
+        cells[index, 1] = col
+        path[index, 0] = origin_x + (col + 0.5) * resolution
+        path[index, 1] = origin_y + (rows - 1 - row + 0.5) * resolution
+        if index > 0:
+            difference = abs(node - sequence[index - 1])
+            length += (
+                resolution if difference == 1 or difference == width else 1.4142135623730951 * resolution
+            )
+    return cells, path, length, explored
+
+
+def search_bidirectional(space: SearchMap, start_node: int, goal_node: int, settings: dict):
+    """Bidirectional A*; returns (found, cells, path [m], length [m], searched, elapsed [s], explored)."""
+    size = len(space.blocked)
+    forward, backward = workspace(size, 0), workspace(size, 1)
+    cost_weight = settings["cost_weight"]
+    cost = space.costs(settings["cost_scaling_factor"]) if cost_weight > 0.0 else no_cost()
+    while True:
+        generation_forward, generation_backward = forward.next_generation(), backward.next_generation()
+        began = time.perf_counter()
+        status, searched_forward, searched_backward, _, meet_forward, meet_backward = bidirectional_search(
+            space.blocked,
+            space.width,
+            start_node,
+            goal_node,
+            settings["connectivity"],
+            settings["corner_cutting"],
+            HEURISTICS[settings["heuristic"]],
+            settings["heuristic_weight"],
+            TIE_BREAKERS[settings["tie_breaker"]],
+            settings["decrease_key"],
+            settings["untrusted_points"],
+            cost,
+            cost_weight,
+            forward.g,
+            forward.nodes,
+            generation_forward,
+            forward.heap_key,
+            forward.heap_node,
+            backward.g,
+            backward.nodes,
+            generation_backward,
+            backward.heap_key,
+            backward.heap_node,
+        )
+        elapsed = time.perf_counter() - began
+        if status >= 0:
+            break
+        forward.grow_heap()
+        backward.grow_heap()
+    grid = space.grid
+    searched = searched_forward + searched_backward
+    if status == 0:
+        return False, None, None, 0.0, searched, elapsed, _explored_only(space, forward, backward, searched_forward,
+                                                                          searched_backward)  # fmt: skip
+    cells, path, length, explored = join_paths(
+        forward.nodes, backward.nodes, start_node, goal_node, meet_forward, meet_backward, searched_forward,
+        searched_backward, space.width, space.rows, space.cols, grid.resolution, grid.origin[0], grid.origin[1],
+    )  # fmt: skip
+    return True, cells, path, length, searched, elapsed, explored
+
+
+def _explored_only(space: SearchMap, forward, backward, searched_forward: int, searched_backward: int):
+    explored = np.zeros(space.rows * space.cols, dtype=bool)
+    for work, count in ((forward, searched_forward), (backward, searched_backward)):
+        nodes = work.nodes[2, :count].astype(np.int64)
+        explored[(nodes // space.width - 1) * space.cols + nodes % space.width - 1] = True
+    return explored.reshape(space.rows, space.cols)
