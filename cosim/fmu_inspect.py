@@ -11,8 +11,11 @@ import tempfile
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 
 import fmpy
+import fmpy.model_description as fmpy_description
+import fmpy.validation as fmpy_validation
 from fmpy.validation import validate_fmu
 
 from cosim.errors import CosimError
@@ -210,8 +213,33 @@ def _binary_problems(path: Path, description) -> list[str]:
     return problems
 
 
+def fmpy_problems(path: Path) -> list[str]:
+    """fmpy's `validate_fmu` checks, with its structured-name check run once per name shape.
+
+    fmpy parses every structured variable name with an Earley parser (~45 ms a name, 90 s for
+    2000 waypoint inputs). Replacing each digit run by "1" keeps a name's membership in the
+    grammar (digits only ever appear as a digit class), so one representative per shape gives
+    the same verdict.
+    """
+    if not hasattr(fmpy_validation, "_validate_variable_names"):
+        return list(validate_fmu(str(path)))
+    problems = []
+    with zipfile.ZipFile(path) as archive:
+        problems += [f'The file path "{n}" contains a backslash.' for n in archive.namelist() if "\\" in n]
+    try:
+        description = fmpy.read_model_description(str(path), validate=True, validate_model_structure=True)
+    except fmpy_description.ValidationError as error:
+        return problems + list(error.problems)
+    except Exception as error:  # fmpy's own validate_fmu reports any failure as a problem
+        return problems + [str(error)]
+    shapes = {re.sub(r"[0-9]+", "1", v.name): v for v in description.modelVariables}
+    representatives = SimpleNamespace(
+        variableNamingConvention=description.variableNamingConvention, modelVariables=list(shapes.values())
+    )
+    return problems + fmpy_validation._validate_variable_names(representatives)
+
+
 def validate(path: Path) -> list[str]:
     """Problems of the FMU at `path`: fmpy's validation plus binary and exported-symbol checks."""
     description = read_description(path)
-    problems = list(validate_fmu(str(path)))
-    return problems + _binary_problems(path, description)
+    return fmpy_problems(path) + _binary_problems(path, description)

@@ -209,7 +209,7 @@ def build_fmu(model_dir: Path, out_dir: Path, header_dir: Path | None = None) ->
         command += [str(s) for s in sources] + ["-o", str(binary), *LINK_FLAGS]
         result = subprocess.run(command, capture_output=True, text=True)
         if result.returncode != 0:
-            errors = [line for line in result.stderr.splitlines() if "error" in line]
+            errors = [line for line in result.stderr.splitlines() if " error: " in line]
             first = errors[0] if errors else result.stderr.strip()
             raise FmuBuildError(f"compiling {model_dir.name} failed: {first}")
         packed: dict[str, Path] = {}
