@@ -1,0 +1,157 @@
+"""The lidar against analytic distances, a brute-force ray march, range limits and noise."""
+
+import math
+
+import numpy as np
+import pytest
+
+from cosim.errors import CosimError
+from cosim.lidar import Lidar
+from cosim.master import Master, System
+from cosim.world import Circle, Polygon, Rectangle
+
+
+def scan(lidar, x, y, theta):
+    lidar.instantiate()
+    lidar.setup(0.0, {})
+    lidar.set_inputs([0, 1, 2], [x, y, theta])
+    lidar.initialize()
+    outputs = lidar.get_outputs()
+    return outputs[: lidar.capacity].copy(), outputs[lidar.capacity :].copy()
+
+
+def test_wall_of_the_grid_at_a_known_distance():
+    occupied = np.zeros((100, 100), dtype=bool)
+    occupied[:, 80] = True  # column 80 spans x = 8.0 .. 8.1 m at 0.1 m cells, origin (0, 0)
+    angles = np.array([0.0, 0.3, -0.5, math.pi])
+    lidar = Lidar(occupied=occupied, resolution=0.1, angles=angles, range_max=20.0, period=0.0)
+    ranges, reported = scan(lidar, 2.05, 5.0, 0.0)
+    expected = (8.0 - 2.05) / np.cos(angles[:3])
+    assert ranges[:3] == pytest.approx(expected, abs=1e-9)
+    assert np.isnan(ranges[3])  # leaves the grid at x = 0 without a hit: missed
+    assert np.array_equal(reported, angles)
+
+
+def test_heading_rotates_the_beams_and_row_zero_is_the_top_of_the_map():
+    occupied = np.zeros((50, 50), dtype=bool)
+    occupied[0, :] = True  # the top row: y = 4.9 .. 5.0 m at 0.1 m cells
+    lidar = Lidar(occupied=occupied, resolution=0.1, origin=(-1.0, 0.0), angles=[0.0], range_max=10.0)
+    ranges, _ = scan(lidar, 1.0, 1.0, math.pi / 2)
+    assert ranges[0] == pytest.approx(3.9, abs=1e-9)
+
+
+def test_circle_rectangle_and_polygon_obstacles():
+    obstacles = [
+        Circle((5.0, 0.0), 1.0),
+        Rectangle((0.0, 4.0), (2.0, 1.0)),  # lower edge at y = 3.5
+        Polygon(((-3.0, -1.0), (-4.0, 0.0), (-3.0, 1.0))),  # edge x = -3 facing the sensor
+        Rectangle((0.0, -6.0), (2.0, 2.0), yaw=math.pi / 4),  # a diamond, top corner at y = -6 + sqrt(2)
+    ]
+    lidar = Lidar(obstacles=obstacles, angles=[0.0, math.pi / 2, math.pi, -math.pi / 2, 0.1], range_max=10.0)
+    ranges, _ = scan(lidar, 0.0, 0.0, 0.0)
+    # Beam at 0.1 rad meets the circle: smallest root of |t d - c|^2 = r^2.
+    b = 5.0 * math.cos(0.1)
+    circle_hit = b - math.sqrt(b * b - 25.0 + 1.0)
+    expected = [4.0, 3.5, 3.0, 6.0 - math.sqrt(2.0), circle_hit]
+    assert ranges == pytest.approx(expected, abs=1e-9)
+
+
+def test_misses_and_range_limits_give_nan():
+    lidar = Lidar(
+        obstacles=[Circle((3.0, 0.0), 0.5), Circle((0.0, 0.8), 0.2)],
+        angles=[0.0, math.pi / 2, math.pi],
+        range_min=1.0,
+        range_max=2.0,
+        capacity=5,
+    )
+    ranges, angles = scan(lidar, 0.0, 0.0, 0.0)
+    assert np.isnan(ranges).all()  # 2.5 m beyond max, 0.6 m below min, nothing behind
+    assert np.isnan(angles[3:]).all() and len(ranges) == 5
+    inside = Lidar(obstacles=[Circle((0.0, 0.0), 1.0)], angles=[0.0, 1.0], range_max=5.0)
+    ranges, _ = scan(inside, 0.2, 0.0, 0.0)
+    assert ranges[:2].tolist() == [0.0, 0.0]  # a sensor inside an obstacle reads 0
+
+
+def brute_force_ranges(occupied, resolution, x, y, angles, range_max, step=1e-4):
+    """Second implementation: march along each beam in tiny steps, look up the cell."""
+    rows = occupied.shape[0]
+    out = []
+    for angle in angles:
+        distances = np.arange(0.0, range_max, step)
+        px, py = x + distances * math.cos(angle), y + distances * math.sin(angle)
+        cols = np.floor(px / resolution).astype(int)
+        rws = rows - 1 - np.floor(py / resolution).astype(int)
+        valid = (cols >= 0) & (cols < occupied.shape[1]) & (rws >= 0) & (rws < rows)
+        hit = np.zeros(len(distances), dtype=bool)
+        hit[valid] = occupied[rws[valid], cols[valid]]
+        out.append(distances[np.argmax(hit)] if hit.any() else np.nan)
+    return np.array(out)
+
+
+def test_grid_ray_casting_agrees_with_a_brute_force_march():
+    rng = np.random.default_rng(7)
+    occupied = rng.random((60, 60)) < 0.03
+    occupied[28:32, 28:32] = False  # keep the sensor's cell free
+    angles = rng.uniform(-math.pi, math.pi, 40)
+    lidar = Lidar(occupied=occupied, resolution=0.1, angles=angles, range_max=4.0)
+    ranges, _ = scan(lidar, 3.01, 2.97, 0.0)
+    expected = brute_force_ranges(occupied, 0.1, 3.01, 2.97, angles, 4.0)
+    assert np.array_equal(np.isnan(ranges), np.isnan(expected))
+    hit = ~np.isnan(expected)
+    assert hit.sum() > 10
+    assert ranges[hit] == pytest.approx(expected[hit], abs=2e-4)
+
+
+def noisy_scan(seed, range_noise, angle_noise):
+    """2000 beams, all at nominal angle 0, against a wall at x = 5 m."""
+    wall = Rectangle((5.5, 0.0), (1.0, 100.0))
+    lidar = Lidar(
+        obstacles=[wall], angles=np.zeros(2000), range_noise=range_noise, angle_noise=angle_noise, seed=seed
+    )
+    return scan(lidar, 0.0, 0.0, 0.0)
+
+
+def test_range_noise_is_seeded_and_has_the_requested_spread():
+    ranges, _ = noisy_scan(3, 0.05, 0.0)
+    assert np.array_equal(ranges, noisy_scan(3, 0.05, 0.0)[0])
+    assert not np.array_equal(ranges, noisy_scan(4, 0.05, 0.0)[0])
+    assert np.mean(ranges) == pytest.approx(5.0, abs=0.005)
+    assert np.std(ranges) == pytest.approx(0.05, rel=0.1)
+
+
+def test_angle_noise_tilts_the_cast_beam_but_not_the_reported_angle():
+    ranges, angles = noisy_scan(5, 0.0, 0.02)
+    assert np.all(angles == 0.0)
+    tilt = np.arccos(5.0 / ranges)  # |angle noise| of each beam, from the wall geometry
+    assert np.mean(tilt) == pytest.approx(0.02 * math.sqrt(2.0 / math.pi), rel=0.1)  # half-normal mean
+
+
+def test_a_sensor_inside_a_rectangle_reads_zero():
+    square = Rectangle((0.0, 0.0), (4.0, 4.0))
+    ranges, _ = scan(Lidar(obstacles=[square], angles=[0.0], range_max=5.0), 0.5, 0.0, 0.0)
+    assert ranges[0] == 0.0  # inside a rectangle obstacle
+
+
+def test_bad_settings_are_errors():
+    with pytest.raises(CosimError, match="range limits"):
+        Lidar(range_min=3.0, range_max=2.0)
+    with pytest.raises(CosimError, match="capacity"):
+        Lidar(count=10, capacity=5)
+    with pytest.raises(CosimError, match="noise"):
+        Lidar(range_noise=-1.0)
+
+
+def test_lidar_in_a_master_scans_at_its_period():
+    system = System(0.01)
+    lidar = system.add(Lidar(obstacles=[Circle((2.0, 0.0), 0.5)], angles=[0.0], range_max=10.0, period=0.1))
+    with Master(system) as master:
+        master.initialize()
+        assert lidar.output_buffer[0] == pytest.approx(1.5)
+        lidar.input_buffer[0] = 0.5  # unconnected input: the pose set by hand
+        master.run(5)
+        assert lidar.output_buffer[0] == pytest.approx(1.0)  # scanned at k = 0
+        lidar.input_buffer[0] = 1.0
+        master.run(5)
+        assert lidar.output_buffer[0] == pytest.approx(1.0)  # held until k = 10
+        master.step()
+        assert lidar.output_buffer[0] == pytest.approx(0.5)
