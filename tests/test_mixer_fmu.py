@@ -1,0 +1,130 @@
+"""AvoidanceMixer FMU: each branch of the follow / avoid / recover / stop rule, for the
+differential drive and the bicycle."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from fmpy.fmi1 import FMICallException
+from fmu_helpers import FmuInstance
+
+FOLLOW, AVOID, RECOVER, STOPPED = 0, 1, 2, 3
+WHEELBASE, LOCK = 2.5, 0.6
+
+
+def mixer(**parameters) -> FmuInstance:
+    return FmuInstance("AvoidanceMixer", parameters=parameters)
+
+
+def bicycle(**parameters) -> FmuInstance:
+    return mixer(vehicle_type=1, wheelbase=WHEELBASE, max_steering_angle=LOCK, **parameters)
+
+
+def command(fmu: FmuInstance, v_in=0.8, omega_in=0.2, target_dir=0.3, steering_dir=0.3, goal_reached=False):
+    fmu.set(
+        {
+            "v_in": v_in,
+            "omega_in": omega_in,
+            "target_dir": target_dir,
+            "steering_dir": steering_dir,
+            "goal_reached": goal_reached,
+        }
+    )
+    fmu.step()
+    return fmu.outputs()
+
+
+def test_differential_drive_follows_when_the_target_is_free():
+    with mixer() as fmu:
+        out = command(fmu, target_dir=0.3, steering_dir=0.35)  # within the 0.1 rad tolerance
+    assert out["mode"] == FOLLOW and (out["v"], out["omega"]) == (0.8, 0.2) and out["steering_angle"] == 0.0
+
+
+def test_differential_drive_avoids_with_the_gain_and_the_speed_factor():
+    with mixer(avoid_gain=0.7, avoid_speed_factor=0.5) as fmu:
+        out = command(fmu, target_dir=0.3, steering_dir=-0.9)
+    assert out["mode"] == AVOID
+    assert out["omega"] == pytest.approx(0.7 * -0.9) and out["v"] == pytest.approx(0.4)
+
+
+def test_the_direction_difference_is_taken_across_plus_minus_pi():
+    with mixer() as fmu:
+        out = command(fmu, target_dir=3.1, steering_dir=-3.13)  # 0.053 rad apart through pi
+    assert out["mode"] == FOLLOW
+
+
+def test_differential_drive_recovers_on_the_spot_toward_the_last_free_side():
+    with mixer(recovery_angular_velocity=0.8) as fmu:
+        command(fmu, target_dir=0.0, steering_dir=-0.6)  # last free to the right
+        out = command(fmu, steering_dir=math.nan)
+        assert out["mode"] == RECOVER and out["v"] == 0.0 and out["omega"] == pytest.approx(-0.8)
+        command(fmu, target_dir=0.0, steering_dir=0.4)  # now free to the left
+        out = command(fmu, steering_dir=math.nan)
+        assert out["omega"] == pytest.approx(0.8)
+
+
+def test_goal_reached_stops_everything_for_both_vehicles():
+    for make in (mixer, bicycle):
+        with make() as fmu:
+            out = command(fmu, steering_dir=math.nan, goal_reached=True)
+        assert out["mode"] == STOPPED and out["v"] == out["omega"] == out["steering_angle"] == 0.0
+
+
+def test_bicycle_follow_converts_omega_to_a_steering_angle():
+    with bicycle() as fmu:
+        out = command(fmu, v_in=2.0, omega_in=0.3, target_dir=0.1, steering_dir=0.1)
+    expected = math.atan(0.3 * WHEELBASE / 2.0)  # 0.359 rad, inside the lock
+    assert out["mode"] == FOLLOW and out["steering_angle"] == pytest.approx(expected)
+    assert out["v"] == 2.0 and out["omega"] == pytest.approx(0.3)  # yaw rate v tan(delta) / L
+
+
+def test_bicycle_avoid_clips_to_the_steering_lock():
+    with bicycle(avoid_gain=2.0) as fmu:
+        out = command(fmu, v_in=0.5, target_dir=0.0, steering_dir=-1.0)  # omega -2: atan(-10) beyond the lock
+    assert out["mode"] == AVOID and out["steering_angle"] == pytest.approx(-LOCK)
+    assert out["omega"] == pytest.approx(0.5 * math.tan(-LOCK) / WHEELBASE)
+
+
+def test_bicycle_reversing_command_folds_the_steering_angle():
+    with bicycle() as fmu:
+        out = command(fmu, v_in=-1.0, omega_in=0.2, target_dir=0.0, steering_dir=0.0)
+    # atan2(0.5, -1) is in the second quadrant; folded by -pi it gives tan(delta) = omega L / v.
+    assert out["steering_angle"] == pytest.approx(math.atan(0.2 * WHEELBASE / -1.0))
+    assert out["omega"] == pytest.approx(0.2)
+
+
+def test_bicycle_recovers_by_reversing_at_full_lock_swinging_toward_the_free_side():
+    with bicycle(recovery_linear_velocity=0.3) as fmu:
+        command(fmu, target_dir=0.0, steering_dir=0.5)  # last free to the left
+        out = command(fmu, steering_dir=math.nan)
+    assert out["mode"] == RECOVER and out["v"] == pytest.approx(-0.3)
+    assert out["steering_angle"] == pytest.approx(-LOCK)  # steer right while reversing ...
+    assert out["omega"] > 0  # ... so the heading turns left, toward the free side
+    assert out["omega"] == pytest.approx(-0.3 * math.tan(-LOCK) / WHEELBASE)
+
+
+@pytest.mark.parametrize(
+    ("parameters", "name"),
+    [
+        ({"vehicle_type": 2}, "vehicle_type"),
+        ({"vehicle_type": 1, "wheelbase": 0.0}, "wheelbase"),
+        ({"vehicle_type": 1, "max_steering_angle": 1.6}, "max_steering_angle"),
+        ({"direction_tolerance": -0.1}, "direction_tolerance"),
+        ({"recovery_angular_velocity": -0.5}, "recovery_angular_velocity"),
+        ({"recovery_linear_velocity": -0.1}, "recovery_linear_velocity"),
+    ],
+)
+def test_bad_parameter_fails_initialisation_naming_it(parameters, name):
+    fmu = FmuInstance("AvoidanceMixer", parameters=parameters, initialize=False)
+    try:
+        with pytest.raises(FMICallException):
+            fmu.exit_initialization()
+        assert any(name in message for message in fmu.messages), fmu.messages
+    finally:
+        fmu.close()
+
+
+def test_wheelbase_is_not_checked_for_the_differential_drive():
+    with mixer(wheelbase=0.0) as fmu:
+        assert command(fmu)["mode"] == FOLLOW
