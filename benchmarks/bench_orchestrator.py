@@ -1,0 +1,198 @@
+"""Orchestrator benchmark (not a test): `python3 benchmarks/bench_orchestrator.py [--parts a] [--steps N]`.
+
+(a) A two-FMU closed loop without logging: the project's DifferentialDrive and a go-to-goal
+    controller FMU (the test fixture `controller_fmi2`, hand-written C), 1 ms macro step, both
+    stepped every step. Steps/s of
+      - a plain fmpy `FMU2Slave` loop through fmpy's methods (naive),
+      - navcosim's master, Python loop (`run(n, compiled=False)`, what a run with per-step
+        observers uses),
+      - navcosim's master, compiled loop (`run(n)`, an FMU-only system with nobody observing),
+      - ecospy's `step(n)` (C++ master) on the same FMUs, when ecospy is installed.
+    Goals: >= 200k steps/s and >= 0.5x ecospy. Each engine's final pose is printed: they agree.
+
+Parts (b) (with MCAP logging) and (c) (shipped scenarios) plug in by adding a function
+`part_<letter>(steps: int) -> list[Row]` to `PARTS`; `main` runs the selected parts and prints
+one table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO / "tests"))
+
+from fixtures.build_fixtures import build_fixture_fmu  # noqa: E402
+
+from cosim.fmu_component import FmuComponent  # noqa: E402
+from cosim.fmus import builtin_fmu  # noqa: E402
+from cosim.master import Master, System  # noqa: E402
+
+MACRO_STEP = 0.001  # s
+GOAL = (5.0, 3.0)  # m
+STATE_OUTPUTS = ("x", "y", "theta")
+
+
+@dataclass
+class Row:
+    part: str
+    engine: str
+    steps: int
+    seconds: float
+    note: str = ""
+
+    @property
+    def rate(self) -> float:
+        return self.steps / self.seconds
+
+
+def _fmus(work: Path) -> tuple[Path, Path]:
+    return builtin_fmu("DifferentialDrive"), build_fixture_fmu("controller_fmi2", work)
+
+
+def _system(vehicle_path: Path, controller_path: Path) -> tuple[System, FmuComponent]:
+    system = System(MACRO_STEP)
+    # The project's DifferentialDrive does not declare its outputs' dependencies (FMI: then they
+    # depend on every input); the pose is a state, so say so.
+    vehicle = system.add(
+        FmuComponent(vehicle_path, "vehicle", feedthrough_override={name: [] for name in STATE_OUTPUTS})
+    )
+    system.add(FmuComponent(controller_path, "controller", {"goal_x": GOAL[0], "goal_y": GOAL[1]}))
+    for name in STATE_OUTPUTS:
+        system.connect(f"vehicle.{name}", f"controller.{name}")
+    system.connect("controller.v", "vehicle.v")
+    system.connect("controller.omega", "vehicle.omega")
+    return system, vehicle
+
+
+def _navcosim(vehicle_path: Path, controller_path: Path, steps: int, compiled: bool) -> Row:
+    system, vehicle = _system(vehicle_path, controller_path)
+    with Master(system) as master:
+        master.initialize()
+        note = ""
+        if compiled:
+            start = time.perf_counter()
+            master.run(1, compiled=True)  # compile once, outside the timing
+            note = f"compile {time.perf_counter() - start:.1f} s; "
+            steps -= 1
+        start = time.perf_counter()
+        master.run(steps, compiled=compiled)
+        seconds = time.perf_counter() - start
+        x, y = vehicle.output_buffer[0], vehicle.output_buffer[1]
+    engine = "navcosim master, compiled loop" if compiled else "navcosim master, Python loop"
+    return Row("a", engine, steps, seconds, note + f"final x, y = {x:.9f}, {y:.9f}")
+
+
+def _naive_fmpy(vehicle_path: Path, controller_path: Path, steps: int, work: Path) -> Row:
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    slaves, references = [], []
+    for path, name in ((vehicle_path, "vehicle"), (controller_path, "controller")):
+        description = read_model_description(str(path))
+        unzipped = extract(str(path), unzipdir=str(work / f"naive-{name}"))
+        slave = FMU2Slave(
+            guid=description.guid,
+            unzipDirectory=unzipped,
+            modelIdentifier=description.coSimulation.modelIdentifier,
+            instanceName=name,
+        )
+        slave.instantiate()
+        slave.setupExperiment(startTime=0.0)
+        references.append({v.name: v.valueReference for v in description.modelVariables})
+        slaves.append(slave)
+    vehicle, controller = slaves
+    vehicle_vr, controller_vr = references
+    controller.setReal([controller_vr["goal_x"], controller_vr["goal_y"]], list(GOAL))
+    for slave in slaves:
+        slave.enterInitializationMode()
+        slave.exitInitializationMode()
+    pose_out = [vehicle_vr[name] for name in STATE_OUTPUTS]
+    pose_in = [controller_vr[name] for name in STATE_OUTPUTS]
+    command_out = [controller_vr["v"], controller_vr["omega"]]
+    command_in = [vehicle_vr["v"], vehicle_vr["omega"]]
+    start = time.perf_counter()
+    for k in range(steps):
+        t = k * MACRO_STEP
+        controller.setReal(pose_in, vehicle.getReal(pose_out))
+        controller.doStep(t, MACRO_STEP)
+        vehicle.setReal(command_in, controller.getReal(command_out))
+        vehicle.doStep(t, MACRO_STEP)
+    seconds = time.perf_counter() - start
+    x, y, _ = vehicle.getReal(pose_out)
+    for slave in slaves:
+        slave.terminate()
+        slave.freeInstance()
+    return Row("a", "plain fmpy FMU2Slave loop (naive)", steps, seconds, f"final x, y = {x:.9f}, {y:.9f}")
+
+
+def _ecospy(vehicle_path: Path, controller_path: Path, steps: int) -> Row | None:
+    try:
+        from ecospy import EcosSimulation, EcosSimulationStructure
+    except ImportError:  # needs `pip install ecospy` and Debian's libtbb12
+        return None
+    structure = EcosSimulationStructure()
+    structure.add_model("vehicle", str(vehicle_path))
+    structure.add_model("controller", str(controller_path))
+    for name in STATE_OUTPUTS:
+        structure.make_real_connection(f"vehicle::{name}", f"controller::{name}")
+    structure.make_real_connection("controller::v", "vehicle::v")
+    structure.make_real_connection("controller::omega", "vehicle::omega")
+    structure.add_parameter_set("goal", {"controller::goal_x": GOAL[0], "controller::goal_y": GOAL[1]})
+    with EcosSimulation(structure=structure, step_size=MACRO_STEP) as simulation:
+        simulation.init(parameter_set="goal")
+        start = time.perf_counter()
+        simulation.step(steps)
+        seconds = time.perf_counter() - start
+        x, y = simulation.get_real("vehicle::x"), simulation.get_real("vehicle::y")
+        simulation.terminate()
+    return Row("a", "ecospy step(n)", steps, seconds, f"final x, y = {x:.9f}, {y:.9f}")
+
+
+def part_a(steps: int) -> list[Row]:
+    """Two-FMU closed loop without logging (see the module docstring)."""
+    with tempfile.TemporaryDirectory() as scratch:
+        work = Path(scratch)
+        vehicle_path, controller_path = _fmus(work)
+        rows = [
+            _naive_fmpy(vehicle_path, controller_path, min(steps, 100_000), work),
+            _navcosim(vehicle_path, controller_path, min(steps, 100_000), compiled=False),
+            _navcosim(vehicle_path, controller_path, steps, compiled=True),
+        ]
+        ecospy = _ecospy(vehicle_path, controller_path, steps)
+        rows += [ecospy] if ecospy else []
+    return rows
+
+
+PARTS: dict[str, Callable[[int], list[Row]]] = {"a": part_a}
+
+
+def print_table(rows: list[Row]) -> None:
+    reference = next((row.rate for row in rows if row.engine.startswith("ecospy")), None)
+    print("| part | engine | steps | steps/s | vs ecospy | note |\n|---|---|---:|---:|---:|---|")
+    for row in rows:
+        ratio = f"{row.rate / reference:.2f}x" if reference and row.part == "a" else ""
+        print(f"| {row.part} | {row.engine} | {row.steps} | {row.rate:,.0f} | {ratio} | {row.note} |")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--parts", default=",".join(PARTS), help="comma-separated parts to run")
+    parser.add_argument("--steps", type=int, default=1_000_000, help="macro steps of part (a)")
+    arguments = parser.parse_args()
+    rows: list[Row] = []
+    for part in arguments.parts.split(","):
+        if part not in PARTS:
+            parser.error(f"unknown part '{part}'; parts: {', '.join(PARTS)}")
+        rows += PARTS[part](arguments.steps)
+    print_table(rows)
+
+
+if __name__ == "__main__":
+    main()
