@@ -19,6 +19,10 @@ void pure_pursuit_compact_path(ModelData *data) {
     data->path_count = count;
 }
 
+/* Euclidean length; sqrt rather than hypot, which is several times slower and guards only
+ * against overflow far beyond map coordinates. */
+static double length(double dx, double dy) { return sqrt(dx * dx + dy * dy); }
+
 /* Closest point to (px, py) on the segment a-b; returns its distance. */
 static double closest_point_on_segment(double ax, double ay, double bx, double by, double px, double py,
                                        double *cx, double *cy) {
@@ -31,7 +35,7 @@ static double closest_point_on_segment(double ax, double ay, double bx, double b
     }
     *cx = ax + t * dx;
     *cy = ay + t * dy;
-    return hypot(px - *cx, py - *cy);
+    return length(px - *cx, py - *cy);
 }
 
 /* Search forward from the current segment; stop once the path length walked since the old
@@ -50,10 +54,10 @@ static void update_projection(const ModelData *data, ProjectionState *projection
     double min_distance = closest_point_on_segment(projection->x, projection->y, path_x[segment + 1],
                                                    path_y[segment + 1], data->x, data->y,
                                                    &projection->x, &projection->y);
-    double walked = hypot(projection->x - path_x[segment + 1], projection->y - path_y[segment + 1]);
+    double walked = length(projection->x - path_x[segment + 1], projection->y - path_y[segment + 1]);
     for (int i = segment + 1; i < last; i++) {
         if (!search_all && walked > data->lookahead_distance) break;
-        walked += hypot(path_x[i + 1] - path_x[i], path_y[i + 1] - path_y[i]);
+        walked += length(path_x[i + 1] - path_x[i], path_y[i + 1] - path_y[i]);
         double cx, cy;
         double distance = closest_point_on_segment(path_x[i], path_y[i], path_x[i + 1], path_y[i + 1],
                                                    data->x, data->y, &cx, &cy);
@@ -83,7 +87,7 @@ void pure_pursuit_lookahead(const ModelData *data, ProjectionState *projection, 
     int segment = projection->segment;
     double start_x = projection->x, start_y = projection->y;
     double end_x = path_x[segment + 1], end_y = path_y[segment + 1];
-    double walked = hypot(end_x - start_x, end_y - start_y);
+    double walked = length(end_x - start_x, end_y - start_y);
     double overshoot = walked - data->lookahead_distance;
     while (overshoot < 0.0 && segment < last - 1) {
         segment++;
@@ -91,12 +95,12 @@ void pure_pursuit_lookahead(const ModelData *data, ProjectionState *projection, 
         start_y = path_y[segment];
         end_x = path_x[segment + 1];
         end_y = path_y[segment + 1];
-        walked += hypot(end_x - start_x, end_y - start_y);
+        walked += length(end_x - start_x, end_y - start_y);
         overshoot = walked - data->lookahead_distance;
     }
     /* overshoot > 0: the point lies `overshoot` back from the segment end; otherwise the path
      * ended before the lookahead was used up and the last waypoint is the target. */
-    double segment_length = hypot(end_x - start_x, end_y - start_y);
+    double segment_length = length(end_x - start_x, end_y - start_y);
     if (overshoot > 0.0 && segment_length > 0.0) {
         double back = overshoot / segment_length;
         *lookahead_x = (1.0 - back) * end_x + back * start_x;
