@@ -17,8 +17,10 @@ Options (units in brackets; defaults in parentheses):
     reverse_cost            multiplier (>= 1) on the length driven backwards (2.0)
     direction_switch_cost   [m] added at every change between forward and reverse (4.0)
     steering_cost           relative extra cost per metre at full lock (0.05)
-    analytic_interval       try a curve to the goal every this many expansions (5) ...
-    analytic_distance       [m] ... and at every expansion closer than this to the goal (4 R)
+    analytic_interval       try a curve to the goal at the first and every this many expansions (5) ...
+    analytic_distance       [m] ... and at every expansion closer than this to the goal (4 R);
+                            analytic_interval 0 turns analytic expansion off (the goal is then
+                            reached by primitives, within the goal tolerances)
     goal_tolerance          [m] position tolerance when a primitive reaches the goal (resolution)
     heading_tolerance       [rad] heading tolerance at the goal (one heading bin)
     interpolation_distance  [m] spacing of the returned poses (resolution)
@@ -139,7 +141,7 @@ def resolve_hybrid_options(grid: OccupancyGrid, options: dict) -> dict:
         "direction_switch_cost", options.get("direction_switch_cost", 4.0), strict=False
     )
     settings["steering_cost"] = _number("steering_cost", options.get("steering_cost", 0.05), strict=False)
-    settings["analytic_interval"] = _integer("analytic_interval", options.get("analytic_interval", 5), 1)
+    settings["analytic_interval"] = _integer("analytic_interval", options.get("analytic_interval", 5), 0)
     settings["analytic_distance"] = _number(
         "analytic_distance", options.get("analytic_distance", 4.0 * radius), strict=False
     )

@@ -159,7 +159,9 @@ def hybrid_search(
         distance = math.hypot(x - goal[0], y - goal[1])
         if distance <= goal_tolerance and abs(wrap_angle(theta - goal[2])) <= heading_tolerance:
             return FOUND_AT_GOAL, node, expanded, 0, 0.0
-        if expanded % analytic_interval == 0 or distance <= analytic_distance:
+        if analytic_interval > 0 and (
+            expanded == 1 or expanded % analytic_interval == 0 or distance <= analytic_distance
+        ):
             count, cost = _analytic_expansion(
                 x, y, theta, node_direction[node], goal, radius, reverse, reverse_cost, steering_cost,
                 switch_cost, occupied, resolution, origin_x, origin_y, collision_step,
