@@ -36,6 +36,7 @@ MESSAGE_HEADER_BYTES = 1 + 8 + 2 + 4 + 8 + 8  # opcode, length, channel, sequenc
 _record_head = struct.Struct("<BQ")
 _chunk_head = struct.Struct("<QQQII")  # start, end, uncompressed size, crc, compression string length
 _message_head = struct.Struct("<HIQQ")
+_zstd = zstandard.ZstdDecompressor()
 
 
 @dataclass
@@ -205,7 +206,7 @@ def block_bytes(handle, block: Block) -> bytes:
     if len(data) != block.data_size:
         raise ValueError("block is cut short")
     if block.compression == "zstd":
-        return zstandard.ZstdDecompressor().decompress(data, max_output_size=block.uncompressed_size)
+        return _zstd.decompress(data, max_output_size=block.uncompressed_size)
     if block.compression == "lz4":
         return lz4.frame.decompress(data)
     if block.compression == "":
@@ -234,35 +235,46 @@ def discover_channels_in_blocks(handle, log: LogIndex) -> None:
 
 
 def fixed_payloads(
-    handle, log: LogIndex, channel: int, skip: int, width: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """Log times [ns] (int64, n) and bytes `skip:skip+width` of every payload of `channel` as an
-    (n, width) uint8 array, in time order. Every record must carry at least skip+width bytes.
-    Vectorised per chunk: the message index gives record offsets, a sliding-window view of the
-    decompressed chunk turns the gather into one fancy-indexing copy."""
-    times, rows = [], []
+    handle, log: LogIndex, layouts: dict[int, tuple[int, int]]
+) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """For each channel in `layouts` ({channel: (skip, width)}): log times [ns] (int64, n) and
+    bytes `skip:skip+width` of every payload as an (n, width) uint8 array, in time order.
+
+    One pass over the chunks, each decompressed once. Vectorised per chunk: the message index
+    gives record offsets, and a sliding-window view of the decompressed chunk turns the gather
+    into one fancy-indexing copy per channel."""
+    times: dict[int, list[np.ndarray]] = {channel: [] for channel in layouts}
+    rows: dict[int, list[np.ndarray]] = {channel: [] for channel in layouts}
     for block in log.blocks:
-        entries = block.index.get(channel)
-        if entries is None or len(entries) == 0:
+        wanted = [channel for channel in layouts if len(block.index.get(channel, ()))]
+        if not wanted:
             continue
         records = np.frombuffer(block_bytes(handle, block), dtype=np.uint8)
-        offsets = entries[:, 1].astype(np.int64)
-        lengths = np.lib.stride_tricks.sliding_window_view(records, 8)[offsets + 1].view("<u8")[:, 0]
-        if np.any(
-            lengths < MESSAGE_HEADER_BYTES - 9 + skip + width
-        ) or offsets.max() + 9 + lengths.max() > len(records):
-            raise CosimError(f"{log.path}: messages of channel {channel} are shorter than their schema")
-        windows = np.lib.stride_tricks.sliding_window_view(records, width)
-        rows.append(windows[offsets + MESSAGE_HEADER_BYTES + skip])
-        times.append(entries[:, 0].astype(np.int64))
-    if not rows:
-        return np.zeros(0, dtype=np.int64), np.zeros((0, width), dtype=np.uint8)
-    all_times = np.concatenate(times)
-    all_rows = np.concatenate(rows)
-    if np.any(np.diff(all_times) < 0):
-        order = np.argsort(all_times, kind="stable")
-        all_times, all_rows = all_times[order], all_rows[order]
-    return all_times, all_rows
+        lengths_view = np.lib.stride_tricks.sliding_window_view(records, 8)
+        for channel in wanted:
+            skip, width = layouts[channel]
+            entries = block.index[channel]
+            offsets = entries[:, 1].astype(np.int64)
+            if offsets.max() + MESSAGE_HEADER_BYTES + skip + width > len(records):
+                raise CosimError(f"{log.path}: message index of channel {channel} points past its chunk")
+            lengths = lengths_view[offsets + 1].view("<u8")[:, 0]
+            if np.any(lengths < MESSAGE_HEADER_BYTES - 9 + skip + width):
+                raise CosimError(f"{log.path}: messages of channel {channel} are shorter than their schema")
+            windows = np.lib.stride_tricks.sliding_window_view(records, width)
+            rows[channel].append(windows[offsets + MESSAGE_HEADER_BYTES + skip])
+            times[channel].append(entries[:, 0].astype(np.int64))
+    result = {}
+    for channel, (_, width) in layouts.items():
+        if not rows[channel]:
+            result[channel] = (np.zeros(0, dtype=np.int64), np.zeros((0, width), dtype=np.uint8))
+            continue
+        all_times = np.concatenate(times[channel])
+        all_rows = np.concatenate(rows[channel]) if len(rows[channel]) > 1 else rows[channel][0]
+        if np.any(np.diff(all_times) < 0):
+            order = np.argsort(all_times, kind="stable")
+            all_times, all_rows = all_times[order], all_rows[order]
+        result[channel] = (all_times, all_rows)
+    return result
 
 
 def iter_payloads(handle, log: LogIndex, channels: set[int]):

@@ -227,23 +227,30 @@ class Log:
         return self._signals[component]
 
     def _read_signals(self, component: str) -> Signals:
-        channel_id = self._signal_channels.get(component)
-        if channel_id is None:
+        """Read every component's signals in one pass (each chunk is decompressed once)."""
+        if component not in self._signal_channels:
             known = ", ".join(self.components) or "none: not a navcosim run log"
             raise CosimError(f"{self.path}: no signals of component {component!r} (components: {known})")
-        channel = self._index.channels[channel_id]
-        names = list(json.loads(channel.metadata[SIGNAL_NAMES_KEY]))
-        schema = self._index.schemas[channel.schema_id]
-        fields = _signal_fields(schema.data.decode())
-        if len(fields) != len(names):
-            raise CosimError(
-                f"{self.path}: {channel.topic}: schema has {len(fields)} fields for {len(names)} names"
-            )
-        t_ns, rows = log_index.fixed_payloads(
-            self._handle, self._index, channel_id, rosmsg.SIGNAL_VALUES_OFFSET, 8 * len(names)
-        )
-        values = rows.view("<f8").reshape(len(t_ns), len(names))
-        return Signals(component, t_ns / 1e9, t_ns, names, fields, values)
+        layouts, described = {}, {}
+        for name, channel_id in self._signal_channels.items():
+            if name in self._signals:
+                continue
+            channel = self._index.channels[channel_id]
+            names = self.signal_names(name)
+            schema = self._index.schemas[channel.schema_id]
+            fields = _signal_fields(schema.data.decode())
+            if len(fields) != len(names):
+                raise CosimError(
+                    f"{self.path}: {channel.topic}: schema has {len(fields)} fields for {len(names)} names"
+                )
+            layouts[channel_id] = (rosmsg.SIGNAL_VALUES_OFFSET, 8 * len(names))
+            described[channel_id] = (name, names, fields)
+        payloads = log_index.fixed_payloads(self._handle, self._index, layouts)
+        for channel_id, (name, names, fields) in described.items():
+            t_ns, rows = payloads[channel_id]
+            values = rows.view("<f8").reshape(len(t_ns), len(names))
+            self._signals[name] = Signals(name, t_ns / 1e9, t_ns, names, fields, values)
+        return self._signals[component]
 
     # --- ROS messages --------------------------------------------------------------------
 
