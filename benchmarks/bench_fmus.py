@@ -1,0 +1,143 @@
+"""Per-step cost of each project FMU: through fmpy's methods and through preallocated ctypes buffers.
+
+One step = set the per-step inputs, fmi2DoStep, get every Real output (as the orchestrator does).
+PurePursuit's waypoints are set once (a plan), not every step; VFH gets a 720-beam scan every step.
+
+    python3 benchmarks/bench_fmus.py [--steps N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import ctypes
+import math
+import time
+
+import numpy as np
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave
+
+from cosim.fmus import builtin_fmu, known_names
+
+BEAMS = 720
+REPEATS = 5  # the best of several runs: the machine may be shared
+SCALAR_INPUTS = {"v": 1.0, "v_in": 1.0, "omega": 0.2, "omega_in": 0.2, "x": 9.9, "target_dir": 0.3}
+
+
+def _inputs(description) -> tuple[dict[int, float], dict[int, float]]:
+    """(values set once, values set every step) by value reference: a plausible robot situation."""
+    once, every_step = {}, {}
+    angles = np.linspace(-math.pi, math.pi, BEAMS, endpoint=False)
+    ranges = 1.2 + 0.6 * np.sin(3 * angles)  # an uneven room, partly inside the distance limits
+    for variable in description.modelVariables:
+        if variable.causality != "input" or variable.type != "Real":
+            continue
+        name, vr = variable.name, variable.valueReference
+        if name.startswith("waypoints["):
+            row, column = (int(i) for i in name[len("waypoints[") : -1].split(","))
+            if row <= 200:  # a 200-point arc, the rest stays NaN padding
+                once[vr] = 10 * math.cos(row / 100) if column == 1 else 10 * math.sin(row / 100)
+        elif name.startswith("ranges["):
+            every_step[vr] = float(ranges[int(name[7:-1]) - 1])
+        elif name.startswith("angles["):
+            every_step[vr] = float(angles[int(name[7:-1]) - 1])
+        else:
+            every_step[vr] = {
+                "v": 1.0,
+                "v_in": 1.0,
+                "omega": 0.2,
+                "omega_in": 0.2,
+                "x": 9.9,
+                "target_dir": 0.3,
+            }.get(name, 0.1)
+    return once, every_step
+
+
+def _slave(name: str):
+    path = builtin_fmu(name)
+    description = read_model_description(str(path))
+    slave = FMU2Slave(
+        guid=description.guid,
+        unzipDirectory=extract(str(path)),
+        modelIdentifier=description.coSimulation.modelIdentifier,
+        instanceName=name,
+    )
+    slave.instantiate()
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    once, every_step = _inputs(description)
+    if once:
+        slave.setReal(list(once), list(once.values()))
+    slave.exitInitializationMode()
+    outputs = [
+        v.valueReference for v in description.modelVariables if v.causality == "output" and v.type == "Real"
+    ]
+    return slave, every_step, outputs
+
+
+def bench_methods(name: str, steps: int) -> float:
+    """µs per step through fmpy's setReal/doStep/getReal (new ctypes arrays every call)."""
+    slave, inputs, outputs = _slave(name)
+    input_vrs, input_values = list(inputs), list(inputs.values())
+    h, best, k = 0.01, math.inf, 0
+    for _ in range(REPEATS):
+        start = time.perf_counter()
+        for _ in range(steps):
+            slave.setReal(input_vrs, input_values)
+            slave.doStep(k * h, h)
+            slave.getReal(outputs)
+            k += 1
+        best = min(best, time.perf_counter() - start)
+    slave.terminate()
+    slave.freeInstance()
+    return best / steps * 1e6
+
+
+def bench_raw(name: str, steps: int) -> tuple[float, float]:
+    """(µs per step, µs per doStep alone) through the raw functions and preallocated buffers."""
+    slave, inputs, outputs = _slave(name)
+    set_real, get_real, do_step = slave.dll.fmi2SetReal, slave.dll.fmi2GetReal, slave.dll.fmi2DoStep
+    for function in (set_real, get_real):
+        function.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p]
+    do_step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int]
+    input_vrs = (ctypes.c_uint * len(inputs))(*inputs)
+    input_values = (ctypes.c_double * len(inputs))(*inputs.values())
+    output_vrs = (ctypes.c_uint * len(outputs))(*outputs)
+    output_values = (ctypes.c_double * len(outputs))()
+    component, h = slave.component, 0.01
+    n_in, n_out = len(inputs), len(outputs)
+    total = step_only = math.inf
+    k = 0
+    for _ in range(REPEATS):
+        start = time.perf_counter()
+        for _ in range(steps):
+            set_real(component, input_vrs, n_in, input_values)
+            do_step(component, k * h, h, 1)
+            get_real(component, output_vrs, n_out, output_values)
+            k += 1
+        total = min(total, time.perf_counter() - start)
+        start = time.perf_counter()
+        for _ in range(steps):
+            do_step(component, k * h, h, 1)
+            k += 1
+        step_only = min(step_only, time.perf_counter() - start)
+    slave.terminate()
+    slave.freeInstance()
+    return total / steps * 1e6, step_only / steps * 1e6
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=2000, help="steps per measurement (default 2000)")
+    args = parser.parse_args()
+    header = f"{'FMU':<22}{'inputs/step':>12}{'fmpy methods':>16}{'raw ctypes':>14}{'doStep only':>14}"
+    print(header + f"   [µs per step, best of {REPEATS}]")
+    for name in known_names():
+        _, inputs, _ = _slave(name)
+        methods = bench_methods(name, args.steps)
+        raw, step_only = bench_raw(name, args.steps)
+        print(f"{name:<22}{len(inputs):>12}{methods:>16.2f}{raw:>14.2f}{step_only:>14.2f}")
+
+
+if __name__ == "__main__":
+    main()
