@@ -64,7 +64,8 @@ static double steering_angle_for(const ModelData *data, double v, double omega) 
 static void compute_outputs(ModelData *data, double *recovery_sign) {
     const bool bicycle = data->vehicle_type == VEHICLE_BICYCLE;
     double v = data->v_in, omega = data->omega_in;
-    if (!isnan(data->steering_dir) && data->steering_dir != 0.0) *recovery_sign = data->steering_dir > 0 ? 1.0 : -1.0;
+    if (!isnan(data->steering_dir) && data->steering_dir != 0.0)
+        *recovery_sign = data->steering_dir > 0 ? 1.0 : -1.0;
 
     if (data->goal_reached) {
         data->mode = MODE_STOPPED;
@@ -103,14 +104,16 @@ static void compute_outputs(ModelData *data, double *recovery_sign) {
 
 ModelStatus model_initialize(ModelInstance *comp, ModelData *data) {
     if (data->vehicle_type != VEHICLE_DIFFERENTIAL && data->vehicle_type != VEHICLE_BICYCLE) {
-        model_log_error(comp, "vehicle_type must be 0 (differential) or 1 (bicycle), got %d", data->vehicle_type);
+        model_log_error(comp, "vehicle_type must be 0 (differential) or 1 (bicycle), got %d",
+                        data->vehicle_type);
         return MODEL_ERROR;
     }
     if (data->vehicle_type == VEHICLE_BICYCLE && !(data->wheelbase > 0.0)) {
         model_log_error(comp, "wheelbase must be > 0 for the bicycle, got %g", data->wheelbase);
         return MODEL_ERROR;
     }
-    if (data->vehicle_type == VEHICLE_BICYCLE && !(data->max_steering_angle > 0.0 && data->max_steering_angle < M_PI / 2)) {
+    const bool lock_valid = data->max_steering_angle > 0.0 && data->max_steering_angle < M_PI / 2;
+    if (data->vehicle_type == VEHICLE_BICYCLE && !lock_valid) {
         model_log_error(comp, "max_steering_angle must be in (0, pi/2) for the bicycle, got %g",
                         data->max_steering_angle);
         return MODEL_ERROR;
@@ -120,16 +123,18 @@ ModelStatus model_initialize(ModelInstance *comp, ModelData *data) {
         return MODEL_ERROR;
     }
     if (!(data->recovery_angular_velocity >= 0.0)) {
-        model_log_error(comp, "recovery_angular_velocity must be >= 0, got %g", data->recovery_angular_velocity);
+        model_log_error(comp, "recovery_angular_velocity must be >= 0, got %g",
+                        data->recovery_angular_velocity);
         return MODEL_ERROR;
     }
     if (!(data->recovery_linear_velocity >= 0.0)) {
-        model_log_error(comp, "recovery_linear_velocity must be >= 0, got %g", data->recovery_linear_velocity);
+        model_log_error(comp, "recovery_linear_velocity must be >= 0, got %g",
+                        data->recovery_linear_velocity);
         return MODEL_ERROR;
     }
     if (!isfinite(data->avoid_gain) || !isfinite(data->avoid_speed_factor)) {
-        model_log_error(comp, "avoid_gain and avoid_speed_factor must be finite, got %g and %g", data->avoid_gain,
-                        data->avoid_speed_factor);
+        model_log_error(comp, "avoid_gain and avoid_speed_factor must be finite, got %g and %g",
+                        data->avoid_gain, data->avoid_speed_factor);
         return MODEL_ERROR;
     }
     data->initialized = true;
@@ -154,8 +159,12 @@ static double *real_variable(ModelData *d, unsigned vr, const char **parameter) 
     case VR_DIRECTION_TOLERANCE: *parameter = "direction_tolerance"; return &d->direction_tolerance;
     case VR_AVOID_GAIN: *parameter = "avoid_gain"; return &d->avoid_gain;
     case VR_AVOID_SPEED_FACTOR: *parameter = "avoid_speed_factor"; return &d->avoid_speed_factor;
-    case VR_RECOVERY_ANGULAR_VELOCITY: *parameter = "recovery_angular_velocity"; return &d->recovery_angular_velocity;
-    case VR_RECOVERY_LINEAR_VELOCITY: *parameter = "recovery_linear_velocity"; return &d->recovery_linear_velocity;
+    case VR_RECOVERY_ANGULAR_VELOCITY:
+        *parameter = "recovery_angular_velocity";
+        return &d->recovery_angular_velocity;
+    case VR_RECOVERY_LINEAR_VELOCITY:
+        *parameter = "recovery_linear_velocity";
+        return &d->recovery_linear_velocity;
     case VR_V_IN: return &d->v_in;
     case VR_OMEGA_IN: return &d->omega_in;
     case VR_TARGET_DIR: return &d->target_dir;

@@ -62,7 +62,8 @@ static void compute_outputs(ModelData *data, ProjectionState *projection) {
 
 ModelStatus model_initialize(ModelInstance *comp, ModelData *data) {
     if (!(data->lookahead_distance > 0.0) || isinf(data->lookahead_distance)) {
-        model_log_error(comp, "lookahead_distance must be positive and finite, got %g", data->lookahead_distance);
+        model_log_error(comp, "lookahead_distance must be positive and finite, got %g",
+                        data->lookahead_distance);
         return MODEL_ERROR;
     }
     if (!(data->max_angular_velocity >= 0.0)) {
@@ -74,7 +75,8 @@ ModelStatus model_initialize(ModelInstance *comp, ModelData *data) {
         return MODEL_ERROR;
     }
     if (!isfinite(data->desired_linear_velocity)) {
-        model_log_error(comp, "desired_linear_velocity must be finite, got %g", data->desired_linear_velocity);
+        model_log_error(comp, "desired_linear_velocity must be finite, got %g",
+                        data->desired_linear_velocity);
         return MODEL_ERROR;
     }
     if (data->angular_velocity_law != 0 && data->angular_velocity_law != 1) {
@@ -140,8 +142,14 @@ static ModelStatus set_parameter(ModelInstance *comp, const ModelData *data, con
 }
 
 ModelStatus model_set_real(ModelInstance *comp, ModelData *data, unsigned vr, double value) {
-    if (is_waypoint(vr, VR_WAYPOINTS_X)) { set_waypoint(data, &data->waypoints_x[vr - VR_WAYPOINTS_X], value); return MODEL_OK; }
-    if (is_waypoint(vr, VR_WAYPOINTS_Y)) { set_waypoint(data, &data->waypoints_y[vr - VR_WAYPOINTS_Y], value); return MODEL_OK; }
+    if (is_waypoint(vr, VR_WAYPOINTS_X)) {
+        set_waypoint(data, &data->waypoints_x[vr - VR_WAYPOINTS_X], value);
+        return MODEL_OK;
+    }
+    if (is_waypoint(vr, VR_WAYPOINTS_Y)) {
+        set_waypoint(data, &data->waypoints_y[vr - VR_WAYPOINTS_Y], value);
+        return MODEL_OK;
+    }
     switch (vr) {
     case VR_DESIRED_LINEAR_VELOCITY:
         return set_parameter(comp, data, "desired_linear_velocity", &data->desired_linear_velocity, value);
@@ -153,7 +161,9 @@ ModelStatus model_set_real(ModelInstance *comp, ModelData *data, unsigned vr, do
     case VR_X: data->x = value; return MODEL_OK;
     case VR_Y: data->y = value; return MODEL_OK;
     case VR_THETA: data->theta = value; return MODEL_OK;
-    default: model_log_error(comp, "Real value reference %u is unknown or not settable", vr); return MODEL_ERROR;
+    default:
+        model_log_error(comp, "Real value reference %u is unknown or not settable", vr);
+        return MODEL_ERROR;
     }
 }
 

@@ -40,12 +40,14 @@ static bool check(ModelInstance *comp, bool ok, const char *name, const char *ru
 static bool parameters_valid(ModelInstance *comp, const ModelData *d) {
     return check(comp, d->num_angular_sectors >= 1 && d->num_angular_sectors <= VFH_MAX_SECTORS,
                  "num_angular_sectors", "must be in 1..720 (compiled capacity)", d->num_angular_sectors) &&
-           check(comp, d->distance_limit_min >= 0.0, "distance_limit_min", "must be >= 0", d->distance_limit_min) &&
+           check(comp, d->distance_limit_min >= 0.0, "distance_limit_min", "must be >= 0",
+                 d->distance_limit_min) &&
            check(comp, d->distance_limit_max > d->distance_limit_min && isfinite(d->distance_limit_max),
                  "distance_limit_max", "must be finite and > distance_limit_min", d->distance_limit_max) &&
            check(comp, d->robot_radius >= 0.0, "robot_radius", "must be >= 0", d->robot_radius) &&
            check(comp, d->safety_distance >= 0.0, "safety_distance", "must be >= 0", d->safety_distance) &&
-           check(comp, d->min_turning_radius >= 0.0, "min_turning_radius", "must be >= 0", d->min_turning_radius) &&
+           check(comp, d->min_turning_radius >= 0.0, "min_turning_radius", "must be >= 0",
+                 d->min_turning_radius) &&
            check(comp, d->target_direction_weight >= 0.0, "target_direction_weight", "must be >= 0",
                  d->target_direction_weight) &&
            check(comp, d->current_direction_weight >= 0.0, "current_direction_weight", "must be >= 0",
@@ -93,7 +95,9 @@ static double *real_parameter(ModelData *d, unsigned vr, const char **name) {
     case VR_MIN_TURNING_RADIUS: *name = "min_turning_radius"; return &d->min_turning_radius;
     case VR_TARGET_DIRECTION_WEIGHT: *name = "target_direction_weight"; return &d->target_direction_weight;
     case VR_CURRENT_DIRECTION_WEIGHT: *name = "current_direction_weight"; return &d->current_direction_weight;
-    case VR_PREVIOUS_DIRECTION_WEIGHT: *name = "previous_direction_weight"; return &d->previous_direction_weight;
+    case VR_PREVIOUS_DIRECTION_WEIGHT:
+        *name = "previous_direction_weight";
+        return &d->previous_direction_weight;
     case VR_HISTOGRAM_THRESHOLD_LOW: *name = "histogram_threshold_low"; return &d->histogram_threshold_low;
     case VR_HISTOGRAM_THRESHOLD_HIGH: *name = "histogram_threshold_high"; return &d->histogram_threshold_high;
     case VR_NARROW_OPENING_THRESHOLD: *name = "narrow_opening_threshold"; return &d->narrow_opening_threshold;
