@@ -274,3 +274,17 @@ def test_random_scans_match_the_matrix_formulation(seed):
                 assert math.isnan(out["steering_dir"])
             else:
                 assert out["steering_dir"] == pytest.approx(steering, abs=1e-12)
+
+
+def test_a_reading_whose_enlargement_falls_between_two_midpoints_adds_to_no_sector():
+    # gamma = asin(0.001 / 1) spans 0.057 sector widths; the range starts just past mid-point 100,
+    # where the sector-range guess is checked exactly, and ends before mid-point 101.
+    width = 2 * math.pi / 180
+    midpoint = -math.pi + width * 100.5
+    angle = midpoint + math.asin(0.001) + 0.001 * width
+    parameters = {"robot_radius": 0.001, "safety_distance": 0.0, "histogram_threshold_low": 0.5}
+    parameters["histogram_threshold_high"] = 0.6
+    with vfh(**parameters) as fmu:
+        out = run(fmu, [1.0], target_dir=angle, angles=[angle])
+    reference = ReferenceVfh({**DEFAULTS, **parameters}).step(np.array([1.0]), np.array([angle]), angle)
+    assert out["free_sectors"] == reference[1] == 180
