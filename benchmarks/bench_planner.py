@@ -20,6 +20,7 @@ per planner, planners interleaved per query so they see the same machine state.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import statistics
 import subprocess
@@ -169,8 +170,11 @@ def load_occupancy(map_path: Path) -> np.ndarray:
     return planner.OccupancyGrid.from_file(map_path).occupied
 
 
-def bench_map(map_path: Path, queries: list[Query]) -> tuple[dict[str, PlannerStats], dict[str, float], int]:
-    """Time every planner on every query; returns stats, build time per planner [s], pyastar2d corner cuts."""
+def bench_map(
+    map_path: Path, queries: list[Query], repeat: int = 1
+) -> tuple[dict[str, PlannerStats], dict[str, float], int]:
+    """Time every planner on every query (the fastest of `repeat` calls, which filters out moments when
+    another process had the CPU); returns stats, build time per planner [s], pyastar2d corner cuts."""
     occupied = load_occupancy(map_path)
     runners, build_times = {}, {}
     for name, factory in FACTORIES.items():
@@ -183,9 +187,11 @@ def bench_map(map_path: Path, queries: list[Query]) -> tuple[dict[str, PlannerSt
     pyastar_cuts = 0
     for query in queries:
         for name, run in runners.items():
-            begin = time.perf_counter()
-            cells = run(query.start, query.goal)
-            elapsed = time.perf_counter() - begin
+            elapsed = math.inf
+            for _ in range(repeat):
+                begin = time.perf_counter()
+                cells = run(query.start, query.goal)
+                elapsed = min(elapsed, time.perf_counter() - begin)
             length = None if cells is None else octile_length(cells)
             stats[name].record(elapsed, length, query.optimal_length)
             if name == "pyastar2d" and cells is not None and corner_cut_steps(cells, occupied):
@@ -216,9 +222,10 @@ def print_table(rows: list[tuple[str, int, dict[str, PlannerStats], dict[str, fl
 
 
 LEGEND = """\
-Legend: median wall time per query [ms] of the call a user makes per query, after one untimed warm-up
-call per planner and map. Included: ours = planner.plan(grid, start_xy, goal_xy, connectivity=8,
-heuristic="octile", corner_cutting=False) (input checks, search, path and PlanResult); tcod = new
+Legend: median over queries of the wall time [ms] of the call a user makes per query (with --repeat R,
+the fastest of R calls per query), after one untimed warm-up call per planner and map. Included:
+ours = planner.plan(grid, start_xy, goal_xy, connectivity=8, heuristic="octile", corner_cutting=False)
+(input checks, search, path and PlanResult); tcod = new
 Pathfinder(graph) + add_root + path_to; pyastar2d = astar_path(weights, ...) (it copies the weights per
 call). Not included: building OccupancyGrid / tcod CustomGraph (+ no-corner-cut condition arrays) /
 pyastar2d weights once per map (printed below). opt = fraction of queries whose octile path length
@@ -231,25 +238,37 @@ charges diagonals as straight steps, so it does not solve the Moving AI problem)
 STARTUP_SCRIPT = textwrap.dedent(
     """
     import json, resource, sys, time, tracemalloc
+    def max_rss_mib():
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    numbers = dict(rss_start=max_rss_mib())
     begin = time.perf_counter()
     import planner
-    import_time = time.perf_counter() - begin
-    grid = planner.OccupancyGrid.from_file(sys.argv[1])
+    numbers["import_time"] = time.perf_counter() - begin
+    numbers["rss_import"] = max_rss_mib()
     start, goal = (int(sys.argv[2]), int(sys.argv[3])), (int(sys.argv[4]), int(sys.argv[5]))
     options = dict(connectivity=8, heuristic="octile", corner_cutting=False)
-    rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    def plan_on(grid):
+        return planner.plan(grid, grid.cell_to_world(start), grid.cell_to_world(goal), **options)
+    grid = planner.OccupancyGrid.from_file(sys.argv[1])
     begin = time.perf_counter()
-    planner.plan(grid, grid.cell_to_world(start), grid.cell_to_world(goal), **options)
-    first = time.perf_counter() - begin
-    rss_after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    plan_on(grid)
+    numbers["first"] = time.perf_counter() - begin
+    numbers["rss_first"] = max_rss_mib()
+    # Memory a user pays per map and per call: a new grid (no per-grid caches yet), then a repeat.
+    fresh = planner.OccupancyGrid(grid.occupied)
     tracemalloc.start()
     begin = time.perf_counter()
-    planner.plan(grid, grid.cell_to_world(start), grid.cell_to_world(goal), **options)
-    second = time.perf_counter() - begin
-    traced_peak = tracemalloc.get_traced_memory()[1]
+    plan_on(fresh)
+    numbers["new_grid"] = time.perf_counter() - begin
+    numbers["traced_new_grid"] = tracemalloc.get_traced_memory()[1] / 2**20
+    tracemalloc.reset_peak()
+    begin = time.perf_counter()
+    plan_on(fresh)
+    numbers["repeat"] = time.perf_counter() - begin
+    numbers["traced_repeat"] = tracemalloc.get_traced_memory()[1] / 2**20
     tracemalloc.stop()
-    print(json.dumps(dict(import_time=import_time, first=first, second=second, rss_before=rss_before,
-                          rss_after=rss_after, traced_peak=traced_peak)))
+    numbers["rss_end"] = max_rss_mib()
+    print(json.dumps(numbers))
     """
 )
 
@@ -264,7 +283,7 @@ def startup_report(map_path: Path, query: Query) -> None:
         # A private NUMBA_CACHE_DIR gives a cleared cache without touching the project's __pycache__.
         environment = dict(os.environ, NUMBA_CACHE_DIR=cache_dir)
         arguments = [str(map_path), *map(str, query.start), *map(str, query.goal)]
-        for label in ("cold numba cache", "warm numba cache"):
+        for label in ("cold numba cache (compiles)", "warm numba cache"):
             completed = subprocess.run(
                 [sys.executable, "-c", STARTUP_SCRIPT, *arguments],
                 env=environment,
@@ -278,11 +297,15 @@ def startup_report(map_path: Path, query: Query) -> None:
                 continue
             numbers = json.loads(completed.stdout.strip().splitlines()[-1])
             print(
-                f"  {label:<17} import planner {numbers['import_time']:.2f} s, first plan() "
-                f"{numbers['first']:.2f} s, second plan() {numbers['second'] * 1e3:.1f} ms, "
-                f"max RSS {numbers['rss_before'] / 1024:.0f} MiB before / "
-                f"{numbers['rss_after'] / 1024:.0f} MiB after the first plan(), "
-                f"tracemalloc peak of one plan() {numbers['traced_peak'] / 2**20:.1f} MiB"
+                f"  {label}: import planner {numbers['import_time']:.2f} s; first plan() "
+                f"{numbers['first']:.2f} s (compile or cache load + search); plan() on a new grid "
+                f"{numbers['new_grid'] * 1e3:.1f} ms, repeated {numbers['repeat'] * 1e3:.1f} ms"
+            )
+            print(
+                f"    max RSS [MiB]: interpreter {numbers['rss_start']:.0f}, after import "
+                f"{numbers['rss_import']:.0f}, after first plan() {numbers['rss_first']:.0f}, end "
+                f"{numbers['rss_end']:.0f}; tracemalloc peak [MiB]: plan() on a new grid "
+                f"{numbers['traced_new_grid']:.1f}, repeated {numbers['traced_repeat']:.1f}"
             )
 
 
@@ -290,12 +313,18 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="bench_planner", description=__doc__.splitlines()[0])
     parser.add_argument("--maps", nargs="+", metavar="NAME", help="map names (stems), default: all")
     parser.add_argument("--limit", type=int, metavar="N", help="at most N queries per map")
+    parser.add_argument(
+        "--repeat", type=int, default=1, metavar="R", help="time each query R times, keep the fastest (1)"
+    )
     parser.add_argument("--skip-startup", action="store_true", help="skip the compile-time/memory report")
     parser.add_argument("--data", type=Path, default=DATA, help=f"Moving AI folder (default {DATA})")
     args = parser.parse_args(argv)
     if not args.data.is_dir():
         print(f"bench_planner: {args.data} not found; nothing to benchmark (skipped)")
         return 0
+    import pyastar2d  # noqa: F401  (imported here so no map's build time includes an import)
+    import tcod.path  # noqa: F401
+
     scenario_files = sorted(args.data.glob("*.scen"))
     rows = []
     for scenario_file in scenario_files:
@@ -307,7 +336,7 @@ def main(argv: list[str] | None = None) -> int:
         if not map_path.is_file() or not queries:
             print(f"bench_planner: {scenario_file.name}: map or queries missing, skipped")
             continue
-        stats, build, cuts = bench_map(map_path, queries)
+        stats, build, cuts = bench_map(map_path, queries, max(1, args.repeat))
         rows.append((map_name, len(queries), stats, build, cuts))
         print(f"  {map_name}: {len(queries)} queries done", file=sys.stderr)
     print()
