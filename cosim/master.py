@@ -13,7 +13,7 @@ Connections
 -----------
 `System.connect("pure_pursuit.v", "mixer.v_in", scale)` copies `scale * source output` into the
 target input before the target steps. An input takes at most one connection; unconnected inputs
-keep their start values (or what the user set).
+keep their start values (or what the user set with `Component.set_inputs`, which sends them).
 
 Ordering (which values a component sees at step k)
 --------------------------------------------------
@@ -254,46 +254,44 @@ class System:
         return [self.components[name] for name in self._topological(edges)]
 
 
-class _Gather:
-    """Copies a consumer's connected inputs from its producers' output buffers."""
+def _gather(
+    system: System, consumer: Component, producers: set[str] | None = None
+) -> Callable[[], None] | None:
+    """A function copying the consumer's connected inputs from its producers' output buffers.
 
-    def __init__(self, system: System, consumer: Component, producers: set[str] | None = None) -> None:
-        groups: dict[str, list[tuple[int, int, float]]] = {}
-        for connection in system.connections:
-            if connection.target_component != consumer.name:
-                continue
-            if producers is not None and connection.source_component not in producers:
-                continue
-            producer, source_index = system.resolve(connection.source, "output")
-            _, target_index = system.resolve(connection.target, "input")
-            groups.setdefault(producer.name, []).append((source_index, target_index, connection.scale))
-        self.scalar: list[tuple[object, int, int, float]] = []
-        self.vector: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]] = []
-        for producer_name, links in groups.items():
-            producer = system.components[producer_name]
-            if len(links) <= _SCALAR_COPY_LIMIT:
-                for source_index, target_index, scale in links:
-                    self.scalar.append((producer.output_cbuffer, source_index, target_index, scale))
-            else:
-                sources = np.array([s for s, _, _ in links], dtype=np.intp)
-                targets = np.array([t for _, t, _ in links], dtype=np.intp)
-                scales = np.array([k for _, _, k in links])
-                self.vector.append(
-                    (producer.output_buffer, sources, targets, None if np.all(scales == 1.0) else scales)
-                )
-        self.target_c = consumer.input_cbuffer
-        self.target = consumer.input_buffer
-        self.empty = not self.scalar and not self.vector
-
-    def __call__(self) -> None:
-        target_c = self.target_c
-        for source, source_index, target_index, scale in self.scalar:
-            target_c[target_index] = source[source_index] * scale
-        for source, sources, targets, scales in self.vector:
-            if scales is None:
-                self.target[targets] = source[sources]
-            else:
-                self.target[targets] = source[sources] * scales
+    Generated as straight-line code (one statement per value, or one NumPy copy for many values
+    from one producer), because it runs for every component on every step. None when the
+    consumer has no connected input (from `producers`, when given).
+    """
+    groups: dict[str, list[tuple[int, int, float]]] = {}
+    for connection in system.connections:
+        if connection.target_component != consumer.name:
+            continue
+        if producers is not None and connection.source_component not in producers:
+            continue
+        producer, source_index = system.resolve(connection.source, "output")
+        _, target_index = system.resolve(connection.target, "input")
+        groups.setdefault(producer.name, []).append((source_index, target_index, connection.scale))
+    if not groups:
+        return None
+    names: dict[str, object] = {"target": consumer.input_cbuffer, "target_array": consumer.input_buffer}
+    lines = ["def gather():"]
+    for number, (producer_name, links) in enumerate(groups.items()):
+        producer = system.components[producer_name]
+        names[f"source{number}"] = producer.output_cbuffer
+        names[f"source_array{number}"] = producer.output_buffer
+        if len(links) <= _SCALAR_COPY_LIMIT:
+            for source_index, target_index, scale in links:
+                factor = "" if scale == 1.0 else f" * {scale!r}"
+                lines.append(f"    target[{target_index}] = source{number}[{source_index}]{factor}")
+            continue
+        names[f"sources{number}"] = np.array([source for source, _, _ in links], dtype=np.intp)
+        names[f"targets{number}"] = np.array([target for _, target, _ in links], dtype=np.intp)
+        names[f"scales{number}"] = np.array([scale for _, _, scale in links])
+        factor = "" if all(scale == 1.0 for _, _, scale in links) else f" * scales{number}"
+        lines.append(f"    target_array[targets{number}] = source_array{number}[sources{number}]{factor}")
+    exec("\n".join(lines), names)  # noqa: S102 - generated from our own templates
+    return names["gather"]
 
 
 class Master:
@@ -320,9 +318,10 @@ class Master:
         self._closed = False
         self._compiled_loop = None
         self._plan = [
-            (component, system.period_steps(component), _Gather(system, component))
+            (component, system.period_steps(component), _gather(system, component))
             for component in self.order
         ]
+        self._steppers: list[tuple] = []
 
     # ---- time --------------------------------------------------------------------------------
 
@@ -350,7 +349,9 @@ class Master:
                 component.setup(t0, self.parameters.get(component.name, {}))
             ready: set[str] = set()
             for component in self.system.initialization_order():
-                _Gather(self.system, component, producers=ready)()
+                gather = _gather(self.system, component, producers=ready)
+                if gather is not None:
+                    gather()
                 component.push_inputs()
                 component.initialize()
                 component.get_outputs()
@@ -359,6 +360,12 @@ class Master:
             self.close()
             raise
         self._initialized = True
+        # Bound once, after initialisation installed the components' fast paths.
+        h_ns = self.system.macro_step_ns
+        self._steppers = [
+            (period, period * h_ns / NS_PER_S, gather, c.push_inputs, c.do_step, c.get_outputs)
+            for c, period, gather in self._plan
+        ]
 
     def _check_running(self) -> None:
         if self.failure is not None:
@@ -423,30 +430,31 @@ class Master:
             raise
 
     def _advance(self, steps: int) -> None:
-        plan = self._plan
+        steppers = self._steppers
         h_ns = self.system.macro_step_ns
         start_ns = self.start_time_ns
         jacobi = self.system.mode == "jacobi"
         k = self.step_index
         try:
             for k in range(self.step_index, self.step_index + steps):
-                t_ns = start_ns + k * h_ns
+                t = (start_ns + k * h_ns) / NS_PER_S
                 if jacobi:
-                    due = [entry for entry in plan if k % entry[1] == 0]
-                    for component, _, gather in due:
-                        gather()
-                        component.push_inputs()
-                    for component, period, _ in due:
-                        component.do_step(t_ns / NS_PER_S, period * h_ns / NS_PER_S)
-                        component.get_outputs()
-                    continue
-                for component, period, gather in plan:
-                    if period == 1 or k % period == 0:
-                        if not gather.empty:
+                    due = [entry for entry in steppers if k % entry[0] == 0]
+                    for _, _, gather, push, _, _ in due:
+                        if gather is not None:
                             gather()
-                            component.push_inputs()
-                        component.do_step(t_ns / NS_PER_S, period * h_ns / NS_PER_S)
-                        component.get_outputs()
+                            push()
+                    for _, h, _, _, do_step, get_outputs in due:
+                        do_step(t, h)
+                        get_outputs()
+                    continue
+                for period, h, gather, push, do_step, get_outputs in steppers:
+                    if period == 1 or k % period == 0:
+                        if gather is not None:
+                            gather()
+                            push()
+                        do_step(t, h)
+                        get_outputs()
         except CosimError as error:
             self.step_index = k
             self.failure = error
