@@ -124,6 +124,14 @@ def _draw_map(axes, log: Log, modes: tuple[np.ndarray, np.ndarray] | None) -> No
         )
         handles.append(line)
         bounds.append(np.column_stack((trajectory.x, trajectory.y)))
+        reason = (log.outcome or {}).get("reason", "log ends" if log.outcome is None else "end")
+        if (log.outcome or {}).get("reached") != "true":
+            axes.plot(
+                trajectory.x[-1], trajectory.y[-1], marker="X", color="#7b2cbf", ms=11, ls="none", zorder=8
+            )
+            handles.append(
+                Line2D([], [], marker="X", color="#7b2cbf", ls="none", ms=9, label=f"end: {reason}")
+            )
         handles += _mark_interventions(axes, trajectory, modes)
     start, goal = log.start(), log.goal()
     if start is not None:
@@ -172,8 +180,8 @@ def _draw_map(axes, log: Log, modes: tuple[np.ndarray, np.ndarray] | None) -> No
     axes.set_ylabel("y [m]")
     axes.set_title("trajectory over the map")
     axes.grid(alpha=0.25)
-    if handles:
-        axes.legend(handles=handles, loc="best", fontsize=8, framealpha=0.85)
+    if handles:  # below the map, so it never hides part of it
+        axes.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, fontsize=8)
 
 
 def _extent(grid) -> tuple[float, float, float, float]:
