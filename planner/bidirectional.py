@@ -169,7 +169,7 @@ def bidirectional_search(
         heap_push(heap_key, heap_node, 0, heap_key_of(h, h, tie_breaker), root)
     if start == goal:
         nodes_forward[2, 0] = start
-        return 1, 1, 0, 0.0, start, start
+        return 1, 1, 0, 0.0, start, -1
     size_forward = 1
     size_backward = 1
     while size_forward > 0 and size_backward > 0:
@@ -290,11 +290,12 @@ def search_bidirectional(space: SearchMap, start_node: int, goal_node: int, sett
     grid = space.grid
     searched = searched_forward + searched_backward
     if status == 0:
-        return False, None, None, 0.0, searched, elapsed, _explored_only(space, forward, backward, searched_forward,
-                                                                          searched_backward)  # fmt: skip
+        explored = _explored_only(space, forward, backward, searched_forward, searched_backward)
+        return False, None, None, 0.0, searched, elapsed, explored
     cells, path, length, explored = join_paths(
-        forward.nodes, backward.nodes, start_node, goal_node, meet_forward, meet_backward, searched_forward,
-        searched_backward, space.width, space.rows, space.cols, grid.resolution, grid.origin[0], grid.origin[1],
+        forward.nodes, backward.nodes, start_node, goal_node, meet_forward, meet_backward,
+        searched_forward, searched_backward, space.width, space.rows, space.cols,
+        grid.resolution, grid.origin[0], grid.origin[1],
     )  # fmt: skip
     return True, cells, path, length, searched, elapsed, explored
 

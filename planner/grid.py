@@ -121,7 +121,7 @@ class OccupancyGrid:
 
     # -- derived grids and files ------------------------------------------------------------------
     def inflate(self, radius_m: float) -> OccupancyGrid:
-        """A new grid with every cell within `radius_m` [m] of an obstacle occupied (see planner.inflation)."""
+        """A new grid: obstacles plus every cell within `radius_m` [m] of one (planner.inflation)."""
         from planner.inflation import inflate
 
         return inflate(self, radius_m)

@@ -26,7 +26,7 @@ _MOVINGAI_PASSABLE = (ord("."), ord("G"))
 
 
 def load_map(path: str | Path, **options) -> OccupancyGrid:
-    """Load a map by its suffix (`.yaml`/`.yml`, `.map`, `.png`/`.pgm`, `.npy`). See OccupancyGrid.from_file."""
+    """Load a map by its suffix (`.yaml`, `.map`, `.png`/`.pgm`, `.npy`); see OccupancyGrid.from_file."""
     path = Path(path)
     suffix = path.suffix.lower()
     if not path.is_file():
@@ -91,7 +91,8 @@ def read_movingai(path: Path) -> np.ndarray:
     for number, row in enumerate(rows):
         if len(row) != width:
             raise PlannerError(
-                f"{path}:{index + 2 + number}: header says width {width} but the row has {len(row)} characters"
+                f"{path}:{index + 2 + number}: header says width {width} "
+                f"but the row has {len(row)} characters"
             )
     chars = np.frombuffer("".join(rows).encode("ascii"), dtype=np.uint8).reshape(height, width)
     return ~np.isin(chars, _MOVINGAI_PASSABLE)
@@ -198,7 +199,7 @@ def _scalar(text: str) -> object:
 
 
 def read_ros_yaml(path: Path) -> OccupancyGrid:
-    """Load a ROS map_server map: YAML keys image, resolution, origin, negate, occupied_thresh, free_thresh."""
+    """Load a ROS map_server map (keys image, resolution, origin, negate, occupied/free_thresh)."""
     values = _parse_flat_yaml(path)
     missing = [key for key in ("image", "resolution", "origin") if key not in values]
     if missing:

@@ -102,7 +102,7 @@ _workspaces: dict[tuple[int, int], Workspace] = {}
 
 
 def workspace(size: int, direction: int = 0) -> Workspace:
-    """The shared workspace for padded maps of `size` cells; direction 1 is the bidirectional backward side."""
+    """The shared workspace for padded maps of `size` cells (direction 1: bidirectional backward)."""
     key = (size, direction)
     found = _workspaces.get(key)
     if found is None:

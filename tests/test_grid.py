@@ -45,7 +45,11 @@ def test_bad_resolution(resolution):
 
 @pytest.mark.parametrize(
     "array, match",
-    [(np.zeros(4, bool), "2-D"), (np.zeros((0, 3), bool), "non-empty"), (np.full((2, 2), 0.5), "0 \\(free\\)")],
+    [
+        (np.zeros(4, bool), "2-D"),
+        (np.zeros((0, 3), bool), "non-empty"),
+        (np.full((2, 2), 0.5), "0 \\(free\\)"),
+    ],
 )
 def test_bad_arrays(array, match):
     with pytest.raises(PlannerError, match=match):

@@ -33,7 +33,9 @@ def test_thresholds_and_negate(tmp_path):
     default = OccupancyGrid.from_file(_write_yaml(tmp_path, "m.png"))
     # occupied when p > 0.65, free when p < 0.196, unknown (counted occupied) between.
     assert default.occupied.tolist() == [[True, True, True, False, False]]
-    loose = OccupancyGrid.from_file(_write_yaml(tmp_path, "m.png", "occupied_thresh: 0.5\nfree_thresh: 0.4\n"))
+    loose = OccupancyGrid.from_file(
+        _write_yaml(tmp_path, "m.png", "occupied_thresh: 0.5\nfree_thresh: 0.4\n")
+    )
     assert loose.occupied.tolist() == [[True, True, False, False, False]]
     negated = OccupancyGrid.from_file(_write_yaml(tmp_path, "m.png", "negate: 1\n"))
     # With negate p = v / 255: 0 -> free, 254 -> occupied.
