@@ -95,9 +95,11 @@ def _turning_radius(options: dict) -> float:
         raise PlannerError(f"hybrid option {given[0]} needs its partner (wheelbase and max_steering_angle)")
     if given:
         wheelbase = _number("wheelbase", options["wheelbase"])
-        steering = abs(_number("max_steering_angle", abs(options["max_steering_angle"]), maximum=math.pi / 2))
-        if steering >= math.pi / 2:
-            raise PlannerError("hybrid option max_steering_angle must be below pi/2 rad")
+        steering = abs(_number("max_steering_angle", options["max_steering_angle"], minimum=-math.inf))
+        if not 0.0 < steering < math.pi / 2:
+            raise PlannerError(
+                f"hybrid option max_steering_angle must be non-zero, |angle| < pi/2 rad, got {steering:g}"
+            )
         return wheelbase / math.tan(steering)
     return DEFAULT_TURNING_RADIUS
 

@@ -107,12 +107,12 @@ def test_forward_only_paths_are_dubins_and_never_reverse(warehouse):
 
 
 def test_wheelbase_and_steering_angle_give_the_turning_radius(warehouse):
-    wheelbase, steering = 2.0, math.pi / 6  # R = 2 / tan(30 deg) = 3.46 m
+    wheelbase, steering = 2.0, -math.pi / 6  # R = 2 / tan(30 deg) = 3.46 m; the sign (side) is ignored
     start, goal = (6.0, 6.0, 0.0), (20.0, 52.0, math.pi)
     result = plan_hybrid(
         warehouse, start, goal, wheelbase=wheelbase, max_steering_angle=steering, expansion_distance=1.0
     )
-    assert_drivable(result, warehouse, start, goal, wheelbase / math.tan(steering), 1.0)
+    assert_drivable(result, warehouse, start, goal, wheelbase / math.tan(abs(steering)), 1.0)
 
 
 def test_empty_map_gives_the_optimal_curve():
@@ -185,6 +185,13 @@ def test_unreachable_for_the_car_exhausts_the_search():
         ((5.0, 5.0, 0.0), (20.0, 5.0, 0.0), {"reverse_cost": 0.5}, "reverse_cost must be >= 1"),
         ((5.0, 5.0, 0.0), (20.0, 5.0, 0.0), {"turning_radius": 3}, "unknown hybrid option"),
         ((5.0, 5.0, 0.0), (20.0, 5.0, 0.0), {"wheelbase": 2.0}, "needs its partner"),
+        ((5.0, 5.0, 0.0), (20.0, 5.0, 0.0), {"wheelbase": 2.0, "max_steering_angle": 0}, "non-zero"),
+        (
+            (5.0, 5.0, 0.0),
+            (20.0, 5.0, 0.0),
+            {"wheelbase": 2.0, "max_steering_angle": "a"},
+            "must be a number",
+        ),
         ((5.0, 5.0, 0.0), (20.0, 5.0, 3.0), {"max_iterations": 3, "analytic_interval": 0}, "iteration cap"),
         (
             (5.0, 5.0, 0.0),
