@@ -47,35 +47,23 @@ def test_info_reports_what_ran(runs, capsys):
     assert "5.950 s" in out  # duration of 120 steps of 50 ms
 
 
-def test_plot_writes_a_png(runs, tmp_path, capsys):
-    png = tmp_path / "run.png"
-    assert main(["log", "plot", str(runs["a"].path), "--png", str(png)]) == 0
-    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000
-    chosen = tmp_path / "chosen.png"
-    assert (
-        main(
-            [
-                "log",
-                "plot",
-                str(runs["a"].path),
-                "--png",
-                str(chosen),
-                "--signals",
-                "vfh.ranges[1]",
-                "mixer.mode",
-            ]
-        )
-        == 0
-    )
-    assert chosen.exists()
-    assert main(["log", "plot", str(runs["a"].path), "--png", str(chosen), "--signals", "vfh.nope"]) == 2
-    assert "no signal 'nope'" in capsys.readouterr().err
-
-
-def test_plot_run_for_the_run_loop(runs, tmp_path):
+def test_plot_run_writes_a_png(runs, tmp_path):
+    """The run loop's entry point: default signals, folders created."""
     from cosim.log_plot import plot_run
 
-    assert plot_run(runs["a"].path, tmp_path / "x" / "run.png").exists()
+    png = plot_run(runs["a"].path, tmp_path / "x" / "run.png")
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000
+
+
+def test_plot_command_with_chosen_signals(runs, tmp_path, capsys):
+    chosen = tmp_path / "chosen.png"
+    args = ["log", "plot", str(runs["a"].path), "--png", str(chosen), "--signals"]
+    assert main([*args, "vfh.ranges[1]", "mixer.mode"]) == 0
+    assert chosen.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert main([*args, "vfh.nope"]) == 2
+    assert "no signal 'nope'" in capsys.readouterr().err
+    assert main([*args, "novariable"]) == 2
+    assert "expected COMPONENT.VARIABLE" in capsys.readouterr().err
 
 
 def test_export_csv_and_npz_equal_the_recording_to_the_bit(runs, tmp_path):
