@@ -202,7 +202,17 @@ def run_scenario(
     progress: bool = False,
     flush_interval: float = 0.5,
 ) -> RunResult:
-    """Run `scenario`, logging to `out_path` (default: `[output].log`). Raises `CosimError` on bad input."""
+    """Run `scenario`, logging to `out_path` (default: `[output].log`). Raises `CosimError` on bad input.
+
+    SIGINT/SIGTERM from here on stop the run at the next step with outcome "interrupted".
+    """
+    with _Interrupt() as interrupt:
+        return _build_and_run(scenario, out_path, progress, flush_interval, interrupt)
+
+
+def _build_and_run(
+    scenario: Scenario, out_path, progress: bool, flush_interval: float, interrupt
+) -> RunResult:
     from cosim.recorder import Recorder
 
     built = build_run(scenario)
@@ -218,7 +228,7 @@ def run_scenario(
         master.close()
         raise
     try:
-        return _run(built, master, recorder, log_path, progress)
+        return _run(built, master, recorder, log_path, progress, interrupt)
     except BaseException:
         # Neither a normal end, an interrupt nor an FMU failure: keep the log, but marked.
         recorder.close({"reached": "false", "reason": "error"})
@@ -228,7 +238,7 @@ def run_scenario(
         raise
 
 
-def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bool) -> RunResult:
+def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bool, interrupt) -> RunResult:
     scenario = built.scenario
     system = built.system
     recording = _Recording(built, master, recorder)
@@ -244,35 +254,31 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     last_update = [wall_start, 0.0]
     state = {"reason": None}
 
-    with _Interrupt() as interrupt:
+    def after_step(current: Master) -> bool:
+        k = current.step_index - 1
+        t_ns = current.time_ns - h_ns
+        recording.after_step(k, t_ns, h_ns)
+        if k % recording.mixer_steps == 0:
+            monitor.check_mode(float(recording.mixer_out[recording.mixer_index[2]]), recording.mixer_period)
+        x, y, _ = recording.pose()
+        reason = monitor.check_position(current.time_ns / NS_PER_S, x, y)
+        if reason is None and interrupt.signal_name is not None:
+            reason = "interrupted"
+        if bar is not None:
+            now = time.perf_counter()
+            if now - last_update[0] >= PROGRESS_INTERVAL:
+                _update_bar(bar, current.time, now - wall_start, last_update)
+                last_update[0] = now
+        if reason is not None:
+            state["reason"] = reason
+            return True
+        return False
 
-        def after_step(current: Master) -> bool:
-            k = current.step_index - 1
-            t_ns = current.time_ns - h_ns
-            recording.after_step(k, t_ns, h_ns)
-            if k % recording.mixer_steps == 0:
-                monitor.check_mode(
-                    float(recording.mixer_out[recording.mixer_index[2]]), recording.mixer_period
-                )
-            x, y, _ = recording.pose()
-            reason = monitor.check_position(current.time_ns / NS_PER_S, x, y)
-            if reason is None and interrupt.signal_name is not None:
-                reason = "interrupted"
-            if bar is not None:
-                now = time.perf_counter()
-                if now - last_update[0] >= PROGRESS_INTERVAL:
-                    _update_bar(bar, current.time, now - wall_start, last_update)
-                    last_update[0] = now
-            if reason is not None:
-                state["reason"] = reason
-                return True
-            return False
-
-        failure = None
-        try:
-            master.run(total_steps, after_step)
-        except CosimError as error:
-            failure = f"{error} (at t = {master.time:.3f} s)"
+    failure = None
+    try:
+        master.run(total_steps, after_step)
+    except CosimError as error:
+        failure = f"{error} (at t = {master.time:.3f} s)"
     wall_time = time.perf_counter() - wall_start
     end_ns = master.time_ns
     if (master.step_index % recording.pose_steps) != 0 or failure is not None:

@@ -62,7 +62,9 @@ def test_defaults_of_a_minimal_scenario():
 
 
 def test_overrides_use_toml_values_and_the_same_validation():
-    scenario = load_scenario(EXAMPLE, ["vfh.robot_radius=0.6", "simulation.master=jacobi", "obstacles.0.yaw=0.5"])
+    scenario = load_scenario(
+        EXAMPLE, ["vfh.robot_radius=0.6", "simulation.master=jacobi", "obstacles.0.yaw=0.5"]
+    )
     assert scenario.components["vfh"].parameters["robot_radius"] == 0.6
     assert scenario.master == "jacobi"  # a bare word is a string
     assert scenario.obstacles[0].yaw == 0.5
@@ -75,7 +77,7 @@ def test_overrides_use_toml_values_and_the_same_validation():
 
 
 def test_explicit_lidar_angles_and_ports_with_scale():
-    text = MINIMAL + '[lidar]\nangles = [-0.7853981633974483, 0.0, 0.7853981633974483]\nrange = [0.0, 10.0]\n'
+    text = MINIMAL + "[lidar]\nangles = [-0.7853981633974483, 0.0, 0.7853981633974483]\nrange = [0.0, 10.0]\n"
     text = text.replace(
         'fmu = "DifferentialDrive"',
         'fmu = "DifferentialDrive"\nports = { v = "speed", omega = { name = "turn", scale = -1.0 } }',
