@@ -89,11 +89,11 @@ def test_commands_work_on_a_killed_run_with_a_warning(killed_log, tmp_path, caps
 
 
 def test_files_cut_anywhere_read_a_prefix_or_fail_in_one_line(tmp_path):
-    full = write_log(tmp_path / "full.mcap", steps=400, flush_every=25)
+    full = write_log(tmp_path / "full.mcap", steps=200, flush_every=10)
     data = full.path.read_bytes()
     expected = full.signals["vehicle"]
     footer_and_magic = 1 + 8 + 20 + 8
-    cuts = np.unique(np.linspace(0, len(data) - footer_and_magic - 1, 37).astype(int))
+    cuts = np.unique(np.linspace(0, len(data) - footer_and_magic - 1, 25).astype(int))
     read_counts = []
     for cut in cuts:
         target = tmp_path / f"cut{cut}.mcap"
@@ -108,7 +108,7 @@ def test_files_cut_anywhere_read_a_prefix_or_fail_in_one_line(tmp_path):
             values = log.signals("vehicle").values
             assert values.tobytes() == expected[: len(values)].tobytes()
             read_counts.append(len(values))
-        for topic in ("/scan", "/pose"):
+        for topic in ("/scan", "/plan"):
             if log.has_topic(topic):
                 list(log.messages(topic))
-    assert read_counts == sorted(read_counts) and 0 < read_counts[-1] <= 400
+    assert read_counts == sorted(read_counts) and 0 < read_counts[-1] <= 200
