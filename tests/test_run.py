@@ -1,4 +1,4 @@
-"""A run's log read back with the `mcap` reader and mcap-ros2-support's decoder; SIGINT/SIGTERM end a run cleanly."""
+"""A run's log read back with the `mcap` reader and the ROS 2 decoder; SIGINT/SIGTERM end a run cleanly."""
 
 from __future__ import annotations
 

@@ -99,7 +99,7 @@ def project_fmu() -> Path:
         ("corrupt_zip", "[vehicle].fmu"),
         ("no_platform_binary", "[vehicle].fmu"),
         ("model_exchange_only", "[vehicle].fmu"),
-        ("unknown_variable", "[vehicle].ports: the FMU has no input for port 'v'"),
+        ("unknown_variable", "has no variable 'speed_command' (mapped to port 'v')"),
     ],
 )
 def test_bad_fmu_file(case: str, expect: str, project_fmu: Path, tmp_path: Path, capsys):
