@@ -76,6 +76,17 @@ def test_options_reach_the_planner(capsys):
     assert "expansion_distance 0.8" in inflated
 
 
+@pytest.mark.skipif(not HYBRID, reason="planner.hybrid not available")
+def test_hybrid_takes_poses(capsys):
+    arguments = ["plan", str(WAREHOUSE), "--start", "6,6,0", "--goal", "84,53,0", "--planner", "hybrid"]
+    assert (
+        main([*arguments, "--expansion-distance", "2.25", "--min-turning-radius", "3.5", "--repeat", "1"])
+        == 0
+    )
+    output = capsys.readouterr().out
+    assert float(metric(output, "path length [m]")) >= np.hypot(84 - 6, 53 - 6)
+
+
 def test_compare_prints_the_thesis_columns_and_draws_panels(tmp_path, capsys):
     png = tmp_path / "compare.png"
     code = main(
@@ -164,6 +175,16 @@ BAD_INPUT = {
     "too many values": [W, "--start", "6,6,0,1", "--goal", "84,53"],
     "hybrid needs a heading": [W, "--start", "6,6", "--goal", "84,53", "--planner", "hybrid"],
     "unknown query": [W, "--query", "nope"],
+    "grid option with hybrid": [
+        W,
+        "--query",
+        "thesis_table_3_1",
+        "--planner",
+        "hybrid",
+        "--heuristic",
+        "octile",
+    ],
+    "hybrid option with A*": [W, "--query", "thesis_table_3_1", "--min-turning-radius", "3.5"],
     "missing start": [W, "--goal", "84,53"],
     "missing map": ["/nonexistent/map.yaml", "--start", "1,1", "--goal", "2,2"],
     "negative expansion": [W, "--query", "thesis_table_3_1", "--expansion-distance", "-1"],

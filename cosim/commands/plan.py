@@ -70,7 +70,9 @@ def register(subparsers) -> None:
     parser.add_argument("--untrusted-points", action="store_true", default=None, help="first improvement")
     parser.add_argument("--planner", choices=("astar", "bidirectional", "hybrid"), default="astar")
     parser.add_argument("--min-turning-radius", type=float, metavar="M", help="hybrid: vehicle's [m]")
-    parser.add_argument("--reverse", action="store_true", default=None, help="hybrid: allow reversing")
+    parser.add_argument(
+        "--reverse", action=argparse.BooleanOptionalAction, help="hybrid: allow reversing (planner's default)"
+    )
     parser.add_argument("--smoothing", choices=SMOOTHING, help="path smoothing (none)")
     parser.add_argument("--resolution", type=float, metavar="M", help="cell size [m] for .png/.npy maps")
     parser.add_argument("--repeat", type=int, default=5, metavar="N", help="timed runs per plan (5)")
@@ -154,7 +156,11 @@ def _load_grid(args: argparse.Namespace, map_path: Path):
 
 
 def _single_options(args: argparse.Namespace) -> dict:
-    """planner.plan options from the command line; unset flags keep the planner's defaults."""
+    """planner.plan options from the command line; unset ones keep the planner's defaults.
+
+    Every option given is passed on, so one the chosen planner does not take (say --heuristic with
+    --planner hybrid) is reported by the planner as an error rather than silently ignored.
+    """
     names = {
         "connectivity": args.connectivity,
         "heuristic": args.heuristic,
@@ -164,10 +170,9 @@ def _single_options(args: argparse.Namespace) -> dict:
         "corner_cutting": args.corner_cutting,
         "untrusted_points": args.untrusted_points,
         "smoothing": None if args.smoothing in (None, "none") else args.smoothing,
+        "min_turning_radius": args.min_turning_radius,
+        "reverse": args.reverse,
     }
-    if args.planner == "hybrid":
-        names = {"expansion_distance": args.expansion_distance, "min_turning_radius": args.min_turning_radius}
-        names["reverse"] = args.reverse
     options = {name: value for name, value in names.items() if value is not None}
     options["planner"] = args.planner
     return options
