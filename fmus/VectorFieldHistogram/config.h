@@ -61,6 +61,7 @@ struct ModelData {
      * angle input changes (a lidar's angles rarely do), so a step needs no trigonometry. */
     bool angles_changed;
     double reading_angle[VFH_MAX_READINGS], reading_cos[VFH_MAX_READINGS], reading_sin[VFH_MAX_READINGS];
+    double reading_position[VFH_MAX_READINGS]; /* (angle - first mid-point) in sector widths */
     double obstacle_density[VFH_MAX_SECTORS];
     /* Density changes from sector k-1 to k in fixed point (exact sums, O(1) per reading). */
     long long density_change[VFH_MAX_SECTORS + 1];

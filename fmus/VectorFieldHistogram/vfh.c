@@ -49,6 +49,7 @@ static void update_reading_angles(ModelData *data) {
         data->reading_angle[i] = angle;
         data->reading_cos[i] = cos(angle);
         data->reading_sin[i] = sin(angle);
+        data->reading_position[i] = (angle - data->sector_midpoints[0]) / data->sector_width;
     }
     data->angles_changed = false;
 }
@@ -62,10 +63,10 @@ static bool reading_is_valid(const ModelData *data, int i) {
 
 static int wrap_sector(int k, int sectors) { return k < 0 ? k + sectors : (k >= sectors ? k - sectors : k); }
 
-static int floor_to_int(double x) {
-    int truncated = (int)x;
-    return truncated - (x < truncated);
-}
+/* floor for x > -FLOOR_OFFSET (sector positions are > -2 * VFH_MAX_SECTORS): truncation of a
+ * positive number, cheaper than floor() from libm. */
+#define FLOOR_OFFSET (4 * VFH_MAX_SECTORS)
+static int floor_to_int(double x) { return (int)(x + FLOOR_OFFSET) - FLOOR_OFFSET; }
 
 /* asin within 7e-5 rad (Abramowitz & Stegun 4.4.45), for x in [0, 1]: a first guess of the sector
  * range, checked by the exact test where a range end lies this close to a sector mid-point. */
@@ -124,16 +125,16 @@ static int exact_highest(const ModelData *data, double edge, double margin, int 
  * enlargement angle gamma = asin((R + d_safe) / d) of its direction. */
 static void build_obstacle_density(ModelData *data) {
     const int sectors = data->num_angular_sectors;
-    const double width = data->sector_width, first_midpoint = data->sector_midpoints[0];
+    const double per_width = 1.0 / data->sector_width;
     const double enlargement_radius = data->robot_radius + data->safety_distance;
-    const double margin = ASIN_ESTIMATE_ERROR / width;
+    const double margin = ASIN_ESTIMATE_ERROR * per_width;
     long long *change = data->density_change;
     for (int k = 0; k <= sectors; k++) change[k] = 0;
     for (int v = 0; v < data->valid_count; v++) {
         const int i = data->valid_readings[v];
         const double range = data->ranges[i];
         const long long weight = (long long)((data->distance_limit_max - range) * data->density_scale + 0.5);
-        const double position = (data->reading_angle[i] - first_midpoint) / width; /* in sector widths */
+        const double position = data->reading_position[i];
         if (sectors == 1) {
             add_to_sectors(change, 0, 0, sectors, weight);
         } else if (enlargement_radius == 0.0) {
@@ -145,7 +146,7 @@ static void build_obstacle_density(ModelData *data) {
             double sine = enlargement_radius / range;
             if (sine >= 1.0) sine = 1.0 - DBL_EPSILON; /* inside the robot: just under pi/2 */
             const double cos_enlargement = sqrt(1.0 - sine * sine);
-            const double reach = asin_estimate(sine) / width;
+            const double reach = asin_estimate(sine) * per_width;
             const int lowest = exact_lowest(data, position - reach, margin, i, cos_enlargement);
             const int highest = exact_highest(data, position + reach, margin, i, cos_enlargement);
             if (lowest <= highest) add_to_sectors(change, lowest, highest, sectors, weight);
