@@ -218,7 +218,7 @@ def plan_hybrid(grid: OccupancyGrid, start, goal, **options) -> PlanResult:
     goal_cell = _check_pose(grid, inflated, goal, "goal", expansion)
     inflated_at = time.perf_counter()
 
-    from planner.plan import distance_to_goal
+    from planner.planning import distance_to_goal
 
     distances = distance_to_goal(inflated, goal_cell, connectivity=8, corner_cutting=False)
     start_cell = grid.world_to_cell(start[:2])
