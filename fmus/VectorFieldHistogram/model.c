@@ -123,24 +123,32 @@ ModelStatus model_get_real(ModelInstance *comp, ModelData *data, unsigned vr, do
 }
 
 ModelStatus model_set_real(ModelInstance *comp, ModelData *data, unsigned vr, double value) {
-    const char *name;
-    double *parameter = real_parameter(data, vr, &name);
-    if (parameter) {
-        if (data->initialized) {
-            model_log_error(comp, "parameter %s is fixed after initialisation", name);
-            return MODEL_ERROR;
-        }
-        *parameter = value;
-    } else if (is_reading(vr, VR_RANGES)) data->ranges[vr - VR_RANGES] = value;
-    else if (is_reading(vr, VR_ANGLES)) {
+    /* The scan first: 1440 of the 1441 values set every step. */
+    if (is_reading(vr, VR_RANGES)) {
+        data->ranges[vr - VR_RANGES] = value;
+        return MODEL_OK;
+    }
+    if (is_reading(vr, VR_ANGLES)) {
         double *angle = &data->angles[vr - VR_ANGLES];
         if (!(*angle == value || (isnan(*angle) && isnan(value)))) data->angles_changed = true;
         *angle = value;
-    } else if (vr == VR_TARGET_DIR) data->target_dir = value;
-    else {
+        return MODEL_OK;
+    }
+    if (vr == VR_TARGET_DIR) {
+        data->target_dir = value;
+        return MODEL_OK;
+    }
+    const char *name;
+    double *parameter = real_parameter(data, vr, &name);
+    if (!parameter) {
         model_log_error(comp, "Real value reference %u is unknown or not settable", vr);
         return MODEL_ERROR;
     }
+    if (data->initialized) {
+        model_log_error(comp, "parameter %s is fixed after initialisation", name);
+        return MODEL_ERROR;
+    }
+    *parameter = value;
     return MODEL_OK;
 }
 
