@@ -215,6 +215,17 @@ def print_table(rows: list[tuple[str, int, dict[str, PlannerStats], dict[str, fl
             f"{median['ours'] / median['pyastar2d']:>10.2f}{fraction['ours']:>10.1%}{fraction['tcod']:>10.1%}"
             f"{fraction['pyastar2d']:>9.1%}{cuts / count:>9.1%}"
         )
+    missed = [
+        name
+        for name, count, stats, _build, _cuts in rows
+        if statistics.median(stats["ours"].times) > 0.5 * statistics.median(stats["tcod"].times)
+        or statistics.median(stats["ours"].times) > 1.0 * statistics.median(stats["pyastar2d"].times)
+        or stats["ours"].optimal < count
+    ]
+    print(
+        f"\nGoal (<= 0.5x tcod, <= 1.0x pyastar2d, 100 % optimal): met on {len(rows) - len(missed)} of "
+        f"{len(rows)} maps" + (f"; missed on {', '.join(missed)}" if missed else "")
+    )
     print()
     print("Per-map build time outside the timed calls [ms]:")
     for name, _count, _stats, build, _cuts in rows:
