@@ -80,6 +80,18 @@ def test_l_shaped_path_lookahead_turns_the_corner_and_projection_only_moves_forw
         assert (out["lookahead_x"], out["lookahead_y"]) == pytest.approx((4.0, 3.5), abs=1e-12)
 
 
+def test_projection_advances_about_one_lookahead_per_call_after_a_jump():
+    # Waypoints every 0.5 m along x. After a jump from x = 1 to x = 8 the forward search stops once
+    # the path walked since the old projection point exceeds L = 1: it checks the segments starting
+    # at 1.0, 1.5 and 2.0 (walked 0.5, 1.0, 1.5) and settles at (2.5, 0); lookahead (3.5, 0).
+    path = np.column_stack([np.arange(0.0, 10.5, 0.5), np.zeros(21)])
+    with follower(path, {"lookahead_distance": 1.0}) as fmu:
+        out = drive_to(fmu, (1.0, 0.3, 0.0))
+        assert (out["lookahead_x"], out["lookahead_y"]) == pytest.approx((2.0, 0.0), abs=1e-12)
+        out = drive_to(fmu, (8.0, 0.3, 0.0))
+        assert (out["lookahead_x"], out["lookahead_y"]) == pytest.approx((3.5, 0.0), abs=1e-12)
+
+
 def polyline_lookahead(path: np.ndarray, point: np.ndarray, lookahead: float) -> np.ndarray:
     """A second implementation: global closest point on the polyline, then arc length + L."""
     starts, ends = path[:-1], path[1:]
