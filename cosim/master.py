@@ -36,10 +36,11 @@ An output `P.o` is *direct* when it depends directly on at least one of P's inpu
   one-step delay breaks it).
 
 Initialisation runs in an order where a producer comes before a consumer whose input feeds one of
-the consumer's outputs directly (so a controller's initial outputs see the vehicle's initial
-pose); each component gathers its inputs from the producers already initialised (other inputs
-keep their start values), initialises, and has its outputs read. Jacobi mode uses the same
-initialisation.
+the consumer's *connected* outputs directly (`System.initialization_order`): a vehicle whose pose
+outputs are states initialises before the controllers that read the pose, even though the
+controllers' commands feed its (unconnected) velocity outputs. Each component gathers its
+inputs from the producers already initialised (other inputs keep their start values),
+initialises, and has its outputs read. Jacobi mode uses the same initialisation.
 
 Failures
 --------
@@ -114,6 +115,7 @@ class System:
         self.mode = mode
         self.components: dict[str, Component] = {}
         self.connections: list[Connection] = []
+        self._targets: set[str] = set()  # connected inputs: a set, so connecting N inputs is O(N)
 
     @property
     def macro_step(self) -> float:
@@ -151,12 +153,13 @@ class System:
         """Connect output `source` ("comp.port") to input `target`, multiplying by `scale`."""
         self.resolve(source, "output")
         self.resolve(target, "input")
-        if any(c.target == target for c in self.connections):
+        if target in self._targets:
             raise CosimError(f"input '{target}' is already connected")
         if not math.isfinite(scale):
             raise CosimError(f"connection {source} -> {target}: scale must be finite")
         connection = Connection(source, target, float(scale))
         self.connections.append(connection)
+        self._targets.add(target)
         return connection
 
     def period_steps(self, component: Component) -> int:
@@ -177,11 +180,6 @@ class System:
     def _is_direct(self, reference: str) -> bool:
         component, index = self.resolve(reference, "output")
         return bool(component.feedthrough[component.outputs[index].name])
-
-    def _feeds_output(self, reference: str) -> bool:
-        component, index = self.resolve(reference, "input")
-        port = component.inputs[index].name
-        return any(port in depends for depends in component.feedthrough.values())
 
     def _topological(self, edges: set[tuple[str, str]]) -> list[str]:
         """Kahn's algorithm; ready components are taken in the order they were added."""
@@ -245,12 +243,26 @@ class System:
         return [self.components[name] for name in self._topological(edges)]
 
     def initialization_order(self) -> list[Component]:
-        """Producers before consumers whose input feeds a consumer output directly."""
-        edges = {
-            (c.source_component, c.target_component)
-            for c in self.connections
-            if c.source_component != c.target_component and self._feeds_output(c.target)
-        }
+        """Producers before the consumers that need their values at initialisation.
+
+        A consumer C needs producer P first when a connection P.o -> C.i feeds input i into an
+        output of C that is itself connected (C's initial value of that output depends on i
+        directly). A state output (no direct dependencies, e.g. a vehicle's pose) is valid as soon
+        as its component is initialised, so a feedback loop through it orders its producer first
+        (the vehicle before the controllers, whose commands only reach its unconnected outputs).
+        """
+        consumed = {c.source for c in self.connections}
+        edges = set()
+        for c in self.connections:
+            if c.source_component == c.target_component:
+                continue
+            consumer, index = self.resolve(c.target, "input")
+            port = consumer.inputs[index].name
+            if any(
+                port in depends and f"{consumer.name}.{output}" in consumed
+                for output, depends in consumer.feedthrough.items()
+            ):
+                edges.add((c.source_component, c.target_component))
         return [self.components[name] for name in self._topological(edges)]
 
 

@@ -18,10 +18,10 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import numpy as np
-from mcap.writer import CompressionType, Writer
 
 from cosim import rosmsg
 from cosim.errors import CosimError
+from cosim.recorder_writer import ChunkWriter
 
 # bytes of uncompressed messages per chunk; the wall-clock flush usually ends a chunk first
 CHUNK_SIZE = 512 * 1024
@@ -68,7 +68,7 @@ class Recorder:
             self._file = open(self.path, "wb")  # noqa: SIM115 - closed by close()
         except OSError as error:
             raise CosimError(f"{self.path}: cannot write the log ({error.strerror})") from None
-        self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD)
+        self._writer = ChunkWriter(self._file, chunk_size=CHUNK_SIZE)
         self._writer.start(profile="ros2", library=_library())
         self.flush_interval = flush_interval
         self._last_flush = time.monotonic()
@@ -135,7 +135,7 @@ class Recorder:
             raise CosimError(f"{self.path}: the log is already closed")
         sequence = self._sequences[channel]
         self._sequences[channel] = sequence + 1
-        self._writer.add_message(channel, t_ns, data, t_ns, sequence)
+        self._writer.add_message(channel, t_ns, data, sequence)
         if time.monotonic() - self._last_flush >= self.flush_interval:
             self.flush()
 

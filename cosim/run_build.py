@@ -19,8 +19,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from cosim.errors import CosimError
 from cosim.master import System
 from cosim.planner_component import PlannerComponent
@@ -180,10 +178,6 @@ def build_run(scenario: Scenario) -> BuiltRun:
     for role, names in ROLE_OUTPUTS.items():
         _check_ports(scenario, fmus[role], role, names, "output")
     _pose_is_state(fmus["vehicle"])
-    # The controllers may initialise before the vehicle (its other outputs, e.g. v_actual, depend on
-    # the mixer's); the pose at t0 is the scenario's start by definition, so they see it, not NaN.
-    for value, port in zip(scenario.start, ("x", "y", "theta"), strict=True):
-        fmus["vehicle"].output_buffer[fmus["vehicle"].output_index[port]] = value
     for component in (planner, fmus["pure_pursuit"], lidar, fmus["vfh"], fmus["mixer"], fmus["vehicle"]):
         system.add(component)
     _connect(scenario, system, planner, lidar, fmus)
@@ -221,11 +215,5 @@ def _connect(scenario: Scenario, system: System, planner, lidar, fmus) -> None:
     system.connect("pure_pursuit.omega", "mixer.omega_in")
     system.connect("pure_pursuit.goal_reached", "mixer.goal_reached")
     system.connect("vfh.steering_dir", "mixer.steering_dir")
-    mixer = fmus["mixer"]
     for port in VEHICLE_INPUTS[scenario.vehicle_type]:
         system.connect(f"mixer.{port}", f"vehicle.{port}")
-        # The vehicle initialises before the mixer (its pose feeds the controllers); until the
-        # mixer's first output it is commanded to stand still, not given the NaN of a missing start.
-        index = mixer.output_index[port]
-        if not np.isfinite(mixer.output_buffer[index]):
-            mixer.output_buffer[index] = 0.0

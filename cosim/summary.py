@@ -47,6 +47,9 @@ class OutcomeMonitor:
         self.outcome = Outcome()
         self.last_xy = (float(start_xy[0]), float(start_xy[1]))
         self.last_mode = MODE_FOLLOW
+        # A known lower bound of the true distance at an anchor point: the distance is 1-Lipschitz,
+        # so at a point r away it is at least bound - r (no need to ask the world every step).
+        self._anchor = (self.last_xy[0], self.last_xy[1], -math.inf)
         self.check_position(0.0, *self.last_xy)
 
     def check_position(self, t: float, x: float, y: float) -> str | None:
@@ -60,8 +63,15 @@ class OutcomeMonitor:
             outcome.collision_point = (x, y)
             return outcome.reason
         # The exact distance only matters when it could set a new minimum (or a collision).
-        if self.world.lower_bound(x, y) - self.radius < outcome.min_clearance:
-            clearance = self.world.distance(x, y) - self.radius
+        anchor_x, anchor_y, anchor_bound = self._anchor
+        if anchor_bound - math.hypot(x - anchor_x, y - anchor_y) - self.radius < outcome.min_clearance:
+            self._anchor = (x, y, self.world.lower_bound(x, y))
+        if self._anchor[2] - math.hypot(x - self._anchor[0], y - self._anchor[1]) - self.radius < (
+            outcome.min_clearance
+        ):
+            distance = self.world.distance(x, y)
+            self._anchor = (x, y, distance)
+            clearance = distance - self.radius
             if clearance < outcome.min_clearance:
                 outcome.min_clearance = clearance
             if clearance < 0.0:
