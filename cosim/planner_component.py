@@ -28,6 +28,23 @@ def downsample_path(path: np.ndarray, capacity: int = WAYPOINT_CAPACITY) -> np.n
     return path[indices]
 
 
+def end_at_goal(path: np.ndarray, goal) -> np.ndarray:
+    """`path` (N x 2) whose last waypoint is exactly `goal` (x, y) [m].
+
+    A grid planner ends at the centre of the goal's cell, up to half a cell diagonal (0.35 m at
+    0.5 m/cell) from the goal itself. Pure Pursuit stops within its tolerance of the LAST waypoint
+    while the run judges the distance to the scenario's goal: with the cell centre as last waypoint
+    a robot could stop "at the goal" for the controller yet outside the run's tolerance (seen:
+    stopped 1.1 m from the goal with a 1.0 m tolerance, until the stop time).
+    """
+    goal = np.asarray(goal, dtype=float)
+    if len(path) >= 2 and np.allclose(path[-1], goal):
+        return path
+    ended = path.copy()
+    ended[-1] = goal
+    return ended
+
+
 def plan_options(settings) -> dict:
     """`planner.plan` keyword options from the scenario's `[planner]` table (`PlannerSettings`)."""
     options = {
@@ -81,6 +98,7 @@ class PlannerComponent(PythonComponent):
         path = np.asarray(self.result.path, dtype=float)[:, :2]
         if len(path) == 0:
             raise CosimError("[planner]: no path from start to goal")
+        path = end_at_goal(path, self.goal[:2])
         self.waypoints = downsample_path(path)
         self.output_buffer[:] = np.nan
         self.output_buffer[: 2 * len(self.waypoints)] = self.waypoints.reshape(-1)

@@ -18,6 +18,9 @@ enum { /* Real value references */
     VR_AVOID_SPEED_FACTOR = 4,
     VR_RECOVERY_ANGULAR_VELOCITY = 5,
     VR_RECOVERY_LINEAR_VELOCITY = 6,
+    VR_AVOID_STEERING_GAIN = 7,
+    VR_RECOVERY_MIN_DURATION = 8,
+    VR_AVOID_HOLD_TIME = 9,
     VR_V_IN = 10,
     VR_OMEGA_IN = 11,
     VR_TARGET_DIR = 12,
@@ -39,6 +42,9 @@ struct ModelData {
     double avoid_speed_factor;        /* v multiplier while avoiding (1 = MATLAB: v kept) */
     double recovery_angular_velocity; /* rad/s, magnitude of the on-the-spot turn */
     double recovery_linear_velocity;  /* m/s, magnitude of the bicycle's reversing speed */
+    double avoid_steering_gain;       /* bicycle: steering_angle = gain * steering_dir while avoiding */
+    double recovery_min_duration;     /* s: once recovering, keep recovering at least this long */
+    double avoid_hold_time;           /* s: keep the last avoidance offset this long after VFH frees the target */
     /* inputs */
     double v_in, omega_in, target_dir, steering_dir;
     bool goal_reached;
@@ -48,6 +54,9 @@ struct ModelData {
     /* state */
     bool initialized;
     double recovery_sign; /* +1 turn left (CCW), -1 right: toward the side that was last free */
+    double recovery_elapsed; /* s spent in the current recovery (0 when not recovering) */
+    double avoid_offset;     /* rad: steering_dir - target_dir of the last avoidance */
+    double hold_elapsed;     /* s since VFH last intervened (while holding its offset) */
 };
 
 #endif

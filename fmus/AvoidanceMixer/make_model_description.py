@@ -90,6 +90,36 @@ def variables(writer) -> list:
             "m/s",
             0.1,
         ),
+        Variable(
+            "avoid_steering_gain",
+            7,
+            "Real",
+            "parameter",
+            "Bicycle, while avoiding: steering_angle = avoid_steering_gain * steering_dir (1: the thesis's "
+            "car steers at the VFH direction)",
+            None,
+            1.0,
+        ),
+        Variable(
+            "recovery_min_duration",
+            8,
+            "Real",
+            "parameter",
+            # no unit attribute: the shared writer's unit table (PurePursuit's generator) lacks "s"
+            "Once recovering, keep recovering at least this long [s] (0: until a direction is free)",
+            None,
+            0.0,
+        ),
+        Variable(
+            "avoid_hold_time",
+            9,
+            "Real",
+            "parameter",
+            "Keep heading at the last avoidance offset from target_dir this long [s] after VFH frees "
+            "the target (0: follow at once)",
+            None,
+            0.0,
+        ),
         Variable("v_in", 10, "Real", "input", "Linear velocity of the path follower", "m/s", 0.0),
         Variable("omega_in", 11, "Real", "input", "Angular velocity of the path follower", "rad/s", 0.0),
         Variable(
