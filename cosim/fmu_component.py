@@ -9,7 +9,10 @@ Port mapping lets any FMU fill a role: `port_map = {"v": "u_speed", "omega": {"n
 "scale": -1}}` exposes FMU variable `u_speed` as port `v` and `yawRate` as port `omega`. The scale
 multiplies in the direction of the data flow: FMU input = scale * port value, port output =
 scale * FMU output, FMU parameter = scale * given value. FMU variables not named in the map keep
-their own names (unless a mapped port already uses the name). Supported variable types: FMI 2.0
+their own names (unless a mapped port already uses the name). Several ports may name one variable:
+an output then fills each of them, and an input receives the value of the port set last (its
+position in the FMU's input order); this lets an FMU with fewer ports than a role (a
+fault-injection FMU, say) fill it. Supported variable types: FMI 2.0
 Real, Integer, Enumeration, Boolean; FMI 3.0 scalar Float64, Int32, Boolean (other FMI 3.0 types
 and array variables are not exposed).
 
@@ -144,7 +147,9 @@ class FmuComponent(Component):
                     f"FMU '{self.path}' (component '{name}') has no variable '{variable}' "
                     f"(mapped to port '{port}'); variables: {closest_names(variable, variables)}"
                 )
-        by_variable = {variable: (port, scale) for port, (variable, scale) in mapping.items()}
+        by_variable: dict[str, list[tuple[str, float]]] = {}
+        for port, (variable, scale) in mapping.items():
+            by_variable.setdefault(variable, []).append((port, scale))
         self._variables: dict[str, tuple[object, float]] = {}  # port name -> (fmpy variable, scale)
         ports: dict[str, list[Port]] = {"input": [], "output": [], "parameter": []}
         for variable in self.model_description.modelVariables:
@@ -152,25 +157,30 @@ class FmuComponent(Component):
             kind = _TYPES.get(variable.type)
             if causality not in ports or kind is None or getattr(variable, "dimensions", None):
                 continue
-            port_name, scale = by_variable.get(variable.name, (variable.name, 1.0))
-            if variable.name not in by_variable and port_name in mapping:
+            if variable.name not in by_variable and variable.name in mapping:
                 continue  # a mapped port already took this name
             start = _start_value(variable.start, kind)
             unit = getattr(variable, "unit", None) or getattr(
                 getattr(variable, "declaredType", None), "unit", None
             )
-            port = Port(port_name, kind, unit or "", variable.description or "", start * scale)
-            ports[causality].append(port)
-            self._variables[port_name] = (variable, scale)
-        port_of = {variable.name: port for port, (variable, _) in self._variables.items()}
+            for port_name, scale in by_variable.get(variable.name, [(variable.name, 1.0)]):
+                port = Port(port_name, kind, unit or "", variable.description or "", start * scale)
+                ports[causality].append(port)
+                self._variables[port_name] = (variable, scale)
+        ports_of: dict[str, list[str]] = {}
+        for port, (variable, _) in self._variables.items():
+            ports_of.setdefault(variable.name, []).append(port)
         feedthrough = {}
         for unknown in self.model_description.outputs:
-            if unknown.dependencies is not None and unknown.variable.name in port_of:
-                feedthrough[port_of[unknown.variable.name]] = [
-                    port_of[d.name]
+            if unknown.dependencies is not None and unknown.variable.name in ports_of:
+                depends = [
+                    port
                     for d in unknown.dependencies
-                    if d.causality == "input" and d.name in port_of
+                    if d.causality == "input" and d.name in ports_of
+                    for port in ports_of[d.name]
                 ]
+                for port in ports_of[unknown.variable.name]:
+                    feedthrough[port] = list(depends)
         feedthrough.update(feedthrough_override or {})
         self._set_ports(ports["input"], ports["output"], ports["parameter"], feedthrough)
         self._plan_transfers()
