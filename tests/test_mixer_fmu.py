@@ -80,10 +80,55 @@ def test_bicycle_follow_converts_omega_to_a_steering_angle():
 
 
 def test_bicycle_avoid_clips_to_the_steering_lock():
-    with bicycle(avoid_gain=2.0) as fmu:
-        out = command(fmu, v_in=0.5, target_dir=0.0, steering_dir=-1.0)  # omega -2: atan(-10) beyond the lock
+    with bicycle(avoid_steering_gain=2.0) as fmu:
+        out = command(fmu, v_in=0.5, target_dir=0.0, steering_dir=-1.0)  # 2 * -1 rad beyond the lock
     assert out["mode"] == AVOID and out["steering_angle"] == pytest.approx(-LOCK)
     assert out["omega"] == pytest.approx(0.5 * math.tan(-LOCK) / WHEELBASE)
+
+
+def test_bicycle_avoid_steers_at_the_vfh_direction_whatever_the_speed():
+    # The thesis's car takes the VFH steering direction as its steering angle (section 4.4.2);
+    # omega = avoid_gain * steering_dir would give atan(0.5 * 0.4 * 2.5 / 7) = 0.07 rad at 7 m/s.
+    with bicycle(avoid_steering_gain=1.0, avoid_speed_factor=0.5) as fmu:
+        out = command(fmu, v_in=7.0, omega_in=0.0, target_dir=0.0, steering_dir=0.4)
+    assert out["mode"] == AVOID and out["steering_angle"] == pytest.approx(0.4)
+    assert out["v"] == pytest.approx(3.5) and out["omega"] == pytest.approx(3.5 * math.tan(0.4) / WHEELBASE)
+
+
+def test_avoid_hold_keeps_the_offset_from_the_moving_target_then_follows():
+    with bicycle(avoid_hold_time=0.15) as fmu:  # three steps of 0.05 s
+        command(fmu, v_in=2.0, target_dir=0.1, steering_dir=-0.3)  # VFH: offset -0.4 rad
+        held = []
+        for target in (0.2, 0.3, 0.35, 0.4):  # VFH calls the target free again each time
+            held.append(command(fmu, v_in=2.0, omega_in=0.1, target_dir=target, steering_dir=target))
+    for out, target in zip(held[:3], (0.2, 0.3, 0.35)):
+        assert out["mode"] == AVOID and out["steering_angle"] == pytest.approx(target - 0.4)
+    assert held[3]["mode"] == FOLLOW
+    assert held[3]["steering_angle"] == pytest.approx(math.atan(0.1 * WHEELBASE / 2.0))
+
+
+def test_without_hold_the_mixer_follows_as_soon_as_the_target_is_free():
+    with mixer() as fmu:
+        command(fmu, target_dir=0.1, steering_dir=-0.3)
+        out = command(fmu, target_dir=0.2, steering_dir=0.2)
+    assert out["mode"] == FOLLOW and out["omega"] == 0.2
+
+
+def test_recovery_lasts_the_minimum_duration_on_the_side_it_started():
+    with bicycle(recovery_min_duration=0.2, recovery_linear_velocity=1.0) as fmu:
+        command(fmu, target_dir=0.0, steering_dir=0.5)  # last free to the left
+        modes = [command(fmu, steering_dir=math.nan)]
+        # Free again at once, on the other side: recovery still holds for 0.2 s = 4 steps in all.
+        modes += [command(fmu, v_in=2.0, target_dir=-0.3, steering_dir=-0.3) for _ in range(4)]
+    assert [out["mode"] for out in modes] == [RECOVER] * 4 + [FOLLOW]
+    assert all(out["steering_angle"] == pytest.approx(-LOCK) and out["v"] == -1.0 for out in modes[:4])
+
+
+def test_recovery_without_minimum_ends_when_a_direction_is_free():
+    with bicycle() as fmu:
+        command(fmu, steering_dir=math.nan)
+        out = command(fmu, target_dir=0.2, steering_dir=0.2)
+    assert out["mode"] == FOLLOW
 
 
 def test_bicycle_reversing_command_folds_the_steering_angle():
@@ -113,6 +158,9 @@ def test_bicycle_recovers_by_reversing_at_full_lock_swinging_toward_the_free_sid
         ({"direction_tolerance": -0.1}, "direction_tolerance"),
         ({"recovery_angular_velocity": -0.5}, "recovery_angular_velocity"),
         ({"recovery_linear_velocity": -0.1}, "recovery_linear_velocity"),
+        ({"recovery_min_duration": -1.0}, "recovery_min_duration"),
+        ({"avoid_hold_time": math.inf}, "avoid_hold_time"),
+        ({"avoid_steering_gain": math.nan}, "avoid_steering_gain"),
     ],
 )
 def test_bad_parameter_fails_initialisation_naming_it(parameters, name):
