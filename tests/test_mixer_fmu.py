@@ -101,7 +101,7 @@ def test_avoid_hold_keeps_the_offset_from_the_moving_target_then_follows():
         held = []
         for target in (0.2, 0.3, 0.35, 0.4):  # VFH calls the target free again each time
             held.append(command(fmu, v_in=2.0, omega_in=0.1, target_dir=target, steering_dir=target))
-    for out, target in zip(held[:3], (0.2, 0.3, 0.35)):
+    for out, target in zip(held[:3], (0.2, 0.3, 0.35), strict=True):
         assert out["mode"] == AVOID and out["steering_angle"] == pytest.approx(target - 0.4)
     assert held[3]["mode"] == FOLLOW
     assert held[3]["steering_angle"] == pytest.approx(math.atan(0.1 * WHEELBASE / 2.0))

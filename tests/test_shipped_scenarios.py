@@ -45,7 +45,7 @@ def distance_to_polygon(points: np.ndarray, vertices: np.ndarray) -> np.ndarray:
 def densify(path: np.ndarray, spacing: float = 0.05) -> np.ndarray:
     """Points every `spacing` metres along a polyline (N x 2)."""
     pieces = [path[:1]]
-    for start, end in zip(path[:-1], path[1:]):
+    for start, end in zip(path[:-1], path[1:], strict=True):
         count = max(1, math.ceil(np.hypot(*(end - start)) / spacing))
         pieces.append(start + np.linspace(0.0, 1.0, count + 1)[1:, None] * (end - start))
     return np.concatenate(pieces)
