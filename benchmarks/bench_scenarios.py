@@ -1,0 +1,100 @@
+"""Orchestrator benchmark with logging (not a test): `python3 benchmarks/bench_scenarios.py [--parts b,c]`.
+
+(b) The two-FMU closed loop of bench_orchestrator part (a) (the project's DifferentialDrive and
+    the `controller_fmi2` fixture, 1 ms macro step) with every signal of both FMUs written to an
+    MCAP log by `cosim.recorder.Recorder` at every step (one `/signals/<component>` message per
+    component per step, as `cosim run` writes them). Goal: >= 50k steps/s.
+(c) Each shipped scenario (`scenarios/*.toml`; the commented example too, it is short) at its
+    full settings through `cosim.run.run_scenario` with full logging: simulated time, wall time
+    of the stepping loop, real-time factor, goal reached. Goal: >= 100x real time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO / "tests"))
+sys.path.insert(0, str(REPO))
+
+import numpy as np  # noqa: E402
+
+from benchmarks.bench_orchestrator import Row, _fmus, _system  # noqa: E402
+from cosim.master import Master  # noqa: E402
+from cosim.recorder import Recorder  # noqa: E402
+
+
+def part_b(steps: int) -> list[Row]:
+    """Two-FMU closed loop, every signal of both FMUs to MCAP at every step."""
+    steps = min(steps, 200_000)
+    with tempfile.TemporaryDirectory() as scratch:
+        work = Path(scratch)
+        vehicle_path, controller_path = _fmus(work)
+        system = _system(vehicle_path, controller_path)[0]
+        log_path = work / "closed_loop.mcap"
+        with Master(system) as master, Recorder(log_path) as recorder:
+            master.initialize()
+            channels = [
+                (recorder.signal_channel(c.name, c.signal_names()), c.input_buffer, c.output_buffer)
+                for c in master.order
+            ]
+            h_ns = system.macro_step_ns
+            write = recorder.write_signals
+            values = [np.empty(len(i) + len(o)) for _, i, o in channels]
+
+            def record(current: Master) -> None:
+                t_ns = current.time_ns - h_ns
+                for (channel, inputs, outputs), buffer in zip(channels, values, strict=True):
+                    buffer[: len(inputs)] = inputs
+                    buffer[len(inputs) :] = outputs
+                    write(channel, t_ns, buffer)
+
+            start = time.perf_counter()
+            master.run(steps, record)
+            recorder.close()
+            seconds = time.perf_counter() - start
+        size = log_path.stat().st_size / 1e6
+    return [Row("b", "navcosim master + Recorder, every signal", steps, seconds, f"{size:.1f} MB log")]
+
+
+def part_c(_steps: int = 0) -> list[Row]:
+    """Each shipped scenario at full settings with full logging."""
+    from cosim.run import run_scenario
+    from cosim.scenario import load_scenario
+
+    rows = []
+    with tempfile.TemporaryDirectory() as scratch:
+        for path in sorted((REPO / "scenarios").glob("*.toml")):
+            scenario = load_scenario(path)
+            result = run_scenario(scenario, Path(scratch) / f"{path.stem}.mcap")
+            reached = "yes" if result.outcome.reached else "no"
+            note = (
+                f"simulated {result.outcome.time:.2f} s, wall {result.wall_time:.2f} s, "
+                f"{result.real_time_factor:.0f}x real time, reached: {reached}"
+            )
+            rows.append(Row("c", path.stem, result.steps, result.wall_time, note))
+    return rows
+
+
+PARTS = {"b": part_b, "c": part_c}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--parts", default="b,c", help="comma-separated parts to run (b, c)")
+    parser.add_argument("--steps", type=int, default=200_000, help="macro steps of part (b)")
+    arguments = parser.parse_args()
+    print("| part | engine / scenario | steps | steps/s | note |\n|---|---|---:|---:|---|")
+    for part in arguments.parts.split(","):
+        if part not in PARTS:
+            parser.error(f"unknown part '{part}'; parts: {', '.join(PARTS)}")
+        for row in PARTS[part](arguments.steps):
+            print(f"| {row.part} | {row.engine} | {row.steps} | {row.rate:,.0f} | {row.note} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
