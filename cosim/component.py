@@ -109,6 +109,10 @@ class Component(ABC):
         input_buffer, output_buffer: float64 arrays, one slot per input/output port.
     """
 
+    # True when the outputs never change after initialize() (a plan fixed for the run): the master
+    # then copies its connections once, at initialisation, and does not step it.
+    constant_outputs: bool = False
+
     def __init__(
         self,
         name: str,

@@ -194,10 +194,20 @@ class FmuComponent(Component):
         self._input_groups = self._groups(self.inputs)
         self._output_groups = self._groups(self.outputs)
 
-    def _groups(self, ports: list[Port]) -> list[tuple[str, list[int], object, object, list[float]]]:
+    def restrict_push(self, slots) -> None:
+        """From now on `push_inputs` sends only the inputs at `slots` (port order): the others keep
+        the values last sent (FMI inputs hold their values), e.g. a plan fixed for the whole run."""
+        self._input_groups = self._groups(self.inputs, set(slots))
+        self._compile_fast_path()
+        if self.state is State.STEPPING:
+            self._install_fast_path()
+
+    def _groups(
+        self, ports: list[Port], only: set[int] | None = None
+    ) -> list[tuple[str, list[int], object, object, list[float]]]:
         groups = []
         for kind in ("real", "integer", "boolean"):
-            slots = [i for i, p in enumerate(ports) if p.type == kind]
+            slots = [i for i, p in enumerate(ports) if p.type == kind and (only is None or i in only)]
             if slots:
                 references = [self._variables[ports[i].name][0].valueReference for i in slots]
                 scales = [self._variables[ports[i].name][1] for i in slots]

@@ -372,12 +372,34 @@ class Master:
             self.close()
             raise
         self._initialized = True
+        self._skip_constant_producers()
         # Bound once, after initialisation installed the components' fast paths.
         h_ns = self.system.macro_step_ns
         self._steppers = [
             (period, period * h_ns / NS_PER_S, gather, c.push_inputs, c.do_step, c.get_outputs)
             for c, period, gather in self._plan
+            if not c.constant_outputs
         ]
+
+    def _skip_constant_producers(self) -> None:
+        """Components with constant outputs were copied from at initialisation: from now on their
+        connections are not copied again, and an FMU consumer pushes only its other inputs."""
+        constant = {name for name, c in self.system.components.items() if c.constant_outputs}
+        if not constant:
+            return
+        dynamic = set(self.system.components) - constant
+        plan = []
+        for component, period, gather in self._plan:
+            fed = [c for c in self.system.connections if c.target_component == component.name]
+            if any(c.source_component in constant for c in fed):
+                gather = _gather(self.system, component, producers=dynamic)
+                static = {
+                    self.system.resolve(c.target, "input")[1] for c in fed if c.source_component in constant
+                }
+                if hasattr(component, "restrict_push"):
+                    component.restrict_push([i for i in range(len(component.inputs)) if i not in static])
+            plan.append((component, period, gather))
+        self._plan = plan
 
     def _check_running(self) -> None:
         if self.failure is not None:

@@ -102,13 +102,18 @@ class _Recording:
             if not names:
                 continue
             channel = recorder.signal_channel(component.name, names)
+            values = np.empty(len(names))  # reused: one record's values, no allocation per step
             self.entries.append(
                 (
-                    component,
                     system.period_steps(component),
                     channel,
+                    component.input_buffer,
                     np.array(inputs, dtype=np.intp),
+                    values[: len(inputs)],
+                    component.output_buffer,
                     np.array(outputs, dtype=np.intp),
+                    values[len(inputs) :],
+                    values,
                 )
             )
         vehicle = system.components["vehicle"]
@@ -138,11 +143,24 @@ class _Recording:
 
     def after_step(self, k: int, t_ns: int, h_ns: int) -> None:
         """Record what step k (starting at t_ns) produced."""
+        write_signals = self.recorder.write_signals
+        take = np.take
+        for (
+            period,
+            channel,
+            inputs,
+            input_index,
+            input_part,
+            outputs,
+            output_index,
+            output_part,
+            values,
+        ) in self.entries:
+            if period == 1 or k % period == 0:
+                take(inputs, input_index, out=input_part)
+                take(outputs, output_index, out=output_part)
+                write_signals(channel, t_ns, values)
         recorder = self.recorder
-        for component, period, channel, inputs, outputs in self.entries:
-            if k % period == 0:
-                values = np.concatenate((component.input_buffer[inputs], component.output_buffer[outputs]))
-                recorder.write_signals(channel, t_ns, values)
         if k % self.lidar_steps == 0:
             recorder.write_scan(t_ns, self.angles, self.lidar_out[self.ranges_index], *self.range_limits)
         if k % self.mixer_steps == 0:
