@@ -10,9 +10,8 @@
       - ecospy's `step(n)` (C++ master) on the same FMUs, when ecospy is installed.
     Goals: >= 200k steps/s and >= 0.5x ecospy. Each engine's final pose is printed: they agree.
 
-Parts (b) (with MCAP logging) and (c) (shipped scenarios) plug in by adding a function
-`part_<letter>(steps: int) -> list[Row]` to `PARTS`; `main` runs the selected parts and prints
-one table.
+(b) The same loop with every signal to MCAP and (c) each shipped scenario at full settings come
+from `benchmarks/bench_scenarios.py` (see there). `--parts a,b,c` runs them all into one table.
 """
 
 from __future__ import annotations
@@ -27,6 +26,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO / "tests"))
+sys.path.insert(0, str(REPO))  # `benchmarks.bench_scenarios` when run as a script
 
 from fixtures.build_fixtures import build_fixture_fmu  # noqa: E402
 
@@ -170,7 +170,21 @@ def part_a(steps: int) -> list[Row]:
     return rows
 
 
-PARTS: dict[str, Callable[[int], list[Row]]] = {"a": part_a}
+def part_b(steps: int) -> list[Row]:
+    """The same loop with every signal to MCAP (benchmarks/bench_scenarios.py)."""
+    from benchmarks.bench_scenarios import part_b as logged_loop
+
+    return logged_loop(steps)
+
+
+def part_c(steps: int) -> list[Row]:
+    """Each shipped scenario at full settings with full logging (benchmarks/bench_scenarios.py)."""
+    from benchmarks.bench_scenarios import part_c as scenarios
+
+    return scenarios(steps)
+
+
+PARTS: dict[str, Callable[[int], list[Row]]] = {"a": part_a, "b": part_b, "c": part_c}
 
 
 def print_table(rows: list[Row]) -> None:
