@@ -105,9 +105,8 @@ def variables(writer) -> list:
             8,
             "Real",
             "parameter",
-            # no unit attribute: the shared writer's unit table (PurePursuit's generator) lacks "s"
             "Once recovering, keep recovering at least this long [s] (0: until a direction is free)",
-            None,
+            "s",
             0.0,
         ),
         Variable(
@@ -117,7 +116,7 @@ def variables(writer) -> list:
             "parameter",
             "Keep heading at the last avoidance offset from target_dir this long [s] after VFH frees "
             "the target (0: follow at once)",
-            None,
+            "s",
             0.0,
         ),
         Variable("v_in", 10, "Real", "input", "Linear velocity of the path follower", "m/s", 0.0),

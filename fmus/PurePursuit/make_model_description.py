@@ -14,7 +14,7 @@ from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
 MAX_WAYPOINTS = 1000  # PP_MAX_WAYPOINTS in config.h
-UNITS = {"m": 'm="1"', "rad": 'rad="1"', "m/s": 'm="1" s="-1"', "rad/s": 's="-1" rad="1"', "1/s": 's="-1"'}
+UNITS = {"m": 'm="1"', "rad": 'rad="1"', "m/s": 'm="1" s="-1"', "rad/s": 's="-1" rad="1"', "1/s": 's="-1"', "s": 's="1"'}
 
 
 @dataclass(frozen=True)
