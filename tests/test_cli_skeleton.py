@@ -31,3 +31,31 @@ def test_missing_command_is_a_usage_error():
     with pytest.raises(SystemExit) as exit_:
         main([])
     assert exit_.value.code == 2
+
+
+LOUD_HANDLER = """
+import sys
+import cosim.cli as cli
+
+def loud(args):
+    for line in range(200_000):
+        print("line", line)
+    return 0
+
+parser = cli.build_parser
+def build_parser():
+    built = parser()
+    built.parse_args = lambda argv=None: type("Args", (), {"handler": staticmethod(loud)})()
+    return built
+cli.build_parser = build_parser
+sys.exit(cli.main([]))
+"""
+
+
+def test_closed_pipe_ends_quietly():
+    """`cosim … | head -1` stops quietly: no BrokenPipeError traceback, SIGPIPE's exit status."""
+    script = f"set -o pipefail; {sys.executable} -c '{LOUD_HANDLER}' | head -1"
+    result = subprocess.run(["bash", "-c", script], capture_output=True, text=True)
+    assert result.stdout == "line 0\n"
+    assert "Traceback" not in result.stderr, result.stderr
+    assert result.returncode == 141
