@@ -76,44 +76,88 @@ def _cast_grid(occupied_up, origin_x, origin_y, resolution, x, y, directions, ma
                 iy += step_y
 
 
-def _cast_circles(x: float, y: float, directions: np.ndarray, circles: np.ndarray) -> np.ndarray:
-    """Nearest intersection distance with circles (N x 3: cx, cy, r) per direction; inf if none."""
-    if len(circles) == 0:
-        return np.full(len(directions), np.inf)
-    offset_x = x - circles[:, 0]  # (C,)
-    offset_y = y - circles[:, 1]
-    b = directions[:, :1] * offset_x + directions[:, 1:] * offset_y  # (B, C)
-    c = offset_x**2 + offset_y**2 - circles[:, 2] ** 2
-    discriminant = b**2 - c
-    root = np.sqrt(np.where(discriminant >= 0, discriminant, 0.0))
-    near, far = -b - root, -b + root
-    distance = np.where(c <= 0, 0.0, np.where((discriminant >= 0) & (near >= 0), near, np.inf))
-    distance = np.where((c > 0) & (discriminant >= 0) & (near < 0) & (far >= 0), 0.0, distance)
-    return distance.min(axis=1)
+@numba.njit(cache=True)
+def _cast_shapes(x, y, directions, circles, segments, out):
+    """Lower `out` to the nearest hit [m] with circles (C x 3: cx, cy, r) and polygon edges
+    (S x 4: ax, ay, bx, by) along each unit direction; 0 when the sensor is inside a circle or a
+    tangent ray starts on its outline."""
+    for beam in range(directions.shape[0]):
+        dx = directions[beam, 0]
+        dy = directions[beam, 1]
+        best = out[beam]
+        for index in range(circles.shape[0]):
+            offset_x = x - circles[index, 0]
+            offset_y = y - circles[index, 1]
+            b = dx * offset_x + dy * offset_y
+            c = offset_x**2 + offset_y**2 - circles[index, 2] ** 2
+            if c <= 0:
+                best = 0.0
+                continue
+            discriminant = b**2 - c
+            if discriminant < 0:
+                continue
+            root = math.sqrt(discriminant)
+            near, far = -b - root, -b + root
+            if near >= 0:
+                best = min(best, near)
+            elif far >= 0:
+                best = 0.0
+        for index in range(segments.shape[0]):
+            ax = segments[index, 0] - x
+            ay = segments[index, 1] - y
+            ex = segments[index, 2] - segments[index, 0]
+            ey = segments[index, 3] - segments[index, 1]
+            # Solve t d = a + u e  ->  cross products (2-D determinant of [d, -e]).
+            denominator = dx * ey - dy * ex
+            if denominator == 0:
+                continue
+            t = (ax * ey - ay * ex) / denominator
+            u = (ax * dy - ay * dx) / denominator
+            if t >= 0 and u >= 0 and u <= 1:
+                best = min(best, t)
+        out[beam] = best
 
 
-def _cast_segments(x: float, y: float, directions: np.ndarray, segments: np.ndarray) -> np.ndarray:
-    """Nearest intersection distance with segments (N x 4: ax, ay, bx, by) per direction."""
-    if len(segments) == 0:
-        return np.full(len(directions), np.inf)
-    ax, ay = segments[:, 0] - x, segments[:, 1] - y
-    ex, ey = segments[:, 2] - segments[:, 0], segments[:, 3] - segments[:, 1]
-    dx, dy = directions[:, :1], directions[:, 1:]
-    # Solve t d = a + u e  ->  cross products (2-D determinant of [d, -e]).
-    denominator = dx * ey - dy * ex
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (ax * ey - ay * ex) / denominator
-        u = (ax * dy - ay * dx) / denominator
-    hit = (denominator != 0) & (t >= 0) & (u >= 0) & (u <= 1)
-    return np.where(hit, t, np.inf).min(axis=1)
+@numba.njit(cache=True)
+def _inside_polygons(x, y, vertices, starts):
+    """True when (x, y) is inside one of the polygons (even-odd rule); polygon p is
+    vertices[starts[p]:starts[p + 1]]."""
+    for polygon in range(starts.shape[0] - 1):
+        first, stop = starts[polygon], starts[polygon + 1]
+        inside = False
+        for index in range(first, stop):
+            ax, ay = vertices[index, 0], vertices[index, 1]
+            following = index + 1 if index + 1 < stop else first
+            bx, by = vertices[following, 0], vertices[following, 1]
+            if (ay > y) != (by > y) and x < ax + (y - ay) * (bx - ax) / (by - ay):
+                inside = not inside
+        if inside:
+            return True
+    return False
 
 
-def _point_in_polygon(x: float, y: float, vertices: np.ndarray) -> bool:
-    inside = False
-    for (ax, ay), (bx, by) in zip(vertices, np.roll(vertices, -1, axis=0), strict=True):
-        if (ay > y) != (by > y) and x < ax + (y - ay) * (bx - ax) / (by - ay):
-            inside = not inside
-    return inside
+@numba.njit(cache=True)
+def _scan(
+    occupied_up, origin_x, origin_y, resolution, x, y, theta, beam_angles, angle_jitter, range_jitter,
+    range_min, range_max, circles, segments, vertices, starts, directions, ranges,
+):  # fmt: skip
+    """One sweep into `ranges` (NaN for missed beams): cast directions from the nominal angles plus
+    theta plus `angle_jitter` (same length, zeros without noise), true distances, then the range
+    limits, then `range_jitter` added to the hits."""
+    count = beam_angles.shape[0]
+    for beam in range(count):
+        cast = beam_angles[beam] + theta + angle_jitter[beam]
+        directions[beam, 0] = math.cos(cast)
+        directions[beam, 1] = math.sin(cast)
+    _cast_grid(occupied_up, origin_x, origin_y, resolution, x, y, directions, range_max, ranges)
+    _cast_shapes(x, y, directions, circles, segments, ranges)
+    inside = _inside_polygons(x, y, vertices, starts)
+    for beam in range(count):
+        distance = 0.0 if inside else ranges[beam]
+        if distance < range_min or distance > range_max or not math.isfinite(distance):
+            ranges[beam] = np.nan
+        else:
+            ranges[beam] = distance + range_jitter[beam]
 
 
 class Lidar(PythonComponent):
@@ -142,7 +186,7 @@ class Lidar(PythonComponent):
             if count < 1:
                 raise CosimError(f"lidar '{name}': count must be >= 1, got {count}")
             angles = np.linspace(angle_min, angle_max, count) if count > 1 else np.array([angle_min])
-        self.beam_angles = np.asarray(angles, dtype=float)
+        self.beam_angles = np.ascontiguousarray(angles, dtype=float)
         capacity = len(self.beam_angles) if capacity is None else capacity
         if self.beam_angles.ndim != 1 or len(self.beam_angles) == 0 or capacity < len(self.beam_angles):
             raise CosimError(f"lidar '{name}': needs 1..capacity ({capacity}) beam angles")
@@ -162,9 +206,15 @@ class Lidar(PythonComponent):
         self.obstacles = list(obstacles)
         circles = [(*o.center, o.radius) for o in self.obstacles if isinstance(o, Circle)]
         self._circles = np.array(circles, dtype=float).reshape(-1, 3)
-        self._polygons = [o.polygon() for o in self.obstacles if not isinstance(o, Circle)]
-        segments = [np.hstack((p, np.roll(p, -1, axis=0))) for p in self._polygons]
-        self._segments = np.vstack(segments) if segments else np.zeros((0, 4))
+        polygons = [np.asarray(o.polygon(), dtype=float) for o in self.obstacles if not isinstance(o, Circle)]
+        segments = [np.hstack((p, np.roll(p, -1, axis=0))) for p in polygons]
+        self._segments = np.ascontiguousarray(np.vstack(segments) if segments else np.zeros((0, 4)))
+        # All polygons' vertices in one array; polygon p is vertices[starts[p]:starts[p + 1]].
+        self._vertices = np.ascontiguousarray(np.vstack(polygons) if polygons else np.zeros((0, 2)))
+        self._starts = np.cumsum([0] + [len(p) for p in polygons]).astype(np.int64)
+        count = len(self.beam_angles)
+        self._directions = np.empty((count, 2))  # scratch of the kernel, reused every scan
+        self._no_jitter = np.zeros(count)
         outputs = array_ports("ranges", capacity, unit="m") + array_ports("angles", capacity, unit="rad")
         inputs = [Port("x", unit="m"), Port("y", unit="m"), Port("theta", unit="rad")]
         super().__init__(name, inputs, outputs, period=period)
@@ -173,6 +223,7 @@ class Lidar(PythonComponent):
 
     def on_setup(self, t0: float, parameters: Mapping[str, float]) -> None:
         self._rng = np.random.default_rng(self.seed)
+        self._angles_written = False
 
     def on_initialize(self) -> None:
         self.scan(*self.input_buffer[:3])
@@ -183,29 +234,36 @@ class Lidar(PythonComponent):
 
     def measure(self, x: float, y: float, theta: float, directions: np.ndarray) -> np.ndarray:
         """True distances [m] along unit `directions` (N x 2, world frame); inf for no hit."""
+        directions = np.ascontiguousarray(directions, dtype=float)
         distances = np.empty(len(directions))
+        x, y = float(x), float(y)
         _cast_grid(
             self.occupied_up, self.origin[0], self.origin[1], self.resolution, x, y, directions,
             self.range_max, distances,
         )  # fmt: skip
-        distances = np.minimum(distances, _cast_circles(x, y, directions, self._circles))
-        distances = np.minimum(distances, _cast_segments(x, y, directions, self._segments))
-        if any(_point_in_polygon(x, y, polygon) for polygon in self._polygons):
+        _cast_shapes(x, y, directions, self._circles, self._segments, distances)
+        if _inside_polygons(x, y, self._vertices, self._starts):
             distances[:] = 0.0
         return distances
 
     def scan(self, x: float, y: float, theta: float) -> None:
         """Fill `ranges[k]`/`angles[k]` for the pose (x, y [m], theta [rad])."""
         count = len(self.beam_angles)
-        cast = self.beam_angles + theta
-        if self.angle_noise > 0:
-            cast = cast + self._rng.normal(0.0, self.angle_noise, count)
-        directions = np.column_stack((np.cos(cast), np.sin(cast)))
-        distances = self.measure(float(x), float(y), float(theta), directions)
-        missed = (distances < self.range_min) | (distances > self.range_max) | ~np.isfinite(distances)
-        if self.range_noise > 0:
-            distances = distances + self._rng.normal(0.0, self.range_noise, count)
-        self._ranges[:count] = np.where(missed, np.nan, distances)
-        self._ranges[count:] = np.nan
-        self._angles[:count] = self.beam_angles
-        self._angles[count:] = np.nan
+        # The generator is drawn in the same order as always (angles, then ranges), so a seed
+        # gives the same noise whatever computes the sweep.
+        angle_jitter = (
+            self._rng.normal(0.0, self.angle_noise, count) if self.angle_noise > 0 else self._no_jitter
+        )
+        range_jitter = (
+            self._rng.normal(0.0, self.range_noise, count) if self.range_noise > 0 else self._no_jitter
+        )
+        _scan(
+            self.occupied_up, self.origin[0], self.origin[1], self.resolution, float(x), float(y),
+            float(theta), self.beam_angles, angle_jitter, range_jitter, self.range_min, self.range_max,
+            self._circles, self._segments, self._vertices, self._starts, self._directions, self._ranges,
+        )  # fmt: skip
+        if not self._angles_written:
+            self._ranges[count:] = np.nan
+            self._angles[:count] = self.beam_angles
+            self._angles[count:] = np.nan
+            self._angles_written = True
