@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
@@ -79,6 +80,12 @@ class WorldDistance:
         self.polygons = [
             [(float(x), float(y)) for x, y in o.polygon()] for o in obstacles if not isinstance(o, Circle)
         ]
+        # The same shapes as arrays for the compiled `distance`; polygon p is
+        # vertices[starts[p]:starts[p + 1]].
+        self._occupied_u8 = np.ascontiguousarray(grid.occupied, dtype=np.uint8)
+        self._circles = np.array(self.circles, dtype=float).reshape(-1, 3)
+        self._vertices = np.array([v for p in self.polygons for v in p], dtype=float).reshape(-1, 2)
+        self._starts = np.cumsum([0] + [len(p) for p in self.polygons]).astype(np.int64)
         # Bounding circles (centre, radius) of the polygons give cheap lower bounds.
         self.bounds = list(self.circles)
         for vertices in self.polygons:
@@ -114,28 +121,12 @@ class WorldDistance:
         """Exact distance [m] from (x, y) to the nearest true obstacle; 0 inside one or off the map."""
         if not self.inside_map(x, y):
             return 0.0
-        best = self.distance_to_edge(x, y)
         row, col, offset = self._cell(x, y)
-        field = self.centre_field[row, col]
-        if math.isfinite(field):
-            # The nearest centre's square is within field + offset; any square that close has its
-            # centre within that plus a half diagonal, so a window of that reach holds the nearest one.
-            reach = min(best, field + offset) + math.sqrt(2.0) * self.half
-            k = int(math.ceil(reach / self.resolution))
-            top, left = max(row - k, 0), max(col - k, 0)
-            window = self.occupied[top : row + k + 1, left : col + k + 1]
-            cells = np.argwhere(window)
-            if len(cells):
-                centre_x = self.x_min + (cells[:, 1] + left + 0.5) * self.resolution
-                centre_y = self.y_min + (self.rows - 1 - (cells[:, 0] + top) + 0.5) * self.resolution
-                dx = np.maximum(np.abs(centre_x - x) - self.half, 0.0)
-                dy = np.maximum(np.abs(centre_y - y) - self.half, 0.0)
-                best = min(best, float(np.sqrt(np.min(dx * dx + dy * dy))))
-        for cx, cy, radius in self.circles:
-            best = min(best, max(0.0, math.hypot(x - cx, y - cy) - radius))
-        for vertices in self.polygons:
-            best = min(best, _polygon_distance(x, y, vertices))
-        return best
+        return _world_distance(
+            float(x), float(y), row, col, offset, self.distance_to_edge(x, y), self._occupied_u8,
+            float(self.centre_field[row, col]), self.x_min, self.y_min, self.resolution, self._circles,
+            self._vertices, self._starts,
+        )  # fmt: skip
 
     def distance_to_edge(self, x: float, y: float) -> float:
         """Distance [m] to the edge of the map (beyond it counts as obstacle)."""
@@ -155,6 +146,50 @@ def _polygon_distance(x: float, y: float, vertices) -> float:
         length_sq = dx * dx + dy * dy
         t = 0.0 if length_sq == 0 else min(1.0, max(0.0, ((x - ax) * dx + (y - ay) * dy) / length_sq))
         best = min(best, math.hypot(x - ax - t * dx, y - ay - t * dy))
+    return best
+
+
+@numba.njit(cache=True)
+def _world_distance(
+    x, y, row, col, offset, best, occupied, field, x_min, y_min, resolution, circles, vertices, starts
+):  # fmt: skip
+    """`WorldDistance.distance` inside the map: (row, col) holds (x, y) at `offset` [m] from its
+    centre, `best` is the distance to the map edge, `field` the cell's centre field value."""
+    half = resolution / 2.0
+    rows, cols = occupied.shape
+    if math.isfinite(field):
+        # The nearest centre's square is within field + offset; any square that close has its
+        # centre within that plus a half diagonal, so a window of that reach holds the nearest one.
+        reach = min(best, field + offset) + math.sqrt(2.0) * half
+        k = int(math.ceil(reach / resolution))
+        nearest_sq = math.inf
+        for r in range(max(row - k, 0), min(row + k + 1, rows)):
+            centre_y = y_min + (rows - 1 - r + 0.5) * resolution
+            dy = max(abs(centre_y - y) - half, 0.0)
+            for c in range(max(col - k, 0), min(col + k + 1, cols)):
+                if occupied[r, c]:
+                    centre_x = x_min + (c + 0.5) * resolution
+                    dx = max(abs(centre_x - x) - half, 0.0)
+                    nearest_sq = min(nearest_sq, dx * dx + dy * dy)
+        best = min(best, math.sqrt(nearest_sq))
+    for index in range(circles.shape[0]):
+        gap = math.hypot(x - circles[index, 0], y - circles[index, 1]) - circles[index, 2]
+        best = min(best, max(0.0, gap))
+    for polygon in range(starts.shape[0] - 1):
+        first, stop = starts[polygon], starts[polygon + 1]
+        inside = False
+        nearest = math.inf
+        for index in range(first, stop):
+            ax, ay = vertices[index, 0], vertices[index, 1]
+            following = index + 1 if index + 1 < stop else first
+            bx, by = vertices[following, 0], vertices[following, 1]
+            if (ay > y) != (by > y) and x < ax + (y - ay) * (bx - ax) / (by - ay):
+                inside = not inside
+            dx, dy = bx - ax, by - ay
+            length_sq = dx * dx + dy * dy
+            t = 0.0 if length_sq == 0 else min(1.0, max(0.0, ((x - ax) * dx + (y - ay) * dy) / length_sq))
+            nearest = min(nearest, math.hypot(x - ax - t * dx, y - ay - t * dy))
+        best = min(best, 0.0 if inside else nearest)
     return best
 
 
