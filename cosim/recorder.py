@@ -21,6 +21,7 @@ import numpy as np
 
 from cosim import rosmsg
 from cosim.errors import CosimError
+from cosim.recorder_batch import MessageBlock
 from cosim.recorder_writer import ChunkWriter
 
 # bytes of uncompressed messages per chunk; the wall-clock flush usually ends a chunk first
@@ -77,21 +78,28 @@ class Recorder:
         self._sequences: dict[int, int] = {}
         self._signal_sizes: dict[int, int] = {}
         self._scan_layouts: dict[bytes, tuple[float, float, np.ndarray, str]] = {}
+        # Signals, poses, commands and scans are held for a block of steps and packed at once
+        # (`cosim.recorder_batch`); any other write, a flush and close pack the block first.
+        self._block = MessageBlock(self._writer, self._sequences)
+        self._pose_channels: tuple[int, int, int] | None = None
         self._closed = False
 
     # --- file-level records --------------------------------------------------------------
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         """A named metadata record (string keys and values)."""
+        self._block.pack()
         self._writer.add_metadata(name, {str(key): str(value) for key, value in data.items()})
 
     def add_attachment(self, name: str, media_type: str, data: bytes) -> None:
         """An attached file (the scenario, the map) stored as-is."""
         now = time.time_ns()
+        self._block.pack()
         self._writer.add_attachment(now, now, name, media_type, bytes(data))
 
     def flush(self) -> None:
         """Close the open chunk and hand everything to the OS (a later SIGKILL keeps it)."""
+        self._block.pack()
         self._writer.flush()
         self._last_flush = time.monotonic()
 
@@ -101,6 +109,7 @@ class Recorder:
             return
         self._closed = True
         try:
+            self._block.pack()
             if outcome is not None:
                 self.add_metadata("outcome", outcome)
             self._writer.finish()
@@ -133,11 +142,21 @@ class Recorder:
     def _write(self, channel: int, t_ns: int, data: bytes) -> None:
         if self._closed:
             raise CosimError(f"{self.path}: the log is already closed")
+        self._block.pack()
         sequence = self._sequences[channel]
         self._sequences[channel] = sequence + 1
         self._writer.add_message(channel, t_ns, data, sequence)
         if time.monotonic() - self._last_flush >= self.flush_interval:
             self.flush()
+
+    def _held(self, full: bool) -> None:
+        """After a message went into the block: pack a full block; flush when the interval is up."""
+        if self._closed:
+            raise CosimError(f"{self.path}: the log is already closed")
+        if time.monotonic() - self._last_flush >= self.flush_interval:
+            self.flush()
+        elif full:
+            self._block.pack()
 
     def _write_message(self, topic: str, t_ns: int, message) -> None:
         self._write(self._channel(topic), t_ns, rosmsg.serialize(message, TOPIC_TYPES[topic]))
@@ -157,6 +176,7 @@ class Recorder:
         self._channels[topic] = channel
         self._sequences[channel] = 0
         self._signal_sizes[channel] = len(names)
+        self._block.add_signal_channel(channel, len(names))
         return channel
 
     def write_signals(self, channel: int, t_ns: int, values: np.ndarray) -> None:
@@ -167,20 +187,29 @@ class Recorder:
             raise CosimError(
                 f"{self.path}: {values.size} signal values for a channel of {self._signal_sizes[channel]}"
             )
-        self._write(channel, t_ns, rosmsg.signals_payload(t_ns, values))
+        if self._closed:
+            raise CosimError(f"{self.path}: the log is already closed")
+        self._held(self._block.add_signals(channel, t_ns, values))
 
     # --- robot topics --------------------------------------------------------------------
 
     def write_pose(self, t_ns: int, x: float, y: float, theta: float, v: float, omega: float) -> None:
         """Robot pose [m, m, rad] and body velocities [m/s, rad/s] on /odom, /tf and /pose."""
-        x, y, theta, v, omega = float(x), float(y), float(theta), float(v), float(omega)
-        self._write(self._channel("/odom"), t_ns, rosmsg.odometry_cdr(t_ns, x, y, theta, v, omega))
-        self._write(self._channel("/tf"), t_ns, rosmsg.tf_cdr(t_ns, x, y, theta))
-        self._write(self._channel("/pose"), t_ns, rosmsg.pose_stamped_cdr(t_ns, x, y, theta))
+        if self._pose_channels is None:
+            self._pose_channels = (self._channel("/odom"), self._channel("/tf"), self._channel("/pose"))
+        if self._closed:
+            raise CosimError(f"{self.path}: the log is already closed")
+        row = (int(t_ns), float(x), float(y), float(theta), float(v), float(omega))
+        self._held(self._block.add_pose(self._pose_channels, row))
 
     def write_cmd_vel(self, t_ns: int, v: float, omega: float) -> None:
         """The commanded body velocities [m/s, rad/s] on /cmd_vel (Twist has no stamp: log time only)."""
-        self._write(self._channel("/cmd_vel"), t_ns, rosmsg.twist_cdr(float(v), float(omega)))
+        self._hold(self._channel("/cmd_vel"), t_ns, rosmsg.twist_cdr(float(v), float(omega)))
+
+    def _hold(self, channel: int, t_ns: int, payload: bytes) -> None:
+        if self._closed:
+            raise CosimError(f"{self.path}: the log is already closed")
+        self._held(self._block.add_raw(channel, int(t_ns), payload))
 
     def write_goal(self, t_ns: int, x: float, y: float, theta: float | None) -> None:
         """The goal [m] on /goal; without a heading the orientation is the identity."""
@@ -261,7 +290,7 @@ class Recorder:
             ranges=binned,
             intensities=np.zeros(0, dtype=np.float32),
         )
-        self._write_message("/scan", t_ns, message)
+        self._hold(self._channels["/scan"], t_ns, rosmsg.serialize(message, TOPIC_TYPES["/scan"]))
 
     def write_obstacles(self, t_ns: int, obstacles: list) -> None:
         """The unknown obstacles (`cosim.world` shapes) on /obstacles: circles as cylinders,

@@ -158,7 +158,7 @@ class ChunkWriter:
         [ns] and byte `offsets` (within `records`) per message."""
         if len(times) == 0:
             return
-        first, last = int(times[0]), int(times[-1])
+        first, last = int(times.min()), int(times.max())
         self._open_records(first)
         base = len(self._chunk)
         self._chunk += records
