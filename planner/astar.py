@@ -37,7 +37,7 @@ _H_SCALE = 4.0
 _H_MAX = 2**16 - 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def heuristic_cells(row_offset, col_offset, kind):
     """h in cells for a (row, col) offset to the goal: 3.1 Manhattan, 3.2 Euclid, 3.3 Chebyshev,
     3.4 octile (diagonal distance), 3.6 the thesis's Euclid + 2 Chebyshev, or 0."""
@@ -58,7 +58,7 @@ def heuristic_cells(row_offset, col_offset, kind):
     return 0.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def heap_push(heap_key, heap_node, size, key, node):
     """Push (key, node) on the binary min-heap (the caller checks the capacity); returns the new size."""
     index = size
@@ -74,7 +74,7 @@ def heap_push(heap_key, heap_node, size, key, node):
     return size + 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def heap_pop(heap_key, heap_node, size):
     """Remove the top of the heap; returns (node, new size)."""
     top = heap_node[0]
@@ -98,7 +98,7 @@ def heap_pop(heap_key, heap_node, size):
     return top, size
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def heap_key_of(f, h, tie_breaker):
     """One int64 key: f on a 2^-24 cell grid in the high bits, h (quarter cells) below for low_h ties."""
     key = np.int64(f * _F_SCALE + 0.5) << _H_BITS
@@ -109,31 +109,25 @@ def heap_key_of(f, h, tie_breaker):
 
 @njit(cache=True)
 def neighbour_tables(width):
-    """Offsets, row/col steps, lengths [cells] and the two orthogonal offsets of each move.
-
-    The 4 straight moves come first, so 4-connectivity uses the first 4 entries."""
+    """Offsets, row/col steps and lengths [cells] of the 8 moves, in the bit order of the move masks
+    (planner.searchspace.MOVES): the 4 straight moves first."""
     offsets = np.array([-width, width, -1, 1, -width - 1, -width + 1, width - 1, width + 1], dtype=np.int64)
     row_steps = np.array([-1, 1, 0, 0, -1, -1, 1, 1], dtype=np.int64)
     col_steps = np.array([0, 0, -1, 1, -1, 1, -1, 1], dtype=np.int64)
     steps = np.array([1.0, 1.0, 1.0, 1.0, SQRT2, SQRT2, SQRT2, SQRT2])
-    side_a = np.array([0, 0, 0, 0, -width, -width, width, width], dtype=np.int64)
-    side_b = np.array([0, 0, 0, 0, -1, 1, -1, 1], dtype=np.int64)
-    return offsets, row_steps, col_steps, steps, side_a, side_b
+    return offsets, row_steps, col_steps, steps
 
 
 @njit(cache=True)
 def astar_search(
-    blocked,
+    moves,
     width,
     start,
     goal,
-    connectivity,
-    corner_cutting,
     heuristic,
-    heuristic_weight,
+    h_scale,
     tie_breaker,
     decrease_key,
-    untrusted,
     cost,
     cost_weight,
     g,
@@ -144,33 +138,46 @@ def astar_search(
 ):
     """A* (or Dijkstra with heuristic 5 and goal -1) on a padded flat grid.
 
+    moves: uint8 per padded cell, bit k set when move k (neighbour_tables order) leaves the cell
+    (planner.searchspace.SearchMap.moves: connectivity, corner rule and untrusted points are in it,
+    so the loop tests one bit per neighbour). h_scale multiplies h (weight, MATLAB's 1.07).
     nodes: int32 [3, size] = parent, stamp, and the expanded nodes in the order they were closed.
     Returns (status, number of expanded nodes): status 1 = goal reached, 0 = OPEN ran empty (no
     path; with goal == -1, the Dijkstra mode, this is the normal end), -1 = the heap arrays are
     full: give larger ones and search again (growing them here would slow every push down).
+
+    The best child of an expansion skips the heap when its key is <= every key in OPEN (it would
+    be popped next anyway): on open ground, where f stays constant along a straight run towards the
+    goal, most nodes never enter the heap. The pop order stays that of the keys, so the search is
+    the same A*.
     """
     parent = nodes[0]
     stamp = nodes[1]
     expanded = nodes[2]
-    offsets, row_steps, col_steps, steps, side_a, side_b = neighbour_tables(width)
-    directions = 8 if connectivity == 8 else 4
+    offsets, row_steps, col_steps, steps = neighbour_tables(width)
     goal_row = goal // width if goal >= 0 else 0
     goal_col = goal % width if goal >= 0 else 0
-    h_scale = heuristic_weight * (1.07 if tie_breaker == 1 else 1.0)
     closed = generation + 1
     use_cost = cost_weight > 0.0
+    capacity = len(heap_key)
 
     g[start] = 0.0
     parent[start] = start
     stamp[start] = generation
-    h_start = heuristic_cells(start // width - goal_row, start % width - goal_col, heuristic) * h_scale
-    capacity = len(heap_key)
-    size = heap_push(heap_key, heap_node, 0, heap_key_of(h_start, h_start, tie_breaker), start)
+    size = 0
+    next_node = start  # the candidate that skips the heap; -1 = none
+    next_key = np.int64(0)
     searched = 0
-    while size > 0:
-        node, size = heap_pop(heap_key, heap_node, size)
-        if stamp[node] == closed:
-            continue  # a stale entry left behind by a decrease-key
+    while True:
+        if next_node >= 0:
+            node = next_node
+            next_node = -1
+        elif size > 0:
+            node, size = heap_pop(heap_key, heap_node, size)
+            if stamp[node] == closed:
+                continue  # a stale entry left behind by a decrease-key
+        else:
+            return 0, searched
         stamp[node] = closed
         expanded[searched] = node
         searched += 1
@@ -179,18 +186,14 @@ def astar_search(
         g_node = g[node]
         row_offset = node // width - goal_row
         col_offset = node % width - goal_col
-        for k in range(directions):
+        allowed = moves[node]
+        for k in range(8):
+            if not (allowed >> k) & 1:
+                continue
             neighbour = node + offsets[k]
-            state = blocked[neighbour]
-            if state != 0:  # one predictable test for the common free cell
-                if state == 1 or (untrusted and neighbour != goal):
-                    continue
             seen = stamp[neighbour]
             if seen == closed:
                 continue
-            if k >= 4 and not corner_cutting:
-                if blocked[node + side_a[k]] == 1 or blocked[node + side_b[k]] == 1:
-                    continue
             step = steps[k]
             if use_cost:
                 step *= 1.0 + cost_weight * cost[neighbour]
@@ -206,11 +209,19 @@ def astar_search(
                 stamp[neighbour] = generation
                 g[neighbour] = g_new
                 parent[neighbour] = node
+            h = heuristic_cells(row_offset + row_steps[k], col_offset + col_steps[k], heuristic) * h_scale
+            key = heap_key_of(g_new + h, h, tie_breaker)
+            if next_node < 0:
+                if size == 0 or key <= heap_key[0]:
+                    next_node = neighbour
+                    next_key = key
+                    continue
+            elif key < next_key:
+                key, next_key = next_key, key
+                neighbour, next_node = next_node, neighbour
             if size == capacity:
                 return -1, searched
-            h = heuristic_cells(row_offset + row_steps[k], col_offset + col_steps[k], heuristic) * h_scale
-            size = heap_push(heap_key, heap_node, size, heap_key_of(g_new + h, h, tie_breaker), neighbour)
-    return 0, searched
+            size = heap_push(heap_key, heap_node, size, key, neighbour)
 
 
 @njit(cache=True)
@@ -267,17 +278,14 @@ def unpad_distances(g, stamp, closed, rows, cols, resolution):
 
 @njit(cache=True)
 def astar_plan(
-    blocked,
+    moves,
     width,
     start,
     goal,
-    connectivity,
-    corner_cutting,
     heuristic,
-    heuristic_weight,
+    h_scale,
     tie_breaker,
     decrease_key,
-    untrusted,
     cost,
     cost_weight,
     g,
@@ -295,25 +303,9 @@ def astar_plan(
 
     Returns (status, searched, cells, path [m], length [m], explored)."""
     status, searched = astar_search(
-        blocked,
-        width,
-        start,
-        goal,
-        connectivity,
-        corner_cutting,
-        heuristic,
-        heuristic_weight,
-        tie_breaker,
-        decrease_key,
-        untrusted,
-        cost,
-        cost_weight,
-        g,
-        nodes,
-        generation,
-        heap_key,
-        heap_node,
-    )
+        moves, width, start, goal, heuristic, h_scale, tie_breaker, decrease_key, cost, cost_weight,
+        g, nodes, generation, heap_key, heap_node,
+    )  # fmt: skip
     if status < 0:
         return (
             status,

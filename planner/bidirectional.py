@@ -19,8 +19,6 @@ from numba import njit
 from planner.astar import (
     _F_SCALE,
     _H_BITS,
-    HEURISTICS,
-    TIE_BREAKERS,
     heap_key_of,
     heap_pop,
     heap_push,
@@ -32,17 +30,14 @@ from planner.searchspace import SearchMap, no_cost, workspace
 
 @njit(cache=True)
 def _expand(
-    blocked,
+    moves,
     width,
     target,
     backward,
-    directions,
-    corner_cutting,
     heuristic,
     h_scale,
     tie_breaker,
     decrease_key,
-    untrusted,
     cost,
     cost_weight,
     g,
@@ -59,14 +54,15 @@ def _expand(
     mine,
 ):
     """Pop and expand one node of one side. best = [mu, forward meet node, backward meet node];
-    mine is this side's index in best (1 forward, 2 backward).
+    mine is this side's index in best (1 forward, 2 backward). The move masks are symmetric (a move
+    and its reverse need the same cells free), so the backward side uses them as they are.
 
     Returns (new heap size, new searched count, status): status -1 = heap full, 0 = popped a stale
     entry or expanded, 1 = heap empty."""
     parent = nodes[0]
     stamp = nodes[1]
     expanded = nodes[2]
-    offsets, row_steps, col_steps, steps, side_a, side_b = neighbour_tables(width)
+    offsets, row_steps, col_steps, steps = neighbour_tables(width)
     closed = generation + 1
     capacity = len(heap_key)
     if size == 0:
@@ -80,26 +76,21 @@ def _expand(
     g_node = g[node]
     row_offset = node // width - target // width
     col_offset = node % width - target % width
-    for k in range(directions):
+    allowed = moves[node]
+    for k in range(8):
+        if not (allowed >> k) & 1:
+            continue
         neighbour = node + offsets[k]
-        state = blocked[neighbour]
-        if state != 0:
-            if state == 1 or (untrusted and neighbour != target):
-                continue
         seen = stamp[neighbour]
         if seen == closed:
             continue
-        if k >= 4 and not corner_cutting:
-            if blocked[node + side_a[k]] == 1 or blocked[node + side_b[k]] == 1:
-                continue
         step = steps[k]
         if cost_weight > 0.0:
             step *= 1.0 + cost_weight * cost[node if backward else neighbour]
         g_new = g_node + step
         other = other_stamp[neighbour]
-        if (other == other_generation or other == other_generation + 1) and g_new + other_g[neighbour] < best[
-            0
-        ]:
+        reached_by_other = other == other_generation or other == other_generation + 1
+        if reached_by_other and g_new + other_g[neighbour] < best[0]:
             best[0] = g_new + other_g[neighbour]
             best[mine] = node
             best[3 - mine] = neighbour
@@ -122,18 +113,25 @@ def _expand(
 
 
 @njit(cache=True)
+def _root(width, root, target, heuristic, h_scale, tie_breaker, g, nodes, generation, heap_key, heap_node):
+    """Put `root` in OPEN of one side."""
+    g[root] = 0.0
+    nodes[0, root] = root
+    nodes[1, root] = generation
+    h = heuristic_cells(root // width - target // width, root % width - target % width, heuristic) * h_scale
+    heap_push(heap_key, heap_node, 0, heap_key_of(h, h, tie_breaker), root)
+
+
+@njit(cache=True)
 def bidirectional_search(
-    blocked,
+    moves,
     width,
     start,
     goal,
-    connectivity,
-    corner_cutting,
     heuristic,
-    heuristic_weight,
+    h_scale,
     tie_breaker,
     decrease_key,
-    untrusted,
     cost,
     cost_weight,
     g_forward,
@@ -150,23 +148,13 @@ def bidirectional_search(
     """Returns (status, searched forward, searched backward, mu [cells], meet forward, meet backward).
 
     status 1 = path found, 0 = none, -1 = a heap is full (enlarge both and search again)."""
-    directions = 8 if connectivity == 8 else 4
-    h_scale = heuristic_weight * (1.07 if tie_breaker == 1 else 1.0)
     best = np.array([np.inf, -1.0, -1.0])
     searched_forward = 0
     searched_backward = 0
-    for root, target, g, nodes, generation, heap_key, heap_node in (
-        (start, goal, g_forward, nodes_forward, generation_forward, heap_key_forward, heap_node_forward),
-        (goal, start, g_backward, nodes_backward, generation_backward, heap_key_backward, heap_node_backward),
-    ):
-        g[root] = 0.0
-        nodes[0, root] = root
-        nodes[1, root] = generation
-        h = (
-            heuristic_cells(root // width - target // width, root % width - target % width, heuristic)
-            * h_scale
-        )
-        heap_push(heap_key, heap_node, 0, heap_key_of(h, h, tie_breaker), root)
+    _root(width, start, goal, heuristic, h_scale, tie_breaker,
+          g_forward, nodes_forward, generation_forward, heap_key_forward, heap_node_forward)  # fmt: skip
+    _root(width, goal, start, heuristic, h_scale, tie_breaker,
+          g_backward, nodes_backward, generation_backward, heap_key_backward, heap_node_backward)  # fmt: skip
     if start == goal:
         nodes_forward[2, 0] = start
         return 1, 1, 0, 0.0, start, -1
@@ -179,17 +167,15 @@ def bidirectional_search(
             break
         if size_forward <= size_backward:
             size_forward, searched_forward, status = _expand(
-                blocked, width, goal, False, directions, corner_cutting, heuristic, h_scale, tie_breaker,
-                decrease_key, untrusted, cost, cost_weight, g_forward, nodes_forward, generation_forward,
-                heap_key_forward, heap_node_forward, size_forward, searched_forward,
-                g_backward, nodes_backward[1], generation_backward, best, 1,
+                moves, width, goal, False, heuristic, h_scale, tie_breaker, decrease_key, cost, cost_weight,
+                g_forward, nodes_forward, generation_forward, heap_key_forward, heap_node_forward,
+                size_forward, searched_forward, g_backward, nodes_backward[1], generation_backward, best, 1,
             )  # fmt: skip
         else:
             size_backward, searched_backward, status = _expand(
-                blocked, width, start, True, directions, corner_cutting, heuristic, h_scale, tie_breaker,
-                decrease_key, untrusted, cost, cost_weight, g_backward, nodes_backward, generation_backward,
-                heap_key_backward, heap_node_backward, size_backward, searched_backward,
-                g_forward, nodes_forward[1], generation_forward, best, 2,
+                moves, width, start, True, heuristic, h_scale, tie_breaker, decrease_key, cost, cost_weight,
+                g_backward, nodes_backward, generation_backward, heap_key_backward, heap_node_backward,
+                size_backward, searched_backward, g_forward, nodes_forward[1], generation_forward, best, 2,
             )  # fmt: skip
         if status < 0:
             return -1, searched_forward, searched_backward, 0.0, -1, -1
@@ -248,8 +234,13 @@ def join_paths(nodes_forward, nodes_backward, start, goal, meet_forward, meet_ba
     return cells, path, length, explored
 
 
-def search_bidirectional(space: SearchMap, start_node: int, goal_node: int, settings: dict):
-    """Bidirectional A*; returns (found, cells, path [m], length [m], searched, elapsed [s], explored)."""
+def search_bidirectional(
+    space: SearchMap, moves: np.ndarray, start_node: int, goal_node: int, settings: dict, parameters: tuple
+):
+    """Bidirectional A*; returns (found, cells, path [m], length [m], searched, elapsed [s], explored).
+
+    moves: the move masks (SearchMap.moves, endpoints opened); parameters: (heuristic code, h scale,
+    tie breaker code, decrease_key) as planner.planning prepares them."""
     size = len(space.blocked)
     forward, backward = workspace(size, 0), workspace(size, 1)
     cost_weight = settings["cost_weight"]
@@ -258,30 +249,10 @@ def search_bidirectional(space: SearchMap, start_node: int, goal_node: int, sett
         generation_forward, generation_backward = forward.next_generation(), backward.next_generation()
         began = time.perf_counter()
         status, searched_forward, searched_backward, _, meet_forward, meet_backward = bidirectional_search(
-            space.blocked,
-            space.width,
-            start_node,
-            goal_node,
-            settings["connectivity"],
-            settings["corner_cutting"],
-            HEURISTICS[settings["heuristic"]],
-            settings["heuristic_weight"],
-            TIE_BREAKERS[settings["tie_breaker"]],
-            settings["decrease_key"],
-            settings["untrusted_points"],
-            cost,
-            cost_weight,
-            forward.g,
-            forward.nodes,
-            generation_forward,
-            forward.heap_key,
-            forward.heap_node,
-            backward.g,
-            backward.nodes,
-            generation_backward,
-            backward.heap_key,
-            backward.heap_node,
-        )
+            moves, space.width, start_node, goal_node, *parameters, cost, cost_weight,
+            forward.g, forward.nodes, generation_forward, forward.heap_key, forward.heap_node,
+            backward.g, backward.nodes, generation_backward, backward.heap_key, backward.heap_node,
+        )  # fmt: skip
         elapsed = time.perf_counter() - began
         if status >= 0:
             break

@@ -121,7 +121,7 @@ def _number(name: str, value, minimum: float = 0.0, strict: bool = False) -> flo
     return number
 
 
-_resolved_cache: dict[tuple, dict] = {}
+_prepared_cache: dict[tuple, tuple[dict, tuple]] = {}
 
 
 def resolve_options(options: dict) -> dict:
@@ -129,17 +129,35 @@ def resolve_options(options: dict) -> dict:
 
     The result is cached per option set (queries in a loop repeat them); do not modify it.
     """
+    return _prepare(options)[0]
+
+
+def _prepare(options: dict) -> tuple[dict, tuple]:
+    """(resolved options, the compiled search's parameters), checked once per option set.
+
+    The key holds each value's type, so True and 1 (which compare equal) stay apart: an option
+    that must be a bool is rejected for 1 even after True has been cached.
+    """
+    values = tuple(options.values())
     try:
-        key = tuple(sorted((name, type(value), value) for name, value in options.items()))
-        cached = _resolved_cache.get(key)
+        key = (tuple(options), values, tuple(map(type, values)))
+        cached = _prepared_cache.get(key)
     except TypeError:  # an unhashable value: check it the slow way
         key, cached = None, None
     if cached is not None:
         return cached
     resolved = _resolve(options)
-    if key is not None and len(_resolved_cache) < 256:
-        _resolved_cache[key] = resolved
-    return resolved
+    tie_breaker = TIE_BREAKERS[resolved["tie_breaker"]]
+    parameters = (
+        HEURISTICS[resolved["heuristic"]],
+        resolved["heuristic_weight"] * (1.07 if resolved["tie_breaker"] == "matlab" else 1.0),
+        tie_breaker,
+        resolved["decrease_key"],
+    )
+    prepared = (resolved, parameters)
+    if key is not None and len(_prepared_cache) < 256:
+        _prepared_cache[key] = prepared
+    return prepared
 
 
 def _resolve(options: dict) -> dict:
@@ -221,20 +239,33 @@ def plan(grid: OccupancyGrid, start, goal, **options) -> PlanResult:
 
         hybrid_options = {name: value for name, value in options.items() if name != "planner"}
         return plan_hybrid(_check_grid(grid), start, goal, **hybrid_options)
-    settings = resolve_options(options)
+    settings, parameters = _prepare(options)
     space = search_map(_check_grid(grid), settings["expansion_distance"])
     start_node = endpoint_node(space, start, "start")
     goal_node = endpoint_node(space, goal, "goal")
-    if settings["planner"] == "bidirectional":
-        from planner.bidirectional import search_bidirectional
+    moves = space.moves(settings["connectivity"], settings["corner_cutting"], settings["untrusted_points"])
+    # Start and goal are exempt from the untrusted points: let the moves into them for this query.
+    saved = (
+        space.open_endpoints(
+            moves, (start_node, goal_node), settings["connectivity"], settings["corner_cutting"]
+        )
+        if settings["untrusted_points"]
+        else None
+    )
+    try:
+        if settings["planner"] == "bidirectional":
+            from planner.bidirectional import search_bidirectional
 
-        found, cells, path, length, searched, elapsed, explored = search_bidirectional(
-            space, start_node, goal_node, settings
-        )
-    else:
-        found, cells, path, length, searched, elapsed, explored = _search_astar(
-            space, start_node, goal_node, settings
-        )
+            found, cells, path, length, searched, elapsed, explored = search_bidirectional(
+                space, moves, start_node, goal_node, settings, parameters
+            )
+        else:
+            found, cells, path, length, searched, elapsed, explored = _search_astar(
+                space, moves, start_node, goal_node, settings, parameters
+            )
+    finally:
+        if saved is not None:
+            space.restore(moves, saved)
     if not found:
         raise PlannerError(
             f"no path from start {tuple(start[:2])} m to goal {tuple(goal[:2])} m "
@@ -273,77 +304,51 @@ def _settings_note(settings: dict) -> str:
     return "; " + ", ".join(notes) if notes else ""
 
 
-def run_astar(space: SearchMap, start_node: int, goal_node: int, settings: dict) -> tuple[int, float]:
+def _cost(space: SearchMap, settings: dict) -> tuple[np.ndarray, float]:
+    cost_weight = settings["cost_weight"]
+    if cost_weight > 0.0:
+        return space.costs(settings["cost_scaling_factor"]), cost_weight
+    return no_cost(), 0.0
+
+
+def run_astar(
+    space: SearchMap, moves: np.ndarray, start_node: int, goal_node: int, settings: dict, parameters: tuple
+):
     """Run the compiled A* into the shared workspace; returns (status, searched, elapsed [s])."""
     work = workspace(len(space.blocked))
-    cost_weight = settings["cost_weight"]
-    cost = space.costs(settings["cost_scaling_factor"]) if cost_weight > 0.0 else no_cost()
+    cost, cost_weight = _cost(space, settings)
     while True:
         generation = work.next_generation()
         began = time.perf_counter()
         status, searched = astar_search(
-            space.blocked,
-            space.width,
-            start_node,
-            goal_node,
-            settings["connectivity"],
-            settings["corner_cutting"],
-            HEURISTICS[settings["heuristic"]],
-            settings["heuristic_weight"],
-            TIE_BREAKERS[settings["tie_breaker"]],
-            settings["decrease_key"],
-            settings["untrusted_points"],
-            cost,
-            cost_weight,
-            work.g,
-            work.nodes,
-            generation,
-            work.heap_key,
-            work.heap_node,
-        )
+            moves, space.width, start_node, goal_node, *parameters, cost, cost_weight,
+            work.g, work.nodes, generation, work.heap_key, work.heap_node,
+        )  # fmt: skip
         elapsed = time.perf_counter() - began
         if status >= 0:
             return status, searched, elapsed
         work.grow_heap()
 
 
-def _search_astar(space: SearchMap, start_node: int, goal_node: int, settings: dict):
+def _search_astar(
+    space: SearchMap, moves: np.ndarray, start_node: int, goal_node: int, settings: dict, parameters: tuple
+):
     """A* and its path; returns (found, cells, path [m], length [m], searched, elapsed [s], explored).
 
     elapsed covers the search and the path reconstruction (Algorithm 3.1, lines 3-15), which run
     in one compiled call."""
     work = workspace(len(space.blocked))
-    cost_weight = settings["cost_weight"]
-    cost = space.costs(settings["cost_scaling_factor"]) if cost_weight > 0.0 else no_cost()
+    cost, cost_weight = _cost(space, settings)
     grid = space.grid
+    heuristic, h_scale, tie_breaker, decrease_key = parameters
     while True:
         generation = work.next_generation()
         began = time.perf_counter()
         status, searched, cells, path, length, explored = astar_plan(
-            space.blocked,
-            space.width,
-            start_node,
-            goal_node,
-            settings["connectivity"],
-            settings["corner_cutting"],
-            HEURISTICS[settings["heuristic"]],
-            settings["heuristic_weight"],
-            TIE_BREAKERS[settings["tie_breaker"]],
-            settings["decrease_key"],
-            settings["untrusted_points"],
-            cost,
-            cost_weight,
-            work.g,
-            work.nodes,
-            generation,
-            work.heap_key,
-            work.heap_node,
-            space.rows,
-            space.cols,
-            grid.resolution,
-            grid.origin[0],
-            grid.origin[1],
-        )
+            moves, space.width, start_node, goal_node, heuristic, h_scale, tie_breaker, decrease_key,
+            cost, cost_weight, work.g, work.nodes, generation, work.heap_key, work.heap_node,
+            space.rows, space.cols, grid.resolution, grid.origin[0], grid.origin[1],
+        )  # fmt: skip
         elapsed = time.perf_counter() - began
         if status >= 0:
             return status == 1, cells, path, length, searched, elapsed, explored
@@ -353,11 +358,6 @@ def _search_astar(space: SearchMap, start_node: int, goal_node: int, settings: d
 _DIJKSTRA = {
     "connectivity": 8,
     "corner_cutting": False,
-    "heuristic": "zero",
-    "heuristic_weight": 1.0,
-    "tie_breaker": "none",
-    "decrease_key": True,
-    "untrusted_points": False,
     "cost_weight": 0.0,
     "cost_scaling_factor": 1.0,
 }
@@ -381,7 +381,9 @@ def distance_to_goal(
     if grid.occupied[row, col]:
         return np.full(grid.shape, np.inf)
     settings = dict(_DIJKSTRA, connectivity=connectivity, corner_cutting=corner_cutting)
-    run_astar(space, space.node(row, col), -1, settings)
+    parameters = (HEURISTICS["zero"], 1.0, TIE_BREAKERS["none"], True)
+    moves = space.moves(connectivity, corner_cutting, False)
+    run_astar(space, moves, space.node(row, col), -1, settings, parameters)
     work = workspace(len(space.blocked))
     return unpad_distances(
         work.g, work.nodes[1], work.generation + 1, space.rows, space.cols, grid.resolution

@@ -14,6 +14,8 @@ from planner.grid import OccupancyGrid
 from planner.inflation import cost_gradient, inflation_mask
 
 _STAMP_LIMIT = 2**31 - 8
+# (row, col) step of each move, in the bit order of SearchMap.moves and planner.astar.neighbour_tables.
+MOVES = ((-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (-1, 1), (1, -1), (1, 1))
 
 
 class SearchMap:
@@ -23,7 +25,17 @@ class SearchMap:
     inflated: bool [rows, cols], the cells added by the expansion distance.
     """
 
-    __slots__ = ("grid", "rows", "cols", "width", "blocked", "inflated", "expansion_distance", "_costs")
+    __slots__ = (
+        "grid",
+        "rows",
+        "cols",
+        "width",
+        "blocked",
+        "inflated",
+        "expansion_distance",
+        "_costs",
+        "_moves",
+    )
 
     def __init__(self, grid: OccupancyGrid, expansion_distance: float) -> None:
         rows, cols = grid.shape
@@ -42,6 +54,7 @@ class SearchMap:
         inner[obstacle] = 1
         self.blocked = padded.ravel()
         self._costs: dict = {}
+        self._moves: dict = {}
 
     def node(self, row: int, col: int) -> int:
         """Padded flat index of cell (row, col)."""
@@ -55,6 +68,59 @@ class SearchMap:
             padded[1:-1, 1:-1] = cost_gradient(self.grid, self.expansion_distance, cost_scaling_factor)
             cached = self._costs[cost_scaling_factor] = padded.ravel()
         return cached
+
+    def moves(self, connectivity: int, corner_cutting: bool, untrusted: bool) -> np.ndarray:
+        """Padded flat uint8 move masks: bit k set when move k (MOVES) may leave the cell.
+
+        A move needs its target free (with `untrusted`, an untrusted point is not free) and, for a
+        diagonal without `corner_cutting`, both orthogonally adjacent cells not obstacles (untrusted
+        points do not block a corner). With 4-connectivity only the straight bits are set. Computed
+        once per option set, so the search loop tests one bit per neighbour; the endpoints' exemption
+        from the untrusted points is added per query by `open_endpoints`.
+        """
+        key = (connectivity, corner_cutting, untrusted)
+        cached = self._moves.get(key)
+        if cached is not None:
+            return cached
+        rows, cols = self.rows, self.cols
+        padded = self.blocked.reshape(rows + 2, self.width)
+        enterable = padded == 0 if untrusted else padded != 1
+        not_obstacle = padded != 1
+        masks = np.zeros((rows + 2, self.width), dtype=np.uint8)
+        for bit, (d_row, d_col) in enumerate(MOVES[:connectivity]):
+            allowed = enterable[1 + d_row : rows + 1 + d_row, 1 + d_col : cols + 1 + d_col].copy()
+            if d_row and d_col and not corner_cutting:
+                allowed &= not_obstacle[1 + d_row : rows + 1 + d_row, 1 : cols + 1]
+                allowed &= not_obstacle[1 : rows + 1, 1 + d_col : cols + 1 + d_col]
+            masks[1:-1, 1:-1] |= allowed.astype(np.uint8) << bit
+        masks[padded == 1] = 0  # never expanded; keeps the masks of blocked cells out of the way
+        cached = self._moves[key] = masks.ravel()
+        return cached
+
+    def open_endpoints(
+        self, moves: np.ndarray, nodes: tuple[int, ...], connectivity: int, corner_cutting: bool
+    ) -> list[tuple[int, int]]:
+        """Let the moves into `nodes` (start and goal, exempt from the untrusted points) in `moves`;
+        returns what to give `restore` after the search."""
+        saved = []
+        width, blocked = self.width, self.blocked
+        for node in nodes:
+            for bit, (d_row, d_col) in enumerate(MOVES[:connectivity]):
+                source = node - d_row * width - d_col
+                if blocked[source] == 1:
+                    continue
+                if d_row and d_col and not corner_cutting:
+                    if blocked[source + d_row * width] == 1 or blocked[source + d_col] == 1:
+                        continue
+                saved.append((source, int(moves[source])))
+                moves[source] |= 1 << bit
+        return saved
+
+    @staticmethod
+    def restore(moves: np.ndarray, saved: list[tuple[int, int]]) -> None:
+        """Undo `open_endpoints` (in reverse, so a cell saved twice gets its first value back)."""
+        for source, value in reversed(saved):
+            moves[source] = value
 
 
 def search_map(grid: OccupancyGrid, expansion_distance: float) -> SearchMap:
