@@ -13,6 +13,7 @@ is a run that did not end normally (`cosim.logs` reads it up to its last complet
 from __future__ import annotations
 
 import json
+import struct
 import time
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
@@ -32,6 +33,7 @@ OBSTACLE_HEIGHT = 0.5  # [m], only for the 3D view
 LINE_WIDTH = 0.05  # [m] of polygon outlines
 SCAN_ANGLE_TOLERANCE = 1e-6  # [rad] below which beam angles count as exactly on the ROS angle grid
 SCAN_MAX_SUBDIVISION = 16
+_STAMP = struct.Struct("<iI")  # builtin_interfaces/Time: int32 sec, uint32 nanosec
 
 SIGNAL_NAMES_KEY = "navcosim.signal_names"  # channel metadata: JSON list of the original variable names
 COMPONENT_KEY = "navcosim.component"
@@ -77,7 +79,7 @@ class Recorder:
         self._channels: dict[str, int] = {}
         self._sequences: dict[int, int] = {}
         self._signal_sizes: dict[int, int] = {}
-        self._scan_layouts: dict[bytes, tuple[float, float, np.ndarray, str]] = {}
+        self._scan_layouts: dict[tuple, tuple] = {}  # (angles, limits) -> `_scan_template`
         # Signals, poses, commands and scans are held for a block of steps and packed at once
         # (`cosim.recorder_batch`); any other write, a flush and close pack the block first.
         self._block = MessageBlock(self._writer, self._sequences)
@@ -267,30 +269,45 @@ class Recorder:
         gives them. LaserScan needs equally spaced angles, so beams go into bins of a uniform grid
         (see `scan_layout`); bins without a beam hold NaN."""
         angles = np.asarray(angles, dtype=float)
-        key = angles.tobytes()
+        key = (angles.tobytes(), float(range_min), float(range_max))
         layout = self._scan_layouts.get(key)
         if layout is None:
-            layout = scan_layout(angles)
+            layout = self._scan_template(angles, float(range_min), float(range_max))
             self._scan_layouts[key] = layout
-        angle_min, increment, bins, description = layout
+        bins, binned, head, tail = layout
+        binned[bins] = ranges
+        # Only the stamp and the ranges change between sweeps: the CDR bytes are the template's
+        # head (encapsulation, stamp, frame, angles, limits, ranges length), the ranges, and the
+        # empty intensities.
+        stamp = _STAMP.pack(*divmod(int(t_ns), 1_000_000_000))
+        payload = b"".join((head[:4], stamp, head[12:], binned.tobytes(), tail))
+        self._hold(self._channels["/scan"], t_ns, payload)
+
+    def _scan_template(self, angles: np.ndarray, range_min: float, range_max: float) -> tuple:
+        """(bins, NaN-filled float32 ranges to fill, CDR head, CDR tail) of a LaserScan layout."""
+        angle_min, increment, bins, description = scan_layout(angles)
         if "/scan" not in self._channels:
             self._channel("/scan", {SCAN_LAYOUT_KEY: description})
         binned = np.full(int(bins[-1]) + 1 if len(bins) else 0, np.nan, dtype=np.float32)
-        binned[bins] = np.asarray(ranges, dtype=np.float32)
         message = rosmsg.make(
             "sensor_msgs/msg/LaserScan",
-            header=rosmsg.header(t_ns, ROBOT_FRAME),
+            header=rosmsg.header(0, ROBOT_FRAME),
             angle_min=angle_min,
             angle_max=angle_min + increment * (len(binned) - 1),
             angle_increment=increment,
             time_increment=0.0,
             scan_time=0.0,
-            range_min=float(range_min),
-            range_max=float(range_max),
+            range_min=range_min,
+            range_max=range_max,
             ranges=binned,
             intensities=np.zeros(0, dtype=np.float32),
         )
-        self._hold(self._channels["/scan"], t_ns, rosmsg.serialize(message, TOPIC_TYPES["/scan"]))
+        template = rosmsg.serialize(message, TOPIC_TYPES["/scan"])
+        tail = bytes(4)  # intensities: a sequence of length 0
+        head = template[: len(template) - binned.nbytes - len(tail)]
+        if head + binned.tobytes() + tail != template:  # the layout the fast path relies on
+            raise CosimError(f"{self.path}: unexpected LaserScan CDR layout")
+        return bins, binned, head, tail
 
     def write_obstacles(self, t_ns: int, obstacles: list) -> None:
         """The unknown obstacles (`cosim.world` shapes) on /obstacles: circles as cylinders,

@@ -301,3 +301,59 @@ def test_flush_interval_puts_data_on_disk_before_close(tmp_path):
     assert not log.is_complete
     np.testing.assert_array_equal(log.signals("vehicle")["x"], np.arange(25) * 0.5)
     recorder.close()
+
+
+def test_held_messages_are_the_bytes_and_order_of_one_message_at_a_time(tmp_path):
+    """Signals, poses, commands and scans are packed per block with NumPy; every record must be
+    what the per-message CDR functions (and rosbags for the scan) give, in the order written,
+    across block boundaries (more messages than one block holds)."""
+    from cosim import rosmsg
+    from cosim.recorder import TOPIC_TYPES
+
+    target = tmp_path / "held.mcap"
+    angles = np.linspace(-1.0, 1.0, 7)
+    expected = []
+    with Recorder(target, flush_interval=1e9) as recorder:
+        vehicle = recorder.signal_channel("vehicle", ["x", "y", "theta"])
+        mixer = recorder.signal_channel("mixer", ["v"])
+        for k in range(1300):
+            t_ns = k * 10_000_000 + 3
+            values = np.array([k * 0.1, math.sin(k), -1.5 * k])
+            recorder.write_signals(vehicle, t_ns, values)
+            expected.append(("/signals/vehicle", t_ns, rosmsg.signals_payload(t_ns, values)))
+            if k % 5 == 0:
+                recorder.write_signals(mixer, t_ns, np.array([k * 0.3]))
+                expected.append(("/signals/mixer", t_ns, rosmsg.signals_payload(t_ns, np.array([k * 0.3]))))
+                recorder.write_cmd_vel(t_ns, 0.5, k * 0.01)
+                expected.append(("/cmd_vel", t_ns, rosmsg.twist_cdr(0.5, k * 0.01)))
+            if k % 10 == 0:
+                ranges = np.where(np.arange(7) == k % 7, np.nan, 0.01 * k + np.arange(7))
+                recorder.write_scan(t_ns, angles, ranges, 0.0, 10.0)
+                message = rosmsg.make(
+                    "sensor_msgs/msg/LaserScan",
+                    header=rosmsg.header(t_ns, "base_link"),
+                    angle_min=-1.0,
+                    angle_max=-1.0 + (angles[1] - angles[0]) * 6,
+                    angle_increment=float(angles[1] - angles[0]),
+                    time_increment=0.0,
+                    scan_time=0.0,
+                    range_min=0.0,
+                    range_max=10.0,
+                    ranges=ranges.astype(np.float32),
+                    intensities=np.zeros(0, dtype=np.float32),
+                )
+                expected.append(("/scan", t_ns, rosmsg.serialize(message, TOPIC_TYPES["/scan"])))
+            if k % 2 == 1:
+                pose = (0.01 * k, -0.02 * k, 0.003 * k - 2.0)
+                recorder.write_pose(t_ns + 10_000_000, *pose, 0.7, 0.1)
+                t_pose = t_ns + 10_000_000
+                expected.append(("/odom", t_pose, rosmsg.odometry_cdr(t_pose, *pose, 0.7, 0.1)))
+                expected.append(("/tf", t_pose, rosmsg.tf_cdr(t_pose, *pose)))
+                expected.append(("/pose", t_pose, rosmsg.pose_stamped_cdr(t_pose, *pose)))
+    with open(target, "rb") as stream:
+        written = [
+            (channel.topic, message.log_time, bytes(message.data))
+            for _, channel, message in make_reader(stream).iter_messages(log_time_order=False)
+        ]
+    assert len(written) == len(expected)
+    assert written == expected
