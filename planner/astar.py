@@ -7,7 +7,7 @@ g, parent and a per-cell `stamp` live in arrays that are reused from query to qu
 `stamp[n] == generation` means n is in OPEN, `generation + 1` means CLOSED, anything else means
 unseen, so a new query costs no clearing of grid-size arrays.
 
-OPEN is a binary heap of (int64 key, node); the key packs f = g + h (rounded to 2^-24 cell) over h
+OPEN is a 4-ary heap of (int64 key, node); the key packs f = g + h (rounded to 2^-24 cell) over h
 (quarter cells), so one integer comparison orders by f and, among equal f, by smaller h (the
 "low_h" tie breaker, which keeps optimality; rounding f puts ties that octile costs make equal in
 exact arithmetic on the same key). The thesis's second improvement, OPEN-list replacement, is a
@@ -60,10 +60,13 @@ def heuristic_cells(row_offset, col_offset, kind):
 
 @njit(cache=True)
 def heap_push(heap_key, heap_node, size, key, node):
-    """Push (key, node) on the binary min-heap (the caller checks the capacity); returns the new size."""
+    """Push (key, node) on the 4-ary min-heap (the caller checks the capacity); returns the new size.
+
+    Four children per entry: half the levels of a binary heap, and a node's children share a cache
+    line, so a pop costs fewer dependent loads."""
     index = size
     while index > 0:
-        parent = (index - 1) >> 1
+        parent = (index - 1) >> 2
         if heap_key[parent] <= key:
             break
         heap_key[index] = heap_key[parent]
@@ -83,12 +86,17 @@ def heap_pop(heap_key, heap_node, size):
     node = heap_node[size]
     index = 0
     while True:
-        child = 2 * index + 1
-        if child >= size:
+        first = 4 * index + 1
+        if first >= size:
             break
-        if child + 1 < size and heap_key[child + 1] < heap_key[child]:
-            child += 1
-        if heap_key[child] >= key:
+        child = first
+        smallest = heap_key[first]
+        last = min(first + 4, size)
+        for other in range(first + 1, last):
+            if heap_key[other] < smallest:
+                smallest = heap_key[other]
+                child = other
+        if smallest >= key:
             break
         heap_key[index] = heap_key[child]
         heap_node[index] = heap_node[child]
