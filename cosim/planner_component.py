@@ -69,6 +69,9 @@ class PlannerComponent(PythonComponent):
     the outputs are constant afterwards, so the master may step it once.
     """
 
+    # The plan is fixed for the whole run: the master copies the waypoints once at initialisation.
+    constant_outputs = True
+
     def __init__(self, name: str, grid, start, goal, settings, period: float = 0.0):
         super().__init__(
             name,

@@ -193,6 +193,15 @@ class Recorder:
             raise CosimError(f"{self.path}: the log is already closed")
         self._held(self._block.add_signals(channel, t_ns, values))
 
+    def hold_signals(
+        self, channel: int, t_ns: int, first: np.ndarray, second: np.ndarray | None = None
+    ) -> None:
+        """`write_signals` for the run loop: the record is `first` (float64), or `first` then
+        `second` (a component's input and output buffers); shapes are checked by NumPy only."""
+        if self._closed:
+            raise CosimError(f"{self.path}: the log is already closed")
+        self._held(self._block.add_signals(channel, t_ns, first, second))
+
     # --- robot topics --------------------------------------------------------------------
 
     def write_pose(self, t_ns: int, x: float, y: float, theta: float, v: float, omega: float) -> None:

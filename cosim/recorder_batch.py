@@ -137,10 +137,16 @@ class MessageBlock:
         self.stream_of[channel] = len(self.streams)
         self.streams.append(self.signals[channel])
 
-    def add_signals(self, channel: int, t_ns: int, values: np.ndarray) -> bool:
-        """Hold one signal record; True when the block is full (the caller packs it)."""
+    def add_signals(
+        self, channel: int, t_ns: int, values: np.ndarray, more: np.ndarray | None = None
+    ) -> bool:
+        """Hold one signal record (`values`, then `more` when given); True when the block is full
+        (the caller packs it)."""
         stream = self.signals[channel]
-        stream.rows[len(stream.times)] = values
+        if more is None:
+            stream.rows[len(stream.times)] = values
+        else:
+            np.concatenate((values, more), out=stream.rows[len(stream.times)])
         stream.times.append(t_ns)
         self.order.append(self.stream_of[channel])
         self.count += 1

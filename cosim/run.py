@@ -102,18 +102,18 @@ class _Recording:
             if not names:
                 continue
             channel = recorder.signal_channel(component.name, names)
-            values = np.empty(len(names))  # reused: one record's values, no allocation per step
+            # One record = the scalar inputs then the scalar outputs. When those are all the ports
+            # (no array ports), a record is the two buffers as they are: no gather per step.
+            whole = len(inputs) == len(component.inputs) and len(outputs) == len(component.outputs)
             self.entries.append(
                 (
                     system.period_steps(component),
                     channel,
                     component.input_buffer,
-                    np.array(inputs, dtype=np.intp),
-                    values[: len(inputs)],
                     component.output_buffer,
-                    np.array(outputs, dtype=np.intp),
-                    values[len(inputs) :],
-                    values,
+                    None if whole else np.array(inputs, dtype=np.intp),
+                    None if whole else np.array(outputs, dtype=np.intp),
+                    np.empty(len(names)),  # the record when gathered; reused, no allocation per step
                 )
             )
         vehicle = system.components["vehicle"]
@@ -143,23 +143,16 @@ class _Recording:
 
     def after_step(self, k: int, t_ns: int, h_ns: int) -> None:
         """Record what step k (starting at t_ns) produced."""
-        write_signals = self.recorder.write_signals
-        take = np.take
-        for (
-            period,
-            channel,
-            inputs,
-            input_index,
-            input_part,
-            outputs,
-            output_index,
-            output_part,
-            values,
-        ) in self.entries:
+        hold = self.recorder.hold_signals
+        for period, channel, inputs, outputs, input_index, output_index, values in self.entries:
             if period == 1 or k % period == 0:
-                take(inputs, input_index, out=input_part)
-                take(outputs, output_index, out=output_part)
-                write_signals(channel, t_ns, values)
+                if input_index is None:
+                    hold(channel, t_ns, inputs, outputs)
+                else:
+                    count = len(input_index)
+                    np.take(inputs, input_index, out=values[:count])
+                    np.take(outputs, output_index, out=values[count:])
+                    hold(channel, t_ns, values)
         recorder = self.recorder
         if k % self.lidar_steps == 0:
             recorder.write_scan(t_ns, self.angles, self.lidar_out[self.ranges_index], *self.range_limits)

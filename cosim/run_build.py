@@ -132,7 +132,6 @@ def build_run(scenario: Scenario) -> BuiltRun:
     planner = PlannerComponent(
         "planner", grid, scenario.start, scenario.goal, scenario.planner, period=controller_period
     )
-    planner.constant_outputs = True  # the plan is fixed for the whole run (see PlannerComponent)
     try:
         planner.plan_path()
     except CosimError as error:
