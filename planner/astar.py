@@ -166,7 +166,6 @@ def astar_search(
     goal_row = goal // width if goal >= 0 else 0
     goal_col = goal % width if goal >= 0 else 0
     closed = generation + 1
-    use_cost = cost_weight > 0.0
     capacity = len(heap_key)
 
     g[start] = 0.0
@@ -203,7 +202,7 @@ def astar_search(
             if seen == closed:
                 continue
             step = steps[k]
-            if use_cost:
+            if cost is not None:  # decided at compile time: None and an array compile apart
                 step *= 1.0 + cost_weight * cost[neighbour]
             g_new = g_node + step
             if seen == generation:

@@ -25,7 +25,7 @@ from planner.astar import (
     heuristic_cells,
     neighbour_tables,
 )
-from planner.searchspace import SearchMap, no_cost, workspace
+from planner.searchspace import SearchMap, workspace
 
 
 @njit(cache=True)
@@ -85,7 +85,7 @@ def _expand(
         if seen == closed:
             continue
         step = steps[k]
-        if cost_weight > 0.0:
+        if cost is not None:  # decided at compile time (None or an array)
             step *= 1.0 + cost_weight * cost[node if backward else neighbour]
         g_new = g_node + step
         other = other_stamp[neighbour]
@@ -244,7 +244,7 @@ def search_bidirectional(
     size = len(space.blocked)
     forward, backward = workspace(size, 0), workspace(size, 1)
     cost_weight = settings["cost_weight"]
-    cost = space.costs(settings["cost_scaling_factor"]) if cost_weight > 0.0 else no_cost()
+    cost = space.costs(settings["cost_scaling_factor"]) if cost_weight > 0.0 else None
     while True:
         generation_forward, generation_backward = forward.next_generation(), backward.next_generation()
         began = time.perf_counter()

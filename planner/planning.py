@@ -51,7 +51,7 @@ from planner.astar import HEURISTICS, TIE_BREAKERS, astar_plan, astar_search, un
 from planner.errors import PlannerError
 from planner.grid import OccupancyGrid
 from planner.result import PlanResult
-from planner.searchspace import SearchMap, no_cost, search_map, workspace
+from planner.searchspace import SearchMap, search_map, workspace
 
 DEFAULTS: dict[str, object] = {
     "planner": "astar",
@@ -200,6 +200,23 @@ def endpoint_node(space: SearchMap, point, role: str) -> int:
     grid = space.grid
     try:
         x, y = float(point[0]), float(point[1])
+        col = math.floor((x - grid.origin[0]) / grid.resolution)
+        row = space.rows - 1 - math.floor((y - grid.origin[1]) / grid.resolution)
+    except (TypeError, ValueError, IndexError, OverflowError):
+        col = row = -1  # the checks below name the problem
+    else:
+        if 0 <= row < space.rows and 0 <= col < space.cols:
+            node = (row + 1) * space.width + col + 1
+            if space.blocked[node] != 1:  # the common case: a free cell, one test
+                return node
+    return _endpoint_error(space, point, role)
+
+
+def _endpoint_error(space: SearchMap, point, role: str) -> int:
+    """Raise the PlannerError that says why `point` cannot be an endpoint."""
+    grid = space.grid
+    try:
+        x, y = float(point[0]), float(point[1])
     except (TypeError, ValueError, IndexError):
         raise PlannerError(f"{role} must be (x, y) in metres, got {point!r}") from None
     if not (math.isfinite(x) and math.isfinite(y)):
@@ -308,7 +325,7 @@ def _cost(space: SearchMap, settings: dict) -> tuple[np.ndarray, float]:
     cost_weight = settings["cost_weight"]
     if cost_weight > 0.0:
         return space.costs(settings["cost_scaling_factor"]), cost_weight
-    return no_cost(), 0.0
+    return None, 0.0
 
 
 def run_astar(

@@ -163,7 +163,6 @@ class Workspace:
         return self.generation
 
 
-_NO_COST = np.zeros(1)
 _workspaces: dict[tuple[int, int], Workspace] = {}
 
 
@@ -177,8 +176,3 @@ def workspace(size: int, direction: int = 0) -> Workspace:
             _workspaces.pop(next(iter(_workspaces)))
         found = _workspaces[key] = Workspace(size)
     return found
-
-
-def no_cost() -> np.ndarray:
-    """A placeholder cost array for searches without a cost gradient (never indexed)."""
-    return _NO_COST
