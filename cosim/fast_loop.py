@@ -55,8 +55,12 @@ def _address(function) -> int:
     return ctypes.cast(function, ctypes.c_void_p).value
 
 
-def compile_loop(master: Master):
+def compile_loop(master: Master, record: bool = False):
     """Generate and compile `loop(first_step, steps) -> (next_step, component, call, status)`.
+
+    With `record`, it is `loop(first_step, steps, histories, rows)`: after each step of component
+    i (index in `master.order`) its inputs then outputs are copied into row `rows[i]` of
+    `histories[i]` (float64, at least as many rows as its steps in the call), and `rows[i]` counts up.
 
     `component` is -1 when all steps ran; otherwise the index (in `master.order`) of the FMU whose
     call (0 set, 1 step, 2 get) returned `status` > Warning at step `next_step`, or (call 3) that
@@ -67,6 +71,8 @@ def compile_loop(master: Master):
     system = master.system
     names: dict[str, object] = {}
     arguments = ", ".join(f"in{i}, out{i}, flag{i}" for i in range(len(master.order)))
+    if record:
+        arguments += ", rows, " + ", ".join(f"history{i}" for i in range(len(master.order)))
     lines = [f"def loop(first_step, steps, {arguments}):"]
     lines += ["    for k in range(first_step, first_step + steps):"]
     lines += [f"        t = ({master.start_time_ns} + k * {system.macro_step_ns}) / 1e9"]
@@ -110,6 +116,14 @@ def compile_loop(master: Master):
                 f"{ctypes.addressof(component.output_cbuffer)}{_count(version, len(component.outputs))})",
                 f"            if status > 1: return k, {i}, 2, status",
             ]
+        if record:
+            count, outputs = len(component.inputs), len(component.outputs)
+            step += [
+                f"            row = rows[{i}]",
+                f"            for j in range({count}): history{i}[row, j] = in{i}[j]",
+                f"            for j in range({outputs}): history{i}[row, {count} + j] = out{i}[j]",
+                f"            rows[{i}] = row + 1",
+            ]
         if jacobi:
             gathers += [due] + (gather or ["            pass"])
             steps += [due] + step
@@ -125,6 +139,15 @@ def compile_loop(master: Master):
             np.ctypeslib.as_array(component._step_flags) if component.fmi_version == 3 else np.zeros(3, bool)
         )
         buffers += [component.input_buffer, component.output_buffer, flags]
+
+    if record:
+
+        def run_recording(
+            first_step: int, count: int, rows: np.ndarray, histories
+        ) -> tuple[int, int, int, int]:
+            return compiled(np.int64(first_step), np.int64(count), *buffers, rows, *histories)
+
+        return run_recording
 
     def run(first_step: int, count: int) -> tuple[int, int, int, int]:
         return compiled(np.int64(first_step), np.int64(count), *buffers)

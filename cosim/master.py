@@ -329,6 +329,7 @@ class Master:
         self._initialized = False
         self._closed = False
         self._compiled_loop = None
+        self._recording_loop = None
         self._plan = [
             (component, system.period_steps(component), _gather(system, component))
             for component in self.order
@@ -441,10 +442,76 @@ class Master:
                 return done
         return steps
 
-    def _run_compiled(self, steps: int) -> None:
-        if self._compiled_loop is None:
-            self._compiled_loop = fast_loop.compile_loop(self)
-        next_step, failed, call, status = self._compiled_loop(self.step_index, steps)
+    def run_recorded(
+        self,
+        steps: int,
+        on_block: Callable[[int, int, list[np.ndarray]], None],
+        block: int = 1000,
+        compiled: bool | None = None,
+    ) -> int:
+        """Advance `steps` macro steps, keeping every component's inputs and outputs after each of
+        its steps; after each block of at most `block` steps call `on_block(first_step, count,
+        histories)`, where `histories[i]` (component i of `order`) has one row per step of that
+        component in the block, k = first_step .. first_step + count - 1 with k % period == 0:
+        its inputs, then its outputs. Returns the steps done.
+
+        A system made only of FMUs with plain real ports runs the blocks in a compiled loop that
+        fills the rows itself (`compiled` as in `run`); otherwise the Python loop copies them.
+        """
+        self._check_running()
+        if steps < 0:
+            raise CosimError(f"number of steps must be >= 0, got {steps}")
+        histories = [
+            np.empty((block // period + 1, len(c.inputs) + len(c.outputs))) for c, period, _ in self._plan
+        ]
+        rows = np.zeros(len(histories), dtype=np.int64)
+        wanted = steps >= COMPILED_MIN_STEPS if compiled is None else compiled
+        use_compiled = wanted and fast_loop.eligible(self)
+        if use_compiled and self._recording_loop is None:
+            self._recording_loop = fast_loop.compile_loop(self, record=True)
+        done = 0
+        while done < steps:
+            count = min(block, steps - done)
+            first = self.step_index
+            rows[:] = 0
+            if use_compiled:
+                try:
+                    self._run_compiled(count, self._recording_loop, rows, histories)
+                finally:
+                    self._deliver(first, on_block, histories, rows)
+            else:
+                try:
+                    for k in range(first, first + count):
+                        self._advance(1)
+                        for i, (component, period, _) in enumerate(self._plan):
+                            if not component.constant_outputs and (period == 1 or k % period == 0):
+                                row = histories[i][rows[i]]
+                                row[: len(component.inputs)] = component.input_buffer
+                                row[len(component.inputs) :] = component.output_buffer
+                                rows[i] += 1
+                finally:
+                    self._deliver(first, on_block, histories, rows)
+            done += count
+        return steps
+
+    def _deliver(self, first: int, on_block, histories: list[np.ndarray], rows: np.ndarray) -> None:
+        """Hand the rows of the steps that ran (all of them, or up to a failure) to `on_block`."""
+        end = self.step_index
+        if end <= first:
+            return
+        # Steps of each component in [first, end): rows of a step cut short by a failure are dropped.
+        kept = [
+            history[: min(int(n), (end + period - 1) // period - (first + period - 1) // period)]
+            for history, n, (_, period, _) in zip(histories, rows, self._plan, strict=True)
+        ]
+        on_block(first, end - first, kept)
+
+    def _run_compiled(self, steps: int, loop=None, *recording) -> None:
+        if loop is None:
+            if self._compiled_loop is None:
+                self._compiled_loop = fast_loop.compile_loop(self)
+            loop = self._compiled_loop
+        next_step, failed, call, status = loop(self.step_index, steps, *recording)
         self.step_index = next_step
         if failed < 0:
             return

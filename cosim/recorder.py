@@ -202,6 +202,18 @@ class Recorder:
             raise CosimError(f"{self.path}: the log is already closed")
         self._held(self._block.add_signals(channel, t_ns, first, second))
 
+    def hold_signal_rows(self, blocks: list[tuple[int, np.ndarray, np.ndarray]]) -> None:
+        """Many signal records at once (`Master.run_recorded`'s blocks): (channel, times [ns],
+        rows of float64 values) per channel; written as if one record at a time, in time order
+        and, at equal times, in the order of `blocks`."""
+        if self._closed:
+            raise CosimError(f"{self.path}: the log is already closed")
+        for channel, times, rows in blocks:
+            if rows.ndim != 2 or rows.shape[1] != self._signal_sizes[channel] or len(rows) != len(times):
+                raise CosimError(f"{self.path}: signal rows of shape {rows.shape} for channel {channel}")
+        self._block.add_signal_rows(blocks)
+        self._held(True)
+
     # --- robot topics --------------------------------------------------------------------
 
     def write_pose(self, t_ns: int, x: float, y: float, theta: float, v: float, omega: float) -> None:

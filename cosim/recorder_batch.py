@@ -152,6 +152,29 @@ class MessageBlock:
         self.count += 1
         return len(stream.times) == self.capacity
 
+    def add_signal_rows(self, blocks: list[tuple[int, np.ndarray, np.ndarray]]) -> None:
+        """Hold many records at once: (channel, times [ns], rows) per channel, in the order one
+        record at a time would have been written (by time, then by position in `blocks`).
+        Packs first when they do not fit next to what is held."""
+        counts = [len(times) for _, times, _ in blocks]
+        if any(
+            len(self.signals[c].times) + n > len(self.signals[c].rows)
+            for (c, _, _), n in zip(blocks, counts, strict=True)
+        ):
+            self.pack()
+        for (channel, times, rows), count in zip(blocks, counts, strict=True):
+            stream = self.signals[channel]
+            if count > len(stream.rows):
+                stream.rows = np.empty((count, stream.rows.shape[1]))
+            held = len(stream.times)
+            stream.rows[held : held + count] = rows
+            stream.times.extend(np.asarray(times, dtype=np.int64).tolist())
+        all_times = np.concatenate([np.asarray(times, dtype=np.int64) for _, times, _ in blocks])
+        position = np.repeat(np.arange(len(blocks)), counts)
+        streams = np.array([self.stream_of[channel] for channel, _, _ in blocks], dtype=np.int64)
+        self.order.extend(streams[position[np.lexsort((position, all_times))]].tolist())
+        self.count += int(sum(counts))
+
     def add_pose(self, channels: tuple[int, int, int], row: tuple) -> bool:
         if self.pose is None:
             self.pose = PoseStream(*channels)

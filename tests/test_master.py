@@ -239,3 +239,41 @@ def test_compiled_loop_is_bit_identical_to_the_python_loop(mode):
             assert master.time == 3.0
     assert np.array_equal(results[0], results[1])
     assert np.hypot(results[0][0] - 2.0, results[0][1] - 1.0) < 0.5  # it drove towards the goal
+
+
+def test_run_recorded_rows_are_each_components_values_after_its_steps():
+    """Compiled and Python `run_recorded` hand over, per block, exactly the inputs and outputs a
+    per-step observer sees after each of a component's steps (the controller every 5th step)."""
+    observed = []
+    system, _ = _robot("diffdrive_plain_fmi2")
+    with Master(system) as master:
+        master.initialize()
+
+        def observe(current):
+            k = current.step_index - 1
+            for index, component in enumerate(current.order):
+                if k % system.period_steps(component) == 0:
+                    observed.append(
+                        (index, k, np.concatenate((component.input_buffer, component.output_buffer)))
+                    )
+
+        master.run(1234, observe)
+    for compiled in (False, True):
+        system, _ = _robot("diffdrive_plain_fmi2")
+        blocks = []
+        with Master(system) as master:
+            master.initialize()
+            periods = [system.period_steps(c) for c in master.order]
+
+            def keep(first, count, histories, periods=periods, blocks=blocks):
+                assert count <= 500
+                for index, (period, rows) in enumerate(zip(periods, histories, strict=True)):
+                    steps = [k for k in range(first, first + count) if k % period == 0]
+                    assert len(rows) == len(steps)
+                    blocks.extend((index, k, row.copy()) for k, row in zip(steps, rows, strict=True))
+
+            assert master.run_recorded(1234, keep, block=500, compiled=compiled) == 1234
+            assert master.step_index == 1234
+        blocks.sort(key=lambda entry: (entry[1], entry[0]))
+        assert [(i, k) for i, k, _ in blocks] == [(i, k) for i, k, _ in observed]
+        assert all(np.array_equal(a, b) for (_, _, a), (_, _, b) in zip(blocks, observed, strict=True))
