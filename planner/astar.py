@@ -30,6 +30,9 @@ TIE_BREAKERS = {"none": 0, "matlab": 1, "low_h": 2}
 FREE, BLOCKED, UNTRUSTED = 0, 1, 2
 
 SQRT2 = math.sqrt(2.0)
+# (row, col) steps of the 8 moves: planner.searchspace.MOVES, the bit order of the move masks.
+_ROW_STEPS = (-1, 1, 0, 0, -1, -1, 1, 1)
+_COL_STEPS = (0, 0, -1, 1, -1, 1, -1, 1)
 # Heap keys pack f (2^-24 cell steps, up to 2^23 cells) over h (quarter cells, saturating at 2^14).
 _H_BITS = 16
 _F_SCALE = float(2**24)
@@ -118,11 +121,19 @@ def heap_key_of(f, h, tie_breaker):
 @njit(cache=True)
 def neighbour_tables(width):
     """Offsets, row/col steps and lengths [cells] of the 8 moves, in the bit order of the move masks
-    (planner.searchspace.MOVES): the 4 straight moves first."""
-    offsets = np.array([-width, width, -1, 1, -width - 1, -width + 1, width - 1, width + 1], dtype=np.int64)
-    row_steps = np.array([-1, 1, 0, 0, -1, -1, 1, 1], dtype=np.int64)
-    col_steps = np.array([0, 0, -1, 1, -1, 1, -1, 1], dtype=np.int64)
-    steps = np.array([1.0, 1.0, 1.0, 1.0, SQRT2, SQRT2, SQRT2, SQRT2])
+    (planner.searchspace.MOVES): the 4 straight moves first. Filled element by element: np.array of
+    a list costs about a second more to compile, and tuples index slower in the loop."""
+    offsets = np.empty(8, dtype=np.int64)
+    row_steps = np.empty(8, dtype=np.int64)
+    col_steps = np.empty(8, dtype=np.int64)
+    steps = np.empty(8, dtype=np.float64)
+    for k in range(8):
+        row_step = _ROW_STEPS[k]
+        col_step = _COL_STEPS[k]
+        row_steps[k] = row_step
+        col_steps[k] = col_step
+        offsets[k] = row_step * width + col_step
+        steps[k] = SQRT2 if row_step != 0 and col_step != 0 else 1.0
     return offsets, row_steps, col_steps, steps
 
 
@@ -171,7 +182,7 @@ def astar_search(
     g[start] = 0.0
     parent[start] = start
     stamp[start] = generation
-    size = 0
+    size = np.int64(0)  # not the literal 0: heap_pop would compile once more for Literal[int](0)
     next_node = start  # the candidate that skips the heap; -1 = none
     next_key = np.int64(0)
     searched = 0
@@ -313,15 +324,6 @@ def astar_plan(
         moves, width, start, goal, heuristic, h_scale, tie_breaker, decrease_key, cost, cost_weight,
         g, nodes, generation, heap_key, heap_node,
     )  # fmt: skip
-    if status < 0:
-        return (
-            status,
-            searched,
-            np.empty((0, 2), dtype=np.int64),
-            np.empty((0, 2)),
-            0.0,
-            np.zeros((0, 0), np.bool_),
-        )
     cells, path, length, explored = finish(
         nodes, start, goal, status == 1, searched, width, rows, cols, resolution, origin_x, origin_y
     )

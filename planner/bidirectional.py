@@ -119,7 +119,7 @@ def _root(width, root, target, heuristic, h_scale, tie_breaker, g, nodes, genera
     nodes[0, root] = root
     nodes[1, root] = generation
     h = heuristic_cells(root // width - target // width, root % width - target % width, heuristic) * h_scale
-    heap_push(heap_key, heap_node, 0, heap_key_of(h, h, tie_breaker), root)
+    heap_push(heap_key, heap_node, np.int64(0), heap_key_of(h, h, tie_breaker), root)
 
 
 @njit(cache=True)
@@ -149,8 +149,8 @@ def bidirectional_search(
 
     status 1 = path found, 0 = none, -1 = a heap is full (enlarge both and search again)."""
     best = np.array([np.inf, -1.0, -1.0])
-    searched_forward = 0
-    searched_backward = 0
+    searched_forward = np.int64(0)
+    searched_backward = np.int64(0)
     _root(width, start, goal, heuristic, h_scale, tie_breaker,
           g_forward, nodes_forward, generation_forward, heap_key_forward, heap_node_forward)  # fmt: skip
     _root(width, goal, start, heuristic, h_scale, tie_breaker,
@@ -158,24 +158,32 @@ def bidirectional_search(
     if start == goal:
         nodes_forward[2, 0] = start
         return 1, 1, 0, 0.0, start, -1
-    size_forward = 1
-    size_backward = 1
+    # np.int64, not literals: a Literal[int] argument would compile _expand and heap_pop once more.
+    size_forward = np.int64(1)
+    size_backward = np.int64(1)
     while size_forward > 0 and size_backward > 0:
         top_forward = (heap_key_forward[0] >> _H_BITS) / _F_SCALE
         top_backward = (heap_key_backward[0] >> _H_BITS) / _F_SCALE
         if top_forward >= best[0] or top_backward >= best[0]:
             break
-        if size_forward <= size_backward:
-            size_forward, searched_forward, status = _expand(
-                moves, width, goal, False, heuristic, h_scale, tie_breaker, decrease_key, cost, cost_weight,
-                g_forward, nodes_forward, generation_forward, heap_key_forward, heap_node_forward,
-                size_forward, searched_forward, g_backward, nodes_backward[1], generation_backward, best, 1,
+        # The side is a runtime value, not a literal True/False/1/2, so _expand compiles once.
+        backward = size_forward > size_backward
+        side = np.int64(2) if backward else np.int64(1)
+        if backward:
+            size_backward, searched_backward, status = _expand(
+                moves, width, start, backward, heuristic, h_scale, tie_breaker, decrease_key,
+                cost, cost_weight,
+                g_backward, nodes_backward, generation_backward, heap_key_backward, heap_node_backward,
+                size_backward, searched_backward,
+                g_forward, nodes_forward[1], generation_forward, best, side,
             )  # fmt: skip
         else:
-            size_backward, searched_backward, status = _expand(
-                moves, width, start, True, heuristic, h_scale, tie_breaker, decrease_key, cost, cost_weight,
-                g_backward, nodes_backward, generation_backward, heap_key_backward, heap_node_backward,
-                size_backward, searched_backward, g_forward, nodes_forward[1], generation_forward, best, 2,
+            size_forward, searched_forward, status = _expand(
+                moves, width, goal, backward, heuristic, h_scale, tie_breaker, decrease_key,
+                cost, cost_weight,
+                g_forward, nodes_forward, generation_forward, heap_key_forward, heap_node_forward,
+                size_forward, searched_forward,
+                g_backward, nodes_backward[1], generation_backward, best, side,
             )  # fmt: skip
         if status < 0:
             return -1, searched_forward, searched_backward, 0.0, -1, -1
