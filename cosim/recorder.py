@@ -33,6 +33,7 @@ OBSTACLE_HEIGHT = 0.5  # [m], only for the 3D view
 LINE_WIDTH = 0.05  # [m] of polygon outlines
 SCAN_ANGLE_TOLERANCE = 1e-6  # [rad] below which beam angles count as exactly on the ROS angle grid
 SCAN_MAX_SUBDIVISION = 16
+CLOCK_EVERY = 16  # held messages between two looks at the wall clock for the flush interval
 _STAMP = struct.Struct("<iI")  # builtin_interfaces/Time: int32 sec, uint32 nanosec
 
 SIGNAL_NAMES_KEY = "navcosim.signal_names"  # channel metadata: JSON list of the original variable names
@@ -84,6 +85,7 @@ class Recorder:
         # (`cosim.recorder_batch`); any other write, a flush and close pack the block first.
         self._block = MessageBlock(self._writer, self._sequences)
         self._pose_channels: tuple[int, int, int] | None = None
+        self._until_clock = 1
         self._closed = False
 
     # --- file-level records --------------------------------------------------------------
@@ -153,11 +155,15 @@ class Recorder:
 
     def _held(self, full: bool) -> None:
         """After a message went into the block: pack a full block; flush when the interval is up."""
-        if self._closed:
-            raise CosimError(f"{self.path}: the log is already closed")
-        if time.monotonic() - self._last_flush >= self.flush_interval:
-            self.flush()
-        elif full:
+        # The clock is read every CLOCK_EVERY held messages (every one with a zero interval):
+        # a run writes a few messages per millisecond of wall time, far below the interval.
+        self._until_clock -= 1
+        if self._until_clock <= 0:
+            self._until_clock = CLOCK_EVERY if self.flush_interval > 0 else 1
+            if time.monotonic() - self._last_flush >= self.flush_interval:
+                self.flush()
+                return
+        if full:
             self._block.pack()
 
     def _write_message(self, topic: str, t_ns: int, message) -> None:
