@@ -52,7 +52,6 @@ struct ModelData {
     double v, omega, steering_angle;
     int mode;
     /* state */
-    bool initialized;
     double recovery_sign; /* +1 turn left (CCW), -1 right: toward the side that was last free */
     double recovery_elapsed; /* s spent in the current recovery (0 when not recovering) */
     double avoid_offset;     /* rad: steering_dir - target_dir of the last avoidance */

@@ -30,12 +30,9 @@
  */
 #include <math.h>
 
-#include "model.h"
+#include "angles.h"
 #include "config.h"
-
-#ifndef M_PI /* not declared by <math.h> under -std=c99 */
-#define M_PI 3.14159265358979323846
-#endif
+#include "model.h"
 
 void model_set_start_values(ModelData *data) {
     data->vehicle_type = VEHICLE_DIFFERENTIAL;
@@ -53,19 +50,10 @@ void model_set_start_values(ModelData *data) {
     data->goal_reached = false;
     data->v = data->omega = data->steering_angle = 0.0;
     data->mode = MODE_FOLLOW;
-    data->initialized = false;
     data->recovery_sign = 1.0;
     data->recovery_elapsed = 0.0;
     data->avoid_offset = 0.0;
     data->hold_elapsed = INFINITY;
-}
-
-static double wrap_to_pi(double angle) {
-    if (fabs(angle) <= M_PI) return angle;
-    double shifted = fmod(angle + M_PI, 2.0 * M_PI);
-    if (shifted < 0.0) shifted += 2.0 * M_PI;
-    if (shifted == 0.0 && angle + M_PI > 0.0) shifted = 2.0 * M_PI;
-    return shifted - M_PI;
 }
 
 static double clip_to_lock(const ModelData *data, double angle) {
@@ -76,10 +64,7 @@ static double clip_to_lock(const ModelData *data, double angle) {
 
 /* Bicycle steering angle for (v, omega): folded into (-pi/2, pi/2], clipped to the lock. */
 static double steering_angle_for(const ModelData *data, double v, double omega) {
-    double angle = atan2(omega * data->wheelbase, v);
-    if (angle > M_PI / 2) angle -= M_PI;
-    else if (angle <= -M_PI / 2) angle += M_PI;
-    return clip_to_lock(data, angle);
+    return clip_to_lock(data, fold_to_half_pi(atan2(omega * data->wheelbase, v)));
 }
 
 /* Evaluate the rule for the current inputs, for outputs held over a step of h seconds.
@@ -193,7 +178,6 @@ ModelStatus model_initialize(ModelInstance *comp, ModelData *data) {
                         data->recovery_min_duration);
         return MODEL_ERROR;
     }
-    data->initialized = true;
     /* Outputs at the start time; the recovery clock starts with the first step. */
     double recovery_sign = data->recovery_sign;
     compute_outputs(data, &recovery_sign, 0.0);
@@ -208,25 +192,18 @@ ModelStatus model_do_step(ModelInstance *comp, ModelData *data, double t, double
     return MODEL_OK;
 }
 
-static double *real_variable(ModelData *d, unsigned vr, const char **parameter) {
-    *parameter = NULL;
+double *model_real(ModelData *d, unsigned vr) {
     switch (vr) {
-    case VR_WHEELBASE: *parameter = "wheelbase"; return &d->wheelbase;
-    case VR_MAX_STEERING_ANGLE: *parameter = "max_steering_angle"; return &d->max_steering_angle;
-    case VR_DIRECTION_TOLERANCE: *parameter = "direction_tolerance"; return &d->direction_tolerance;
-    case VR_AVOID_GAIN: *parameter = "avoid_gain"; return &d->avoid_gain;
-    case VR_AVOID_SPEED_FACTOR: *parameter = "avoid_speed_factor"; return &d->avoid_speed_factor;
-    case VR_RECOVERY_ANGULAR_VELOCITY:
-        *parameter = "recovery_angular_velocity";
-        return &d->recovery_angular_velocity;
-    case VR_RECOVERY_LINEAR_VELOCITY:
-        *parameter = "recovery_linear_velocity";
-        return &d->recovery_linear_velocity;
-    case VR_AVOID_STEERING_GAIN: *parameter = "avoid_steering_gain"; return &d->avoid_steering_gain;
-    case VR_AVOID_HOLD_TIME: *parameter = "avoid_hold_time"; return &d->avoid_hold_time;
-    case VR_RECOVERY_MIN_DURATION:
-        *parameter = "recovery_min_duration";
-        return &d->recovery_min_duration;
+    case VR_WHEELBASE: return &d->wheelbase;
+    case VR_MAX_STEERING_ANGLE: return &d->max_steering_angle;
+    case VR_DIRECTION_TOLERANCE: return &d->direction_tolerance;
+    case VR_AVOID_GAIN: return &d->avoid_gain;
+    case VR_AVOID_SPEED_FACTOR: return &d->avoid_speed_factor;
+    case VR_RECOVERY_ANGULAR_VELOCITY: return &d->recovery_angular_velocity;
+    case VR_RECOVERY_LINEAR_VELOCITY: return &d->recovery_linear_velocity;
+    case VR_AVOID_STEERING_GAIN: return &d->avoid_steering_gain;
+    case VR_AVOID_HOLD_TIME: return &d->avoid_hold_time;
+    case VR_RECOVERY_MIN_DURATION: return &d->recovery_min_duration;
     case VR_V_IN: return &d->v_in;
     case VR_OMEGA_IN: return &d->omega_in;
     case VR_TARGET_DIR: return &d->target_dir;
@@ -238,67 +215,12 @@ static double *real_variable(ModelData *d, unsigned vr, const char **parameter) 
     }
 }
 
-ModelStatus model_get_real(ModelInstance *comp, ModelData *data, unsigned vr, double *value) {
-    const char *parameter;
-    double *variable = real_variable(data, vr, &parameter);
-    if (!variable) {
-        model_log_error(comp, "unknown Real value reference %u", vr);
-        return MODEL_ERROR;
-    }
-    *value = *variable;
-    return MODEL_OK;
-}
-
-ModelStatus model_set_real(ModelInstance *comp, ModelData *data, unsigned vr, double value) {
-    const char *parameter;
-    double *variable = real_variable(data, vr, &parameter);
-    if (!variable || vr >= VR_V) {
-        model_log_error(comp, "Real value reference %u is unknown or not settable", vr);
-        return MODEL_ERROR;
-    }
-    if (parameter && data->initialized) {
-        model_log_error(comp, "parameter %s is fixed after initialisation", parameter);
-        return MODEL_ERROR;
-    }
-    *variable = value;
-    return MODEL_OK;
-}
-
-ModelStatus model_get_integer(ModelInstance *comp, ModelData *data, unsigned vr, int *value) {
+int *model_integer(ModelData *d, unsigned vr) {
     switch (vr) {
-    case VR_VEHICLE_TYPE: *value = data->vehicle_type; return MODEL_OK;
-    case VR_MODE: *value = data->mode; return MODEL_OK;
-    default: model_log_error(comp, "unknown Integer value reference %u", vr); return MODEL_ERROR;
+    case VR_VEHICLE_TYPE: return &d->vehicle_type;
+    case VR_MODE: return &d->mode;
+    default: return NULL;
     }
 }
 
-ModelStatus model_set_integer(ModelInstance *comp, ModelData *data, unsigned vr, int value) {
-    if (vr != VR_VEHICLE_TYPE) {
-        model_log_error(comp, "Integer value reference %u is unknown or not settable", vr);
-        return MODEL_ERROR;
-    }
-    if (data->initialized) {
-        model_log_error(comp, "parameter vehicle_type is fixed after initialisation");
-        return MODEL_ERROR;
-    }
-    data->vehicle_type = value;
-    return MODEL_OK;
-}
-
-ModelStatus model_get_boolean(ModelInstance *comp, ModelData *data, unsigned vr, bool *value) {
-    if (vr == VR_GOAL_REACHED) {
-        *value = data->goal_reached;
-        return MODEL_OK;
-    }
-    model_log_error(comp, "unknown Boolean value reference %u", vr);
-    return MODEL_ERROR;
-}
-
-ModelStatus model_set_boolean(ModelInstance *comp, ModelData *data, unsigned vr, bool value) {
-    if (vr == VR_GOAL_REACHED) {
-        data->goal_reached = value;
-        return MODEL_OK;
-    }
-    model_log_error(comp, "Boolean value reference %u is unknown or not settable", vr);
-    return MODEL_ERROR;
-}
+bool *model_boolean(ModelData *d, unsigned vr) { return vr == VR_GOAL_REACHED ? &d->goal_reached : NULL; }

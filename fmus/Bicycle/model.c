@@ -21,6 +21,7 @@
  */
 #include <math.h>
 
+#include "angles.h"
 #include "config.h"
 #include "model.h"
 #include "planar_motion.h"
@@ -42,13 +43,7 @@ static double clip(double value, double low, double high) { return value < low ?
 /* Steering angle giving yaw rate omega at longitudinal speed v, folded into (-pi/2, pi/2]. */
 static double steering_for_yaw_rate(const ModelData *m, double v, double omega) {
     double divisor = m->steering_mode == STEERING_ZERO_SIDESLIP ? 2.0 : 1.0;
-    double angle = atan2(omega * m->wheelbase, divisor * v);
-    if (angle > M_PI / 2.0) {
-        angle -= M_PI;
-    } else if (angle <= -M_PI / 2.0) {
-        angle += M_PI;
-    }
-    return angle;
+    return fold_to_half_pi(atan2(omega * m->wheelbase, divisor * v));
 }
 
 static ModelStatus apply_inputs(ModelInstance *comp, ModelData *m) {
@@ -115,7 +110,7 @@ ModelStatus model_initialize(ModelInstance *comp, ModelData *m) {
     }
     m->x = m->x0;
     m->y = m->y0;
-    m->theta = planar_wrap_angle(m->theta0);
+    m->theta = wrap_heading(m->theta0);
     return apply_inputs(comp, m);
 }
 
@@ -128,8 +123,7 @@ ModelStatus model_do_step(ModelInstance *comp, ModelData *m, double t, double h)
     return MODEL_OK;
 }
 
-/* Real variables by value reference; the glue has already rejected unknown or read-only ones. */
-static double *real_variable(ModelData *m, unsigned vr) {
+double *model_real(ModelData *m, unsigned vr) {
     switch (vr) {
     case VR_WHEELBASE: return &m->wheelbase;
     case VR_REAR_AXLE_DISTANCE: return &m->rear_axle_distance;
@@ -153,7 +147,7 @@ static double *real_variable(ModelData *m, unsigned vr) {
     }
 }
 
-static int *integer_variable(ModelData *m, unsigned vr) {
+int *model_integer(ModelData *m, unsigned vr) {
     switch (vr) {
     case VR_INPUT_MODE: return &m->input_mode;
     case VR_STEERING_MODE: return &m->steering_mode;
@@ -161,56 +155,8 @@ static int *integer_variable(ModelData *m, unsigned vr) {
     }
 }
 
-ModelStatus model_get_real(ModelInstance *comp, ModelData *m, unsigned vr, double *value) {
-    double *variable = real_variable(m, vr);
-    if (variable == NULL) {
-        model_log_error(comp, "unknown Real value reference %u", vr);
-        return MODEL_ERROR;
-    }
-    *value = *variable;
-    return MODEL_OK;
-}
-
-ModelStatus model_set_real(ModelInstance *comp, ModelData *m, unsigned vr, double value) {
-    double *variable = real_variable(m, vr);
-    if (variable == NULL) {
-        model_log_error(comp, "unknown Real value reference %u", vr);
-        return MODEL_ERROR;
-    }
-    *variable = value;
-    return MODEL_OK;
-}
-
-ModelStatus model_get_integer(ModelInstance *comp, ModelData *m, unsigned vr, int *value) {
-    int *variable = integer_variable(m, vr);
-    if (variable == NULL) {
-        model_log_error(comp, "unknown Integer value reference %u", vr);
-        return MODEL_ERROR;
-    }
-    *value = *variable;
-    return MODEL_OK;
-}
-
-ModelStatus model_set_integer(ModelInstance *comp, ModelData *m, unsigned vr, int value) {
-    int *variable = integer_variable(m, vr);
-    if (variable == NULL) {
-        model_log_error(comp, "unknown Integer value reference %u", vr);
-        return MODEL_ERROR;
-    }
-    *variable = value;
-    return MODEL_OK;
-}
-
-ModelStatus model_get_boolean(ModelInstance *comp, ModelData *m, unsigned vr, bool *value) {
+bool *model_boolean(ModelData *m, unsigned vr) {
     (void)m;
-    (void)value;
-    model_log_error(comp, "unknown Boolean value reference %u", vr);
-    return MODEL_ERROR;
-}
-
-ModelStatus model_set_boolean(ModelInstance *comp, ModelData *m, unsigned vr, bool value) {
-    (void)m;
-    (void)value;
-    model_log_error(comp, "unknown Boolean value reference %u", vr);
-    return MODEL_ERROR;
+    (void)vr;
+    return NULL;
 }

@@ -71,7 +71,7 @@ ModelStatus model_initialize(ModelInstance *comp, ModelData *m) {
     }
     m->x = m->x0;
     m->y = m->y0;
-    m->theta = planar_wrap_angle(m->theta0);
+    m->theta = wrap_heading(m->theta0);
     return apply_inputs(comp, m);
 }
 
@@ -84,8 +84,7 @@ ModelStatus model_do_step(ModelInstance *comp, ModelData *m, double t, double h)
     return MODEL_OK;
 }
 
-/* Real variables by value reference; the glue has already rejected unknown or read-only ones. */
-static double *real_variable(ModelData *m, unsigned vr) {
+double *model_real(ModelData *m, unsigned vr) {
     switch (vr) {
     case VR_WHEEL_RADIUS: return &m->wheel_radius;
     case VR_TRACK_WIDTH: return &m->track_width;
@@ -109,54 +108,10 @@ static double *real_variable(ModelData *m, unsigned vr) {
     }
 }
 
-ModelStatus model_get_real(ModelInstance *comp, ModelData *m, unsigned vr, double *value) {
-    double *variable = real_variable(m, vr);
-    if (variable == NULL) {
-        model_log_error(comp, "unknown Real value reference %u", vr);
-        return MODEL_ERROR;
-    }
-    *value = *variable;
-    return MODEL_OK;
-}
+int *model_integer(ModelData *m, unsigned vr) { return vr == VR_INPUT_MODE ? &m->input_mode : NULL; }
 
-ModelStatus model_set_real(ModelInstance *comp, ModelData *m, unsigned vr, double value) {
-    double *variable = real_variable(m, vr);
-    if (variable == NULL) {
-        model_log_error(comp, "unknown Real value reference %u", vr);
-        return MODEL_ERROR;
-    }
-    *variable = value;
-    return MODEL_OK;
-}
-
-ModelStatus model_get_integer(ModelInstance *comp, ModelData *m, unsigned vr, int *value) {
-    if (vr != VR_INPUT_MODE) {
-        model_log_error(comp, "unknown Integer value reference %u", vr);
-        return MODEL_ERROR;
-    }
-    *value = m->input_mode;
-    return MODEL_OK;
-}
-
-ModelStatus model_set_integer(ModelInstance *comp, ModelData *m, unsigned vr, int value) {
-    if (vr != VR_INPUT_MODE) {
-        model_log_error(comp, "unknown Integer value reference %u", vr);
-        return MODEL_ERROR;
-    }
-    m->input_mode = value;
-    return MODEL_OK;
-}
-
-ModelStatus model_get_boolean(ModelInstance *comp, ModelData *m, unsigned vr, bool *value) {
+bool *model_boolean(ModelData *m, unsigned vr) {
     (void)m;
-    (void)value;
-    model_log_error(comp, "unknown Boolean value reference %u", vr);
-    return MODEL_ERROR;
-}
-
-ModelStatus model_set_boolean(ModelInstance *comp, ModelData *m, unsigned vr, bool value) {
-    (void)m;
-    (void)value;
-    model_log_error(comp, "unknown Boolean value reference %u", vr);
-    return MODEL_ERROR;
+    (void)vr;
+    return NULL;
 }

@@ -6,6 +6,7 @@
 
 #define MODEL_IDENTIFIER "PurePursuit"
 #define MODEL_GUID "{5d0c7a2e-7f0b-4c59-9d8e-2f1a6b3c4d01}"
+#define MODEL_HAS_REAL_CHANGED /* a changed waypoint marks a new plan */
 
 /* Capacity of the NaN-padded waypoint input (rows of the N x 2 array). */
 #define PP_MAX_WAYPOINTS 1000
@@ -52,7 +53,6 @@ struct ModelData {
     double v, omega, target_dir, lookahead_x, lookahead_y, goal_distance;
     bool goal_reached;
     /* state */
-    bool initialized;
     bool waypoints_changed;          /* set when any waypoint input element changes value */
     int path_count;                  /* rows of the waypoint input without NaN */
     double path_x[PP_MAX_WAYPOINTS], path_y[PP_MAX_WAYPOINTS];

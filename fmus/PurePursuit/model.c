@@ -10,6 +10,7 @@
  */
 #include <math.h>
 
+#include "angles.h"
 #include "model.h"
 #include "pure_pursuit.h"
 
@@ -26,7 +27,6 @@ void model_set_start_values(ModelData *data) {
     data->lookahead_x = data->lookahead_y = 0.0;
     data->goal_distance = NAN;
     data->goal_reached = false;
-    data->initialized = false;
     data->waypoints_changed = true;
     data->path_count = 0;
     data->projection.valid = false;
@@ -48,7 +48,7 @@ static void compute_outputs(ModelData *data, ProjectionState *projection) {
         return;
     }
     pure_pursuit_lookahead(data, projection, &data->lookahead_x, &data->lookahead_y);
-    double alpha = pure_pursuit_wrap_to_pi(atan2(data->lookahead_y - data->y, data->lookahead_x - data->x) -
+    double alpha = wrap_to_pi(atan2(data->lookahead_y - data->y, data->lookahead_x - data->x) -
                                            data->theta);
     data->omega = pure_pursuit_angular_velocity(data, alpha);
     data->v = data->desired_linear_velocity;
@@ -84,7 +84,6 @@ ModelStatus model_initialize(ModelInstance *comp, ModelData *data) {
                         data->angular_velocity_law);
         return MODEL_ERROR;
     }
-    data->initialized = true;
     /* Initial outputs from the initial inputs; the projection state is left untouched so the first
      * doStep is MATLAB's first call. */
     ProjectionState scratch = data->projection;
@@ -103,98 +102,34 @@ ModelStatus model_do_step(ModelInstance *comp, ModelData *data, double t, double
 
 static bool is_waypoint(unsigned vr, unsigned first) { return vr >= first && vr < first + PP_MAX_WAYPOINTS; }
 
-ModelStatus model_get_real(ModelInstance *comp, ModelData *data, unsigned vr, double *value) {
-    if (is_waypoint(vr, VR_WAYPOINTS_X)) { *value = data->waypoints_x[vr - VR_WAYPOINTS_X]; return MODEL_OK; }
-    if (is_waypoint(vr, VR_WAYPOINTS_Y)) { *value = data->waypoints_y[vr - VR_WAYPOINTS_Y]; return MODEL_OK; }
+double *model_real(ModelData *data, unsigned vr) {
+    if (is_waypoint(vr, VR_WAYPOINTS_X)) return &data->waypoints_x[vr - VR_WAYPOINTS_X];
+    if (is_waypoint(vr, VR_WAYPOINTS_Y)) return &data->waypoints_y[vr - VR_WAYPOINTS_Y];
     switch (vr) {
-    case VR_DESIRED_LINEAR_VELOCITY: *value = data->desired_linear_velocity; return MODEL_OK;
-    case VR_MAX_ANGULAR_VELOCITY: *value = data->max_angular_velocity; return MODEL_OK;
-    case VR_LOOKAHEAD_DISTANCE: *value = data->lookahead_distance; return MODEL_OK;
-    case VR_GOAL_TOLERANCE: *value = data->goal_tolerance; return MODEL_OK;
-    case VR_X: *value = data->x; return MODEL_OK;
-    case VR_Y: *value = data->y; return MODEL_OK;
-    case VR_THETA: *value = data->theta; return MODEL_OK;
-    case VR_V: *value = data->v; return MODEL_OK;
-    case VR_OMEGA: *value = data->omega; return MODEL_OK;
-    case VR_TARGET_DIR: *value = data->target_dir; return MODEL_OK;
-    case VR_LOOKAHEAD_X: *value = data->lookahead_x; return MODEL_OK;
-    case VR_LOOKAHEAD_Y: *value = data->lookahead_y; return MODEL_OK;
-    case VR_GOAL_DISTANCE: *value = data->goal_distance; return MODEL_OK;
-    default: model_log_error(comp, "unknown Real value reference %u", vr); return MODEL_ERROR;
+    case VR_DESIRED_LINEAR_VELOCITY: return &data->desired_linear_velocity;
+    case VR_MAX_ANGULAR_VELOCITY: return &data->max_angular_velocity;
+    case VR_LOOKAHEAD_DISTANCE: return &data->lookahead_distance;
+    case VR_GOAL_TOLERANCE: return &data->goal_tolerance;
+    case VR_X: return &data->x;
+    case VR_Y: return &data->y;
+    case VR_THETA: return &data->theta;
+    case VR_V: return &data->v;
+    case VR_OMEGA: return &data->omega;
+    case VR_TARGET_DIR: return &data->target_dir;
+    case VR_LOOKAHEAD_X: return &data->lookahead_x;
+    case VR_LOOKAHEAD_Y: return &data->lookahead_y;
+    case VR_GOAL_DISTANCE: return &data->goal_distance;
+    default: return NULL;
     }
 }
 
-/* A waypoint element that changes value (NaN to NaN is no change) marks a new plan. */
-static void set_waypoint(ModelData *data, double *element, double value) {
-    bool same = (*element == value) || (isnan(*element) && isnan(value));
-    if (!same) data->waypoints_changed = true;
-    *element = value;
+/* A waypoint element that changes value marks a new plan: the next step compacts the path once. */
+void model_real_changed(ModelData *data, unsigned vr) {
+    if (is_waypoint(vr, VR_WAYPOINTS_X) || is_waypoint(vr, VR_WAYPOINTS_Y)) data->waypoints_changed = true;
 }
 
-static ModelStatus set_parameter(ModelInstance *comp, const ModelData *data, const char *name, double *target,
-                                 double value) {
-    if (data->initialized) {
-        model_log_error(comp, "parameter %s is fixed after initialisation", name);
-        return MODEL_ERROR;
-    }
-    *target = value;
-    return MODEL_OK;
+int *model_integer(ModelData *data, unsigned vr) {
+    return vr == VR_ANGULAR_VELOCITY_LAW ? &data->angular_velocity_law : NULL;
 }
 
-ModelStatus model_set_real(ModelInstance *comp, ModelData *data, unsigned vr, double value) {
-    if (is_waypoint(vr, VR_WAYPOINTS_X)) {
-        set_waypoint(data, &data->waypoints_x[vr - VR_WAYPOINTS_X], value);
-        return MODEL_OK;
-    }
-    if (is_waypoint(vr, VR_WAYPOINTS_Y)) {
-        set_waypoint(data, &data->waypoints_y[vr - VR_WAYPOINTS_Y], value);
-        return MODEL_OK;
-    }
-    switch (vr) {
-    case VR_DESIRED_LINEAR_VELOCITY:
-        return set_parameter(comp, data, "desired_linear_velocity", &data->desired_linear_velocity, value);
-    case VR_MAX_ANGULAR_VELOCITY:
-        return set_parameter(comp, data, "max_angular_velocity", &data->max_angular_velocity, value);
-    case VR_LOOKAHEAD_DISTANCE:
-        return set_parameter(comp, data, "lookahead_distance", &data->lookahead_distance, value);
-    case VR_GOAL_TOLERANCE: return set_parameter(comp, data, "goal_tolerance", &data->goal_tolerance, value);
-    case VR_X: data->x = value; return MODEL_OK;
-    case VR_Y: data->y = value; return MODEL_OK;
-    case VR_THETA: data->theta = value; return MODEL_OK;
-    default:
-        model_log_error(comp, "Real value reference %u is unknown or not settable", vr);
-        return MODEL_ERROR;
-    }
-}
-
-ModelStatus model_get_integer(ModelInstance *comp, ModelData *data, unsigned vr, int *value) {
-    if (vr == VR_ANGULAR_VELOCITY_LAW) { *value = data->angular_velocity_law; return MODEL_OK; }
-    model_log_error(comp, "unknown Integer value reference %u", vr);
-    return MODEL_ERROR;
-}
-
-ModelStatus model_set_integer(ModelInstance *comp, ModelData *data, unsigned vr, int value) {
-    if (vr != VR_ANGULAR_VELOCITY_LAW) {
-        model_log_error(comp, "Integer value reference %u is unknown or not settable", vr);
-        return MODEL_ERROR;
-    }
-    if (data->initialized) {
-        model_log_error(comp, "parameter angular_velocity_law is fixed after initialisation");
-        return MODEL_ERROR;
-    }
-    data->angular_velocity_law = value;
-    return MODEL_OK;
-}
-
-ModelStatus model_get_boolean(ModelInstance *comp, ModelData *data, unsigned vr, bool *value) {
-    if (vr == VR_GOAL_REACHED) { *value = data->goal_reached; return MODEL_OK; }
-    model_log_error(comp, "unknown Boolean value reference %u", vr);
-    return MODEL_ERROR;
-}
-
-ModelStatus model_set_boolean(ModelInstance *comp, ModelData *data, unsigned vr, bool value) {
-    (void)data;
-    (void)value;
-    model_log_error(comp, "Boolean value reference %u is unknown or not settable", vr);
-    return MODEL_ERROR;
-}
+bool *model_boolean(ModelData *data, unsigned vr) { return vr == VR_GOAL_REACHED ? &data->goal_reached : NULL; }

@@ -111,14 +111,6 @@ void pure_pursuit_lookahead(const ModelData *data, ProjectionState *projection, 
     }
 }
 
-double pure_pursuit_wrap_to_pi(double angle) {
-    if (fabs(angle) <= M_PI) return angle;
-    double shifted = fmod(angle + M_PI, 2.0 * M_PI);
-    if (shifted < 0.0) shifted += 2.0 * M_PI;
-    if (shifted == 0.0 && angle + M_PI > 0.0) shifted = 2.0 * M_PI; /* +pi stays +pi */
-    return shifted - M_PI;
-}
-
 static double sign(double value) { return value > 0.0 ? 1.0 : (value < 0.0 ? -1.0 : value); }
 
 double pure_pursuit_angular_velocity(const ModelData *data, double alpha) {

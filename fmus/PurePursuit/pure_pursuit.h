@@ -2,12 +2,9 @@
 #ifndef PURE_PURSUIT_H
 #define PURE_PURSUIT_H
 
-#include "model.h"
+#include "angles.h"
 #include "config.h"
-
-#ifndef M_PI /* not declared by <math.h> under -std=c99 */
-#define M_PI 3.14159265358979323846
-#endif
+#include "model.h"
 
 /* Copy the rows of the waypoint input that hold no NaN into data->path_*, in order. */
 void pure_pursuit_compact_path(ModelData *data);
@@ -17,9 +14,6 @@ void pure_pursuit_compact_path(ModelData *data);
  * last waypoint when the path ends first. Needs path_count >= 1. */
 void pure_pursuit_lookahead(const ModelData *data, ProjectionState *projection, double *lookahead_x,
                             double *lookahead_y);
-
-/* Angle in (-pi, pi], MATLAB's wrapToPi. */
-double pure_pursuit_wrap_to_pi(double angle);
 
 /* Angular velocity [rad/s] for the bearing alpha [rad] of the lookahead point. */
 double pure_pursuit_angular_velocity(const ModelData *data, double alpha);

@@ -6,6 +6,7 @@
 
 #define MODEL_IDENTIFIER "VectorFieldHistogram"
 #define MODEL_GUID "{5d0c7a2e-7f0b-4c59-9d8e-2f1a6b3c4d02}"
+#define MODEL_HAS_REAL_CHANGED /* a changed reading angle invalidates the cached trigonometry */
 
 #define VFH_MAX_READINGS 720 /* capacity of the NaN-padded ranges/angles inputs */
 #define VFH_MAX_SECTORS 720  /* largest num_angular_sectors (0.5 degree sectors) */
@@ -50,7 +51,6 @@ struct ModelData {
     int free_sectors, num_valleys;
     bool target_dir_free;
     /* state carried between steps */
-    bool initialized;
     bool binary_histogram[VFH_MAX_SECTORS]; /* true = occupied; hysteresis memory */
     double previous_direction;              /* rad; NaN after a step with nothing free */
     /* derived at initialisation, scratch reused every step */

@@ -25,7 +25,6 @@ void model_set_start_values(ModelData *data) {
     data->steering_dir = 0.0;
     data->free_sectors = data->num_valleys = 0;
     data->target_dir_free = false;
-    data->initialized = false;
     memset(data->binary_histogram, 0, sizeof data->binary_histogram);
     data->previous_direction = 0.0;
     data->angles_changed = true;
@@ -64,7 +63,6 @@ static bool parameters_valid(ModelInstance *comp, const ModelData *d) {
 
 ModelStatus model_initialize(ModelInstance *comp, ModelData *data) {
     if (!parameters_valid(comp, data)) return MODEL_ERROR;
-    data->initialized = true;
     vfh_prepare_sectors(data);
     /* Initial outputs from the initial inputs, without touching the histogram memory, so the first
      * doStep is MATLAB's first call. */
@@ -85,107 +83,42 @@ ModelStatus model_do_step(ModelInstance *comp, ModelData *data, double t, double
     return MODEL_OK;
 }
 
-/* The Real parameters in value-reference order, with their names for messages. */
-static double *real_parameter(ModelData *d, unsigned vr, const char **name) {
+static bool is_reading(unsigned vr, unsigned first) { return vr >= first && vr < first + VFH_MAX_READINGS; }
+
+double *model_real(ModelData *d, unsigned vr) {
+    /* The scan first: 1440 of the 1441 values set every step. */
+    if (is_reading(vr, VR_RANGES)) return &d->ranges[vr - VR_RANGES];
+    if (is_reading(vr, VR_ANGLES)) return &d->angles[vr - VR_ANGLES];
     switch (vr) {
-    case VR_DISTANCE_LIMIT_MIN: *name = "distance_limit_min"; return &d->distance_limit_min;
-    case VR_DISTANCE_LIMIT_MAX: *name = "distance_limit_max"; return &d->distance_limit_max;
-    case VR_ROBOT_RADIUS: *name = "robot_radius"; return &d->robot_radius;
-    case VR_SAFETY_DISTANCE: *name = "safety_distance"; return &d->safety_distance;
-    case VR_MIN_TURNING_RADIUS: *name = "min_turning_radius"; return &d->min_turning_radius;
-    case VR_TARGET_DIRECTION_WEIGHT: *name = "target_direction_weight"; return &d->target_direction_weight;
-    case VR_CURRENT_DIRECTION_WEIGHT: *name = "current_direction_weight"; return &d->current_direction_weight;
-    case VR_PREVIOUS_DIRECTION_WEIGHT:
-        *name = "previous_direction_weight";
-        return &d->previous_direction_weight;
-    case VR_HISTOGRAM_THRESHOLD_LOW: *name = "histogram_threshold_low"; return &d->histogram_threshold_low;
-    case VR_HISTOGRAM_THRESHOLD_HIGH: *name = "histogram_threshold_high"; return &d->histogram_threshold_high;
-    case VR_NARROW_OPENING_THRESHOLD: *name = "narrow_opening_threshold"; return &d->narrow_opening_threshold;
+    case VR_TARGET_DIR: return &d->target_dir;
+    case VR_STEERING_DIR: return &d->steering_dir;
+    case VR_DISTANCE_LIMIT_MIN: return &d->distance_limit_min;
+    case VR_DISTANCE_LIMIT_MAX: return &d->distance_limit_max;
+    case VR_ROBOT_RADIUS: return &d->robot_radius;
+    case VR_SAFETY_DISTANCE: return &d->safety_distance;
+    case VR_MIN_TURNING_RADIUS: return &d->min_turning_radius;
+    case VR_TARGET_DIRECTION_WEIGHT: return &d->target_direction_weight;
+    case VR_CURRENT_DIRECTION_WEIGHT: return &d->current_direction_weight;
+    case VR_PREVIOUS_DIRECTION_WEIGHT: return &d->previous_direction_weight;
+    case VR_HISTOGRAM_THRESHOLD_LOW: return &d->histogram_threshold_low;
+    case VR_HISTOGRAM_THRESHOLD_HIGH: return &d->histogram_threshold_high;
+    case VR_NARROW_OPENING_THRESHOLD: return &d->narrow_opening_threshold;
     default: return NULL;
     }
 }
 
-static bool is_reading(unsigned vr, unsigned first) { return vr >= first && vr < first + VFH_MAX_READINGS; }
-
-ModelStatus model_get_real(ModelInstance *comp, ModelData *data, unsigned vr, double *value) {
-    const char *name;
-    double *parameter = real_parameter(data, vr, &name);
-    if (parameter) *value = *parameter;
-    else if (is_reading(vr, VR_RANGES)) *value = data->ranges[vr - VR_RANGES];
-    else if (is_reading(vr, VR_ANGLES)) *value = data->angles[vr - VR_ANGLES];
-    else if (vr == VR_TARGET_DIR) *value = data->target_dir;
-    else if (vr == VR_STEERING_DIR) *value = data->steering_dir;
-    else {
-        model_log_error(comp, "unknown Real value reference %u", vr);
-        return MODEL_ERROR;
-    }
-    return MODEL_OK;
+/* A changed reading angle invalidates the cached angles' cosines and sines. */
+void model_real_changed(ModelData *data, unsigned vr) {
+    if (is_reading(vr, VR_ANGLES)) data->angles_changed = true;
 }
 
-ModelStatus model_set_real(ModelInstance *comp, ModelData *data, unsigned vr, double value) {
-    /* The scan first: 1440 of the 1441 values set every step. */
-    if (is_reading(vr, VR_RANGES)) {
-        data->ranges[vr - VR_RANGES] = value;
-        return MODEL_OK;
-    }
-    if (is_reading(vr, VR_ANGLES)) {
-        double *angle = &data->angles[vr - VR_ANGLES];
-        if (!(*angle == value || (isnan(*angle) && isnan(value)))) data->angles_changed = true;
-        *angle = value;
-        return MODEL_OK;
-    }
-    if (vr == VR_TARGET_DIR) {
-        data->target_dir = value;
-        return MODEL_OK;
-    }
-    const char *name;
-    double *parameter = real_parameter(data, vr, &name);
-    if (!parameter) {
-        model_log_error(comp, "Real value reference %u is unknown or not settable", vr);
-        return MODEL_ERROR;
-    }
-    if (data->initialized) {
-        model_log_error(comp, "parameter %s is fixed after initialisation", name);
-        return MODEL_ERROR;
-    }
-    *parameter = value;
-    return MODEL_OK;
-}
-
-ModelStatus model_get_integer(ModelInstance *comp, ModelData *data, unsigned vr, int *value) {
+int *model_integer(ModelData *d, unsigned vr) {
     switch (vr) {
-    case VR_NUM_ANGULAR_SECTORS: *value = data->num_angular_sectors; return MODEL_OK;
-    case VR_FREE_SECTORS: *value = data->free_sectors; return MODEL_OK;
-    case VR_NUM_VALLEYS: *value = data->num_valleys; return MODEL_OK;
-    default: model_log_error(comp, "unknown Integer value reference %u", vr); return MODEL_ERROR;
+    case VR_NUM_ANGULAR_SECTORS: return &d->num_angular_sectors;
+    case VR_FREE_SECTORS: return &d->free_sectors;
+    case VR_NUM_VALLEYS: return &d->num_valleys;
+    default: return NULL;
     }
 }
 
-ModelStatus model_set_integer(ModelInstance *comp, ModelData *data, unsigned vr, int value) {
-    if (vr != VR_NUM_ANGULAR_SECTORS) {
-        model_log_error(comp, "Integer value reference %u is unknown or not settable", vr);
-        return MODEL_ERROR;
-    }
-    if (data->initialized) {
-        model_log_error(comp, "parameter num_angular_sectors is fixed after initialisation");
-        return MODEL_ERROR;
-    }
-    data->num_angular_sectors = value;
-    return MODEL_OK;
-}
-
-ModelStatus model_get_boolean(ModelInstance *comp, ModelData *data, unsigned vr, bool *value) {
-    if (vr == VR_TARGET_DIR_FREE) {
-        *value = data->target_dir_free;
-        return MODEL_OK;
-    }
-    model_log_error(comp, "unknown Boolean value reference %u", vr);
-    return MODEL_ERROR;
-}
-
-ModelStatus model_set_boolean(ModelInstance *comp, ModelData *data, unsigned vr, bool value) {
-    (void)data;
-    (void)value;
-    model_log_error(comp, "Boolean value reference %u is unknown or not settable", vr);
-    return MODEL_ERROR;
-}
+bool *model_boolean(ModelData *d, unsigned vr) { return vr == VR_TARGET_DIR_FREE ? &d->target_dir_free : NULL; }

@@ -19,14 +19,6 @@
 #include <float.h>
 #include <math.h>
 
-static double wrap_to_pi(double angle) {
-    if (fabs(angle) <= M_PI) return angle;
-    double shifted = fmod(angle + M_PI, 2.0 * M_PI);
-    if (shifted < 0.0) shifted += 2.0 * M_PI;
-    if (shifted == 0.0 && angle + M_PI > 0.0) shifted = 2.0 * M_PI; /* +pi stays +pi */
-    return shifted - M_PI;
-}
-
 /* MATLAB's tolerance for "the same" angle or cost. */
 static double tolerance(void) { return sqrt(DBL_EPSILON); }
 

@@ -2,12 +2,9 @@
 #ifndef VFH_H
 #define VFH_H
 
-#include "model.h"
+#include "angles.h"
 #include "config.h"
-
-#ifndef M_PI /* not declared by <math.h> under -std=c99 */
-#define M_PI 3.14159265358979323846
-#endif
+#include "model.h"
 
 /* Sector mid-points linspace(-pi + pi/N, pi - pi/N, N); call once the parameters are fixed. */
 void vfh_prepare_sectors(ModelData *data);

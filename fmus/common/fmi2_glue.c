@@ -1,11 +1,12 @@
 /*
  * The FMI 2.0 co-simulation API, written once for every navcosim FMU.
  *
- * The glue owns the instance lifecycle, the FMI state machine, logging and the value-reference
- * checks; the model (fmus/<Model>/model.c, see model.h) owns only its maths. The build compiles
- * this file together with one model and a generated `variable_table.h` that says, per value
- * reference and type, whether the variable exists and when it may be set (from the model's
- * modelDescription.xml, the single source of the variable list).
+ * The glue owns the instance lifecycle, the FMI state machine, logging and get/set with their
+ * value-reference checks; the model (fmus/<Model>/model.c, see model.h) owns only its maths and
+ * says where each variable is stored. The build compiles this file together with one model and a
+ * generated `variable_table.h` that gives, per value reference and type, whether the variable
+ * exists, its name and when it may be set (from the model's modelDescription.xml, the single
+ * source of the variable list).
  *
  * There is no global or static mutable state: every instance is independent.
  */
@@ -264,27 +265,49 @@ fmi2Status fmi2Reset(fmi2Component c) {
 
 /* ---------------------------------------------------------------- get and set */
 
-/* Check one value reference against the generated table before the model sees it. */
-static int may_access(ModelInstance *comp, const unsigned char *table, size_t table_size, fmi2ValueReference vr,
-                      const char *type_name, int setting) {
-    int access = vr < table_size ? table[vr] : ACCESS_UNKNOWN;
+/* One FMI type's part of the generated variable table. */
+typedef struct {
+    const char *type_name;
+    const unsigned char *access; /* enum VariableAccess per value reference */
+    const char *const *names;    /* variable name per value reference, NULL where none */
+    size_t size;
+} VariableTable;
+
+static const VariableTable REAL_VARIABLES = {"Real", real_access, real_names, REAL_TABLE_SIZE};
+static const VariableTable INTEGER_VARIABLES = {"Integer", integer_access, integer_names, INTEGER_TABLE_SIZE};
+static const VariableTable BOOLEAN_VARIABLES = {"Boolean", boolean_access, boolean_names, BOOLEAN_TABLE_SIZE};
+
+/* Check one value reference against the generated table before the model's storage is touched;
+ * every message names the variable when it exists. */
+static int may_access(ModelInstance *comp, const VariableTable *table, fmi2ValueReference vr, int setting) {
+    int access = vr < table->size ? table->access[vr] : ACCESS_UNKNOWN;
     if (access == ACCESS_UNKNOWN) {
-        model_log_error(comp, "unknown %s value reference %u", type_name, vr);
+        model_log_error(comp, "unknown %s value reference %u", table->type_name, vr);
         return 0;
     }
     if (!setting) {
         return 1;
     }
     if (access == ACCESS_READ_ONLY) {
-        model_log_error(comp, "%s variable with value reference %u cannot be set (output or calculated)", type_name,
-                        vr);
+        model_log_error(comp, "%s variable %s (value reference %u) cannot be set (output or calculated)",
+                        table->type_name, table->names[vr], vr);
         return 0;
     }
     if (access == ACCESS_FIXED && comp->state == STATE_STEP_COMPLETE) {
-        model_log_error(comp, "fixed parameter %s %u cannot be set after initialisation", type_name, vr);
+        model_log_error(comp, "fixed parameter %s (%s value reference %u) cannot be set after initialisation",
+                        table->names[vr], table->type_name, vr);
         return 0;
     }
     return 1;
+}
+
+/* The model's storage for a variable the table lists: NULL means model and description disagree. */
+static void *storage(ModelInstance *comp, const VariableTable *table, fmi2ValueReference vr, void *variable) {
+    if (variable == NULL) {
+        model_log_error(comp, "%s variable %s (value reference %u) is in modelDescription.xml but not in the model",
+                        table->type_name, table->names[vr], vr);
+    }
+    return variable;
 }
 
 static int arguments_valid(ModelInstance *comp, const void *vr, size_t nvr, const void *value,
@@ -296,50 +319,57 @@ static int arguments_valid(ModelInstance *comp, const void *vr, size_t nvr, cons
     return 1;
 }
 
+/* State and argument checks shared by every get (setting = 0) and set (setting = 1) function. */
+static int call_valid(ModelInstance *comp, const void *vr, size_t nvr, const void *value, const char *function,
+                      int setting) {
+    return state_allows(comp, setting ? STATES_WRITABLE : STATES_READABLE, function) &&
+           arguments_valid(comp, vr, nvr, value, function);
+}
+
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
     ModelInstance *comp = (ModelInstance *)c;
-    if (!state_allows(comp, STATES_READABLE, "fmi2GetReal") || !arguments_valid(comp, vr, nvr, value, "fmi2GetReal")) {
+    if (!call_valid(comp, vr, nvr, value, "fmi2GetReal", 0)) {
         return fmi2Error;
     }
     for (size_t i = 0; i < nvr; i++) {
-        if (!may_access(comp, real_access, REAL_TABLE_SIZE, vr[i], "Real", 0) ||
-            model_get_real(comp, &comp->data, vr[i], &value[i]) == MODEL_ERROR) {
+        const double *variable;
+        if (!may_access(comp, &REAL_VARIABLES, vr[i], 0) ||
+            !(variable = storage(comp, &REAL_VARIABLES, vr[i], model_real(&comp->data, vr[i])))) {
             return fmi2Error;
         }
+        value[i] = *variable;
     }
     return fmi2OK;
 }
 
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
     ModelInstance *comp = (ModelInstance *)c;
-    if (!state_allows(comp, STATES_READABLE, "fmi2GetInteger") ||
-        !arguments_valid(comp, vr, nvr, value, "fmi2GetInteger")) {
+    if (!call_valid(comp, vr, nvr, value, "fmi2GetInteger", 0)) {
         return fmi2Error;
     }
     for (size_t i = 0; i < nvr; i++) {
-        int integer = 0;
-        if (!may_access(comp, integer_access, INTEGER_TABLE_SIZE, vr[i], "Integer", 0) ||
-            model_get_integer(comp, &comp->data, vr[i], &integer) == MODEL_ERROR) {
+        const int *variable;
+        if (!may_access(comp, &INTEGER_VARIABLES, vr[i], 0) ||
+            !(variable = storage(comp, &INTEGER_VARIABLES, vr[i], model_integer(&comp->data, vr[i])))) {
             return fmi2Error;
         }
-        value[i] = integer;
+        value[i] = *variable;
     }
     return fmi2OK;
 }
 
 fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
     ModelInstance *comp = (ModelInstance *)c;
-    if (!state_allows(comp, STATES_READABLE, "fmi2GetBoolean") ||
-        !arguments_valid(comp, vr, nvr, value, "fmi2GetBoolean")) {
+    if (!call_valid(comp, vr, nvr, value, "fmi2GetBoolean", 0)) {
         return fmi2Error;
     }
     for (size_t i = 0; i < nvr; i++) {
-        bool flag = false;
-        if (!may_access(comp, boolean_access, BOOLEAN_TABLE_SIZE, vr[i], "Boolean", 0) ||
-            model_get_boolean(comp, &comp->data, vr[i], &flag) == MODEL_ERROR) {
+        const bool *variable;
+        if (!may_access(comp, &BOOLEAN_VARIABLES, vr[i], 0) ||
+            !(variable = storage(comp, &BOOLEAN_VARIABLES, vr[i], model_boolean(&comp->data, vr[i])))) {
             return fmi2Error;
         }
-        value[i] = flag ? fmi2True : fmi2False;
+        value[i] = *variable ? fmi2True : fmi2False;
     }
     return fmi2OK;
 }
@@ -360,44 +390,58 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
     ModelInstance *comp = (ModelInstance *)c;
-    if (!state_allows(comp, STATES_WRITABLE, "fmi2SetReal") || !arguments_valid(comp, vr, nvr, value, "fmi2SetReal")) {
+    if (!call_valid(comp, vr, nvr, value, "fmi2SetReal", 1)) {
         return fmi2Error;
     }
     for (size_t i = 0; i < nvr; i++) {
-        if (!may_access(comp, real_access, REAL_TABLE_SIZE, vr[i], "Real", 1) ||
-            model_set_real(comp, &comp->data, vr[i], value[i]) == MODEL_ERROR) {
+        double *variable;
+        if (!may_access(comp, &REAL_VARIABLES, vr[i], 1) ||
+            !(variable = storage(comp, &REAL_VARIABLES, vr[i], model_real(&comp->data, vr[i])))) {
             return fmi2Error;
         }
+#ifdef MODEL_HAS_REAL_CHANGED
+        {
+            const double previous = *variable;
+            *variable = value[i];
+            if (!(previous == value[i] || (isnan(previous) && isnan(value[i])))) {
+                model_real_changed(&comp->data, vr[i]);
+            }
+        }
+#else
+        *variable = value[i];
+#endif
     }
     return fmi2OK;
 }
 
 fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[]) {
     ModelInstance *comp = (ModelInstance *)c;
-    if (!state_allows(comp, STATES_WRITABLE, "fmi2SetInteger") ||
-        !arguments_valid(comp, vr, nvr, value, "fmi2SetInteger")) {
+    if (!call_valid(comp, vr, nvr, value, "fmi2SetInteger", 1)) {
         return fmi2Error;
     }
     for (size_t i = 0; i < nvr; i++) {
-        if (!may_access(comp, integer_access, INTEGER_TABLE_SIZE, vr[i], "Integer", 1) ||
-            model_set_integer(comp, &comp->data, vr[i], value[i]) == MODEL_ERROR) {
+        int *variable;
+        if (!may_access(comp, &INTEGER_VARIABLES, vr[i], 1) ||
+            !(variable = storage(comp, &INTEGER_VARIABLES, vr[i], model_integer(&comp->data, vr[i])))) {
             return fmi2Error;
         }
+        *variable = value[i];
     }
     return fmi2OK;
 }
 
 fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[]) {
     ModelInstance *comp = (ModelInstance *)c;
-    if (!state_allows(comp, STATES_WRITABLE, "fmi2SetBoolean") ||
-        !arguments_valid(comp, vr, nvr, value, "fmi2SetBoolean")) {
+    if (!call_valid(comp, vr, nvr, value, "fmi2SetBoolean", 1)) {
         return fmi2Error;
     }
     for (size_t i = 0; i < nvr; i++) {
-        if (!may_access(comp, boolean_access, BOOLEAN_TABLE_SIZE, vr[i], "Boolean", 1) ||
-            model_set_boolean(comp, &comp->data, vr[i], value[i] != fmi2False) == MODEL_ERROR) {
+        bool *variable;
+        if (!may_access(comp, &BOOLEAN_VARIABLES, vr[i], 1) ||
+            !(variable = storage(comp, &BOOLEAN_VARIABLES, vr[i], model_boolean(&comp->data, vr[i])))) {
             return fmi2Error;
         }
+        *variable = value[i] != fmi2False;
     }
     return fmi2OK;
 }

@@ -1,11 +1,13 @@
 /*
  * Contract between the FMI 2.0 glue (written once, in fmus/common/) and each model
  * (fmus/<Model>/model.c + config.h). The glue owns the FMI API, the instance lifecycle and
- * state machine, logging and value-reference dispatch; a model holds only its maths.
+ * state machine, logging and get/set of variables by value reference; a model holds only its
+ * maths and the storage of its variables.
  *
  * Each model folder provides:
- *   config.h           MODEL_IDENTIFIER, MODEL_GUID, an enum of value references, and
- *                      `struct ModelData { ... }` (parameters, inputs, outputs, state)
+ *   config.h           MODEL_IDENTIFIER, MODEL_GUID, an enum of value references,
+ *                      `struct ModelData { ... }` (parameters, inputs, outputs, state) and,
+ *                      when the model has the hook below, `#define MODEL_HAS_REAL_CHANGED`
  *   model.c            the functions declared below
  *   modelDescription.xml  the variable list (value references match the enum)
  */
@@ -34,14 +36,18 @@ void model_set_start_values(ModelData *data);
 ModelStatus model_initialize(ModelInstance *comp, ModelData *data);
 /* Advance from t by h, reading inputs and writing outputs in `data`. */
 ModelStatus model_do_step(ModelInstance *comp, ModelData *data, double t, double h);
-/* Get/set one scalar by value reference; return MODEL_ERROR (and log) for an unknown one.
- * Set returns MODEL_ERROR for a fixed parameter after initialisation (the glue also checks
- * causality/variability where it knows it). */
-ModelStatus model_get_real(ModelInstance *comp, ModelData *data, unsigned vr, double *value);
-ModelStatus model_set_real(ModelInstance *comp, ModelData *data, unsigned vr, double value);
-ModelStatus model_get_integer(ModelInstance *comp, ModelData *data, unsigned vr, int *value);
-ModelStatus model_set_integer(ModelInstance *comp, ModelData *data, unsigned vr, int value);
-ModelStatus model_get_boolean(ModelInstance *comp, ModelData *data, unsigned vr, bool *value);
-ModelStatus model_set_boolean(ModelInstance *comp, ModelData *data, unsigned vr, bool value);
+/* Where the variable with value reference `vr` is stored, NULL when the model has no variable of
+ * that type there. Get and set are the glue's: before it touches the storage it checks the value
+ * reference against the generated variable table (modelDescription.xml) and answers an unknown
+ * one, setting an output or calculated value, or setting a fixed parameter after initialisation
+ * with fmi2Error and a logged message that names the variable. */
+double *model_real(ModelData *data, unsigned vr);
+int *model_integer(ModelData *data, unsigned vr);
+bool *model_boolean(ModelData *data, unsigned vr);
+
+/* Optional: a model whose config.h defines MODEL_HAS_REAL_CHANGED provides this. The glue calls
+ * it after fmi2SetReal stored a value different from the previous one (NaN to NaN is no change),
+ * so the model can note, e.g., a new plan once instead of rescanning its inputs every step. */
+void model_real_changed(ModelData *data, unsigned vr);
 
 #endif

@@ -14,22 +14,11 @@
 
 #include <math.h>
 
-#ifndef M_PI
-#define M_PI 3.14159265358979323846
-#endif
+#include "angles.h"
 
 /* sin(a)/a; the Taylor series below |a| = 1e-4 has a truncation error under 1e-20. */
 static inline double planar_sinc(double a) {
     return fabs(a) < 1e-4 ? 1.0 - a * a / 6.0 : sin(a) / a;
-}
-
-/* Wrap an angle [rad] into (-pi, pi]. */
-static inline double planar_wrap_angle(double angle) {
-    double wrapped = fmod(angle + M_PI, 2.0 * M_PI);
-    if (wrapped <= 0.0) {
-        wrapped += 2.0 * M_PI;
-    }
-    return wrapped - M_PI;
 }
 
 /* Advance pose (x [m], y [m], theta [rad]) by h [s]; speed [m/s] of the tracked point, signed. */
@@ -40,7 +29,7 @@ static inline void planar_advance(double *x, double *y, double *theta, double sp
     double direction = *theta + heading_offset + 0.5 * turn;
     *x += chord * cos(direction);
     *y += chord * sin(direction);
-    *theta = planar_wrap_angle(*theta + turn);
+    *theta = wrap_heading(*theta + turn);
 }
 
 #endif
