@@ -102,20 +102,26 @@ class _Recording:
             if not names:
                 continue
             channel = recorder.signal_channel(component.name, names)
-            # One record = the scalar inputs then the scalar outputs. When those are all the ports
-            # (no array ports), a record is the two buffers as they are: no gather per step.
-            whole = len(inputs) == len(component.inputs) and len(outputs) == len(component.outputs)
-            self.entries.append(
-                (
-                    system.period_steps(component),
-                    channel,
-                    component.input_buffer,
-                    component.output_buffer,
-                    None if whole else np.array(inputs, dtype=np.intp),
-                    None if whole else np.array(outputs, dtype=np.intp),
-                    np.empty(len(names)),  # the record when gathered; reused, no allocation per step
-                )
+            # One record = the scalar inputs then the scalar outputs. Where each side's scalars
+            # are one run of slots (all ports, or the scalars before the arrays), the record is two
+            # views of the buffers made once: no gather per step.
+            first, second = (
+                _run_view(component.input_buffer, inputs),
+                _run_view(component.output_buffer, outputs),
             )
+            if first is not None and second is not None:
+                self.entries.append((system.period_steps(component), channel, first, second, None))
+                continue
+            values = np.empty(len(names))  # the record, gathered; reused, no allocation per step
+            gather = (
+                component.input_buffer,
+                np.array(inputs, dtype=np.intp),
+                values[: len(inputs)],
+                component.output_buffer,
+                np.array(outputs, dtype=np.intp),
+                values[len(inputs) :],
+            )
+            self.entries.append((system.period_steps(component), channel, values, None, gather))
         vehicle = system.components["vehicle"]
         self.vehicle_out = vehicle.output_buffer
         self.pose_index = [vehicle.output_index[name] for name in ("x", "y", "theta")]
@@ -127,7 +133,9 @@ class _Recording:
         lidar = system.components["lidar"]
         self.lidar_steps = system.period_steps(lidar)
         self.lidar_out = lidar.output_buffer
-        self.ranges_index = np.array([i for i, p in enumerate(lidar.outputs) if p.array_name == "ranges"])
+        ranges_index = [i for i, p in enumerate(lidar.outputs) if p.array_name == "ranges"]
+        self.lidar_ranges = _run_view(self.lidar_out, ranges_index)
+        self.ranges_index = None if self.lidar_ranges is not None else np.array(ranges_index, dtype=np.intp)
         self.angles = np.asarray(built.scenario.lidar.angles, dtype=float)
         self.range_limits = (built.scenario.lidar.range_min, built.scenario.lidar.range_max)
         self.pose_steps = max(1, round(1.0 / (built.scenario.pose_rate * built.scenario.macro_step)))
@@ -144,23 +152,30 @@ class _Recording:
     def after_step(self, k: int, t_ns: int, h_ns: int) -> None:
         """Record what step k (starting at t_ns) produced."""
         hold = self.recorder.hold_signals
-        for period, channel, inputs, outputs, input_index, output_index, values in self.entries:
+        for period, channel, first, second, gather in self.entries:
             if period == 1 or k % period == 0:
-                if input_index is None:
-                    hold(channel, t_ns, inputs, outputs)
-                else:
-                    count = len(input_index)
-                    np.take(inputs, input_index, out=values[:count])
-                    np.take(outputs, output_index, out=values[count:])
-                    hold(channel, t_ns, values)
+                if gather is not None:
+                    inputs, input_index, input_part, outputs, output_index, output_part = gather
+                    # mode="clip": with the default "raise" NumPy buffers `out` (a copy per call).
+                    np.take(inputs, input_index, out=input_part, mode="clip")
+                    np.take(outputs, output_index, out=output_part, mode="clip")
+                hold(channel, t_ns, first, second)
         recorder = self.recorder
         if k % self.lidar_steps == 0:
-            recorder.write_scan(t_ns, self.angles, self.lidar_out[self.ranges_index], *self.range_limits)
+            ranges = self.lidar_ranges if self.ranges_index is None else self.lidar_out[self.ranges_index]
+            recorder.write_scan(t_ns, self.angles, ranges, *self.range_limits)
         if k % self.mixer_steps == 0:
             mixer = self.mixer_out
             recorder.write_cmd_vel(t_ns, float(mixer[self.mixer_index[0]]), float(mixer[self.mixer_index[1]]))
         if (k + 1) % self.pose_steps == 0:
             self.write_pose(t_ns + h_ns)
+
+
+def _run_view(buffer: np.ndarray, slots: list[int]) -> np.ndarray | None:
+    """A view of `buffer[slots]` when the slots are consecutive (it follows the buffer), else None."""
+    if slots and slots != list(range(slots[0], slots[0] + len(slots))):
+        return None
+    return buffer[slots[0] : slots[0] + len(slots)] if slots else buffer[:0]
 
 
 def _write_header(built: BuiltRun, master: Master, recorder) -> None:
