@@ -12,8 +12,11 @@ from planner import OccupancyGrid, PlannerError
 MOVES = [(-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (-1, 1), (1, -1), (1, 1)]
 
 
-def grid_graph(occupied, connectivity=8, corner_cutting=False, resolution=1.0):
-    """Sparse adjacency matrix of the free cells (edge cost in metres), built edge by edge."""
+def grid_graph(occupied, connectivity=8, corner_cutting=False, resolution=1.0, closed=None):
+    """Sparse adjacency matrix of the free cells (edge cost in metres), built edge by edge.
+
+    closed: cells no edge may enter (default: the occupied ones); corners are cut by occupied cells only."""
+    closed = occupied if closed is None else closed
     rows, cols = occupied.shape
     sources, targets, weights = [], [], []
     for row in range(rows):
@@ -22,7 +25,7 @@ def grid_graph(occupied, connectivity=8, corner_cutting=False, resolution=1.0):
                 continue
             for d_row, d_col in MOVES[:connectivity]:
                 r, c = row + d_row, col + d_col
-                if not (0 <= r < rows and 0 <= c < cols) or occupied[r, c]:
+                if not (0 <= r < rows and 0 <= c < cols) or closed[r, c]:
                     continue
                 diagonal = d_row != 0 and d_col != 0
                 if (
@@ -134,6 +137,38 @@ def test_untrusted_points_are_closed_but_start_goal_exempt():
     for row, col in untrusted.cells[1:-1]:
         assert not padded[row : row + 3, col : col + 3].any()
     assert (untrusted.explored <= ~occupied).all()
+
+
+@pytest.mark.parametrize("search", ["astar", "bidirectional"])
+def test_untrusted_points_lengths_agree_with_scipy_dijkstra(search):
+    """Untrusted points (free cells with an obstacle among their 8 neighbours) closed except at the
+    query's own start and goal; the exemption of one query must not leak into the next."""
+    occupied = _random_map(21, (24, 30), 0.04)
+    grid = OccupancyGrid(occupied)
+    padded = np.pad(occupied, 1)
+    near = np.zeros_like(occupied)
+    for d_row in range(3):
+        for d_col in range(3):
+            near |= padded[d_row : d_row + 24, d_col : d_col + 30]
+    untrusted = near & ~occupied
+    free = np.argwhere(~occupied)
+    rng = np.random.default_rng(5)
+    compared = 0
+    for _ in range(40):
+        start, goal = free[rng.integers(len(free), size=2)]
+        closed = occupied | untrusted
+        closed[tuple(start)] = closed[tuple(goal)] = False
+        graph = grid_graph(occupied, closed=closed)
+        expected = dijkstra(graph, indices=start[0] * 30 + start[1])[goal[0] * 30 + goal[1]]
+        points = grid.cell_to_world(start), grid.cell_to_world(goal)
+        if np.isinf(expected):
+            with pytest.raises(PlannerError, match="no path"):
+                planner.plan(grid, *points, untrusted_points=True, planner=search)
+            continue
+        result = planner.plan(grid, *points, untrusted_points=True, planner=search)
+        assert result.length == pytest.approx(expected, rel=1e-9)
+        compared += 1
+    assert compared > 10
 
 
 def test_thesis_heuristic_searches_fewer_nodes_on_open_map():
