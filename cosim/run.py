@@ -141,13 +141,15 @@ class _Recording:
         self.pose_steps = max(1, round(1.0 / (built.scenario.pose_rate * built.scenario.macro_step)))
 
     def pose(self) -> tuple[float, float, float]:
-        out, (ix, iy, itheta) = self.vehicle_out, self.pose_index
-        return float(out[ix]), float(out[iy]), float(out[itheta])
+        item, (ix, iy, itheta) = self.vehicle_out.item, self.pose_index
+        return item(ix), item(iy), item(itheta)  # .item: a Python float without a NumPy scalar
 
     def write_pose(self, t_ns: int) -> None:
-        x, y, theta = self.pose()
-        v, omega = float(self.mixer_out[self.mixer_index[0]]), float(self.mixer_out[self.mixer_index[1]])
-        self.recorder.write_pose(t_ns, x, y, theta, v, omega)
+        item, (ix, iy, itheta) = self.vehicle_out.item, self.pose_index
+        mixer = self.mixer_out.item
+        self.recorder.write_pose(
+            t_ns, item(ix), item(iy), item(itheta), mixer(self.mixer_index[0]), mixer(self.mixer_index[1])
+        )
 
     def after_step(self, k: int, t_ns: int, h_ns: int) -> None:
         """Record what step k (starting at t_ns) produced."""
@@ -280,14 +282,18 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     last_update = [wall_start, 0.0]
     state = {"reason": None}
 
+    start_ns = master.start_time_ns
+    vehicle_item, (index_x, index_y, _) = recording.vehicle_out.item, recording.pose_index
+
     def after_step(current: Master) -> bool:
         k = current.step_index - 1
-        t_ns = current.time_ns - h_ns
+        t_ns = start_ns + k * h_ns
         recording.after_step(k, t_ns, h_ns)
         if k % recording.mixer_steps == 0:
-            monitor.check_mode(float(recording.mixer_out[recording.mixer_index[2]]), recording.mixer_period)
-        x, y, _ = recording.pose()
-        reason = monitor.check_position(current.time_ns / NS_PER_S, x, y)
+            monitor.check_mode(recording.mixer_out.item(recording.mixer_index[2]), recording.mixer_period)
+        reason = monitor.check_position(
+            (t_ns + h_ns) / NS_PER_S, vehicle_item(index_x), vehicle_item(index_y)
+        )
         if reason is None and interrupt.signal_name is not None:
             reason = "interrupted"
         if bar is not None:
