@@ -27,7 +27,16 @@ _LAZY = {
     "plan": "planner.planning",
 }
 
-__all__ = ["NavcosimError", "PlannerError", *_LAZY]
+__all__ = [
+    "NavcosimError",
+    "OccupancyGrid",
+    "PlanResult",
+    "PlannerError",
+    "cost_gradient",
+    "distance_to_goal",
+    "inflate",
+    "plan",
+]
 
 
 def __getattr__(name: str):
