@@ -56,7 +56,8 @@ class OutcomeMonitor:
         """Update at time t [s] with the vehicle at (x, y) [m]; return why the run ends, or None."""
         outcome = self.outcome
         outcome.time = t
-        outcome.distance += math.hypot(x - self.last_xy[0], y - self.last_xy[1])
+        last_x, last_y = self.last_xy
+        outcome.distance += math.hypot(x - last_x, y - last_y)
         self.last_xy = (x, y)
         if not (math.isfinite(x) and math.isfinite(y)):
             outcome.reason = "collision"
@@ -64,20 +65,20 @@ class OutcomeMonitor:
             return outcome.reason
         # The exact distance only matters when it could set a new minimum (or a collision).
         anchor_x, anchor_y, anchor_bound = self._anchor
-        if anchor_bound - math.hypot(x - anchor_x, y - anchor_y) - self.radius < outcome.min_clearance:
-            self._anchor = (x, y, self.world.lower_bound(x, y))
-        if self._anchor[2] - math.hypot(x - self._anchor[0], y - self._anchor[1]) - self.radius < (
-            outcome.min_clearance
-        ):
-            distance = self.world.distance(x, y)
-            self._anchor = (x, y, distance)
-            clearance = distance - self.radius
-            if clearance < outcome.min_clearance:
-                outcome.min_clearance = clearance
-            if clearance < 0.0:
-                outcome.reason = "collision"
-                outcome.collision_point = (x, y)
-                return outcome.reason
+        margin = outcome.min_clearance + self.radius
+        if anchor_bound - math.hypot(x - anchor_x, y - anchor_y) < margin:
+            bound = self.world.lower_bound(x, y)
+            self._anchor = (x, y, bound)
+            if bound < margin:
+                distance = self.world.distance(x, y)
+                self._anchor = (x, y, distance)
+                clearance = distance - self.radius
+                if clearance < outcome.min_clearance:
+                    outcome.min_clearance = clearance
+                if clearance < 0.0:
+                    outcome.reason = "collision"
+                    outcome.collision_point = (x, y)
+                    return outcome.reason
         if math.hypot(x - self.goal[0], y - self.goal[1]) <= self.tolerance:
             outcome.reached = True
             outcome.reason = "goal_reached"
