@@ -46,7 +46,11 @@ def test_unknown_value_references(drive):
 def test_setting_an_output_or_a_fixed_parameter_after_initialisation(drive):
     drive.initialize()
     _expect_error(
-        drive, drive.slave.setReal, [drive.vr["x"]], [3.0], message="Real variable x (value reference 20) cannot"
+        drive,
+        drive.slave.setReal,
+        [drive.vr["x"]],
+        [3.0],
+        message="Real variable x (value reference 20) cannot",
     )
     _expect_error(
         drive,

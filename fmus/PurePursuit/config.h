@@ -6,7 +6,6 @@
 
 #define MODEL_IDENTIFIER "PurePursuit"
 #define MODEL_GUID "{5d0c7a2e-7f0b-4c59-9d8e-2f1a6b3c4d01}"
-#define MODEL_HAS_REAL_CHANGED /* a changed waypoint marks a new plan */
 
 /* Capacity of the NaN-padded waypoint input (rows of the N x 2 array). */
 #define PP_MAX_WAYPOINTS 1000
@@ -29,6 +28,8 @@ enum {
     VR_WAYPOINTS_X = 1000,
     VR_WAYPOINTS_Y = 2000
 };
+/* A changed waypoint element marks a new plan (model_real_changed). */
+#define MODEL_WATCHES_REAL(vr) ((vr) >= VR_WAYPOINTS_X && (vr) < VR_WAYPOINTS_Y + PP_MAX_WAYPOINTS)
 enum { VR_ANGULAR_VELOCITY_LAW = 0 };                /* Integer */
 enum { VR_GOAL_REACHED = 0 };                        /* Boolean */
 

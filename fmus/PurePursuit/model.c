@@ -123,9 +123,10 @@ double *model_real(ModelData *data, unsigned vr) {
     }
 }
 
-/* A waypoint element that changes value marks a new plan: the next step compacts the path once. */
+/* Called for a waypoint element that changed value: a new plan, compacted once by the next step. */
 void model_real_changed(ModelData *data, unsigned vr) {
-    if (is_waypoint(vr, VR_WAYPOINTS_X) || is_waypoint(vr, VR_WAYPOINTS_Y)) data->waypoints_changed = true;
+    (void)vr;
+    data->waypoints_changed = true;
 }
 
 int *model_integer(ModelData *data, unsigned vr) {

@@ -6,7 +6,6 @@
 
 #define MODEL_IDENTIFIER "VectorFieldHistogram"
 #define MODEL_GUID "{5d0c7a2e-7f0b-4c59-9d8e-2f1a6b3c4d02}"
-#define MODEL_HAS_REAL_CHANGED /* a changed reading angle invalidates the cached trigonometry */
 
 #define VFH_MAX_READINGS 720 /* capacity of the NaN-padded ranges/angles inputs */
 #define VFH_MAX_SECTORS 720  /* largest num_angular_sectors (0.5 degree sectors) */
@@ -31,6 +30,8 @@ enum {
     VR_RANGES = 1000,
     VR_ANGLES = 2000
 };
+/* A changed reading angle invalidates the cached trigonometry (model_real_changed). */
+#define MODEL_WATCHES_REAL(vr) ((vr) >= VR_ANGLES && (vr) < VR_ANGLES + VFH_MAX_READINGS)
 enum { VR_NUM_ANGULAR_SECTORS = 0, VR_FREE_SECTORS = 10, VR_NUM_VALLEYS = 11 }; /* Integer */
 enum { VR_TARGET_DIR_FREE = 0 };                                                /* Boolean */
 

@@ -107,9 +107,10 @@ double *model_real(ModelData *d, unsigned vr) {
     }
 }
 
-/* A changed reading angle invalidates the cached angles' cosines and sines. */
+/* Called for a reading angle that changed value: the cached cosines and sines are stale. */
 void model_real_changed(ModelData *data, unsigned vr) {
-    if (is_reading(vr, VR_ANGLES)) data->angles_changed = true;
+    (void)vr;
+    data->angles_changed = true;
 }
 
 int *model_integer(ModelData *d, unsigned vr) {

@@ -30,6 +30,18 @@ enum VariableAccess {
 
 #include "variable_table.h"
 
+/* One FMI type's part of the generated variable table. */
+typedef struct {
+    const char *type_name;
+    const unsigned char *access; /* enum VariableAccess per value reference */
+    const char *const *names;    /* variable name per value reference, NULL where none */
+    size_t size;
+} VariableTable;
+
+static const VariableTable REAL_VARIABLES = {"Real", real_access, real_names, REAL_TABLE_SIZE};
+static const VariableTable INTEGER_VARIABLES = {"Integer", integer_access, integer_names, INTEGER_TABLE_SIZE};
+static const VariableTable BOOLEAN_VARIABLES = {"Boolean", boolean_access, boolean_names, BOOLEAN_TABLE_SIZE};
+
 /* FMI 2.0 co-simulation states (a bit each, so a function lists the states it accepts). */
 enum InstanceState {
     STATE_INSTANTIATED = 1 << 0,
@@ -155,6 +167,34 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
     return fmi2OK;
 }
 
+static int missing_storage(ModelInstance *comp, const VariableTable *table, unsigned vr) {
+    model_log_error(comp, "%s variable %s (value reference %u) is in modelDescription.xml but not in the model",
+                    table->type_name, table->names[vr], vr);
+    return 0;
+}
+
+/* Every variable of modelDescription.xml has storage in the model: checked once per instance, so
+ * get and set dereference the model's pointers without a check per value. (The loops run over the
+ * arrays, never empty, as a type without variables has TABLE_SIZE 0.) */
+static int storage_matches_description(ModelInstance *comp) {
+    for (unsigned vr = 0; vr < sizeof real_access; vr++) {
+        if (real_access[vr] != ACCESS_UNKNOWN && model_real(&comp->data, vr) == NULL) {
+            return missing_storage(comp, &REAL_VARIABLES, vr);
+        }
+    }
+    for (unsigned vr = 0; vr < sizeof integer_access; vr++) {
+        if (integer_access[vr] != ACCESS_UNKNOWN && model_integer(&comp->data, vr) == NULL) {
+            return missing_storage(comp, &INTEGER_VARIABLES, vr);
+        }
+    }
+    for (unsigned vr = 0; vr < sizeof boolean_access; vr++) {
+        if (boolean_access[vr] != ACCESS_UNKNOWN && model_boolean(&comp->data, vr) == NULL) {
+            return missing_storage(comp, &BOOLEAN_VARIABLES, vr);
+        }
+    }
+    return 1;
+}
+
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                               fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
                               fmi2Boolean visible, fmi2Boolean loggingOn) {
@@ -192,6 +232,10 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     comp->logging_on = loggingOn;
     comp->state = STATE_INSTANTIATED;
     model_set_start_values(&comp->data);
+    if (!storage_matches_description(comp)) {
+        fmi2FreeInstance(comp);
+        return NULL;
+    }
     return comp;
 }
 
@@ -265,35 +309,19 @@ fmi2Status fmi2Reset(fmi2Component c) {
 
 /* ---------------------------------------------------------------- get and set */
 
-/* One FMI type's part of the generated variable table. */
-typedef struct {
-    const char *type_name;
-    const unsigned char *access; /* enum VariableAccess per value reference */
-    const char *const *names;    /* variable name per value reference, NULL where none */
-    size_t size;
-} VariableTable;
-
-static const VariableTable REAL_VARIABLES = {"Real", real_access, real_names, REAL_TABLE_SIZE};
-static const VariableTable INTEGER_VARIABLES = {"Integer", integer_access, integer_names, INTEGER_TABLE_SIZE};
-static const VariableTable BOOLEAN_VARIABLES = {"Boolean", boolean_access, boolean_names, BOOLEAN_TABLE_SIZE};
-
-/* Check one value reference against the generated table before the model's storage is touched;
- * every message names the variable when it exists. */
-static int may_access(ModelInstance *comp, const VariableTable *table, fmi2ValueReference vr, int setting) {
-    int access = vr < table->size ? table->access[vr] : ACCESS_UNKNOWN;
+/* Why a value reference may not be accessed, logged with the variable's name when it exists;
+ * returns 1 when it may be after all (a fixed parameter before initialisation ends). */
+static int access_allowed_slow(ModelInstance *comp, const VariableTable *table, fmi2ValueReference vr, int access) {
     if (access == ACCESS_UNKNOWN) {
         model_log_error(comp, "unknown %s value reference %u", table->type_name, vr);
         return 0;
-    }
-    if (!setting) {
-        return 1;
     }
     if (access == ACCESS_READ_ONLY) {
         model_log_error(comp, "%s variable %s (value reference %u) cannot be set (output or calculated)",
                         table->type_name, table->names[vr], vr);
         return 0;
     }
-    if (access == ACCESS_FIXED && comp->state == STATE_STEP_COMPLETE) {
+    if (comp->state == STATE_STEP_COMPLETE) {
         model_log_error(comp, "fixed parameter %s (%s value reference %u) cannot be set after initialisation",
                         table->names[vr], table->type_name, vr);
         return 0;
@@ -301,13 +329,15 @@ static int may_access(ModelInstance *comp, const VariableTable *table, fmi2Value
     return 1;
 }
 
-/* The model's storage for a variable the table lists: NULL means model and description disagree. */
-static void *storage(ModelInstance *comp, const VariableTable *table, fmi2ValueReference vr, void *variable) {
-    if (variable == NULL) {
-        model_log_error(comp, "%s variable %s (value reference %u) is in modelDescription.xml but not in the model",
-                        table->type_name, table->names[vr], vr);
+/* Check one value reference against the generated table before the model's storage is touched.
+ * Inline with the common case (an existing variable read, an input set) first: VFH sets 1441
+ * values a step. */
+static inline int may_access(ModelInstance *comp, const VariableTable *table, fmi2ValueReference vr, int setting) {
+    int access = vr < table->size ? table->access[vr] : ACCESS_UNKNOWN;
+    if (access == ACCESS_ANY_TIME || (!setting && access != ACCESS_UNKNOWN)) {
+        return 1;
     }
-    return variable;
+    return access_allowed_slow(comp, table, vr, setting ? access : ACCESS_UNKNOWN);
 }
 
 static int arguments_valid(ModelInstance *comp, const void *vr, size_t nvr, const void *value,
@@ -332,11 +362,10 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
         return fmi2Error;
     }
     for (size_t i = 0; i < nvr; i++) {
-        const double *variable;
-        if (!may_access(comp, &REAL_VARIABLES, vr[i], 0) ||
-            !(variable = storage(comp, &REAL_VARIABLES, vr[i], model_real(&comp->data, vr[i])))) {
+        if (!may_access(comp, &REAL_VARIABLES, vr[i], 0)) {
             return fmi2Error;
         }
+        const double *variable = model_real(&comp->data, vr[i]);
         value[i] = *variable;
     }
     return fmi2OK;
@@ -348,11 +377,10 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
         return fmi2Error;
     }
     for (size_t i = 0; i < nvr; i++) {
-        const int *variable;
-        if (!may_access(comp, &INTEGER_VARIABLES, vr[i], 0) ||
-            !(variable = storage(comp, &INTEGER_VARIABLES, vr[i], model_integer(&comp->data, vr[i])))) {
+        if (!may_access(comp, &INTEGER_VARIABLES, vr[i], 0)) {
             return fmi2Error;
         }
+        const int *variable = model_integer(&comp->data, vr[i]);
         value[i] = *variable;
     }
     return fmi2OK;
@@ -364,11 +392,10 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
         return fmi2Error;
     }
     for (size_t i = 0; i < nvr; i++) {
-        const bool *variable;
-        if (!may_access(comp, &BOOLEAN_VARIABLES, vr[i], 0) ||
-            !(variable = storage(comp, &BOOLEAN_VARIABLES, vr[i], model_boolean(&comp->data, vr[i])))) {
+        if (!may_access(comp, &BOOLEAN_VARIABLES, vr[i], 0)) {
             return fmi2Error;
         }
+        const bool *variable = model_boolean(&comp->data, vr[i]);
         value[i] = *variable ? fmi2True : fmi2False;
     }
     return fmi2OK;
@@ -394,18 +421,15 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
         return fmi2Error;
     }
     for (size_t i = 0; i < nvr; i++) {
-        double *variable;
-        if (!may_access(comp, &REAL_VARIABLES, vr[i], 1) ||
-            !(variable = storage(comp, &REAL_VARIABLES, vr[i], model_real(&comp->data, vr[i])))) {
+        if (!may_access(comp, &REAL_VARIABLES, vr[i], 1)) {
             return fmi2Error;
         }
-#ifdef MODEL_HAS_REAL_CHANGED
-        {
-            const double previous = *variable;
-            *variable = value[i];
-            if (!(previous == value[i] || (isnan(previous) && isnan(value[i])))) {
-                model_real_changed(&comp->data, vr[i]);
-            }
+        double *variable = model_real(&comp->data, vr[i]);
+#ifdef MODEL_WATCHES_REAL
+        const double previous = *variable; /* store first, then test: the faster order for VFH's 1441 values */
+        *variable = value[i];
+        if (MODEL_WATCHES_REAL(vr[i]) && !(previous == value[i] || (isnan(previous) && isnan(value[i])))) {
+            model_real_changed(&comp->data, vr[i]);
         }
 #else
         *variable = value[i];
@@ -420,11 +444,10 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
         return fmi2Error;
     }
     for (size_t i = 0; i < nvr; i++) {
-        int *variable;
-        if (!may_access(comp, &INTEGER_VARIABLES, vr[i], 1) ||
-            !(variable = storage(comp, &INTEGER_VARIABLES, vr[i], model_integer(&comp->data, vr[i])))) {
+        if (!may_access(comp, &INTEGER_VARIABLES, vr[i], 1)) {
             return fmi2Error;
         }
+        int *variable = model_integer(&comp->data, vr[i]);
         *variable = value[i];
     }
     return fmi2OK;
@@ -436,11 +459,10 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
         return fmi2Error;
     }
     for (size_t i = 0; i < nvr; i++) {
-        bool *variable;
-        if (!may_access(comp, &BOOLEAN_VARIABLES, vr[i], 1) ||
-            !(variable = storage(comp, &BOOLEAN_VARIABLES, vr[i], model_boolean(&comp->data, vr[i])))) {
+        if (!may_access(comp, &BOOLEAN_VARIABLES, vr[i], 1)) {
             return fmi2Error;
         }
+        bool *variable = model_boolean(&comp->data, vr[i]);
         *variable = value[i] != fmi2False;
     }
     return fmi2OK;

@@ -7,7 +7,7 @@
  * Each model folder provides:
  *   config.h           MODEL_IDENTIFIER, MODEL_GUID, an enum of value references,
  *                      `struct ModelData { ... }` (parameters, inputs, outputs, state) and,
- *                      when the model has the hook below, `#define MODEL_HAS_REAL_CHANGED`
+ *                      when the model has the hook below, `#define MODEL_WATCHES_REAL(vr)`
  *   model.c            the functions declared below
  *   modelDescription.xml  the variable list (value references match the enum)
  */
@@ -45,9 +45,10 @@ double *model_real(ModelData *data, unsigned vr);
 int *model_integer(ModelData *data, unsigned vr);
 bool *model_boolean(ModelData *data, unsigned vr);
 
-/* Optional: a model whose config.h defines MODEL_HAS_REAL_CHANGED provides this. The glue calls
- * it after fmi2SetReal stored a value different from the previous one (NaN to NaN is no change),
- * so the model can note, e.g., a new plan once instead of rescanning its inputs every step. */
+/* Optional: a model whose config.h defines the predicate MODEL_WATCHES_REAL(vr) provides this.
+ * The glue calls it after fmi2SetReal stored, into a watched Real, a value different from the
+ * previous one (NaN to NaN is no change), so the model can note, e.g., a new plan once instead
+ * of rescanning its inputs every step. Other values are stored with no comparison and no call. */
 void model_real_changed(ModelData *data, unsigned vr);
 
 #endif
