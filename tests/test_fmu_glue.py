@@ -43,25 +43,6 @@ def test_unknown_value_references(drive):
     drive.slave.doStep(0.0, 0.1)  # misuse does not break the instance
 
 
-def test_setting_an_output_or_a_fixed_parameter_after_initialisation(drive):
-    drive.initialize()
-    _expect_error(
-        drive,
-        drive.slave.setReal,
-        [drive.vr["x"]],
-        [3.0],
-        message="Real variable x (value reference 20) cannot",
-    )
-    _expect_error(
-        drive,
-        drive.slave.setReal,
-        [drive.vr["wheel_radius"]],
-        [0.1],
-        message="fixed parameter wheel_radius (Real value reference 1) cannot be set after initialisation",
-    )
-    assert drive.get("x", "wheel_radius") == [0.0, 0.05]
-
-
 def test_lifecycle_order_is_enforced(drive):
     _expect_error(
         drive, drive.slave.exitInitializationMode, message="fmi2ExitInitializationMode is not allowed"

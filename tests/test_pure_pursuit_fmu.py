@@ -2,10 +2,7 @@
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +10,6 @@ from fmpy.fmi1 import FMICallException
 from fmu_helpers import FmuInstance, array_inputs
 
 CAPACITY = 1000
-FMU_DIR = Path(__file__).resolve().parent.parent / "fmus"
 
 
 def follower(waypoints, parameters=None, pose=(0.0, 0.0, 0.0)) -> FmuInstance:
@@ -179,26 +175,6 @@ def test_a_new_plan_restarts_the_projection_search():
     assert out["goal_distance"] == pytest.approx(5.0)
 
 
-@pytest.mark.parametrize(
-    ("name", "value"),
-    [
-        ("lookahead_distance", 0.0),
-        ("lookahead_distance", -1.0),
-        ("max_angular_velocity", -0.1),
-        ("goal_tolerance", -0.5),
-        ("angular_velocity_law", 2),
-    ],
-)
-def test_bad_parameter_fails_initialisation_naming_it(name, value):
-    fmu = FmuInstance("PurePursuit", parameters={name: value}, initialize=False)
-    try:
-        with pytest.raises(FMICallException):
-            fmu.exit_initialization()
-        assert any(name in message for message in fmu.messages), fmu.messages
-    finally:
-        fmu.close()
-
-
 def test_waypoint_capacity_is_exactly_1000_rows():
     with FmuInstance("PurePursuit") as fmu:
         assert "waypoints[1000,2]" in fmu.variables
@@ -206,18 +182,3 @@ def test_waypoint_capacity_is_exactly_1000_rows():
         with pytest.raises(FMICallException):
             fmu.fmu.setReal([3000], [1.0])  # one past waypoints[1000,2]
         assert any("3000" in message for message in fmu.messages)
-
-
-def load_generator(model: str):
-    path = FMU_DIR / model / "make_model_description.py"
-    spec = importlib.util.spec_from_file_location(f"generator_{model}", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-@pytest.mark.parametrize("model", ["PurePursuit", "VectorFieldHistogram", "AvoidanceMixer"])
-def test_committed_model_description_is_the_generators_output(model):
-    committed = (FMU_DIR / model / "modelDescription.xml").read_text()
-    assert committed == load_generator(model).generate()

@@ -1,30 +1,22 @@
 """Generate `modelDescription.xml` of the AvoidanceMixer FMU.
 
 Run `python3 fmus/AvoidanceMixer/make_model_description.py` after changing the table and commit
-both; the XML writer is shared with PurePursuit's generator.
+both; the XML writer is fmus/common/model_description.py.
 """
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import sys
 from pathlib import Path
 
-
-def _writer():
-    """PurePursuit's generator module, which holds the shared XML writer."""
-    path = Path(__file__).resolve().parent.parent / "PurePursuit" / "make_model_description.py"
-    spec = importlib.util.spec_from_file_location("navcosim_pure_pursuit_description", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
+# The shared writer sits in fmus/common/, beside the C glue; generators run as scripts.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "common"))
+from model_description import Variable, model_description, write_model_description  # noqa: E402
 
 
-def variables(writer) -> list:
+def variables() -> list[Variable]:
     """AvoidanceMixer's variables; value references as in config.h."""
-    Variable = writer.Variable
     return [
         Variable(
             "vehicle_type",
@@ -159,16 +151,15 @@ def variables(writer) -> list:
 
 def generate() -> str:
     """The modelDescription.xml text of AvoidanceMixer."""
-    writer = _writer()
-    return writer.model_description(
+    return model_description(
         "AvoidanceMixer",
         "{5d0c7a2e-7f0b-4c59-9d8e-2f1a6b3c4d03}",
         "Fuses the pure-pursuit command with the VFH steering direction: follow, avoid, recover "
         "(thesis section 4.3.3, Figure 4.12), for a differential drive or a bicycle",
-        variables(writer),
+        variables(),
         0.05,
     )
 
 
 if __name__ == "__main__":
-    _writer().write_model_description(Path(__file__).with_name("modelDescription.xml"), generate())
+    write_model_description(Path(__file__).with_name("modelDescription.xml"), generate())

@@ -1,32 +1,24 @@
 """Generate `modelDescription.xml` of the VectorFieldHistogram FMU (720 ranges and angles).
 
 Run `python3 fmus/VectorFieldHistogram/make_model_description.py` after changing the table and
-commit both; the XML writer is shared with PurePursuit's generator.
+commit both; the XML writer is fmus/common/model_description.py.
 """
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import sys
 from pathlib import Path
 
+# The shared writer sits in fmus/common/, beside the C glue; generators run as scripts.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "common"))
+from model_description import Variable, model_description, write_model_description  # noqa: E402
+
 MAX_READINGS = 720  # VFH_MAX_READINGS in config.h
 
 
-def _writer():
-    """PurePursuit's generator module, which holds the shared XML writer."""
-    path = Path(__file__).resolve().parent.parent / "PurePursuit" / "make_model_description.py"
-    spec = importlib.util.spec_from_file_location("navcosim_pure_pursuit_description", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
-
-
-def variables(writer) -> list:
+def variables() -> list[Variable]:
     """VectorFieldHistogram's variables; value references as in config.h. Defaults are MATLAB's."""
-    Variable = writer.Variable
     parameters = [
         Variable(
             "num_angular_sectors",
@@ -182,16 +174,15 @@ def variables(writer) -> list:
 
 def generate() -> str:
     """The modelDescription.xml text of VectorFieldHistogram."""
-    writer = _writer()
-    return writer.model_description(
+    return model_description(
         "VectorFieldHistogram",
         "{5d0c7a2e-7f0b-4c59-9d8e-2f1a6b3c4d02}",
         "VFH+ obstacle avoidance as MATLAB controllerVFH: polar density with enlargement angle, hysteresis, "
         "turning-radius mask, valley candidates, three-weight cost",
-        variables(writer),
+        variables(),
         0.05,
     )
 
 
 if __name__ == "__main__":
-    _writer().write_model_description(Path(__file__).with_name("modelDescription.xml"), generate())
+    write_model_description(Path(__file__).with_name("modelDescription.xml"), generate())
