@@ -104,13 +104,9 @@ ModelStatus model_initialize(ModelInstance *comp, ModelData *m) {
                               "steering cannot yaw");
         return MODEL_ERROR;
     }
-    if (!isfinite(m->x0) || !isfinite(m->y0) || !isfinite(m->theta0)) {
-        model_log_error(comp, "parameters x0, y0, theta0 must be finite");
+    if (!planar_start_pose(comp, m->x0, m->y0, m->theta0, &m->x, &m->y, &m->theta)) {
         return MODEL_ERROR;
     }
-    m->x = m->x0;
-    m->y = m->y0;
-    m->theta = wrap_heading(m->theta0);
     return apply_inputs(comp, m);
 }
 

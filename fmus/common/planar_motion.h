@@ -13,12 +13,28 @@
 #define NAVCOSIM_PLANAR_MOTION_H
 
 #include <math.h>
+#include <stdbool.h>
 
 #include "angles.h"
+#include "model.h"
 
 /* sin(a)/a; the Taylor series below |a| = 1e-4 has a truncation error under 1e-20. */
 static inline double planar_sinc(double a) {
     return fabs(a) < 1e-4 ? 1.0 - a * a / 6.0 : sin(a) / a;
+}
+
+/* Start the pose (x [m], y [m], theta [rad]) at the parameters x0, y0, theta0, theta wrapped;
+ * logs and returns false when one of them is not finite. */
+static inline bool planar_start_pose(ModelInstance *comp, double x0, double y0, double theta0, double *x, double *y,
+                                     double *theta) {
+    if (!isfinite(x0) || !isfinite(y0) || !isfinite(theta0)) {
+        model_log_error(comp, "parameters x0, y0, theta0 must be finite");
+        return false;
+    }
+    *x = x0;
+    *y = y0;
+    *theta = wrap_heading(theta0);
+    return true;
 }
 
 /* Advance pose (x [m], y [m], theta [rad]) by h [s]; speed [m/s] of the tracked point, signed. */
