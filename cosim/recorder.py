@@ -4,9 +4,15 @@ Topics: `/odom`, `/tf` (map -> base_link), `/pose`, `/scan`, `/cmd_vel`, `/plan`
 `/map_inflated`, `/obstacles`, `/goal`, and `/signals/<component>` (one generated float64 struct
 per component; see `cosim.rosmsg`). The run loop writes messages in time order.
 
-A killed run: the open chunk is flushed (written and handed to the OS) whenever a write finds
-more than `flush_interval` seconds of wall time since the last flush, so SIGKILL loses at most the
-data of that last interval. Only `close()` writes the summary and footer, so a file without them
+Speed: signals, poses, commands and scans (the per-step topics) are held in a
+`cosim.recorder_batch.MessageBlock` and packed into MCAP records with NumPy, a block at a time
+(at most 512 records of a channel); the records and their order are exactly those of writing one
+message at a time. Any other write, `flush()` and `close()` pack the held messages first.
+
+A killed run: the open chunk is flushed (held messages packed, written and handed to the OS)
+whenever a write finds more than `flush_interval` seconds of wall time since the last flush (the
+clock is read every 16 held messages, every one with a zero interval), so SIGKILL loses at most
+the data of about that last interval. Only `close()` writes the summary and footer, so a file without them
 is a run that did not end normally (`cosim.logs` reads it up to its last complete chunk).
 """
 
