@@ -243,18 +243,19 @@ def astar_search(
 
 
 @njit(cache=True)
-def finish(nodes, start, goal, found, searched, width, rows, cols, resolution, origin_x, origin_y):
-    """The path of a finished search and the explored mask.
+def finish(
+    nodes, start, goal, found, searched, width, rows, resolution, origin_x, origin_y, explored, cells, path
+):
+    """Write the path of a finished search and the explored mask into the caller's arrays.
 
-    Returns (cells N x 2 row/col, path N x 2 x/y [m] of cell centres, length [m], explored bool
-    [rows, cols]); with found False the cells and path are empty.
+    cells (int64) and path (float64) are C x 2 buffers: rows 0..N-1 get the N path cells
+    (row, col) and the cell centres (x, y) [m]; explored, bool [rows, cols], gets True where a cell
+    was expanded. Returns (N, length [m]); N = 0 with found False. When N > C nothing is written
+    (give buffers of N rows and call again). The arrays come from the caller because returning new
+    arrays from a compiled function costs ~3 us each (numba boxes them through a pickled dtype).
     """
     parent = nodes[0]
     expanded = nodes[2]
-    explored = np.zeros((rows, cols), dtype=np.bool_)
-    for index in range(searched):
-        node = expanded[index]
-        explored[node // width - 1, node % width - 1] = True
     count = 0
     if found:
         count = 1
@@ -262,8 +263,11 @@ def finish(nodes, start, goal, found, searched, width, rows, cols, resolution, o
         while node != start:
             node = parent[node]
             count += 1
-    cells = np.empty((count, 2), dtype=np.int64)
-    path = np.empty((count, 2))
+    if count > len(cells):
+        return count, 0.0
+    for index in range(searched):
+        node = expanded[index]
+        explored[node // width - 1, node % width - 1] = True
     length = 0.0
     node = goal
     for index in range(count - 1, -1, -1):
@@ -278,7 +282,7 @@ def finish(nodes, start, goal, found, searched, width, rows, cols, resolution, o
             difference = abs(previous - node)
             length += resolution if difference == 1 or difference == width else SQRT2 * resolution
         node = previous
-    return cells, path, length, explored
+    return count, length
 
 
 @njit(cache=True)
@@ -295,36 +299,27 @@ def unpad_distances(g, stamp, closed, rows, cols, resolution):
 
 
 @njit(cache=True)
-def astar_plan(
-    moves,
-    width,
-    start,
-    goal,
-    heuristic,
-    h_scale,
-    tie_breaker,
-    decrease_key,
-    cost,
-    cost_weight,
-    g,
-    nodes,
-    generation,
-    heap_key,
-    heap_node,
-    rows,
-    cols,
-    resolution,
-    origin_x,
-    origin_y,
-):
+def astar_plan(moves, cost, integers, reals, start, goal, generation, g, nodes, heap_key, heap_node, explored,
+               cells, path):  # fmt: skip
     """astar_search then finish in one compiled call (one dispatch: small maps answer in microseconds).
 
-    Returns (status, searched, cells, path [m], length [m], explored)."""
+    integers: int64 [width, heuristic, tie breaker, decrease_key, rows]; reals: float64 [h_scale,
+    cost_weight, resolution [m], origin x, origin y [m]] (kept per map and option set by the caller:
+    every argument of a compiled call costs dispatch time). explored, cells, path: see finish.
+    Returns (status, searched, N, length [m]): status as astar_search's, or -2 when the path has
+    more than len(cells) = C cells (nothing written: search again with buffers of N rows).
+    """
+    width = integers[0]
     status, searched = astar_search(
-        moves, width, start, goal, heuristic, h_scale, tie_breaker, decrease_key, cost, cost_weight,
+        moves, width, start, goal, integers[1], reals[0], integers[2], integers[3] != 0, cost, reals[1],
         g, nodes, generation, heap_key, heap_node,
     )  # fmt: skip
-    cells, path, length, explored = finish(
-        nodes, start, goal, status == 1, searched, width, rows, cols, resolution, origin_x, origin_y
-    )
-    return status, searched, cells, path, length, explored
+    if status < 0:
+        return status, searched, 0, 0.0
+    count, length = finish(
+        nodes, start, goal, status == 1, searched, width, integers[4], reals[2], reals[3], reals[4],
+        explored, cells, path,
+    )  # fmt: skip
+    if count > len(cells):
+        return -2, searched, count, 0.0
+    return status, searched, count, length

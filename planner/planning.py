@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import difflib
 import math
-import time
+from time import perf_counter
 
 import numpy as np
 
@@ -336,12 +336,12 @@ def run_astar(
     cost, cost_weight = _cost(space, settings)
     while True:
         generation = work.next_generation()
-        began = time.perf_counter()
+        began = perf_counter()
         status, searched = astar_search(
             moves, space.width, start_node, goal_node, *parameters, cost, cost_weight,
             work.g, work.nodes, generation, work.heap_key, work.heap_node,
         )  # fmt: skip
-        elapsed = time.perf_counter() - began
+        elapsed = perf_counter() - began
         if status >= 0:
             return status, searched, elapsed
         work.grow_heap()
@@ -353,23 +353,28 @@ def _search_astar(
     """A* and its path; returns (found, cells, path [m], length [m], searched, elapsed [s], explored).
 
     elapsed covers the search and the path reconstruction (Algorithm 3.1, lines 3-15), which run
-    in one compiled call."""
+    in one compiled call. The compiled call writes into arrays made here and in the workspace
+    (returning new arrays from it costs more than the search of a short query)."""
     work = workspace(len(space.blocked))
-    cost, cost_weight = _cost(space, settings)
-    grid = space.grid
-    heuristic, h_scale, tie_breaker, decrease_key = parameters
+    integers, reals, cost = space.kernel_arguments(
+        parameters, settings["cost_weight"], settings["cost_scaling_factor"]
+    )
+    explored = np.zeros((space.rows, space.cols), dtype=bool)
     while True:
         generation = work.next_generation()
-        began = time.perf_counter()
-        status, searched, cells, path, length, explored = astar_plan(
-            moves, space.width, start_node, goal_node, heuristic, h_scale, tie_breaker, decrease_key,
-            cost, cost_weight, work.g, work.nodes, generation, work.heap_key, work.heap_node,
-            space.rows, space.cols, grid.resolution, grid.origin[0], grid.origin[1],
+        began = perf_counter()
+        status, searched, count, length = astar_plan(
+            moves, cost, integers, reals, start_node, goal_node, generation, work.g, work.nodes,
+            work.heap_key, work.heap_node, explored, work.cells, work.path,
         )  # fmt: skip
-        elapsed = time.perf_counter() - began
+        elapsed = perf_counter() - began
         if status >= 0:
+            cells, path = work.cells[:count].copy(), work.path[:count].copy()
             return status == 1, cells, path, length, searched, elapsed, explored
-        work.grow_heap()
+        if status == -1:
+            work.grow_heap()
+        else:
+            work.grow_path(count)
 
 
 _DIJKSTRA = {
