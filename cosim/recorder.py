@@ -92,6 +92,7 @@ class Recorder:
         self._block = MessageBlock(self._writer, self._sequences)
         self._pose_channels: tuple[int, int, int] | None = None
         self._until_clock = 1
+        self._last_scan: tuple | None = None  # (angles, range_min, range_max, layout) of the last sweep
         self._closed = False
 
     # --- file-level records --------------------------------------------------------------
@@ -301,12 +302,19 @@ class Recorder:
         """A lidar sweep on /scan: beam angles [rad] in the robot frame and ranges [m] as the lidar
         gives them. LaserScan needs equally spaced angles, so beams go into bins of a uniform grid
         (see `scan_layout`); bins without a beam hold NaN."""
-        angles = np.asarray(angles, dtype=float)
-        key = (angles.tobytes(), float(range_min), float(range_max))
-        layout = self._scan_layouts.get(key)
-        if layout is None:
-            layout = self._scan_template(angles, float(range_min), float(range_max))
-            self._scan_layouts[key] = layout
+        last = self._last_scan
+        if last is not None and angles is last[0] and range_min == last[1] and range_max == last[2]:
+            layout = last[3]  # the run loop passes the same angle array every sweep
+        else:
+            angle_array = np.asarray(angles, dtype=float)
+            key = (angle_array.tobytes(), float(range_min), float(range_max))
+            layout = self._scan_layouts.get(key)
+            if layout is None:
+                layout = self._scan_template(angle_array, float(range_min), float(range_max))
+                self._scan_layouts[key] = layout
+            # Keyed by identity only for a read-only array, which cannot change between sweeps.
+            frozen = isinstance(angles, np.ndarray) and not angles.flags.writeable
+            self._last_scan = (angles, range_min, range_max, layout) if frozen else None
         bins, binned, head, tail = layout
         binned[bins] = ranges
         # Only the stamp and the ranges change between sweeps: the CDR bytes are the template's

@@ -136,7 +136,8 @@ class _Recording:
         ranges_index = [i for i, p in enumerate(lidar.outputs) if p.array_name == "ranges"]
         self.lidar_ranges = _run_view(self.lidar_out, ranges_index)
         self.ranges_index = None if self.lidar_ranges is not None else np.array(ranges_index, dtype=np.intp)
-        self.angles = np.asarray(built.scenario.lidar.angles, dtype=float)
+        self.angles = np.array(built.scenario.lidar.angles, dtype=float)
+        self.angles.flags.writeable = False  # fixed for the run: the recorder keeps its /scan layout
         self.range_limits = (built.scenario.lidar.range_min, built.scenario.lidar.range_max)
         self.pose_steps = max(1, round(1.0 / (built.scenario.pose_rate * built.scenario.macro_step)))
 
