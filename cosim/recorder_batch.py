@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import struct
 
+import numba
 import numpy as np
 
 from cosim import rosmsg
@@ -29,6 +30,16 @@ _HEAD_FIELDS = {
 _CDR = len(rosmsg.CDR_HEADER)
 RAW = "raw"  # the stream of messages held as ready payload bytes
 RAW_STREAM = 0
+
+
+@numba.njit(cache=True)
+def _scatter(out, starts, records):
+    """Copy row j of `records` (bytes) to out[starts[j]:]; one compiled loop instead of a NumPy
+    fancy index per byte (a block of odometry records is ~400 kB)."""
+    size = records.shape[1]
+    for row in range(records.shape[0]):
+        start = starts[row]
+        out[start : start + size] = records[row]
 
 
 def _record_dtype(payload_fields: dict[str, tuple], payload_size: int) -> np.dtype:
@@ -250,7 +261,7 @@ class MessageBlock:
         for number, (records, record_times, channel) in parts.items():
             where = np.flatnonzero(order == number)
             size = records.dtype.itemsize
-            out[offsets[where][:, None] + np.arange(size)] = records.view(np.uint8).reshape(-1, size)
+            _scatter(out, offsets[where], records.view(np.uint8).reshape(-1, size))
             channels[where] = channel
             times[where] = record_times
         if raw_records:
