@@ -66,17 +66,21 @@ def heap_push(heap_key, heap_node, size, key, node):
     """Push (key, node) on the 4-ary min-heap (the caller checks the capacity); returns the new size.
 
     Four children per entry: half the levels of a binary heap, and a node's children share a cache
-    line, so a pop costs fewer dependent loads."""
+    line, so a pop costs fewer dependent loads. Indices are cast to unsigned where they index: numba
+    adds negative-index wraparound code to every signed index (~7 % of the search time)."""
     index = size
     while index > 0:
         parent = (index - 1) >> 2
-        if heap_key[parent] <= key:
+        parent_slot = np.uint64(parent)
+        if heap_key[parent_slot] <= key:
             break
-        heap_key[index] = heap_key[parent]
-        heap_node[index] = heap_node[parent]
+        slot = np.uint64(index)
+        heap_key[slot] = heap_key[parent_slot]
+        heap_node[slot] = heap_node[parent_slot]
         index = parent
-    heap_key[index] = key
-    heap_node[index] = node
+    slot = np.uint64(index)
+    heap_key[slot] = key
+    heap_node[slot] = node
     return size + 1
 
 
@@ -85,27 +89,31 @@ def heap_pop(heap_key, heap_node, size):
     """Remove the top of the heap; returns (node, new size)."""
     top = heap_node[0]
     size -= 1
-    key = heap_key[size]
-    node = heap_node[size]
+    key = heap_key[np.uint64(size)]
+    node = heap_node[np.uint64(size)]
     index = 0
     while True:
         first = 4 * index + 1
         if first >= size:
             break
         child = first
-        smallest = heap_key[first]
+        smallest = heap_key[np.uint64(first)]
         last = min(first + 4, size)
         for other in range(first + 1, last):
-            if heap_key[other] < smallest:
-                smallest = heap_key[other]
+            candidate = heap_key[np.uint64(other)]
+            if candidate < smallest:
+                smallest = candidate
                 child = other
         if smallest >= key:
             break
-        heap_key[index] = heap_key[child]
-        heap_node[index] = heap_node[child]
+        slot = np.uint64(index)
+        child_slot = np.uint64(child)
+        heap_key[slot] = smallest
+        heap_node[slot] = heap_node[child_slot]
         index = child
-    heap_key[index] = key
-    heap_node[index] = node
+    slot = np.uint64(index)
+    heap_key[slot] = key
+    heap_node[slot] = node
     return top, size
 
 
@@ -192,24 +200,26 @@ def astar_search(
             next_node = -1
         elif size > 0:
             node, size = heap_pop(heap_key, heap_node, size)
-            if stamp[node] == closed:
+            if stamp[np.uint64(node)] == closed:
                 continue  # a stale entry left behind by a decrease-key
         else:
             return 0, searched
-        stamp[node] = closed
-        expanded[searched] = node
+        here = np.uint64(node)
+        stamp[here] = closed
+        expanded[np.uint64(searched)] = node
         searched += 1
         if node == goal:
             return 1, searched
-        g_node = g[node]
+        g_node = g[here]
         row_offset = node // width - goal_row
         col_offset = node % width - goal_col
-        allowed = moves[node]
+        allowed = moves[here]
         for k in range(8):
             if not (allowed >> k) & 1:
                 continue
             neighbour = node + offsets[k]
-            seen = stamp[neighbour]
+            slot = np.uint64(neighbour)  # an unsigned index: no negative-index wraparound code
+            seen = stamp[slot]
             if seen == closed:
                 continue
             step = steps[k]
@@ -217,16 +227,16 @@ def astar_search(
                 step *= 1.0 + cost_weight * cost[neighbour]
             g_new = g_node + step
             if seen == generation:
-                if g_new >= g[neighbour]:
+                if g_new >= g[slot]:
                     continue
-                g[neighbour] = g_new
-                parent[neighbour] = node
+                g[slot] = g_new
+                parent[slot] = node
                 if not decrease_key:
                     continue  # plannerAStarGrid: g, f and parent change, the key in OPEN does not
             else:
-                stamp[neighbour] = generation
-                g[neighbour] = g_new
-                parent[neighbour] = node
+                stamp[slot] = generation
+                g[slot] = g_new
+                parent[slot] = node
             h = heuristic_cells(row_offset + row_steps[k], col_offset + col_steps[k], heuristic) * h_scale
             key = heap_key_of(g_new + h, h, tie_breaker)
             if next_node < 0:
