@@ -224,7 +224,7 @@ def astar_search(
                 continue
             step = steps[k]
             if cost is not None:  # decided at compile time: None and an array compile apart
-                step *= 1.0 + cost_weight * cost[neighbour]
+                step *= 1.0 + cost_weight * cost[slot]
             g_new = g_node + step
             if seen == generation:
                 if g_new >= g[slot]:

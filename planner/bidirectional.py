@@ -68,43 +68,45 @@ def _expand(
     if size == 0:
         return size, searched, 1
     node, size = heap_pop(heap_key, heap_node, size)
-    if stamp[node] == closed:
+    here = np.uint64(node)  # unsigned indices: numba adds wraparound code to signed ones
+    if stamp[here] == closed:
         return size, searched, 0
-    stamp[node] = closed
-    expanded[searched] = node
+    stamp[here] = closed
+    expanded[np.uint64(searched)] = node
     searched += 1
-    g_node = g[node]
+    g_node = g[here]
     row_offset = node // width - target // width
     col_offset = node % width - target % width
-    allowed = moves[node]
+    allowed = moves[here]
     for k in range(8):
         if not (allowed >> k) & 1:
             continue
         neighbour = node + offsets[k]
-        seen = stamp[neighbour]
+        slot = np.uint64(neighbour)
+        seen = stamp[slot]
         if seen == closed:
             continue
         step = steps[k]
         if cost is not None:  # decided at compile time (None or an array)
-            step *= 1.0 + cost_weight * cost[node if backward else neighbour]
+            step *= 1.0 + cost_weight * cost[here if backward else slot]
         g_new = g_node + step
-        other = other_stamp[neighbour]
+        other = other_stamp[slot]
         reached_by_other = other == other_generation or other == other_generation + 1
-        if reached_by_other and g_new + other_g[neighbour] < best[0]:
-            best[0] = g_new + other_g[neighbour]
+        if reached_by_other and g_new + other_g[slot] < best[0]:
+            best[0] = g_new + other_g[slot]
             best[mine] = node
             best[3 - mine] = neighbour
         if seen == generation:
-            if g_new >= g[neighbour]:
+            if g_new >= g[slot]:
                 continue
-            g[neighbour] = g_new
-            parent[neighbour] = node
+            g[slot] = g_new
+            parent[slot] = node
             if not decrease_key:
                 continue
         else:
-            stamp[neighbour] = generation
-            g[neighbour] = g_new
-            parent[neighbour] = node
+            stamp[slot] = generation
+            g[slot] = g_new
+            parent[slot] = node
         if size == capacity:
             return size, searched, -1
         h = heuristic_cells(row_offset + row_steps[k], col_offset + col_steps[k], heuristic) * h_scale
