@@ -246,3 +246,25 @@ def test_start_equals_goal():
     for search in ("astar", "bidirectional"):
         result = planner.plan(grid, (1.5, 1.5), (1.5, 1.4), planner=search)
         assert result.length == 0.0 and result.path_nodes == 1 and result.searched_nodes == 1
+
+
+def test_first_call_elapsed_excludes_jit_compilation():
+    """PlanResult.elapsed is the search's time: the first call in a process, which compiles the
+    kernel or loads it from numba's cache (hundreds of ms at least), is not counted."""
+    import subprocess
+    import sys
+
+    script = (
+        "import time, planner\n"
+        "grid = planner.OccupancyGrid.from_file('scenarios/maps/warehouse.yaml')\n"
+        "for kind in ('astar', 'bidirectional'):\n"
+        "    began = time.perf_counter()\n"
+        "    result = planner.plan(grid, (6.0, 6.0), (84.0, 53.0), planner=kind)\n"
+        "    print(kind, result.elapsed, time.perf_counter() - began)\n"
+    )
+    repo = __import__("pathlib").Path(__file__).resolve().parent.parent
+    run = subprocess.run([sys.executable, "-c", script], cwd=repo, capture_output=True, text=True, check=True)
+    lines = [line.split() for line in run.stdout.splitlines()]
+    assert float(lines[0][2]) > 0.05, "the process's first plan() should include numba's compile or load"
+    for kind, elapsed, _ in lines:
+        assert float(elapsed) < 0.02, f"{kind}: elapsed {elapsed} s includes JIT compilation"
