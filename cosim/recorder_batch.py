@@ -42,6 +42,12 @@ def _scatter(out, starts, records):
         out[start : start + size] = records[row]
 
 
+def warm_up() -> None:
+    """Compile `_scatter` (or load it from numba's cache) for the argument types a flush uses, so
+    the first block written inside a timed run does not pay for it."""
+    _scatter(np.zeros(4, dtype=np.uint8), np.zeros(1, dtype=np.int64), np.zeros((1, 4), dtype=np.uint8))
+
+
 def _record_dtype(payload_fields: dict[str, tuple], payload_size: int) -> np.dtype:
     """A packed structured dtype of one MCAP message record: head fields, then payload fields at
     their byte offsets within the payload (shifted by the head size)."""

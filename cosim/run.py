@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cosim import recorder_batch
 from cosim.errors import CosimError
 from cosim.master import NS_PER_S, Master
 from cosim.run_build import BuiltRun, build_run
@@ -278,6 +279,10 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     recording.write_pose(0)
     h_ns = system.macro_step_ns
     total_steps = round(scenario.stop_time * NS_PER_S / h_ns)
+    # Compile (or load from numba's cache) the kernels that would first run inside the loop, so the
+    # real-time factor measures the simulation, not a first run's JIT compilation.
+    monitor.world.distance(*scenario.start[:2])
+    recorder_batch.warm_up()
     bar = _progress_bar(scenario.stop_time) if progress else None
     wall_start = time.perf_counter()
     last_update = [wall_start, 0.0]
