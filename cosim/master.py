@@ -436,35 +436,7 @@ class Master:
             else:
                 self._advance(steps)
             return steps
-        if self.system.mode == "jacobi":
-            for done in range(1, steps + 1):
-                self._advance(1)
-                if callback(self):
-                    return done
-            return steps
-        # `_advance` inlined for one step at a time: the per-step overhead matters here.
-        steppers = self._steppers
-        h_ns = self.system.macro_step_ns
-        start_ns = self.start_time_ns
-        k = self.step_index
-        for done in range(1, steps + 1):
-            t = (start_ns + k * h_ns) / NS_PER_S
-            try:
-                for period, h, gather, push, do_step, get_outputs in steppers:
-                    if period == 1 or k % period == 0:
-                        if gather is not None:
-                            gather()
-                            push()
-                        do_step(t, h)
-                        get_outputs()
-            except CosimError as error:
-                self.failure = error
-                raise
-            k += 1
-            self.step_index = k
-            if callback(self):
-                return done
-        return steps
+        return self._advance(steps, callback)
 
     def run_recorded(
         self,
@@ -554,14 +526,16 @@ class Master:
             self.failure = error
             raise
 
-    def _advance(self, steps: int) -> None:
+    def _advance(self, steps: int, callback: Callable[[Master], bool | None] | None = None) -> int:
+        """Step `steps` times (or until `callback`, called after each step, returns true); return
+        the number of steps done. On a failure `step_index` is the step that failed."""
         steppers = self._steppers
         h_ns = self.system.macro_step_ns
         start_ns = self.start_time_ns
         jacobi = self.system.mode == "jacobi"
-        k = self.step_index
+        first = k = self.step_index
         try:
-            for k in range(self.step_index, self.step_index + steps):
+            for k in range(first, first + steps):
                 t = (start_ns + k * h_ns) / NS_PER_S
                 if jacobi:
                     due = [entry for entry in steppers if k % entry[0] == 0]
@@ -572,19 +546,24 @@ class Master:
                     for _, h, _, _, do_step, get_outputs in due:
                         do_step(t, h)
                         get_outputs()
-                    continue
-                for period, h, gather, push, do_step, get_outputs in steppers:
-                    if period == 1 or k % period == 0:
-                        if gather is not None:
-                            gather()
-                            push()
-                        do_step(t, h)
-                        get_outputs()
+                else:
+                    for period, h, gather, push, do_step, get_outputs in steppers:
+                        if period == 1 or k % period == 0:
+                            if gather is not None:
+                                gather()
+                                push()
+                            do_step(t, h)
+                            get_outputs()
+                if callback is not None:
+                    self.step_index = k + 1
+                    if callback(self):
+                        return k + 1 - first
         except CosimError as error:
             self.step_index = k
             self.failure = error
             raise
-        self.step_index = k + 1 if steps else self.step_index
+        self.step_index = first + steps
+        return steps
 
     def close(self) -> None:
         """Terminate healthy components and free all; idempotent. Raises the first terminate error."""
