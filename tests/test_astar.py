@@ -261,6 +261,10 @@ def test_first_call_elapsed_excludes_jit_compilation():
         "    began = time.perf_counter()\n"
         "    result = planner.plan(grid, (6.0, 6.0), (84.0, 53.0), planner=kind)\n"
         "    print(kind, result.elapsed, time.perf_counter() - began)\n"
+        "began = time.perf_counter()\n"
+        "result = planner.plan(grid, (6.0, 6.0, 0.0), (84.0, 53.0, 0.0), planner='hybrid',\n"
+        "                      expansion_distance=2.25)\n"
+        "print('hybrid', result.elapsed, time.perf_counter() - began)\n"
     )
     repo = __import__("pathlib").Path(__file__).resolve().parent.parent
     run = subprocess.run([sys.executable, "-c", script], cwd=repo, capture_output=True, text=True, check=True)
