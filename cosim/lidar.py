@@ -28,6 +28,7 @@ import numpy as np
 
 from cosim.component import Port, PythonComponent, array_ports
 from cosim.errors import CosimError
+from cosim.geometry import inside_polygon
 from cosim.world import Circle, Obstacle
 
 
@@ -120,18 +121,9 @@ def _cast_shapes(x, y, directions, circles, segments, out):
 
 @numba.njit(cache=True)
 def _inside_polygons(x, y, vertices, starts):
-    """True when (x, y) is inside one of the polygons (even-odd rule); polygon p is
-    vertices[starts[p]:starts[p + 1]]."""
+    """True when (x, y) is inside one of the polygons; polygon p is vertices[starts[p]:starts[p + 1]]."""
     for polygon in range(starts.shape[0] - 1):
-        first, stop = starts[polygon], starts[polygon + 1]
-        inside = False
-        for index in range(first, stop):
-            ax, ay = vertices[index, 0], vertices[index, 1]
-            following = index + 1 if index + 1 < stop else first
-            bx, by = vertices[following, 0], vertices[following, 1]
-            if (ay > y) != (by > y) and x < ax + (y - ay) * (bx - ax) / (by - ay):
-                inside = not inside
-        if inside:
+        if inside_polygon(x, y, vertices, starts[polygon], starts[polygon + 1]):
             return True
     return False
 

@@ -15,6 +15,7 @@ import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 from cosim.errors import CosimError
+from cosim.geometry import polygon_distance
 from cosim.world import Circle, Obstacle
 from planner.errors import PlannerError
 from planner.grid import OccupancyGrid
@@ -33,23 +34,12 @@ def load_known_map(scenario) -> OccupancyGrid:
         raise CosimError(f"{scenario.source}: [map].file: {error}") from None
 
 
-def point_in_polygon(x: float, y: float, vertices: np.ndarray) -> bool:
-    """Even-odd rule; a point on an edge may fall either way (it has distance 0 anyway)."""
-    inside = False
-    count = len(vertices)
-    for index in range(count):
-        x1, y1 = vertices[index]
-        x2, y2 = vertices[(index + 1) % count]
-        if (y1 > y) != (y2 > y) and x < x1 + (y - y1) * (x2 - x1) / (y2 - y1):
-            inside = not inside
-    return inside
-
-
 def distance_to_obstacle(x: float, y: float, obstacle: Obstacle) -> float:
     """Exact distance [m] from (x, y) to the shape; 0 inside it."""
     if isinstance(obstacle, Circle):
         return max(0.0, math.hypot(x - obstacle.center[0], y - obstacle.center[1]) - obstacle.radius)
-    return _polygon_distance(x, y, [(float(vx), float(vy)) for vx, vy in obstacle.polygon()])
+    vertices = np.ascontiguousarray(obstacle.polygon(), dtype=np.float64)
+    return polygon_distance(float(x), float(y), vertices, 0, len(vertices))
 
 
 class WorldDistance:
@@ -133,22 +123,6 @@ class WorldDistance:
         return min(x - self.x_min, self.x_max - x, y - self.y_min, self.y_max - y)
 
 
-def _polygon_distance(x: float, y: float, vertices) -> float:
-    """Exact distance [m] from (x, y) to a polygon given as a list of (x, y); 0 inside."""
-    if point_in_polygon(x, y, vertices):
-        return 0.0
-    best = math.inf
-    count = len(vertices)
-    for index in range(count):
-        ax, ay = vertices[index]
-        bx, by = vertices[(index + 1) % count]
-        dx, dy = bx - ax, by - ay
-        length_sq = dx * dx + dy * dy
-        t = 0.0 if length_sq == 0 else min(1.0, max(0.0, ((x - ax) * dx + (y - ay) * dy) / length_sq))
-        best = min(best, math.hypot(x - ax - t * dx, y - ay - t * dy))
-    return best
-
-
 @numba.njit(cache=True)
 def _world_distance(
     x, y, row, col, offset, best, occupied, field, x_min, y_min, resolution, circles, vertices, starts
@@ -176,20 +150,7 @@ def _world_distance(
         gap = math.hypot(x - circles[index, 0], y - circles[index, 1]) - circles[index, 2]
         best = min(best, max(0.0, gap))
     for polygon in range(starts.shape[0] - 1):
-        first, stop = starts[polygon], starts[polygon + 1]
-        inside = False
-        nearest = math.inf
-        for index in range(first, stop):
-            ax, ay = vertices[index, 0], vertices[index, 1]
-            following = index + 1 if index + 1 < stop else first
-            bx, by = vertices[following, 0], vertices[following, 1]
-            if (ay > y) != (by > y) and x < ax + (y - ay) * (bx - ax) / (by - ay):
-                inside = not inside
-            dx, dy = bx - ax, by - ay
-            length_sq = dx * dx + dy * dy
-            t = 0.0 if length_sq == 0 else min(1.0, max(0.0, ((x - ax) * dx + (y - ay) * dy) / length_sq))
-            nearest = min(nearest, math.hypot(x - ax - t * dx, y - ay - t * dy))
-        best = min(best, 0.0 if inside else nearest)
+        best = min(best, polygon_distance(x, y, vertices, starts[polygon], starts[polygon + 1]))
     return best
 
 
