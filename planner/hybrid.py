@@ -178,26 +178,6 @@ def _pose(value, role: str) -> tuple[float, float, float]:
     return x, y, theta
 
 
-def _check_pose(
-    grid: OccupancyGrid, inflated: OccupancyGrid, pose, role: str, expansion: float
-) -> tuple[int, int]:
-    row, col = grid.world_to_cell(pose[:2])
-    where = f"{role} ({pose[0]:g}, {pose[1]:g}) m = cell (row {row}, col {col})"
-    if not grid.contains_cell((row, col)):
-        width, height = grid.size_m
-        raise PlannerError(
-            f"{where} is outside the map (x in [{grid.origin[0]:g}, {grid.origin[0] + width:g}), "
-            f"y in [{grid.origin[1]:g}, {grid.origin[1] + height:g}) m)"
-        )
-    if grid.occupied[row, col]:
-        raise PlannerError(f"{where} is on an obstacle")
-    if inflated.occupied[row, col]:
-        raise PlannerError(
-            f"{where} is inside the inflation (expansion_distance {expansion:g} m) around an obstacle"
-        )
-    return row, col
-
-
 def _compiled_kernels() -> int:
     """How many compiled specialisations the numba kernels a hybrid plan calls hold so far."""
     from planner import astar, dubins, hybrid_geometry, hybrid_search, planning, reeds_shepp
@@ -236,11 +216,11 @@ def _plan_hybrid(grid: OccupancyGrid, start, goal, **options) -> PlanResult:
     began = time.perf_counter()
     expansion = settings["expansion_distance"]
     inflated = grid.inflate(expansion) if expansion > 0.0 else grid
-    _check_pose(grid, inflated, start, "start", expansion)
-    goal_cell = _check_pose(grid, inflated, goal, "goal", expansion)
-    inflated_at = time.perf_counter()
+    from planner.planning import check_endpoint_cell, distance_to_goal
 
-    from planner.planning import distance_to_goal
+    check_endpoint_cell(grid, inflated.occupied, expansion, start, "start")
+    goal_cell = check_endpoint_cell(grid, inflated.occupied, expansion, goal, "goal")
+    inflated_at = time.perf_counter()
 
     distances = distance_to_goal(inflated, goal_cell, connectivity=8, corner_cutting=False)
     start_cell = grid.world_to_cell(start[:2])

@@ -212,6 +212,29 @@ def endpoint_node(space: SearchMap, point, role: str) -> int:
     return _endpoint_error(space, point, role)
 
 
+def check_endpoint_cell(
+    grid: OccupancyGrid, inflated: np.ndarray, expansion_distance: float, point, role: str
+) -> tuple[int, int]:
+    """The (row, col) of a start/goal point (x, y) [m]; PlannerError when it is outside the map, on
+    an obstacle, or inside the inflation (`inflated`, bool [row, col], by `expansion_distance` m)."""
+    row, col = grid.world_to_cell((point[0], point[1]))
+    where = f"{role} {_describe(grid, point, (row, col))}"
+    if not grid.contains_cell((row, col)):
+        width, height = grid.size_m
+        raise PlannerError(
+            f"{where} is outside the map (x in [{grid.origin[0]:g}, {grid.origin[0] + width:g}), "
+            f"y in [{grid.origin[1]:g}, {grid.origin[1] + height:g}) m)"
+        )
+    if grid.occupied[row, col]:
+        raise PlannerError(f"{where} is on an obstacle")
+    if inflated[row, col]:
+        raise PlannerError(
+            f"{where} is inside the inflation (expansion_distance {expansion_distance:g} m) "
+            "around an obstacle"
+        )
+    return row, col
+
+
 def _endpoint_error(space: SearchMap, point, role: str) -> int:
     """Raise the PlannerError that says why `point` cannot be an endpoint."""
     grid = space.grid
@@ -221,21 +244,7 @@ def _endpoint_error(space: SearchMap, point, role: str) -> int:
         raise PlannerError(f"{role} must be (x, y) in metres, got {point!r}") from None
     if not (math.isfinite(x) and math.isfinite(y)):
         raise PlannerError(f"{role} must be finite (x, y) in metres, got {point!r}")
-    row, col = grid.world_to_cell((x, y))
-    if not (0 <= row < space.rows and 0 <= col < space.cols):
-        width, height = grid.size_m
-        raise PlannerError(
-            f"{role} {_describe(grid, (x, y), (row, col))} is outside the map "
-            f"(x in [{grid.origin[0]:g}, {grid.origin[0] + width:g}), y in [{grid.origin[1]:g}, "
-            f"{grid.origin[1] + height:g}) m)"
-        )
-    if grid.occupied[row, col]:
-        raise PlannerError(f"{role} {_describe(grid, (x, y), (row, col))} is on an obstacle")
-    if space.inflated[row, col]:
-        raise PlannerError(
-            f"{role} {_describe(grid, (x, y), (row, col))} is inside the inflation "
-            f"(expansion_distance {space.expansion_distance:g} m) around an obstacle"
-        )
+    row, col = check_endpoint_cell(grid, space.inflated, space.expansion_distance, (x, y), role)
     return space.node(row, col)
 
 
