@@ -182,3 +182,102 @@ def test_waypoint_capacity_is_exactly_1000_rows():
         with pytest.raises(FMICallException):
             fmu.fmu.setReal([3000], [1.0])  # one past waypoints[1000,2]
         assert any("3000" in message for message in fmu.messages)
+
+
+def new_path(fmu: FmuInstance, waypoints) -> None:
+    """Send a new plan mid-run, as a replanner does: every row, NaN-padded to the capacity."""
+    fmu.set(array_inputs("waypoints", np.asarray(waypoints, dtype=float), CAPACITY))
+
+
+def test_replanned_path_is_followed_from_the_current_pose_with_its_own_segment_index():
+    # Path A: waypoints 1 m apart along x. Driven to x = 8 in steps of 0.5 m, the projection sits on
+    # A's segment 8, an index path B (3 waypoints, 2 segments) does not have.
+    path_a = [[float(k), 0.0] for k in range(11)]
+    with follower(path_a, {"lookahead_distance": 1.0, "desired_linear_velocity": 0.3}) as fmu:
+        for k in range(17):
+            out = drive_to(fmu, (0.5 * k, 0.0, 0.0))
+        assert (out["lookahead_x"], out["lookahead_y"]) == pytest.approx((9.0, 0.0), abs=1e-12)
+
+        # Path B starts elsewhere: down x = 6 from y = 2 to y = -4, then along y = -4 to x = 9.
+        # Closest point to (8, 0): (6, 0) on B's first leg (2 m; its second leg is 4 m away), so the
+        # lookahead is 1 m further down that leg, (6, -1).
+        new_path(fmu, [[6, 2], [6, -4], [9, -4]])
+        pose = (8.0, 0.0, 0.0)
+        out = drive_to(fmu, pose)
+        assert (out["lookahead_x"], out["lookahead_y"]) == pytest.approx((6.0, -1.0), abs=1e-12)
+        assert out["target_dir"] == pytest.approx(math.atan2(-1.0, -2.0), abs=1e-12)
+        assert out["omega"] == pytest.approx(-2.0 / math.sqrt(5.0), abs=1e-12)  # 2 sin(alpha) / L
+        assert out["goal_distance"] == pytest.approx(math.hypot(1.0, 4.0)) and out["v"] == 0.3
+
+        # B is then followed like any path: forward along its first leg and round its corner.
+        out = drive_to(fmu, (6.0, -2.5, -math.pi / 2))
+        assert (out["lookahead_x"], out["lookahead_y"]) == pytest.approx((6.0, -3.5), abs=1e-12)
+        out = drive_to(fmu, (6.0, -3.6, -math.pi / 2))  # 0.4 m to B's corner, then 0.6 m along y = -4
+        assert (out["lookahead_x"], out["lookahead_y"]) == pytest.approx((6.6, -4.0), abs=1e-12)
+
+
+def test_more_waypoints_alone_restart_the_search_and_a_resent_plan_does_not():
+    # Out along y = 0, back along y = 0.2. With L = 0.5 the forward-only search from the first leg
+    # stops after 1 m walked, so it never reaches the return leg 0.05 m away from (3, 0.15).
+    out_leg = [[0, 0], [4, 0]]
+    out_and_back = [*out_leg, [4, 0.2], [0, 0.2]]
+    poses = [(0.5 * k, 0.0, 0.0) for k in range(7)]  # up to (3, 0)
+    near_return_leg = (3.0, 0.15, 0.0)
+    with follower(out_and_back, {"lookahead_distance": 0.5}) as fmu:
+        for pose in poses:
+            new_path(fmu, out_and_back)  # the same plan every step: no change, no restart
+            drive_to(fmu, pose)
+        new_path(fmu, out_and_back)
+        out = drive_to(fmu, near_return_leg)
+        assert (out["lookahead_x"], out["lookahead_y"]) == pytest.approx((3.5, 0.0), abs=1e-12)
+
+    # The same plan, but its return leg arrives mid-run: only rows 3 and 4 change (NaN -> values),
+    # i.e. the waypoint count. The search restarts over every segment and finds the return leg:
+    # projection (3, 0.2), lookahead 0.5 m along it toward x = 0.
+    with follower(out_leg, {"lookahead_distance": 0.5}) as fmu:
+        for pose in poses:
+            drive_to(fmu, pose)
+        new_path(fmu, out_and_back)
+        out = drive_to(fmu, near_return_leg)
+        assert (out["lookahead_x"], out["lookahead_y"]) == pytest.approx((2.5, 0.2), abs=1e-12)
+        assert out["goal_distance"] == pytest.approx(math.hypot(3.0, 0.05))
+
+        # Fewer waypoints again (the return leg dropped): back on the out leg, projection (3, 0).
+        new_path(fmu, out_leg)
+        out = drive_to(fmu, near_return_leg)
+        assert (out["lookahead_x"], out["lookahead_y"]) == pytest.approx((3.5, 0.0), abs=1e-12)
+
+
+def test_a_new_plan_after_the_goal_drives_again():
+    parameters = {"goal_tolerance": 0.1, "desired_linear_velocity": 0.5}
+    with follower([[0, 0], [5, 0]], parameters) as fmu:
+        out = drive_to(fmu, (4.95, 0.0, 0.0))
+        assert out["goal_reached"] and out["v"] == 0.0
+        new_path(fmu, [[5, 0], [5, 5]])
+        out = drive_to(fmu, (4.95, 0.0, 0.0))
+    # Projection (5, 0), the new path's start; lookahead 1 m up it.
+    assert not out["goal_reached"] and out["v"] == 0.5
+    assert (out["lookahead_x"], out["lookahead_y"]) == pytest.approx((5.0, 1.0), abs=1e-12)
+    assert out["goal_distance"] == pytest.approx(math.hypot(0.05, 5.0))
+    assert out["target_dir"] == pytest.approx(math.atan2(1.0, 0.05), abs=1e-12)
+
+
+def test_closed_loop_with_the_drive_follows_a_path_replanned_mid_run():
+    """PurePursuit and DifferentialDrive stepped together: path A along x; at t = 6 s, path B from
+    the vehicle's pose up to (x, 3). The vehicle leaves A and stops at B's goal."""
+    parameters = {"desired_linear_velocity": 0.5, "lookahead_distance": 0.8, "goal_tolerance": 0.1}
+    with follower([[0, 0], [20, 0]], parameters) as controller, FmuInstance("DifferentialDrive") as drive:
+        switched_at = None
+        for step in range(600):
+            pose = (drive.get("x"), drive.get("y"), drive.get("theta"))
+            if step == 120:
+                switched_at = pose
+                new_path(controller, [[pose[0], pose[1]], [pose[0] + 1.0, 1.0], [pose[0] + 1.0, 3.0]])
+            out = drive_to(controller, pose)
+            if out["goal_reached"]:
+                break
+            drive.set({"v": out["v"], "omega": out["omega"]})
+            drive.step()
+    assert switched_at[0] == pytest.approx(3.0, abs=0.05) and abs(switched_at[1]) < 1e-6
+    assert out["goal_reached"] and step < 599
+    assert math.hypot(pose[0] - (switched_at[0] + 1.0), pose[1] - 3.0) <= 0.1

@@ -5,8 +5,11 @@
  * Differences from MATLAB's block, on purpose: at the goal (distance to the last waypoint within
  * goal_tolerance) v = omega = 0, so the vehicle stops (MATLAB keeps driving at
  * DesiredLinearVelocity and leaves the stop to the caller); angular_velocity_law = 1 gives the
- * nav2 form omega = v * kappa. A change of any waypoint element restarts the projection search
- * from waypoint 1, as MATLAB does when its Waypoints property changes.
+ * nav2 form omega = v * kappa. A change of any waypoint element (a replanned path, or rows
+ * appearing or turning NaN: a new waypoint count) restarts the projection search over every
+ * segment from waypoint 1, as MATLAB does when its Waypoints property changes, so the new path is
+ * followed from the vehicle's current pose; resending the same values is no change. goal_reached
+ * is evaluated every step, not latched: a new plan after the goal drives again.
  */
 #include <math.h>
 
