@@ -1,7 +1,7 @@
 """Build hook: a wheel (`pip install .`) ships the project's FMUs prebuilt in `cosim/_fmus/`.
 
 Metadata lives in pyproject.toml; this file only adds the FMU build to `build_py`. An editable
-install (`pip install -e .`, uv too) builds them on first use instead (`cosim.fmus`, with a
+install (`pip install -e .`, uv too) builds them on first use instead (`cosim.fmi.builtin`, with a
 source-hash stamp), because an editable install is never rebuilt after a C edit.
 """
 

@@ -17,7 +17,7 @@ import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
-from cosim.fmus import builtin_fmu, known_names
+from cosim.fmi.builtin import builtin_fmu, known_names
 
 BEAMS = 720
 REPEATS = 5  # best of several runs; CPU time of this process, so other load does not count

@@ -21,7 +21,7 @@ import numpy as np
 from mcap.reader import NonSeekingReader, make_reader
 
 from cosim.logs import open_log
-from cosim.recorder import Recorder
+from cosim.record.recorder import Recorder
 
 COMPONENTS = {  # name -> (variables, every how many steps)
     "vehicle": (20, 1),

@@ -30,9 +30,9 @@ sys.path.insert(0, str(REPO))  # `benchmarks.bench_scenarios` when run as a scri
 
 from fixtures.build_fixtures import build_fixture_fmu  # noqa: E402
 
-from cosim.fmu_component import FmuComponent  # noqa: E402
-from cosim.fmus import builtin_fmu  # noqa: E402
-from cosim.master import Master, System  # noqa: E402
+from cosim.core.master import Master, System  # noqa: E402
+from cosim.fmi.builtin import builtin_fmu  # noqa: E402
+from cosim.fmi.component import FmuComponent  # noqa: E402
 
 MACRO_STEP = 0.001  # s
 GOAL = (5.0, 3.0)  # m

@@ -2,11 +2,11 @@
 
 (b) The two-FMU closed loop of bench_orchestrator part (a) (the project's DifferentialDrive and
     the `controller_fmi2` fixture, 1 ms macro step) with every signal of both FMUs written to an
-    MCAP log by `cosim.recorder.Recorder` at every step (one `/signals/<component>` message per
+    MCAP log by `cosim.record.recorder.Recorder` at every step (one `/signals/<component>` message per
     component per step, as `cosim run` writes them): `Master.run_recorded` keeps the rows in the
     compiled loop and the recorder packs them per block of 1000 steps. Goal: >= 50k steps/s.
 (c) Each shipped scenario (`scenarios/*.toml`; the commented example too, it is short) at its
-    full settings through `cosim.run.run_scenario` with full logging: simulated time, wall time
+    full settings through `cosim.navigation.run.run_scenario` with full logging: simulated time, wall time
     of the stepping loop, real-time factor, goal reached, distance and minimum clearance (the
     outcome, which optimisations must not change). `--repeat R` keeps the fastest of R runs
     (on a shared machine the load of other processes only ever slows a run down).
@@ -28,8 +28,8 @@ sys.path.insert(0, str(REPO))
 import numpy as np  # noqa: E402
 
 from benchmarks.bench_orchestrator import Row, _fmus, _system  # noqa: E402
-from cosim.master import Master  # noqa: E402
-from cosim.recorder import Recorder  # noqa: E402
+from cosim.core.master import Master  # noqa: E402
+from cosim.record.recorder import Recorder  # noqa: E402
 
 
 def part_b(steps: int) -> list[Row]:
@@ -66,8 +66,8 @@ def part_b(steps: int) -> list[Row]:
 
 def part_c(_steps: int = 0, repeat: int = 1) -> list[Row]:
     """Each shipped scenario at full settings with full logging (the fastest of `repeat` runs)."""
-    from cosim.run import run_scenario
-    from cosim.scenario import load_scenario
+    from cosim.navigation.run import run_scenario
+    from cosim.scenario.load import load_scenario
 
     rows = []
     with tempfile.TemporaryDirectory() as scratch:

@@ -15,6 +15,6 @@ __all__ = ["CosimError", "builtin_fmu"]
 def builtin_fmu(name: str) -> Path:
     """The built `.fmu` of a project FMU (DifferentialDrive, Bicycle, PurePursuit,
     VectorFieldHistogram, AvoidanceMixer), built from its C sources if needed."""
-    from cosim.fmus import builtin_fmu as _builtin_fmu
+    from cosim.fmi.builtin import builtin_fmu as _builtin_fmu
 
     return _builtin_fmu(name)

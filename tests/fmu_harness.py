@@ -9,7 +9,7 @@ from pathlib import Path
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
 
-from cosim.fmus import builtin_fmu
+from cosim.fmi.builtin import builtin_fmu
 
 
 @cache

@@ -31,7 +31,7 @@ from fmpy.fmi2 import (
 )
 from fmpy.logging import addLoggerProxy
 
-from cosim.fmus import builtin_fmu
+from cosim.fmi.builtin import builtin_fmu
 
 Value = float | int | bool
 

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim.recorder import Recorder
-from cosim.world import Circle, Polygon, Rectangle
+from cosim.record.recorder import Recorder
+from cosim.world.shapes import Circle, Polygon, Rectangle
 from planner.grid import OccupancyGrid
 
 RADIUS = 4.0  # [m]

@@ -8,7 +8,7 @@ from log_synthetic import COMPONENTS, METADATA, STEP_NS, write_log
 from mcap_ros2.writer import Writer as Ros2Writer
 
 from cosim.cli import main
-from cosim.log_export import read_csv
+from cosim.logs.export import read_csv
 
 
 @pytest.fixture(scope="module")
@@ -49,7 +49,7 @@ def test_info_reports_what_ran(runs, capsys):
 
 def test_plot_run_writes_a_png(runs, tmp_path):
     """The run loop's entry point: default signals, folders created."""
-    from cosim.log_plot import plot_run
+    from cosim.logs.plot import plot_run
 
     png = plot_run(runs["a"].path, tmp_path / "x" / "run.png")
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000

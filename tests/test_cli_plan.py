@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from cosim.cli import main
-from cosim.plan_plot import figure_size_px
+from cosim.cli.plan_plot import figure_size_px
 
 REPO = Path(__file__).resolve().parent.parent
 WAREHOUSE = REPO / "scenarios" / "maps" / "warehouse.yaml"

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from cosim.component import Port, PythonComponent, State, array_ports
+from cosim.core.component import Port, PythonComponent, State, array_ports
 from cosim.errors import CosimError
 
 

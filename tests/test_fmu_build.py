@@ -13,10 +13,10 @@ from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 from fmu_harness import copy_sources
 
-from cosim import fmus
 from cosim.cli import main
 from cosim.errors import CosimError
-from cosim.fmu_inspect import FMPY_HEADERS, fmpy_problems, required_functions, validate
+from cosim.fmi import builtin as fmus
+from cosim.fmi.inspect import FMPY_HEADERS, fmpy_problems, required_functions, validate
 
 REPO = Path(__file__).resolve().parent.parent
 NAMES = fmus.known_names()

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from fixtures.conftest_helpers import fixture_fmu
 
-from cosim.component import State
+from cosim.core.component import State
+from cosim.core.master import Master, System
 from cosim.errors import CosimError
-from cosim.fmu_component import FmuComponent
-from cosim.master import Master, System
+from cosim.fmi.component import FmuComponent
 
 
 def arc(x0, y0, theta0, v, omega, t):

@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
+from cosim.core.master import Master, System
 from cosim.errors import CosimError
-from cosim.lidar import Lidar
-from cosim.master import Master, System
-from cosim.world import Circle, Polygon, Rectangle
+from cosim.world.lidar import Lidar
+from cosim.world.shapes import Circle, Polygon, Rectangle
 
 
 def scan(lidar, x, y, theta):

@@ -21,7 +21,7 @@ WRITER = textwrap.dedent(
     """
     import sys
     import numpy as np
-    from cosim.recorder import Recorder
+    from cosim.record.recorder import Recorder
 
     recorder = Recorder(sys.argv[1], flush_interval=0.05)
     recorder.add_metadata("navcosim", {"scenario_name": "killed", "goal": "100,0"})

@@ -30,10 +30,10 @@ from mcap_ros2.writer import Writer as Ros2Writer
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
-from cosim import rosmsg
 from cosim.errors import CosimError
 from cosim.logs import open_log
-from cosim.recorder import COMPONENT_KEY, SIGNAL_NAMES_KEY
+from cosim.record import rosmsg
+from cosim.record.rosmsg import COMPONENT_KEY, SIGNAL_NAMES_KEY
 
 
 @pytest.fixture(scope="module")
@@ -131,7 +131,7 @@ def test_messages_decode_ros_types(log):
 def test_log_without_outcome_warns(tmp_path):
     target = write_log(tmp_path / "no_outcome.mcap", steps=5, outcome={}).path
     # an empty outcome dict is still an outcome; a file closed without one warns
-    from cosim.recorder import Recorder
+    from cosim.record.recorder import Recorder
 
     with Recorder(tmp_path / "bare.mcap") as recorder:
         recorder.write_cmd_vel(0, 1.0, 0.0)

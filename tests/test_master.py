@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from fixtures.conftest_helpers import fixture_fmu
 
-from cosim.component import Port, PythonComponent
+from cosim.core.component import Port, PythonComponent
+from cosim.core.master import Master, System
 from cosim.errors import CosimError
-from cosim.fmu_component import FmuComponent
-from cosim.master import Master, System
+from cosim.fmi.component import FmuComponent
 
 
 class Counter(PythonComponent):

@@ -30,9 +30,9 @@ from mcap_ros2.reader import read_ros2_messages
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
-from cosim import rosmsg
 from cosim.errors import CosimError
-from cosim.recorder import Recorder, scan_layout
+from cosim.record import rosmsg
+from cosim.record.recorder import Recorder, scan_layout
 
 
 @pytest.fixture(scope="module")
@@ -307,8 +307,8 @@ def test_held_messages_are_the_bytes_and_order_of_one_message_at_a_time(tmp_path
     """Signals, poses, commands and scans are packed per block with NumPy; every record must be
     what the per-message CDR functions (and rosbags for the scan) give, in the order written,
     across block boundaries (more messages than one block holds)."""
-    from cosim import rosmsg
-    from cosim.recorder import TOPIC_TYPES
+    from cosim.record import rosmsg
+    from cosim.record.recorder import TOPIC_TYPES
 
     target = tmp_path / "held.mcap"
     angles = np.linspace(-1.0, 1.0, 7)

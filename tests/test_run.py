@@ -13,8 +13,8 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from cosim.run import run_scenario
-from cosim.scenario import load_scenario
+from cosim.navigation.run import run_scenario
+from cosim.scenario.load import load_scenario
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "scenarios" / "example_commented.toml"
 STOP_TIME = 4.0  # [s] simulated: 400 macro steps of 10 ms

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from cosim.errors import CosimError
-from cosim.planner_component import downsample_path
-from cosim.scenario import load_scenario, parse_scenario
-from cosim.scenario_world import WorldDistance, distance_to_obstacle
-from cosim.summary import OutcomeMonitor
-from cosim.world import Circle, Polygon, Rectangle
+from cosim.navigation.outcome import OutcomeMonitor
+from cosim.navigation.planner import downsample_path
+from cosim.scenario.load import load_scenario, parse_scenario
+from cosim.world.distance import WorldDistance, distance_to_obstacle
+from cosim.world.shapes import Circle, Polygon, Rectangle
 from planner.grid import OccupancyGrid
 
 REPO = Path(__file__).resolve().parent.parent

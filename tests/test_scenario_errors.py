@@ -88,7 +88,7 @@ def _scenario_with_vehicle(tmp_path: Path, fmu: Path, ports: str = "") -> Path:
 
 @pytest.fixture(scope="module")
 def project_fmu() -> Path:
-    from cosim.fmus import builtin_fmu
+    from cosim.fmi.builtin import builtin_fmu
 
     return builtin_fmu("DifferentialDrive")
 

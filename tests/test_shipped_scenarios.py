@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from cosim.logs import open_log
-from cosim.run import run_scenario
-from cosim.scenario import load_scenario
+from cosim.navigation.run import run_scenario
+from cosim.scenario.load import load_scenario
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 SHIPPED = sorted(SCENARIOS.glob("*.toml"))

@@ -17,8 +17,8 @@ import pytest
 from fixtures.conftest_helpers import fixture_fmu
 
 from cosim.logs import open_log
-from cosim.run import run_scenario
-from cosim.scenario import load_scenario
+from cosim.navigation.run import run_scenario
+from cosim.scenario.load import load_scenario
 
 REPO = Path(__file__).resolve().parent.parent
 SHIPPED = REPO / "scenarios" / "warehouse_diff_drive_one_obstacle.toml"

@@ -1,0 +1,45 @@
+"""The `cosim` command line: one sub-command module per job (fmu, plan, run, log)."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+
+from planner.errors import NavcosimError
+
+COMMANDS = ("fmu", "plan", "run", "log")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="cosim",
+        description="Scenario co-simulation of mobile robots: plan, run, inspect logs.",
+    )
+    subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name in COMMANDS:
+        importlib.import_module(f"cosim.cli.{name}").register(subparsers)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the CLI. Each handler returns its exit code; user errors exit 2 with one line."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.handler(args) or 0)
+    except NavcosimError as error:
+        print(f"cosim: error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("cosim: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        # The reader of our output went away (`cosim … | head`): stop quietly, as a shell tool does.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,118 @@
+"""`cosim log info|plot|export|diff LOG`: inspect a run's MCAP log without another tool."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from cosim.errors import CosimError
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "log",
+        help="inspect run logs (MCAP): info, plot, export, diff",
+        description="Inspect a run's MCAP log: summary, plots, signal tables, comparison of two runs.",
+    )
+    commands = parser.add_subparsers(dest="log_command", required=True, metavar="ACTION")
+
+    info = commands.add_parser("info", help="duration, topics, scenario, outcome, FMUs, completeness")
+    info.add_argument("log", type=Path, help="run log (.mcap)")
+    info.set_defaults(handler=_info)
+
+    plot = commands.add_parser("plot", help="trajectory over the map and signals over time (PNG)")
+    plot.add_argument("log", type=Path, help="run log (.mcap)")
+    plot.add_argument(
+        "--signals",
+        nargs="+",
+        metavar="COMPONENT.VAR",
+        help="signals to plot over time, e.g. vehicle.v_actual vfh.steering_dir (default: speed, "
+        "turn rate or steering angle, VFH steering direction, minimum range, distance to goal)",
+    )
+    plot.add_argument("--png", type=Path, metavar="OUT", help="output image (default: LOG with .png)")
+    plot.set_defaults(handler=_plot)
+
+    export = commands.add_parser("export", help="signals as CSV (one file per component) or NPZ")
+    export.add_argument("log", type=Path, help="run log (.mcap)")
+    export.add_argument("--component", nargs="+", metavar="NAME", help="components to export (default: all)")
+    export.add_argument("--to", choices=("csv", "npz"), required=True, help="table format")
+    export.add_argument("--out", type=Path, metavar="DIR", help="output folder (default: the log's folder)")
+    export.set_defaults(handler=_export)
+
+    diff = commands.add_parser(
+        "diff",
+        help="per-signal maximum deviation and outcome differences; exit 1 above the tolerance",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Compare two run logs signal by signal. Exit 0 when every common signal and the\n"
+        "outcome agree within --tolerance, 1 when not (use it to gate a swapped FMU in CI), 2 on bad input.",
+    )
+    diff.add_argument("log_a", type=Path, metavar="LOG_A")
+    diff.add_argument("log_b", type=Path, metavar="LOG_B")
+    diff.add_argument(
+        "--tolerance", type=float, default=1e-9, metavar="X", help="largest allowed |A-B| (1e-9)"
+    )
+    diff.set_defaults(handler=_diff)
+
+
+def _open(path: Path):
+    """Open a log, print its warnings, and turn any failure to read it into one line."""
+    from cosim.logs.reader import open_log
+
+    try:
+        log = open_log(path)
+    except CosimError:
+        raise
+    except Exception as error:  # a malformed file must not end in a traceback
+        raise CosimError(f"{path}: cannot read the log ({type(error).__name__}: {error})") from None
+    for warning in log.warnings:
+        print(f"cosim: warning: {path}: {warning}", file=sys.stderr)
+    return log
+
+
+def _guard(path: Path, action):
+    try:
+        return action()
+    except CosimError:
+        raise
+    except Exception as error:
+        raise CosimError(f"{path}: cannot read the log ({type(error).__name__}: {error})") from None
+
+
+def _info(args) -> int:
+    from cosim.logs.info import format_info
+
+    log = _open(args.log)
+    print(_guard(args.log, lambda: format_info(log)))
+    return 0
+
+
+def _plot(args) -> int:
+    from cosim.logs.plot import plot_log
+
+    log = _open(args.log)
+    png = args.png or args.log.with_suffix(".png")
+    written = _guard(args.log, lambda: plot_log(log, png, args.signals))
+    print(f"wrote {written}")
+    return 0
+
+
+def _export(args) -> int:
+    from cosim.logs.export import export_signals
+
+    log = _open(args.log)
+    out_dir = args.out or args.log.parent
+    for path in _guard(args.log, lambda: export_signals(log, out_dir, args.to, args.component)):
+        print(f"wrote {path}")
+    return 0
+
+
+def _diff(args) -> int:
+    from cosim.logs.diff import diff_logs, format_report
+
+    if not args.tolerance >= 0:
+        raise CosimError(f"--tolerance must be >= 0, got {args.tolerance}")
+    log_a, log_b = _open(args.log_a), _open(args.log_b)
+    report = _guard(args.log_a, lambda: diff_logs(log_a, log_b, args.tolerance))
+    print(format_report(report, log_a, log_b))
+    return 1 if report.differs else 0

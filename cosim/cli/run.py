@@ -1,0 +1,70 @@
+"""`cosim run SCENARIO`: run a scenario, print the summary, write the MCAP log and a PNG beside it.
+
+Exit codes: 0 goal reached, 1 not reached (stop time, collision, interrupted), 2 bad input or a
+failed FMU (one line on stderr, no traceback).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from cosim.errors import CosimError
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "run",
+        help="run a scenario co-simulation and log it to MCAP",
+        description="Run a scenario (TOML): plan, step the FMUs and the lidar, log every signal to MCAP.",
+    )
+    parser.add_argument(
+        "scenario", type=Path, help="scenario file (.toml), e.g. scenarios/example_commented.toml"
+    )
+    parser.add_argument(
+        "--out", type=Path, help="log file (default: [output].log, logs/<scenario>-<timestamp>.mcap)"
+    )
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scenario key, e.g. --set vfh.robot_radius=0.6 (repeatable; same validation)",
+    )
+    parser.add_argument("--no-plot", action="store_true", help="do not draw the PNG beside the log")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar and no summary table")
+    parser.set_defaults(handler=_handler)
+
+
+def _handler(args) -> int:
+    from cosim.navigation.outcome import format_summary
+    from cosim.navigation.run import run_scenario
+    from cosim.scenario.load import load_scenario
+
+    scenario = load_scenario(args.scenario, args.overrides)
+    result = run_scenario(scenario, args.out, progress=not args.quiet)
+    if not args.quiet:
+        print(format_summary(scenario.name, result.outcome, result.log_path, result.wall_time))
+    if result.failure is not None:
+        print(f"cosim: error: {result.failure}; log (up to the failure): {result.log_path}", file=sys.stderr)
+        return 2
+    if scenario.plot and not args.no_plot:
+        _plot(result.log_path, args.quiet)
+    return result.exit_code
+
+
+def _plot(log_path: Path, quiet: bool) -> None:
+    try:
+        from cosim.logs.plot import plot_run
+    except ImportError:
+        print("cosim: note: no plot (cosim.logs.plot is not available)", file=sys.stderr)
+        return
+    png_path = log_path.with_suffix(".png")
+    try:
+        plot_run(log_path, png_path)
+    except CosimError as error:
+        print(f"cosim: note: no plot: {error}", file=sys.stderr)
+        return
+    if not quiet:
+        print(f"plot: {png_path}")

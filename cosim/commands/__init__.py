@@ -1,1 +1,0 @@
-"""One module per `cosim` sub-command; each defines `register(subparsers)`."""

@@ -1,0 +1,588 @@
+"""The master algorithm: a system of components and connections stepped on an integer time base.
+
+Time base
+---------
+The macro step h is held as an integer number of nanoseconds; step k starts at
+t_k = start + k * h exactly (`Master.time_ns`), and the float time handed to components is that
+integer divided once by 1e9, so time never accumulates rounding: 2,000,000 steps of 1 ms end at
+exactly 2000.0 s. A component's `period` is an integer multiple P of h (0 = every step); it is
+stepped at the steps k with k % P == 0, by `do_step(t_k, P * h)`. Between its steps its outputs
+hold their last values (sample and hold).
+
+Connections
+-----------
+`System.connect("pure_pursuit.v", "mixer.v_in", scale)` copies `scale * source output` into the
+target input before the target steps. An input takes at most one connection; unconnected inputs
+keep their start values (or what the user set with `Component.set_inputs`, which sends them).
+
+Ordering (which values a component sees at step k)
+--------------------------------------------------
+An output `P.o` is *direct* when it depends directly on at least one of P's inputs (its entry in
+`P.feedthrough` is non-empty); otherwise it is a *state* output, fixed by P's past alone.
+
+* **Gauss-Seidel** (default). The components are stepped one after the other in an order that is
+  a topological order of the *direct* connections (P before C for every connection P.o -> C.i
+  with P.o direct); components that this leaves unordered keep the order in which they were
+  added to the system. Connections from state outputs put no constraint on the order; they break
+  feedback cycles. At step k a due component C first gathers its inputs: from a producer P
+  earlier in the order, C sees P's outputs after P's most recent step (that is P's step at k if
+  P was due at k); from a producer later in the order, C sees P's outputs as they were before
+  step k (P's step at k has not run yet). Then C steps and its outputs are read.
+  A cycle of direct connections through direct outputs (P.o direct on P.i, P.i fed by a direct
+  output ... back to P.o) is an algebraic loop: `System.order()` raises `CosimError` naming it.
+* **Jacobi**. Every due component gathers its inputs first, all from the outputs as they were
+  before step k (after each producer's most recent step before k); then all due components
+  step. The order only fixes the sequence of calls. A loop of direct outputs is allowed (the
+  one-step delay breaks it).
+
+Initialisation runs in an order where a producer comes before a consumer whose input feeds one of
+the consumer's *connected* outputs directly (`System.initialization_order`): a vehicle whose pose
+outputs are states initialises before the controllers that read the pose, even though the
+controllers' commands feed its (unconnected) velocity outputs. Each component gathers its
+inputs from the producers already initialised (other inputs keep their start values),
+initialises, and has its outputs read. Jacobi mode uses the same initialisation.
+
+Failures
+--------
+A component that raises `CosimError` while stepping stops the master: `step()`/`run()` re-raise
+it, further steps are refused, and `close()` terminates the healthy components and frees all
+(a failed FMU is not terminated; freeing it is safe).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from fractions import Fraction
+
+import numpy as np
+
+from cosim.core import fast_loop
+from cosim.core.component import Component, State, closest_names
+from cosim.errors import CosimError
+
+NS_PER_S = 1_000_000_000
+MODES = ("gauss-seidel", "jacobi")
+# Below this many values from one producer, per-value ctypes copies beat one NumPy fancy-index copy.
+_SCALAR_COPY_LIMIT = 4
+# Compiling the loop of an FMU-only system costs about a second; worth it for long runs only.
+COMPILED_MIN_STEPS = 200_000
+
+
+def seconds_to_ns(seconds: float | Fraction | int, what: str) -> int:
+    """Convert a duration [s] to integer nanoseconds; `CosimError` if not a whole number of ns."""
+    if isinstance(seconds, bool) or not isinstance(seconds, int | float | Fraction):
+        raise CosimError(f"{what} must be a number of seconds, got {seconds!r}")
+    if isinstance(seconds, float) and not math.isfinite(seconds):
+        raise CosimError(f"{what} must be finite, got {seconds}")
+    exact = Fraction(seconds) * NS_PER_S if not isinstance(seconds, float) else None
+    nanoseconds = round(seconds * NS_PER_S) if exact is None else round(exact)
+    # A float such as 0.001 is not exactly 1e6 ns; accept it when it is the nearest float.
+    if exact is not None and exact != nanoseconds:
+        raise CosimError(f"{what} {seconds} s is not a whole number of nanoseconds")
+    if exact is None and abs(nanoseconds - seconds * NS_PER_S) > 1e-6 * max(1.0, abs(seconds * NS_PER_S)):
+        raise CosimError(f"{what} {seconds} s is not a whole number of nanoseconds")
+    return nanoseconds
+
+
+@dataclass(frozen=True)
+class Connection:
+    """`source` output -> `target` input, value multiplied by `scale` on the way."""
+
+    source: str  # "component.port"
+    target: str
+    scale: float = 1.0
+
+    @property
+    def source_component(self) -> str:
+        return self.source.split(".", 1)[0]
+
+    @property
+    def target_component(self) -> str:
+        return self.target.split(".", 1)[0]
+
+
+class System:
+    """Components, connections, the macro step [s] and the master algorithm (`mode`)."""
+
+    def __init__(self, macro_step: float | Fraction, mode: str = "gauss-seidel") -> None:
+        self.macro_step_ns = seconds_to_ns(macro_step, "macro step")
+        if self.macro_step_ns <= 0:
+            raise CosimError(f"macro step must be > 0 s, got {macro_step}")
+        if mode not in MODES:
+            raise CosimError(f"master mode '{mode}' is not one of {', '.join(MODES)}")
+        self.mode = mode
+        self.components: dict[str, Component] = {}
+        self.connections: list[Connection] = []
+        self._targets: set[str] = set()  # connected inputs: a set, so connecting N inputs is O(N)
+
+    @property
+    def macro_step(self) -> float:
+        return self.macro_step_ns / NS_PER_S
+
+    def add(self, component: Component) -> Component:
+        if component.name in self.components:
+            raise CosimError(f"component '{component.name}' added twice")
+        self.components[component.name] = component
+        return component
+
+    def component(self, name: str) -> Component:
+        if name not in self.components:
+            raise CosimError(
+                f"no component '{name}'; components: {closest_names(name, self.components) or 'none'}"
+            )
+        return self.components[name]
+
+    def resolve(self, reference: str, direction: str) -> tuple[Component, int]:
+        """'component.port' -> (component, index of the port in its inputs or outputs)."""
+        name, dot, port = reference.partition(".")
+        if not dot or not port:
+            raise CosimError(f"connection end '{reference}' must be 'component.port'")
+        component = self.component(name)
+        ports = component.outputs if direction == "output" else component.inputs
+        index = component.output_index if direction == "output" else component.input_index
+        if port not in index:
+            raise CosimError(
+                f"component '{name}' has no {direction} '{port}'; {direction}s: "
+                f"{closest_names(port, [p.name for p in ports]) or 'none'}"
+            )
+        return component, index[port]
+
+    def connect(self, source: str, target: str, scale: float = 1.0) -> Connection:
+        """Connect output `source` ("comp.port") to input `target`, multiplying by `scale`."""
+        self.resolve(source, "output")
+        self.resolve(target, "input")
+        if target in self._targets:
+            raise CosimError(f"input '{target}' is already connected")
+        if not math.isfinite(scale):
+            raise CosimError(f"connection {source} -> {target}: scale must be finite")
+        connection = Connection(source, target, float(scale))
+        self.connections.append(connection)
+        self._targets.add(target)
+        return connection
+
+    def period_steps(self, component: Component) -> int:
+        """The component's period as a whole number of macro steps (>= 1)."""
+        if component.period == 0:
+            return 1
+        period_ns = seconds_to_ns(component.period, f"period of '{component.name}'")
+        steps, remainder = divmod(period_ns, self.macro_step_ns)
+        if remainder or steps == 0:
+            raise CosimError(
+                f"period {component.period} s of '{component.name}' is not a multiple of the "
+                f"macro step {self.macro_step} s"
+            )
+        return steps
+
+    # ---- ordering ----------------------------------------------------------------------------
+
+    def _is_direct(self, reference: str) -> bool:
+        component, index = self.resolve(reference, "output")
+        return bool(component.feedthrough[component.outputs[index].name])
+
+    def _topological(self, edges: set[tuple[str, str]]) -> list[str]:
+        """Kahn's algorithm; ready components are taken in the order they were added."""
+        names = list(self.components)
+        indegree = dict.fromkeys(names, 0)
+        for _, consumer in edges:
+            indegree[consumer] += 1
+        order: list[str] = []
+        remaining = list(names)
+        while remaining:
+            ready = next((n for n in remaining if indegree[n] == 0), remaining[0])
+            remaining.remove(ready)
+            order.append(ready)
+            for producer, consumer in edges:
+                if producer == ready and consumer in remaining:
+                    indegree[consumer] -= 1
+        return order
+
+    def check_algebraic_loops(self) -> None:
+        """Raise `CosimError` naming a cycle of direct dependencies between ports, if any."""
+        graph: dict[str, list[str]] = {}
+        for connection in self.connections:
+            graph.setdefault(connection.source, []).append(connection.target)
+        for component in self.components.values():
+            for output, depends in component.feedthrough.items():
+                for name in depends:
+                    graph.setdefault(f"{component.name}.{name}", []).append(f"{component.name}.{output}")
+        colour: dict[str, int] = {}  # 1 = on the current path, 2 = finished
+        for start in list(graph):
+            if colour.get(start):
+                continue
+            path = [start]
+            iterators = [iter(graph.get(start, []))]
+            colour[start] = 1
+            while iterators:
+                node = next(iterators[-1], None)
+                if node is None:
+                    colour[path.pop()] = 2
+                    iterators.pop()
+                elif colour.get(node) == 1:
+                    loop = path[path.index(node) :] + [node]
+                    raise CosimError(
+                        "algebraic loop (direct feedthrough only): "
+                        + " -> ".join(loop)
+                        + "; an FMU output without declared dependencies depends on every input"
+                    )
+                elif not colour.get(node):
+                    colour[node] = 1
+                    path.append(node)
+                    iterators.append(iter(graph.get(node, [])))
+
+    def order(self) -> list[Component]:
+        """Step order (see the module docstring); checks algebraic loops in Gauss-Seidel mode."""
+        if self.mode == "gauss-seidel":
+            self.check_algebraic_loops()
+        edges = {
+            (c.source_component, c.target_component)
+            for c in self.connections
+            if c.source_component != c.target_component and self._is_direct(c.source)
+        }
+        return [self.components[name] for name in self._topological(edges)]
+
+    def initialization_order(self) -> list[Component]:
+        """Producers before the consumers that need their values at initialisation.
+
+        A consumer C needs producer P first when a connection P.o -> C.i feeds input i into an
+        output of C that is itself connected (C's initial value of that output depends on i
+        directly). A state output (no direct dependencies, e.g. a vehicle's pose) is valid as soon
+        as its component is initialised, so a feedback loop through it orders its producer first
+        (the vehicle before the controllers, whose commands only reach its unconnected outputs).
+        """
+        consumed = {c.source for c in self.connections}
+        edges = set()
+        for c in self.connections:
+            if c.source_component == c.target_component:
+                continue
+            consumer, index = self.resolve(c.target, "input")
+            port = consumer.inputs[index].name
+            if any(
+                port in depends and f"{consumer.name}.{output}" in consumed
+                for output, depends in consumer.feedthrough.items()
+            ):
+                edges.add((c.source_component, c.target_component))
+        return [self.components[name] for name in self._topological(edges)]
+
+
+def _gather(
+    system: System, consumer: Component, producers: set[str] | None = None
+) -> Callable[[], None] | None:
+    """A function copying the consumer's connected inputs from its producers' output buffers.
+
+    Generated as straight-line code (one statement per value, or one NumPy copy for many values
+    from one producer), because it runs for every component on every step. None when the
+    consumer has no connected input (from `producers`, when given).
+    """
+    groups: dict[str, list[tuple[int, int, float]]] = {}
+    for connection in system.connections:
+        if connection.target_component != consumer.name:
+            continue
+        if producers is not None and connection.source_component not in producers:
+            continue
+        producer, source_index = system.resolve(connection.source, "output")
+        _, target_index = system.resolve(connection.target, "input")
+        groups.setdefault(producer.name, []).append((source_index, target_index, connection.scale))
+    if not groups:
+        return None
+    names: dict[str, object] = {"target": consumer.input_cbuffer, "target_array": consumer.input_buffer}
+    lines = ["def gather():"]
+    for number, (producer_name, links) in enumerate(groups.items()):
+        producer = system.components[producer_name]
+        names[f"source{number}"] = producer.output_cbuffer
+        names[f"source_array{number}"] = producer.output_buffer
+        if len(links) <= _SCALAR_COPY_LIMIT:
+            for source_index, target_index, scale in links:
+                factor = "" if scale == 1.0 else f" * {scale!r}"
+                lines.append(f"    target[{target_index}] = source{number}[{source_index}]{factor}")
+            continue
+        names[f"sources{number}"] = np.array([source for source, _, _ in links], dtype=np.intp)
+        names[f"targets{number}"] = np.array([target for _, target, _ in links], dtype=np.intp)
+        names[f"scales{number}"] = np.array([scale for _, _, scale in links])
+        factor = "" if all(scale == 1.0 for _, _, scale in links) else f" * scales{number}"
+        lines.append(f"    target_array[targets{number}] = source_array{number}[sources{number}]{factor}")
+    exec("\n".join(lines), names)  # noqa: S102 - generated from our own templates
+    return names["gather"]
+
+
+class Master:
+    """Runs a `System`: initialise, step (one macro step per call) or run many, close.
+
+    Use as a context manager, or call `close()` in a `finally`.
+    """
+
+    def __init__(
+        self,
+        system: System,
+        start_time: float = 0.0,
+        parameters: Mapping[str, Mapping[str, float]] | None = None,
+    ) -> None:
+        self.system = system
+        self.start_time_ns = seconds_to_ns(start_time, "start time")
+        self.parameters = {name: dict(values) for name, values in (parameters or {}).items()}
+        for name in self.parameters:
+            system.component(name)
+        self.order = system.order()
+        self.step_index = 0
+        self.failure: CosimError | None = None
+        self._initialized = False
+        self._closed = False
+        self._compiled_loop = None
+        self._recording_loop = None
+        self._plan = [
+            (component, system.period_steps(component), _gather(system, component))
+            for component in self.order
+        ]
+        self._steppers: list[tuple] = []
+
+    # ---- time --------------------------------------------------------------------------------
+
+    @property
+    def time_ns(self) -> int:
+        """Start of the next step (the current simulation time) in integer nanoseconds."""
+        return self.start_time_ns + self.step_index * self.system.macro_step_ns
+
+    @property
+    def time(self) -> float:
+        """Current simulation time [s], exact up to one float rounding of `time_ns`."""
+        return self.time_ns / NS_PER_S
+
+    # ---- lifecycle ---------------------------------------------------------------------------
+
+    def initialize(self) -> None:
+        """Instantiate, set up (parameters), and initialise every component (see module doc)."""
+        if self._initialized:
+            raise CosimError("the master is already initialised")
+        t0 = self.start_time_ns / NS_PER_S
+        try:
+            for component in self.order:
+                component.instantiate()
+            for component in self.order:
+                component.setup(t0, self.parameters.get(component.name, {}))
+            ready: set[str] = set()
+            for component in self.system.initialization_order():
+                gather = _gather(self.system, component, producers=ready)
+                if gather is not None:
+                    gather()
+                component.push_inputs()
+                component.initialize()
+                component.get_outputs()
+                ready.add(component.name)
+        except BaseException:
+            self.close()
+            raise
+        self._initialized = True
+        self._skip_constant_producers()
+        # Bound once, after initialisation installed the components' fast paths.
+        h_ns = self.system.macro_step_ns
+        self._steppers = [
+            (period, period * h_ns / NS_PER_S, gather, c.push_inputs, c.do_step, c.get_outputs)
+            for c, period, gather in self._plan
+            if not c.constant_outputs
+        ]
+
+    def _skip_constant_producers(self) -> None:
+        """Components with constant outputs were copied from at initialisation: from now on their
+        connections are not copied again, and an FMU consumer pushes only its other inputs."""
+        constant = {name for name, c in self.system.components.items() if c.constant_outputs}
+        if not constant:
+            return
+        dynamic = set(self.system.components) - constant
+        plan = []
+        for component, period, gather in self._plan:
+            fed = [c for c in self.system.connections if c.target_component == component.name]
+            if any(c.source_component in constant for c in fed):
+                gather = _gather(self.system, component, producers=dynamic)
+                static = {
+                    self.system.resolve(c.target, "input")[1] for c in fed if c.source_component in constant
+                }
+                if hasattr(component, "restrict_push"):
+                    component.restrict_push([i for i in range(len(component.inputs)) if i not in static])
+            plan.append((component, period, gather))
+        self._plan = plan
+
+    def _check_running(self) -> None:
+        if self.failure is not None:
+            raise CosimError(f"the master stopped after a failure: {self.failure}")
+        if not self._initialized or self._closed:
+            raise CosimError("the master is not running (call initialize() first; not after close())")
+
+    def step(self) -> None:
+        """Advance one macro step, from `time` to `time + macro_step`."""
+        self._check_running()
+        self._advance(1)
+
+    def run(
+        self,
+        steps: int,
+        callback: Callable[[Master], bool | None] | None = None,
+        compiled: bool | None = None,
+    ) -> int:
+        """Advance `steps` macro steps; return the number done.
+
+        With `callback`, it is called after every step and a true return stops early. Without
+        it the loop has no per-step Python callback, and a system made only of FMUs with plain
+        real ports runs in a compiled loop (`cosim.core.fast_loop`): `compiled=None` chooses it for
+        runs of at least `COMPILED_MIN_STEPS`, True forces it where possible, False never.
+        """
+        self._check_running()
+        if steps < 0:
+            raise CosimError(f"number of steps must be >= 0, got {steps}")
+        if callback is None:
+            wanted = steps >= COMPILED_MIN_STEPS if compiled is None else compiled
+            if wanted and self._native() is not None:
+                self._run_compiled(steps)
+            else:
+                self._advance(steps)
+            return steps
+        return self._advance(steps, callback)
+
+    def run_recorded(
+        self,
+        steps: int,
+        on_block: Callable[[int, int, list[np.ndarray]], None],
+        block: int = 1000,
+        compiled: bool | None = None,
+    ) -> int:
+        """Advance `steps` macro steps, keeping every component's inputs and outputs after each of
+        its steps; after each block of at most `block` steps call `on_block(first_step, count,
+        histories)`, where `histories[i]` (component i of `order`) has one row per step of that
+        component in the block, k = first_step .. first_step + count - 1 with k % period == 0:
+        its inputs, then its outputs. Returns the steps done.
+
+        A system made only of FMUs with plain real ports runs the blocks in a compiled loop that
+        fills the rows itself (`compiled` as in `run`); otherwise the Python loop copies them.
+        """
+        self._check_running()
+        if steps < 0:
+            raise CosimError(f"number of steps must be >= 0, got {steps}")
+        histories = [
+            np.empty((block // period + 1, len(c.inputs) + len(c.outputs))) for c, period, _ in self._plan
+        ]
+        rows = np.zeros(len(histories), dtype=np.int64)
+        wanted = steps >= COMPILED_MIN_STEPS if compiled is None else compiled
+        use_compiled = wanted and self._native() is not None
+        if use_compiled and self._recording_loop is None:
+            self._recording_loop = self._compile(record=True)
+        done = 0
+        while done < steps:
+            count = min(block, steps - done)
+            first = self.step_index
+            rows[:] = 0
+            if use_compiled:
+                try:
+                    self._run_compiled(count, self._recording_loop, rows, histories)
+                finally:
+                    self._deliver(first, on_block, histories, rows)
+            else:
+                try:
+                    for k in range(first, first + count):
+                        self._advance(1)
+                        for i, (component, period, _) in enumerate(self._plan):
+                            if not component.constant_outputs and (period == 1 or k % period == 0):
+                                row = histories[i][rows[i]]
+                                row[: len(component.inputs)] = component.input_buffer
+                                row[len(component.inputs) :] = component.output_buffer
+                                rows[i] += 1
+                finally:
+                    self._deliver(first, on_block, histories, rows)
+            done += count
+        return steps
+
+    def _deliver(self, first: int, on_block, histories: list[np.ndarray], rows: np.ndarray) -> None:
+        """Hand the rows of the steps that ran (all of them, or up to a failure) to `on_block`."""
+        end = self.step_index
+        if end <= first:
+            return
+        # Steps of each component in [first, end): rows of a step cut short by a failure are dropped.
+        kept = [
+            history[: min(int(n), (end + period - 1) // period - (first + period - 1) // period)]
+            for history, n, (_, period, _) in zip(histories, rows, self._plan, strict=True)
+        ]
+        on_block(first, end - first, kept)
+
+    def _native(self):
+        """The components' C-level steps in plan order, or None when one needs Python."""
+        return fast_loop.native_steps([component for component, _, _ in self._plan])
+
+    def _compile(self, record: bool = False):
+        native = self._native()
+        return fast_loop.compile_loop(self._plan, self.system, self.start_time_ns, native, record=record)
+
+    def _run_compiled(self, steps: int, loop=None, *recording) -> None:
+        if loop is None:
+            if self._compiled_loop is None:
+                self._compiled_loop = self._compile()
+            loop = self._compiled_loop
+        next_step, failed, call, status = loop(self.step_index, steps, *recording)
+        self.step_index = next_step
+        if failed < 0:
+            return
+        try:
+            self._native()[failed].fail(call, status, self.time)
+        except CosimError as error:
+            self.failure = error
+            raise
+
+    def _advance(self, steps: int, callback: Callable[[Master], bool | None] | None = None) -> int:
+        """Step `steps` times (or until `callback`, called after each step, returns true); return
+        the number of steps done. On a failure `step_index` is the step that failed."""
+        steppers = self._steppers
+        h_ns = self.system.macro_step_ns
+        start_ns = self.start_time_ns
+        jacobi = self.system.mode == "jacobi"
+        first = k = self.step_index
+        try:
+            for k in range(first, first + steps):
+                t = (start_ns + k * h_ns) / NS_PER_S
+                if jacobi:
+                    due = [entry for entry in steppers if k % entry[0] == 0]
+                    for _, _, gather, push, _, _ in due:
+                        if gather is not None:
+                            gather()
+                            push()
+                    for _, h, _, _, do_step, get_outputs in due:
+                        do_step(t, h)
+                        get_outputs()
+                else:
+                    for period, h, gather, push, do_step, get_outputs in steppers:
+                        if period == 1 or k % period == 0:
+                            if gather is not None:
+                                gather()
+                                push()
+                            do_step(t, h)
+                            get_outputs()
+                if callback is not None:
+                    self.step_index = k + 1
+                    if callback(self):
+                        return k + 1 - first
+        except CosimError as error:
+            self.step_index = k
+            self.failure = error
+            raise
+        self.step_index = first + steps
+        return steps
+
+    def close(self) -> None:
+        """Terminate healthy components and free all; idempotent. Raises the first terminate error."""
+        if self._closed:
+            return
+        self._closed = True
+        first_error: CosimError | None = None
+        for component in self.order:
+            if component.state in (State.SET_UP, State.STEPPING):
+                try:
+                    component.terminate()
+                except CosimError as error:
+                    first_error = first_error or error
+        for component in self.order:
+            component.free()
+        if first_error is not None and self.failure is None:
+            raise first_error
+
+    def __enter__(self) -> Master:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()

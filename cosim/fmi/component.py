@@ -1,0 +1,583 @@
+"""FMI 2.0 and 3.0 co-simulation FMUs as components, through fmpy, with a strict lifecycle.
+
+fmpy loads the binary and runs the lifecycle calls; the per-step calls (set inputs, do step, get
+outputs) go straight to the FMU's C functions with value references resolved once and values in
+preallocated ctypes arrays: one batched call per FMI type, about 4x faster than fmpy's methods
+(reference/fmpy-pitfalls.md §6).
+
+Port mapping lets any FMU fill a role: `port_map = {"v": "u_speed", "omega": {"name": "yawRate",
+"scale": -1}}` exposes FMU variable `u_speed` as port `v` and `yawRate` as port `omega`. The scale
+multiplies in the direction of the data flow: FMU input = scale * port value, port output =
+scale * FMU output, FMU parameter = scale * given value. FMU variables not named in the map keep
+their own names (unless a mapped port already uses the name). Several ports may name one variable:
+an output then fills each of them, and an input receives the value of the port set last (its
+position in the FMU's input order); this lets an FMU with fewer ports than a role (a
+fault-injection FMU, say) fill it. Supported variable types: FMI 2.0
+Real, Integer, Enumeration, Boolean; FMI 3.0 scalar Float64, Int32, Boolean (other FMI 3.0 types
+and array variables are not exposed).
+
+fmpy behaviour owned here: each instance is extracted into its own directory (static state inside
+a shared library is not shared between instances); the working directory is restored after a
+failed load; status Discard, Error and Fatal become `CosimError` naming the component, the model
+and the time. After Error the instance is only freed; after Fatal nothing more is called (the
+standard forbids it), and `free()` just forgets the instance.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import shutil
+import tempfile
+import weakref
+import zipfile
+from collections import deque
+from collections.abc import Mapping
+from functools import cache
+from pathlib import Path
+
+import fmpy
+import numpy as np
+from fmpy.fmi2 import FMU2Slave
+from fmpy.fmi3 import FMU3Slave
+
+from cosim.core.component import Component, NativeStep, Port, State, closest_names
+from cosim.errors import CosimError
+
+_STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
+_TYPES = {
+    "Real": "real",
+    "Float64": "real",
+    "Integer": "integer",
+    "Enumeration": "integer",
+    "Int32": "integer",
+}
+_TYPES["Boolean"] = "boolean"
+_FMI_TYPE_NAMES = {2: {"real": "Real", "integer": "Integer", "boolean": "Boolean"}}
+_FMI_TYPE_NAMES[3] = {"real": "Float64", "integer": "Int32", "boolean": "Boolean"}
+_C_TYPES = {2: {"real": ctypes.c_double, "integer": ctypes.c_int, "boolean": ctypes.c_int}}
+_C_TYPES[3] = {"real": ctypes.c_double, "integer": ctypes.c_int32, "boolean": ctypes.c_bool}
+
+
+def _read_description(path: Path):
+    """Check the archive and return fmpy's model description; one-line `CosimError` otherwise."""
+    if not path.is_file():
+        raise CosimError(f"FMU '{path}' not found")
+    if not zipfile.is_zipfile(path):
+        raise CosimError(f"FMU '{path}' is not a zip archive (corrupt file or not an FMU)")
+    try:
+        with zipfile.ZipFile(path) as archive:
+            names = archive.namelist()
+    except (zipfile.BadZipFile, OSError) as error:
+        raise CosimError(f"FMU '{path}' cannot be read: {error}") from None
+    if "modelDescription.xml" not in names:
+        raise CosimError(f"FMU '{path}' has no modelDescription.xml")
+    try:
+        description = fmpy.read_model_description(str(path))
+    except Exception as error:  # fmpy raises plain Exceptions with multi-line text
+        first_line = " ".join(str(error).split())[:300]
+        raise CosimError(f"FMU '{path}': invalid modelDescription.xml: {first_line}") from None
+    version = int(str(description.fmiVersion).split(".")[0])
+    if version not in (2, 3):
+        raise CosimError(f"FMU '{path}' is FMI {description.fmiVersion}; navcosim supports FMI 2.0 and 3.0")
+    if description.coSimulation is None:
+        raise CosimError(
+            f"FMU '{path}' (model {description.modelName}) supports model exchange only; "
+            "navcosim needs a co-simulation FMU"
+        )
+    platform = fmpy.platform if version == 2 else fmpy.platform_tuple
+    binary = f"binaries/{platform}/{description.coSimulation.modelIdentifier}{fmpy.sharedLibraryExtension}"
+    if binary not in names:
+        present = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
+        raise CosimError(
+            f"FMU '{path}' has no binary for this platform ({platform}); "
+            f"it has: {', '.join(present) or 'none'}"
+        )
+    return description, version
+
+
+def _parse_port_map(port_map: Mapping[str, object], path: Path) -> dict[str, tuple[str, float]]:
+    """port name -> (FMU variable name, scale)."""
+    parsed: dict[str, tuple[str, float]] = {}
+    for port, target in port_map.items():
+        if isinstance(target, str):
+            parsed[port] = (target, 1.0)
+        elif isinstance(target, Mapping) and isinstance(target.get("name"), str):
+            unknown = set(target) - {"name", "scale"}
+            scale = target.get("scale", 1.0)
+            if unknown or isinstance(scale, bool) or not isinstance(scale, int | float):
+                raise CosimError(f"FMU '{path}': port map entry '{port}' must be a name or {{name, scale}}")
+            parsed[port] = (target["name"], float(scale))
+        else:
+            raise CosimError(f"FMU '{path}': port map entry '{port}' must be a name or {{name, scale}}")
+    return parsed
+
+
+class FmuComponent(Component):
+    """A co-simulation FMU (FMI 2.0 or 3.0) as a component.
+
+    Args:
+        path: the .fmu file.
+        name: component name (role) in the system.
+        parameters: default parameter values by port name (overridden by `setup`).
+        port_map: port name -> FMU variable name or {"name": ..., "scale": ...}.
+        period: seconds between steps (0 = every macro step).
+        feedthrough_override: output port -> input ports it depends on directly, overriding the FMU's
+            <ModelStructure> (where an output without `dependencies` depends on every input).
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        name: str,
+        parameters: Mapping[str, float] | None = None,
+        port_map: Mapping[str, object] | None = None,
+        period: float = 0.0,
+        feedthrough_override: Mapping[str, list[str]] | None = None,
+    ) -> None:
+        super().__init__(name, period=period)
+        self.path = Path(path)
+        self.model_description, self.fmi_version = _read_description(self.path)
+        self.default_parameters = dict(parameters or {})
+        mapping = _parse_port_map(port_map or {}, self.path)
+        variables = {v.name: v for v in self.model_description.modelVariables}
+        for port, (variable, _) in mapping.items():
+            if variable not in variables:
+                raise CosimError(
+                    f"FMU '{self.path}' (component '{name}') has no variable '{variable}' "
+                    f"(mapped to port '{port}'); variables: {closest_names(variable, variables)}"
+                )
+        by_variable: dict[str, list[tuple[str, float]]] = {}
+        for port, (variable, scale) in mapping.items():
+            by_variable.setdefault(variable, []).append((port, scale))
+        self._variables: dict[str, tuple[object, float]] = {}  # port name -> (fmpy variable, scale)
+        ports: dict[str, list[Port]] = {"input": [], "output": [], "parameter": []}
+        for variable in self.model_description.modelVariables:
+            causality = variable.causality if variable.causality != "structuralParameter" else "parameter"
+            kind = _TYPES.get(variable.type)
+            if causality not in ports or kind is None or getattr(variable, "dimensions", None):
+                continue
+            if variable.name not in by_variable and variable.name in mapping:
+                continue  # a mapped port already took this name
+            start = _start_value(variable.start, kind)
+            unit = getattr(variable, "unit", None) or getattr(
+                getattr(variable, "declaredType", None), "unit", None
+            )
+            for port_name, scale in by_variable.get(variable.name, [(variable.name, 1.0)]):
+                port = Port(port_name, kind, unit or "", variable.description or "", start * scale)
+                ports[causality].append(port)
+                self._variables[port_name] = (variable, scale)
+        ports_of: dict[str, list[str]] = {}
+        for port, (variable, _) in self._variables.items():
+            ports_of.setdefault(variable.name, []).append(port)
+        feedthrough = {}
+        for unknown in self.model_description.outputs:
+            if unknown.dependencies is not None and unknown.variable.name in ports_of:
+                depends = [
+                    port
+                    for d in unknown.dependencies
+                    if d.causality == "input" and d.name in ports_of
+                    for port in ports_of[d.name]
+                ]
+                for port in ports_of[unknown.variable.name]:
+                    feedthrough[port] = list(depends)
+        feedthrough.update(feedthrough_override or {})
+        self._set_ports(ports["input"], ports["output"], ports["parameter"], feedthrough)
+        self._plan_transfers()
+        self._slave = None
+        self._unzip_dir: str | None = None
+        self._fatal = False
+        self.log_messages: deque[str] = deque(maxlen=20)
+
+    def _plan_transfers(self) -> None:
+        """Per FMI type: buffer slots, value references, FMI value array, scales."""
+        self._input_groups = self._groups(self.inputs)
+        self._output_groups = self._groups(self.outputs)
+
+    def restrict_push(self, slots) -> None:
+        """From now on `push_inputs` sends only the inputs at `slots` (port order): the others keep
+        the values last sent (FMI inputs hold their values), e.g. a plan fixed for the whole run."""
+        self._input_groups = self._groups(self.inputs, set(slots))
+        self._compile_fast_path()
+        if self.state is State.STEPPING:
+            self._install_fast_path()
+
+    def _groups(
+        self, ports: list[Port], only: set[int] | None = None
+    ) -> list[tuple[str, list[int], object, object, list[float]]]:
+        groups = []
+        for kind in ("real", "integer", "boolean"):
+            slots = [i for i, p in enumerate(ports) if p.type == kind and (only is None or i in only)]
+            if slots:
+                references = [self._variables[ports[i].name][0].valueReference for i in slots]
+                scales = [self._variables[ports[i].name][1] for i in slots]
+                values = (_C_TYPES[self.fmi_version][kind] * len(slots))()
+                groups.append((kind, slots, (ctypes.c_uint32 * len(slots))(*references), values, scales))
+        return groups
+
+    def _compile_fast_path(self) -> None:
+        """Generate specialised `push_inputs`, `do_step`, `get_outputs` for this FMU.
+
+        The functions are generated as straight-line Python with every buffer, value reference
+        and C function bound as a constant: a step then costs the C calls plus a few
+        element copies, with no loop, lookup or allocation. `_remove_fast_path` puts the checked
+        class methods back when the instance leaves the stepping state.
+        """
+        n = "" if self.fmi_version == 2 else ", {n}"
+        names: dict[str, object] = {"fail": self._fail, "np": np, "ib": self.input_cbuffer}
+        names.update(
+            ob=self.output_cbuffer, obn=self.output_buffer, ibn=self.input_buffer, handle=self._handle
+        )
+        push, pull = ["def push_inputs():"], ["def get_outputs():"]
+        for direction, groups, lines in (
+            ("Set", self._input_groups, push),
+            ("Get", self._output_groups, pull),
+        ):
+            for g, (kind, slots, references, values, scales) in enumerate(groups):
+                function = f"fmi{self.fmi_version}{direction}{_FMI_TYPE_NAMES[self.fmi_version][kind]}"
+                direct = kind == "real" and all(scale == 1.0 for scale in scales) and len(groups) == 1
+                buffer = self.input_cbuffer if direction == "Set" else self.output_cbuffer
+                if direct and slots == list(range(len(slots))):
+                    values = buffer  # the FMI call reads/writes the component's buffer itself
+                names.update(
+                    {f"f{direction}{g}": self._setters[kind] if direction == "Set" else self._getters[kind]}
+                )
+                names.update({f"r{direction}{g}": references, f"v{direction}{g}": values})
+                names[f"vn{direction}{g}"] = np.ctypeslib.as_array(values)
+                names[f"s{direction}{g}"] = np.array(slots, dtype=np.intp)
+                names[f"k{direction}{g}"] = np.array(scales)
+                copies = [] if values is buffer else _copy_lines(direction, g, kind, slots, scales)
+                call = [
+                    f"    status = f{direction}{g}(handle, r{direction}{g}, {len(slots)}, v{direction}{g}"
+                    + n.format(n=len(slots))
+                    + ")",
+                    f"    if status > 1: fail(status, '{function}')",
+                ]
+                lines += copies + call if direction == "Set" else call + copies
+        push.append("    return None")
+        pull.append("    return obn")
+        if self.fmi_version == 2:
+            step = ["def do_step(t, h):", "    status = raw(handle, t, h, 1)"]
+        else:
+            step = ["def do_step(t, h):", "    status = raw(handle, t, h, True, *flags)"]
+        step.append(f"    if status > 1: fail(status, 'fmi{self.fmi_version}DoStep', t)")
+        if self.fmi_version == 3:
+            step.append("    if step_flags[1]: asked_to_terminate(t)")
+            names.update(flags=self._do_step_flags, step_flags=self._step_flags)
+            names["asked_to_terminate"] = self._asked_to_terminate
+        names["raw"] = self._raw_do_step
+        exec("\n".join(push + pull + step), names)  # noqa: S102 - generated from our own templates
+        self._compiled = {method: names[method] for method in ("push_inputs", "get_outputs", "do_step")}
+
+    def _install_fast_path(self) -> None:
+        self.__dict__.update(self._compiled)
+
+    def _remove_fast_path(self) -> None:
+        for method in ("push_inputs", "get_outputs", "do_step"):
+            self.__dict__.pop(method, None)
+
+    # ---- lifecycle ---------------------------------------------------------------------------
+
+    def _fail(self, status: int, function: str, t: float | None = None) -> None:
+        """Raise the `CosimError` for a bad status; Error and Fatal mark the instance failed."""
+        if status >= 3:
+            self._remove_fast_path()
+            self.state = State.FAILED
+            self._fatal = self._fatal or status == 4
+        when = f" at t = {t:.9g} s" if t is not None else ""
+        detail = f": {self.log_messages[-1]}" if self.log_messages else ""
+        name = _STATUS[status] if 0 <= status < len(_STATUS) else str(status)
+        raise CosimError(
+            f"FMU '{self.name}' (model {self.model_description.modelName}) returned "
+            f"fmi{self.fmi_version}{name} from {function}{when}{detail}"
+        )
+
+    def _log(self, *args) -> None:
+        # FMI 3.0 passes (environment, status, category, message); FMI 2.0 comes via the dispatcher.
+        status, category, message = args[-3:]
+        if status >= 1:
+            text = message.decode(errors="replace") if isinstance(message, bytes) else str(message)
+            self.log_messages.append(" ".join(text.split()))
+
+    def instantiate(self) -> None:
+        self._require("instantiate", State.CREATED)
+        self._unzip_dir = tempfile.mkdtemp(prefix=f"navcosim-{self.name}-")
+        description = self.model_description
+        work_dir = os.getcwd()
+        try:
+            fmpy.extract(str(self.path), unzipdir=self._unzip_dir)
+            slave_class = FMU2Slave if self.fmi_version == 2 else FMU3Slave
+            guid = description.guid if self.fmi_version == 2 else description.instantiationToken
+            self._slave = slave_class(
+                guid=guid,
+                unzipDirectory=self._unzip_dir,
+                modelIdentifier=description.coSimulation.modelIdentifier,
+                instanceName=self.name,
+            )
+            if self.fmi_version == 2:
+                self._slave.instantiate(callbacks=self._fmi2_callbacks())
+            else:
+                self._slave.instantiate(logMessage=self._log)
+        except Exception as error:
+            self._discard_files()
+            detail = (
+                f": {self.log_messages[-1]}" if self.log_messages else f": {' '.join(str(error).split())}"
+            )
+            raise CosimError(
+                f"FMU '{self.path}' (component '{self.name}') failed to instantiate{detail[:300]}"
+            ) from None
+        finally:
+            # fmpy changes into the binary's folder and does not change back when loading fails.
+            os.chdir(work_dir)
+        self._bind_raw_functions()
+        self._compile_fast_path()
+        self.state = State.INSTANTIATED
+
+    def _fmi2_callbacks(self):
+        from fmpy.fmi2 import (
+            fmi2CallbackAllocateMemoryTYPE,
+            fmi2CallbackFreeMemoryTYPE,
+            fmi2CallbackFunctions,
+        )
+
+        callbacks = fmi2CallbackFunctions()
+        callbacks.logger = _fmi2_logger()
+        callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
+        callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(fmpy.free)
+        # The FMU hands componentEnvironment back to the logger: it selects this component.
+        callbacks.componentEnvironment = id(self)
+        _LOG_TARGETS[id(self)] = weakref.ref(self)
+        try:  # fmpy's C proxy formats the variadic message; it keeps one logger process-wide
+            from fmpy.logging import addLoggerProxy
+
+            addLoggerProxy(ctypes.byref(callbacks))
+        except Exception:
+            pass
+        self._callbacks = callbacks  # keep the callbacks alive as long as the instance
+        return callbacks
+
+    def _bind_raw_functions(self) -> None:
+        """Own prototypes of the per-step C functions (fmpy's wrappers allocate on every call)."""
+        dll = self._slave.dll
+        c_void_p, c_size_t, c_double, c_int = ctypes.c_void_p, ctypes.c_size_t, ctypes.c_double, ctypes.c_int
+        self._handle = self._slave.component
+        self._setters, self._getters = {}, {}
+        for kind, type_name in _FMI_TYPE_NAMES[self.fmi_version].items():
+            values = ctypes.POINTER(_C_TYPES[self.fmi_version][kind])
+            vrs = ctypes.POINTER(ctypes.c_uint32)
+            if self.fmi_version == 2:
+                prototype = ctypes.CFUNCTYPE(c_int, c_void_p, vrs, c_size_t, values)
+            else:
+                prototype = ctypes.CFUNCTYPE(c_int, c_void_p, vrs, c_size_t, values, c_size_t)
+            self._setters[kind] = prototype((f"fmi{self.fmi_version}Set{type_name}", dll))
+            self._getters[kind] = prototype((f"fmi{self.fmi_version}Get{type_name}", dll))
+        if self.fmi_version == 2:
+            prototype = ctypes.CFUNCTYPE(c_int, c_void_p, c_double, c_double, c_int)
+            self._raw_do_step = prototype(("fmi2DoStep", dll))
+            self._do_step_flags = ()
+        else:
+            flag = ctypes.POINTER(ctypes.c_bool)
+            prototype = ctypes.CFUNCTYPE(
+                c_int, c_void_p, c_double, c_double, ctypes.c_bool, flag, flag, flag, ctypes.POINTER(c_double)
+            )
+            self._raw_do_step = prototype(("fmi3DoStep", dll))
+            # eventHandlingNeeded, terminateSimulation, earlyReturn: contiguous for the compiled loop.
+            self._step_flags = (ctypes.c_bool * 3)()
+            self._last_successful_time = ctypes.c_double()
+            first = ctypes.addressof(self._step_flags)
+            self._do_step_flags = tuple(ctypes.cast(first + i, flag) for i in range(3)) + (
+                ctypes.pointer(self._last_successful_time),
+            )
+
+    def _call_lifecycle(self, function: str, *args) -> None:
+        try:
+            getattr(self._slave, function)(*args)
+        except Exception as error:
+            status = getattr(error, "status", 3)
+            self._fail(int(status), function)
+
+    def setup(self, t0: float, parameters: Mapping[str, float]) -> None:
+        self._require("setup", State.INSTANTIATED)
+        values = dict(self.default_parameters)
+        values.update(parameters)
+        names = [p.name for p in self.parameters]
+        kinds = {p.name: p.type for p in self.parameters}
+        for key, value in values.items():
+            if key not in kinds:
+                raise CosimError(
+                    f"FMU '{self.name}' (model {self.model_description.modelName}) has no parameter "
+                    f"'{key}'; parameters: {closest_names(key, names) or 'none'}"
+                )
+            variable, scale = self._variables[key]
+            self._set_scalar(kinds[key], variable.valueReference, value * scale, key)
+        self.t0 = float(t0)
+        if self.fmi_version == 2:
+            self._call_lifecycle("setupExperiment", None, self.t0)
+        self.state = State.SET_UP
+
+    def _set_scalar(self, kind: str, reference: int, value: float, name: str) -> None:
+        if kind != "real" and float(value) != int(value):
+            raise CosimError(f"FMU '{self.name}': parameter '{name}' must be an integer, got {value}")
+        values = (_C_TYPES[self.fmi_version][kind] * 1)(value if kind == "real" else int(value))
+        status = self._setters[kind](
+            self._handle, (ctypes.c_uint32 * 1)(reference), 1, values, *self._count(1)
+        )
+        if status > 1:
+            self._fail(status, f"fmi{self.fmi_version}Set{_FMI_TYPE_NAMES[self.fmi_version][kind]} ({name})")
+
+    def _count(self, n: int) -> tuple[int, ...]:
+        return () if self.fmi_version == 2 else (n,)
+
+    def initialize(self) -> None:
+        self._require("initialize", State.SET_UP)
+        if self.fmi_version == 2:
+            self._call_lifecycle("enterInitializationMode")
+        else:
+            self._call_lifecycle("enterInitializationMode", None, self.t0)
+        self._call_lifecycle("exitInitializationMode")
+        self.state = State.STEPPING
+        self._install_fast_path()
+
+    def push_inputs(self) -> None:
+        self._require("push_inputs", State.INSTANTIATED, State.SET_UP, State.STEPPING)
+        self._compiled["push_inputs"]()
+
+    def do_step(self, t: float, h: float) -> None:
+        self._require("do_step", State.STEPPING)
+        self._compiled["do_step"](t, h)
+
+    def get_outputs(self) -> np.ndarray:
+        self._require("get_outputs", State.STEPPING)
+        return self._compiled["get_outputs"]()
+
+    def native_step(self) -> NativeStep | None:
+        """C-level stepping for the compiled loop when every input and output is an unscaled real."""
+        for groups in (self._input_groups, self._output_groups):
+            if any(
+                kind != "real" or any(scale != 1.0 for scale in scales) for kind, _, _, _, scales in groups
+            ):
+                return None
+        if self._input_groups and self._input_groups[0][1] != list(range(len(self.inputs))):
+            return None  # `restrict_push` left only some inputs to send
+
+        def address(function) -> int:
+            return ctypes.cast(function, ctypes.c_void_p).value
+
+        def references(groups) -> int:
+            return ctypes.addressof(groups[0][2]) if groups else 0
+
+        version = self.fmi_version
+        return NativeStep(
+            fmi_version=version,
+            handle=self._handle if isinstance(self._handle, int) else self._handle.value,
+            set_real=address(self._setters["real"]),
+            do_step=address(self._raw_do_step),
+            get_real=address(self._getters["real"]),
+            input_references=references(self._input_groups),
+            output_references=references(self._output_groups),
+            input_values=ctypes.addressof(self.input_cbuffer),
+            output_values=ctypes.addressof(self.output_cbuffer),
+            step_flags=np.ctypeslib.as_array(self._step_flags) if version == 3 else np.zeros(3, bool),
+            last_successful_time=ctypes.addressof(self._last_successful_time) if version == 3 else 0,
+            fail=self._native_failure,
+        )
+
+    def _native_failure(self, call: int, status: int, t: float) -> None:
+        if call == 3:
+            self._asked_to_terminate(t)
+        real = "Real" if self.fmi_version == 2 else "Float64"
+        function = ("Set" + real, "DoStep", "Get" + real)[call]
+        self._fail(status, f"fmi{self.fmi_version}{function}", t)
+
+    def _asked_to_terminate(self, t: float) -> None:
+        raise CosimError(
+            f"FMU '{self.name}' (model {self.model_description.modelName}) asked to terminate "
+            f"the simulation at t = {t:.9g} s"
+        )
+
+    def terminate(self) -> None:
+        self._require("terminate", State.SET_UP, State.STEPPING)
+        self._remove_fast_path()
+        self.state = State.TERMINATED
+        self._call_lifecycle("terminate")
+
+    def free(self) -> None:
+        """Free the instance and unload the binary; after fmi*Fatal only forget them."""
+        self._remove_fast_path()
+        if self._slave is not None and self.state is not State.FREED:
+            slave, self._slave = self._slave, None
+            if not self._fatal:
+                try:
+                    slave.freeInstance()
+                except Exception:  # a broken FMU must not prevent freeing the others
+                    pass
+        self.state = State.FREED
+        _LOG_TARGETS.pop(id(self), None)
+        self._discard_files()
+
+    def _discard_files(self) -> None:
+        if self._unzip_dir is not None:
+            shutil.rmtree(self._unzip_dir, ignore_errors=True)
+            self._unzip_dir = None
+
+    def describe(self) -> dict[str, str]:
+        description = self.model_description
+        return {
+            "fmu": str(self.path),
+            "model_name": description.modelName or "",
+            "fmi_version": description.fmiVersion or "",
+            "guid": (description.guid if self.fmi_version == 2 else description.instantiationToken) or "",
+            "generation_tool": description.generationTool or "",
+            "generation_date": description.generationDateAndTime or "",
+        }
+
+
+_LOG_TARGETS: dict[int, weakref.ref] = {}
+
+
+@cache
+def _fmi2_logger():
+    """One FMI 2.0 logger for all instances, dispatching on componentEnvironment."""
+    from fmpy.fmi2 import fmi2CallbackLoggerTYPE
+
+    def dispatch(environment, instance, status, category, message):
+        target = _LOG_TARGETS.get(environment or 0)
+        component = target() if target is not None else None
+        if component is not None:
+            component._log(status, category, message)
+
+    return fmi2CallbackLoggerTYPE(dispatch)
+
+
+def _copy_lines(direction: str, group: int, kind: str, slots: list[int], scales: list[float]) -> list[str]:
+    """Source lines copying one type group between a component buffer and its FMI value array."""
+    values, array = f"v{direction}{group}", f"vn{direction}{group}"
+    if len(slots) > 8:  # one NumPy copy beats many element copies
+        scaled = "" if all(scale == 1.0 for scale in scales) else f" * k{direction}{group}"
+        if direction == "Get":
+            return [f"    obn[s{direction}{group}] = {array}{scaled}"]
+        staged = f"ibn[s{direction}{group}]{scaled}"
+        convert = {"real": staged, "integer": f"np.rint({staged})", "boolean": f"{staged} != 0.0"}[kind]
+        return [f"    {array}[:] = {convert}"]
+    lines = []
+    for position, (slot, scale) in enumerate(zip(slots, scales, strict=True)):
+        factor = "" if scale == 1.0 else f" * {scale!r}"
+        if direction == "Get":
+            lines.append(f"    ob[{slot}] = {values}[{position}]{factor}")
+        else:
+            convert = {"real": "{}", "integer": "int(round({}))", "boolean": "{} != 0.0"}[kind]
+            lines.append(f"    {values}[{position}] = " + convert.format(f"ib[{slot}]{factor}"))
+    return lines
+
+
+def _start_value(start: object, kind: str) -> float:
+    """A variable's start attribute as a float (NaN when absent)."""
+    if start is None or start == "":
+        return float("nan") if kind == "real" else 0.0
+    text = str(start).strip().split()[0]
+    if kind == "boolean":
+        return 1.0 if text.lower() in ("true", "1") else 0.0
+    try:
+        return float(text)
+    except ValueError:
+        return float("nan")

@@ -1,0 +1,172 @@
+"""Compare two runs' logs: per signal the largest deviation over time, and the outcomes.
+
+Time base: when a component's sample times are identical in both logs the values are compared
+sample by sample; otherwise B is interpolated linearly onto A's sample times inside the time span
+both logs cover (and the report says so). NaN in both at the same time counts as equal; NaN in
+only one counts as an infinite deviation.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cosim.logs.reader import Log
+
+# outcome keys compared as text; the others are compared as numbers against the tolerance
+OUTCOME_TEXT_KEYS = ("reached", "reason")
+
+
+@dataclass(frozen=True)
+class SignalDeviation:
+    component: str
+    name: str
+    max_deviation: float  # max |A - B| over the compared times
+    at_time: float  # [s] where it occurs (NaN when nothing was compared)
+    interpolated: bool  # B was interpolated onto A's times
+
+
+@dataclass
+class DiffReport:
+    tolerance: float
+    deviations: list[SignalDeviation] = field(default_factory=list)
+    only_in_a: list[str] = field(default_factory=list)  # "component.name"
+    only_in_b: list[str] = field(default_factory=list)
+    outcome_differences: list[tuple[str, str, str]] = field(default_factory=list)  # key, A, B
+
+    @property
+    def exceeding(self) -> list[SignalDeviation]:
+        return [item for item in self.deviations if not item.max_deviation <= self.tolerance]
+
+    @property
+    def differs(self) -> bool:
+        """True when a signal or the outcome differs by more than the tolerance."""
+        return bool(self.exceeding or self.outcome_differences)
+
+
+def diff_logs(log_a: Log, log_b: Log, tolerance: float) -> DiffReport:
+    report = DiffReport(tolerance)
+    for component in log_a.components:
+        names_a = log_a.signals(component).names
+        if component not in log_b.components:
+            report.only_in_a += [f"{component}.{name}" for name in names_a]
+            continue
+        a, b = log_a.signals(component), log_b.signals(component)
+        report.only_in_a += [f"{component}.{name}" for name in a.names if name not in b.names]
+        report.only_in_b += [f"{component}.{name}" for name in b.names if name not in a.names]
+        common = [name for name in a.names if name in b.names]
+        same_times = np.array_equal(a.t_ns, b.t_ns)
+        for name in common:
+            deviation, at_time = _max_deviation(a.t_ns, a[name], b.t_ns, b[name], same_times)
+            report.deviations.append(SignalDeviation(component, name, deviation, at_time, not same_times))
+    for component in log_b.components:
+        if component not in log_a.components:
+            report.only_in_b += [f"{component}.{name}" for name in log_b.signals(component).names]
+    report.outcome_differences = _outcome_differences(log_a.outcome, log_b.outcome, tolerance)
+    report.deviations.sort(key=lambda item: (-_sort_key(item.max_deviation), item.component, item.name))
+    return report
+
+
+def _sort_key(value: float) -> float:
+    return math.inf if math.isnan(value) else value
+
+
+def _max_deviation(
+    t_a: np.ndarray, a: np.ndarray, t_b: np.ndarray, b: np.ndarray, same_times: bool
+) -> tuple[float, float]:
+    """Largest |a - b| and the time [s] where it occurs; times are int64 ns."""
+    if not same_times:
+        inside = (t_a >= t_b[0]) & (t_a <= t_b[-1]) if len(t_b) else np.zeros(len(t_a), dtype=bool)
+        t_a, a = t_a[inside], a[inside]
+        b = _interpolate(t_b, b, t_a)
+    if len(a) == 0:
+        return math.nan, math.nan
+    equal = (a == b) | (np.isnan(a) & np.isnan(b))  # inf == inf and NaN/NaN count as equal
+    with np.errstate(invalid="ignore"):
+        deviation = np.where(equal, 0.0, np.abs(a - b))
+    deviation = np.where(np.isnan(deviation), np.inf, deviation)
+    worst = int(np.argmax(deviation))
+    return float(deviation[worst]), float(t_a[worst]) / 1e9
+
+
+def _interpolate(t_ns: np.ndarray, values: np.ndarray, at_ns: np.ndarray) -> np.ndarray:
+    """Linear interpolation at `at_ns`; a time that equals a sample takes that sample exactly
+    (so NaN and inf survive), between samples a non-finite neighbour gives NaN."""
+    last = len(t_ns) - 1
+    right = np.clip(np.searchsorted(t_ns, at_ns), 0, last)
+    left = np.clip(right - 1, 0, last)
+    exact = t_ns[right] == at_ns
+    span = (t_ns[right] - t_ns[left]).astype(float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        weight = np.where(span > 0, (at_ns - t_ns[left]) / np.where(span > 0, span, 1.0), 0.0)
+        result = values[left] + weight * (values[right] - values[left])
+    result[exact] = values[right[exact]]
+    return result
+
+
+def _outcome_differences(
+    a: dict[str, str] | None, b: dict[str, str] | None, tolerance: float
+) -> list[tuple[str, str, str]]:
+    if a is None and b is None:
+        return []
+    a, b = a or {}, b or {}
+    differences = []
+    for key in sorted(set(a) | set(b)):
+        value_a, value_b = a.get(key, "-"), b.get(key, "-")
+        if value_a == value_b:
+            continue
+        if key not in OUTCOME_TEXT_KEYS:
+            try:
+                if abs(float(value_a) - float(value_b)) <= tolerance:
+                    continue
+            except ValueError:
+                pass
+        differences.append((key, value_a, value_b))
+    return differences
+
+
+def format_report(report: DiffReport, log_a: Log, log_b: Log, limit: int = 40) -> str:
+    """The report as text lines for the terminal."""
+    lines = [
+        f"A: {log_a.path} ({log_a.scenario_name or '?'}, {log_a.duration:.3f} s)",
+        f"B: {log_b.path} ({log_b.scenario_name or '?'}, {log_b.duration:.3f} s)",
+    ]
+    interpolated = sorted({item.component for item in report.deviations if item.interpolated})
+    if interpolated:
+        lines.append(
+            f"time base: sample times differ for {', '.join(interpolated)}: B interpolated linearly "
+            "onto A's times where both cover them"
+        )
+    else:
+        lines.append("time base: identical sample times, compared sample by sample")
+    exceeding = report.exceeding
+    shown = exceeding[:limit] if exceeding else []
+    if shown:
+        lines.append(f"{'signal':<40} {'max |A-B|':>12}  at t [s]")
+        for item in shown:
+            lines.append(
+                f"{item.component + '.' + item.name:<40} {item.max_deviation:>12.6g}  {item.at_time:.3f}"
+            )
+        if len(exceeding) > limit:
+            lines.append(f"... and {len(exceeding) - limit} more signals above the tolerance")
+    largest = max((_sort_key(item.max_deviation) for item in report.deviations), default=0.0)
+    within = len(report.deviations) - len(exceeding)
+    lines.append(
+        f"{within} of {len(report.deviations)} common signals within tolerance {report.tolerance:g}"
+        f" (largest deviation {largest:.6g})"
+    )
+    for label, names in (("only in A", report.only_in_a), ("only in B", report.only_in_b)):
+        if names:
+            lines.append(f"{label}: {', '.join(names[:20])}{' ...' if len(names) > 20 else ''}")
+    for key, value_a, value_b in report.outcome_differences:
+        lines.append(f"outcome {key}: A {value_a}  B {value_b}")
+    if not report.outcome_differences:
+        lines.append("outcome: equal")
+    components = sorted({item.component for item in exceeding})
+    verdict = (
+        f"DIFFERENT ({', '.join(components) or 'outcome'})" if report.differs else "EQUAL within tolerance"
+    )
+    lines.append(f"result: {verdict}")
+    return "\n".join(lines)

@@ -1,0 +1,63 @@
+"""Export a log's signals as tables: CSV (one file per component) or one NumPy .npz.
+
+CSV columns: `t_ns` (exact log time [ns]), `t` [s], then one column per variable under its
+original name; floats are written with 17 significant digits, so they read back bit for bit.
+NPZ keys per component: `<component>.t_ns`, `<component>.t`, `<component>.values` (rows = times,
+columns = variables) and `<component>.names`.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from cosim.errors import CosimError
+from cosim.logs.reader import Log
+
+
+def export_signals(log: Log, out_dir: Path, fmt: str, components: list[str] | None = None) -> list[Path]:
+    """Write the signals of `components` (default: all) to `out_dir`; returns the files written."""
+    chosen = components or log.components
+    if not chosen:
+        raise CosimError(f"{log.path}: no navcosim signal channels to export")
+    unknown = [name for name in chosen if name not in log.components]
+    if unknown:
+        known = ", ".join(log.components) or "none"
+        raise CosimError(f"{log.path}: no component {', '.join(unknown)} (components: {known})")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    stem = log.path.stem
+    if fmt == "npz":
+        arrays = {}
+        for component in chosen:
+            signals = log.signals(component)
+            arrays[f"{component}.t_ns"] = signals.t_ns
+            arrays[f"{component}.t"] = signals.t
+            arrays[f"{component}.values"] = signals.values
+            arrays[f"{component}.names"] = np.array(signals.names, dtype=str)
+        path = out_dir / f"{stem}-signals.npz"
+        np.savez(path, **arrays)
+        return [path]
+    if fmt == "csv":
+        return [_write_csv(log, component, out_dir / f"{stem}-{component}.csv") for component in chosen]
+    raise CosimError(f"unknown export format {fmt!r} (csv or npz)")
+
+
+def _write_csv(log: Log, component: str, path: Path) -> Path:
+    signals = log.signals(component)
+    with open(path, "w", newline="") as handle:
+        csv.writer(handle).writerow(["t_ns", "t", *signals.names])
+        table = np.column_stack((signals.t, signals.values))
+        for t_ns, row in zip(signals.t_ns.tolist(), table, strict=True):
+            handle.write(f"{t_ns}," + ",".join(f"{value:.17g}" for value in row.tolist()) + "\n")
+    return path
+
+
+def read_csv(path: Path) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """(names, t_ns, values) of a CSV written by `export_signals`."""
+    with open(path, newline="") as handle:
+        header = next(csv.reader(handle))
+    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, dtype=float)
+    t_ns = np.loadtxt(path, delimiter=",", skiprows=1, usecols=0, ndmin=1, dtype=np.int64)
+    return header[2:], t_ns, data[:, 2:]

@@ -1,0 +1,141 @@
+"""Outcomes of a run: goal, collision, clearance, distance driven, VFH interventions, recovery time.
+
+`OutcomeMonitor` is fed the vehicle's position after every vehicle step and the mixer's mode after
+every mixer step; it decides when the run ends (goal reached or collision) and keeps the numbers
+of the summary. `format_summary` prints them as a table; `outcome_metadata` stores them in the log.
+
+Definitions:
+- goal reached: the vehicle's reference point is within the goal tolerance of the goal.
+- clearance: distance from the vehicle's footprint circle (centre = its (x, y), radius = the
+  scenario's vehicle radius) to the nearest TRUE obstacle (known map cells as exact squares and the
+  unknown shapes; off the map counts as an obstacle); exact (`scenario_world.WorldDistance`),
+  checked at every vehicle step. A collision is clearance < 0.
+- VFH interventions: the number of times the mixer enters avoid mode (mode 1) from another mode.
+- time in recovery: the time the mixer spends in recover mode (mode 2), counted per mixer period.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+MODE_FOLLOW, MODE_AVOID, MODE_RECOVER = 0, 1, 2  # AvoidanceMixer's `mode` output
+
+
+@dataclass
+class Outcome:
+    """The summary of one run. `reason`: goal_reached, collision, stop_time, interrupted, fmu_failed."""
+
+    reached: bool = False
+    reason: str = "running"
+    time: float = 0.0  # [s] simulated
+    distance: float = 0.0  # [m] driven
+    min_clearance: float = math.inf  # [m]
+    vfh_interventions: int = 0
+    recovery_time: float = 0.0  # [s]
+    collision_point: tuple[float, float] | None = None
+
+
+class OutcomeMonitor:
+    """Tracks one run's outcome; `world` gives the exact distance to the true obstacles."""
+
+    def __init__(self, world, goal: tuple[float, float], tolerance: float, radius: float, start_xy):
+        self.world = world
+        self.goal = goal
+        self.tolerance = tolerance
+        self.radius = radius
+        self.outcome = Outcome()
+        self.last_xy = (float(start_xy[0]), float(start_xy[1]))
+        self.last_mode = MODE_FOLLOW
+        # A known lower bound of the true distance at an anchor point: the distance is 1-Lipschitz,
+        # so at a point r away it is at least bound - r (no need to ask the world every step).
+        self._anchor = (self.last_xy[0], self.last_xy[1], -math.inf)
+        self.check_position(0.0, *self.last_xy)
+
+    def check_position(self, t: float, x: float, y: float) -> str | None:
+        """Update at time t [s] with the vehicle at (x, y) [m]; return why the run ends, or None."""
+        outcome = self.outcome
+        outcome.time = t
+        last_x, last_y = self.last_xy
+        outcome.distance += math.hypot(x - last_x, y - last_y)
+        self.last_xy = (x, y)
+        if not (math.isfinite(x) and math.isfinite(y)):
+            outcome.reason = "collision"
+            outcome.collision_point = (x, y)
+            return outcome.reason
+        # The exact distance only matters when it could set a new minimum (or a collision).
+        anchor_x, anchor_y, anchor_bound = self._anchor
+        margin = outcome.min_clearance + self.radius
+        if anchor_bound - math.hypot(x - anchor_x, y - anchor_y) < margin:
+            bound = self.world.lower_bound(x, y)
+            self._anchor = (x, y, bound)
+            if bound < margin:
+                distance = self.world.distance(x, y)
+                self._anchor = (x, y, distance)
+                clearance = distance - self.radius
+                if clearance < outcome.min_clearance:
+                    outcome.min_clearance = clearance
+                if clearance < 0.0:
+                    outcome.reason = "collision"
+                    outcome.collision_point = (x, y)
+                    return outcome.reason
+        if math.hypot(x - self.goal[0], y - self.goal[1]) <= self.tolerance:
+            outcome.reached = True
+            outcome.reason = "goal_reached"
+            return outcome.reason
+        return None
+
+    def check_mode(self, mode: float, period: float) -> None:
+        """Update with the mixer's mode after a mixer step of `period` [s]."""
+        if not math.isfinite(mode):
+            return
+        mode = int(round(mode))
+        if mode == MODE_AVOID and self.last_mode != MODE_AVOID:
+            self.outcome.vfh_interventions += 1
+        if mode == MODE_RECOVER:
+            self.outcome.recovery_time += period
+        self.last_mode = mode
+
+    def finish(self, t: float, reason: str) -> Outcome:
+        """End the run at t [s] for `reason` unless a position check already ended it."""
+        if self.outcome.reason == "running":
+            self.outcome.reason = reason
+            self.outcome.time = t
+        return self.outcome
+
+
+def outcome_metadata(outcome: Outcome) -> dict[str, str]:
+    """The `outcome` metadata record of the log (strings, SI units)."""
+    return {
+        "reached": "true" if outcome.reached else "false",
+        "reason": outcome.reason,
+        "time": f"{outcome.time:.6f}",
+        "distance": f"{outcome.distance:.6f}",
+        "min_clearance": f"{outcome.min_clearance:.6f}",
+        "vfh_interventions": str(outcome.vfh_interventions),
+        "recovery_time": f"{outcome.recovery_time:.6f}",
+    }
+
+
+def format_summary(name: str, outcome: Outcome, log_path=None, wall_time: float | None = None) -> str:
+    """A two-column table of the outcome, for the terminal."""
+    rows = [
+        ("scenario", name),
+        ("goal reached", "yes" if outcome.reached else f"no ({outcome.reason.replace('_', ' ')})"),
+        ("simulated time", f"{outcome.time:.2f} s"),
+        ("distance driven", f"{outcome.distance:.2f} m"),
+        ("minimum clearance", f"{outcome.min_clearance:.3f} m"),
+        ("VFH interventions", str(outcome.vfh_interventions)),
+        ("time in recovery", f"{outcome.recovery_time:.2f} s"),
+    ]
+    if outcome.collision_point is not None:
+        rows.append(
+            ("collision at", f"({outcome.collision_point[0]:.2f}, {outcome.collision_point[1]:.2f}) m")
+        )
+    if wall_time is not None and wall_time > 0:
+        rows.append(("real-time factor", f"{outcome.time / wall_time:.0f}x ({wall_time:.2f} s wall)"))
+    if log_path is not None:
+        rows.append(("log", str(log_path)))
+    width = max(len(label) for label, _ in rows)
+    rule = "-" * (width + 2 + max(len(value) for _, value in rows))
+    return "\n".join([rule, *(f"{label:<{width}}  {value}" for label, value in rows), rule])

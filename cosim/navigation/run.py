@@ -1,0 +1,357 @@
+"""Run a scenario: build, plan, step the master, record every signal to MCAP, decide the outcome.
+
+`run_scenario(scenario, out_path)` builds the system (`cosim.navigation.build`), initialises every
+component, and only then creates the log, so bad input never leaves a log behind. The loop stops
+when the goal is reached, on a collision, at the stop time, on SIGINT/SIGTERM, or when an FMU fails.
+
+Log contents and rates (t = simulated time, integer nanoseconds):
+- `/signals/<component>`: every scalar input and output of the component, each time it steps
+  (its rate), stamped with the start of that step: the inputs it used and the outputs that step
+  returned. Array ports (waypoints, ranges, angles) are on `/plan` and `/scan` instead.
+- `/odom`, `/tf`, `/pose`: the vehicle pose at t = 0 and every 1/pose_rate s ([output].pose_rate,
+  default 50 Hz), and at the end of the run; twist = the mixer's commanded v and omega.
+- `/scan`: every lidar step; `/cmd_vel`: every mixer step (v, omega of the mixer).
+- `/plan`, `/map`, `/map_inflated`, `/obstacles`, `/goal`: once at t = 0.
+- metadata `navcosim`, `fmu/<role>`, `outcome`; attachments `scenario.toml` and the map file(s).
+
+End of a run: a normal end, an interrupt (outcome reason "interrupted") and an FMU failure
+(reason "fmu_failed") all finalise the log at its path, readable up to the last step. Any other
+error after the log was created finalises it and renames it `<name>.failed.mcap`.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import time
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+
+from cosim.core.master import NS_PER_S, Master
+from cosim.errors import CosimError
+from cosim.navigation.build import BuiltRun, build_run
+from cosim.navigation.outcome import Outcome, OutcomeMonitor, outcome_metadata
+from cosim.record import batch as recorder_batch
+from cosim.scenario.load import Scenario
+
+PROGRESS_INTERVAL = 0.1  # [s] wall time between progress-bar updates
+
+
+@dataclass
+class RunResult:
+    outcome: Outcome
+    log_path: Path | None
+    steps: int
+    wall_time: float  # [s]
+    failure: str | None = None  # message of a failed FMU
+
+    @property
+    def exit_code(self) -> int:
+        """0 goal reached, 1 not reached (stop time, collision, interrupt), 2 failed FMU."""
+        if self.failure is not None:
+            return 2
+        return 0 if self.outcome.reached else 1
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.outcome.time / self.wall_time if self.wall_time > 0 else math.inf
+
+
+def default_log_path(scenario: Scenario, now: datetime | None = None) -> Path:
+    """`[output].log` with {scenario} and {timestamp} (local time, to the second) filled in."""
+    stamp = (now or datetime.now()).strftime("%Y%m%d-%H%M%S")
+    return Path(scenario.log_pattern.format(scenario=scenario.name, timestamp=stamp))
+
+
+class _Interrupt:
+    """Turns SIGINT/SIGTERM into a flag the loop polls, so the log is finalised, not cut."""
+
+    def __init__(self) -> None:
+        self.signal_name: str | None = None
+        self.previous: dict[int, object] = {}
+
+    def __enter__(self) -> _Interrupt:
+        for number in (signal.SIGINT, signal.SIGTERM):
+            try:
+                self.previous[number] = signal.signal(number, self._handle)
+            except ValueError:  # not the main thread: leave signals alone
+                pass
+        return self
+
+    def _handle(self, number, frame) -> None:
+        self.signal_name = signal.Signals(number).name
+
+    def __exit__(self, *exc_info) -> None:
+        for number, handler in self.previous.items():
+            signal.signal(number, handler)
+
+
+class _Recording:
+    """What the loop records at each step; index arrays are resolved once."""
+
+    def __init__(self, built: BuiltRun, master: Master, recorder) -> None:
+        self.recorder = recorder
+        system = built.system
+        self.entries = []
+        for component in master.order:
+            inputs = [i for i, p in enumerate(component.inputs) if not p.is_array_element]
+            outputs = [i for i, p in enumerate(component.outputs) if not p.is_array_element]
+            names = [component.inputs[i].name for i in inputs] + [component.outputs[i].name for i in outputs]
+            if not names:
+                continue
+            channel = recorder.signal_channel(component.name, names)
+            # One record = the scalar inputs then the scalar outputs. Where each side's scalars
+            # are one run of slots (all ports, or the scalars before the arrays), the record is two
+            # views of the buffers made once: no gather per step.
+            first, second = (
+                _run_view(component.input_buffer, inputs),
+                _run_view(component.output_buffer, outputs),
+            )
+            if first is not None and second is not None:
+                self.entries.append((system.period_steps(component), channel, first, second, None))
+                continue
+            values = np.empty(len(names))  # the record, gathered; reused, no allocation per step
+            gather = (
+                component.input_buffer,
+                np.array(inputs, dtype=np.intp),
+                values[: len(inputs)],
+                component.output_buffer,
+                np.array(outputs, dtype=np.intp),
+                values[len(inputs) :],
+            )
+            self.entries.append((system.period_steps(component), channel, values, None, gather))
+        vehicle = system.components["vehicle"]
+        self.vehicle_out = vehicle.output_buffer
+        self.pose_index = [vehicle.output_index[name] for name in ("x", "y", "theta")]
+        mixer = system.components["mixer"]
+        self.mixer_out = mixer.output_buffer
+        self.mixer_index = [mixer.output_index[name] for name in ("v", "omega", "mode")]
+        self.mixer_steps = system.period_steps(mixer)
+        self.mixer_period = self.mixer_steps * system.macro_step
+        lidar = system.components["lidar"]
+        self.lidar_steps = system.period_steps(lidar)
+        self.lidar_out = lidar.output_buffer
+        ranges_index = [i for i, p in enumerate(lidar.outputs) if p.array_name == "ranges"]
+        self.lidar_ranges = _run_view(self.lidar_out, ranges_index)
+        self.ranges_index = None if self.lidar_ranges is not None else np.array(ranges_index, dtype=np.intp)
+        self.angles = np.array(built.scenario.lidar.angles, dtype=float)
+        self.angles.flags.writeable = False  # fixed for the run: the recorder keeps its /scan layout
+        self.range_limits = (built.scenario.lidar.range_min, built.scenario.lidar.range_max)
+        self.pose_steps = max(1, round(1.0 / (built.scenario.pose_rate * built.scenario.macro_step)))
+
+    def pose(self) -> tuple[float, float, float]:
+        item, (ix, iy, itheta) = self.vehicle_out.item, self.pose_index
+        return item(ix), item(iy), item(itheta)  # .item: a Python float without a NumPy scalar
+
+    def write_pose(self, t_ns: int) -> None:
+        item, (ix, iy, itheta) = self.vehicle_out.item, self.pose_index
+        mixer = self.mixer_out.item
+        self.recorder.write_pose(
+            t_ns, item(ix), item(iy), item(itheta), mixer(self.mixer_index[0]), mixer(self.mixer_index[1])
+        )
+
+    def after_step(self, k: int, t_ns: int, h_ns: int) -> None:
+        """Record what step k (starting at t_ns) produced."""
+        hold = self.recorder.hold_signals
+        for period, channel, first, second, gather in self.entries:
+            if period == 1 or k % period == 0:
+                if gather is not None:
+                    inputs, input_index, input_part, outputs, output_index, output_part = gather
+                    # mode="clip": with the default "raise" NumPy buffers `out` (a copy per call).
+                    np.take(inputs, input_index, out=input_part, mode="clip")
+                    np.take(outputs, output_index, out=output_part, mode="clip")
+                hold(channel, t_ns, first, second)
+        recorder = self.recorder
+        if k % self.lidar_steps == 0:
+            ranges = self.lidar_ranges if self.ranges_index is None else self.lidar_out[self.ranges_index]
+            recorder.write_scan(t_ns, self.angles, ranges, *self.range_limits)
+        if k % self.mixer_steps == 0:
+            mixer = self.mixer_out
+            recorder.write_cmd_vel(t_ns, float(mixer[self.mixer_index[0]]), float(mixer[self.mixer_index[1]]))
+        if (k + 1) % self.pose_steps == 0:
+            self.write_pose(t_ns + h_ns)
+
+
+def _run_view(buffer: np.ndarray, slots: list[int]) -> np.ndarray | None:
+    """A view of `buffer[slots]` when the slots are consecutive (it follows the buffer), else None."""
+    if slots and slots != list(range(slots[0], slots[0] + len(slots))):
+        return None
+    return buffer[slots[0] : slots[0] + len(slots)] if slots else buffer[:0]
+
+
+def _write_header(built: BuiltRun, master: Master, recorder) -> None:
+    """Metadata, attachments and the once-only topics at t = 0."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    scenario = built.scenario
+    try:
+        navcosim_version = version("navcosim")
+    except PackageNotFoundError:
+        navcosim_version = "unknown"
+    x, y, theta = scenario.start
+    recorder.add_metadata(
+        "navcosim",
+        {
+            "scenario_name": scenario.name,
+            "navcosim_version": navcosim_version,
+            "start": f"{x},{y},{theta}",
+            "goal": f"{scenario.goal[0]},{scenario.goal[1]}",
+            "goal_tolerance": str(scenario.goal_tolerance),
+            "macro_step": str(scenario.macro_step),
+            "stop_time": str(scenario.stop_time),
+            "overrides": " ".join(scenario.overrides),
+            "master": scenario.master,
+        },
+    )
+    for name, component in built.system.components.items():
+        description = component.describe()
+        if description:
+            recorder.add_metadata(f"fmu/{name}", description)
+    recorder.add_attachment("scenario.toml", "application/toml", scenario.text.encode())
+    map_file = scenario.map_file
+    recorder.add_attachment(map_file.name, "application/octet-stream", map_file.read_bytes())
+    if map_file.suffix in (".yaml", ".yml"):
+        for line in map_file.read_text().splitlines():
+            key, _, value = line.partition(":")
+            image = map_file.parent / value.strip().strip("'\"")
+            if key.strip() == "image" and image.is_file():
+                recorder.add_attachment(image.name, "image/x-portable-graymap", image.read_bytes())
+    recorder.write_grid(0, built.grid, "/map")
+    recorder.write_grid(0, built.inflated, "/map_inflated")
+    recorder.write_path(0, built.planner.result.path)
+    recorder.write_obstacles(0, list(scenario.obstacles))
+    recorder.write_goal(0, scenario.goal[0], scenario.goal[1], None)
+
+
+def run_scenario(
+    scenario: Scenario,
+    out_path: Path | None = None,
+    progress: bool = False,
+    flush_interval: float = 0.5,
+) -> RunResult:
+    """Run `scenario`, logging to `out_path` (default: `[output].log`). Raises `CosimError` on bad input.
+
+    SIGINT/SIGTERM from here on stop the run at the next step with outcome "interrupted".
+    """
+    with _Interrupt() as interrupt:
+        return _build_and_run(scenario, out_path, progress, flush_interval, interrupt)
+
+
+def _build_and_run(
+    scenario: Scenario, out_path, progress: bool, flush_interval: float, interrupt
+) -> RunResult:
+    from cosim.record.recorder import Recorder
+
+    built = build_run(scenario)
+    master = Master(built.system, parameters=built.parameters)
+    try:
+        master.initialize()
+    except CosimError as error:
+        raise CosimError(f"{scenario.source}: initialising the system failed: {error}") from None
+    log_path = Path(out_path) if out_path is not None else default_log_path(scenario)
+    try:
+        recorder = Recorder(log_path, flush_interval=flush_interval)
+    except BaseException:
+        master.close()
+        raise
+    try:
+        return _run(built, master, recorder, log_path, progress, interrupt)
+    except BaseException:
+        # Neither a normal end, an interrupt nor an FMU failure: keep the log, but marked.
+        recorder.close({"reached": "false", "reason": "error"})
+        master.close()
+        failed = log_path.with_suffix(".failed.mcap")
+        log_path.replace(failed)
+        raise
+
+
+def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bool, interrupt) -> RunResult:
+    scenario = built.scenario
+    system = built.system
+    recording = _Recording(built, master, recorder)
+    monitor = OutcomeMonitor(
+        built.world, scenario.goal, scenario.goal_tolerance, scenario.vehicle_radius, scenario.start
+    )
+    _write_header(built, master, recorder)
+    recording.write_pose(0)
+    h_ns = system.macro_step_ns
+    total_steps = round(scenario.stop_time * NS_PER_S / h_ns)
+    # Compile (or load from numba's cache) the kernels that would first run inside the loop, so the
+    # real-time factor measures the simulation, not a first run's JIT compilation.
+    monitor.world.distance(*scenario.start[:2])
+    recorder_batch.warm_up()
+    bar = _progress_bar(scenario.stop_time) if progress else None
+    wall_start = time.perf_counter()
+    last_update = [wall_start, 0.0]
+    state = {"reason": None}
+
+    start_ns = master.start_time_ns
+    vehicle_item, (index_x, index_y, _) = recording.vehicle_out.item, recording.pose_index
+
+    def after_step(current: Master) -> bool:
+        k = current.step_index - 1
+        t_ns = start_ns + k * h_ns
+        recording.after_step(k, t_ns, h_ns)
+        if k % recording.mixer_steps == 0:
+            monitor.check_mode(recording.mixer_out.item(recording.mixer_index[2]), recording.mixer_period)
+        reason = monitor.check_position(
+            (t_ns + h_ns) / NS_PER_S, vehicle_item(index_x), vehicle_item(index_y)
+        )
+        if reason is None and interrupt.signal_name is not None:
+            reason = "interrupted"
+        if bar is not None:
+            now = time.perf_counter()
+            if now - last_update[0] >= PROGRESS_INTERVAL:
+                _update_bar(bar, current.time, now - wall_start, last_update)
+                last_update[0] = now
+        if reason is not None:
+            state["reason"] = reason
+            return True
+        return False
+
+    failure = None
+    try:
+        master.run(total_steps, after_step)
+    except CosimError as error:
+        failure = f"{error} (at t = {master.time:.3f} s)"
+    wall_time = time.perf_counter() - wall_start
+    end_ns = master.time_ns
+    if (master.step_index % recording.pose_steps) != 0 or failure is not None:
+        recording.write_pose(end_ns)
+    reason = "fmu_failed" if failure else state["reason"] or "stop_time"
+    outcome = monitor.finish(end_ns / NS_PER_S, reason)
+    if bar is not None:
+        _update_bar(bar, master.time, wall_time, last_update)
+        bar.close()
+    metadata = outcome_metadata(outcome)
+    if failure:
+        metadata["failure"] = failure
+    try:
+        master.close()
+    except CosimError as error:
+        failure = failure or f"terminating the system failed: {error}"
+    recorder.close(metadata)
+    return RunResult(outcome, log_path, master.step_index, wall_time, failure)
+
+
+def _progress_bar(stop_time: float):
+    from tqdm import tqdm
+
+    return tqdm(
+        total=round(stop_time, 3),
+        unit="s",
+        desc="simulated",
+        leave=False,
+        dynamic_ncols=True,
+        bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} s [{elapsed}{postfix}]",
+    )
+
+
+def _update_bar(bar, sim_time: float, wall: float, last_update: list) -> None:
+    bar.update(round(sim_time - last_update[1], 3))
+    last_update[1] = sim_time
+    if wall > 0:
+        bar.set_postfix_str(f"{sim_time / wall:.0f}x real time", refresh=False)

@@ -1,0 +1,1 @@
+"""Stage 5, recording: ROS 2 messages, one signal struct per component, and the MCAP writer."""

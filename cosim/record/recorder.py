@@ -1,0 +1,434 @@
+"""Write a run's log: one MCAP file of ROS 2 messages (cdr, profile "ros2"), zstd-compressed chunks.
+
+Topics: `/odom`, `/tf` (map -> base_link), `/pose`, `/scan`, `/cmd_vel`, `/plan`, `/map`,
+`/map_inflated`, `/obstacles`, `/goal`, and `/signals/<component>` (one generated float64 struct
+per component; see `cosim.record.rosmsg`). The run loop writes messages in time order.
+
+Speed: signals, poses, commands and scans (the per-step topics) are held in a
+`cosim.record.batch.MessageBlock` and packed into MCAP records with NumPy, a block at a time
+(at most 512 records of a channel); the records and their order are exactly those of writing one
+message at a time. Any other write, `flush()` and `close()` pack the held messages first.
+
+A killed run: the open chunk is flushed (held messages packed, written and handed to the OS)
+whenever a write finds more than `flush_interval` seconds of wall time since the last flush (the
+clock is read every 16 held messages, every one with a zero interval), so SIGKILL loses at most
+the data of about that last interval. Only `close()` writes the summary and footer, so a file without them
+is a run that did not end normally (`cosim.logs.reader` reads it up to its last complete chunk).
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+import time
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+
+import numpy as np
+
+from cosim.errors import CosimError
+from cosim.record import rosmsg
+from cosim.record.batch import MessageBlock
+from cosim.record.writer import ChunkWriter
+
+# bytes of uncompressed messages per chunk; the wall-clock flush usually ends a chunk first
+CHUNK_SIZE = 512 * 1024
+MAP_FRAME = rosmsg.MAP_FRAME
+ROBOT_FRAME = rosmsg.ROBOT_FRAME
+OBSTACLE_HEIGHT = 0.5  # [m], only for the 3D view
+LINE_WIDTH = 0.05  # [m] of polygon outlines
+SCAN_ANGLE_TOLERANCE = 1e-6  # [rad] below which beam angles count as exactly on the ROS angle grid
+SCAN_MAX_SUBDIVISION = 16
+CLOCK_EVERY = 16  # held messages between two looks at the wall clock for the flush interval
+_STAMP = struct.Struct("<iI")  # builtin_interfaces/Time: int32 sec, uint32 nanosec
+
+SIGNAL_NAMES_KEY = rosmsg.SIGNAL_NAMES_KEY
+COMPONENT_KEY = rosmsg.COMPONENT_KEY
+SCAN_LAYOUT_KEY = "navcosim.scan_angles"
+
+TOPIC_TYPES = {
+    "/odom": "nav_msgs/msg/Odometry",
+    "/tf": "tf2_msgs/msg/TFMessage",
+    "/pose": "geometry_msgs/msg/PoseStamped",
+    "/scan": "sensor_msgs/msg/LaserScan",
+    "/cmd_vel": "geometry_msgs/msg/Twist",
+    "/plan": "nav_msgs/msg/Path",
+    "/map": "nav_msgs/msg/OccupancyGrid",
+    "/map_inflated": "nav_msgs/msg/OccupancyGrid",
+    "/obstacles": "visualization_msgs/msg/MarkerArray",
+    "/goal": "geometry_msgs/msg/PoseStamped",
+}
+
+
+def _library() -> str:
+    try:
+        return f"navcosim {version('navcosim')}"
+    except PackageNotFoundError:
+        return "navcosim"
+
+
+class Recorder:
+    """Writes one run to `path` (parent folders created). Use as a context manager: leaving the
+    `with` block, normally or by an exception, finalises the file."""
+
+    def __init__(self, path: Path, *, flush_interval: float = 0.5) -> None:
+        self.path = Path(path)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._file = open(self.path, "wb")  # noqa: SIM115 - closed by close()
+        except OSError as error:
+            raise CosimError(f"{self.path}: cannot write the log ({error.strerror})") from None
+        self._writer = ChunkWriter(self._file, chunk_size=CHUNK_SIZE)
+        self._writer.start(profile="ros2", library=_library())
+        self.flush_interval = flush_interval
+        self._last_flush = time.monotonic()
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self._sequences: dict[int, int] = {}
+        self._signal_sizes: dict[int, int] = {}
+        self._scan_layouts: dict[tuple, tuple] = {}  # (angles, limits) -> `_scan_template`
+        # Signals, poses, commands and scans are held for a block of steps and packed at once
+        # (`cosim.record.batch`); any other write, a flush and close pack the block first.
+        self._block = MessageBlock(self._writer, self._sequences)
+        self._pose_channels: tuple[int, int, int] | None = None
+        self._until_clock = 1
+        self._last_scan: tuple | None = None  # (angles, range_min, range_max, layout) of the last sweep
+        self._closed = False
+
+    # --- file-level records --------------------------------------------------------------
+
+    def add_metadata(self, name: str, data: dict[str, str]) -> None:
+        """A named metadata record (string keys and values)."""
+        self._block.pack()
+        self._writer.add_metadata(name, {str(key): str(value) for key, value in data.items()})
+
+    def add_attachment(self, name: str, media_type: str, data: bytes) -> None:
+        """An attached file (the scenario, the map) stored as-is."""
+        now = time.time_ns()
+        self._block.pack()
+        self._writer.add_attachment(now, now, name, media_type, bytes(data))
+
+    def flush(self) -> None:
+        """Close the open chunk and hand everything to the OS (a later SIGKILL keeps it)."""
+        self._block.pack()
+        self._writer.flush()
+        self._last_flush = time.monotonic()
+
+    def close(self, outcome: dict[str, str] | None = None) -> None:
+        """Write `outcome` as metadata "outcome", then the summary and footer. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._block.pack()
+            if outcome is not None:
+                self.add_metadata("outcome", outcome)
+            self._writer.finish()
+        finally:
+            self._file.close()
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self.close()
+
+    # --- channels ------------------------------------------------------------------------
+
+    def _schema(self, typename: str, definition: str | None = None) -> int:
+        if typename not in self._schemas:
+            text = definition if definition is not None else rosmsg.message_definition(typename)
+            self._schemas[typename] = self._writer.register_schema(typename, "ros2msg", text.encode())
+        return self._schemas[typename]
+
+    def _channel(self, topic: str, metadata: dict[str, str] | None = None) -> int:
+        channel = self._channels.get(topic)
+        if channel is None:
+            schema = self._schema(TOPIC_TYPES[topic])
+            channel = self._writer.register_channel(topic, "cdr", schema, metadata or {})
+            self._channels[topic] = channel
+            self._sequences[channel] = 0
+        return channel
+
+    def _write(self, channel: int, t_ns: int, data: bytes) -> None:
+        if self._closed:
+            raise CosimError(f"{self.path}: the log is already closed")
+        self._block.pack()
+        sequence = self._sequences[channel]
+        self._sequences[channel] = sequence + 1
+        self._writer.add_message(channel, t_ns, data, sequence)
+        if time.monotonic() - self._last_flush >= self.flush_interval:
+            self.flush()
+
+    def _held(self, full: bool) -> None:
+        """After a message went into the block: pack a full block; flush when the interval is up."""
+        # The clock is read every CLOCK_EVERY held messages (every one with a zero interval):
+        # a run writes a few messages per millisecond of wall time, far below the interval.
+        self._until_clock -= 1
+        if self._until_clock <= 0:
+            self._until_clock = CLOCK_EVERY if self.flush_interval > 0 else 1
+            if time.monotonic() - self._last_flush >= self.flush_interval:
+                self.flush()
+                return
+        if full:
+            self._block.pack()
+
+    def _write_message(self, topic: str, t_ns: int, message) -> None:
+        self._write(self._channel(topic), t_ns, rosmsg.serialize(message, TOPIC_TYPES[topic]))
+
+    # --- signals -------------------------------------------------------------------------
+
+    def signal_channel(self, component: str, names: list[str]) -> int:
+        """Register `/signals/<component>` with one float64 field per name; returns its handle."""
+        topic = f"/signals/{component}"
+        if topic in self._channels:
+            raise CosimError(f"{self.path}: signal channel {topic} registered twice")
+        fields = rosmsg.field_names(list(names))
+        typename = rosmsg.signals_type_name(component)
+        schema = self._schema(typename, rosmsg.signals_definition(fields))
+        metadata = {COMPONENT_KEY: component, SIGNAL_NAMES_KEY: json.dumps(list(names))}
+        channel = self._writer.register_channel(topic, "cdr", schema, metadata)
+        self._channels[topic] = channel
+        self._sequences[channel] = 0
+        self._signal_sizes[channel] = len(names)
+        self._block.add_signal_channel(channel, len(names))
+        return channel
+
+    def write_signals(self, channel: int, t_ns: int, values: np.ndarray) -> None:
+        """One record of a component's signals at `t_ns` [ns]: float64 values in the channel's order."""
+        if values.dtype != np.float64:
+            values = np.asarray(values, dtype=np.float64)
+        if values.size != self._signal_sizes[channel]:
+            raise CosimError(
+                f"{self.path}: {values.size} signal values for a channel of {self._signal_sizes[channel]}"
+            )
+        if self._closed:
+            raise CosimError(f"{self.path}: the log is already closed")
+        self._held(self._block.add_signals(channel, t_ns, values))
+
+    def hold_signals(
+        self, channel: int, t_ns: int, first: np.ndarray, second: np.ndarray | None = None
+    ) -> None:
+        """`write_signals` for the run loop: the record is `first` (float64), or `first` then
+        `second` (a component's input and output buffers); shapes are checked by NumPy only."""
+        if self._closed:
+            raise CosimError(f"{self.path}: the log is already closed")
+        self._held(self._block.add_signals(channel, t_ns, first, second))
+
+    def hold_signal_rows(self, blocks: list[tuple[int, np.ndarray, np.ndarray]]) -> None:
+        """Many signal records at once (`Master.run_recorded`'s blocks): (channel, times [ns],
+        rows of float64 values) per channel; written as if one record at a time, in time order
+        and, at equal times, in the order of `blocks`."""
+        if self._closed:
+            raise CosimError(f"{self.path}: the log is already closed")
+        for channel, times, rows in blocks:
+            if rows.ndim != 2 or rows.shape[1] != self._signal_sizes[channel] or len(rows) != len(times):
+                raise CosimError(f"{self.path}: signal rows of shape {rows.shape} for channel {channel}")
+        self._block.add_signal_rows(blocks)
+        self._held(True)
+
+    # --- robot topics --------------------------------------------------------------------
+
+    def write_pose(self, t_ns: int, x: float, y: float, theta: float, v: float, omega: float) -> None:
+        """Robot pose [m, m, rad] and body velocities [m/s, rad/s] on /odom, /tf and /pose."""
+        if self._pose_channels is None:
+            self._pose_channels = (self._channel("/odom"), self._channel("/tf"), self._channel("/pose"))
+        if self._closed:
+            raise CosimError(f"{self.path}: the log is already closed")
+        row = (int(t_ns), float(x), float(y), float(theta), float(v), float(omega))
+        self._held(self._block.add_pose(self._pose_channels, row))
+
+    def write_cmd_vel(self, t_ns: int, v: float, omega: float) -> None:
+        """The commanded body velocities [m/s, rad/s] on /cmd_vel (Twist has no stamp: log time only)."""
+        self._hold(self._channel("/cmd_vel"), t_ns, rosmsg.twist_cdr(float(v), float(omega)))
+
+    def _hold(self, channel: int, t_ns: int, payload: bytes) -> None:
+        if self._closed:
+            raise CosimError(f"{self.path}: the log is already closed")
+        self._held(self._block.add_raw(channel, int(t_ns), payload))
+
+    def write_goal(self, t_ns: int, x: float, y: float, theta: float | None) -> None:
+        """The goal [m] on /goal; without a heading the orientation is the identity."""
+        self._write_message("/goal", t_ns, rosmsg.pose_stamped(t_ns, x, y, 0.0 if theta is None else theta))
+
+    def write_path(self, t_ns: int, path: np.ndarray) -> None:
+        """The planned path, N x 2 (x, y) or N x 3 (x, y, theta) [m, m, rad], on /plan. Without
+        headings each pose faces the next waypoint."""
+        points = np.asarray(path, dtype=float)
+        if points.ndim != 2 or points.shape[1] not in (2, 3):
+            raise CosimError(f"{self.path}: a path must be N x 2 or N x 3, not {points.shape}")
+        if points.shape[1] >= 3:
+            headings = points[:, 2]
+        elif len(points) >= 2:
+            steps = np.diff(points[:, :2], axis=0)
+            headings = np.arctan2(steps[:, 1], steps[:, 0])
+            headings = np.append(headings, headings[-1])
+        else:
+            headings = np.zeros(len(points))
+        poses = [
+            rosmsg.pose_stamped(t_ns, px, py, yaw)
+            for (px, py), yaw in zip(points[:, :2], headings, strict=True)
+        ]
+        message = rosmsg.make("nav_msgs/msg/Path", header=rosmsg.header(t_ns, MAP_FRAME), poses=poses)
+        self._write_message("/plan", t_ns, message)
+
+    def write_grid(self, t_ns: int, grid, topic: str = "/map") -> None:
+        """An occupancy grid (`planner.OccupancyGrid`: `.occupied` [row, col] with row 0 at the top,
+        `.resolution` [m], `.origin` lower-left corner [m]) as nav_msgs/OccupancyGrid, whose rows run
+        bottom to top: the rows are flipped. Occupied cells are 100, free cells 0."""
+        if topic not in ("/map", "/map_inflated"):
+            raise CosimError(f"{self.path}: grid topic must be /map or /map_inflated, not {topic}")
+        occupied = np.asarray(grid.occupied)
+        cells = occupied.astype(np.int8) * 100 if occupied.dtype == bool else np.clip(occupied, -1, 100)
+        origin = tuple(float(value) for value in grid.origin)
+        origin_yaw = origin[2] if len(origin) > 2 else 0.0
+        info = rosmsg.make(
+            "nav_msgs/msg/MapMetaData",
+            map_load_time=rosmsg.time_msg(t_ns),
+            resolution=float(grid.resolution),
+            width=int(occupied.shape[1]),
+            height=int(occupied.shape[0]),
+            origin=rosmsg.pose(origin[0], origin[1], origin_yaw),
+        )
+        data = np.ascontiguousarray(np.flipud(cells).astype(np.int8)).reshape(-1)
+        message = rosmsg.make(
+            "nav_msgs/msg/OccupancyGrid", header=rosmsg.header(t_ns, MAP_FRAME), info=info, data=data
+        )
+        self._write_message(topic, t_ns, message)
+
+    def write_scan(
+        self, t_ns: int, angles: np.ndarray, ranges: np.ndarray, range_min: float, range_max: float
+    ) -> None:
+        """A lidar sweep on /scan: beam angles [rad] in the robot frame and ranges [m] as the lidar
+        gives them. LaserScan needs equally spaced angles, so beams go into bins of a uniform grid
+        (see `scan_layout`); bins without a beam hold NaN."""
+        last = self._last_scan
+        if last is not None and angles is last[0] and range_min == last[1] and range_max == last[2]:
+            layout = last[3]  # the run loop passes the same angle array every sweep
+        else:
+            angle_array = np.asarray(angles, dtype=float)
+            key = (angle_array.tobytes(), float(range_min), float(range_max))
+            layout = self._scan_layouts.get(key)
+            if layout is None:
+                layout = self._scan_template(angle_array, float(range_min), float(range_max))
+                self._scan_layouts[key] = layout
+            # Keyed by identity only for a read-only array, which cannot change between sweeps.
+            frozen = isinstance(angles, np.ndarray) and not angles.flags.writeable
+            self._last_scan = (angles, range_min, range_max, layout) if frozen else None
+        bins, binned, head, tail = layout
+        binned[bins] = ranges
+        # Only the stamp and the ranges change between sweeps: the CDR bytes are the template's
+        # head (encapsulation, stamp, frame, angles, limits, ranges length), the ranges, and the
+        # empty intensities.
+        stamp = _STAMP.pack(*divmod(int(t_ns), 1_000_000_000))
+        payload = b"".join((head[:4], stamp, head[12:], binned.tobytes(), tail))
+        self._hold(self._channels["/scan"], t_ns, payload)
+
+    def _scan_template(self, angles: np.ndarray, range_min: float, range_max: float) -> tuple:
+        """(bins, NaN-filled float32 ranges to fill, CDR head, CDR tail) of a LaserScan layout."""
+        angle_min, increment, bins, description = scan_layout(angles)
+        if "/scan" not in self._channels:
+            self._channel("/scan", {SCAN_LAYOUT_KEY: description})
+        binned = np.full(int(bins[-1]) + 1 if len(bins) else 0, np.nan, dtype=np.float32)
+        message = rosmsg.make(
+            "sensor_msgs/msg/LaserScan",
+            header=rosmsg.header(0, ROBOT_FRAME),
+            angle_min=angle_min,
+            angle_max=angle_min + increment * (len(binned) - 1),
+            angle_increment=increment,
+            time_increment=0.0,
+            scan_time=0.0,
+            range_min=range_min,
+            range_max=range_max,
+            ranges=binned,
+            intensities=np.zeros(0, dtype=np.float32),
+        )
+        template = rosmsg.serialize(message, TOPIC_TYPES["/scan"])
+        tail = bytes(4)  # intensities: a sequence of length 0
+        head = template[: len(template) - binned.nbytes - len(tail)]
+        if head + binned.tobytes() + tail != template:  # the layout the fast path relies on
+            raise CosimError(f"{self.path}: unexpected LaserScan CDR layout")
+        return bins, binned, head, tail
+
+    def write_obstacles(self, t_ns: int, obstacles: list) -> None:
+        """The unknown obstacles (`cosim.world.shapes` shapes) on /obstacles: circles as cylinders,
+        rectangles as cubes (same centre, size, yaw), polygons as closed line strips."""
+        markers = [_marker(t_ns, index, obstacle) for index, obstacle in enumerate(obstacles)]
+        message = rosmsg.make("visualization_msgs/msg/MarkerArray", markers=markers)
+        self._write_message("/obstacles", t_ns, message)
+
+
+def scan_layout(angles: np.ndarray) -> tuple[float, float, np.ndarray, str]:
+    """Place beam angles [rad, increasing] on a uniform angle grid for sensor_msgs/LaserScan.
+
+    Returns (angle_min, angle_increment, bin of each beam, description). Uniform angles map 1:1.
+    Otherwise the grid step is the smallest beam spacing divided by the smallest m <= 16 that puts
+    every beam within 1e-6 rad of a grid angle (bins between beams hold NaN); when no such m
+    exists each beam goes to its nearest bin at m = 16 and the description states the largest
+    angle error.
+    """
+    count = len(angles)
+    if count == 0:
+        return 0.0, 0.0, np.zeros(0, dtype=np.int64), "empty"
+    if np.any(np.diff(angles) <= 0.0):
+        raise CosimError("lidar beam angles must be strictly increasing to be written as a LaserScan")
+    angle_min = float(angles[0])
+    if count == 1:
+        return angle_min, 0.0, np.zeros(1, dtype=np.int64), "uniform"
+    spacing = float(np.min(np.diff(angles)))
+    for subdivision in range(1, SCAN_MAX_SUBDIVISION + 1):
+        increment = spacing / subdivision
+        position = (angles - angle_min) / increment
+        bins = np.rint(position).astype(np.int64)
+        error = float(np.max(np.abs(position - bins)) * increment)
+        if error <= SCAN_ANGLE_TOLERANCE:
+            uniform = subdivision == 1 and bins[-1] == count - 1
+            return angle_min, increment, bins, "uniform" if uniform else "exact, NaN between beams"
+    return angle_min, increment, bins, f"nearest bin, angle error up to {error:.3g} rad"
+
+
+def _marker(t_ns: int, index: int, obstacle):
+    kind = getattr(obstacle, "kind", None)
+    scale, points = rosmsg.vector3(LINE_WIDTH, LINE_WIDTH, LINE_WIDTH), []
+    if kind == "circle":
+        marker_type, (cx, cy), yaw = 3, obstacle.center, 0.0
+        diameter = 2.0 * float(obstacle.radius)
+        scale = rosmsg.vector3(diameter, diameter, OBSTACLE_HEIGHT)
+    elif kind == "rectangle":
+        marker_type, (cx, cy), yaw = 1, obstacle.center, float(obstacle.yaw)
+        scale = rosmsg.vector3(obstacle.size[0], obstacle.size[1], OBSTACLE_HEIGHT)
+    elif kind == "polygon":
+        marker_type, (cx, cy), yaw = 4, (0.0, 0.0), 0.0
+        vertices = np.asarray(obstacle.polygon(), dtype=float)
+        points = [rosmsg.point(px, py) for px, py in np.vstack([vertices, vertices[:1]])]
+    else:
+        raise CosimError(f"cannot write obstacle {obstacle!r} as a marker (not a cosim.world.shapes shape)")
+    height = OBSTACLE_HEIGHT / 2.0 if marker_type != 4 else 0.0
+    empty = np.zeros(0, dtype=np.uint8)
+    return rosmsg.make(
+        "visualization_msgs/msg/Marker",
+        header=rosmsg.header(t_ns, MAP_FRAME),
+        ns="obstacles",
+        id=index,
+        type=marker_type,
+        action=0,
+        pose=rosmsg.pose(float(cx), float(cy), yaw, height),
+        scale=scale,
+        color=rosmsg.color(0.85, 0.2, 0.15, 0.8),
+        lifetime=rosmsg.make("builtin_interfaces/msg/Duration", sec=0, nanosec=0),
+        frame_locked=False,
+        points=points,
+        colors=[],
+        texture_resource="",
+        texture=rosmsg.make(
+            "sensor_msgs/msg/CompressedImage", header=rosmsg.header(t_ns, MAP_FRAME), format="", data=empty
+        ),
+        uv_coordinates=[],
+        text=kind,
+        mesh_resource="",
+        mesh_file=rosmsg.make("visualization_msgs/msg/MeshFile", filename="", data=empty),
+        mesh_use_embedded_materials=False,
+    )
+
+
+__all__ = ["Recorder", "scan_layout", "TOPIC_TYPES"]

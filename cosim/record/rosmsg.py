@@ -1,0 +1,225 @@
+"""ROS 2 messages of the logs: definitions, construction and CDR serialisation via `rosbags`.
+
+Every channel of a navcosim log is a ROS 2 message (``cdr`` encoding, ``ros2msg`` schema) so
+Foxglove, ``ros2 bag``, rosbags and @mcap/core read the whole file (`reference/mcap.md`).
+Standard messages come from rosbags' ROS 2 Humble type store. Each component's signals get one
+generated struct, ``navcosim_msgs/msg/<Component>Signals``: a ``builtin_interfaces/Time stamp``
+followed by one ``float64`` per variable, so every record of a channel has the same size and
+NumPy loads a whole channel with one ``frombuffer``.
+"""
+
+from __future__ import annotations
+
+import keyword
+import math
+import re
+import struct
+
+import numpy as np
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+TYPESTORE_NAME = Stores.ROS2_HUMBLE
+SIGNALS_PACKAGE = "navcosim_msgs"
+CDR_HEADER = b"\x00\x01\x00\x00"  # CDR little-endian encapsulation, options 0
+SIGNAL_STAMP_BYTES = 8  # builtin_interfaces/Time: int32 sec, uint32 nanosec
+SIGNAL_VALUES_OFFSET = len(CDR_HEADER) + SIGNAL_STAMP_BYTES  # float64 fields start 8-aligned after it
+SEPARATOR = "=" * 80
+# Channel metadata of a `/signals/<component>` channel, read back by `cosim.logs`.
+SIGNAL_NAMES_KEY = "navcosim.signal_names"  # JSON list of the original variable names
+COMPONENT_KEY = "navcosim.component"
+
+_TIME_DEFINITION = "int32 sec\nuint32 nanosec\n"
+_stamp = struct.Struct("<iI")
+
+
+def new_typestore():
+    """A fresh rosbags type store (ROS 2 Humble); callers register their own custom types in it."""
+    return get_typestore(TYPESTORE_NAME)
+
+
+TYPESTORE = new_typestore()
+
+
+def split_time(t_ns: int) -> tuple[int, int]:
+    """(sec, nanosec) of a time in nanoseconds, as builtin_interfaces/Time holds it."""
+    sec, nanosec = divmod(int(t_ns), 1_000_000_000)
+    return sec, nanosec
+
+
+# --- names -----------------------------------------------------------------------------------
+
+
+def field_name(name: str) -> str:
+    """A valid ROS 2 field name for a variable name (lowercase, [a-z][a-z0-9_]*, no '__', no
+    trailing '_'); `waypoints[3,1]` -> `waypoints_3_1`, `Steering.Angle` -> `steering_angle`."""
+    text = re.sub(r"([a-z0-9])([A-Z])", r"\1_\2", name)
+    text = re.sub(r"[^a-z0-9]+", "_", text.lower()).strip("_")
+    text = re.sub(r"_+", "_", text)
+    if not text:
+        text = "value"
+    if not text[0].isalpha():
+        text = "v_" + text
+    if keyword.iskeyword(text):
+        # rosbags and mcap-ros2-support build Python classes from the schema
+        text += "_value"
+    return text
+
+
+def field_names(names: list[str]) -> list[str]:
+    """Unique ROS 2 field names for `names`, in order; clashes get a numeric suffix."""
+    used: set[str] = {"stamp"}
+    fields = []
+    for name in names:
+        base = field_name(name)
+        candidate, counter = base, 2
+        while candidate in used:
+            candidate = f"{base}_{counter}"
+            counter += 1
+        used.add(candidate)
+        fields.append(candidate)
+    return fields
+
+
+def signals_type_name(component: str) -> str:
+    """`pure_pursuit` -> `navcosim_msgs/msg/PurePursuitSignals`."""
+    words = re.split(r"[^A-Za-z0-9]+", component)
+    camel = "".join(word[:1].upper() + word[1:] for word in words if word)
+    if not camel or not camel[0].isalpha():
+        camel = "Component" + camel
+    return f"{SIGNALS_PACKAGE}/msg/{camel}Signals"
+
+
+# --- definitions ----------------------------------------------------------------------------
+
+
+def signals_definition(fields: list[str]) -> str:
+    """ros2msg schema text of a signals struct, with the Time dependency appended as ROS 2 does."""
+    body = "builtin_interfaces/Time stamp\n" + "".join(f"float64 {field}\n" for field in fields)
+    return f"{body}{SEPARATOR}\nMSG: builtin_interfaces/Time\n{_TIME_DEFINITION}"
+
+
+def message_definition(typename: str) -> str:
+    """ros2msg schema text of a standard message (with its dependencies)."""
+    return TYPESTORE.generate_msgdef(typename, ros_version=2)[0]
+
+
+def register_definition(typestore, typename: str, definition: str) -> None:
+    """Register a ros2msg schema text (main type and the `MSG:` sections) into `typestore`."""
+    sections = definition.split(SEPARATOR + "\n")
+    types = dict(get_types_from_msg(sections[0], typename))
+    for section in sections[1:]:
+        head, _, body = section.partition("\n")
+        name = head.removeprefix("MSG:").strip()
+        parts = name.split("/")
+        if len(parts) == 2:
+            name = f"{parts[0]}/msg/{parts[1]}"
+        if name not in typestore.types:
+            types.update(get_types_from_msg(body, name))
+    typestore.register({name: value for name, value in types.items() if name not in typestore.types})
+
+
+# --- construction --------------------------------------------------------------------------
+
+_types = TYPESTORE.types
+
+
+def time_msg(t_ns: int):
+    return _types["builtin_interfaces/msg/Time"](*split_time(t_ns))
+
+
+def header(t_ns: int, frame_id: str = "map"):
+    return _types["std_msgs/msg/Header"](stamp=time_msg(t_ns), frame_id=frame_id)
+
+
+def quaternion(yaw: float):
+    """Rotation about z by `yaw` [rad]."""
+    return _types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
+
+
+def yaw_of(orientation) -> float:
+    """Yaw [rad] of a quaternion message (rotation about z)."""
+    q = orientation
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def point(x: float, y: float, z: float = 0.0):
+    return _types["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=float(z))
+
+
+def pose(x: float, y: float, yaw: float, z: float = 0.0):
+    return _types["geometry_msgs/msg/Pose"](position=point(x, y, z), orientation=quaternion(yaw))
+
+
+def vector3(x: float = 0.0, y: float = 0.0, z: float = 0.0):
+    return _types["geometry_msgs/msg/Vector3"](x=float(x), y=float(y), z=float(z))
+
+
+def twist(v: float, omega: float):
+    """Planar twist: v [m/s] along x of the body, omega [rad/s] about z."""
+    return _types["geometry_msgs/msg/Twist"](linear=vector3(v), angular=vector3(0.0, 0.0, omega))
+
+
+def pose_stamped(t_ns: int, x: float, y: float, yaw: float, frame_id: str = "map"):
+    return _types["geometry_msgs/msg/PoseStamped"](header=header(t_ns, frame_id), pose=pose(x, y, yaw))
+
+
+def color(r: float, g: float, b: float, a: float = 1.0):
+    return _types["std_msgs/msg/ColorRGBA"](r=r, g=g, b=b, a=a)
+
+
+def make(typename: str, **fields):
+    """A message of a standard type from keyword fields."""
+    return _types[typename](**fields)
+
+
+def serialize(message, typename: str) -> bytes:
+    """CDR bytes (little endian, with encapsulation header) of a message."""
+    return bytes(TYPESTORE.serialize_cdr(message, typename))
+
+
+# --- hot paths: fixed-layout messages packed directly --------------------------------------
+# The run loop writes poses and velocity commands at every control step; building rosbags
+# dataclasses for them costs ~40 us per pose. Their CDR layout is fixed (the frame names are
+# constants), so they are packed with precomputed structs; tests compare the bytes with rosbags.
+# CDR aligns each primitive to its size, counted from the end of the 4-byte encapsulation header.
+MAP_FRAME = "map"
+ROBOT_FRAME = "base_link"
+_MAP = b"map\0"
+_ROBOT = b"base_link\0"
+_pose_stamped = struct.Struct("<iII4s7d")  # stamp, frame_id "map", Pose (8-aligned at 16)
+_twist = struct.Struct("<6d")
+_tf_message = struct.Struct("<IiII4sI10s6x7d")  # 1 transform: stamp, "map", "base_link", pad to 40
+_odometry_head = struct.Struct("<iII4sI10s2x7d")  # stamp, "map", "base_link", pad to 32, Pose
+_zero_covariance = bytes(36 * 8)
+
+
+def pose_stamped_cdr(t_ns: int, x: float, y: float, yaw: float) -> bytes:
+    """geometry_msgs/PoseStamped in frame "map" at the planar pose (x, y [m], yaw [rad])."""
+    sec, nanosec = split_time(t_ns)
+    qz, qw = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
+    return CDR_HEADER + _pose_stamped.pack(sec, nanosec, 4, _MAP, x, y, 0.0, 0.0, 0.0, qz, qw)
+
+
+def twist_cdr(v: float, omega: float) -> bytes:
+    """geometry_msgs/Twist: v [m/s] along body x, omega [rad/s] about z."""
+    return CDR_HEADER + _twist.pack(v, 0.0, 0.0, 0.0, 0.0, omega)
+
+
+def tf_cdr(t_ns: int, x: float, y: float, yaw: float) -> bytes:
+    """tf2_msgs/TFMessage with the one transform map -> base_link."""
+    sec, nanosec = split_time(t_ns)
+    qz, qw = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
+    return CDR_HEADER + _tf_message.pack(1, sec, nanosec, 4, _MAP, 10, _ROBOT, x, y, 0.0, 0.0, 0.0, qz, qw)
+
+
+def odometry_cdr(t_ns: int, x: float, y: float, yaw: float, v: float, omega: float) -> bytes:
+    """nav_msgs/Odometry: pose in "map", twist in "base_link", zero covariances."""
+    sec, nanosec = split_time(t_ns)
+    qz, qw = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
+    head = _odometry_head.pack(sec, nanosec, 4, _MAP, 10, _ROBOT, x, y, 0.0, 0.0, 0.0, qz, qw)
+    return CDR_HEADER + head + _zero_covariance + _twist.pack(v, 0.0, 0.0, 0.0, 0.0, omega) + _zero_covariance
+
+
+def signals_payload(t_ns: int, values: np.ndarray) -> bytes:
+    """CDR bytes of a signals struct: header, stamp, then the float64 values packed (8-aligned)."""
+    return CDR_HEADER + _stamp.pack(*split_time(t_ns)) + values.tobytes()

@@ -1,0 +1,430 @@
+"""Scenario files: TOML in, a validated `Scenario` out.
+
+`load_scenario(path, overrides)` reads the file, applies `--set key=value` overrides to the parsed
+TOML (so they pass the same validation), checks types, ranges and unknown keys, and checks that
+start and goal lie in free space of the true world. `scenarios/example_commented.toml` documents
+every key. What needs the FMU files themselves (does the FMU load, do the port names exist) is
+checked when the system is built (`cosim.navigation.run.prepare_run`), still before any log is created.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cosim.errors import CosimError
+from cosim.scenario.schema import REQUIRED, TableReader, describe, did_you_mean, is_number
+from cosim.world.shapes import Circle, Obstacle, Polygon, Rectangle
+
+BUILTIN_FMUS = ("DifferentialDrive", "Bicycle", "PurePursuit", "VectorFieldHistogram", "AvoidanceMixer")
+VEHICLE_TYPES = {"DifferentialDrive": "differential", "Bicycle": "bicycle"}
+DEFAULT_FMUS = {"pure_pursuit": "PurePursuit", "vfh": "VectorFieldHistogram", "mixer": "AvoidanceMixer"}
+# Section keys that are not FMU parameters; every other key of a component section is one.
+COMPONENT_KEYS = ("fmu", "ports", "rate")
+SECTIONS = (
+    "scenario", "map", "obstacles", "start", "goal", "planner", "vehicle", "pure_pursuit", "vfh",
+    "mixer", "lidar", "simulation", "output",
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class PortMapping:
+    """Where a role port lives in the FMU: its variable name and a scale.
+
+    The scale multiplies along the data flow: FMU input = scale * port value, port output = scale *
+    FMU output, FMU parameter = scale * given value (`cosim.fmi.component`).
+    """
+
+    variable: str
+    scale: float = 1.0
+
+
+@dataclass(frozen=True)
+class ComponentSpec:
+    """One FMU role (`vehicle`, `pure_pursuit`, `vfh`, `mixer`) as the scenario declares it.
+
+    fmu: a project FMU name (`cosim.fmi.builtin.builtin_fmu`) or an absolute path to a `.fmu`.
+    parameters: role parameter name -> value (translated through `ports` when mapped).
+    rate: stepping rate [Hz]; None = every macro step.
+    """
+
+    role: str
+    fmu: str
+    parameters: dict[str, float | int | bool]
+    ports: dict[str, PortMapping]
+    rate: float | None
+
+    @property
+    def is_builtin(self) -> bool:
+        return self.fmu in BUILTIN_FMUS
+
+
+@dataclass(frozen=True)
+class PlannerSettings:
+    configuration: str = "modified"
+    algorithm: str = "astar"
+    heuristic: str | None = None
+    connectivity: int = 8
+    expansion_distance: float = 0.0
+    smoothing: str = "line_of_sight"
+    min_turning_radius: float | None = None
+    reverse: bool = False
+
+
+@dataclass(frozen=True)
+class LidarSettings:
+    """Beams [rad, robot frame], range limits [m], Gaussian range noise std [m], seed, rate [Hz]."""
+
+    angles: np.ndarray
+    range_min: float
+    range_max: float
+    noise: float
+    seed: int
+    rate: float
+
+
+@dataclass(frozen=True)
+class Scenario:
+    source: str  # how errors name the file
+    path: Path | None
+    text: str
+    name: str
+    description: str
+    map_file: Path
+    map_resolution: float | None
+    map_origin: tuple[float, float] | None
+    obstacles: tuple[Obstacle, ...]
+    start: tuple[float, float, float]  # x [m], y [m], theta [rad]
+    goal: tuple[float, float]  # x [m], y [m]
+    goal_tolerance: float  # [m]
+    planner: PlannerSettings
+    vehicle_type: str  # "differential" | "bicycle"
+    vehicle_radius: float  # footprint circle for collisions [m]
+    components: dict[str, ComponentSpec]
+    lidar: LidarSettings
+    macro_step: float  # [s]
+    stop_time: float  # [s]
+    master: str  # "gauss-seidel" | "jacobi"
+    controller_rate: float  # [Hz]
+    log_pattern: str
+    plot: bool
+    pose_rate: float  # [Hz] of /odom, /tf, /pose
+    overrides: tuple[str, ...] = field(default=())
+
+
+def load_scenario(path: str | Path, overrides: list[str] | tuple[str, ...] = (), check_world: bool = True):
+    """Read, override and validate a scenario file; raise `CosimError` (one line) on any problem."""
+    path = Path(path)
+    source = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise CosimError(f"{source}: no such scenario file") from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise CosimError(f"{source}: cannot read: {error}") from None
+    scenario = parse_scenario(text, source, path.resolve().parent, overrides, path=path)
+    if check_world:
+        from cosim.world.distance import check_start_goal
+
+        check_start_goal(scenario)
+    return scenario
+
+
+def parse_scenario(
+    text: str,
+    source: str,
+    base_dir: Path,
+    overrides: list[str] | tuple[str, ...] = (),
+    path: Path | None = None,
+) -> Scenario:
+    """Validate scenario TOML `text`; relative file names resolve against `base_dir`."""
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise CosimError(f"{source}: TOML syntax error: {error}") from None
+    for override in overrides:
+        apply_override(raw, override, source)
+    return _build(raw, source, base_dir, text, path, tuple(overrides))
+
+
+def apply_override(raw: dict, override: str, source: str) -> None:
+    """Apply `key.path=value` (value in TOML syntax; a bare word is a string) to the parsed TOML."""
+    key, separator, value_text = override.partition("=")
+    key = key.strip()
+    if not separator or not key:
+        raise CosimError(f"--set {override}: expected key=value, e.g. vfh.robot_radius=0.6")
+    try:
+        value = tomllib.loads(f"value = {value_text.strip()}")["value"]
+    except tomllib.TOMLDecodeError:
+        value = value_text.strip()
+    parts = key.split(".")
+    if parts[0] not in SECTIONS:
+        raise CosimError(f"--set {override}: unknown section '{parts[0]}'{did_you_mean(parts[0], SECTIONS)}")
+    node: Any = raw
+    for depth, part in enumerate(parts[:-1]):
+        if isinstance(node, list):
+            if not part.isdigit() or int(part) >= len(node):
+                raise CosimError(f"--set {override}: no item {part} in {'.'.join(parts[:depth])}")
+            node = node[int(part)]
+        else:
+            node = node.setdefault(part, {})
+        if not isinstance(node, dict | list):
+            raise CosimError(f"--set {override}: {'.'.join(parts[: depth + 1])} is not a table")
+    if isinstance(node, list):
+        raise CosimError(f"--set {override}: give an item index after {'.'.join(parts[:-1])}")
+    node[parts[-1]] = value
+
+
+def _build(
+    raw: dict, source: str, base_dir: Path, text: str, path: Path | None, overrides: tuple
+) -> Scenario:
+    top = TableReader(source, "", raw)
+    scenario_table = TableReader(source, "[scenario]", top.raw("scenario"))
+    name = scenario_table.string("name")
+    if not name or any(char in name for char in "/\\\0"):
+        raise scenario_table.error("name", f"must be a non-empty file-name-safe string, got '{name}'")
+    description = scenario_table.string("description", "")
+    scenario_table.finish()
+
+    map_table = TableReader(source, "[map]", top.raw("map"))
+    map_file = (base_dir / map_table.string("file")).resolve()
+    if not map_file.is_file():
+        raise map_table.error("file", f"no such map file: {map_file}")
+    map_resolution = map_table.number("resolution", None, minimum=0.0, exclusive_minimum=True)
+    origin = map_table.numbers("origin", None, length=2)
+    map_table.finish()
+
+    obstacles = tuple(_obstacle(source, index, item) for index, item in enumerate(_list(top, "obstacles")))
+
+    start_table = TableReader(source, "[start]", top.raw("start"))
+    start = (start_table.number("x"), start_table.number("y"), start_table.number("theta", 0.0))
+    start_table.finish()
+    goal_table = TableReader(source, "[goal]", top.raw("goal"))
+    goal = (goal_table.number("x"), goal_table.number("y"))
+    goal_tolerance = goal_table.number("tolerance", 1.0, minimum=0.0, exclusive_minimum=True)
+    goal_table.finish()
+
+    simulation = TableReader(source, "[simulation]", top.raw("simulation", {}))
+    macro_step = simulation.number("macro_step", 0.01, minimum=0.0, exclusive_minimum=True)
+    stop_time = simulation.number("stop_time", 300.0, minimum=0.0, exclusive_minimum=True)
+    master = simulation.string("master", "gauss-seidel", choices=("gauss-seidel", "jacobi"))
+    controller_rate = simulation.number("controller_rate", 20.0, minimum=0.0, exclusive_minimum=True)
+    if stop_time < macro_step:
+        raise simulation.error(
+            "stop_time", f"{stop_time:g} s is shorter than one macro step ({macro_step:g} s)"
+        )
+    _check_rate(simulation, "controller_rate", controller_rate, macro_step)
+    simulation.finish()
+
+    vehicle_table = TableReader(source, "[vehicle]", top.raw("vehicle"))
+    vehicle_fmu = _fmu_name(vehicle_table, None, base_dir)
+    # A project FMU implies the type; an FMU given by path must say which ports it fills.
+    vehicle_type = vehicle_table.string(
+        "type", VEHICLE_TYPES.get(vehicle_fmu, REQUIRED), choices=("differential", "bicycle")
+    )
+    if vehicle_fmu in VEHICLE_TYPES and VEHICLE_TYPES[vehicle_fmu] != vehicle_type:
+        raise vehicle_table.error("type", f"'{vehicle_type}' does not match the project FMU {vehicle_fmu}")
+    components: dict[str, ComponentSpec] = {}
+    vfh_table = TableReader(source, "[vfh]", top.raw("vfh", {}))
+    vfh_radius = vfh_table.table.get("robot_radius")
+    default_radius = float(vfh_radius) if is_number(vfh_radius) and vfh_radius > 0 else 0.5
+    vehicle_radius = vehicle_table.number("radius", default_radius, minimum=0.0, exclusive_minimum=True)
+    components["vehicle"] = _component(vehicle_table, "vehicle", vehicle_fmu, None, macro_step)
+    for role in ("pure_pursuit", "vfh", "mixer"):
+        table = vfh_table if role == "vfh" else TableReader(source, f"[{role}]", top.raw(role, {}))
+        fmu = _fmu_name(table, DEFAULT_FMUS[role], base_dir)
+        components[role] = _component(table, role, fmu, controller_rate, macro_step)
+
+    planner = _planner(TableReader(source, "[planner]", top.raw("planner", {})), vehicle_radius)
+    lidar = _lidar(TableReader(source, "[lidar]", top.raw("lidar", {})), macro_step)
+
+    output = TableReader(source, "[output]", top.raw("output", {}))
+    log_pattern = output.string("log", "logs/{scenario}-{timestamp}.mcap")
+    try:
+        log_pattern.format(scenario="s", timestamp="t")
+    except (KeyError, IndexError, ValueError) as error:
+        raise output.error(
+            "log", f"bad pattern (placeholders: {{scenario}}, {{timestamp}}): {error}"
+        ) from None
+    plot = output.boolean("plot", True)
+    pose_rate = output.number("pose_rate", 50.0, minimum=0.0, exclusive_minimum=True)
+    _check_rate(output, "pose_rate", pose_rate, macro_step)
+    output.finish()
+    top.finish()
+
+    return Scenario(
+        source=source,
+        path=path,
+        text=text,
+        name=name,
+        description=description,
+        map_file=map_file,
+        map_resolution=map_resolution,
+        map_origin=origin,
+        obstacles=obstacles,
+        start=start,
+        goal=goal,
+        goal_tolerance=goal_tolerance,
+        planner=planner,
+        vehicle_type=vehicle_type,
+        vehicle_radius=vehicle_radius,
+        components=components,
+        lidar=lidar,
+        macro_step=macro_step,
+        stop_time=stop_time,
+        master=master,
+        controller_rate=controller_rate,
+        log_pattern=log_pattern,
+        plot=plot,
+        pose_rate=pose_rate,
+        overrides=overrides,
+    )
+
+
+def _list(top: TableReader, key: str) -> list:
+    value = top.raw(key, [])
+    if not isinstance(value, list):
+        raise top.error(key, f"must be an array of tables [[{key}]], got {describe(value)}")
+    return value
+
+
+def _check_rate(table: TableReader, key: str, rate: float, macro_step: float) -> None:
+    """A rate must give a period that is a whole number (>= 1) of macro steps."""
+    steps = 1.0 / (rate * macro_step)
+    if steps < 1.0 - 1e-9 or abs(steps - round(steps)) > 1e-6 * steps:
+        raise table.error(
+            key,
+            f"{rate:g} Hz is not a whole number of macro steps of {macro_step:g} s (period {1 / rate:g} s)",
+        )
+
+
+def _fmu_name(table: TableReader, default: str | None, base_dir: Path) -> str:
+    """A project FMU name stays a name; anything else is a path (relative to the scenario file)."""
+    fmu = table.string("fmu", REQUIRED if default is None else default)
+    if fmu in BUILTIN_FMUS:
+        return fmu
+    if "/" not in fmu and not fmu.endswith(".fmu"):
+        raise table.error(
+            "fmu", f"unknown project FMU '{fmu}'{did_you_mean(fmu, BUILTIN_FMUS)}; or give a path"
+        )
+    fmu_path = (base_dir / fmu).resolve()
+    if not fmu_path.is_file():
+        raise table.error("fmu", f"no such FMU file: {fmu_path}")
+    return str(fmu_path)
+
+
+def _component(
+    table: TableReader, role: str, fmu: str, default_rate: float | None, macro_step: float
+) -> ComponentSpec:
+    from cosim.scenario.params import check_parameters
+
+    ports: dict[str, PortMapping] = {}
+    port_table = table.table_of("ports")
+    for port, value in port_table.table.items():
+        port_table.used.add(port)
+        if isinstance(value, str):
+            ports[port] = PortMapping(value)
+            continue
+        entry = TableReader(table.source, f"{port_table.where}.{port}", value)
+        ports[port] = PortMapping(entry.string("name"), entry.number("scale", 1.0))
+        if ports[port].scale == 0.0:
+            raise entry.error("scale", "must not be 0")
+        entry.finish()
+    rate = table.number("rate", default_rate, minimum=0.0, exclusive_minimum=True)
+    if rate is not None:
+        _check_rate(table, "rate", rate, macro_step)
+    parameters: dict[str, float | int | bool] = {}
+    for key, value in table.table.items():
+        if key in COMPONENT_KEYS or key in ("type", "radius") and role == "vehicle":
+            continue
+        table.used.add(key)
+        parameters[key] = value
+    parameters = check_parameters(table, fmu, parameters)
+    table.finish()
+    return ComponentSpec(role=role, fmu=fmu, parameters=parameters, ports=ports, rate=rate)
+
+
+def _obstacle(source: str, index: int, item: Any) -> Obstacle:
+    table = TableReader(source, f"[[obstacles]][{index}]", item)
+    kind = table.string("type", choices=("rectangle", "circle", "polygon"))
+    if kind == "circle":
+        obstacle: Obstacle = Circle(
+            table.numbers("center", length=2), table.number("radius", minimum=0.0, exclusive_minimum=True)
+        )
+    elif kind == "rectangle":
+        size = table.numbers("size", length=2)
+        if min(size) <= 0:
+            raise table.error("size", f"length and width must be > 0, got {list(size)}")
+        obstacle = Rectangle(table.numbers("center", length=2), size, table.number("yaw", 0.0))
+    else:
+        vertices = table.raw("vertices")
+        if not isinstance(vertices, list) or len(vertices) < 3:
+            raise table.error(
+                "vertices", f"must be a list of at least 3 [x, y] points, got {describe(vertices)}"
+            )
+        points = tuple(table.check_numbers(f"vertices[{i}]", v, 2) for i, v in enumerate(vertices))
+        area = 0.5 * sum(
+            a[0] * b[1] - b[0] * a[1] for a, b in zip(points, points[1:] + points[:1], strict=True)
+        )
+        if abs(area) < 1e-12:
+            raise table.error("vertices", "the polygon has zero area")
+        obstacle = Polygon(points)
+    table.finish()
+    return obstacle
+
+
+def _planner(table: TableReader, vehicle_radius: float) -> PlannerSettings:
+    settings = PlannerSettings(
+        configuration=table.string("configuration", "modified", choices=("basic", "modified")),
+        algorithm=table.string("algorithm", "astar", choices=("astar", "bidirectional", "hybrid")),
+        heuristic=table.string(
+            "heuristic", None, choices=("manhattan", "euclidean", "chebyshev", "octile", "thesis")
+        ),
+        connectivity=table.integer("connectivity", 8),
+        expansion_distance=table.number("expansion_distance", vehicle_radius, minimum=0.0),
+        smoothing=table.string("smoothing", "line_of_sight", choices=("none", "line_of_sight", "curvature")),
+        min_turning_radius=table.number("min_turning_radius", None, minimum=0.0, exclusive_minimum=True),
+        reverse=table.boolean("reverse", False),
+    )
+    if settings.connectivity not in (4, 8):
+        raise table.error("connectivity", f"must be 4 or 8, got {settings.connectivity}")
+    if settings.algorithm == "hybrid" and settings.min_turning_radius is None:
+        raise table.error("min_turning_radius", "missing required key for algorithm 'hybrid'")
+    table.finish()
+    return settings
+
+
+def _lidar(table: TableReader, macro_step: float) -> LidarSettings:
+    if table.has("angles") and any(table.has(key) for key in ("angle_min", "angle_max", "count")):
+        raise table.error("angles", "give either angles or angle_min/angle_max/count, not both")
+    if table.has("angles"):
+        angles = np.asarray(table.numbers("angles"))
+        if angles.size == 0:
+            raise table.error("angles", "must hold at least one angle")
+    else:
+        angle_min = table.number("angle_min", -math.pi, minimum=-math.pi, maximum=math.pi)
+        angle_max = table.number("angle_max", math.pi, minimum=-math.pi, maximum=math.pi)
+        if angle_min >= angle_max:
+            raise table.error("angle_max", f"must be > angle_min ({angle_min:g}), got {angle_max:g}")
+        count = table.integer("count", 360, minimum=1)
+        # A full turn would count the beam at -pi twice.
+        full_turn = angle_max - angle_min >= 2 * math.pi - 1e-9
+        angles = np.linspace(angle_min, angle_max, count, endpoint=not full_turn)
+    if angles.size > 720:
+        raise table.error("angles", f"at most 720 beams (the VFH input size), got {angles.size}")
+    if np.any(np.abs(angles) > math.pi + 1e-9):
+        raise table.error("angles", "every angle must lie in [-pi, pi]")
+    range_min, range_max = table.interval("range", [0.0, 20.0], minimum=0.0)
+    if range_max <= 0:
+        raise table.error("range", f"max must be > 0, got {range_max:g}")
+    noise = table.number("noise", 0.0, minimum=0.0)
+    seed = table.integer("seed", 0, minimum=0)
+    rate = table.number("rate", 10.0, minimum=0.0, exclusive_minimum=True)
+    _check_rate(table, "rate", rate, macro_step)
+    table.finish()
+    return LidarSettings(angles, range_min, range_max, noise, seed, rate)

@@ -1,0 +1,181 @@
+"""The scenario's world: the known map the planner sees and the true world the robot drives in.
+
+The true world is the known occupancy grid plus the unknown obstacles (seen only by the lidar).
+`WorldDistance` gives the exact Euclidean distance from a point to the nearest true obstacle: to
+the nearest occupied cell *square* (not its centre) and to the exact shape of each unknown
+obstacle. Outside the map counts as an obstacle (a robot leaving the map has crashed).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from scipy.ndimage import distance_transform_edt
+
+from cosim.errors import CosimError
+from cosim.world.geometry import polygon_distance
+from cosim.world.shapes import Circle, Obstacle
+from planner.errors import PlannerError
+from planner.grid import OccupancyGrid
+
+
+def load_known_map(scenario) -> OccupancyGrid:
+    """The planner's map: the scenario's map file with its resolution/origin where the format lacks them."""
+    options = {}
+    if scenario.map_resolution is not None:
+        options["resolution"] = scenario.map_resolution
+    if scenario.map_origin is not None:
+        options["origin"] = scenario.map_origin
+    try:
+        return OccupancyGrid.from_file(scenario.map_file, **options)
+    except PlannerError as error:
+        raise CosimError(f"{scenario.source}: [map].file: {error}") from None
+
+
+def distance_to_obstacle(x: float, y: float, obstacle: Obstacle) -> float:
+    """Exact distance [m] from (x, y) to the shape; 0 inside it."""
+    if isinstance(obstacle, Circle):
+        return max(0.0, math.hypot(x - obstacle.center[0], y - obstacle.center[1]) - obstacle.radius)
+    vertices = np.ascontiguousarray(obstacle.polygon(), dtype=np.float64)
+    return polygon_distance(float(x), float(y), vertices, 0, len(vertices))
+
+
+class WorldDistance:
+    """Exact distance [m] from a point to the nearest true obstacle (grid cells + unknown shapes).
+
+    Speed: a per-cell field of the distance from each cell centre to the nearest occupied cell
+    centre bounds the search. `lower_bound` is cheap; `distance` looks only at the occupied cells
+    of a small window that must contain the nearest one, as exact point-to-square distances.
+    """
+
+    def __init__(self, grid: OccupancyGrid, obstacles: tuple[Obstacle, ...] = ()):
+        self.grid = grid
+        self.resolution = grid.resolution
+        self.half = grid.resolution / 2.0
+        rows, cols = grid.shape
+        self.rows, self.cols = rows, cols
+        self.occupied = grid.occupied
+        # Distance [m] from each cell centre to the nearest occupied cell centre (0 on occupied cells).
+        if grid.occupied.any():
+            self.centre_field = distance_transform_edt(~grid.occupied) * grid.resolution
+        else:
+            self.centre_field = np.full(grid.shape, np.inf)
+        self.x_min, self.y_min = grid.origin
+        self.x_max = self.x_min + cols * grid.resolution
+        self.y_max = self.y_min + rows * grid.resolution
+        self.obstacles = obstacles
+        self.circles = [(o.center[0], o.center[1], o.radius) for o in obstacles if isinstance(o, Circle)]
+        self.polygons = [
+            [(float(x), float(y)) for x, y in o.polygon()] for o in obstacles if not isinstance(o, Circle)
+        ]
+        # The same shapes as arrays for the compiled `distance`; polygon p is
+        # vertices[starts[p]:starts[p + 1]].
+        self._occupied_u8 = np.ascontiguousarray(grid.occupied, dtype=np.uint8)
+        self._circles = np.array(self.circles, dtype=float).reshape(-1, 3)
+        self._vertices = np.array([v for p in self.polygons for v in p], dtype=float).reshape(-1, 2)
+        self._starts = np.cumsum([0] + [len(p) for p in self.polygons]).astype(np.int64)
+        # Bounding circles (centre, radius) of the polygons give cheap lower bounds.
+        self.bounds = list(self.circles)
+        for vertices in self.polygons:
+            cx = sum(x for x, _ in vertices) / len(vertices)
+            cy = sum(y for _, y in vertices) / len(vertices)
+            self.bounds.append((cx, cy, max(math.hypot(x - cx, y - cy) for x, y in vertices)))
+
+    def _cell(self, x: float, y: float) -> tuple[int, int, float]:
+        """(row, col) of the cell holding (x, y) and the distance [m] from (x, y) to its centre."""
+        col = int((x - self.x_min) / self.resolution)
+        row = self.rows - 1 - int((y - self.y_min) / self.resolution)
+        centre_x = self.x_min + (col + 0.5) * self.resolution
+        centre_y = self.y_min + (self.rows - 1 - row + 0.5) * self.resolution
+        return row, col, math.hypot(x - centre_x, y - centre_y)
+
+    def inside_map(self, x: float, y: float) -> bool:
+        return self.x_min <= x < self.x_max and self.y_min <= y < self.y_max
+
+    def lower_bound(self, x: float, y: float) -> float:
+        """A cheap lower bound of `distance(x, y)` [m]."""
+        if not self.inside_map(x, y):
+            return 0.0
+        row, col, offset = self._cell(x, y)
+        # Nearest occupied centre >= field - offset; its square's boundary is at most a half diagonal closer.
+        bound = min(
+            self.centre_field[row, col] - offset - math.sqrt(2.0) * self.half, self.distance_to_edge(x, y)
+        )
+        for cx, cy, radius in self.bounds:
+            bound = min(bound, math.hypot(x - cx, y - cy) - radius)
+        return max(0.0, bound)
+
+    def distance(self, x: float, y: float) -> float:
+        """Exact distance [m] from (x, y) to the nearest true obstacle; 0 inside one or off the map."""
+        if not self.inside_map(x, y):
+            return 0.0
+        row, col, offset = self._cell(x, y)
+        return _world_distance(
+            float(x), float(y), row, col, offset, self.distance_to_edge(x, y), self._occupied_u8,
+            float(self.centre_field[row, col]), self.x_min, self.y_min, self.resolution, self._circles,
+            self._vertices, self._starts,
+        )  # fmt: skip
+
+    def distance_to_edge(self, x: float, y: float) -> float:
+        """Distance [m] to the edge of the map (beyond it counts as obstacle)."""
+        return min(x - self.x_min, self.x_max - x, y - self.y_min, self.y_max - y)
+
+
+@numba.njit(cache=True)
+def _world_distance(
+    x, y, row, col, offset, best, occupied, field, x_min, y_min, resolution, circles, vertices, starts
+):  # fmt: skip
+    """`WorldDistance.distance` inside the map: (row, col) holds (x, y) at `offset` [m] from its
+    centre, `best` is the distance to the map edge, `field` the cell's centre field value."""
+    half = resolution / 2.0
+    rows, cols = occupied.shape
+    if math.isfinite(field):
+        # The nearest centre's square is within field + offset; any square that close has its
+        # centre within that plus a half diagonal, so a window of that reach holds the nearest one.
+        reach = min(best, field + offset) + math.sqrt(2.0) * half
+        k = int(math.ceil(reach / resolution))
+        nearest_sq = math.inf
+        for r in range(max(row - k, 0), min(row + k + 1, rows)):
+            centre_y = y_min + (rows - 1 - r + 0.5) * resolution
+            dy = max(abs(centre_y - y) - half, 0.0)
+            for c in range(max(col - k, 0), min(col + k + 1, cols)):
+                if occupied[r, c]:
+                    centre_x = x_min + (c + 0.5) * resolution
+                    dx = max(abs(centre_x - x) - half, 0.0)
+                    nearest_sq = min(nearest_sq, dx * dx + dy * dy)
+        best = min(best, math.sqrt(nearest_sq))
+    for index in range(circles.shape[0]):
+        gap = math.hypot(x - circles[index, 0], y - circles[index, 1]) - circles[index, 2]
+        best = min(best, max(0.0, gap))
+    for polygon in range(starts.shape[0] - 1):
+        best = min(best, polygon_distance(x, y, vertices, starts[polygon], starts[polygon + 1]))
+    return best
+
+
+def check_start_goal(scenario) -> None:
+    """Start and goal must lie in free space: not in a known cell, the inflated map or an unknown obstacle."""
+    grid = load_known_map(scenario)
+    inflated = (
+        grid.inflate(scenario.planner.expansion_distance) if scenario.planner.expansion_distance else grid
+    )
+    for label, point in (("[start]", scenario.start[:2]), ("[goal]", scenario.goal)):
+        x, y = point
+        cell = grid.world_to_cell((x, y))
+        where = f"{scenario.source}: {label}: ({x:g}, {y:g})"
+        if not grid.contains_cell(cell):
+            raise CosimError(f"{where} is outside the map {scenario.map_file.name}")
+        if grid.occupied[cell]:
+            raise CosimError(f"{where} is inside an obstacle of the known map {scenario.map_file.name}")
+        if inflated.occupied[cell]:
+            raise CosimError(
+                f"{where} is inside the inflated known map (expansion_distance "
+                f"{scenario.planner.expansion_distance:g} m of [planner])"
+            )
+        for index, obstacle in enumerate(scenario.obstacles):
+            if distance_to_obstacle(x, y, obstacle) < scenario.vehicle_radius:
+                raise CosimError(
+                    f"{where} is inside unknown obstacle [[obstacles]][{index}] ({obstacle.kind}, "
+                    f"counting the vehicle radius {scenario.vehicle_radius:g} m)"
+                )
