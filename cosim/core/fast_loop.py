@@ -4,9 +4,9 @@ Python-side ctypes calls cost about a microsecond each (more on a loaded machine
 needs three of them. When every component is an `FmuComponent` whose inputs and outputs are all
 unscaled reals, and nothing observes the individual steps, the master hands the loop to a
 function generated for this system and compiled with numba: it calls the FMUs' C functions by
-address and copies the connections between the same buffers the Python path uses, with the same
-order, periods and time arithmetic, so both paths give bit-identical results. Compilation costs
-about a second, so the master uses it only for long runs.
+address and copies the connections (with their scale and offset) between the same buffers the
+Python path uses, with the same order, periods and arithmetic, so both paths give bit-identical
+results. Compilation costs about a second, so the master uses it only for long runs.
 """
 
 from __future__ import annotations
@@ -27,6 +27,16 @@ _PROTOTYPES = {
         ctypes.c_int, _U64, ctypes.c_double, ctypes.c_double, ctypes.c_bool, _U64, _U64, _U64, _U64
     ),
 }
+
+
+def transfer_expression(value: str, scale: float, offset: float) -> str:
+    """Source text of what a connection delivers: `value * scale + offset`, without the no-op terms.
+
+    The master's Python loop (`cosim.core.master`) and the compiled loop both use it, so they do the
+    same floating-point operations and give bit-identical inputs.
+    """
+    expression = value if scale == 1.0 else f"{value} * {scale!r}"
+    return expression if offset == 0.0 else f"{expression} + {offset!r}"
 
 
 def native_steps(order: list[Component]) -> list[NativeStep] | None:
@@ -77,7 +87,10 @@ def compile_loop(
             if connection.target_component == component.name:
                 producer, source = system.resolve(connection.source, "output")
                 _, target = system.resolve(connection.target, "input")
-                gather.append(f"            in{i}[{target}] = out{index[producer.name]}[{source}]")
+                value = transfer_expression(
+                    f"out{index[producer.name]}[{source}]", connection.scale, connection.offset
+                )
+                gather.append(f"            in{i}[{target}] = {value}")
         version, handle = c.fmi_version, c.handle
         if component.inputs:
             names[f"set{i}"] = _PROTOTYPES[f"transfer{version}"](c.set_real)

@@ -11,9 +11,10 @@ hold their last values (sample and hold).
 
 Connections
 -----------
-`System.connect("pure_pursuit.v", "mixer.v_in", scale)` copies `scale * source output` into the
-target input before the target steps. An input takes at most one connection; unconnected inputs
-keep their start values (or what the user set with `Component.set_inputs`, which sends them).
+`System.connect("pure_pursuit.v", "mixer.v_in", scale, offset)` copies `source output * scale +
+offset` into the target input before the target steps (a unit conversion, a sign flip, a bias).
+An input takes at most one connection; unconnected inputs keep their start values (or what the user
+set with `Component.set_inputs`, which sends them).
 
 Ordering (which values a component sees at step k)
 --------------------------------------------------
@@ -88,11 +89,17 @@ def seconds_to_ns(seconds: float | Fraction | int, what: str) -> int:
 
 @dataclass(frozen=True)
 class Connection:
-    """`source` output -> `target` input, value multiplied by `scale` on the way."""
+    """`source` output -> `target` input; the input receives `output * scale + offset`."""
 
     source: str  # "component.port"
     target: str
     scale: float = 1.0
+    offset: float = 0.0  # [unit of the target input]
+
+    @property
+    def is_plain(self) -> bool:
+        """True when the value is copied unchanged (scale 1, offset 0)."""
+        return self.scale == 1.0 and self.offset == 0.0
 
     @property
     def source_component(self) -> str:
@@ -149,15 +156,15 @@ class System:
             )
         return component, index[port]
 
-    def connect(self, source: str, target: str, scale: float = 1.0) -> Connection:
-        """Connect output `source` ("comp.port") to input `target`, multiplying by `scale`."""
+    def connect(self, source: str, target: str, scale: float = 1.0, offset: float = 0.0) -> Connection:
+        """Connect output `source` ("comp.port") to input `target`: input = output * scale + offset."""
         self.resolve(source, "output")
         self.resolve(target, "input")
         if target in self._targets:
             raise CosimError(f"input '{target}' is already connected")
-        if not math.isfinite(scale):
-            raise CosimError(f"connection {source} -> {target}: scale must be finite")
-        connection = Connection(source, target, float(scale))
+        if not (math.isfinite(scale) and math.isfinite(offset)):
+            raise CosimError(f"connection {source} -> {target}: scale and offset must be finite")
+        connection = Connection(source, target, float(scale), float(offset))
         self.connections.append(connection)
         self._targets.add(target)
         return connection
@@ -275,7 +282,7 @@ def _gather(
     from one producer), because it runs for every component on every step. None when the
     consumer has no connected input (from `producers`, when given).
     """
-    groups: dict[str, list[tuple[int, int, float]]] = {}
+    groups: dict[str, list[tuple[int, int, float, float]]] = {}
     for connection in system.connections:
         if connection.target_component != consumer.name:
             continue
@@ -283,7 +290,8 @@ def _gather(
             continue
         producer, source_index = system.resolve(connection.source, "output")
         _, target_index = system.resolve(connection.target, "input")
-        groups.setdefault(producer.name, []).append((source_index, target_index, connection.scale))
+        link = (source_index, target_index, connection.scale, connection.offset)
+        groups.setdefault(producer.name, []).append(link)
     if not groups:
         return None
     names: dict[str, object] = {"target": consumer.input_cbuffer, "target_array": consumer.input_buffer}
@@ -293,15 +301,29 @@ def _gather(
         names[f"source{number}"] = producer.output_cbuffer
         names[f"source_array{number}"] = producer.output_buffer
         if len(links) <= _SCALAR_COPY_LIMIT:
-            for source_index, target_index, scale in links:
-                factor = "" if scale == 1.0 else f" * {scale!r}"
-                lines.append(f"    target[{target_index}] = source{number}[{source_index}]{factor}")
+            for source_index, target_index, scale, offset in links:
+                value = fast_loop.transfer_expression(f"source{number}[{source_index}]", scale, offset)
+                lines.append(f"    target[{target_index}] = {value}")
             continue
-        names[f"sources{number}"] = np.array([source for source, _, _ in links], dtype=np.intp)
-        names[f"targets{number}"] = np.array([target for _, target, _ in links], dtype=np.intp)
-        names[f"scales{number}"] = np.array([scale for _, _, scale in links])
-        factor = "" if all(scale == 1.0 for _, _, scale in links) else f" * scales{number}"
-        lines.append(f"    target_array[targets{number}] = source_array{number}[sources{number}]{factor}")
+        # One NumPy copy per kind of link, each with exactly the arithmetic of the scalar path (a
+        # plain copy stays a copy: adding 0.0 would turn -0.0 into 0.0).
+        kinds = {
+            "copy": [link for link in links if link[2] == 1.0 and link[3] == 0.0],
+            "scaled": [link for link in links if link[2] != 1.0 and link[3] == 0.0],
+            "affine": [link for link in links if link[3] != 0.0],
+        }
+        for kind, chosen in kinds.items():
+            if not chosen:
+                continue
+            key = f"{number}_{kind}"
+            names[f"sources{key}"] = np.array([link[0] for link in chosen], dtype=np.intp)
+            names[f"targets{key}"] = np.array([link[1] for link in chosen], dtype=np.intp)
+            names[f"scales{key}"] = np.array([link[2] for link in chosen])
+            names[f"offsets{key}"] = np.array([link[3] for link in chosen])
+            value = f"source_array{number}[sources{key}]"
+            if kind != "copy":
+                value += f" * scales{key}" + (f" + offsets{key}" if kind == "affine" else "")
+            lines.append(f"    target_array[targets{key}] = {value}")
     exec("\n".join(lines), names)  # noqa: S102 - generated from our own templates
     return names["gather"]
 
