@@ -1,16 +1,22 @@
-"""Build the project's FMUs: C sources -> standard FMI 2.0 co-simulation `.fmu` archives.
+"""Build the project's FMUs: C sources -> standard FMI 2.0 and FMI 3.0 co-simulation `.fmu` archives.
 
-Every folder under `fmus/` holding a `modelDescription.xml` is an FMU. Its `*.c` files are compiled
-together with the glue in `fmus/common/` into `binaries/<platform>/<modelIdentifier>.so`, and packed
-with the model description and all sources (so any FMI tool can rebuild it) into `<Name>.fmu`.
+Every folder under `fmus/` holding a `modelDescription.xml` (FMI 2.0) is an FMU. Its `*.c` files are
+compiled together with the shared C of `fmus/common/` and one FMI version's glue into
+`binaries/<platform>/<modelIdentifier>.so`, and packed with the model description and all sources
+(declared in `<SourceFiles>` for FMI 2.0 and in `sources/buildDescription.xml`, so any FMI tool can
+rebuild the binary) into `<Name>.fmu`. The FMI 3.0 FMU of the same model gets its description
+derived from the FMI 2.0 one (`fmus/common/model_description.py`: arrays instead of scalars) and
+goes into the `fmi3/` folder beside the FMI 2.0 ones.
 
 Standalone on purpose (standard library only): `setup.py` imports it in pip's isolated build
-environment, and `cosim.fmus` imports it from a source checkout. Run `python3 fmus/build.py [OUT_DIR]`.
+environment, and `cosim.fmus` imports it from a source checkout. Run
+`python3 fmus/build.py [OUT_DIR] [--fmi 2|3]` (both versions by default).
 """
 
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import os
 import platform
 import re
@@ -20,7 +26,9 @@ import sys
 import tempfile
 import xml.etree.ElementTree as ElementTree
 import zipfile
+from functools import cache
 from pathlib import Path
+from types import ModuleType
 
 FMUS_ROOT = Path(__file__).resolve().parent
 COMPILE_FLAGS = ["-std=c99", "-O2", "-fPIC", "-shared", "-Wall", "-Wextra", "-Werror", "-fvisibility=hidden"]
@@ -28,6 +36,8 @@ COMPILE_FLAGS = ["-std=c99", "-O2", "-fPIC", "-shared", "-Wall", "-Wextra", "-We
 # --no-undefined turns a forgotten library into a link error instead of a load failure elsewhere.
 LINK_FLAGS = ["-lm", "-Wl,--no-undefined"]
 GENERATION_TOOL = "navcosim fmus/build.py"
+FMI_VERSIONS = (2, 3)
+FMI3_SUBDIR = "fmi3"  # FMI 3.0 FMUs go to <out>/fmi3/<Name>.fmu, beside the FMI 2.0 <out>/<Name>.fmu
 
 ACCESS_UNKNOWN, ACCESS_READ_ONLY, ACCESS_FIXED, ACCESS_ANY_TIME = 0, 1, 2, 3
 TYPE_TAGS = ("Real", "Integer", "Boolean", "String", "Enumeration")
@@ -38,15 +48,24 @@ class FmuBuildError(Exception):
     """An FMU could not be built (no compiler, bad model description, compile error). One line."""
 
 
-def platform_folder() -> tuple[str, str]:
-    """The FMI 2.0 binaries folder name and shared-library suffix of this machine."""
+def platform_folder(fmi_version: int = 2) -> tuple[str, str]:
+    """The binaries folder name (FMI 2.0 `linux64`, FMI 3.0 `x86_64-linux`) and shared-library
+    suffix of this machine."""
     bits = "64" if sys.maxsize > 2**32 else "32"
     system = platform.system()
-    if system == "Linux":
-        return f"linux{bits}", ".so"
-    if system == "Darwin":
-        return f"darwin{bits}", ".dylib"
-    raise FmuBuildError(f"building FMUs on {system} is not supported (Linux and macOS are)")
+    if system not in ("Linux", "Darwin"):
+        raise FmuBuildError(f"building FMUs on {system} is not supported (Linux and macOS are)")
+    suffix = ".so" if system == "Linux" else ".dylib"
+    if fmi_version == 3:
+        machine = platform.machine().lower()
+        architecture = {"amd64": "x86_64", "arm64": "aarch64"}.get(machine, machine)
+        return f"{architecture}-{system.lower()}", suffix
+    return f"{system.lower()}{bits}", suffix
+
+
+def output_dir(out_dir: Path, fmi_version: int) -> Path:
+    """Where `build_all(out_dir)` puts the FMUs of `fmi_version`."""
+    return Path(out_dir) if fmi_version == 2 else Path(out_dir) / FMI3_SUBDIR
 
 
 def find_compiler() -> str:
@@ -60,14 +79,33 @@ def find_compiler() -> str:
     raise FmuBuildError(f"no C compiler found (tried {tried}): install gcc (apt-get install gcc) or set CC")
 
 
-def fmi2_header_dir(common_dir: Path) -> Path:
-    """The FMI 2.0 standard headers shipped by fmpy, else our own minimal declarations."""
+def fmi_header_dir(common_dir: Path, fmi_version: int = 2) -> Path:
+    """The FMI standard headers of `fmi_version` shipped by fmpy, else our own minimal declarations
+    (`fmus/common/fmi2/`, `fmus/common/fmi3/`)."""
+    own = common_dir / f"fmi{fmi_version}"
     try:
         import fmpy
     except ImportError:
-        return common_dir / "fmi2"
+        return own
     shipped = Path(fmpy.__file__).parent / "c-code"
-    return shipped if (shipped / "fmi2Functions.h").is_file() else common_dir / "fmi2"
+    return shipped if (shipped / f"fmi{fmi_version}Functions.h").is_file() else own
+
+
+def fmi2_header_dir(common_dir: Path) -> Path:
+    return fmi_header_dir(common_dir, 2)
+
+
+@cache
+def description_module(common_dir: Path) -> ModuleType:
+    """`model_description.py` of the source tree (the shared writer and the FMI 3.0 derivation)."""
+    path = Path(common_dir) / "model_description.py"
+    spec = importlib.util.spec_from_file_location(f"navcosim_model_description_{abs(hash(path))}", path)
+    if spec is None or spec.loader is None:
+        raise FmuBuildError(f"cannot load {path}")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up while the file executes
+    spec.loader.exec_module(module)
+    return module
 
 
 def model_dirs(source_root: Path = FMUS_ROOT) -> list[Path]:
@@ -79,22 +117,27 @@ def fmu_names(source_root: Path = FMUS_ROOT) -> list[str]:
     return [d.name for d in model_dirs(source_root)]
 
 
-def source_files(model_dir: Path) -> list[Path]:
-    """The files an FMU is built from: its folder, the glue, and this build script."""
+def source_files(model_dir: Path, fmi_version: int = 2) -> list[Path]:
+    """The files an FMU is built from: its folder, the shared C and headers of `common/` (of the
+    glues and FMI header folders, only that version's), the description writer and this script."""
     common_dir = model_dir.parent / "common"
+    other = [f"fmi{v}" for v in FMI_VERSIONS if v != fmi_version]
     files = [p for p in sorted(model_dir.rglob("*")) if p.is_file()]
-    files += [p for p in sorted(common_dir.rglob("*")) if p.is_file() and p.suffix in (".c", ".h")]
-    return files + [Path(__file__).resolve()]
+    for path in sorted(common_dir.rglob("*")):
+        foreign = path.name in {f"{o}_glue.c" for o in other} or any(o in path.parts for o in other)
+        if path.is_file() and path.suffix in (".c", ".h") and not foreign:
+            files.append(path)
+    return files + [common_dir / "model_description.py", Path(__file__).resolve()]
 
 
-def source_hash(model_dir: Path) -> str:
+def source_hash(model_dir: Path, fmi_version: int = 2) -> str:
     """SHA-256 over the FMU's sources, the compiler and the header folder: a change means rebuild."""
-    digest = hashlib.sha256()
-    for path in source_files(model_dir):
-        if "__pycache__" in path.parts:
+    digest = hashlib.sha256(f"FMI {fmi_version}".encode())
+    for path in source_files(model_dir, fmi_version):
+        if "__pycache__" in path.parts or not path.is_file():
             continue
         digest.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
-    digest.update(str(fmi2_header_dir(model_dir.parent / "common")).encode())
+    digest.update(str(fmi_header_dir(model_dir.parent / "common", fmi_version)).encode())
     digest.update(os.environ.get("CC", "").encode())
     return digest.hexdigest()
 
@@ -160,8 +203,40 @@ def variable_table(model_description: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _read_identity(model_dir: Path) -> tuple[str, str, str]:
-    """(modelName, modelIdentifier, guid) of the description, checked against config.h."""
+def fmi3_variable_table(variables: list) -> str:
+    """C source of `fmi3_variable_table.h` from the FMI 3.0 variables (`Fmi3Variable`s): per value
+    reference the type, access, elements and name; the elements as the model's value references."""
+    types = {"Float64": "TYPE_FLOAT64", "Int32": "TYPE_INT32", "Boolean": "TYPE_BOOLEAN"}
+    rows, elements = [], []
+    for variable in variables:
+        if variable.causality == "independent":
+            rows.append(f"    {{TYPE_INDEPENDENT, ACCESS_READ_ONLY, 0u, 1u, {_c_string(variable.name)}}},")
+            continue
+        access = ACCESS_NAMES[_access(variable.causality, variable.variability)]
+        first = len(elements)
+        elements += variable.elements
+        rows.append(
+            f"    {{{types[variable.type]}, {access}, {first}u, {len(variable.elements)}u, "
+            f"{_c_string(variable.name)}}}, /* value reference {variable.value_reference} */"
+        )
+    lines = [
+        f"/* Generated by {GENERATION_TOOL} from modelDescription.xml (FMI 3.0 form); do not edit. */",
+        f"#define VARIABLE_COUNT {len(variables)}u",
+        f"#define ELEMENT_COUNT {max(len(elements), 1)}u",
+        "static const VariableInfo variables[VARIABLE_COUNT] = {",
+        *rows,
+        "};",
+        # C forbids an empty array: a model with only `time` gets one unused element.
+        "static const unsigned model_references[ELEMENT_COUNT] = {"
+        + (", ".join(f"{r}u" for r in elements) or "0u")
+        + "};",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def _read_identity(model_dir: Path) -> tuple[str, str, str, ElementTree.Element]:
+    """(modelName, modelIdentifier, guid, root) of the description, checked against config.h and
+    against the sources the build compiles."""
     description = model_dir / "modelDescription.xml"
     try:
         root = ElementTree.parse(description).getroot()
@@ -177,7 +252,15 @@ def _read_identity(model_dir: Path) -> tuple[str, str, str]:
         if match is None or match.group(1) != expected:
             config_path = model_dir / "config.h"
             raise FmuBuildError(f'{config_path}: {macro} must be "{expected}" as in modelDescription.xml')
-    return root.get("modelName", identifier), identifier, guid
+    # FMI 2.0 tools rebuild the binary from <SourceFiles>: it must list exactly what we compile.
+    declared = [f.get("name", "") for f in cosimulation.findall("SourceFiles/File")]
+    compiled = [path.name for path in description_module(model_dir.parent / "common").c_sources(model_dir, 2)]
+    if sorted(declared) != sorted(compiled):
+        raise FmuBuildError(
+            f"{description}: <SourceFiles> lists {', '.join(declared) or 'nothing'} but the FMU is built "
+            f"from {', '.join(compiled)} (regenerate it: make_model_description.py)"
+        )
+    return root.get("modelName", identifier), identifier, guid, root
 
 
 def _build_description(identifier: str, sources: list[str]) -> str:
@@ -195,26 +278,44 @@ def _build_description(identifier: str, sources: list[str]) -> str:
     )
 
 
-def build_fmu(model_dir: Path, out_dir: Path, header_dir: Path | None = None) -> Path:
-    """Compile and pack the FMU of `model_dir` into `out_dir/<Name>.fmu`; returns its path.
+def build_fmu(model_dir: Path, out_dir: Path, header_dir: Path | None = None, fmi_version: int = 2) -> Path:
+    """Compile and pack the FMI `fmi_version` FMU of `model_dir` into `out_dir/<Name>.fmu`; returns
+    its path.
 
     The archive is written to a temporary file in `out_dir` and renamed into place, so a reader
     (or a second build running at the same time) never sees a half-written `.fmu`.
     """
     model_dir, out_dir = Path(model_dir), Path(out_dir)
+    if fmi_version not in FMI_VERSIONS:
+        raise FmuBuildError(f"FMI version {fmi_version} is not built (2 and 3 are)")
     common_dir = model_dir.parent / "common"
-    header_dir = header_dir or fmi2_header_dir(common_dir)
-    _, identifier, _ = _read_identity(model_dir)
-    folder, suffix = platform_folder()
+    headers_from = header_dir or fmi_header_dir(common_dir, fmi_version)
+    _, identifier, _, root = _read_identity(model_dir)
+    descriptions = description_module(common_dir)
+    folder, suffix = platform_folder(fmi_version)
     compiler = find_compiler()
     out_dir.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix=f".{model_dir.name}-", dir=out_dir) as temp:
         generated = Path(temp) / "generated"
         generated.mkdir()
-        (generated / "variable_table.h").write_text(variable_table(model_dir / "modelDescription.xml"))
-        sources = sorted(common_dir.glob("*.c")) + sorted(model_dir.glob("*.c"))
+        if fmi_version == 2:
+            description = model_dir / "modelDescription.xml"
+            table = generated / "variable_table.h"
+            table.write_text(variable_table(description))
+        else:
+            description = generated / "modelDescription.xml"
+            try:
+                description.write_text(
+                    descriptions.fmi3_model_description((model_dir / "modelDescription.xml").read_text())
+                )
+                variables = descriptions.fmi3_variables(root)
+            except descriptions.DescriptionError as error:
+                raise FmuBuildError(f"{model_dir.name}: no FMI 3.0 form: {error}") from None
+            table = generated / "fmi3_variable_table.h"
+            table.write_text(fmi3_variable_table(variables))
+        sources = descriptions.c_sources(model_dir, fmi_version)
         binary = Path(temp) / f"{identifier}{suffix}"
-        includes = [f"-I{include_dir}" for include_dir in (generated, model_dir, common_dir, header_dir)]
+        includes = [f"-I{include_dir}" for include_dir in (generated, model_dir, common_dir, headers_from)]
         command = [compiler, *COMPILE_FLAGS, *includes]
         command += [str(s) for s in sources] + ["-o", str(binary), *LINK_FLAGS]
         result = subprocess.run(command, capture_output=True, text=True)
@@ -224,14 +325,14 @@ def build_fmu(model_dir: Path, out_dir: Path, header_dir: Path | None = None) ->
             raise FmuBuildError(f"compiling {model_dir.name} failed: {first}")
         packed: dict[str, Path] = {}
         headers = [*sorted(common_dir.glob("*.h")), *sorted(model_dir.glob("*.h"))]
-        headers += sorted(header_dir.glob("fmi2*.h"))
-        for path in [*sources, *headers, generated / "variable_table.h"]:
+        headers += sorted(headers_from.glob(f"fmi{fmi_version}*.h"))
+        for path in [*sources, *headers, table]:
             if path.name in packed:
                 raise FmuBuildError(f"{model_dir.name}: two source files named {path.name!r}")
             packed[path.name] = path
         archive = Path(temp) / f"{model_dir.name}.fmu"
         with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED) as fmu:
-            fmu.write(model_dir / "modelDescription.xml", "modelDescription.xml")
+            fmu.write(description, "modelDescription.xml")
             fmu.write(binary, f"binaries/{folder}/{identifier}{suffix}")
             for name, path in sorted(packed.items()):
                 fmu.write(path, f"sources/{name}")
@@ -241,15 +342,30 @@ def build_fmu(model_dir: Path, out_dir: Path, header_dir: Path | None = None) ->
     return target
 
 
-def build_all(out_dir: Path, source_root: Path = FMUS_ROOT) -> list[Path]:
-    """Build every FMU under `source_root` into `out_dir`."""
-    return [build_fmu(model_dir, out_dir) for model_dir in model_dirs(source_root)]
+def build_all(
+    out_dir: Path, source_root: Path = FMUS_ROOT, fmi_versions: tuple[int, ...] = FMI_VERSIONS
+) -> list[Path]:
+    """Build every FMU under `source_root`: FMI 2.0 into `out_dir`, FMI 3.0 into `out_dir/fmi3`."""
+    return [
+        build_fmu(model_dir, output_dir(out_dir, version), fmi_version=version)
+        for version in fmi_versions
+        for model_dir in model_dirs(source_root)
+    ]
 
 
 def main(argv: list[str]) -> int:
+    versions = FMI_VERSIONS
+    if "--fmi" in argv:
+        position = argv.index("--fmi")
+        choice = argv[position + 1] if position + 1 < len(argv) else ""
+        if choice not in ("2", "3"):
+            print("fmus/build.py: error: --fmi takes 2 or 3", file=sys.stderr)
+            return 2
+        versions = (int(choice),)
+        argv = argv[:position] + argv[position + 2 :]
     out_dir = Path(argv[0]) if argv else FMUS_ROOT.parent / "build" / "fmus"
     try:
-        for path in build_all(out_dir):
+        for path in build_all(out_dir, fmi_versions=versions):
             print(path)
     except FmuBuildError as error:
         print(f"fmus/build.py: error: {error}", file=sys.stderr)

@@ -61,7 +61,6 @@ def test_invalid_step_size(drive):
 
 def test_unsupported_functions_return_error_with_a_message(drive):
     drive.initialize()
-    _expect_error(drive, drive.slave.getFMUstate, message="fmi2GetFMUstate is not supported")
     _expect_error(
         drive,
         drive.slave.getDirectionalDerivative,

@@ -8,6 +8,9 @@
  * exists, its name and when it may be set (from the model's modelDescription.xml, the single
  * source of the variable list).
  *
+ * FMU state (get/set/free, serialise/deserialise) is a copy of the instance's model data, time and
+ * state-machine position (fmu_state.c, shared with the FMI 3.0 glue).
+ *
  * There is no global or static mutable state: every instance is independent.
  */
 #include <math.h>
@@ -18,6 +21,7 @@
 
 #include "fmi2Functions.h"
 #include "config.h"
+#include "fmu_state.h"
 #include "model.h"
 
 /* When a variable may be set; the generated table holds one of these per value reference. */
@@ -563,38 +567,122 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
     return unsupported(c, "fmi2GetRealOutputDerivatives");
 }
 
-/* ---------------------------------------------------------------- not supported (FMI 2 requires the symbols) */
+/* ---------------------------------------------------------------- FMU state */
+
+/* A state saved by fmi2GetFMUstate: model data, time and state-machine position (fmu_state.c). */
+static int state_valid(ModelInstance *comp, fmi2FMUstate FMUstate, const char *function) {
+    if (!fmu_state_is_valid((const FmuState *)FMUstate)) {
+        model_log_error(comp, "%s: the FMU state is NULL, freed or not from this FMU", function);
+        return 0;
+    }
+    return 1;
+}
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
-    (void)FMUstate;
-    return unsupported(c, "fmi2GetFMUstate");
+    ModelInstance *comp = (ModelInstance *)c;
+    FmuState *state;
+    if (!state_allows(comp, STATES_ANY, "fmi2GetFMUstate") ||
+        !arguments_valid(comp, FMUstate, 1, FMUstate, "fmi2GetFMUstate")) {
+        return fmi2Error;
+    }
+    /* A non-NULL *FMUstate is a state saved before: it is overwritten in place. */
+    if (*FMUstate != NULL && !state_valid(comp, *FMUstate, "fmi2GetFMUstate")) {
+        return fmi2Error;
+    }
+    state = *FMUstate != NULL ? (FmuState *)*FMUstate : fmu_state_new();
+    if (state == NULL) {
+        model_log_error(comp, "fmi2GetFMUstate: out of memory");
+        return fmi2Error;
+    }
+    fmu_state_save(state, &comp->data, comp->time, (int)comp->state);
+    *FMUstate = state;
+    return fmi2OK;
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
-    (void)FMUstate;
-    return unsupported(c, "fmi2SetFMUstate");
+    ModelInstance *comp = (ModelInstance *)c;
+    int instance_state;
+    if (!state_allows(comp, STATES_ANY, "fmi2SetFMUstate") || !state_valid(comp, FMUstate, "fmi2SetFMUstate")) {
+        return fmi2Error;
+    }
+    fmu_state_restore((const FmuState *)FMUstate, &comp->data, &comp->time, &instance_state);
+    comp->state = (enum InstanceState)instance_state;
+    return fmi2OK;
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
-    (void)FMUstate;
-    return unsupported(c, "fmi2FreeFMUstate");
+    ModelInstance *comp = (ModelInstance *)c;
+    if (!state_allows(comp, STATES_ANY, "fmi2FreeFMUstate")) {
+        return fmi2Error;
+    }
+    if (FMUstate == NULL || *FMUstate == NULL) {
+        return fmi2OK; /* nothing to free */
+    }
+    if (!state_valid(comp, *FMUstate, "fmi2FreeFMUstate")) {
+        return fmi2Error;
+    }
+    fmu_state_free((FmuState *)*FMUstate);
+    *FMUstate = NULL;
+    return fmi2OK;
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size) {
-    (void)FMUstate, (void)size;
-    return unsupported(c, "fmi2SerializedFMUstateSize");
+    ModelInstance *comp = (ModelInstance *)c;
+    if (!state_allows(comp, STATES_ANY, "fmi2SerializedFMUstateSize") ||
+        !state_valid(comp, FMUstate, "fmi2SerializedFMUstateSize") ||
+        !arguments_valid(comp, size, 1, size, "fmi2SerializedFMUstateSize")) {
+        return fmi2Error;
+    }
+    *size = fmu_state_serialized_size();
+    return fmi2OK;
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size) {
-    (void)FMUstate, (void)serializedState, (void)size;
-    return unsupported(c, "fmi2SerializeFMUstate");
+    ModelInstance *comp = (ModelInstance *)c;
+    if (!state_allows(comp, STATES_ANY, "fmi2SerializeFMUstate") ||
+        !state_valid(comp, FMUstate, "fmi2SerializeFMUstate") ||
+        !arguments_valid(comp, serializedState, 1, serializedState, "fmi2SerializeFMUstate")) {
+        return fmi2Error;
+    }
+    if (size < fmu_state_serialized_size()) {
+        model_log_error(comp, "fmi2SerializeFMUstate: buffer of %zu bytes, the state needs %zu", size,
+                        fmu_state_serialized_size());
+        return fmi2Error;
+    }
+    fmu_state_serialize((const FmuState *)FMUstate, 2, (unsigned char *)serializedState);
+    return fmi2OK;
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
                                    fmi2FMUstate *FMUstate) {
-    (void)serializedState, (void)size, (void)FMUstate;
-    return unsupported(c, "fmi2DeSerializeFMUstate");
+    ModelInstance *comp = (ModelInstance *)c;
+    FmuState *state;
+    const char *problem;
+    if (!state_allows(comp, STATES_ANY, "fmi2DeSerializeFMUstate") ||
+        !arguments_valid(comp, serializedState, 1, FMUstate, "fmi2DeSerializeFMUstate")) {
+        return fmi2Error;
+    }
+    if (*FMUstate != NULL && !state_valid(comp, *FMUstate, "fmi2DeSerializeFMUstate")) {
+        return fmi2Error;
+    }
+    state = *FMUstate != NULL ? (FmuState *)*FMUstate : fmu_state_new();
+    if (state == NULL) {
+        model_log_error(comp, "fmi2DeSerializeFMUstate: out of memory");
+        return fmi2Error;
+    }
+    problem = fmu_state_deserialize(state, 2, (const unsigned char *)serializedState, size);
+    if (problem != NULL) {
+        if (*FMUstate == NULL) {
+            fmu_state_free(state);
+        }
+        model_log_error(comp, "fmi2DeSerializeFMUstate: %s", problem);
+        return fmi2Error;
+    }
+    *FMUstate = state;
+    return fmi2OK;
 }
+
+/* ---------------------------------------------------------------- not supported (FMI 2 requires the symbols) */
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
                                         const fmi2ValueReference vKnown_ref[], size_t nKnown,

@@ -1,8 +1,15 @@
 /*
- * Contract between the FMI 2.0 glue (written once, in fmus/common/) and each model
- * (fmus/<Model>/model.c + config.h). The glue owns the FMI API, the instance lifecycle and
- * state machine, logging and get/set of variables by value reference; a model holds only its
- * maths and the storage of its variables.
+ * Contract between the glue (written once per FMI version, in fmus/common/: fmi2_glue.c and
+ * fmi3_glue.c) and each model (fmus/<Model>/model.c + config.h). The glue owns the FMI API, the
+ * instance lifecycle and state machine, logging, FMU state and get/set of variables by value
+ * reference; a model holds only its maths and the storage of its variables. One model builds both
+ * FMI versions.
+ *
+ * Value references here are the model's own, those of its FMI 2.0 modelDescription.xml (unique per
+ * type). The FMI 3.0 glue maps its own value references (arrays included) onto them.
+ *
+ * `struct ModelData` holds values only, no pointers and no handles: FMU state (get/set,
+ * serialise) is a byte copy of it (fmu_state.c).
  *
  * Each model folder provides:
  *   config.h           MODEL_IDENTIFIER, MODEL_GUID, an enum of value references,
@@ -30,7 +37,7 @@ ModelData *model_data(ModelInstance *comp);
 
 /* Provided by each model. */
 void model_set_start_values(ModelData *data);
-/* Called at fmi2ExitInitializationMode: check parameters, compute derived values, set
+/* Called at fmi2/fmi3ExitInitializationMode: check parameters, compute derived values, set
  * initial outputs. On a bad parameter, log one message naming the parameter and return
  * MODEL_ERROR. */
 ModelStatus model_initialize(ModelInstance *comp, ModelData *data);
@@ -40,13 +47,13 @@ ModelStatus model_do_step(ModelInstance *comp, ModelData *data, double t, double
  * that type there. Get and set are the glue's: before it touches the storage it checks the value
  * reference against the generated variable table (modelDescription.xml) and answers an unknown
  * one, setting an output or calculated value, or setting a fixed parameter after initialisation
- * with fmi2Error and a logged message that names the variable. */
+ * with fmi2Error (fmi3Error) and a logged message that names the variable. */
 double *model_real(ModelData *data, unsigned vr);
 int *model_integer(ModelData *data, unsigned vr);
 bool *model_boolean(ModelData *data, unsigned vr);
 
 /* Optional: a model whose config.h defines the predicate MODEL_WATCHES_REAL(vr) provides this.
- * The glue calls it after fmi2SetReal stored, into a watched Real, a value different from the
+ * The glue calls it after fmi2SetReal (fmi3SetFloat64, per array element) stored, into a watched Real, a value different from the
  * previous one (NaN to NaN is no change), so the model can note, e.g., a new plan once instead
  * of rescanning its inputs every step. Other values are stored with no comparison and no call. */
 void model_real_changed(ModelData *data, unsigned vr);
