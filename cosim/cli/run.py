@@ -1,7 +1,8 @@
-"""`cosim run SCENARIO`: run a scenario, print the summary, write the MCAP log and a PNG beside it.
+"""`cosim run SCENARIO|SYSTEM.ssp`: run a scenario (or an SSP archive), print the summary, write the
+MCAP log and a PNG beside it.
 
-Exit codes: 0 goal reached, 1 not reached (stop time, collision, interrupted), 2 bad input or a
-failed FMU (one line on stderr, no traceback).
+Exit codes: 0 goal reached (an FMU-only SSP: the run completed), 1 not reached (stop time,
+collision, interrupted), 2 bad input or a failed FMU (one line on stderr, no traceback).
 """
 
 from __future__ import annotations
@@ -19,7 +20,9 @@ def register(subparsers) -> None:
         description="Run a scenario (TOML): plan, step the FMUs and the lidar, log every signal to MCAP.",
     )
     parser.add_argument(
-        "scenario", type=Path, help="scenario file (.toml), e.g. scenarios/example_commented.toml"
+        "scenario",
+        type=Path,
+        help="scenario file (.toml), e.g. scenarios/example_commented.toml, or an SSP 1.0 archive (.ssp)",
     )
     parser.add_argument(
         "--out", type=Path, help="log file (default: [output].log, logs/<scenario>-<timestamp>.mcap)"
@@ -38,6 +41,8 @@ def register(subparsers) -> None:
 
 
 def _handler(args) -> int:
+    if args.scenario.suffix.lower() == ".ssp":
+        return _run_ssp(args)
     from cosim.navigation.outcome import format_summary
     from cosim.navigation.run import run_scenario
     from cosim.scenario.load import load_scenario
@@ -51,6 +56,25 @@ def _handler(args) -> int:
         return 2
     if scenario.plot and not args.no_plot:
         _plot(result.log_path, args.quiet)
+    return result.exit_code
+
+
+def _run_ssp(args) -> int:
+    from cosim.navigation.ssp_run import SspRunResult, run_ssp, summary
+
+    result = run_ssp(args.scenario, args.out, args.overrides, progress=not args.quiet)
+    if not isinstance(result, SspRunResult):  # an SSP navcosim exported: a scenario run
+        from cosim.navigation.outcome import format_summary
+
+        if not args.quiet:
+            print(format_summary(result.scenario_name, result.outcome, result.log_path, result.wall_time))
+        if result.failure is None and not args.no_plot:
+            _plot(result.log_path, args.quiet)
+    elif not args.quiet:
+        print(summary(result))
+    if result.failure is not None:
+        print(f"cosim: error: {result.failure}; log (up to the failure): {result.log_path}", file=sys.stderr)
+        return 2
     return result.exit_code
 
 

@@ -1,0 +1,3 @@
+"""Placeholder replaced below."""
+
+SCENARIO_ANNOTATION = "org.navcosim.scenario"

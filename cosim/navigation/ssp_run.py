@@ -1,0 +1,214 @@
+"""`cosim run SYSTEM.ssp`: run an SSP 1.0 archive and log every component's variables.
+
+An SSP that navcosim exported carries the navigation parts (planner, lidar, world, outcome) in its
+`org.navcosim.scenario` annotation; it runs as the scenario did (`cosim.navigation.ssp_export`).
+Any other SSP runs FMU-only: the FMU components and connections of the SSD, stepped by the master
+from the start to the stop time, with every scalar input and output of each component on
+`/signals/<component>` at each of its steps (stamped with the step's start: the inputs it used and
+the outputs it returned; `cosim.navigation.run` documents the same convention).
+
+Overrides: `--set simulation.stop_time=S`, `simulation.macro_step=S`, `simulation.start_time=S`,
+`simulation.master=gauss-seidel|jacobi` take precedence over the file.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cosim.core.master import COMPILED_MIN_STEPS, MODES, Master, seconds_to_ns
+from cosim.errors import CosimError
+from cosim.scenario.ssp_read import SspSystem, build_system, open_ssp
+
+SIMULATION_KEYS = ("stop_time", "macro_step", "start_time", "master")
+CHUNK_STEPS = 20_000  # steps between checks for an interrupt
+
+
+@dataclass
+class SspRunResult:
+    log_path: Path
+    steps: int
+    end_time: float  # [s]
+    wall_time: float  # [s]
+    reason: str  # stop_time, interrupted, fmu_failed
+    failure: str | None = None
+
+    @property
+    def exit_code(self) -> int:
+        """0 the run completed, 1 interrupted, 2 a failed FMU."""
+        if self.failure is not None:
+            return 2
+        return 0 if self.reason == "stop_time" else 1
+
+
+@dataclass(frozen=True)
+class Experiment:
+    start_time: float
+    stop_time: float
+    macro_step: float
+    master: str
+
+
+def parse_overrides(overrides: list[str] | tuple[str, ...]) -> dict[str, object]:
+    """`simulation.KEY=VALUE` overrides of an SSP run (other keys belong to scenarios only)."""
+    values: dict[str, object] = {}
+    for override in overrides:
+        key, separator, text = override.partition("=")
+        section, _, name = key.strip().partition(".")
+        if not separator or section != "simulation" or name not in SIMULATION_KEYS:
+            known = ", ".join(f"simulation.{k}" for k in SIMULATION_KEYS)
+            raise CosimError(f"--set {override}: an SSP run takes only {known}")
+        try:
+            value = tomllib.loads(f"value = {text.strip()}")["value"]
+        except tomllib.TOMLDecodeError:
+            value = text.strip()
+        if name == "master":
+            if value not in MODES:
+                raise CosimError(f"--set {override}: master must be one of {', '.join(MODES)}")
+        elif isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            raise CosimError(f"--set {override}: {name} must be a number of seconds")
+        values[name] = value
+    return values
+
+
+def experiment(ssp: SspSystem, overrides: dict[str, object]) -> Experiment:
+    """Start, stop, macro step and master from the overrides, else the file; errors say which is missing."""
+    where = f"{ssp.source}: SystemStructure.ssd"
+    start = float(overrides.get("start_time", ssp.start_time))
+    stop = overrides.get("stop_time", ssp.stop_time)
+    if stop is None:
+        raise CosimError(
+            f"{where}: DefaultExperiment gives no stopTime; pass --set simulation.stop_time=SECONDS"
+        )
+    step = overrides.get("macro_step", ssp.macro_step)
+    if step is None:
+        raise CosimError(
+            f"{where}: no macro step (SSP 1.0 has none; navcosim reads nc:Simulation macroStep from "
+            "the org.navcosim.simulation annotation of DefaultExperiment); "
+            "pass --set simulation.macro_step=SECONDS"
+        )
+    master = str(overrides.get("master", ssp.master or "gauss-seidel"))
+    if master not in MODES:
+        raise CosimError(f"{where}: nc:Simulation master '{master}' is not one of {', '.join(MODES)}")
+    if float(step) <= 0:
+        raise CosimError(f"{where}: macro step must be > 0 s, got {step}")
+    if float(stop) <= start:
+        raise CosimError(f"{where}: stop time {stop} s is not after the start time {start} s")
+    return Experiment(start, float(stop), float(step), master)
+
+
+def run_ssp(path: str | Path, out_path: Path | None = None, overrides=(), progress: bool = False):
+    """Run the SSP archive `path`, logging to `out_path` (default logs/<name>-<timestamp>.mcap).
+
+    Returns an `SspRunResult`, or for an SSP that navcosim exported from a scenario, the
+    scenario run's `RunResult`. Raises `CosimError` on bad input, before any log exists.
+    """
+    from cosim.navigation.run import _Interrupt
+
+    values = parse_overrides(overrides)
+    with open_ssp(path) as ssp:
+        from cosim.navigation import ssp_export
+
+        if ssp_export.SCENARIO_ANNOTATION in ssp.annotations:
+            return ssp_export.run_exported(ssp, values, out_path, progress)
+        with _Interrupt() as interrupt:
+            return _run_fmus(ssp, experiment(ssp, values), out_path, interrupt)
+
+
+def default_log_path(name: str) -> Path:
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    return Path("logs") / f"{name or 'ssp'}-{stamp}.mcap"
+
+
+def _run_fmus(ssp: SspSystem, run: Experiment, out_path: Path | None, interrupt) -> SspRunResult:
+    from cosim.record import batch as recorder_batch
+    from cosim.record.recorder import Recorder
+
+    system, parameters = build_system(ssp, run.macro_step, run.master)
+    master = Master(system, start_time=run.start_time, parameters=parameters)
+    try:
+        master.initialize()
+    except CosimError as error:
+        raise CosimError(f"{ssp.source}: initialising the system failed: {error}") from None
+    log_path = Path(out_path) if out_path is not None else default_log_path(Path(ssp.source).stem)
+    try:
+        recorder = Recorder(log_path)
+    except BaseException:
+        master.close()
+        raise
+    h_ns = system.macro_step_ns
+    total = round((seconds_to_ns(run.stop_time, "stop time") - master.start_time_ns) / h_ns)
+    recorder_batch.warm_up()  # compile (or load) the packing kernels outside the timed run
+    wall_start = time.perf_counter()
+    failure = None
+    with recorder:
+        _write_header(ssp, run, master, recorder)
+        channels, periods = [], []
+        for component in master.order:
+            channels.append(recorder.signal_channel(component.name, component.signal_names()))
+            periods.append(system.period_steps(component))
+
+        def record(first: int, count: int, histories: list[np.ndarray]) -> None:
+            blocks = []
+            for channel, period, rows in zip(channels, periods, histories, strict=True):
+                first_k = -(-first // period) * period  # row j is step first_k + j * period
+                times = master.start_time_ns + (first_k + period * np.arange(len(rows))) * h_ns
+                blocks.append((channel, times, rows))
+            recorder.hold_signal_rows(blocks)
+
+        compiled = total >= COMPILED_MIN_STEPS
+        try:
+            while master.step_index < total and interrupt.signal_name is None:
+                master.run_recorded(min(CHUNK_STEPS, total - master.step_index), record, compiled=compiled)
+        except CosimError as error:
+            failure = f"{error} (at t = {master.time:.3f} s)"
+        reason = "fmu_failed" if failure else ("stop_time" if master.step_index >= total else "interrupted")
+        try:
+            master.close()
+        except CosimError as error:
+            failure = failure or f"terminating the system failed: {error}"
+        outcome = {"reached": "false", "reason": reason, "time": repr(master.time)}
+        if failure:
+            outcome["failure"] = failure
+        recorder.close(outcome)
+    wall_time = time.perf_counter() - wall_start
+    return SspRunResult(log_path, master.step_index, master.time, wall_time, reason, failure)
+
+
+def _write_header(ssp: SspSystem, run: Experiment, master: Master, recorder) -> None:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        navcosim_version = version("navcosim")
+    except PackageNotFoundError:
+        navcosim_version = "unknown"
+    recorder.add_metadata(
+        "navcosim",
+        {
+            "scenario_name": ssp.name,
+            "navcosim_version": navcosim_version,
+            "ssp": Path(ssp.source).name,
+            "macro_step": repr(run.macro_step),
+            "start_time": repr(run.start_time),
+            "stop_time": repr(run.stop_time),
+            "master": run.master,
+        },
+    )
+    for component in master.order:
+        description = component.describe()
+        if description:
+            recorder.add_metadata(f"fmu/{component.name}", description)
+    recorder.add_attachment("SystemStructure.ssd", "application/x-ssp-definition", ssp.ssd_text)
+
+
+def summary(result: SspRunResult) -> str:
+    rate = result.end_time / result.wall_time if result.wall_time > 0 else math.inf
+    return (
+        f"{result.reason}: {result.steps} steps to t = {result.end_time:.6g} s in {result.wall_time:.2f} s "
+        f"({rate:.0f}x real time); log: {result.log_path}"
+    )

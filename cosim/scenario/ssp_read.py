@@ -1,0 +1,551 @@
+"""Reading an SSP 1.0 archive as one flat system of FMU components.
+
+An SSP is a zip archive with `SystemStructure.ssd` at its root and the files that it references
+(FMUs, .ssv parameter sets) beside it, usually under `resources/`. `open_ssp(path)` unpacks it,
+checks the SSD and every parameter set against the normative SSP 1.0 schemas and returns an
+`SspSystem`: the FMU components (a component inside nested systems is named by its path with
+`_` for the dots, `follower.car` -> `follower_car`), the connections between FMU variables, the
+parameter and start values, and the experiment. Every error is one `CosimError` line naming the
+archive, the file and the element.
+
+Semantics, as SSP 1.0 defines them:
+- Connections join connectors of a system and of its direct elements; the data flows from an
+  output (or a system's own input) to an input (or a system's own output), whatever the order of
+  start and end. Chains through the connectors of nested systems are followed to the FMU output
+  that feeds each FMU input, composing the linear transformations (factor, offset) on the way.
+  A system connector that nothing feeds but a parameter binding gives a value, passes that value
+  on as a constant (start value of an input, value of a parameter).
+- Parameter bindings (a .ssv file, `source`, or an inline `ssv:ParameterSet`, with an optional
+  `prefix`) set parameters and the start values of inputs. A system's binding names variables
+  hierarchically (`car.wheelbase` inside the system holding `car`). Later bindings override
+  earlier ones of the same element; a binding higher in the hierarchy overrides lower ones. Names
+  that match no variable are ignored, as the standard says.
+- Time: `DefaultExperiment` gives startTime and stopTime. SSP 1.0 has no step size, so navcosim
+  reads the macro step (and the master algorithm) from its annotation on the DefaultExperiment,
+  `<ssc:Annotation type="org.navcosim.simulation"><nc:Simulation macroStep="0.01"
+  master="gauss-seidel"/>`; a component's period from `<ssc:Annotation type="org.navcosim.component">
+  <nc:Component period="0.05"/>`. Either may be missing: the run then takes them from `--set`.
+
+Not supported (an error, not a silent change of meaning): referenced SSDs/SSPs as components,
+model-exchange-only FMUs, signal dictionaries, parameter mappings (.ssm), mapping transformations,
+connections that carry a calculated parameter, String and Binary values, unit conversion.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import tempfile
+import xml.etree.ElementTree as ET
+import zipfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path, PurePosixPath
+
+from cosim.core.component import closest_names
+from cosim.errors import CosimError
+from cosim.scenario import ssp_xml
+from cosim.scenario.ssp_xml import tag
+
+SSD_NAME = "SystemStructure.ssd"
+FMU_TYPE = "application/x-fmu-sharedlibrary"
+PARAMETER_SET_TYPE = "application/x-ssp-parameter-set"
+SIMULATION_ANNOTATION = "org.navcosim.simulation"
+COMPONENT_ANNOTATION = "org.navcosim.component"
+_SOURCES = ("output", "calculatedParameter")  # kinds that give a value, seen from outside an element
+_CAUSALITY_KINDS = {"input": "input", "output": "output", "parameter": "parameter"}
+_CAUSALITY_KINDS |= {"structuralParameter": "parameter", "calculatedParameter": "calculatedParameter"}
+
+
+@dataclass
+class SspComponent:
+    """One FMU of the system.
+
+    name: the component's name in the navcosim System (an identifier);
+    path: its hierarchical SSP name ("follower.car");
+    fmu: the FMU file inside the unpacked archive;
+    parameters: FMU parameter -> value; inputs: FMU input -> start value;
+    period: [s] between its steps, 0 = every macro step.
+    """
+
+    name: str
+    path: str
+    fmu: Path
+    parameters: dict[str, float] = field(default_factory=dict)
+    inputs: dict[str, float] = field(default_factory=dict)
+    period: float = 0.0
+    variables: dict = field(default_factory=dict, repr=False)  # FMU variable name -> fmpy variable
+
+
+@dataclass(frozen=True)
+class SspConnection:
+    """FMU output -> FMU input ("component.variable"); target = factor * source + offset."""
+
+    source: str
+    target: str
+    factor: float = 1.0
+    offset: float = 0.0
+
+
+@dataclass
+class SspSystem:
+    """A flattened SSP: what `cosim run X.ssp` builds and runs."""
+
+    source: str  # the archive, as errors name it
+    name: str  # the SSD's name
+    directory: Path  # the unpacked archive
+    components: list[SspComponent]
+    connections: list[SspConnection]
+    start_time: float
+    stop_time: float | None  # [s] from DefaultExperiment
+    macro_step: float | None  # [s] from the navcosim annotation
+    master: str | None
+    annotations: dict[str, ET.Element]  # SSD-level annotations by type: their content element
+    ssd_text: bytes = b""
+
+    def component(self, name: str) -> SspComponent:
+        for component in self.components:
+            if component.name == name:
+                return component
+        raise CosimError(f"{self.source}: no component '{name}'")
+
+
+@contextmanager
+def open_ssp(path: str | Path) -> Iterator[SspSystem]:
+    """Unpack the archive `path` into a temporary folder, read it, and delete the folder on exit."""
+    path = Path(path)
+    source = str(path)
+    if not path.is_file():
+        raise CosimError(f"{source}: no such SSP file")
+    if not zipfile.is_zipfile(path):
+        raise CosimError(f"{source}: not a zip archive (an SSP is a zip with {SSD_NAME} at its root)")
+    directory = Path(tempfile.mkdtemp(prefix="navcosim-ssp-"))
+    try:
+        try:
+            with zipfile.ZipFile(path) as archive:
+                names = archive.namelist()
+                if SSD_NAME not in names:
+                    raise CosimError(f"{source}: the archive has no {SSD_NAME} at its root")
+                for name in names:
+                    target = (directory / name).resolve()
+                    if not target.is_relative_to(directory.resolve()):
+                        raise CosimError(f"{source}: archive member '{name}' points outside the archive")
+                archive.extractall(directory)
+        except (zipfile.BadZipFile, OSError) as error:
+            raise CosimError(f"{source}: cannot unpack: {error}") from None
+        yield read_ssd(directory, source)
+    finally:
+        shutil.rmtree(directory, ignore_errors=True)
+
+
+def read_ssd(directory: Path, source: str) -> SspSystem:
+    """Read `directory/SystemStructure.ssd` (an unpacked SSP); errors name `source`."""
+    ssd_path = directory / SSD_NAME
+    data = ssd_path.read_bytes()
+    where = f"{source}: {SSD_NAME}"
+    root = ssp_xml.parse(data, "ssd", where)
+    reader = _Reader(directory, source, where)
+    reader.system(root.find(tag("ssd:System")), ())
+    components = reader.finish()
+    start_time, stop_time, macro_step, master = _experiment(root.find(tag("ssd:DefaultExperiment")), where)
+    return SspSystem(
+        source=source,
+        name=root.get("name", ""),
+        directory=directory,
+        components=components,
+        connections=reader.connections,
+        start_time=start_time,
+        stop_time=stop_time,
+        macro_step=macro_step,
+        master=master,
+        annotations=annotations_of(root),
+        ssd_text=data,
+    )
+
+
+def annotations_of(element: ET.Element | None) -> dict[str, ET.Element]:
+    """The `ssc:Annotation` children of an element's `Annotations`, by type: their content element."""
+    found: dict[str, ET.Element] = {}
+    if element is None:
+        return found
+    for block in (element.find(tag("ssd:Annotations")), element.find(tag("ssc:Annotations"))):
+        if block is None:
+            continue
+        for annotation in block.findall(tag("ssc:Annotation")):
+            content = list(annotation)
+            found[annotation.get("type", "")] = content[0] if content else ET.Element("empty")
+    return found
+
+
+def _experiment(element: ET.Element | None, where: str):
+    if element is None:
+        return 0.0, None, None, None
+    start = float(element.get("startTime", 0.0))
+    stop = float(element.get("stopTime")) if element.get("stopTime") is not None else None
+    simulation = annotations_of(element).get(SIMULATION_ANNOTATION)
+    macro_step = master = None
+    if simulation is not None:
+        if simulation.tag != tag("nc:Simulation"):
+            raise CosimError(f"{where}: annotation {SIMULATION_ANNOTATION} must hold one nc:Simulation")
+        macro_step = _number(simulation, "macroStep", where) if simulation.get("macroStep") else None
+        master = simulation.get("master")
+    return start, stop, macro_step, master
+
+
+def _number(element: ET.Element, attribute: str, where: str) -> float:
+    text = element.get(attribute)
+    try:
+        return float(text)
+    except (TypeError, ValueError):
+        what = f"{_local(element.tag)}.{attribute}"
+        raise CosimError(f"{where}: {what} must be a number, got {text!r}") from None
+
+
+def _local(qualified: str) -> str:
+    return qualified.rpartition("}")[2]
+
+
+def component_name(path: tuple[str, ...]) -> str:
+    """The navcosim component name of an element path: joined by '_', other characters '_'."""
+    name = re.sub(r"[^A-Za-z0-9_]", "_", "_".join(path))
+    return f"_{name}" if name[:1].isdigit() else name
+
+
+@dataclass
+class _Node:
+    """A connector of a component or a system (`owner` = the element's path)."""
+
+    owner: tuple[str, ...]
+    name: str
+    kind: str
+    is_system: bool
+
+
+class _Reader:
+    """Walks the system hierarchy, collecting components, connector nodes, edges and bindings."""
+
+    def __init__(self, directory: Path, source: str, where: str) -> None:
+        self.directory = directory
+        self.source = source
+        self.where = where
+        self.components: dict[tuple[str, ...], SspComponent] = {}
+        self.systems: set[tuple[str, ...]] = set()
+        self.nodes: dict[tuple[tuple[str, ...], str], _Node] = {}
+        self.incoming: dict[tuple, tuple[tuple, float, float, str]] = {}  # sink -> (source, f, o, what)
+        self.bindings: list[tuple[int, int, str, str, str, str | None, str]] = []
+        self.connections: list[SspConnection] = []
+
+    # ---- hierarchy ---------------------------------------------------------------------------
+
+    def system(self, element: ET.Element, path: tuple[str, ...]) -> None:
+        self.systems.add(path)
+        self._connectors(element, path, True)
+        self._bindings(element, path)
+        elements = element.find(tag("ssd:Elements"))
+        names: set[str] = set()
+        for child in list(elements) if elements is not None else []:
+            name = child.get("name", "")
+            if name in names:
+                raise CosimError(f"{self.where}: system '{_dotted(path)}' has two elements named '{name}'")
+            names.add(name)
+            if child.tag == tag("ssd:Component"):
+                self.component(child, path + (name,))
+            elif child.tag == tag("ssd:System"):
+                self.system(child, path + (name,))
+            else:
+                raise CosimError(
+                    f"{self.where}: {_where(path + (name,))}: {_local(child.tag)} is not supported"
+                )
+        for connection in element.iterfind(f"{tag('ssd:Connections')}/{tag('ssd:Connection')}"):
+            self._connection(connection, path)
+        if element.find(tag("ssd:SignalDictionaries")) is not None:
+            raise CosimError(f"{self.where}: {_where(path)}: signal dictionaries are not supported")
+
+    def component(self, element: ET.Element, path: tuple[str, ...]) -> None:
+        from cosim.fmi.component import FmuComponent
+
+        where = f"{self.where}: {_where(path)}"
+        kind = element.get("type", FMU_TYPE)
+        if kind != FMU_TYPE:
+            raise CosimError(f"{where}: component type '{kind}' is not supported (only FMUs, {FMU_TYPE})")
+        if element.get("implementation", "any") == "ModelExchange":
+            raise CosimError(f"{where}: implementation 'ModelExchange' is not supported (co-simulation only)")
+        fmu_path = self._resource(element.get("source", ""), where)
+        name = component_name(path)
+        try:
+            fmu = FmuComponent(fmu_path, name)
+        except CosimError as error:
+            raise CosimError(f"{where}: {error}") from None
+        variables = {v.name: v for v in fmu.model_description.modelVariables}
+        period = 0.0
+        annotation = annotations_of(element).get(COMPONENT_ANNOTATION)
+        if annotation is not None and annotation.get("period") is not None:
+            period = _number(annotation, "period", where)
+        self.components[path] = SspComponent(
+            name, _dotted(path), fmu_path, period=period, variables=variables
+        )
+        for connector in self._connectors(element, path, False):
+            variable = variables.get(connector.get("name"))
+            if variable is None:
+                raise CosimError(
+                    f"{where}: connector '{connector.get('name')}' is not a variable of {fmu_path.name}; "
+                    f"variables: {closest_names(connector.get('name'), variables)}"
+                )
+            expected = _CAUSALITY_KINDS.get(variable.causality)
+            if connector.get("kind") != expected:
+                raise CosimError(
+                    f"{where}: connector '{variable.name}' has kind '{connector.get('kind')}' but the FMU "
+                    f"variable's causality is '{variable.causality}'"
+                )
+        self._bindings(element, path)
+
+    def _connectors(self, element: ET.Element, path: tuple[str, ...], is_system: bool) -> list[ET.Element]:
+        connectors = element.findall(f"{tag('ssd:Connectors')}/{tag('ssd:Connector')}")
+        for connector in connectors:
+            name, kind = connector.get("name", ""), connector.get("kind", "")
+            if (path, name) in self.nodes:
+                raise CosimError(f"{self.where}: {_where(path)}: connector '{name}' declared twice")
+            if kind == "inout":
+                raise CosimError(
+                    f"{self.where}: {_where(path)}: connector '{name}': kind 'inout' is not supported"
+                )
+            self.nodes[(path, name)] = _Node(path, name, kind, is_system)
+        return connectors
+
+    def _resource(self, uri: str, where: str) -> Path:
+        relative = PurePosixPath(uri)
+        if not uri or uri.startswith("#") or "://" in uri or relative.is_absolute() or ".." in relative.parts:
+            raise CosimError(f"{where}: source '{uri}' must be a relative path inside the archive")
+        path = self.directory / relative
+        if not path.is_file():
+            raise CosimError(f"{where}: source '{uri}' is not in the archive")
+        return path
+
+    # ---- connections -------------------------------------------------------------------------
+
+    def _endpoint(self, system: tuple[str, ...], element: str | None, connector: str, where: str):
+        owner = system if element is None else system + (element,)
+        if element is not None and owner not in self.components and owner not in self.systems:
+            raise CosimError(f"{where}: no element '{element}' in {_where(system)}")
+        node = self.nodes.get((owner, connector))
+        if node is None:
+            known = [name for (path, name) in self.nodes if path == owner]
+            raise CosimError(
+                f"{where}: {_where(owner)} has no connector '{connector}'; "
+                f"connectors: {closest_names(connector, known) or 'none'}"
+            )
+        # Seen from inside its own system, a system's input gives a value and its output takes one.
+        gives = node.kind in _SOURCES if element is not None else node.kind in ("input", "parameter")
+        return (owner, connector), node, gives
+
+    def _connection(self, element: ET.Element, system: tuple[str, ...]) -> None:
+        start = (element.get("startElement"), element.get("startConnector"))
+        end = (element.get("endElement"), element.get("endConnector"))
+        what = f"{_dotted(system + ((start[0],) if start[0] else ()) + (start[1],))} -> " + _dotted(
+            system + ((end[0],) if end[0] else ()) + (end[1],)
+        )
+        where = f"{self.where}: connection {what}"
+        first, first_node, first_gives = self._endpoint(system, *start, where)
+        second, second_node, second_gives = self._endpoint(system, *end, where)
+        if first_gives == second_gives:
+            side = "give" if first_gives else "take"
+            kinds = f"{first_node.kind}, {second_node.kind}"
+            raise CosimError(f"{where}: both connectors {side} a value (kinds {kinds})")
+        source, sink = (first, second) if first_gives else (second, first)
+        if "calculatedParameter" in (first_node.kind, second_node.kind):
+            raise CosimError(f"{where}: connections of calculated parameters are not supported")
+        factor, offset = 1.0, 0.0
+        for child in element:
+            if child.tag == tag("ssc:LinearTransformation"):
+                factor = float(child.get("factor", 1.0))
+                offset = float(child.get("offset", 0.0))
+            elif child.tag.endswith("MappingTransformation"):
+                raise CosimError(f"{where}: {_local(child.tag)} is not supported")
+        if sink in self.incoming:
+            raise CosimError(f"{where}: {_dotted(sink[0] + (sink[1],))} is already connected")
+        self.incoming[sink] = (source, factor, offset, where)
+
+    # ---- parameter bindings ------------------------------------------------------------------
+
+    def _bindings(self, element: ET.Element, path: tuple[str, ...]) -> None:
+        where = f"{self.where}: {_where(path)}"
+        for order, binding in enumerate(
+            element.iterfind(f"{tag('ssd:ParameterBindings')}/{tag('ssd:ParameterBinding')}")
+        ):
+            kind = binding.get("type", PARAMETER_SET_TYPE)
+            if kind != PARAMETER_SET_TYPE:
+                raise CosimError(f"{where}: parameter binding type '{kind}' is not supported")
+            if binding.find(tag("ssd:ParameterMapping")) is not None:
+                raise CosimError(f"{where}: parameter mappings (.ssm) are not supported")
+            prefix = binding.get("prefix", "")
+            uri = binding.get("source")
+            if uri is not None:
+                if binding.get("sourceBase", "SSD") != "SSD":
+                    raise CosimError(f"{where}: parameter binding sourceBase 'component' is not supported")
+                file_where = f"{self.source}: {uri}"
+                parameter_set = ssp_xml.parse(self._resource(uri, where).read_bytes(), "ssv", file_where)
+            else:
+                values = binding.find(tag("ssd:ParameterValues"))
+                parameter_set = values.find(tag("ssv:ParameterSet")) if values is not None else None
+                file_where = f"{where}: inline parameter set"
+                if parameter_set is None:
+                    raise CosimError(f"{where}: parameter binding without source or inline ssv:ParameterSet")
+                ssp_xml.validate(parameter_set, "ssv", file_where)
+            for parameter in parameter_set.iterfind(f"{tag('ssv:Parameters')}/{tag('ssv:Parameter')}"):
+                value = list(parameter)[0]
+                name = path + tuple((prefix + parameter.get("name", "")).split("."))
+                entry = (-len(path), order, _dotted(name), _local(value.tag), value.get("value"))
+                self.bindings.append(entry + (value.get("unit"), file_where))
+
+    def _apply_bindings(self) -> dict[tuple, float]:
+        """Apply every binding, deepest first (higher levels override); returns system connector values."""
+        system_values: dict[tuple, float] = {}
+        for _, _, name, kind, text, unit, where in sorted(self.bindings, key=lambda b: (b[0], b[1])):
+            target = self._resolve(name)
+            if target is None:
+                continue  # the standard: names that match no variable are ignored
+            if target[0] == "system":
+                system_values[target[1]] = _value(kind, text, None, f"{where}: parameter '{name}'")
+                continue
+            component, variable = target[1], target[2]
+            fmu_variable = component.variables[variable]
+            value = _value(kind, text, fmu_variable, f"{where}: parameter '{name}'")
+            _check_unit(unit, fmu_variable, f"{where}: parameter '{name}'")
+            causality = fmu_variable.causality
+            if causality in ("parameter", "structuralParameter"):
+                component.parameters[variable] = value
+            elif causality == "input":
+                component.inputs[variable] = value
+            else:
+                raise CosimError(
+                    f"{where}: parameter '{name}': {component.path}.{variable} has causality '{causality}'; "
+                    "only parameters and inputs can be given values"
+                )
+        return system_values
+
+    def _resolve(self, name: str):
+        """A hierarchical name -> ("component", SspComponent, variable) or ("system", node key)."""
+        parts = tuple(name.split("."))
+        for split in range(len(parts) - 1, -1, -1):
+            owner, rest = parts[:split], ".".join(parts[split:])
+            if owner in self.components and rest in self.components[owner].variables:
+                return "component", self.components[owner], rest
+            if owner in self.systems and (owner, rest) in self.nodes:
+                return "system", (owner, rest)
+        return None
+
+    # ---- flattening --------------------------------------------------------------------------
+
+    def finish(self) -> list[SspComponent]:
+        """Apply the bindings and follow every FMU input back to its FMU output (or constant)."""
+        system_values = self._apply_bindings()
+        names: dict[str, str] = {}
+        for component in self.components.values():
+            if component.name in names:
+                raise CosimError(
+                    f"{self.where}: elements '{names[component.name]}' and '{component.path}' both become "
+                    f"component '{component.name}'; rename one"
+                )
+            names[component.name] = component.path
+        for key, node in self.nodes.items():
+            if node.is_system or node.kind not in ("input", "parameter") or key not in self.incoming:
+                continue
+            component = self.components[node.owner]
+            factor, offset, current, seen = 1.0, 0.0, key, {key}
+            while current in self.incoming:
+                source, f, o, where = self.incoming[current]
+                factor, offset = factor * f, factor * o + offset
+                if source in seen:
+                    raise CosimError(f"{where}: the connection chain loops through system connectors")
+                seen.add(source)
+                current = source
+            origin = self.nodes[current]
+            if not origin.is_system:
+                if node.kind == "parameter":
+                    raise CosimError(f"{where}: a parameter can only be fed a constant, not an output")
+                producer = self.components[origin.owner]
+                source_name, target_name = f"{producer.name}.{origin.name}", f"{component.name}.{node.name}"
+                self.connections.append(SspConnection(source_name, target_name, factor, offset))
+            elif current in system_values:
+                value = factor * system_values[current] + offset
+                target = component.parameters if node.kind == "parameter" else component.inputs
+                target[node.name] = value
+        return list(self.components.values())
+
+
+def _value(kind: str, text: str | None, variable, where: str) -> float:
+    """A parameter value as the float navcosim passes (Booleans 0/1, enumerations their integer)."""
+    if kind == "Real":
+        return float(text)
+    if kind == "Integer":
+        return float(int(text))
+    if kind == "Boolean":
+        return 1.0 if text.strip() in ("true", "1") else 0.0
+    if kind == "Enumeration":
+        items = getattr(getattr(variable, "declaredType", None), "items", None) or []
+        for item in items:
+            if item.name == text:
+                return float(item.value)
+        known = ", ".join(item.name for item in items) or "none"
+        raise CosimError(f"{where}: '{text}' is not an item of the variable's enumeration ({known})")
+    raise CosimError(
+        f"{where}: {kind} values are not supported (navcosim sets Real, Integer, Boolean, Enumeration)"
+    )
+
+
+def _check_unit(unit: str | None, variable, where: str) -> None:
+    if not unit:
+        return
+    declared = getattr(variable, "unit", None)
+    declared = declared or getattr(getattr(variable, "declaredType", None), "unit", None)
+    if declared and declared != unit:
+        raise CosimError(
+            f"{where}: unit '{unit}' differs from the variable's '{declared}' (no unit conversion)"
+        )
+
+
+def _dotted(path: tuple[str, ...]) -> str:
+    return ".".join(path)
+
+
+def _where(path: tuple[str, ...]) -> str:
+    return f"element '{_dotted(path)}'" if path else "the root system"
+
+
+def build_system(ssp: SspSystem, macro_step: float, master: str = "gauss-seidel"):
+    """A `System` of the SSP's FMU components and connections, and the parameters for `Master`.
+
+    Input start values from parameter bindings are staged in the components' input buffers, which
+    `Master.initialize` sends before initialising each FMU (connected inputs are then overwritten).
+    """
+    from cosim.core.master import System
+    from cosim.fmi.component import FmuComponent
+
+    system = System(macro_step, master)
+    parameters: dict[str, dict[str, float]] = {}
+    for spec in ssp.components:
+        where = f"{ssp.source}: {_where(tuple(spec.path.split('.')))}"
+        try:
+            component = FmuComponent(spec.fmu, spec.name, period=spec.period)
+            for name, value in spec.inputs.items():
+                component.input_buffer[component.input_index[name]] = value
+            system.add(component)
+            system.period_steps(component)
+        except CosimError as error:
+            raise CosimError(f"{where}: {error}") from None
+        parameters[spec.name] = dict(spec.parameters)
+    for connection in ssp.connections:
+        try:
+            if connection.offset:
+                system.connect(connection.source, connection.target, connection.factor, connection.offset)
+            else:
+                system.connect(connection.source, connection.target, connection.factor)
+        except (CosimError, TypeError) as error:
+            what = f"connection {connection.source} -> {connection.target}"
+            raise CosimError(f"{ssp.source}: {what}: {error}") from None
+    try:
+        system.order()  # raises on an algebraic loop
+    except CosimError as error:
+        raise CosimError(f"{ssp.source}: {error}") from None
+    return system, parameters

@@ -1,0 +1,84 @@
+"""SSP 1.0 XML: namespaces, the normative schemas, parsing and validation with one-line errors.
+
+The schemas in `ssp_schemas/` are the Modelica Association's normative SSP 1.0.1 XSD files (BSD
+2-clause, see `ssp_schemas/LICENSE.txt`), used unchanged. Every file navcosim reads or writes
+(SystemStructure.ssd, .ssv parameter sets, inline parameter sets) is checked against them.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from functools import cache
+from pathlib import Path
+
+from cosim.errors import CosimError
+
+SCHEMA_DIR = Path(__file__).resolve().parent / "ssp_schemas"
+NS = {
+    "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
+    "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
+    "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
+    "ssm": "http://ssp-standard.org/SSP1/SystemStructureParameterMapping",
+    "ssb": "http://ssp-standard.org/SSP1/SystemStructureSignalDictionary",
+    "nc": "urn:navcosim:ssp:1",  # navcosim's own annotations (ssc:Annotation type="org.navcosim.*")
+}
+SCHEMAS = {
+    "ssd": "SystemStructureDescription.xsd",
+    "ssv": "SystemStructureParameterValues.xsd",
+    "ssm": "SystemStructureParameterMapping.xsd",
+}
+for _prefix, _uri in NS.items():
+    ET.register_namespace(_prefix, _uri)
+
+
+def tag(qualified: str) -> str:
+    """'ssd:System' -> '{http://...}System' (ElementTree's notation)."""
+    prefix, _, local = qualified.partition(":")
+    return f"{{{NS[prefix]}}}{local}"
+
+
+@cache
+def schema(kind: str):
+    """The compiled normative schema `kind` ('ssd', 'ssv', 'ssm'); compiled once per process."""
+    import xmlschema
+
+    return xmlschema.XMLSchema(str(SCHEMA_DIR / SCHEMAS[kind]))
+
+
+def validate(element: ET.Element, kind: str, where: str) -> None:
+    """Raise `CosimError` naming `where` and the first invalid element when `element` breaks the schema."""
+    for error in schema(kind).iter_errors(element):
+        reason = " ".join(str(error.reason or error.message).split())
+        path = _short(error.path or "/")
+        elem = getattr(error, "elem", None)
+        if elem is not None and elem.get("name") is not None:
+            path += f" (name '{elem.get('name')}')"
+        raise CosimError(f"{where}: not valid SSP 1.0 ({SCHEMAS[kind]}) at {path}: {reason}")
+
+
+def _short(path: str) -> str:
+    """An XPath with the namespace URIs replaced by their usual prefixes."""
+    for prefix, uri in NS.items():
+        path = path.replace(f"{{{uri}}}", f"{prefix}:")
+    return path
+
+
+def parse(data: bytes, kind: str, where: str) -> ET.Element:
+    """Parse and validate one XML document; `CosimError` names `where` and the line on bad XML."""
+    try:
+        root = ET.fromstring(data)
+    except ET.ParseError as error:
+        line, column = error.position
+        raise CosimError(f"{where}: bad XML at line {line}, column {column}: {_reason(error)}") from None
+    validate(root, kind, where)
+    return root
+
+
+def _reason(error: ET.ParseError) -> str:
+    return str(error).split(":")[0]
+
+
+def to_bytes(root: ET.Element) -> bytes:
+    """An element as a UTF-8 XML document with a declaration, indented for readers."""
+    ET.indent(root, space="  ")
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
