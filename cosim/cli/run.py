@@ -60,17 +60,10 @@ def _handler(args) -> int:
 
 
 def _run_ssp(args) -> int:
-    from cosim.navigation.ssp_run import SspRunResult, run_ssp, summary
+    from cosim.navigation.ssp_run import run_ssp, summary
 
-    result = run_ssp(args.scenario, args.out, args.overrides, progress=not args.quiet)
-    if not isinstance(result, SspRunResult):  # an SSP navcosim exported: a scenario run
-        from cosim.navigation.outcome import format_summary
-
-        if not args.quiet:
-            print(format_summary(result.scenario_name, result.outcome, result.log_path, result.wall_time))
-        if result.failure is None and not args.no_plot:
-            _plot(result.log_path, args.quiet)
-    elif not args.quiet:
+    result = run_ssp(args.scenario, args.out, args.overrides)
+    if not args.quiet:
         print(summary(result))
     if result.failure is not None:
         print(f"cosim: error: {result.failure}; log (up to the failure): {result.log_path}", file=sys.stderr)

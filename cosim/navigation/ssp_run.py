@@ -1,11 +1,9 @@
 """`cosim run SYSTEM.ssp`: run an SSP 1.0 archive and log every component's variables.
 
-An SSP that navcosim exported carries the navigation parts (planner, lidar, world, outcome) in its
-`org.navcosim.scenario` annotation; it runs as the scenario did (`cosim.navigation.ssp_export`).
-Any other SSP runs FMU-only: the FMU components and connections of the SSD, stepped by the master
-from the start to the stop time, with every scalar input and output of each component on
-`/signals/<component>` at each of its steps (stamped with the step's start: the inputs it used and
-the outputs it returned; `cosim.navigation.run` documents the same convention).
+The FMU components and connections of the SSD are stepped by the master from the start to the
+stop time, with every scalar input and output of each component on `/signals/<component>` at each
+of its steps (stamped with the step's start: the inputs it used and the outputs it returned; the
+convention of `cosim.navigation.run`).
 
 Overrides: `--set simulation.stop_time=S`, `simulation.macro_step=S`, `simulation.start_time=S`,
 `simulation.master=gauss-seidel|jacobi` take precedence over the file.
@@ -102,20 +100,15 @@ def experiment(ssp: SspSystem, overrides: dict[str, object]) -> Experiment:
     return Experiment(start, float(stop), float(step), master)
 
 
-def run_ssp(path: str | Path, out_path: Path | None = None, overrides=(), progress: bool = False):
+def run_ssp(path: str | Path, out_path: Path | None = None, overrides=()) -> SspRunResult:
     """Run the SSP archive `path`, logging to `out_path` (default logs/<name>-<timestamp>.mcap).
 
-    Returns an `SspRunResult`, or for an SSP that navcosim exported from a scenario, the
-    scenario run's `RunResult`. Raises `CosimError` on bad input, before any log exists.
+    Raises `CosimError` on bad input, before any log exists.
     """
     from cosim.navigation.run import _Interrupt
 
     values = parse_overrides(overrides)
     with open_ssp(path) as ssp:
-        from cosim.navigation import ssp_export
-
-        if ssp_export.SCENARIO_ANNOTATION in ssp.annotations:
-            return ssp_export.run_exported(ssp, values, out_path, progress)
         with _Interrupt() as interrupt:
             return _run_fmus(ssp, experiment(ssp, values), out_path, interrupt)
 

@@ -1,3 +1,0 @@
-"""Placeholder replaced below."""
-
-SCENARIO_ANNOTATION = "org.navcosim.scenario"
