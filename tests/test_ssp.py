@@ -202,6 +202,30 @@ def test_bindings_higher_in_the_hierarchy_and_later_ones_take_precedence(tmp_pat
         assert car.parameters == {"wheelbase": 3.5, "max_steering_angle": 0.5, "y0": -3.0}
 
 
+def test_linear_transformations_compose_through_system_connectors(convoy, tmp_path):
+    """leader.x -> follower.v: x 2 - 0.5 on the way in, then x 0.5 + 1 inside the follower:
+    car.v = 0.5 (2 x - 0.5) + 1 = x + 0.75 at every step; the steering keeps its plain path."""
+    ssd = (CONVOY / "SystemStructure.ssd").read_text()
+    outer = 'endElement="follower" endConnector="v"/>'
+    inner = 'startConnector="v" endElement="car" endConnector="v"/>'
+    ssd = ssd.replace(
+        outer, outer[:-2] + '><ssc:LinearTransformation factor="2" offset="-0.5"/></ssd:Connection>'
+    )
+    ssd = ssd.replace(
+        inner, inner[:-2] + '><ssc:LinearTransformation factor="0.5" offset="1"/></ssd:Connection>'
+    )
+    xmlschema.XMLSchema(SCHEMAS / "SystemStructureDescription.xsd").validate(ssd)
+    archive = pack(tmp_path / "scaled.ssp", ssd, convoy_files())
+    with open_ssp(archive) as ssp:
+        assert ssp.connections[0].factor == 1.0 and ssp.connections[0].offset == 0.75
+    log = open_log(run_ssp(archive, tmp_path / "scaled.mcap").log_path)
+    leader, car = log.signals("leader"), log.signals("follower_car")
+    # Jacobi: step k reads the leader's x after step k - 1 (its initial 0 at k = 0).
+    x_before = np.concatenate(([0.0], leader["x"][:-1]))
+    assert np.array_equal(car["v"], x_before + 0.75)
+    assert np.array_equal(car["steering_angle"], np.concatenate(([0.0], leader["theta"][:-1])))
+
+
 def test_experiment_from_the_command_line_when_the_file_has_none(convoy, tmp_path, capsys):
     ssd = (CONVOY / "SystemStructure.ssd").read_text()
     start, end = ssd.index("<ssd:DefaultExperiment"), ssd.index("</ssd:DefaultExperiment>")

@@ -537,11 +537,8 @@ def build_system(ssp: SspSystem, macro_step: float, master: str = "gauss-seidel"
         parameters[spec.name] = dict(spec.parameters)
     for connection in ssp.connections:
         try:
-            if connection.offset:
-                system.connect(connection.source, connection.target, connection.factor, connection.offset)
-            else:
-                system.connect(connection.source, connection.target, connection.factor)
-        except (CosimError, TypeError) as error:
+            system.connect(connection.source, connection.target, connection.factor, connection.offset)
+        except CosimError as error:
             what = f"connection {connection.source} -> {connection.target}"
             raise CosimError(f"{ssp.source}: {what}: {error}") from None
     try:
