@@ -1,4 +1,4 @@
-"""The `cosim` command line: one sub-command module per job (fmu, plan, run, log)."""
+"""The `cosim` command line: one sub-command module per job (fmu, plan, run, log, ssp)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import sys
 
 from planner.errors import NavcosimError
 
-COMMANDS = ("fmu", "plan", "run", "log")
+COMMANDS = ("fmu", "plan", "run", "log", "ssp")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -60,11 +60,20 @@ def _handler(args) -> int:
 
 
 def _run_ssp(args) -> int:
-    from cosim.navigation.ssp_run import run_ssp, summary
+    from cosim.navigation.ssp_run import SspRunResult, run_ssp, summary
 
-    result = run_ssp(args.scenario, args.out, args.overrides)
-    if not args.quiet:
-        print(summary(result))
+    result = run_ssp(args.scenario, args.out, args.overrides, progress=not args.quiet)
+    if isinstance(result, SspRunResult):
+        if not args.quiet:
+            print(summary(result))
+    else:  # an SSP navcosim exported: the scenario's run
+        from cosim.navigation.outcome import format_summary
+
+        scenario, result = result
+        if not args.quiet:
+            print(format_summary(scenario.name, result.outcome, result.log_path, result.wall_time))
+        if result.failure is None and scenario.plot and not args.no_plot:
+            _plot(result.log_path, args.quiet)
     if result.failure is not None:
         print(f"cosim: error: {result.failure}; log (up to the failure): {result.log_path}", file=sys.stderr)
         return 2

@@ -1,6 +1,7 @@
 """`cosim run SYSTEM.ssp`: run an SSP 1.0 archive and log every component's variables.
 
-The FMU components and connections of the SSD are stepped by the master from the start to the
+An SSP that navcosim exported runs as the scenario it came from (`cosim.navigation.ssp_export`).
+In any other, the FMU components and connections of the SSD are stepped by the master from the start to the
 stop time, with every scalar input and output of each component on `/signals/<component>` at each
 of its steps (stamped with the step's start: the inputs it used and the outputs it returned; the
 convention of `cosim.navigation.run`).
@@ -100,15 +101,21 @@ def experiment(ssp: SspSystem, overrides: dict[str, object]) -> Experiment:
     return Experiment(start, float(stop), float(step), master)
 
 
-def run_ssp(path: str | Path, out_path: Path | None = None, overrides=()) -> SspRunResult:
+def run_ssp(path: str | Path, out_path: Path | None = None, overrides=(), progress: bool = False):
     """Run the SSP archive `path`, logging to `out_path` (default logs/<name>-<timestamp>.mcap).
 
-    Raises `CosimError` on bad input, before any log exists.
+    Returns an `SspRunResult`; for an SSP that navcosim exported from a scenario (it carries the
+    `org.navcosim.scenario` annotation) the scenario's run: (scenario, `RunResult`). Raises
+    `CosimError` on bad input, before any log exists.
     """
     from cosim.navigation.run import _Interrupt
 
     values = parse_overrides(overrides)
     with open_ssp(path) as ssp:
+        from cosim.navigation import ssp_export
+
+        if ssp_export.SCENARIO_ANNOTATION in ssp.annotations:
+            return ssp_export.run_exported(ssp, values, out_path, progress)
         with _Interrupt() as interrupt:
             return _run_fmus(ssp, experiment(ssp, values), out_path, interrupt)
 

@@ -1,0 +1,45 @@
+"""`cosim ssp export SCENARIO --out X.ssp`: write a scenario's whole system as an SSP 1.0 archive.
+
+The FMUs go in `resources/`, their parameters in `resources/parameters.ssv`, the navigation parts
+(planner, lidar, world, outcome settings) in a navcosim annotation with the scenario TOML and its
+map as resources (`cosim.navigation.ssp_export`). `cosim run X.ssp` reproduces the scenario's run.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "ssp",
+        help="SSP 1.0 archives: export a scenario (cosim run runs any .ssp)",
+        description="System Structure and Parameterization (SSP 1.0) archives.",
+    )
+    actions = parser.add_subparsers(dest="ssp_command", required=True, metavar="ACTION")
+    export = actions.add_parser(
+        "export",
+        help="write a scenario's whole system as an .ssp archive",
+        description="Write the scenario's FMUs, parameters, connections and navigation parts as an SSP.",
+    )
+    export.add_argument("scenario", type=Path, help="scenario file (.toml)")
+    export.add_argument("--out", type=Path, required=True, help="the .ssp archive to write")
+    export.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scenario key before exporting, as for cosim run (repeatable)",
+    )
+    export.set_defaults(handler=_export)
+
+
+def _export(args) -> int:
+    from cosim.navigation.ssp_export import export_scenario
+    from cosim.scenario.load import load_scenario
+
+    scenario = load_scenario(args.scenario, args.overrides)
+    path = export_scenario(scenario, args.out)
+    print(f"wrote {path} ({path.stat().st_size / 1e3:.0f} kB)")
+    return 0

@@ -1,0 +1,207 @@
+"""`cosim ssp export SCENARIO --out X.ssp`, and running such an archive as the scenario it came from.
+
+The archive holds the scenario's whole system:
+- the FMU components as `resources/<component>.fmu` (the files that the scenario runs), their
+  parameters (as the run sets them, derived ones included) in `resources/parameters.ssv`, the
+  connections between FMUs, the stop time, macro step, master and periods (`cosim.scenario.ssp_write`);
+  any SSP 1.0 tool runs this FMU part;
+- the parts that are not FMUs (planner, lidar, world, outcome settings) as resources, the scenario
+  TOML `resources/navcosim/scenario.toml` as written and its map files beside it, described by the
+  SSD-level annotation `org.navcosim.scenario`:
+  `<nc:Scenario name=... scenario="resources/navcosim/scenario.toml">` with one `nc:Python` per
+  Python component (planner, lidar), one `nc:Resource` per map file, and `nc:Set` overrides that
+  re-point file names into the archive (and repeat the `--set` overrides of the export).
+
+`cosim run X.ssp` on such an archive rebuilds the navigation system: the scenario from the TOML
+(the non-FMU parts), the FMUs from the SSD's components and their parameters from the SSV. The
+system it builds is checked against the SSD (same components, periods and connections), so an SSD
+edited into something the scenario does not describe is an error rather than silently ignored.
+The run is the scenario's run: `cosim log diff` of both logs at tolerance 0 finds no difference.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import replace
+from pathlib import Path
+
+from cosim.errors import CosimError
+from cosim.scenario.load import Scenario, parse_scenario
+from cosim.scenario.ssp_read import SspComponent, SspConnection, SspSystem
+from cosim.scenario.ssp_xml import tag
+
+SCENARIO_ANNOTATION = "org.navcosim.scenario"
+SCENARIO_DIR = "resources/navcosim"
+ROLES = ("vehicle", "pure_pursuit", "vfh", "mixer")
+
+
+def _port_of(scenario: Scenario, name: str, port: str) -> tuple[str, float]:
+    """(FMU variable, scale) of a component's port."""
+    spec = scenario.components.get(name)
+    mapping = spec.ports.get(port) if spec is not None else None
+    return (mapping.variable, mapping.scale) if mapping is not None else (port, 1.0)
+
+
+def flat_system(built) -> tuple[list[SspComponent], list[SspConnection]]:
+    """The FMU part of a built run in SSP terms: FMU variables and FMU-level values.
+
+    Ports map to FMU variables with a scale (FMU input = scale * port value, output port =
+    scale * FMU output, FMU parameter = scale * value), so a connection `target = k * source + c`
+    between ports is `target_var = (t k s) source_var + t c` between variables.
+    """
+    from cosim.fmi.component import FmuComponent
+
+    scenario = built.scenario
+    components: list[SspComponent] = []
+    for name, component in built.system.components.items():
+        if not isinstance(component, FmuComponent):
+            continue
+        variables = {v.name: v for v in component.model_description.modelVariables}
+        parameters = {}
+        for port, value in built.parameters.get(name, {}).items():
+            variable, scale = _port_of(scenario, name, port)
+            parameters[variable] = value * scale
+            if parameters[variable] / scale != value:
+                raise CosimError(
+                    f"{scenario.source}: [{name}].{port}: {value!r} times the port scale {scale!r} does not "
+                    "divide back exactly; the exported SSP would not reproduce the run"
+                )
+        components.append(
+            SspComponent(name, name, component.path, parameters, {}, component.period, variables)
+        )
+    fmus = {component.name for component in components}
+    connections = []
+    for connection in built.system.connections:
+        if connection.source_component not in fmus or connection.target_component not in fmus:
+            continue  # a Python component's connection: the template makes it again
+        source, source_scale = _port_of(scenario, *connection.source.split(".", 1))
+        target, target_scale = _port_of(scenario, *connection.target.split(".", 1))
+        factor = target_scale * connection.scale * source_scale
+        connections.append(
+            SspConnection(
+                f"{connection.source_component}.{source}",
+                f"{connection.target_component}.{target}",
+                factor,
+                target_scale * connection.offset,
+            )
+        )
+    return components, connections
+
+
+def _map_files(scenario: Scenario) -> list[Path]:
+    """The known map and, for a ROS map .yaml, its image (both must sit in one folder)."""
+    files = [scenario.map_file]
+    if scenario.map_file.suffix in (".yaml", ".yml"):
+        for line in scenario.map_file.read_text().splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "image":
+                image = (scenario.map_file.parent / value.strip().strip("'\"")).resolve()
+                if image.parent != scenario.map_file.parent:
+                    raise CosimError(
+                        f"{scenario.map_file}: image '{value.strip()}' must sit beside the .yaml "
+                        "to be exported"
+                    )
+                files.append(image)
+    return files
+
+
+def export_scenario(scenario: Scenario, out: Path) -> Path:
+    """Write the SSP of `scenario` to `out` (see the module docstring); `CosimError` on bad input."""
+    from cosim.navigation.build import build_run
+    from cosim.scenario.ssp_write import parameter_set, system_structure, write_ssp
+
+    built = build_run(scenario)
+    components, connections = flat_system(built)
+    content = ET.Element(tag("nc:Scenario"), name=scenario.name, scenario=f"{SCENARIO_DIR}/scenario.toml")
+    sets = [f'map.file="{scenario.map_file.name}"']
+    for component in components:
+        spec = scenario.components[component.name]
+        if not spec.is_builtin:
+            section = component.name if component.name in ROLES else f"components.{component.name}"
+            sets.append(f'{section}.fmu="../{component.name}.fmu"')
+    for name in built.system.components:
+        if name not in {component.name for component in components}:
+            ET.SubElement(content, tag("nc:Python"), name=name, kind=name)
+    resources = {f"{SCENARIO_DIR}/scenario.toml": scenario.text.encode()}
+    for path in _map_files(scenario):
+        resources[f"{SCENARIO_DIR}/{path.name}"] = path.read_bytes()
+        ET.SubElement(content, tag("nc:Resource"), path=f"{SCENARIO_DIR}/{path.name}")
+    for override in sets + list(scenario.overrides):
+        ET.SubElement(content, tag("nc:Set"), value=override)
+    ssd = system_structure(
+        scenario.name,
+        components,
+        connections,
+        scenario.stop_time,
+        scenario.macro_step,
+        scenario.master,
+        (SCENARIO_ANNOTATION, content),
+    )
+    ssv = parameter_set(scenario.name, components)
+    return write_ssp(Path(out), ssd, ssv, components, resources)
+
+
+def scenario_of(ssp: SspSystem, simulation: dict[str, object]) -> Scenario:
+    """The scenario an exported SSP describes, with the FMUs and parameters of its SSD and SSV."""
+    from cosim.world.distance import check_start_goal
+
+    content = ssp.annotations[SCENARIO_ANNOTATION]
+    where = f"{ssp.source}: SystemStructure.ssd: annotation {SCENARIO_ANNOTATION}"
+    uri = content.get("scenario")
+    toml = ssp.directory / uri if uri else None
+    if content.tag != tag("nc:Scenario") or toml is None or not toml.is_file():
+        raise CosimError(
+            f"{where}: needs an nc:Scenario whose scenario attribute names a file in the archive"
+        )
+    if float(simulation.get("start_time", 0.0)) != 0.0:
+        raise CosimError(
+            f"{ssp.source}: a navcosim scenario starts at t = 0; simulation.start_time is not allowed"
+        )
+    overrides = [element.get("value", "") for element in content.iterfind(tag("nc:Set"))]
+    overrides += [f"simulation.{key}={value}" for key, value in simulation.items()]
+    scenario = parse_scenario(
+        toml.read_text(encoding="utf-8"), f"{ssp.source}: {uri}", toml.parent, overrides
+    )
+    check_start_goal(scenario)
+    components = dict(scenario.components)
+    for name, spec in scenario.components.items():
+        component = ssp.component(name)
+        parameters = {}
+        for variable, value in component.parameters.items():
+            ports = [port for port in spec.ports if spec.ports[port].variable == variable]
+            port = ports[0] if ports else variable
+            parameters[port] = value / _port_of(scenario, name, port)[1]
+        components[name] = replace(spec, fmu=str(component.fmu), parameters=parameters)
+    return replace(scenario, components=components)
+
+
+def _check_against_ssd(ssp: SspSystem, scenario: Scenario) -> None:
+    """The scenario's FMU part must be the SSD's: same components, periods and connections."""
+    from cosim.navigation.build import build_run
+
+    components, connections = flat_system(build_run(scenario))
+    where = f"{ssp.source}: SystemStructure.ssd"
+    ours = [(c.name, c.period) for c in components]
+    theirs = [(c.name, c.period) for c in ssp.components]
+    if sorted(ours) != sorted(theirs):
+        raise CosimError(f"{where}: components and periods {theirs} differ from the scenario's {ours}")
+    if sorted(map(_key, connections)) != sorted(map(_key, ssp.connections)):
+        missing = sorted(set(map(_key, connections)) - set(map(_key, ssp.connections)))
+        extra = sorted(set(map(_key, ssp.connections)) - set(map(_key, connections)))
+        raise CosimError(
+            f"{where}: the connections differ from the scenario's (edit {SCENARIO_DIR}/scenario.toml "
+            f"instead): missing {missing[:3]}, not in the scenario {extra[:3]}"
+        )
+
+
+def _key(connection: SspConnection) -> tuple:
+    return (connection.source, connection.target, connection.factor, connection.offset)
+
+
+def run_exported(ssp: SspSystem, simulation: dict[str, object], out_path: Path | None, progress: bool):
+    """Run an exported SSP as its scenario; returns (scenario, `cosim.navigation.run.RunResult`)."""
+    from cosim.navigation.run import run_scenario
+
+    scenario = scenario_of(ssp, simulation)
+    _check_against_ssd(ssp, scenario)
+    return scenario, run_scenario(scenario, out_path, progress=progress)
