@@ -15,7 +15,7 @@ from fmu_helpers import FmuInstance
 
 FMU_DIR = Path(__file__).resolve().parent.parent / "fmus"
 FMI2_ERROR = 3
-GENERATED = ["PurePursuit", "VectorFieldHistogram", "AvoidanceMixer"]
+GENERATED = ["PurePursuit", "VectorFieldHistogram", "AvoidanceMixer", "ArtificialPotentialField"]
 ALL_FMUS = ["DifferentialDrive", "Bicycle", *GENERATED]
 
 
@@ -61,6 +61,16 @@ BAD_PARAMETERS = [
     ("VectorFieldHistogram", {"safety_distance": -0.1}, "safety_distance"),
     ("VectorFieldHistogram", {"min_turning_radius": -1.0}, "min_turning_radius"),
     ("VectorFieldHistogram", {"narrow_opening_threshold": 0.0}, "narrow_opening_threshold"),
+    ("ArtificialPotentialField", {"distance_limit_min": -0.1}, "distance_limit_min"),
+    ("ArtificialPotentialField", {"distance_limit_max": 0.01}, "distance_limit_max"),  # < min 0.05
+    ("ArtificialPotentialField", {"distance_limit_max": math.inf}, "distance_limit_max"),
+    ("ArtificialPotentialField", {"robot_radius": -0.1}, "robot_radius"),
+    ("ArtificialPotentialField", {"safety_distance": math.nan}, "safety_distance"),
+    ("ArtificialPotentialField", {"influence_distance": 0.0}, "influence_distance"),
+    ("ArtificialPotentialField", {"attractive_gain": 0.0}, "attractive_gain"),
+    ("ArtificialPotentialField", {"repulsive_gain": -1.0}, "repulsive_gain"),
+    ("ArtificialPotentialField", {"max_target_deviation": 0.0}, "max_target_deviation"),
+    ("ArtificialPotentialField", {"max_target_deviation": 3.2}, "max_target_deviation"),  # > pi
     ("AvoidanceMixer", {"vehicle_type": 2}, "vehicle_type"),
     ("AvoidanceMixer", {"vehicle_type": 1, "wheelbase": 0.0}, "wheelbase"),
     ("AvoidanceMixer", {"vehicle_type": 1, "max_steering_angle": 1.6}, "max_steering_angle"),

@@ -32,6 +32,7 @@ START_VALUES = {
         "waypoints[2,2]": 1.0,
     },
     "VectorFieldHistogram": {"ranges[1]": 0.5, "angles[1]": 0.1, "target_dir": 0.2},
+    "ArtificialPotentialField": {"ranges[1]": 0.5, "angles[1]": 0.1, "target_dir": 0.2},
     "AvoidanceMixer": {"v_in": 0.5, "omega_in": 0.2, "target_dir": 0.3, "steering_dir": 0.9},
 }
 
