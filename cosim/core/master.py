@@ -53,7 +53,7 @@ it, further steps are refused, and `close()` terminates the healthy components a
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from fractions import Fraction
 
@@ -207,36 +207,14 @@ class System:
 
     def check_algebraic_loops(self) -> None:
         """Raise `CosimError` naming a cycle of direct dependencies between ports, if any."""
-        graph: dict[str, list[str]] = {}
-        for connection in self.connections:
-            graph.setdefault(connection.source, []).append(connection.target)
-        for component in self.components.values():
-            for output, depends in component.feedthrough.items():
-                for name in depends:
-                    graph.setdefault(f"{component.name}.{name}", []).append(f"{component.name}.{output}")
-        colour: dict[str, int] = {}  # 1 = on the current path, 2 = finished
-        for start in list(graph):
-            if colour.get(start):
-                continue
-            path = [start]
-            iterators = [iter(graph.get(start, []))]
-            colour[start] = 1
-            while iterators:
-                node = next(iterators[-1], None)
-                if node is None:
-                    colour[path.pop()] = 2
-                    iterators.pop()
-                elif colour.get(node) == 1:
-                    loop = path[path.index(node) :] + [node]
-                    raise CosimError(
-                        "algebraic loop (direct feedthrough only): "
-                        + " -> ".join(loop)
-                        + "; an FMU output without declared dependencies depends on every input"
-                    )
-                elif not colour.get(node):
-                    colour[node] = 1
-                    path.append(node)
-                    iterators.append(iter(graph.get(node, [])))
+        feedthrough = {name: c.feedthrough for name, c in self.components.items()}
+        loop = find_algebraic_loop([(c.source, c.target) for c in self.connections], feedthrough)
+        if loop is not None:
+            raise CosimError(
+                "algebraic loop (direct feedthrough only): "
+                + " -> ".join(loop)
+                + "; an FMU output without declared dependencies depends on every input"
+            )
 
     def order(self) -> list[Component]:
         """Step order (see the module docstring); checks algebraic loops in Gauss-Seidel mode."""
@@ -271,6 +249,43 @@ class System:
             ):
                 edges.add((c.source_component, c.target_component))
         return [self.components[name] for name in self._topological(edges)]
+
+
+def find_algebraic_loop(
+    connections: Iterable[tuple[str, str]], feedthrough: Mapping[str, Mapping[str, Iterable[str]]]
+) -> list[str] | None:
+    """A cycle of direct dependencies, as the ports along it ("comp.port", first = last), or None.
+
+    `connections` are (source output, target input) pairs; `feedthrough[component][output]` names
+    the inputs that output depends on directly. Works on names alone, so a system description can
+    be checked before any component exists (`cosim.scenario.system`).
+    """
+    graph: dict[str, list[str]] = {}
+    for source, target in connections:
+        graph.setdefault(source, []).append(target)
+    for component, outputs in feedthrough.items():
+        for output, depends in outputs.items():
+            for name in depends:
+                graph.setdefault(f"{component}.{name}", []).append(f"{component}.{output}")
+    colour: dict[str, int] = {}  # 1 = on the current path, 2 = finished
+    for start in list(graph):
+        if colour.get(start):
+            continue
+        path = [start]
+        iterators = [iter(graph.get(start, []))]
+        colour[start] = 1
+        while iterators:
+            node = next(iterators[-1], None)
+            if node is None:
+                colour[path.pop()] = 2
+                iterators.pop()
+            elif colour.get(node) == 1:
+                return path[path.index(node) :] + [node]
+            elif not colour.get(node):
+                colour[node] = 1
+                path.append(node)
+                iterators.append(iter(graph.get(node, [])))
+    return None
 
 
 def _gather(

@@ -12,9 +12,8 @@ import numpy as np
 
 from cosim.core.component import PythonComponent, array_ports
 from cosim.errors import CosimError
+from cosim.scenario.template import WAYPOINT_CAPACITY
 from planner.errors import PlannerError
-
-WAYPOINT_CAPACITY = 1000  # rows of PurePursuit's waypoints input
 
 
 def downsample_path(path: np.ndarray, capacity: int = WAYPOINT_CAPACITY) -> np.ndarray:

@@ -89,23 +89,40 @@ class _Interrupt:
             signal.signal(number, handler)
 
 
+def _output(system, reference: str) -> tuple[np.ndarray, int]:
+    """(output buffer, slot) of an observed "component.port"."""
+    component, index = system.resolve(reference, "output")
+    return component.output_buffer, index
+
+
 class _Recording:
-    """What the loop records at each step; index arrays are resolved once."""
+    """What the loop records at each step; index arrays are resolved once.
+
+    Components and ports are the system's own; what is read besides the signals (the robot pose,
+    the commanded velocity, the scan) comes from the description's `Observed`, by name.
+    """
 
     def __init__(self, built: BuiltRun, master: Master, recorder) -> None:
         self.recorder = recorder
         system = built.system
         self.entries = []
+        self.constant = []  # (channel, record) of components whose outputs never change: once, at t = 0
+        arrays = built.scenario.signal_arrays
         for component in master.order:
+            # Array ports are on /plan and /scan; with [output].signal_arrays the array outputs are
+            # recorded too (array inputs never: each is fed by an array output).
             inputs = [i for i, p in enumerate(component.inputs) if not p.is_array_element]
-            outputs = [i for i, p in enumerate(component.outputs) if not p.is_array_element]
+            outputs = [i for i, p in enumerate(component.outputs) if arrays or not p.is_array_element]
             names = [component.inputs[i].name for i in inputs] + [component.outputs[i].name for i in outputs]
             if not names:
                 continue
             channel = recorder.signal_channel(component.name, names)
-            # One record = the scalar inputs then the scalar outputs. Where each side's scalars
-            # are one run of slots (all ports, or the scalars before the arrays), the record is two
-            # views of the buffers made once: no gather per step.
+            if component.constant_outputs:
+                self.constant.append((channel, component, inputs, outputs))
+                continue
+            # One record = the scalar inputs then the outputs. Where the scalar inputs are one run of
+            # slots (all ports, or the scalars before the arrays), the record is two views of the
+            # buffers made once: no gather per step.
             first, second = (
                 _run_view(component.input_buffer, inputs),
                 _run_view(component.output_buffer, outputs),
@@ -123,35 +140,50 @@ class _Recording:
                 values[len(inputs) :],
             )
             self.entries.append((system.period_steps(component), channel, values, None, gather))
-        vehicle = system.components["vehicle"]
-        self.vehicle_out = vehicle.output_buffer
-        self.pose_index = [vehicle.output_index[name] for name in ("x", "y", "theta")]
-        mixer = system.components["mixer"]
-        self.mixer_out = mixer.output_buffer
-        self.mixer_index = [mixer.output_index[name] for name in ("v", "omega", "mode")]
-        self.mixer_steps = system.period_steps(mixer)
-        self.mixer_period = self.mixer_steps * system.macro_step
-        lidar = system.components["lidar"]
-        self.lidar_steps = system.period_steps(lidar)
-        self.lidar_out = lidar.output_buffer
-        ranges_index = [i for i, p in enumerate(lidar.outputs) if p.array_name == "ranges"]
-        self.lidar_ranges = _run_view(self.lidar_out, ranges_index)
-        self.ranges_index = None if self.lidar_ranges is not None else np.array(ranges_index, dtype=np.intp)
-        self.angles = np.array(built.scenario.lidar.angles, dtype=float)
-        self.angles.flags.writeable = False  # fixed for the run: the recorder keeps its /scan layout
-        self.range_limits = (built.scenario.lidar.range_min, built.scenario.lidar.range_max)
+        observed = built.description.observed
+        (self.pose_x, self.x), (self.pose_y, self.y), (self.pose_theta, self.theta) = (
+            _output(system, reference) for reference in observed.pose
+        )
+        self.command = None
+        if observed.command is not None:
+            (v_buffer, v), (omega_buffer, omega) = (_output(system, r) for r in observed.command)
+            steps = system.period_steps(system.component(observed.command[0].split(".")[0]))
+            self.command = (steps, v_buffer, v, omega_buffer, omega)
+        self.mode = None
+        if observed.mode is not None:
+            buffer, index = _output(system, observed.mode)
+            steps = system.period_steps(system.component(observed.mode.split(".")[0]))
+            self.mode = (steps, steps * system.macro_step, buffer, index)
+        self.scan = None
+        if observed.scan is not None:
+            source = observed.scan
+            lidar = system.component(source.component)
+            ranges_index = [i for i, p in enumerate(lidar.outputs) if p.array_name == "ranges"]
+            ranges = _run_view(lidar.output_buffer, ranges_index)
+            gather = None if ranges is not None else np.array(ranges_index, dtype=np.intp)
+            angles = np.array(source.angles, dtype=float)
+            angles.flags.writeable = False  # fixed for the run: the recorder keeps its /scan layout
+            limits = (source.range_min, source.range_max)
+            self.scan = (system.period_steps(lidar), lidar.output_buffer, ranges, gather, angles, limits)
         self.pose_steps = max(1, round(1.0 / (built.scenario.pose_rate * built.scenario.macro_step)))
 
+    def write_constant(self, t_ns: int) -> None:
+        """The records of the components whose outputs are fixed for the run (the plan)."""
+        for channel, component, inputs, outputs in self.constant:
+            record = np.concatenate((component.input_buffer[inputs], component.output_buffer[outputs]))
+            self.recorder.write_signals(channel, t_ns, record)
+
     def pose(self) -> tuple[float, float, float]:
-        item, (ix, iy, itheta) = self.vehicle_out.item, self.pose_index
-        return item(ix), item(iy), item(itheta)  # .item: a Python float without a NumPy scalar
+        # .item: a Python float without a NumPy scalar
+        return self.pose_x.item(self.x), self.pose_y.item(self.y), self.pose_theta.item(self.theta)
 
     def write_pose(self, t_ns: int) -> None:
-        item, (ix, iy, itheta) = self.vehicle_out.item, self.pose_index
-        mixer = self.mixer_out.item
-        self.recorder.write_pose(
-            t_ns, item(ix), item(iy), item(itheta), mixer(self.mixer_index[0]), mixer(self.mixer_index[1])
-        )
+        x, y, theta = self.pose()
+        v = omega = math.nan
+        if self.command is not None:
+            _, v_buffer, index_v, omega_buffer, index_omega = self.command
+            v, omega = v_buffer.item(index_v), omega_buffer.item(index_omega)
+        self.recorder.write_pose(t_ns, x, y, theta, v, omega)
 
     def after_step(self, k: int, t_ns: int, h_ns: int) -> None:
         """Record what step k (starting at t_ns) produced."""
@@ -165,12 +197,14 @@ class _Recording:
                     np.take(outputs, output_index, out=output_part, mode="clip")
                 hold(channel, t_ns, first, second)
         recorder = self.recorder
-        if k % self.lidar_steps == 0:
-            ranges = self.lidar_ranges if self.ranges_index is None else self.lidar_out[self.ranges_index]
-            recorder.write_scan(t_ns, self.angles, ranges, *self.range_limits)
-        if k % self.mixer_steps == 0:
-            mixer = self.mixer_out
-            recorder.write_cmd_vel(t_ns, float(mixer[self.mixer_index[0]]), float(mixer[self.mixer_index[1]]))
+        scan = self.scan
+        if scan is not None and k % scan[0] == 0:
+            _, buffer, ranges, gather, angles, limits = scan
+            recorder.write_scan(t_ns, angles, ranges if gather is None else buffer[gather], *limits)
+        command = self.command
+        if command is not None and k % command[0] == 0:
+            _, v_buffer, index_v, omega_buffer, index_omega = command
+            recorder.write_cmd_vel(t_ns, v_buffer.item(index_v), omega_buffer.item(index_omega))
         if (k + 1) % self.pose_steps == 0:
             self.write_pose(t_ns + h_ns)
 
@@ -221,7 +255,8 @@ def _write_header(built: BuiltRun, master: Master, recorder) -> None:
                 recorder.add_attachment(image.name, "image/x-portable-graymap", image.read_bytes())
     recorder.write_grid(0, built.grid, "/map")
     recorder.write_grid(0, built.inflated, "/map_inflated")
-    recorder.write_path(0, built.planner.result.path)
+    if built.plan is not None:
+        recorder.write_path(0, built.plan.path)
     recorder.write_obstacles(0, list(scenario.obstacles))
     recorder.write_goal(0, scenario.goal[0], scenario.goal[1], None)
 
@@ -276,6 +311,7 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
         built.world, scenario.goal, scenario.goal_tolerance, scenario.vehicle_radius, scenario.start
     )
     _write_header(built, master, recorder)
+    recording.write_constant(master.start_time_ns)
     recording.write_pose(0)
     h_ns = system.macro_step_ns
     total_steps = round(scenario.stop_time * NS_PER_S / h_ns)
@@ -289,17 +325,16 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     state = {"reason": None}
 
     start_ns = master.start_time_ns
-    vehicle_item, (index_x, index_y, _) = recording.vehicle_out.item, recording.pose_index
+    x_item, y_item, index_x, index_y = recording.pose_x.item, recording.pose_y.item, recording.x, recording.y
+    mode_steps, mode_period, mode_buffer, mode_index = recording.mode or (0, 0.0, None, 0)
 
     def after_step(current: Master) -> bool:
         k = current.step_index - 1
         t_ns = start_ns + k * h_ns
         recording.after_step(k, t_ns, h_ns)
-        if k % recording.mixer_steps == 0:
-            monitor.check_mode(recording.mixer_out.item(recording.mixer_index[2]), recording.mixer_period)
-        reason = monitor.check_position(
-            (t_ns + h_ns) / NS_PER_S, vehicle_item(index_x), vehicle_item(index_y)
-        )
+        if mode_steps and k % mode_steps == 0:
+            monitor.check_mode(mode_buffer.item(mode_index), mode_period)
+        reason = monitor.check_position((t_ns + h_ns) / NS_PER_S, x_item(index_x), y_item(index_y))
         if reason is None and interrupt.signal_name is not None:
             reason = "interrupted"
         if bar is not None:

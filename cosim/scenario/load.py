@@ -3,8 +3,10 @@
 `load_scenario(path, overrides)` reads the file, applies `--set key=value` overrides to the parsed
 TOML (so they pass the same validation), checks types, ranges and unknown keys, and checks that
 start and goal lie in free space of the true world. `scenarios/example_commented.toml` documents
-every key. What needs the FMU files themselves (does the FMU load, do the port names exist) is
-checked when the system is built (`cosim.navigation.run.prepare_run`), still before any log is created.
+every key. What needs the FMU files themselves (does the FMU load, do the variables of the ports,
+parameters and connections exist, is there an algebraic loop) is checked when the scenario is
+turned into a system description (`cosim.scenario.system.describe_system`), still before any log
+is created.
 """
 
 from __future__ import annotations
@@ -26,10 +28,13 @@ VEHICLE_TYPES = {"DifferentialDrive": "differential", "Bicycle": "bicycle"}
 DEFAULT_FMUS = {"pure_pursuit": "PurePursuit", "vfh": "VectorFieldHistogram", "mixer": "AvoidanceMixer"}
 # Section keys that are not FMU parameters; every other key of a component section is one.
 COMPONENT_KEYS = ("fmu", "ports", "rate")
+ROLE_SECTIONS = ("vehicle", "pure_pursuit", "vfh", "mixer")
 SECTIONS = (
     "scenario", "map", "obstacles", "start", "goal", "planner", "vehicle", "pure_pursuit", "vfh",
-    "mixer", "lidar", "simulation", "output",
+    "mixer", "lidar", "simulation", "output", "components", "connections",
 )  # fmt: skip
+# Components of the navigation template that are not FMUs (`cosim.scenario.template`).
+PYTHON_COMPONENTS = ("planner", "lidar")
 
 
 @dataclass(frozen=True)
@@ -46,22 +51,46 @@ class PortMapping:
 
 @dataclass(frozen=True)
 class ComponentSpec:
-    """One FMU role (`vehicle`, `pure_pursuit`, `vfh`, `mixer`) as the scenario declares it.
+    """One FMU component as the scenario declares it: a role section (`[vehicle]`, `[pure_pursuit]`,
+    `[vfh]`, `[mixer]`) or an added one (`[components.NAME]`).
 
     fmu: a project FMU name (`cosim.fmi.builtin.builtin_fmu`) or an absolute path to a `.fmu`.
-    parameters: role parameter name -> value (translated through `ports` when mapped).
+    parameters: parameter name -> value (role sections: translated through `ports` when mapped;
+        added components: the FMU's variable names, a parameter or an input held at that value).
     rate: stepping rate [Hz]; None = every macro step.
+    added: True for `[components.NAME]`.
     """
 
-    role: str
+    name: str
     fmu: str
     parameters: dict[str, float | int | bool]
     ports: dict[str, PortMapping]
     rate: float | None
+    added: bool = False
 
     @property
     def is_builtin(self) -> bool:
         return self.fmu in BUILTIN_FMUS
+
+    @property
+    def where(self) -> str:
+        """The section that declares it, for error messages."""
+        return f"[components.{self.name}]" if self.added else f"[{self.name}]"
+
+
+@dataclass(frozen=True)
+class ConnectionSpec:
+    """One `[[connections]]` table: `target` input = `source` output * scale + offset."""
+
+    source: str  # "component.variable" as written
+    target: str
+    scale: float
+    offset: float
+    index: int  # position in the file's [[connections]] array
+
+    @property
+    def where(self) -> str:
+        return f"[[connections]][{self.index}]"
 
 
 @dataclass(frozen=True)
@@ -114,7 +143,9 @@ class Scenario:
     log_pattern: str
     plot: bool
     pose_rate: float  # [Hz] of /odom, /tf, /pose
+    signal_arrays: bool  # /signals/<component> also holds array outputs (lidar ranges, waypoints)
     overrides: tuple[str, ...] = field(default=())
+    connections: tuple[ConnectionSpec, ...] = field(default=())
 
 
 def load_scenario(path: str | Path, overrides: list[str] | tuple[str, ...] = (), check_world: bool = True):
@@ -239,6 +270,10 @@ def _build(
         table = vfh_table if role == "vfh" else TableReader(source, f"[{role}]", top.raw(role, {}))
         fmu = _fmu_name(table, DEFAULT_FMUS[role], base_dir)
         components[role] = _component(table, role, fmu, controller_rate, macro_step)
+    components.update(_added_components(top, base_dir))
+    connections = tuple(
+        _connection(source, index, item) for index, item in enumerate(_list(top, "connections"))
+    )
 
     planner = _planner(TableReader(source, "[planner]", top.raw("planner", {})), vehicle_radius)
     lidar = _lidar(TableReader(source, "[lidar]", top.raw("lidar", {})), macro_step)
@@ -254,6 +289,7 @@ def _build(
     plot = output.boolean("plot", True)
     pose_rate = output.number("pose_rate", 50.0, minimum=0.0, exclusive_minimum=True)
     _check_rate(output, "pose_rate", pose_rate, macro_step)
+    signal_arrays = output.boolean("signal_arrays", False)
     output.finish()
     top.finish()
 
@@ -282,7 +318,9 @@ def _build(
         log_pattern=log_pattern,
         plot=plot,
         pose_rate=pose_rate,
+        signal_arrays=signal_arrays,
         overrides=overrides,
+        connections=connections,
     )
 
 
@@ -293,14 +331,18 @@ def _list(top: TableReader, key: str) -> list:
     return value
 
 
-def _check_rate(table: TableReader, key: str, rate: float, macro_step: float) -> None:
-    """A rate must give a period that is a whole number (>= 1) of macro steps."""
+def rate_problem(rate: float, macro_step: float) -> str | None:
+    """Why `rate` [Hz] is no period of a whole number (>= 1) of macro steps [s], or None."""
     steps = 1.0 / (rate * macro_step)
     if steps < 1.0 - 1e-9 or abs(steps - round(steps)) > 1e-6 * steps:
-        raise table.error(
-            key,
-            f"{rate:g} Hz is not a whole number of macro steps of {macro_step:g} s (period {1 / rate:g} s)",
-        )
+        return f"{rate:g} Hz is not a whole number of macro steps of {macro_step:g} s (period {1 / rate:g} s)"
+    return None
+
+
+def _check_rate(table: TableReader, key: str, rate: float, macro_step: float) -> None:
+    problem = rate_problem(rate, macro_step)
+    if problem:
+        raise table.error(key, problem)
 
 
 def _fmu_name(table: TableReader, default: str | None, base_dir: Path) -> str:
@@ -346,7 +388,56 @@ def _component(
         parameters[key] = value
     parameters = check_parameters(table, fmu, parameters)
     table.finish()
-    return ComponentSpec(role=role, fmu=fmu, parameters=parameters, ports=ports, rate=rate)
+    return ComponentSpec(name=role, fmu=fmu, parameters=parameters, ports=ports, rate=rate)
+
+
+def _added_components(top: TableReader, base_dir: Path) -> dict[str, ComponentSpec]:
+    """`[components.NAME]` tables: `fmu` (required), `rate`, every other key an FMU variable's value.
+
+    Whether the rate is a whole number of macro steps, and whether the variables exist, is checked
+    with everything else about the system (`cosim.scenario.system`), so all problems come at once.
+    """
+    tables = top.table_of("components")
+    components: dict[str, ComponentSpec] = {}
+    for name, value in tables.table.items():
+        tables.used.add(name)
+        where = f"[components.{name}]"
+        if not isinstance(value, dict):
+            raise tables.error(name, f"must be a table {where}, got {describe(value)}")
+        table = TableReader(tables.source, where, value)
+        if not name.isidentifier() or not name.isascii():
+            raise table.error(None, "a component name must be an identifier (letters, digits, _)")
+        if name in ROLE_SECTIONS or name in PYTHON_COMPONENTS:
+            raise table.error(None, f"'{name}' is a component of the navigation template; set it in [{name}]")
+        fmu = _fmu_name(table, None, base_dir)
+        rate = table.number("rate", None, minimum=0.0, exclusive_minimum=True)
+        parameters: dict[str, float | int | bool] = {}
+        for key, item in table.table.items():
+            if key in ("fmu", "rate"):
+                continue
+            table.used.add(key)
+            if isinstance(item, bool) or is_number(item):
+                parameters[key] = item
+            else:
+                raise table.error(
+                    key, f"an FMU variable's value must be a number or true/false, got {describe(item)}"
+                )
+        table.finish()
+        components[name] = ComponentSpec(name, fmu, parameters, {}, rate, added=True)
+    return components
+
+
+def _connection(source: str, index: int, item: Any) -> ConnectionSpec:
+    table = TableReader(source, f"[[connections]][{index}]", item)
+    connection = ConnectionSpec(
+        source=table.string("from"),
+        target=table.string("to"),
+        scale=table.number("scale", 1.0),
+        offset=table.number("offset", 0.0),
+        index=index,
+    )
+    table.finish()
+    return connection
 
 
 def _obstacle(source: str, index: int, item: Any) -> Obstacle:

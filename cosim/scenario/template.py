@@ -1,0 +1,162 @@
+"""The navigation template: the default components and connections of a robot scenario.
+
+The robot pipeline of the thesis (chapter 4) as data. `cosim.scenario.compose.describe_system`
+merges it with the scenario's `[components.NAME]` and `[[connections]]` (a connection into an input
+that the template feeds replaces the template's) and checks the whole; `cosim.navigation.build`
+makes the components. Nothing downstream knows these names: what a run reads besides the
+recording (robot pose, commanded velocity, avoidance mode, scan) is declared here (`Observed`).
+
+Components, in the order they are added to the system (it breaks ties of the step order):
+    planner       Python: the plan on the known map; outputs waypoints[k,c], k = 1..1000, c = 1 (x), 2 (y)
+    pure_pursuit  [pure_pursuit] FMU
+    lidar         Python: ray casting on the true world; inputs x, y, theta; outputs ranges[k], angles[k]
+    vfh           [vfh] FMU
+    mixer         [mixer] FMU
+    vehicle       [vehicle] FMU; its x, y, theta are states unless its FMU declares dependencies
+
+Connections:
+    vehicle.x/y/theta         -> pure_pursuit.x/y/theta, lidar.x/y/theta
+    planner.waypoints[k,c]    -> pure_pursuit.waypoints[k,c]
+    lidar.ranges[k]/angles[k] -> vfh.ranges[k]/angles[k]               (k = 1..lidar beams)
+    pure_pursuit.target_dir   -> vfh.target_dir, mixer.target_dir
+    pure_pursuit.v/omega/goal_reached -> mixer.v_in/omega_in/goal_reached
+    vfh.steering_dir          -> mixer.steering_dir
+    mixer.v, mixer.omega      -> vehicle.v, vehicle.omega               (differential drive)
+    mixer.v, mixer.steering_angle -> vehicle.v, vehicle.steering_angle  (bicycle)
+
+Parameters derived from other sections: vehicle x0, y0, theta0 from [start] (the vehicle FMU must
+have them); pure_pursuit goal_tolerance from [goal].tolerance; mixer vehicle_type from
+[vehicle].type and wheelbase, max_steering_angle from [vehicle] (set when the FMU has them).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from cosim.core.component import array_ports
+from cosim.scenario.description import (
+    TEMPLATE,
+    ComponentDescription,
+    ConnectionDescription,
+    Observed,
+    ScanSource,
+)
+from cosim.scenario.load import ComponentSpec, Scenario
+
+WAYPOINT_CAPACITY = 1000  # rows of the planner's waypoints output (PurePursuit's waypoints input)
+ORDER = ("planner", "pure_pursuit", "lidar", "vfh", "mixer", "vehicle")
+VEHICLE_INPUTS = {"differential": ("v", "omega"), "bicycle": ("v", "steering_angle")}
+POSE = ("x", "y", "theta")
+# The ports each role FMU has for the template (the keys its `ports` table may map, besides its
+# parameters): what the template connects, for either vehicle type, and what a run observes.
+ROLE_PORTS = {
+    "vehicle": ("v", "omega", "steering_angle", *POSE, "x0", "y0", "theta0"),
+    "pure_pursuit": (*POSE, "waypoints", "v", "omega", "target_dir", "goal_reached", "goal_tolerance"),
+    "vfh": ("ranges", "angles", "target_dir", "steering_dir"),
+    "mixer": (
+        "v_in", "omega_in", "target_dir", "steering_dir", "goal_reached", "v", "omega", "steering_angle",
+        "mode", "vehicle_type", "wheelbase", "max_steering_angle",
+    ),
+}  # fmt: skip
+
+
+def planner_outputs() -> list[str]:
+    return [port.name for port in array_ports("waypoints", WAYPOINT_CAPACITY, columns=2)]
+
+
+def lidar_outputs(beams: int) -> list[str]:
+    return [port.name for port in array_ports("ranges", beams) + array_ports("angles", beams)]
+
+
+def _fmu_component(
+    spec: ComponentSpec,
+    defaults: dict[str, float] | None = None,
+    required: dict[str, tuple[float, str]] | None = None,
+) -> ComponentDescription:
+    """A role FMU; `defaults` are set when the FMU has them, `required` (value, key it comes from)
+    must exist in the FMU. The section's own values win over both."""
+    parameters = {name: float(value) for name, value in spec.parameters.items()}
+    required = {name: item for name, item in (required or {}).items() if name not in parameters}
+    parameters.update({name: float(value) for name, (value, _) in required.items()})
+    return ComponentDescription(
+        name=spec.name,
+        kind="fmu",
+        where=spec.where,
+        rate=spec.rate,
+        port_map=dict(spec.ports),
+        parameters=parameters,
+        defaults={k: float(v) for k, v in (defaults or {}).items() if k not in spec.parameters},
+        required_parameters={name: key for name, (_, key) in required.items()},
+    )
+
+
+def template_components(scenario: Scenario) -> list[ComponentDescription]:
+    """The template's components (interfaces of the FMUs not yet read), in `ORDER`."""
+    components = scenario.components
+    start_x, start_y, start_theta = scenario.start
+    vehicle = components["vehicle"]
+    start = {"x0": start_x, "y0": start_y, "theta0": start_theta}
+    mixer_defaults = {"vehicle_type": 0 if scenario.vehicle_type == "differential" else 1}
+    for name in ("wheelbase", "max_steering_angle"):
+        if name in vehicle.parameters:
+            mixer_defaults[name] = vehicle.parameters[name]
+    beams = len(scenario.lidar.angles)
+    made = {
+        "planner": ComponentDescription(
+            "planner",
+            "planner",
+            "[planner]",
+            rate=scenario.controller_rate,
+            outputs=tuple(planner_outputs()),
+        ),
+        "pure_pursuit": _fmu_component(
+            components["pure_pursuit"], defaults={"goal_tolerance": scenario.goal_tolerance}
+        ),
+        "lidar": ComponentDescription(
+            "lidar",
+            "lidar",
+            "[lidar]",
+            rate=scenario.lidar.rate,
+            inputs=POSE,
+            outputs=tuple(lidar_outputs(beams)),
+            feedthrough={name: POSE for name in lidar_outputs(beams)},
+        ),
+        "vfh": _fmu_component(components["vfh"]),
+        "mixer": _fmu_component(components["mixer"], defaults=mixer_defaults),
+        "vehicle": _fmu_component(
+            vehicle, required={name: (value, f"[start].{name[:-1]}") for name, value in start.items()}
+        ),
+    }
+    made["vehicle"] = replace(made["vehicle"], state_outputs=POSE)
+    return [made[name] for name in ORDER]
+
+
+def template_connections(scenario: Scenario) -> list[ConnectionDescription]:
+    """The template's connections, in the order listed in the module docstring."""
+    pairs: list[tuple[str, str]] = []
+    for axis in POSE:
+        pairs += [(f"vehicle.{axis}", f"pure_pursuit.{axis}"), (f"vehicle.{axis}", f"lidar.{axis}")]
+    pairs += [(f"planner.{name}", f"pure_pursuit.{name}") for name in planner_outputs()]
+    for k in range(1, len(scenario.lidar.angles) + 1):
+        pairs += [(f"lidar.{signal}[{k}]", f"vfh.{signal}[{k}]") for signal in ("ranges", "angles")]
+    pairs += [
+        ("pure_pursuit.target_dir", "vfh.target_dir"),
+        ("pure_pursuit.target_dir", "mixer.target_dir"),
+        ("pure_pursuit.v", "mixer.v_in"),
+        ("pure_pursuit.omega", "mixer.omega_in"),
+        ("pure_pursuit.goal_reached", "mixer.goal_reached"),
+        ("vfh.steering_dir", "mixer.steering_dir"),
+    ]
+    pairs += [(f"mixer.{port}", f"vehicle.{port}") for port in VEHICLE_INPUTS[scenario.vehicle_type]]
+    return [ConnectionDescription(source, target, where=TEMPLATE) for source, target in pairs]
+
+
+def template_observed(scenario: Scenario) -> Observed:
+    """The robot pose is the vehicle's; commands and mode are the mixer's; the scan the lidar's."""
+    lidar = scenario.lidar
+    return Observed(
+        pose=("vehicle.x", "vehicle.y", "vehicle.theta"),
+        command=("mixer.v", "mixer.omega"),
+        mode="mixer.mode",
+        scan=ScanSource("lidar", tuple(float(a) for a in lidar.angles), lidar.range_min, lidar.range_max),
+    )
