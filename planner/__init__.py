@@ -13,9 +13,10 @@ from typing import TYPE_CHECKING
 from planner.errors import NavcosimError, PlannerError
 
 if TYPE_CHECKING:
+    from planner.goal_distance import distance_to_goal
     from planner.grid import OccupancyGrid
     from planner.inflation import cost_gradient, inflate
-    from planner.planning import distance_to_goal, plan
+    from planner.planning import plan
     from planner.result import PlanResult
 
 _LAZY = {
@@ -23,7 +24,7 @@ _LAZY = {
     "PlanResult": "planner.result",
     "cost_gradient": "planner.inflation",
     "inflate": "planner.inflation",
-    "distance_to_goal": "planner.planning",
+    "distance_to_goal": "planner.goal_distance",
     "plan": "planner.planning",
 }
 

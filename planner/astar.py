@@ -39,6 +39,47 @@ _F_SCALE = float(2**24)
 _H_SCALE = 4.0
 _H_MAX = 2**16 - 1
 
+# The search's settings travel in one float64 array (every argument of a compiled call costs
+# dispatch time); the index of each entry:
+PARAMETERS = (
+    "width",  # padded columns, cols + 2
+    "heuristic",  # HEURISTICS code
+    "tie_breaker",  # TIE_BREAKERS code
+    "decrease_key",  # 1.0 or 0.0
+    "h_scale",  # multiplier of h: heuristic_weight (x 1.07 for the "matlab" tie breaker)
+    "cost_weight",  # weight of the cost gradient
+    "rows",
+    "cols",
+    "resolution",  # [m/cell]
+    "origin_x",  # [m]
+    "origin_y",  # [m]
+)
+P_WIDTH, P_HEURISTIC, P_TIE, P_DECREASE, P_H_SCALE, P_COST_WEIGHT = range(6)
+P_ROWS, P_COLS, P_RESOLUTION, P_ORIGIN_X, P_ORIGIN_Y = range(6, 11)
+
+# Status codes of astar_search / astar_plan.
+FOUND, NO_PATH, HEAP_FULL, ROUTE_FULL, BAD_START, BAD_GOAL = 1, 0, -1, -2, -3, -4
+
+
+def search_parameters(
+    width: int,
+    heuristic: int,
+    tie_breaker: int,
+    decrease_key: bool,
+    h_scale: float,
+    cost_weight: float,
+    rows: int = 0,
+    cols: int = 0,
+    resolution: float = 1.0,
+    origin: tuple[float, float] = (0.0, 0.0),
+) -> np.ndarray:
+    """The PARAMETERS array of astar_search / astar_plan."""
+    return np.array(
+        [width, heuristic, tie_breaker, float(decrease_key), h_scale, cost_weight, rows, cols, resolution,
+         origin[0], origin[1]],
+        dtype=np.float64,
+    )  # fmt: skip
+
 
 @njit(cache=True)
 def heuristic_cells(row_offset, col_offset, kind):
@@ -86,7 +127,12 @@ def heap_push(heap_key, heap_node, size, key, node):
 
 @njit(cache=True)
 def heap_pop(heap_key, heap_node, size):
-    """Remove the top of the heap; returns (node, new size)."""
+    """Remove the top of the heap; returns (node, new size).
+
+    The last entry sinks from the root along the smallest children. Of four children the first
+    smallest one is chosen by a branch-free tournament (pairs, then the pair winners, the earlier
+    on ties): which child wins is data-dependent, so branches here were mispredicted at about
+    every level (~12 % of the search time)."""
     top = heap_node[0]
     size -= 1
     key = heap_key[np.uint64(size)]
@@ -94,22 +140,33 @@ def heap_pop(heap_key, heap_node, size):
     index = 0
     while True:
         first = 4 * index + 1
-        if first >= size:
+        if first + 3 < size:
+            slot = np.uint64(first)
+            key0 = heap_key[slot]
+            key1 = heap_key[slot + np.uint64(1)]
+            key2 = heap_key[slot + np.uint64(2)]
+            key3 = heap_key[slot + np.uint64(3)]
+            child_a = first + 1 if key1 < key0 else first
+            key_a = key1 if key1 < key0 else key0
+            child_b = first + 3 if key3 < key2 else first + 2
+            key_b = key3 if key3 < key2 else key2
+            child = child_b if key_b < key_a else child_a
+            smallest = key_b if key_b < key_a else key_a
+        elif first < size:
+            child = first
+            smallest = heap_key[np.uint64(first)]
+            for other in range(first + 1, size):
+                candidate = heap_key[np.uint64(other)]
+                if candidate < smallest:
+                    smallest = candidate
+                    child = other
+        else:
             break
-        child = first
-        smallest = heap_key[np.uint64(first)]
-        last = min(first + 4, size)
-        for other in range(first + 1, last):
-            candidate = heap_key[np.uint64(other)]
-            if candidate < smallest:
-                smallest = candidate
-                child = other
         if smallest >= key:
             break
         slot = np.uint64(index)
-        child_slot = np.uint64(child)
         heap_key[slot] = smallest
-        heap_node[slot] = heap_node[child_slot]
+        heap_node[slot] = heap_node[np.uint64(child)]
         index = child
     slot = np.uint64(index)
     heap_key[slot] = key
@@ -146,41 +203,34 @@ def neighbour_tables(width):
 
 
 @njit(cache=True)
-def astar_search(
-    moves,
-    width,
-    start,
-    goal,
-    heuristic,
-    h_scale,
-    tie_breaker,
-    decrease_key,
-    cost,
-    cost_weight,
-    g,
-    nodes,
-    generation,
-    heap_key,
-    heap_node,
-):
+def astar_search(moves, cost, parameters, start, goal, generation, g, nodes, heap):
     """A* (or Dijkstra with heuristic 5 and goal -1) on a padded flat grid.
 
     moves: uint8 per padded cell, bit k set when move k (neighbour_tables order) leaves the cell
     (planner.searchspace.SearchMap.moves: connectivity, corner rule and untrusted points are in it,
-    so the loop tests one bit per neighbour). h_scale multiplies h (weight, MATLAB's 1.07).
-    nodes: int32 [3, size] = parent, stamp, and the expanded nodes in the order they were closed.
-    Returns (status, number of expanded nodes): status 1 = goal reached, 0 = OPEN ran empty (no
-    path; with goal == -1, the Dijkstra mode, this is the normal end), -1 = the heap arrays are
-    full: give larger ones and search again (growing them here would slow every push down).
+    so the loop tests one bit per neighbour). cost: None or the padded cost gradient.
+    parameters: PARAMETERS. nodes: int32 [3, size] = parent, stamp, and the expanded nodes in the
+    order they were closed. heap: int64 [2, capacity], keys and nodes of OPEN.
+    Returns (status, number of expanded nodes): FOUND, NO_PATH (OPEN ran empty; with goal == -1,
+    the Dijkstra mode, this is the normal end) or HEAP_FULL (give larger heap arrays and search
+    again: growing them here would slow every push down).
 
     The best child of an expansion skips the heap when its key is <= every key in OPEN (it would
     be popped next anyway): on open ground, where f stays constant along a straight run towards the
     goal, most nodes never enter the heap. The pop order stays that of the keys, so the search is
     the same A*.
     """
+    width = np.int64(parameters[P_WIDTH])
+    heuristic = np.int64(parameters[P_HEURISTIC])
+    tie_breaker = np.int64(parameters[P_TIE])
+    decrease_key = parameters[P_DECREASE] != 0.0
+    h_scale = parameters[P_H_SCALE]
+    cost_weight = parameters[P_COST_WEIGHT]
     parent = nodes[0]
     stamp = nodes[1]
     expanded = nodes[2]
+    heap_key = heap[0]
+    heap_node = heap[1]
     offsets, row_steps, col_steps, steps = neighbour_tables(width)
     goal_row = goal // width if goal >= 0 else 0
     goal_col = goal % width if goal >= 0 else 0
@@ -203,13 +253,13 @@ def astar_search(
             if stamp[np.uint64(node)] == closed:
                 continue  # a stale entry left behind by a decrease-key
         else:
-            return 0, searched
+            return NO_PATH, searched
         here = np.uint64(node)
         stamp[here] = closed
         expanded[np.uint64(searched)] = node
         searched += 1
         if node == goal:
-            return 1, searched
+            return FOUND, searched
         g_node = g[here]
         row_offset = node // width - goal_row
         col_offset = node % width - goal_col
@@ -248,51 +298,79 @@ def astar_search(
                 key, next_key = next_key, key
                 neighbour, next_node = next_node, neighbour
             if size == capacity:
-                return -1, searched
+                return HEAP_FULL, searched
             size = heap_push(heap_key, heap_node, size, key, neighbour)
 
 
 @njit(cache=True)
-def finish(
-    nodes, start, goal, found, searched, width, rows, resolution, origin_x, origin_y, explored, cells, path
-):
-    """Write the path of a finished search and the explored mask into the caller's arrays.
+def endpoint_node(blocked, parameters, x, y):
+    """Padded node of the cell that contains (x, y) [m], or -1 when that is outside the map, not a
+    number, or a blocked cell (obstacle, inflated, border). Same arithmetic as
+    OccupancyGrid.world_to_cell, so both agree on every point."""
+    resolution = parameters[P_RESOLUTION]
+    # np.floor keeps a float, so a huge or NaN coordinate fails the range test below instead of
+    # overflowing an integer conversion.
+    column = np.floor((x - parameters[P_ORIGIN_X]) / resolution)
+    row_from_bottom = np.floor((y - parameters[P_ORIGIN_Y]) / resolution)
+    rows = parameters[P_ROWS]
+    if not (0.0 <= column < parameters[P_COLS] and 0.0 <= row_from_bottom < rows):
+        return -1  # also NaN, which fails every comparison
+    node = (np.int64(rows) - np.int64(row_from_bottom)) * np.int64(parameters[P_WIDTH]) + np.int64(column) + 1
+    if blocked[node] == BLOCKED:
+        return -1
+    return node
 
-    cells (int64) and path (float64) are C x 2 buffers: rows 0..N-1 get the N path cells
-    (row, col) and the cell centres (x, y) [m]; explored, bool [rows, cols], gets True where a cell
-    was expanded. Returns (N, length [m]); N = 0 with found False. When N > C nothing is written
-    (give buffers of N rows and call again). The arrays come from the caller because returning new
-    arrays from a compiled function costs ~3 us each (numba boxes them through a pickled dtype).
+
+@njit(cache=True)
+def astar_plan(moves, blocked, cost, parameters, start_x, start_y, goal_x, goal_y, generation, g, nodes, heap,
+               path, cells):  # fmt: skip
+    """A query in one compiled call (one dispatch: small maps answer in microseconds): the endpoint
+    cells of (start_x, start_y) and (goal_x, goal_y) [m], astar_search, and the path.
+
+    path (float64) and cells (int64): C x 2 buffers; rows 0..N-1 get the path's cell centres (x, y)
+    [m] and its cells (row, col). Returns (status, searched, N, length [m]): status as
+    astar_search's, or ROUTE_FULL when the path has more than C cells (search again with buffers of
+    N rows), BAD_START / BAD_GOAL when that endpoint is outside the map or blocked (the caller says
+    which and why). The buffers come from the caller because returning new arrays from a compiled
+    function costs ~3 us each (numba boxes them through a pickled dtype).
     """
+    start = endpoint_node(blocked, parameters, start_x, start_y)
+    if start < 0:
+        return BAD_START, 0, 0, 0.0
+    goal = endpoint_node(blocked, parameters, goal_x, goal_y)
+    if goal < 0:
+        return BAD_GOAL, 0, 0, 0.0
+    status, searched = astar_search(moves, cost, parameters, start, goal, generation, g, nodes, heap)
+    if status != FOUND:
+        return status, searched, 0, 0.0
     parent = nodes[0]
-    expanded = nodes[2]
-    count = 0
-    if found:
-        count = 1
-        node = goal
-        while node != start:
-            node = parent[node]
-            count += 1
-    if count > len(cells):
-        return count, 0.0
-    for index in range(searched):
-        node = expanded[index]
-        explored[node // width - 1, node % width - 1] = True
+    count = 1
+    node = goal
+    while node != start:
+        node = parent[node]
+        count += 1
+    if count > len(path):
+        return ROUTE_FULL, searched, count, 0.0
+    width = np.int64(parameters[P_WIDTH])
+    rows = parameters[P_ROWS]
+    resolution = parameters[P_RESOLUTION]
+    origin_x = parameters[P_ORIGIN_X]
+    origin_y = parameters[P_ORIGIN_Y]
     length = 0.0
     node = goal
     for index in range(count - 1, -1, -1):
         row = node // width - 1
         col = node % width - 1
-        cells[index, 0] = row
-        cells[index, 1] = col
         path[index, 0] = origin_x + (col + 0.5) * resolution
         path[index, 1] = origin_y + (rows - 1 - row + 0.5) * resolution
+        cells[index, 0] = row
+        cells[index, 1] = col
         previous = parent[node]
         if node != start:
             difference = abs(previous - node)
             length += resolution if difference == 1 or difference == width else SQRT2 * resolution
         node = previous
-    return count, length
+    return FOUND, searched, count, length
 
 
 @njit(cache=True)
@@ -306,30 +384,3 @@ def unpad_distances(g, stamp, closed, rows, cols, resolution):
             if stamp[base + col] == closed:
                 result[row, col] = g[base + col] * resolution
     return result
-
-
-@njit(cache=True)
-def astar_plan(moves, cost, integers, reals, start, goal, generation, g, nodes, heap_key, heap_node, explored,
-               cells, path):  # fmt: skip
-    """astar_search then finish in one compiled call (one dispatch: small maps answer in microseconds).
-
-    integers: int64 [width, heuristic, tie breaker, decrease_key, rows]; reals: float64 [h_scale,
-    cost_weight, resolution [m], origin x, origin y [m]] (kept per map and option set by the caller:
-    every argument of a compiled call costs dispatch time). explored, cells, path: see finish.
-    Returns (status, searched, N, length [m]): status as astar_search's, or -2 when the path has
-    more than len(cells) = C cells (nothing written: search again with buffers of N rows).
-    """
-    width = integers[0]
-    status, searched = astar_search(
-        moves, width, start, goal, integers[1], reals[0], integers[2], integers[3] != 0, cost, reals[1],
-        g, nodes, generation, heap_key, heap_node,
-    )  # fmt: skip
-    if status < 0:
-        return status, searched, 0, 0.0
-    count, length = finish(
-        nodes, start, goal, status == 1, searched, width, integers[4], reals[2], reals[3], reals[4],
-        explored, cells, path,
-    )  # fmt: skip
-    if count > len(cells):
-        return -2, searched, count, 0.0
-    return status, searched, count, length

@@ -19,6 +19,11 @@ from numba import njit
 from planner.astar import (
     _F_SCALE,
     _H_BITS,
+    P_COST_WEIGHT,
+    P_DECREASE,
+    P_H_SCALE,
+    P_HEURISTIC,
+    P_TIE,
     heap_key_of,
     heap_pop,
     heap_push,
@@ -195,14 +200,9 @@ def bidirectional_search(
 
 
 @njit(cache=True)
-def join_paths(nodes_forward, nodes_backward, start, goal, meet_forward, meet_backward, searched_forward,
-               searched_backward, width, rows, cols, resolution, origin_x, origin_y):  # fmt: skip
-    """Cells, path [m], length [m] through the meeting edge, and the union of both explored sets."""
-    explored = np.zeros((rows, cols), dtype=np.bool_)
-    for nodes, count in ((nodes_forward, searched_forward), (nodes_backward, searched_backward)):
-        for index in range(count):
-            node = nodes[2, index]
-            explored[node // width - 1, node % width - 1] = True
+def join_paths(nodes_forward, nodes_backward, start, goal, meet_forward, meet_backward, width, rows,
+               resolution, origin_x, origin_y):  # fmt: skip
+    """Cells, path [m] and length [m] of the path through the meeting edge."""
     forward_count = 1
     node = meet_forward
     while node != start:
@@ -241,28 +241,34 @@ def join_paths(nodes_forward, nodes_backward, start, goal, meet_forward, meet_ba
             length += (
                 resolution if difference == 1 or difference == width else 1.4142135623730951 * resolution
             )
-    return cells, path, length, explored
+    return cells, path, length
 
 
 def search_bidirectional(
-    space: SearchMap, moves: np.ndarray, start_node: int, goal_node: int, settings: dict, parameters: tuple
-):
+    space: SearchMap, moves: np.ndarray, cost: np.ndarray | None, parameters: np.ndarray, start_node: int,
+    goal_node: int,
+):  # fmt: skip
     """Bidirectional A*; returns (found, cells, path [m], length [m], searched, elapsed [s], explored).
 
-    moves: the move masks (SearchMap.moves, endpoints opened); parameters: (heuristic code, h scale,
-    tie breaker code, decrease_key) as planner.planning prepares them."""
+    moves: the move masks (SearchMap.moves, endpoints opened); cost: None or the padded cost
+    gradient; parameters: planner.astar.PARAMETERS; explored: (expanded nodes, width, shape) as
+    planner.result.PlanResult takes it."""
     size = len(space.blocked)
     forward, backward = workspace(size, 0), workspace(size, 1)
-    cost_weight = settings["cost_weight"]
-    cost = space.costs(settings["cost_scaling_factor"]) if cost_weight > 0.0 else None
+    heuristic = int(parameters[P_HEURISTIC])
+    h_scale = float(parameters[P_H_SCALE])
+    tie_breaker = int(parameters[P_TIE])
+    decrease_key = bool(parameters[P_DECREASE])
+    cost_weight = float(parameters[P_COST_WEIGHT])
     while True:
         generation_forward, generation_backward = forward.next_generation(), backward.next_generation()
         compiled = len(bidirectional_search.overloads)
         began = time.perf_counter()
         status, searched_forward, searched_backward, _, meet_forward, meet_backward = bidirectional_search(
-            moves, space.width, start_node, goal_node, *parameters, cost, cost_weight,
-            forward.g, forward.nodes, generation_forward, forward.heap_key, forward.heap_node,
-            backward.g, backward.nodes, generation_backward, backward.heap_key, backward.heap_node,
+            moves, space.width, start_node, goal_node, heuristic, h_scale, tie_breaker, decrease_key,
+            cost, cost_weight,
+            forward.g, forward.nodes, generation_forward, forward.heap[0], forward.heap[1],
+            backward.g, backward.nodes, generation_backward, backward.heap[0], backward.heap[1],
         )  # fmt: skip
         elapsed = time.perf_counter() - began
         if len(bidirectional_search.overloads) != compiled:
@@ -273,20 +279,12 @@ def search_bidirectional(
         backward.grow_heap()
     grid = space.grid
     searched = searched_forward + searched_backward
+    expanded = np.concatenate((forward.nodes[2, :searched_forward], backward.nodes[2, :searched_backward]))
+    explored = (expanded, space.width, grid.shape)
     if status == 0:
-        explored = _explored_only(space, forward, backward, searched_forward, searched_backward)
         return False, None, None, 0.0, searched, elapsed, explored
-    cells, path, length, explored = join_paths(
-        forward.nodes, backward.nodes, start_node, goal_node, meet_forward, meet_backward,
-        searched_forward, searched_backward, space.width, space.rows, space.cols,
-        grid.resolution, grid.origin[0], grid.origin[1],
+    cells, path, length = join_paths(
+        forward.nodes, backward.nodes, start_node, goal_node, meet_forward, meet_backward, space.width,
+        space.rows, grid.resolution, grid.origin[0], grid.origin[1],
     )  # fmt: skip
     return True, cells, path, length, searched, elapsed, explored
-
-
-def _explored_only(space: SearchMap, forward, backward, searched_forward: int, searched_backward: int):
-    explored = np.zeros(space.rows * space.cols, dtype=bool)
-    for work, count in ((forward, searched_forward), (backward, searched_backward)):
-        nodes = work.nodes[2, :count].astype(np.int64)
-        explored[(nodes // space.width - 1) * space.cols + nodes % space.width - 1] = True
-    return explored.reshape(space.rows, space.cols)

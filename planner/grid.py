@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from planner.errors import PlannerError
+from planner.mapio import load_map, write_yaml
 
 
 class OccupancyGrid:
@@ -122,9 +123,11 @@ class OccupancyGrid:
     # -- derived grids and files ------------------------------------------------------------------
     def inflate(self, radius_m: float) -> OccupancyGrid:
         """A new grid: obstacles plus every cell within `radius_m` [m] of one (planner.inflation)."""
-        from planner.inflation import inflate
+        # Imported here: planner.inflation pulls in scipy, which a grid that is never inflated
+        # does not need.
+        from planner.inflation import inflation_mask
 
-        return inflate(self, radius_m)
+        return OccupancyGrid(self.occupied | inflation_mask(self, radius_m), self.resolution, self.origin)
 
     @classmethod
     def from_file(cls, path: str | Path, **options) -> OccupancyGrid:
@@ -133,12 +136,8 @@ class OccupancyGrid:
         Keyword options for images and `.npy` (ignored elsewhere is an error): `resolution` [m/cell],
         `origin` (x, y) [m]; for images also `negate`, `occupied_thresh`, `free_thresh`.
         """
-        from planner.mapio import load_map
-
-        return load_map(path, **options)
+        return cls(*load_map(path, **options))
 
     def to_yaml(self, path: str | Path) -> Path:
         """Write a ROS map_server YAML and a PGM beside it (same stem); returns the YAML path."""
-        from planner.mapio import write_yaml
-
-        return write_yaml(self, path)
+        return write_yaml(path, self.occupied, self.resolution, self.origin)

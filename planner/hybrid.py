@@ -36,7 +36,9 @@ import time
 
 import numpy as np
 
+from planner.endpoints import check_endpoint_cell
 from planner.errors import PlannerError
+from planner.goal_distance import distance_to_goal
 from planner.grid import OccupancyGrid
 from planner.hybrid_geometry import sample_segments
 from planner.hybrid_primitives import build_primitives
@@ -180,11 +182,11 @@ def _pose(value, role: str) -> tuple[float, float, float]:
 
 def _compiled_kernels() -> int:
     """How many compiled specialisations the numba kernels a hybrid plan calls hold so far."""
-    from planner import astar, dubins, hybrid_geometry, hybrid_search, planning, reeds_shepp
+    from planner import astar, dubins, hybrid_geometry, hybrid_search, reeds_shepp
 
     return sum(
         len(kernel.overloads)
-        for module in (astar, dubins, hybrid_geometry, hybrid_search, planning, reeds_shepp)
+        for module in (astar, dubins, hybrid_geometry, hybrid_search, reeds_shepp)
         for kernel in vars(module).values()
         if hasattr(kernel, "overloads")
     )
@@ -216,8 +218,6 @@ def _plan_hybrid(grid: OccupancyGrid, start, goal, **options) -> PlanResult:
     began = time.perf_counter()
     expansion = settings["expansion_distance"]
     inflated = grid.inflate(expansion) if expansion > 0.0 else grid
-    from planner.planning import check_endpoint_cell, distance_to_goal
-
     check_endpoint_cell(grid, inflated.occupied, expansion, start, "start")
     goal_cell = check_endpoint_cell(grid, inflated.occupied, expansion, goal, "goal")
     inflated_at = time.perf_counter()

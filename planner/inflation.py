@@ -5,20 +5,36 @@ the nearest occupied cell is <= the radius [m]. Distances come from scipy's exac
 distance transform, so the rule is exact (no chamfer approximation) at every resolution.
 Consequence: a path through cell centres of the inflated grid keeps more than `radius` from every
 obstacle *centre*, i.e. more than `radius - resolution / 2` from an obstacle cell's edge.
+
+The functions take a `planner.grid.OccupancyGrid` but do not import it: the grid's `inflate`
+method is built on `inflation_mask`, so the grid module sits above this one.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Protocol
 
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 from planner.errors import PlannerError
-from planner.grid import OccupancyGrid
 
 
-def obstacle_distance(grid: OccupancyGrid) -> np.ndarray:
+class Grid(Protocol):
+    """What this module reads of a `planner.grid.OccupancyGrid`."""
+
+    occupied: np.ndarray  # bool [row, col]
+    resolution: float  # [m/cell]
+    _cache: dict  # derived arrays of the grid (read-only), keyed by name
+
+    @property
+    def shape(self) -> tuple[int, int]: ...
+
+    def inflate(self, radius_m: float) -> Grid: ...
+
+
+def obstacle_distance(grid: Grid) -> np.ndarray:
     """Distance [m] from every cell centre to the nearest occupied cell centre (0 on obstacles).
 
     With no obstacle at all the distance is inf everywhere. Cached on the grid.
@@ -45,7 +61,7 @@ def _check_radius(radius_m: float, name: str = "expansion_distance") -> float:
     return radius
 
 
-def inflation_mask(grid: OccupancyGrid, radius_m: float) -> np.ndarray:
+def inflation_mask(grid: Grid, radius_m: float) -> np.ndarray:
     """Bool mask of the cells added by inflating `grid` by `radius_m` [m] (occupied cells excluded)."""
     radius = _check_radius(radius_m)
     if radius == 0.0:
@@ -55,14 +71,13 @@ def inflation_mask(grid: OccupancyGrid, radius_m: float) -> np.ndarray:
     return (obstacle_distance(grid) <= radius * (1.0 + 1e-12)) & ~grid.occupied
 
 
-def inflate(grid: OccupancyGrid, radius_m: float) -> OccupancyGrid:
+def inflate(grid: Grid, radius_m: float) -> Grid:
     """A new grid whose occupied cells are the obstacles plus every cell within `radius_m` [m] of one."""
-    mask = inflation_mask(grid, radius_m)
-    return OccupancyGrid(grid.occupied | mask, grid.resolution, grid.origin)
+    return grid.inflate(radius_m)
 
 
 def cost_gradient(
-    grid: OccupancyGrid, expansion_distance: float = 0.0, cost_scaling_factor: float = 1.0
+    grid: Grid, expansion_distance: float = 0.0, cost_scaling_factor: float = 1.0
 ) -> np.ndarray:
     """nav2-style inflation cost in [0, 1] per cell: 1 at or inside `expansion_distance` [m] of an
     obstacle, exp(-cost_scaling_factor * (d - expansion_distance)) farther out (d: obstacle distance

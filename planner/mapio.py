@@ -1,6 +1,8 @@
 """Map files in and out: ROS map_server YAML + PGM/PNG, Moving AI `.map`, images, NumPy `.npy`.
 
-Every malformed file raises `PlannerError` with a one-line message that names the file.
+Every malformed file raises `PlannerError` with a one-line message that names the file. This module
+reads and writes plain arrays (`MapData`); `planner.grid.OccupancyGrid.from_file` and `.to_yaml`
+wrap them, so the grid depends on its file formats and not the other way round.
 
 Image semantics follow ROS map_server (trinary mode): with `negate` false a pixel's occupancy
 probability is p = (255 - v) / 255 (dark = occupied); p > occupied_thresh is occupied,
@@ -12,11 +14,11 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from planner.errors import PlannerError
-from planner.grid import OccupancyGrid
 
 #: ROS map_server defaults.
 DEFAULT_OCCUPIED_THRESH = 0.65
@@ -25,8 +27,21 @@ DEFAULT_FREE_THRESH = 0.196
 _MOVINGAI_PASSABLE = (ord("."), ord("G"))
 
 
-def load_map(path: str | Path, **options) -> OccupancyGrid:
-    """Load a map by its suffix (`.yaml`, `.map`, `.png`/`.pgm`, `.npy`); see OccupancyGrid.from_file."""
+class MapData(NamedTuple):
+    """What a map file holds: the arguments of `planner.grid.OccupancyGrid` (checked there).
+
+    occupied: 2-D array [row, col], True / 1 = obstacle, row 0 at the top of the file.
+    resolution: cell size [m/cell] as the file (or the caller) gives it.
+    origin: (x, y) [m] of the lower-left corner.
+    """
+
+    occupied: np.ndarray
+    resolution: object
+    origin: object
+
+
+def load_map(path: str | Path, **options) -> MapData:
+    """Read a map by its suffix (`.yaml`, `.map`, `.png`/`.pgm`, `.npy`); see OccupancyGrid.from_file."""
     path = Path(path)
     suffix = path.suffix.lower()
     if not path.is_file():
@@ -36,17 +51,15 @@ def load_map(path: str | Path, **options) -> OccupancyGrid:
         return read_ros_yaml(path)
     if suffix == ".map":
         _reject_options(path, options, ())
-        return OccupancyGrid(read_movingai(path), 1.0, (0.0, 0.0))
+        return MapData(read_movingai(path), 1.0, (0.0, 0.0))
     if suffix in (".png", ".pgm", ".bmp", ".jpg", ".jpeg", ".tif", ".tiff"):
         _reject_options(path, options, ("resolution", "origin", "negate", "occupied_thresh", "free_thresh"))
         resolution = options.pop("resolution", 1.0)
         origin = options.pop("origin", (0.0, 0.0))
-        return OccupancyGrid(read_image_occupancy(path, **options), resolution, origin)
+        return MapData(read_image_occupancy(path, **options), resolution, origin)
     if suffix == ".npy":
         _reject_options(path, options, ("resolution", "origin"))
-        return OccupancyGrid(
-            read_npy(path), options.get("resolution", 1.0), options.get("origin", (0.0, 0.0))
-        )
+        return MapData(read_npy(path), options.get("resolution", 1.0), options.get("origin", (0.0, 0.0)))
     raise PlannerError(f"{path}: unknown map format {suffix!r} (use .yaml, .map, .png, .pgm or .npy)")
 
 
@@ -198,7 +211,7 @@ def _scalar(text: str) -> object:
         return text
 
 
-def read_ros_yaml(path: Path) -> OccupancyGrid:
+def read_ros_yaml(path: Path) -> MapData:
     """Load a ROS map_server map (keys image, resolution, origin, negate, occupied/free_thresh)."""
     values = _parse_flat_yaml(path)
     missing = [key for key in ("image", "resolution", "origin") if key not in values]
@@ -229,29 +242,34 @@ def read_ros_yaml(path: Path) -> OccupancyGrid:
         occupied_thresh=values.get("occupied_thresh", DEFAULT_OCCUPIED_THRESH),
         free_thresh=values.get("free_thresh", DEFAULT_FREE_THRESH),
     )
-    return OccupancyGrid(occupied, float(resolution), (float(origin[0]), float(origin[1])))
+    return MapData(occupied, float(resolution), (float(origin[0]), float(origin[1])))
 
 
 def _is_number(value: object) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
 
 
-def write_yaml(grid: OccupancyGrid, path: str | Path) -> Path:
-    """Write `grid` as map_server YAML + binary PGM (occupied 0 = black, free 254); returns the YAML path."""
+def write_yaml(
+    path: str | Path, occupied: np.ndarray, resolution: float, origin: tuple[float, float]
+) -> Path:
+    """Write a map as map_server YAML + binary PGM (occupied 0 = black, free 254); returns the YAML path.
+
+    occupied: bool [row, col], row 0 at the top; resolution [m/cell]; origin (x, y) [m] of the
+    lower-left corner."""
     path = Path(path)
     if path.suffix.lower() not in (".yaml", ".yml"):
         path = path.with_suffix(".yaml")
     image_path = path.with_suffix(".pgm")
-    rows, cols = grid.shape
-    pixels = np.where(grid.occupied, 0, 254).astype(np.uint8)
+    rows, cols = occupied.shape
+    pixels = np.where(occupied, 0, 254).astype(np.uint8)
     try:
         with open(image_path, "wb") as stream:
             stream.write(f"P5\n{cols} {rows}\n255\n".encode("ascii"))
             stream.write(pixels.tobytes())
         path.write_text(
             f"image: {image_path.name}\n"
-            f"resolution: {grid.resolution!r}\n"
-            f"origin: [{grid.origin[0]!r}, {grid.origin[1]!r}, 0.0]\n"
+            f"resolution: {resolution!r}\n"
+            f"origin: [{origin[0]!r}, {origin[1]!r}, 0.0]\n"
             "negate: 0\n"
             f"occupied_thresh: {DEFAULT_OCCUPIED_THRESH}\n"
             f"free_thresh: {DEFAULT_FREE_THRESH}\n",

@@ -36,7 +36,6 @@ class SearchMap:
         "expansion_distance",
         "_costs",
         "_moves",
-        "_kernel",
     )
 
     def __init__(self, grid: OccupancyGrid, expansion_distance: float) -> None:
@@ -57,7 +56,6 @@ class SearchMap:
         self.blocked = padded.ravel()
         self._costs: dict = {}
         self._moves: dict = {}
-        self._kernel: dict = {}
 
     def node(self, row: int, col: int) -> int:
         """Padded flat index of cell (row, col)."""
@@ -70,27 +68,6 @@ class SearchMap:
             padded = np.zeros((self.rows + 2, self.cols + 2))
             padded[1:-1, 1:-1] = cost_gradient(self.grid, self.expansion_distance, cost_scaling_factor)
             cached = self._costs[cost_scaling_factor] = padded.ravel()
-        return cached
-
-    def kernel_arguments(
-        self, parameters: tuple, cost_weight: float, cost_scaling_factor: float
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """(integers, reals, cost) of planner.astar.astar_plan for this map and option set, cached.
-
-        parameters: (heuristic, h_scale, tie breaker, decrease_key) as planner.planning prepares them.
-        Packed in two arrays because every argument of a compiled call costs dispatch time.
-        """
-        key = (parameters, cost_weight, cost_scaling_factor)
-        cached = self._kernel.get(key)
-        if cached is None:
-            heuristic, h_scale, tie_breaker, decrease_key = parameters
-            grid = self.grid
-            integers = np.array(
-                [self.width, heuristic, tie_breaker, int(decrease_key), self.rows], dtype=np.int64
-            )
-            reals = np.array([h_scale, cost_weight, grid.resolution, *grid.origin[:2]], dtype=float)
-            cost = self.costs(cost_scaling_factor) if cost_weight > 0.0 else None
-            cached = self._kernel[key] = (integers, reals, cost)
         return cached
 
     def moves(self, connectivity: int, corner_cutting: bool, untrusted: bool) -> np.ndarray:
@@ -160,32 +137,31 @@ class Workspace:
     """Reusable arrays of one search direction over a padded map of `size` cells.
 
     g [cells] per node; nodes int32 [3, size]: parent, stamp, expanded nodes in closing order;
-    heap arrays of one entry per cell, doubled if OPEN ever outgrows them (decrease-keys push a node
-    again, so OPEN can in theory hold up to 8 entries per cell).
+    heap int64 [2, capacity]: keys and nodes of OPEN, one entry per cell at first, doubled if OPEN
+    ever outgrows them (decrease-keys push a node again, so OPEN can in theory hold up to 8 entries
+    per cell); path float64 and cells int64 [C, 2]: the last path, (x, y) [m] and (row, col) per
+    node, which the caller copies out.
     """
 
-    __slots__ = ("g", "nodes", "generation", "heap_key", "heap_node", "cells", "path")
+    __slots__ = ("g", "nodes", "generation", "heap", "path", "cells")
 
     def __init__(self, size: int) -> None:
         self.g = np.empty(size)
         self.nodes = np.zeros((3, size), dtype=np.int32)
         self.generation = 0
-        self.heap_key = np.empty(size, dtype=np.int64)
-        self.heap_node = np.empty(size, dtype=np.int32)
-        # The path of the last search, (row, col) and (x, y) [m] per node; the caller copies it out.
-        self.cells = np.empty((_PATH_ROWS, 2), dtype=np.int64)
+        self.heap = np.empty((2, size), dtype=np.int64)
         self.path = np.empty((_PATH_ROWS, 2))
+        self.cells = np.empty((_PATH_ROWS, 2), dtype=np.int64)
 
     def grow_path(self, count: int) -> None:
-        """Path buffers of at least `count` rows (a search returned status -2: its path did not fit)."""
-        rows = max(count, 2 * len(self.cells))
-        self.cells = np.empty((rows, 2), dtype=np.int64)
+        """Path buffers of at least `count` rows (a search's path did not fit)."""
+        rows = max(count, 2 * len(self.path))
         self.path = np.empty((rows, 2))
+        self.cells = np.empty((rows, 2), dtype=np.int64)
 
     def grow_heap(self) -> None:
-        """Double the heap arrays (a search returned status -1: OPEN outgrew them)."""
-        self.heap_key = np.empty(2 * len(self.heap_key), dtype=np.int64)
-        self.heap_node = np.empty(2 * len(self.heap_node), dtype=np.int32)
+        """Double the heap arrays (a search returned HEAP_FULL: OPEN outgrew them)."""
+        self.heap = np.empty((2, 2 * self.heap.shape[1]), dtype=np.int64)
 
     def next_generation(self) -> int:
         """A fresh generation (OPEN = generation, CLOSED = generation + 1) with no stale stamps."""

@@ -270,5 +270,7 @@ def test_first_call_elapsed_excludes_jit_compilation():
     run = subprocess.run([sys.executable, "-c", script], cwd=repo, capture_output=True, text=True, check=True)
     lines = [line.split() for line in run.stdout.splitlines()]
     assert float(lines[0][2]) > 0.05, "the process's first plan() should include numba's compile or load"
-    for kind, elapsed, _ in lines:
-        assert float(elapsed) < 0.02, f"{kind}: elapsed {elapsed} s includes JIT compilation"
+    # Against the call's own wall time, not a fixed limit: on a loaded machine a 5 ms search can take
+    # 30 ms, but never a large part of a call that loaded or compiled kernels.
+    for kind, elapsed, wall in lines:
+        assert float(elapsed) < 0.25 * float(wall), f"{kind}: elapsed {elapsed} s of {wall} s includes JIT"
