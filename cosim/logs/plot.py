@@ -111,6 +111,14 @@ def _draw_map(axes, log: Log, modes: tuple[np.ndarray, np.ndarray] | None) -> No
         )
     if obstacles:
         handles.append(patches.Patch(color="#c1121f", alpha=0.75, label="unknown obstacles (lidar only)"))
+    moved = [track for track in log.obstacle_tracks() if len(track) > 1]
+    for number, track in enumerate(moved):
+        (line,) = axes.plot(
+            track[:, 1], track[:, 2], ":", color="#c1121f", lw=1.4, zorder=3,
+            label="moving obstacles: tracks (last pose drawn)" if number == 0 else None,
+        )  # fmt: skip
+        if number == 0:
+            handles.append(line)
     plan = log.plan()
     if plan is not None and len(plan):
         (line,) = axes.plot(

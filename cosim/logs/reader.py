@@ -356,6 +356,23 @@ class Log:
                 shapes.append(Polygon(vertices))
         return shapes
 
+    def obstacle_tracks(self) -> list[np.ndarray]:
+        """Where each unknown obstacle was: per marker id, rows (t [s], x [m], y [m]) of its centre
+        (a polygon's vertex mean) in every /obstacles message; one row for a still obstacle."""
+        if not self.has_topic("/obstacles"):
+            return []
+        tracks: dict[int, list[tuple[float, float, float]]] = {}
+        for item in self.messages("/obstacles"):
+            for marker in item.message.markers:
+                if marker.type == 4 and len(marker.points) > 1:
+                    points = marker.points[:-1]
+                    x = sum(point.x for point in points) / len(points)
+                    y = sum(point.y for point in points) / len(points)
+                else:
+                    x, y = marker.pose.position.x, marker.pose.position.y
+                tracks.setdefault(marker.id, []).append((item.t, x, y))
+        return [np.array(tracks[key], dtype=float) for key in sorted(tracks)]
+
     def goal(self) -> tuple[float, float] | None:
         """Goal (x, y) [m] from the run's metadata, else the last /goal message."""
         goal = _floats(self.metadata.get("navcosim", {}).get("goal"))

@@ -8,8 +8,9 @@ Definitions:
 - goal reached: the vehicle's reference point is within the goal tolerance of the goal.
 - clearance: distance from the vehicle's footprint circle (centre = its (x, y), radius = the
   scenario's vehicle radius) to the nearest TRUE obstacle (known map cells as exact squares and the
-  unknown shapes; off the map counts as an obstacle); exact (`scenario_world.WorldDistance`),
-  checked at every vehicle step. A collision is clearance < 0.
+  unknown shapes, moving ones at their pose at that time; off the map counts as an obstacle);
+  exact (`cosim.world.distance.WorldDistance`), checked at every vehicle step. A collision is
+  clearance < 0.
 - VFH interventions: the number of times the mixer enters avoid mode (mode 1) from another mode.
 - time in recovery: the time the mixer spends in recover mode (mode 2), counted per mixer period.
 """
@@ -47,9 +48,13 @@ class OutcomeMonitor:
         self.outcome = Outcome()
         self.last_xy = (float(start_xy[0]), float(start_xy[1]))
         self.last_mode = MODE_FOLLOW
-        # A known lower bound of the true distance at an anchor point: the distance is 1-Lipschitz,
-        # so at a point r away it is at least bound - r (no need to ask the world every step).
-        self._anchor = (self.last_xy[0], self.last_xy[1], -math.inf)
+        # A known lower bound of the true distance at an anchor point and time: the distance is
+        # 1-Lipschitz in space, and moving obstacles come closer at most at their top speed, so at
+        # a point r away and dt later it is at least bound - r - speed * dt (no need to ask the
+        # world every step).
+        self._speed = getattr(world, "max_speed", 0.0)
+        self._moving = bool(getattr(world, "moving", False))
+        self._anchor = (self.last_xy[0], self.last_xy[1], 0.0, -math.inf)
         self.check_position(0.0, *self.last_xy)
 
     def check_position(self, t: float, x: float, y: float) -> str | None:
@@ -64,14 +69,17 @@ class OutcomeMonitor:
             outcome.collision_point = (x, y)
             return outcome.reason
         # The exact distance only matters when it could set a new minimum (or a collision).
-        anchor_x, anchor_y, anchor_bound = self._anchor
+        anchor_x, anchor_y, anchor_t, anchor_bound = self._anchor
         margin = outcome.min_clearance + self.radius
-        if anchor_bound - math.hypot(x - anchor_x, y - anchor_y) < margin:
+        drift = self._speed * (t - anchor_t) if self._speed else 0.0
+        if anchor_bound - math.hypot(x - anchor_x, y - anchor_y) - drift < margin:
+            if self._moving:
+                self.world.at(t)
             bound = self.world.lower_bound(x, y)
-            self._anchor = (x, y, bound)
+            self._anchor = (x, y, t, bound)
             if bound < margin:
                 distance = self.world.distance(x, y)
-                self._anchor = (x, y, distance)
+                self._anchor = (x, y, t, distance)
                 clearance = distance - self.radius
                 if clearance < outcome.min_clearance:
                     outcome.min_clearance = clearance

@@ -11,7 +11,9 @@ Log contents and rates (t = simulated time, integer nanoseconds):
 - `/odom`, `/tf`, `/pose`: the vehicle pose at t = 0 and every 1/pose_rate s ([output].pose_rate,
   default 50 Hz), and at the end of the run; twist = the mixer's commanded v and omega.
 - `/scan`: every lidar step; `/cmd_vel`: every mixer step (v, omega of the mixer).
-- `/plan`, `/map`, `/map_inflated`, `/obstacles`, `/goal`: once at t = 0.
+- `/obstacles`: at t = 0, and at every lidar step at which a moving obstacle has moved (the poses
+  that scan saw).
+- `/plan`, `/map`, `/map_inflated`, `/goal`: once at t = 0.
 - metadata `navcosim`, `fmu/<role>`, `outcome`; attachments `scenario.toml` and the map file(s).
 
 End of a run: a normal end, an interrupt (outcome reason "interrupted") and an FMU failure
@@ -36,6 +38,7 @@ from cosim.navigation.build import BuiltRun, build_run
 from cosim.navigation.outcome import Outcome, OutcomeMonitor, outcome_metadata
 from cosim.record import batch as recorder_batch
 from cosim.scenario.load import Scenario
+from cosim.world.shapes import moves
 
 PROGRESS_INTERVAL = 0.1  # [s] wall time between progress-bar updates
 
@@ -166,6 +169,11 @@ class _Recording:
             limits = (source.range_min, source.range_max)
             self.scan = (system.period_steps(lidar), lidar.output_buffer, ranges, gather, angles, limits)
         self.pose_steps = max(1, round(1.0 / (built.scenario.pose_rate * built.scenario.macro_step)))
+        self.obstacles = built.scenario.obstacles
+        self.moving = [obstacle.motion for obstacle in self.obstacles if moves(obstacle)]
+        self.obstacle_offsets = tuple((0.0, 0.0) for _ in self.moving)  # as written at t = 0
+        # Moved obstacles go out with the scans (the poses each scan saw), else at the pose rate.
+        self.obstacle_steps = self.scan[0] if self.scan is not None else self.pose_steps
 
     def write_constant(self, t_ns: int) -> None:
         """The records of the components whose outputs are fixed for the run (the plan)."""
@@ -185,6 +193,14 @@ class _Recording:
             v, omega = v_buffer.item(index_v), omega_buffer.item(index_omega)
         self.recorder.write_pose(t_ns, x, y, theta, v, omega)
 
+    def write_moved_obstacles(self, t_ns: int) -> None:
+        """/obstacles at the poses the lidar saw at t_ns, when any obstacle moved since the last one."""
+        t = t_ns / NS_PER_S
+        offsets = tuple(motion.offset(t) for motion in self.moving)
+        if offsets != self.obstacle_offsets:
+            self.obstacle_offsets = offsets
+            self.recorder.write_obstacles(t_ns, [obstacle.at(t) for obstacle in self.obstacles])
+
     def after_step(self, k: int, t_ns: int, h_ns: int) -> None:
         """Record what step k (starting at t_ns) produced."""
         hold = self.recorder.hold_signals
@@ -201,6 +217,8 @@ class _Recording:
         if scan is not None and k % scan[0] == 0:
             _, buffer, ranges, gather, angles, limits = scan
             recorder.write_scan(t_ns, angles, ranges if gather is None else buffer[gather], *limits)
+        if self.moving and k % self.obstacle_steps == 0:
+            self.write_moved_obstacles(t_ns)
         command = self.command
         if command is not None and k % command[0] == 0:
             _, v_buffer, index_v, omega_buffer, index_omega = command
@@ -257,7 +275,7 @@ def _write_header(built: BuiltRun, master: Master, recorder) -> None:
     recorder.write_grid(0, built.inflated, "/map_inflated")
     if built.plan is not None:
         recorder.write_path(0, built.plan.path)
-    recorder.write_obstacles(0, list(scenario.obstacles))
+    recorder.write_obstacles(0, [obstacle.at(0.0) for obstacle in scenario.obstacles])
     recorder.write_goal(0, scenario.goal[0], scenario.goal[1], None)
 
 

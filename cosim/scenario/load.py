@@ -21,9 +21,13 @@ import numpy as np
 
 from cosim.errors import CosimError
 from cosim.scenario.schema import REQUIRED, TableReader, describe, did_you_mean, is_number
+from cosim.world.motion import MOTIONS, Motion
 from cosim.world.shapes import Circle, Obstacle, Polygon, Rectangle
 
-BUILTIN_FMUS = ("DifferentialDrive", "Bicycle", "PurePursuit", "VectorFieldHistogram", "AvoidanceMixer")
+BUILTIN_FMUS = (
+    "DifferentialDrive", "Bicycle", "PurePursuit", "VectorFieldHistogram", "ArtificialPotentialField",
+    "AvoidanceMixer",
+)  # fmt: skip
 VEHICLE_TYPES = {"DifferentialDrive": "differential", "Bicycle": "bicycle"}
 DEFAULT_FMUS = {"pure_pursuit": "PurePursuit", "vfh": "VectorFieldHistogram", "mixer": "AvoidanceMixer"}
 # Section keys that are not FMU parameters; every other key of a component section is one.
@@ -443,15 +447,22 @@ def _connection(source: str, index: int, item: Any) -> ConnectionSpec:
 def _obstacle(source: str, index: int, item: Any) -> Obstacle:
     table = TableReader(source, f"[[obstacles]][{index}]", item)
     kind = table.string("type", choices=("rectangle", "circle", "polygon"))
+    motion = _motion(table)
+    # A shape moving along a path may leave out its centre: it starts at the path's first point.
+    at_path = list(motion.path[0]) if motion is not None and motion.path else REQUIRED
     if kind == "circle":
         obstacle: Obstacle = Circle(
-            table.numbers("center", length=2), table.number("radius", minimum=0.0, exclusive_minimum=True)
+            table.numbers("center", at_path, length=2),
+            table.number("radius", minimum=0.0, exclusive_minimum=True),
+            motion,
         )
     elif kind == "rectangle":
         size = table.numbers("size", length=2)
         if min(size) <= 0:
             raise table.error("size", f"length and width must be > 0, got {list(size)}")
-        obstacle = Rectangle(table.numbers("center", length=2), size, table.number("yaw", 0.0))
+        obstacle = Rectangle(
+            table.numbers("center", at_path, length=2), size, table.number("yaw", 0.0), motion
+        )
     else:
         vertices = table.raw("vertices")
         if not isinstance(vertices, list) or len(vertices) < 3:
@@ -464,9 +475,33 @@ def _obstacle(source: str, index: int, item: Any) -> Obstacle:
         )
         if abs(area) < 1e-12:
             raise table.error("vertices", "the polygon has zero area")
-        obstacle = Polygon(points)
+        obstacle = Polygon(points, motion)
     table.finish()
     return obstacle
+
+
+def _motion(table: TableReader) -> Motion | None:
+    """An obstacle's `path` + `speed` + `motion`, or `velocity`, each with `start_time` (or None)."""
+    if table.has("path") and table.has("velocity"):
+        raise table.error("velocity", "give either path (with speed) or velocity, not both")
+    if table.has("path"):
+        path = table.raw("path")
+        if not isinstance(path, list) or len(path) < 2:
+            raise table.error("path", f"must be a list of at least 2 [x, y] points, got {describe(path)}")
+        points = tuple(table.check_numbers(f"path[{i}]", p, 2) for i, p in enumerate(path))
+        speed = table.number("speed", minimum=0.0, exclusive_minimum=True)
+        mode = table.string("motion", "loop", choices=MOTIONS)
+        return Motion(points, speed, mode, start_time=table.number("start_time", 0.0, minimum=0.0))
+    if table.has("velocity"):
+        for key in ("speed", "motion"):
+            if table.has(key):
+                raise table.error(key, "belongs to a path; a velocity = [vx, vy] motion has no " + key)
+        velocity = table.numbers("velocity", length=2)
+        return Motion(velocity=velocity, start_time=table.number("start_time", 0.0, minimum=0.0))
+    for key in ("speed", "motion", "start_time"):
+        if table.has(key):
+            raise table.error(key, "needs a path = [[x, y], ...] or a velocity = [vx, vy]")
+    return None
 
 
 def _planner(table: TableReader, vehicle_radius: float) -> PlannerSettings:

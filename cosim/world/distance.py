@@ -16,6 +16,7 @@ from scipy.ndimage import distance_transform_edt
 
 from cosim.errors import CosimError
 from cosim.world.geometry import polygon_distance
+from cosim.world.obstacles import ObstacleArrays
 from cosim.world.shapes import Circle, Obstacle
 from planner.errors import PlannerError
 from planner.grid import OccupancyGrid
@@ -43,7 +44,8 @@ def distance_to_obstacle(x: float, y: float, obstacle: Obstacle) -> float:
 
 
 class WorldDistance:
-    """Exact distance [m] from a point to the nearest true obstacle (grid cells + unknown shapes).
+    """Exact distance [m] from a point to the nearest true obstacle (grid cells + unknown shapes,
+    moving ones at their pose at the time last given to `at`).
 
     Speed: a per-cell field of the distance from each cell centre to the nearest occupied cell
     centre bounds the search. `lower_bound` is cheap; `distance` looks only at the occupied cells
@@ -65,23 +67,25 @@ class WorldDistance:
         self.x_min, self.y_min = grid.origin
         self.x_max = self.x_min + cols * grid.resolution
         self.y_max = self.y_min + rows * grid.resolution
-        self.obstacles = obstacles
-        self.circles = [(o.center[0], o.center[1], o.radius) for o in obstacles if isinstance(o, Circle)]
-        self.polygons = [
-            [(float(x), float(y)) for x, y in o.polygon()] for o in obstacles if not isinstance(o, Circle)
-        ]
-        # The same shapes as arrays for the compiled `distance`; polygon p is
-        # vertices[starts[p]:starts[p + 1]].
+        self.obstacles = tuple(obstacles)
+        # The shapes as arrays for the compiled `distance` (moved by `at`); polygons' bounding
+        # circles give cheap lower bounds.
+        self.shapes = ObstacleArrays(self.obstacles)
         self._occupied_u8 = np.ascontiguousarray(grid.occupied, dtype=np.uint8)
-        self._circles = np.array(self.circles, dtype=float).reshape(-1, 3)
-        self._vertices = np.array([v for p in self.polygons for v in p], dtype=float).reshape(-1, 2)
-        self._starts = np.cumsum([0] + [len(p) for p in self.polygons]).astype(np.int64)
-        # Bounding circles (centre, radius) of the polygons give cheap lower bounds.
-        self.bounds = list(self.circles)
-        for vertices in self.polygons:
-            cx = sum(x for x, _ in vertices) / len(vertices)
-            cy = sum(y for _, y in vertices) / len(vertices)
-            self.bounds.append((cx, cy, max(math.hypot(x - cx, y - cy) for x, y in vertices)))
+
+    @property
+    def moving(self) -> bool:
+        """True when an unknown obstacle moves: distances then depend on the time set by `at`."""
+        return self.shapes.moving
+
+    @property
+    def max_speed(self) -> float:
+        """The fastest any obstacle moves [m/s]: a distance changes at most this fast in time."""
+        return self.shapes.max_speed
+
+    def at(self, t: float) -> None:
+        """Measure from now on against the obstacles' poses at time t [s]."""
+        self.shapes.at(t)
 
     def _cell(self, x: float, y: float) -> tuple[int, int, float]:
         """(row, col) of the cell holding (x, y) and the distance [m] from (x, y) to its centre."""
@@ -103,8 +107,9 @@ class WorldDistance:
         bound = min(
             self.centre_field[row, col] - offset - math.sqrt(2.0) * self.half, self.distance_to_edge(x, y)
         )
-        for cx, cy, radius in self.bounds:
-            bound = min(bound, math.hypot(x - cx, y - cy) - radius)
+        for circles in (self.shapes.circles, self.shapes.bounds):
+            for cx, cy, radius in circles.tolist():
+                bound = min(bound, math.hypot(x - cx, y - cy) - radius)
         return max(0.0, bound)
 
     def distance(self, x: float, y: float) -> float:
@@ -114,8 +119,8 @@ class WorldDistance:
         row, col, offset = self._cell(x, y)
         return _world_distance(
             float(x), float(y), row, col, offset, self.distance_to_edge(x, y), self._occupied_u8,
-            float(self.centre_field[row, col]), self.x_min, self.y_min, self.resolution, self._circles,
-            self._vertices, self._starts,
+            float(self.centre_field[row, col]), self.x_min, self.y_min, self.resolution,
+            self.shapes.circles, self.shapes.vertices, self.shapes.starts,
         )  # fmt: skip
 
     def distance_to_edge(self, x: float, y: float) -> float:
@@ -155,8 +160,18 @@ def _world_distance(
 
 
 def check_start_goal(scenario) -> None:
-    """Start and goal must lie in free space: not in a known cell, the inflated map or an unknown obstacle."""
+    """Start and goal must lie in free space: not in a known cell, the inflated map or an unknown
+    obstacle (where it stands at t = 0); a moving obstacle's path must lie on the map."""
     grid = load_known_map(scenario)
+    x_min, y_min = grid.origin
+    x_max, y_max = x_min + grid.shape[1] * grid.resolution, y_min + grid.shape[0] * grid.resolution
+    for index, obstacle in enumerate(scenario.obstacles):
+        for k, (x, y) in enumerate(obstacle.motion.path if obstacle.motion is not None else ()):
+            if not (x_min <= x <= x_max and y_min <= y <= y_max):
+                raise CosimError(
+                    f"{scenario.source}: [[obstacles]][{index}].path[{k}]: ({x:g}, {y:g}) is outside the "
+                    f"map {scenario.map_file.name} (x {x_min:g}..{x_max:g}, y {y_min:g}..{y_max:g} m)"
+                )
     inflated = (
         grid.inflate(scenario.planner.expansion_distance) if scenario.planner.expansion_distance else grid
     )
@@ -174,7 +189,7 @@ def check_start_goal(scenario) -> None:
                 f"{scenario.planner.expansion_distance:g} m of [planner])"
             )
         for index, obstacle in enumerate(scenario.obstacles):
-            if distance_to_obstacle(x, y, obstacle) < scenario.vehicle_radius:
+            if distance_to_obstacle(x, y, obstacle.at(0.0)) < scenario.vehicle_radius:
                 raise CosimError(
                     f"{where} is inside unknown obstacle [[obstacles]][{index}] ({obstacle.kind}, "
                     f"counting the vehicle radius {scenario.vehicle_radius:g} m)"

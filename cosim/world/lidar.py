@@ -12,7 +12,8 @@ Semantics follow MATLAB's `rangeSensor` (reference/matlab-blocks.md §1.7):
   plus Gaussian noise of standard deviation `angle_noise` [rad], while the reported angle stays
   nominal (the sensor does not know its jitter).
 * Cells outside the grid are free. Grid cells are hit on their boundary (exact for axis-aligned
-  walls); circles, rectangles and polygons (cosim.world.shapes) are intersected exactly.
+  walls); circles, rectangles and polygons (cosim.world.shapes) are intersected exactly, moving
+  ones at their pose at the scan's time (the start of the lidar's step).
 
 Outputs `ranges[k]` and `angles[k]`, k = 1..capacity (capacity >= beam count, the rest NaN), so
 the ports match VFH inputs of a fixed size. Inputs `x`, `y`, `theta`.
@@ -29,7 +30,8 @@ import numpy as np
 from cosim.core.component import Port, PythonComponent, array_ports
 from cosim.errors import CosimError
 from cosim.world.geometry import inside_polygon
-from cosim.world.shapes import Circle, Obstacle
+from cosim.world.obstacles import ObstacleArrays
+from cosim.world.shapes import Obstacle
 
 
 @numba.njit(cache=True)
@@ -196,14 +198,8 @@ class Lidar(PythonComponent):
         self.resolution = float(resolution)
         self.origin = (float(origin[0]), float(origin[1]))
         self.obstacles = list(obstacles)
-        circles = [(*o.center, o.radius) for o in self.obstacles if isinstance(o, Circle)]
-        self._circles = np.array(circles, dtype=float).reshape(-1, 3)
-        polygons = [np.asarray(o.polygon(), dtype=float) for o in self.obstacles if not isinstance(o, Circle)]
-        segments = [np.hstack((p, np.roll(p, -1, axis=0))) for p in polygons]
-        self._segments = np.ascontiguousarray(np.vstack(segments) if segments else np.zeros((0, 4)))
-        # All polygons' vertices in one array; polygon p is vertices[starts[p]:starts[p + 1]].
-        self._vertices = np.ascontiguousarray(np.vstack(polygons) if polygons else np.zeros((0, 2)))
-        self._starts = np.cumsum([0] + [len(p) for p in polygons]).astype(np.int64)
+        # The shapes as arrays; moving ones are put at their pose of each scan's time.
+        self.world = ObstacleArrays(self.obstacles)
         count = len(self.beam_angles)
         self._directions = np.empty((count, 2))  # scratch of the kernel, reused every scan
         self._no_jitter = np.zeros(count)
@@ -218,14 +214,17 @@ class Lidar(PythonComponent):
         self._angles_written = False
 
     def on_initialize(self) -> None:
-        self.scan(*self.input_buffer[:3])
+        self.scan(*self.input_buffer[:3], t=self.t0)
 
     def step(self, t: float, h: float) -> None:
-        # The scan at the start of the step, from the pose the vehicle had then (sample and hold).
-        self.scan(*self.input_buffer[:3])
+        # The scan at the start of the step, from the pose the vehicle had then and the obstacles'
+        # poses at that time (sample and hold).
+        self.scan(*self.input_buffer[:3], t=t)
 
-    def measure(self, x: float, y: float, theta: float, directions: np.ndarray) -> np.ndarray:
-        """True distances [m] along unit `directions` (N x 2, world frame); inf for no hit."""
+    def measure(self, x: float, y: float, theta: float, directions: np.ndarray, t: float = 0.0) -> np.ndarray:
+        """True distances [m] along unit `directions` (N x 2, world frame) at time t [s]; inf for no hit."""
+        self.world.at(t)
+        world = self.world
         directions = np.ascontiguousarray(directions, dtype=float)
         distances = np.empty(len(directions))
         x, y = float(x), float(y)
@@ -233,13 +232,15 @@ class Lidar(PythonComponent):
             self.occupied_up, self.origin[0], self.origin[1], self.resolution, x, y, directions,
             self.range_max, distances,
         )  # fmt: skip
-        _cast_shapes(x, y, directions, self._circles, self._segments, distances)
-        if _inside_polygons(x, y, self._vertices, self._starts):
+        _cast_shapes(x, y, directions, world.circles, world.segments, distances)
+        if _inside_polygons(x, y, world.vertices, world.starts):
             distances[:] = 0.0
         return distances
 
-    def scan(self, x: float, y: float, theta: float) -> None:
-        """Fill `ranges[k]`/`angles[k]` for the pose (x, y [m], theta [rad])."""
+    def scan(self, x: float, y: float, theta: float, t: float = 0.0) -> None:
+        """Fill `ranges[k]`/`angles[k]` for the pose (x, y [m], theta [rad]) at time t [s]."""
+        world = self.world
+        world.at(t)
         count = len(self.beam_angles)
         # The generator is drawn in the same order as always (angles, then ranges), so a seed
         # gives the same noise whatever computes the sweep.
@@ -252,7 +253,7 @@ class Lidar(PythonComponent):
         _scan(
             self.occupied_up, self.origin[0], self.origin[1], self.resolution, float(x), float(y),
             float(theta), self.beam_angles, angle_jitter, range_jitter, self.range_min, self.range_max,
-            self._circles, self._segments, self._vertices, self._starts, self._directions, self._ranges,
+            world.circles, world.segments, world.vertices, world.starts, self._directions, self._ranges,
         )  # fmt: skip
         if not self._angles_written:
             self._ranges[count:] = np.nan
