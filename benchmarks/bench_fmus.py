@@ -1,7 +1,10 @@
-"""Per-step cost of each project FMU: through fmpy's methods and through preallocated ctypes buffers.
+"""Per-step cost of each project FMU: through fmpy's methods and through preallocated ctypes buffers;
+then VFH's 720-beam scan exchanged as FMI 3.0 arrays against FMI 2.0 scalars.
 
 One step = set the per-step inputs, fmi2DoStep, get every Real output (as the orchestrator does).
 PurePursuit's waypoints are set once (a plan), not every step; VFH gets a 720-beam scan every step.
+The FMI 3.0 comparison sets the same 1441 values (ranges, angles, target_dir) with one
+fmi3SetFloat64 of 3 value references instead of one fmi2SetReal of 1441, same model, same steps.
 
     python3 benchmarks/bench_fmus.py [--steps N]
 """
@@ -16,6 +19,7 @@ import time
 import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
+from fmpy.fmi3 import FMU3Slave
 
 from cosim.fmi.builtin import builtin_fmu, known_names
 
@@ -126,6 +130,91 @@ def bench_raw(name: str, steps: int) -> tuple[float, float]:
     return total / steps * 1e6, step_only / steps * 1e6
 
 
+def _vfh_slaves():
+    """The FMI 2.0 and FMI 3.0 builds of VectorFieldHistogram, initialised, with their per-step
+    value references: (slave, input references, output references) each."""
+    scan_angles = np.linspace(-math.pi, math.pi, BEAMS, endpoint=False)
+    slaves = {}
+    for version in (2, 3):
+        path = builtin_fmu("VectorFieldHistogram", version)
+        description = read_model_description(str(path))
+        vr = {v.name: v.valueReference for v in description.modelVariables}
+        kind = FMU2Slave if version == 2 else FMU3Slave
+        slave = kind(
+            guid=description.guid,
+            unzipDirectory=extract(str(path)),
+            modelIdentifier="VectorFieldHistogram",
+            instanceName=f"vfh{version}",
+        )
+        slave.instantiate()
+        if version == 2:
+            slave.setupExperiment(startTime=0.0)
+            slave.enterInitializationMode()
+            inputs = [vr[f"ranges[{k}]"] for k in range(1, BEAMS + 1)]
+            inputs += [vr[f"angles[{k}]"] for k in range(1, BEAMS + 1)] + [vr["target_dir"]]
+        else:
+            slave.enterInitializationMode(startTime=0.0)
+            inputs = [vr["ranges"], vr["angles"], vr["target_dir"]]
+        slave.exitInitializationMode()
+        slaves[version] = (slave, inputs, [vr["steering_dir"]])
+    values = np.concatenate([1.2 + 0.6 * np.sin(3 * scan_angles), scan_angles, [0.3]])
+    return slaves, values
+
+
+def bench_vfh_fmi3_against_fmi2(steps: int) -> dict[str, tuple[float, float, float]]:
+    """µs per step for FMI 2.0 and 3.0: (set inputs alone, doStep alone, set + doStep + get), raw
+    C calls with pointer arguments passed as addresses."""
+    slaves, values = _vfh_slaves()
+    results = {}
+    for version, (slave, inputs, outputs) in slaves.items():
+        prefix = f"fmi{version}"
+        real = "Real" if version == 2 else "Float64"
+        set_values = getattr(slave.dll, f"{prefix}Set{real}")
+        get_values = getattr(slave.dll, f"{prefix}Get{real}")
+        do_step = getattr(slave.dll, f"{prefix}DoStep")
+        extra = [] if version == 2 else [ctypes.c_size_t]
+        for function in (set_values, get_values):
+            function.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p, *extra]
+        input_vrs = (ctypes.c_uint32 * len(inputs))(*inputs)
+        input_values = (ctypes.c_double * len(values))(*values)
+        output_vrs = (ctypes.c_uint32 * len(outputs))(*outputs)
+        output_values = (ctypes.c_double * len(outputs))()
+        counts = [] if version == 2 else [len(values)]
+        out_counts = [] if version == 2 else [len(outputs)]
+        if version == 2:
+            do_step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int]
+            step_args = [1]
+        else:
+            do_step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_bool]
+            do_step.argtypes += [ctypes.c_void_p] * 4  # eventHandlingNeeded, terminate, earlyReturn, time
+            flags, last = (ctypes.c_bool * 3)(), ctypes.c_double()
+            first = ctypes.addressof(flags)
+            step_args = [True, first, first + 1, first + 2, ctypes.addressof(last)]
+        component, h, k = slave.component, 0.05, 0
+        set_only = step_only = total = math.inf
+        for _ in range(REPEATS):
+            start = time.process_time()
+            for _ in range(steps):
+                set_values(component, input_vrs, len(inputs), input_values, *counts)
+            set_only = min(set_only, time.process_time() - start)
+            start = time.process_time()
+            for _ in range(steps):
+                do_step(component, k * h, h, *step_args)
+                k += 1
+            step_only = min(step_only, time.process_time() - start)
+            start = time.process_time()
+            for _ in range(steps):
+                set_values(component, input_vrs, len(inputs), input_values, *counts)
+                do_step(component, k * h, h, *step_args)
+                get_values(component, output_vrs, len(outputs), output_values, *out_counts)
+                k += 1
+            total = min(total, time.process_time() - start)
+        results[prefix] = (set_only / steps * 1e6, step_only / steps * 1e6, total / steps * 1e6)
+        slave.terminate()
+        slave.freeInstance()
+    return results
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=2000, help="steps per measurement (default 2000)")
@@ -137,6 +226,19 @@ def main() -> None:
         methods = bench_methods(name, args.steps)
         raw, step_only = bench_raw(name, args.steps)
         print(f"{name:<22}{len(inputs):>12}{methods:>16.2f}{raw:>14.2f}{step_only:>14.2f}")
+    results = bench_vfh_fmi3_against_fmi2(args.steps)
+    print(
+        f"\nVectorFieldHistogram, {2 * BEAMS + 1} input values a step   [CPU µs per step, best of {REPEATS}]"
+    )
+    print(f"{'interface':<34}{'set inputs':>12}{'doStep only':>13}{'set+step+get':>14}")
+    rows = [
+        ("FMI 2.0: 1441 scalar references", results["fmi2"]),
+        ("FMI 3.0: 3 array references", results["fmi3"]),
+    ]
+    ratios = tuple(a / b for a, b in zip(results["fmi3"], results["fmi2"], strict=True))
+    rows.append(("ratio FMI 3.0 / FMI 2.0", ratios))
+    for label, (set_inputs, step, whole) in rows:
+        print(f"{label:<34}{set_inputs:>12.2f}{step:>13.2f}{whole:>14.2f}")
 
 
 if __name__ == "__main__":

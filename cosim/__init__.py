@@ -12,9 +12,10 @@ if TYPE_CHECKING:
 __all__ = ["CosimError", "builtin_fmu"]
 
 
-def builtin_fmu(name: str) -> Path:
+def builtin_fmu(name: str, fmi_version: int = 2) -> Path:
     """The built `.fmu` of a project FMU (DifferentialDrive, Bicycle, PurePursuit,
-    VectorFieldHistogram, AvoidanceMixer), built from its C sources if needed."""
+    VectorFieldHistogram, AvoidanceMixer) as an FMI 2.0 or (`fmi_version=3`) FMI 3.0 co-simulation
+    FMU, built from its C sources if needed."""
     from cosim.fmi.builtin import builtin_fmu as _builtin_fmu
 
-    return _builtin_fmu(name)
+    return _builtin_fmu(name, fmi_version)

@@ -10,7 +10,6 @@ from __future__ import annotations
 import atexit
 import math
 import shutil
-import tempfile
 from collections.abc import Sequence
 from functools import cache
 from pathlib import Path
@@ -26,19 +25,9 @@ NAMES = fmus.known_names()
 
 
 @cache
-def _build_dir() -> Path:
-    directory = Path(tempfile.mkdtemp(prefix="navcosim-test-fmi3-"))
-    atexit.register(shutil.rmtree, directory, ignore_errors=True)
-    return directory
-
-
-@cache
 def fmu_path(name: str, fmi_version: int) -> Path:
-    """The built FMU `name` of `fmi_version`, once per test session."""
-    if fmi_version == 2:
-        return fmus.builtin_fmu(name)
-    build = fmus._build_module(fmus.SOURCE_ROOT)
-    return build.build_fmu(fmus.SOURCE_ROOT / name, _build_dir() / "fmi3", fmi_version=3)
+    """The built project FMU `name` of `fmi_version` (`cosim.builtin_fmu`)."""
+    return fmus.builtin_fmu(name, fmi_version)
 
 
 @cache

@@ -13,6 +13,7 @@ def register(subparsers) -> None:
         "info", help="model, GUID and every variable (causality, unit, start) of an FMU"
     )
     info.add_argument("fmu", metavar="FILE|NAME", help="an .fmu file (FMI 2.0 or 3.0) or a project FMU name")
+    _fmi_option(info)
     info.set_defaults(handler=_info)
 
     validate = actions.add_parser(
@@ -21,29 +22,44 @@ def register(subparsers) -> None:
     validate.add_argument(
         "fmu", metavar="FILE|NAME", help="an .fmu file (FMI 2.0 or 3.0) or a project FMU name"
     )
+    _fmi_option(validate)
     validate.set_defaults(handler=_validate)
 
     path = actions.add_parser(
         "path", help="print the path of a project FMU's built .fmu (builds it if needed)"
     )
     path.add_argument("name", metavar="NAME", help="project FMU name, e.g. DifferentialDrive")
+    _fmi_option(path)
     path.set_defaults(handler=_path)
 
-    build = actions.add_parser("build", help="build every project FMU and print the paths")
+    build = actions.add_parser("build", help="build every project FMU (FMI 2.0 and 3.0) and print the paths")
+    build.add_argument(
+        "--fmi", type=int, choices=(2, 3), default=None, help="build only this FMI version (default: both)"
+    )
     build.set_defaults(handler=_build)
+
+
+def _fmi_option(parser) -> None:
+    parser.add_argument(
+        "--fmi",
+        type=int,
+        choices=(2, 3),
+        default=2,
+        help="FMI version of a project FMU given by name (default 2; 3: arrays as FMI 3.0 array variables)",
+    )
 
 
 def _info(args: argparse.Namespace) -> int:
     from cosim.fmi.inspect import format_info, resolve
 
-    print(format_info(resolve(args.fmu)))
+    print(format_info(resolve(args.fmu, args.fmi)))
     return 0
 
 
 def _validate(args: argparse.Namespace) -> int:
     from cosim.fmi.inspect import resolve, validate
 
-    path = resolve(args.fmu)
+    path = resolve(args.fmu, args.fmi)
     problems = validate(path)
     if not problems:
         print(f"{path}: valid")
@@ -57,13 +73,13 @@ def _validate(args: argparse.Namespace) -> int:
 def _path(args: argparse.Namespace) -> int:
     from cosim.fmi.builtin import builtin_fmu
 
-    print(builtin_fmu(args.name))
+    print(builtin_fmu(args.name, args.fmi))
     return 0
 
 
 def _build(args: argparse.Namespace) -> int:
     from cosim.fmi.builtin import build_all
 
-    for path in build_all():
+    for path in build_all((2, 3) if args.fmi is None else (args.fmi,)):
         print(path)
     return 0

@@ -60,6 +60,9 @@ class NativeStep:
     step_flags: np.ndarray  # FMI 3.0: eventHandlingNeeded, terminateSimulation, earlyReturn
     last_successful_time: int  # FMI 3.0: address of the double doStep writes
     fail: Callable[[int, int, float], None]
+    # Value references per get/set call; fewer than the ports when FMI 3.0 arrays move whole.
+    input_reference_count: int = -1  # -1: one per input port
+    output_reference_count: int = -1
 
 
 @dataclass(frozen=True)

@@ -95,8 +95,9 @@ def compile_loop(
         if component.inputs:
             names[f"set{i}"] = _PROTOTYPES[f"transfer{version}"](c.set_real)
             references = c.input_references
+            count = c.input_reference_count if c.input_reference_count >= 0 else len(component.inputs)
             gather += [
-                f"            status = set{i}({handle}, {references}, {len(component.inputs)}, "
+                f"            status = set{i}({handle}, {references}, {count}, "
                 f"{c.input_values}{_count(version, len(component.inputs))})",
                 f"            if status > 1: return k, {i}, 0, status",
             ]
@@ -114,8 +115,9 @@ def compile_loop(
         if component.outputs:
             names[f"get{i}"] = _PROTOTYPES[f"transfer{version}"](c.get_real)
             references = c.output_references
+            count = c.output_reference_count if c.output_reference_count >= 0 else len(component.outputs)
             step += [
-                f"            status = get{i}({handle}, {references}, {len(component.outputs)}, "
+                f"            status = get{i}({handle}, {references}, {count}, "
                 f"{c.output_values}{_count(version, len(component.outputs))})",
                 f"            if status > 1: return k, {i}, 2, status",
             ]

@@ -1,8 +1,10 @@
 """The project's own FMUs: where the built `.fmu` of each one is, building it when needed.
 
-A wheel ships the FMUs prebuilt in `cosim/_fmus/`. A source checkout (editable install) builds
-them on first use into a cache (`<repo>/build/fmus/`, or `$NAVCOSIM_FMU_CACHE`) and rebuilds one
-when the hash of its sources changes, so an edit to the C code is picked up on the next call
+Each FMU exists as FMI 2.0 and as FMI 3.0 (`builtin_fmu(name, fmi_version=3)`), built from the
+same C model. A wheel ships the FMUs prebuilt in `cosim/_fmus/` (FMI 3.0 in `cosim/_fmus/fmi3/`).
+A source checkout (editable install) builds them on first use into a cache (`<repo>/build/fmus/`,
+or `$NAVCOSIM_FMU_CACHE`; FMI 3.0 in its `fmi3/`) and rebuilds one when the hash of its sources
+changes, so an edit to the C code is picked up on the next call
 whatever installed the package (pip never rebuilds an editable install; uv only with cache-keys).
 """
 
@@ -50,23 +52,40 @@ def known_names(source_root: Path = SOURCE_ROOT) -> list[str]:
     return sorted(p.stem for p in SHIPPED_DIR.glob("*.fmu"))
 
 
-def build_if_stale(name: str, source_root: Path, cache_dir: Path) -> Path:
-    """Build FMU `name` from `source_root` into `cache_dir` unless its stamp matches the sources.
+FMI_VERSIONS = (2, 3)
+
+
+def _check_version(fmi_version: int) -> int:
+    if isinstance(fmi_version, bool) or fmi_version not in FMI_VERSIONS:
+        raise CosimError(f"FMI version {fmi_version!r}: the project FMUs are built as FMI 2 and FMI 3")
+    return int(fmi_version)
+
+
+def version_dir(directory: Path, fmi_version: int) -> Path:
+    """Where the FMUs of `fmi_version` are under a cache or shipped folder: FMI 2.0 in it, FMI 3.0 in
+    its `fmi3/` subfolder (the layout of `fmus/build.py`)."""
+    return directory if fmi_version == 2 else directory / "fmi3"
+
+
+def build_if_stale(name: str, source_root: Path, cache_dir: Path, fmi_version: int = 2) -> Path:
+    """Build FMU `name` (FMI `fmi_version`) from `source_root` into `cache_dir` (FMI 3.0: its `fmi3/`
+    subfolder) unless its stamp matches the sources.
 
     Safe with concurrent callers: one process builds under a file lock while the others wait,
     and the archive and stamp are renamed into place atomically.
     """
     build = _build_module(source_root)
     model_dir = source_root / name
+    cache_dir = version_dir(cache_dir, _check_version(fmi_version))
     target, stamp = cache_dir / f"{name}.fmu", cache_dir / f"{name}.stamp"
     try:
         cache_dir.mkdir(parents=True, exist_ok=True)
         with open(cache_dir / f"{name}.lock", "w") as lock:
             fcntl.flock(lock, fcntl.LOCK_EX)
-            digest = build.source_hash(model_dir)
+            digest = build.source_hash(model_dir, fmi_version)
             if target.is_file() and stamp.is_file() and stamp.read_text().strip() == digest:
                 return target
-            build.build_fmu(model_dir, cache_dir)
+            build.build_fmu(model_dir, cache_dir, fmi_version=fmi_version)
             temporary_stamp = cache_dir / f".{name}.stamp.{os.getpid()}"
             temporary_stamp.write_text(digest + "\n")
             os.replace(temporary_stamp, stamp)
@@ -77,19 +96,23 @@ def build_if_stale(name: str, source_root: Path, cache_dir: Path) -> Path:
     return target
 
 
-def builtin_fmu(name: str) -> Path:
-    """The built `.fmu` of project FMU `name` (e.g. "DifferentialDrive"), built if needed.
+def builtin_fmu(name: str, fmi_version: int = 2) -> Path:
+    """The built `.fmu` of project FMU `name` (e.g. "DifferentialDrive") as an FMI `fmi_version`
+    (2 or 3) co-simulation FMU, built if needed. The FMI 3.0 build of a model has its arrays
+    (waypoints, ranges, angles) as array variables; the FMI 2.0 build has them as scalars.
 
-    Raises CosimError for an unknown name (listing the known ones) or a failed build.
+    Raises CosimError for an unknown name (listing the known ones), another FMI version or a failed
+    build.
     """
+    fmi_version = _check_version(fmi_version)
     names = known_names()
     if name not in names:
         raise CosimError(f"unknown project FMU {name!r}; known: {', '.join(names) or '(none)'}")
     if _has_sources(SOURCE_ROOT):
-        return build_if_stale(name, SOURCE_ROOT, default_cache_dir())
-    return SHIPPED_DIR / f"{name}.fmu"
+        return build_if_stale(name, SOURCE_ROOT, default_cache_dir(), fmi_version)
+    return version_dir(SHIPPED_DIR, fmi_version) / f"{name}.fmu"
 
 
-def build_all() -> list[Path]:
-    """Build (or find up to date) every project FMU; returns their paths."""
-    return [builtin_fmu(name) for name in known_names()]
+def build_all(fmi_versions: tuple[int, ...] = FMI_VERSIONS) -> list[Path]:
+    """Build (or find up to date) every project FMU in each of `fmi_versions`; returns their paths."""
+    return [builtin_fmu(name, version) for version in fmi_versions for name in known_names()]

@@ -13,8 +13,14 @@ their own names (unless a mapped port already uses the name). Several ports may 
 an output then fills each of them, and an input receives the value of the port set last (its
 position in the FMU's input order); this lets an FMU with fewer ports than a role (a
 fault-injection FMU, say) fill it. Supported variable types: FMI 2.0
-Real, Integer, Enumeration, Boolean; FMI 3.0 scalar Float64, Int32, Boolean (other FMI 3.0 types
-and array variables are not exposed).
+Real, Integer, Enumeration, Boolean; FMI 3.0 Float64, Int32, Boolean, scalars and arrays (other
+FMI 3.0 types, and arrays sized by a tunable structural parameter, are not exposed).
+
+An FMI 3.0 array variable of fixed size appears as one port per element, named as FMI 2.0's
+structured scalars (`ranges[3]`, `waypoints[12,1]`; row-major), so a system connects the FMI 2.0
+and the FMI 3.0 build of a model alike. The transfer is native: one fmi3Get/fmi3Set call moves all
+variables of a type, each array as one value reference with all its elements (a 720-beam scan is
+one reference, not 720). An array is always sent whole; the port map renames scalars only.
 
 fmpy behaviour owned here: each instance is extracted into its own directory (static state inside
 a shared library is not shared between instances); the working directory is restored after a
@@ -151,18 +157,22 @@ class FmuComponent(Component):
         for port, (variable, scale) in mapping.items():
             by_variable.setdefault(variable, []).append((port, scale))
         self._variables: dict[str, tuple[object, float]] = {}  # port name -> (fmpy variable, scale)
+        self._elements: dict[str, int] = {}  # element port of an FMI 3.0 array -> row-major index
         ports: dict[str, list[Port]] = {"input": [], "output": [], "parameter": []}
         for variable in self.model_description.modelVariables:
             causality = variable.causality if variable.causality != "structuralParameter" else "parameter"
             kind = _TYPES.get(variable.type)
-            if causality not in ports or kind is None or getattr(variable, "dimensions", None):
+            if causality not in ports or kind is None:
+                continue
+            unit = getattr(variable, "unit", None) or getattr(
+                getattr(variable, "declaredType", None), "unit", None
+            )
+            if getattr(variable, "dimensions", None):
+                self._add_array_ports(variable, kind, unit or "", ports[causality], mapping, by_variable)
                 continue
             if variable.name not in by_variable and variable.name in mapping:
                 continue  # a mapped port already took this name
             start = _start_value(variable.start, kind)
-            unit = getattr(variable, "unit", None) or getattr(
-                getattr(variable, "declaredType", None), "unit", None
-            )
             for port_name, scale in by_variable.get(variable.name, [(variable.name, 1.0)]):
                 port = Port(port_name, kind, unit or "", variable.description or "", start * scale)
                 ports[causality].append(port)
@@ -189,6 +199,32 @@ class FmuComponent(Component):
         self._fatal = False
         self.log_messages: deque[str] = deque(maxlen=20)
 
+    def _add_array_ports(
+        self, variable, kind: str, unit: str, ports: list[Port], mapping, by_variable
+    ) -> None:
+        """One port per element of FMI 3.0 array `variable`, named `name[i]` / `name[i,j]`."""
+        shape = _array_shape(variable, self.model_description)
+        if shape is None:
+            return  # sized by a tunable structural parameter: the ports would change size
+        if variable.name in by_variable:
+            raise CosimError(
+                f"FMU '{self.path}' (component '{self.name}'): port map entry "
+                f"'{by_variable[variable.name][0][0]}' names array variable '{variable.name}'; "
+                "only scalar variables can be mapped"
+            )
+        starts = str(variable.start).split() if variable.start not in (None, "") else []
+        for element, index in enumerate(np.ndindex(*shape)):
+            port_name = f"{variable.name}[{','.join(str(i + 1) for i in index)}]"
+            if port_name in mapping:
+                raise CosimError(
+                    f"FMU '{self.path}' (component '{self.name}'): mapped port '{port_name}' "
+                    f"is also an element of array variable '{variable.name}'"
+                )
+            text = starts[element if len(starts) > 1 else 0] if starts else None
+            ports.append(Port(port_name, kind, unit, variable.description or "", _start_value(text, kind)))
+            self._variables[port_name] = (variable, 1.0)
+            self._elements[port_name] = element
+
     def _plan_transfers(self) -> None:
         """Per FMI type: buffer slots, value references, FMI value array, scales."""
         self._input_groups = self._groups(self.inputs)
@@ -205,14 +241,28 @@ class FmuComponent(Component):
     def _groups(
         self, ports: list[Port], only: set[int] | None = None
     ) -> list[tuple[str, list[int], object, object, list[float]]]:
+        """Per FMI type: (kind, buffer slots, value references, FMI value array, scales). An FMI 3.0
+        array's element ports are consecutive (in element order), so its reference is listed once,
+        at its first element, and its values fill that stretch of the value array."""
+        if only is not None:  # an array is transferred whole: a slot of it brings all of them
+            arrays = {self._variables[ports[i].name][0].name for i in only if ports[i].name in self._elements}
+            only = set(only) | {
+                i
+                for i, p in enumerate(ports)
+                if p.name in self._elements and self._variables[p.name][0].name in arrays
+            }
         groups = []
         for kind in ("real", "integer", "boolean"):
             slots = [i for i, p in enumerate(ports) if p.type == kind and (only is None or i in only)]
             if slots:
-                references = [self._variables[ports[i].name][0].valueReference for i in slots]
+                references = [
+                    self._variables[ports[i].name][0].valueReference
+                    for i in slots
+                    if self._elements.get(ports[i].name, 0) == 0
+                ]
                 scales = [self._variables[ports[i].name][1] for i in slots]
                 values = (_C_TYPES[self.fmi_version][kind] * len(slots))()
-                groups.append((kind, slots, (ctypes.c_uint32 * len(slots))(*references), values, scales))
+                groups.append((kind, slots, (ctypes.c_uint32 * len(references))(*references), values, scales))
         return groups
 
     def _compile_fast_path(self) -> None:
@@ -247,8 +297,9 @@ class FmuComponent(Component):
                 names[f"s{direction}{g}"] = np.array(slots, dtype=np.intp)
                 names[f"k{direction}{g}"] = np.array(scales)
                 copies = [] if values is buffer else _copy_lines(direction, g, kind, slots, scales)
+                count = len(references)  # FMI 3.0: then the number of values (array elements)
                 call = [
-                    f"    status = f{direction}{g}(handle, r{direction}{g}, {len(slots)}, v{direction}{g}"
+                    f"    status = f{direction}{g}(handle, r{direction}{g}, {count}, v{direction}{g}"
                     + n.format(n=len(slots))
                     + ")",
                     f"    if status > 1: fail(status, '{function}')",
@@ -402,14 +453,20 @@ class FmuComponent(Component):
         values.update(parameters)
         names = [p.name for p in self.parameters]
         kinds = {p.name: p.type for p in self.parameters}
+        arrays: dict[str, dict[int, float]] = {}  # FMI 3.0 array parameter -> given elements
         for key, value in values.items():
             if key not in kinds:
                 raise CosimError(
                     f"FMU '{self.name}' (model {self.model_description.modelName}) has no parameter "
                     f"'{key}'; parameters: {closest_names(key, names) or 'none'}"
                 )
+            if key in self._elements:
+                arrays.setdefault(key.split("[")[0], {})[self._elements[key]] = value
+                continue
             variable, scale = self._variables[key]
             self._set_scalar(kinds[key], variable.valueReference, value * scale, key)
+        for array, elements in arrays.items():
+            self._set_array_parameter(array, elements)
         self.t0 = float(t0)
         if self.fmi_version == 2:
             self._call_lifecycle("setupExperiment", None, self.t0)
@@ -424,6 +481,21 @@ class FmuComponent(Component):
         )
         if status > 1:
             self._fail(status, f"fmi{self.fmi_version}Set{_FMI_TYPE_NAMES[self.fmi_version][kind]} ({name})")
+
+    def _set_array_parameter(self, array: str, elements: Mapping[int, float]) -> None:
+        """Set FMI 3.0 array parameter `array` whole: the given elements, the others at their start."""
+        ports = [p for p in self.parameters if p.name in self._elements and p.name.split("[")[0] == array]
+        variable = self._variables[ports[0].name][0]
+        kind = ports[0].type
+        numbers = [elements.get(self._elements[p.name], p.start) for p in ports]
+        if kind != "real" and any(float(v) != int(v) for v in numbers):
+            raise CosimError(f"FMU '{self.name}': parameter '{array}' must have integer elements")
+        values = (_C_TYPES[3][kind] * len(numbers))(*(v if kind == "real" else int(v) for v in numbers))
+        status = self._setters[kind](
+            self._handle, (ctypes.c_uint32 * 1)(variable.valueReference), 1, values, len(numbers)
+        )
+        if status > 1:
+            self._fail(status, f"fmi3Set{_FMI_TYPE_NAMES[3][kind]} ({array})")
 
     def _count(self, n: int) -> tuple[int, ...]:
         return () if self.fmi_version == 2 else (n,)
@@ -475,6 +547,8 @@ class FmuComponent(Component):
             get_real=address(self._getters["real"]),
             input_references=references(self._input_groups),
             output_references=references(self._output_groups),
+            input_reference_count=len(self._input_groups[0][2]) if self._input_groups else 0,
+            output_reference_count=len(self._output_groups[0][2]) if self._output_groups else 0,
             input_values=ctypes.addressof(self.input_cbuffer),
             output_values=ctypes.addressof(self.output_cbuffer),
             step_flags=np.ctypeslib.as_array(self._step_flags) if version == 3 else np.zeros(3, bool),
@@ -568,6 +642,22 @@ def _copy_lines(direction: str, group: int, kind: str, slots: list[int], scales:
             convert = {"real": "{}", "integer": "int(round({}))", "boolean": "{} != 0.0"}[kind]
             lines.append(f"    {values}[{position}] = " + convert.format(f"ib[{slot}]{factor}"))
     return lines
+
+
+def _array_shape(variable, description) -> tuple[int, ...] | None:
+    """The fixed shape of an FMI 3.0 array variable; None when a dimension is a tunable structural
+    parameter (its size could change in configuration mode)."""
+    by_reference = {v.valueReference: v for v in description.modelVariables}
+    shape = []
+    for dimension in variable.dimensions:
+        size = dimension.start
+        if size is None:
+            parameter = by_reference.get(dimension.valueReference)
+            if parameter is None or parameter.variability not in ("constant", "fixed"):
+                return None
+            size = parameter.start
+        shape.append(int(size))
+    return tuple(shape)
 
 
 def _start_value(start: object, kind: str) -> float:

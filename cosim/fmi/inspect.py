@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ctypes
+import math
 import os
 import platform
 import re
@@ -38,13 +39,13 @@ class VariableRow:
     description: str
 
 
-def resolve(file_or_name: str) -> Path:
-    """An FMU file path, or the built FMU of a project FMU name."""
+def resolve(file_or_name: str, fmi_version: int = 2) -> Path:
+    """An FMU file path, or the built FMU of a project FMU name in FMI `fmi_version`."""
     path = Path(file_or_name)
     if path.exists():
         return path
     if file_or_name in known_names():
-        return builtin_fmu(file_or_name)
+        return builtin_fmu(file_or_name, fmi_version)
     raise CosimError(f"{file_or_name}: no such file and not a project FMU ({', '.join(known_names())})")
 
 
@@ -78,16 +79,42 @@ def _start(variable) -> str:
     return text if len(text) <= 24 else text[:21] + "..."
 
 
+def _dimension_sizes(variable, description) -> list[int | None]:
+    """Each dimension's size: its start, or the start of the structural parameter it names (None
+    when neither gives a number)."""
+    by_reference = {v.valueReference: v for v in description.modelVariables}
+    sizes: list[int | None] = []
+    for dimension in getattr(variable, "dimensions", None) or []:
+        size = dimension.start
+        if size is None and dimension.valueReference is not None:
+            size = getattr(by_reference.get(dimension.valueReference), "start", None)
+        try:
+            sizes.append(int(size))
+        except (TypeError, ValueError):
+            sizes.append(None)
+    return sizes
+
+
+def _array_row(variable, description, row: VariableRow) -> VariableRow:
+    """An FMI 3.0 array variable: its shape in the name, one start when all elements share it."""
+    sizes = _dimension_sizes(variable, description)
+    row.name = variable.name + "".join(f"[{size if size is not None else '?'}]" for size in sizes)
+    starts = str(variable.start).split() if variable.start is not None else []
+    row.start = starts[0] if len(set(starts)) == 1 else ("(varies)" if starts else "")
+    count = math.prod(size or 0 for size in sizes)
+    row.description = f"array of {count} elements; {row.description}".rstrip("; ")
+    return row
+
+
 def variable_rows(description) -> list[VariableRow]:
-    """The variable table: scalars as they are, arrays of scalars summarised with their index ranges."""
+    """The variable table: scalars as they are, FMI 3.0 arrays with their shape, FMI 2.0 arrays of
+    scalars summarised with their index ranges."""
     rows: list[VariableRow] = []
     groups: dict[str, tuple[VariableRow, list[list[int]], set[tuple[str, str]]]] = {}
     first_name: dict[str, str] = {}
     for variable in description.modelVariables:
-        dimensions = getattr(variable, "dimensions", None) or []
-        shape = "".join(f"[{d.start or d.valueReference}]" for d in dimensions)
         row = VariableRow(
-            name=variable.name + shape,
+            name=variable.name,
             causality=variable.causality or "",
             variability=variable.variability or "",
             type=variable.type,
@@ -95,6 +122,9 @@ def variable_rows(description) -> list[VariableRow]:
             start=_start(variable),
             description=variable.description or "",
         )
+        if getattr(variable, "dimensions", None):
+            rows.append(_array_row(variable, description, row))
+            continue
         match = _ELEMENT.match(variable.name)
         if match is None:
             rows.append(row)
@@ -239,7 +269,66 @@ def fmpy_problems(path: Path) -> list[str]:
     return problems + fmpy_validation._validate_variable_names(representatives)
 
 
+_INTEGER_TYPES = {"Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64"}
+
+
+def array_problems(description) -> list[str]:
+    """FMI 3.0 array variables that fmpy's validation lets through: a Dimension without a size (no
+    start, no valueReference), a Dimension naming something other than an integer structural
+    parameter or constant, and start values that do not fill the array (one value, or one per
+    element, each a number of the variable's type)."""
+    if not str(description.fmiVersion).startswith("3"):
+        return []
+    by_reference = {v.valueReference: v for v in description.modelVariables}
+    problems = []
+    for variable in description.modelVariables:
+        dimensions = getattr(variable, "dimensions", None) or []
+        if not dimensions:
+            continue
+        label = f"array variable {variable.name!r}"
+        for number, dimension in enumerate(dimensions, start=1):
+            if dimension.start is None and dimension.valueReference is None:
+                problems.append(f"{label}: Dimension {number} has neither start nor valueReference")
+            elif dimension.start is None:
+                size = by_reference.get(dimension.valueReference)
+                if (
+                    size is None
+                    or size.type not in _INTEGER_TYPES
+                    or size.causality
+                    not in (
+                        "structuralParameter",
+                        "calculatedParameter",
+                    )
+                    and size.variability != "constant"
+                ):
+                    problems.append(
+                        f"{label}: Dimension {number} refers to value reference {dimension.valueReference}, "
+                        "which is not an integer structural parameter or constant"
+                    )
+            elif int(dimension.start) < 0:
+                problems.append(f"{label}: Dimension {number} has a negative size {dimension.start}")
+        sizes = _dimension_sizes(variable, description)
+        if variable.start is None or None in sizes:
+            continue
+        starts = str(variable.start).split()
+        count = math.prod(sizes)
+        if len(starts) not in (1, count):
+            problems.append(f"{label}: {len(starts)} start values for {count} elements (give 1 or {count})")
+        parse = float if variable.type in ("Float32", "Float64") else int
+        if variable.type in ("Float32", "Float64") or variable.type in _INTEGER_TYPES:
+            bad = []
+            for text in starts:
+                try:
+                    parse(text)
+                except ValueError:
+                    bad.append(text)
+            if bad:
+                problems.append(f"{label}: start value {bad[0]!r} is not a {variable.type}")
+    return problems
+
+
 def validate(path: Path) -> list[str]:
-    """Problems of the FMU at `path`: fmpy's validation plus binary and exported-symbol checks."""
+    """Problems of the FMU at `path`: fmpy's validation, FMI 3.0 array checks, binary and
+    exported-symbol checks."""
     description = read_description(path)
-    return fmpy_problems(path) + _binary_problems(path, description)
+    return fmpy_problems(path) + array_problems(description) + _binary_problems(path, description)

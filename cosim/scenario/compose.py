@@ -73,7 +73,8 @@ def describe_system(scenario: Scenario) -> SystemDescription:
         if component.kind != "fmu":
             components[component.name] = component
             continue
-        described = _describe_fmu(scenario.components[component.name], component, template, problems)
+        spec = scenario.components[component.name]
+        described = _describe_fmu(spec, component, template, problems, scenario.fmi_version)
         if described is None:
             broken.add(component.name)
         else:
@@ -107,11 +108,12 @@ def _added(spec: ComponentSpec) -> ComponentDescription:
     )
 
 
-def fmu_path(spec: ComponentSpec) -> Path:
-    """The .fmu file of a component: a project FMU is built on first use."""
+def fmu_path(spec: ComponentSpec, fmi_version: int = 2) -> Path:
+    """The .fmu file of a component: a project FMU is built on first use, in the scenario's
+    `[simulation] fmi_version`."""
     from cosim.fmi.builtin import builtin_fmu
 
-    return builtin_fmu(spec.fmu) if spec.is_builtin else Path(spec.fmu)
+    return builtin_fmu(spec.fmu, fmi_version) if spec.is_builtin else Path(spec.fmu)
 
 
 def _listing(names, around: str = "") -> str:
@@ -124,13 +126,14 @@ def _describe_fmu(
     component: ComponentDescription,
     template: list[ConnectionDescription],
     problems: Problems,
+    fmi_version: int = 2,
 ) -> ComponentDescription | None:
     """Read the FMU's interface (through the port map); check the map and the parameters."""
     from cosim.fmi.component import FmuComponent
 
     where = component.where
     try:
-        path = fmu_path(spec)
+        path = fmu_path(spec, fmi_version)
         plain = FmuComponent(path, component.name)
     except CosimError as error:
         problems.add(f"{where}.fmu", str(error))

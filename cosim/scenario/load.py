@@ -150,6 +150,7 @@ class Scenario:
     signal_arrays: bool  # /signals/<component> also holds array outputs (lidar ranges, waypoints)
     overrides: tuple[str, ...] = field(default=())
     connections: tuple[ConnectionSpec, ...] = field(default=())
+    fmi_version: int = 2  # which build of the project FMUs the roles use (2 or 3)
 
 
 def load_scenario(path: str | Path, overrides: list[str] | tuple[str, ...] = (), check_world: bool = True):
@@ -249,6 +250,9 @@ def _build(
     stop_time = simulation.number("stop_time", 300.0, minimum=0.0, exclusive_minimum=True)
     master = simulation.string("master", "gauss-seidel", choices=("gauss-seidel", "jacobi"))
     controller_rate = simulation.number("controller_rate", 20.0, minimum=0.0, exclusive_minimum=True)
+    fmi_version = simulation.integer("fmi_version", 2)
+    if fmi_version not in (2, 3):
+        raise simulation.error("fmi_version", f"must be 2 or 3 (the project FMUs' builds), got {fmi_version}")
     if stop_time < macro_step:
         raise simulation.error(
             "stop_time", f"{stop_time:g} s is shorter than one macro step ({macro_step:g} s)"
@@ -325,6 +329,7 @@ def _build(
         signal_arrays=signal_arrays,
         overrides=overrides,
         connections=connections,
+        fmi_version=fmi_version,
     )
 
 
