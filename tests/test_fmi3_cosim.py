@@ -20,6 +20,7 @@ from cosim.errors import CosimError
 from cosim.fmi.builtin import known_names
 from cosim.fmi.component import FmuComponent
 from cosim.fmi.inspect import array_problems, validate
+from cosim.logs import open_log
 from cosim.navigation.run import run_scenario
 from cosim.scenario.load import load_scenario
 
@@ -154,4 +155,6 @@ def test_shipped_scenario_log_is_equal_in_fmi3(path: Path, tmp_path: Path):
         logs[version] = tmp_path / f"fmi{version}.mcap"
         result = run_scenario(scenario, logs[version])
         assert result.outcome.reason == "goal_reached"
+        versions = {fmu["fmi_version"] for fmu in open_log(logs[version]).fmus.values()}
+        assert versions == {f"{version}.0"}  # every role ran the build of that version
     assert main(["log", "diff", str(logs[2]), str(logs[3]), "--tolerance", "0"]) == 0
