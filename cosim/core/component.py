@@ -45,7 +45,9 @@ class NativeStep:
     FMI get/set/doStep functions. The loop copies connected inputs into `input_values` and reads
     outputs from `output_values`: the C buffers behind the component's `input_buffer` and
     `output_buffer`. `fail(call, status, t)` raises the component's `CosimError` for a call
-    (0 set, 1 doStep, 2 get, 3 asked to terminate) that the loop stopped at.
+    (0 set, 1 doStep, 2 get, 3 asked to terminate, 4 an output not finite: `status` is its slot)
+    that the loop stopped at. After each get the loop checks that the outputs at `finite_outputs`
+    are finite and those at `nan_outputs` are not infinite.
     """
 
     fmi_version: int
@@ -63,6 +65,8 @@ class NativeStep:
     # Value references per get/set call; fewer than the ports when FMI 3.0 arrays move whole.
     input_reference_count: int = -1  # -1: one per input port
     output_reference_count: int = -1
+    finite_outputs: tuple[int, ...] = ()
+    nan_outputs: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)

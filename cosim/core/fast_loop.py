@@ -65,7 +65,7 @@ def compile_loop(
 
     `component` is -1 when all steps ran; otherwise the index (in `plan`) of the FMU whose
     call (0 set, 1 step, 2 get) returned `status` > Warning at step `next_step`, or (call 3) that
-    asked to terminate the simulation.
+    asked to terminate the simulation, or (call 4) whose output at slot `status` is not finite.
     """
     import numba
 
@@ -121,6 +121,14 @@ def compile_loop(
                 f"{c.output_values}{_count(version, len(component.outputs))})",
                 f"            if status > 1: return k, {i}, 2, status",
             ]
+            # x - x is NaN exactly when x is NaN or infinite.
+            step += [
+                f"            if out{i}[{j}] - out{i}[{j}] != 0.0: return k, {i}, 4, {j}"
+                for j in c.finite_outputs
+            ]
+            step += [
+                f"            if abs(out{i}[{j}]) == np.inf: return k, {i}, 4, {j}" for j in c.nan_outputs
+            ]
         if record:
             count, outputs = len(component.inputs), len(component.outputs)
             step += [
@@ -136,6 +144,7 @@ def compile_loop(
             lines += [due] + gather + step
     lines += gathers + steps
     lines += ["    return first_step + steps, -1, 0, 0"]
+    names["np"] = np
     exec("\n".join(lines), names)  # noqa: S102 - generated from our own templates
     compiled = numba.njit(names["loop"])
     buffers = []

@@ -22,6 +22,15 @@ and the FMI 3.0 build of a model alike. The transfer is native: one fmi3Get/fmi3
 variables of a type, each array as one value reference with all its elements (a 720-beam scan is
 one reference, not 720). An array is always sent whole; the port map renames scalars only.
 
+Every real output must be finite: after each step (and after initialisation) `get_outputs` raises
+`CosimError` naming the output when one is NaN or infinite, since a NaN fed on would pass as a value
+(a NaN pose is no position at all). Outputs listed in `nan_outputs` may be NaN where the FMU gives
+NaN a meaning (VFH's `steering_dir` is NaN when no direction is free); they must still not be
+infinite. Integer and Boolean outputs are always finite.
+
+The archive's total uncompressed size is checked before anything is extracted
+(`cosim.fmi.archive`; default limit 1 GiB, `max_unpacked_size` raises it).
+
 fmpy behaviour owned here: each instance is extracted into its own directory (static state inside
 a shared library is not shared between instances); the working directory is restored after a
 failed load; status Discard, Error and Fatal become `CosimError` naming the component, the model
@@ -32,13 +41,14 @@ standard forbids it), and `free()` just forgets the instance.
 from __future__ import annotations
 
 import ctypes
+import math
 import os
 import shutil
 import tempfile
 import weakref
 import zipfile
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from functools import cache
 from pathlib import Path
 
@@ -49,6 +59,7 @@ from fmpy.fmi3 import FMU3Slave
 
 from cosim.core.component import Component, NativeStep, Port, State, closest_names
 from cosim.errors import CosimError
+from cosim.fmi.archive import check_unpacked_size
 
 _STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
 _TYPES = {
@@ -65,7 +76,7 @@ _C_TYPES = {2: {"real": ctypes.c_double, "integer": ctypes.c_int, "boolean": cty
 _C_TYPES[3] = {"real": ctypes.c_double, "integer": ctypes.c_int32, "boolean": ctypes.c_bool}
 
 
-def _read_description(path: Path):
+def _read_description(path: Path, max_unpacked_size: int | None = None):
     """Check the archive and return fmpy's model description; one-line `CosimError` otherwise."""
     if not path.is_file():
         raise CosimError(f"FMU '{path}' not found")
@@ -74,6 +85,7 @@ def _read_description(path: Path):
     try:
         with zipfile.ZipFile(path) as archive:
             names = archive.namelist()
+            check_unpacked_size(path, archive, max_unpacked_size)
     except (zipfile.BadZipFile, OSError) as error:
         raise CosimError(f"FMU '{path}' cannot be read: {error}") from None
     if "modelDescription.xml" not in names:
@@ -130,6 +142,8 @@ class FmuComponent(Component):
         period: seconds between steps (0 = every macro step).
         feedthrough_override: output port -> input ports it depends on directly, overriding the FMU's
             <ModelStructure> (where an output without `dependencies` depends on every input).
+        nan_outputs: output ports that may be NaN (not infinite); every other output must be finite.
+        max_unpacked_size: refuse an archive whose entries unpack to more bytes (default 1 GiB).
     """
 
     def __init__(
@@ -140,10 +154,12 @@ class FmuComponent(Component):
         port_map: Mapping[str, object] | None = None,
         period: float = 0.0,
         feedthrough_override: Mapping[str, list[str]] | None = None,
+        nan_outputs: Collection[str] = (),
+        max_unpacked_size: int | None = None,
     ) -> None:
         super().__init__(name, period=period)
         self.path = Path(path)
-        self.model_description, self.fmi_version = _read_description(self.path)
+        self.model_description, self.fmi_version = _read_description(self.path, max_unpacked_size)
         self.default_parameters = dict(parameters or {})
         mapping = _parse_port_map(port_map or {}, self.path)
         variables = {v.name: v for v in self.model_description.modelVariables}
@@ -193,6 +209,9 @@ class FmuComponent(Component):
                     feedthrough[port] = list(depends)
         feedthrough.update(feedthrough_override or {})
         self._set_ports(ports["input"], ports["output"], ports["parameter"], feedthrough)
+        self.nan_outputs: frozenset[str] = frozenset()
+        self.allow_nan(*nan_outputs)
+        self._step_time: list[float | None] = [None]  # start of the last doStep [s], for messages
         self._plan_transfers()
         self._slave = None
         self._unzip_dir: str | None = None
@@ -229,6 +248,27 @@ class FmuComponent(Component):
         """Per FMI type: buffer slots, value references, FMI value array, scales."""
         self._input_groups = self._groups(self.inputs)
         self._output_groups = self._groups(self.outputs)
+
+    def allow_nan(self, *ports: str) -> None:
+        """Let these outputs be NaN (not infinite) from now on; before `instantiate()` only."""
+        self._require("allow_nan", State.CREATED)
+        for port in ports:
+            if port not in self.output_index:
+                raise CosimError(
+                    f"FMU '{self.path}' (component '{self.name}'): '{port}' is not an output, so it "
+                    f"cannot be allowed NaN; outputs: {closest_names(port, self.output_index)}"
+                )
+        self.nan_outputs = self.nan_outputs | frozenset(ports)
+
+    def variable_name(self, port: str) -> str:
+        """The FMU variable behind a port (the port's own name unless the port map renames it)."""
+        return self._variables[port][0].name
+
+    def _checked_outputs(self) -> tuple[list[int], list[int]]:
+        """Slots of the real outputs that must be finite, and of those that may only be NaN."""
+        real = [i for i, port in enumerate(self.outputs) if port.type == "real"]
+        finite = [i for i in real if self.outputs[i].name not in self.nan_outputs]
+        return finite, [i for i in real if self.outputs[i].name in self.nan_outputs]
 
     def restrict_push(self, slots) -> None:
         """From now on `push_inputs` sends only the inputs at `slots` (port order): the others keep
@@ -306,11 +346,14 @@ class FmuComponent(Component):
                 ]
                 lines += copies + call if direction == "Set" else call + copies
         push.append("    return None")
+        pull += _finite_check_lines(*self._checked_outputs())
+        names.update(nonfinite=self._nonfinite_output, zeros=np.zeros(len(self.outputs)), inf=math.inf)
         pull.append("    return obn")
         if self.fmi_version == 2:
-            step = ["def do_step(t, h):", "    status = raw(handle, t, h, 1)"]
+            step = ["def do_step(t, h):", "    clock[0] = t", "    status = raw(handle, t, h, 1)"]
         else:
-            step = ["def do_step(t, h):", "    status = raw(handle, t, h, True, *flags)"]
+            step = ["def do_step(t, h):", "    clock[0] = t", "    status = raw(handle, t, h, True, *flags)"]
+        names["clock"] = self._step_time
         step.append(f"    if status > 1: fail(status, 'fmi{self.fmi_version}DoStep', t)")
         if self.fmi_version == 3:
             step.append("    if step_flags[1]: asked_to_terminate(t)")
@@ -554,14 +597,35 @@ class FmuComponent(Component):
             step_flags=np.ctypeslib.as_array(self._step_flags) if version == 3 else np.zeros(3, bool),
             last_successful_time=ctypes.addressof(self._last_successful_time) if version == 3 else 0,
             fail=self._native_failure,
+            finite_outputs=tuple(self._checked_outputs()[0]),
+            nan_outputs=tuple(self._checked_outputs()[1]),
         )
 
     def _native_failure(self, call: int, status: int, t: float) -> None:
         if call == 3:
             self._asked_to_terminate(t)
+        if call == 4:
+            self._step_time[0] = t
+            self._nonfinite_output()
         real = "Real" if self.fmi_version == 2 else "Float64"
         function = ("Set" + real, "DoStep", "Get" + real)[call]
         self._fail(status, f"fmi{self.fmi_version}{function}", t)
+
+    def _nonfinite_output(self) -> None:
+        """Raise the `CosimError` naming the first output that is NaN (not allowed) or infinite."""
+        for port, value in zip(self.outputs, self.output_buffer.tolist(), strict=True):
+            if math.isfinite(value) or math.isnan(value) and port.name in self.nan_outputs:
+                continue
+            variable = self.variable_name(port.name)
+            named = f"'{port.name}'" + (f" (variable '{variable}')" if variable != port.name else "")
+            t = self._step_time[0]
+            when = "initialisation" if t is None else f"fmi{self.fmi_version}DoStep at t = {t:.9g} s"
+            shown = "NaN" if math.isnan(value) else f"{value:+}"
+            raise CosimError(
+                f"FMU '{self.name}' (model {self.model_description.modelName}) output {named} is "
+                f"{shown} after {when} (FMU outputs must be finite; list outputs whose NaN has a "
+                "meaning in the component's nan_outputs)"
+            )
 
     def _asked_to_terminate(self, t: float) -> None:
         raise CosimError(
@@ -621,6 +685,23 @@ def _fmi2_logger():
             component._log(status, category, message)
 
     return fmi2CallbackLoggerTYPE(dispatch)
+
+
+def _finite_check_lines(finite: list[int], nan_allowed: list[int]) -> list[str]:
+    """Source lines calling `nonfinite()` when an output at a `finite` slot is NaN or infinite, or
+    one at a `nan_allowed` slot is infinite. x - x is 0.0 for every finite x and NaN otherwise, so
+    one comparison covers a whole sum of such differences."""
+    lines = []
+    if len(finite) > 10:  # one NumPy dot product beats many element reads
+        if finite == list(range(len(finite))) and not nan_allowed:
+            lines.append("    if obn.dot(zeros) != 0.0: nonfinite()")
+        else:
+            lines.append(f"    if obn[{finite!r}].dot(zeros[:{len(finite)}]) != 0.0: nonfinite()")
+    elif finite:
+        terms = " + ".join(f"((a{slot} := ob[{slot}]) - a{slot})" for slot in finite)
+        lines.append(f"    if {terms} != 0.0: nonfinite()")
+    lines += [f"    if abs(ob[{slot}]) == inf: nonfinite()" for slot in nan_allowed]
+    return lines
 
 
 def _copy_lines(direction: str, group: int, kind: str, slots: list[int], scales: list[float]) -> list[str]:

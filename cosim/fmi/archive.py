@@ -1,0 +1,37 @@
+"""Limits on what an FMU archive may unpack to, checked before anything is extracted.
+
+An FMU is a zip archive; deflate packs a run of zeros about 1000:1, so a 2 MB file can hold a 2 GiB
+entry that would fill the disk (or the memory of a tmpfs) when extracted. The archive's central
+directory declares every entry's uncompressed size, and Python's `zipfile` (which fmpy's extraction
+uses) never writes more than the declared size of an entry, so the sum of the declared sizes bounds
+what extraction can write: checking it refuses such an archive without inflating a byte.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+
+from cosim.errors import CosimError
+
+MIB = 1 << 20
+DEFAULT_MAX_UNPACKED_SIZE = 1 << 30  # [bytes] 1 GiB; scenarios raise it with [simulation] fmu_max_size
+
+
+def unpacked_size(archive: zipfile.ZipFile) -> int:
+    """The total uncompressed size [bytes] the archive's entries declare."""
+    return sum(info.file_size for info in archive.infolist())
+
+
+def check_unpacked_size(path: Path, archive: zipfile.ZipFile, limit: int | None = None) -> None:
+    """Raise `CosimError` when the entries of `archive` (the file at `path`) unpack to more than
+    `limit` bytes (default `DEFAULT_MAX_UNPACKED_SIZE`)."""
+    limit = DEFAULT_MAX_UNPACKED_SIZE if limit is None else limit
+    total = unpacked_size(archive)
+    if total > limit:
+        largest = max(archive.infolist(), key=lambda info: info.file_size)
+        raise CosimError(
+            f"FMU '{path}' would unpack to {total / MIB:,.0f} MiB ('{largest.filename}' alone "
+            f"{largest.file_size / MIB:,.0f} MiB), more than the limit of {limit / MIB:,.0f} MiB; "
+            "not extracted (raise the limit with [simulation] fmu_max_size, in MiB, if you trust it)"
+        )

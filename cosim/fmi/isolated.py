@@ -1,0 +1,384 @@
+"""An FMU in a child process: a crash, abort, exit() or hang of a foreign FMU ends the run with a
+message naming it, instead of taking the orchestrator (and the log) down with it.
+
+`IsolatedFmuComponent` takes `FmuComponent`'s arguments (plus `timeout`) and is used the same way.
+The host reads the model description itself (ports, feedthrough, port-map errors are the same as
+in-process, raised before any process exists); at `instantiate()` it starts
+`python -m cosim.fmi.isolated_child`, which builds an `FmuComponent` from the same arguments and
+loads the FMU with the same code, so values, checks (finite outputs) and messages are identical.
+
+Exchange
+--------
+Both processes map one shared memory block (a memfd): a header with t and h [s] and the FMI call
+the child is in, then the component's input buffer, then its output buffer. The host's
+`input_buffer`/`output_buffer` and the child's FmuComponent buffers ARE these views, so the master
+writes inputs straight into the child's buffer and reads outputs from it: no copies. Signalling is
+one datagram each way on a Unix SOCK_SEQPACKET socket pair, one exchange per step: the host writes
+t and h and sends "step" (with "push the inputs first" when `push_inputs` was called since the last
+step); the child sets the inputs, calls doStep, gets the outputs and answers one byte.
+
+Why a socket, not a futex: measured on this project's 2-core machine, a Python-to-Python round
+trip costs 8.7 us through a futex pair and 9.5 us through the socket pair, but the socket gives
+the two things a futex does not: the kernel ends a wait after `timeout` by itself (SO_RCVTIMEO, no
+extra poll call), and a dead child shows at once as end-of-file instead of as a timeout.
+
+Failures (each a one-line `CosimError` naming the component, the model, the FMI call and the
+simulation time; the component is then FAILED and the child gone):
+- the child ended during a call: killed by a signal (SIGSEGV, SIGABRT...) or exited (an FMU
+  calling exit()); the call is the one the child recorded in the shared header before making it;
+- a call did not return within `timeout` seconds: the child is killed with SIGKILL (only a
+  process can stop a hung C call; threads and signals the FMU may ignore cannot);
+- an FMU error status, a non-finite output, etc. inside the child: the child's `CosimError`
+  message, verbatim.
+The child dies with the host (PR_SET_PDEATHSIG), ignores the terminal's Ctrl-C (the host handles
+it and ends the run cleanly), and its stderr is kept in a file whose last line is added to a
+crash message (and copied to the host's stderr on a clean end).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import mmap
+import os
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import tempfile
+import weakref
+from collections.abc import Collection, Mapping
+from pathlib import Path
+
+import numpy as np
+
+import cosim
+from cosim.core.component import Component, State
+from cosim.errors import CosimError
+from cosim.fmi.component import FmuComponent
+
+DEFAULT_TIMEOUT = 10.0  # [s] longest FMI call ([simulation] fmu_timeout)
+STARTUP_TIMEOUT = 120.0  # [s] for the child's Python to start and read the model description
+FREE_TIMEOUT = 5.0  # [s] for a child to free its instance and exit before it is killed
+
+# Shared memory: t [s], h [s] (doubles at 0, 8), the call the child is in (int32 at 16), then the
+# input and output buffers (doubles) from BUFFERS_OFFSET on.
+TIMES_OFFSET, CALL_OFFSET, BUFFERS_OFFSET = 0, 16, 64
+MAX_PACKET = 1 << 16
+
+# Host -> child commands (first byte of a datagram; JSON arguments follow where needed).
+STEP, STEP_PUSHED = b"s", b"S"  # doStep (after sending the inputs), then get the outputs
+INSTANTIATE, SETUP, INITIALIZE, RESTRICT, TERMINATE, FREE = b"I", b"U", b"N", b"R", b"T", b"F"
+# Child -> host: OK alone, or ERROR + the component's state (one byte) + the message (UTF-8).
+OK, ERROR = b"\x00", b"\x01"
+
+# What the child is doing, as it records it in the shared header before each call.
+CALL_IDLE, CALL_SET, CALL_STEP, CALL_GET = 0, 1, 2, 3
+CALL_INSTANTIATE, CALL_SETUP, CALL_INITIALIZE, CALL_TERMINATE, CALL_FREE, CALL_LOAD = 4, 5, 6, 7, 8, 9
+_TYPE_NAMES = {2: {"real": "Real", "integer": "Integer", "boolean": "Boolean"}}
+_TYPE_NAMES[3] = {"real": "Float64", "integer": "Int32", "boolean": "Boolean"}
+
+
+def shared_size(inputs: int, outputs: int) -> int:
+    """Bytes of the shared block for a component with these numbers of ports."""
+    return BUFFERS_OFFSET + 8 * (max(1, inputs) + max(1, outputs))
+
+
+def bind_buffers(component: Component, memory: mmap.mmap) -> None:
+    """Make the component's input and output buffers (ctypes arrays and their NumPy views) views of
+    the shared block. Values are not copied: the block's current contents become the buffers'."""
+    inputs, outputs = len(component.inputs), len(component.outputs)
+    output_offset = BUFFERS_OFFSET + 8 * max(1, inputs)
+    component.input_cbuffer = (ctypes.c_double * max(1, inputs)).from_buffer(memory, BUFFERS_OFFSET)
+    component.output_cbuffer = (ctypes.c_double * max(1, outputs)).from_buffer(memory, output_offset)
+    component.input_buffer = np.ctypeslib.as_array(component.input_cbuffer)[:inputs]
+    component.output_buffer = np.ctypeslib.as_array(component.output_cbuffer)[:outputs]
+
+
+def _set_receive_timeout(sock: socket.socket, seconds: float) -> None:
+    whole = int(seconds)
+    sock.setsockopt(
+        socket.SOL_SOCKET, socket.SO_RCVTIMEO, struct.pack("ll", whole, int((seconds - whole) * 1e6))
+    )
+
+
+class _Child:
+    """The child process and its ends of the exchange; `close()` is also the GC finaliser."""
+
+    def __init__(self, process: subprocess.Popen, sock: socket.socket, stderr) -> None:
+        self.process = process
+        self.sock = sock
+        self.stderr = stderr
+
+    def kill(self) -> None:
+        if self.process.poll() is None:
+            self.process.kill()
+        self.process.wait()
+
+    def stderr_text(self) -> str:
+        self.stderr.seek(0)
+        return self.stderr.read().decode(errors="replace")
+
+    def close(self) -> None:
+        self.kill()
+        self.sock.close()
+        self.stderr.close()
+
+
+class IsolatedFmuComponent(Component):
+    """An FMU (FMI 2.0 or 3.0 co-simulation) stepped in a child process; see the module docstring.
+
+    Args: those of `FmuComponent` (path, name, parameters, port_map, period, feedthrough_override,
+    nan_outputs, max_unpacked_size), and `timeout`: the longest an FMI call may take [s] before the
+    child is killed and the call fails.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        name: str,
+        parameters: Mapping[str, float] | None = None,
+        port_map: Mapping[str, object] | None = None,
+        period: float = 0.0,
+        feedthrough_override: Mapping[str, list[str]] | None = None,
+        nan_outputs: Collection[str] = (),
+        max_unpacked_size: int | None = None,
+        timeout: float = DEFAULT_TIMEOUT,
+    ) -> None:
+        if not timeout > 0:
+            raise CosimError(f"component '{name}': FMU timeout must be > 0 s, got {timeout}")
+        self._arguments = {
+            "path": str(Path(path).resolve()),
+            "name": name,
+            "parameters": dict(parameters or {}),
+            "port_map": dict(port_map or {}),
+            "period": period,
+            "feedthrough_override": {k: list(v) for k, v in (feedthrough_override or {}).items()},
+            "nan_outputs": list(nan_outputs),
+            "max_unpacked_size": max_unpacked_size,
+        }
+        # Reads and checks the description here, so bad input fails before any process starts.
+        self.spec = FmuComponent(**self._arguments)
+        super().__init__(name, period=period)
+        spec = self.spec
+        self._set_ports(spec.inputs, spec.outputs, spec.parameters, spec.feedthrough)
+        self.path = spec.path
+        self.model_description = spec.model_description
+        self.fmi_version = spec.fmi_version
+        self.nan_outputs = spec.nan_outputs
+        self.timeout = float(timeout)
+        self._memory_fd = os.memfd_create(f"navcosim-{name}", os.MFD_CLOEXEC)
+        os.ftruncate(self._memory_fd, shared_size(len(self.inputs), len(self.outputs)))
+        self._memory = mmap.mmap(self._memory_fd, 0)
+        self._memory_fd_closer = weakref.finalize(self, os.close, self._memory_fd)  # unless started
+        starts = self.input_buffer.copy(), self.output_buffer.copy()
+        bind_buffers(self, self._memory)
+        self.input_buffer[:], self.output_buffer[:] = starts
+        self._times = (ctypes.c_double * 2).from_buffer(self._memory, TIMES_OFFSET)
+        self._call = ctypes.c_int32.from_buffer(self._memory, CALL_OFFSET)
+        self._child: _Child | None = None
+        self._finalizer: weakref.finalize | None = None
+        self._fd = -1
+        self._push_pending = False
+        self._time: float | None = None  # simulation time of the current call [s], for messages
+
+    def variable_name(self, port: str) -> str:
+        """The FMU variable behind a port."""
+        return self.spec.variable_name(port)
+
+    def allow_nan(self, *ports: str) -> None:
+        """As `FmuComponent.allow_nan` (before `instantiate()`, which hands the set to the child)."""
+        self._require("allow_nan", State.CREATED)
+        self.spec.allow_nan(*ports)
+        self.nan_outputs = self.spec.nan_outputs
+        self._arguments["nan_outputs"] = sorted(self.nan_outputs)
+
+    def describe(self) -> dict[str, str]:
+        return {**self.spec.describe(), "isolation": "process"}
+
+    @property
+    def pid(self) -> int | None:
+        """The child's process id while it runs."""
+        return self._child.process.pid if self._child is not None else None
+
+    # ---- the exchange ------------------------------------------------------------------------
+
+    def _start(self) -> None:
+        """Start the child and hand it the component's arguments; it answers once it has built
+        its FmuComponent over the shared buffers (the FMU is not loaded yet)."""
+        host_end, child_end = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        package_root = str(Path(cosim.__file__).resolve().parent.parent)
+        environment = dict(os.environ)
+        environment["PYTHONPATH"] = os.pathsep.join(
+            filter(None, [package_root, os.environ.get("PYTHONPATH")])
+        )
+        stderr = tempfile.TemporaryFile(prefix=f"navcosim-{self.name}-stderr-")
+        command = [sys.executable, "-m", "cosim.fmi.isolated_child"]
+        command += [str(child_end.fileno()), str(self._memory_fd), str(os.getpid())]
+        try:
+            process = subprocess.Popen(
+                command,
+                pass_fds=(child_end.fileno(), self._memory_fd),
+                env=environment,
+                stdin=subprocess.DEVNULL,
+                stderr=stderr,
+                start_new_session=True,  # the terminal's Ctrl-C goes to the host only
+            )
+        except OSError as error:
+            host_end.close()
+            stderr.close()
+            raise CosimError(f"FMU '{self.name}': cannot start its process: {error}") from None
+        finally:
+            child_end.close()
+            self._memory_fd_closer()  # the child has its own descriptor; the mapping stays
+        self._child = _Child(process, host_end, stderr)
+        self._finalizer = weakref.finalize(self, self._child.close)
+        self._fd = host_end.fileno()
+        _set_receive_timeout(host_end, STARTUP_TIMEOUT)
+        self._exchange(json.dumps(self._arguments).encode(), "load", STARTUP_TIMEOUT)
+        _set_receive_timeout(host_end, self.timeout)
+
+    def _exchange(self, packet: bytes, what: str, timeout: float | None = None) -> bytes:
+        """Send one command and return the child's answer (after OK); raise on any failure."""
+        try:
+            os.write(self._fd, packet)
+            reply = os.read(self._fd, MAX_PACKET)
+        except OSError as error:
+            reply = error
+        if reply[:1] != OK:
+            self._failed(reply, what, timeout)
+        return reply[1:]
+
+    def _failed(self, reply: bytes | OSError, what: str, timeout: float | None = None) -> None:
+        """Raise the `CosimError` for a failed exchange; a dead or hung child is ended first."""
+        call = self._call_name(self._call.value, what)
+        when = f" at t = {self._time:.9g} s" if self._time is not None else ""
+        model = f"FMU '{self.name}' (model {self.model_description.modelName}"
+        if isinstance(reply, bytes) and reply[:1] == ERROR:
+            self.state = State(reply[1])
+            raise CosimError(reply[2:].decode(errors="replace"))
+        child = self._child
+        self.state = State.FAILED
+        if isinstance(reply, BlockingIOError):
+            child.kill()
+            limit = f"{timeout or self.timeout:g} s"
+            raise CosimError(
+                f"{model}, process {child.process.pid}) did not return from {call}{when} within {limit} "
+                f"(fmu_timeout); its process was killed"
+            )
+        returncode = child.process.wait()
+        if returncode < 0:
+            number = -returncode
+            try:
+                name = f"{signal.Signals(number).name}, "
+            except ValueError:
+                name = ""
+            what_happened = f"crashed with signal {number} ({name}{signal.strsignal(number)})"
+        else:
+            what_happened = f"ended its process with exit status {returncode} (exit() inside the FMU)"
+        last_line = next((line for line in reversed(child.stderr_text().splitlines()) if line.strip()), "")
+        detail = f"; its stderr: {' '.join(last_line.split())[:300]}" if last_line else ""
+        raise CosimError(f"{model}, process {child.process.pid}) {what_happened} in {call}{when}{detail}")
+
+    def _call_name(self, call: int, what: str) -> str:
+        """The FMI function(s) behind one of the child's recorded calls."""
+        v = self.fmi_version
+        names = _TYPE_NAMES[v]
+        if call in (CALL_SET, CALL_GET):
+            ports = self.inputs if call == CALL_SET else self.outputs
+            direction = "Set" if call == CALL_SET else "Get"
+            kinds = [kind for kind in names if any(p.type == kind for p in ports)]
+            return "/".join(f"fmi{v}{direction}{names[kind]}" for kind in kinds)
+        return {
+            CALL_STEP: f"fmi{v}DoStep",
+            CALL_INSTANTIATE: f"fmi{v}Instantiate",
+            CALL_SETUP: f"fmi{v}Set* of the parameters" + (" / fmi2SetupExperiment" if v == 2 else ""),
+            CALL_INITIALIZE: f"fmi{v}EnterInitializationMode / fmi{v}ExitInitializationMode",
+            CALL_TERMINATE: f"fmi{v}Terminate",
+            CALL_FREE: f"fmi{v}FreeInstance",
+            CALL_LOAD: "reading the model description",
+        }.get(call, f"{what} (between FMI calls)")
+
+    # ---- lifecycle ---------------------------------------------------------------------------
+
+    def instantiate(self) -> None:
+        self._require("instantiate", State.CREATED)
+        self._start()
+        self._exchange(INSTANTIATE, "instantiate")
+        self.state = State.INSTANTIATED
+
+    def setup(self, t0: float, parameters: Mapping[str, float]) -> None:
+        self._require("setup", State.INSTANTIATED)
+        self._time = float(t0)
+        arguments = {"t0": float(t0), "parameters": dict(parameters), "push": self._push_pending}
+        self._push_pending = False
+        self._exchange(SETUP + json.dumps(arguments).encode(), "setup")
+        self.t0 = float(t0)
+        self.state = State.SET_UP
+
+    def initialize(self) -> None:
+        self._require("initialize", State.SET_UP)
+        self._exchange(INITIALIZE + (b"1" if self._push_pending else b"0"), "initialize")
+        self._push_pending = False
+        self.state = State.STEPPING
+
+    def restrict_push(self, slots) -> None:
+        """As `FmuComponent.restrict_push`, in the child."""
+        self._exchange(RESTRICT + json.dumps([int(slot) for slot in slots]).encode(), "restrict_push")
+
+    def push_inputs(self) -> None:
+        if self.state not in (State.INSTANTIATED, State.SET_UP, State.STEPPING):
+            self._require("push_inputs", State.INSTANTIATED, State.SET_UP, State.STEPPING)
+        self._push_pending = True  # the inputs are already in the child's buffer; sent at the next call
+
+    def do_step(self, t: float, h: float) -> None:
+        if self.state is not State.STEPPING:
+            self._require("do_step", State.STEPPING)
+        times = self._times
+        times[0] = t
+        times[1] = h
+        self._time = t
+        if self._push_pending:
+            self._push_pending = False
+            command = STEP_PUSHED
+        else:
+            command = STEP
+        try:
+            os.write(self._fd, command)
+            reply = os.read(self._fd, MAX_PACKET)
+        except OSError as error:  # a timeout (BlockingIOError), or the child is gone
+            reply = error
+        if reply != OK:
+            self._failed(reply, "step")
+
+    def get_outputs(self) -> np.ndarray:
+        if self.state is not State.STEPPING:
+            self._require("get_outputs", State.STEPPING)
+        return self.output_buffer  # the child has written them at the end of its step
+
+    def terminate(self) -> None:
+        self._require("terminate", State.SET_UP, State.STEPPING)
+        self.state = State.TERMINATED
+        self._exchange(TERMINATE, "terminate")
+
+    def free(self) -> None:
+        """Free the instance and end the child (killed when it does not exit in time); safe in
+        every state and twice."""
+        child, self._child = self._child, None
+        if child is not None:
+            if child.process.poll() is None:
+                try:
+                    _set_receive_timeout(child.sock, min(self.timeout, FREE_TIMEOUT))
+                    os.write(self._fd, FREE)
+                    os.read(self._fd, MAX_PACKET)
+                    child.process.wait(FREE_TIMEOUT)
+                except (OSError, subprocess.TimeoutExpired):
+                    pass
+                text = child.stderr_text()
+                if text and self.state is not State.FAILED:  # what the FMU wrote in a run that went well
+                    sys.stderr.write(text)
+            self._finalizer.detach()
+            child.close()
+        self._fd = -1
+        self.state = State.FREED

@@ -1,0 +1,127 @@
+"""The child process of an `IsolatedFmuComponent`: `python -m cosim.fmi.isolated_child SOCKET MEMORY PARENT`.
+
+SOCKET is its end of the host's SOCK_SEQPACKET pair, MEMORY the descriptor of the shared block,
+PARENT the host's process id. The first datagram holds `FmuComponent`'s arguments (JSON); the
+child builds the component over the shared buffers and then serves one command per datagram
+(protocol in `cosim.fmi.isolated`) until FREE or until the host goes away. Before each FMI call it
+records which call it makes in the shared header, so that if the call never returns (a crash, an
+exit(), a hang) the host can say which one it was.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import mmap
+import os
+import signal
+import sys
+
+from cosim.errors import CosimError
+from cosim.fmi import isolated as protocol
+from cosim.fmi.component import FmuComponent
+
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with(parent: int) -> None:
+    """Be killed when the host ends, even while hung inside an FMU call (Linux)."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    if os.getppid() != parent:  # the host ended before prctl took effect
+        os._exit(1)
+
+
+def _error(component: FmuComponent | None, message: str) -> bytes:
+    state = component.state if component is not None else 0
+    return protocol.ERROR + bytes([int(state)]) + message.encode(errors="replace")[: protocol.MAX_PACKET - 2]
+
+
+def serve(fd: int, memory: mmap.mmap) -> int:
+    """Answer the host's commands on socket `fd`; return the exit status."""
+    read, write = os.read, os.write
+    try:
+        component = FmuComponent(**json.loads(read(fd, protocol.MAX_PACKET)))
+    except CosimError as error:
+        write(fd, _error(None, str(error)))
+        return 0
+    protocol.bind_buffers(component, memory)
+    write(fd, protocol.OK)
+    times = (ctypes.c_double * 2).from_buffer(memory, protocol.TIMES_OFFSET)
+    call = ctypes.c_int32.from_buffer(memory, protocol.CALL_OFFSET)
+    step, step_pushed = protocol.STEP, protocol.STEP_PUSHED
+    while True:
+        packet = read(fd, protocol.MAX_PACKET)
+        try:
+            if packet == step or packet == step_pushed:  # the hot path: one macro step
+                if packet == step_pushed:
+                    call.value = protocol.CALL_SET
+                    component.push_inputs()
+                call.value = protocol.CALL_STEP
+                component.do_step(times[0], times[1])
+                call.value = protocol.CALL_GET
+                component.get_outputs()
+                call.value = protocol.CALL_IDLE
+                write(fd, protocol.OK)
+                continue
+            if not packet:
+                return 0  # the host has gone
+            command, argument = packet[:1], packet[1:]
+            if command == protocol.INSTANTIATE:
+                call.value = protocol.CALL_INSTANTIATE
+                component.instantiate()
+            elif command == protocol.SETUP:
+                arguments = json.loads(argument)
+                if arguments["push"]:
+                    call.value = protocol.CALL_SET
+                    component.push_inputs()
+                call.value = protocol.CALL_SETUP
+                component.setup(arguments["t0"], arguments["parameters"])
+            elif command == protocol.INITIALIZE:
+                if argument == b"1":
+                    call.value = protocol.CALL_SET
+                    component.push_inputs()
+                call.value = protocol.CALL_INITIALIZE
+                component.initialize()
+                call.value = protocol.CALL_GET
+                component.get_outputs()
+            elif command == protocol.RESTRICT:
+                component.restrict_push(json.loads(argument))
+            elif command == protocol.TERMINATE:
+                call.value = protocol.CALL_TERMINATE
+                component.terminate()
+            elif command == protocol.FREE:
+                call.value = protocol.CALL_FREE
+                component.free()
+                call.value = protocol.CALL_IDLE
+                write(fd, protocol.OK)
+                return 0
+            else:
+                raise CosimError(f"isolated FMU '{component.name}': unknown command {command!r}")
+            call.value = protocol.CALL_IDLE
+            write(fd, protocol.OK)
+        except CosimError as error:
+            call.value = protocol.CALL_IDLE
+            write(fd, _error(component, str(error)))
+        except Exception as error:  # a bug here, not the FMU's: still one line for the host
+            call.value = protocol.CALL_IDLE
+            write(
+                fd,
+                _error(component, f"FMU '{component.name}' in its process: {type(error).__name__}: {error}"),
+            )
+
+
+def main(argv: list[str]) -> int:
+    fd, memory_fd, parent = (int(value) for value in argv)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the host decides how a run ends
+    _die_with(parent)
+    memory = mmap.mmap(memory_fd, 0)
+    os.close(memory_fd)
+    try:
+        return serve(fd, memory)
+    except (BrokenPipeError, ConnectionResetError):
+        return 0  # the host has gone
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
