@@ -21,6 +21,11 @@ from cosim.scenario.description import ComponentDescription, SystemDescription
 from cosim.scenario.load import Scenario
 from cosim.world.distance import WorldDistance, load_known_map
 
+# Role outputs whose NaN is a value, whatever FMU fills the role: VFH's steering direction is NaN when
+# no direction is free, which the mixer answers with recovery. Every other FMU output must be finite
+# (unless the component's `nan_outputs` or the project FMU's documentation says otherwise).
+ROLE_NAN_OUTPUTS = {"vfh": ("steering_dir",)}
+
 
 @dataclass
 class BuiltRun:
@@ -36,22 +41,55 @@ class BuiltRun:
     plan: object  # planner.PlanResult of the planner component
 
 
-def make_fmu(component: ComponentDescription) -> Component:
-    """The FMU component of a description (its interface as described: port map, dependencies)."""
+def make_fmu(
+    component: ComponentDescription,
+    isolation: str = "none",
+    timeout: float = 10.0,
+    max_unpacked_size: int | None = None,
+    nan_outputs: tuple[str, ...] = (),
+) -> Component:
+    """The FMU component of a description (its interface as described: port map, dependencies), in
+    this process (`isolation` "none") or in a child process ("process", calls limited to `timeout`
+    seconds); `nan_outputs` may be NaN."""
     from cosim.fmi.component import FmuComponent
+    from cosim.fmi.isolated import IsolatedFmuComponent
 
     port_map = {port: {"name": m.variable, "scale": m.scale} for port, m in component.port_map.items()}
     override = {output: list(depends) for output, depends in component.feedthrough.items()}
-    fmu = FmuComponent(
-        component.fmu,
-        component.name,
-        port_map=port_map,
-        period=component.period,
-        feedthrough_override=override,
-    )
+    options = {"port_map": port_map, "period": component.period, "feedthrough_override": override}
+    options.update(max_unpacked_size=max_unpacked_size, nan_outputs=nan_outputs)
+    if isolation == "process":
+        fmu = IsolatedFmuComponent(component.fmu, component.name, timeout=timeout, **options)
+    else:
+        fmu = FmuComponent(component.fmu, component.name, **options)
     for name, value in component.held_inputs.items():
         fmu.input_buffer[fmu.input_index[name]] = value
     return fmu
+
+
+def _fmu(scenario: Scenario, component: ComponentDescription) -> Component:
+    """An FMU of the scenario, where `Scenario.isolation` says, with its NaN allowance."""
+    from cosim.fmi.archive import MIB
+
+    spec = scenario.components[component.name]
+    outputs = set(component.outputs)
+    for port in spec.nan_outputs:
+        if port not in outputs:
+            raise CosimError(
+                f"{scenario.source}: {component.where}.nan_outputs: '{port}' is not an output of the FMU; "
+                f"outputs: {', '.join(component.outputs)[:400]}"
+            )
+    allowed = spec.nan_outputs + tuple(p for p in ROLE_NAN_OUTPUTS.get(component.name, ()) if p in outputs)
+    try:
+        return make_fmu(
+            component,
+            scenario.isolation(spec),
+            scenario.fmu_timeout,
+            round(scenario.fmu_max_size * MIB),
+            allowed,
+        )
+    except CosimError as error:
+        raise CosimError(f"{scenario.source}: {component.where}.fmu: {error}") from None
 
 
 def build_run(scenario: Scenario) -> BuiltRun:
@@ -67,10 +105,7 @@ def build_run(scenario: Scenario) -> BuiltRun:
     plans = []
     for component in description.components.values():
         if component.kind == "fmu":
-            try:
-                made = make_fmu(component)
-            except CosimError as error:
-                raise CosimError(f"{scenario.source}: {component.where}.fmu: {error}") from None
+            made = _fmu(scenario, component)
         elif component.kind == "planner":
             made = PlannerComponent(
                 component.name, grid, scenario.start, scenario.goal, scenario.planner, period=component.period

@@ -17,8 +17,10 @@ Log contents and rates (t = simulated time, integer nanoseconds):
 - metadata `navcosim`, `fmu/<role>`, `outcome`; attachments `scenario.toml` and the map file(s).
 
 End of a run: a normal end, an interrupt (outcome reason "interrupted") and an FMU failure
-(reason "fmu_failed") all finalise the log at its path, readable up to the last step. Any other
-error after the log was created finalises it and renames it `<name>.failed.mcap`.
+(reason "fmu_failed": an error status, a crash, exit() or hang of an FMU in a child process, a NaN
+output; metadata `outcome.failure` holds the message) all finalise the log at its path, readable
+up to the last completed step. Any other error after the log was created finalises it and renames
+it `<name>.failed.mcap`.
 """
 
 from __future__ import annotations
@@ -369,10 +371,13 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     try:
         master.run(total_steps, after_step)
     except CosimError as error:
-        failure = f"{error} (at t = {master.time:.3f} s)"
+        failure = str(error) if " at t = " in str(error) else f"{error} (at t = {master.time:.3f} s)"
     wall_time = time.perf_counter() - wall_start
     end_ns = master.time_ns
-    if (master.step_index % recording.pose_steps) != 0 or failure is not None:
+    # The pose at end_ns is the vehicle's after the last completed step (after a failure too; the
+    # after_step of that step wrote it already when end_ns is on the pose grid). A pose that turned
+    # NaN in the failed step is not logged.
+    if master.step_index % recording.pose_steps != 0 and all(map(math.isfinite, recording.pose())):
         recording.write_pose(end_ns)
     reason = "fmu_failed" if failure else state["reason"] or "stop_time"
     outcome = monitor.finish(end_ns / NS_PER_S, reason)

@@ -74,7 +74,9 @@ def describe_system(scenario: Scenario) -> SystemDescription:
             components[component.name] = component
             continue
         spec = scenario.components[component.name]
-        described = _describe_fmu(spec, component, template, problems, scenario.fmi_version)
+        described = _describe_fmu(
+            spec, component, template, problems, scenario.fmi_version, scenario.fmu_max_size
+        )
         if described is None:
             broken.add(component.name)
         else:
@@ -127,14 +129,17 @@ def _describe_fmu(
     template: list[ConnectionDescription],
     problems: Problems,
     fmi_version: int = 2,
+    max_size: float = 1024.0,
 ) -> ComponentDescription | None:
-    """Read the FMU's interface (through the port map); check the map and the parameters."""
+    """Read the FMU's interface (through the port map); check the map and the parameters. The
+    archive may unpack to `max_size` MiB ([simulation] fmu_max_size)."""
+    from cosim.fmi.archive import MIB
     from cosim.fmi.component import FmuComponent
 
     where = component.where
     try:
         path = fmu_path(spec, fmi_version)
-        plain = FmuComponent(path, component.name)
+        plain = FmuComponent(path, component.name, max_unpacked_size=round(max_size * MIB))
     except CosimError as error:
         problems.add(f"{where}.fmu", str(error))
         return None
@@ -162,7 +167,7 @@ def _describe_fmu(
     fmu = plain
     if port_map:
         mapped = {port: {"name": m.variable, "scale": m.scale} for port, m in port_map.items()}
-        fmu = FmuComponent(path, component.name, port_map=mapped)
+        fmu = FmuComponent(path, component.name, port_map=mapped, max_unpacked_size=round(max_size * MIB))
     # A state output: its FMU declares no dependencies for it and the template says it is one.
     declared = {unknown.variable.name for unknown in description.outputs if unknown.dependencies is not None}
     feedthrough = {output: tuple(depends) for output, depends in fmu.feedthrough.items()}

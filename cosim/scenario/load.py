@@ -31,7 +31,8 @@ BUILTIN_FMUS = (
 VEHICLE_TYPES = {"DifferentialDrive": "differential", "Bicycle": "bicycle"}
 DEFAULT_FMUS = {"pure_pursuit": "PurePursuit", "vfh": "VectorFieldHistogram", "mixer": "AvoidanceMixer"}
 # Section keys that are not FMU parameters; every other key of a component section is one.
-COMPONENT_KEYS = ("fmu", "ports", "rate")
+COMPONENT_KEYS = ("fmu", "ports", "rate", "isolation", "nan_outputs")
+ISOLATIONS = ("process", "none")  # an FMU in a child process, or in the run's own process
 ROLE_SECTIONS = ("vehicle", "pure_pursuit", "vfh", "mixer")
 SECTIONS = (
     "scenario", "map", "obstacles", "start", "goal", "planner", "vehicle", "pure_pursuit", "vfh",
@@ -63,6 +64,8 @@ class ComponentSpec:
         added components: the FMU's variable names, a parameter or an input held at that value).
     rate: stepping rate [Hz]; None = every macro step.
     added: True for `[components.NAME]`.
+    isolation: "process" or "none"; None = [simulation] fmu_isolation decides (`Scenario.isolation`).
+    nan_outputs: output ports that may be NaN (every other FMU output must stay finite).
     """
 
     name: str
@@ -71,6 +74,8 @@ class ComponentSpec:
     ports: dict[str, PortMapping]
     rate: float | None
     added: bool = False
+    isolation: str | None = None
+    nan_outputs: tuple[str, ...] = ()
 
     @property
     def is_builtin(self) -> bool:
@@ -151,6 +156,19 @@ class Scenario:
     overrides: tuple[str, ...] = field(default=())
     connections: tuple[ConnectionSpec, ...] = field(default=())
     fmi_version: int = 2  # which build of the project FMUs the roles use (2 or 3)
+    fmu_isolation: str = "auto"  # "auto" | "process" | "none": see `isolation`
+    fmu_timeout: float = 10.0  # [s] longest FMI call of an FMU in a child process
+    fmu_max_size: float = 1024.0  # [MiB] largest total uncompressed size of an FMU archive
+
+    def isolation(self, spec: ComponentSpec) -> str:
+        """Where one FMU runs: "process" (a child process) or "none" (in the run's process). The
+        component's own `isolation` key wins; otherwise [simulation] fmu_isolation, whose "auto"
+        puts FMUs given by path in a child process and the project's own FMUs in-process."""
+        if spec.isolation is not None:
+            return spec.isolation
+        if self.fmu_isolation != "auto":
+            return self.fmu_isolation
+        return "none" if spec.is_builtin else "process"
 
 
 def load_scenario(path: str | Path, overrides: list[str] | tuple[str, ...] = (), check_world: bool = True):
@@ -258,6 +276,9 @@ def _build(
             "stop_time", f"{stop_time:g} s is shorter than one macro step ({macro_step:g} s)"
         )
     _check_rate(simulation, "controller_rate", controller_rate, macro_step)
+    fmu_isolation = simulation.string("fmu_isolation", "auto", choices=("auto", *ISOLATIONS))
+    fmu_timeout = simulation.number("fmu_timeout", 10.0, minimum=0.0, exclusive_minimum=True)
+    fmu_max_size = simulation.number("fmu_max_size", 1024.0, minimum=0.0, exclusive_minimum=True)
     simulation.finish()
 
     vehicle_table = TableReader(source, "[vehicle]", top.raw("vehicle"))
@@ -330,6 +351,9 @@ def _build(
         overrides=overrides,
         connections=connections,
         fmi_version=fmi_version,
+        fmu_isolation=fmu_isolation,
+        fmu_timeout=fmu_timeout,
+        fmu_max_size=fmu_max_size,
     )
 
 
@@ -389,6 +413,7 @@ def _component(
     rate = table.number("rate", default_rate, minimum=0.0, exclusive_minimum=True)
     if rate is not None:
         _check_rate(table, "rate", rate, macro_step)
+    isolation, nan_outputs = _isolation_keys(table)
     parameters: dict[str, float | int | bool] = {}
     for key, value in table.table.items():
         if key in COMPONENT_KEYS or key in ("type", "radius") and role == "vehicle":
@@ -397,7 +422,24 @@ def _component(
         parameters[key] = value
     parameters = check_parameters(table, fmu, parameters)
     table.finish()
-    return ComponentSpec(name=role, fmu=fmu, parameters=parameters, ports=ports, rate=rate)
+    return ComponentSpec(
+        name=role,
+        fmu=fmu,
+        parameters=parameters,
+        ports=ports,
+        rate=rate,
+        isolation=isolation,
+        nan_outputs=nan_outputs,
+    )
+
+
+def _isolation_keys(table: TableReader) -> tuple[str | None, tuple[str, ...]]:
+    """A component section's `isolation` and `nan_outputs`."""
+    isolation = table.string("isolation", None, choices=ISOLATIONS)
+    nan_outputs = table.raw("nan_outputs", [])
+    if not isinstance(nan_outputs, list) or not all(isinstance(port, str) for port in nan_outputs):
+        raise table.error("nan_outputs", f"must be a list of output port names, got {describe(nan_outputs)}")
+    return isolation, tuple(nan_outputs)
 
 
 def _added_components(top: TableReader, base_dir: Path) -> dict[str, ComponentSpec]:
@@ -420,9 +462,10 @@ def _added_components(top: TableReader, base_dir: Path) -> dict[str, ComponentSp
             raise table.error(None, f"'{name}' is a component of the navigation template; set it in [{name}]")
         fmu = _fmu_name(table, None, base_dir)
         rate = table.number("rate", None, minimum=0.0, exclusive_minimum=True)
+        isolation, nan_outputs = _isolation_keys(table)
         parameters: dict[str, float | int | bool] = {}
         for key, item in table.table.items():
-            if key in ("fmu", "rate"):
+            if key in ("fmu", "rate", "isolation", "nan_outputs"):
                 continue
             table.used.add(key)
             if isinstance(item, bool) or is_number(item):
@@ -432,7 +475,7 @@ def _added_components(top: TableReader, base_dir: Path) -> dict[str, ComponentSp
                     key, f"an FMU variable's value must be a number or true/false, got {describe(item)}"
                 )
         table.finish()
-        components[name] = ComponentSpec(name, fmu, parameters, {}, rate, added=True)
+        components[name] = ComponentSpec(name, fmu, parameters, {}, rate, True, isolation, nan_outputs)
     return components
 
 
