@@ -149,7 +149,7 @@ class IsolatedFmuComponent(Component):
         if not timeout > 0:
             raise CosimError(f"component '{name}': FMU timeout must be > 0 s, got {timeout}")
         self._arguments = {
-            "path": str(Path(path).resolve()),
+            "path": str(path),  # the child starts in this working directory
             "name": name,
             "parameters": dict(parameters or {}),
             "port_map": dict(port_map or {}),
