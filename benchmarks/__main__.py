@@ -19,6 +19,7 @@ BENCHMARKS = {
     "planner": ["bench_planner.py"],
     "hybrid": ["bench_hybrid.py"],
     "orchestrator": ["bench_orchestrator.py", "--parts", "a,b,c"],
+    "isolation": ["bench_isolation.py"],
     "logs": ["bench_logs.py"],
 }
 
