@@ -12,6 +12,7 @@ import tempfile
 import zipfile
 import zlib
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 from fixtures.build_fixtures import FAULTS
@@ -20,6 +21,7 @@ from fixtures.conftest_helpers import fixture_fmu
 from cosim.core.master import Master, System
 from cosim.errors import CosimError
 from cosim.fmi.archive import DEFAULT_MAX_UNPACKED_SIZE, MIB
+from cosim.fmi.builtin import builtin_fmu, documented_nan_variables, known_names
 from cosim.fmi.component import FmuComponent
 from cosim.fmi.isolated import IsolatedFmuComponent
 from cosim.navigation.build import build_run
@@ -86,7 +88,22 @@ def test_the_navigation_template_allows_nan_only_for_the_vfh_steering_direction(
         for name, component in built.system.components.items()
         if hasattr(component, "nan_outputs")
     }
-    assert allowed == {"vehicle": [], "pure_pursuit": [], "vfh": ["steering_dir"], "mixer": []}
+    assert allowed == {"vehicle": [], "pure_pursuit": ["goal_distance"], "vfh": ["steering_dir"], "mixer": []}
+
+
+def test_the_project_fmus_nan_outputs_are_the_ones_their_descriptions_document():
+    """NAN_OUTPUTS against the FMUs' own words: an output is allowed NaN exactly when its
+    description in modelDescription.xml says when it is NaN."""
+    documented, allowed = {}, {}
+    for name in known_names():
+        component = FmuComponent(builtin_fmu(name), "c")
+        descriptions = {v.name: v.description or "" for v in component.model_description.modelVariables}
+        documented[name] = sorted(p.name for p in component.outputs if "NaN" in descriptions[p.name])
+        allowed[name] = sorted(component.nan_outputs)
+    assert allowed == documented
+    assert documented["VectorFieldHistogram"] == ["steering_dir"]
+    # An FMU from another tool with the same model name gets no allowance: it is not ours.
+    assert documented_nan_variables(SimpleNamespace(generationTool="other", modelName="PurePursuit")) == ()
 
 
 def write_zip_bomb(path: Path, entry_size: int) -> None:
@@ -250,7 +267,6 @@ def test_nan_outputs_key_reaches_the_component_and_is_checked_against_its_output
 def test_fmu_max_size_applies_to_every_fmu_of_the_run(tmp_path):
     """A limit above the fixture vehicle's size and below PurePursuit's (2000 waypoint inputs make
     its description large) refuses the project FMU: the limit is the run's, not per FMU kind."""
-    from cosim.fmi.builtin import builtin_fmu
 
     def unpacked(path: Path) -> int:
         with zipfile.ZipFile(path) as archive:

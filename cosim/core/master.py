@@ -407,7 +407,10 @@ class Master:
                 component.get_outputs()
                 ready.add(component.name)
         except BaseException:
-            self.close()
+            try:
+                self.close()
+            except CosimError:
+                pass  # terminating the others failed too; the error that stopped initialisation is the news
             raise
         self._initialized = True
         self._skip_constant_producers()

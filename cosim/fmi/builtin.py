@@ -19,9 +19,21 @@ from types import ModuleType
 
 from cosim.errors import CosimError
 
+# Outputs of the project FMUs whose NaN is a documented value (their descriptions say when): the
+# NaN check of FmuComponent lets them through. Keyed by modelName, for FMUs this project generated.
+NAN_OUTPUTS = {"VectorFieldHistogram": ("steering_dir",), "PurePursuit": ("goal_distance",)}
+GENERATION_TOOL = "navcosim"  # how the project FMUs' generationTool starts
+
 PACKAGE_DIR = Path(__file__).resolve().parent.parent  # the `cosim` package
 SHIPPED_DIR = PACKAGE_DIR / "_fmus"
 SOURCE_ROOT = PACKAGE_DIR.parent / "fmus"
+
+
+def documented_nan_variables(description) -> tuple[str, ...]:
+    """Variables of a project FMU (by its model description) whose NaN is a value; () otherwise."""
+    if not (description.generationTool or "").startswith(GENERATION_TOOL):
+        return ()
+    return NAN_OUTPUTS.get(description.modelName, ())
 
 
 @cache

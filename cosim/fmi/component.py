@@ -24,9 +24,11 @@ one reference, not 720). An array is always sent whole; the port map renames sca
 
 Every real output must be finite: after each step (and after initialisation) `get_outputs` raises
 `CosimError` naming the output when one is NaN or infinite, since a NaN fed on would pass as a value
-(a NaN pose is no position at all). Outputs listed in `nan_outputs` may be NaN where the FMU gives
-NaN a meaning (VFH's `steering_dir` is NaN when no direction is free); they must still not be
-infinite. Integer and Boolean outputs are always finite.
+(a NaN pose is no position at all). Outputs listed in `nan_outputs` (or `allow_nan`) may be NaN where
+the FMU gives NaN a meaning; they must still not be infinite. The project FMUs' documented NaN
+outputs (VFH's `steering_dir` when no direction is free, PurePursuit's `goal_distance` without
+waypoints: `cosim.fmi.builtin.NAN_OUTPUTS`) are allowed by default. Integer and Boolean outputs are
+always finite.
 
 The archive's total uncompressed size is checked before anything is extracted
 (`cosim.fmi.archive`; default limit 1 GiB, `max_unpacked_size` raises it).
@@ -60,6 +62,7 @@ from fmpy.fmi3 import FMU3Slave
 from cosim.core.component import Component, NativeStep, Port, State, closest_names
 from cosim.errors import CosimError
 from cosim.fmi.archive import check_unpacked_size
+from cosim.fmi.builtin import documented_nan_variables
 
 _STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
 _TYPES = {
@@ -210,7 +213,8 @@ class FmuComponent(Component):
         feedthrough.update(feedthrough_override or {})
         self._set_ports(ports["input"], ports["output"], ports["parameter"], feedthrough)
         self.nan_outputs: frozenset[str] = frozenset()
-        self.allow_nan(*nan_outputs)
+        documented = documented_nan_variables(self.model_description)
+        self.allow_nan(*nan_outputs, *(port for name in documented for port in ports_of.get(name, ())))
         self._step_time: list[float | None] = [None]  # start of the last doStep [s], for messages
         self._plan_transfers()
         self._slave = None

@@ -50,11 +50,12 @@ def flat_system(built) -> tuple[list[SspComponent], list[SspConnection]]:
     between ports is `target_var = (t k s) source_var + t c` between variables.
     """
     from cosim.fmi.component import FmuComponent
+    from cosim.fmi.isolated import IsolatedFmuComponent
 
     scenario = built.scenario
     components: list[SspComponent] = []
     for name, component in built.system.components.items():
-        if not isinstance(component, FmuComponent):
+        if not isinstance(component, FmuComponent | IsolatedFmuComponent):
             continue
         variables = {v.name: v for v in component.model_description.modelVariables}
         parameters = {}
