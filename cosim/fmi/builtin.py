@@ -19,9 +19,6 @@ from types import ModuleType
 
 from cosim.errors import CosimError
 
-# Outputs of the project FMUs whose NaN is a documented value (their descriptions say when): the
-# NaN check of FmuComponent lets them through. Keyed by modelName, for FMUs this project generated.
-NAN_OUTPUTS = {"VectorFieldHistogram": ("steering_dir",), "PurePursuit": ("goal_distance",)}
 GENERATION_TOOL = "navcosim"  # how the project FMUs' generationTool starts
 
 PACKAGE_DIR = Path(__file__).resolve().parent.parent  # the `cosim` package
@@ -30,10 +27,18 @@ SOURCE_ROOT = PACKAGE_DIR.parent / "fmus"
 
 
 def documented_nan_variables(description) -> tuple[str, ...]:
-    """Variables of a project FMU (by its model description) whose NaN is a value; () otherwise."""
+    """The real outputs of a project FMU whose NaN is a value: those whose description in
+    modelDescription.xml (the single source of an FMU's variables) says when they are NaN, such as
+    VFH's steering_dir "(NaN when nothing is free)". () for an FMU another tool generated."""
     if not (description.generationTool or "").startswith(GENERATION_TOOL):
         return ()
-    return NAN_OUTPUTS.get(description.modelName, ())
+    return tuple(
+        variable.name
+        for variable in description.modelVariables
+        if variable.causality == "output"
+        and variable.type in ("Real", "Float64")
+        and "NaN" in (variable.description or "")
+    )
 
 
 @cache

@@ -27,8 +27,8 @@ Every real output must be finite: after each step (and after initialisation) `ge
 (a NaN pose is no position at all). Outputs listed in `nan_outputs` (or `allow_nan`) may be NaN where
 the FMU gives NaN a meaning; they must still not be infinite. The project FMUs' documented NaN
 outputs (VFH's `steering_dir` when no direction is free, PurePursuit's `goal_distance` without
-waypoints: `cosim.fmi.builtin.NAN_OUTPUTS`) are allowed by default. Integer and Boolean outputs are
-always finite.
+waypoints: `cosim.fmi.builtin.documented_nan_variables`) are allowed by default. Integer and
+Boolean outputs are always finite.
 
 The archive's total uncompressed size is checked before anything is extracted
 (`cosim.fmi.archive`; default limit 1 GiB, `max_unpacked_size` raises it).
