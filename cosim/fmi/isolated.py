@@ -221,7 +221,7 @@ class IsolatedFmuComponent(Component):
                 command,
                 pass_fds=(child_end.fileno(), self._memory_fd),
                 env=environment,
-                stdin=subprocess.DEVNULL,
+                stdin=subprocess.PIPE,  # the arguments, of any size (a datagram holds 64 KiB)
                 stderr=stderr,
                 start_new_session=True,  # the terminal's Ctrl-C goes to the host only
             )
@@ -236,18 +236,27 @@ class IsolatedFmuComponent(Component):
         self._finalizer = weakref.finalize(self, self._child.close)
         self._fd = host_end.fileno()
         _set_receive_timeout(host_end, STARTUP_TIMEOUT)
-        self._exchange(json.dumps(self._arguments).encode(), "load", STARTUP_TIMEOUT)
+        try:
+            process.stdin.write(json.dumps(self._arguments).encode())
+            process.stdin.close()
+            reply = os.read(self._fd, MAX_PACKET)
+        except OSError as error:  # the child ended before reading them, or did not answer
+            reply = error
+        if reply != OK:
+            self._failed(reply, "load", STARTUP_TIMEOUT)
         _set_receive_timeout(host_end, self.timeout)
 
-    def _exchange(self, packet: bytes, what: str, timeout: float | None = None) -> bytes:
+    def _exchange(self, packet: bytes, what: str) -> bytes:
         """Send one command and return the child's answer (after OK); raise on any failure."""
+        if len(packet) > MAX_PACKET:
+            raise CosimError(f"FMU '{self.name}': {what} needs {len(packet)} bytes, more than {MAX_PACKET}")
         try:
             os.write(self._fd, packet)
             reply = os.read(self._fd, MAX_PACKET)
         except OSError as error:
             reply = error
         if reply[:1] != OK:
-            self._failed(reply, what, timeout)
+            self._failed(reply, what)
         return reply[1:]
 
     def _failed(self, reply: bytes | OSError, what: str, timeout: float | None = None) -> None:

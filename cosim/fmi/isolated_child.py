@@ -1,8 +1,9 @@
 """The child process of an `IsolatedFmuComponent`: `python -m cosim.fmi.isolated_child SOCKET MEMORY PARENT`.
 
 SOCKET is its end of the host's SOCK_SEQPACKET pair, MEMORY the descriptor of the shared block,
-PARENT the host's process id. The first datagram holds `FmuComponent`'s arguments (JSON); the
-child builds the component over the shared buffers and then serves one command per datagram
+PARENT the host's process id. Standard input holds `FmuComponent`'s arguments (JSON, up to its
+end); the child builds the component over the shared buffers, answers OK, and serves one command
+per datagram
 (protocol in `cosim.fmi.isolated`) until FREE or until the host goes away. Before each FMI call it
 records which call it makes in the shared header, so that if the call never returns (a crash, an
 exit(), a hang) the host can say which one it was.
@@ -41,7 +42,7 @@ def serve(fd: int, memory: mmap.mmap) -> int:
     """Answer the host's commands on socket `fd`; return the exit status."""
     read, write = os.read, os.write
     try:
-        component = FmuComponent(**json.loads(read(fd, protocol.MAX_PACKET)))
+        component = FmuComponent(**json.loads(sys.stdin.buffer.read()))
     except CosimError as error:
         write(fd, _error(None, str(error)))
         return 0
