@@ -20,7 +20,10 @@ step); the child sets the inputs, calls doStep, gets the outputs and answers one
 Why a socket, not a futex: measured on this project's 2-core machine, a Python-to-Python round
 trip costs 8.7 us through a futex pair and 9.5 us through the socket pair, but the socket gives
 the two things a futex does not: the kernel ends a wait after `timeout` by itself (SO_RCVTIMEO, no
-extra poll call), and a dead child shows at once as end-of-file instead of as a timeout.
+extra poll call), and a dead child shows at once as end-of-file instead of as a timeout. The host
+blocks in read: spinning on a reply counter in the shared header first was measured slower (14.5 us
+extra per isolated step in benchmarks/bench_isolation.py without, 16-18 us with 200-1000 polls),
+as the spinning host takes the core the child needs.
 
 Failures (each a one-line `CosimError` naming the component, the model, the FMI call and the
 simulation time; the component is then FAILED and the child gone):
