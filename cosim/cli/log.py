@@ -1,4 +1,4 @@
-"""`cosim log info|plot|export|diff LOG`: inspect a run's MCAP log without another tool."""
+"""`cosim log info|plot|animate|export|diff LOG`: inspect a run's MCAP log without another tool."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from cosim.errors import CosimError
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "log",
-        help="inspect run logs (MCAP): info, plot, export, diff",
+        help="inspect run logs (MCAP): info, plot, animate, export, diff",
         description="Inspect a run's MCAP log: summary, plots, signal tables, comparison of two runs.",
     )
     commands = parser.add_subparsers(dest="log_command", required=True, metavar="ACTION")
@@ -32,6 +32,18 @@ def register(subparsers) -> None:
     )
     plot.add_argument("--png", type=Path, metavar="OUT", help="output image (default: LOG with .png)")
     plot.set_defaults(handler=_plot)
+
+    animate = commands.add_parser(
+        "animate", help="the run as a video over the map (GIF, or MP4 with ffmpeg installed)"
+    )
+    animate.add_argument("log", type=Path, help="run log (.mcap)")
+    animate.add_argument("--out", type=Path, required=True, metavar="OUT", help="run.gif or run.mp4")
+    animate.add_argument("--fps", type=float, default=20.0, help="video frames per second (20)")
+    animate.add_argument(
+        "--speed", type=float, default=10.0, help="simulated seconds per second of video (10)"
+    )
+    animate.add_argument("--quiet", action="store_true", help="no progress bar")
+    animate.set_defaults(handler=_animate)
 
     export = commands.add_parser("export", help="signals as CSV (one file per component) or NPZ")
     export.add_argument("log", type=Path, help="run log (.mcap)")
@@ -94,6 +106,16 @@ def _plot(args) -> int:
     png = args.png or args.log.with_suffix(".png")
     written = _guard(args.log, lambda: plot_log(log, png, args.signals))
     print(f"wrote {written}")
+    return 0
+
+
+def _animate(args) -> int:
+    from cosim.logs.animate import animate_log
+
+    log = _open(args.log)
+    video = _guard(args.log, lambda: animate_log(log, args.out, args.fps, args.speed, not args.quiet))
+    width, height = video.size
+    print(f"wrote {video.path} ({video.frames} frames, {width} x {height} px, {video.seconds:.1f} s)")
     return 0
 
 

@@ -80,30 +80,8 @@ def _title(log: Log) -> str:
 
 
 def _draw_map(axes, log: Log, modes: tuple[np.ndarray, np.ndarray] | None) -> None:
-    handles = []
-    bounds: list[np.ndarray] = []  # points that must be inside the view [m]
-    grid, inflated = log.map("/map"), log.map("/map_inflated")
-    if grid is not None:
-        extent = _extent(grid)
-        if inflated is not None and inflated.shape == grid.shape:
-            zone = inflated.occupied & ~grid.occupied
-            overlay = np.zeros((*zone.shape, 4))
-            overlay[zone] = (0.55, 0.7, 0.95, 0.55)
-            axes.imshow(overlay, extent=extent, origin="upper", interpolation="nearest", zorder=1)
-            handles.append(patches.Patch(color=(0.55, 0.7, 0.95), label="inflated zone (planner)"))
-        cells = np.where(grid.occupied, 0.15, 1.0)
-        axes.imshow(
-            cells,
-            cmap="gray",
-            vmin=0,
-            vmax=1,
-            extent=extent,
-            origin="upper",
-            interpolation="nearest",
-            zorder=0,
-        )
-        handles.append(patches.Patch(color="0.15", label="map: occupied"))
-        bounds.append(np.array([[extent[0], extent[2]], [extent[1], extent[3]]]))
+    handles, bounds = draw_grid(axes, log)
+    has_map = bool(bounds)
     obstacles = log.obstacles()
     for obstacle in obstacles:
         axes.add_patch(
@@ -174,7 +152,7 @@ def _draw_map(axes, log: Log, modes: tuple[np.ndarray, np.ndarray] | None) -> No
         margin = 0.03 * max(float(np.max(high - low)), 1.0)
         axes.set_xlim(low[0] - margin, high[0] + margin)
         axes.set_ylim(low[1] - margin, high[1] + margin)
-    if grid is None and trajectory is None:
+    if not has_map and trajectory is None:
         axes.text(
             0.5,
             0.5,
@@ -190,6 +168,36 @@ def _draw_map(axes, log: Log, modes: tuple[np.ndarray, np.ndarray] | None) -> No
     axes.grid(alpha=0.25)
     if handles:  # below the map, so it never hides part of it
         axes.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, fontsize=8)
+
+
+def draw_grid(axes, log: Log) -> tuple[list, list[np.ndarray]]:
+    """Draw the known map (occupied cells) and the planner's inflated zone; returns the legend
+    handles and the map's corners [m] (a bounds entry), both empty without a /map."""
+    handles: list = []
+    bounds: list[np.ndarray] = []  # points that must be inside the view [m]
+    grid, inflated = log.map("/map"), log.map("/map_inflated")
+    if grid is not None:
+        extent = _extent(grid)
+        if inflated is not None and inflated.shape == grid.shape:
+            zone = inflated.occupied & ~grid.occupied
+            overlay = np.zeros((*zone.shape, 4))
+            overlay[zone] = (0.55, 0.7, 0.95, 0.55)
+            axes.imshow(overlay, extent=extent, origin="upper", interpolation="nearest", zorder=1)
+            handles.append(patches.Patch(color=(0.55, 0.7, 0.95), label="inflated zone (planner)"))
+        cells = np.where(grid.occupied, 0.15, 1.0)
+        axes.imshow(
+            cells,
+            cmap="gray",
+            vmin=0,
+            vmax=1,
+            extent=extent,
+            origin="upper",
+            interpolation="nearest",
+            zorder=0,
+        )
+        handles.append(patches.Patch(color="0.15", label="map: occupied"))
+        bounds.append(np.array([[extent[0], extent[2]], [extent[1], extent[3]]]))
+    return handles, bounds
 
 
 def _extent(grid) -> tuple[float, float, float, float]:

@@ -312,11 +312,13 @@ class Log:
     def plan(self) -> np.ndarray | None:
         """The last planned path on /plan as N x 2 [m], or None."""
         message = self.last_message("/plan")
-        if message is None:
-            return None
-        return np.array([(pose.pose.position.x, pose.pose.position.y) for pose in message.poses]).reshape(
-            -1, 2
-        )
+        return None if message is None else _path_points(message)
+
+    def plans(self) -> list[tuple[float, np.ndarray]]:
+        """Every published plan (the first and each replan) as (log time [s], N x 2 [m]), in order."""
+        if not self.has_topic("/plan"):
+            return []
+        return [(item.t, _path_points(item.message)) for item in self.messages("/plan")]
 
     def trajectory(self) -> Trajectory | None:
         """The driven trajectory: the vehicle's x, y, theta signals, else the /pose messages."""
@@ -341,20 +343,13 @@ class Log:
     def obstacles(self) -> list:
         """The unknown obstacles (last /obstacles message) as `cosim.world.shapes` shapes."""
         message = self.last_message("/obstacles")
-        if message is None:
+        return [] if message is None else _marker_shapes(message)
+
+    def obstacle_frames(self) -> list[tuple[float, list]]:
+        """Every /obstacles message as (log time [s], shapes): moving obstacles where they stood."""
+        if not self.has_topic("/obstacles"):
             return []
-        shapes = []
-        for marker in message.markers:
-            centre = (marker.pose.position.x, marker.pose.position.y)
-            if marker.type == 3:
-                shapes.append(Circle(centre, marker.scale.x / 2.0))
-            elif marker.type == 1:
-                yaw = rosmsg.yaw_of(marker.pose.orientation)
-                shapes.append(Rectangle(centre, (marker.scale.x, marker.scale.y), yaw))
-            elif marker.type == 4 and len(marker.points) > 1:
-                vertices = tuple((point.x, point.y) for point in marker.points[:-1])
-                shapes.append(Polygon(vertices))
-        return shapes
+        return [(item.t, _marker_shapes(item.message)) for item in self.messages("/obstacles")]
 
     def obstacle_tracks(self) -> list[np.ndarray]:
         """Where each unknown obstacle was: per marker id, rows (t [s], x [m], y [m]) of its centre
@@ -390,6 +385,27 @@ class Log:
         if trajectory is None or len(trajectory.t) == 0:
             return None
         return float(trajectory.x[0]), float(trajectory.y[0]), float(trajectory.theta[0])
+
+
+def _path_points(message) -> np.ndarray:
+    """A nav_msgs/Path's positions as N x 2 [m]."""
+    return np.array([(pose.pose.position.x, pose.pose.position.y) for pose in message.poses]).reshape(-1, 2)
+
+
+def _marker_shapes(message) -> list:
+    """A visualization_msgs/MarkerArray of obstacles as `cosim.world.shapes` shapes."""
+    shapes = []
+    for marker in message.markers:
+        centre = (marker.pose.position.x, marker.pose.position.y)
+        if marker.type == 3:
+            shapes.append(Circle(centre, marker.scale.x / 2.0))
+        elif marker.type == 1:
+            yaw = rosmsg.yaw_of(marker.pose.orientation)
+            shapes.append(Rectangle(centre, (marker.scale.x, marker.scale.y), yaw))
+        elif marker.type == 4 and len(marker.points) > 1:
+            vertices = tuple((point.x, point.y) for point in marker.points[:-1])
+            shapes.append(Polygon(vertices))
+    return shapes
 
 
 def _floats(text: str | None) -> tuple[float, ...] | None:
