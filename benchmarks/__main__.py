@@ -21,6 +21,7 @@ BENCHMARKS = {
     "orchestrator": ["bench_orchestrator.py", "--parts", "a,b,c"],
     "isolation": ["bench_isolation.py"],
     "logs": ["bench_logs.py"],
+    "startup": ["bench_startup.py"],
 }
 
 

@@ -383,6 +383,10 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     outcome = monitor.finish(end_ns / NS_PER_S, reason)
     if bar is not None:
         _update_bar(bar, master.time, wall_time, last_update)
+        # The run is over whatever its reason (goal reached early, collision, interrupt): the bar
+        # ends full, at the time the run ended, instead of vanishing part-way.
+        bar.total = bar.n
+        bar.refresh()
         bar.close()
     metadata = outcome_metadata(outcome)
     if failure:
