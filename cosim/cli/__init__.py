@@ -1,4 +1,4 @@
-"""The `cosim` command line: one sub-command module per job (fmu, plan, run, log, ssp)."""
+"""The `cosim` command line: one sub-command module per job (fmu, plan, run, system, log, ssp)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import sys
 
 from planner.errors import NavcosimError
 
-COMMANDS = ("fmu", "plan", "run", "log", "ssp")
+COMMANDS = ("fmu", "plan", "run", "system", "log", "ssp")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -24,13 +24,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the CLI. Each handler returns its exit code; user errors exit 2 with one line."""
+    """Run the CLI. Each handler returns its exit code; user errors exit 2 with one line per problem."""
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         return int(args.handler(args) or 0)
     except NavcosimError as error:
-        print(f"cosim: error: {error}", file=sys.stderr)
+        for line in str(error).splitlines() or [""]:  # a scenario's problems come all at once
+            print(f"cosim: error: {line}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("cosim: interrupted", file=sys.stderr)

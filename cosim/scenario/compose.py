@@ -33,7 +33,7 @@ from cosim.scenario.description import (
     ConnectionDescription,
     SystemDescription,
 )
-from cosim.scenario.load import ComponentSpec, Scenario, rate_problem
+from cosim.scenario.load import ComponentSpec, PortMapping, Scenario, rate_problem
 from cosim.scenario.schema import did_you_mean
 from cosim.scenario.template import (
     ROLE_PORTS,
@@ -62,52 +62,7 @@ class Problems:
 
 def describe_system(scenario: Scenario) -> SystemDescription:
     """The system of `scenario`, checked; `CosimError` listing every problem (one per line)."""
-    problems = Problems(scenario.source)
-    template = template_connections(scenario)
-    declared = template_components(scenario) + [
-        _added(spec) for spec in scenario.components.values() if spec.added
-    ]
-    components: dict[str, ComponentDescription] = {}
-    broken: set[str] = set()  # components whose FMU did not load: already reported
-    for component in declared:
-        if component.kind != "fmu":
-            components[component.name] = component
-            continue
-        spec = scenario.components[component.name]
-        described = _describe_fmu(
-            spec, component, template, problems, scenario.fmi_version, scenario.fmu_max_size
-        )
-        if described is None:
-            broken.add(component.name)
-        else:
-            components[component.name] = described
-    for spec in scenario.components.values():  # the role sections' rates were checked on load
-        problem = rate_problem(spec.rate, scenario.macro_step) if spec.added and spec.rate else None
-        if problem:
-            problems.add(f"{spec.where}.rate", problem)
-    connections, replaced = _connections(scenario, components, broken, template, problems)
-    _check_unconnected(components, connections, problems)
-    if scenario.master == "gauss-seidel":
-        _check_loops(components, connections, problems)
-    problems.check()
-    return SystemDescription(
-        components=components,
-        connections=tuple(connections),
-        macro_step=scenario.macro_step,
-        master=scenario.master,
-        observed=template_observed(scenario),
-        replaced=tuple(replaced),
-    )
-
-
-def _added(spec: ComponentSpec) -> ComponentDescription:
-    return ComponentDescription(
-        spec.name,
-        "fmu",
-        spec.where,
-        rate=spec.rate,
-        parameters={name: float(value) for name, value in spec.parameters.items()},
-    )
+    return _Composer(scenario).describe()
 
 
 def fmu_path(spec: ComponentSpec, fmi_version: int = 2) -> Path:
@@ -123,116 +78,301 @@ def _listing(names, around: str = "") -> str:
     return closest_names(around, names, limit=_LISTED) if names else "none"
 
 
-def _describe_fmu(
-    spec: ComponentSpec,
-    component: ComponentDescription,
-    template: list[ConnectionDescription],
-    problems: Problems,
-    fmi_version: int = 2,
-    max_size: float = 1024.0,
-) -> ComponentDescription | None:
-    """Read the FMU's interface (through the port map); check the map and the parameters. The
-    archive may unpack to `max_size` MiB ([simulation] fmu_max_size)."""
-    from cosim.fmi.archive import MIB
-    from cosim.fmi.component import FmuComponent
+class _Composer:
+    """One `describe_system` call: what is known so far and the problems found."""
 
-    where = component.where
-    try:
-        path = fmu_path(spec, fmi_version)
-        plain = FmuComponent(path, component.name, max_unpacked_size=round(max_size * MIB))
-    except CosimError as error:
-        problems.add(f"{where}.fmu", str(error))
-        return None
-    description = plain.model_description
-    variables = {variable.name: variable for variable in description.modelVariables}
-    port_map = {}
-    if component.port_map:
-        ports = _role_ports(component, template)
+    def __init__(self, scenario: Scenario) -> None:
+        self.scenario = scenario
+        self.problems = Problems(scenario.source)
+        self.template = template_connections(scenario)
+        self.components: dict[str, ComponentDescription] = {}
+        self.broken: set[str] = set()  # components whose FMU did not load: reported once
+        self.missing: dict[str, list[str]] = {}  # role component -> ports the template needs, absent
+        self.own: dict[str, dict[str, list[str]]] = {}  # component -> causality -> FMU variable names
+
+    def describe(self) -> SystemDescription:
+        scenario = self.scenario
+        for component in template_components(scenario):
+            if component.kind == "fmu":
+                self._add_fmu(scenario.components[component.name], component)
+            else:
+                self.components[component.name] = component
+        for spec in scenario.components.values():
+            if spec.added:
+                self._add_fmu(spec, ComponentDescription(spec.name, "fmu", spec.where, rate=spec.rate))
+                # The role sections' rates were checked on load.
+                problem = rate_problem(spec.rate, scenario.macro_step) if spec.rate else None
+                if problem:
+                    self.problems.add(f"{spec.where}.rate", problem)
+        connections, replaced, attempted = self._connections()
+        for name, ports in self.missing.items():
+            self._missing_ports(self.components[name], list(dict.fromkeys(ports)))
+        self._check_unconnected(connections, attempted)
+        if scenario.master == "gauss-seidel":
+            self._check_loops(connections)
+        self.problems.check()
+        return SystemDescription(
+            components=self.components,
+            connections=tuple(connections),
+            macro_step=scenario.macro_step,
+            master=scenario.master,
+            observed=template_observed(scenario),
+            replaced=tuple(replaced),
+        )
+
+    # ---- components --------------------------------------------------------------------------
+
+    def _add_fmu(self, spec: ComponentSpec, component: ComponentDescription) -> None:
+        """Read the FMU's interface (through the port map); check the map and the values. The
+        archive may unpack to [simulation] fmu_max_size MiB."""
+        from cosim.fmi.archive import MIB
+        from cosim.fmi.component import FmuComponent
+
+        where = component.where
+        max_size = round(self.scenario.fmu_max_size * MIB)
+        try:
+            path = fmu_path(spec, self.scenario.fmi_version)
+            plain = FmuComponent(path, component.name, max_unpacked_size=max_size)
+        except CosimError as error:
+            self.problems.add(f"{where}.fmu", str(error))
+            self.broken.add(component.name)
+            return
+        description = plain.model_description
+        variables = {variable.name: variable for variable in description.modelVariables}
+        own: dict[str, list[str]] = {}
+        for variable in description.modelVariables:
+            own.setdefault(variable.causality, []).append(variable.name)
+        self.own[component.name] = own
+        port_map = self._port_map(component, variables)
+        fmu = plain
+        if port_map:
+            mapped = {port: {"name": m.variable, "scale": m.scale} for port, m in port_map.items()}
+            fmu = FmuComponent(path, component.name, port_map=mapped, max_unpacked_size=max_size)
+        # A state output: the template says it is one and the FMU declares no dependencies for it.
+        declared = {u.variable.name for u in description.outputs if u.dependencies is not None}
+        feedthrough = {output: tuple(depends) for output, depends in fmu.feedthrough.items()}
+        for port in component.state_outputs:
+            variable = port_map[port].variable if port in port_map else port
+            if port in feedthrough and variable not in declared:
+                feedthrough[port] = ()
+        described = replace(
+            component,
+            fmu=path,
+            fmi_version=fmu.fmi_version,
+            model_name=description.modelName or "",
+            port_map=port_map,
+            inputs=tuple(p.name for p in fmu.inputs),
+            outputs=tuple(p.name for p in fmu.outputs),
+            parameter_names=tuple(p.name for p in fmu.parameters),
+            feedthrough=feedthrough,
+        )
+        self.components[component.name] = self._values(described, spec, variables)
+
+    def _port_map(self, component: ComponentDescription, variables: dict) -> dict[str, PortMapping]:
+        """The valid part of a role's `ports` table; each bad entry is reported."""
+        if not component.port_map:
+            return {}
+        ports = self._role_ports(component)
+        valid = {}
         for port, mapping in component.port_map.items():
+            where = f"{component.where}.ports.{port}"
             if port not in ports:
-                problems.add(
-                    f"{where}.ports.{port}",
-                    f"unknown port '{port}'{did_you_mean(port, ports)}; the ports of {where}: "
+                self.problems.add(
+                    where,
+                    f"unknown port '{port}'{did_you_mean(port, ports)}; the ports of {component.where}: "
                     f"{_listing(sorted(ports), port)}",
                 )
             elif mapping.variable not in variables:
-                problems.add(
-                    f"{where}.ports.{port}",
+                self.problems.add(
+                    where,
                     f"the FMU has no variable '{mapping.variable}' (mapped to port '{port}')"
                     f"{did_you_mean(mapping.variable, variables)}; variables: "
                     f"{_listing(variables, mapping.variable)}",
                 )
             else:
-                port_map[port] = mapping
-    fmu = plain
-    if port_map:
-        mapped = {port: {"name": m.variable, "scale": m.scale} for port, m in port_map.items()}
-        fmu = FmuComponent(path, component.name, port_map=mapped, max_unpacked_size=round(max_size * MIB))
-    # A state output: its FMU declares no dependencies for it and the template says it is one.
-    declared = {unknown.variable.name for unknown in description.outputs if unknown.dependencies is not None}
-    feedthrough = {output: tuple(depends) for output, depends in fmu.feedthrough.items()}
-    for port in component.state_outputs:
-        variable = port_map[port].variable if port in port_map else port
-        if port in feedthrough and variable not in declared:
-            feedthrough[port] = ()
-    described = replace(
-        component,
-        fmu=path,
-        fmi_version=fmu.fmi_version,
-        model_name=description.modelName or "",
-        port_map=port_map,
-        inputs=tuple(p.name for p in fmu.inputs),
-        outputs=tuple(p.name for p in fmu.outputs),
-        parameter_names=tuple(p.name for p in fmu.parameters),
-        feedthrough=feedthrough,
-    )
-    return _check_parameters(described, spec, fmu, variables, problems)
+                valid[port] = mapping
+        return valid
 
+    def _role_ports(self, component: ComponentDescription) -> set[str]:
+        """What a role's `ports` table may map: the role's ports (array ports by element too, as
+        the template connects them) and the section's parameters."""
+        ports = set(ROLE_PORTS.get(component.name, ())) | set(component.parameters)
+        for connection in self.template:
+            for reference in (connection.source, connection.target):
+                name, _, port = reference.partition(".")
+                if name == component.name:
+                    ports.add(port)
+        return ports
 
-def _role_ports(component: ComponentDescription, template: list[ConnectionDescription]) -> set[str]:
-    """What a role's `ports` table may map: the role's ports (array ports by element too, as the
-    template connects them) and the section's parameters."""
-    ports = set(ROLE_PORTS.get(component.name, ())) | set(component.parameters)
-    for connection in template:
-        for reference in (connection.source, connection.target):
+    def _values(self, component: ComponentDescription, spec: ComponentSpec, variables: dict):
+        """Split the section's values into parameters and held inputs; check names, types, ranges."""
+        where = component.where
+        known = set(component.parameter_names)
+        settable = known | (set(component.inputs) if spec.added else set())
+        values = dict(component.parameters) if not spec.added else dict(spec.parameters)
+        parameters, held = {}, {}
+        for name, value in values.items():
+            if name in component.required_parameters and name not in known:
+                self.missing.setdefault(component.name, []).append(name)
+                continue
+            if name not in settable:
+                kind = "parameter or input" if spec.added else "parameter"
+                self.problems.add(
+                    f"{where}.{name}", f"the FMU has no {kind} '{name}'{did_you_mean(name, settable)}"
+                )
+                continue
+            mapping = component.port_map.get(name)
+            variable = variables[mapping.variable if mapping else name]
+            received = float(value) * (mapping.scale if mapping else 1.0)
+            problem = _value_problem(variable, received, spec.parameters.get(name, value))
+            if problem:
+                self.problems.add(f"{where}.{name}", problem)
+            (parameters if name in known else held)[name] = float(value)
+        for name, value in component.defaults.items():
+            if name in known:
+                parameters[name] = value
+        return replace(component, parameters=parameters, held_inputs=held, defaults={})
+
+    # ---- connections -------------------------------------------------------------------------
+
+    def _connections(self):
+        """The template's connections, minus those the scenario replaces, then the scenario's;
+        the replaced pairs; the inputs named by a scenario connection (even one that failed)."""
+        fed: dict[str, ConnectionDescription] = {}
+        attempted: set[str] = set()
+        added = []
+        for spec in self.scenario.connections:
+            target = self._endpoint(spec.target, f"{spec.where}.to", "input")
+            source = self._endpoint(spec.source, f"{spec.where}.from", "output")
+            if target is not None:
+                attempted.add(target)
+            if source is None or target is None:
+                continue
+            if target in fed:
+                self.problems.add(
+                    f"{spec.where}.to",
+                    f"input '{target}' is already fed by {fed[target].where} (from '{fed[target].source}'); "
+                    "an input takes one connection",
+                )
+                continue
+            fed[target] = ConnectionDescription(source, target, spec.scale, spec.offset, spec.where)
+            added.append(fed[target])
+        # Sets: the template connects thousands of ports (waypoints, beams).
+        ports = {
+            name: {"inputs": set(c.inputs), "outputs": set(c.outputs)} for name, c in self.components.items()
+        }
+
+        def present(reference: str, kind: str) -> bool:
             name, _, port = reference.partition(".")
-            if name == component.name:
-                ports.add(port)
-    return ports
+            if name in self.broken or (name in ports and port in ports[name][kind]):
+                return True
+            self.missing.setdefault(name, []).append(port)
+            return False
 
+        kept, replaced = [], []
+        for connection in self.template:
+            if connection.target in fed:
+                replaced.append((connection, fed[connection.target]))
+            # `&`, not `and`: both ends are looked at, so every missing port is reported.
+            elif present(connection.source, "outputs") & present(connection.target, "inputs"):
+                kept.append(connection)
+        for _, reference in template_observed(self.scenario).references():
+            present(reference, "outputs")
+        return kept + added, replaced, attempted
 
-def _check_parameters(
-    component: ComponentDescription, spec: ComponentSpec, fmu, variables: dict, problems: Problems
-) -> ComponentDescription:
-    """Split the section's values into parameters and held inputs; check names, types, ranges."""
-    where = component.where
-    known = set(component.parameter_names)
-    settable = known | (set(component.inputs) if spec.added else set())
-    parameters, held = {}, {}
-    for name, value in component.parameters.items():
-        if name in component.required_parameters and name not in known:
-            problems.add(
-                where,
-                f"the FMU has no parameter '{name}' for {component.required_parameters[name]}; map it with "
-                f'ports = {{ {name} = "<variable>" }}; its parameters: {_listing(known, name)}',
-            )
-            continue
-        if name not in settable:
-            kind = "parameter or input" if spec.added else "parameter"
-            problems.add(f"{where}.{name}", f"the FMU has no {kind} '{name}'{did_you_mean(name, settable)}")
-            continue
-        mapping = component.port_map.get(name)
-        variable = variables[mapping.variable if mapping else name]
-        problem = _value_problem(
-            variable, value * (mapping.scale if mapping else 1.0), spec.parameters.get(name, value)
+    def _missing_ports(self, component: ComponentDescription, ports: list[str]) -> None:
+        """One line for every port the template needs that a role FMU lacks, with its own variables."""
+        shown = ", ".join(ports[:_LISTED])
+        if len(ports) > _LISTED:
+            shown += f" (and {len(ports) - _LISTED} more)"
+        example = ", ".join(f'{port} = "<variable>"' for port in ports[:3])
+        own = self.own.get(component.name, {})
+        listed = "; ".join(
+            f"{causality}s {_listing(own[causality], ports[0])}"
+            for causality in ("input", "output", "parameter")
+            if own.get(causality)
         )
-        if problem:
-            problems.add(f"{where}.{name}", problem)
-        (parameters if name in known else held)[name] = value
-    for name, value in component.defaults.items():
-        if name in known:
-            parameters[name] = value
-    return replace(component, parameters=parameters, held_inputs=held, defaults={})
+        self.problems.add(
+            f"{component.where}.ports",
+            f"the FMU ({component.model_name or component.name}) has no variables for the ports "
+            f"{shown} that the {TEMPLATE} uses; map them with ports = {{ {example} }}; the FMU's "
+            f"variables: {listed or 'none'}",
+        )
+
+    def _endpoint(self, reference: str, where: str, direction: str) -> str | None:
+        """`reference` ("component.variable") when it names a port of that direction, else None."""
+        name, dot, port = reference.partition(".")
+        if not dot or not name or not port:
+            self.problems.add(where, f"must be 'component.variable', got '{reference}'")
+            return None
+        if name in self.broken:
+            return None
+        if name not in self.components:
+            self.problems.add(
+                where,
+                f"no component '{name}'{did_you_mean(name, self.components)}; "
+                f"components: {_listing(self.components, name)}",
+            )
+            return None
+        component = self.components[name]
+        wanted, other = component.outputs, component.inputs
+        if direction == "input":
+            wanted, other = other, wanted
+        if port in wanted:
+            return reference
+        if port in other:
+            kind = "input" if direction == "output" else "output"
+            key = "from" if direction == "output" else "to"
+            self.problems.add(
+                where,
+                f"'{reference}' is an {kind}, and `{key}` takes an {direction} (an {kind} cannot be "
+                f"wired to an {kind}){did_you_mean(port, wanted)}; {direction}s of {name}: "
+                f"{_listing(wanted, port)}",
+            )
+            return None
+        self.problems.add(
+            where,
+            f"component '{name}' has no {direction} '{port}'{did_you_mean(port, wanted)}; "
+            f"{direction}s: {_listing(wanted, port)}",
+        )
+        return None
+
+    def _check_unconnected(self, connections: list[ConnectionDescription], attempted: set[str]) -> None:
+        """Every input of an added component is connected or held at a value (the template feeds
+        its own); one that a failed connection meant to feed is reported with that connection."""
+        fed = {connection.target for connection in connections} | attempted
+        outputs = [f"{c.name}.{port}" for c in self.components.values() for port in c.outputs]
+        for spec in self.scenario.components.values():
+            component = self.components.get(spec.name)
+            if not spec.added or component is None:
+                continue
+            for port in component.inputs:
+                if f"{component.name}.{port}" in fed or port in component.held_inputs:
+                    continue
+                # The same name on another component is the likeliest source.
+                same = [o for o in outputs if o.endswith(f".{port}") and o.split(".")[0] != component.name]
+                suggestion = f" (did you mean from = '{same[0]}'?)" if same else did_you_mean(port, outputs)
+                self.problems.add(
+                    component.where,
+                    f"input '{port}' is not connected: add [[connections]] from = \"<component>.<output>\", "
+                    f'to = "{component.name}.{port}", or hold it with {port} = <value>{suggestion}',
+                )
+
+    def _check_loops(self, connections: list[ConnectionDescription]) -> None:
+        feedthrough = {name: component.feedthrough for name, component in self.components.items()}
+        loop = find_algebraic_loop([(c.source, c.target) for c in connections], feedthrough)
+        if loop is None:
+            return
+        names = list(dict.fromkeys(reference.split(".", 1)[0] for reference in loop))
+        links = set(zip(loop, loop[1:], strict=False))
+        declared = [c.where for c in connections if (c.source, c.target) in links and c.where != TEMPLATE]
+        self.problems.add(
+            declared[0] if declared else TEMPLATE,
+            f"algebraic loop through components {', '.join(names)}: {' -> '.join(loop)} (each output "
+            "depends directly on the input before it; an FMU output without declared dependencies "
+            "depends on every input): break it with a component whose output is a state, or use "
+            '[simulation] master = "jacobi"',
+        )
 
 
 def _value_problem(variable, value: float, given) -> str | None:
@@ -271,161 +411,3 @@ def _bound(text) -> float | None:
 
 def _text(bound: float | None) -> str:
     return "-inf" if bound is None else f"{bound:g}"
-
-
-def _connections(
-    scenario: Scenario,
-    components: dict[str, ComponentDescription],
-    broken: set[str],
-    template: list[ConnectionDescription],
-    problems: Problems,
-) -> tuple[list[ConnectionDescription], list[tuple[ConnectionDescription, ConnectionDescription]]]:
-    """The template's connections, minus those the scenario's replace, then the scenario's."""
-    fed: dict[str, ConnectionDescription] = {}
-    scenario_connections = []
-    for spec in scenario.connections:
-        source = _endpoint(spec.source, f"{spec.where}.from", "output", components, broken, problems)
-        target = _endpoint(spec.target, f"{spec.where}.to", "input", components, broken, problems)
-        if source is None or target is None:
-            continue
-        if target in fed:
-            problems.add(
-                f"{spec.where}.to",
-                f"input '{target}' is already fed by {fed[target].where} (from '{fed[target].source}'); "
-                "an input takes one connection",
-            )
-            continue
-        connection = ConnectionDescription(source, target, spec.scale, spec.offset, spec.where)
-        fed[target] = connection
-        scenario_connections.append(connection)
-    kept, replaced = [], []
-    missing: dict[str, list[str]] = {}
-    # Sets: the template connects thousands of ports (waypoints, beams).
-    ports = {name: {"inputs": set(c.inputs), "outputs": set(c.outputs)} for name, c in components.items()}
-
-    def has(reference: str, kind: str) -> bool:
-        name, _, port = reference.partition(".")
-        return name in broken or (name in ports and port in ports[name][kind])
-
-    for connection in template:
-        if connection.target in fed:
-            replaced.append((connection, fed[connection.target]))
-            continue
-        ends = ((connection.source, "outputs"), (connection.target, "inputs"))
-        absent = [reference for reference, kind in ends if not has(reference, kind)]
-        for reference in absent:
-            name, _, port = reference.partition(".")
-            if name not in broken:
-                missing.setdefault(name, []).append(port)
-        if not absent:
-            kept.append(connection)
-    observed = template_observed(scenario)
-    for _, reference in observed.references():
-        name, _, port = reference.partition(".")
-        if name not in broken and not has(reference, "outputs"):
-            missing.setdefault(name, []).append(port)
-    for name, ports in missing.items():
-        _missing_ports(components[name], list(dict.fromkeys(ports)), problems)
-    return kept + scenario_connections, replaced
-
-
-def _missing_ports(component: ComponentDescription, ports: list[str], problems: Problems) -> None:
-    """One line for every port the template needs that a role FMU lacks, with the FMU's variables."""
-    shown = ", ".join(ports[:_LISTED]) + (
-        f" (and {len(ports) - _LISTED} more)" if len(ports) > _LISTED else ""
-    )
-    example = ", ".join(f'{port} = "<variable>"' for port in ports[:3])
-    hint = "; map them with" if component.kind == "fmu" else ";"
-    own = f"inputs {_listing(component.inputs, ports[0])}; outputs {_listing(component.outputs, ports[0])}"
-    problems.add(
-        f"{component.where}.ports",
-        f"the {TEMPLATE} connects ports the FMU ({component.model_name or component.name}) does not have: "
-        f"{shown}{hint} ports = {{ {example} }}; its variables: {own}",
-    )
-
-
-def _endpoint(
-    reference: str,
-    where: str,
-    direction: str,
-    components: dict[str, ComponentDescription],
-    broken: set[str],
-    problems: Problems,
-) -> str | None:
-    """`reference` ("component.variable") when it names an existing port of that direction, else None."""
-    name, dot, port = reference.partition(".")
-    if not dot or not name or not port:
-        problems.add(where, f"must be 'component.variable', got '{reference}'")
-        return None
-    if name in broken:
-        return None
-    if name not in components:
-        problems.add(
-            where,
-            f"no component '{name}'{did_you_mean(name, components)}; "
-            f"components: {_listing(components, name)}",
-        )
-        return None
-    component = components[name]
-    wanted, other = (
-        (component.outputs, component.inputs)
-        if direction == "output"
-        else (component.inputs, component.outputs)
-    )
-    if port in wanted:
-        return reference
-    key = "from" if direction == "output" else "to"
-    if port in other:
-        kind = "input" if direction == "output" else "output"
-        problems.add(
-            where,
-            f"'{reference}' is an {kind}, and `{key}` takes an {direction} (an {kind} cannot be wired to "
-            f"an {kind}){did_you_mean(port, wanted)}; {direction}s of {name}: {_listing(wanted, port)}",
-        )
-        return None
-    problems.add(
-        where,
-        f"component '{name}' has no {direction} '{port}'{did_you_mean(port, wanted)}; "
-        f"{direction}s: {_listing(wanted, port)}",
-    )
-    return None
-
-
-def _check_unconnected(
-    components: dict[str, ComponentDescription], connections: list[ConnectionDescription], problems: Problems
-) -> None:
-    """Every input of an added component is connected or held at a value (template ones are fed)."""
-    fed = {connection.target for connection in connections}
-    outputs = [f"{c.name}.{port}" for c in components.values() for port in c.outputs]
-    for component in components.values():
-        if not component.where.startswith("[components."):
-            continue
-        for port in component.inputs:
-            if f"{component.name}.{port}" in fed or port in component.held_inputs:
-                continue
-            # The same name on another component is the likeliest source.
-            close = [o for o in outputs if o.endswith(f".{port}") and o.split(".")[0] != component.name]
-            suggestion = f" (did you mean from = '{close[0]}'?)" if close else did_you_mean(port, outputs)
-            problems.add(
-                component.where,
-                f"input '{port}' is not connected: add [[connections]] from = \"<component>.<output>\", "
-                f'to = "{component.name}.{port}", or hold it with {port} = <value>{suggestion}',
-            )
-
-
-def _check_loops(
-    components: dict[str, ComponentDescription], connections: list[ConnectionDescription], problems: Problems
-) -> None:
-    feedthrough = {name: component.feedthrough for name, component in components.items()}
-    loop = find_algebraic_loop([(c.source, c.target) for c in connections], feedthrough)
-    if loop is None:
-        return
-    names = list(dict.fromkeys(reference.split(".", 1)[0] for reference in loop))
-    links = set(zip(loop, loop[1:], strict=False))
-    declared = [c.where for c in connections if (c.source, c.target) in links and c.where != TEMPLATE]
-    problems.add(
-        declared[0] if declared else TEMPLATE,
-        f"algebraic loop through components {', '.join(names)}: {' -> '.join(loop)} (each output depends "
-        "directly on the input before it; an FMU output without declared dependencies depends on every "
-        'input): break it with a component whose output is a state, or use [simulation] master = "jacobi"',
-    )

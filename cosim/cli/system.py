@@ -1,0 +1,116 @@
+"""`cosim system SCENARIO`: print the expanded system (components, connections, step order).
+
+What runs is the navigation template plus the scenario's `[components.NAME]` and `[[connections]]`
+(`cosim.scenario.compose.describe_system`); this prints it: each component with its FMU, FMI
+version and rate, each connection with its scale and offset and who declared it (connections
+between elements of two arrays are folded into one line, e.g. `lidar.ranges[1..360] ->
+vfh.ranges[1..360]`), the template connections the scenario replaced, and the order in which
+the master steps the components. `--png FILE` draws the wiring as a block diagram.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from cosim.cli.wiring import fold
+from cosim.scenario.description import SystemDescription
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "system",
+        help="print the expanded system of a scenario: components, connections, step order",
+        description="Print the system a scenario runs (the navigation template plus its own "
+        "[components.*] and [[connections]]): each component's FMU, FMI version and rate, each "
+        "connection with scale and offset, and the step order.",
+    )
+    parser.add_argument("scenario", type=Path, help="scenario file (.toml)")
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scenario key, as for cosim run (repeatable)",
+    )
+    parser.add_argument("--png", type=Path, metavar="FILE", help="also draw the wiring as a block diagram")
+    parser.set_defaults(handler=_handler)
+
+
+def _handler(args) -> int:
+    from cosim.navigation.build import build_run
+    from cosim.scenario.load import load_scenario
+
+    scenario = load_scenario(args.scenario, args.overrides)
+    built = build_run(scenario)  # the system that `cosim run` steps, not initialised
+    order = [component.name for component in built.system.order()]
+    constant = {name for name, component in built.system.components.items() if component.constant_outputs}
+    print(format_system(built.description, order, constant, f"{scenario.name} ({scenario.source})"))
+    if args.png is not None:
+        from cosim.cli.system_plot import draw_system
+
+        draw_system(built.description, order, args.png, title=scenario.name)
+        print(f"block diagram: {args.png}")
+    return 0
+
+
+def _number(value: float) -> str:
+    return f"{value:g}"
+
+
+def _rate(rate: float | None, macro_step: float) -> str:
+    if rate is None:
+        return f"{1 / macro_step:g} Hz (every step)"
+    steps = round(1.0 / (rate * macro_step))
+    return f"{rate:g} Hz (every {steps} steps)" if steps > 1 else f"{rate:g} Hz (every step)"
+
+
+def _table(rows: list[tuple[str, ...]], indent: str = "  ") -> list[str]:
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    return [
+        indent + "  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True)).rstrip()
+        for row in rows
+    ]
+
+
+def format_system(description: SystemDescription, order: list[str], constant: set[str], title: str) -> str:
+    """The text `cosim system` prints."""
+    lines = [
+        f"system of {title}",
+        f"macro step {_number(description.macro_step)} s, master {description.master}",
+        "",
+        f"components ({len(description.components)})",
+    ]
+    rows = [("name", "FMU", "FMI", "rate", "declared in")]
+    for component in description.components.values():
+        if component.kind == "fmu":
+            fmu = f"{component.model_name} ({component.fmu})"
+            version = f"{component.fmi_version}.0"
+        else:
+            fmu, version = f"Python {component.kind} (navcosim)", "-"
+        rows.append(
+            (component.name, fmu, version, _rate(component.rate, description.macro_step), component.where)
+        )
+    lines += _table(rows)
+    links = fold(description.connections)
+    lines += ["", f"connections ({len(description.connections)}; input = output * scale + offset)"]
+    rows = [("from", "to", "scale", "offset", "declared in")]
+    for link in links:
+        count = f" ({link.count} connections)" if link.count > 1 else ""
+        rows.append((link.source, link.target, _number(link.scale), _number(link.offset), link.where + count))
+    lines += _table(rows)
+    if description.replaced:
+        lines += ["", "template connections replaced by the scenario's"]
+        rows = [
+            (old.source, "->", old.target, "replaced by", new.where, f"(from {new.source})")
+            for old, new in description.replaced
+        ]
+        lines += _table(rows)
+    lines += ["", f"step order ({description.master})"]
+    for position, name in enumerate(order, start=1):
+        note = "  (outputs fixed after initialisation: not stepped)" if name in constant else ""
+        lines.append(f"  {position}. {name}{note}")
+    observed = description.observed
+    if observed is not None:
+        lines += ["", f"robot pose for the outcome and /odom: {', '.join(observed.pose)}"]
+    return "\n".join(lines)

@@ -1,0 +1,201 @@
+"""Scenario composition: `[components.NAME]` and `[[connections]]` on top of the navigation template.
+
+- A third-party first-order lag (made with PythonFMU, tests/fixtures/pythonfmu_src) between the
+  mixer and the vehicle: the run reaches the goal and the logged `vehicle.v` is the exact
+  first-order response to the logged mixer command (closed form while the command is constant,
+  the exact held-input recursion over the whole run).
+- A go-to-goal FMU (the `controller_fmi2` C fixture) replaces Pure Pursuit's commands: the robot
+  drives the straight corridor at the controller's 1 m/s (Pure Pursuit asks for 1.5), so the goal
+  is reached at the analytic time and distance.
+- A connection's scale and offset reach the FMU input exactly; an added component's input can be
+  held at a value.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fixtures.conftest_helpers import fixture_fmu
+from fixtures.pythonfmu_fixtures import pythonfmu_fmu
+
+from cosim.logs import open_log
+from cosim.navigation.build import build_run
+from cosim.navigation.run import run_scenario
+from cosim.scenario.load import load_scenario
+
+REPO = Path(__file__).resolve().parent.parent
+SCENARIOS = REPO / "scenarios"
+MACRO_STEP = 0.01  # [s] of the shipped scenarios
+LAG_T = 0.5  # [s] time constant of the lag
+
+
+def write_scenario(tmp_path: Path, name: str, base: str, extra: str, replace: dict | None = None) -> Path:
+    """A shipped scenario with an absolute map path, `replace` applied (regex -> text), `extra` added."""
+    text = (SCENARIOS / base).read_text()
+    text = re.sub(r'(?m)^file = "maps/', f'file = "{SCENARIOS}/maps/', text)
+    for pattern, substitute in (replace or {}).items():
+        text, count = re.subn(pattern, substitute, text, flags=re.MULTILINE)
+        assert count == 1, pattern
+    path = tmp_path / f"{name}.toml"
+    path.write_text(text + "\n" + extra)
+    return path
+
+
+def held(source_t_ns: np.ndarray, values: np.ndarray, at_t_ns: np.ndarray) -> np.ndarray:
+    """Sample and hold: the value of the most recent sample at or before each time."""
+    return values[np.searchsorted(source_t_ns, at_t_ns, side="right") - 1]
+
+
+LAG = """
+[components.lag]
+fmu = "{fmu}"
+T = {T}
+
+[[connections]]
+from = "mixer.v"
+to = "lag.u"
+
+[[connections]]
+from = "lag.y"
+to = "vehicle.v"
+"""
+
+
+@pytest.fixture(scope="module")
+def lag_run(tmp_path_factory):
+    tmp_path = tmp_path_factory.mktemp("lag")
+    extra = LAG.format(fmu=pythonfmu_fmu("first_order_lag"), T=LAG_T)
+    path = write_scenario(tmp_path, "lag", "warehouse_diff_drive_one_obstacle.toml", extra)
+    scenario = load_scenario(path, ["output.plot=false"])
+    built = build_run(scenario)
+    order = [component.name for component in built.system.order()]
+    result = run_scenario(scenario, tmp_path / "lag.mcap")
+    return built, order, result, open_log(tmp_path / "lag.mcap")
+
+
+def test_lag_sits_between_mixer_and_vehicle(lag_run):
+    built, order, _, log = lag_run
+    description = built.description
+    assert description.components["lag"].model_name == "FirstOrderLag"
+    assert log.metadata["fmu/lag"]["generation_tool"].startswith("PythonFMU")
+    targets = {c.target: c for c in description.connections}
+    assert targets["vehicle.v"].source == "lag.y" and targets["lag.u"].source == "mixer.v"
+    assert [(old.source, new.where) for old, new in description.replaced] == [
+        ("mixer.v", "[[connections]][1]")
+    ]
+    # PythonFMU declares no dependencies: y depends on u directly, so the lag steps after the
+    # mixer and before the vehicle (Gauss-Seidel), though it was added last.
+    assert order.index("mixer") < order.index("lag") < order.index("vehicle")
+
+
+def test_lag_run_reaches_the_goal_with_the_first_order_response_on_vehicle_v(lag_run):
+    _, _, result, log = lag_run
+    assert result.failure is None
+    assert result.outcome.reached and result.outcome.reason == "goal_reached"
+    vehicle, mixer, lag = log.signals("vehicle"), log.signals("mixer"), log.signals("lag")
+    command = held(mixer.t_ns, mixer["v"], vehicle.t_ns)  # what the mixer held at each vehicle step
+    np.testing.assert_array_equal(lag["u"], command)  # the lag saw exactly the mixer's command
+    np.testing.assert_array_equal(lag["y"], vehicle["v"])
+    # Closed form while the mixer holds its first command: y(t_k + h) = v (1 - exp(-(k + 1) h / T)).
+    first = command[0]
+    steady = int(np.argmax(command != first)) if np.any(command != first) else len(command)
+    assert steady * MACRO_STEP > 4 * LAG_T and first == pytest.approx(1.5)
+    k = np.arange(steady)
+    np.testing.assert_allclose(
+        vehicle["v"][:steady], first * (1 - np.exp(-(k + 1) * MACRO_STEP / LAG_T)), rtol=0, atol=1e-12
+    )
+    # The whole run: each step exact for the held command, y' = u + (y - u) exp(-h / T).
+    decay = math.exp(-MACRO_STEP / LAG_T)
+    expected, y = np.empty(len(command)), 0.0
+    for index, u in enumerate(command):
+        y = u + (y - u) * decay
+        expected[index] = y
+    np.testing.assert_allclose(vehicle["v"], expected, rtol=0, atol=1e-12)
+    # The lag shows: where VFH changes the command the vehicle's speed trails it.
+    assert np.max(np.abs(vehicle["v"] - command)) > 0.1
+
+
+GO_TO_GOAL = """
+[components.go_to_goal]
+fmu = "{fmu}"
+goal_x = 80.0
+goal_y = 6.0
+v_max = 1.0
+rate = 20.0
+
+[[connections]]
+from = "vehicle.x"
+to = "go_to_goal.x"
+
+[[connections]]
+from = "vehicle.y"
+to = "go_to_goal.y"
+
+[[connections]]
+from = "vehicle.theta"
+to = "go_to_goal.theta"
+
+[[connections]]
+from = "go_to_goal.v"
+to = "mixer.v_in"
+
+[[connections]]
+from = "go_to_goal.omega"
+to = "mixer.omega_in"
+"""
+
+
+def test_go_to_goal_fmu_replaces_pure_pursuit_and_reaches_the_goal(tmp_path):
+    extra = GO_TO_GOAL.format(fmu=fixture_fmu("controller_fmi2"))
+    goal = {r"^\[goal\]\nx = 84.0\ny = 53.0": "[goal]\nx = 80.0\ny = 6.0"}
+    path = write_scenario(tmp_path, "go_to_goal", "warehouse_diff_drive_no_obstacle.toml", extra, goal)
+    scenario = load_scenario(path, ["output.plot=false"])
+    result = run_scenario(scenario, tmp_path / "go.mcap")
+    assert result.failure is None and result.outcome.reached
+    log = open_log(tmp_path / "go.mcap")
+    vehicle, pure_pursuit, controller = (
+        log.signals(name) for name in ("vehicle", "pure_pursuit", "go_to_goal")
+    )
+    # Pure Pursuit still runs (it gives VFH its target direction) but asks for 1.5 m/s, while the
+    # vehicle drives the go-to-goal controller's v = min(gain_v * distance, v_max) = 1 m/s.
+    assert np.all(pure_pursuit["v"][:100] == 1.5)
+    np.testing.assert_array_equal(vehicle["v"], 1.0)
+    np.testing.assert_array_equal(controller["v"], 1.0)
+    assert result.outcome.vfh_interventions == 0
+    # Straight along y = 6 from x = 6 at 1 m/s: within the 1 m tolerance of x = 80 after 73 s.
+    np.testing.assert_allclose(vehicle["y"], 6.0, atol=1e-9)
+    assert result.outcome.time == pytest.approx(73.0, abs=MACRO_STEP + 1e-9)
+    assert result.outcome.distance == pytest.approx(result.outcome.time * 1.0, abs=1e-9)
+
+
+def test_scale_offset_and_held_input_reach_the_fmu(tmp_path):
+    extra = f"""
+[components.probe]
+fmu = "{fixture_fmu("controller_fmi2")}"
+goal_x = 10.0
+goal_y = 0.0
+y = 0.0
+theta = 0.0
+
+[[connections]]
+from = "mixer.v"
+to = "probe.x"
+scale = -2.0
+offset = 10.5
+"""
+    path = write_scenario(tmp_path, "probe", "warehouse_diff_drive_one_obstacle.toml", extra)
+    scenario = load_scenario(path, ["output.plot=false", "simulation.stop_time=3.0"])
+    assert scenario.connections[0].scale == -2.0 and scenario.connections[0].offset == 10.5
+    result = run_scenario(scenario, tmp_path / "probe.mcap")
+    assert result.failure is None
+    log = open_log(tmp_path / "probe.mcap")
+    mixer, probe = log.signals("mixer"), log.signals("probe")
+    x = held(mixer.t_ns, mixer["v"], probe.t_ns) * -2.0 + 10.5
+    np.testing.assert_array_equal(probe["x"], x)  # bit for bit: input = output * scale + offset
+    np.testing.assert_array_equal(probe["y"], 0.0)  # held
+    # The controller's v from those inputs: min(gain_v * |goal - (x, 0)|, v_max) with gain 1, v_max 1.
+    np.testing.assert_allclose(probe["v"], np.minimum(np.abs(10.0 - x), 1.0), rtol=0, atol=1e-12)

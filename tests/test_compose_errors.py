@@ -1,0 +1,166 @@
+"""A badly composed scenario: every problem at once, one line each, naming the file and the key,
+with a "did you mean" where a name is close; `cosim run` prints each line and exits 2 with no log.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from fixtures.conftest_helpers import fixture_fmu
+from fixtures.pythonfmu_fixtures import pythonfmu_fmu
+from test_compose import write_scenario
+
+from cosim.cli import main
+from cosim.errors import CosimError
+from cosim.scenario.compose import describe_system
+from cosim.scenario.load import load_scenario
+
+BROKEN = """
+[components.lag]
+fmu = "{lag}"
+T = 0.5
+y_0 = 1.0
+rate = 7.0
+
+[components.c1]
+fmu = "{controller}"
+y = 0.0
+theta = 0.0
+
+[components.c2]
+fmu = "{controller}"
+y = 0.0
+theta = 0.0
+
+[components.c3]
+fmu = "{controller}"
+
+[[connections]]
+from = "c1.v"
+to = "c2.x"
+
+[[connections]]
+from = "c2.v"
+to = "c1.x"
+
+[[connections]]
+from = "vehicel.x"
+to = "lag.u"
+
+[[connections]]
+from = "mixer.v"
+to = "vehicle.x"
+
+[[connections]]
+from = "lag.y"
+to = "vehicle.v"
+
+[[connections]]
+from = "mixer.v"
+to = "vehicle.v"
+
+[[connections]]
+from = "lag.yy"
+to = "vehicle.omega"
+
+[[connections]]
+from = "vehicle.x"
+to = "c3.x"
+
+[[connections]]
+from = "vehicle.y"
+to = "c3.y"
+
+[[connections]]
+from = "c3.omega"
+to = "mixer.x"
+"""
+
+# (key, what the line must say), in the order they are reported.
+EXPECTED = [
+    ("[components.lag].y_0", "the FMU has no parameter or input 'y_0' (did you mean 'y0'?)"),
+    ("[components.lag].rate", "7 Hz is not a whole number of macro steps of 0.01 s"),
+    ("[[connections]][2].from", "no component 'vehicel' (did you mean 'vehicle'?)"),
+    ("[[connections]][3].to", "'vehicle.x' is an output, and `to` takes an input (an output cannot be wired"),
+    ("[[connections]][5].to", "input 'vehicle.v' is already fed by [[connections]][4] (from 'lag.y')"),
+    ("[[connections]][6].from", "component 'lag' has no output 'yy' (did you mean 'y'?)"),
+    ("[[connections]][9].to", "component 'mixer' has no input 'x'"),
+    ("[components.c3]", "input 'theta' is not connected"),
+    ("[components.c3]", "(did you mean from = 'vehicle.theta'?)"),
+    ("[[connections]][0]", "algebraic loop through components c1, c2: "),
+    ("[[connections]][0]", "c1.v -> c2.x -> c2.v -> c1.x"),
+]
+
+
+@pytest.fixture
+def broken(tmp_path) -> Path:
+    extra = BROKEN.format(lag=pythonfmu_fmu("first_order_lag"), controller=fixture_fmu("controller_fmi2"))
+    return write_scenario(tmp_path, "broken", "warehouse_diff_drive_one_obstacle.toml", extra)
+
+
+def test_every_problem_is_reported_at_once(broken):
+    scenario = load_scenario(broken)
+    with pytest.raises(CosimError) as raised:
+        describe_system(scenario)
+    lines = str(raised.value).splitlines()
+    assert len(lines) == len(EXPECTED) - 2, "\n".join(lines)  # c3's and the loop's are two checks each
+    for key, text in EXPECTED:
+        assert any(line.startswith(f"{broken}: {key}: ") and text in line for line in lines), (
+            key,
+            text,
+            lines,
+        )
+    # The unconnected input that a failed connection meant to feed is reported with that connection.
+    assert not any("input 'u' is not connected" in line for line in lines)
+
+
+def test_cli_prints_every_problem_on_its_own_line(broken, tmp_path, capsys):
+    log = tmp_path / "run.mcap"
+    code = main(["run", str(broken), "--out", str(log), "--quiet", "--no-plot"])
+    err = capsys.readouterr().err
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == len(EXPECTED) - 2
+    assert all(line.startswith(f"cosim: error: {broken}: ") for line in lines), err
+    assert "Traceback" not in err and not log.exists()
+
+
+def test_jacobi_allows_the_loop(broken):
+    """The one-step delay of Jacobi breaks an algebraic loop: not a problem there."""
+    scenario = load_scenario(broken, ["simulation.master=jacobi"])
+    with pytest.raises(CosimError) as raised:
+        describe_system(scenario)
+    assert "algebraic loop" not in str(raised.value)
+
+
+RENAMED = """[vehicle]
+fmu = "{fmu}"
+type = "differential"
+radius = 0.5
+ports = {{ velocity = "speed_cmd", x = "pos_x", theta = "headin" }}
+"""
+
+
+def test_port_map_problems_at_once_with_the_fmus_own_names(tmp_path):
+    section = RENAMED.format(fmu=fixture_fmu("diffdrive_fmi2_renamed"))
+    vehicle = {r"^\[vehicle\]\n(?:[^\[\n].*\n|\n)*?(?=\[)": section + "\n"}
+    path = write_scenario(tmp_path, "renamed", "warehouse_diff_drive_one_obstacle.toml", "", vehicle)
+    with pytest.raises(CosimError) as raised:
+        describe_system(load_scenario(path))
+    lines = str(raised.value).splitlines()
+    assert len(lines) == 3, lines
+    unknown, misspelt, missing = lines
+    # A key that is no port of the role is unknown (not "an input that exists").
+    assert unknown.startswith(f"{path}: [vehicle].ports.velocity: unknown port 'velocity'")
+    assert "the ports of [vehicle]: " in unknown and " v," in unknown
+    assert misspelt.startswith(f"{path}: [vehicle].ports.theta: the FMU has no variable 'headin' (mapped to")
+    assert "(did you mean 'heading'?)" in misspelt
+    # Every port the template needs and the FMU lacks, at once, with the FMU's own variable names.
+    assert missing.startswith(f"{path}: [vehicle].ports: the FMU (fixture_diffdrive_fmi2_renamed) has no ")
+    ports = missing.split("for the ports ")[1].split(" that the")[0]
+    assert sorted(ports.split(", ")) == sorted(["y", "theta", "v", "omega", "x0", "y0", "theta0"])
+    own = missing.split("the FMU's variables: ")[1]
+    assert "inputs " in own and "speed_cmd" in own and "yaw_rate_cmd" in own
+    assert "outputs " in own and "pos_y" in own and "heading" in own
+    assert "parameters " in own and "start_x" in own
