@@ -9,7 +9,7 @@ from cosim.errors import CosimError
 if TYPE_CHECKING:
     from pathlib import Path
 
-__all__ = ["CosimError", "builtin_fmu"]
+__all__ = ["CosimError", "builtin_fmu", "sweep"]
 
 
 def builtin_fmu(name: str, fmi_version: int = 2) -> Path:
@@ -19,3 +19,13 @@ def builtin_fmu(name: str, fmi_version: int = 2) -> Path:
     from cosim.fmi.builtin import builtin_fmu as _builtin_fmu
 
     return _builtin_fmu(name, fmi_version)
+
+
+def __getattr__(name: str):
+    # `cosim.sweep` is the sweep package, callable as the API function (`cosim.sweep(...)` returns
+    # a pandas DataFrame); imported on first use so `import cosim` does not load Dask.
+    if name == "sweep":
+        import importlib
+
+        return importlib.import_module("cosim.sweep")
+    raise AttributeError(f"module 'cosim' has no attribute {name!r}")

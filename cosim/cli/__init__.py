@@ -1,4 +1,4 @@
-"""The `cosim` command line: one sub-command module per job (fmu, plan, run, system, log, ssp)."""
+"""The `cosim` command line: one sub-command module per job (fmu, plan, run, system, log, ssp, sweep)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import sys
 
 from planner.errors import NavcosimError
 
-COMMANDS = ("fmu", "plan", "run", "system", "log", "ssp")
+COMMANDS = ("fmu", "plan", "run", "system", "log", "ssp", "sweep")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,351 @@
+"""Run a sweep on Dask: validate it, start or reach a cluster, run every point, collect the table.
+
+Engine: a `distributed.Client` on a `LocalCluster` (one process per worker, one thread each, on
+127.0.0.1) or on the scheduler given by address. The scenario and its files go to each worker
+once (`cosim.sweep.worker.BundlePlugin`); each task returns its log's bytes, which land in
+`DIR/runs/<run-id>.mcap`. Rows are appended to `DIR/results.csv` as runs finish, so Ctrl-C keeps
+every finished row and log; at the end the file is rewritten in sweep order, so the same sweep
+gives the same table (apart from wall time and worker). `resume` skips runs whose completed row and
+log are already in DIR; failed runs are run again.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import secrets
+import signal
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+
+import cosim.sweep.adapter as adapter
+from cosim.errors import CosimError
+from cosim.sweep.bundle import Bundle, BundleBuilder, Run
+from cosim.sweep.results import (
+    COMPLETED,
+    FAILED,
+    RESULTS_FILE,
+    ResultsFile,
+    columns,
+    format_summary,
+    read_rows,
+    read_table,
+)
+from cosim.sweep.spec import SweepOptions, SweepSpec, display_value, sample_points, toml_value
+
+CONNECT_TIMEOUT = 5.0  # [s] to reach a scheduler
+WORKER_WAIT = 30.0  # [s] for a reached scheduler to have at least one worker
+PLOT_FILE = "sweep.png"
+
+
+@dataclass
+class SweepResult:
+    """A finished (or interrupted) sweep: its rows in sweep order and where they are."""
+
+    spec: SweepSpec
+    scenario_name: str
+    out_dir: Path
+    rows: list[dict[str, str]]
+    outcome_keys: tuple[str, ...]
+    wall_time: float  # [s] from the start of the cluster to the last row
+    workers: int | None
+    plot_path: Path | None
+    skipped: int  # runs found in DIR by resume
+
+    @property
+    def failed(self) -> int:
+        return sum(row["status"] != COMPLETED for row in self.rows)
+
+    @property
+    def exit_code(self) -> int:
+        """0 every run completed, 1 some failed."""
+        return 1 if self.failed else 0
+
+    @property
+    def results_path(self) -> Path:
+        return self.out_dir / RESULTS_FILE
+
+    def table(self):
+        """The results as a pandas DataFrame (read back from results.csv)."""
+        return read_table(self.results_path)
+
+    def summary(self) -> str:
+        title = f"{self.scenario_name} ({self.spec.method}, {len(self.rows)} runs"
+        title += f", {self.skipped} from an earlier sweep)" if self.skipped else ")"
+        return format_summary(
+            title,
+            self.rows,
+            self.outcome_keys,
+            self.wall_time,
+            len(self.rows) - self.skipped,
+            self.workers,
+            self.results_path,
+            self.plot_path,
+        )
+
+
+def plan(spec: SweepSpec) -> tuple[Bundle, list[Run], str]:
+    """Validate the sweep's keys and values and list its runs; raises `CosimError` (one line).
+
+    Every varied value (of an interval: both ends) passes the scenario's validation with the base
+    overrides, so a wrong key, type or range is caught before anything runs. Returns the bundle,
+    the runs in sweep order and the scenario's name.
+    """
+    base = adapter.load(spec.scenario, spec.overrides, check_world=False)
+    for dimension in spec.dimensions:
+        for value in dimension.values if dimension.values is not None else dimension.interval:
+            override = f"{dimension.key}={toml_value(value)}"
+            try:
+                adapter.load(spec.scenario, [*spec.overrides, override], check_world=False)
+            except CosimError as error:
+                raise CosimError(f"{dimension.describe()}: {_without_set(str(error))}") from None
+    builder = BundleBuilder(spec.scenario)
+    seen: set[tuple[str, ...]] = set()
+    for values in sample_points(spec):
+        varied = sorted(
+            (f"{d.key}={toml_value(v)}" for d, v in zip(spec.dimensions, values, strict=True)),
+            key=lambda text: text.partition("=")[0],
+        )
+        overrides = (*spec.overrides, *varied)
+        if overrides in seen:  # a random draw from a list may repeat a point: it would be the same run
+            continue
+        seen.add(overrides)
+        builder.add_run(len(seen) - 1, values, overrides)
+    bundle, runs = builder.finish()
+    return bundle, runs, base.name
+
+
+def check_run(spec: SweepSpec, run: Run) -> None:
+    """Build one run without running it (map, plan, FMUs, parameter and port names).
+
+    The sweep checks its first run (in sweep order) this way, so what only a build can tell, such
+    as a misspelt FMU parameter, stops it with one line (exit 2) before anything runs. A later run
+    that fails to build is a failed row like any other."""
+    try:
+        adapter.check_builds(adapter.load(spec.scenario, run.overrides))
+    except CosimError as error:
+        raise CosimError(f"{error} (checked on the run with {' '.join(run.overrides)})") from None
+
+
+def _without_set(message: str) -> str:
+    """Override errors say `--set K=V: ...`; under --vary the prefix would only repeat the key."""
+    return message.split(": ", 1)[1] if message.startswith("--set ") and ": " in message else message
+
+
+def default_out_dir(scenario_name: str, now: datetime | None = None) -> Path:
+    stamp = (now or datetime.now()).strftime("%Y%m%d-%H%M%S")
+    return Path("logs") / f"sweep-{scenario_name}-{stamp}"
+
+
+def _prepare_out_dir(out_dir: Path, resume: bool) -> list[Path]:
+    """Create DIR/runs and check that DIR takes files; returns the folders it created."""
+    created = [
+        folder for folder in (*reversed((out_dir / "runs").parents), out_dir / "runs") if not folder.exists()
+    ]
+    try:
+        (out_dir / "runs").mkdir(parents=True, exist_ok=True)
+        probe = out_dir / f".write-test-{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as error:
+        raise CosimError(f"--out {out_dir}: not writable: {error.strerror or error}") from None
+    if not resume and (out_dir / RESULTS_FILE).exists():
+        raise CosimError(
+            f"--out {out_dir}: holds an earlier sweep ({RESULTS_FILE}); add --resume or choose another folder"
+        )
+    return created
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    for folder in reversed(folders):
+        try:
+            folder.rmdir()
+        except OSError:
+            return
+
+
+@contextmanager
+def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterator[tuple[object, int]]:
+    """A client on `scheduler`, or on a new LocalCluster of `workers` processes (default: one per
+    core, never more than there are runs); yields (client, number of workers)."""
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout=CONNECT_TIMEOUT, set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as error:
+            raise CosimError(f"--scheduler {scheduler}: cannot reach the Dask scheduler: {error}") from None
+        try:
+            try:
+                client.wait_for_workers(1, timeout=WORKER_WAIT)
+            except TimeoutError:
+                raise CosimError(
+                    f"--scheduler {scheduler}: the scheduler has no workers (waited {WORKER_WAIT:g} s); "
+                    f"start some with `dask worker {scheduler}`"
+                ) from None
+            yield client, len(client.scheduler_info()["workers"])
+        finally:
+            client.close()
+        return
+    import dask
+
+    count = max(1, min(workers or os.cpu_count() or 1, pending))
+    # Ctrl-C in a terminal reaches the whole process group. The workers inherit an ignored SIGINT
+    # (the only disposition that survives exec), so the interrupt ends the sweep here, which then
+    # closes them, instead of each one printing its own KeyboardInterrupt traceback. Distributed's
+    # sampling profiler is off: it costs a run about a sixth more CPU time and nobody reads it here.
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with dask.config.set({"distributed.worker.profile.enabled": False}):
+            cluster = LocalCluster(
+                n_workers=count,
+                threads_per_worker=1,
+                processes=True,
+                host="127.0.0.1",
+                dashboard_address=None,
+                silence_logs=logging.ERROR,
+            )
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    try:
+        client = Client(cluster, set_as_default=False)
+        try:
+            yield client, count
+        finally:
+            client.close()
+    finally:
+        cluster.close()
+
+
+def _row(run: Run, keys: tuple[str, ...], result, out_dir: Path) -> dict[str, str]:
+    """The results row of a run, writing its log into DIR/runs/."""
+    row = {"run_id": run.run_id}
+    row.update({key: display_value(value) for key, value in zip(keys, run.values, strict=True)})
+    row["status"] = COMPLETED if result.error is None and result.outcome is not None else FAILED
+    row.update(result.outcome or {})
+    row["wall_time"] = f"{result.wall_time:.3f}" if result.wall_time >= 0 else ""
+    row["worker"] = result.worker
+    row["log"] = ""
+    if result.log is not None:
+        name = f"runs/{run.run_id}{result.log_suffix}"
+        temporary = out_dir / "runs" / f".{run.run_id}.partial"
+        temporary.write_bytes(result.log)
+        os.replace(temporary, out_dir / name)  # a log is either whole or absent
+        row["log"] = name
+    row["error"] = result.error or ""
+    return row
+
+
+def _execute(client, bundle: Bundle, pending: list[Run], keys, out_dir, results, rows, progress, total):
+    from distributed import as_completed
+    from tqdm import tqdm
+
+    from cosim.sweep.worker import BundlePlugin, TaskResult, run_task
+
+    plugin = BundlePlugin(bundle)
+    client.register_plugin(plugin, name=plugin.name)
+    token = secrets.token_hex(4)
+    futures = {
+        client.submit(run_task, plugin.name, run, key=f"navcosim-{run.run_id}-{token}", pure=False): run
+        for run in pending
+    }
+    bar = tqdm(total=total, initial=total - len(pending), unit="run", desc="sweep", disable=not progress)
+    failed = 0
+    try:
+        for future in as_completed(list(futures), loop=client.loop):
+            run = futures.pop(future)
+            try:
+                result = future.result()
+            except Exception as error:  # the worker died (a crashing FMU) or could not run the task
+                message = f"the worker failed: {type(error).__name__}: {' '.join(str(error).split())}"
+                result = TaskResult(run.run_id, None, message, -1.0, "", None, ".mcap")
+            future.release()
+            row = _row(run, keys, result, out_dir)
+            rows[run.run_id] = row
+            results.append(row)
+            failed += row["status"] != COMPLETED
+            bar.update(1)
+            if failed:
+                bar.set_postfix(failed=failed)
+    finally:
+        bar.close()
+        for future in futures:
+            future.cancel()
+        try:
+            client.unregister_worker_plugin(plugin.name)
+        except Exception:  # the cluster is going away anyway; its workers drop the plugin then
+            pass
+
+
+def run_sweep(
+    spec: SweepSpec, options: SweepOptions, progress: bool = True, plot: bool = True
+) -> SweepResult:
+    """Run the sweep; the rows of finished runs are in DIR even when this is interrupted."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    if options.workers is not None and options.scheduler is not None:
+        raise CosimError("--workers and --scheduler exclude each other (a scheduler has its own workers)")
+    if options.workers is not None and options.workers < 1:
+        raise CosimError(f"--workers {options.workers}: must be >= 1")
+    bundle, runs, name = plan(spec)
+    out_dir = Path(options.out) if options.out is not None else default_out_dir(name)
+    created = _prepare_out_dir(out_dir, options.resume)
+    keys = spec.keys
+    outcome_keys = adapter.outcome_keys()
+    results = ResultsFile(out_dir / RESULTS_FILE, columns(keys, outcome_keys))
+    ids = {run.run_id for run in runs}
+    rows: dict[str, dict[str, str]] = {}
+    if options.resume:
+        for row in read_rows(out_dir / RESULTS_FILE):
+            log = row.get("log") or ""
+            if (
+                row.get("run_id") in ids
+                and row.get("status") == COMPLETED
+                and log
+                and (out_dir / log).is_file()
+            ):
+                rows[row["run_id"]] = {key: row.get(key) or "" for key in results.header}
+    skipped = len(rows)
+    pending = [run for run in runs if run.run_id not in rows]
+
+    def ordered() -> list[dict[str, str]]:
+        return [rows[run.run_id] for run in runs if run.run_id in rows]
+
+    def draw() -> Path | None:
+        from cosim.sweep.plot import plot_sweep
+
+        return plot_sweep(ordered(), keys, outcome_keys, out_dir / PLOT_FILE, spec.method == "grid")
+
+    started = time.perf_counter()
+    workers, plot_path, plotting = None, None, None
+    with ThreadPoolExecutor(1) as pool:
+        if pending:
+            # The first run is built here as a check while the cluster's processes start.
+            check = pool.submit(check_run, spec, runs[0])
+            writing = False
+            try:
+                with connect(options.scheduler, options.workers, len(pending)) as (client, workers):
+                    check.result()
+                    results.rewrite(ordered())
+                    writing = True
+                    _execute(client, bundle, pending, keys, out_dir, results, rows, progress, len(runs))
+                    results.rewrite(ordered())
+                    if plot:  # drawn while the cluster closes
+                        plotting = pool.submit(draw)
+            except CosimError:
+                if not writing:  # refused before anything ran: leave nothing behind
+                    _remove_empty(created)
+                raise
+            finally:
+                if writing:
+                    results.rewrite(ordered())
+            plot_path = plotting.result() if plotting is not None else None
+        else:
+            results.rewrite(ordered())
+            plot_path = draw() if plot else None
+    wall_time = time.perf_counter() - started
+    return SweepResult(spec, name, out_dir, ordered(), outcome_keys, wall_time, workers, plot_path, skipped)

@@ -1,0 +1,227 @@
+"""Sweeps on real Dask clusters: a LocalCluster, and a `dask scheduler` with `dask worker`s started
+here (on 127.0.0.1, in other working directories). Each row is checked against its own log, one
+run against a run made without Dask, and the two clusters' tables against each other."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+import cosim
+from cosim.logs import open_log
+from cosim.navigation.outcome import outcome_metadata
+from cosim.navigation.run import run_scenario
+from cosim.scenario.load import load_scenario
+from cosim.sweep.results import TIMING_COLUMNS
+
+REPO = Path(__file__).resolve().parent.parent
+SCENARIO = REPO / "scenarios" / "warehouse_diff_drive_one_obstacle.toml"
+BASE = ["--set", "simulation.stop_time=4"]  # [s] simulated: 400 macro steps a run
+VARY = ["--vary", "pure_pursuit.desired_linear_velocity=1.0,1.5", "--vary", "lidar.noise=0.0,0.2"]
+OUTCOME = ("reached", "reason", "time", "distance", "min_clearance", "vfh_interventions", "recovery_time")
+
+
+def _sweep(out: Path, *options: str, cwd: Path = REPO) -> subprocess.CompletedProcess:
+    command = [sys.executable, "-m", "cosim", "sweep", str(SCENARIO), *BASE, *VARY, "--out", str(out)]
+    return subprocess.run([*command, *options], capture_output=True, text=True, cwd=cwd, timeout=600)
+
+
+def _rows(out: Path) -> list[dict[str, str]]:
+    with open(out / "results.csv", newline="") as stream:
+        return list(csv.DictReader(stream))
+
+
+@pytest.fixture(scope="module")
+def local_sweep(tmp_path_factory):
+    out = tmp_path_factory.mktemp("local") / "sweep"
+    result = _sweep(out, "--workers", "2")
+    assert result.returncode == 0, result.stderr
+    return out, result
+
+
+def test_each_row_matches_its_log(local_sweep):
+    out, result = local_sweep
+    rows = _rows(out)
+    assert len(rows) == 4 and len({row["run_id"] for row in rows}) == 4
+    assert [(row["pure_pursuit.desired_linear_velocity"], row["lidar.noise"]) for row in rows] == [
+        ("1.0", "0.0"),
+        ("1.0", "0.2"),
+        ("1.5", "0.0"),
+        ("1.5", "0.2"),
+    ]
+    for row in rows:
+        assert row["status"] == "completed" and row["error"] == ""
+        assert row["log"] == f"runs/{row['run_id']}.mcap"
+        with open_log(out / row["log"]) as log:
+            assert log.is_complete
+            assert {key: row[key] for key in OUTCOME} == log.outcome
+            overrides = log.metadata["navcosim"]["overrides"].split()
+        assert overrides == [
+            "simulation.stop_time=4",
+            f"lidar.noise={row['lidar.noise']}",
+            f"pure_pursuit.desired_linear_velocity={row['pure_pursuit.desired_linear_velocity']}",
+        ]
+        assert row["worker"].startswith("tcp://127.0.0.1:") and float(row["wall_time"]) > 0
+    # Kinematic driving at the commanded speed from rest: the two speeds drive different distances,
+    # so rows and logs cannot be paired up wrongly without the check above failing.
+    assert float(rows[0]["distance"]) < float(rows[2]["distance"]) <= 1.5 * 4 + 1e-9
+    assert (out / "sweep.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert sorted(path.name for path in (out / "runs").iterdir()) == sorted(
+        f"{r['run_id']}.mcap" for r in rows
+    )
+    assert "completed  4 of 4" in result.stdout
+
+
+def test_a_row_equals_a_run_without_dask(local_sweep, tmp_path):
+    out, _ = local_sweep
+    row = _rows(out)[3]
+    overrides = ["simulation.stop_time=4", "lidar.noise=0.2", "pure_pursuit.desired_linear_velocity=1.5"]
+    result = run_scenario(load_scenario(SCENARIO, overrides), tmp_path / "direct.mcap")
+    assert outcome_metadata(result.outcome) == {key: row[key] for key in OUTCOME}
+
+
+def test_the_python_api_returns_the_table(local_sweep):
+    out, _ = local_sweep
+    # Every run is in DIR already: resume answers from DIR without starting a cluster.
+    table = cosim.sweep(
+        SCENARIO,
+        {"pure_pursuit.desired_linear_velocity": [1.0, 1.5], "lidar.noise": "0.0:0.2:2"},
+        overrides=["simulation.stop_time=4"],
+        out=out,
+        resume=True,
+        progress=False,
+        plot=False,
+    )
+    rows = _rows(out)
+    assert list(table["run_id"]) == [row["run_id"] for row in rows]
+    assert list(table["distance"]) == [float(row["distance"]) for row in rows]
+    assert table["reached"].dtype == bool
+    assert table["pure_pursuit.desired_linear_velocity"].tolist() == [1.0, 1.0, 1.5, 1.5]
+
+
+def _stop(process: subprocess.Popen) -> None:
+    """End a service we started, by its PID: SIGTERM to its process group, SIGKILL if it lingers."""
+    if process.poll() is not None:
+        return
+    os.killpg(process.pid, signal.SIGTERM)
+    try:
+        process.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        os.killpg(process.pid, signal.SIGKILL)
+        process.wait(timeout=30)
+
+
+@pytest.fixture(scope="module")
+def dask_scheduler(tmp_path_factory):
+    """`dask scheduler` on a random port of 127.0.0.1 and `dask worker` (2 processes, 1 thread each),
+    each in a working directory of its own; stopped by PID however the tests end."""
+    scheduler_dir, worker_dir = tmp_path_factory.mktemp("scheduler"), tmp_path_factory.mktemp("worker")
+    scheduler_file = scheduler_dir / "scheduler.json"
+    dask = [sys.executable, "-m", "dask"]
+    services = []
+    try:
+        services.append(
+            subprocess.Popen(
+                [*dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard"]
+                + ["--scheduler-file", str(scheduler_file)],
+                cwd=scheduler_dir,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+                start_new_session=True,
+            )
+        )
+        deadline = time.monotonic() + 120
+        while not scheduler_file.exists() or not scheduler_file.read_text().strip():
+            assert time.monotonic() < deadline and services[0].poll() is None, "the scheduler did not start"
+            time.sleep(0.1)
+        address = json.loads(scheduler_file.read_text())["address"]
+        assert address.startswith("tcp://127.0.0.1:")
+        services.append(
+            subprocess.Popen(
+                [*dask, "worker", address, "--nworkers", "2", "--nthreads", "1", "--host", "127.0.0.1"]
+                + ["--no-dashboard", "--local-directory", str(worker_dir)],
+                cwd=worker_dir,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+                start_new_session=True,
+            )
+        )
+        yield address
+    finally:
+        for process in reversed(services):
+            _stop(process)
+
+
+def _comparable(rows: list[dict[str, str]]) -> list[dict[str, str]]:
+    return [{key: value for key, value in row.items() if key not in TIMING_COLUMNS} for row in rows]
+
+
+def test_a_sweep_on_a_dask_scheduler_gives_the_same_table(local_sweep, dask_scheduler, tmp_path):
+    local_out, _ = local_sweep
+    client_dir = tmp_path / "client"
+    client_dir.mkdir()
+    # From another folder too: the sweep's files reach the workers through Dask, not paths.
+    result = _sweep(tmp_path / "remote", "--scheduler", dask_scheduler, cwd=client_dir)
+    assert result.returncode == 0, result.stderr
+    remote = _rows(tmp_path / "remote")
+    assert _comparable(remote) == _comparable(_rows(local_out))
+    assert all(row["worker"].startswith("tcp://127.0.0.1:") for row in remote)
+    for row in remote:
+        with open_log(tmp_path / "remote" / row["log"]) as log:
+            assert {key: row[key] for key in OUTCOME} == log.outcome
+
+
+def test_failed_runs_are_rows_interrupt_keeps_rows_and_resume_finishes(dask_scheduler, tmp_path):
+    """A run whose start lies inside an obstacle fails on its worker; Ctrl-C (SIGINT to the process
+    group, as a terminal sends it) keeps the finished rows and logs; --resume runs what is missing,
+    and the failed runs again."""
+    out = tmp_path / "sweep"
+    command = [sys.executable, "-m", "cosim", "sweep", str(SCENARIO), "--set", "simulation.stop_time=10"]
+    command += ["--vary", "simulation.macro_step=0.01,0.001"]
+    command += ["--vary", "obstacles.0.center=[60.0, 19.25],[6.0, 6.0]"]
+    command += ["--scheduler", dask_scheduler, "--out", str(out)]
+    process = subprocess.Popen(
+        command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+    )
+    try:
+        deadline = time.monotonic() + 300
+        while process.poll() is None and time.monotonic() < deadline:
+            if (out / "results.csv").exists() and len(_rows(out)) >= 2:
+                break
+            time.sleep(0.05)
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGINT)
+        _, stderr = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+    assert process.returncode in (130, 1), stderr  # interrupted, or it had already finished
+    assert "Traceback" not in stderr
+    before = {row["run_id"]: row for row in _rows(out)}
+    assert len(before) >= 2
+    for row in before.values():
+        assert (out / row["log"]).is_file() if row["log"] else row["status"] == "failed"
+    result = subprocess.run([*command, "--resume"], cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 1, result.stderr  # some runs failed
+    rows = _rows(out)
+    assert [row["obstacles.0.center"] for row in rows] == ["[60.0, 19.25]", "[6.0, 6.0]"] * 2
+    for row in rows:
+        if row["obstacles.0.center"] == "[6.0, 6.0]":
+            assert row["status"] == "failed" and row["log"] == ""
+            assert str(SCENARIO) in row["error"] and "[start]" in row["error"], row["error"]
+        else:
+            assert row["status"] == "completed" and row["reason"] == "stop_time"
+            with open_log(out / row["log"]) as log:
+                assert log.outcome == {key: row[key] for key in OUTCOME}
+    for run_id, row in before.items():
+        if row["status"] == "completed":  # skipped by resume: the very same row
+            assert next(r for r in rows if r["run_id"] == run_id) == row
