@@ -40,6 +40,8 @@ from cosim.sweep.spec import SweepOptions, SweepSpec, display_value, sample_poin
 CONNECT_TIMEOUT = 5.0  # [s] to reach a scheduler
 WORKER_WAIT = 30.0  # [s] for a reached scheduler to have at least one worker
 PLOT_FILE = "sweep.png"
+# Imported once by the local cluster's fork server, so its workers start with them loaded.
+WORKER_PRELOAD = ["distributed", "cosim.sweep.worker", "cosim.scenario.load", "cosim.navigation.run"]
 
 
 @dataclass
@@ -198,9 +200,18 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
     # (the only disposition that survives exec), so the interrupt ends the sweep here, which then
     # closes them, instead of each one printing its own KeyboardInterrupt traceback. Distributed's
     # sampling profiler is off: it costs a run about a sixth more CPU time and nobody reads it here.
+    # The workers fork from one server process that imported Dask and the run stage once, instead
+    # of each importing them anew (measured: the 8-run benchmark sweep about a quarter faster).
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        with dask.config.set({"distributed.worker.profile.enabled": False}):
+        settings = {
+            "distributed.worker.profile.enabled": False,
+            "distributed.worker.multiprocessing-method": "forkserver",
+        }
+        with dask.config.set(settings):
+            from distributed.utils import get_mp_context
+
+            get_mp_context().set_forkserver_preload(WORKER_PRELOAD)
             cluster = LocalCluster(
                 n_workers=count,
                 threads_per_worker=1,
