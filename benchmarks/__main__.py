@@ -22,6 +22,7 @@ BENCHMARKS = {
     "isolation": ["bench_isolation.py"],
     "logs": ["bench_logs.py"],
     "startup": ["bench_startup.py"],
+    "sweep": ["bench_sweep.py"],
 }
 
 

@@ -1,0 +1,183 @@
+"""Sweep benchmark (not a test): `python3 benchmarks/bench_sweep.py [--repeat R]`.
+
+Eight runs of `warehouse_diff_drive_one_obstacle` at full settings (lidar.seed 0..3 x lidar.noise
+0.02, 0.05 m), made three ways in one benchmark run, each timed from the start of its command(s) to
+their end:
+- sequential `cosim run`: 8 subprocesses one after the other, as written (each draws its PNG), and
+  with `--no-plot` (then each writes just its log, as a sweep does);
+- `cosim sweep --workers 2`: the command starts a LocalCluster of 2 processes and stops it again,
+  so start-up, the check build of the first run, collecting the logs and `sweep.png` are in the time;
+- `cosim sweep --scheduler`: against a `dask scheduler` and `dask worker --nworkers 2 --nthreads 1`
+  on 127.0.0.1, started before the timing (services run on, like a cluster's) and stopped by PID
+  after; the first sweep meets cold workers, a second one (`warm`) workers that ran before.
+Prints wall time, runs per minute and the ratio to sequential `cosim run`, and checks that every
+way gives the same outcomes (each sequential log against the sweep's row of the same overrides).
+`--repeat R` keeps the fastest of R for each way (other processes only ever slow a run down).
+Goal (issue 11): the local sweep <= 0.33x the sequential `cosim run` time on a 2-core machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+from cosim.logs import open_log  # noqa: E402
+
+SCENARIO = REPO / "scenarios" / "warehouse_diff_drive_one_obstacle.toml"
+SEEDS, NOISES = (0, 1, 2, 3), (0.02, 0.05)
+VARY = ["--vary", "lidar.seed=0:3:4", "--vary", "lidar.noise=0.02,0.05"]
+OUTCOME = ("reached", "reason", "time", "distance", "min_clearance", "vfh_interventions", "recovery_time")
+COSIM = [sys.executable, "-m", "cosim"]
+ENVIRONMENT = {
+    **os.environ,
+    "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])),
+}
+
+
+def _timed(commands: list[list[str]], cwd: Path) -> float:
+    start = time.perf_counter()
+    for command in commands:
+        result = subprocess.run(command, cwd=cwd, env=ENVIRONMENT, capture_output=True, text=True)
+        if result.returncode not in (0, 1):
+            raise SystemExit(f"{' '.join(command)} failed ({result.returncode}): {result.stderr.strip()}")
+    return time.perf_counter() - start
+
+
+def sequential(work: Path, plot: bool) -> tuple[float, dict[tuple[int, float], dict[str, str]]]:
+    folder = work / f"sequential-{'plot' if plot else 'no-plot'}"
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir()
+    commands = []
+    for seed in SEEDS:
+        for noise in NOISES:
+            log = folder / f"seed{seed}-noise{noise}.mcap"
+            options = ["--set", f"lidar.seed={seed}", "--set", f"lidar.noise={noise}", "--quiet"]
+            commands.append(
+                [*COSIM, "run", str(SCENARIO), "--out", str(log), *options] + ([] if plot else ["--no-plot"])
+            )
+    seconds = _timed(commands, REPO)
+    outcomes = {}
+    for seed in SEEDS:
+        for noise in NOISES:
+            with open_log(folder / f"seed{seed}-noise{noise}.mcap") as log:
+                outcomes[(seed, noise)] = log.outcome
+    return seconds, outcomes
+
+
+def sweep(work: Path, name: str, options: list[str]) -> tuple[float, dict[tuple[int, float], dict[str, str]]]:
+    out = work / name
+    shutil.rmtree(out, ignore_errors=True)
+    seconds = _timed([[*COSIM, "sweep", str(SCENARIO), *VARY, "--out", str(out), "--quiet", *options]], REPO)
+    with open(out / "results.csv", newline="") as stream:
+        rows = list(csv.DictReader(stream))
+    if len(rows) != 8 or any(row["status"] != "completed" for row in rows):
+        raise SystemExit(f"{name}: expected 8 completed runs, got {[row['status'] for row in rows]}")
+    return seconds, {
+        (int(row["lidar.seed"]), float(row["lidar.noise"])): {key: row[key] for key in OUTCOME}
+        for row in rows
+    }
+
+
+def _stop(process: subprocess.Popen) -> None:
+    if process.poll() is None:
+        os.killpg(process.pid, signal.SIGTERM)
+        try:
+            process.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+
+
+def start_services(work: Path) -> tuple[str, list[subprocess.Popen]]:
+    """A scheduler on a random port of 127.0.0.1 and 2 single-thread workers, each in its own folder."""
+    for folder in ("scheduler", "worker"):
+        (work / folder).mkdir(exist_ok=True)
+    scheduler_file = work / "scheduler" / "scheduler.json"
+    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL, "start_new_session": True}
+    dask = [sys.executable, "-m", "dask"]
+    services = [
+        subprocess.Popen(
+            [*dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard"]
+            + ["--scheduler-file", str(scheduler_file)],
+            cwd=work / "scheduler",
+            env=ENVIRONMENT,
+            **quiet,
+        )
+    ]
+    try:
+        deadline = time.monotonic() + 120
+        while not scheduler_file.exists() or not scheduler_file.read_text().strip():
+            if time.monotonic() > deadline or services[0].poll() is not None:
+                raise SystemExit("the dask scheduler did not start")
+            time.sleep(0.1)
+        address = json.loads(scheduler_file.read_text())["address"]
+        services.append(
+            subprocess.Popen(
+                [*dask, "worker", address, "--nworkers", "2", "--nthreads", "1", "--host", "127.0.0.1"]
+                + ["--no-dashboard", "--local-directory", str(work / "worker")],
+                cwd=work / "worker",
+                env=ENVIRONMENT,
+                **quiet,
+            )
+        )
+    except BaseException:
+        for process in services:
+            _stop(process)
+        raise
+    return address, services
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=1, help="keep the fastest of R for each way")
+    args = parser.parse_args(argv)
+    with tempfile.TemporaryDirectory(prefix="bench-sweep-") as scratch:
+        work = Path(scratch)
+        results: dict[str, tuple[float, dict]] = {}
+
+        def best(name: str, measure) -> None:
+            for _ in range(args.repeat):
+                seconds, outcomes = measure()
+                if name not in results or seconds < results[name][0]:
+                    results[name] = (seconds, outcomes)
+
+        best("sequential cosim run", lambda: sequential(work, plot=True))
+        best("sequential cosim run --no-plot", lambda: sequential(work, plot=False))
+        best("cosim sweep --workers 2", lambda: sweep(work, "local", ["--workers", "2"]))
+        address, services = start_services(work)
+        try:
+            best("cosim sweep --scheduler (cold)", lambda: sweep(work, "remote", ["--scheduler", address]))
+            best("cosim sweep --scheduler (warm)", lambda: sweep(work, "remote", ["--scheduler", address]))
+        finally:
+            for process in reversed(services):
+                _stop(process)
+    reference_name = "sequential cosim run"
+    reference_seconds, reference = results[reference_name]
+    print(f"8 runs of {SCENARIO.stem} (lidar.seed 0..3 x lidar.noise 0.02, 0.05), {os.cpu_count()} cores")
+    print(f"{'way':<34}{'wall [s]':>10}{'runs/min':>10}{'x sequential':>14}{'same outcomes':>15}")
+    for name, (seconds, outcomes) in results.items():
+        same = "yes" if outcomes == reference else "NO"
+        ratio = seconds / reference_seconds
+        print(f"{name:<34}{seconds:>10.2f}{8 * 60 / seconds:>10.1f}{ratio:>14.2f}{same:>15}")
+    local = results["cosim sweep --workers 2"][0] / reference_seconds
+    no_plot = results["cosim sweep --workers 2"][0] / results["sequential cosim run --no-plot"][0]
+    verdict = "met" if local <= 0.33 else "NOT met"
+    print(f"goal (issue 11): local sweep <= 0.33x sequential cosim run: {local:.2f}x, {verdict}")
+    print(f"against sequential cosim run --no-plot (same outputs but the per-run PNGs): {no_plot:.2f}x")
+    return 0 if all(outcomes == reference for _, outcomes in results.values()) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
