@@ -99,6 +99,10 @@ def _maps(rows, keys, metrics, grid: bool):
             for xi, yi, value in zip(np.searchsorted(xs, x), np.searchsorted(ys, y), values, strict=True):
                 cells[yi, xi] = value  # a grid has one run per cell (duplicates are dropped)
             image = axis.imshow(cells, origin="lower", aspect="auto", cmap="viridis")
+            if cells.size <= 64:  # small grids: the number in each cell too
+                for (yi, xi), value in np.ndenumerate(cells):
+                    if np.isfinite(value):
+                        axis.text(xi, yi, f"{value:.3g}", ha="center", va="center", fontsize=7, color="w")
             axis.set_xticks(range(len(xs)), x_labels or [f"{v:g}" for v in xs], rotation=30, fontsize=7)
             axis.set_yticks(range(len(ys)), y_labels or [f"{v:g}" for v in ys], fontsize=7)
         else:
