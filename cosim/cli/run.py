@@ -37,7 +37,49 @@ def register(subparsers) -> None:
     )
     parser.add_argument("--no-plot", action="store_true", help="do not draw the PNG beside the log")
     parser.add_argument("--quiet", action="store_true", help="no progress bar and no summary table")
+    parser.add_argument(
+        "--live",
+        action="store_true",
+        help="stream every channel to a Foxglove WebSocket server while the run goes (open "
+        "ws://127.0.0.1:PORT in Foxglove); paced at --realtime 1 unless told otherwise",
+    )
+    parser.add_argument("--port", type=int, default=8765, help="the live view's port (8765)")
+    parser.add_argument(
+        "--realtime",
+        type=float,
+        metavar="R",
+        help="pace the run at R x the wall clock (default with --live: 1; without: as fast as possible)",
+    )
+    parser.add_argument(
+        "--linger",
+        type=float,
+        metavar="SECONDS",
+        help="with --live: keep serving this long after the run (default: until Ctrl-C)",
+    )
     parser.set_defaults(handler=_handler)
+
+
+def _live_sink(args):
+    """The sink of --live / --realtime (None: neither), after checking their values."""
+    if args.realtime is not None and not args.realtime > 0:
+        raise CosimError(f"--realtime must be > 0, got {args.realtime}")
+    if args.linger is not None and not args.linger >= 0:
+        raise CosimError(f"--linger must be >= 0, got {args.linger}")
+    if not args.live:
+        if args.linger is not None or args.port != 8765:
+            raise CosimError("--port and --linger need --live")
+        if args.realtime is None:
+            return None
+        from cosim.record.live import Pacer
+
+        return Pacer(args.realtime)
+    if not 0 <= args.port <= 65535:
+        raise CosimError(f"--port must be 0..65535, got {args.port}")
+    from cosim.record.live import FoxgloveLive
+
+    live = FoxgloveLive(args.port, 1.0 if args.realtime is None else args.realtime)
+    print(f"live view: {live.url} (Foxglove: Open connection, WebSocket)", file=sys.stderr, flush=True)
+    return live
 
 
 def _handler(args) -> int:
@@ -48,18 +90,31 @@ def _handler(args) -> int:
     from cosim.scenario.load import load_scenario
 
     scenario = load_scenario(args.scenario, args.overrides)
-    result = run_scenario(scenario, args.out, progress=not args.quiet)
-    if not args.quiet:
-        print(format_summary(scenario.name, result.outcome, result.log_path, result.wall_time))
-    if result.failure is not None:
-        print(f"cosim: error: {result.failure}; log (up to the failure): {result.log_path}", file=sys.stderr)
-        return 2
-    if scenario.plot and not args.no_plot:
-        _plot(result.log_path, args.quiet)
-    return result.exit_code
+    sink = _live_sink(args)
+    try:
+        result = run_scenario(scenario, args.out, progress=not args.quiet, sink=sink)
+        if not args.quiet:
+            print(format_summary(scenario.name, result.outcome, result.log_path, result.wall_time))
+        if result.failure is not None:
+            print(
+                f"cosim: error: {result.failure}; log (up to the failure): {result.log_path}", file=sys.stderr
+            )
+            return 2
+        if scenario.plot and not args.no_plot:
+            _plot(result.log_path, args.quiet)
+        if args.live and result.outcome.reason != "interrupted":
+            wait = "until Ctrl-C" if args.linger is None else f"for {args.linger:g} s"
+            print(f"live view: run ended; serving {sink.url} {wait}", file=sys.stderr, flush=True)
+            sink.linger(args.linger)
+        return result.exit_code
+    finally:
+        if args.live:
+            sink.stop()
 
 
 def _run_ssp(args) -> int:
+    if args.live or args.realtime is not None:
+        raise CosimError(f"{args.scenario}: --live and --realtime run scenario files (.toml), not SSP")
     from cosim.navigation.ssp_run import SspRunResult, run_ssp, summary
 
     result = run_ssp(args.scenario, args.out, args.overrides, progress=not args.quiet)

@@ -286,17 +286,19 @@ def run_scenario(
     out_path: Path | None = None,
     progress: bool = False,
     flush_interval: float = 0.5,
+    sink=None,
 ) -> RunResult:
     """Run `scenario`, logging to `out_path` (default: `[output].log`). Raises `CosimError` on bad input.
+    `sink` (`cosim.record.live.Sink`, e.g. the live view) also gets everything the log gets.
 
     SIGINT/SIGTERM from here on stop the run at the next step with outcome "interrupted".
     """
     with _Interrupt() as interrupt:
-        return _build_and_run(scenario, out_path, progress, flush_interval, interrupt)
+        return _build_and_run(scenario, out_path, progress, flush_interval, interrupt, sink)
 
 
 def _build_and_run(
-    scenario: Scenario, out_path, progress: bool, flush_interval: float, interrupt
+    scenario: Scenario, out_path, progress: bool, flush_interval: float, interrupt, sink=None
 ) -> RunResult:
     from cosim.record.recorder import Recorder
 
@@ -308,7 +310,7 @@ def _build_and_run(
         raise CosimError(f"{scenario.source}: initialising the system failed: {error}") from None
     log_path = Path(out_path) if out_path is not None else default_log_path(scenario)
     try:
-        recorder = Recorder(log_path, flush_interval=flush_interval)
+        recorder = Recorder(log_path, flush_interval=flush_interval, sink=sink)
     except BaseException:
         master.close()
         raise

@@ -71,7 +71,8 @@ class Recorder:
     """Writes one run to `path` (parent folders created). Use as a context manager: leaving the
     `with` block, normally or by an exception, finalises the file."""
 
-    def __init__(self, path: Path, *, flush_interval: float = 0.5) -> None:
+    def __init__(self, path: Path, *, flush_interval: float = 0.5, sink=None) -> None:
+        """`sink` (`cosim.record.live.Sink`): also gets every schema, channel and message written."""
         self.path = Path(path)
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -80,6 +81,10 @@ class Recorder:
             raise CosimError(f"{self.path}: cannot write the log ({error.strerror})") from None
         self._writer = ChunkWriter(self._file, chunk_size=CHUNK_SIZE)
         self._writer.start(profile="ros2", library=_library())
+        if sink is not None:  # the live view: same channels, same bytes as the file
+            from cosim.record.live import tee_writer
+
+            self._writer = tee_writer(self._writer, sink)
         self.flush_interval = flush_interval
         self._last_flush = time.monotonic()
         self._schemas: dict[str, int] = {}

@@ -1,0 +1,188 @@
+"""Live view of a run: every channel the recorder writes, streamed as it is written.
+
+The recorder hands each schema, channel and message that goes into the MCAP file to a sink as
+well (`Recorder(path, sink=...)`, through `tee_writer`), so a live client sees the same topics,
+the same schemas (ros2msg) and the same CDR bytes as the file. Two sinks:
+
+- `Pacer(realtime)`: holds each message until its simulated time, divided by `realtime`, has
+  passed on the wall clock since the first message (`cosim run --realtime R`).
+- `FoxgloveLive(port, realtime)`: a Foxglove WebSocket server (foxglove-sdk) with a channel per
+  recorded channel (`cosim run --live`); paced like `Pacer`.
+
+Messages reach the sink in blocks (the recorder packs a block of steps at a time); pacing per
+message keeps the stream's wall-clock timing right regardless.
+"""
+
+from __future__ import annotations
+
+import struct
+import threading
+import time
+from typing import Protocol
+
+import numpy as np
+
+from cosim.errors import CosimError
+from cosim.record.writer import MESSAGE_HEAD
+
+# Topics published once (or rarely) that a client connecting later must still get: the last
+# message of each is sent again when someone subscribes.
+LATCHED = ("/map", "/map_inflated", "/plan", "/goal", "/obstacles")
+_LENGTH = struct.Struct("<Q")
+
+
+class Sink(Protocol):
+    def channel(
+        self, channel_id: int, topic: str, encoding: str, schema: tuple[str, str, bytes] | None, metadata
+    ) -> None:
+        """A channel was registered: id, topic, message encoding, (schema name, encoding, data)."""
+
+    def message(self, channel_id: int, t_ns: int, payload: bytes) -> None:
+        """A message of a registered channel at log time t_ns [ns]."""
+
+
+def tee_writer(writer, sink: Sink):
+    """`writer` (a `cosim.record.writer.ChunkWriter`) that also hands everything to `sink`."""
+    return _Tee(writer, sink)
+
+
+class _Tee:
+    def __init__(self, writer, sink: Sink) -> None:
+        self._writer = writer
+        self._sink = sink
+        self._schemas: dict[int, tuple[str, str, bytes]] = {}
+
+    def __getattr__(self, name: str):
+        return getattr(self._writer, name)
+
+    def register_schema(self, name: str, encoding: str, data: bytes, *args, **kwargs) -> int:
+        schema_id = self._writer.register_schema(name, encoding, data, *args, **kwargs)
+        self._schemas[schema_id] = (name, encoding, bytes(data))
+        return schema_id
+
+    def register_channel(self, topic: str, encoding: str, schema_id: int, metadata, *args, **kwargs) -> int:
+        channel_id = self._writer.register_channel(topic, encoding, schema_id, metadata, *args, **kwargs)
+        self._sink.channel(channel_id, topic, encoding, self._schemas.get(schema_id), dict(metadata))
+        return channel_id
+
+    def add_message(self, channel: int, t_ns: int, data: bytes, *args, **kwargs) -> None:
+        self._writer.add_message(channel, t_ns, data, *args, **kwargs)
+        self._sink.message(channel, int(t_ns), bytes(data))
+
+    def add_records(
+        self, records: bytes, channels: np.ndarray, times: np.ndarray, offsets: np.ndarray
+    ) -> None:
+        self._writer.add_records(records, channels, times, offsets)
+        view = memoryview(records)
+        for channel, t_ns, offset in zip(channels.tolist(), times.tolist(), offsets.tolist(), strict=True):
+            (length,) = _LENGTH.unpack_from(view, offset + 1)  # after the opcode byte
+            self._sink.message(channel, t_ns, bytes(view[offset + MESSAGE_HEAD.size : offset + 9 + length]))
+
+
+class Pacer:
+    """Holds messages back so simulated time runs `realtime` times as fast as the wall clock."""
+
+    def __init__(self, realtime: float) -> None:
+        if not realtime > 0:
+            raise CosimError(f"--realtime must be > 0, got {realtime}")
+        self.realtime = realtime
+        self._origin: tuple[float, int] | None = None  # (wall clock [s], log time [ns]) of the first
+
+    def channel(self, channel_id, topic, encoding, schema, metadata) -> None:
+        pass
+
+    def message(self, channel_id: int, t_ns: int, payload: bytes) -> None:
+        self.wait(t_ns)
+
+    def wait(self, t_ns: int) -> None:
+        now = time.monotonic()
+        if self._origin is None:
+            self._origin = (now, t_ns)
+            return
+        wall0, t0 = self._origin
+        ahead = wall0 + (t_ns - t0) / 1e9 / self.realtime - now
+        if ahead > 0.0005:  # sleeping for less costs more than it is worth
+            time.sleep(ahead)
+
+
+class FoxgloveLive:
+    """A Foxglove WebSocket server streaming every recorded channel (ros2msg schemas, CDR)."""
+
+    def __init__(self, port: int = 8765, realtime: float | None = 1.0, host: str = "127.0.0.1") -> None:
+        import foxglove
+
+        self._foxglove = foxglove
+        self._pacer = Pacer(realtime) if realtime is not None else None
+        self._context = foxglove.Context()
+        self._channels: dict[int, object] = {}
+        self._latched: dict[str, tuple[int, bytes]] = {}  # topic -> last (t_ns, payload)
+        self._lock = threading.Lock()
+        try:
+            self.server = foxglove.start_server(
+                name="navcosim",
+                host=host,
+                port=port,
+                context=self._context,
+                capabilities=[foxglove.Capability.Time],
+                server_listener=_listener(self),
+            )
+        except Exception as error:  # the SDK raises a plain RuntimeError for a taken port
+            text = str(error).splitlines()[0] if str(error) else type(error).__name__
+            raise CosimError(f"--live: cannot serve on {host}:{port} ({text})") from None
+        self.port = self.server.port
+        self.url = f"ws://{host}:{self.port}"
+        self._last_time = -1
+
+    def channel(self, channel_id, topic, encoding, schema, metadata) -> None:
+        foxglove = self._foxglove
+        described = foxglove.Schema(name=schema[0], encoding=schema[1], data=schema[2]) if schema else None
+        self._channels[channel_id] = foxglove.Channel(
+            topic, schema=described, message_encoding=encoding, context=self._context, metadata=metadata
+        )
+
+    def message(self, channel_id: int, t_ns: int, payload: bytes) -> None:
+        if self._pacer is not None:
+            self._pacer.wait(t_ns)
+        channel = self._channels[channel_id]
+        topic = channel.topic()
+        if topic in LATCHED:
+            with self._lock:
+                self._latched[topic] = (t_ns, payload)
+        channel.log(payload, log_time=t_ns)
+        if t_ns > self._last_time:  # the client's clock follows simulated time
+            self._last_time = t_ns
+            self.server.broadcast_time(t_ns)
+
+    def replay(self, topic: str) -> None:
+        """Send the last message of a latched topic again (a client just subscribed to it)."""
+        with self._lock:
+            last = self._latched.get(topic)
+        channel = next((c for c in self._channels.values() if c.topic() == topic), None)
+        if last is not None and channel is not None:
+            channel.log(last[1], log_time=last[0])
+
+    def linger(self, seconds: float | None) -> None:
+        """Keep serving after the run: `seconds`, or until Ctrl-C when None."""
+        try:
+            if seconds is None:
+                while True:
+                    time.sleep(3600)
+            elif seconds > 0:
+                time.sleep(seconds)
+        except KeyboardInterrupt:
+            pass
+
+    def stop(self) -> None:
+        self.server.stop()
+
+
+def _listener(live: FoxgloveLive):
+    """Foxglove server callbacks: a new subscriber of a latched topic gets its last message."""
+    from foxglove import ServerListener
+
+    class Listener(ServerListener):
+        def on_subscribe(self, client, channel) -> None:
+            if channel.topic in LATCHED:
+                live.replay(channel.topic)
+
+    return Listener()
