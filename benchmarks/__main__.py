@@ -23,6 +23,7 @@ BENCHMARKS = {
     "logs": ["bench_logs.py"],
     "startup": ["bench_startup.py"],
     "sweep": ["bench_sweep.py"],
+    "live": ["bench_live.py"],
 }
 
 

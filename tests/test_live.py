@@ -193,3 +193,23 @@ def test_a_client_joining_after_the_run_gets_the_map_and_ctrl_c_ends_the_wait(tm
     for topic in latched:
         stamp, payload = received[topic][0]
         assert messages[topic][stamp] == payload
+
+
+def test_pacer_holds_messages_until_their_time_over_r_and_slips_when_late(monkeypatch):
+    """A fake clock: each message leaves at origin + t / R; a late one restarts the schedule."""
+    from cosim.record import live
+
+    clock = [100.0]
+    monkeypatch.setattr(live.time, "monotonic", lambda: clock[0])
+    monkeypatch.setattr(live.time, "sleep", lambda seconds: clock.__setitem__(0, clock[0] + seconds))
+    pacer = live.Pacer(2.0)
+    departures = []
+    for t in (0.0, 0.1, 0.2, 0.2, 0.4):
+        pacer.message(1, int(t * 1e9), b"")
+        departures.append(clock[0])
+    assert departures == pytest.approx([100.0, 100.05, 100.1, 100.1, 100.2])
+    clock[0] += 1.0  # the run stalls for a second of wall time
+    pacer.message(1, int(0.5e9), b"")
+    assert clock[0] == pytest.approx(101.2)  # sent at once, not held
+    pacer.message(1, int(0.7e9), b"")  # and the schedule goes on from there at R = 2
+    assert clock[0] == pytest.approx(101.3)

@@ -5,7 +5,8 @@ well (`Recorder(path, sink=...)`, through `tee_writer`), so a live client sees t
 the same schemas (ros2msg) and the same CDR bytes as the file. Two sinks:
 
 - `Pacer(realtime)`: holds each message until its simulated time, divided by `realtime`, has
-  passed on the wall clock since the first message (`cosim run --realtime R`).
+  passed on the wall clock since the first message (`cosim run --realtime R`); when the run falls
+  behind, the schedule restarts from the late message, so the stream never runs faster than R.
 - `FoxgloveLive(port, realtime)`: a Foxglove WebSocket server (foxglove-sdk) with a channel per
   recorded channel (`cosim run --live`); paced like `Pacer`.
 
@@ -29,6 +30,7 @@ from cosim.record.writer import MESSAGE_HEAD
 # message of each is sent again when someone subscribes.
 LATCHED = ("/map", "/map_inflated", "/plan", "/goal", "/obstacles")
 _LENGTH = struct.Struct("<Q")
+LATE = 0.05  # [s] of wall time behind schedule after which the pacer starts again from now
 
 
 class Sink(Protocol):
@@ -103,6 +105,10 @@ class Pacer:
         ahead = wall0 + (t_ns - t0) / 1e9 / self.realtime - now
         if ahead > 0.0005:  # sleeping for less costs more than it is worth
             time.sleep(ahead)
+        elif ahead < -LATE:
+            # The run fell behind (start-up of the loop, a slow step): the stream slips instead
+            # of catching up in a burst faster than R x real time.
+            self._origin = (now, t_ns)
 
 
 class FoxgloveLive:
