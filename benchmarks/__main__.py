@@ -24,6 +24,7 @@ BENCHMARKS = {
     "startup": ["bench_startup.py"],
     "sweep": ["bench_sweep.py"],
     "live": ["bench_live.py"],
+    "mcap_writers": ["bench_mcap_writers.py"],
 }
 
 
