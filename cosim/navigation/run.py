@@ -7,9 +7,12 @@ when the goal is reached, on a collision, at the stop time, on SIGINT/SIGTERM, o
 Log contents and rates (t = simulated time, integer nanoseconds):
 - `/signals/<component>`: every scalar input and output of the component, each time it steps
   (its rate), stamped with the start of that step: the inputs it used and the outputs that step
-  returned. Array ports (waypoints, ranges, angles) are on `/plan` and `/scan` instead.
-- `/odom`, `/tf`, `/pose`: the vehicle pose at t = 0 and every 1/pose_rate s ([output].pose_rate,
-  default 50 Hz), and at the end of the run; twist = the mixer's commanded v and omega.
+  returned. Array ports (waypoints, ranges, angles) are on `/plan` and `/scan` instead; with
+  [output].signal_arrays array outputs are recorded too (a component whose outputs never change,
+  the planner, once at t = 0).
+- `/odom`, `/tf`, `/pose`: the robot pose (the description's `Observed.pose`, the vehicle's x, y,
+  theta) at t = 0 and every 1/pose_rate s ([output].pose_rate, default 50 Hz), and at the end of
+  the run; twist = the commanded v and omega (`Observed.command`, the mixer's).
 - `/scan`: every lidar step; `/cmd_vel`: every mixer step (v, omega of the mixer).
 - `/obstacles`: at t = 0, and at every lidar step at which a moving obstacle has moved (the poses
   that scan saw).
