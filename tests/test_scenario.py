@@ -11,6 +11,7 @@ import pytest
 from cosim.errors import CosimError
 from cosim.navigation.outcome import OutcomeMonitor
 from cosim.navigation.planner import downsample_path
+from cosim.scenario.compose import describe_system
 from cosim.scenario.load import load_scenario, parse_scenario
 from cosim.world.distance import WorldDistance, distance_to_obstacle
 from cosim.world.shapes import Circle, Polygon, Rectangle
@@ -68,8 +69,9 @@ def test_overrides_use_toml_values_and_the_same_validation():
     assert scenario.components["vfh"].parameters["robot_radius"] == 0.6
     assert scenario.master == "jacobi"  # a bare word is a string
     assert scenario.obstacles[0].yaw == 0.5
+    # The range is the FMU's (its modelDescription.xml), checked when the system is described.
     with pytest.raises(CosimError, match=r"\[vfh\]\.robot_radius: must be >= 0, got -1"):
-        load_scenario(EXAMPLE, ["vfh.robot_radius=-1"])
+        describe_system(load_scenario(EXAMPLE, ["vfh.robot_radius=-1"]))
     with pytest.raises(CosimError, match="expected key=value"):
         load_scenario(EXAMPLE, ["vfh.robot_radius"])
     with pytest.raises(CosimError, match="no item 5 in obstacles"):

@@ -34,6 +34,7 @@ from cosim.scenario.description import (
     SystemDescription,
 )
 from cosim.scenario.load import ComponentSpec, PortMapping, Scenario, rate_problem
+from cosim.scenario.params import pair_key
 from cosim.scenario.schema import did_you_mean
 from cosim.scenario.template import (
     ROLE_PORTS,
@@ -226,6 +227,9 @@ class _Composer:
             received = float(value) * (mapping.scale if mapping else 1.0)
             problem = _value_problem(variable, received, spec.parameters.get(name, value))
             if problem:
+                pair = pair_key(name) if not spec.added else None
+                if pair:  # the section may have set it through the pair
+                    problem += f" ({pair} = [low, high] sets it too)"
                 self.problems.add(f"{where}.{name}", problem)
             (parameters if name in known else held)[name] = float(value)
         for name, value in component.defaults.items():

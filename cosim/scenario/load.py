@@ -420,7 +420,7 @@ def _component(
             continue
         table.used.add(key)
         parameters[key] = value
-    parameters = check_parameters(table, fmu, parameters)
+    parameters = check_parameters(table, parameters)
     table.finish()
     return ComponentSpec(
         name=role,

@@ -38,6 +38,7 @@ def variables() -> list[Variable]:
             "Readings closer than this are ignored (as VFH)",
             "m",
             0.05,
+            minimum=0.0,
         ),
         Variable(
             "distance_limit_max",
@@ -47,6 +48,7 @@ def variables() -> list[Variable]:
             "Readings farther than this are ignored (as VFH)",
             "m",
             2.0,
+            minimum=1e-9,
         ),
         Variable(
             "robot_radius",
@@ -56,6 +58,7 @@ def variables() -> list[Variable]:
             "Radius of the circle around the vehicle; clearances are measured from it",
             "m",
             0.1,
+            minimum=0.0,
         ),
         Variable(
             "safety_distance",
@@ -65,6 +68,7 @@ def variables() -> list[Variable]:
             "A reading within robot_radius + safety_distance blocks the directions within 90 degrees of it",
             "m",
             0.1,
+            minimum=0.0,
         ),
         Variable(
             "influence_distance",
@@ -74,6 +78,7 @@ def variables() -> list[Variable]:
             "Clearance rho_0 (range - robot_radius) beyond which a reading does not repel, > 0",
             "m",
             1.0,
+            minimum=1e-9,
         ),
         Variable(
             "attractive_gain",
@@ -83,6 +88,7 @@ def variables() -> list[Variable]:
             "Strength of the constant pull toward target_dir, > 0",
             None,
             1.0,
+            minimum=1e-9,
         ),
         Variable(
             "repulsive_gain",
@@ -92,6 +98,7 @@ def variables() -> list[Variable]:
             "Khatib's eta [m^3]: a reading at clearance rho repels with eta (1/rho - 1/rho_0) / rho^2",
             None,
             0.005,
+            minimum=0.0,
         ),
         Variable(
             "max_target_deviation",
@@ -102,6 +109,8 @@ def variables() -> list[Variable]:
             "pi: never",
             "rad",
             math.pi,
+            minimum=1e-9,
+            maximum=math.pi,
         ),
     ]
     inputs = [v for v in _vfh_variables() if v.causality == "input"]

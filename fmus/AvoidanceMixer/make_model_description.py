@@ -26,8 +26,10 @@ def variables() -> list[Variable]:
             "0: differential drive (outputs v, omega); 1: bicycle (outputs v, steering_angle)",
             None,
             0,
+            minimum=0,
+            maximum=1,
         ),
-        Variable("wheelbase", 0, "Real", "parameter", "Bicycle wheelbase L", "m", 1.0),
+        Variable("wheelbase", 0, "Real", "parameter", "Bicycle wheelbase L", "m", 1.0, minimum=1e-9),
         Variable(
             "max_steering_angle",
             1,
@@ -36,6 +38,8 @@ def variables() -> list[Variable]:
             "Bicycle steering lock, in (0, pi/2)",
             "rad",
             math.pi / 4,
+            minimum=1e-9,
+            maximum=math.nextafter(math.pi / 2, 0.0),
         ),
         Variable(
             "direction_tolerance",
@@ -45,6 +49,7 @@ def variables() -> list[Variable]:
             "Avoid when |steering_dir - target_dir| exceeds this",
             "rad",
             0.1,
+            minimum=0.0,
         ),
         Variable(
             "avoid_gain",
@@ -72,6 +77,7 @@ def variables() -> list[Variable]:
             "Differential drive recovery: turn on the spot at this rate toward the side last free",
             "rad/s",
             0.5,
+            minimum=0.0,
         ),
         Variable(
             "recovery_linear_velocity",
@@ -81,6 +87,7 @@ def variables() -> list[Variable]:
             "Bicycle recovery: reverse at this speed with full lock, nose swinging toward the side last free",
             "m/s",
             0.1,
+            minimum=0.0,
         ),
         Variable(
             "avoid_steering_gain",
@@ -100,6 +107,7 @@ def variables() -> list[Variable]:
             "Once recovering, keep recovering at least this long [s] (0: until a direction is free)",
             "s",
             0.0,
+            minimum=0.0,
         ),
         Variable(
             "avoid_hold_time",
@@ -110,6 +118,7 @@ def variables() -> list[Variable]:
             "the target (0: follow at once)",
             "s",
             0.0,
+            minimum=0.0,
         ),
         Variable("v_in", 10, "Real", "input", "Linear velocity of the path follower", "m/s", 0.0),
         Variable("omega_in", 11, "Real", "input", "Angular velocity of the path follower", "rad/s", 0.0),

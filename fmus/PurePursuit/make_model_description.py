@@ -38,6 +38,7 @@ def variables() -> list[Variable]:
             "|omega| is clipped to this (MATLAB MaxAngularVelocity)",
             "rad/s",
             1.0,
+            minimum=0.0,
         ),
         Variable(
             "lookahead_distance",
@@ -47,6 +48,7 @@ def variables() -> list[Variable]:
             "Arc length from the projection point to the lookahead point (MATLAB LookaheadDistance)",
             "m",
             1.0,
+            minimum=1e-9,
         ),
         Variable(
             "goal_tolerance",
@@ -56,6 +58,7 @@ def variables() -> list[Variable]:
             "goal_reached when the distance to the last waypoint is at most this; then v = omega = 0",
             "m",
             0.1,
+            minimum=0.0,
         ),
         Variable(
             "angular_velocity_law",
@@ -65,6 +68,8 @@ def variables() -> list[Variable]:
             "0: omega = 2 sin(alpha)/L as MATLAB (independent of v); 1: nav2 omega = v * 2 sin(alpha)/L",
             None,
             0,
+            minimum=0,
+            maximum=1,
         ),
     ]
     inputs = [

@@ -15,6 +15,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "common"))
 from model_description import Variable, model_description, write_model_description  # noqa: E402
 
 MAX_READINGS = 720  # VFH_MAX_READINGS in config.h
+MAX_SECTORS = 720  # VFH_MAX_SECTORS in config.h
 
 
 def variables() -> list[Variable]:
@@ -28,6 +29,8 @@ def variables() -> list[Variable]:
             "Number of histogram sectors over [-pi, pi], 1..720 (MATLAB NumAngularSectors)",
             None,
             180,
+            minimum=1,
+            maximum=MAX_SECTORS,
         ),
         Variable(
             "distance_limit_min",
@@ -37,6 +40,7 @@ def variables() -> list[Variable]:
             "Readings closer than this are ignored (MATLAB DistanceLimits(1))",
             "m",
             0.05,
+            minimum=0.0,
         ),
         Variable(
             "distance_limit_max",
@@ -46,6 +50,7 @@ def variables() -> list[Variable]:
             "Readings farther than this are ignored; also the weight constant a (MATLAB DistanceLimits(2))",
             "m",
             2.0,
+            minimum=1e-9,
         ),
         Variable(
             "robot_radius",
@@ -55,6 +60,7 @@ def variables() -> list[Variable]:
             "Radius of the circle around the vehicle (MATLAB RobotRadius)",
             "m",
             0.1,
+            minimum=0.0,
         ),
         Variable(
             "safety_distance",
@@ -64,6 +70,7 @@ def variables() -> list[Variable]:
             "Clearance added to robot_radius (MATLAB SafetyDistance)",
             "m",
             0.1,
+            minimum=0.0,
         ),
         Variable(
             "min_turning_radius",
@@ -73,6 +80,7 @@ def variables() -> list[Variable]:
             "Turning radius at the current speed, for the masked histogram (MATLAB MinTurningRadius)",
             "m",
             0.1,
+            minimum=0.0,
         ),
         Variable(
             "target_direction_weight",
@@ -82,6 +90,7 @@ def variables() -> list[Variable]:
             "Cost weight mu1 of the target direction",
             None,
             5.0,
+            minimum=0.0,
         ),
         Variable(
             "current_direction_weight",
@@ -91,6 +100,7 @@ def variables() -> list[Variable]:
             "Cost weight mu2 of the current direction (0)",
             None,
             2.0,
+            minimum=0.0,
         ),
         Variable(
             "previous_direction_weight",
@@ -100,6 +110,7 @@ def variables() -> list[Variable]:
             "Cost weight mu3 of the previous direction",
             None,
             2.0,
+            minimum=0.0,
         ),
         Variable(
             "histogram_threshold_low",
@@ -109,6 +120,7 @@ def variables() -> list[Variable]:
             "Density below this frees a sector (MATLAB HistogramThresholds(1))",
             None,
             3.0,
+            minimum=0.0,
         ),
         Variable(
             "histogram_threshold_high",
@@ -118,6 +130,7 @@ def variables() -> list[Variable]:
             "Density above this occupies a sector (MATLAB HistogramThresholds(2))",
             None,
             10.0,
+            minimum=0.0,
         ),
         Variable(
             "narrow_opening_threshold",
@@ -127,6 +140,7 @@ def variables() -> list[Variable]:
             "Valleys narrower than this give their bisector, wider ones two edge candidates",
             "rad",
             0.8,
+            minimum=1e-9,
         ),
     ]
     inputs = [

@@ -56,6 +56,10 @@ class Variable:
     description: str
     unit: str | None = None
     start: float | int | bool | None = None
+    # The valid range, inclusive (FMI min/max), as the model checks it at initialisation; a tool
+    # (and the scenario loader) checks values against it first. "> 0" is written minimum = 1e-9.
+    minimum: float | int | None = None
+    maximum: float | int | None = None
 
     @property
     def variability(self) -> str:
@@ -81,6 +85,9 @@ def _variable_xml(index: int, variable: Variable) -> str:
     attributes = f' unit="{variable.unit}"' if variable.unit else ""
     if variable.start is not None:
         attributes += f' start="{_format_start(variable.start)}"'
+    for attribute, limit in (("min", variable.minimum), ("max", variable.maximum)):
+        if limit is not None:
+            attributes += f' {attribute}="{_format_start(limit)}"'
     return (
         f"    <!-- {index} --><ScalarVariable name={quoteattr(variable.name)} "
         f'valueReference="{variable.value_reference}" causality="{variable.causality}" '
