@@ -42,9 +42,18 @@ def part_b(steps: int) -> list[Row]:
         log_path = work / "closed_loop.mcap"
         with Master(system) as master, Recorder(log_path) as recorder:
             master.initialize()
-            channels = [recorder.signal_channel(c.name, c.signal_names()) for c in master.order]
             periods = [system.period_steps(c) for c in master.order]
             h_ns = system.macro_step_ns
+            channels = [
+                recorder.signal_channel(
+                    c.name,
+                    c.signal_names(),
+                    inputs=len(c.inputs),
+                    initial=c.signal_values(),
+                    period_ns=period * h_ns,
+                )
+                for c, period in zip(master.order, periods, strict=True)
+            ]
 
             def record(first: int, count: int, histories: list[np.ndarray]) -> None:
                 # Row j of a component with period P is its step k = first rounded up to P, + j P.
@@ -58,6 +67,7 @@ def part_b(steps: int) -> list[Row]:
             master.run_recorded(1, record, compiled=True)  # compile once, outside the timing
             start = time.perf_counter()
             master.run_recorded(steps - 1, record, compiled=True)
+            recorder.end_steps(master.time_ns)
             recorder.close()
             seconds = time.perf_counter() - start
         size = log_path.stat().st_size / 1e6

@@ -287,20 +287,27 @@ def test_close_is_idempotent_and_writing_after_close_fails(tmp_path):
             recorder.write_signals(channel, 0, np.zeros(3))
 
 
-def test_flush_interval_puts_data_on_disk_before_close(tmp_path):
-    """With a zero interval every write is flushed: another reader sees all of it while the
-    recorder is still open (what a SIGKILL would leave)."""
+def test_ended_chunks_reach_the_disk_before_close_and_the_wall_clock_changes_no_byte(tmp_path):
+    """Chunks end by simulated time (windows of `chunk_duration`): while the recorder is still
+    open (what a SIGKILL would leave) another reader sees every record before the open window.
+    The wall-clock flush (here at every write) only hands ended chunks to the OS, so the file's
+    bytes are those of a recorder that never flushed."""
     from cosim.logs import open_log
 
-    target = tmp_path / "open.mcap"
-    recorder = Recorder(target, flush_interval=0.0)
-    channel = recorder.signal_channel("vehicle", ["x"])
-    for k in range(25):
-        recorder.write_signals(channel, k * 1000, np.array([k * 0.5]))
-    log = open_log(target)
-    assert not log.is_complete
-    np.testing.assert_array_equal(log.signals("vehicle")["x"], np.arange(25) * 0.5)
-    recorder.close()
+    targets = {interval: tmp_path / f"open{interval}.mcap" for interval in (0.0, 1e9)}
+    for interval, target in targets.items():
+        recorder = Recorder(target, flush_interval=interval, chunk_duration=0.5)
+        channel = recorder.signal_channel("vehicle", ["x"])
+        for k in range(25):  # t = 0 .. 2.4 s: windows [0, 0.5) .. [1.5, 2) ended, [2, 2.5) open
+            recorder.write_signals(channel, k * 100_000_000, np.array([k * 0.5]))
+        if interval == 0.0:
+            log = open_log(target)
+            assert not log.is_complete
+            np.testing.assert_array_equal(log.signals("vehicle")["x"], np.arange(20) * 0.5)
+            assert len(log._index.blocks) == 4
+        recorder.close()
+    assert targets[0.0].read_bytes() == targets[1e9].read_bytes()
+    assert len(open_log(targets[0.0]).signals("vehicle").t) == 25
 
 
 def test_held_messages_are_the_bytes_and_order_of_one_message_at_a_time(tmp_path):

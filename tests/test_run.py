@@ -52,10 +52,11 @@ def test_log_topics_and_counts_match_the_rates(short_run):
     assert counts["/odom"] == counts["/tf"] == counts["/pose"] == 1 + steps // 2  # 50 Hz plus t = 0
     assert counts["/scan"] == steps // 10  # 10 Hz
     assert counts["/cmd_vel"] == steps // 5  # 20 Hz
-    assert counts["/signals/vehicle"] == steps  # every macro step
+    # Every step of a component, plus a last record with its outputs at the end.
+    assert counts["/signals/vehicle"] == steps + 1  # every macro step
     for controller in ("pure_pursuit", "vfh", "mixer"):
-        assert counts[f"/signals/{controller}"] == steps // 5
-    assert counts["/signals/lidar"] == steps // 10
+        assert counts[f"/signals/{controller}"] == steps // 5 + 1
+    assert counts["/signals/lidar"] == steps // 10 + 1
     for once in ("/plan", "/map", "/map_inflated", "/obstacles", "/goal"):
         assert counts[once] == 1
     assert metadata["outcome"]["reason"] == "stop_time"

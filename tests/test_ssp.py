@@ -94,14 +94,17 @@ def test_hand_written_ssp_matches_fmpy_ssp_to_1e_9(convoy):
     parameters = read_ssv(str(archive), resource="resources/parameters.ssv")
     reference = simulate_ssp(str(archive), stop_time=STOP, step_size=STEP, parameter_set=parameters)
     leader, car = log.signals("leader"), log.signals("follower_car")
-    assert len(reference) == len(leader.t) == len(car.t) == round(STOP / STEP)
-    assert np.array_equal(reference["time"], leader.t) and np.array_equal(reference["time"], car.t)
+    # fmpy.ssp's row k, stamped t_k, holds what step k left: the outputs at t_k+1 and the inputs
+    # they feed into step k + 1. Ours stamps each value at the time it holds: record k + 1 (at
+    # t_k+1) has the same outputs, and the same inputs except for the last record (held inputs).
+    assert len(reference) + 1 == len(leader.t) == len(car.t) == round(STOP / STEP) + 1
+    assert np.array_equal(reference["time"] + STEP, leader.t[1:]) and np.array_equal(leader.t, car.t)
     deviations = {}
     for ours, prefix in ((leader, "leader"), (car, "follower.car")):
         for name in ("x", "y", "theta"):
-            deviations[f"{prefix}.{name}"] = np.max(np.abs(ours[name] - reference[f"{prefix}.{name}"]))
-    for name in ("v", "steering_angle"):  # fmpy's row k: the inputs of step k + 1
-        deviations[f"car.{name}"] = np.max(np.abs(car[name][1:] - reference[f"follower.car.{name}"][:-1]))
+            deviations[f"{prefix}.{name}"] = np.max(np.abs(ours[name][1:] - reference[f"{prefix}.{name}"]))
+    for name in ("v", "steering_angle"):
+        deviations[f"car.{name}"] = np.max(np.abs(car[name][1:-1] - reference[f"follower.car.{name}"][:-1]))
     print("max |navcosim - fmpy.ssp|:", max(deviations.values()), deviations)
     assert max(deviations.values()) <= 1e-9
     # Not a trivial agreement: both vehicles moved, and the steering hit its bound from the .ssv.
@@ -220,10 +223,10 @@ def test_linear_transformations_compose_through_system_connectors(convoy, tmp_pa
         assert ssp.connections[0].factor == 1.0 and ssp.connections[0].offset == 0.75
     log = open_log(run_ssp(archive, tmp_path / "scaled.mcap").log_path)
     leader, car = log.signals("leader"), log.signals("follower_car")
-    # Jacobi: step k reads the leader's x after step k - 1 (its initial 0 at k = 0).
-    x_before = np.concatenate(([0.0], leader["x"][:-1]))
-    assert np.array_equal(car["v"], x_before + 0.75)
-    assert np.array_equal(car["steering_angle"], np.concatenate(([0.0], leader["theta"][:-1])))
+    # Jacobi: the input applied at t_k is the leader's output at t_k, and each record holds both
+    # at its stamp (the last record, at the end, holds the inputs last applied).
+    assert leader["x"][0] == 0.0 and np.array_equal(car["v"][:-1], leader["x"][:-1] + 0.75)
+    assert np.array_equal(car["steering_angle"][:-1], leader["theta"][:-1])
 
 
 def test_experiment_from_the_command_line_when_the_file_has_none(convoy, tmp_path, capsys):
@@ -240,7 +243,7 @@ def test_experiment_from_the_command_line_when_the_file_has_none(convoy, tmp_pat
     argv += ["--set", "simulation.macro_step=0.125", "--set", "simulation.master=jacobi"]
     assert main(argv) == 0
     short = open_log(tmp_path / "a.mcap").signals("follower_car")
-    assert len(short.t) == 16 and short.t[-1] == 2 - 0.125
+    assert len(short.t) == 17 and short.t[-1] == 2.0  # 16 steps and the end
     # The convoy's own file with the same overrides runs the same steps.
     argv = ["run", str(convoy[0]), "--out", str(tmp_path / "b.mcap"), "--quiet", "--set"]
     assert main(argv + ["simulation.stop_time=2", "--set", "simulation.macro_step=0.125"]) == 0
@@ -268,12 +271,11 @@ def test_fmi3_fmu_in_an_ssp_follows_the_exact_arc(tmp_path):
         pack(tmp_path / "arc.ssp", ssd, files), tmp_path / "arc.mcap", ["simulation.macro_step=0.01"]
     )
     robot = open_log(result.log_path).signals("robot")
-    t_end = robot.t + 0.01  # each record holds the outputs at the end of its step
-    theta = omega * t_end
+    theta = omega * robot.t  # each record holds the outputs at its stamp
     assert np.allclose(robot["theta"], theta, rtol=0, atol=1e-12)
     assert np.allclose(robot["x"], v / omega * np.sin(theta), rtol=0, atol=1e-12)
     assert np.allclose(robot["y"], 1.0 + v / omega * (1 - np.cos(theta)), rtol=0, atol=1e-12)
-    assert robot["steps"][-1] == 300 and math.isclose(robot.t[-1], 2.99)
+    assert robot["steps"][0] == 0 and robot["steps"][-1] == 300 and math.isclose(robot.t[-1], 3.0)
 
 
 CONNECTOR = '<ssd:Connector name="x" kind="output"><ssc:Real unit="m"/></ssd:Connector>'

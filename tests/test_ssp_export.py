@@ -140,8 +140,9 @@ def test_without_the_navcosim_annotation_the_archive_runs_fmu_only(exported, tmp
     assert isinstance(result, SspRunResult) and result.exit_code == 0 and result.steps == 50
     log = open_log(result.log_path)
     assert sorted(log.components) == ["mixer", "pure_pursuit", "vehicle", "vfh"]
-    # The controllers step at their exported period (20 Hz), the vehicle every macro step.
-    assert len(log.signals("vehicle").t) == 50 and len(log.signals("mixer").t) == 10
+    # The controllers step at their exported period (20 Hz), the vehicle every macro step; each
+    # has a last record at the end (t = 0.5 s) with its final outputs.
+    assert len(log.signals("vehicle").t) == 51 and len(log.signals("mixer").t) == 11
 
 
 def test_export_errors_are_one_line(tmp_path, capsys):

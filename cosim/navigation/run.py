@@ -6,10 +6,11 @@ when the goal is reached, on a collision, at the stop time, on SIGINT/SIGTERM, o
 
 Log contents and rates (t = simulated time, integer nanoseconds):
 - `/signals/<component>`: every scalar input and output of the component, each time it steps
-  (its rate), stamped with the start of that step: the inputs it used and the outputs that step
-  returned. Array ports (waypoints, ranges, angles) are on `/plan` and `/scan` instead; with
-  [output].signal_arrays array outputs are recorded too (a component whose outputs never change,
-  the planner, once at t = 0).
+  (its rate), each value stamped at the time it holds: the record at t has the inputs applied at
+  t and the outputs at t (the first record the initial outputs), and a last record at the end
+  has the final outputs (`cosim.record.recorder`). Array ports (waypoints, ranges, angles) are
+  on `/plan` and `/scan` instead; with [output].signal_arrays array outputs are recorded too (a
+  component whose outputs never change, the planner, once at t = 0).
 - `/odom`, `/tf`, `/pose`: the robot pose (the description's `Observed.pose`, the vehicle's x, y,
   theta) at t = 0 and every 1/pose_rate s ([output].pose_rate, default 50 Hz), and at the end of
   the run; twist = the commanded v and omega (`Observed.command`, the mixer's).
@@ -124,10 +125,20 @@ class _Recording:
             names = [component.inputs[i].name for i in inputs] + [component.outputs[i].name for i in outputs]
             if not names:
                 continue
-            channel = recorder.signal_channel(component.name, names)
+            ports = [component.inputs[i] for i in inputs] + [component.outputs[i] for i in outputs]
+            units = [port.unit for port in ports]
             if component.constant_outputs:
+                channel = recorder.signal_channel(component.name, names, units=units)
                 self.constant.append((channel, component, inputs, outputs))
                 continue
+            channel = recorder.signal_channel(
+                component.name,
+                names,
+                units=units,
+                inputs=len(inputs),
+                initial=np.concatenate((component.input_buffer[inputs], component.output_buffer[outputs])),
+                period_ns=system.period_steps(component) * system.macro_step_ns,
+            )
             # One record = the scalar inputs then the outputs. Where the scalar inputs are one run of
             # slots (all ports, or the scalars before the arrays), the record is two views of the
             # buffers made once: no gather per step.
@@ -384,6 +395,7 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     # NaN in the failed step is not logged.
     if master.step_index % recording.pose_steps != 0 and all(map(math.isfinite, recording.pose())):
         recording.write_pose(end_ns)
+    recorder.end_steps(end_ns)
     reason = "fmu_failed" if failure else state["reason"] or "stop_time"
     outcome = monitor.finish(end_ns / NS_PER_S, reason)
     if bar is not None:

@@ -3,8 +3,8 @@
 An SSP that navcosim exported runs as the scenario it came from (`cosim.navigation.ssp_export`).
 In any other, the FMU components and connections of the SSD are stepped by the master from the start to the
 stop time, with every scalar input and output of each component on `/signals/<component>` at each
-of its steps (stamped with the step's start: the inputs it used and the outputs it returned; the
-convention of `cosim.navigation.run`).
+of its steps, each value stamped at the time it holds (inputs applied at t, outputs at t, a last
+record with the final outputs at the end; the convention of `cosim.navigation.run`).
 
 Overrides: `--set simulation.stop_time=S`, `simulation.macro_step=S`, `simulation.start_time=S`,
 `simulation.master=gauss-seidel|jacobi` take precedence over the file.
@@ -150,8 +150,17 @@ def _run_fmus(ssp: SspSystem, run: Experiment, out_path: Path | None, interrupt)
         _write_header(ssp, run, master, recorder)
         channels, periods = [], []
         for component in master.order:
-            channels.append(recorder.signal_channel(component.name, component.signal_names()))
             periods.append(system.period_steps(component))
+            channels.append(
+                recorder.signal_channel(
+                    component.name,
+                    component.signal_names(),
+                    units=[port.unit for port in (*component.inputs, *component.outputs)],
+                    inputs=len(component.inputs),
+                    initial=component.signal_values(),
+                    period_ns=periods[-1] * h_ns,
+                )
+            )
 
         def record(first: int, count: int, histories: list[np.ndarray]) -> None:
             blocks = []
@@ -175,6 +184,7 @@ def _run_fmus(ssp: SspSystem, run: Experiment, out_path: Path | None, interrupt)
         outcome = {"reached": "false", "reason": reason, "time": repr(master.time)}
         if failure:
             outcome["failure"] = failure
+        recorder.end_steps(master.time_ns)
         recorder.close(outcome)
     wall_time = time.perf_counter() - wall_start
     return SspRunResult(log_path, master.step_index, master.time, wall_time, reason, failure)

@@ -15,6 +15,7 @@ import struct
 import numba
 import numpy as np
 
+from cosim.errors import CosimError
 from cosim.record import rosmsg
 from cosim.record.writer import MESSAGE_HEAD, MESSAGE_HEAD_SIZE, ChunkWriter
 
@@ -95,16 +96,47 @@ def _stamp_fields(offset: int) -> dict[str, tuple]:
 
 
 class SignalStream:
-    """Rows of one `/signals/<component>` channel: `values` float64 per record."""
+    """Rows of one `/signals/<component>` channel: `values` float64 per record.
 
-    def __init__(self, channel: int, size: int, capacity: int) -> None:
+    A step stream (`split` = number of inputs) is handed a step's applied inputs and its end
+    outputs; row n gets the inputs, and the outputs go into row n + 1, the record of the
+    component's next step, at whose start they hold. So `rows[len(times)]` is always the pending
+    record: its outputs are known, its inputs come with the next step (or, at the end, are the
+    inputs last applied, held)."""
+
+    def __init__(
+        self,
+        channel: int,
+        size: int,
+        capacity: int,
+        split: int | None = None,
+        initial: np.ndarray | None = None,
+        period_ns: int = 0,
+        start_ns: int = 0,
+    ) -> None:
         payload = rosmsg.signals_payload(0, np.zeros(size))
         fields = _stamp_fields(_CDR)
         if size:
             fields["values"] = (("<f8", (size,)), rosmsg.SIGNAL_VALUES_OFFSET)
         self.records = _Records(channel, payload, fields)
-        self.rows = np.empty((capacity, size))
+        self.split = split
+        self.period_ns = period_ns
+        self.rows = np.empty((capacity + 1, size))
+        if split is not None:
+            self.rows[0] = initial
         self.times: list[int] = []
+        self.pending_ns: int | None = None  # [ns] when the pending record's outputs hold (None: first step)
+        self.ended = False
+
+    def carry(self) -> None:
+        """After the held rows were packed: the pending record becomes row 0, with the inputs of
+        the last record (for a last record at the end)."""
+        held = len(self.times)
+        if self.split is not None and held and not self.ended:
+            self.rows[0, self.split :] = self.rows[held, self.split :]
+            self.rows[0, : self.split] = self.rows[held - 1, : self.split]
+            self.pending_ns = self.times[-1] + self.period_ns
+        self.times = []
 
 
 class PoseStream:
@@ -136,8 +168,14 @@ class PoseStream:
 class MessageBlock:
     """Messages of a block of steps, in write order, until `pack` hands them to the writer."""
 
-    def __init__(self, writer: ChunkWriter, sequences: dict[int, int], capacity: int = 512) -> None:
+    def __init__(
+        self, writer: ChunkWriter, sequences: dict[int, int], capacity: int = 512, window_ns: int = 0
+    ) -> None:
         self.writer = writer
+        # A message past the window of the first one held asks for a pack, so the writer can end
+        # that window's chunk (what a killed run keeps) without waiting for a full block.
+        self.window_ns = window_ns
+        self.deadline = 0  # [ns] end of the first held message's window (when window_ns)
         self.sequences = sequences  # channel -> next sequence number (shared with the Recorder)
         self.capacity = capacity
         self.signals: dict[int, SignalStream] = {}
@@ -149,8 +187,24 @@ class MessageBlock:
         self.order: list[int] = []  # stream number of each message, in write order
         self.count = 0  # messages held
 
-    def add_signal_channel(self, channel: int, size: int) -> None:
-        self.signals[channel] = SignalStream(channel, size, self.capacity)
+    def _due(self, t_ns: int) -> bool:
+        """True when `t_ns` (of the message just held) is past the first held message's window."""
+        if not self.window_ns:
+            return False
+        if self.count == 1:
+            self.deadline = (t_ns // self.window_ns + 1) * self.window_ns
+            return False
+        return t_ns >= self.deadline
+
+    def add_signal_channel(
+        self,
+        channel: int,
+        size: int,
+        split: int | None = None,
+        initial: np.ndarray | None = None,
+        period_ns: int = 0,
+    ) -> None:
+        self.signals[channel] = SignalStream(channel, size, self.capacity, split, initial, period_ns)
         self.stream_of[channel] = len(self.streams)
         self.streams.append(self.signals[channel])
 
@@ -158,19 +212,30 @@ class MessageBlock:
         self, channel: int, t_ns: int, values: np.ndarray, more: np.ndarray | None = None
     ) -> bool:
         """Hold one signal record (`values`, then `more` when given); True when the block is full
-        (the caller packs it)."""
+        (the caller packs it). On a step stream: a step's inputs and end outputs (`SignalStream`)."""
         stream = self.signals[channel]
-        if more is None:
-            stream.rows[len(stream.times)] = values
+        held = len(stream.times)
+        split = stream.split
+        if split is not None:
+            if stream.ended:
+                raise CosimError(f"signal channel {channel}: a step after end_steps")
+            if more is None:
+                stream.rows[held, :split] = values[:split]
+                stream.rows[held + 1, split:] = values[split:]
+            else:
+                stream.rows[held, :split] = values
+                stream.rows[held + 1, split:] = more
+        elif more is None:
+            stream.rows[held] = values
         else:  # two slice copies: about 1 us less than np.concatenate(..., out=row)
-            row = stream.rows[len(stream.times)]
+            row = stream.rows[held]
             split = len(values)
             row[:split] = values
             row[split:] = more
         stream.times.append(t_ns)
         self.order.append(self.stream_of[channel])
         self.count += 1
-        return len(stream.times) == self.capacity
+        return held + 1 == self.capacity or self._due(t_ns)
 
     def add_signal_rows(self, blocks: list[tuple[int, np.ndarray, np.ndarray]]) -> None:
         """Hold many records at once: (channel, times [ns], rows) per channel, in the order one
@@ -178,22 +243,52 @@ class MessageBlock:
         Packs first when they do not fit next to what is held."""
         counts = [len(times) for _, times, _ in blocks]
         if any(
-            len(self.signals[c].times) + n > len(self.signals[c].rows)
+            len(self.signals[c].times) + n >= len(self.signals[c].rows)
             for (c, _, _), n in zip(blocks, counts, strict=True)
         ):
             self.pack()
         for (channel, times, rows), count in zip(blocks, counts, strict=True):
             stream = self.signals[channel]
-            if count > len(stream.rows):
-                stream.rows = np.empty((count, stream.rows.shape[1]))
+            if count + 1 > len(stream.rows):
+                grown = np.empty((count + 1, stream.rows.shape[1]))
+                grown[0] = stream.rows[0]  # the pending record (nothing else is held after pack)
+                stream.rows = grown
             held = len(stream.times)
-            stream.rows[held : held + count] = rows
+            split = stream.split
+            if split is None:
+                stream.rows[held : held + count] = rows
+            else:
+                if stream.ended and count:
+                    raise CosimError(f"signal channel {channel}: a step after end_steps")
+                stream.rows[held : held + count, :split] = rows[:, :split]
+                stream.rows[held + 1 : held + count + 1, split:] = rows[:, split:]
             stream.times.extend(np.asarray(times, dtype=np.int64).tolist())
         all_times = np.concatenate([np.asarray(times, dtype=np.int64) for _, times, _ in blocks])
         position = np.repeat(np.arange(len(blocks)), counts)
         streams = np.array([self.stream_of[channel] for channel, _, _ in blocks], dtype=np.int64)
         self.order.extend(streams[position[np.lexsort((position, all_times))]].tolist())
         self.count += int(sum(counts))
+
+    def end_steps(self, end_ns: int) -> None:
+        """Hold the last record of every step stream whose pending outputs hold at or before
+        `end_ns` (they are the final outputs), stamped at that time; then no more steps."""
+        for channel, stream in self.signals.items():
+            if stream.split is None or stream.ended:
+                continue
+            held = len(stream.times)
+            if held:
+                pending = stream.times[-1] + stream.period_ns
+                stream.rows[held, : stream.split] = stream.rows[held - 1, : stream.split]
+            else:  # nothing held: the pending record is row 0 (initial values, or carried)
+                pending = stream.pending_ns
+            stream.ended = True
+            if pending is None or pending <= end_ns:
+                # Row `held` exists: a stream is packed before its pending row is the last one.
+                at = end_ns if pending is None else pending  # never stepped: its initial values
+                stream.times.append(int(at))
+                self.order.append(self.stream_of[channel])
+                self.count += 1
+        self.pack()
 
     def add_pose(self, channels: tuple[int, int, int], row: tuple) -> bool:
         if self.pose is None:
@@ -204,13 +299,15 @@ class MessageBlock:
         self.pose.rows.append(row)
         self.order.extend(self.pose_streams)
         self.count += 3
-        return len(self.pose.rows) == self.capacity
+        if self.count == 3 and self.window_ns:  # the first held messages
+            self.deadline = (row[0] // self.window_ns + 1) * self.window_ns
+        return len(self.pose.rows) == self.capacity or self._due(row[0])
 
     def add_raw(self, channel: int, t_ns: int, payload: bytes) -> bool:
         self.raw.append((channel, t_ns, payload))
         self.order.append(RAW_STREAM)
         self.count += 1
-        return len(self.raw) == self.capacity
+        return len(self.raw) == self.capacity or self._due(t_ns)
 
     def _sequence(self, channel: int, count: int) -> int:
         first = self.sequences[channel]
@@ -230,7 +327,7 @@ class MessageBlock:
                 if stream.rows.shape[1]:
                     records["values"] = stream.rows[: len(times)]
                 parts[number] = (records, times, stream.records.channel)
-                stream.times = []
+                stream.carry()
         if self.pose is not None and self.pose.rows:
             rows = np.array(self.pose.rows)
             times = np.array([row[0] for row in self.pose.rows], dtype=np.uint64)

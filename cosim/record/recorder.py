@@ -9,11 +9,25 @@ Speed: signals, poses, commands and scans (the per-step topics) are held in a
 (at most 512 records of a channel); the records and their order are exactly those of writing one
 message at a time. Any other write, `flush()` and `close()` pack the held messages first.
 
-A killed run: the open chunk is flushed (held messages packed, written and handed to the OS)
-whenever a write finds more than `flush_interval` seconds of wall time since the last flush (the
-clock is read every 16 held messages, every one with a zero interval), so SIGKILL loses at most
-the data of about that last interval. Only `close()` writes the summary and footer, so a file without them
-is a run that did not end normally (`cosim.logs.reader` reads it up to its last complete chunk).
+Same run, same bytes: nothing in the file comes from the wall clock or the machine. Attachments
+carry the simulation time they were attached at; chunks end by content alone (`CHUNK_SIZE` bytes
+of records, or `CHUNK_DURATION` of simulated time: a chunk holds one window [n D, (n + 1) D)).
+
+A killed run: every `flush_interval` seconds of wall time (the clock is read every 16 held
+messages) the chunks already ended are handed to the OS (`file.flush()`, which does not change
+the bytes). So SIGKILL loses the open chunk (at most `CHUNK_DURATION` of simulated time, or
+`CHUNK_SIZE` bytes) plus at most `flush_interval` of wall time of ended chunks. A smaller
+`CHUNK_DURATION` loses less but makes more, smaller chunks (more per-chunk overhead when reading,
+slightly worse compression). Only `close()` writes the summary and footer, so a file without them
+is a run that did not end normally (`cosim.logs.reader` reads it up to its last complete record;
+`cosim log recover` rewrites it as a complete, indexed file).
+
+Signals recorded from steps (`signal_channel(..., inputs=n, initial=..., period_ns=...)`): the
+caller hands over, after each step of a component, the inputs applied at the step's start t and
+the outputs at its end. The recorder stamps each value at the time it holds: the record at t holds
+the inputs applied at t and the outputs at t (those of the previous step; the first record holds
+the initial outputs), and `end_steps(t_end)` adds a last record at the end time with the final
+outputs (and the inputs last applied, held).
 """
 
 from __future__ import annotations
@@ -31,18 +45,20 @@ from cosim.record import rosmsg
 from cosim.record.batch import MessageBlock
 from cosim.record.writer import ChunkWriter
 
-# bytes of uncompressed messages per chunk; the wall-clock flush usually ends a chunk first
-CHUNK_SIZE = 512 * 1024
+CHUNK_SIZE = 512 * 1024  # bytes of uncompressed records after which a chunk ends
+CHUNK_DURATION = 0.5  # [s] of simulated time per chunk window: what SIGKILL loses at most
 MAP_FRAME = rosmsg.MAP_FRAME
 ROBOT_FRAME = rosmsg.ROBOT_FRAME
 OBSTACLE_HEIGHT = 0.5  # [m], only for the 3D view
 LINE_WIDTH = 0.05  # [m] of polygon outlines
 SCAN_ANGLE_TOLERANCE = 1e-6  # [rad] below which beam angles count as exactly on the ROS angle grid
 SCAN_MAX_SUBDIVISION = 16
-CLOCK_EVERY = 16  # held messages between two looks at the wall clock for the flush interval
+CLOCK_EVERY = 16  # held messages between two looks at the wall clock for the OS flush
 _STAMP = struct.Struct("<iI")  # builtin_interfaces/Time: int32 sec, uint32 nanosec
 
 SIGNAL_NAMES_KEY = rosmsg.SIGNAL_NAMES_KEY
+SIGNAL_UNITS_KEY = rosmsg.SIGNAL_UNITS_KEY
+SIGNAL_INPUTS_KEY = rosmsg.SIGNAL_INPUTS_KEY
 COMPONENT_KEY = rosmsg.COMPONENT_KEY
 SCAN_LAYOUT_KEY = "navcosim.scan_angles"
 
@@ -71,7 +87,14 @@ class Recorder:
     """Writes one run to `path` (parent folders created). Use as a context manager: leaving the
     `with` block, normally or by an exception, finalises the file."""
 
-    def __init__(self, path: Path, *, flush_interval: float = 0.5, sink=None) -> None:
+    def __init__(
+        self,
+        path: Path,
+        *,
+        flush_interval: float = 0.5,
+        chunk_duration: float = CHUNK_DURATION,
+        sink=None,
+    ) -> None:
         """`sink` (`cosim.record.live.Sink`): also gets every schema, channel and message written."""
         self.path = Path(path)
         try:
@@ -79,7 +102,11 @@ class Recorder:
             self._file = open(self.path, "wb")  # noqa: SIM115 - closed by close()
         except OSError as error:
             raise CosimError(f"{self.path}: cannot write the log ({error.strerror})") from None
-        self._writer = ChunkWriter(self._file, chunk_size=CHUNK_SIZE)
+        if not chunk_duration > 0:
+            self._file.close()
+            raise CosimError(f"{self.path}: chunk_duration must be > 0 s, got {chunk_duration}")
+        window_ns = round(chunk_duration * 1e9)
+        self._writer = ChunkWriter(self._file, chunk_size=CHUNK_SIZE, chunk_duration_ns=window_ns)
         self._writer.start(profile="ros2", library=_library())
         if sink is not None:  # the live view: same channels, same bytes as the file
             from cosim.record.live import tee_writer
@@ -94,7 +121,7 @@ class Recorder:
         self._scan_layouts: dict[tuple, tuple] = {}  # (angles, limits) -> `_scan_template`
         # Signals, poses, commands and scans are held for a block of steps and packed at once
         # (`cosim.record.batch`); any other write, a flush and close pack the block first.
-        self._block = MessageBlock(self._writer, self._sequences)
+        self._block = MessageBlock(self._writer, self._sequences, window_ns=window_ns)
         self._pose_channels: tuple[int, int, int] | None = None
         self._until_clock = 1
         self._last_scan: tuple | None = None  # (angles, range_min, range_max, layout) of the last sweep
@@ -107,17 +134,30 @@ class Recorder:
         self._block.pack()
         self._writer.add_metadata(name, {str(key): str(value) for key, value in data.items()})
 
-    def add_attachment(self, name: str, media_type: str, data: bytes) -> None:
-        """An attached file (the scenario, the map) stored as-is."""
-        now = time.time_ns()
+    def add_attachment(self, name: str, media_type: str, data: bytes, t_ns: int = 0) -> None:
+        """An attached file (the scenario, the map) stored as-is; its create and log time are the
+        simulation time `t_ns` [ns] it was attached at (not the wall clock: same run, same bytes)."""
         self._block.pack()
-        self._writer.add_attachment(now, now, name, media_type, bytes(data))
+        self._writer.add_attachment(int(t_ns), int(t_ns), name, media_type, bytes(data))
 
     def flush(self) -> None:
-        """Close the open chunk and hand everything to the OS (a later SIGKILL keeps it)."""
+        """End the open chunk and hand everything to the OS (a later SIGKILL keeps it). This
+        changes where a chunk ends: call it at points that depend on the simulation only."""
         self._block.pack()
         self._writer.flush()
+        self._sync()
+
+    def _sync(self) -> None:
+        """Hand the chunks already ended to the OS; the bytes of the file do not change."""
+        self._file.flush()
         self._last_flush = time.monotonic()
+
+    def end_steps(self, end_ns: int) -> None:
+        """The run ended at `end_ns` [ns]: add each step channel's last record (see the module
+        docstring); a component whose last step did not reach `end_ns` gets none."""
+        if self._closed:
+            raise CosimError(f"{self.path}: the log is already closed")
+        self._block.end_steps(int(end_ns))
 
     def close(self, outcome: dict[str, str] | None = None) -> None:
         """Write `outcome` as metadata "outcome", then the summary and footer. Idempotent."""
@@ -163,7 +203,7 @@ class Recorder:
         self._sequences[channel] = sequence + 1
         self._writer.add_message(channel, t_ns, data, sequence)
         if time.monotonic() - self._last_flush >= self.flush_interval:
-            self.flush()
+            self._sync()
 
     def _held(self, full: bool) -> None:
         """After a message went into the block: pack a full block; flush when the interval is up."""
@@ -173,8 +213,7 @@ class Recorder:
         if self._until_clock <= 0:
             self._until_clock = CLOCK_EVERY if self.flush_interval > 0 else 1
             if time.monotonic() - self._last_flush >= self.flush_interval:
-                self.flush()
-                return
+                self._sync()
         if full:
             self._block.pack()
 
@@ -183,24 +222,53 @@ class Recorder:
 
     # --- signals -------------------------------------------------------------------------
 
-    def signal_channel(self, component: str, names: list[str]) -> int:
-        """Register `/signals/<component>` with one float64 field per name; returns its handle."""
+    def signal_channel(
+        self,
+        component: str,
+        names: list[str],
+        *,
+        units: list[str] | None = None,
+        inputs: int | None = None,
+        initial: np.ndarray | None = None,
+        period_ns: int = 0,
+    ) -> int:
+        """Register `/signals/<component>` with one float64 field per name; returns its handle.
+
+        `units` (one per name, "" for none) go into the channel metadata. With `inputs` the
+        channel is recorded from steps: the first `inputs` names are inputs, the rest outputs,
+        `initial` holds every value after initialisation and `period_ns` [ns] is the component's
+        step; `hold_signals`/`hold_signal_rows` then take a step's applied inputs and end outputs
+        and the records are stamped as the module docstring says."""
         topic = f"/signals/{component}"
         if topic in self._channels:
             raise CosimError(f"{self.path}: signal channel {topic} registered twice")
-        fields = rosmsg.field_names(list(names))
+        names = list(names)
+        fields = rosmsg.field_names(names)
         typename = rosmsg.signals_type_name(component)
         schema = self._schema(typename, rosmsg.signals_definition(fields))
-        metadata = {COMPONENT_KEY: component, SIGNAL_NAMES_KEY: json.dumps(list(names))}
+        metadata = {COMPONENT_KEY: component, SIGNAL_NAMES_KEY: json.dumps(names)}
+        if units is not None:
+            if len(units) != len(names):
+                raise CosimError(f"{self.path}: {len(units)} units for the {len(names)} signals of {topic}")
+            metadata[SIGNAL_UNITS_KEY] = json.dumps([str(unit) for unit in units])
+        if inputs is not None:
+            if initial is None or np.size(initial) != len(names) or not 0 <= inputs <= len(names):
+                raise CosimError(f"{self.path}: {topic}: a step channel needs {len(names)} initial values")
+            if period_ns <= 0:
+                raise CosimError(
+                    f"{self.path}: {topic}: a step channel needs a period > 0, got {period_ns} ns"
+                )
+            metadata[SIGNAL_INPUTS_KEY] = str(inputs)
         channel = self._writer.register_channel(topic, "cdr", schema, metadata)
         self._channels[topic] = channel
         self._sequences[channel] = 0
         self._signal_sizes[channel] = len(names)
-        self._block.add_signal_channel(channel, len(names))
+        self._block.add_signal_channel(channel, len(names), inputs, initial, period_ns)
         return channel
 
     def write_signals(self, channel: int, t_ns: int, values: np.ndarray) -> None:
-        """One record of a component's signals at `t_ns` [ns]: float64 values in the channel's order."""
+        """One record of a component's signals at `t_ns` [ns]: float64 values in the channel's
+        order, stamped as given (not for a step channel)."""
         if values.dtype != np.float64:
             values = np.asarray(values, dtype=np.float64)
         if values.size != self._signal_sizes[channel]:
@@ -209,13 +277,16 @@ class Recorder:
             )
         if self._closed:
             raise CosimError(f"{self.path}: the log is already closed")
+        if self._block.signals[channel].split is not None:
+            raise CosimError(f"{self.path}: channel {channel} is recorded from steps: use hold_signals")
         self._held(self._block.add_signals(channel, t_ns, values))
 
     def hold_signals(
         self, channel: int, t_ns: int, first: np.ndarray, second: np.ndarray | None = None
     ) -> None:
-        """`write_signals` for the run loop: the record is `first` (float64), or `first` then
-        `second` (a component's input and output buffers); shapes are checked by NumPy only."""
+        """`write_signals` for the run loop: the values are `first` (float64), or `first` then
+        `second` (a component's input and output buffers); shapes are checked by NumPy only. On a
+        step channel `t_ns` is the step's start and the values are its inputs and end outputs."""
         if self._closed:
             raise CosimError(f"{self.path}: the log is already closed")
         self._held(self._block.add_signals(channel, t_ns, first, second))
@@ -223,7 +294,8 @@ class Recorder:
     def hold_signal_rows(self, blocks: list[tuple[int, np.ndarray, np.ndarray]]) -> None:
         """Many signal records at once (`Master.run_recorded`'s blocks): (channel, times [ns],
         rows of float64 values) per channel; written as if one record at a time, in time order
-        and, at equal times, in the order of `blocks`."""
+        and, at equal times, in the order of `blocks`. On a step channel the times are the steps'
+        starts and a row is a step's inputs then its end outputs, as for `hold_signals`."""
         if self._closed:
             raise CosimError(f"{self.path}: the log is already closed")
         for channel, times, rows in blocks:

@@ -26,6 +26,8 @@ SIGNAL_VALUES_OFFSET = len(CDR_HEADER) + SIGNAL_STAMP_BYTES  # float64 fields st
 SEPARATOR = "=" * 80
 # Channel metadata of a `/signals/<component>` channel, read back by `cosim.logs`.
 SIGNAL_NAMES_KEY = "navcosim.signal_names"  # JSON list of the original variable names
+SIGNAL_UNITS_KEY = "navcosim.signal_units"  # JSON list of their units ("" for none), same order
+SIGNAL_INPUTS_KEY = "navcosim.signal_inputs"  # how many of the first names are inputs (step channels)
 COMPONENT_KEY = "navcosim.component"
 
 _TIME_DEFINITION = "int32 sec\nuint32 nanosec\n"

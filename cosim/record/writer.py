@@ -9,6 +9,11 @@ the chunk where they are first used (so a cut file is self-describing); each chu
 MessageIndex per channel; attachments and metadata between chunks; then DataEnd, the summary
 (schemas, channels, statistics, chunk/attachment/metadata indexes), summary offsets and footer.
 The non-message records are written with `mcap.records`.
+
+Chunk boundaries depend only on the messages, never on the wall clock, so the same messages give
+the same bytes: a chunk ends when it holds more than `chunk_size` bytes of records, and (with
+`chunk_duration_ns`) before the first message of a later window of log time, windows being
+[n D, (n + 1) D). `copy_chunk` writes a chunk read from another file as it is (`cosim log recover`).
 """
 
 from __future__ import annotations
@@ -46,9 +51,17 @@ _MESSAGE_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, length, channel, byte le
 class ChunkWriter:
     """Writes one MCAP file to a binary `stream` (not closed by `finish`)."""
 
-    def __init__(self, stream, chunk_size: int = 512 * 1024, compression_level: int = 3) -> None:
+    def __init__(
+        self,
+        stream,
+        chunk_size: int = 512 * 1024,
+        compression_level: int = 3,
+        chunk_duration_ns: int | None = None,
+    ) -> None:
         self._stream = stream
         self.chunk_size = chunk_size
+        self.chunk_duration_ns = chunk_duration_ns  # [ns] of log time per chunk window, or None
+        self._deadline = 0  # [ns] end of the open chunk's window
         self._compressor = zstandard.ZstdCompressor(level=compression_level)
         self._chunk = bytearray()
         self._chunk_start = 0  # [ns] earliest log time in the open chunk
@@ -81,24 +94,44 @@ class ChunkWriter:
         self._stream.write(MAGIC)
         self._write_record(Header(profile=profile, library=library))
 
-    def register_schema(self, name: str, encoding: str, data: bytes) -> int:
-        schema = Schema(id=len(self._schemas) + 1, name=name, encoding=encoding, data=data)
+    def register_schema(self, name: str, encoding: str, data: bytes, schema_id: int | None = None) -> int:
+        """A schema (id: the next free one unless given), written before the first message after it."""
+        schema = Schema(
+            id=schema_id if schema_id is not None else len(self._schemas) + 1,
+            name=name,
+            encoding=encoding,
+            data=data,
+        )
         self._schemas[schema.id] = schema
         self._unwritten.append(schema)
         return schema.id
 
-    def register_channel(self, topic: str, encoding: str, schema_id: int, metadata: dict[str, str]) -> int:
+    def register_channel(
+        self,
+        topic: str,
+        encoding: str,
+        schema_id: int,
+        metadata: dict[str, str],
+        channel_id: int | None = None,
+    ) -> int:
         channel = Channel(
-            id=len(self._channels) + 1,
+            id=channel_id if channel_id is not None else len(self._channels) + 1,
             topic=topic,
             message_encoding=encoding,
             schema_id=schema_id,
             metadata=dict(metadata),
         )
         self._channels[channel.id] = channel
-        self._counts[channel.id] = 0
+        self._counts.setdefault(channel.id, 0)
         self._unwritten.append(channel)
         return channel.id
+
+    def write_definitions(self) -> None:
+        """Write the schemas and channels registered since the last chunk as top-level records now
+        (for chunks copied with `copy_chunk`, which may not hold them)."""
+        for record in self._unwritten:
+            self._write_record(record)
+        self._unwritten.clear()
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         offset, length = self._write_record(Metadata(name=name, metadata=data))
@@ -134,9 +167,16 @@ class ChunkWriter:
             self._unwritten.clear()
         if self._chunk_messages == 0:
             self._chunk_start = self._chunk_end = t_ns
+            if self.chunk_duration_ns:
+                self._deadline = (t_ns // self.chunk_duration_ns + 1) * self.chunk_duration_ns
+
+    def _past_window(self, t_ns: int) -> bool:
+        return bool(self.chunk_duration_ns) and self._chunk_messages > 0 and t_ns >= self._deadline
 
     def add_message(self, channel: int, t_ns: int, data: bytes, sequence: int) -> None:
         """One message (log time = publish time = t_ns)."""
+        if self._past_window(t_ns):
+            self._finish_chunk()
         self._open_records(t_ns)
         chunk = self._chunk
         offset = len(chunk)
@@ -155,16 +195,47 @@ class ChunkWriter:
         self, records: bytes, channels: np.ndarray, times: np.ndarray, offsets: np.ndarray
     ) -> None:
         """Append message records packed by the caller (in log-time order): `channels`, `times`
-        [ns] and byte `offsets` (within `records`) per message."""
-        if len(times) == 0:
+        [ns] and byte `offsets` (within `records`) per message. The records are split where a
+        chunk ends (its size, its time window)."""
+        count = len(times)
+        if count == 0:
             return
-        first, last = int(times.min()), int(times.max())
-        self._open_records(first)
-        base = len(self._chunk)
-        self._chunk += records
+        times = np.asarray(times, dtype=np.uint64)
+        offsets = np.asarray(offsets, dtype=np.int64)
+        ends = np.empty(count, dtype=np.int64)
+        ends[:-1] = offsets[1:]
+        ends[-1] = len(records)
+        first = 0
+        while first < count:
+            if self._past_window(int(times[first])):
+                self._finish_chunk()
+            self._open_records(int(times[first]))
+            stop = count
+            if self.chunk_duration_ns:
+                later = np.flatnonzero(times[first:] >= self._deadline)
+                if len(later):
+                    stop = first + max(int(later[0]), 1)
+            room = self.chunk_size - len(self._chunk) + int(offsets[first])
+            over = int(np.searchsorted(ends[first:stop], room, side="right"))
+            stop = min(stop, first + over + 1)  # the record that passes the size ends the chunk
+            self._append(
+                records, channels[first:stop], times[first:stop], offsets[first:stop], ends[stop - 1]
+            )
+            first = stop
+            if first < count or len(self._chunk) > self.chunk_size:
+                self._finish_chunk()
+
+    def _append(
+        self, records: bytes, channels: np.ndarray, times: np.ndarray, offsets: np.ndarray, end: int
+    ) -> None:
+        """Records `offsets[0]:end` of `records` into the open chunk, with their index entries."""
+        begin = int(offsets[0])
+        base = len(self._chunk) - begin
+        self._chunk += memoryview(records)[begin:end]
         pairs = np.empty((len(times), 2), dtype="<u8")
         pairs[:, 0] = times
         pairs[:, 1] = offsets + base
+        first, last = int(times.min()), int(times.max())
         for channel in np.unique(channels):
             channel = int(channel)
             selected = channels == channel
@@ -173,19 +244,20 @@ class ChunkWriter:
                 index = self._index[channel] = array("Q")
             index.frombytes(pairs[selected].tobytes())
             self._count(channel, int(np.count_nonzero(selected)), first, last)
-        if len(self._chunk) > self.chunk_size:
-            self._finish_chunk()
 
     def _count(self, channel: int, count: int, first: int, last: int) -> None:
-        self._counts[channel] += count
-        if self._message_count == 0:
-            self._start_time = first
-        self._message_count += count
-        self._start_time = min(self._start_time, first)
-        self._end_time = max(self._end_time, last)
+        self._count_file(channel, count, first, last)
         self._chunk_messages += count
         self._chunk_start = min(self._chunk_start, first)
         self._chunk_end = max(self._chunk_end, last)
+
+    def _count_file(self, channel: int, count: int, first: int, last: int) -> None:
+        self._counts[channel] = self._counts.get(channel, 0) + count
+        if self._message_count == 0:
+            self._start_time, self._end_time = first, last
+        self._message_count += count
+        self._start_time = min(self._start_time, first)
+        self._end_time = max(self._end_time, last)
 
     def _finish_chunk(self) -> None:
         if self._chunk_messages == 0:
@@ -202,13 +274,44 @@ class ChunkWriter:
         )
         stream.write(struct.pack("<I4sQ", 4, b"zstd", len(compressed)))
         stream.write(compressed)
+        index = {
+            channel: np.frombuffer(pairs, dtype="<u8").reshape(-1, 2)
+            for channel, pairs in self._index.items()
+        }
+        self._write_message_indexes(
+            index,
+            start,
+            1 + 8 + length,
+            self._chunk_start,
+            self._chunk_end,
+            "zstd",
+            len(compressed),
+            len(data),
+        )
+        self._chunk = bytearray()
+        self._index = {}
+        self._chunk_messages = 0
+
+    def _write_message_indexes(
+        self,
+        index: dict[int, np.ndarray],
+        start: int,
+        chunk_length: int,
+        start_time: int,
+        end_time: int,
+        compression: str,
+        compressed_size: int,
+        uncompressed_size: int,
+    ) -> None:
+        """The MessageIndex records after the chunk at `start` (one per channel, in channel order)
+        and its ChunkIndex for the summary."""
+        stream = self._stream
         index_start = stream.tell()
         offsets = {}
         parts = []
         position = index_start
-        for channel in sorted(self._index):
-            pairs = self._index[channel]
-            body = pairs.tobytes()
+        for channel in sorted(index):
+            body = np.ascontiguousarray(index[channel], dtype="<u8").tobytes()
             offsets[channel] = position
             part = (
                 _MESSAGE_INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 2 + 4 + len(body), channel, len(body)) + body
@@ -218,20 +321,40 @@ class ChunkWriter:
         stream.write(b"".join(parts))
         self._chunk_indexes.append(
             ChunkIndex(
-                message_start_time=self._chunk_start,
-                message_end_time=self._chunk_end,
+                message_start_time=start_time,
+                message_end_time=end_time,
                 chunk_start_offset=start,
-                chunk_length=1 + 8 + length,
+                chunk_length=chunk_length,
                 message_index_offsets=offsets,
                 message_index_length=position - index_start,
-                compression="zstd",
-                compressed_size=len(compressed),
-                uncompressed_size=len(data),
+                compression=compression,
+                compressed_size=compressed_size,
+                uncompressed_size=uncompressed_size,
             )
         )
-        self._chunk = bytearray()
-        self._index = {}
-        self._chunk_messages = 0
+
+    def copy_chunk(
+        self,
+        record: bytes,
+        index: dict[int, np.ndarray],
+        compression: str,
+        compressed_size: int,
+        uncompressed_size: int,
+    ) -> None:
+        """Write a whole Chunk record (opcode to end) as it is, then message indexes from `index`
+        (channel -> (n, 2) log time [ns], offset pairs); the open chunk is ended first."""
+        self._finish_chunk()
+        self.write_definitions()
+        start = self._stream.tell()
+        self._stream.write(record)
+        start_time = min(int(pairs[:, 0].min()) for pairs in index.values() if len(pairs))
+        end_time = max(int(pairs[:, 0].max()) for pairs in index.values() if len(pairs))
+        for channel, pairs in index.items():
+            if len(pairs):
+                self._count_file(channel, len(pairs), int(pairs[:, 0].min()), int(pairs[:, 0].max()))
+        self._write_message_indexes(
+            index, start, len(record), start_time, end_time, compression, compressed_size, uncompressed_size
+        )
 
     def flush(self) -> None:
         """End the open chunk (if it holds messages) and hand everything to the OS."""
