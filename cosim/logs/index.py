@@ -4,8 +4,15 @@ Why not `mcap`'s readers: the indexed reader needs the summary that a killed run
 the streaming readers decode every message into a Python object (too slow for signals). This walk
 reads the top-level records in file order like `mcap.stream_reader.NonSeekingReader`, skips over
 chunk bodies (they are decompressed only when asked for), and stops at the first record that is
-cut short or malformed: everything before it is a complete, usable part of the log. Record bodies
-other than chunks and message indexes are parsed with `mcap`'s own record classes.
+cut short or malformed: everything before it is a complete, usable part of the log; of a chunk
+cut short, the records that its compressed prefix still holds are kept. Record bodies other than
+chunks and message indexes are parsed with `mcap`'s own record classes.
+
+Decompression is bounded, so a hostile or broken file cannot take the memory or the time of the
+machine: a chunk declaring more than `MAX_CHUNK_BYTES` uncompressed is skipped (with a note in
+`LogIndex.skipped`), and chunks are decompressed as streams that stop one byte past their
+declared size (a chunk that expands further is an error, not an allocation). A chunk's CRC, when
+it has one, is checked.
 
 MCAP layout used here (https://mcap.dev/spec): magic, then records `opcode u8 | length u64 |
 body`; a Chunk body is `start u64 | end u64 | uncompressed_size u64 | crc u32 | compression str |
@@ -18,6 +25,7 @@ from __future__ import annotations
 
 import io
 import struct
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -37,6 +45,7 @@ _record_head = struct.Struct("<BQ")
 _chunk_head = struct.Struct("<QQQII")  # start, end, uncompressed size, crc, compression string length
 _message_head = struct.Struct("<HIQQ")
 _zstd = zstandard.ZstdDecompressor()
+MAX_CHUNK_BYTES = 256 * 2**20  # largest uncompressed chunk read [bytes]; navcosim writes ~0.5 MiB
 
 
 @dataclass
@@ -49,6 +58,11 @@ class Block:
     compression: str  # "zstd", "lz4" or "" (stored)
     index: dict[int, np.ndarray] = field(default_factory=dict)  # channel -> (n, 2) uint64 (time, offset)
     indexed: bool = False  # True once the message indexes after the chunk were read completely
+    crc: int = 0  # CRC-32 of the uncompressed records (0: none)
+    record_offset: int = -1  # file offset of the Chunk record (its opcode); -1 for top-level messages
+    record_length: int = 0  # bytes of the whole Chunk record
+    partial: bool = False  # the file ends inside this chunk: only a prefix of its records is there
+    usable_size: int = -1  # of a partial chunk: bytes of its complete records (-1: not walked yet)
 
 
 @dataclass
@@ -62,9 +76,11 @@ class LogIndex:
     attachments: list[Attachment] = field(default_factory=list)
     complete: bool = False  # the footer was read
     problem: str | None = None  # why the walk stopped early
+    skipped: list[str] = field(default_factory=list)  # chunks left out, and why
 
 
-def _parse(record_class, body: bytes):
+def parse_record(record_class, body: bytes):
+    """A record body (bytes after opcode and length) as an `mcap.records` object."""
     return record_class.read(ReadDataStream(io.BytesIO(body)))
 
 
@@ -96,6 +112,7 @@ def _walk(handle, file_size: int, log: LogIndex) -> None:
     position = len(MAGIC)
     raw_messages: list[tuple[int, int, int]] = []  # (channel, time, offset) of top-level messages
     raw_block: Block | None = None
+    current: Block | None = None  # the chunk that the message indexes being read belong to
     while True:
         head = handle.read(_record_head.size)
         if len(head) < _record_head.size:
@@ -105,11 +122,15 @@ def _walk(handle, file_size: int, log: LogIndex) -> None:
         body_start = position + _record_head.size
         if body_start + length > file_size:
             log.problem = "the last record is cut short"
+            if opcode == OP_CHUNK:
+                _salvage_chunk(handle, position, body_start, file_size, log)
             break
-        if log.blocks and opcode != OP_MESSAGE_INDEX:
-            log.blocks[-1].indexed = True
+        if opcode != OP_MESSAGE_INDEX:
+            if current is not None:
+                current.indexed = True
+            current = None
         if opcode == OP_CHUNK:
-            log.blocks.append(_read_chunk_head(handle, body_start, length))
+            current = _admit(_read_chunk_head(handle, position, body_start, length), position, log)
         elif opcode == OP_MESSAGE:
             channel, _, log_time, _ = _message_head.unpack(handle.read(_message_head.size))
             if raw_block is None or raw_block.data_offset + raw_block.data_size != position:
@@ -118,11 +139,12 @@ def _walk(handle, file_size: int, log: LogIndex) -> None:
             raw_messages.append((channel, log_time, position - raw_block.data_offset))
             raw_block.data_size = body_start + length - raw_block.data_offset
             raw_block.uncompressed_size = raw_block.data_size
-        elif opcode == OP_MESSAGE_INDEX and log.blocks:
+        elif opcode == OP_MESSAGE_INDEX:
             body = handle.read(length)
-            channel, byte_length = struct.unpack_from("<HI", body)
-            entries = np.frombuffer(body, dtype="<u8", count=byte_length // 8, offset=6).reshape(-1, 2)
-            log.blocks[-1].index[channel] = entries
+            if current is not None:
+                channel, byte_length = struct.unpack_from("<HI", body)
+                entries = np.frombuffer(body, dtype="<u8", count=byte_length // 8, offset=6).reshape(-1, 2)
+                current.index[channel] = entries
         elif opcode == OP_FOOTER:
             log.complete = True
             log.problem = None
@@ -130,17 +152,17 @@ def _walk(handle, file_size: int, log: LogIndex) -> None:
         else:
             body = handle.read(length)
             if opcode == OP_SCHEMA:
-                schema = _parse(Schema, body)
+                schema = parse_record(Schema, body)
                 log.schemas[schema.id] = schema
             elif opcode == OP_CHANNEL:
-                channel_record = _parse(Channel, body)
+                channel_record = parse_record(Channel, body)
                 log.channels[channel_record.id] = channel_record
             elif opcode == OP_METADATA:
-                log.metadata.append(_parse(Metadata, body))
+                log.metadata.append(parse_record(Metadata, body))
             elif opcode == OP_ATTACHMENT:
-                log.attachments.append(_parse(Attachment, body))
+                log.attachments.append(parse_record(Attachment, body))
             elif opcode == OP_HEADER:
-                log.header = _parse(Header, body)
+                log.header = parse_record(Header, body)
             elif opcode == OP_DATA_END and raw_block is not None:
                 raw_block = _finish_raw(log, raw_block, raw_messages)
         position = body_start + length
@@ -148,14 +170,53 @@ def _walk(handle, file_size: int, log: LogIndex) -> None:
     _finish_raw(log, raw_block, raw_messages)
 
 
-def _read_chunk_head(handle, body_start: int, length: int) -> Block:
-    start, end, uncompressed_size, _crc, name_length = _chunk_head.unpack(handle.read(_chunk_head.size))
+def _admit(block: Block, position: int, log: LogIndex) -> Block | None:
+    """Add a chunk to the log unless its declared size is above the limit (then None)."""
+    if block.uncompressed_size > MAX_CHUNK_BYTES:
+        log.skipped.append(
+            f"chunk at byte {position} declares {block.uncompressed_size} bytes uncompressed, above the "
+            f"limit of {MAX_CHUNK_BYTES}: skipped"
+        )
+        return None
+    log.blocks.append(block)
+    return block
+
+
+def _read_chunk_head(handle, position: int, body_start: int, length: int) -> Block:
+    start, end, uncompressed_size, crc, name_length = _chunk_head.unpack(handle.read(_chunk_head.size))
     compression = handle.read(name_length).decode()
     (records_length,) = struct.unpack("<Q", handle.read(8))
     data_offset = body_start + _chunk_head.size + name_length + 8
     if data_offset + records_length > body_start + length:
         raise ValueError("chunk records overrun the chunk record")
-    return Block(data_offset, records_length, uncompressed_size, compression)
+    return Block(
+        data_offset,
+        records_length,
+        uncompressed_size,
+        compression,
+        crc=crc,
+        record_offset=position,
+        record_length=_record_head.size + length,
+    )
+
+
+def _salvage_chunk(handle, position: int, body_start: int, file_size: int, log: LogIndex) -> None:
+    """The file ends inside a chunk: keep its available compressed prefix as a partial block,
+    whose complete records `_reindex_last` indexes."""
+    handle.seek(body_start)
+    head = handle.read(_chunk_head.size)
+    if len(head) < _chunk_head.size:
+        return
+    _, _, uncompressed_size, crc, name_length = _chunk_head.unpack(head)
+    name, size = handle.read(name_length), handle.read(8)
+    if len(name) < name_length or len(size) < 8:
+        return
+    data_offset = body_start + _chunk_head.size + name_length + 8
+    available = min(struct.unpack("<Q", size)[0], file_size - data_offset)
+    if available > 0:
+        compression = name.decode(errors="replace")
+        block = Block(data_offset, available, uncompressed_size, compression, crc=crc, partial=True)
+        _admit(block, position, log)
 
 
 def _finish_raw(log: LogIndex, block: Block | None, messages: list[tuple[int, int, int]]) -> None:
@@ -172,8 +233,9 @@ def _finish_raw(log: LogIndex, block: Block | None, messages: list[tuple[int, in
 
 
 def _reindex_last(handle, log: LogIndex) -> None:
-    """The last chunk of a cut file may lack (some of) its message indexes: rebuild them by
-    walking its records; drop the chunk when it does not decompress."""
+    """The last chunk of a cut file may lack (some of) its message indexes, or be cut itself:
+    rebuild its index by walking its complete records; drop the chunk when it does not
+    decompress or holds no complete message."""
     block = log.blocks[-1]
     try:
         records = block_bytes(handle, block)
@@ -185,33 +247,69 @@ def _reindex_last(handle, log: LogIndex) -> None:
     offset = 0
     while offset + _record_head.size <= len(records):
         opcode, length = _record_head.unpack_from(records, offset)
-        if opcode == OP_MESSAGE:
-            channel, _, log_time, _ = _message_head.unpack_from(records, offset + _record_head.size)
+        body = offset + _record_head.size
+        if body + length > len(records):
+            break  # a partial chunk's last record, cut short
+        if opcode == OP_MESSAGE and length >= _message_head.size:
+            channel, _, log_time, _ = _message_head.unpack_from(records, body)
             index.setdefault(channel, []).append((log_time, offset))
         elif opcode == OP_CHANNEL:
-            channel_record = _parse(Channel, records[offset + 9 : offset + 9 + length])
+            channel_record = parse_record(Channel, records[body : body + length])
             log.channels.setdefault(channel_record.id, channel_record)
         elif opcode == OP_SCHEMA:
-            schema = _parse(Schema, records[offset + 9 : offset + 9 + length])
+            schema = parse_record(Schema, records[body : body + length])
             log.schemas.setdefault(schema.id, schema)
-        offset += _record_head.size + length
+        offset = body + length
+    if block.partial:
+        block.usable_size = offset
     block.index = {channel: np.array(entries, dtype=np.uint64) for channel, entries in index.items()}
     block.indexed = True
+    if not index:
+        log.blocks.pop()
+
+
+def _decompress(data: bytes, compression: str, size: int, partial: bool) -> bytes:
+    """The records of a chunk declaring `size` uncompressed bytes, decompressed as a stream that
+    stops one byte past `size`; of a partial chunk, whatever its prefix holds."""
+    if compression == "zstd":
+        with _zstd.stream_reader(data, read_across_frames=True) as reader:
+            records = reader.read(size + 1)
+    elif compression == "lz4":
+        records = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
+    elif compression == "":
+        records = data[: size + 1]
+    else:
+        raise ValueError(f"unsupported chunk compression {compression!r}")
+    if len(records) > size:
+        raise ValueError(f"chunk expands beyond its declared {size} bytes")
+    if len(records) < size and not partial:
+        raise ValueError(f"chunk holds {len(records)} bytes, not its declared {size}")
+    return records
 
 
 def block_bytes(handle, block: Block) -> bytes:
-    """The uncompressed records of a block."""
+    """The uncompressed records of a block (of a partial chunk: its complete records); raises
+    ValueError for a block that is cut, corrupt or expands beyond its declared size."""
     handle.seek(block.data_offset)
     data = handle.read(block.data_size)
     if len(data) != block.data_size:
         raise ValueError("block is cut short")
-    if block.compression == "zstd":
-        return _zstd.decompress(data, max_output_size=block.uncompressed_size)
-    if block.compression == "lz4":
-        return lz4.frame.decompress(data)
-    if block.compression == "":
-        return data
-    raise ValueError(f"unsupported chunk compression {block.compression!r}")
+    if block.record_offset < 0 and not block.partial:
+        return data  # top-level messages of an unchunked file
+    records = _decompress(data, block.compression, block.uncompressed_size, block.partial)
+    if block.partial:
+        return records[: block.usable_size] if block.usable_size >= 0 else records
+    if block.crc and zlib.crc32(records) != block.crc:
+        raise ValueError(f"chunk at byte {block.record_offset} fails its CRC check")
+    return records
+
+
+def records_of(handle, log: LogIndex, block: Block) -> bytes:
+    """`block_bytes`, with a broken block as a one-line CosimError that names the file."""
+    try:
+        return block_bytes(handle, block)
+    except (zstandard.ZstdError, RuntimeError, ValueError) as error:
+        raise CosimError(f"{log.path}: unreadable chunk ({error})") from None
 
 
 def discover_channels_in_blocks(handle, log: LogIndex) -> None:
@@ -220,16 +318,16 @@ def discover_channels_in_blocks(handle, log: LogIndex) -> None:
     for block in log.blocks:
         if all(channel in log.channels for channel in block.index):
             continue
-        records = block_bytes(handle, block)
+        records = records_of(handle, log, block)
         offset = 0
         while offset + _record_head.size <= len(records):
             opcode, length = _record_head.unpack_from(records, offset)
             body = records[offset + _record_head.size : offset + _record_head.size + length]
             if opcode == OP_SCHEMA:
-                schema = _parse(Schema, body)
+                schema = parse_record(Schema, body)
                 log.schemas.setdefault(schema.id, schema)
             elif opcode == OP_CHANNEL:
-                channel_record = _parse(Channel, body)
+                channel_record = parse_record(Channel, body)
                 log.channels.setdefault(channel_record.id, channel_record)
             offset += _record_head.size + length
 
@@ -249,7 +347,7 @@ def fixed_payloads(
         wanted = [channel for channel in layouts if len(block.index.get(channel, ()))]
         if not wanted:
             continue
-        records = np.frombuffer(block_bytes(handle, block), dtype=np.uint8)
+        records = np.frombuffer(records_of(handle, log, block), dtype=np.uint8)
         lengths_view = np.lib.stride_tricks.sliding_window_view(records, 8)
         for channel in wanted:
             skip, width = layouts[channel]
@@ -284,7 +382,7 @@ def iter_payloads(handle, log: LogIndex, channels: set[int]):
         wanted = [entries for channel, entries in block.index.items() if channel in channels and len(entries)]
         if not wanted:
             continue
-        records = block_bytes(handle, block)
+        records = records_of(handle, log, block)
         entries = np.concatenate(wanted)
         entries = entries[np.argsort(entries[:, 0], kind="stable")]
         for log_time, offset in entries.tolist():

@@ -95,6 +95,7 @@ class Log:
         self._signals: dict[str, Signals] = {}
         self._typestore = None
         self.warnings: list[str] = []
+        self.warnings.extend(self._index.skipped)
         if not self.is_complete:
             self.warnings.append(
                 f"incomplete log ({self._index.problem}): read up to its last complete chunk, "
