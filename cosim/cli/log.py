@@ -1,4 +1,4 @@
-"""`cosim log info|plot|animate|export|diff LOG`: inspect a run's MCAP log without another tool."""
+"""`cosim log info|plot|animate|export|diff|recover LOG`: inspect a run's MCAP log without another tool."""
 
 from __future__ import annotations
 
@@ -12,8 +12,9 @@ from cosim.errors import CosimError
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "log",
-        help="inspect run logs (MCAP): info, plot, animate, export, diff",
-        description="Inspect a run's MCAP log: summary, plots, signal tables, comparison of two runs.",
+        help="inspect run logs (MCAP): info, plot, animate, export, diff, recover",
+        description="Inspect a run's MCAP log: summary, plots, signal tables, comparison of two runs, "
+        "recovery of a cut log.",
     )
     commands = parser.add_subparsers(dest="log_command", required=True, metavar="ACTION")
 
@@ -65,6 +66,18 @@ def register(subparsers) -> None:
         "--tolerance", type=float, default=1e-9, metavar="X", help="largest allowed |A-B| (1e-9)"
     )
     diff.set_defaults(handler=_diff)
+
+    recover = commands.add_parser(
+        "recover",
+        help="rewrite a cut log (killed run) as a complete, indexed MCAP that every reader opens",
+        description="Write everything readable in a log cut short (no summary or footer, e.g. after "
+        "SIGKILL) as a complete, indexed MCAP: schemas, channels, messages, metadata and attachments.",
+    )
+    recover.add_argument("log", type=Path, metavar="IN", help="run log (.mcap), cut or complete")
+    recover.add_argument(
+        "--out", type=Path, metavar="OUT", help="recovered log (default: IN with .recovered.mcap)"
+    )
+    recover.set_defaults(handler=_recover)
 
 
 def _open(path: Path):
@@ -138,3 +151,19 @@ def _diff(args) -> int:
     report = _guard(args.log_a, lambda: diff_logs(log_a, log_b, args.tolerance))
     print(format_report(report, log_a, log_b))
     return 1 if report.differs else 0
+
+
+def _recover(args) -> int:
+    from cosim.logs.recover import recover_log
+
+    recovery = _guard(args.log, lambda: recover_log(args.log, args.out))
+    for note in recovery.dropped:
+        print(f"cosim: warning: {args.log}: {note}", file=sys.stderr)
+    state = "complete already" if recovery.was_complete else f"cut: {recovery.problem}"
+    print(
+        f"wrote {recovery.target}: {recovery.messages} messages on {recovery.channels} channels, "
+        f"t = {recovery.start_time:.3f} .. {recovery.end_time:.3f} s, {recovery.metadata} metadata, "
+        f"{recovery.attachments} attachments ({recovery.chunks_copied} chunks copied, "
+        f"{recovery.chunks_rebuilt} rebuilt; the source was {state})"
+    )
+    return 0
