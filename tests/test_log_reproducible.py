@@ -94,3 +94,17 @@ def test_signals_hold_the_values_at_their_stamps(two_runs):
     assert np.max(np.hypot(np.diff(x), np.diff(y))) > 0.5 * 1.5 * h  # it drove
     held = vehicle["v"]
     assert not math.isnan(held[-1]) and held[-1] == held[-2]  # the last record: inputs last applied
+
+
+def test_signal_units_are_those_of_the_fmu_model_description(two_runs):
+    from fmpy import read_model_description
+
+    from cosim.fmi.builtin import builtin_fmu
+
+    _, (path, _) = two_runs
+    log = open_log(path)
+    description = read_model_description(str(builtin_fmu("DifferentialDrive")))
+    declared = {variable.name: variable.unit or "" for variable in description.modelVariables}
+    names, units = log.signal_names("vehicle"), log.signal_units("vehicle")
+    assert units == [declared[name] for name in names]
+    assert dict(zip(names, units, strict=True))["theta"] == "rad" and "m" in units

@@ -4,6 +4,11 @@ Time base: when a component's sample times are identical in both logs the values
 sample by sample; otherwise B is interpolated linearly onto A's sample times inside the time span
 both logs cover (and the report says so). NaN in both at the same time counts as equal; NaN in
 only one counts as an infinite deviation.
+
+Angles: a signal whose unit is "rad" in either log (units come from the FMUs' model descriptions,
+stored in the channel metadata) is compared modulo 2 pi, so a heading wrapped to (-pi, pi] and
+one that is not agree; B is unwrapped before it is interpolated. A difference of at most pi is
+taken as it is, so equal values stay exactly equal.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ from cosim.logs.reader import Log
 
 # outcome keys compared as text; the others are compared as numbers against the tolerance
 OUTCOME_TEXT_KEYS = ("reached", "reason")
+ANGLE_UNIT = "rad"  # signals in this unit are compared modulo 2 pi
 
 
 @dataclass(frozen=True)
@@ -26,6 +32,7 @@ class SignalDeviation:
     max_deviation: float  # max |A - B| over the compared times
     at_time: float  # [s] where it occurs (NaN when nothing was compared)
     interpolated: bool  # B was interpolated onto A's times
+    angle: bool = False  # compared modulo 2 pi (unit rad)
 
 
 @dataclass
@@ -59,8 +66,11 @@ def diff_logs(log_a: Log, log_b: Log, tolerance: float) -> DiffReport:
         common = [name for name in a.names if name in b.names]
         same_times = np.array_equal(a.t_ns, b.t_ns)
         for name in common:
-            deviation, at_time = _max_deviation(a.t_ns, a[name], b.t_ns, b[name], same_times)
-            report.deviations.append(SignalDeviation(component, name, deviation, at_time, not same_times))
+            angle = ANGLE_UNIT in (a.unit(name), b.unit(name))
+            deviation, at_time = _max_deviation(a.t_ns, a[name], b.t_ns, b[name], same_times, angle)
+            report.deviations.append(
+                SignalDeviation(component, name, deviation, at_time, not same_times, angle)
+            )
     for component in log_b.components:
         if component not in log_a.components:
             report.only_in_b += [f"{component}.{name}" for name in log_b.signals(component).names]
@@ -74,21 +84,33 @@ def _sort_key(value: float) -> float:
 
 
 def _max_deviation(
-    t_a: np.ndarray, a: np.ndarray, t_b: np.ndarray, b: np.ndarray, same_times: bool
+    t_a: np.ndarray, a: np.ndarray, t_b: np.ndarray, b: np.ndarray, same_times: bool, angle: bool = False
 ) -> tuple[float, float]:
-    """Largest |a - b| and the time [s] where it occurs; times are int64 ns."""
+    """Largest |a - b| (modulo 2 pi for an angle) and the time [s] where it occurs; times are int64 ns."""
     if not same_times:
         inside = (t_a >= t_b[0]) & (t_a <= t_b[-1]) if len(t_b) else np.zeros(len(t_a), dtype=bool)
         t_a, a = t_a[inside], a[inside]
-        b = _interpolate(t_b, b, t_a)
+        b = _interpolate(t_b, _unwrap(b) if angle else b, t_a)
     if len(a) == 0:
         return math.nan, math.nan
     equal = (a == b) | (np.isnan(a) & np.isnan(b))  # inf == inf and NaN/NaN count as equal
     with np.errstate(invalid="ignore"):
-        deviation = np.where(equal, 0.0, np.abs(a - b))
+        difference = np.abs(a - b)
+        if angle:  # the distance on the circle; within pi the plain difference (exact when equal)
+            wrapped = np.abs(np.remainder(a - b + math.pi, 2.0 * math.pi) - math.pi)
+            difference = np.where(difference > math.pi, wrapped, difference)
+        deviation = np.where(equal, 0.0, difference)
     deviation = np.where(np.isnan(deviation), np.inf, deviation)
     worst = int(np.argmax(deviation))
     return float(deviation[worst]), float(t_a[worst]) / 1e9
+
+
+def _unwrap(values: np.ndarray) -> np.ndarray:
+    """Angles [rad] without jumps of more than pi between finite samples (NaN and inf stay)."""
+    finite = np.isfinite(values)
+    result = values.astype(float, copy=True)
+    result[finite] = np.unwrap(values[finite])
+    return result
 
 
 def _interpolate(t_ns: np.ndarray, values: np.ndarray, at_ns: np.ndarray) -> np.ndarray:
@@ -146,9 +168,8 @@ def format_report(report: DiffReport, log_a: Log, log_b: Log, limit: int = 40) -
     if shown:
         lines.append(f"{'signal':<40} {'max |A-B|':>12}  at t [s]")
         for item in shown:
-            lines.append(
-                f"{item.component + '.' + item.name:<40} {item.max_deviation:>12.6g}  {item.at_time:.3f}"
-            )
+            label = item.component + "." + item.name + (" (mod 2 pi)" if item.angle else "")
+            lines.append(f"{label:<40} {item.max_deviation:>12.6g}  {item.at_time:.3f}")
         if len(exceeding) > limit:
             lines.append(f"... and {len(exceeding) - limit} more signals above the tolerance")
     largest = max((_sort_key(item.max_deviation) for item in report.deviations), default=0.0)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import re
 from dataclasses import dataclass
+from dataclasses import field as dataclass_field
 from functools import cached_property
 from pathlib import Path
 from typing import NamedTuple
@@ -24,7 +25,7 @@ import numpy as np
 import cosim.logs.index as log_index
 from cosim.errors import CosimError
 from cosim.record import rosmsg
-from cosim.record.rosmsg import COMPONENT_KEY, SIGNAL_NAMES_KEY
+from cosim.record.rosmsg import COMPONENT_KEY, SIGNAL_NAMES_KEY, SIGNAL_UNITS_KEY
 from cosim.world.shapes import Circle, Polygon, Rectangle
 
 
@@ -51,6 +52,12 @@ class Signals:
     names: list[str]  # original variable names
     fields: list[str]  # their ROS 2 field names in the log
     values: np.ndarray  # (len(t), len(names)) float64
+    units: list[str] = dataclass_field(default_factory=list)  # per name, "" when unknown (older logs)
+
+    def unit(self, name: str) -> str:
+        """The unit of a variable (from the FMU's model description), "" when the log has none."""
+        index = self.names.index(name) if name in self.names else self.fields.index(name)
+        return self.units[index] if index < len(self.units) else ""
 
     def __getitem__(self, name: str) -> np.ndarray:
         """The column of a variable, by its original name or its ROS 2 field name."""
@@ -220,6 +227,14 @@ class Log:
             raise CosimError(f"{self.path}: no signals of component {component!r}")
         return list(json.loads(self._index.channels[channel_id].metadata[SIGNAL_NAMES_KEY]))
 
+    def signal_units(self, component: str) -> list[str]:
+        """The units of a component's signals, in `signal_names` order ("" for none; all "" for a
+        log written before units were recorded)."""
+        names = self.signal_names(component)
+        metadata = self._index.channels[self._signal_channels[component]].metadata
+        units = json.loads(metadata[SIGNAL_UNITS_KEY]) if SIGNAL_UNITS_KEY in metadata else []
+        return [str(unit) for unit in units] if len(units) == len(names) else [""] * len(names)
+
     # --- signals -------------------------------------------------------------------------
 
     def signals(self, component: str) -> Signals:
@@ -251,7 +266,8 @@ class Log:
         for channel_id, (name, names, fields) in described.items():
             t_ns, rows = payloads[channel_id]
             values = rows.view("<f8").reshape(len(t_ns), len(names))
-            self._signals[name] = Signals(name, t_ns / 1e9, t_ns, names, fields, values)
+            units = self.signal_units(name)
+            self._signals[name] = Signals(name, t_ns / 1e9, t_ns, names, fields, values, units)
         return self._signals[component]
 
     # --- ROS messages --------------------------------------------------------------------
