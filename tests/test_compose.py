@@ -97,16 +97,22 @@ def test_lag_run_reaches_the_goal_with_the_first_order_response_on_vehicle_v(lag
     assert result.failure is None
     assert result.outcome.reached and result.outcome.reason == "goal_reached"
     vehicle, mixer, lag = log.signals("vehicle"), log.signals("mixer"), log.signals("lag")
-    command = held(mixer.t_ns, mixer["v"], vehicle.t_ns)  # what the mixer held at each vehicle step
-    np.testing.assert_array_equal(lag["u"], command)  # the lag saw exactly the mixer's command
-    np.testing.assert_array_equal(lag["y"], vehicle["v"])
+    # Each record holds values at its stamp: inputs applied at t, outputs at t (the last record is
+    # the end of the run). Gauss-Seidel: an input applied at t_k is its producer's output after the
+    # producer's step at t_k, i.e. the producer's record at its next stamp.
+    steps = vehicle.t_ns[:-1]
+    command = mixer["v"][np.searchsorted(mixer.t_ns, steps, side="right")]  # mixer output after its step
+    np.testing.assert_array_equal(lag["u"][:-1], command)  # the lag saw exactly the mixer's command
+    assert lag["y"][0] == 0.0
+    np.testing.assert_array_equal(lag["y"][1:], vehicle["v"][:-1])
+    vehicle_v = vehicle["v"][:-1]
     # Closed form while the mixer holds its first command: y(t_k + h) = v (1 - exp(-(k + 1) h / T)).
     first = command[0]
     steady = int(np.argmax(command != first)) if np.any(command != first) else len(command)
     assert steady * MACRO_STEP > 4 * LAG_T and first == pytest.approx(1.5)
     k = np.arange(steady)
     np.testing.assert_allclose(
-        vehicle["v"][:steady], first * (1 - np.exp(-(k + 1) * MACRO_STEP / LAG_T)), rtol=0, atol=1e-12
+        vehicle_v[:steady], first * (1 - np.exp(-(k + 1) * MACRO_STEP / LAG_T)), rtol=0, atol=1e-12
     )
     # The whole run: each step exact for the held command, y' = u + (y - u) exp(-h / T).
     decay = math.exp(-MACRO_STEP / LAG_T)
@@ -114,9 +120,9 @@ def test_lag_run_reaches_the_goal_with_the_first_order_response_on_vehicle_v(lag
     for index, u in enumerate(command):
         y = u + (y - u) * decay
         expected[index] = y
-    np.testing.assert_allclose(vehicle["v"], expected, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(vehicle_v, expected, rtol=0, atol=1e-12)
     # The lag shows: where VFH changes the command the vehicle's speed trails it.
-    assert np.max(np.abs(vehicle["v"] - command)) > 0.1
+    assert np.max(np.abs(vehicle_v - command)) > 0.1
 
 
 GO_TO_GOAL = """

@@ -270,8 +270,9 @@ class MessageBlock:
         self.count += int(sum(counts))
 
     def end_steps(self, end_ns: int) -> None:
-        """Hold the last record of every step stream whose pending outputs hold at or before
-        `end_ns` (they are the final outputs), stamped at that time; then no more steps."""
+        """Hold the last record of every step stream: the final outputs, stamped when they hold
+        (the end of the component's last step) or at `end_ns` when that is earlier (the run
+        stopped inside a slower component's step, or before its first); then no more steps."""
         for channel, stream in self.signals.items():
             if stream.split is None or stream.ended:
                 continue
@@ -282,12 +283,10 @@ class MessageBlock:
             else:  # nothing held: the pending record is row 0 (initial values, or carried)
                 pending = stream.pending_ns
             stream.ended = True
-            if pending is None or pending <= end_ns:
-                # Row `held` exists: a stream is packed before its pending row is the last one.
-                at = end_ns if pending is None else pending  # never stepped: its initial values
-                stream.times.append(int(at))
-                self.order.append(self.stream_of[channel])
-                self.count += 1
+            # Row `held` exists: a stream is packed before its pending row is the last one.
+            stream.times.append(int(end_ns if pending is None else min(pending, end_ns)))
+            self.order.append(self.stream_of[channel])
+            self.count += 1
         self.pack()
 
     def add_pose(self, channels: tuple[int, int, int], row: tuple) -> bool:

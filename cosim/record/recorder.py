@@ -153,8 +153,8 @@ class Recorder:
         self._last_flush = time.monotonic()
 
     def end_steps(self, end_ns: int) -> None:
-        """The run ended at `end_ns` [ns]: add each step channel's last record (see the module
-        docstring); a component whose last step did not reach `end_ns` gets none."""
+        """The run ended at `end_ns` [ns]: add each step channel's last record, its final outputs,
+        at the end of its last step or at `end_ns` when the run stopped inside that step."""
         if self._closed:
             raise CosimError(f"{self.path}: the log is already closed")
         self._block.end_steps(int(end_ns))
