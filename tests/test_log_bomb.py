@@ -9,8 +9,8 @@ the gigabyte (measured by the kernel: `os.wait4`).
 
 from __future__ import annotations
 
-import os
 import struct
+import subprocess
 import sys
 
 import numpy as np
@@ -59,21 +59,27 @@ def readable(tmp_path_factory):
     return data[: summary_start - 13]  # without DataEnd (13 bytes), summary and footer
 
 
+# Started from a fresh, small interpreter: a child forked from this (large) test process would
+# count this process's resident pages in its own peak.
+_MEASURE = """
+import os, sys
+pid = os.fork()
+if pid == 0:
+    os.execv(sys.executable, [sys.executable, "-m", "cosim", "log", "info", sys.argv[1]])
+_, status, usage = os.wait4(pid, 0)
+with open(sys.argv[2], "w") as report:
+    report.write(f"{os.waitstatus_to_exitcode(status)} {usage.ru_maxrss}")
+"""
+
+
 def _info_measured(path) -> tuple[int, str, str, int]:
     """`cosim log info` in a child: (exit code, stdout, stderr, peak resident memory [bytes])."""
-    read_out, write_out = os.pipe()
-    read_err, write_err = os.pipe()
-    pid = os.fork()
-    if pid == 0:  # the child: cosim log info with stdout/stderr to the pipes
-        os.dup2(write_out, 1)
-        os.dup2(write_err, 2)
-        os.execv(sys.executable, [sys.executable, "-m", "cosim", "log", "info", str(path)])
-    os.close(write_out)
-    os.close(write_err)
-    with os.fdopen(read_out) as out_stream, os.fdopen(read_err) as err_stream:
-        out, err = out_stream.read(), err_stream.read()
-    _, status, usage = os.wait4(pid, 0)
-    return os.waitstatus_to_exitcode(status), out, err, usage.ru_maxrss * 1024
+    report = path.with_suffix(".rusage")
+    completed = subprocess.run(
+        [sys.executable, "-c", _MEASURE, str(path), str(report)], capture_output=True, text=True, check=True
+    )
+    code, peak_kib = (int(part) for part in report.read_text().split())
+    return code, completed.stdout, completed.stderr, peak_kib * 1024
 
 
 @pytest.mark.parametrize("declared", [EXPANDED, 2**20], ids=["declares_1GiB", "declares_1MiB"])
