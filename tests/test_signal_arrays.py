@@ -45,8 +45,12 @@ def test_arrays_recorded_on_request(tmp_path):
     ranges, angles = lidar.values[:, 3 : 3 + beams], lidar.values[:, 3 + beams :]
     np.testing.assert_array_equal(angles, np.broadcast_to(scenario.lidar.angles, angles.shape))
     scans = list(log.messages("/scan"))
-    assert len(scans) == len(lidar.t) == 30  # 10 Hz for 3 s
-    for scan, row in zip(scans, ranges, strict=True):
+    # 10 Hz for 3 s. /scan at t is the sweep taken at t, the lidar's outputs after its step at t,
+    # which /signals/lidar (values at the time they hold: the end of that step) has at t + 0.1 s.
+    assert len(scans) == len(lidar.t) - 1 == 30
+    # The initial outputs (at t = 0) are a sweep from the start pose, as the first /scan is.
+    np.testing.assert_array_equal(np.asarray(scans[0].message.ranges), ranges[0].astype(np.float32))
+    for scan, row in zip(scans, ranges[1:], strict=True):
         np.testing.assert_array_equal(
             np.asarray(scan.message.ranges, dtype=np.float32), row.astype(np.float32)
         )
