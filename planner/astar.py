@@ -371,16 +371,3 @@ def astar_plan(moves, blocked, cost, parameters, start_x, start_y, goal_x, goal_
             length += resolution if difference == 1 or difference == width else SQRT2 * resolution
         node = previous
     return FOUND, searched, count, length
-
-
-@njit(cache=True)
-def unpad_distances(g, stamp, closed, rows, cols, resolution):
-    """g [cells] of closed padded nodes as an unpadded [rows, cols] array in metres, inf elsewhere."""
-    width = cols + 2
-    result = np.full((rows, cols), np.inf)
-    for row in range(rows):
-        base = (row + 1) * width + 1
-        for col in range(cols):
-            if stamp[base + col] == closed:
-                result[row, col] = g[base + col] * resolution
-    return result

@@ -36,13 +36,14 @@ import time
 
 import numpy as np
 
+from planner import reeds_shepp
 from planner.endpoints import check_endpoint_cell
 from planner.errors import PlannerError
 from planner.goal_distance import distance_to_goal
 from planner.grid import OccupancyGrid
 from planner.hybrid_geometry import sample_segments
 from planner.hybrid_primitives import build_primitives
-from planner.hybrid_search import FOUND_ANALYTIC, ITERATION_CAP, hybrid_search
+from planner.hybrid_search import FOUND_ANALYTIC, ITERATION_CAP, TIED, hybrid_search
 from planner.result import PlanResult
 
 OPTIONS = (
@@ -242,50 +243,47 @@ def _plan_hybrid(grid: OccupancyGrid, start, goal, **options) -> PlanResult:
         settings["collision_step"],
     )
     capacity = settings["max_iterations"] * len(primitives.cost) + 1
-    node_x, node_y, node_theta, node_g = (np.empty(capacity) for _ in range(4))
-    node_parent = np.empty(capacity, dtype=np.int64)
-    node_primitive = np.empty(capacity, dtype=np.int64)
-    node_direction = np.empty(capacity, dtype=np.int64)
-    explored = np.zeros(grid.shape, dtype=bool)
+    # Allocated here rather than in the compiled search: every np.empty/np.zeros signature there
+    # is one more thing to compile on a cold cache. np.empty and np.zeros only reserve memory;
+    # pages are touched as the search reaches them.
+    node_x, node_y, node_theta, node_g, heap_f, heap_h = (np.empty(capacity) for _ in range(6))
+    node_parent, node_primitive, node_direction, heap_node = (
+        np.empty(capacity, dtype=np.int64) for _ in range(4)
+    )
+    candidates = reeds_shepp.MAX_CANDIDATES
+    scratch = (
+        np.zeros((candidates, 5), dtype=np.int64),
+        np.zeros((candidates, 5)),
+        np.empty(candidates),
+        np.empty(candidates, dtype=np.int64),
+        np.empty(5),
+        np.empty(5),
+    )
     analytic_curvature = np.zeros(5)
     analytic_length = np.zeros(5)
     search_began = time.perf_counter()
-    status, final, searched, analytic_count, _ = hybrid_search(
-        inflated.occupied,
-        grid.resolution,
-        float(grid.origin[0]),
-        float(grid.origin[1]),
-        distances,
-        np.array(start),
-        np.array(goal),
-        primitives.curvature,
-        primitives.cost,
-        primitives.direction,
-        primitives.samples,
-        primitives.sample_count,
-        settings["heading_bins"],
-        radius,
-        settings["reverse"],
-        settings["reverse_cost"],
-        settings["steering_cost"],
-        settings["direction_switch_cost"],
-        settings["analytic_interval"],
-        settings["analytic_distance"],
-        settings["goal_tolerance"],
-        settings["heading_tolerance"],
-        settings["collision_step"],
-        settings["max_iterations"],
-        node_x,
-        node_y,
-        node_theta,
-        node_g,
-        node_parent,
-        node_primitive,
-        node_direction,
-        explored,
-        analytic_curvature,
-        analytic_length,
-    )
+    # None, not False: the kernel then compiles only the curves (Reeds-Shepp or Dubins) and the
+    # sort it uses; a search that meets an exact tie between analytic curves runs once more with
+    # the sort that orders ties (see planner.hybrid_search._analytic_expansion).
+    forward_only = None if settings["reverse"] else True
+    for exact_ties in (None, True):
+        closed = np.zeros(capacity, dtype=bool)
+        explored = np.zeros(grid.shape, dtype=bool)
+        status, final, searched, analytic_count, _ = hybrid_search(
+            inflated.occupied, grid.resolution, float(grid.origin[0]), float(grid.origin[1]), distances,
+            np.array(start), np.array(goal),
+            primitives.curvature, primitives.cost, primitives.direction, primitives.samples,
+            primitives.sample_count,
+            settings["heading_bins"], radius, forward_only, settings["reverse_cost"],
+            settings["steering_cost"], settings["direction_switch_cost"], settings["analytic_interval"],
+            settings["analytic_distance"], settings["goal_tolerance"], settings["heading_tolerance"],
+            settings["collision_step"], exact_ties,
+            settings["max_iterations"],
+            node_x, node_y, node_theta, node_g, node_parent, node_primitive, node_direction,
+            closed, heap_f, heap_h, heap_node, scratch, explored, analytic_curvature, analytic_length,
+        )  # fmt: skip
+        if status != TIED:
+            break
     searched_at = time.perf_counter()
     if status <= 0:
         reason = (
