@@ -1,7 +1,9 @@
-"""Grid A* benchmark on the Moving AI maps: this planner against tcod and pyastar2d, in one run.
+"""Grid A* benchmark on the Moving AI maps: this planner against tcod and pyastar2d, in one run, with the
+code before the issue-9/15 work ("before", the baseline checkout) measured beside it.
 
-Run: `python3 -m benchmarks.bench_planner [--maps NAME ...] [--limit N] [--skip-startup]`
-(or `python3 benchmarks/bench_planner.py ...`). Not a test: it prints tables, it asserts nothing.
+Run: `python3 -m benchmarks.bench_planner [--maps NAME ...] [--limit N] [--repeat R] [--skip-startup]
+[--baseline DIR]` (or `python3 benchmarks/bench_planner.py ...`). Not a test: it prints tables, it
+asserts nothing.
 
 For every query of every `.scen` file in `<repo>/../shared/data/movingai`:
 - ours: `planner.plan(grid, start, goal, connectivity=8, heuristic="octile", corner_cutting=False)`;
@@ -10,11 +12,18 @@ For every query of every `.scen` file in `<repo>/../shared/data/movingai`:
   `Pathfinder`, `add_root(start)` and `path_to(goal)` (what a user calls for each query);
 - pyastar2d: `astar_path(weights, start, goal, allow_diagonal=True)`. It cuts corners and charges a
   diagonal step like a straight one, so its paths are measured with octile costs and are often not
-  optimal for the Moving AI rule; the table reports that fraction as it is.
+  optimal for the Moving AI rule; the table reports that fraction as it is;
+- before: the same `plan()` call of the planner in `--baseline DIR` (default `<repo>/../baseline`,
+  the checkout the issue's figures were taken on), in a subprocess (both packages are called
+  `planner`), on the same queries, interleaved per query with pyastar2d in that process, so that
+  before/pyastar2d is a ratio of one process and one moment, as after/pyastar2d is.
 Per map, the objects a user builds once per map (our OccupancyGrid, tcod's graph, pyastar2d's
 weights) are built outside the timed call; their build time is printed separately. Each planner
 runs once before timing (our JIT compile, the peers' first-call costs), then every query is timed once
 per planner, planners interleaved per query so they see the same machine state.
+The per-call overhead column is a query between two adjacent free cells (the first free cell, in
+row-major order, whose right neighbour is free): the fixed cost of a call, which grew with the map
+before (a grid-sized array per call).
 """
 
 from __future__ import annotations
@@ -37,6 +46,8 @@ if str(REPO) not in sys.path:  # `python3 benchmarks/bench_planner.py` from anyw
     sys.path.insert(0, str(REPO))
 
 DATA = REPO.parent / "shared" / "data" / "movingai"
+BASELINE = REPO.parent / "baseline"
+OPTIONS = {"connectivity": 8, "heuristic": "octile", "corner_cutting": False}
 OPTIMAL_TOLERANCE = 1e-6  # relative error vs the .scen optimal length
 TCOD_CARDINAL = 100_000  # tcod costs are integers: octile costs scaled by 1e5
 TCOD_DIAGONAL = 141_421
@@ -100,20 +111,14 @@ def corner_cut_steps(cells: np.ndarray, occupied: np.ndarray) -> int:
 
 # -- the three planners, each as: build once per map -> callable(start, goal) -> path cells | None --
 def ours_factory(occupied: np.ndarray):
+    """plan() of the `planner` on sys.path (this tree's, or the baseline's in a --before-worker)."""
     import planner
 
     grid = planner.OccupancyGrid(occupied, resolution=1.0)
 
     def run(start: tuple[int, int], goal: tuple[int, int]):
         try:
-            result = planner.plan(
-                grid,
-                grid.cell_to_world(start),
-                grid.cell_to_world(goal),
-                connectivity=8,
-                heuristic="octile",
-                corner_cutting=False,
-            )
+            result = planner.plan(grid, grid.cell_to_world(start), grid.cell_to_world(goal), **OPTIONS)
         except planner.PlannerError:
             return None
         return result.cells
@@ -170,16 +175,41 @@ def load_occupancy(map_path: Path) -> np.ndarray:
     return planner.OccupancyGrid.from_file(map_path).occupied
 
 
-def bench_map(
-    map_path: Path, queries: list[Query], repeat: int = 1
-) -> tuple[dict[str, PlannerStats], dict[str, float], int]:
-    """Time every planner on every query (the fastest of `repeat` calls, which filters out moments when
-    another process had the CPU); returns stats, build time per planner [s], pyastar2d corner cuts."""
-    occupied = load_occupancy(map_path)
-    runners, build_times = {}, {}
-    for name, factory in FACTORIES.items():
+def adjacent_cells(occupied: np.ndarray) -> tuple[tuple[int, int], tuple[int, int]]:
+    """The first free cell (row-major) whose right neighbour is free, and that neighbour."""
+    pairs = np.argwhere(~occupied[:, :-1] & ~occupied[:, 1:])
+    row, col = (int(value) for value in pairs[0])
+    return (row, col), (row, col + 1)
+
+
+def call_overhead(occupied: np.ndarray, batches: int = 300, calls: int = 20) -> float:
+    """Wall time [s] of one plan() call between two adjacent cells, world coordinates computed
+    beforehand: the fastest batch of `calls` calls, as a mean (short batches, so that some of them
+    run while no other process has the CPU)."""
+    import planner
+
+    grid = planner.OccupancyGrid(occupied, resolution=1.0)
+    start, goal = (grid.cell_to_world(cell) for cell in adjacent_cells(occupied))
+    planner.plan(grid, start, goal, **OPTIONS)
+    best = math.inf
+    for _ in range(batches):
         begin = time.perf_counter()
-        runners[name] = factory(occupied)
+        for _ in range(calls):
+            planner.plan(grid, start, goal, **OPTIONS)
+        best = min(best, (time.perf_counter() - begin) / calls)
+    return best
+
+
+def bench_map(
+    occupied: np.ndarray, queries: list[Query], repeat: int, names: tuple[str, ...]
+) -> tuple[dict[str, PlannerStats], dict[str, float], int]:
+    """Time the planners `names` on every query (the fastest of `repeat` calls, which filters out
+    moments when another process had the CPU); returns stats, build time per planner [s], pyastar2d
+    corner cuts."""
+    runners, build_times = {}, {}
+    for name in names:
+        begin = time.perf_counter()
+        runners[name] = FACTORIES[name](occupied)
         build_times[name] = time.perf_counter() - begin
     for run in runners.values():  # first call outside the timing: JIT compile, caches
         run(queries[0].start, queries[0].goal)
@@ -199,50 +229,122 @@ def bench_map(
     return stats, build_times, pyastar_cuts
 
 
-def print_table(rows: list[tuple[str, int, dict[str, PlannerStats], dict[str, float], int]]) -> None:
+# -- "before": the baseline planner in its own process -----------------------------------------------
+def before_worker(baseline: Path, map_path: Path, scen_path: Path, limit: int | None, repeat: int) -> None:
+    """Print (JSON) the baseline's and pyastar2d's per-query times and the baseline's call overhead.
+
+    Runs in a subprocess whose sys.path starts with `baseline`, so `import planner` is the
+    baseline's; Moving AI maps are read here (not by that planner) so both trees see the same grid."""
+    import json
+
+    sys.path.insert(0, str(baseline))
+    import planner
+
+    if Path(planner.__file__).resolve().parent.parent != baseline.resolve():
+        raise SystemExit(f"bench_planner: the baseline's planner did not import from {baseline}")
+    from planner.mapio import read_movingai  # present in the baseline as in this tree
+
+    occupied = read_movingai(map_path)
+    queries = read_scenarios(scen_path, limit)
+    stats, _, _ = bench_map(occupied, queries, repeat, ("ours", "pyastar2d"))
+    print(
+        json.dumps(
+            {
+                "ours": stats["ours"].times,
+                "pyastar2d": stats["pyastar2d"].times,
+                "optimal": stats["ours"].optimal,
+                "overhead": call_overhead(occupied),
+            }
+        )
+    )
+
+
+def measure_before(baseline: Path, map_path: Path, scen_path: Path, limit: int | None, repeat: int):
+    """The --before-worker's numbers for one map, or None (with the reason printed) if it failed."""
+    import json
+    import tempfile
+
+    # Its own numba cache and no bytecode files: the baseline checkout is not written to.
+    cache = Path(tempfile.gettempdir()) / "navcosim-bench-baseline-numba"
+    environment = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONDONTWRITEBYTECODE="1")
+    environment.pop("PYTHONPATH", None)
+    command = [sys.executable, str(Path(__file__).resolve()), "--before-worker", str(baseline),
+               str(map_path), str(scen_path), str(limit or 0), str(repeat)]  # fmt: skip
+    completed = subprocess.run(command, env=environment, capture_output=True, text=True, check=False)
+    if completed.returncode != 0:
+        last = (completed.stderr.strip().splitlines() or ["no output"])[-1]
+        print(f"bench_planner: baseline run on {map_path.name} failed: {last}", file=sys.stderr)
+        return None
+    return json.loads(completed.stdout.strip().splitlines()[-1])
+
+
+def print_table(rows: list[dict]) -> None:
     header = (
-        f"{'map':<26}{'queries':>8}{'ours ms':>10}{'tcod ms':>10}{'pyastar ms':>11}"
-        f"{'ours/tcod':>10}{'ours/pya':>10}{'opt ours':>10}{'opt tcod':>10}{'opt pya':>9}{'pya cuts':>9}"
+        f"{'map':<24}{'queries':>8}{'before ms':>10}{'ours ms':>10}{'tcod ms':>9}{'pya ms':>9}"
+        f"{'bef/pya':>8}{'ours/pya':>9}{'ours/tcod':>10}{'opt ours':>9}{'opt bef':>8}{'opt pya':>8}"
+        f"{'pya cuts':>9}{'call us bef':>12}{'call us':>8}"
     )
     print(header)
     print("-" * len(header))
-    for name, count, stats, _build, cuts in rows:
+    for row in rows:
+        count, stats, before = row["queries"], row["stats"], row["before"]
         median = {key: statistics.median(value.times) for key, value in stats.items()}
         fraction = {key: value.optimal / count for key, value in stats.items()}
+        if before is not None:
+            before_ms = statistics.median(before["ours"])
+            before_ratio = before_ms / statistics.median(before["pyastar2d"])
+            before_cells = (
+                f"{before_ms * 1e3:>10.3f}",
+                f"{before_ratio:>8.2f}",
+                f"{before['optimal'] / count:>8.1%}",
+                f"{before['overhead'] * 1e6:>12.2f}",
+            )
+        else:
+            before_cells = (f"{'-':>10}", f"{'-':>8}", f"{'-':>8}", f"{'-':>12}")
         print(
-            f"{name:<26}{count:>8}{median['ours'] * 1e3:>10.3f}{median['tcod'] * 1e3:>10.3f}"
-            f"{median['pyastar2d'] * 1e3:>11.3f}{median['ours'] / median['tcod']:>10.2f}"
-            f"{median['ours'] / median['pyastar2d']:>10.2f}{fraction['ours']:>10.1%}{fraction['tcod']:>10.1%}"
-            f"{fraction['pyastar2d']:>9.1%}{cuts / count:>9.1%}"
+            f"{row['map']:<24}{count:>8}{before_cells[0]}{median['ours'] * 1e3:>10.3f}"
+            f"{median['tcod'] * 1e3:>9.3f}{median['pyastar2d'] * 1e3:>9.3f}{before_cells[1]}"
+            f"{median['ours'] / median['pyastar2d']:>9.2f}{median['ours'] / median['tcod']:>10.2f}"
+            f"{fraction['ours']:>9.1%}{before_cells[2]}{fraction['pyastar2d']:>8.1%}"
+            f"{row['cuts'] / count:>9.1%}"
+            f"{before_cells[3]}{row['overhead'] * 1e6:>8.2f}"
         )
     missed = [
-        name
-        for name, count, stats, _build, _cuts in rows
-        if statistics.median(stats["ours"].times) > 0.5 * statistics.median(stats["tcod"].times)
-        or statistics.median(stats["ours"].times) > 1.0 * statistics.median(stats["pyastar2d"].times)
-        or stats["ours"].optimal < count
+        row["map"]
+        for row in rows
+        if statistics.median(row["stats"]["ours"].times)
+        > 0.7 * statistics.median(row["stats"]["pyastar2d"].times)
+        or row["stats"]["ours"].optimal < row["queries"]
+        or row["overhead"] > 4e-6
     ]
     print(
-        f"\nGoal (<= 0.5x tcod, <= 1.0x pyastar2d, 100 % optimal): met on {len(rows) - len(missed)} of "
-        f"{len(rows)} maps" + (f"; missed on {', '.join(missed)}" if missed else "")
+        f"\nGoal (issue 9: <= 0.7x pyastar2d, 100 % optimal, a call between adjacent cells <= 4 us): met on "
+        f"{len(rows) - len(missed)} of {len(rows)} maps"
+        + (f"; missed on {', '.join(missed)}" if missed else "")
     )
     print()
     print("Per-map build time outside the timed calls [ms]:")
-    for name, _count, _stats, build, _cuts in rows:
-        print(f"  {name:<24} " + "  ".join(f"{key} {value * 1e3:.1f}" for key, value in build.items()))
+    for row in rows:
+        print(
+            f"  {row['map']:<24} "
+            + "  ".join(f"{key} {value * 1e3:.1f}" for key, value in row["build"].items())
+        )
 
 
 LEGEND = """\
 Legend: median over queries of the wall time [ms] of the call a user makes per query (with --repeat R,
 the fastest of R calls per query), after one untimed warm-up call per planner and map. Included:
 ours = planner.plan(grid, start_xy, goal_xy, connectivity=8, heuristic="octile", corner_cutting=False)
-(input checks, search, path and PlanResult); tcod = new
-Pathfinder(graph) + add_root + path_to; pyastar2d = astar_path(weights, ...) (it copies the weights per
-call). Not included: building OccupancyGrid / tcod CustomGraph (+ no-corner-cut condition arrays) /
-pyastar2d weights once per map (printed below). opt = fraction of queries whose octile path length
-equals the .scen optimum (relative error <= 1e-6, Moving AI rule: no corner cutting). pya cuts =
-fraction of pyastar2d paths with at least one corner-cutting diagonal step (pyastar2d allows them and
-charges diagonals as straight steps, so it does not solve the Moving AI problem)."""
+(input checks, search, path and PlanResult); before = the same call of the baseline planner
+(--baseline), in its own process with its own pyastar2d times (bef/pya is that process's ratio);
+tcod = new Pathfinder(graph) + add_root + path_to; pyastar2d = astar_path(weights, ...) (it copies
+the weights per call). Not included: building OccupancyGrid / tcod CustomGraph (+ no-corner-cut
+condition arrays) / pyastar2d weights once per map (printed below). opt = fraction of queries whose
+octile path length equals the .scen optimum (relative error <= 1e-6, Moving AI rule: no corner
+cutting). pya cuts = fraction of pyastar2d paths with at least one corner-cutting diagonal step
+(pyastar2d allows them and charges diagonals as straight steps, so it does not solve the Moving AI
+problem). call us = wall time of one plan() between two adjacent free cells (fastest batch of 20
+calls), the fixed cost per call; bef = the baseline's."""
 
 
 # -- first-call compile time and peak memory on the large map, in fresh processes ------------------
@@ -293,40 +395,45 @@ STARTUP_SCRIPT = textwrap.dedent(
 )
 
 
-def startup_report(map_path: Path, query: Query) -> None:
-    """First plan() call in a fresh process with an empty numba cache, then with a warm one; memory."""
+def startup_report(map_path: Path, query: Query, baseline: Path | None) -> None:
+    """First plan() call in a fresh process with an empty numba cache, then with a warm one; memory.
+    For this tree and, when given, the baseline ("before")."""
     import json
     import tempfile
 
     print(f"\nFirst-call time and memory on {map_path.name} (fresh process each; query {query}):")
-    with tempfile.TemporaryDirectory(prefix="navcosim-numba-cache-") as cache_dir:
-        # A private NUMBA_CACHE_DIR gives a cleared cache without touching the project's __pycache__.
-        environment = dict(os.environ, NUMBA_CACHE_DIR=cache_dir)
-        arguments = [str(map_path), *map(str, query.start), *map(str, query.goal)]
-        for label in ("cold numba cache (compiles)", "warm numba cache"):
-            completed = subprocess.run(
-                [sys.executable, "-c", STARTUP_SCRIPT, *arguments],
-                env=environment,
-                capture_output=True,
-                text=True,
-                cwd=REPO,
-                check=False,
-            )
-            if completed.returncode != 0:
-                print(f"  {label}: failed: {completed.stderr.strip().splitlines()[-1:]}")
-                continue
-            numbers = json.loads(completed.stdout.strip().splitlines()[-1])
-            print(
-                f"  {label}: import planner {numbers['import_time']:.2f} s; first plan() "
-                f"{numbers['first']:.2f} s (numba import, compile or cache load, search); plan() on a "
-                f"new grid {numbers['new_grid'] * 1e3:.1f} ms, repeated {numbers['repeat'] * 1e3:.1f} ms"
-            )
-            print(
-                f"    max RSS [MiB]: interpreter {numbers['rss_start']:.0f}, after import "
-                f"{numbers['rss_import']:.0f}, after first plan() {numbers['rss_first']:.0f}, end "
-                f"{numbers['rss_end']:.0f}; tracemalloc peak [MiB]: plan() on a new grid "
-                f"{numbers['traced_new_grid']:.1f}, repeated {numbers['traced_repeat']:.1f}"
-            )
+    trees = [("before", baseline)] if baseline is not None else []
+    for tree_label, tree in [*trees, ("after", REPO)]:
+        with tempfile.TemporaryDirectory(prefix="navcosim-numba-cache-") as cache_dir:
+            # A private NUMBA_CACHE_DIR gives a cleared cache without touching a tree's __pycache__;
+            # `python -c` imports `planner` from its working directory, the tree.
+            environment = dict(os.environ, NUMBA_CACHE_DIR=cache_dir, PYTHONDONTWRITEBYTECODE="1")
+            environment.pop("PYTHONPATH", None)
+            arguments = [str(map_path), *map(str, query.start), *map(str, query.goal)]
+            for label in ("cold numba cache (compiles)", "warm numba cache"):
+                completed = subprocess.run(
+                    [sys.executable, "-c", STARTUP_SCRIPT, *arguments],
+                    env=environment,
+                    capture_output=True,
+                    text=True,
+                    cwd=tree,
+                    check=False,
+                )
+                if completed.returncode != 0:
+                    print(f"  {tree_label}, {label}: failed: {completed.stderr.strip().splitlines()[-1:]}")
+                    continue
+                numbers = json.loads(completed.stdout.strip().splitlines()[-1])
+                print(
+                    f"  {tree_label}, {label}: import planner {numbers['import_time']:.2f} s; first plan() "
+                    f"{numbers['first']:.2f} s (numba import, compile or cache load, search); plan() on a "
+                    f"new grid {numbers['new_grid'] * 1e3:.1f} ms, repeated {numbers['repeat'] * 1e3:.1f} ms"
+                )
+                print(
+                    f"    max RSS [MiB]: interpreter {numbers['rss_start']:.0f}, after import "
+                    f"{numbers['rss_import']:.0f}, after first plan() {numbers['rss_first']:.0f}, end "
+                    f"{numbers['rss_end']:.0f}; tracemalloc peak [MiB]: plan() on a new grid "
+                    f"{numbers['traced_new_grid']:.1f}, repeated {numbers['traced_repeat']:.1f}"
+                )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -338,15 +445,27 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--skip-startup", action="store_true", help="skip the compile-time/memory report")
     parser.add_argument("--data", type=Path, default=DATA, help=f"Moving AI folder (default {DATA})")
+    parser.add_argument(
+        "--baseline", type=Path, default=BASELINE, help=f"checkout measured as 'before' (default {BASELINE})"
+    )
+    parser.add_argument("--before-worker", nargs=5, metavar="ARG", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.before_worker:
+        baseline, map_path, scen_path, limit, repeat = args.before_worker
+        before_worker(Path(baseline), Path(map_path), Path(scen_path), int(limit) or None, int(repeat))
+        return 0
     if not args.data.is_dir():
         print(f"bench_planner: {args.data} not found; nothing to benchmark (skipped)")
         return 0
+    baseline = args.baseline if (args.baseline / "planner" / "__init__.py").is_file() else None
+    if baseline is None:
+        print(f"bench_planner: no baseline checkout at {args.baseline}; the 'before' columns stay empty")
     import pyastar2d  # noqa: F401  (imported here so no map's build time includes an import)
     import tcod.path  # noqa: F401
 
     scenario_files = sorted(args.data.glob("*.scen"))
     rows = []
+    repeat = max(1, args.repeat)
     for scenario_file in scenario_files:
         map_name = scenario_file.name.split("-random-")[0].removesuffix(".scen")
         if args.maps and map_name not in args.maps:
@@ -356,8 +475,13 @@ def main(argv: list[str] | None = None) -> int:
         if not map_path.is_file() or not queries:
             print(f"bench_planner: {scenario_file.name}: map or queries missing, skipped")
             continue
-        stats, build, cuts = bench_map(map_path, queries, max(1, args.repeat))
-        rows.append((map_name, len(queries), stats, build, cuts))
+        before = measure_before(baseline, map_path, scenario_file, args.limit, repeat) if baseline else None
+        occupied = load_occupancy(map_path)
+        stats, build, cuts = bench_map(occupied, queries, repeat, tuple(FACTORIES))
+        rows.append(
+            {"map": map_name, "queries": len(queries), "stats": stats, "build": build, "cuts": cuts,
+             "before": before, "overhead": call_overhead(occupied)}
+        )  # fmt: skip
         print(f"  {map_name}: {len(queries)} queries done", file=sys.stderr)
     print()
     print_table(rows)
@@ -368,7 +492,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.skip_startup and large.is_file() and large_scen is not None:
         queries = read_scenarios(large_scen, None)
         longest = max(queries, key=lambda query: query.optimal_length)
-        startup_report(large, longest)
+        startup_report(large, longest, baseline)
     return 0
 
 

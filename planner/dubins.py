@@ -86,10 +86,11 @@ def enumerate_normalized(x: float, y: float, phi: float, letters: np.ndarray, le
 
 
 @njit(cache=True)
-def shortest_length_normalized(x: float, y: float, phi: float) -> float:
-    """Length of the shortest Dubins path from the origin to (x, y, phi) for R = 1."""
-    letters = np.empty((MAX_CANDIDATES, 3), dtype=np.int64)
-    lengths = np.empty((MAX_CANDIDATES, 3))
+def shortest_length_normalized(
+    x: float, y: float, phi: float, letters: np.ndarray, lengths: np.ndarray
+) -> float:
+    """Length of the shortest Dubins path from the origin to (x, y, phi) for R = 1; letters and
+    lengths are enumerate_normalized's buffers (K x 3 or wider; only the first 3 columns are used)."""
     count = enumerate_normalized(x, y, phi, letters, lengths)
     best = np.inf
     for k in range(count):
@@ -119,4 +120,6 @@ def shortest_path(start, goal, turning_radius: float) -> CurvePath:
 def path_length(start, goal, turning_radius: float) -> float:
     """Length [m] of the shortest Dubins path from `start` to `goal`."""
     x, y, phi = normalize(*map(float, start), *map(float, goal), float(turning_radius))
-    return float(shortest_length_normalized(x, y, phi)) * float(turning_radius)
+    letters = np.empty((MAX_CANDIDATES, 3), dtype=np.int64)
+    lengths = np.empty((MAX_CANDIDATES, 3))
+    return float(shortest_length_normalized(x, y, phi, letters, lengths)) * float(turning_radius)

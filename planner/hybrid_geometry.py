@@ -36,61 +36,6 @@ def advance(x: float, y: float, theta: float, curvature: float, signed_length: f
 
 
 @njit(cache=True)
-def count_samples(signed_lengths: np.ndarray, count: int, step: float) -> int:
-    """Number of poses `sample_into` writes for the first `count` segments at spacing `step`."""
-    total = 1
-    for k in range(count):
-        length = abs(signed_lengths[k])
-        if length > 0.0:
-            total += max(1, int(math.ceil(length / step - 1e-9)))
-    return total
-
-
-@njit(cache=True)
-def sample_into(
-    x: float,
-    y: float,
-    theta: float,
-    curvatures: np.ndarray,
-    signed_lengths: np.ndarray,
-    count: int,
-    step: float,
-    poses: np.ndarray,
-    directions: np.ndarray,
-) -> int:
-    """Write poses every <= `step` [m] along the first `count` segments into `poses` (M x 3).
-
-    Every segment end is a sample, so cusps (direction changes) are exact poses. directions[i]
-    is the driving direction (+1 / -1) of the segment that reaches pose i (pose 0 takes the
-    first segment's). Returns the number of poses written (see `count_samples`).
-    """
-    poses[0, 0] = x
-    poses[0, 1] = y
-    poses[0, 2] = theta
-    directions[0] = 1
-    written = 1
-    first = True
-    for k in range(count):
-        length = signed_lengths[k]
-        if length == 0.0:
-            continue
-        sign = 1 if length > 0.0 else -1
-        if first:
-            directions[0] = sign
-            first = False
-        pieces = max(1, int(math.ceil(abs(length) / step - 1e-9)))
-        for piece in range(1, pieces + 1):
-            px, py, pt = advance(x, y, theta, curvatures[k], length * piece / pieces)
-            poses[written, 0] = px
-            poses[written, 1] = py
-            poses[written, 2] = pt
-            directions[written] = sign
-            written += 1
-        x, y, theta = poses[written - 1, 0], poses[written - 1, 1], poses[written - 1, 2]
-    return written
-
-
-@njit(cache=True)
 def point_free(
     occupied: np.ndarray, resolution: float, origin_x: float, origin_y: float, x: float, y: float
 ) -> bool:
@@ -140,22 +85,30 @@ def sample_segments(
     signed_lengths: np.ndarray,
     step: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Poses (N x 3) every <= `step` [m] along a segment path from `start`, and directions (N)."""
-    curvatures = np.ascontiguousarray(curvatures, dtype=np.float64)
-    signed_lengths = np.ascontiguousarray(signed_lengths, dtype=np.float64)
-    count = len(signed_lengths)
-    total = count_samples(signed_lengths, count, step)
-    poses = np.empty((total, 3))
-    directions = np.empty(total, dtype=np.int8)
-    written = sample_into(
-        float(start[0]),
-        float(start[1]),
-        float(start[2]),
-        curvatures,
-        signed_lengths,
-        count,
-        step,
-        poses,
-        directions,
-    )
-    return poses[:written], directions[:written]
+    """Poses (N x 3) every <= `step` [m] along a segment path from `start`, and directions (N).
+
+    Every segment end is a sample, so cusps (direction changes) are exact poses. directions[i] is
+    the driving direction (+1 / -1) of the segment that reaches pose i (pose 0 takes the first
+    segment's). Run by the interpreter (`advance.py_func`, the same arithmetic as the compiled
+    `advance`): a plan samples a few hundred poses once, which is not worth a kernel to compile.
+    """
+    move = advance.py_func
+    x, y, theta = float(start[0]), float(start[1]), float(start[2])
+    poses = [(x, y, theta)]
+    directions = [1]
+    first = True
+    for curvature, length in zip(np.asarray(curvatures, dtype=float), np.asarray(signed_lengths, dtype=float),
+                                 strict=True):  # fmt: skip
+        curvature, length = float(curvature), float(length)
+        if length == 0.0:
+            continue
+        sign = 1 if length > 0.0 else -1
+        if first:
+            directions[0] = sign
+            first = False
+        pieces = max(1, int(math.ceil(abs(length) / step - 1e-9)))
+        for piece in range(1, pieces + 1):
+            poses.append(move(x, y, theta, curvature, length * piece / pieces))
+            directions.append(sign)
+        x, y, theta = poses[-1]
+    return np.array(poses, dtype=np.float64).reshape(-1, 3), np.array(directions, dtype=np.int8)

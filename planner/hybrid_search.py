@@ -47,17 +47,19 @@ def _state_key(row, col, theta, cols, heading_bins):
 
 
 @njit(cache=True)
-def curve_length_to_goal(x, y, theta, goal, radius, forward_only):
+def curve_length_to_goal(x, y, theta, goal, radius, forward_only, letters, lengths):
     """Obstacle-free Reeds-Shepp (forward_only None: reverse allowed) or Dubins (forward_only True)
-    length [m] from a pose to the goal."""
+    length [m] from a pose to the goal; letters, lengths: the candidate buffers of the scratch."""
     nx, ny, nphi = reeds_shepp.normalize(x, y, theta, goal[0], goal[1], goal[2], radius)
     if forward_only is None:
-        return reeds_shepp.shortest_length_normalized(nx, ny, nphi) * radius
-    return dubins.shortest_length_normalized(nx, ny, nphi) * radius
+        return reeds_shepp.shortest_length_normalized(nx, ny, nphi, letters, lengths) * radius
+    return dubins.shortest_length_normalized(nx, ny, nphi, letters, lengths) * radius
 
 
 @njit(cache=True)
-def _heuristic(x, y, theta, goal, distance_grid, resolution, origin_x, origin_y, radius, forward_only):
+def _heuristic(
+    x, y, theta, goal, distance_grid, resolution, origin_x, origin_y, radius, forward_only, scratch
+):
     rows, cols = distance_grid.shape
     row, col = _cell(x, y, resolution, origin_x, origin_y, rows)
     if row < 0 or row >= rows or col < 0 or col >= cols:
@@ -68,7 +70,8 @@ def _heuristic(x, y, theta, goal, distance_grid, resolution, origin_x, origin_y,
         # Far from the goal the curve length is the Euclidean distance plus a few radii, which
         # the obstacle-aware distance almost always exceeds; the curve costs ~15 us, so skip it.
         return max(distance, euclidean)
-    return max(distance, curve_length_to_goal(x, y, theta, goal, radius, forward_only))
+    letters, lengths = scratch[0], scratch[1]
+    return max(distance, curve_length_to_goal(x, y, theta, goal, radius, forward_only, letters, lengths))
 
 
 # Closed-set index: open addressing on int64 state keys (-1 = empty slot), grown at half load.
@@ -275,6 +278,7 @@ def hybrid_search(
         origin_y,
         radius,
         forward_only,
+        scratch,
     )
     size = _heap_push(heap_f, heap_h, heap_node, np.int64(0), h, h, np.int64(0))
     row, col = _cell(start[0], start[1], resolution, origin_x, origin_y, rows)
@@ -349,6 +353,7 @@ def hybrid_search(
                 origin_y,
                 radius,
                 forward_only,
+                scratch,
             )
             if h == np.inf:
                 continue

@@ -181,10 +181,12 @@ def enumerate_normalized(x: float, y: float, phi: float, letters: np.ndarray, le
 
 
 @njit(cache=True)
-def shortest_length_normalized(x: float, y: float, phi: float) -> float:
-    """Length of the shortest Reeds-Shepp path from the origin to (x, y, phi) for R = 1."""
-    letters = np.empty((MAX_CANDIDATES, 5), dtype=np.int64)
-    lengths = np.empty((MAX_CANDIDATES, 5))
+def shortest_length_normalized(
+    x: float, y: float, phi: float, letters: np.ndarray, lengths: np.ndarray
+) -> float:
+    """Length of the shortest Reeds-Shepp path from the origin to (x, y, phi) for R = 1; letters and
+    lengths are enumerate_normalized's buffers (the caller's: hybrid A* calls this for most of its
+    nodes, and an allocation here would be one more thing to compile)."""
     count = enumerate_normalized(x, y, phi, letters, lengths)
     best = np.inf
     for k in range(count):
@@ -266,4 +268,6 @@ def shortest_path(start, goal, turning_radius: float) -> CurvePath:
 def path_length(start, goal, turning_radius: float) -> float:
     """Length [m] of the shortest Reeds-Shepp path from `start` to `goal`."""
     x, y, phi = normalize(*map(float, start), *map(float, goal), float(turning_radius))
-    return float(shortest_length_normalized(x, y, phi)) * float(turning_radius)
+    letters = np.empty((MAX_CANDIDATES, 5), dtype=np.int64)
+    lengths = np.empty((MAX_CANDIDATES, 5))
+    return float(shortest_length_normalized(x, y, phi, letters, lengths)) * float(turning_radius)
