@@ -10,12 +10,15 @@ connection graph has no algebraic loop.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+
+import numpy as np
 
 from cosim.core.component import Component
 from cosim.core.master import System
 from cosim.errors import CosimError
-from cosim.navigation.planner import PlannerComponent
+from cosim.navigation.planner import PlannerComponent, Replanning
 from cosim.scenario.compose import describe_system
 from cosim.scenario.description import ComponentDescription, SystemDescription
 from cosim.scenario.load import Scenario
@@ -38,7 +41,8 @@ class BuiltRun:
     grid: object  # planner.OccupancyGrid (known map)
     inflated: object  # the known map inflated by the expansion distance
     world: WorldDistance
-    plan: object  # planner.PlanResult of the planner component
+    plan: object  # planner.PlanResult of the planner component (its first plan)
+    planner: PlannerComponent | None = None  # the template's planner (replans, no_path)
 
 
 def make_fmu(
@@ -92,6 +96,34 @@ def _fmu(scenario: Scenario, component: ComponentDescription) -> Component:
         raise CosimError(f"{scenario.source}: {component.where}.fmu: {error}") from None
 
 
+def replanning(scenario: Scenario) -> Replanning:
+    """The replanning settings of `scenario`; a bicycle replans with Hybrid A* at `[planner]`'s
+    min_turning_radius, else its wheelbase / tan(max_steering_angle)."""
+    settings = scenario.planner
+    turning_radius = None
+    if scenario.vehicle_type == "bicycle" or settings.algorithm == "hybrid":
+        turning_radius = settings.min_turning_radius
+        vehicle = scenario.components["vehicle"].parameters
+        if turning_radius is None and "wheelbase" in vehicle and "max_steering_angle" in vehicle:
+            turning_radius = float(vehicle["wheelbase"]) / math.tan(float(vehicle["max_steering_angle"]))
+        if turning_radius is None or not turning_radius > 0:
+            raise CosimError(
+                f"{scenario.source}: [planner].min_turning_radius: a bicycle replans with Hybrid A*, "
+                "which needs it (or [vehicle] wheelbase and max_steering_angle)"
+            )
+    return Replanning(
+        angles=np.asarray(scenario.lidar.angles, dtype=float),
+        range_min=scenario.lidar.range_min,
+        range_max=scenario.lidar.range_max,
+        vehicle_radius=scenario.vehicle_radius,
+        hybrid_turning_radius=turning_radius,
+        replan_after=settings.replan_after,
+        replan_stall_time=settings.replan_stall_time,
+        replan_horizon=settings.replan_horizon,
+        replan_interval=settings.replan_interval,
+    )
+
+
 def build_run(scenario: Scenario) -> BuiltRun:
     """Describe, check and build the system of `scenario`; plan the path."""
     from cosim.world.lidar import Lidar
@@ -108,7 +140,13 @@ def build_run(scenario: Scenario) -> BuiltRun:
             made = _fmu(scenario, component)
         elif component.kind == "planner":
             made = PlannerComponent(
-                component.name, grid, scenario.start, scenario.goal, scenario.planner, period=component.period
+                component.name,
+                grid,
+                scenario.start,
+                scenario.goal,
+                scenario.planner,
+                period=component.period,
+                replanning=replanning(scenario) if component.inputs else None,
             )
             try:
                 plans.append(made.plan_path())
@@ -144,4 +182,5 @@ def build_run(scenario: Scenario) -> BuiltRun:
         if component.kind == "fmu"
     }
     plan = plans[0] if plans else None
-    return BuiltRun(scenario, description, system, parameters, grid, inflated, world, plan)
+    planner = next((c for c in system.components.values() if isinstance(c, PlannerComponent)), None)
+    return BuiltRun(scenario, description, system, parameters, grid, inflated, world, plan, planner)

@@ -25,7 +25,8 @@ MODE_FOLLOW, MODE_AVOID, MODE_RECOVER = 0, 1, 2  # AvoidanceMixer's `mode` outpu
 
 @dataclass
 class Outcome:
-    """The summary of one run. `reason`: goal_reached, collision, stop_time, interrupted, fmu_failed."""
+    """The summary of one run. `reason`: goal_reached, collision, stop_time, no_path (the goal
+    cannot be reached any more: a replan found no path), interrupted, fmu_failed."""
 
     reached: bool = False
     reason: str = "running"
@@ -35,6 +36,8 @@ class Outcome:
     vfh_interventions: int = 0
     recovery_time: float = 0.0  # [s]
     collision_point: tuple[float, float] | None = None
+    replans: int = 0  # plans made at run time (the first plan not counted)
+    no_path: str | None = None  # why the last replan found no path
 
 
 class OutcomeMonitor:
@@ -122,7 +125,8 @@ def outcome_metadata(outcome: Outcome) -> dict[str, str]:
         "min_clearance": f"{outcome.min_clearance:.6f}",
         "vfh_interventions": str(outcome.vfh_interventions),
         "recovery_time": f"{outcome.recovery_time:.6f}",
-    }
+        "replans": str(outcome.replans),
+    } | ({"no_path": outcome.no_path} if outcome.no_path else {})
 
 
 def format_summary(name: str, outcome: Outcome, log_path=None, wall_time: float | None = None) -> str:
@@ -135,6 +139,7 @@ def format_summary(name: str, outcome: Outcome, log_path=None, wall_time: float 
         ("minimum clearance", f"{outcome.min_clearance:.3f} m"),
         ("VFH interventions", str(outcome.vfh_interventions)),
         ("time in recovery", f"{outcome.recovery_time:.2f} s"),
+        ("replans", str(outcome.replans)),
     ]
     if outcome.collision_point is not None:
         rows.append(

@@ -1,19 +1,45 @@
-"""The global planner as a component: plans once, before the run, on the KNOWN map.
+"""The global planner as a component: plans before the run on the KNOWN map, and replans at run time.
 
 It mirrors the thesis's setup (section 4.4): the modified A* computes the waypoints in advance on
 the known warehouse map (inflated by the expansion distance, then smoothed) and hands them to the
 Pure Pursuit block as an N x 2 input padded with NaN. Unknown obstacles are not in this map; the
 lidar and VFH deal with them at run time.
+
+With replanning (`[planner] replan = true`, `Replanning`), the component also reads the vehicle's
+pose, VFH's steering direction and the lidar's ranges, and keeps a costmap (`Costmap`: the known
+map plus the lidar's returns, cleared by the rays that pass through). It replans from the current
+pose when
+- VFH has had no free direction (NaN steering) for `replan_after` s, or
+- progress along the plan (arc length of the closest point) has grown by less than
+  `STALL_DISTANCE` in `replan_stall_time` s, or
+- a cell marked since the current plan was made lies within the vehicle radius of the plan's next
+  `replan_horizon` m,
+and at most once every `replan_interval` s. A replan searches the costmap inflated by the
+expansion distance; when that has no path, inflated by the vehicle radius only (the footprint:
+the robot still fits); when neither has one, the goal cannot be reached any more: `no_path` is set
+and the run ends. Cells of the inflation around the robot's own position are opened (not the
+obstacles themselves), so a robot that stands closer to an obstacle than the expansion distance
+can still leave. Bicycles replan with Hybrid A* from their pose. The new waypoints are the
+component's outputs from that step on (`constant_outputs` is False then).
 """
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass, field
+
 import numpy as np
 
-from cosim.core.component import PythonComponent, array_ports
+from cosim.core.component import Port, PythonComponent, array_ports
 from cosim.errors import CosimError
+from cosim.navigation.costmap import Costmap
 from cosim.scenario.template import WAYPOINT_CAPACITY
 from planner.errors import PlannerError
+from planner.grid import OccupancyGrid
+
+STALL_DISTANCE = 1.0  # [m] of progress along the plan that counts as progress
+COST_WEIGHT = 3.0  # of the cost gradient in a replan (planner.options cost_weight)
+SEARCH_WINDOW = 60  # plan segments searched ahead of the last progress for the closest point
 
 
 def downsample_path(path: np.ndarray, capacity: int = WAYPOINT_CAPACITY) -> np.ndarray:
@@ -61,29 +87,86 @@ def plan_options(settings) -> dict:
     return options
 
 
+@dataclass(frozen=True)
+class Replanning:
+    """What replanning needs besides `[planner]`: the lidar's beams [rad] and limits [m], the
+    vehicle radius [m], and the Hybrid A* turning radius [m] (None: replan with `[planner]`'s
+    algorithm; a number: Hybrid A*, as for a bicycle)."""
+
+    angles: np.ndarray
+    range_min: float
+    range_max: float
+    vehicle_radius: float
+    hybrid_turning_radius: float | None = None
+    replan_after: float = 2.0  # [s]
+    replan_stall_time: float = 10.0  # [s]
+    replan_horizon: float = 20.0  # [m]
+    replan_interval: float = 1.0  # [s]
+
+
+@dataclass
+class Replan:
+    """One replan: time [s], why (`no_free_direction`, `stalled`, `obstacle_on_plan`), and the new
+    path's length [m] (NaN when there was none)."""
+
+    time: float
+    reason: str
+    length: float
+    inflation: float = field(default=math.nan)  # [m] the costmap was inflated by
+
+
 class PlannerComponent(PythonComponent):
     """Outputs `waypoints[k,1]` (x [m]) and `waypoints[k,2]` (y [m]), k = 1..1000, NaN padded.
 
-    `plan_path()` runs the search (call it before the log is opened: a failed plan is bad input);
-    the outputs are constant afterwards, so the master may step it once.
+    `plan_path()` runs the first search (call it before the log is opened: a failed plan is bad
+    input). Without `replanning` the outputs are constant afterwards, so the master copies them
+    once; with it the inputs are `x`, `y`, `theta` (vehicle pose), `steering_dir` (VFH, NaN = no
+    free direction) and `ranges[k]` (lidar), and `replans`, `no_path` and `plan_version` tell the
+    run what happened.
     """
 
-    # The plan is fixed for the whole run: the master copies the waypoints once at initialisation.
-    constant_outputs = True
-
-    def __init__(self, name: str, grid, start, goal, settings, period: float = 0.0):
+    def __init__(
+        self,
+        name: str,
+        grid,
+        start,
+        goal,
+        settings,
+        period: float = 0.0,
+        replanning: Replanning | None = None,
+    ):
+        inputs = []
+        if replanning is not None:
+            inputs = [Port("x", unit="m"), Port("y", unit="m"), Port("theta", unit="rad")]
+            inputs += [Port("steering_dir", unit="rad")] + array_ports(
+                "ranges", len(replanning.angles), unit="m"
+            )
+        outputs = array_ports("waypoints", WAYPOINT_CAPACITY, columns=2, unit="m")
+        # A replan uses the scan of the same step, so the planner steps after the lidar; one range
+        # declared is enough to order it (cosim.scenario.template). Never VFH's direction: VFH
+        # depends on the waypoints.
+        direct = ["ranges[1]"] if replanning is not None else []
         super().__init__(
             name,
-            outputs=array_ports("waypoints", WAYPOINT_CAPACITY, columns=2, unit="m"),
+            inputs=inputs,
+            outputs=outputs,
             period=period,
-            feedthrough={},
+            feedthrough={port.name: direct for port in outputs},
         )
+        # A plan fixed for the run: the master copies the waypoints once at initialisation.
+        self.constant_outputs = replanning is None
         self.grid = grid
         self.start = start
         self.goal = goal
         self.settings = settings
+        self.replanning = replanning
         self.result = None
         self.waypoints = np.empty((0, 2))
+        self.replans: list[Replan] = []
+        self.no_path: str | None = None  # why the goal cannot be reached any more
+        self.plan_version = 0  # counts the plans made (1 after plan_path)
+        if replanning is not None:
+            self.costmap = Costmap(grid, replanning.angles, replanning.range_min, replanning.range_max)
 
     def plan_path(self):
         """Plan from start to goal; returns the `PlanResult`. Raises `CosimError` when there is no path."""
@@ -94,21 +177,173 @@ class PlannerComponent(PythonComponent):
         if self.settings.algorithm == "hybrid" and len(goal) == 2:
             goal = (*goal, float(np.arctan2(goal[1] - start[1], goal[0] - start[0])))
         try:
-            self.result = plan(self.grid, start, goal, **plan_options(self.settings))
+            result = plan(self.grid, start, goal, **plan_options(self.settings))
         except PlannerError as error:
             raise CosimError(f"[planner]: {error}") from None
-        path = np.asarray(self.result.path, dtype=float)[:, :2]
-        if len(path) == 0:
+        if len(result.path) == 0:
             raise CosimError("[planner]: no path from start to goal")
-        path = end_at_goal(path, self.goal[:2])
+        self._use(result)
+        return self.result
+
+    def _use(self, result) -> None:
+        """Make `result` the plan: waypoints, outputs, the progress along it."""
+        self.result = result
+        path = end_at_goal(np.asarray(result.path, dtype=float)[:, :2], self.goal[:2])
         self.waypoints = downsample_path(path)
         self.output_buffer[:] = np.nan
         self.output_buffer[: 2 * len(self.waypoints)] = self.waypoints.reshape(-1)
-        return self.result
+        self.plan_version += 1
+        self._arc = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(self.waypoints, axis=0).T))))
+        self._segment = 0  # index of the plan segment the progress lies on
+        self._progress = 0.0  # [m] along the plan
+        if self.replanning is not None:
+            self._marks_at_plan = self.costmap.snapshot()
+            self._obstacle_on_plan = False
+
+    def on_setup(self, t0: float, parameters) -> None:
+        self._last_replan = -math.inf
+        self._blocked_since: float | None = None
+        self._progress_mark = (t0, 0.0)  # (time [s], progress [m]) of the last real progress
 
     def on_initialize(self) -> None:
         if self.result is None:
             self.plan_path()
 
     def step(self, t: float, h: float) -> None:
-        """Nothing to do: the plan is fixed for the whole run."""
+        """Update the costmap and the progress from the inputs; replan when a trigger fires."""
+        if self.replanning is None or self.no_path is not None:
+            return
+        inputs = self.input_buffer
+        x, y, theta, steering = inputs.item(0), inputs.item(1), inputs.item(2), inputs.item(3)
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(theta)):
+            return
+        changed = self.costmap.integrate(x, y, theta, inputs[4:])
+        self._advance_progress(x, y)
+        reason = self._trigger(t, steering, changed > 0)
+        if reason is not None and t - self._last_replan >= self.replanning.replan_interval:
+            self.replan(t, (x, y, theta), reason)
+
+    def _advance_progress(self, x: float, y: float) -> None:
+        """Move the progress to the closest point of the plan ahead (never backwards)."""
+        points = self.waypoints
+        first = self._segment
+        stop = min(first + SEARCH_WINDOW, len(points) - 1)
+        if stop <= first:
+            return
+        a, b = points[first:stop], points[first + 1 : stop + 1]
+        edge = b - a
+        length_sq = (edge * edge).sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            fraction = np.clip(
+                ((x - a[:, 0]) * edge[:, 0] + (y - a[:, 1]) * edge[:, 1]) / length_sq, 0.0, 1.0
+            )
+        fraction = np.nan_to_num(fraction)
+        nearest = a + fraction[:, None] * edge
+        best = int(np.argmin(np.hypot(nearest[:, 0] - x, nearest[:, 1] - y)))
+        progress = self._arc[first + best] + fraction[best] * math.sqrt(length_sq[best])
+        if progress > self._progress:
+            self._segment, self._progress = first + best, progress
+
+    def _trigger(self, t: float, steering: float, new_marks: bool) -> str | None:
+        """Why to replan now, or None (see the module docstring)."""
+        settings = self.replanning
+        if math.isnan(steering):
+            if self._blocked_since is None:
+                self._blocked_since = t
+            elif t - self._blocked_since >= settings.replan_after:
+                return "no_free_direction"
+        else:
+            self._blocked_since = None
+        mark_time, mark_progress = self._progress_mark
+        if self._progress >= mark_progress + STALL_DISTANCE:
+            self._progress_mark = (t, self._progress)
+        elif t - mark_time >= settings.replan_stall_time:
+            return "stalled"
+        # The marks only change with a scan; a finding held back by the interval is kept.
+        if new_marks and not self._obstacle_on_plan:
+            ahead = self._plan_ahead(settings.replan_horizon)
+            self._obstacle_on_plan = self.costmap.new_marks_near(
+                ahead, settings.vehicle_radius, self._marks_at_plan
+            )
+        return "obstacle_on_plan" if self._obstacle_on_plan else None
+
+    def _plan_ahead(self, horizon: float) -> np.ndarray:
+        """Points every half cell along the plan from the progress to `horizon` [m] further."""
+        end = self._progress + horizon
+        spacing = self.grid.resolution / 2.0
+        along = np.arange(self._progress, min(end, self._arc[-1]) + spacing, spacing)
+        along = along[along <= self._arc[-1]]
+        x = np.interp(along, self._arc, self.waypoints[:, 0])
+        y = np.interp(along, self._arc, self.waypoints[:, 1])
+        return np.column_stack((x, y))
+
+    def replan(self, t: float, pose: tuple[float, float, float], reason: str) -> bool:
+        """Plan from `pose` (x, y [m], theta [rad]) to the goal on the costmap; False (and `no_path`
+        set) when there is no path any more."""
+        self._last_replan = t
+        self._blocked_since = None
+        self._progress_mark = (t, 0.0)
+        radius = self.replanning.vehicle_radius
+        inflations = [radius]
+        if self.replanning.hybrid_turning_radius is not None and self.settings.expansion_distance > radius:
+            # Hybrid A* has no cost gradient: first keep half the expansion distance's extra margin.
+            inflations.insert(0, (radius + self.settings.expansion_distance) / 2.0)
+        error = None
+        for inflation in inflations:
+            try:
+                result = self._search(pose, inflation)
+            except PlannerError as failure:
+                error = failure
+                continue
+            self._use(result)
+            self.replans.append(Replan(t, reason, float(result.length), inflation))
+            return True
+        self.replans.append(Replan(t, reason, math.nan))
+        self.no_path = f"no path from ({pose[0]:.2f}, {pose[1]:.2f}) m at t = {t:.2f} s: {error}"
+        return False
+
+    def _search(self, pose: tuple[float, float, float], inflation: float):
+        """One search on the costmap inflated by `inflation` [m], opened around the pose and goal."""
+        from planner import plan
+
+        grid = self.costmap.grid()
+        blocked = (grid.inflate(inflation) if inflation > 0 else grid).occupied.copy()
+        for point in (pose[:2], self.goal[:2]):
+            blocked &= ~_disc(grid, point, inflation) | grid.occupied
+        costmap = OccupancyGrid(blocked, grid.resolution, grid.origin)
+        if self.replanning.hybrid_turning_radius is not None:
+            # Arrive as the current plan does (the heading of its last segment).
+            end = self.waypoints[-2:] if len(self.waypoints) >= 2 else np.array([pose[:2], self.goal[:2]])
+            heading = float(np.arctan2(end[-1, 1] - end[0, 1], end[-1, 0] - end[0, 0]))
+            options = {
+                "planner": "hybrid",
+                "min_turning_radius": self.replanning.hybrid_turning_radius,
+                "reverse": self.settings.reverse,
+            }
+            result = plan(costmap, tuple(pose), (*self.goal[:2], heading), **options)
+        else:
+            # The footprint is the hard limit; the expansion distance becomes a cost that keeps the
+            # path away from obstacles where there is room (a hard expansion would close an aisle
+            # that a box narrows, and send the robot round another one).
+            options = {
+                **plan_options(self.settings),
+                "expansion_distance": 0.0,
+                "cost_weight": COST_WEIGHT,
+                "cost_scaling_factor": 1.0 / max(self.settings.expansion_distance, self.grid.resolution),
+            }
+            result = plan(costmap, tuple(pose[:2]), tuple(self.goal[:2]), **options)
+        if len(result.path) == 0:
+            raise PlannerError("empty path")
+        return result
+
+
+def _disc(grid: OccupancyGrid, point, radius: float) -> np.ndarray:
+    """Cells whose centre is within `radius` [m] of `point`, plus the point's own cell."""
+    rows, cols = grid.shape
+    x = grid.origin[0] + (np.arange(cols) + 0.5) * grid.resolution
+    y = grid.origin[1] + (rows - 1 - np.arange(rows) + 0.5) * grid.resolution
+    disc = np.hypot(x[None, :] - point[0], y[:, None] - point[1]) <= radius
+    row, col = grid.world_to_cell((point[0], point[1]))
+    if grid.contains_cell((row, col)):
+        disc[row, col] = True
+    return disc

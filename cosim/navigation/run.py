@@ -17,7 +17,8 @@ Log contents and rates (t = simulated time, integer nanoseconds):
 - `/scan`: every lidar step; `/cmd_vel`: every mixer step (v, omega of the mixer).
 - `/obstacles`: at t = 0, and at every lidar step at which a moving obstacle has moved (the poses
   that scan saw).
-- `/plan`, `/map`, `/map_inflated`, `/goal`: once at t = 0.
+- `/plan`: at t = 0 and at each replan (stamped with the start of the planner step that made it).
+- `/map`, `/map_inflated`, `/goal`: once at t = 0.
 - metadata `navcosim`, `fmu/<role>`, `outcome`; attachments `scenario.toml` and the map file(s).
 
 End of a run: a normal end, an interrupt (outcome reason "interrupted") and an FMU failure
@@ -364,6 +365,9 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     x_item, y_item, index_x, index_y = recording.pose_x.item, recording.pose_y.item, recording.x, recording.y
     mode_steps, mode_period, mode_buffer, mode_index = recording.mode or (0, 0.0, None, 0)
 
+    planner = built.planner if built.planner is not None and not built.planner.constant_outputs else None
+    plan_version = [planner.plan_version if planner is not None else 0]
+
     def after_step(current: Master) -> bool:
         k = current.step_index - 1
         t_ns = start_ns + k * h_ns
@@ -371,6 +375,14 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
         if mode_steps and k % mode_steps == 0:
             monitor.check_mode(mode_buffer.item(mode_index), mode_period)
         reason = monitor.check_position((t_ns + h_ns) / NS_PER_S, x_item(index_x), y_item(index_y))
+        if planner is not None:
+            if planner.plan_version != plan_version[0]:
+                plan_version[0] = planner.plan_version
+                recorder.write_path(t_ns, planner.result.path)  # the plan made in step k
+            monitor.outcome.replans = len(planner.replans)
+            if reason is None and planner.no_path is not None:
+                monitor.outcome.no_path = planner.no_path
+                reason = "no_path"
         if reason is None and interrupt.signal_name is not None:
             reason = "interrupted"
         if bar is not None:

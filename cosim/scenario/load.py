@@ -112,6 +112,12 @@ class PlannerSettings:
     smoothing: str = "line_of_sight"
     min_turning_radius: float | None = None
     reverse: bool = False
+    # Replanning at run time on the known map plus the lidar's returns (cosim.navigation.planner).
+    replan: bool = True
+    replan_after: float = 2.0  # [s] without a free VFH direction
+    replan_stall_time: float = 10.0  # [s] without 1 m of progress along the plan
+    replan_horizon: float = 20.0  # [m] of the plan ahead checked for newly seen obstacles
+    replan_interval: float = 1.0  # [s] at least between two replans
 
 
 @dataclass(frozen=True)
@@ -564,6 +570,11 @@ def _planner(table: TableReader, vehicle_radius: float) -> PlannerSettings:
         smoothing=table.string("smoothing", "line_of_sight", choices=("none", "line_of_sight", "curvature")),
         min_turning_radius=table.number("min_turning_radius", None, minimum=0.0, exclusive_minimum=True),
         reverse=table.boolean("reverse", False),
+        replan=table.boolean("replan", True),
+        replan_after=table.number("replan_after", 2.0, minimum=0.0, exclusive_minimum=True),
+        replan_stall_time=table.number("replan_stall_time", 10.0, minimum=0.0, exclusive_minimum=True),
+        replan_horizon=table.number("replan_horizon", 20.0, minimum=0.0),
+        replan_interval=table.number("replan_interval", 1.0, minimum=0.0),
     )
     if settings.connectivity not in (4, 8):
         raise table.error("connectivity", f"must be 4 or 8, got {settings.connectivity}")

@@ -7,7 +7,8 @@ makes the components. Nothing downstream knows these names: what a run reads bes
 recording (robot pose, commanded velocity, avoidance mode, scan) is declared here (`Observed`).
 
 Components, in the order they are added to the system (it breaks ties of the step order):
-    planner       Python: the plan on the known map; outputs waypoints[k,c], k = 1..1000, c = 1 (x), 2 (y)
+    planner       Python: the plan on the known map; outputs waypoints[k,c], k = 1..1000, c = 1 (x), 2 (y);
+                  with [planner].replan also inputs x, y, theta, steering_dir, ranges[k] (at the lidar rate)
     pure_pursuit  [pure_pursuit] FMU
     lidar         Python: ray casting on the true world; inputs x, y, theta; outputs ranges[k], angles[k]
     vfh           [vfh] FMU
@@ -17,6 +18,7 @@ Components, in the order they are added to the system (it breaks ties of the ste
 Connections:
     vehicle.x/y/theta         -> pure_pursuit.x/y/theta, lidar.x/y/theta
     planner.waypoints[k,c]    -> pure_pursuit.waypoints[k,c]
+    vehicle.x/y/theta, lidar.ranges[k], vfh.steering_dir -> planner (with [planner].replan)
     lidar.ranges[k]/angles[k] -> vfh.ranges[k]/angles[k]               (k = 1..lidar beams)
     pure_pursuit.target_dir   -> vfh.target_dir, mixer.target_dir
     pure_pursuit.v/omega/goal_reached -> mixer.v_in/omega_in/goal_reached
@@ -90,6 +92,34 @@ def _fmu_component(
     )
 
 
+def planner_inputs(scenario: Scenario) -> tuple[str, ...]:
+    """A replanning planner reads the pose, VFH's steering direction and the lidar's ranges."""
+    if not scenario.planner.replan:
+        return ()
+    ranges = [port.name for port in array_ports("ranges", len(scenario.lidar.angles))]
+    return (*POSE, "steering_dir", *ranges)
+
+
+def _planner_component(scenario: Scenario) -> ComponentDescription:
+    """The planner: a plan fixed for the run at the controller rate, or (replanning) a costmap fed
+    by every scan, so it steps with the lidar; its waypoints depend on the scan and pose of the
+    same step (not on VFH's direction, which depends on the waypoints)."""
+    inputs = planner_inputs(scenario)
+    rate = scenario.lidar.rate if inputs else scenario.controller_rate
+    # Every range counts, but one declared range already orders the planner after the lidar (all
+    # ranges come from it) without a 1000 x beams dependency graph.
+    direct = ("ranges[1]",) if inputs else ()
+    return ComponentDescription(
+        "planner",
+        "planner",
+        "[planner]",
+        rate=rate,
+        inputs=inputs,
+        outputs=tuple(planner_outputs()),
+        feedthrough={name: direct for name in planner_outputs()},
+    )
+
+
 def template_components(scenario: Scenario) -> list[ComponentDescription]:
     """The template's components (interfaces of the FMUs not yet read), in `ORDER`."""
     components = scenario.components
@@ -102,13 +132,7 @@ def template_components(scenario: Scenario) -> list[ComponentDescription]:
             mixer_defaults[name] = vehicle.parameters[name]
     beams = len(scenario.lidar.angles)
     made = {
-        "planner": ComponentDescription(
-            "planner",
-            "planner",
-            "[planner]",
-            rate=scenario.controller_rate,
-            outputs=tuple(planner_outputs()),
-        ),
+        "planner": _planner_component(scenario),
         "pure_pursuit": _fmu_component(
             components["pure_pursuit"], defaults={"goal_tolerance": scenario.goal_tolerance}
         ),
@@ -137,6 +161,12 @@ def template_connections(scenario: Scenario) -> list[ConnectionDescription]:
     for axis in POSE:
         pairs += [(f"vehicle.{axis}", f"pure_pursuit.{axis}"), (f"vehicle.{axis}", f"lidar.{axis}")]
     pairs += [(f"planner.{name}", f"pure_pursuit.{name}") for name in planner_outputs()]
+    if scenario.planner.replan:
+        pairs += [(f"vehicle.{axis}", f"planner.{axis}") for axis in POSE]
+        pairs += [
+            (f"lidar.ranges[{k}]", f"planner.ranges[{k}]") for k in range(1, len(scenario.lidar.angles) + 1)
+        ]
+        pairs += [("vfh.steering_dir", "planner.steering_dir")]
     for k in range(1, len(scenario.lidar.angles) + 1):
         pairs += [(f"lidar.{signal}[{k}]", f"vfh.{signal}[{k}]") for signal in ("ranges", "angles")]
     pairs += [
