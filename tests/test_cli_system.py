@@ -40,8 +40,9 @@ def test_system_prints_components_connections_and_step_order(lag_scenario, capsy
     )
     assert re.search(r"Python lidar .*\s-\s+10 Hz \(every 10 steps\)", rows["lidar"])
     # The template's connections (pose to Pure Pursuit and lidar, waypoints, beams, commands, the
-    # two vehicle inputs), one replaced by the scenario's, plus the scenario's two.
-    template = 6 + 2 * WAYPOINTS + 2 * BEAMS + 6 + 2
+    # two vehicle inputs, and the replanning planner's pose, ranges and VFH direction), one
+    # replaced by the scenario's, plus the scenario's two.
+    template = 6 + 2 * WAYPOINTS + 2 * BEAMS + 6 + 2 + (3 + BEAMS + 1)
     assert f"connections ({template - 1 + 2}; input = output * scale + offset)" in out
     lines = sections["connections"].splitlines()
     assert re.search(
@@ -61,11 +62,16 @@ def test_system_prints_components_connections_and_step_order(lag_scenario, capsy
     )
     order = [line.split(". ", 1)[1].split()[0] for line in sections["step order"].splitlines()]
     assert sorted(order) == sorted(rows)
-    assert "planner  (outputs fixed after initialisation: not stepped)" in out
+    # Replanning (the default): the planner steps with the lidar, after it (it reads the scan).
+    assert re.search(r"Python planner .*\s-\s+10 Hz \(every 10 steps\)", rows["planner"])
+    assert order.index("lidar") < order.index("planner") < order.index("pure_pursuit")
 
 
 def test_step_order_puts_every_direct_producer_first(lag_scenario, capsys):
-    """Gauss-Seidel: a producer whose output depends directly on its inputs steps before its consumer."""
+    """Gauss-Seidel: a producer whose output depends directly on its inputs steps before a consumer
+    whose outputs depend directly on that connection's input (the replanning planner reads VFH's
+    direction of the step before: its waypoints do not depend on it, else VFH -> planner -> Pure
+    Pursuit -> VFH would be a loop)."""
     assert main(["system", str(lag_scenario)]) == 0
     out = capsys.readouterr().out
     order = re.findall(r"(?m)^  \d+\. (\w+)", out)
@@ -73,7 +79,10 @@ def test_step_order_puts_every_direct_producer_first(lag_scenario, capsys):
     for connection in description.connections:
         producer = description.components[connection.source_component]
         output = connection.source.split(".", 1)[1]
-        if producer.feedthrough.get(output, producer.inputs):  # direct (a Python output lists none)
+        consumer = description.components[connection.target_component]
+        used = connection.target.split(".", 1)[1]
+        direct_use = any(used in consumer.feedthrough.get(o, consumer.inputs) for o in consumer.outputs)
+        if producer.feedthrough.get(output, producer.inputs) and direct_use:  # a Python output lists none
             assert order.index(producer.name) < order.index(connection.target_component), connection
 
 

@@ -57,8 +57,10 @@ def test_log_topics_and_counts_match_the_rates(short_run):
     for controller in ("pure_pursuit", "vfh", "mixer"):
         assert counts[f"/signals/{controller}"] == steps // 5 + 1
     assert counts["/signals/lidar"] == steps // 10 + 1
-    for once in ("/plan", "/map", "/map_inflated", "/obstacles", "/goal"):
+    for once in ("/map", "/map_inflated", "/obstacles", "/goal"):
         assert counts[once] == 1
+    # /plan at t = 0 and at every replan (the example's box is seen on the plan at once).
+    assert counts["/plan"] == 1 + short_run[1].outcome.replans
     assert metadata["outcome"]["reason"] == "stop_time"
     assert metadata["navcosim"]["scenario_name"] == "example_commented"
     assert {"fmu/vehicle", "fmu/pure_pursuit", "fmu/vfh", "fmu/mixer"} <= set(metadata)

@@ -88,7 +88,8 @@ def test_running_the_ssp_reproduces_the_scenario_log_exactly(exported, tmp_path,
     report = capsys.readouterr().out
     assert "EQUAL within tolerance" in report and "(largest deviation 0)" in report
     a, b = open_log(direct), open_log(again)
-    assert sorted(a.components) == sorted(b.components) and len(a.components) == 5
+    # Five FMUs and lidar plus the replanning planner (its pose and VFH-direction inputs).
+    assert sorted(a.components) == sorted(b.components) and len(a.components) == 6
     assert a.scenario_text == b.scenario_text and a.outcome == b.outcome
 
 

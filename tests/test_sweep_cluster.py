@@ -26,7 +26,16 @@ REPO = Path(__file__).resolve().parent.parent
 SCENARIO = REPO / "scenarios" / "warehouse_diff_drive_one_obstacle.toml"
 BASE = ["--set", "simulation.stop_time=4"]  # [s] simulated: 400 macro steps a run
 VARY = ["--vary", "pure_pursuit.desired_linear_velocity=1.0,1.5", "--vary", "lidar.noise=0.0,0.2"]
-OUTCOME = ("reached", "reason", "time", "distance", "min_clearance", "vfh_interventions", "recovery_time")
+OUTCOME = (
+    "reached",
+    "reason",
+    "time",
+    "distance",
+    "min_clearance",
+    "vfh_interventions",
+    "recovery_time",
+    "replans",
+)
 
 
 def _sweep(out: Path, *options: str, cwd: Path = REPO) -> subprocess.CompletedProcess:
