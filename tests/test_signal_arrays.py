@@ -21,7 +21,12 @@ SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "warehouse_dif
 
 
 def _log(tmp_path: Path, arrays: bool):
-    overrides = ["simulation.stop_time=3.0", f"output.signal_arrays={str(arrays).lower()}"]
+    # A plan fixed for the run (a replanning planner also has scalar inputs, so always a channel).
+    overrides = [
+        "simulation.stop_time=3.0",
+        f"output.signal_arrays={str(arrays).lower()}",
+        "planner.replan=false",
+    ]
     scenario = load_scenario(SCENARIO, overrides)
     assert scenario.signal_arrays is arrays
     result = run_scenario(scenario, tmp_path / f"{arrays}.mcap")
