@@ -274,3 +274,47 @@ def test_first_call_elapsed_excludes_jit_compilation():
     # 30 ms, but never a large part of a call that loaded or compiled kernels.
     for kind, elapsed, wall in lines:
         assert float(elapsed) < 0.25 * float(wall), f"{kind}: elapsed {elapsed} s of {wall} s includes JIT"
+
+
+def test_a_repeated_query_checks_its_options_and_endpoints_as_the_first_did():
+    """plan() keeps a prepared search per grid and option set; a later call must not slip past the
+    checks: 0 is not a bool even after False was accepted, and bad endpoints still name the problem."""
+    grid = OccupancyGrid(np.zeros((10, 10), bool))
+    for _ in range(2):
+        planner.plan(grid, (1.5, 1.5), (8.5, 8.5), corner_cutting=False)
+        with pytest.raises(PlannerError, match="corner_cutting must be True or False"):
+            planner.plan(grid, (1.5, 1.5), (8.5, 8.5), corner_cutting=0)
+    for point, match in [
+        ((float("nan"), 1.5), "start must be finite"),
+        ((1e300, 1.5), "start .* is outside the map"),
+        ((1.5,), "start must be"),
+    ]:
+        with pytest.raises(PlannerError, match=match):
+            planner.plan(grid, point, (8.5, 8.5), corner_cutting=False)
+    with pytest.raises(PlannerError, match="connectivity="):
+        planner.plan(grid, (1.5, 1.5), (8.5, 8.5), connectivity=[8])  # unhashable: not cached
+
+
+def test_explored_is_the_expanded_cells_of_its_own_query():
+    """The explored mask is built on first access from the nodes the search expanded; a later query,
+    which reuses the search's work arrays, must not change an earlier result's mask."""
+    occupied = np.zeros((20, 30), bool)
+    occupied[3:17, 12] = True
+    grid = OccupancyGrid(occupied)
+    first = planner.plan(grid, (1.5, 10.5), (28.5, 10.5))
+    second = planner.plan(grid, (28.5, 1.5), (1.5, 18.5))
+    for result in (second, first):
+        explored = result.explored
+        assert explored.shape == grid.shape and explored.sum() == result.searched_nodes
+        assert not (explored & occupied).any()
+        assert explored[tuple(result.cells.T)].all()  # every path cell was expanded (closed)
+    assert not np.array_equal(first.explored, second.explored)
+
+
+def test_paths_longer_than_the_first_path_buffer():
+    """A 1 x 3000 corridor: the path (3000 cells) outgrows the reused path buffers, which grow."""
+    grid = OccupancyGrid(np.zeros((1, 3000), bool))
+    result = planner.plan(grid, (0.5, 0.5), (2999.5, 0.5))
+    assert result.path_nodes == 3000 and result.length == 2999.0
+    assert np.array_equal(result.cells[:, 1], np.arange(3000)) and (result.cells[:, 0] == 0).all()
+    assert np.array_equal(result.path[:, 0], np.arange(3000) + 0.5)

@@ -134,6 +134,18 @@ def test_empty_map_gives_the_optimal_curve():
     assert straight.length == pytest.approx(26.0, abs=1e-9) and straight.info["cusps"] == 0
 
 
+def test_mirror_image_curves_of_equal_cost():
+    """A goal right behind the car, facing back: the turn to the left and the turn to the right
+    cost exactly the same (the search then orders the candidate curves by np.argsort, as a run of
+    its own); either is a shortest Reeds-Shepp path, pi R long."""
+    grid = OccupancyGrid(np.zeros((60, 60), dtype=bool), resolution=0.5)
+    start, goal = (15.0, 15.0, 0.0), (11.0, 15.0, math.pi)
+    result = plan_hybrid(grid, start, goal, min_turning_radius=2.0)
+    assert result.length == pytest.approx(math.pi * 2.0, abs=1e-9)
+    assert result.length == pytest.approx(reeds_shepp.path_length(start, goal, 2.0), abs=1e-9)
+    assert_drivable(result, grid, start, goal, 2.0, 0.0)
+
+
 def test_goal_tolerance_without_analytic_expansion():
     # With analytic expansion off, the search must end on a primitive within
     # the goal tolerances.
