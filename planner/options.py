@@ -136,6 +136,7 @@ def resolve(options: dict) -> dict:
     if flag("bidirectional", resolved["bidirectional"]):
         resolved["planner"] = "bidirectional"
     choice("connectivity", resolved["connectivity"], (4, 8))
+    resolved["connectivity"] = int(resolved["connectivity"])  # 8.0 is 8 (it indexes the move table)
     if resolved["heuristic"] is None:
         resolved["heuristic"] = "octile" if resolved["connectivity"] == 8 else "manhattan"
     choice("heuristic", resolved["heuristic"], tuple(name for name in HEURISTICS if name != "zero"))

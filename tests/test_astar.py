@@ -1,6 +1,8 @@
 """Grid A* against a second implementation (scipy's csgraph Dijkstra on an explicitly built grid
 graph), the thesis's switches, and every user error."""
 
+import math
+
 import numpy as np
 import pytest
 from scipy.sparse import coo_matrix
@@ -293,6 +295,9 @@ def test_a_repeated_query_checks_its_options_and_endpoints_as_the_first_did():
             planner.plan(grid, point, (8.5, 8.5), corner_cutting=False)
     with pytest.raises(PlannerError, match="connectivity="):
         planner.plan(grid, (1.5, 1.5), (8.5, 8.5), connectivity=[8])  # unhashable: not cached
+    assert planner.plan(grid, (1.5, 1.5), (8.5, 8.5), connectivity=8.0).length == pytest.approx(
+        7 * math.sqrt(2)
+    )
 
 
 def test_explored_is_the_expanded_cells_of_its_own_query():
