@@ -79,12 +79,23 @@ def test_robot_topics_round_trip_through_anyreader(log_path):
         log_time, odometry = topics["/odom"][k]
         assert log_time == k * STEP_NS
         assert odometry.header.stamp.sec * 10**9 + odometry.header.stamp.nanosec == k * STEP_NS
-        assert odometry.header.frame_id == "map" and odometry.child_frame_id == "base_link"
+        # REP-105: odometry in "odom" of "base_link"; /tf is the tree map -> odom -> base_link.
+        assert odometry.header.frame_id == "odom" and odometry.child_frame_id == "base_link"
         assert (odometry.pose.pose.position.x, odometry.pose.pose.position.y) == (x, y)
         assert _angle_difference(_yaw(odometry.pose.pose.orientation), theta) < 1e-12
         assert odometry.twist.twist.linear.x == SPEED and odometry.twist.twist.angular.z == SPEED / RADIUS
-        transform = topics["/tf"][k][1].transforms[0]
-        assert (transform.header.frame_id, transform.child_frame_id) == ("map", "base_link")
+        to_odom, transform = topics["/tf"][k][1].transforms
+        assert (to_odom.header.frame_id, to_odom.child_frame_id) == ("map", "odom")
+        assert (transform.header.frame_id, transform.child_frame_id) == ("odom", "base_link")
+        assert to_odom.header.stamp == transform.header.stamp == odometry.header.stamp
+        identity = to_odom.transform
+        assert (identity.translation.x, identity.translation.y, identity.translation.z) == (0.0, 0.0, 0.0)
+        assert (identity.rotation.x, identity.rotation.y, identity.rotation.z, identity.rotation.w) == (
+            0,
+            0,
+            0,
+            1,
+        )
         assert (transform.transform.translation.x, transform.transform.translation.y) == (x, y)
         assert _angle_difference(_yaw(transform.transform.rotation), theta) < 1e-12
         pose = topics["/pose"][k][1].pose
@@ -103,7 +114,8 @@ def test_scan_round_trips_with_its_angles(log_path):
     assert log_time == k * STEP_NS
     beam_angles = scan.angle_min + scan.angle_increment * np.arange(len(scan.ranges))
     np.testing.assert_allclose(beam_angles, ANGLES, atol=1e-6)  # float32 fields
-    np.testing.assert_array_equal(scan.ranges, scan_at(k).astype(np.float32))
+    # REP-117: a beam without a return (NaN from the lidar) is +inf on /scan.
+    np.testing.assert_array_equal(scan.ranges, np.nan_to_num(scan_at(k), nan=np.inf).astype(np.float32))
     assert scan.header.frame_id == "base_link"
 
 
@@ -184,7 +196,17 @@ def test_packed_messages_equal_rosbags_serialisation():
         assert rosmsg.twist_cdr(v, omega) == rosmsg.serialize(
             rosmsg.twist(v, omega), "geometry_msgs/msg/Twist"
         )
-        header = rosmsg.header(t_ns, "map")
+        header = rosmsg.header(t_ns, "odom")
+        to_odom = rosmsg.make(
+            "geometry_msgs/msg/TransformStamped",
+            header=rosmsg.header(t_ns, "map"),
+            child_frame_id="odom",
+            transform=rosmsg.make(
+                "geometry_msgs/msg/Transform",
+                translation=rosmsg.vector3(0.0, 0.0),
+                rotation=rosmsg.quaternion(0.0),
+            ),
+        )
         transform = rosmsg.make(
             "geometry_msgs/msg/TransformStamped",
             header=header,
@@ -196,7 +218,7 @@ def test_packed_messages_equal_rosbags_serialisation():
             ),
         )
         expected_tf = rosmsg.serialize(
-            rosmsg.make("tf2_msgs/msg/TFMessage", transforms=[transform]), "tf2_msgs/msg/TFMessage"
+            rosmsg.make("tf2_msgs/msg/TFMessage", transforms=[to_odom, transform]), "tf2_msgs/msg/TFMessage"
         )
         assert rosmsg.tf_cdr(t_ns, x, y, yaw) == expected_tf
         odometry = rosmsg.make(
@@ -346,7 +368,7 @@ def test_held_messages_are_the_bytes_and_order_of_one_message_at_a_time(tmp_path
                     scan_time=0.0,
                     range_min=0.0,
                     range_max=10.0,
-                    ranges=ranges.astype(np.float32),
+                    ranges=np.where(np.isnan(ranges), np.inf, ranges).astype(np.float32),
                     intensities=np.zeros(0, dtype=np.float32),
                 )
                 expected.append(("/scan", t_ns, rosmsg.serialize(message, TOPIC_TYPES["/scan"])))

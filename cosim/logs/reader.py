@@ -272,7 +272,14 @@ class Log:
 
     # --- ROS messages --------------------------------------------------------------------
 
+    def topic_name(self, topic: str) -> str:
+        """The name `topic` ("/odom") has in this log: remapped by the run's [output.topics]."""
+        remap = self.metadata.get("navcosim", {}).get("topics", "")
+        names = dict(item.split("=", 1) for item in remap.split(",") if "=" in item)
+        return names.get(topic, topic)
+
     def _topic_channels(self, topic: str) -> dict[int, str]:
+        topic = self.topic_name(topic)
         channels = {cid: channel for cid, channel in self._index.channels.items() if channel.topic == topic}
         if not channels:
             raise CosimError(f"{self.path}: no topic {topic} in the log")
@@ -300,6 +307,7 @@ class Log:
             yield LogMessage(t_ns / 1e9, t_ns, typestore.deserialize_cdr(payload, channels[channel_id]))
 
     def has_topic(self, topic: str) -> bool:
+        topic = self.topic_name(topic)
         return any(info.name == topic and info.count for info in self.topics)
 
     def last_message(self, topic: str):

@@ -183,7 +183,8 @@ class _Recording:
             gather = None if ranges is not None else np.array(ranges_index, dtype=np.intp)
             angles = np.array(source.angles, dtype=float)
             angles.flags.writeable = False  # fixed for the run: the recorder keeps its /scan layout
-            limits = (source.range_min, source.range_max)
+            # Range limits [m] and scan_time [s] (the lidar's period) of /scan.
+            limits = (source.range_min, source.range_max, system.period_steps(lidar) * system.macro_step)
             self.scan = (system.period_steps(lidar), lidar.output_buffer, ranges, gather, angles, limits)
         self.pose_steps = max(1, round(1.0 / (built.scenario.pose_rate * built.scenario.macro_step)))
         self.obstacles = built.scenario.obstacles
@@ -273,6 +274,7 @@ def _write_header(built: BuiltRun, master: Master, recorder) -> None:
             "stop_time": str(scenario.stop_time),
             "overrides": " ".join(scenario.overrides),
             "master": scenario.master,
+            "topics": ",".join(f"{topic}={name}" for topic, name in scenario.topics.items()),
         },
     )
     for name, component in built.system.components.items():
@@ -325,7 +327,7 @@ def _build_and_run(
         raise CosimError(f"{scenario.source}: initialising the system failed: {error}") from None
     log_path = Path(out_path) if out_path is not None else default_log_path(scenario)
     try:
-        recorder = Recorder(log_path, flush_interval=flush_interval, sink=sink)
+        recorder = Recorder(log_path, flush_interval=flush_interval, sink=sink, topics=scenario.topics)
     except BaseException:
         master.close()
         raise

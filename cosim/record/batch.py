@@ -85,9 +85,10 @@ class _Records:
         records["sequence"] = np.arange(sequence, sequence + len(times), dtype=np.uint32)
         records["log_time"] = times
         records["publish_time"] = times
-        if "sec" in self.dtype.names:
-            records["sec"] = times // NS_PER_S
-            records["nanosec"] = times % NS_PER_S
+        for suffix in ("", "2"):  # a TFMessage's second transform has its own stamp
+            if "sec" + suffix in self.dtype.names:
+                records["sec" + suffix] = times // NS_PER_S
+                records["nanosec" + suffix] = times % NS_PER_S
         return records
 
 
@@ -145,14 +146,19 @@ class PoseStream:
     def __init__(self, odom: int, tf: int, pose: int) -> None:
         zero_pose = (0.0, 0.0, 0.0)
         odom_payload = rosmsg.odometry_cdr(0, *zero_pose, 0.0, 0.0)
-        pose_offset = _CDR + struct.calcsize("<iII4sI10s2x")
+        pose_offset = _CDR + struct.calcsize(rosmsg.ODOMETRY_HEAD)
         odom_fields = _stamp_fields(_CDR) | {"pose": ("<f8", pose_offset), "pose_y": ("<f8", pose_offset + 8)}
         odom_fields |= {"qz": ("<f8", pose_offset + 40), "qw": ("<f8", pose_offset + 48)}
         twist_offset = pose_offset + 56 + 36 * 8
         odom_fields |= {"v": ("<f8", twist_offset), "omega": ("<f8", twist_offset + 40)}
         self.odom = _Records(odom, odom_payload, odom_fields)
-        tf_offset = _CDR + struct.calcsize("<IiII4sI10s6x")
-        tf_fields = _stamp_fields(_CDR + 4) | {"pose": ("<f8", tf_offset), "pose_y": ("<f8", tf_offset + 8)}
+        tf_offset = _CDR + struct.calcsize(rosmsg.TF_SECOND)  # the pose of odom -> base_link
+        second_stamp = _CDR + struct.calcsize(rosmsg.TF_HEAD) + 7 * 8
+        tf_fields = _stamp_fields(_CDR + 4) | {
+            "sec2": ("<i4", second_stamp),
+            "nanosec2": ("<u4", second_stamp + 4),
+        }
+        tf_fields |= {"pose": ("<f8", tf_offset), "pose_y": ("<f8", tf_offset + 8)}
         tf_fields |= {"qz": ("<f8", tf_offset + 40), "qw": ("<f8", tf_offset + 48)}
         self.tf = _Records(tf, rosmsg.tf_cdr(0, *zero_pose), tf_fields)
         stamped_offset = _CDR + struct.calcsize("<iII4s")

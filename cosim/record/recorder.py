@@ -94,9 +94,12 @@ class Recorder:
         flush_interval: float = 0.5,
         chunk_duration: float = CHUNK_DURATION,
         sink=None,
+        topics: dict[str, str] | None = None,
     ) -> None:
-        """`sink` (`cosim.record.live.Sink`): also gets every schema, channel and message written."""
+        """`sink` (`cosim.record.live.Sink`): also gets every schema, channel and message written.
+        `topics`: a topic's name in the log, by its name here ("/odom" -> "/ground-truth-pose")."""
         self.path = Path(path)
+        self.topics = dict(topics or {})
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._file = open(self.path, "wb")  # noqa: SIM115 - closed by close()
@@ -190,7 +193,8 @@ class Recorder:
         channel = self._channels.get(topic)
         if channel is None:
             schema = self._schema(TOPIC_TYPES[topic])
-            channel = self._writer.register_channel(topic, "cdr", schema, metadata or {})
+            name = self.topics.get(topic, topic)
+            channel = self._writer.register_channel(name, "cdr", schema, metadata or {})
             self._channels[topic] = channel
             self._sequences[channel] = 0
         return channel
@@ -374,26 +378,42 @@ class Recorder:
         self._write_message(topic, t_ns, message)
 
     def write_scan(
-        self, t_ns: int, angles: np.ndarray, ranges: np.ndarray, range_min: float, range_max: float
+        self,
+        t_ns: int,
+        angles: np.ndarray,
+        ranges: np.ndarray,
+        range_min: float,
+        range_max: float,
+        scan_time: float = 0.0,
     ) -> None:
-        """A lidar sweep on /scan: beam angles [rad] in the robot frame and ranges [m] as the lidar
-        gives them. LaserScan needs equally spaced angles, so beams go into bins of a uniform grid
-        (see `scan_layout`); bins without a beam hold NaN."""
+        """A lidar sweep on /scan: beam angles [rad] in the robot frame and ranges [m]; `scan_time`
+        [s] between sweeps (1 / rate). REP-117: a beam without a return (NaN from the lidar) is
+        +inf. All beams are taken at the stamp, so `time_increment` is 0. LaserScan needs equally
+        spaced angles, so beams go into bins of a uniform grid (see `scan_layout`); bins without a
+        beam hold NaN (no measurement)."""
         last = self._last_scan
-        if last is not None and angles is last[0] and range_min == last[1] and range_max == last[2]:
+        if (
+            last is not None
+            and angles is last[0]
+            and (range_min, range_max, scan_time) == (last[1], last[2], last[4])
+        ):
             layout = last[3]  # the run loop passes the same angle array every sweep
         else:
             angle_array = np.asarray(angles, dtype=float)
-            key = (angle_array.tobytes(), float(range_min), float(range_max))
+            key = (angle_array.tobytes(), float(range_min), float(range_max), float(scan_time))
             layout = self._scan_layouts.get(key)
             if layout is None:
-                layout = self._scan_template(angle_array, float(range_min), float(range_max))
+                layout = self._scan_template(
+                    angle_array, float(range_min), float(range_max), float(scan_time)
+                )
                 self._scan_layouts[key] = layout
             # Keyed by identity only for a read-only array, which cannot change between sweeps.
             frozen = isinstance(angles, np.ndarray) and not angles.flags.writeable
-            self._last_scan = (angles, range_min, range_max, layout) if frozen else None
+            self._last_scan = (angles, range_min, range_max, layout, scan_time) if frozen else None
         bins, binned, head, tail = layout
         binned[bins] = ranges
+        beams = binned[bins]
+        binned[bins[np.isnan(beams)]] = np.inf
         # Only the stamp and the ranges change between sweeps: the CDR bytes are the template's
         # head (encapsulation, stamp, frame, angles, limits, ranges length), the ranges, and the
         # empty intensities.
@@ -401,7 +421,9 @@ class Recorder:
         payload = b"".join((head[:4], stamp, head[12:], binned.tobytes(), tail))
         self._hold(self._channels["/scan"], t_ns, payload)
 
-    def _scan_template(self, angles: np.ndarray, range_min: float, range_max: float) -> tuple:
+    def _scan_template(
+        self, angles: np.ndarray, range_min: float, range_max: float, scan_time: float
+    ) -> tuple:
         """(bins, NaN-filled float32 ranges to fill, CDR head, CDR tail) of a LaserScan layout."""
         angle_min, increment, bins, description = scan_layout(angles)
         if "/scan" not in self._channels:
@@ -414,7 +436,7 @@ class Recorder:
             angle_max=angle_min + increment * (len(binned) - 1),
             angle_increment=increment,
             time_increment=0.0,
-            scan_time=0.0,
+            scan_time=scan_time,
             range_min=range_min,
             range_max=range_max,
             ranges=binned,

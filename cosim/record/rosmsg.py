@@ -184,14 +184,22 @@ def serialize(message, typename: str) -> bytes:
 # dataclasses for them costs ~40 us per pose. Their CDR layout is fixed (the frame names are
 # constants), so they are packed with precomputed structs; tests compare the bytes with rosbags.
 # CDR aligns each primitive to its size, counted from the end of the 4-byte encapsulation header.
+# REP-105 frames: map -> odom -> base_link. Odometry here has no drift, so map -> odom is the
+# identity and odom -> base_link is the true pose.
 MAP_FRAME = "map"
+ODOM_FRAME = "odom"
 ROBOT_FRAME = "base_link"
 _MAP = b"map\0"
+_ODOM = b"odom\0"
 _ROBOT = b"base_link\0"
 _pose_stamped = struct.Struct("<iII4s7d")  # stamp, frame_id "map", Pose (8-aligned at 16)
 _twist = struct.Struct("<6d")
-_tf_message = struct.Struct("<IiII4sI10s6x7d")  # 1 transform: stamp, "map", "base_link", pad to 40
-_odometry_head = struct.Struct("<iII4sI10s2x7d")  # stamp, "map", "base_link", pad to 32, Pose
+# 2 transforms: [stamp, "map", "odom", pad to 32, 7d] then [stamp, "odom", "base_link", pad to 128, 7d].
+TF_HEAD = "<IiII4sI5s3x"
+TF_SECOND = "<IiII4sI5s3x7diII5s3xI10s6x"
+_tf_message = struct.Struct(TF_SECOND + "7d")
+ODOMETRY_HEAD = "<iII5s3xI10s6x"  # stamp, "odom", "base_link", pad to 40, then the Pose
+_odometry_head = struct.Struct(ODOMETRY_HEAD + "7d")
 _zero_covariance = bytes(36 * 8)
 
 
@@ -208,17 +216,21 @@ def twist_cdr(v: float, omega: float) -> bytes:
 
 
 def tf_cdr(t_ns: int, x: float, y: float, yaw: float) -> bytes:
-    """tf2_msgs/TFMessage with the one transform map -> base_link."""
+    """tf2_msgs/TFMessage with map -> odom (identity) and odom -> base_link (the pose)."""
     sec, nanosec = split_time(t_ns)
     qz, qw = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
-    return CDR_HEADER + _tf_message.pack(1, sec, nanosec, 4, _MAP, 10, _ROBOT, x, y, 0.0, 0.0, 0.0, qz, qw)
+    identity = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+    return CDR_HEADER + _tf_message.pack(
+        2, sec, nanosec, 4, _MAP, 5, _ODOM, *identity,
+        sec, nanosec, 5, _ODOM, 10, _ROBOT, x, y, 0.0, 0.0, 0.0, qz, qw,
+    )  # fmt: skip
 
 
 def odometry_cdr(t_ns: int, x: float, y: float, yaw: float, v: float, omega: float) -> bytes:
-    """nav_msgs/Odometry: pose in "map", twist in "base_link", zero covariances."""
+    """nav_msgs/Odometry: pose in "odom" of child "base_link", twist in "base_link", zero covariances."""
     sec, nanosec = split_time(t_ns)
     qz, qw = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
-    head = _odometry_head.pack(sec, nanosec, 4, _MAP, 10, _ROBOT, x, y, 0.0, 0.0, 0.0, qz, qw)
+    head = _odometry_head.pack(sec, nanosec, 5, _ODOM, 10, _ROBOT, x, y, 0.0, 0.0, 0.0, qz, qw)
     return CDR_HEADER + head + _zero_covariance + _twist.pack(v, 0.0, 0.0, 0.0, 0.0, omega) + _zero_covariance
 
 

@@ -160,6 +160,7 @@ class Scenario:
     pose_rate: float  # [Hz] of /odom, /tf, /pose
     signal_arrays: bool  # /signals/<component> also holds array outputs (lidar ranges, waypoints)
     overrides: tuple[str, ...] = field(default=())
+    topics: dict[str, str] = field(default_factory=dict)  # [output.topics]: "/odom" -> name in the log
     connections: tuple[ConnectionSpec, ...] = field(default=())
     fmi_version: int = 2  # which build of the project FMUs the roles use (2 or 3)
     fmu_isolation: str = "auto"  # "auto" | "process" | "none": see `isolation`
@@ -325,6 +326,7 @@ def _build(
     pose_rate = output.number("pose_rate", 50.0, minimum=0.0, exclusive_minimum=True)
     _check_rate(output, "pose_rate", pose_rate, macro_step)
     signal_arrays = output.boolean("signal_arrays", False)
+    topics = _topics(output.table_of("topics"))
     output.finish()
     top.finish()
 
@@ -354,6 +356,7 @@ def _build(
         plot=plot,
         pose_rate=pose_rate,
         signal_arrays=signal_arrays,
+        topics=topics,
         overrides=overrides,
         connections=connections,
         fmi_version=fmi_version,
@@ -361,6 +364,27 @@ def _build(
         fmu_timeout=fmu_timeout,
         fmu_max_size=fmu_max_size,
     )
+
+
+REMAPPABLE_TOPICS = (
+    "odom", "tf", "pose", "scan", "cmd_vel", "plan", "map", "map_inflated", "obstacles", "goal",
+)  # fmt: skip
+
+
+def _topics(table: TableReader) -> dict[str, str]:
+    """`[output.topics]`: `odom = "/ground-truth-pose"` names a topic in the log (ROS remapping)."""
+    topics: dict[str, str] = {}
+    for key in list(table.table):
+        if key not in REMAPPABLE_TOPICS:
+            raise table.error(key, f"not a topic of the log{did_you_mean(key, REMAPPABLE_TOPICS)}")
+        name = table.string(key)
+        if not name.startswith("/") or len(name) < 2 or any(c.isspace() for c in name):
+            raise table.error(key, f"a topic name starts with '/' and has no spaces, got '{name}'")
+        if name in topics.values() or (name != f"/{key}" and name[1:] in REMAPPABLE_TOPICS):
+            raise table.error(key, f"'{name}' is already the name of another topic")
+        topics[f"/{key}"] = name
+    table.finish()
+    return topics
 
 
 def _list(top: TableReader, key: str) -> list:

@@ -1,0 +1,120 @@
+"""A run's log follows the ROS conventions, read back by rosbags: REP-105 frames (/tf is the tree
+map -> odom -> base_link, /odom is in odom of base_link), REP-117 ranges (+inf without a return),
+scan_time = 1 / rate, and [output.topics] renames topics (the reader follows the renaming)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
+
+from cosim.errors import CosimError
+from cosim.logs import open_log
+from cosim.navigation.run import run_scenario
+from cosim.scenario.load import load_scenario
+
+SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "warehouse_diff_drive_one_obstacle.toml"
+RENAMED = [
+    'output.topics.odom="/ground-truth-pose"',
+    'output.topics.cmd_vel="/mobile-base/commands/velocity"',
+]
+
+
+@pytest.fixture(scope="module")
+def renamed_log(tmp_path_factory):
+    path = tmp_path_factory.mktemp("ros") / "run.mcap"
+    scenario = load_scenario(SCENARIO, ["simulation.stop_time=3.0", "lidar.range=[0.0, 8.0]", *RENAMED])
+    run_scenario(scenario, path)
+    return scenario, path
+
+
+def _compose(a, b):
+    """Planar transform a * b, each (x, y, yaw) from a geometry_msgs/Transform."""
+    ax, ay, ayaw = a
+    bx, by, byaw = b
+    return (
+        ax + math.cos(ayaw) * bx - math.sin(ayaw) * by,
+        ay + math.sin(ayaw) * bx + math.cos(ayaw) * by,
+        ayaw + byaw,
+    )
+
+
+def _planar(transform):
+    q = transform.rotation
+    return transform.translation.x, transform.translation.y, 2.0 * math.atan2(q.z, q.w)
+
+
+def test_tf_tree_odom_frames_and_renamed_topics_through_rosbags(renamed_log):
+    _, path = renamed_log
+    topics: dict[str, list] = {}
+    with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
+        for connection, _, raw in reader.messages():
+            topics.setdefault(connection.topic, []).append(reader.deserialize(raw, connection.msgtype))
+    assert "/odom" not in topics and "/cmd_vel" not in topics
+    odometry, commands = topics["/ground-truth-pose"], topics["/mobile-base/commands/velocity"]
+    assert len(commands) > 0 and len(odometry) == len(topics["/tf"]) == len(topics["/pose"])
+    for message, odom, pose in zip(topics["/tf"], odometry, topics["/pose"], strict=True):
+        parents = {t.child_frame_id: (t.header.frame_id, _planar(t.transform)) for t in message.transforms}
+        assert parents.keys() == {"odom", "base_link"}
+        assert parents["odom"][0] == "map" and parents["base_link"][0] == "odom"  # one chain to the root
+        robot = _compose(parents["odom"][1], parents["base_link"][1])  # map -> base_link
+        assert odom.header.frame_id == "odom" and odom.child_frame_id == "base_link"
+        assert pose.header.frame_id == "map"
+        assert robot[:2] == pytest.approx((pose.pose.position.x, pose.pose.position.y), abs=1e-12)
+        assert robot[:2] == pytest.approx((odom.pose.pose.position.x, odom.pose.pose.position.y), abs=1e-12)
+
+
+def test_scan_uses_inf_for_no_return_and_its_period(renamed_log):
+    scenario, path = renamed_log
+    log = open_log(path)
+    scans = [item.message for item in log.messages("/scan")]
+    assert scans and all(scan.scan_time == pytest.approx(1.0 / scenario.lidar.rate) for scan in scans)
+    assert all(scan.time_increment == 0.0 for scan in scans)  # every beam at the stamp
+    ranges = np.concatenate([np.asarray(scan.ranges, dtype=float) for scan in scans])
+    # With an 8 m range in the warehouse some beams see nothing: +inf, never NaN (a beam per bin).
+    assert np.isposinf(ranges).any() and not np.isnan(ranges).any()
+    assert (ranges[np.isfinite(ranges)] <= 8.0).all()
+    # The reader follows the renaming: "/odom" is /ground-truth-pose in this log.
+    assert log.topic_name("/odom") == "/ground-truth-pose" and log.has_topic("/odom")
+    first = next(iter(log.messages("/odom"))).message
+    assert (first.pose.pose.position.x, first.pose.pose.position.y) == scenario.start[:2]
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        (
+            'output.topics.odometry="/x"',
+            r"\[output\]\.topics\.odometry: not a topic of the log \(did you mean",
+        ),
+        ('output.topics.odom="x"', r"\[output\]\.topics\.odom: a topic name starts with '/'"),
+        ('output.topics.odom="/pose"', r"\[output\]\.topics\.odom: '/pose' is already the name"),
+    ],
+)
+def test_bad_topic_names_are_errors_naming_the_key(override, message):
+    with pytest.raises(CosimError, match=message):
+        load_scenario(SCENARIO, [override])
+
+
+def test_foxglove_layout_frames_the_whole_map():
+    """The 3D panel looks straight down at the map's centre from far enough that the 100 m x 60 m
+    warehouse fits a 16:9 view (height 2 d tan(fovy / 2)), and shows the three REP-105 frames."""
+    import json
+
+    from planner.grid import OccupancyGrid
+
+    layout = Path(__file__).resolve().parent.parent / "foxglove" / "navcosim-layout.json"
+    panel = json.loads(layout.read_text())["configById"]["3D!navcosim"]
+    camera = panel["cameraState"]
+    grid = OccupancyGrid.from_file(SCENARIO.parent / "maps" / "warehouse.yaml")
+    width, height = grid.shape[1] * grid.resolution, grid.shape[0] * grid.resolution
+    centre = (grid.origin[0] + width / 2, grid.origin[1] + height / 2)
+    assert tuple(camera["target"][:2]) == pytest.approx(centre)
+    seen_height = 2 * camera["distance"] * math.tan(math.radians(camera["fovy"]) / 2)
+    assert seen_height >= height and seen_height * 16 / 9 >= width
+    assert seen_height < 1.5 * max(height, width * 9 / 16)  # and not lost in the distance
+    assert {"frame:map", "frame:odom", "frame:base_link"} <= set(panel["transforms"])
