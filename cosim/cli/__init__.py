@@ -24,18 +24,28 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the CLI. Each handler returns its exit code; user errors exit 2 with one line per problem."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    """Run the CLI. Each handler returns its exit code; user errors exit 2 with one line per problem.
+
+    SIGINT and SIGTERM at any moment exit 1 with one line (`cosim.core.interrupt`): a run that
+    has opened its log finalises it first; before that nothing has been written.
+    """
+    from cosim.core.interrupt import Interrupted, catching_signals
+
     try:
-        return int(args.handler(args) or 0)
+        with catching_signals():
+            parser = build_parser()
+            args = parser.parse_args(argv)
+            return int(args.handler(args) or 0)
     except NavcosimError as error:
         for line in str(error).splitlines() or [""]:  # a scenario's problems come all at once
             print(f"cosim: error: {line}", file=sys.stderr)
         return 2
+    except Interrupted as interrupt:
+        print(f"cosim: interrupted ({interrupt.signal_name})", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
-        print("cosim: interrupted", file=sys.stderr)
-        return 130
+        print("cosim: interrupted (SIGINT)", file=sys.stderr)
+        return 1
     except BrokenPipeError:
         # The reader of our output went away (`cosim … | head`): stop quietly, as a shell tool does.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

@@ -7,6 +7,8 @@ collision, interrupted), 2 bad input or a failed FMU (one line on stderr, no tra
 
 from __future__ import annotations
 
+import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -34,6 +36,13 @@ def register(subparsers) -> None:
         default=[],
         metavar="KEY=VALUE",
         help="override a scenario key, e.g. --set vfh.robot_radius=0.6 (repeatable; same validation)",
+    )
+    parser.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    parser.add_argument(
+        "--max-steps",
+        type=_positive_int,
+        metavar="N",
+        help="allow up to N macro steps (default: [simulation].max_steps, 100000000)",
     )
     parser.add_argument("--no-plot", action="store_true", help="do not draw the PNG beside the log")
     parser.add_argument("--quiet", action="store_true", help="no progress bar and no summary table")
@@ -89,10 +98,13 @@ def _handler(args) -> int:
     from cosim.navigation.run import run_scenario
     from cosim.scenario.load import load_scenario
 
-    scenario = load_scenario(args.scenario, args.overrides)
+    overrides = list(args.overrides)
+    if args.max_steps is not None:
+        overrides.append(f"simulation.max_steps={args.max_steps}")
+    scenario = load_scenario(args.scenario, overrides)
     sink = _live_sink(args)
     try:
-        result = run_scenario(scenario, args.out, progress=not args.quiet, sink=sink)
+        result = run_scenario(scenario, args.out, progress=not args.quiet, sink=sink, force=args.force)
         if not args.quiet:
             print(format_summary(scenario.name, result.outcome, result.log_path, result.wall_time))
         if result.failure is not None:
@@ -142,10 +154,25 @@ def _plot(log_path: Path, quiet: bool) -> None:
         print("cosim: note: no plot (cosim.logs.plot is not available)", file=sys.stderr)
         return
     png_path = log_path.with_suffix(".png")
+    # Drawn beside and renamed into place, so an interrupt never leaves half a PNG.
+    partial = png_path.with_name(f".{png_path.stem}.{os.getpid()}.png")
     try:
-        plot_run(log_path, png_path)
-    except CosimError as error:
+        plot_run(log_path, partial)
+        os.replace(partial, png_path)
+    except (CosimError, OSError) as error:
         print(f"cosim: note: no plot: {error}", file=sys.stderr)
         return
+    finally:
+        partial.unlink(missing_ok=True)
     if not quiet:
         print(f"plot: {png_path}")
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number, got {text[:80]!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value

@@ -31,7 +31,6 @@ it `<name>.failed.mcap`.
 from __future__ import annotations
 
 import math
-import signal
 import time
 from dataclasses import dataclass
 from datetime import datetime
@@ -39,11 +38,13 @@ from pathlib import Path
 
 import numpy as np
 
+from cosim.core import interrupt
 from cosim.core.master import NS_PER_S, Master
-from cosim.errors import CosimError
+from cosim.errors import PATH_LIMIT, CosimError, shorten
 from cosim.navigation.build import BuiltRun, build_run
 from cosim.navigation.outcome import Outcome, OutcomeMonitor, outcome_metadata
 from cosim.record import batch as recorder_batch
+from cosim.record.logfile import claim_default_log, claim_log, is_regular_file
 from cosim.scenario.load import Scenario
 from cosim.world.shapes import moves
 
@@ -71,32 +72,12 @@ class RunResult:
 
 
 def default_log_path(scenario: Scenario, now: datetime | None = None) -> Path:
-    """`[output].log` with {scenario} and {timestamp} (local time, to the second) filled in."""
-    stamp = (now or datetime.now()).strftime("%Y%m%d-%H%M%S")
+    """`[output].log` with {scenario} and {timestamp} (local time, to the millisecond:
+    20260131-142501-123) filled in. Runs that start in the same millisecond are kept apart when
+    the file is created (`cosim.record.logfile.claim_default_log`)."""
+    now = now or datetime.now()
+    stamp = f"{now:%Y%m%d-%H%M%S}-{now.microsecond // 1000:03d}"
     return Path(scenario.log_pattern.format(scenario=scenario.name, timestamp=stamp))
-
-
-class _Interrupt:
-    """Turns SIGINT/SIGTERM into a flag the loop polls, so the log is finalised, not cut."""
-
-    def __init__(self) -> None:
-        self.signal_name: str | None = None
-        self.previous: dict[int, object] = {}
-
-    def __enter__(self) -> _Interrupt:
-        for number in (signal.SIGINT, signal.SIGTERM):
-            try:
-                self.previous[number] = signal.signal(number, self._handle)
-            except ValueError:  # not the main thread: leave signals alone
-                pass
-        return self
-
-    def _handle(self, number, frame) -> None:
-        self.signal_name = signal.Signals(number).name
-
-    def __exit__(self, *exc_info) -> None:
-        for number, handler in self.previous.items():
-            signal.signal(number, handler)
 
 
 def _output(system, reference: str) -> tuple[np.ndarray, int]:
@@ -304,18 +285,25 @@ def run_scenario(
     progress: bool = False,
     flush_interval: float = 0.5,
     sink=None,
+    force: bool = False,
 ) -> RunResult:
     """Run `scenario`, logging to `out_path` (default: `[output].log`). Raises `CosimError` on bad input.
     `sink` (`cosim.record.live.Sink`, e.g. the live view) also gets everything the log gets.
 
-    SIGINT/SIGTERM from here on stop the run at the next step with outcome "interrupted".
+    An existing `out_path` is refused unless `force`; a default name that is taken gets a numbered
+    suffix (`cosim.record.logfile`). SIGINT/SIGTERM before the log exists raise
+    `cosim.core.interrupt.Interrupted` (nothing written); after, they stop the run at the next step
+    with outcome "interrupted" and a finalised log.
     """
-    with _Interrupt() as interrupt:
-        return _build_and_run(scenario, out_path, progress, flush_interval, interrupt, sink)
+    if out_path is not None and not force and is_regular_file(Path(out_path)):
+        # Checked again, race-free, when the log is created; here to fail before the build.
+        raise CosimError(f"{shorten(out_path, PATH_LIMIT)}: already exists; give --force to overwrite it")
+    with interrupt.catching_signals():
+        return _build_and_run(scenario, out_path, force, progress, flush_interval, sink)
 
 
 def _build_and_run(
-    scenario: Scenario, out_path, progress: bool, flush_interval: float, interrupt, sink=None
+    scenario: Scenario, out_path, force: bool, progress: bool, flush_interval: float, sink=None
 ) -> RunResult:
     from cosim.record.recorder import Recorder
 
@@ -324,25 +312,52 @@ def _build_and_run(
     try:
         master.initialize()
     except CosimError as error:
+        _close_quietly(master)
         raise CosimError(f"{scenario.source}: initialising the system failed: {error}") from None
-    log_path = Path(out_path) if out_path is not None else default_log_path(scenario)
-    try:
-        recorder = Recorder(log_path, flush_interval=flush_interval, sink=sink, topics=scenario.topics)
     except BaseException:
-        master.close()
+        _close_quietly(master)
         raise
-    try:
-        return _run(built, master, recorder, log_path, progress, interrupt)
-    except BaseException:
-        # Neither a normal end, an interrupt nor an FMU failure: keep the log, but marked.
-        recorder.close({"reached": "false", "reason": "error"})
-        master.close()
-        failed = log_path.with_suffix(".failed.mcap")
-        log_path.replace(failed)
-        raise
+    with interrupt.deferred():
+        try:
+            if out_path is not None:
+                log_path, stream = Path(out_path), claim_log(Path(out_path), force)
+            else:
+                log_path, stream = claim_default_log(default_log_path(scenario))
+            recorder = Recorder(
+                log_path, flush_interval=flush_interval, sink=sink, topics=scenario.topics, stream=stream
+            )
+        except BaseException:
+            _close_quietly(master)
+            raise
+        try:
+            return _run(built, master, recorder, log_path, progress)
+        except OSError as error:
+            # The log could not be written (no space, I/O error): what reached the file stays.
+            _close_quietly(master, recorder)
+            where = shorten(error.filename or log_path, PATH_LIMIT)
+            raise CosimError(f"{where}: writing the log failed ({error.strerror or error})") from None
+        except BaseException:
+            # Neither a normal end, an interrupt nor an FMU failure: keep the log, but marked.
+            _close_quietly(master, recorder, {"reached": "false", "reason": "error"})
+            if is_regular_file(log_path):
+                log_path.replace(log_path.with_suffix(".failed.mcap"))
+            raise
 
 
-def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bool, interrupt) -> RunResult:
+def _close_quietly(master: Master, recorder=None, outcome: dict[str, str] | None = None) -> None:
+    """Close what a run opened, on its way out with an error that matters more than theirs."""
+    try:
+        master.close()
+    except CosimError:
+        pass
+    if recorder is not None:
+        try:
+            recorder.close(outcome)
+        except (OSError, CosimError):
+            pass
+
+
+def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bool) -> RunResult:
     scenario = built.scenario
     system = built.system
     recording = _Recording(built, master, recorder)
@@ -364,6 +379,7 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     state = {"reason": None}
 
     start_ns = master.start_time_ns
+    take_signal = interrupt.take
     x_item, y_item, index_x, index_y = recording.pose_x.item, recording.pose_y.item, recording.x, recording.y
     mode_steps, mode_period, mode_buffer, mode_index = recording.mode or (0, 0.0, None, 0)
 
@@ -385,7 +401,7 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
             if reason is None and planner.no_path is not None:
                 monitor.outcome.no_path = planner.no_path
                 reason = "no_path"
-        if reason is None and interrupt.signal_name is not None:
+        if reason is None and take_signal() is not None:
             reason = "interrupted"
         if bar is not None:
             now = time.perf_counter()

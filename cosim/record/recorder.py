@@ -37,6 +37,7 @@ import struct
 import time
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -95,16 +96,21 @@ class Recorder:
         chunk_duration: float = CHUNK_DURATION,
         sink=None,
         topics: dict[str, str] | None = None,
+        stream: BinaryIO | None = None,
     ) -> None:
         """`sink` (`cosim.record.live.Sink`): also gets every schema, channel and message written.
-        `topics`: a topic's name in the log, by its name here ("/odom" -> "/ground-truth-pose")."""
+        `topics`: a topic's name in the log, by its name here ("/odom" -> "/ground-truth-pose").
+        `stream`: the file already opened for `path` (`cosim.record.logfile.claim_log`); it is
+        closed by `close()`. Without it `path` is opened (and truncated) here."""
         self.path = Path(path)
         self.topics = dict(topics or {})
         try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._file = open(self.path, "wb")  # noqa: SIM115 - closed by close()
+            if stream is None:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+                stream = open(self.path, "wb")  # noqa: SIM115 - closed by close()
         except OSError as error:
             raise CosimError(f"{self.path}: cannot write the log ({error.strerror})") from None
+        self._file = stream
         if not chunk_duration > 0:
             self._file.close()
             raise CosimError(f"{self.path}: chunk_duration must be > 0 s, got {chunk_duration}")

@@ -1,0 +1,84 @@
+"""SIGINT and SIGTERM, at any moment of a run: an exception before a log exists, a flag after.
+
+`catching_signals()` routes both signals to one handler for as long as it is entered (the CLI
+enters it first thing; `run_scenario` enters it too, so library callers get the same behaviour).
+Outside `deferred()` a signal raises `Interrupted` wherever the main thread is: nothing has been
+written yet, so unwinding is the whole clean-up. Inside `deferred()` (from just before the log
+is created until it is closed) a signal only records its name; the run loop polls `take()` and
+stops at the next step with outcome "interrupted", so the log is finalised, never cut. A signal
+that arrives inside `deferred()` after the loop stopped polling is raised when the block ends.
+
+`Interrupted` derives from `KeyboardInterrupt`, so `except Exception` in any library on the way
+up does not swallow it; the CLI turns it into one line on stderr and exit code 1.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class Interrupted(KeyboardInterrupt):
+    """A run stopped by SIGINT or SIGTERM; `signal_name` is "SIGINT" or "SIGTERM"."""
+
+    def __init__(self, signal_name: str) -> None:
+        super().__init__(signal_name)
+        self.signal_name = signal_name
+
+
+class _State:
+    installed = False  # inside catching_signals() on the main thread
+    deferring = 0  # nesting of deferred()
+    pending: str | None = None  # a signal received while deferring, not yet taken
+
+
+_state = _State()
+
+
+def _handle(number: int, frame) -> None:
+    name = signal.Signals(number).name
+    if _state.deferring:
+        _state.pending = _state.pending or name
+        return
+    raise Interrupted(name)
+
+
+@contextmanager
+def catching_signals() -> Iterator[None]:
+    """Route SIGINT/SIGTERM to this module while inside; the previous handlers come back after.
+
+    Off the main thread (where Python cannot set handlers) this does nothing.
+    """
+    if _state.installed or threading.current_thread() is not threading.main_thread():
+        yield  # already routed by an outer block, or not ours to route
+        return
+    previous = {number: signal.signal(number, _handle) for number in SIGNALS}
+    _state.installed, _state.pending = True, None
+    try:
+        yield
+    finally:
+        _state.installed = False
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+
+
+@contextmanager
+def deferred() -> Iterator[None]:
+    """Inside, a signal is only recorded (see `take`); a signal nobody took is raised at the end."""
+    _state.deferring += 1
+    try:
+        yield
+    finally:
+        _state.deferring -= 1
+    if not _state.deferring and _state.pending is not None:
+        raise Interrupted(take())
+
+
+def take() -> str | None:
+    """The name of a signal received while deferring ("SIGINT"/"SIGTERM"), once; None if none."""
+    name, _state.pending = _state.pending, None
+    return name
