@@ -63,6 +63,7 @@ from cosim.core.component import Component, NativeStep, Port, State, closest_nam
 from cosim.errors import CosimError
 from cosim.fmi.archive import check_unpacked_size
 from cosim.fmi.builtin import documented_nan_variables
+from cosim.fmi.diagnose import dangling_reference, missing_binary
 
 _STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
 _TYPES = {
@@ -109,7 +110,8 @@ def _read_description(path: Path, max_unpacked_size: int | None = None):
     try:
         description = _parsed_description(str(path.resolve()), *_file_identity(path))
     except Exception as error:  # fmpy raises plain Exceptions with multi-line text
-        first_line = " ".join(str(error).split())[:300]
+        problem = dangling_reference(path) if isinstance(error, IndexError | KeyError) else None
+        first_line = problem or " ".join(str(error).split())[:300]
         raise CosimError(f"FMU '{path}': invalid modelDescription.xml: {first_line}") from None
     version = int(str(description.fmiVersion).split(".")[0])
     if version not in (2, 3):
@@ -122,11 +124,8 @@ def _read_description(path: Path, max_unpacked_size: int | None = None):
     platform = fmpy.platform if version == 2 else fmpy.platform_tuple
     binary = f"binaries/{platform}/{description.coSimulation.modelIdentifier}{fmpy.sharedLibraryExtension}"
     if binary not in names:
-        present = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
-        raise CosimError(
-            f"FMU '{path}' has no binary for this platform ({platform}); "
-            f"it has: {', '.join(present) or 'none'}"
-        )
+        identifier = description.coSimulation.modelIdentifier
+        raise CosimError(missing_binary(path, names, platform, identifier, fmpy.sharedLibraryExtension))
     return description, version
 
 
