@@ -2,7 +2,9 @@
 
 Every malformed file raises `PlannerError` with a one-line message that names the file. This module
 reads and writes plain arrays (`MapData`); `planner.grid.OccupancyGrid.from_file` and `.to_yaml`
-wrap them, so the grid depends on its file formats and not the other way round.
+wrap them, so the grid depends on its file formats and not the other way round. Values
+quoted from a file are cut to 80 characters. A map has at most `MAX_MAP_CELLS` cells, checked from
+the header before any pixel is decoded (a 40000 x 40000 PGM is refused, not allocated).
 
 Image semantics follow ROS map_server (trinary mode): with `negate` false a pixel's occupancy
 probability is p = (255 - v) / 255 (dark = occupied); p > occupied_thresh is occupied,
@@ -26,6 +28,39 @@ DEFAULT_FREE_THRESH = 0.196
 
 _MOVINGAI_PASSABLE = (ord("."), ord("G"))
 
+#: The largest map: 2^26 cells (8192 x 8192, 410 m x 410 m at 5 cm). Planning, inflation and the
+#: exact world distance each hold a few arrays of this many float64 or int64 values.
+MAX_MAP_CELLS = 1 << 26
+_QUOTE = 80  # characters of a value quoted in a message
+
+
+def _shown(value: object) -> str:
+    """repr(value) on one line, cut to 80 characters (a file may hold a 50 MB line)."""
+    text = repr(value) if not isinstance(value, str) or len(value) <= _QUOTE else repr(value[:_QUOTE])
+    return text if len(text) <= _QUOTE else text[: _QUOTE - 1] + "…"
+
+
+def _path_text(path: Path) -> str:
+    """A path for a message, cut to 200 characters."""
+    text = str(path)
+    return text if len(text) <= 200 else text[:199] + "…"
+
+
+def _check_cells(path: Path, rows: int, cols: int) -> None:
+    if rows * cols > MAX_MAP_CELLS:
+        raise PlannerError(
+            f"{path}: map of {rows} x {cols} cells is larger than the limit of {MAX_MAP_CELLS} cells"
+        )
+
+
+def _is_file(path: Path) -> bool:
+    """Path.is_file() that reports a name too long or a symbolic link loop as PlannerError."""
+    try:
+        return path.is_file()
+    except (OSError, ValueError) as error:
+        reason = error.strerror if isinstance(error, OSError) and error.strerror else str(error)
+        raise PlannerError(f"{_path_text(path)}: cannot open ({reason})") from None
+
 
 class MapData(NamedTuple):
     """What a map file holds: the arguments of `planner.grid.OccupancyGrid` (checked there).
@@ -44,8 +79,8 @@ def load_map(path: str | Path, **options) -> MapData:
     """Read a map by its suffix (`.yaml`, `.map`, `.png`/`.pgm`, `.npy`); see OccupancyGrid.from_file."""
     path = Path(path)
     suffix = path.suffix.lower()
-    if not path.is_file():
-        raise PlannerError(f"map file not found: {path}")
+    if not _is_file(path):
+        raise PlannerError(f"map file not found: {_path_text(path)}")
     if suffix in (".yaml", ".yml"):
         _reject_options(path, options, ())
         return read_ros_yaml(path)
@@ -60,7 +95,7 @@ def load_map(path: str | Path, **options) -> MapData:
     if suffix == ".npy":
         _reject_options(path, options, ("resolution", "origin"))
         return MapData(read_npy(path), options.get("resolution", 1.0), options.get("origin", (0.0, 0.0)))
-    raise PlannerError(f"{path}: unknown map format {suffix!r} (use .yaml, .map, .png, .pgm or .npy)")
+    raise PlannerError(f"{path}: unknown map format {_shown(suffix)} (use .yaml, .map, .png, .pgm or .npy)")
 
 
 def _reject_options(path: Path, options: dict, allowed: tuple[str, ...]) -> None:
@@ -84,18 +119,21 @@ def read_movingai(path: Path) -> np.ndarray:
     while index < len(lines) and lines[index].strip().lower() != "map":
         parts = lines[index].split()
         if len(parts) != 2 or parts[0] not in ("type", "height", "width"):
-            raise PlannerError(f"{path}:{index + 1}: bad Moving AI header line {lines[index]!r}")
+            raise PlannerError(f"{path}:{index + 1}: bad Moving AI header line {_shown(lines[index])}")
         header[parts[0]] = parts[1]
         index += 1
     missing = [key for key in ("type", "height", "width") if key not in header]
     if index == len(lines) or missing:
         raise PlannerError(f"{path}: bad Moving AI header (missing {', '.join(missing) or 'the line `map`'})")
     try:
+        if max(len(header["height"]), len(header["width"])) > 18:  # int() of 5000 digits is refused
+            raise ValueError
         height, width = int(header["height"]), int(header["width"])
     except ValueError:
         raise PlannerError(f"{path}: height and width must be integers in the header") from None
     if height <= 0 or width <= 0:
         raise PlannerError(f"{path}: height and width must be > 0, got {height} x {width}")
+    _check_cells(path, height, width)
     rows = [line.rstrip("\r\n ") for line in lines[index + 1 :]]
     while rows and rows[-1] == "":
         rows.pop()
@@ -114,10 +152,22 @@ def read_movingai(path: Path) -> np.ndarray:
 # -- images -----------------------------------------------------------------------------------------
 def _image_gray(path: Path) -> np.ndarray:
     """Grey levels 0..255 (float) of an image file; colour = mean of R, G, B; alpha ignored."""
+    import warnings
+
     from PIL import Image, UnidentifiedImageError
 
     try:
-        with Image.open(path) as image:
+        with warnings.catch_warnings():
+            # Our own limit is checked from the header below; PIL's warning would be a second voice.
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            image = Image.open(path)
+    except Image.DecompressionBombError:
+        raise PlannerError(f"{path}: image larger than the map limit of {MAX_MAP_CELLS} pixels") from None
+    except (OSError, UnidentifiedImageError, ValueError) as error:
+        raise PlannerError(f"{path}: unreadable image ({error})") from None
+    try:
+        with image:
+            _check_cells(path, image.height, image.width)
             image.load()
             if image.mode in ("I;16", "I;16B", "I;16L", "I"):
                 values = np.asarray(image, dtype=np.float64)
@@ -151,7 +201,7 @@ def _probability(path: Path, key: str, value) -> float:
     try:
         value = float(value)
     except (TypeError, ValueError):
-        raise PlannerError(f"{path}: {key} must be a number in [0, 1], got {value!r}") from None
+        raise PlannerError(f"{path}: {key} must be a number in [0, 1], got {_shown(value)}") from None
     if not 0.0 <= value <= 1.0:
         raise PlannerError(f"{path}: {key} must be in [0, 1], got {value}")
     return value
@@ -160,11 +210,19 @@ def _probability(path: Path, key: str, value) -> float:
 def read_npy(path: Path) -> np.ndarray:
     """A 2-D bool or 0/1 array from `.npy` (True / 1 = occupied)."""
     try:
+        with open(path, "rb") as stream:  # the shape from the header, before any data is read
+            version = np.lib.format.read_magic(stream)
+            if version == (1, 0):
+                shape, _, _ = np.lib.format.read_array_header_1_0(stream)
+            else:
+                shape, _, _ = np.lib.format.read_array_header_2_0(stream)
+        if len(shape) == 2:
+            _check_cells(path, *shape)
         array = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as error:
-        raise PlannerError(f"{path}: unreadable .npy ({error})") from None
+    except (OSError, ValueError, EOFError) as error:
+        raise PlannerError(f"{path}: unreadable .npy ({_shown(str(error))})") from None
     if array.ndim != 2:
-        raise PlannerError(f"{path}: .npy map must be 2-D, got shape {array.shape}")
+        raise PlannerError(f"{path}: .npy map must be 2-D, got shape {_shown(array.shape)}")
     if array.dtype != np.bool_ and not (
         np.issubdtype(array.dtype, np.number) and np.isin(array, (0, 1)).all()
     ):
@@ -186,7 +244,7 @@ def _parse_flat_yaml(path: Path) -> dict[str, object]:
             continue
         key, colon, value = line.partition(":")
         if not colon or not key.strip():
-            raise PlannerError(f"{path}:{number}: expected `key: value`, got {raw.strip()!r}")
+            raise PlannerError(f"{path}:{number}: expected `key: value`, got {_shown(raw.strip())}")
         value = value.strip()
         if value.startswith("[") and value.endswith("]"):
             values[key.strip()] = [_scalar(item.strip()) for item in value[1:-1].split(",") if item.strip()]
@@ -219,23 +277,23 @@ def read_ros_yaml(path: Path) -> MapData:
         raise PlannerError(f"{path}: missing key(s) {', '.join(missing)}")
     mode = values.get("mode", "trinary")
     if mode not in ("trinary", "scale"):
-        raise PlannerError(f"{path}: mode {mode!r} not supported (trinary or scale)")
+        raise PlannerError(f"{path}: mode {_shown(mode)} not supported (trinary or scale)")
     origin = values["origin"]
     if not isinstance(origin, list) or len(origin) not in (2, 3) or not all(_is_number(v) for v in origin):
-        raise PlannerError(f"{path}: origin must be [x, y, yaw], got {origin!r}")
+        raise PlannerError(f"{path}: origin must be [x, y, yaw], got {_shown(origin)}")
     if len(origin) == 3 and abs(float(origin[2])) > 1e-9:
         raise PlannerError(f"{path}: origin yaw {origin[2]} not supported (maps must be axis-aligned)")
     resolution = values["resolution"]
     if not _is_number(resolution) or not float(resolution) > 0.0:
-        raise PlannerError(f"{path}: resolution must be > 0 [m/cell], got {resolution!r}")
+        raise PlannerError(f"{path}: resolution must be > 0 [m/cell], got {_shown(resolution)}")
     negate = values.get("negate", 0)
     if negate not in (0, 1, True, False):
-        raise PlannerError(f"{path}: negate must be 0 or 1, got {negate!r}")
+        raise PlannerError(f"{path}: negate must be 0 or 1, got {_shown(negate)}")
     image_path = Path(str(values["image"]))
     if not image_path.is_absolute():
         image_path = path.parent / image_path
-    if not image_path.is_file():
-        raise PlannerError(f"{path}: image file not found: {image_path}")
+    if not _is_file(image_path):
+        raise PlannerError(f"{path}: image file not found: {_path_text(image_path)}")
     occupied = read_image_occupancy(
         image_path,
         negate=bool(negate),

@@ -388,6 +388,8 @@ def _value_problem(variable, value: float, given) -> str | None:
         if value not in (0.0, 1.0):
             return f"must be true or false, got {given}"
         return None
+    if isinstance(given, bool):  # TOML true/false where the FMU wants a number
+        return f"must be a number (the FMU's {variable.type}), got {str(given).lower()}"
     low = _bound(variable.min)
     high = _bound(variable.max)
     if kind == "integer":

@@ -19,8 +19,17 @@ from typing import Any
 
 import numpy as np
 
-from cosim.errors import CosimError
-from cosim.scenario.schema import REQUIRED, TableReader, describe, did_you_mean, is_number
+from cosim.errors import PATH_LIMIT, CosimError
+from cosim.scenario.limits import (
+    MAX_LIDAR_BEAMS,
+    MAX_NAME_LENGTH,
+    MAX_OBSTACLES,
+    MAX_TIME,
+    check_run_length,
+    check_speeds,
+    check_time_base,
+)
+from cosim.scenario.schema import REQUIRED, TableReader, describe, did_you_mean, is_number, shorten
 from cosim.world.motion import MOTIONS, Motion
 from cosim.world.shapes import Circle, Obstacle, Polygon, Rectangle
 
@@ -208,6 +217,10 @@ def parse_scenario(
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise CosimError(f"{source}: TOML syntax error: {error}") from None
+    except RecursionError:
+        raise CosimError(f"{source}: TOML nested too deeply (arrays or inline tables)") from None
+    except ValueError as error:  # an integer of more than 4300 digits
+        raise CosimError(f"{source}: TOML value not readable: {shorten(str(error))}") from None
     for override in overrides:
         apply_override(raw, override, source)
     return _build(raw, source, base_dir, text, path, tuple(overrides))
@@ -217,27 +230,32 @@ def apply_override(raw: dict, override: str, source: str) -> None:
     """Apply `key.path=value` (value in TOML syntax; a bare word is a string) to the parsed TOML."""
     key, separator, value_text = override.partition("=")
     key = key.strip()
+    shown = shorten(override)
     if not separator or not key:
-        raise CosimError(f"--set {override}: expected key=value, e.g. vfh.robot_radius=0.6")
+        raise CosimError(f"--set {shown}: expected key=value, e.g. vfh.robot_radius=0.6")
     try:
         value = tomllib.loads(f"value = {value_text.strip()}")["value"]
-    except tomllib.TOMLDecodeError:
+    except (tomllib.TOMLDecodeError, RecursionError, ValueError):
         value = value_text.strip()
     parts = key.split(".")
     if parts[0] not in SECTIONS:
-        raise CosimError(f"--set {override}: unknown section '{parts[0]}'{did_you_mean(parts[0], SECTIONS)}")
+        raise CosimError(
+            f"--set {shown}: unknown section {describe(parts[0])}{did_you_mean(parts[0], SECTIONS)}"
+        )
     node: Any = raw
     for depth, part in enumerate(parts[:-1]):
         if isinstance(node, list):
             if not part.isdigit() or int(part) >= len(node):
-                raise CosimError(f"--set {override}: no item {part} in {'.'.join(parts[:depth])}")
+                raise CosimError(
+                    f"--set {shown}: no item {shorten(part)} in {shorten('.'.join(parts[:depth]))}"
+                )
             node = node[int(part)]
         else:
             node = node.setdefault(part, {})
         if not isinstance(node, dict | list):
-            raise CosimError(f"--set {override}: {'.'.join(parts[: depth + 1])} is not a table")
+            raise CosimError(f"--set {shown}: {shorten('.'.join(parts[: depth + 1]))} is not a table")
     if isinstance(node, list):
-        raise CosimError(f"--set {override}: give an item index after {'.'.join(parts[:-1])}")
+        raise CosimError(f"--set {shown}: give an item index after {shorten('.'.join(parts[:-1]))}")
     node[parts[-1]] = value
 
 
@@ -247,20 +265,24 @@ def _build(
     top = TableReader(source, "", raw)
     scenario_table = TableReader(source, "[scenario]", top.raw("scenario"))
     name = scenario_table.string("name")
-    if not name or any(char in name for char in "/\\\0"):
-        raise scenario_table.error("name", f"must be a non-empty file-name-safe string, got '{name}'")
+    if not name or len(name) > MAX_NAME_LENGTH or any(char in name for char in "/\\\0"):
+        raise scenario_table.error(
+            "name",
+            f"must be a file-name-safe string of 1 to {MAX_NAME_LENGTH} characters, got {describe(name)}",
+        )
     description = scenario_table.string("description", "")
     scenario_table.finish()
 
     map_table = TableReader(source, "[map]", top.raw("map"))
-    map_file = (base_dir / map_table.string("file")).resolve()
-    if not map_file.is_file():
-        raise map_table.error("file", f"no such map file: {map_file}")
+    map_file = _existing_file(map_table, "file", base_dir, "map file")
     map_resolution = map_table.number("resolution", None, minimum=0.0, exclusive_minimum=True)
     origin = map_table.numbers("origin", None, length=2)
     map_table.finish()
 
-    obstacles = tuple(_obstacle(source, index, item) for index, item in enumerate(_list(top, "obstacles")))
+    obstacle_tables = _list(top, "obstacles")
+    if len(obstacle_tables) > MAX_OBSTACLES:
+        raise top.error("obstacles", f"at most {MAX_OBSTACLES} obstacles, got {len(obstacle_tables)}")
+    obstacles = tuple(_obstacle(source, index, item) for index, item in enumerate(obstacle_tables))
 
     start_table = TableReader(source, "[start]", top.raw("start"))
     start = (start_table.number("x"), start_table.number("y"), start_table.number("theta", 0.0))
@@ -271,13 +293,16 @@ def _build(
     goal_table.finish()
 
     simulation = TableReader(source, "[simulation]", top.raw("simulation", {}))
-    macro_step = simulation.number("macro_step", 0.01, minimum=0.0, exclusive_minimum=True)
-    stop_time = simulation.number("stop_time", 300.0, minimum=0.0, exclusive_minimum=True)
+    macro_step = simulation.number("macro_step", 0.01, minimum=0.0, exclusive_minimum=True, maximum=MAX_TIME)
+    check_time_base(simulation, "macro_step", macro_step)
+    stop_time = simulation.number("stop_time", 300.0, minimum=0.0, exclusive_minimum=True, maximum=MAX_TIME)
     master = simulation.string("master", "gauss-seidel", choices=("gauss-seidel", "jacobi"))
     controller_rate = simulation.number("controller_rate", 20.0, minimum=0.0, exclusive_minimum=True)
     fmi_version = simulation.integer("fmi_version", 2)
     if fmi_version not in (2, 3):
-        raise simulation.error("fmi_version", f"must be 2 or 3 (the project FMUs' builds), got {fmi_version}")
+        raise simulation.error(
+            "fmi_version", f"must be 2 or 3 (the project FMUs' builds), got {describe(fmi_version)}"
+        )
     if stop_time < macro_step:
         raise simulation.error(
             "stop_time", f"{stop_time:g} s is shorter than one macro step ({macro_step:g} s)"
@@ -286,6 +311,7 @@ def _build(
     fmu_isolation = simulation.string("fmu_isolation", "auto", choices=("auto", *ISOLATIONS))
     fmu_timeout = simulation.number("fmu_timeout", 10.0, minimum=0.0, exclusive_minimum=True)
     fmu_max_size = simulation.number("fmu_max_size", 1024.0, minimum=0.0, exclusive_minimum=True)
+    check_run_length(simulation, macro_step, stop_time)
     simulation.finish()
 
     vehicle_table = TableReader(source, "[vehicle]", top.raw("vehicle"))
@@ -396,6 +422,8 @@ def _list(top: TableReader, key: str) -> list:
 
 def rate_problem(rate: float, macro_step: float) -> str | None:
     """Why `rate` [Hz] is no period of a whole number (>= 1) of macro steps [s], or None."""
+    if 1.0 / rate > MAX_TIME:
+        return f"must be >= {1 / MAX_TIME:g} Hz (a period of at most {MAX_TIME:g} s), got {rate:g}"
     steps = 1.0 / (rate * macro_step)
     if steps < 1.0 - 1e-9 or abs(steps - round(steps)) > 1e-6 * steps:
         return f"{rate:g} Hz is not a whole number of macro steps of {macro_step:g} s (period {1 / rate:g} s)"
@@ -408,6 +436,22 @@ def _check_rate(table: TableReader, key: str, rate: float, macro_step: float) ->
         raise table.error(key, problem)
 
 
+def _existing_file(table: TableReader, key: str, base_dir: Path, what: str, name: str | None = None) -> Path:
+    """`table[key]` (or `name`) resolved against `base_dir`; it must be an existing file."""
+    name = table.string(key) if name is None else name
+    try:
+        path = (base_dir / name).resolve()
+        if path.is_file():
+            return path
+        problem = f"no such {what}: {shorten(path, PATH_LIMIT)}"
+    except RuntimeError:  # Python 3.11's resolve() on a symbolic link loop
+        problem = f"cannot open the {what} {describe(name)}: symbolic link loop"
+    except (OSError, ValueError) as error:  # name too long, link loop, embedded NUL byte, ...
+        reason = error.strerror if isinstance(error, OSError) and error.strerror else str(error)
+        problem = f"cannot open the {what} {describe(name)}: {reason}"
+    raise table.error(key, problem)
+
+
 def _fmu_name(table: TableReader, default: str | None, base_dir: Path) -> str:
     """A project FMU name stays a name; anything else is a path (relative to the scenario file)."""
     fmu = table.string("fmu", REQUIRED if default is None else default)
@@ -417,10 +461,7 @@ def _fmu_name(table: TableReader, default: str | None, base_dir: Path) -> str:
         raise table.error(
             "fmu", f"unknown project FMU '{fmu}'{did_you_mean(fmu, BUILTIN_FMUS)}; or give a path"
         )
-    fmu_path = (base_dir / fmu).resolve()
-    if not fmu_path.is_file():
-        raise table.error("fmu", f"no such FMU file: {fmu_path}")
-    return str(fmu_path)
+    return str(_existing_file(table, "fmu", base_dir, "FMU file", fmu))
 
 
 def _component(
@@ -451,6 +492,7 @@ def _component(
         table.used.add(key)
         parameters[key] = value
     parameters = check_parameters(table, parameters)
+    check_speeds(table, role, parameters)
     table.finish()
     return ComponentSpec(
         name=role,
@@ -621,11 +663,17 @@ def _lidar(table: TableReader, macro_step: float) -> LidarSettings:
         if angle_min >= angle_max:
             raise table.error("angle_max", f"must be > angle_min ({angle_min:g}), got {angle_max:g}")
         count = table.integer("count", 360, minimum=1)
+        if count > MAX_LIDAR_BEAMS:  # before the angles are made: count may be 2^63 - 1
+            raise table.error(
+                "count", f"at most {MAX_LIDAR_BEAMS} beams (the VFH input size), got {describe(count)}"
+            )
         # A full turn would count the beam at -pi twice.
         full_turn = angle_max - angle_min >= 2 * math.pi - 1e-9
         angles = np.linspace(angle_min, angle_max, count, endpoint=not full_turn)
-    if angles.size > 720:
-        raise table.error("angles", f"at most 720 beams (the VFH input size), got {angles.size}")
+    if angles.size > MAX_LIDAR_BEAMS:
+        raise table.error(
+            "angles", f"at most {MAX_LIDAR_BEAMS} beams (the VFH input size), got {angles.size}"
+        )
     if np.any(np.abs(angles) > math.pi + 1e-9):
         raise table.error("angles", "every angle must lie in [-pi, pi]")
     range_min, range_max = table.interval("range", [0.0, 20.0], minimum=0.0)

@@ -154,6 +154,9 @@ def _scan(
             ranges[beam] = distance + range_jitter[beam]
 
 
+MAX_BEAMS = 100_000  # beams of one sweep (two output ports each); a scenario allows fewer (the VFH's 720)
+
+
 class Lidar(PythonComponent):
     """Lidar component (see the module docstring). Lengths [m], angles [rad], period [s]."""
 
@@ -177,13 +180,33 @@ class Lidar(PythonComponent):
         period: float = 0.1,
     ) -> None:
         if angles is None:
-            if count < 1:
-                raise CosimError(f"lidar '{name}': count must be >= 1, got {count}")
+            if (
+                isinstance(count, bool)
+                or not isinstance(count, int | np.integer)
+                or not 1 <= count <= MAX_BEAMS
+            ):
+                raise CosimError(
+                    f"lidar '{name}': count must be an integer in 1..{MAX_BEAMS}, got {count!r:.80}"
+                )
             angles = np.linspace(angle_min, angle_max, count) if count > 1 else np.array([angle_min])
-        self.beam_angles = np.ascontiguousarray(angles, dtype=float)
-        capacity = len(self.beam_angles) if capacity is None else capacity
-        if self.beam_angles.ndim != 1 or len(self.beam_angles) == 0 or capacity < len(self.beam_angles):
-            raise CosimError(f"lidar '{name}': needs 1..capacity ({capacity}) beam angles")
+        try:
+            self.beam_angles = np.ascontiguousarray(angles, dtype=float)
+        except (TypeError, ValueError):
+            raise CosimError(f"lidar '{name}': beam angles must be a list of numbers [rad]") from None
+        beams = self.beam_angles.size
+        if self.beam_angles.ndim != 1 or not 1 <= beams <= MAX_BEAMS:
+            raise CosimError(
+                f"lidar '{name}': needs a flat list of 1..{MAX_BEAMS} beam angles, "
+                f"got shape {self.beam_angles.shape}"
+            )
+        if not np.isfinite(self.beam_angles).all():
+            raise CosimError(f"lidar '{name}': beam angles must be finite")
+        capacity = beams if capacity is None else capacity
+        if not beams <= capacity <= MAX_BEAMS:
+            raise CosimError(
+                f"lidar '{name}': capacity (ports ranges[k], angles[k]) must be in {beams}..{MAX_BEAMS} "
+                f"for {beams} beams, got {capacity}"
+            )
         if not 0 <= range_min < range_max:
             raise CosimError(f"lidar '{name}': range limits [{range_min}, {range_max}] m need 0 <= min < max")
         if range_noise < 0 or angle_noise < 0:
