@@ -241,3 +241,43 @@ def test_deferred_signal_is_taken_once():
             os.kill(os.getpid(), signal.SIGINT)
             assert interrupt.take() == "SIGINT"
             assert interrupt.take() is None
+
+
+# --- SSP runs claim their log and take signals the same way --------------------------------------
+@pytest.fixture()
+def convoy_ssp(tmp_path) -> Path:
+    import zipfile
+
+    import cosim
+
+    convoy = REPO / "tests" / "data" / "ssp" / "convoy"
+    archive = tmp_path / "convoy.ssp"
+    with zipfile.ZipFile(archive, "w") as ssp:
+        ssp.write(convoy / "SystemStructure.ssd", "SystemStructure.ssd")
+        ssp.write(convoy / "resources" / "parameters.ssv", "resources/parameters.ssv")
+        ssp.write(cosim.builtin_fmu("DifferentialDrive"), "resources/DifferentialDrive.fmu")
+        ssp.write(cosim.builtin_fmu("Bicycle"), "resources/Bicycle.fmu")
+    return archive
+
+
+def test_ssp_run_refuses_an_existing_out(convoy_ssp, tmp_path, capsys):
+    log = tmp_path / "precious.mcap"
+    log.write_bytes(b"an earlier run")
+    assert main(["run", str(convoy_ssp), "--out", str(log), "--quiet"]) == 2
+    assert (
+        one_line(capsys.readouterr().err)
+        == f"cosim: error: {log}: already exists; give --force to overwrite it"
+    )
+    assert log.read_bytes() == b"an earlier run"
+
+
+@pytest.mark.parametrize("signal_number", SIGNALS, ids=["SIGINT", "SIGTERM"])
+def test_ssp_run_interrupted_after_the_log_opened(signal_number, convoy_ssp, tmp_path, capsys, monkeypatch):
+    from cosim.navigation import ssp_run
+
+    monkeypatch.setattr(ssp_run, "_write_header", _signal_self(signal_number)(ssp_run._write_header))
+    log = tmp_path / "convoy.mcap"
+    assert main(["run", str(convoy_ssp), "--out", str(log), "--quiet"]) == 1
+    assert capsys.readouterr().err == ""
+    outcome = finalised_outcome(log)
+    assert outcome["reason"] == "interrupted" and float(outcome["time"]) < 8.0  # before the stop time

@@ -129,7 +129,7 @@ def _run_ssp(args) -> int:
         raise CosimError(f"{args.scenario}: --live and --realtime run scenario files (.toml), not SSP")
     from cosim.navigation.ssp_run import SspRunResult, run_ssp, summary
 
-    result = run_ssp(args.scenario, args.out, args.overrides, progress=not args.quiet)
+    result = run_ssp(args.scenario, args.out, args.overrides, progress=not args.quiet, force=args.force)
     if isinstance(result, SspRunResult):
         if not args.quiet:
             print(summary(result))

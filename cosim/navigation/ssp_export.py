@@ -199,10 +199,12 @@ def _key(connection: SspConnection) -> tuple:
     return (connection.source, connection.target, connection.factor, connection.offset)
 
 
-def run_exported(ssp: SspSystem, simulation: dict[str, object], out_path: Path | None, progress: bool):
+def run_exported(
+    ssp: SspSystem, simulation: dict[str, object], out_path: Path | None, progress: bool, force: bool = False
+):
     """Run an exported SSP as its scenario; returns (scenario, `cosim.navigation.run.RunResult`)."""
     from cosim.navigation.run import run_scenario
 
     scenario = scenario_of(ssp, simulation)
     _check_against_ssd(ssp, scenario)
-    return scenario, run_scenario(scenario, out_path, progress=progress)
+    return scenario, run_scenario(scenario, out_path, progress=progress, force=force)

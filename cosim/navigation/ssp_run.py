@@ -16,12 +16,15 @@ import math
 import time
 import tomllib
 from dataclasses import dataclass
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
 
+from cosim.core import interrupt
 from cosim.core.master import COMPILED_MIN_STEPS, MODES, Master, seconds_to_ns
 from cosim.errors import CosimError
+from cosim.record.logfile import claim_default_log, claim_log
 from cosim.scenario.ssp_read import SspSystem, build_system, open_ssp
 
 SIMULATION_KEYS = ("stop_time", "macro_step", "start_time", "master")
@@ -101,43 +104,56 @@ def experiment(ssp: SspSystem, overrides: dict[str, object]) -> Experiment:
     return Experiment(start, float(stop), float(step), master)
 
 
-def run_ssp(path: str | Path, out_path: Path | None = None, overrides=(), progress: bool = False):
+def run_ssp(
+    path: str | Path, out_path: Path | None = None, overrides=(), progress: bool = False, force: bool = False
+):
     """Run the SSP archive `path`, logging to `out_path` (default logs/<name>-<timestamp>.mcap).
 
     Returns an `SspRunResult`; for an SSP that navcosim exported from a scenario (it carries the
     `org.navcosim.scenario` annotation) the scenario's run: (scenario, `RunResult`). Raises
-    `CosimError` on bad input, before any log exists.
+    `CosimError` on bad input, before any log exists. The log is claimed and signals are handled as
+    for a scenario (`cosim.navigation.run.run_scenario`).
     """
-    from cosim.navigation.run import _Interrupt
-
     values = parse_overrides(overrides)
     with open_ssp(path) as ssp:
         from cosim.navigation import ssp_export
 
         if ssp_export.SCENARIO_ANNOTATION in ssp.annotations:
-            return ssp_export.run_exported(ssp, values, out_path, progress)
-        with _Interrupt() as interrupt:
-            return _run_fmus(ssp, experiment(ssp, values), out_path, interrupt)
+            return ssp_export.run_exported(ssp, values, out_path, progress, force)
+        with interrupt.catching_signals():
+            return _run_fmus(ssp, experiment(ssp, values), out_path, force)
 
 
 def default_log_path(name: str) -> Path:
-    stamp = time.strftime("%Y%m%d-%H%M%S")
-    return Path("logs") / f"{name or 'ssp'}-{stamp}.mcap"
+    """logs/<name>-<timestamp>.mcap, the timestamp to the millisecond (a taken name gets a suffix)."""
+    now = datetime.now()
+    return Path("logs") / f"{name or 'ssp'}-{now:%Y%m%d-%H%M%S}-{now.microsecond // 1000:03d}.mcap"
 
 
-def _run_fmus(ssp: SspSystem, run: Experiment, out_path: Path | None, interrupt) -> SspRunResult:
-    from cosim.record import batch as recorder_batch
-    from cosim.record.recorder import Recorder
-
+def _run_fmus(ssp: SspSystem, run: Experiment, out_path: Path | None, force: bool) -> SspRunResult:
     system, parameters = build_system(ssp, run.macro_step, run.master)
     master = Master(system, start_time=run.start_time, parameters=parameters)
     try:
         master.initialize()
     except CosimError as error:
         raise CosimError(f"{ssp.source}: initialising the system failed: {error}") from None
-    log_path = Path(out_path) if out_path is not None else default_log_path(Path(ssp.source).stem)
+    with interrupt.deferred():
+        return _record(ssp, run, master, system, out_path, force)
+
+
+def _record(
+    ssp: SspSystem, run: Experiment, master: Master, system, out_path: Path | None, force: bool
+) -> SspRunResult:
+    """Step and log, with signals deferred: an interrupt ends the run with a finalised log."""
+    from cosim.record import batch as recorder_batch
+    from cosim.record.recorder import Recorder
+
     try:
-        recorder = Recorder(log_path)
+        if out_path is not None:
+            log_path, stream = Path(out_path), claim_log(Path(out_path), force)
+        else:
+            log_path, stream = claim_default_log(default_log_path(Path(ssp.source).stem))
+        recorder = Recorder(log_path, stream=stream)
     except BaseException:
         master.close()
         raise
@@ -172,7 +188,7 @@ def _run_fmus(ssp: SspSystem, run: Experiment, out_path: Path | None, interrupt)
 
         compiled = total >= COMPILED_MIN_STEPS
         try:
-            while master.step_index < total and interrupt.signal_name is None:
+            while master.step_index < total and interrupt.take() is None:
                 master.run_recorded(min(CHUNK_STEPS, total - master.step_index), record, compiled=compiled)
         except CosimError as error:
             failure = f"{error} (at t = {master.time:.3f} s)"
