@@ -63,7 +63,7 @@ def test_boolean_where_a_real_is_expected(tmp_path, capsys):
 def test_boolean_for_a_real_parameter_of_a_foreign_fmu(tmp_path, capsys):
     # AvoidanceMixer.avoid_speed_factor is a Real the schema does not list: the FMU's own type decides.
     message = reject(tmp_path, capsys, args=("--set", "mixer.avoid_speed_factor=true"))
-    assert "[mixer].avoid_speed_factor: the FMU's parameter is real, got true (a boolean)" in message
+    assert "[mixer].avoid_speed_factor: must be a number (the FMU's Real), got true" in message
 
 
 @pytest.mark.parametrize(
