@@ -67,22 +67,31 @@ def test_boolean_for_a_real_parameter_of_a_foreign_fmu(tmp_path, capsys):
 
 
 @pytest.mark.parametrize(
-    "override, expect",
+    "overrides, expect",
     [
         (
-            "pure_pursuit.desired_linear_velocity=1e20",
+            ["pure_pursuit.desired_linear_velocity=1e20"],
             "[pure_pursuit].desired_linear_velocity: must be <= 100",
         ),
-        ("pure_pursuit.max_angular_velocity=1e20", "[pure_pursuit].max_angular_velocity: must be <= 100"),
+        (["pure_pursuit.max_angular_velocity=1e20"], "[pure_pursuit].max_angular_velocity: must be <= 100"),
         (
-            "vehicle.wheel_speed_range=[-1e20, 1e20]",
+            ["vehicle.wheel_speed_range=[-1e20, 1e20]"],
             "[vehicle].wheel_speed_range: wheel_speed_min must be in",
         ),
-        ("mixer.recovery_angular_velocity=1e20", "[mixer].recovery_angular_velocity: must be <= 100"),
+        (["mixer.recovery_angular_velocity=1e20"], "[mixer].recovery_angular_velocity: must be <= 100"),
+        (
+            ["obstacles.0.velocity=[1e20, 0.0]"],
+            "[[obstacles]][0].velocity: a speed of at most 100 m/s, got 1e+20",
+        ),
+        (
+            ["obstacles.0.path=[[25.0, 10.5], [30.0, 10.5]]", "obstacles.0.speed=1e20"],
+            "[[obstacles]][0].speed: must be <= 100, got 1e+20",
+        ),
     ],
 )
-def test_absurd_velocities(override, expect, tmp_path, capsys):
-    assert expect in reject(tmp_path, capsys, args=("--set", override))
+def test_absurd_velocities(overrides, expect, tmp_path, capsys):
+    args = [arg for override in overrides for arg in ("--set", override)]
+    assert expect in reject(tmp_path, capsys, args=tuple(args))
 
 
 def test_tiny_macro_step_hits_the_step_limit(tmp_path, capsys):

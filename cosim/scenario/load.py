@@ -22,6 +22,7 @@ import numpy as np
 from cosim.errors import PATH_LIMIT, CosimError
 from cosim.scenario.limits import (
     MAX_LIDAR_BEAMS,
+    MAX_LINEAR_SPEED,
     MAX_NAME_LENGTH,
     MAX_OBSTACLES,
     MAX_TIME,
@@ -609,7 +610,7 @@ def _motion(table: TableReader) -> Motion | None:
         if not isinstance(path, list) or len(path) < 2:
             raise table.error("path", f"must be a list of at least 2 [x, y] points, got {describe(path)}")
         points = tuple(table.check_numbers(f"path[{i}]", p, 2) for i, p in enumerate(path))
-        speed = table.number("speed", minimum=0.0, exclusive_minimum=True)
+        speed = table.number("speed", minimum=0.0, exclusive_minimum=True, maximum=MAX_LINEAR_SPEED)
         mode = table.string("motion", "loop", choices=MOTIONS)
         return Motion(points, speed, mode, start_time=table.number("start_time", 0.0, minimum=0.0))
     if table.has("velocity"):
@@ -617,6 +618,10 @@ def _motion(table: TableReader) -> Motion | None:
             if table.has(key):
                 raise table.error(key, "belongs to a path; a velocity = [vx, vy] motion has no " + key)
         velocity = table.numbers("velocity", length=2)
+        if math.hypot(*velocity) > MAX_LINEAR_SPEED:
+            raise table.error(
+                "velocity", f"a speed of at most {MAX_LINEAR_SPEED:g} m/s, got {math.hypot(*velocity):g} m/s"
+            )
         return Motion(velocity=velocity, start_time=table.number("start_time", 0.0, minimum=0.0))
     for key in ("speed", "motion", "start_time"):
         if table.has(key):
