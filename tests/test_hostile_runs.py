@@ -281,3 +281,24 @@ def test_ssp_run_interrupted_after_the_log_opened(signal_number, convoy_ssp, tmp
     assert capsys.readouterr().err == ""
     outcome = finalised_outcome(log)
     assert outcome["reason"] == "interrupted" and float(outcome["time"]) < 8.0  # before the stop time
+
+
+@pytest.mark.parametrize("signal_number", SIGNALS, ids=["SIGINT", "SIGTERM"])
+def test_signal_after_the_command_finished(signal_number, tmp_path):
+    """Between the end of the work and the end of the process (interpreter shutdown) a signal still
+    means exit 1, never -15 or a traceback; what was printed is not lost."""
+    log = tmp_path / "run.mcap"
+    script = (
+        "import os, sys\n"
+        "from cosim.cli import main\n"
+        f"sys.argv = ['cosim', 'run', {str(EXAMPLE)!r}, '--out', {str(log)!r}, '--no-plot',\n"
+        "            '--set', 'simulation.stop_time=0.5']\n"
+        "code = main()\n"
+        f"os.kill(os.getpid(), {int(signal_number)})\n"
+        "sys.exit(code)\n"
+    )
+    completed = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert completed.returncode == 1, completed.stderr  # was -15 for SIGTERM
+    assert "Traceback" not in completed.stderr and "interrupted" not in completed.stderr  # only tqdm's bar
+    assert str(log) in completed.stdout  # the summary table came out before the exit
+    assert finalised_outcome(log)["reason"] == "stop_time"

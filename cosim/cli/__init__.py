@@ -32,7 +32,9 @@ def main(argv: list[str] | None = None) -> int:
     from cosim.core.interrupt import Interrupted, catching_signals
 
     try:
-        with catching_signals():
+        # Called without arguments, main() is the program (`cosim`, `python -m cosim`): signals stay
+        # handled until the process exits. Called with a list (tests, scripts), they are given back.
+        with catching_signals(until_exit=argv is None):
             parser = build_parser()
             args = parser.parse_args(argv)
             return int(args.handler(args) or 0)

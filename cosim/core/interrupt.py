@@ -7,6 +7,7 @@ written yet, so unwinding is the whole clean-up. Inside `deferred()` (from just 
 is created until it is closed) a signal only records its name; the run loop polls `take()` and
 stops at the next step with outcome "interrupted", so the log is finalised, never cut. A signal
 that arrives inside `deferred()` after the loop stopped polling is raised when the block ends.
+For the `cosim` command the handlers stay in place until the process exits (`until_exit`).
 
 `Interrupted` derives from `KeyboardInterrupt`, so `except Exception` in any library on the way
 up does not swallow it; the CLI turns it into one line on stderr and exit code 1.
@@ -14,7 +15,9 @@ up does not swallow it; the CLI turns it into one line on stderr and exit code 1
 
 from __future__ import annotations
 
+import os
 import signal
+import sys
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -48,9 +51,12 @@ def _handle(number: int, frame) -> None:
 
 
 @contextmanager
-def catching_signals() -> Iterator[None]:
+def catching_signals(until_exit: bool = False) -> Iterator[None]:
     """Route SIGINT/SIGTERM to this module while inside; the previous handlers come back after.
 
+    `until_exit`: the block is the whole program (the `cosim` command). After it, a signal exits
+    at once with status 1 (standard streams flushed first), so one that arrives while the
+    interpreter shuts down neither prints a traceback nor ends the process as killed (-15).
     Off the main thread (where Python cannot set handlers) this does nothing.
     """
     if _state.installed or threading.current_thread() is not threading.main_thread():
@@ -63,7 +69,16 @@ def catching_signals() -> Iterator[None]:
     finally:
         _state.installed = False
         for number, handler in previous.items():
-            signal.signal(number, handler)
+            signal.signal(number, _exit_now if until_exit else handler)
+
+
+def _exit_now(number: int, frame) -> None:
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except Exception:  # closed, broken pipe, or interrupted mid-write: exit regardless
+            pass
+    os._exit(1)
 
 
 @contextmanager
