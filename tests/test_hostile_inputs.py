@@ -57,7 +57,7 @@ def reject(tmp_path: Path, capsys, text: str | None = None, args: tuple[str, ...
 
 def test_boolean_where_a_real_is_expected(tmp_path, capsys):
     message = reject(tmp_path, capsys, args=("--set", "pure_pursuit.max_angular_velocity=true"))
-    assert "[pure_pursuit].max_angular_velocity: must be a number, got true" in message
+    assert "[pure_pursuit].max_angular_velocity: must be a number (the FMU's Real), got true" in message
 
 
 def test_boolean_for_a_real_parameter_of_a_foreign_fmu(tmp_path, capsys):
@@ -71,14 +71,28 @@ def test_boolean_for_a_real_parameter_of_a_foreign_fmu(tmp_path, capsys):
     [
         (
             ["pure_pursuit.desired_linear_velocity=1e20"],
-            "[pure_pursuit].desired_linear_velocity: must be <= 100",
+            "[pure_pursuit].desired_linear_velocity: must be at most 100 m/s in magnitude, got 1e+20",
         ),
-        (["pure_pursuit.max_angular_velocity=1e20"], "[pure_pursuit].max_angular_velocity: must be <= 100"),
         (
-            ["vehicle.wheel_speed_range=[-1e20, 1e20]"],
-            "[vehicle].wheel_speed_range: wheel_speed_min must be in",
+            ["pure_pursuit.desired_linear_velocity=-1e20"],
+            "[pure_pursuit].desired_linear_velocity: must be at most 100 m/s in magnitude, got -1e+20",
         ),
-        (["mixer.recovery_angular_velocity=1e20"], "[mixer].recovery_angular_velocity: must be <= 100"),
+        (
+            ["pure_pursuit.max_angular_velocity=1e20"],
+            "[pure_pursuit].max_angular_velocity: must be at most 100 rad/s in magnitude",
+        ),
+        (
+            ["mixer.recovery_linear_velocity=1e20"],
+            "[mixer].recovery_linear_velocity: must be at most 100 m/s in magnitude",
+        ),
+        (
+            ["mixer.recovery_angular_velocity=1e20"],
+            "[mixer].recovery_angular_velocity: must be at most 100 rad/s in magnitude",
+        ),
+        (
+            ["mixer.recovery_angular_velocity=" + "9" * 400],
+            "[mixer].recovery_angular_velocity: must be at most 100 rad/s in magnitude, got an integer of",
+        ),
         (
             ["obstacles.0.velocity=[1e20, 0.0]"],
             "[[obstacles]][0].velocity: a speed of at most 100 m/s, got 1e+20",
