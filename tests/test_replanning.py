@@ -23,8 +23,9 @@ SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 
 def _run(name: str, tmp_path: Path, *overrides: str):
     scenario = dataclasses.replace(load_scenario(SCENARIOS / name, [*REDUCED, *overrides]), plot=False)
-    result = run_scenario(scenario, tmp_path / "run.mcap")
-    return scenario, result, open_log(tmp_path / "run.mcap")
+    log = tmp_path / f"run{len(list(tmp_path.glob('run*.mcap')))}.mcap"  # an existing log is refused
+    result = run_scenario(scenario, log)
+    return scenario, result, open_log(log)
 
 
 def _plans(log) -> list[np.ndarray]:
