@@ -36,16 +36,31 @@ def _plans(log) -> list[np.ndarray]:
 
 
 def test_blocked_aisle_needs_the_replan(tmp_path: Path):
-    """Without replanning the robot never gets past the wall; with it, it replans (once, when the
-    lidar shows the wall on the plan) round another aisle and reaches the goal."""
-    scenario, blind, _ = _run("warehouse_blocked_aisle.toml", tmp_path, "planner.replan=false")
-    wall = np.asarray(scenario.obstacles[0].polygon())
-    assert not blind.outcome.reached and blind.exit_code == 1
-    assert blind.outcome.replans == 0
-    # It ends where the wall stopped it: nowhere near the goal (84, 53).
-    assert blind.outcome.reason in ("stop_time", "collision")
+    """Without replanning the robot does not reach the goal and the run ends at the stop time
+    (exit 1) with no collision; with it, it replans (once, when the lidar shows the wall on the
+    plan) round another aisle and reaches the goal."""
+    scenario, blind, log = _run("warehouse_blocked_aisle.toml", tmp_path, "planner.replan=false")
+    assert blind.outcome.reason == "stop_time" and blind.exit_code == 1
+    assert blind.outcome.time == pytest.approx(scenario.stop_time)
+    assert not blind.outcome.reached and blind.outcome.replans == 0
+    assert blind.outcome.min_clearance > 0.0 and blind.outcome.collision_point is None
+    # It ends in the thesis's recovery (section 4.3.3): no free VFH direction (NaN), and the mixer
+    # turns the robot on the spot, v = 0 and omega = +-recovery_angular_velocity (0.5 rad/s, the
+    # FMU's default), so the pose stays put while it turns.
+    mixer, vehicle = log.signals("mixer"), log.signals("vehicle")
+    blocked = np.isnan(mixer["steering_dir"])
+    recovering = mixer["mode"] == 2
+    assert blind.outcome.recovery_time > 10.0 and blocked[-1]
+    # The logged outputs are those of the step that read the previous sample's inputs.
+    assert np.array_equal(recovering[1:], blocked[:-1])
+    assert np.all(mixer["v"][recovering] == 0.0)
+    assert np.allclose(np.abs(mixer["omega"][recovering]), 0.5)
+    last = np.flatnonzero(~blocked)[-1] + 3  # once the final recovery's command has moved the robot
+    assert np.ptp(vehicle["x"][last:]) < 1e-9 and np.ptp(vehicle["y"][last:]) < 1e-9
+    assert np.ptp(np.unwrap(vehicle["theta"][last:])) > 2 * math.pi  # it keeps turning
 
     scenario, result, log = _run("warehouse_blocked_aisle.toml", tmp_path)
+    wall = np.asarray(scenario.obstacles[0].polygon())
     assert result.outcome.reason == "goal_reached" and result.exit_code == 0
     assert result.outcome.min_clearance > 0.0
     assert result.outcome.replans >= 1 and log.outcome["replans"] == str(result.outcome.replans)
@@ -57,6 +72,44 @@ def test_blocked_aisle_needs_the_replan(tmp_path: Path):
     trajectory = log.trajectory()
     poses = np.column_stack([trajectory.x, trajectory.y])
     assert distance_to_polygon(poses, wall).min() > scenario.vehicle_radius
+
+
+def test_beam_spacing_against_the_arc_between_beams():
+    """The widest gap between adjacent beams at the range, as the arc range * angle."""
+    from cosim.navigation.planner import Replanning
+
+    thesis = Replanning(np.array([-math.pi / 4, 0.0, math.pi / 4]), 0.0, 10.0, vehicle_radius=1.5)
+    assert thesis.beam_spacing == pytest.approx(10.0 * math.pi / 4)  # not the 270 degrees behind
+    assert not thesis.resolves_obstacles  # 7.85 m > the 3 m car
+    full = Replanning(-math.pi + 2 * math.pi * np.arange(360) / 360, 0.0, 20.0, vehicle_radius=0.5)
+    assert full.beam_spacing == pytest.approx(20.0 * math.pi / 180)  # the wrap at +-pi included
+    assert full.resolves_obstacles  # 0.35 m <= the 1 m robot
+    uneven = Replanning(np.array([-1.0, -0.5, 0.2, 0.3]), 0.0, 2.0, vehicle_radius=1.0)
+    assert uneven.beam_spacing == pytest.approx(2.0 * 0.7)
+    assert uneven.resolves_obstacles == (1.4 <= 2.0)
+
+
+def test_bicycle_three_obstacles_leaves_obstacles_on_the_plan_to_vfh(tmp_path: Path):
+    """With replanning on (the default), Table 4.5's three beams do not replan round a first return
+    (the replan round the pallet row's first return brushed its unseen corner at t = 2.6 s): the
+    car reaches the goal without a collision, VFH passing the obstacles as without replanning."""
+    scenario, result, log = _run("warehouse_bicycle_three_obstacles.toml", tmp_path)
+    assert scenario.planner.replan
+    assert result.outcome.reason == "goal_reached" and result.exit_code == 0
+    assert result.outcome.min_clearance > 0.0 and result.outcome.vfh_interventions > 0
+    # VFH is never stuck for replan_after nor progress stalled here: no replan at all, so the run is
+    # the fixed plan's run step for step.
+    assert result.outcome.replans == 0 and len(_plans(log)) == 1
+    _, fixed, _ = _run("warehouse_bicycle_three_obstacles.toml", tmp_path, "planner.replan=false")
+    assert (result.outcome.time, result.outcome.min_clearance) == (
+        fixed.outcome.time,
+        fixed.outcome.min_clearance,
+    )
+    trajectory = log.trajectory()
+    poses = np.column_stack([trajectory.x, trajectory.y])
+    for obstacle in scenario.obstacles:
+        vertices = np.asarray(obstacle.polygon(), dtype=float)
+        assert distance_to_polygon(poses, vertices).min() > scenario.vehicle_radius - 0.02
 
 
 def _person_centre(t: float) -> tuple[float, float]:
