@@ -158,3 +158,55 @@ def test_scenario_keys_give_the_motion(tmp_path: Path):
 def test_motion_errors_name_the_key(tmp_path: Path, obstacle: str, message: str):
     with pytest.raises(CosimError, match=message):
         load_scenario(_scenario(tmp_path, obstacle))
+
+
+def test_republished_obstacles_read_back_at_their_poses(tmp_path: Path):
+    """/obstacles written again and again (circles and rectangles reuse one message's bytes, a
+    polygon is serialised in full) reads back through mcap-ros2 with each marker at the shape's
+    analytic pose at the stamp, and the bytes equal a fresh serialisation of every message."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    from cosim.record.recorder import Recorder, _serialize_obstacles
+
+    walker = Circle((2.0, 1.0), 0.3, Motion(velocity=(1.0, 0.5)))
+    cart = Rectangle((5.0, 5.0), (1.0, 2.0), 0.4, Motion(((5.0, 5.0), (5.0, 9.0)), 2.0, "bounce"))
+    box = Rectangle((1.0, 8.0), (0.5, 0.5))
+    shapes = [walker, cart, box]
+    triangle = Polygon(((0.0, 0.0), (1.0, 0.0), (0.0, 1.0)), Motion(velocity=(0.0, -1.0)))
+
+    def centres(t: float) -> list[tuple[float, float]]:
+        """By hand: the walker at 1 m/s x 0.5 m/s; the cart 2 m/s up 4 m and back; the box stands."""
+        s = math.fmod(2.0 * t, 8.0)
+        return [(2.0 + t, 1.0 + 0.5 * t), (5.0, 5.0 + (s if s <= 4.0 else 8.0 - s)), (1.0, 8.0)]
+
+    times = [0.1 * k for k in range(1, 40)]
+    stamps = [round(t * 1e9) for t in times]
+    log = tmp_path / "obstacles.mcap"
+    with Recorder(log) as recorder:
+        for t, t_ns in zip(times, stamps, strict=True):
+            recorder.write_obstacles(t_ns, [shape.at(t) for shape in shapes])
+        recorder.write_obstacles(stamps[-1] + 1, [triangle.at(5.0)])
+        recorder.write_obstacles(stamps[-1] + 2, [shape.at(0.0) for shape in shapes])
+
+    with open(log, "rb") as stream:
+        raw = [(message.log_time, message.data) for _, _, message in make_reader(stream).iter_messages()]
+    written = [*zip(times, stamps, strict=True), (5.0, stamps[-1] + 1), (0.0, stamps[-1] + 2)]
+    assert [log_time for log_time, _ in raw] == [t_ns for _, t_ns in written]
+    for (t, t_ns), (_, data) in zip(written, raw, strict=True):
+        drawn = [triangle.at(t)] if t_ns == stamps[-1] + 1 else [shape.at(t) for shape in shapes]
+        assert data == _serialize_obstacles(t_ns, drawn)
+
+    with open(log, "rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        decoded = [message for *_, message in reader.iter_decoded_messages()]
+    for (t, t_ns), message in zip(written[:-2], decoded, strict=False):
+        assert len(message.markers) == 3
+        for index, (marker, centre) in enumerate(zip(message.markers, centres(t), strict=True)):
+            stamp = marker.header.stamp
+            assert marker.id == index and stamp.sec * 10**9 + stamp.nanosec == t_ns
+            assert (marker.pose.position.x, marker.pose.position.y) == pytest.approx(centre, abs=1e-12)
+        assert [marker.type for marker in message.markers] == [3, 1, 1]  # cylinder, cube, cube
+        assert message.markers[1].scale.y == 2.0
+    (polygon,) = decoded[-2].markers
+    assert [(p.x, p.y) for p in polygon.points[:3]] == pytest.approx([(0.0, -5.0), (1.0, -5.0), (0.0, -4.0)])

@@ -32,6 +32,7 @@ outputs (and the inputs last applied, held).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import struct
 import time
@@ -56,6 +57,7 @@ SCAN_ANGLE_TOLERANCE = 1e-6  # [rad] below which beam angles count as exactly on
 SCAN_MAX_SUBDIVISION = 16
 CLOCK_EVERY = 16  # held messages between two looks at the wall clock for the OS flush
 _STAMP = struct.Struct("<iI")  # builtin_interfaces/Time: int32 sec, uint32 nanosec
+_FLOAT64 = struct.Struct("<d")
 
 SIGNAL_NAMES_KEY = rosmsg.SIGNAL_NAMES_KEY
 SIGNAL_UNITS_KEY = rosmsg.SIGNAL_UNITS_KEY
@@ -128,6 +130,7 @@ class Recorder:
         self._sequences: dict[int, int] = {}
         self._signal_sizes: dict[int, int] = {}
         self._scan_layouts: dict[tuple, tuple] = {}  # (angles, limits) -> `_scan_template`
+        self._obstacle_templates: dict[tuple, _ObstacleTemplate] = {}  # shapes -> template
         # Signals, poses, commands and scans are held for a block of steps and packed at once
         # (`cosim.record.batch`); any other write, a flush and close pack the block first.
         self._block = MessageBlock(self._writer, self._sequences, window_ns=window_ns)
@@ -457,10 +460,86 @@ class Recorder:
 
     def write_obstacles(self, t_ns: int, obstacles: list) -> None:
         """The unknown obstacles (`cosim.world.shapes` shapes) on /obstacles: circles as cylinders,
-        rectangles as cubes (same centre, size, yaw), polygons as closed line strips."""
-        markers = [_marker(t_ns, index, obstacle) for index, obstacle in enumerate(obstacles)]
-        message = rosmsg.make("visualization_msgs/msg/MarkerArray", markers=markers)
-        self._write_message("/obstacles", t_ns, message)
+        rectangles as cubes (same centre, size, yaw), polygons as closed line strips.
+
+        Moving obstacles are republished with every scan, so circles and rectangles reuse the CDR
+        bytes of the first message of the same shapes (`_ObstacleTemplate`): only the stamps and
+        the centres change. The message is held in the block like /scan (a direct write packs the
+        block first); the block keeps the order of the messages, so the log reads the same."""
+        key = tuple(_marker_key(obstacle) for obstacle in obstacles)
+        if None in key:  # a polygon: its points change when it moves
+            payload = _serialize_obstacles(t_ns, obstacles)
+        else:
+            template = self._obstacle_templates.get(key)
+            if template is None:
+                template = _ObstacleTemplate(obstacles)
+                if template.fill(t_ns, obstacles) != _serialize_obstacles(t_ns, obstacles):
+                    raise CosimError(f"{self.path}: unexpected MarkerArray CDR layout")
+                self._obstacle_templates[key] = template
+            payload = template.fill(t_ns, obstacles)
+        self._hold(self._channel("/obstacles"), t_ns, payload)
+
+
+def _serialize_obstacles(t_ns: int, obstacles: list) -> bytes:
+    markers = [_marker(t_ns, index, obstacle) for index, obstacle in enumerate(obstacles)]
+    message = rosmsg.make("visualization_msgs/msg/MarkerArray", markers=markers)
+    return rosmsg.serialize(message, TOPIC_TYPES["/obstacles"])
+
+
+def _marker_key(obstacle) -> tuple | None:
+    """What fixes a marker's bytes apart from its stamp and centre (None: more changes, a polygon)."""
+    kind = getattr(obstacle, "kind", None)
+    if kind == "circle":
+        return (kind, float(obstacle.radius))
+    if kind == "rectangle":
+        return (kind, tuple(float(v) for v in obstacle.size), float(obstacle.yaw))
+    return None
+
+
+_SENTINEL_NS = 1_234_567_891_987_654_321  # a stamp no run writes, to find in the template
+
+
+class _ObstacleTemplate:
+    """The /obstacles CDR of circles and rectangles with the byte offsets of every stamp and of each
+    marker's centre (x, y), found by serialising sentinel values (checked once against the full
+    serialisation by `Recorder.write_obstacles`)."""
+
+    def __init__(self, obstacles: list) -> None:
+        sentinels = [(-1.0e250 * (index + 1.5), 1.0e250 * (index + 1.5)) for index in range(len(obstacles))]
+        placed = [
+            dataclasses.replace(obstacle, center=centre)
+            for obstacle, centre in zip(obstacles, sentinels, strict=True)
+        ]
+        data = _serialize_obstacles(_SENTINEL_NS, placed)
+        self.data = bytearray(data)
+        stamp = _STAMP.pack(*divmod(_SENTINEL_NS, 1_000_000_000))
+        self.stamps = _offsets(data, stamp)
+        if len(self.stamps) != 2 * len(obstacles):  # the marker's header and its texture's
+            raise CosimError("unexpected MarkerArray CDR layout (stamps)")
+        self.centres = []
+        for cx, cy in sentinels:
+            (x_at,), (y_at,) = _offsets(data, _FLOAT64.pack(cx)), _offsets(data, _FLOAT64.pack(cy))
+            self.centres.append((x_at, y_at))
+
+    def fill(self, t_ns: int, obstacles: list) -> bytes:
+        data = self.data
+        stamp = _STAMP.pack(*divmod(int(t_ns), 1_000_000_000))
+        for at in self.stamps:
+            data[at : at + 8] = stamp
+        for (x_at, y_at), obstacle in zip(self.centres, obstacles, strict=True):
+            cx, cy = obstacle.center
+            data[x_at : x_at + 8] = _FLOAT64.pack(float(cx))
+            data[y_at : y_at + 8] = _FLOAT64.pack(float(cy))
+        return bytes(data)
+
+
+def _offsets(data: bytes, pattern: bytes) -> list[int]:
+    """Every offset of `pattern` in `data`."""
+    found, at = [], data.find(pattern)
+    while at >= 0:
+        found.append(at)
+        at = data.find(pattern, at + 1)
+    return found
 
 
 def scan_layout(angles: np.ndarray) -> tuple[float, float, np.ndarray, str]:
