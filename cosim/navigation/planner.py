@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -115,7 +116,7 @@ class Replanning:
     replan_horizon: float = 20.0  # [m]
     replan_interval: float = 1.0  # [s]
 
-    @property
+    @cached_property
     def beam_spacing(self) -> float:
         """[m] The widest gap between adjacent beams at the lidar's range, within its view.
 
@@ -130,7 +131,7 @@ class Replanning:
             gaps = np.delete(gaps, int(np.argmax(gaps)))
         return float(gaps.max() * self.range_max)
 
-    @property
+    @cached_property
     def resolves_obstacles(self) -> bool:
         """Whether the scan shows an obstacle's extent well enough to plan round it: adjacent beams at
         most the vehicle's diameter apart at the lidar's range (see the module docstring)."""
