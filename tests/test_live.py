@@ -1,11 +1,15 @@
 """`cosim run --live`: a WebSocket client (written here with `websockets`, speaking the subprotocol
 the foxglove-sdk server answers with) subscribes to /odom and /scan, decodes the messages with the
-advertised schemas (rosbags), and gets the poses and ranges the log holds at the same times."""
+advertised schemas (rosbags), and gets the poses and ranges the log holds at the same times. A
+client that publishes a PoseStamped (serialised by rosbags) on /goal_pose moves the goal: the robot
+replans and ends at the new goal."""
 
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import json
+import math
 import signal
 import socket
 import struct
@@ -23,6 +27,12 @@ websockets = pytest.importorskip("websockets")
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "scenarios" / "warehouse_diff_drive_one_obstacle.toml"
+BICYCLE = ROOT / "scenarios" / "warehouse_bicycle_no_obstacle.toml"
+# From the start (6, 6) the scenarios' goal is (84, 53); this one lies where the vertical aisle at
+# x = 38..46 m crosses the aisle at y = 26..34 m (maps/warehouse.yaml), another way from the start.
+NEW_GOAL = (42.0, 30.0)
+IN_A_RACK = (20.0, 14.0)  # the rack row y = 12..16 m, x = 10..38 m
+OFF_THE_MAP = (-5.0, 3.0)
 SUBPROTOCOL = "foxglove.sdk.v1"  # what foxglove-sdk 0.30's server accepts (it answers 400 otherwise)
 TOPICS = ("/odom", "/scan")
 
@@ -213,3 +223,147 @@ def test_pacer_holds_messages_until_their_time_over_r_and_slips_when_late(monkey
     assert clock[0] == pytest.approx(101.2)  # sent at once, not held
     pacer.message(1, int(0.7e9), b"")  # and the schedule goes on from there at R = 2
     assert clock[0] == pytest.approx(101.3)
+
+
+def _pose_stamped_cdr(x: float, y: float, frame_id: str = "map") -> bytes:
+    """A geometry_msgs/msg/PoseStamped at (x, y), serialised by rosbags (not by navcosim)."""
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    types = store.types
+    message = types["geometry_msgs/msg/PoseStamped"](
+        header=types["std_msgs/msg/Header"](
+            stamp=types["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id=frame_id
+        ),
+        pose=types["geometry_msgs/msg/Pose"](
+            position=types["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+            orientation=types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+        ),
+    )
+    return bytes(store.serialize_cdr(message, "geometry_msgs/msg/PoseStamped"))
+
+
+async def _publish_goals(url: str, goals: list[tuple[float, float]]) -> tuple[dict, list[str]]:
+    """Advertise /goal_pose (cdr, ros2msg) and, once /odom flows, publish each goal in turn; the
+    next after the server's status about the previous one. Returns the server info and the
+    status messages, collected until the server stops."""
+    definition, _ = get_typestore(Stores.ROS2_HUMBLE).generate_msgdef("geometry_msgs/msg/PoseStamped")
+    statuses: list[str] = []
+    info: dict = {}
+    pending = list(goals)
+    async with websockets.connect(url, subprotocols=[SUBPROTOCOL], max_size=None) as client:
+        try:
+            async for frame in client:
+                if not isinstance(frame, str):
+                    if pending and len(statuses) == len(goals) - len(pending):
+                        x, y = pending.pop(0)
+                        await client.send(struct.pack("<BI", 1, 7) + _pose_stamped_cdr(x, y))
+                    continue
+                message = json.loads(frame)
+                if message["op"] == "serverInfo":
+                    info = message
+                    goal_channel = {
+                        "id": 7,
+                        "topic": "/goal_pose",
+                        "encoding": "cdr",
+                        "schemaName": "geometry_msgs/msg/PoseStamped",
+                        "schemaEncoding": "ros2msg",
+                        "schema": definition,
+                    }
+                    await client.send(json.dumps({"op": "advertise", "channels": [goal_channel]}))
+                elif message["op"] == "advertise":
+                    odom = [c for c in message["channels"] if c["topic"] == "/odom"]
+                    if odom:
+                        subscription = {"id": 1, "channelId": odom[0]["id"]}
+                        await client.send(json.dumps({"op": "subscribe", "subscriptions": [subscription]}))
+                elif message["op"] == "status" and "/goal_pose" in message["message"]:
+                    statuses.append(message["message"])
+        except websockets.ConnectionClosed:
+            pass
+    return info, statuses
+
+
+def test_a_goal_published_on_goal_pose_is_replanned_to_and_reached(tmp_path):
+    """Two refused goals (in a rack, off the map) leave the run going; the third one is reached."""
+    log = tmp_path / "goal.mcap"
+    command = [
+        sys.executable, "-m", "cosim", "run", str(SCENARIO), "--out", str(log), "--no-plot", "--quiet",
+        "--live", "--port", "0", "--realtime", "10", "--linger", "0",
+    ]  # fmt: skip
+    process = subprocess.Popen(command, cwd=ROOT, stderr=subprocess.PIPE, text=True)
+    try:
+        url = process.stderr.readline().split()[2]
+        goals = [IN_A_RACK, OFF_THE_MAP, NEW_GOAL]
+        info, statuses = asyncio.run(asyncio.wait_for(_publish_goals(url, goals), timeout=300))
+        rest = process.stderr.read()
+        assert process.wait(timeout=120) == 0, rest  # the goal (now NEW_GOAL) was reached
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert "clientPublish" in info["capabilities"] and "cdr" in info["supportedEncodings"]
+    assert len(statuses) == 3, statuses
+    assert "refused" in statuses[0] and "refused" in statuses[1] and "new goal" in statuses[2]
+    assert rest.count("cosim: warning: /goal_pose") == 2, rest
+
+    from cosim.logs import open_log
+
+    opened = open_log(log)
+    assert opened.outcome["reached"] == "true" and opened.outcome["reason"] == "goal_reached"
+    assert opened.outcome["goal"] == f"{NEW_GOAL[0]},{NEW_GOAL[1]}"
+    assert int(opened.outcome["replans"]) >= 1
+    logged_goals = [
+        (item.message.pose.position.x, item.message.pose.position.y) for item in opened.messages("/goal")
+    ]
+    assert logged_goals == [(84.0, 53.0), NEW_GOAL]
+    new_goal_time = list(opened.messages("/goal"))[1].t_ns
+    plans = list(opened.messages("/plan"))
+    assert any(item.t_ns == new_goal_time for item in plans)  # the replan to it, same step
+    last = plans[-1].message.poses[-1].pose.position
+    assert math.dist((last.x, last.y), NEW_GOAL) <= 0.5 * math.sqrt(0.5)  # the goal's 0.5 m cell
+    trajectory = opened.trajectory()
+    end = (trajectory.x[-1], trajectory.y[-1])
+    assert math.dist(end, NEW_GOAL) <= 1.0  # the scenario's goal tolerance
+
+
+def test_the_bicycle_replans_to_a_new_goal_with_hybrid_a_star(tmp_path):
+    """The run's goal hook (no server): a bicycle given a new goal replans with Hybrid A* from where
+    it is and reaches it; refused goals change nothing."""
+    from cosim.logs import open_log
+    from cosim.navigation.run import run_scenario
+    from cosim.scenario.load import load_scenario
+    from tests.test_shipped_scenarios import REDUCED
+
+    class Goals:
+        def __init__(self, goals):
+            self.goals, self.reports, self.calls = list(goals), [], 0
+
+        def take(self):
+            self.calls += 1
+            return self.goals.pop(0) if self.goals and self.calls % 5 == 0 else None
+
+        def report(self, text, warning=True):
+            self.reports.append((warning, text))
+
+    scenario = dataclasses.replace(load_scenario(BICYCLE, REDUCED), plot=False)
+    goals = Goals([OFF_THE_MAP, IN_A_RACK, NEW_GOAL])
+    result = run_scenario(scenario, tmp_path / "bicycle.mcap", goals=goals)
+    assert [warning for warning, _ in goals.reports] == [True, True, False], goals.reports
+    assert result.outcome.reason == "goal_reached" and result.outcome.min_clearance > 0
+    log = open_log(tmp_path / "bicycle.mcap")
+    end = log.trajectory()
+    assert math.dist((end.x[-1], end.y[-1]), NEW_GOAL) <= scenario.goal_tolerance
+    plans = list(log.messages("/plan"))
+    assert len(plans) == 2
+    poses = plans[1].message.poses
+    last = poses[-1].pose.position
+    assert math.dist((last.x, last.y), NEW_GOAL) <= 0.5 * math.sqrt(0.5)  # the goal's 0.5 m cell
+    first = poses[0].pose.position
+    assert math.dist((first.x, first.y), (end.x[0], end.y[0])) > 1.0  # from where it was, not the start
+    # Hybrid A*'s arcs (3.5 m turning radius), not a grid path: a grid A* path turns 45 degrees within
+    # a cell (three points on a circle of 0.79 m); here no three points lie on a circle under 2 m.
+    points = np.array([(pose.pose.position.x, pose.pose.position.y) for pose in poses])
+    a, b, c = points[:-2], points[1:-1], points[2:]
+    sides = np.linalg.norm(b - a, axis=1) * np.linalg.norm(c - b, axis=1) * np.linalg.norm(c - a, axis=1)
+    u, v = b - a, c - a
+    twice_area = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+    with np.errstate(divide="ignore"):
+        assert (sides / (2.0 * twice_area)).min() > 2.0

@@ -50,7 +50,8 @@ def register(subparsers) -> None:
         "--live",
         action="store_true",
         help="stream every channel to a Foxglove WebSocket server while the run goes (open "
-        "ws://127.0.0.1:PORT in Foxglove); paced at --realtime 1 unless told otherwise",
+        "ws://127.0.0.1:PORT in Foxglove); paced at --realtime 1 unless told otherwise. A "
+        "geometry_msgs/PoseStamped a client publishes on /goal_pose sets a new goal (replanned)",
     )
     parser.add_argument("--port", type=int, default=8765, help="the live view's port (8765)")
     parser.add_argument(
@@ -104,7 +105,10 @@ def _handler(args) -> int:
     scenario = load_scenario(args.scenario, overrides)
     sink = _live_sink(args)
     try:
-        result = run_scenario(scenario, args.out, progress=not args.quiet, sink=sink, force=args.force)
+        goals = sink if args.live else None  # a client's /goal_pose sets a new goal
+        result = run_scenario(
+            scenario, args.out, progress=not args.quiet, sink=sink, force=args.force, goals=goals
+        )
         if not args.quiet:
             print(format_summary(scenario.name, result.outcome, result.log_path, result.wall_time))
         if result.failure is not None:

@@ -140,7 +140,7 @@ class Replanning:
 
 @dataclass
 class Replan:
-    """One replan: time [s], why (`no_free_direction`, `stalled`, `obstacle_on_plan`), and the new
+    """One replan: time [s], why (`no_free_direction`, `stalled`, `obstacle_on_plan`, `new_goal`), and the new
     path's length [m] (NaN when there was none)."""
 
     time: float
@@ -369,6 +369,28 @@ class PlannerComponent(PythonComponent):
         if len(result.path) == 0:
             raise PlannerError("empty path")
         return result
+
+    def set_goal(self, x: float, y: float, t: float, pose: tuple[float, float, float]) -> str | None:
+        """A new goal (x, y) [m] at time t [s] (the live view's /goal_pose): replan from `pose` to
+        it at once. Returns None when the new plan is in use, else why not; then the old goal and
+        plan stay (no `no_path`: the run goes on). Needs replanning (the pose and costmap inputs)."""
+        if self.replanning is None:
+            return "the scenario does not replan ([planner].replan = false)"
+        grid = self.costmap.grid()
+        cell = grid.world_to_cell((x, y))
+        if not grid.contains_cell(cell):
+            return "outside the map"
+        if grid.occupied[cell]:
+            return "on an occupied cell of the costmap"
+        old_goal, old_waypoints = self.goal, self.waypoints
+        self.goal = (float(x), float(y))
+        # Hybrid A* arrives with the heading of the plan's last segment: here, from the pose to the goal.
+        self.waypoints = np.array([pose[:2], self.goal], dtype=float)
+        if self.replan(t, pose, "new_goal"):
+            return None
+        self.replans.pop()
+        self.goal, self.waypoints, self.no_path = old_goal, old_waypoints, None
+        return f"no path to it from ({pose[0]:.2f}, {pose[1]:.2f}) m"
 
 
 def _disc(grid: OccupancyGrid, point, radius: float) -> np.ndarray:

@@ -286,9 +286,12 @@ def run_scenario(
     flush_interval: float = 0.5,
     sink=None,
     force: bool = False,
+    goals=None,
 ) -> RunResult:
     """Run `scenario`, logging to `out_path` (default: `[output].log`). Raises `CosimError` on bad input.
     `sink` (`cosim.record.live.Sink`, e.g. the live view) also gets everything the log gets.
+    `goals` (`cosim.record.live.GoalSource`, e.g. the live view's /goal_pose) gives new goals during
+    the run (`_goal_poll`).
 
     An existing `out_path` is refused unless `force`; a default name that is taken gets a numbered
     suffix (`cosim.record.logfile`). SIGINT/SIGTERM before the log exists raise
@@ -299,11 +302,11 @@ def run_scenario(
         # Checked again, race-free, when the log is created; here to fail before the build.
         raise CosimError(f"{shorten(out_path, PATH_LIMIT)}: already exists; give --force to overwrite it")
     with interrupt.catching_signals():
-        return _build_and_run(scenario, out_path, force, progress, flush_interval, sink)
+        return _build_and_run(scenario, out_path, force, progress, flush_interval, sink, goals)
 
 
 def _build_and_run(
-    scenario: Scenario, out_path, force: bool, progress: bool, flush_interval: float, sink=None
+    scenario: Scenario, out_path, force: bool, progress: bool, flush_interval: float, sink=None, goals=None
 ) -> RunResult:
     from cosim.record.recorder import Recorder
 
@@ -330,7 +333,7 @@ def _build_and_run(
             _close_quietly(master)
             raise
         try:
-            return _run(built, master, recorder, log_path, progress)
+            return _run(built, master, recorder, log_path, progress, goals)
         except OSError as error:
             # The log could not be written (no space, I/O error): what reached the file stays.
             _close_quietly(master, recorder)
@@ -357,7 +360,7 @@ def _close_quietly(master: Master, recorder=None, outcome: dict[str, str] | None
             pass
 
 
-def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bool) -> RunResult:
+def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bool, goals=None) -> RunResult:
     scenario = built.scenario
     system = built.system
     recording = _Recording(built, master, recorder)
@@ -385,6 +388,9 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
 
     planner = built.planner if built.planner is not None and not built.planner.constant_outputs else None
     plan_version = [planner.plan_version if planner is not None else 0]
+    # New goals during the run (the live view's /goal_pose), polled at the planner's rate.
+    goal_poll = _goal_poll(goals, built, monitor, recorder, recording) if goals is not None else None
+    goal_steps = system.period_steps(built.planner) if goal_poll is not None and built.planner else 1
 
     def after_step(current: Master) -> bool:
         k = current.step_index - 1
@@ -393,6 +399,8 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
         if mode_steps and k % mode_steps == 0:
             monitor.check_mode(mode_buffer.item(mode_index), mode_period)
         reason = monitor.check_position((t_ns + h_ns) / NS_PER_S, x_item(index_x), y_item(index_y))
+        if goal_poll is not None and reason is None and k % goal_steps == 0:
+            goal_poll(t_ns, h_ns)
         if planner is not None:
             if planner.plan_version != plan_version[0]:
                 plan_version[0] = planner.plan_version
@@ -436,6 +444,8 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
         bar.refresh()
         bar.close()
     metadata = outcome_metadata(outcome)
+    if tuple(monitor.goal) != tuple(scenario.goal[:2]):
+        metadata["goal"] = f"{monitor.goal[0]},{monitor.goal[1]}"  # the last goal given during the run
     if failure:
         metadata["failure"] = failure
     try:
@@ -444,6 +454,52 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
         failure = failure or f"terminating the system failed: {error}"
     recorder.close(metadata)
     return RunResult(outcome, log_path, master.step_index, wall_time, failure)
+
+
+def _goal_poll(goals, built: BuiltRun, monitor: OutcomeMonitor, recorder, recording: _Recording):
+    """`poll(t_ns, h_ns)`, called after a planner step that started at t_ns: takes the newest goal
+    `goals` holds (`take()` -> (x, y) [m] or None) and, unless the robot would not fit there (the
+    true obstacles, as the live view shows them) or the planner finds no path to it, makes it the
+    goal: the planner replans from the current pose (its new plan goes on /plan as any replan's),
+    the outcome monitor judges the new goal (reaching it ends the run), and /goal gets it. A goal
+    refused is `goals.report(text)`-ed; the old goal stays and the run goes on."""
+    planner = built.planner
+    radius = built.scenario.vehicle_radius
+
+    def poll(t_ns: int, h_ns: int) -> None:
+        goal = goals.take()
+        if goal is None:
+            return
+        x, y = float(goal[0]), float(goal[1])
+        t = (t_ns + h_ns) / NS_PER_S
+        why = None
+        if not (math.isfinite(x) and math.isfinite(y)):
+            why = "not a finite position"
+        elif planner is None:
+            why = "the scenario has no planner"
+        elif _world_at(built.world, t).distance(x, y) < radius:
+            why = f"in an obstacle or off the map (the vehicle's {radius:g} m radius does not fit)"
+        else:
+            why = planner.set_goal(x, y, t, recording.pose())
+        if why is not None:
+            old = monitor.goal
+            goals.report(
+                f"/goal_pose ({x:.2f}, {y:.2f}) m at t = {t:.2f} s refused: {why}; "
+                f"the goal stays ({old[0]:.2f}, {old[1]:.2f}) m"
+            )
+            return
+        monitor.goal = (x, y)
+        recorder.write_goal(t_ns, x, y, None)
+        goals.report(f"/goal_pose ({x:.2f}, {y:.2f}) m at t = {t:.2f} s: new goal, replanned", warning=False)
+
+    return poll
+
+
+def _world_at(world, t: float):
+    """The true world with its moving obstacles at time t [s]."""
+    if getattr(world, "moving", False):
+        world.at(t)
+    return world
 
 
 def _progress_bar(stop_time: float):

@@ -8,7 +8,10 @@ the same schemas (ros2msg) and the same CDR bytes as the file. Two sinks:
   passed on the wall clock since the first message (`cosim run --realtime R`); when the run falls
   behind, the schedule restarts from the late message, so the stream never runs faster than R.
 - `FoxgloveLive(port, realtime)`: a Foxglove WebSocket server (foxglove-sdk) with a channel per
-  recorded channel (`cosim run --live`); paced like `Pacer`.
+  recorded channel (`cosim run --live`); paced like `Pacer`. It is also a `GoalSource`: clients
+  may publish (capability `clientPublish`, encoding `cdr`) a `geometry_msgs/msg/PoseStamped` on
+  `/goal_pose` (Foxglove's "Publish pose" tool), decoded here with rosbags and handed to the run
+  thread through a queue; the run takes the newest one between steps (`cosim.navigation.run`).
 
 Messages reach the sink in blocks (the recorder packs a block of steps at a time); pacing per
 message keeps the stream's wall-clock timing right regardless.
@@ -16,7 +19,10 @@ message keeps the stream's wall-clock timing right regardless.
 
 from __future__ import annotations
 
+import math
+import queue
 import struct
+import sys
 import threading
 import time
 from typing import Protocol
@@ -31,6 +37,9 @@ from cosim.record.writer import MESSAGE_HEAD
 LATCHED = ("/map", "/map_inflated", "/plan", "/goal", "/obstacles")
 _LENGTH = struct.Struct("<Q")
 LATE = 0.05  # [s] of wall time behind schedule after which the pacer starts again from now
+GOAL_TOPIC = "/goal_pose"
+GOAL_SCHEMAS = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/PoseStamped")
+GOAL_FRAMES = ("map", "")  # the log's fixed frame; an empty frame_id is taken as it
 
 
 class Sink(Protocol):
@@ -81,6 +90,30 @@ class _Tee:
             self._sink.message(channel, t_ns, bytes(view[offset + MESSAGE_HEAD.size : offset + 9 + length]))
 
 
+class GoalSource(Protocol):
+    def take(self) -> tuple[float, float] | None:
+        """The newest goal (x, y) [m] in frame map given since the last call, or None."""
+
+    def report(self, text: str, warning: bool = True) -> None:
+        """What became of a goal (one line)."""
+
+
+def decode_goal_pose(encoding: str, schema_name: str, data: bytes) -> tuple[float, float]:
+    """(x, y) [m] of a CDR `geometry_msgs/msg/PoseStamped` in frame map. Raises ValueError (one
+    line) for anything else."""
+    from cosim.record.rosmsg import TYPESTORE
+
+    if encoding != "cdr" or schema_name not in GOAL_SCHEMAS:
+        raise ValueError(f"expected encoding cdr and schema {GOAL_SCHEMAS[0]}, got {encoding} {schema_name}")
+    try:
+        message = TYPESTORE.deserialize_cdr(bytes(data), GOAL_SCHEMAS[0])
+    except Exception as error:  # rosbags raises assorted errors for a short or malformed buffer
+        raise ValueError(f"not a CDR PoseStamped ({type(error).__name__}: {error})") from None
+    if message.header.frame_id not in GOAL_FRAMES:
+        raise ValueError(f"frame_id {message.header.frame_id!r} is not map")
+    return float(message.pose.position.x), float(message.pose.position.y)
+
+
 class Pacer:
     """Holds messages back so simulated time runs `realtime` times as fast as the wall clock."""
 
@@ -123,13 +156,16 @@ class FoxgloveLive:
         self._channels: dict[int, object] = {}
         self._latched: dict[str, tuple[int, bytes]] = {}  # topic -> last (t_ns, payload)
         self._lock = threading.Lock()
+        self._goals: queue.SimpleQueue[tuple[float, float]] = queue.SimpleQueue()
+        self._client_channels: dict[tuple[int, int], object] = {}  # (client id, channel id) -> ClientChannel
         try:
             self.server = foxglove.start_server(
                 name="navcosim",
                 host=host,
                 port=port,
                 context=self._context,
-                capabilities=[foxglove.Capability.Time],
+                capabilities=[foxglove.Capability.Time, foxglove.Capability.ClientPublish],
+                supported_encodings=["cdr"],
                 server_listener=_listener(self),
             )
         except Exception as error:  # the SDK raises a plain RuntimeError for a taken port
@@ -167,6 +203,36 @@ class FoxgloveLive:
         if last is not None and channel is not None:
             channel.log(last[1], log_time=last[0])
 
+    def client_message(self, client_id: int, channel_id: int, data: bytes) -> None:
+        """A message a client published (server thread): a /goal_pose goes to the run's queue."""
+        channel = self._client_channels.get((client_id, channel_id))
+        if channel is None or channel.topic != GOAL_TOPIC:
+            return
+        try:
+            x, y = decode_goal_pose(channel.encoding, channel.schema_name, data)
+        except ValueError as error:
+            self.report(f"{GOAL_TOPIC} ignored: {error}")
+            return
+        if math.isfinite(x) and math.isfinite(y):
+            self._goals.put((x, y))
+        else:
+            self.report(f"{GOAL_TOPIC} ignored: position ({x}, {y}) is not finite")
+
+    def take(self) -> tuple[float, float] | None:
+        """The newest goal published since the last call (older ones are superseded), or None."""
+        goal = None
+        while True:
+            try:
+                goal = self._goals.get_nowait()
+            except queue.Empty:
+                return goal
+
+    def report(self, text: str, warning: bool = True) -> None:
+        """A line on stderr and a status message to the clients (Foxglove shows it)."""
+        level = self._foxglove.websocket.StatusLevel
+        print(f"cosim: {'warning: ' if warning else ''}{text}", file=sys.stderr, flush=True)
+        self.server.publish_status(text, level.Warning if warning else level.Info)
+
     def linger(self, seconds: float | None) -> None:
         """Keep serving after the run: `seconds`, or until Ctrl-C when None."""
         try:
@@ -183,12 +249,22 @@ class FoxgloveLive:
 
 
 def _listener(live: FoxgloveLive):
-    """Foxglove server callbacks: a new subscriber of a latched topic gets its last message."""
+    """Foxglove server callbacks: a new subscriber of a latched topic gets its last message; a
+    client's /goal_pose becomes a goal."""
     from foxglove import ServerListener
 
     class Listener(ServerListener):
         def on_subscribe(self, client, channel) -> None:
             if channel.topic in LATCHED:
                 live.replay(channel.topic)
+
+        def on_client_advertise(self, client, channel) -> None:
+            live._client_channels[(client.id, channel.id)] = channel
+
+        def on_client_unadvertise(self, client, client_channel_id: int) -> None:
+            live._client_channels.pop((client.id, client_channel_id), None)
+
+        def on_message_data(self, client, client_channel_id: int, data: bytes) -> None:
+            live.client_message(client.id, client_channel_id, data)
 
     return Listener()
