@@ -367,3 +367,43 @@ def test_the_bicycle_replans_to_a_new_goal_with_hybrid_a_star(tmp_path):
     twice_area = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
     with np.errstate(divide="ignore"):
         assert (sides / (2.0 * twice_area)).min() > 2.0
+
+
+def test_set_goal_keeps_the_old_goal_and_plan_when_there_is_no_path():
+    """The planner's set_goal on a corridor the lidar has seen closed at x = 10 m: a goal behind the
+    wall, off the map or on an occupied cell is refused (goal, plan and replans as they were, no
+    `no_path`: the run goes on); one in front of it is planned to from the given pose."""
+    from cosim.navigation.planner import PlannerComponent, Replanning
+    from cosim.scenario.load import PlannerSettings
+    from planner.grid import OccupancyGrid
+
+    occupied = np.zeros((10, 40), dtype=bool)
+    occupied[[0, -1], :] = True  # a 4 m wide corridor (rows 1..8) along x, 20 m long
+    grid = OccupancyGrid(occupied, 0.5, (0.0, 0.0))
+    angles = np.linspace(-math.pi / 3, math.pi / 3, 61)
+    planner = PlannerComponent(
+        "planner",
+        grid,
+        (2.0, 2.5, 0.0),
+        (5.0, 2.5),
+        PlannerSettings(expansion_distance=0.5, smoothing="none"),
+        replanning=Replanning(angles, 0.0, 30.0, vehicle_radius=0.5),
+    )
+    planner.plan_path()
+    planner.on_setup(0.0, {})
+    ranges = np.where(np.abs(np.tan(angles) * 8.0) < 2.6, 8.0 / np.cos(angles), np.nan)
+    planner.costmap.integrate(2.0, 2.5, 0.0, ranges)  # the wall across the corridor at x = 10 m
+    waypoints, version = planner.waypoints.copy(), planner.plan_version
+    for goal, why in (((15.0, 2.5), "no path"), ((25.0, 2.5), "outside"), ((10.0, 2.5), "on an occupied")):
+        assert planner.set_goal(*goal, 1.0, (2.0, 2.5, 0.0)).startswith(why)
+        assert planner.goal == (5.0, 2.5) and planner.no_path is None and planner.replans == []
+        np.testing.assert_array_equal(planner.waypoints, waypoints)
+        assert planner.plan_version == version
+    assert planner.set_goal(8.0, 3.0, 2.0, (3.0, 2.5, 0.0)) is None
+    assert planner.goal == (8.0, 3.0) and planner.plan_version == version + 1
+    assert tuple(planner.waypoints[-1]) == (8.0, 3.0)
+    assert math.dist(planner.waypoints[0], (3.0, 2.5)) <= 0.5 * math.sqrt(0.5)  # from the pose's cell
+    assert [(replan.time, replan.reason) for replan in planner.replans] == [(2.0, "new_goal")]
+    np.testing.assert_array_equal(
+        planner.output_buffer[: 2 * len(planner.waypoints)], planner.waypoints.ravel()
+    )
