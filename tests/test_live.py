@@ -407,3 +407,19 @@ def test_set_goal_keeps_the_old_goal_and_plan_when_there_is_no_path():
     np.testing.assert_array_equal(
         planner.output_buffer[: 2 * len(planner.waypoints)], planner.waypoints.ravel()
     )
+
+
+def test_decode_goal_pose_takes_a_cdr_pose_stamped_in_map_only():
+    from cosim.record.live import decode_goal_pose
+
+    schema = "geometry_msgs/msg/PoseStamped"
+    assert decode_goal_pose("cdr", schema, _pose_stamped_cdr(12.5, -3.25)) == (12.5, -3.25)
+    assert decode_goal_pose("cdr", schema, _pose_stamped_cdr(1.0, 2.0, frame_id="")) == (1.0, 2.0)
+    for encoding, name, data, why in (
+        ("cdr", schema, _pose_stamped_cdr(1.0, 2.0, frame_id="odom"), "frame_id 'odom'"),
+        ("json", schema, b"{}", "expected encoding cdr"),
+        ("cdr", "geometry_msgs/msg/Pose", b"", "expected encoding cdr"),
+        ("cdr", schema, _pose_stamped_cdr(1.0, 2.0)[:20], "not a CDR PoseStamped"),
+    ):
+        with pytest.raises(ValueError, match=why):
+            decode_goal_pose(encoding, name, data)
