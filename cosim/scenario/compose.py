@@ -13,7 +13,12 @@ where a name is close to a known one:
 - a parameter the FMU lacks, or one outside the FMU's declared min/max or of the wrong type;
 - a connection end that is no `component.variable`, an unknown component or variable, an output
   wired to an output (or from an input), two connections into one input;
-- an input of an added component that is neither connected nor held at a value;
+- a `[system] remove` name that is no template component (or is the vehicle, whose pose the run
+  needs);
+- an input of an added (or replacing) component that is neither connected nor held at a value, and
+  an input of a template component whose template connection was dropped (its source removed, or
+  replaced by an FMU without that output) that is neither connected nor held; an input both
+  connected and held;
 - a rate that is not a whole number of macro steps;
 - an algebraic loop (Gauss-Seidel only), naming its components.
 """
@@ -37,6 +42,9 @@ from cosim.scenario.load import ComponentSpec, PortMapping, Scenario, rate_probl
 from cosim.scenario.params import pair_key
 from cosim.scenario.schema import did_you_mean
 from cosim.scenario.template import (
+    ORDER,
+    POSE,
+    POSE_COMPONENT,
     ROLE_PORTS,
     template_components,
     template_connections,
@@ -74,6 +82,13 @@ def fmu_path(spec: ComponentSpec, fmi_version: int = 2) -> Path:
     return builtin_fmu(spec.fmu, fmi_version) if spec.is_builtin else Path(spec.fmu)
 
 
+def _first(names) -> str:
+    """The names in their order, the first `_LISTED` of them, and how many more."""
+    names = list(names)
+    more = f" (and {len(names) - _LISTED} more)" if len(names) > _LISTED else ""
+    return ", ".join(names[:_LISTED]) + more
+
+
 def _listing(names, around: str = "") -> str:
     names = list(names)
     return closest_names(around, names, limit=_LISTED) if names else "none"
@@ -90,9 +105,12 @@ class _Composer:
         self.broken: set[str] = set()  # components whose FMU did not load: reported once
         self.missing: dict[str, list[str]] = {}  # role component -> ports the template needs, absent
         self.own: dict[str, dict[str, list[str]]] = {}  # component -> causality -> FMU variable names
+        self.removed = [name for name in dict.fromkeys(scenario.removed) if name in ORDER]
+        self.replacing = {name for name, spec in scenario.components.items() if spec.added and name in ORDER}
 
     def describe(self) -> SystemDescription:
         scenario = self.scenario
+        self._check_removed()
         for component in template_components(scenario):
             if component.kind == "fmu":
                 self._add_fmu(scenario.components[component.name], component)
@@ -100,15 +118,16 @@ class _Composer:
                 self.components[component.name] = component
         for spec in scenario.components.values():
             if spec.added:
-                self._add_fmu(spec, ComponentDescription(spec.name, "fmu", spec.where, rate=spec.rate))
+                if spec.name not in self.replacing:
+                    self._add_fmu(spec, ComponentDescription(spec.name, "fmu", spec.where, rate=spec.rate))
                 # The role sections' rates were checked on load.
                 problem = rate_problem(spec.rate, scenario.macro_step) if spec.rate else None
                 if problem:
                     self.problems.add(f"{spec.where}.rate", problem)
-        connections, replaced, attempted = self._connections()
+        connections, replaced, attempted, dropped = self._connections()
         for name, ports in self.missing.items():
             self._missing_ports(self.components[name], list(dict.fromkeys(ports)))
-        self._check_unconnected(connections, attempted)
+        self._check_unconnected(connections, attempted, dropped)
         if scenario.master == "gauss-seidel":
             self._check_loops(connections)
         self.problems.check()
@@ -117,9 +136,39 @@ class _Composer:
             connections=tuple(connections),
             macro_step=scenario.macro_step,
             master=scenario.master,
-            observed=template_observed(scenario),
+            observed=template_observed(scenario, self.components, connections),
             replaced=tuple(replaced),
+            removed=tuple(self.removed),
+            replacing=tuple(name for name in ORDER if name in self.replacing),
+            dropped=tuple(dropped),
         )
+
+    def _check_removed(self) -> None:
+        """Each `[system] remove` name is a template component other than the vehicle, once."""
+        where = "[system].remove"
+        removable = [name for name in ORDER if name != POSE_COMPONENT]
+        seen = set()
+        for name in self.scenario.removed:
+            if name in seen:
+                self.problems.add(where, f"'{name}' is listed twice")
+            seen.add(name)
+            if name == POSE_COMPONENT:
+                pose = ", ".join(f"{POSE_COMPONENT}.{axis}" for axis in POSE)
+                self.problems.add(
+                    where,
+                    f"'{name}' cannot be removed: the run needs the robot pose ({pose}) for the outcome, "
+                    "/odom and /tf; swap its FMU in [vehicle] (fmu, ports) instead",
+                )
+            elif name in self.scenario.components and self.scenario.components[name].added:
+                self.problems.add(
+                    where, f"'{name}' is not a template component but [components.{name}]: delete that table"
+                )
+            elif name not in ORDER:
+                self.problems.add(
+                    where,
+                    f"no template component '{name}'{did_you_mean(name, removable)}; "
+                    f"removable: {', '.join(removable)}",
+                )
 
     # ---- components --------------------------------------------------------------------------
 
@@ -209,7 +258,7 @@ class _Composer:
         """Split the section's values into parameters and held inputs; check names, types, ranges."""
         where = component.where
         known = set(component.parameter_names)
-        settable = known | (set(component.inputs) if spec.added else set())
+        settable = known | set(component.inputs)  # an input given a value is held at it
         values = dict(component.parameters) if not spec.added else dict(spec.parameters)
         parameters, held = {}, {}
         for name, value in values.items():
@@ -217,7 +266,7 @@ class _Composer:
                 self.missing.setdefault(component.name, []).append(name)
                 continue
             if name not in settable:
-                kind = "parameter or input" if spec.added else "parameter"
+                kind = "parameter or input"
                 self.problems.add(
                     f"{where}.{name}", f"the FMU has no {kind} '{name}'{did_you_mean(name, settable)}"
                 )
@@ -240,8 +289,9 @@ class _Composer:
     # ---- connections -------------------------------------------------------------------------
 
     def _connections(self):
-        """The template's connections, minus those the scenario replaces, then the scenario's;
-        the replaced pairs; the inputs named by a scenario connection (even one that failed)."""
+        """The template's connections, minus those the scenario replaces and those that lost an
+        end, then the scenario's; the replaced pairs; the inputs named by a scenario connection
+        (even one that failed); the dropped template connections (connection, why)."""
         fed: dict[str, ConnectionDescription] = {}
         attempted: set[str] = set()
         added = []
@@ -273,16 +323,32 @@ class _Composer:
             self.missing.setdefault(name, []).append(port)
             return False
 
-        kept, replaced = [], []
+        def lost(reference: str, kind: str) -> str | None:
+            """Why a template connection's end is gone: its component removed, or replaced by an
+            FMU without that port; None if it is there (or its absence is a problem)."""
+            name, _, port = reference.partition(".")
+            if name in self.removed:
+                return f"{name} is removed by [system].remove"
+            if name in self.replacing and name not in self.broken and port not in ports[name][kind]:
+                return f"[components.{name}] has no such {kind[:-1]}"
+            return None
+
+        kept, replaced, dropped = [], [], []
         for connection in self.template:
-            if connection.target in fed:
+            reason = lost(connection.source, "outputs") or lost(connection.target, "inputs")
+            if reason is not None:
+                dropped.append((connection, reason))
+            elif connection.target in fed:
                 replaced.append((connection, fed[connection.target]))
             # `&`, not `and`: both ends are looked at, so every missing port is reported.
             elif present(connection.source, "outputs") & present(connection.target, "inputs"):
                 kept.append(connection)
-        for _, reference in template_observed(self.scenario).references():
-            present(reference, "outputs")
-        return kept + added, replaced, attempted
+        # What the run observes of a template component must be there (a replacement's is optional).
+        observed = template_observed(self.scenario, self.components, kept + added)
+        for _, reference in observed.references():
+            if reference.partition(".")[0] not in self.replacing:
+                present(reference, "outputs")
+        return kept + added, replaced, attempted, dropped
 
     def _missing_ports(self, component: ComponentDescription, ports: list[str]) -> None:
         """One line for every port the template needs that a role FMU lacks, with its own variables."""
@@ -296,10 +362,13 @@ class _Composer:
             for causality in ("input", "output", "parameter")
             if own.get(causality)
         )
+        pose = ""
+        if component.name == POSE_COMPONENT and set(POSE) & set(ports):
+            pose = f" (the run needs the robot pose {', '.join(f'{POSE_COMPONENT}.{a}' for a in POSE)})"
         self.problems.add(
             f"{component.where}.ports",
             f"the FMU ({component.model_name or component.name}) has no variables for the ports "
-            f"{shown} that the {TEMPLATE} uses; map them with ports = {{ {example} }}; the FMU's "
+            f"{shown} that the {TEMPLATE} uses{pose}; map them with ports = {{ {example} }}; the FMU's "
             f"variables: {listed or 'none'}",
         )
 
@@ -310,6 +379,11 @@ class _Composer:
             self.problems.add(where, f"must be 'component.variable', got '{reference}'")
             return None
         if name in self.broken:
+            return None
+        if name in self.removed:
+            self.problems.add(
+                where, f"'{name}' is removed by [system].remove; connect a component of the system"
+            )
             return None
         if name not in self.components:
             self.problems.add(
@@ -341,11 +415,27 @@ class _Composer:
         )
         return None
 
-    def _check_unconnected(self, connections: list[ConnectionDescription], attempted: set[str]) -> None:
+    def _check_unconnected(
+        self,
+        connections: list[ConnectionDescription],
+        attempted: set[str],
+        dropped: list[tuple[ConnectionDescription, str]],
+    ) -> None:
         """Every input of an added component is connected or held at a value (the template feeds
-        its own); one that a failed connection meant to feed is reported with that connection."""
-        fed = {connection.target for connection in connections} | attempted
+        its own, unless a connection it made was dropped); one that a failed connection meant to
+        feed is reported with that connection. A held input must not be connected too."""
+        feeding = {connection.target: connection for connection in connections}
+        fed = set(feeding) | attempted
         outputs = [f"{c.name}.{port}" for c in self.components.values() for port in c.outputs]
+        for component in self.components.values():
+            for port in component.held_inputs:
+                connection = feeding.get(f"{component.name}.{port}")
+                if connection is not None:
+                    self.problems.add(
+                        f"{component.where}.{port}",
+                        f"input '{port}' is held at a value and also connected (from '{connection.source}', "
+                        f"{connection.where}); drop one of them",
+                    )
         for spec in self.scenario.components.values():
             component = self.components.get(spec.name)
             if not spec.added or component is None:
@@ -361,6 +451,40 @@ class _Composer:
                     f"input '{port}' is not connected: add [[connections]] from = \"<component>.<output>\", "
                     f'to = "{component.name}.{port}", or hold it with {port} = <value>{suggestion}',
                 )
+        # Template inputs whose template connection was dropped: one line per component and reason.
+        unfed: dict[tuple[str, str], list[str]] = {}
+        sources: dict[tuple[str, str], list[str]] = {}
+        for connection, reason in dropped:
+            name, _, port = connection.target.partition(".")
+            component = self.components.get(name)
+            if component is None or name in self.replacing or connection.target in fed:
+                continue  # removed, or an added component's input (reported above), or fed
+            if port in component.held_inputs:
+                continue
+            unfed.setdefault((name, reason), []).append(port)
+            sources.setdefault((name, reason), []).append(connection.source)
+        for (name, reason), ports in unfed.items():
+            component = self.components[name]
+            ports = list(dict.fromkeys(ports))
+            shown, source = _first(ports), _first(dict.fromkeys(sources[name, reason]))
+            several = len(ports) > 1
+            if component.kind == "planner":
+                remedy = "set [planner] replan = false (the replanning planner reads them), or connect them"
+            elif component.kind == "fmu":
+                remedy = (
+                    f'add [[connections]] to = "{name}.{ports[0]}"{" (and the rest)" if several else ""}, '
+                    f"or hold {'each' if several else 'it'} at a value in {component.where} "
+                    f"({ports[0]} = <value>)"
+                )
+            else:
+                remedy = f'add [[connections]] to = "{name}.{ports[0]}"{" (and the rest)" if several else ""}'
+            self.problems.add(
+                component.where,
+                f"input{'s' if several else ''} {shown} of {name} {'are' if several else 'is'} "
+                "not connected: "
+                f"the template's connection{'s' if several else ''} into {'them' if several else 'it'} "
+                f"{'were' if several else 'was'} dropped (from {source}: {reason}); {remedy}",
+            )
 
     def _check_loops(self, connections: list[ConnectionDescription]) -> None:
         feedthrough = {name: component.feedthrough for name, component in self.components.items()}

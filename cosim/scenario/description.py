@@ -95,9 +95,11 @@ class ScanSource:
 class Observed:
     """What a run reads from the system besides recording it, named as "component.port".
 
-    pose: x [m], y [m], theta [rad] of the robot (outcome, /odom, /tf, /pose).
-    command: commanded v [m/s], omega [rad/s] (/cmd_vel and the twist of /odom), or None.
-    mode: the avoidance mode (0 follow, 1 avoid, 2 recover) counted in the outcome, or None.
+    pose: x [m], y [m], theta [rad] of the robot (outcome, /odom, /tf, /pose); required.
+    command: commanded v [m/s], omega [rad/s] (/cmd_vel and the twist of /odom), or None (no
+        /cmd_vel; the twist of /odom is NaN: unknown).
+    mode: the avoidance mode (0 follow, 1 avoid, 2 recover) counted in the outcome, or None (the
+        VFH counts stay 0).
     scan: the component whose ranges go to /scan, or None.
     """
 
@@ -117,8 +119,10 @@ class Observed:
 @dataclass(frozen=True)
 class SystemDescription:
     """Components in the order they are added (it breaks ties of the step order), connections,
-    the macro step [s] and master algorithm, what is observed, and which template connections the
-    scenario replaced (template connection, the scenario's connection into the same input)."""
+    the macro step [s] and master algorithm, what is observed, which template connections the
+    scenario replaced (template connection, the scenario's connection into the same input), the
+    template components it removed (`[system] remove`) and replaced (`[components.NAME]` of a
+    template name), and the template connections dropped with them (connection, why)."""
 
     components: dict[str, ComponentDescription]
     connections: tuple[ConnectionDescription, ...]
@@ -126,3 +130,6 @@ class SystemDescription:
     master: str
     observed: Observed | None = None
     replaced: tuple[tuple[ConnectionDescription, ConnectionDescription], ...] = ()
+    removed: tuple[str, ...] = ()
+    replacing: tuple[str, ...] = ()
+    dropped: tuple[tuple[ConnectionDescription, str], ...] = ()

@@ -46,10 +46,13 @@ ISOLATIONS = ("process", "none")  # an FMU in a child process, or in the run's o
 ROLE_SECTIONS = ("vehicle", "pure_pursuit", "vfh", "mixer")
 SECTIONS = (
     "scenario", "map", "obstacles", "start", "goal", "planner", "vehicle", "pure_pursuit", "vfh",
-    "mixer", "lidar", "simulation", "output", "components", "connections",
+    "mixer", "lidar", "simulation", "output", "components", "connections", "system",
 )  # fmt: skip
 # Components of the navigation template that are not FMUs (`cosim.scenario.template`).
 PYTHON_COMPONENTS = ("planner", "lidar")
+# Template components a `[components.NAME]` of the same name replaces by any FMU (the vehicle is
+# swapped in [vehicle]: the run reads the robot pose from it).
+REPLACEABLE = ("pure_pursuit", "vfh", "mixer")
 
 
 @dataclass(frozen=True)
@@ -73,7 +76,7 @@ class ComponentSpec:
     parameters: parameter name -> value (role sections: translated through `ports` when mapped;
         added components: the FMU's variable names, a parameter or an input held at that value).
     rate: stepping rate [Hz]; None = every macro step.
-    added: True for `[components.NAME]`.
+    added: True for `[components.NAME]` (also one that replaces a template component of its name).
     isolation: "process" or "none"; None = [simulation] fmu_isolation decides (`Scenario.isolation`).
     nan_outputs: output ports that may be NaN (every other FMU output must stay finite).
     """
@@ -176,6 +179,9 @@ class Scenario:
     fmu_isolation: str = "auto"  # "auto" | "process" | "none": see `isolation`
     fmu_timeout: float = 10.0  # [s] longest FMI call of an FMU in a child process
     fmu_max_size: float = 1024.0  # [MiB] largest total uncompressed size of an FMU archive
+    # [system] remove: template components left out (as written; `describe_system` checks the names).
+    # A removed role has no entry in `components`.
+    removed: tuple[str, ...] = ()
 
     def isolation(self, spec: ComponentSpec) -> str:
         """Where one FMU runs: "process" (a child process) or "none" (in the run's process). The
@@ -324,16 +330,25 @@ def _build(
     if vehicle_fmu in VEHICLE_TYPES and VEHICLE_TYPES[vehicle_fmu] != vehicle_type:
         raise vehicle_table.error("type", f"'{vehicle_type}' does not match the project FMU {vehicle_fmu}")
     components: dict[str, ComponentSpec] = {}
+    removed = _removed(top)
+    tables = top.raw("components", {})
+    replaced = set(tables) & set(REPLACEABLE) if isinstance(tables, dict) else set()
+    for role in (*ROLE_SECTIONS, *PYTHON_COMPONENTS):
+        if role != "vehicle" and (role in removed or role in replaced) and top.has(role):
+            how = "removed by [system].remove" if role in removed else f"replaced by [components.{role}]"
+            raise top.error(role, f"'{role}' is {how}: this section would set nothing; delete it")
     vfh_table = TableReader(source, "[vfh]", top.raw("vfh", {}))
     vfh_radius = vfh_table.table.get("robot_radius")
     default_radius = float(vfh_radius) if is_number(vfh_radius) and vfh_radius > 0 else 0.5
     vehicle_radius = vehicle_table.number("radius", default_radius, minimum=0.0, exclusive_minimum=True)
     components["vehicle"] = _component(vehicle_table, "vehicle", vehicle_fmu, None, macro_step)
     for role in ("pure_pursuit", "vfh", "mixer"):
+        if role in removed or role in replaced:
+            continue
         table = vfh_table if role == "vfh" else TableReader(source, f"[{role}]", top.raw(role, {}))
         fmu = _fmu_name(table, DEFAULT_FMUS[role], base_dir)
         components[role] = _component(table, role, fmu, controller_rate, macro_step)
-    components.update(_added_components(top, base_dir))
+    components.update(_added_components(top, base_dir, removed))
     connections = tuple(
         _connection(source, index, item) for index, item in enumerate(_list(top, "connections"))
     )
@@ -390,7 +405,18 @@ def _build(
         fmu_isolation=fmu_isolation,
         fmu_timeout=fmu_timeout,
         fmu_max_size=fmu_max_size,
+        removed=removed,
     )
+
+
+def _removed(top: TableReader) -> tuple[str, ...]:
+    """`[system] remove = ["vfh", "mixer"]`: template components left out of the system."""
+    table = TableReader(top.source, "[system]", top.raw("system", {}))
+    removed = table.raw("remove", [])
+    if not isinstance(removed, list) or not all(isinstance(name, str) for name in removed):
+        raise table.error("remove", f"must be a list of component names, got {describe(removed)}")
+    table.finish()
+    return tuple(removed)
 
 
 REMAPPABLE_TOPICS = (
@@ -515,8 +541,9 @@ def _isolation_keys(table: TableReader) -> tuple[str | None, tuple[str, ...]]:
     return isolation, tuple(nan_outputs)
 
 
-def _added_components(top: TableReader, base_dir: Path) -> dict[str, ComponentSpec]:
+def _added_components(top: TableReader, base_dir: Path, removed: tuple[str, ...]) -> dict[str, ComponentSpec]:
     """`[components.NAME]` tables: `fmu` (required), `rate`, every other key an FMU variable's value.
+    A name in `REPLACEABLE` replaces the template's component of that name.
 
     Whether the rate is a whole number of macro steps, and whether the variables exist, is checked
     with everything else about the system (`cosim.scenario.system`), so all problems come at once.
@@ -531,8 +558,20 @@ def _added_components(top: TableReader, base_dir: Path) -> dict[str, ComponentSp
         table = TableReader(tables.source, where, value)
         if not name.isidentifier() or not name.isascii():
             raise table.error(None, "a component name must be an identifier (letters, digits, _)")
-        if name in ROLE_SECTIONS or name in PYTHON_COMPONENTS:
-            raise table.error(None, f"'{name}' is a component of the navigation template; set it in [{name}]")
+        if name in removed and name in REPLACEABLE:
+            raise table.error(None, f"'{name}' is also in [system].remove: replace it or remove it, not both")
+        if name == "vehicle":
+            raise table.error(
+                None,
+                "swap the vehicle in [vehicle] (fmu, ports): the run reads the robot pose from its x, y, "
+                "theta",
+            )
+        if name in PYTHON_COMPONENTS:
+            raise table.error(
+                None,
+                f"'{name}' is a Python component of the navigation template: set it in [{name}], or leave it "
+                f'out with [system] remove = ["{name}"] and add your FMU under another name',
+            )
         fmu = _fmu_name(table, None, base_dir)
         rate = table.number("rate", None, minimum=0.0, exclusive_minimum=True)
         isolation, nan_outputs = _isolation_keys(table)

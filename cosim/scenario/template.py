@@ -29,6 +29,21 @@ Connections:
 Parameters derived from other sections: vehicle x0, y0, theta0 from [start] (the vehicle FMU must
 have them); pure_pursuit goal_tolerance from [goal].tolerance; mixer vehicle_type from
 [vehicle].type and wheelbase, max_steering_angle from [vehicle] (set when the FMU has them).
+
+A scenario changes the template (`cosim.scenario.compose` applies it):
+- `[system] remove = ["vfh", "mixer"]` leaves template components out (any but the vehicle: the run
+  needs the robot pose); their connections go with them.
+- `[components.pure_pursuit]` (or `vfh`, `mixer`) replaces that component by any FMU: the template
+  connections to and from ports the new FMU has are kept, the others dropped.
+An input that a dropped connection fed must then be connected or held at a value.
+
+What a run observes (`template_observed`): the pose is always the vehicle's x, y, theta. The
+command (/cmd_vel, /odom twist) is the mixer's v, omega; without a mixer (or with a replacement
+lacking them), the outputs that feed the vehicle's v and omega directly (scale 1, offset 0); else
+there is none (no /cmd_vel, a NaN twist on /odom; so for a bicycle without a mixer, which takes
+no omega). The avoidance
+mode counted in the outcome is the mixer's `mode` (none without it: VFH counts stay 0); the scan
+is the template lidar's (none when it is removed).
 """
 
 from __future__ import annotations
@@ -47,6 +62,7 @@ from cosim.scenario.load import ComponentSpec, Scenario
 
 WAYPOINT_CAPACITY = 1000  # rows of the planner's waypoints output (PurePursuit's waypoints input)
 ORDER = ("planner", "pure_pursuit", "lidar", "vfh", "mixer", "vehicle")
+POSE_COMPONENT = "vehicle"  # the run reads the robot pose from its x, y, theta; it cannot be removed
 VEHICLE_INPUTS = {"differential": ("v", "omega"), "bicycle": ("v", "steering_angle")}
 POSE = ("x", "y", "theta")
 # The ports each role FMU has for the template (the keys its `ports` table may map, besides its
@@ -121,7 +137,9 @@ def _planner_component(scenario: Scenario) -> ComponentDescription:
 
 
 def template_components(scenario: Scenario) -> list[ComponentDescription]:
-    """The template's components (interfaces of the FMUs not yet read), in `ORDER`."""
+    """The template's components (interfaces of the FMUs not yet read), in `ORDER`, without those
+    `[system] remove` leaves out; a `[components.NAME]` replacement is described from its own table
+    (the derived parameters are still set when its FMU has them)."""
     components = scenario.components
     start_x, start_y, start_theta = scenario.start
     vehicle = components["vehicle"]
@@ -131,11 +149,9 @@ def template_components(scenario: Scenario) -> list[ComponentDescription]:
         if name in vehicle.parameters:
             mixer_defaults[name] = vehicle.parameters[name]
     beams = len(scenario.lidar.angles)
+    removed = set(scenario.removed) - {POSE_COMPONENT}
     made = {
         "planner": _planner_component(scenario),
-        "pure_pursuit": _fmu_component(
-            components["pure_pursuit"], defaults={"goal_tolerance": scenario.goal_tolerance}
-        ),
         "lidar": ComponentDescription(
             "lidar",
             "lidar",
@@ -145,14 +161,18 @@ def template_components(scenario: Scenario) -> list[ComponentDescription]:
             outputs=tuple(lidar_outputs(beams)),
             feedthrough={name: POSE for name in lidar_outputs(beams)},
         ),
-        "vfh": _fmu_component(components["vfh"]),
-        "mixer": _fmu_component(components["mixer"], defaults=mixer_defaults),
         "vehicle": _fmu_component(
             vehicle, required={name: (value, f"[start].{name[:-1]}") for name, value in start.items()}
         ),
     }
     made["vehicle"] = replace(made["vehicle"], state_outputs=POSE)
-    return [made[name] for name in ORDER]
+    defaults = {"pure_pursuit": {"goal_tolerance": scenario.goal_tolerance}, "mixer": mixer_defaults}
+    for name in ("pure_pursuit", "vfh", "mixer"):
+        if name in components:
+            made[name] = _fmu_component(components[name], defaults=defaults.get(name))
+            if components[name].added and components[name].rate is None:  # a replacement: the role's rate
+                made[name] = replace(made[name], rate=scenario.controller_rate)
+    return [made[name] for name in ORDER if name not in removed]
 
 
 def template_connections(scenario: Scenario) -> list[ConnectionDescription]:
@@ -181,12 +201,29 @@ def template_connections(scenario: Scenario) -> list[ConnectionDescription]:
     return [ConnectionDescription(source, target, where=TEMPLATE) for source, target in pairs]
 
 
-def template_observed(scenario: Scenario) -> Observed:
-    """The robot pose is the vehicle's; commands and mode are the mixer's; the scan the lidar's."""
+def template_observed(
+    scenario: Scenario,
+    components: dict[str, ComponentDescription],
+    connections: list[ConnectionDescription],
+) -> Observed:
+    """What a run reads of the described system (see the module docstring): the robot pose is the
+    vehicle's; command and mode the mixer's (a template mixer must have them, a replacement may
+    not), else the command is what feeds the vehicle; the scan is the template lidar's."""
+    pose = tuple(f"{POSE_COMPONENT}.{axis}" for axis in POSE)
+    mixer = components.get("mixer")
+    template_mixer = mixer is not None and not scenario.components["mixer"].added
+    has = set(mixer.outputs) if mixer is not None else set()
+    command = None
+    if template_mixer or {"v", "omega"} <= has:
+        command = ("mixer.v", "mixer.omega")
+    else:
+        feeds = {c.target: c for c in connections}
+        inputs = [feeds.get(f"{POSE_COMPONENT}.{port}") for port in ("v", "omega")]
+        if all(c is not None and c.scale == 1.0 and c.offset == 0.0 for c in inputs):
+            command = (inputs[0].source, inputs[1].source)
+    mode = "mixer.mode" if template_mixer or "mode" in has else None
     lidar = scenario.lidar
-    return Observed(
-        pose=("vehicle.x", "vehicle.y", "vehicle.theta"),
-        command=("mixer.v", "mixer.omega"),
-        mode="mixer.mode",
-        scan=ScanSource("lidar", tuple(float(a) for a in lidar.angles), lidar.range_min, lidar.range_max),
-    )
+    scan = None
+    if components.get("lidar") is not None and components["lidar"].kind == "lidar":
+        scan = ScanSource("lidar", tuple(float(a) for a in lidar.angles), lidar.range_min, lidar.range_max)
+    return Observed(pose=pose, command=command, mode=mode, scan=scan)
