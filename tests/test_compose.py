@@ -4,9 +4,12 @@
   mixer and the vehicle: the run reaches the goal and the logged `vehicle.v` is the exact
   first-order response to the logged mixer command (closed form while the command is constant,
   the exact held-input recursion over the whole run).
-- A go-to-goal FMU (the `controller_fmi2` C fixture) replaces Pure Pursuit's commands: the robot
-  drives the straight corridor at the controller's 1 m/s (Pure Pursuit asks for 1.5), so the goal
-  is reached at the analytic time and distance.
+- A go-to-goal FMU (the `controller_fmi2` C fixture) replaces Pure Pursuit (`[components.pure_pursuit]`):
+  PurePursuit is gone from the system and the log, the robot drives the straight corridor at the
+  controller's 1 m/s, so the goal is reached at the analytic time and distance.
+- With Pure Pursuit, VFH and the mixer removed (`[system] remove`), the go-to-goal FMU drives the
+  vehicle directly along a curve: the logged pose matches an independent integration of the law
+  (numpy, exact arcs) to 1e-9, and the run ends when that integration enters the goal tolerance.
 - A connection's scale and offset reach the FMU input exactly; an added component's input can be
   held at a value.
 """
@@ -125,12 +128,119 @@ def test_lag_run_reaches_the_goal_with_the_first_order_response_on_vehicle_v(lag
     assert np.max(np.abs(vehicle_v - command)) > 0.1
 
 
-GO_TO_GOAL = """
-[components.go_to_goal]
-fmu = "{fmu}"
-goal_x = 80.0
-goal_y = 6.0
+def remove_section(name: str) -> dict:
+    """A `write_scenario` replacement deleting the section `[name]` (up to the next section)."""
+    return {rf"^\[{name}\][^\n]*\n(?:[^\[\n].*\n|\n)*": ""}
+
+
+GO_TO_GOAL_X, GO_TO_GOAL_Y = 80.0, 6.0
+# The go-to-goal FMU (the `controller_fmi2` C fixture) in Pure Pursuit's place: the template keeps
+# the connections to the ports it has (vehicle.x/y/theta -> x/y/theta, v/omega -> mixer.v_in/omega_in)
+# and drops the others (waypoints, target_dir, goal_reached): those inputs of VFH and the mixer are
+# held (straight ahead along the corridor, goal not reached: the outcome decides arrival).
+REPLACE_PURE_PURSUIT = f"""
+[components.pure_pursuit]
+fmu = "{{fmu}}"
+goal_x = {GO_TO_GOAL_X}
+goal_y = {GO_TO_GOAL_Y}
 v_max = 1.0
+
+[vfh]
+target_dir = 0.0
+robot_radius = 0.5
+
+[mixer]
+target_dir = 0.0
+goal_reached = false
+"""
+
+
+def test_go_to_goal_fmu_replaces_pure_pursuit_and_reaches_the_goal(tmp_path):
+    extra = REPLACE_PURE_PURSUIT.format(fmu=fixture_fmu("controller_fmi2"))
+    replace = {
+        r"^\[goal\]\nx = 84.0\ny = 53.0": f"[goal]\nx = {GO_TO_GOAL_X}\ny = {GO_TO_GOAL_Y}",
+        **remove_section("pure_pursuit"),
+        **remove_section("vfh"),
+    }
+    path = write_scenario(tmp_path, "go_to_goal", "warehouse_diff_drive_no_obstacle.toml", extra, replace)
+    scenario = load_scenario(path, ["output.plot=false"])
+    built = build_run(scenario)
+    description = built.description
+    assert "PurePursuit" not in {c.model_name for c in description.components.values()}
+    assert description.components["pure_pursuit"].model_name == "fixture_controller_fmi2"
+    assert description.replacing == ("pure_pursuit",) and description.removed == ()
+    # A replacement without its own rate steps at the controller rate, like the role it replaces.
+    assert description.components["pure_pursuit"].rate == scenario.controller_rate == 20.0
+    dropped = {(c.source, c.target) for c, _ in description.dropped}
+    assert ("pure_pursuit.target_dir", "vfh.target_dir") in dropped
+    assert ("planner.waypoints[1,1]", "pure_pursuit.waypoints[1,1]") in dropped
+    assert len(dropped) == 2 * 1000 + 3  # waypoints; target_dir twice, goal_reached
+    targets = {c.target: c.source for c in description.connections}
+    assert targets["mixer.v_in"] == "pure_pursuit.v" and targets["pure_pursuit.x"] == "vehicle.x"
+    assert not any(c.target.startswith("pure_pursuit.waypoints") for c in description.connections)
+    assert description.components["vfh"].held_inputs == {"target_dir": 0.0}
+    result = run_scenario(scenario, tmp_path / "go.mcap")
+    assert result.failure is None and result.outcome.reached
+    log = open_log(tmp_path / "go.mcap")
+    assert log.metadata["fmu/pure_pursuit"]["model_name"] == "fixture_controller_fmi2"
+    vehicle, controller, mixer = (log.signals(name) for name in ("vehicle", "pure_pursuit", "mixer"))
+    assert "waypoints[1,1]" not in controller.names and "target_dir" not in controller.names
+    signals = {topic.name for topic in log.topics if topic.name.startswith("/signals/")}
+    assert signals == {
+        f"/signals/{n}" for n in ("planner", "pure_pursuit", "lidar", "vfh", "mixer", "vehicle")
+    }
+    # The vehicle drives the controller's v = min(gain_v * distance, v_max) = 1 m/s through the
+    # mixer (VFH sees a free corridor and follows the held target direction 0).
+    np.testing.assert_array_equal(controller["v"], 1.0)
+    np.testing.assert_array_equal(vehicle["v"], 1.0)
+    np.testing.assert_array_equal(mixer["mode"], 0.0)
+    assert result.outcome.vfh_interventions == 0
+    # Straight along y = 6 from x = 6 at 1 m/s: within the 1 m tolerance of x = 80 after 73 s.
+    np.testing.assert_allclose(vehicle["y"], 6.0, atol=1e-9)
+    assert result.outcome.time == pytest.approx(73.0, abs=MACRO_STEP + 1e-9)
+    assert result.outcome.distance == pytest.approx(result.outcome.time * 1.0, abs=1e-9)
+
+
+def go_to_goal_law(x, y, theta, goal, gain_v=1.0, gain_omega=2.0, v_max=1.0):
+    """The controller fixture's law, written again: v = min(gain_v d, v_max), omega = gain_omega *
+    heading error wrapped to (-pi, pi]."""
+    dx, dy = goal[0] - x, goal[1] - y
+    error = math.atan2(dy, dx) - theta
+    error = math.atan2(math.sin(error), math.cos(error))
+    return min(gain_v * math.hypot(dx, dy), v_max), gain_omega * error
+
+
+def unicycle(start, goal, period_steps, h, steps):
+    """Poses after each of `steps` macro steps: the go-to-goal law sampled every `period_steps`
+    steps at the pose of that step's start, held in between; each step the exact arc of constant
+    v, omega (the differential drive with unlimited wheel speeds)."""
+    x, y, theta = start
+    poses = np.empty((steps + 1, 3))
+    poses[0] = start
+    for k in range(steps):
+        if k % period_steps == 0:
+            v, omega = go_to_goal_law(x, y, theta, goal)
+        # The arc's chord, 2 v/omega sin(omega h / 2), along the mean heading: the closed form
+        # x += v/omega (sin theta' - sin theta), ... without its cancellation at small omega.
+        turn = omega * h
+        chord = v * h * float(np.sinc(turn / 2 / math.pi))  # np.sinc(u) = sin(pi u) / (pi u)
+        x += chord * math.cos(theta + turn / 2)
+        y += chord * math.sin(theta + turn / 2)
+        theta += turn
+        poses[k + 1] = (x, y, theta)
+    return poses
+
+
+GOAL_CURVED = (30.0, 8.0)
+START_HEADING = -0.6  # [rad]: away from the goal, so the law turns the robot round first
+DIRECT = f"""
+[system]
+remove = ["pure_pursuit", "vfh", "mixer"]
+
+[components.go_to_goal]
+fmu = "{{fmu}}"
+goal_x = {GOAL_CURVED[0]}
+goal_y = {GOAL_CURVED[1]}
 rate = 20.0
 
 [[connections]]
@@ -147,35 +257,62 @@ to = "go_to_goal.theta"
 
 [[connections]]
 from = "go_to_goal.v"
-to = "mixer.v_in"
+to = "vehicle.v"
 
 [[connections]]
 from = "go_to_goal.omega"
-to = "mixer.omega_in"
+to = "vehicle.omega"
 """
 
 
-def test_go_to_goal_fmu_replaces_pure_pursuit_and_reaches_the_goal(tmp_path):
-    extra = GO_TO_GOAL.format(fmu=fixture_fmu("controller_fmi2"))
-    goal = {r"^\[goal\]\nx = 84.0\ny = 53.0": "[goal]\nx = 80.0\ny = 6.0"}
-    path = write_scenario(tmp_path, "go_to_goal", "warehouse_diff_drive_no_obstacle.toml", extra, goal)
-    scenario = load_scenario(path, ["output.plot=false"])
-    result = run_scenario(scenario, tmp_path / "go.mcap")
-    assert result.failure is None and result.outcome.reached
-    log = open_log(tmp_path / "go.mcap")
-    vehicle, pure_pursuit, controller = (
-        log.signals(name) for name in ("vehicle", "pure_pursuit", "go_to_goal")
-    )
-    # Pure Pursuit still runs (it gives VFH its target direction) but asks for 1.5 m/s, while the
-    # vehicle drives the go-to-goal controller's v = min(gain_v * distance, v_max) = 1 m/s.
-    assert np.all(pure_pursuit["v"][:100] == 1.5)
-    np.testing.assert_array_equal(vehicle["v"], 1.0)
-    np.testing.assert_array_equal(controller["v"], 1.0)
-    assert result.outcome.vfh_interventions == 0
-    # Straight along y = 6 from x = 6 at 1 m/s: within the 1 m tolerance of x = 80 after 73 s.
-    np.testing.assert_allclose(vehicle["y"], 6.0, atol=1e-9)
-    assert result.outcome.time == pytest.approx(73.0, abs=MACRO_STEP + 1e-9)
-    assert result.outcome.distance == pytest.approx(result.outcome.time * 1.0, abs=1e-9)
+def direct_scenario(tmp_path: Path, extra: str = "", replan: bool = False) -> Path:
+    """The no-obstacle warehouse with Pure Pursuit, VFH and the mixer removed and the go-to-goal
+    FMU driving the vehicle directly toward GOAL_CURVED (off the start's heading: a curve)."""
+    replace = {
+        r"^theta = 0.0$": f"theta = {START_HEADING}",
+        r"^\[goal\]\nx = 84.0\ny = 53.0": f"[goal]\nx = {GOAL_CURVED[0]}\ny = {GOAL_CURVED[1]}",
+        **remove_section("pure_pursuit"),
+        **remove_section("vfh"),
+    }
+    if not replan:
+        replace[r"^smoothing = \"none\".*$"] = 'smoothing = "none"\nreplan = false'
+    body = DIRECT.format(fmu=fixture_fmu("controller_fmi2")) + extra
+    return write_scenario(tmp_path, "direct", "warehouse_diff_drive_no_obstacle.toml", body, replace)
+
+
+def test_go_to_goal_drives_the_vehicle_with_vfh_and_mixer_removed(tmp_path):
+    scenario = load_scenario(direct_scenario(tmp_path), ["output.plot=false"])
+    built = build_run(scenario)
+    description = built.description
+    assert set(description.components) == {"planner", "lidar", "vehicle", "go_to_goal"}
+    assert description.removed == ("pure_pursuit", "vfh", "mixer")
+    assert description.observed.command == ("go_to_goal.v", "go_to_goal.omega")
+    assert description.observed.mode is None and description.observed.scan is not None
+    result = run_scenario(scenario, tmp_path / "direct.mcap")
+    assert result.failure is None and result.outcome.reached, result.outcome
+    assert result.outcome.vfh_interventions == 0 and result.outcome.recovery_time == 0.0
+    log = open_log(tmp_path / "direct.mcap")
+    signals = {topic.name for topic in log.topics if topic.name.startswith("/signals/")}
+    # (The planner, not replanning, has only array outputs: they go to /plan, not /signals.)
+    assert signals == {f"/signals/{name}" for name in ("lidar", "vehicle", "go_to_goal")}
+    vehicle = log.signals("vehicle")
+    # An independent integration of the law: the pose after every macro step, to 1e-9.
+    steps = len(vehicle.t) - 1
+    expected = unicycle(scenario.start, GOAL_CURVED, 5, MACRO_STEP, steps)
+    for column, name in enumerate(("x", "y", "theta")):
+        np.testing.assert_allclose(vehicle[name], expected[:, column], rtol=0, atol=1e-9, err_msg=name)
+    # It curves (it starts heading 0.68 rad right of the goal), and the run ends at the first pose
+    # within the goal tolerance, which the integration says when.
+    assert np.ptp(expected[:, 2]) > 0.6
+    inside = np.hypot(expected[:, 0] - GOAL_CURVED[0], expected[:, 1] - GOAL_CURVED[1]) <= 1.0
+    arrival = int(np.argmax(inside))
+    assert arrival == steps and result.outcome.time == pytest.approx(arrival * MACRO_STEP, abs=1e-9)
+    travelled = np.sum(np.hypot(np.diff(expected[:, 0]), np.diff(expected[:, 1])))
+    assert result.outcome.distance == pytest.approx(travelled, abs=1e-6)
+    # /cmd_vel is what feeds the vehicle: the go-to-goal command.
+    commands = list(log.messages("/cmd_vel"))
+    controller = log.signals("go_to_goal")
+    assert commands and commands[0].message.linear.x == controller["v"][1]
 
 
 def test_scale_offset_and_held_input_reach_the_fmu(tmp_path):

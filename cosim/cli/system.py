@@ -4,12 +4,16 @@ What runs is the navigation template plus the scenario's `[components.NAME]` and
 (`cosim.scenario.compose.describe_system`); this prints it: each component with its FMU, FMI
 version and rate, each connection with its scale and offset and who declared it (connections
 between elements of two arrays are folded into one line, e.g. `lidar.ranges[1..360] ->
-vfh.ranges[1..360]`), the template connections the scenario replaced, and the order in which
-the master steps the components. `--png FILE` draws the wiring as a block diagram.
+vfh.ranges[1..360]`), the template connections the scenario replaced, the template components it
+removed (`[system] remove`) or replaced (`[components.NAME]` of a template name) with the template
+connections dropped with them, the order in which the master steps the components, and what the
+run reads besides the recording (robot pose, command, avoidance mode, scan). `--png FILE` draws
+the wiring as a block diagram.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 from cosim.cli.wiring import fold
@@ -106,6 +110,20 @@ def format_system(description: SystemDescription, order: list[str], constant: se
             for old, new in description.replaced
         ]
         lines += _table(rows)
+    if description.removed:
+        lines += ["", f"template components removed ([system].remove): {', '.join(description.removed)}"]
+    if description.replacing:
+        replacing = ", ".join(f"{name} (by [components.{name}])" for name in description.replacing)
+        lines += ["", f"template components replaced: {replacing}"]
+    if description.dropped:
+        # Fold with the reason as the "declared in" column: runs of array elements share it.
+        dropped = [replace(connection, where=why) for connection, why in description.dropped]
+        lines += ["", f"template connections dropped with them ({len(dropped)})"]
+        rows = [("from", "to", "why")]
+        for link in fold(dropped):
+            count = f" ({link.count} connections)" if link.count > 1 else ""
+            rows.append((link.source, link.target, link.where + count))
+        lines += _table(rows)
     lines += ["", f"step order ({description.master})"]
     for position, name in enumerate(order, start=1):
         note = "  (outputs fixed after initialisation: not stepped)" if name in constant else ""
@@ -113,4 +131,10 @@ def format_system(description: SystemDescription, order: list[str], constant: se
     observed = description.observed
     if observed is not None:
         lines += ["", f"robot pose for the outcome and /odom: {', '.join(observed.pose)}"]
+        command = ", ".join(observed.command) if observed.command else "none (no /cmd_vel; /odom twist NaN)"
+        lines.append(f"command for /cmd_vel and the /odom twist: {command}")
+        mode = observed.mode or "none (the VFH counts of the outcome stay 0)"
+        lines.append(f"avoidance mode for the outcome: {mode}")
+        scan = f"{observed.scan.component}.ranges" if observed.scan else "none (no /scan)"
+        lines.append(f"scan for /scan: {scan}")
     return "\n".join(lines)

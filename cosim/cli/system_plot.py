@@ -154,9 +154,17 @@ def draw_system(description: SystemDescription, order: list[str], png: Path, tit
     axes.set_aspect("equal")
     axes.axis("off")
     heading = f"{title}: " if title else ""
+    changes = []
+    if description.removed:
+        changes.append(f"removed from the template: {', '.join(description.removed)}")
+    if description.replacing:
+        changes.append(f"replaced by the scenario's FMU: {', '.join(description.replacing)}")
+    if description.dropped:
+        changes.append(f"{len(description.dropped)} template connections dropped")
     axes.set_title(
         f"{heading}{len(description.components)} components, {len(description.connections)} connections; "
-        "numbers = step order, dashed = feedback into an earlier-stepped component, orange = the scenario's",
+        "numbers = step order, dashed = feedback into an earlier-stepped component, orange = the scenario's"
+        + (f"\n{'; '.join(changes)}" if changes else ""),
         fontsize=9,
     )
     figure.tight_layout()
