@@ -164,3 +164,146 @@ def test_port_map_problems_at_once_with_the_fmus_own_names(tmp_path):
     assert "inputs " in own and "speed_cmd" in own and "yaw_rate_cmd" in own
     assert "outputs " in own and "pos_y" in own and "heading" in own
     assert "parameters " in own and "start_x" in own
+    assert "(the run needs the robot pose vehicle.x, vehicle.y, vehicle.theta)" in missing
+
+
+def _without(*sections: str) -> dict:
+    """`write_scenario` replacements deleting whole sections."""
+    return {rf"^\[{name}\][^\n]*\n(?:[^\[\n].*\n|\n)*": "" for name in sections}
+
+
+REMOVED = """
+[system]
+remove = ["vfh", "mixr", "vehicle", "vfh"]
+
+[[connections]]
+from = "lidar.ranges[1]"
+to = "vfh.ranges[1]"
+"""
+
+
+def test_removal_problems_at_once(tmp_path):
+    path = write_scenario(
+        tmp_path, "removed", "warehouse_diff_drive_one_obstacle.toml", REMOVED, _without("vfh")
+    )
+    with pytest.raises(CosimError) as raised:
+        describe_system(load_scenario(path))
+    lines = str(raised.value).splitlines()
+    expected = [
+        ("[system].remove", "'vfh' is listed twice"),
+        ("[system].remove", "no template component 'mixr' (did you mean 'mixer'?); removable: planner, "),
+        (
+            "[system].remove",
+            "'vehicle' cannot be removed: the run needs the robot pose (vehicle.x, vehicle.y, ",
+        ),
+        ("[[connections]][0].to", "'vfh' is removed by [system].remove"),
+        # Inputs the removed component fed: the planner's (replanning) and the mixer's.
+        (
+            "[planner]",
+            "input steering_dir of planner is not connected: the template's connection into it "
+            "was dropped (from vfh.steering_dir: vfh is removed by [system].remove); set [planner] replan "
+            "= false",
+        ),
+        ("[mixer]", "input steering_dir of mixer is not connected"),
+        ("[mixer]", 'add [[connections]] to = "mixer.steering_dir", or hold it at a value in [mixer]'),
+    ]
+    assert len(lines) == len(expected) - 1, "\n".join(lines)
+    for key, text in expected:
+        assert any(line.startswith(f"{path}: {key}: ") and text in line for line in lines), (key, text, lines)
+
+
+REPLACED = """
+[components.pure_pursuit]
+fmu = "{controller}"
+goal_x = 80.0
+goal_y = 6.0
+rate = 7.0
+
+[mixer]
+v_in = 1.0
+"""
+
+
+def test_replacement_problems_at_once(tmp_path):
+    extra = REPLACED.format(controller=fixture_fmu("controller_fmi2"))
+    path = write_scenario(
+        tmp_path,
+        "replaced",
+        "warehouse_diff_drive_one_obstacle.toml",
+        extra,
+        _without("pure_pursuit"),
+    )
+    with pytest.raises(CosimError) as raised:
+        describe_system(load_scenario(path))
+    lines = str(raised.value).splitlines()
+    expected = [
+        ("[components.pure_pursuit].rate", "7 Hz is not a whole number of macro steps of 0.01 s"),
+        (
+            "[mixer].v_in",
+            "input 'v_in' is held at a value and also connected (from 'pure_pursuit.v', "
+            "navigation template); drop one of them",
+        ),
+        # One line per component: the ports the replacement lacks fed VFH's and the mixer's inputs.
+        (
+            "[vfh]",
+            "input target_dir of vfh is not connected: the template's connection into it was dropped "
+            "(from pure_pursuit.target_dir: [components.pure_pursuit] has no such output)",
+        ),
+        (
+            "[mixer]",
+            "inputs target_dir, goal_reached of mixer are not connected: the template's connections "
+            "into them were dropped (from pure_pursuit.target_dir, pure_pursuit.goal_reached: ",
+        ),
+    ]
+    assert len(lines) == len(expected), "\n".join(lines)
+    for key, text in expected:
+        assert any(line.startswith(f"{path}: {key}: ") and text in line for line in lines), (key, text, lines)
+
+
+@pytest.mark.parametrize(
+    ("extra", "drop", "key", "text"),
+    [
+        ('[system]\nremove = "vfh"\n', (), "[system].remove", "must be a list of component names"),
+        (
+            '[system]\nremove = ["vfh"]\n',
+            (),
+            "[vfh]",
+            "'vfh' is removed by [system].remove: this section would set nothing; delete it",
+        ),
+        ('[system]\nremove = ["mixer"]\nkeep = 1\n', (), "[system].keep", "unknown key"),
+        (
+            '[components.pure_pursuit]\nfmu = "PurePursuit"\n',
+            (),
+            "[pure_pursuit]",
+            "'pure_pursuit' is replaced by [components.pure_pursuit]: this section would set nothing",
+        ),
+        (
+            '[system]\nremove = ["vfh"]\n\n[components.vfh]\nfmu = "VectorFieldHistogram"\n',
+            ("vfh",),
+            "[components.vfh]",
+            "'vfh' is also in [system].remove: replace it or remove it, not both",
+        ),
+        (
+            '[components.vehicle]\nfmu = "DifferentialDrive"\n',
+            (),
+            "[components.vehicle]",
+            "swap the vehicle in [vehicle] (fmu, ports): the run reads the robot pose from its x, y, theta",
+        ),
+        (
+            '[components.lidar]\nfmu = "DifferentialDrive"\n',
+            (),
+            "[components.lidar]",
+            "'lidar' is a Python component of the navigation template",
+        ),
+    ],
+)
+def test_removal_and_replacement_keys_on_load(tmp_path, capsys, extra, drop, key, text):
+    path = write_scenario(tmp_path, "keys", "warehouse_diff_drive_one_obstacle.toml", extra, _without(*drop))
+    with pytest.raises(CosimError) as raised:
+        load_scenario(path)
+    assert str(raised.value).startswith(f"{path}: {key}: ") and text in str(raised.value), str(raised.value)
+    # The command line: one line, exit 2, no log.
+    log = tmp_path / "run.mcap"
+    assert main(["run", str(path), "--out", str(log), "--quiet", "--no-plot"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err and not log.exists()

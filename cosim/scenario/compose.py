@@ -105,7 +105,8 @@ class _Composer:
         self.broken: set[str] = set()  # components whose FMU did not load: reported once
         self.missing: dict[str, list[str]] = {}  # role component -> ports the template needs, absent
         self.own: dict[str, dict[str, list[str]]] = {}  # component -> causality -> FMU variable names
-        self.removed = [name for name in dict.fromkeys(scenario.removed) if name in ORDER]
+        # The template components left out ([system] remove); every other name there is a problem.
+        self.removed = [n for n in dict.fromkeys(scenario.removed) if n in ORDER and n != POSE_COMPONENT]
         self.replacing = {name for name, spec in scenario.components.items() if spec.added and name in ORDER}
 
     def describe(self) -> SystemDescription:
