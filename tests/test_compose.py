@@ -156,13 +156,7 @@ goal_reached = false
 
 
 def test_go_to_goal_fmu_replaces_pure_pursuit_and_reaches_the_goal(tmp_path):
-    extra = REPLACE_PURE_PURSUIT.format(fmu=fixture_fmu("controller_fmi2"))
-    replace = {
-        r"^\[goal\]\nx = 84.0\ny = 53.0": f"[goal]\nx = {GO_TO_GOAL_X}\ny = {GO_TO_GOAL_Y}",
-        **remove_section("pure_pursuit"),
-        **remove_section("vfh"),
-    }
-    path = write_scenario(tmp_path, "go_to_goal", "warehouse_diff_drive_no_obstacle.toml", extra, replace)
+    path = replacement_scenario(tmp_path)
     scenario = load_scenario(path, ["output.plot=false"])
     built = build_run(scenario)
     description = built.description
@@ -313,6 +307,49 @@ def test_go_to_goal_drives_the_vehicle_with_vfh_and_mixer_removed(tmp_path):
     commands = list(log.messages("/cmd_vel"))
     controller = log.signals("go_to_goal")
     assert commands and commands[0].message.linear.x == controller["v"][1]
+
+
+def replacement_scenario(tmp_path: Path) -> Path:
+    extra = REPLACE_PURE_PURSUIT.format(fmu=fixture_fmu("controller_fmi2"))
+    replace = {
+        r"^\[goal\]\nx = 84.0\ny = 53.0": f"[goal]\nx = {GO_TO_GOAL_X}\ny = {GO_TO_GOAL_Y}",
+        **remove_section("pure_pursuit"),
+        **remove_section("vfh"),
+    }
+    return write_scenario(tmp_path, "go_to_goal", "warehouse_diff_drive_no_obstacle.toml", extra, replace)
+
+
+@pytest.mark.parametrize("make", [replacement_scenario, direct_scenario], ids=["replaced", "removed"])
+def test_ssp_export_of_a_changed_template_reproduces_the_run(tmp_path, capsys, make):
+    """The exported archive carries the replacement (its FMU, the held inputs) and the removal."""
+    import io
+    import zipfile
+
+    import xmlschema
+
+    from cosim.cli import main
+
+    path = make(tmp_path)
+    sets = ["--set", "simulation.stop_time=6"]
+    archive, direct, again = tmp_path / "x.ssp", tmp_path / "direct.mcap", tmp_path / "again.mcap"
+    assert main(["ssp", "export", str(path), "--out", str(archive), *sets]) == 0
+    schemas = Path(__file__).resolve().parent / "data" / "ssp-1.0.1"
+    with zipfile.ZipFile(archive) as zipped:
+        ssd, ssv = zipped.read("SystemStructure.ssd"), zipped.read("resources/parameters.ssv")
+        fmus = sorted(name for name in zipped.namelist() if name.endswith(".fmu"))
+    xmlschema.XMLSchema(schemas / "SystemStructureDescription.xsd").validate(io.BytesIO(ssd))
+    xmlschema.XMLSchema(schemas / "SystemStructureParameterValues.xsd").validate(io.BytesIO(ssv))
+    if make is replacement_scenario:
+        assert fmus == [f"resources/{n}.fmu" for n in ("mixer", "pure_pursuit", "vehicle", "vfh")]
+        assert b'"vfh.target_dir"' in ssv and b'"mixer.goal_reached"' in ssv  # the held inputs
+    else:
+        assert fmus == ["resources/go_to_goal.fmu", "resources/vehicle.fmu"]
+    codes = [main(["run", str(path), "--out", str(direct), "--no-plot", "--quiet", *sets])]
+    codes.append(main(["run", str(archive), "--out", str(again), "--no-plot", "--quiet"]))
+    assert codes[0] == codes[1]
+    capsys.readouterr()
+    assert main(["log", "diff", str(direct), str(again), "--tolerance", "0"]) == 0
+    assert "(largest deviation 0)" in capsys.readouterr().out
 
 
 def test_scale_offset_and_held_input_reach_the_fmu(tmp_path):

@@ -32,7 +32,6 @@ from cosim.scenario.ssp_xml import tag
 
 SCENARIO_ANNOTATION = "org.navcosim.scenario"
 SCENARIO_DIR = "resources/navcosim"
-ROLES = ("vehicle", "pure_pursuit", "vfh", "mixer")
 
 
 def _port_of(scenario: Scenario, name: str, port: str) -> tuple[str, float]:
@@ -58,18 +57,19 @@ def flat_system(built) -> tuple[list[SspComponent], list[SspConnection]]:
         if not isinstance(component, FmuComponent | IsolatedFmuComponent):
             continue
         variables = {v.name: v for v in component.model_description.modelVariables}
-        parameters = {}
-        for port, value in built.parameters.get(name, {}).items():
-            variable, scale = _port_of(scenario, name, port)
-            parameters[variable] = value * scale
-            if parameters[variable] / scale != value:
-                raise CosimError(
-                    f"{scenario.source}: [{name}].{port}: {value!r} times the port scale {scale!r} does not "
-                    "divide back exactly; the exported SSP would not reproduce the run"
-                )
-        components.append(
-            SspComponent(name, name, component.path, parameters, {}, component.period, variables)
-        )
+        # Parameters, and the inputs the scenario holds at a value (start values of the inputs).
+        values: tuple[dict, dict] = ({}, {})
+        held = built.description.components[name].held_inputs
+        for target, given in zip(values, (built.parameters.get(name, {}), held), strict=True):
+            for port, value in given.items():
+                variable, scale = _port_of(scenario, name, port)
+                target[variable] = value * scale
+                if target[variable] / scale != value:
+                    raise CosimError(
+                        f"{scenario.source}: [{name}].{port}: {value!r} times the port scale {scale!r} does "
+                        "not divide back exactly; the exported SSP would not reproduce the run"
+                    )
+        components.append(SspComponent(name, name, component.path, *values, component.period, variables))
     fmus = {component.name for component in components}
     connections = []
     for connection in built.system.connections:
@@ -118,7 +118,8 @@ def export_scenario(scenario: Scenario, out: Path) -> Path:
     for component in components:
         spec = scenario.components[component.name]
         if not spec.is_builtin:
-            section = component.name if component.name in ROLES else f"components.{component.name}"
+            # A [components.NAME] may carry a role's name: it replaces that role.
+            section = f"components.{component.name}" if spec.added else component.name
             sets.append(f'{section}.fmu="../{component.name}.fmu"')
     for name in built.system.components:
         if name not in {component.name for component in components}:
@@ -168,7 +169,7 @@ def scenario_of(ssp: SspSystem, simulation: dict[str, object]) -> Scenario:
     for name, spec in scenario.components.items():
         component = ssp.component(name)
         parameters = {}
-        for variable, value in component.parameters.items():
+        for variable, value in {**component.parameters, **component.inputs}.items():
             ports = [port for port in spec.ports if spec.ports[port].variable == variable]
             port = ports[0] if ports else variable
             parameters[port] = value / _port_of(scenario, name, port)[1]
