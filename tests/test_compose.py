@@ -381,11 +381,11 @@ offset = 10.5
     np.testing.assert_allclose(probe["v"], np.minimum(np.abs(10.0 - x), 1.0), rtol=0, atol=1e-12)
 
 
-def _readme_block(heading: str) -> str:
-    """The first ```toml block after `heading` in the README."""
+def _readme_block(heading: str, index: int = 0) -> str:
+    """The `index`-th ```toml block after `heading` in the README."""
     text = (REPO / "README.md").read_text()
     after = text[text.index(heading) :]
-    return after.split("```toml\n", 1)[1].split("```", 1)[0]
+    return after.split("```toml\n")[1 + index].split("```", 1)[0]
 
 
 def test_readme_swap_example_runs_as_written(tmp_path):
@@ -413,6 +413,25 @@ def test_readme_composition_example_runs_as_written(tmp_path):
     k = np.arange(len(vehicle.t) - 1)  # the steps; the last record (the end) holds the last input
     applied = vehicle["v"][:-1]  # at t_k: the lag's output after its step at t_k (Gauss-Seidel)
     np.testing.assert_allclose(applied, 1.5 * (1 - np.exp(-(k + 1) * MACRO_STEP / 0.5)), atol=1e-12)
+
+
+def test_readme_removal_example_runs_as_written(tmp_path):
+    block = _readme_block("### Composing a system", 1)
+    assert 'fmu = "go_to_goal.fmu"' in block and 'remove = ["pure_pursuit", "vfh", "mixer"]' in block
+    extra = block.replace("go_to_goal.fmu", str(fixture_fmu("controller_fmi2")))
+    # As the block says: the [pure_pursuit] and [vfh] sections go, [planner] gets replan = false.
+    replace = {
+        **remove_section("pure_pursuit"),
+        **remove_section("vfh"),
+        r"^smoothing = \"none\".*$": 'smoothing = "none"\nreplan = false',
+    }
+    path = write_scenario(tmp_path, "readme_direct", "warehouse_diff_drive_no_obstacle.toml", extra, replace)
+    scenario = load_scenario(path, ["output.plot=false", "simulation.stop_time=5.0"])
+    result = run_scenario(scenario, tmp_path / "readme_direct.mcap")
+    assert result.failure is None
+    vehicle = open_log(tmp_path / "readme_direct.mcap").signals("vehicle")
+    # Heading straight for (80, 6) from (6, 6) at the controller's 1 m/s.
+    assert vehicle["x"][-1] == pytest.approx(6.0 + 5.0, abs=1e-9) and np.all(vehicle["y"] == 6.0)
 
 
 def test_example_commented_composition_block_is_valid_when_uncommented(tmp_path):
