@@ -446,3 +446,25 @@ def test_example_commented_composition_block_is_valid_when_uncommented(tmp_path)
     description = build_run(load_scenario(path, ["output.plot=false"])).description
     assert description.components["lag"].parameters == {"T": 0.5}
     assert [(old.target, new.source) for old, new in description.replaced] == [("vehicle.v", "lag.y")]
+
+
+def test_example_commented_removal_block_reports_what_must_follow(tmp_path):
+    """The commented-out [system] example: removing VFH and the mixer leaves the planner's
+    steering_dir and the vehicle's v, omega unfed, as its comment says; all reported at once."""
+    from cosim.errors import CosimError
+    from cosim.scenario.compose import describe_system
+
+    text = (SCENARIOS / "example_commented.toml").read_text()
+    start = text.index("# [system]")
+    block = "\n".join(line[2:] for line in text[start:].split("\n\n", 1)[0].splitlines())
+    assert block == '[system]\nremove = ["vfh", "mixer"]'
+    path = write_scenario(tmp_path, "example_removed", "example_commented.toml", block, remove_section("vfh"))
+    path.write_text(re.sub(r"(?ms)^\[mixer\].*?(?=^# More components)", "", path.read_text()))
+    with pytest.raises(CosimError) as raised:
+        describe_system(load_scenario(path))
+    lines = str(raised.value).splitlines()
+    assert len(lines) == 2, lines
+    assert lines[0].startswith(f"{path}: [planner]: input steering_dir of planner is not connected")
+    assert "set [planner] replan = false" in lines[0]
+    assert lines[1].startswith(f"{path}: [vehicle]: inputs v, omega of vehicle are not connected")
+    assert "(from mixer.v, mixer.omega: mixer is removed by [system].remove)" in lines[1]
