@@ -113,3 +113,47 @@ def test_system_of_a_broken_scenario_lists_its_problems(tmp_path, capsys):
     assert len(lines) == 2
     assert "[[connections]][0].to: component 'vehicle' has no input 'vv' (did you mean 'v'?)" in lines[0]
     assert "[[connections]][0].from: no component 'mixr' (did you mean 'mixer'?)" in lines[1]
+
+
+def test_system_lists_removed_and_replaced_components_and_dropped_connections(tmp_path, capsys):
+    from test_compose import direct_scenario, replacement_scenario
+
+    replaced = replacement_scenario(tmp_path)
+    png = tmp_path / "replaced.png"
+    assert main(["system", str(replaced), "--png", str(png)]) == 0
+    out = capsys.readouterr().out
+    rows = re.findall(r"(?m)^  (\w+)\s+\S", out.split("components (")[1].split("\n\n")[0])[1:]
+    assert rows == ["planner", "pure_pursuit", "lidar", "vfh", "mixer", "vehicle"]
+    assert re.search(
+        r"(?m)^  pure_pursuit\s+fixture_controller_fmi2 .*20 Hz .*\[components\.pure_pursuit\]$", out
+    )
+    assert "PurePursuit" not in out
+    assert "template components replaced: pure_pursuit (by [components.pure_pursuit])" in out
+    assert f"template connections dropped with them ({2 * WAYPOINTS + 3})" in out
+    dropped = out.split("template connections dropped with them")[1].split("\n\n")[0]
+    assert re.search(
+        rf"planner\.waypoints\[1\.\.{WAYPOINTS},1\.\.2\]\s+pure_pursuit\.waypoints\[1\.\.{WAYPOINTS},1\.\.2\]\s+"
+        rf"\[components\.pure_pursuit\] has no such input \({2 * WAYPOINTS} connections\)",
+        dropped,
+    )
+    for target in ("vfh.target_dir", "mixer.target_dir"):
+        assert re.search(
+            rf"pure_pursuit\.target_dir\s+{re.escape(target)}\s+\[components\.pure_pursuit\] has no", dropped
+        )
+    assert re.search(r"pure_pursuit\.goal_reached\s+mixer\.goal_reached\s+", dropped)
+    assert "command for /cmd_vel and the /odom twist: mixer.v, mixer.omega" in out
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+    removed = direct_scenario(tmp_path)
+    assert main(["system", str(removed), "--png", str(tmp_path / "removed.png")]) == 0
+    out = capsys.readouterr().out
+    assert "components (4)" in out
+    assert "template components removed ([system].remove): pure_pursuit, vfh, mixer" in out
+    # Every template connection to or from them: pose, waypoints, beams, commands, the vehicle's
+    # two inputs; the planner does not replan here (no pose, ranges, direction into it).
+    count = 3 + 2 * WAYPOINTS + 2 * BEAMS + 6 + 2
+    assert f"template connections dropped with them ({count})" in out
+    assert re.search(r"mixer\.v\s+vehicle\.v\s+mixer is removed by \[system\]\.remove", out)
+    assert "command for /cmd_vel and the /odom twist: go_to_goal.v, go_to_goal.omega" in out
+    assert "avoidance mode for the outcome: none (the VFH counts of the outcome stay 0)" in out
+    assert "scan for /scan: lidar.ranges" in out
