@@ -267,7 +267,9 @@ class _Composer:
                 self.missing.setdefault(component.name, []).append(name)
                 continue
             if name not in settable:
-                kind = "parameter or input"
+                kind = (
+                    "parameter or input" if spec.added else "parameter"
+                )  # (a role section may hold inputs too)
                 self.problems.add(
                     f"{where}.{name}", f"the FMU has no {kind} '{name}'{did_you_mean(name, settable)}"
                 )
