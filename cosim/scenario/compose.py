@@ -267,9 +267,8 @@ class _Composer:
                 self.missing.setdefault(component.name, []).append(name)
                 continue
             if name not in settable:
-                kind = (
-                    "parameter or input" if spec.added else "parameter"
-                )  # (a role section may hold inputs too)
+                # (A role section may hold an input too; its message names the parameter.)
+                kind = "parameter or input" if spec.added else "parameter"
                 self.problems.add(
                     f"{where}.{name}", f"the FMU has no {kind} '{name}'{did_you_mean(name, settable)}"
                 )
