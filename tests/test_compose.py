@@ -177,6 +177,19 @@ def test_go_to_goal_fmu_replaces_pure_pursuit_and_reaches_the_goal(tmp_path):
     assert result.failure is None and result.outcome.reached
     log = open_log(tmp_path / "go.mcap")
     assert log.metadata["fmu/pure_pursuit"]["model_name"] == "fixture_controller_fmi2"
+    fmus = {key: value["model_name"] for key, value in log.metadata.items() if key.startswith("fmu/")}
+    assert "PurePursuit" not in fmus.values() and len(fmus) == 4
+    built_models = {
+        c.model_description.modelName
+        for c in built.system.components.values()
+        if hasattr(c, "model_description")
+    }
+    assert built_models == {
+        "fixture_controller_fmi2",
+        "VectorFieldHistogram",
+        "AvoidanceMixer",
+        "DifferentialDrive",
+    }
     vehicle, controller, mixer = (log.signals(name) for name in ("vehicle", "pure_pursuit", "mixer"))
     assert "waypoints[1,1]" not in controller.names and "target_dir" not in controller.names
     signals = {topic.name for topic in log.topics if topic.name.startswith("/signals/")}
