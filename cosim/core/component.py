@@ -67,6 +67,13 @@ class NativeStep:
     output_reference_count: int = -1
     finite_outputs: tuple[int, ...] = ()
     nan_outputs: tuple[int, ...] = ()
+    # Every get/set call of a step, for `cosim.core.kernel`: (direction "set" or "get", kind
+    # "real"/"integer"/"boolean", function, value references, reference count, value count, FMI
+    # value array, direct (the array is the component's buffer), buffer slots, scales); `plain` is
+    # False when the fields above do not describe the step (integer or boolean ports, scales, a
+    # restricted push): then only the kernel can step it.
+    groups: tuple = ()
+    plain: bool = True
 
 
 @dataclass(frozen=True)

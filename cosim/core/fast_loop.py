@@ -42,7 +42,7 @@ def transfer_expression(value: str, scale: float, offset: float) -> str:
 def native_steps(order: list[Component]) -> list[NativeStep] | None:
     """Every component's C-level step, or None when any of them needs Python to step."""
     steps = [component.native_step() for component in order]
-    return None if any(step is None for step in steps) else steps
+    return None if any(step is None or not step.plain for step in steps) else steps
 
 
 def _count(version: int, n: int) -> str:
@@ -164,3 +164,147 @@ def compile_loop(
         return compiled(np.int64(first_step), np.int64(count), *buffers)
 
     return run
+
+
+class KernelTables:
+    """The tables `cosim.core.kernel.step_kernel` reads for one master plan (see there).
+
+    `plan` is the master's [(component, period, gather)] in step order; `skip` names components
+    that are never stepped (constant outputs), whose connections are not copied again either.
+    A component whose `native_step()` is None is handed back to Python where it is due.
+    """
+
+    def __init__(self, plan, system, skip: set[str], record: bool, block: int) -> None:
+        from cosim.core import kernel as K
+
+        n = len(plan)
+        components = np.zeros((n, K.COMPONENT_COLUMNS), dtype=np.int64)
+        step_sizes = np.zeros(n)
+        links, link_numbers, groups, slots, scales, checks = [], [], [], [], [], []
+        self.native: list[NativeStep | None] = []
+        record_offset = 0
+        self.record_shapes: list[tuple[int, int] | None] = []
+        for i, (component, period, _) in enumerate(plan):
+            native = component.native_step()
+            self.native.append(native)
+            row = components[i]
+            row[K.C_PERIOD] = period
+            step_sizes[i] = period * system.macro_step_ns / 1e9
+            if component.name in skip:
+                row[K.C_KIND] = K.KIND_IDLE
+                self.record_shapes.append(None)
+                continue
+            row[K.C_KIND] = K.KIND_NATIVE if native is not None else K.KIND_PYTHON
+            row[K.C_IN_ADDRESS] = ctypes.addressof(component.input_cbuffer)
+            row[K.C_IN_COUNT] = len(component.inputs)
+            row[K.C_OUT_ADDRESS] = ctypes.addressof(component.output_cbuffer)
+            row[K.C_OUT_COUNT] = len(component.outputs)
+            row[K.C_LINK_FIRST] = len(links)
+            for connection in system.connections:
+                if connection.target_component != component.name or connection.source_component in skip:
+                    continue
+                producer, source = system.resolve(connection.source, "output")
+                _, target = system.resolve(connection.target, "input")
+                kind = 0 if connection.is_plain else (1 if connection.offset == 0.0 else 2)
+                links.append(
+                    (
+                        ctypes.addressof(producer.output_cbuffer) + 8 * source,
+                        ctypes.addressof(component.input_cbuffer) + 8 * target,
+                        kind,
+                    )
+                )
+                link_numbers.append((connection.scale, connection.offset))
+            row[K.C_LINK_COUNT] = len(links) - row[K.C_LINK_FIRST]
+            if native is None:
+                self.record_shapes.append(None)
+                continue
+            row[K.C_VERSION] = native.fmi_version
+            row[K.C_HANDLE] = native.handle
+            row[K.C_STEP] = native.do_step
+            row[K.C_FLAGS] = native.step_flags.ctypes.data if native.fmi_version == 3 else 0
+            row[K.C_LAST_TIME] = native.last_successful_time
+            for direction, first_column, count_column in (
+                ("set", K.C_SET_FIRST, K.C_SET_COUNT),
+                ("get", K.C_GET_FIRST, K.C_GET_COUNT),
+            ):
+                row[first_column] = len(groups)
+                buffer = component.input_cbuffer if direction == "set" else component.output_cbuffer
+                for call in native.groups:
+                    if call[0] != direction:
+                        continue
+                    (
+                        _,
+                        kind,
+                        function,
+                        refs,
+                        ref_count,
+                        value_count,
+                        values,
+                        direct,
+                        call_slots,
+                        call_scales,
+                    ) = call
+                    groups.append(
+                        (
+                            {"real": K.KIND_REAL, "integer": K.KIND_INTEGER, "boolean": K.KIND_BOOLEAN}[kind],
+                            function, refs, ref_count, value_count, values, int(direct),
+                            len(slots), len(call_slots),
+                        )
+                    )  # fmt: skip
+                    slots += [ctypes.addressof(buffer) + 8 * slot for slot in call_slots]
+                    scales += list(call_scales)
+                row[count_column] = len(groups) - row[first_column]
+            row[K.C_CHECK_FIRST] = len(checks)
+            output_base = ctypes.addressof(component.output_cbuffer)
+            checks += [(output_base + 8 * slot, 0, slot) for slot in native.finite_outputs]
+            checks += [(output_base + 8 * slot, 1, slot) for slot in native.nan_outputs]
+            row[K.C_CHECK_COUNT] = len(checks) - row[K.C_CHECK_FIRST]
+            if record:
+                width = len(component.inputs) + len(component.outputs)
+                capacity = block // period + 2
+                row[K.C_RECORD] = 1
+                row[K.C_RECORD_OFFSET] = record_offset
+                self.record_shapes.append((record_offset, capacity, width))
+                record_offset += capacity * width
+            else:
+                self.record_shapes.append(None)
+        self.components = components
+        self.step_sizes = step_sizes
+        self.link_addresses = np.array(links, dtype=np.int64).reshape(-1, 3)
+        self.link_numbers = np.array(link_numbers, dtype=np.float64).reshape(-1, 2)
+        self.groups = np.array(groups, dtype=np.int64).reshape(-1, K.GROUP_COLUMNS)
+        self.slot_addresses = np.array(slots, dtype=np.int64)
+        self.slot_scales = np.array(scales, dtype=np.float64)
+        self.checks = np.array(checks, dtype=np.int64).reshape(-1, 3)
+        self.history = np.zeros(max(1, record_offset))
+        self.rows = np.zeros(n, dtype=np.int64)
+        self.watch_addresses = np.zeros(3, dtype=np.int64)
+        self.watch_numbers = np.zeros(6)
+        # What the tables point into stays alive with them.
+        self._keep = [component for component, _, _ in plan]
+
+    def histories(self) -> list[np.ndarray | None]:
+        """Per component, its rows so far as a (rows, inputs + outputs) view, None when not recorded."""
+        views = []
+        for i, shape in enumerate(self.record_shapes):
+            if shape is None:
+                views.append(None)
+                continue
+            offset, capacity, width = shape
+            block = self.history[offset : offset + capacity * width].reshape(capacity, width)
+            views.append(block[: self.rows[i]])
+        return views
+
+    def warm_up(self) -> None:
+        """Compile the kernel, or load it from numba's cache (a call of no steps)."""
+        self.run(0, 0, 0, 0, 1, False)
+
+    def run(self, first_step: int, steps: int, position: int, start_ns: int, h_ns: int, jacobi: bool):
+        from cosim.core.kernel import step_kernel
+
+        return step_kernel(
+            np.int64(first_step), np.int64(steps), np.int64(position), np.int64(start_ns), np.int64(h_ns),
+            bool(jacobi), self.components, self.step_sizes, self.link_addresses, self.link_numbers,
+            self.groups, self.slot_addresses, self.slot_scales, self.checks, self.history, self.rows,
+            self.watch_addresses, self.watch_numbers,
+        )  # fmt: skip

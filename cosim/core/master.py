@@ -69,6 +69,8 @@ MODES = ("gauss-seidel", "jacobi")
 _SCALAR_COPY_LIMIT = 4
 # Compiling the loop of an FMU-only system costs about a second; worth it for long runs only.
 COMPILED_MIN_STEPS = 200_000
+# Most steps per call of the compiled kernel (`Master.run_blocks`).
+KERNEL_BLOCK = 1000
 
 
 def seconds_to_ns(seconds: float | Fraction | int, what: str) -> int:
@@ -529,6 +531,118 @@ class Master:
                     self._deliver(first, on_block, histories, rows)
             done += count
         return steps
+
+    def kernel_tables(self, record: bool = False, block: int = KERNEL_BLOCK) -> fast_loop.KernelTables | None:
+        """The tables of `run_blocks` (`cosim.core.kernel`), or None when the kernel cannot run this
+        system: no component steps by C calls, or Jacobi mode with a component that needs Python."""
+        self._check_running()
+        skip = {c.name for c, _, _ in self._plan if c.constant_outputs}
+        tables = fast_loop.KernelTables(self._plan, self.system, skip, record, block)
+        stepped = [
+            native for native, (c, _, _) in zip(tables.native, self._plan, strict=True) if c.name not in skip
+        ]
+        if not any(native is not None for native in stepped):
+            return None
+        if self.system.mode == "jacobi" and any(native is None for native in stepped):
+            return None
+        return tables
+
+    def run_blocks(
+        self,
+        steps: int,
+        tables: fast_loop.KernelTables,
+        on_block: Callable[[int, int, list, bool], bool | None] | None = None,
+        block: int = KERNEL_BLOCK,
+        before_block: Callable[[], None] | None = None,
+    ) -> int:
+        """Advance up to `steps` macro steps through the compiled kernel (`cosim.core.kernel`);
+        components that need Python are stepped here where they are due. Returns the steps done.
+
+        After each stretch of complete steps [first, end) -- at most `block` steps, cut where a
+        Python component is due (before it steps), at the end of a step in which one stepped, and
+        after a step whose watched position (`tables.watch_*`) needs a look -- `on_block(first,
+        end, histories, clean)` is called: `histories[i]` holds component i's buffers (inputs,
+        then outputs) after each of its steps in the stretch when the tables record it, else None.
+        `clean` is True when no component has stepped yet in step `end`: then a true return
+        stops the run at `end` (the same place as the Python loop's callback would); otherwise
+        the return is ignored. `before_block()` is called before each call of the kernel.
+        """
+        self._check_running()
+        if steps < 0:
+            raise CosimError(f"number of steps must be >= 0, got {steps}")
+        from cosim.core import kernel
+
+        h_ns, start_ns = self.system.macro_step_ns, self.start_time_ns
+        jacobi = self.system.mode == "jacobi"
+        periods = [period for _, period, _ in self._plan]
+        end = self.step_index + steps
+        first = k = self.step_index
+        position = 0
+        tables.rows[:] = 0
+        finish_step = False  # a Python component stepped: the kernel ends this step, then returns
+        while True:
+            if k >= end and position == 0:
+                break
+            if before_block is not None:
+                before_block()
+            count = 1 if finish_step else min(block, end - k)
+            code, k, position, failed, call, status, kind = tables.run(
+                k, count, position, start_ns, h_ns, jacobi
+            )
+            finish_step = False
+            clean = position == 0 or not any(
+                tables.components[i, kernel.C_KIND] != kernel.KIND_IDLE and k % periods[i] == 0
+                for i in range(position)
+            )
+            if k > first:
+                histories = tables.histories()
+                delivered = []
+                for i, history in enumerate(histories):
+                    if history is None:
+                        delivered.append(None)
+                        continue
+                    period = periods[i]
+                    n = (k + period - 1) // period - (first + period - 1) // period
+                    delivered.append(history[:n])
+                self.step_index = k
+                stop = on_block(first, k, delivered, clean) if on_block is not None else False
+                # Rows of step k already taken (components before `position`) move to the front.
+                for i, history in enumerate(histories):
+                    if history is not None:
+                        n = len(delivered[i])
+                        extra = len(history) - n
+                        if extra:
+                            history[:extra] = history[n:].copy()
+                        tables.rows[i] = extra
+                first = k
+                if stop and clean:
+                    break
+            self.step_index = k
+            if code == kernel.FAILED:
+                try:
+                    native = tables.native[failed]
+                    kind_name = ("real", "integer", "boolean")[kind]
+                    native.fail(
+                        call, status, None if call in (0, 2) else (start_ns + k * h_ns) / NS_PER_S, kind_name
+                    )
+                except CosimError as error:
+                    self.failure = error
+                    raise
+                raise CosimError(f"component '{self._plan[failed][0].name}' failed at step {k}")
+            if code == kernel.HAND_BACK:
+                component, period, gather = self._plan[position]
+                try:
+                    if gather is not None:
+                        gather()
+                        component.push_inputs()
+                    component.do_step((start_ns + k * h_ns) / NS_PER_S, period * h_ns / NS_PER_S)
+                    component.get_outputs()
+                except CosimError as error:
+                    self.failure = error
+                    raise
+                position += 1
+                finish_step = True
+        return self.step_index - (end - steps)
 
     def _deliver(self, first: int, on_block, histories: list[np.ndarray], rows: np.ndarray) -> None:
         """Hand the rows of the steps that ran (all of them, or up to a failure) to `on_block`."""

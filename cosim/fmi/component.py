@@ -582,14 +582,16 @@ class FmuComponent(Component):
         return self._compiled["get_outputs"]()
 
     def native_step(self) -> NativeStep | None:
-        """C-level stepping for the compiled loop when every input and output is an unscaled real."""
+        """C-level stepping for the compiled loops: every get/set call as a group (`NativeStep.groups`);
+        `plain` when every input and output is an unscaled real sent whole (the generated loop's case)."""
+        plain = True
         for groups in (self._input_groups, self._output_groups):
             if any(
                 kind != "real" or any(scale != 1.0 for scale in scales) for kind, _, _, _, scales in groups
             ):
-                return None
+                plain = False
         if self._input_groups and self._input_groups[0][1] != list(range(len(self.inputs))):
-            return None  # `restrict_push` left only some inputs to send
+            plain = False  # `restrict_push` left only some inputs to send
 
         def address(function) -> int:
             return ctypes.cast(function, ctypes.c_void_p).value
@@ -598,6 +600,23 @@ class FmuComponent(Component):
             return ctypes.addressof(groups[0][2]) if groups else 0
 
         version = self.fmi_version
+        calls = []
+        for direction, groups, buffer in (
+            ("set", self._input_groups, self.input_cbuffer),
+            ("get", self._output_groups, self.output_cbuffer),
+        ):
+            functions = self._setters if direction == "set" else self._getters
+            for kind, slots, refs, values, scales in groups:
+                # As `_compile_fast_path`: a lone unscaled real group over all ports is the buffer.
+                direct = kind == "real" and all(scale == 1.0 for scale in scales) and len(groups) == 1
+                direct = direct and slots == list(range(len(slots)))
+                calls.append(
+                    (
+                        direction, kind, address(functions[kind]), ctypes.addressof(refs), len(refs),
+                        len(slots), ctypes.addressof(buffer if direct else values), direct,
+                        tuple(slots), tuple(float(scale) for scale in scales),
+                    )
+                )  # fmt: skip
         return NativeStep(
             fmi_version=version,
             handle=self._handle if isinstance(self._handle, int) else self._handle.value,
@@ -615,16 +634,18 @@ class FmuComponent(Component):
             fail=self._native_failure,
             finite_outputs=tuple(self._checked_outputs()[0]),
             nan_outputs=tuple(self._checked_outputs()[1]),
+            groups=tuple(calls),
+            plain=plain,
         )
 
-    def _native_failure(self, call: int, status: int, t: float) -> None:
+    def _native_failure(self, call: int, status: int, t: float, kind: str = "real") -> None:
         if call == 3:
             self._asked_to_terminate(t)
         if call == 4:
             self._step_time[0] = t
             self._nonfinite_output()
-        real = "Real" if self.fmi_version == 2 else "Float64"
-        function = ("Set" + real, "DoStep", "Get" + real)[call]
+        type_name = _FMI_TYPE_NAMES[self.fmi_version][kind]
+        function = ("Set" + type_name, "DoStep", "Get" + type_name)[call]
         self._fail(status, f"fmi{self.fmi_version}{function}", t)
 
     def _nonfinite_output(self) -> None:

@@ -30,6 +30,7 @@ it `<name>.failed.mcap`.
 
 from __future__ import annotations
 
+import ctypes
 import math
 import time
 from dataclasses import dataclass
@@ -376,6 +377,9 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     # real-time factor measures the simulation, not a first run's JIT compilation.
     monitor.world.distance(*scenario.start[:2])
     recorder_batch.warm_up()
+    tables = master.kernel_tables(record=True) if _use_kernel(scenario) else None
+    if tables is not None:
+        tables.warm_up()
     bar = _progress_bar(scenario.stop_time) if progress else None
     wall_start = time.perf_counter()
     last_update = [wall_start, 0.0]
@@ -392,8 +396,8 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     goal_poll = _goal_poll(goals, built, monitor, recorder, recording) if goals is not None else None
     goal_steps = system.period_steps(built.planner) if goal_poll is not None and built.planner else 1
 
-    def after_step(current: Master) -> bool:
-        k = current.step_index - 1
+    def finish_step(k: int) -> str | None:
+        """Record what step k produced and check the outcome; why the run ends after it, or None."""
         t_ns = start_ns + k * h_ns
         recording.after_step(k, t_ns, h_ns)
         if mode_steps and k % mode_steps == 0:
@@ -409,13 +413,20 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
             if reason is None and planner.no_path is not None:
                 monitor.outcome.no_path = planner.no_path
                 reason = "no_path"
+        return reason
+
+    def show_progress(sim_time: float) -> None:
+        now = time.perf_counter()
+        if now - last_update[0] >= PROGRESS_INTERVAL:
+            _update_bar(bar, sim_time, now - wall_start, last_update)
+            last_update[0] = now
+
+    def after_step(current: Master) -> bool:
+        reason = finish_step(current.step_index - 1)
         if reason is None and take_signal() is not None:
             reason = "interrupted"
         if bar is not None:
-            now = time.perf_counter()
-            if now - last_update[0] >= PROGRESS_INTERVAL:
-                _update_bar(bar, current.time, now - wall_start, last_update)
-                last_update[0] = now
+            show_progress(current.time)
         if reason is not None:
             state["reason"] = reason
             return True
@@ -423,7 +434,23 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
 
     failure = None
     try:
-        master.run(total_steps, after_step)
+        if tables is None:
+            master.run(total_steps, after_step)
+        else:
+            blocks = _KernelBlocks(built, master, tables, monitor, finish_step)
+
+            def on_block(first: int, end: int, histories, clean: bool) -> bool:
+                reason = blocks.replay(first, end, histories, clean)
+                if reason is None and clean and take_signal() is not None:
+                    reason = "interrupted"
+                if bar is not None:
+                    show_progress(master.time)
+                if reason is not None:
+                    state["reason"] = reason
+                    return True
+                return False
+
+            master.run_blocks(total_steps, tables, on_block, block=blocks.block, before_block=blocks.watch)
     except CosimError as error:
         failure = str(error) if " at t = " in str(error) else f"{error} (at t = {master.time:.3f} s)"
     wall_time = time.perf_counter() - wall_start
@@ -500,6 +527,121 @@ def _world_at(world, t: float):
     if getattr(world, "moving", False):
         world.at(t)
     return world
+
+
+def _use_kernel(scenario: Scenario) -> bool:
+    """Whether the run steps its FMUs in the compiled kernel (`Master.run_blocks`); both ways give
+    the same log. NAVCOSIM_LOOP=python forces the Python loop (tests compare the two)."""
+    import os
+
+    return os.environ.get("NAVCOSIM_LOOP", "kernel") != "python"
+
+
+class _KernelBlocks:
+    """The run loop's side of `Master.run_blocks`: the watched position and the replay of blocks.
+
+    The kernel returns after any step whose position may end the run: not finite, within the
+    goal tolerance (plus a margin), or outside a circle around the last checked position that
+    the true obstacles cannot reach within the block (the world's distance there, minus the
+    vehicle's radius, minus what moving obstacles can cover in a block, minus a margin). So the
+    exact checks of `OutcomeMonitor.check_position`, replayed here for every step from the rows
+    the kernel kept, can only end the run at the last step of a block, where the kernel stopped.
+    """
+
+    def __init__(self, built: BuiltRun, master: Master, tables, monitor, finish_step) -> None:
+        scenario = built.scenario
+        system = built.system
+        self.master = master
+        self.monitor = monitor
+        self.finish_step = finish_step
+        self.tables = tables
+        self.components = [component for component, _, _ in master._plan]
+        self.periods = [period for _, period, _ in master._plan]
+        observed = built.description.observed
+        (vehicle_x, x), (vehicle_y, y) = (system.resolve(r, "output") for r in observed.pose[:2])
+        self.pose = (vehicle_x.output_buffer, x, vehicle_y.output_buffer, y)
+        tables.watch_addresses[:] = (
+            1,
+            ctypes.addressof(vehicle_x.output_cbuffer) + 8 * x,
+            ctypes.addressof(vehicle_y.output_cbuffer) + 8 * y,
+        )
+        reach = scenario.goal_tolerance + 1e-6 * (1.0 + scenario.goal_tolerance)
+        tables.watch_numbers[:3] = (scenario.goal[0], scenario.goal[1], reach * reach)
+        self.radius = scenario.vehicle_radius
+        self.world = monitor.world
+        self.speed = getattr(self.world, "max_speed", 0.0)
+        self.moving = bool(getattr(self.world, "moving", False))
+        # Moving obstacles: short blocks, so the reach of the obstacles in one block stays small.
+        self.block = 50 if self.speed > 0.0 else 1000
+        self.h = system.macro_step
+        self.anchor: tuple[float, float] | None = None
+        # Each component's buffers after the last step replayed (at first: after initialisation).
+        self.held = {
+            i: (component.input_buffer.copy(), component.output_buffer.copy())
+            for i, component in enumerate(self.components)
+        }
+
+    def watch(self) -> None:
+        """Before a kernel call: the circle around the current position known free of collisions."""
+        buffer_x, x, buffer_y, y = self.pose
+        x, y = buffer_x.item(x), buffer_y.item(y)
+        if (x, y) == self.anchor and not self.moving:
+            return
+        self.anchor = (x, y)
+        numbers = self.tables.watch_numbers
+        if not (math.isfinite(x) and math.isfinite(y)):
+            numbers[3:] = (0.0, 0.0, -1.0)  # every step is checked
+            return
+        if self.moving:
+            self.world.at(self.master.time)
+        distance = self.world.lower_bound(x, y)
+        if distance - self.radius < 1.0:
+            distance = self.world.distance(x, y)
+        drift = self.speed * (self.block + 1) * self.h
+        free = distance - self.radius - drift - 1e-6 * (1.0 + distance)
+        numbers[3:] = (x, y, free * free if free > 0.0 else -1.0)
+
+    def replay(self, first: int, end: int, histories, clean: bool) -> str | None:
+        """Steps [first, end) as the Python loop's callback sees them: each recorded component's
+        buffers are set to what they held after each step (its rows, held between its steps), then
+        put back as they are now."""
+        components, periods = self.components, self.periods
+        recorded = [i for i, history in enumerate(histories) if history is not None]
+        live = []
+        views = []
+        for i in recorded:
+            component, period = components[i], periods[i]
+            input_buffer, output_buffer = component.input_buffer, component.output_buffer
+            live.append((input_buffer, output_buffer, input_buffer.copy(), output_buffer.copy()))
+            held_inputs, held_outputs = self.held[i]
+            input_buffer[:] = held_inputs
+            output_buffer[:] = held_outputs
+            if len(histories[i]):
+                views.append(
+                    (period, -(-first // period) * period, histories[i], input_buffer, output_buffer,
+                     len(component.inputs))
+                )  # fmt: skip
+        reason = None
+        try:
+            for k in range(first, end):
+                for period, first_k, history, input_buffer, output_buffer, inputs in views:
+                    if k % period == 0:
+                        row = history[(k - first_k) // period]
+                        input_buffer[:] = row[:inputs]
+                        output_buffer[:] = row[inputs:]
+                reason = self.finish_step(k)
+                if reason is not None:
+                    if k != end - 1 or not clean:
+                        raise RuntimeError(
+                            f"the compiled loop ran past step {k}, where the run ends ({reason})"
+                        )
+                    break
+        finally:
+            for i, (input_buffer, output_buffer, inputs, outputs) in zip(recorded, live, strict=True):
+                self.held[i] = (input_buffer.copy(), output_buffer.copy())
+                input_buffer[:] = inputs
+                output_buffer[:] = outputs
+        return reason
 
 
 def _progress_bar(stop_time: float):

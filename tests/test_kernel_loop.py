@@ -1,0 +1,145 @@
+"""The compiled kernel (`cosim.core.kernel`, `Master.run_blocks`) against the master's Python loop.
+
+Truth: the Python loop (`Master.run` with a per-step callback), which the kernel must reproduce bit
+for bit: the same outputs after every step, the same rows recorded, and for scenario runs the
+same log bytes and outcome, including where a run stops (goal reached, collision, FMU failure,
+interrupt) at the step the Python loop stops.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fixtures.conftest_helpers import fixture_fmu
+
+from cosim.core import interrupt
+from cosim.core.master import Master
+from cosim.navigation import run as run_module
+from cosim.navigation.run import run_scenario
+from cosim.scenario.load import load_scenario
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+SCENARIOS = REPO / "scenarios"
+
+
+def _closed_loop(tmp_path):
+    from benchmarks.bench_orchestrator import _fmus, _system
+
+    return _system(*_fmus(tmp_path))
+
+
+def test_kernel_steps_an_fmu_system_as_the_python_loop(tmp_path):
+    steps = 3000
+    system, vehicle = _closed_loop(tmp_path)
+    expected = []
+    with Master(system) as master:
+        master.initialize()
+        master.run(steps, lambda m: expected.append(vehicle.output_buffer.copy()) and False)
+    system, vehicle = _closed_loop(tmp_path)
+    with Master(system) as master:
+        master.initialize()
+        tables = master.kernel_tables(record=True, block=128)
+        assert tables is not None
+        rows = []
+
+        def on_block(first, end, histories, clean):
+            index = [c.name for c in master.order].index("vehicle")
+            history = histories[index]
+            width = len(vehicle.inputs)
+            rows.extend(history[:, width:].copy())
+            assert len(history) == end - first and clean
+
+        done = master.run_blocks(steps, tables, on_block, block=128)
+        assert done == steps and master.step_index == steps
+    assert np.array_equal(np.array(rows), np.array(expected))
+
+
+def _scenario_file(tmp_path: Path, source: Path, extra: str = "") -> Path:
+    text = source.read_text()
+    map_file = (source.parent / "maps" / "warehouse.yaml").resolve()
+    text = re.sub(r'(?m)^file = "maps/warehouse.yaml"', f'file = "{map_file}"', text) + extra
+    path = tmp_path / source.name
+    path.write_text(text)
+    return path
+
+
+def _both(tmp_path, monkeypatch, path: Path, overrides=()):
+    """Run `path` through the Python loop and through the kernel; return both results and logs."""
+    results = []
+    for loop in ("python", "kernel"):
+        monkeypatch.setenv("NAVCOSIM_LOOP", loop)
+        scenario = load_scenario(path, list(overrides))
+        out = tmp_path / f"{loop}.mcap"
+        results.append((run_scenario(scenario, out), out.read_bytes()))
+    (python, python_log), (kernel, kernel_log) = results
+    assert kernel.outcome == python.outcome
+    assert kernel.steps == python.steps
+    assert kernel.failure == python.failure
+    assert kernel_log == python_log
+    return python
+
+
+@pytest.mark.parametrize(
+    "name, overrides, reason",
+    [
+        # VFH, lidar, a replan; stopped by the stop time.
+        ("warehouse_diff_drive_one_obstacle", ["simulation.stop_time=15"], "stop_time"),
+        # The goal within reach: the run ends at the first step inside the tolerance.
+        ("warehouse_diff_drive_no_obstacle", ["goal.x=16.0", "goal.y=6.0"], "goal_reached"),
+        # A collision (the bicycle runs into the drum after replanning).
+        ("warehouse_bicycle_three_obstacles", ["planner.replan=true"], "collision"),
+        # Moving obstacles: short blocks, the world at each block's time.
+        ("warehouse_moving_crossing", ["simulation.stop_time=20"], None),
+    ],
+)
+def test_scenario_runs_give_the_same_log_through_both_loops(tmp_path, monkeypatch, name, overrides, reason):
+    result = _both(tmp_path, monkeypatch, SCENARIOS / f"{name}.toml", overrides)
+    if reason is not None:
+        assert result.outcome.reason == reason
+
+
+def test_a_failing_fmu_stops_both_loops_at_the_same_step(tmp_path, monkeypatch):
+    inputs = ", ".join(
+        f'{port} = "u"' for port in ("v_in", "omega_in", "target_dir", "steering_dir", "goal_reached")
+    )
+    outputs = ", ".join(f'{port} = "y"' for port in ("v", "omega", "steering_angle", "mode"))
+    extra = f"""
+[mixer]
+fmu = "{fixture_fmu("failing_fmi2")}"
+fail_time = 3.0
+fail_status = 3
+ports = {{ {inputs}, {outputs} }}
+"""
+    path = _scenario_file(tmp_path, SCENARIOS / "warehouse_diff_drive_one_obstacle.toml", extra)
+    result = _both(tmp_path, monkeypatch, path)
+    assert result.outcome.reason == "fmu_failed" and "fmi2DoStep at t = 3 s" in result.failure
+
+
+@pytest.mark.parametrize("stop_step", [101, 250])
+def test_an_interrupt_at_a_block_edge_stops_both_loops_at_that_step(tmp_path, monkeypatch, stop_step):
+    """A signal noticed at step `stop_step` (a lidar step, the step after, a mid-period step where
+    the kernel's blocks do not end): the Python loop stops there; the kernel at its next block edge,
+    which is that step when the step is a block edge."""
+    masters = []
+
+    class Watched(Master):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            masters.append(self)
+
+    monkeypatch.setattr(run_module, "Master", Watched)
+    monkeypatch.setattr(interrupt, "take", lambda: "SIGINT" if masters[-1].step_index >= stop_step else None)
+    path = SCENARIOS / "warehouse_diff_drive_one_obstacle.toml"
+    if stop_step % 10 in (0, 1):
+        result = _both(tmp_path, monkeypatch, path)
+        assert result.outcome.reason == "interrupted" and result.steps == stop_step
+    else:
+        monkeypatch.setenv("NAVCOSIM_LOOP", "kernel")
+        result = run_scenario(load_scenario(path), tmp_path / "kernel.mcap")
+        # The next block edge: the lidar step at a multiple of 10.
+        assert result.outcome.reason == "interrupted" and result.steps == -(-stop_step // 10) * 10
