@@ -8,7 +8,11 @@
         observers uses),
       - navcosim's master, compiled loop (`run(n)`, an FMU-only system with nobody observing),
       - ecospy's `step(n)` (C++ master) on the same FMUs, when ecospy is installed.
-    Goals: >= 200k steps/s and >= 0.5x ecospy. Each engine's final pose is printed: they agree.
+      - the scenario loop with logging off (a position check after every step): the Python loop
+        with a per-step callback, what `cosim run` used before issue 15 ("now"), and the compiled
+        kernel (`Master.run_blocks`) that watches the position and calls back per block ("after").
+    Goals: >= 200k steps/s and >= 0.5x ecospy; issue 15: the scenario loop >= 1x ecospy (was
+    0.13-0.25x). Each engine's final pose is printed: they agree.
 
 (b) The same loop with every signal to MCAP and (c) each shipped scenario at full settings come
 from `benchmarks/bench_scenarios.py` (see there). `--parts a,b,c` runs them all into one table.
@@ -17,6 +21,7 @@ from `benchmarks/bench_scenarios.py` (see there). `--parts a,b,c` runs them all 
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import tempfile
 import time
@@ -87,6 +92,57 @@ def _navcosim(vehicle_path: Path, controller_path: Path, steps: int, compiled: b
         x, y = vehicle.output_buffer[0], vehicle.output_buffer[1]
     engine = "navcosim master, compiled loop" if compiled else "navcosim master, Python loop"
     return Row("a", engine, steps, seconds, note + f"final x, y = {x:.9f}, {y:.9f}")
+
+
+def _scenario_loop(vehicle_path: Path, controller_path: Path, steps: int, kernel: bool) -> Row:
+    """The scenario run's stepping with logging off, on the same FMUs: every step's position checked
+    against a goal circle (the outcome check that ends a run). Before ("now"): the master's Python
+    loop with a per-step callback, as `cosim run` stepped until issue 15. After: the compiled kernel
+    (`Master.run_blocks`) watching the position, a Python callback per block of 1000 steps."""
+    import numpy as np
+
+    system, vehicle = _system(vehicle_path, controller_path)
+    goal_x, goal_y, tolerance = GOAL[0] + 100.0, GOAL[1], 0.5  # never reached: the run goes on
+    with Master(system) as master:
+        master.initialize()
+        x_slot, y_slot = vehicle.output_index["x"], vehicle.output_index["y"]
+        buffer = vehicle.output_buffer
+        checks = [0]
+        if kernel:
+            tables = master.kernel_tables()
+            tables.watch_addresses[:] = (
+                1,
+                vehicle.output_buffer.ctypes.data + 8 * x_slot,
+                vehicle.output_buffer.ctypes.data + 8 * y_slot,
+            )
+            tables.watch_numbers[:] = (goal_x, goal_y, tolerance**2, 0.0, 0.0, np.inf)
+
+            def on_block(first: int, end: int, histories, clean: bool) -> bool:
+                checks[0] += end - first
+                x, y = buffer[x_slot], buffer[y_slot]
+                return math.hypot(x - goal_x, y - goal_y) <= tolerance
+
+            master.run_blocks(1, tables, on_block)  # compile or load the kernel, outside the timing
+            start = time.perf_counter()
+            master.run_blocks(steps - 1, tables, on_block)
+        else:
+
+            def after_step(current: Master) -> bool:
+                checks[0] += 1
+                x, y = buffer[x_slot], buffer[y_slot]
+                return math.hypot(x - goal_x, y - goal_y) <= tolerance
+
+            master.run(1, after_step)
+            start = time.perf_counter()
+            master.run(steps - 1, after_step)
+        seconds = time.perf_counter() - start
+        x, y = buffer[x_slot], buffer[y_slot]
+    engine = (
+        "scenario loop, logging off: compiled kernel (after)"
+        if kernel
+        else "scenario loop, logging off: Python loop + callback (now)"
+    )
+    return Row("a", engine, steps - 1, seconds, f"final x, y = {x:.9f}, {y:.9f}")
 
 
 def _naive_fmpy(vehicle_path: Path, controller_path: Path, steps: int, work: Path) -> Row:
@@ -164,6 +220,8 @@ def part_a(steps: int) -> list[Row]:
             _naive_fmpy(vehicle_path, controller_path, min(steps, 100_000), work),
             _navcosim(vehicle_path, controller_path, min(steps, 100_000), compiled=False),
             _navcosim(vehicle_path, controller_path, steps, compiled=True),
+            _scenario_loop(vehicle_path, controller_path, min(steps, 100_000), kernel=False),
+            _scenario_loop(vehicle_path, controller_path, steps, kernel=True),
         ]
         ecospy = _ecospy(vehicle_path, controller_path, steps)
         rows += [ecospy] if ecospy else []

@@ -278,6 +278,7 @@ class KernelTables:
         self.checks = np.array(checks, dtype=np.int64).reshape(-1, 3)
         self.history = np.zeros(max(1, record_offset))
         self.rows = np.zeros(n, dtype=np.int64)
+        self._blocks: list[np.ndarray | None] | None = None
         self.watch_addresses = np.zeros(3, dtype=np.int64)
         self.watch_numbers = np.zeros(6)
         # What the tables point into stays alive with them.
@@ -285,15 +286,16 @@ class KernelTables:
 
     def histories(self) -> list[np.ndarray | None]:
         """Per component, its rows so far as a (rows, inputs + outputs) view, None when not recorded."""
-        views = []
-        for i, shape in enumerate(self.record_shapes):
-            if shape is None:
-                views.append(None)
-                continue
-            offset, capacity, width = shape
-            block = self.history[offset : offset + capacity * width].reshape(capacity, width)
-            views.append(block[: self.rows[i]])
-        return views
+        if self._blocks is None:
+            self._blocks = []
+            for shape in self.record_shapes:
+                if shape is None:
+                    self._blocks.append(None)
+                    continue
+                offset, capacity, width = shape
+                self._blocks.append(self.history[offset : offset + capacity * width].reshape(capacity, width))
+        rows = self.rows.tolist()
+        return [None if block is None else block[: rows[i]] for i, block in enumerate(self._blocks)]
 
     def warm_up(self) -> None:
         """Compile the kernel, or load it from numba's cache (a call of no steps)."""

@@ -575,6 +575,7 @@ class Master:
         h_ns, start_ns = self.system.macro_step_ns, self.start_time_ns
         jacobi = self.system.mode == "jacobi"
         periods = [period for _, period, _ in self._plan]
+        stepping = [i for i in range(len(periods)) if tables.components[i, kernel.C_KIND] != kernel.KIND_IDLE]
         end = self.step_index + steps
         first = k = self.step_index
         position = 0
@@ -590,10 +591,7 @@ class Master:
                 k, count, position, start_ns, h_ns, jacobi
             )
             finish_step = False
-            clean = position == 0 or not any(
-                tables.components[i, kernel.C_KIND] != kernel.KIND_IDLE and k % periods[i] == 0
-                for i in range(position)
-            )
+            clean = position == 0 or not any(k % periods[i] == 0 for i in stepping if i < position)
             if k > first:
                 histories = tables.histories()
                 delivered = []

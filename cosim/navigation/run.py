@@ -575,20 +575,34 @@ class _KernelBlocks:
         self.block = 50 if self.speed > 0.0 else 1000
         self.h = system.macro_step
         self.anchor: tuple[float, float] | None = None
-        # Each component's buffers after the last step replayed (at first: after initialisation).
-        self.held = {
-            i: (component.input_buffer.copy(), component.output_buffer.copy())
-            for i, component in enumerate(self.components)
-        }
+        # Per component: period, its scalar inputs (a view of the buffer; array inputs are not
+        # recorded), where they sit in a row, its outputs, and both as they were after the last
+        # step replayed (at first: after initialisation).
+        self.parts = []
+        for component, period in zip(self.components, self.periods, strict=True):
+            slots = [i for i, port in enumerate(component.inputs) if not port.is_array_element]
+            if not slots:
+                where = slice(0, 0)
+            elif slots == list(range(slots[0], slots[-1] + 1)):
+                where = slice(slots[0], slots[-1] + 1)
+            else:  # scalars between arrays: the whole buffer
+                where = slice(0, len(component.inputs))
+            inputs = component.input_buffer[where]
+            outputs = component.output_buffer
+            self.parts.append((period, inputs, where, outputs, inputs.copy(), outputs.copy()))
 
     def watch(self) -> None:
         """Before a kernel call: the circle around the current position known free of collisions."""
         buffer_x, x, buffer_y, y = self.pose
         x, y = buffer_x.item(x), buffer_y.item(y)
-        if (x, y) == self.anchor and not self.moving:
-            return
-        self.anchor = (x, y)
         numbers = self.tables.watch_numbers
+        if not self.moving and self.anchor is not None:
+            # A static world: the circle stays valid; a new one only when half of it is used up.
+            anchor_x, anchor_y = self.anchor
+            dx, dy = x - anchor_x, y - anchor_y
+            if 4.0 * (dx * dx + dy * dy) < numbers[5]:
+                return
+        self.anchor = (x, y)
         if not (math.isfinite(x) and math.isfinite(y)):
             numbers[3:] = (0.0, 0.0, -1.0)  # every step is checked
             return
@@ -603,32 +617,27 @@ class _KernelBlocks:
 
     def replay(self, first: int, end: int, histories, clean: bool) -> str | None:
         """Steps [first, end) as the Python loop's callback sees them: each recorded component's
-        buffers are set to what they held after each step (its rows, held between its steps), then
-        put back as they are now."""
-        components, periods = self.components, self.periods
-        recorded = [i for i, history in enumerate(histories) if history is not None]
+        buffers (its scalar inputs and its outputs, what the recording reads) are set to what they
+        held after each step (its rows, held between its steps), then put back as they are now."""
         live = []
         views = []
-        for i in recorded:
-            component, period = components[i], periods[i]
-            input_buffer, output_buffer = component.input_buffer, component.output_buffer
-            live.append((input_buffer, output_buffer, input_buffer.copy(), output_buffer.copy()))
-            held_inputs, held_outputs = self.held[i]
-            input_buffer[:] = held_inputs
-            output_buffer[:] = held_outputs
-            if len(histories[i]):
-                views.append(
-                    (period, -(-first // period) * period, histories[i], input_buffer, output_buffer,
-                     len(component.inputs))
-                )  # fmt: skip
+        for i, history in enumerate(histories):
+            if history is None:
+                continue
+            period, inputs, row_inputs, outputs, held_inputs, held_outputs = self.parts[i]
+            live.append((inputs.copy(), outputs.copy(), i))
+            inputs[:] = held_inputs
+            outputs[:] = held_outputs
+            if len(history):
+                views.append((period, -(-first // period) * period, history, inputs, outputs, row_inputs))
         reason = None
         try:
             for k in range(first, end):
-                for period, first_k, history, input_buffer, output_buffer, inputs in views:
+                for period, first_k, history, inputs, outputs, row_inputs in views:
                     if k % period == 0:
                         row = history[(k - first_k) // period]
-                        input_buffer[:] = row[:inputs]
-                        output_buffer[:] = row[inputs:]
+                        inputs[:] = row[row_inputs]
+                        outputs[:] = row[-len(outputs) :] if len(outputs) else row[:0]
                 reason = self.finish_step(k)
                 if reason is not None:
                     if k != end - 1 or not clean:
@@ -637,10 +646,12 @@ class _KernelBlocks:
                         )
                     break
         finally:
-            for i, (input_buffer, output_buffer, inputs, outputs) in zip(recorded, live, strict=True):
-                self.held[i] = (input_buffer.copy(), output_buffer.copy())
-                input_buffer[:] = inputs
-                output_buffer[:] = outputs
+            for live_inputs, live_outputs, i in live:
+                _, inputs, _, outputs, held_inputs, held_outputs = self.parts[i]
+                held_inputs[:] = inputs
+                held_outputs[:] = outputs
+                inputs[:] = live_inputs
+                outputs[:] = live_outputs
         return reason
 
 
