@@ -33,14 +33,17 @@ def _closed_loop(tmp_path):
     return _system(*_fmus(tmp_path))
 
 
-def test_kernel_steps_an_fmu_system_as_the_python_loop(tmp_path):
+@pytest.mark.parametrize("mode", ["gauss-seidel", "jacobi"])
+def test_kernel_steps_an_fmu_system_as_the_python_loop(tmp_path, mode):
     steps = 3000
     system, vehicle = _closed_loop(tmp_path)
+    system.mode = mode
     expected = []
     with Master(system) as master:
         master.initialize()
         master.run(steps, lambda m: expected.append(vehicle.output_buffer.copy()) and False)
     system, vehicle = _closed_loop(tmp_path)
+    system.mode = mode
     with Master(system) as master:
         master.initialize()
         tables = master.kernel_tables(record=True, block=128)
@@ -89,6 +92,12 @@ def _both(tmp_path, monkeypatch, path: Path, overrides=()):
     [
         # VFH, lidar, a replan; stopped by the stop time.
         ("warehouse_diff_drive_one_obstacle", ["simulation.stop_time=15"], "stop_time"),
+        # The FMI 3.0 builds: array variables set whole, C bool flags, Int32 and Boolean ports.
+        (
+            "warehouse_diff_drive_one_obstacle",
+            ["simulation.stop_time=10", "simulation.fmi_version=3"],
+            "stop_time",
+        ),
         # The goal within reach: the run ends at the first step inside the tolerance.
         ("warehouse_diff_drive_no_obstacle", ["goal.x=16.0", "goal.y=6.0"], "goal_reached"),
         # A collision (the bicycle runs into the drum after replanning).

@@ -305,8 +305,7 @@ class KernelTables:
         from cosim.core.kernel import step_kernel
 
         return step_kernel(
-            np.int64(first_step), np.int64(steps), np.int64(position), np.int64(start_ns), np.int64(h_ns),
-            bool(jacobi), self.components, self.step_sizes, self.link_addresses, self.link_numbers,
-            self.groups, self.slot_addresses, self.slot_scales, self.checks, self.history, self.rows,
-            self.watch_addresses, self.watch_numbers,
+            first_step, steps, position, start_ns, h_ns, jacobi, self.components, self.step_sizes,
+            self.link_addresses, self.link_numbers, self.groups, self.slot_addresses, self.slot_scales,
+            self.checks, self.history, self.rows, self.watch_addresses, self.watch_numbers,
         )  # fmt: skip

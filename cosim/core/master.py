@@ -628,17 +628,23 @@ class Master:
                     raise
                 raise CosimError(f"component '{self._plan[failed][0].name}' failed at step {k}")
             if code == kernel.HAND_BACK:
-                component, period, gather = self._plan[position]
-                try:
-                    if gather is not None:
-                        gather()
-                        component.push_inputs()
-                    component.do_step((start_ns + k * h_ns) / NS_PER_S, period * h_ns / NS_PER_S)
-                    component.get_outputs()
-                except CosimError as error:
-                    self.failure = error
-                    raise
-                position += 1
+                # This component, and the next ones due in this step while they need Python too.
+                while True:
+                    component, period, gather = self._plan[position]
+                    try:
+                        if gather is not None:
+                            gather()
+                            component.push_inputs()
+                        component.do_step((start_ns + k * h_ns) / NS_PER_S, period * h_ns / NS_PER_S)
+                        component.get_outputs()
+                    except CosimError as error:
+                        self.failure = error
+                        raise
+                    position += 1
+                    following = next((i for i in stepping if i >= position and k % periods[i] == 0), None)
+                    if following is None or tables.native[following] is not None:
+                        break
+                    position = following
                 finish_step = True
         return self.step_index - (end - steps)
 

@@ -565,8 +565,6 @@ class _KernelBlocks:
             ctypes.addressof(vehicle_x.output_cbuffer) + 8 * x,
             ctypes.addressof(vehicle_y.output_cbuffer) + 8 * y,
         )
-        reach = scenario.goal_tolerance + 1e-6 * (1.0 + scenario.goal_tolerance)
-        tables.watch_numbers[:3] = (scenario.goal[0], scenario.goal[1], reach * reach)
         self.radius = scenario.vehicle_radius
         self.world = monitor.world
         self.speed = getattr(self.world, "max_speed", 0.0)
@@ -596,6 +594,10 @@ class _KernelBlocks:
         buffer_x, x, buffer_y, y = self.pose
         x, y = buffer_x.item(x), buffer_y.item(y)
         numbers = self.tables.watch_numbers
+        # The goal as the monitor has it now (a hook may move it between blocks).
+        goal, tolerance = self.monitor.goal, self.monitor.tolerance
+        reach = tolerance + 1e-6 * (1.0 + tolerance)
+        numbers[:3] = (goal[0], goal[1], reach * reach)
         if not self.moving and self.anchor is not None:
             # A static world: the circle stays valid; a new one only when half of it is used up.
             anchor_x, anchor_y = self.anchor
