@@ -100,8 +100,12 @@ def _both(tmp_path, monkeypatch, path: Path, overrides=()):
         ),
         # The goal within reach: the run ends at the first step inside the tolerance.
         ("warehouse_diff_drive_no_obstacle", ["goal.x=16.0", "goal.y=6.0"], "goal_reached"),
-        # A collision (the bicycle runs into the drum after replanning).
-        ("warehouse_bicycle_three_obstacles", ["planner.replan=true"], "collision"),
+        # A collision: a wide footprint starting next to the box, the kernel watching every step there.
+        (
+            "warehouse_diff_drive_one_obstacle",
+            ["vehicle.radius=1.5", "start.x=52", "start.y=19.25", "simulation.stop_time=20"],
+            "collision",
+        ),
         # Moving obstacles: short blocks, the world at each block's time.
         ("warehouse_moving_crossing", ["simulation.stop_time=20"], None),
     ],
