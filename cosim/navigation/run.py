@@ -21,6 +21,19 @@ Log contents and rates (t = simulated time, integer nanoseconds):
 - `/map`, `/map_inflated`, `/goal`: once at t = 0.
 - metadata `navcosim`, `fmu/<role>`, `outcome`; attachments `scenario.toml` and the map file(s).
 
+The loop: the FMUs step in the compiled kernel (`Master.run_blocks`, `cosim.core.kernel`), which keeps
+their buffers after each step and hands the Python components (lidar, planner) back where they are
+due. After each block of steps (cut at every Python component's step, at the end of a step in which
+one stepped, and after any step whose position may end the run: not finite, near the goal, or
+outside a circle that the true obstacles cannot reach) `_KernelBlocks.replay` sets the buffers
+to each step's values in turn and calls `finish_step` (recording, mode, outcome, planner) for it,
+as the Python loop's per-step callback does; so the log and the outcome are the same bytes and
+numbers, and the run ends at the same step. Hooks: `finish_step(k)` runs once per step (both
+loops), `on_block` once per block (kernel; interrupts are noticed there, at most one block late),
+`_KernelBlocks.watch` before each kernel call (it re-reads the monitor's goal). A system the
+kernel cannot step (Jacobi mode with Python components) and NAVCOSIM_LOOP=python use the master's
+Python loop with the per-step callback.
+
 End of a run: a normal end, an interrupt (outcome reason "interrupted") and an FMU failure
 (reason "fmu_failed": an error status, a crash, exit() or hang of an FMU in a child process, a NaN
 output; metadata `outcome.failure` holds the message) all finalise the log at its path, readable
