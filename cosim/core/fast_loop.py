@@ -183,6 +183,9 @@ class KernelTables:
         links, link_numbers, groups, slots, scales, checks = [], [], [], [], [], []
         self.native: list[NativeStep | None] = []
         record_offset = 0
+        fed: dict[str, list] = {}
+        for connection in system.connections:
+            fed.setdefault(connection.target_component, []).append(connection)
         self.record_shapes: list[tuple[int, int] | None] = []
         for i, (component, period, _) in enumerate(plan):
             native = component.native_step()
@@ -200,8 +203,8 @@ class KernelTables:
             row[K.C_OUT_ADDRESS] = ctypes.addressof(component.output_cbuffer)
             row[K.C_OUT_COUNT] = len(component.outputs)
             row[K.C_LINK_FIRST] = len(links)
-            for connection in system.connections:
-                if connection.target_component != component.name or connection.source_component in skip:
+            for connection in fed.get(component.name, ()):
+                if connection.source_component in skip:
                     continue
                 producer, source = system.resolve(connection.source, "output")
                 _, target = system.resolve(connection.target, "input")

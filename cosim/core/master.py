@@ -239,16 +239,20 @@ class System:
         (the vehicle before the controllers, whose commands only reach its unconnected outputs).
         """
         consumed = {c.source for c in self.connections}
+        # Per consumer, the inputs some connected output depends on directly (one pass over the
+        # feedthrough; a planner's 2000 waypoints feed every output of a path follower).
+        feeding: dict[str, set[str]] = {}
+        for name, component in self.components.items():
+            feeding[name] = set()
+            for output, depends in component.feedthrough.items():
+                if f"{name}.{output}" in consumed:
+                    feeding[name].update(depends)
         edges = set()
         for c in self.connections:
             if c.source_component == c.target_component:
                 continue
             consumer, index = self.resolve(c.target, "input")
-            port = consumer.inputs[index].name
-            if any(
-                port in depends and f"{consumer.name}.{output}" in consumed
-                for output, depends in consumer.feedthrough.items()
-            ):
+            if consumer.inputs[index].name in feeding[consumer.name]:
                 edges.add((c.source_component, c.target_component))
         return [self.components[name] for name in self._topological(edges)]
 
