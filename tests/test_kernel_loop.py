@@ -156,3 +156,32 @@ def test_an_interrupt_at_a_block_edge_stops_both_loops_at_that_step(tmp_path, mo
         result = run_scenario(load_scenario(path), tmp_path / "kernel.mcap")
         # The next block edge: the lidar step at a multiple of 10.
         assert result.outcome.reason == "interrupted" and result.steps == -(-stop_step // 10) * 10
+
+
+def test_a_goal_given_during_the_run_ends_both_loops_at_the_same_step(tmp_path, monkeypatch):
+    """The run's goal hook (the live view's /goal_pose) moves the goal at a planner step; the kernel
+    watches the new goal from its next block, and the run ends where the Python loop ends it."""
+
+    class Goals:
+        def __init__(self):
+            self.calls, self.reports = 0, []
+
+        def take(self):
+            self.calls += 1
+            return (16.0, 6.0) if self.calls == 3 else None
+
+        def report(self, text, warning=True):
+            self.reports.append((warning, text))
+
+    results = []
+    for loop in ("python", "kernel"):
+        monkeypatch.setenv("NAVCOSIM_LOOP", loop)
+        scenario = load_scenario(SCENARIOS / "warehouse_diff_drive_one_obstacle.toml")
+        goals = Goals()
+        out = tmp_path / f"{loop}.mcap"
+        results.append((run_scenario(scenario, out, goals=goals), out.read_bytes(), goals.reports))
+    (python, python_log, python_reports), (kernel, kernel_log, kernel_reports) = results
+    assert python_reports == kernel_reports and [w for w, _ in python_reports] == [False]
+    assert python.outcome.reason == "goal_reached" and python.outcome.time < 20.0
+    assert kernel.outcome == python.outcome and kernel.steps == python.steps
+    assert kernel_log == python_log
