@@ -77,7 +77,7 @@ def part_b(steps: int) -> list[Row]:
     return [Row("b", "navcosim master + Recorder, every signal", steps, seconds, f"{size:.1f} MB log")]
 
 
-def part_c(_steps: int = 0, repeat: int = 1) -> list[Row]:
+def part_c(_steps: int = 0, repeat: int = 1, only: list[str] | None = None) -> list[Row]:
     """Each shipped scenario at full settings with full logging (the fastest of `repeat` runs),
     through the compiled kernel (after) and the master's Python loop (now), interleaved."""
     import os
@@ -89,6 +89,8 @@ def part_c(_steps: int = 0, repeat: int = 1) -> list[Row]:
     before = os.environ.get("NAVCOSIM_LOOP")
     with tempfile.TemporaryDirectory() as scratch:
         for path in sorted((REPO / "scenarios").glob("*.toml")):
+            if only and path.stem not in only:
+                continue
             scenario = load_scenario(path)
             results: dict[str, list] = {"kernel": [], "python": []}
             try:
@@ -133,12 +135,16 @@ def main() -> None:
     parser.add_argument("--parts", default="b,c", help="comma-separated parts to run (b, c)")
     parser.add_argument("--steps", type=int, default=200_000, help="macro steps of part (b)")
     parser.add_argument("--repeat", type=int, default=1, help="part (c): fastest of R runs per scenario")
+    parser.add_argument("--scenarios", nargs="*", help="part (c): only these scenarios (file stems)")
     arguments = parser.parse_args()
     print("| part | engine / scenario | steps | steps/s | note |\n|---|---|---:|---:|---|")
     for part in arguments.parts.split(","):
         if part not in PARTS:
             parser.error(f"unknown part '{part}'; parts: {', '.join(PARTS)}")
-        rows = part_c(repeat=arguments.repeat) if part == "c" else PARTS[part](arguments.steps)
+        if part == "c":
+            rows = part_c(repeat=arguments.repeat, only=arguments.scenarios)
+        else:
+            rows = PARTS[part](arguments.steps)
         for row in rows:
             print(f"| {row.part} | {row.engine} | {row.steps} | {row.rate:,.0f} | {row.note} |", flush=True)
 
