@@ -7,6 +7,11 @@ function generated for this system and compiled with numba: it calls the FMUs' C
 address and copies the connections (with their scale and offset) between the same buffers the
 Python path uses, with the same order, periods and arithmetic, so both paths give bit-identical
 results. Compilation costs about a second, so the master uses it only for long runs.
+
+`KernelTables` fills the tables of `cosim.core.kernel.step_kernel`, the compiled loop written
+once (cached by numba, no per-process compile) that `Master.run_blocks` runs: any FMU whose
+`native_step()` describes its calls (integer, boolean and scaled ports included), with the Python
+components handed back where they are due.
 """
 
 from __future__ import annotations

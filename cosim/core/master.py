@@ -43,6 +43,15 @@ controllers' commands feed its (unconnected) velocity outputs. Each component ga
 inputs from the producers already initialised (other inputs keep their start values),
 initialises, and has its outputs read. Jacobi mode uses the same initialisation.
 
+Loops
+-----
+`Master.run` steps in Python (with a per-step callback, or always when `compiled=False`) or, for a
+system made only of FMUs with plain real ports and nobody observing the steps, in a loop generated
+and compiled for the system (`cosim.core.fast_loop`). `Master.run_blocks` steps through the
+compiled kernel (`cosim.core.kernel`, cached), handing components that need Python back where
+they are due, recording the FMUs' buffers and watching a position; its callback runs per block of
+steps. All loops give bit-identical values.
+
 Failures
 --------
 A component that raises `CosimError` while stepping stops the master: `step()`/`run()` re-raise
