@@ -644,15 +644,21 @@ class _KernelBlocks:
             inputs[:] = held_inputs
             outputs[:] = held_outputs
             if len(history):
-                views.append((period, -(-first // period) * period, history, inputs, outputs, row_inputs))
+                # Rows of the block as two 2-D views: the scalar inputs, the outputs.
+                input_rows = history[:, row_inputs]
+                output_rows = history[:, history.shape[1] - len(outputs) :]
+                views.append((period, -(-first // period) * period, input_rows, output_rows, inputs, outputs))
         reason = None
         try:
             for k in range(first, end):
-                for period, first_k, history, inputs, outputs, row_inputs in views:
-                    if k % period == 0:
-                        row = history[(k - first_k) // period]
-                        inputs[:] = row[row_inputs]
-                        outputs[:] = row[-len(outputs) :] if len(outputs) else row[:0]
+                for period, first_k, input_rows, output_rows, inputs, outputs in views:
+                    if period == 1:
+                        inputs[:] = input_rows[k - first_k]
+                        outputs[:] = output_rows[k - first_k]
+                    elif k % period == 0:
+                        j = (k - first_k) // period
+                        inputs[:] = input_rows[j]
+                        outputs[:] = output_rows[j]
                 reason = self.finish_step(k)
                 if reason is not None:
                     if k != end - 1 or not clean:
