@@ -133,7 +133,7 @@ ports = {{ {inputs}, {outputs} }}
     assert result.outcome.reason == "fmu_failed" and "fmi2DoStep at t = 3 s" in result.failure
 
 
-@pytest.mark.parametrize("stop_step", [101, 250])
+@pytest.mark.parametrize("stop_step", [101, 250, 255])
 def test_an_interrupt_at_a_block_edge_stops_both_loops_at_that_step(tmp_path, monkeypatch, stop_step):
     """A signal noticed at step `stop_step` (a lidar step, the step after, a mid-period step where
     the kernel's blocks do not end): the Python loop stops there; the kernel at its next block edge,
