@@ -358,3 +358,16 @@ def step_kernel(
             if dx * dx + dy * dy >= watch_numbers[5]:
                 return WATCH, k, 0, -1, 0, 0, 0
     return DONE, k, 0, -1, 0, 0, 0
+
+
+def warm_up() -> None:
+    """Compile `step_kernel` (or load it from numba's cache) without a system: a call of no steps on
+    empty tables, with the argument types every run uses. For a build or install step that fills
+    the cache, so a first run does not compile it."""
+    empty = np.zeros((0, COMPONENT_COLUMNS), dtype=np.int64)
+    step_kernel(
+        0, 0, 0, 0, 1, False, empty, np.zeros(0), np.zeros((0, 3), dtype=np.int64), np.zeros((0, 2)),
+        np.zeros((0, GROUP_COLUMNS), dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0),
+        np.zeros((0, 3), dtype=np.int64), np.zeros(1), np.zeros(0, dtype=np.int64),
+        np.zeros(3, dtype=np.int64), np.zeros(6),
+    )  # fmt: skip
