@@ -91,11 +91,11 @@ def _both(tmp_path, monkeypatch, path: Path, overrides=()):
     "name, overrides, reason",
     [
         # VFH, lidar, a replan; stopped by the stop time.
-        ("warehouse_diff_drive_one_obstacle", ["simulation.stop_time=15"], "stop_time"),
+        ("warehouse_diff_drive_one_obstacle", ["simulation.stop_time=8"], "stop_time"),
         # The FMI 3.0 builds: array variables set whole, C bool flags, Int32 and Boolean ports.
         (
             "warehouse_diff_drive_one_obstacle",
-            ["simulation.stop_time=10", "simulation.fmi_version=3"],
+            ["simulation.stop_time=5", "simulation.fmi_version=3"],
             "stop_time",
         ),
         # The goal within reach: the run ends at the first step inside the tolerance.
@@ -107,7 +107,7 @@ def _both(tmp_path, monkeypatch, path: Path, overrides=()):
             "collision",
         ),
         # Moving obstacles: short blocks, the world at each block's time.
-        ("warehouse_moving_crossing", ["simulation.stop_time=20"], None),
+        ("warehouse_moving_crossing", ["simulation.stop_time=8"], None),
     ],
 )
 def test_scenario_runs_give_the_same_log_through_both_loops(tmp_path, monkeypatch, name, overrides, reason):
