@@ -1,5 +1,7 @@
 """Errors a user can cause in the orchestrator; see `planner.errors.NavcosimError`."""
 
+import re
+
 from planner.errors import NavcosimError
 
 
@@ -9,9 +11,21 @@ class CosimError(NavcosimError):
 
 QUOTE_LIMIT = 80  # characters of a user's value quoted in an error message
 PATH_LIMIT = 200  # characters of a path quoted in an error message
+WHERE_LIMIT = 120  # characters of the key path an error names, e.g. [components.lag].ports.u
+WORD_LIMIT = 120  # characters of a name, value or path without spaces in a message (see shorten_words)
 
 
 def shorten(text: object, limit: int = QUOTE_LIMIT) -> str:
     """`text` on one line, cut to `limit` characters with an ellipsis (a value or path in a message)."""
     text = str(text).replace("\n", "\\n").replace("\r", "\\r")
     return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
+_LONG_WORD = re.compile(rf"\S{{{WORD_LIMIT + 1},}}")
+
+
+def shorten_words(text: str, limit: int = 1000) -> str:
+    """`text` with every run of more than `WORD_LIMIT` characters without a space cut (a message
+    that quotes names or values the user wrote, which may be megabytes long), and at most `limit`
+    characters in all."""
+    return shorten(_LONG_WORD.sub(lambda match: shorten(match.group(0), WORD_LIMIT), text), limit)

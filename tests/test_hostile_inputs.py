@@ -318,3 +318,51 @@ def test_deleted_variable_of_an_fmi3_fmu(tmp_path):
         f"FMU '{fmu}': invalid modelDescription.xml: <ModelStructure> <Output valueReference=\"5\"> "
         "refers to valueReference 5, which no variable of <ModelVariables> has"
     )
+
+
+# Found by the scenario mutator (tests/test_scenario_mutants.py).
+
+
+def test_component_name_of_3000_characters(tmp_path, capsys):
+    name = "x" * 3000
+    message = reject(tmp_path, capsys, example_text() + f'\n[components.{name}]\nfmu = "DifferentialDrive"\n')
+    assert "[components].xxxx" in message
+    assert "a component name must be an identifier (letters, digits, _) of at most 100 characters" in message
+
+
+def test_component_that_is_not_a_table_names_its_section(tmp_path, capsys):
+    message = reject(tmp_path, capsys, example_text() + "\n[components]\nghost = 1.5\n")
+    assert message.endswith(": [components].ghost: must be a table [components.ghost], got 1.5")
+
+
+def test_connection_endpoint_of_7000_characters_is_cut(tmp_path, capsys):
+    # Composition problems quote the user's names; each line stays short however long they are.
+    extra = "\n[[connections]]\nfrom = 'mixer." + "v" * 7000 + "'\nto = 'vehicle.v'\n"
+    message = reject(tmp_path, capsys, example_text() + extra)
+    assert "[[connections]][0].from: component 'mixer' has no output 'vvvv" in message and "…" in message
+
+
+def test_parameter_name_of_3000_characters_is_cut(tmp_path, capsys):
+    text = example_text(**{"[vfh] ": "[vfh]\n" + "z" * 3000 + " = 1.0\n"})
+    message = reject(tmp_path, capsys, text)
+    assert "[vfh].zzzz" in message and "the FMU has no parameter 'zzzz" in message
+
+
+def test_toml_date_is_quoted_as_written(tmp_path, capsys):
+    message = reject(tmp_path, capsys, example_text(**{"stop_time = 200.0": "stop_time = 2026-01-01"}))
+    assert message.endswith("[simulation].stop_time: must be a number, got 2026-01-01")
+
+
+def test_empty_key_is_named(tmp_path, capsys):
+    message = reject(tmp_path, capsys, example_text(**{"[vfh] ": '[vfh]\n"" = "x"\n'}))
+    assert message.endswith("""[vfh]."": an FMU parameter must be a number or true/false, got 'x'""")
+
+
+@pytest.mark.parametrize("kind", ["directory", "device"])
+def test_map_file_that_is_not_a_regular_file(kind, tmp_path, capsys):
+    target = tmp_path / "a_map.yaml" if kind == "directory" else Path("/dev/null")
+    if kind == "directory":
+        target.mkdir()
+    message = reject(tmp_path, capsys, example_text(**{f'"{WAREHOUSE}"': f'"{target}"'}))
+    what = "is a directory" if kind == "directory" else "is not a regular file"
+    assert message.endswith(f"[map].file: the map file {what}: {target}")

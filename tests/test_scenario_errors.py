@@ -147,3 +147,22 @@ def test_bad_input_subprocess_has_no_traceback(tmp_path: Path):
         f"cosim: error: {scenario}: [vfh].histogram_thresholds: low 12 > high 10"
     ]
     assert not log.exists()
+
+
+def test_override_sets_an_item_of_a_list(tmp_path: Path, capsys):
+    # Found by the scenario mutator: `--set vfh.distance_limits.1=2` once said "give an item index".
+    scenario = REPO / "scenarios" / "example_commented.toml"
+    log = tmp_path / "run.mcap"
+    code, _, err = run_cli(
+        ["run", str(scenario), "--out", str(log), "--quiet", "--set", "vfh.distance_limits.1=2"], capsys
+    )
+    assert_bad_input(code, err, "[vfh].distance_limits: low 3.5 > high 2", scenario, log)
+
+
+def test_override_of_a_list_item_out_of_range(tmp_path: Path, capsys):
+    scenario = REPO / "scenarios" / "example_commented.toml"
+    code, _, err = run_cli(["system", str(scenario), "--set", "vfh.distance_limits.2=25"], capsys)
+    assert code == 2
+    assert err.splitlines() == [
+        "cosim: error: --set vfh.distance_limits.2=25: no item 2 in vfh.distance_limits (items 0 to 1)"
+    ]

@@ -31,7 +31,7 @@ from pathlib import Path
 
 from cosim.core.component import closest_names
 from cosim.core.master import find_algebraic_loop
-from cosim.errors import CosimError
+from cosim.errors import WHERE_LIMIT, CosimError, shorten, shorten_words
 from cosim.scenario.description import (
     TEMPLATE,
     ComponentDescription,
@@ -62,7 +62,8 @@ class Problems:
         self.lines: list[str] = []
 
     def add(self, where: str, problem: str) -> None:
-        self.lines.append(f"{self.source}: {where}: {problem}")
+        # A name or reference the user wrote may be megabytes long: each line stays short.
+        self.lines.append(f"{self.source}: {shorten(where, WHERE_LIMIT)}: {shorten_words(problem)}")
 
     def check(self) -> None:
         if self.lines:

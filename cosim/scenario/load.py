@@ -261,8 +261,14 @@ def apply_override(raw: dict, override: str, source: str) -> None:
             node = node.setdefault(part, {})
         if not isinstance(node, dict | list):
             raise CosimError(f"--set {shown}: {shorten('.'.join(parts[: depth + 1]))} is not a table")
-    if isinstance(node, list):
-        raise CosimError(f"--set {shown}: give an item index after {shorten('.'.join(parts[:-1]))}")
+    if isinstance(node, list):  # an item of a list, e.g. vfh.distance_limits.1=25
+        if not parts[-1].isdigit() or int(parts[-1]) >= len(node):
+            raise CosimError(
+                f"--set {shown}: no item {shorten(parts[-1])} in {shorten('.'.join(parts[:-1]))} "
+                f"(items 0 to {len(node) - 1})"
+            )
+        node[int(parts[-1])] = value
+        return
     node[parts[-1]] = value
 
 
@@ -470,7 +476,12 @@ def _existing_file(table: TableReader, key: str, base_dir: Path, what: str, name
         path = (base_dir / name).resolve()
         if path.is_file():
             return path
-        problem = f"no such {what}: {shorten(path, PATH_LIMIT)}"
+        if path.is_dir():
+            problem = f"the {what} is a directory: {shorten(path, PATH_LIMIT)}"
+        elif path.exists():  # a device, a pipe, a socket
+            problem = f"the {what} is not a regular file: {shorten(path, PATH_LIMIT)}"
+        else:
+            problem = f"no such {what}: {shorten(path, PATH_LIMIT)}"
     except RuntimeError:  # Python 3.11's resolve() on a symbolic link loop
         problem = f"cannot open the {what} {describe(name)}: symbolic link loop"
     except (OSError, ValueError) as error:  # name too long, link loop, embedded NUL byte, ...
@@ -552,12 +563,16 @@ def _added_components(top: TableReader, base_dir: Path, removed: tuple[str, ...]
     components: dict[str, ComponentSpec] = {}
     for name, value in tables.table.items():
         tables.used.add(name)
+        if not name.isidentifier() or not name.isascii() or len(name) > MAX_NAME_LENGTH:
+            raise tables.error(
+                name,
+                f"a component name must be an identifier (letters, digits, _) of at most {MAX_NAME_LENGTH} "
+                "characters",
+            )
         where = f"[components.{name}]"
         if not isinstance(value, dict):
             raise tables.error(name, f"must be a table {where}, got {describe(value)}")
         table = TableReader(tables.source, where, value)
-        if not name.isidentifier() or not name.isascii():
-            raise table.error(None, "a component name must be an identifier (letters, digits, _)")
         if name in removed and name in REPLACEABLE:
             raise table.error(None, f"'{name}' is also in [system].remove: replace it or remove it, not both")
         if name == "vehicle":

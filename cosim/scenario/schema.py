@@ -7,6 +7,7 @@ is left at `finish()` is an unknown key, reported with a "did you mean". Every e
 
 from __future__ import annotations
 
+import datetime
 import difflib
 import math
 from collections.abc import Callable, Iterable
@@ -68,6 +69,8 @@ def _preview(value: Any) -> str:
             emit("true" if item else "false")
         elif isinstance(item, str):
             emit(f"'{item[: QUOTE_LIMIT + 1]}'")
+        elif isinstance(item, datetime.date | datetime.time):  # a TOML date or time, as written
+            emit(item.isoformat())
         elif isinstance(item, int) and item.bit_length() > 256:  # str() of a huge int is slow or refused
             emit(f"an integer of about {int(item.bit_length() * math.log10(2)) + 1} digits")
         else:
@@ -102,7 +105,7 @@ class TableReader:
         self.used: set[str] = set()
 
     def error(self, key: str | None, problem: str) -> CosimError:
-        key = shorten(key) if key else key
+        key = '""' if key == "" else shorten(key) if key else key  # "" is a key TOML allows
         if not self.where:  # the top level: its keys are the sections
             return CosimError(f"{self.source}: [{key}]: {problem}")
         where = f"{self.where}.{key}" if key else self.where
@@ -197,7 +200,8 @@ class TableReader:
         return low, high
 
     def table_of(self, key: str) -> TableReader:
-        return TableReader(self.source, f"{self.where}.{shorten(key)}", self.raw(key, {}))
+        where = f"{self.where}.{shorten(key)}" if self.where else f"[{shorten(key)}]"  # a section
+        return TableReader(self.source, where, self.raw(key, {}))
 
     def finish(self, extra_allowed: Callable[[str], bool] | None = None) -> None:
         """Raise on the first key nobody read (an unknown key)."""
