@@ -302,3 +302,51 @@ def test_signal_after_the_command_finished(signal_number, tmp_path):
     assert "Traceback" not in completed.stderr and "interrupted" not in completed.stderr  # only tqdm's bar
     assert str(log) in completed.stdout  # the summary table came out before the exit
     assert finalised_outcome(log)["reason"] == "stop_time"
+
+
+@pytest.mark.parametrize("signal_number", SIGNALS, ids=["SIGINT", "SIGTERM"])
+def test_signal_while_an_fmu_hangs_in_do_step(signal_number, tmp_path):
+    """Issue 10: an FMU hung in fmi2DoStep once made cosim ignore SIGINT and SIGTERM for good. In a
+    child process (an FMU given by path), the host still takes the signal: exit 1, the log finalised
+    with outcome "interrupted" at the last completed step, and the hung child is gone."""
+    from test_isolation_run import scenario
+
+    path = scenario(tmp_path, "hang", stop_time=4.0)
+    text = path.read_text().replace("fault_time = 2.0", "fault_time = 0.5")
+    path.write_text(text.replace("fmu_timeout = 1.0", "fmu_timeout = 3600"))  # only the signal ends it
+    log = tmp_path / "hung.mcap"
+    host = subprocess.Popen(
+        [sys.executable, "-m", "cosim", "run", str(path), "--out", str(log), "--quiet", "--no-plot"],
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=tmp_path,
+    )
+    child = None
+    while host.poll() is None:  # until the child hangs: the fault sleeps in nanosleep() for good
+        children = Path(f"/proc/{host.pid}/task/{host.pid}/children").read_text().split()
+        child = next((int(pid) for pid in children if _is_isolated_child(int(pid))), None)
+        if child is not None and log.exists() and "nanosleep" in _wchan(child):
+            break
+    assert host.poll() is None and child is not None
+    host.send_signal(signal_number)
+    _, stderr = host.communicate()
+    assert host.returncode == 1, stderr
+    assert stderr == ""  # an ordinary "not reached" end, as when the loop takes the signal
+    outcome = finalised_outcome(log)
+    assert outcome["reason"] == "interrupted" and float(outcome["time"]) == 0.5  # the last completed step
+    assert not Path(f"/proc/{child}").exists() or "Z" in Path(f"/proc/{child}/stat").read_text().split()[2]
+
+
+def _is_isolated_child(pid: int) -> bool:
+    try:
+        return b"cosim.fmi.isolated_child" in Path(f"/proc/{pid}/cmdline").read_bytes()
+    except FileNotFoundError:
+        return False
+
+
+def _wchan(pid: int) -> str:
+    """The kernel function a process waits in ('' when it runs or is gone)."""
+    try:
+        return Path(f"/proc/{pid}/wchan").read_text()
+    except FileNotFoundError:
+        return ""

@@ -36,6 +36,7 @@ class Interrupted(KeyboardInterrupt):
 class _State:
     installed = False  # inside catching_signals() on the main thread
     deferring = 0  # nesting of deferred()
+    waiting = False  # in a wait that may be abandoned (for a child process's FMU call): raise there too
     pending: str | None = None  # a signal received while deferring, not yet taken
 
 
@@ -46,8 +47,20 @@ def _handle(number: int, frame) -> None:
     name = signal.Signals(number).name
     if _state.deferring:
         _state.pending = _state.pending or name
-        return
+        if not _state.waiting:
+            return
     raise Interrupted(name)
+
+
+@contextmanager
+def abandonable() -> Iterator[None]:
+    """A wait inside `deferred()` that a signal ends at once (`Interrupted`; the signal stays pending
+    for `take`): an FMU hung in a child process keeps the run from reaching its next step."""
+    _state.waiting = True
+    try:
+        yield
+    finally:
+        _state.waiting = False
 
 
 @contextmanager

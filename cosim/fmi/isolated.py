@@ -58,6 +58,7 @@ import numpy as np
 
 import cosim
 from cosim.core.component import Component, State
+from cosim.core.interrupt import Interrupted, abandonable
 from cosim.errors import CosimError
 from cosim.fmi.component import FmuComponent
 
@@ -357,10 +358,15 @@ class IsolatedFmuComponent(Component):
         else:
             command = STEP
         try:
-            os.write(self._fd, command)
-            reply = os.read(self._fd, MAX_PACKET)
+            with abandonable():  # SIGINT/SIGTERM end the wait: the child may hang in the FMU for good
+                os.write(self._fd, command)
+                reply = os.read(self._fd, MAX_PACKET)
         except OSError as error:  # a timeout (BlockingIOError), or the child is gone
             reply = error
+        except Interrupted:
+            self.state = State.FAILED  # mid-step: the child is ended, never asked for more
+            self._child.kill()
+            raise
         if reply != OK:
             self._failed(reply, "step")
 

@@ -466,6 +466,9 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
             master.run_blocks(total_steps, tables, on_block, block=blocks.block, before_block=blocks.watch)
     except CosimError as error:
         failure = str(error) if " at t = " in str(error) else f"{error} (at t = {master.time:.3f} s)"
+    except interrupt.Interrupted:  # a signal while an FMU in a child process did not answer
+        take_signal()
+        state["reason"] = "interrupted"
     wall_time = time.perf_counter() - wall_start
     end_ns = master.time_ns
     # The pose at end_ns is the vehicle's after the last completed step (after a failure too; the
