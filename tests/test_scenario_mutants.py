@@ -10,8 +10,9 @@ Mutations: keys deleted, renamed to near misses, added; values replaced by other
 (booleans, strings, arrays, tables, dates) or extreme numbers (0, negative, 1e300, nan, inf,
 2**63, 5e-324); huge strings; map paths that are missing, directories, symbolic-link loops, 5000
 characters long, hold a NUL byte, or point at a hostile map YAML; FMU paths that are missing,
-empty, not a zip, a directory; connections duplicated, swapped, looped, misnamed; obstacles of odd
-shapes; `--set` overrides, well and badly formed; the TOML text itself cut or nested deep.
+empty, not a zip, a directory; connections duplicated, swapped, looped, misnamed; template
+components replaced or left out ([system] remove); obstacles of odd shapes; `--set` overrides,
+well and badly formed; the TOML text itself cut or nested deep.
 
 Most mutants are only loaded and described (`cosim system`); about one in eight is run for 0.05 s
 (`cosim run --set simulation.stop_time=0.05 --no-plot`). The examples are derandomized, so CI sees
@@ -398,8 +399,8 @@ class Mutator:
         if not isinstance(components, dict):
             return self.replace_value()
         choice = self.rnd.randint(0, 7)
-        name = self.choice(["extra", "vehicle", "planner", "lidar", "9bad", "a-b", "é",
-                                          "x" * 300])  # fmt: skip
+        name = self.choice(["extra", "vehicle", "planner", "lidar", "pure_pursuit", "mixer", "9bad", "a-b",
+                            "é", "x" * 300])  # fmt: skip
         table = [
             {"fmu": "DifferentialDrive"},  # inputs neither connected nor held
             {"fmu": "PurePursuit", "rate": 20.0},
@@ -445,9 +446,16 @@ class Mutator:
                 [],
             ],
         )  # fmt: skip
-        count = self.choice([1, 1, 2, 1001])
+        count = self.choice([1, 1, 2, 1001] if len(str(shape)) < 200 else [1, 2])  # text of at most 0.2 MB
         obstacles.extend(copy.deepcopy(shape) for _ in range(count))
         self.notes.append(f"obstacle {str(shape)[:60]} x{count}")
+
+    def system_remove(self):
+        """`[system] remove`: template components left out, some of them needed, some unknown."""
+        names = ["vfh", "mixer", "pure_pursuit", "planner", "lidar", "vehicle", "ghost", "vhf", "", "vfh"]
+        removed = self.rnd.sample(names, self.rnd.randint(0, 3))
+        self.raw["system"] = {"remove": self.choice([removed, removed, "vfh", [1], {}])}
+        self.notes.append(f"[system] remove = {self.raw['system']['remove']}")
 
     def override(self):
         paths = [".".join(str(part) for part in path) for path in paths_of(self.raw) if len(path) <= 3]
@@ -473,7 +481,8 @@ class Mutator:
 
     MUTATIONS = (
         "delete_key", "rename_key", "add_key", "replace_value", "replace_value", "scale_number",
-        "map_path", "fmu_path", "connections", "components", "obstacles", "override", "override", "text",
+        "map_path", "fmu_path", "connections", "components", "system_remove", "obstacles", "override",
+        "override", "text",
     )  # fmt: skip
 
     def write(self, path: Path) -> None:
