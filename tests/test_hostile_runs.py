@@ -322,14 +322,19 @@ def test_signal_while_an_fmu_hangs_in_do_step(signal_number, tmp_path):
         cwd=tmp_path,
     )
     child = None
-    while host.poll() is None:  # until the child hangs: the fault sleeps in nanosleep() for good
-        children = Path(f"/proc/{host.pid}/task/{host.pid}/children").read_text().split()
-        child = next((int(pid) for pid in children if _is_isolated_child(int(pid))), None)
-        if child is not None and log.exists() and "nanosleep" in _wchan(child):
-            break
-    assert host.poll() is None and child is not None
-    host.send_signal(signal_number)
-    _, stderr = host.communicate()
+    try:
+        while host.poll() is None:  # until the child hangs: the fault sleeps in nanosleep() for good
+            children = Path(f"/proc/{host.pid}/task/{host.pid}/children").read_text().split()
+            child = next((int(pid) for pid in children if _is_isolated_child(int(pid))), None)
+            if child is not None and log.exists() and "nanosleep" in _wchan(child):
+                break
+        assert host.poll() is None and child is not None
+        host.send_signal(signal_number)
+        _, stderr = host.communicate()
+    finally:
+        if host.poll() is None:  # the test failed: leave no run (and no hung child) behind
+            host.kill()
+            host.communicate()
     assert host.returncode == 1, stderr
     assert stderr == ""  # an ordinary "not reached" end, as when the loop takes the signal
     outcome = finalised_outcome(log)
@@ -340,7 +345,7 @@ def test_signal_while_an_fmu_hangs_in_do_step(signal_number, tmp_path):
 def _is_isolated_child(pid: int) -> bool:
     try:
         return b"cosim.fmi.isolated_child" in Path(f"/proc/{pid}/cmdline").read_bytes()
-    except FileNotFoundError:
+    except OSError:  # gone between the listing and the read (ProcessLookupError, FileNotFoundError)
         return False
 
 
@@ -348,5 +353,5 @@ def _wchan(pid: int) -> str:
     """The kernel function a process waits in ('' when it runs or is gone)."""
     try:
         return Path(f"/proc/{pid}/wchan").read_text()
-    except FileNotFoundError:
+    except OSError:
         return ""

@@ -52,15 +52,21 @@ def _handle(number: int, frame) -> None:
     raise Interrupted(name)
 
 
-@contextmanager
-def abandonable() -> Iterator[None]:
-    """A wait inside `deferred()` that a signal ends at once (`Interrupted`; the signal stays pending
-    for `take`): an FMU hung in a child process keeps the run from reaching its next step."""
-    _state.waiting = True
-    try:
-        yield
-    finally:
+class _Abandonable:
+    """`with abandonable:` a wait inside `deferred()` that a signal ends at once (`Interrupted`; the
+    signal stays pending for `take`): an FMU hung in a child process keeps the run from reaching its
+    next step. A class, not a generator: it wraps every isolated FMU step (0.5 us against 3 us)."""
+
+    __slots__ = ()
+
+    def __enter__(self) -> None:
+        _state.waiting = True
+
+    def __exit__(self, *exc_info) -> None:
         _state.waiting = False
+
+
+abandonable = _Abandonable()
 
 
 @contextmanager

@@ -358,7 +358,7 @@ class IsolatedFmuComponent(Component):
         else:
             command = STEP
         try:
-            with abandonable():  # SIGINT/SIGTERM end the wait: the child may hang in the FMU for good
+            with abandonable:  # SIGINT/SIGTERM end the wait: the child may hang in the FMU for good
                 os.write(self._fd, command)
                 reply = os.read(self._fd, MAX_PACKET)
         except OSError as error:  # a timeout (BlockingIOError), or the child is gone
