@@ -192,6 +192,8 @@ def _record(
                 master.run_recorded(min(CHUNK_STEPS, total - master.step_index), record, compiled=compiled)
         except CosimError as error:
             failure = f"{error} (at t = {master.time:.3f} s)"
+        except interrupt.Interrupted:  # a signal while an FMU in a child process did not answer
+            interrupt.take()
         reason = "fmu_failed" if failure else ("stop_time" if master.step_index >= total else "interrupted")
         try:
             master.close()
