@@ -609,11 +609,9 @@ def test_scenario_mutants(tmp_path_factory):
 
 SUBPROCESS_MUTANTS = [
     ("simulation.stop_time", 1e300),
-    ("lidar.count", 2**63 - 1),
     ("vfh.robot_radius", "x" * HUGE),
     ("map.file", "m" * 5000),
-    ("pure_pursuit.max_angular_velocity", True),
-]
+]  # three: each process spends seconds importing
 
 
 def test_mutants_through_a_subprocess(tmp_path):
