@@ -40,8 +40,15 @@ from cosim.sweep.spec import SweepOptions, SweepSpec, display_value, sample_poin
 CONNECT_TIMEOUT = 5.0  # [s] to reach a scheduler
 WORKER_WAIT = 30.0  # [s] for a reached scheduler to have at least one worker
 PLOT_FILE = "sweep.png"
-# Imported once by the local cluster's fork server, so its workers start with them loaded.
-WORKER_PRELOAD = ["distributed", "cosim.sweep.worker", "cosim.scenario.load", "cosim.navigation.run"]
+# Imported once by the local cluster's fork server, so its workers start with them loaded; the last
+# one also makes a short run of the sweep's scenario there (`cosim.sweep.warm`).
+WORKER_PRELOAD = [
+    "distributed",
+    "cosim.scenario.load",
+    "cosim.navigation.run",
+    "cosim.sweep.worker",
+    "cosim.sweep.warm",
+]
 
 
 @dataclass
@@ -121,18 +128,6 @@ def plan(spec: SweepSpec) -> tuple[Bundle, list[Run], str]:
     return bundle, runs, base.name
 
 
-def check_run(spec: SweepSpec, run: Run) -> None:
-    """Build one run without running it (map, plan, FMUs, parameter and port names).
-
-    The sweep checks its first run (in sweep order) this way, so what only a build can tell, such
-    as a misspelt FMU parameter, stops it with one line (exit 2) before anything runs. A later run
-    that fails to build is a failed row like any other."""
-    try:
-        adapter.check_builds(adapter.load(spec.scenario, run.overrides))
-    except CosimError as error:
-        raise CosimError(f"{error} (checked on the run with {' '.join(run.overrides)})") from None
-
-
 def _without_set(message: str) -> str:
     """Override errors say `--set K=V: ...`; under --vary the prefix would only repeat the key."""
     return message.split(": ", 1)[1] if message.startswith("--set ") and ": " in message else message
@@ -170,6 +165,38 @@ def _remove_empty(folders: list[Path]) -> None:
             return
 
 
+def start_fork_server(scenario: Path, overrides: tuple[str, ...]) -> None:
+    """Start the local cluster's fork server now, warming it up on `scenario` with `overrides`.
+
+    The server imports `WORKER_PRELOAD` and makes a short run (`cosim.sweep.warm`) while this
+    process goes on importing Dask and planning; the workers forked from it later start warm. It
+    inherits an ignored SIGINT (the only disposition that survives exec), and so do the workers it
+    forks: Ctrl-C in a terminal reaches the whole process group, and the interrupt must end the
+    sweep here, which then closes them, instead of each one printing its own traceback. Does
+    nothing when the server already runs (an earlier sweep of this process started it).
+    """
+    import json
+    import multiprocessing
+    from multiprocessing import forkserver
+
+    from cosim.sweep.warm import WARM_ENV
+
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload(WORKER_PRELOAD)
+    request = json.dumps({"scenario": str(Path(scenario).resolve()), "overrides": list(overrides)})
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    saved = os.environ.get(WARM_ENV)
+    os.environ[WARM_ENV] = request
+    try:
+        forkserver.ensure_running()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if saved is None:
+            os.environ.pop(WARM_ENV, None)
+        else:
+            os.environ[WARM_ENV] = saved
+
+
 @contextmanager
 def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterator[tuple[object, int]]:
     """A client on `scheduler`, or on a new LocalCluster of `workers` processes (default: one per
@@ -193,32 +220,34 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
         finally:
             client.close()
         return
+    from multiprocessing import get_context
+
     import dask
+    import distributed.utils
 
     count = max(1, min(workers or os.cpu_count() or 1, pending))
-    # Ctrl-C in a terminal reaches the whole process group. The workers inherit an ignored SIGINT
-    # (the only disposition that survives exec), so the interrupt ends the sweep here, which then
-    # closes them, instead of each one printing its own KeyboardInterrupt traceback. Distributed's
-    # sampling profiler is off: it costs a run about a sixth more CPU time and nobody reads it here.
-    # The workers fork from one server process that imported Dask and the run stage once, instead
-    # of each importing them anew (measured: the 8-run benchmark sweep about a quarter faster).
+    # The workers fork from the fork server (`start_fork_server`, started with SIGINT ignored, as
+    # the cluster's own processes are here). Distributed's sampling profiler is off: it costs a run
+    # about a sixth more CPU time and nobody reads it here. Distributed would import its optional
+    # packages here (pandas: most of a second) only to name them as the server's preload, which
+    # `start_fork_server` set already.
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         settings = {
             "distributed.worker.profile.enabled": False,
             "distributed.worker.multiprocessing-method": "forkserver",
         }
+        get_context("forkserver").set_forkserver_preload(WORKER_PRELOAD)  # if not started yet
+        if hasattr(distributed.utils, "_forkserver_preload_set"):
+            distributed.utils._forkserver_preload_set = True
         with dask.config.set(settings):
-            from distributed.utils import get_mp_context
-
-            get_mp_context().set_forkserver_preload(WORKER_PRELOAD)
             cluster = LocalCluster(
                 n_workers=count,
                 threads_per_worker=1,
                 processes=True,
                 host="127.0.0.1",
                 dashboard_address=None,
-                silence_logs=logging.ERROR,
+                silence_logs=logging.CRITICAL,
             )
     finally:
         signal.signal(signal.SIGINT, previous)
@@ -251,22 +280,52 @@ def _row(run: Run, keys: tuple[str, ...], result, out_dir: Path) -> dict[str, st
     return row
 
 
-def _execute(client, bundle: Bundle, pending: list[Run], keys, out_dir, results, rows, progress, total):
+def _execute(
+    client,
+    bundle: Bundle,
+    first: Run,
+    pending: list[Run],
+    keys,
+    out_dir,
+    results,
+    rows,
+    progress,
+    total,
+    checked,
+    workers: int,
+    tail,
+):
+    """Check `first` on a worker, then run `pending`, writing each row as it comes. `checked()` is
+    called once the check passed, before any row is kept; a failed check raises `CosimError`.
+    `tail()` (if not None) is called once when fewer runs are left than there are workers."""
     from distributed import as_completed
     from tqdm import tqdm
 
-    from cosim.sweep.worker import BundlePlugin, TaskResult, run_task
+    from cosim.sweep.worker import BundlePlugin, TaskResult, check_task, run_task
 
     plugin = BundlePlugin(bundle)
     client.register_plugin(plugin, name=plugin.name)
     token = secrets.token_hex(4)
+    # The check goes first (a higher priority); the runs start on the other workers meanwhile, and
+    # their results wait in memory until the check passed.
+    check = client.submit(
+        check_task, plugin.name, first, key=f"navcosim-check-{token}", pure=False, priority=1
+    )
     futures = {
         client.submit(run_task, plugin.name, run, key=f"navcosim-{run.run_id}-{token}", pure=False): run
         for run in pending
     }
-    bar = tqdm(total=total, initial=total - len(pending), unit="run", desc="sweep", disable=not progress)
+    bar = None
     failed = 0
     try:
+        try:
+            error = check.result()
+        except Exception as failure:  # the worker died while building
+            error = f"the worker failed: {type(failure).__name__}: {' '.join(str(failure).split())}"
+        if error is not None:
+            raise CosimError(f"{error} (checked on the run with {' '.join(first.overrides)})")
+        checked()
+        bar = tqdm(total=total, initial=total - len(pending), unit="run", desc="sweep", disable=not progress)
         for future in as_completed(list(futures), loop=client.loop):
             run = futures.pop(future)
             try:
@@ -282,14 +341,24 @@ def _execute(client, bundle: Bundle, pending: list[Run], keys, out_dir, results,
             bar.update(1)
             if failed:
                 bar.set_postfix(failed=failed)
+            if tail is not None and len(futures) < workers:
+                tail()
+                tail = None
     finally:
-        bar.close()
+        if bar is not None:
+            bar.close()
+        check.cancel()
         for future in futures:
             future.cancel()
         try:
             client.unregister_worker_plugin(plugin.name)
         except Exception:  # the cluster is going away anyway; its workers drop the plugin then
             pass
+
+
+def _load_plotting() -> None:
+    """Import the plot module (Matplotlib: about a second) while the last runs end."""
+    import cosim.sweep.plot  # noqa: F401
 
 
 def run_sweep(
@@ -333,30 +402,48 @@ def run_sweep(
 
     started = time.perf_counter()
     workers, plot_path, plotting = None, None, None
-    with ThreadPoolExecutor(1) as pool:
-        if pending:
-            # The first run is built here as a check while the cluster's processes start.
-            check = pool.submit(check_run, spec, runs[0])
-            writing = False
-            try:
+    if pending:
+        if options.scheduler is None:
+            # Warms up while this process imports Dask and starts the cluster.
+            start_fork_server(spec.scenario, runs[0].overrides)
+        writing = False
+
+        def checked() -> None:
+            nonlocal writing
+            results.rewrite(ordered())
+            writing = True
+
+        try:
+            with ThreadPoolExecutor(1) as pool:
                 with connect(options.scheduler, options.workers, len(pending)) as (client, workers):
-                    check.result()
-                    results.rewrite(ordered())
-                    writing = True
-                    _execute(client, bundle, pending, keys, out_dir, results, rows, progress, len(runs))
+                    _execute(
+                        client,
+                        bundle,
+                        runs[0],
+                        pending,
+                        keys,
+                        out_dir,
+                        results,
+                        rows,
+                        progress,
+                        len(runs),
+                        checked,
+                        workers,
+                        (lambda: pool.submit(_load_plotting)) if plot else None,
+                    )
                     results.rewrite(ordered())
                     if plot:  # drawn while the cluster closes
                         plotting = pool.submit(draw)
-            except CosimError:
-                if not writing:  # refused before anything ran: leave nothing behind
-                    _remove_empty(created)
-                raise
-            finally:
-                if writing:
-                    results.rewrite(ordered())
-            plot_path = plotting.result() if plotting is not None else None
-        else:
-            results.rewrite(ordered())
-            plot_path = draw() if plot else None
+                plot_path = plotting.result() if plotting is not None else None
+        except CosimError:
+            if not writing:  # refused before anything ran: leave nothing behind
+                _remove_empty(created)
+            raise
+        finally:
+            if writing:
+                results.rewrite(ordered())
+    else:
+        results.rewrite(ordered())
+        plot_path = draw() if plot else None
     wall_time = time.perf_counter() - started
     return SweepResult(spec, name, out_dir, ordered(), outcome_keys, wall_time, workers, plot_path, skipped)

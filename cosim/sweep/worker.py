@@ -74,6 +74,24 @@ def _redirects(run: Run, files: Path) -> list[str]:
     return overrides
 
 
+def check_task(plugin_name: str, run: Run) -> str | None:
+    """Build `run` on this worker without running it (map, plan, FMUs, parameter and port names);
+    None when it builds, else the one-line error, naming the user's files.
+
+    The sweep checks its first run this way before it keeps any row, so what only a build can tell,
+    such as a misspelt FMU parameter, stops the sweep (exit 2). On a worker, not on the client: the
+    workers load the run stage anyway, and the client then never has to."""
+    plugin: BundlePlugin = get_worker().plugins[plugin_name]
+    files = plugin.folder / "files"
+    try:
+        adapter.check_builds(
+            adapter.load(files / plugin.bundle.scenario, [*run.overrides, *_redirects(run, files)])
+        )
+    except CosimError as error:
+        return str(error).replace(str(files), plugin.bundle.root)
+    return None
+
+
 def run_task(plugin_name: str, run: Run) -> TaskResult:
     """Run one scenario of the sweep on this worker; a run that fails is a result, not an exception."""
     worker = get_worker()
