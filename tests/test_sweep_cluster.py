@@ -5,22 +5,26 @@ run against a run made without Dask, and the two clusters' tables against each o
 from __future__ import annotations
 
 import csv
+import hashlib
 import json
 import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 import pytest
 
 import cosim
+from cosim.errors import CosimError
 from cosim.logs import open_log
 from cosim.navigation.outcome import outcome_metadata
 from cosim.navigation.run import run_scenario
 from cosim.scenario.load import load_scenario
 from cosim.sweep.results import TIMING_COLUMNS
+from cosim.sweep.warm import WARM_ENV, warm_up
 
 REPO = Path(__file__).resolve().parent.parent
 SCENARIO = REPO / "scenarios" / "warehouse_diff_drive_one_obstacle.toml"
@@ -89,12 +93,24 @@ def test_each_row_matches_its_log(local_sweep):
     assert "completed  4 of 4" in result.stdout
 
 
-def test_a_row_equals_a_run_without_dask(local_sweep, tmp_path):
+def test_every_log_equals_a_run_without_dask(local_sweep, tmp_path):
+    # The workers fork from a server that made a short run of the first point (cosim.sweep.warm),
+    # and a worker makes its runs one after the other: whatever it keeps from a run to the next
+    # must not change a log. A log holds no path, PID or wall time, so the same run gives the same bytes.
     out, _ = local_sweep
-    row = _rows(out)[3]
-    overrides = ["simulation.stop_time=4", "lidar.noise=0.2", "pure_pursuit.desired_linear_velocity=1.5"]
-    result = run_scenario(load_scenario(SCENARIO, overrides), tmp_path / "direct.mcap")
-    assert outcome_metadata(result.outcome) == {key: row[key] for key in OUTCOME}
+    for index, row in enumerate(_rows(out)):
+        overrides = [
+            "simulation.stop_time=4",
+            f"lidar.noise={row['lidar.noise']}",
+            f"pure_pursuit.desired_linear_velocity={row['pure_pursuit.desired_linear_velocity']}",
+        ]
+        direct = tmp_path / f"direct{index}.mcap"
+        result = run_scenario(load_scenario(SCENARIO, overrides), direct)
+        assert outcome_metadata(result.outcome) == {key: row[key] for key in OUTCOME}
+        assert (
+            hashlib.sha256(direct.read_bytes()).digest()
+            == hashlib.sha256((out / row["log"]).read_bytes()).digest()
+        )
 
 
 def test_the_python_api_returns_the_table(local_sweep):
@@ -234,3 +250,43 @@ def test_failed_runs_are_rows_interrupt_keeps_rows_and_resume_finishes(dask_sche
     for run_id, row in before.items():
         if row["status"] == "completed":  # skipped by resume: the very same row
             assert next(r for r in rows if r["run_id"] == run_id) == row
+
+
+def _import_warm(request: str | None, tmp_path: Path) -> subprocess.CompletedProcess:
+    environment = {**os.environ, "TMPDIR": str(tmp_path)}
+    if request is not None:
+        environment[WARM_ENV] = request
+    command = [
+        sys.executable,
+        "-c",
+        "import cosim.sweep.warm, os; print(os.environ.get('NAVCOSIM_SWEEP_WARM'))",
+    ]
+    return subprocess.run(command, capture_output=True, text=True, env=environment, timeout=300)
+
+
+def test_the_fork_server_warm_up_runs_quietly_and_leaves_nothing(tmp_path, monkeypatch):
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    warm_up(str(SCENARIO), ["lidar.seed=3"])  # raises if the short run fails
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(CosimError, match="robot_radus"):
+        warm_up(str(SCENARIO), ["vfh.robot_radus=0.5"])
+    assert list(tmp_path.iterdir()) == []
+    # In the fork server: nothing printed, and the request is out of the environment it passes on.
+    request = json.dumps({"scenario": str(SCENARIO), "overrides": ["lidar.seed=3"]})
+    result = _import_warm(request, tmp_path)
+    assert result.returncode == 0 and result.stdout == "None\n" and result.stderr == "", result
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "request_text",
+    [
+        "not json",
+        json.dumps({"scenario": "/no/such/scenario.toml", "overrides": []}),
+        json.dumps({"scenario": str(SCENARIO), "overrides": ["vfh.robot_radus=0.5"]}),
+    ],
+)
+def test_a_failed_warm_up_never_stops_the_fork_server(request_text, tmp_path):
+    result = _import_warm(request_text, tmp_path)
+    assert result.returncode == 0 and result.stdout == "None\n" and result.stderr == "", result
+    assert list(tmp_path.iterdir()) == []
