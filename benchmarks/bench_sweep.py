@@ -1,4 +1,4 @@
-"""Sweep benchmark (not a test): `python3 -m benchmarks.bench_sweep [--repeat R]`.
+"""Sweep benchmark (not a test): `python3 -m benchmarks.bench_sweep [--repeat R] [--baseline DIR]`.
 
 Eight runs of `warehouse_diff_drive_one_obstacle` at full settings (lidar.seed 0..3 x lidar.noise
 0.02, 0.05 m), made three ways in one benchmark run, each timed from the start of its command(s) to
@@ -15,7 +15,8 @@ process the way ran (sampled every 50 ms, so a process's last moments are missed
 services count only while the sweep runs); checks that every way gives the same outcomes (each
 sequential log's outcome metadata against the sweep's row of the same overrides). The load average
 is printed before and after: other processes slow wall times down (CPU times much less).
-`--repeat R` keeps the fastest of R for each way.
+`--repeat R` keeps the fastest of R for each way. `--baseline DIR` also measures the local sweep of
+another checkout (`git worktree add /tmp/old COMMIT`) in the same run, against the same sequential time.
 Goal (issue 11): the local sweep <= 0.33x the sequential `cosim run` time on a 2-core machine.
 """
 
@@ -120,13 +121,28 @@ class CpuMeter:
         return sum(cpu - self.base.get(key, 0.0) for key, cpu in self.seen.items())
 
 
-def _timed(commands: list[list[str]], cwd: Path, extra_pids: tuple[int, ...] = ()) -> tuple[float, float]:
-    """Wall time and CPU time of running `commands` one after the other."""
+def _environment(checkout: Path) -> dict[str, str]:
+    """The environment that makes `python3 -m cosim` import `checkout`'s cosim."""
+    return {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join(filter(None, [str(checkout), os.environ.get("PYTHONPATH")])),
+    }
+
+
+def _timed(
+    commands: list[list[str]], cwd: Path, extra_pids: tuple[int, ...] = (), checkout: Path = REPO
+) -> tuple[float, float]:
+    """Wall time and CPU time of running `commands` one after the other (with `checkout`'s cosim)."""
     meter = CpuMeter(extra_pids)
     start = time.perf_counter()
     for command in commands:
         process = subprocess.Popen(
-            command, cwd=cwd, env=ENVIRONMENT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+            command,
+            cwd=cwd,
+            env=_environment(checkout),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
         )
         meter.root = psutil.Process(process.pid)
         _, stderr = process.communicate()
@@ -163,12 +179,13 @@ def sequential(work: Path, plot: bool) -> tuple[float, float, Outcomes]:
 
 
 def sweep(
-    work: Path, name: str, options: list[str], services: tuple[int, ...] = ()
+    work: Path, name: str, options: list[str], services: tuple[int, ...] = (), checkout: Path = REPO
 ) -> tuple[float, float, Outcomes]:
     out = work / name
     shutil.rmtree(out, ignore_errors=True)
-    command = [*COSIM, "sweep", str(SCENARIO), *VARY, "--out", str(out), "--quiet", *options]
-    seconds, cpu = _timed([command], REPO, services)
+    scenario = checkout / SCENARIO.relative_to(REPO)
+    command = [*COSIM, "sweep", str(scenario), *VARY, "--out", str(out), "--quiet", *options]
+    seconds, cpu = _timed([command], checkout, services, checkout)
     with open(out / "results.csv", newline="") as stream:
         rows = list(csv.DictReader(stream))
     if len(rows) != 8 or any(row["status"] != "completed" for row in rows):
@@ -235,6 +252,9 @@ def start_services(work: Path) -> tuple[str, list[subprocess.Popen]]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=1, help="keep the fastest of R for each way")
+    parser.add_argument(
+        "--baseline", type=Path, help="another checkout whose local sweep to measure beside this one's"
+    )
     args = parser.parse_args(argv)
     load_before = os.getloadavg()
     with tempfile.TemporaryDirectory(prefix="bench-sweep-") as scratch:
@@ -250,6 +270,12 @@ def main(argv: list[str] | None = None) -> int:
         best("sequential cosim run", lambda: sequential(work, plot=True))
         best("sequential cosim run --no-plot", lambda: sequential(work, plot=False))
         best("cosim sweep --workers 2", lambda: sweep(work, "local", ["--workers", "2"]))
+        if args.baseline is not None:
+            baseline = args.baseline.resolve()
+            best(
+                "baseline: cosim sweep --workers 2",
+                lambda: sweep(work, "baseline", ["--workers", "2"], checkout=baseline),
+            )
         address, services = start_services(work)
         pids = tuple(process.pid for process in services)
         try:
