@@ -15,8 +15,9 @@ process the way ran (sampled every 50 ms, so a process's last moments are missed
 services count only while the sweep runs); checks that every way gives the same outcomes (each
 sequential log's outcome metadata against the sweep's row of the same overrides). The load average
 is printed before and after: other processes slow wall times down (CPU times much less).
-`--repeat R` keeps the fastest of R for each way. `--baseline DIR` also measures the local sweep of
-another checkout (`git worktree add /tmp/old COMMIT`) in the same run, against the same sequential time.
+`--repeat R` makes R rounds of every way (interleaved) and keeps the fastest of each. `--baseline DIR`
+also measures the local sweep of another checkout (`git worktree add /tmp/old COMMIT`) in the same
+run, against the same sequential time.
 Goal (issue 11): the local sweep <= 0.33x the sequential `cosim run` time on a 2-core machine.
 """
 
@@ -251,7 +252,7 @@ def start_services(work: Path) -> tuple[str, list[subprocess.Popen]]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeat", type=int, default=1, help="keep the fastest of R for each way")
+    parser.add_argument("--repeat", type=int, default=1, help="R rounds; the fastest of each way")
     parser.add_argument(
         "--baseline", type=Path, help="another checkout whose local sweep to measure beside this one's"
     )
@@ -261,35 +262,42 @@ def main(argv: list[str] | None = None) -> int:
         work = Path(scratch)
         results: dict[str, tuple[float, float, Outcomes]] = {}
 
-        def best(name: str, measure) -> None:
-            for _ in range(args.repeat):
-                seconds, cpu, outcomes = measure()
-                if name not in results or seconds < results[name][0]:
-                    results[name] = (seconds, cpu, outcomes)
+        def best(name: str, measure, *arguments, **keywords) -> None:
+            seconds, cpu, outcomes = measure(*arguments, **keywords)
+            if name not in results or seconds < results[name][0]:
+                results[name] = (seconds, cpu, outcomes)
 
-        best("sequential cosim run", lambda: sequential(work, plot=True))
-        best("sequential cosim run --no-plot", lambda: sequential(work, plot=False))
-        best("cosim sweep --workers 2", lambda: sweep(work, "local", ["--workers", "2"]))
-        if args.baseline is not None:
-            baseline = args.baseline.resolve()
-            best(
-                "baseline: cosim sweep --workers 2",
-                lambda: sweep(work, "baseline", ["--workers", "2"], checkout=baseline),
-            )
-        address, services = start_services(work)
-        pids = tuple(process.pid for process in services)
-        try:
-            best(
-                "cosim sweep --scheduler (cold)",
-                lambda: sweep(work, "remote", ["--scheduler", address], pids),
-            )
-            best(
-                "cosim sweep --scheduler (warm)",
-                lambda: sweep(work, "remote", ["--scheduler", address], pids),
-            )
-        finally:
-            for process in reversed(services):
-                _stop(process)
+        # Round by round, every way once a round: a change of the machine's load hits all of them.
+        for _ in range(args.repeat):
+            best("sequential cosim run", sequential, work, plot=True)
+            best("sequential cosim run --no-plot", sequential, work, plot=False)
+            best("cosim sweep --workers 2", sweep, work, "local", ["--workers", "2"])
+            if args.baseline is not None:
+                baseline = args.baseline.resolve()
+                best(
+                    "baseline: cosim sweep --workers 2",
+                    sweep,
+                    work,
+                    "baseline",
+                    ["--workers", "2"],
+                    checkout=baseline,
+                )
+            # New services each round, so that the first sweep meets cold workers.
+            address, services = start_services(work)
+            pids = tuple(process.pid for process in services)
+            try:
+                for name in ("cold", "warm"):
+                    best(
+                        f"cosim sweep --scheduler ({name})",
+                        sweep,
+                        work,
+                        "remote",
+                        ["--scheduler", address],
+                        pids,
+                    )
+            finally:
+                for process in reversed(services):
+                    _stop(process)
     load_after = os.getloadavg()
     reference_name = "sequential cosim run"
     reference_seconds, _, reference = results[reference_name]
