@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import os
 import shutil
 import subprocess
 import zipfile
@@ -209,3 +210,70 @@ def test_validate_reports_a_missing_binary(tmp_path, capsys):
                 target.writestr(item, source.read(item))
     assert main(["fmu", "validate", str(broken)]) == 1
     assert "binaries/linux64/DifferentialDrive.so is missing" in capsys.readouterr().out
+
+
+def _age(path: Path, seconds: float) -> None:
+    """Move `path`'s modification time `seconds` into the past (as if written that long ago)."""
+    status = path.stat()
+    os.utime(path, ns=(status.st_atime_ns, status.st_mtime_ns - int(seconds * 1e9)))
+
+
+def test_up_to_date_fmu_is_found_without_reading_its_sources(tmp_path, monkeypatch):
+    """The freshness check compares the files' times and sizes with the stamp: no hash, no build."""
+    sources = copy_sources(REPO / "fmus", tmp_path / "fmus")
+    cache_dir = tmp_path / "cache"
+    built = fmus.build_if_stale("DifferentialDrive", sources, cache_dir)
+    for path in sources.rglob("*"):
+        if path.is_file():
+            _age(path, 60)  # sources older than the stamp: no racy window
+    fmus.build_if_stale("DifferentialDrive", sources, cache_dir)  # renews the recorded times
+    build = fmus._build_module(sources)
+
+    def refuse(*_args, **_kwargs):
+        raise AssertionError("the fresh check read the sources or built")
+
+    monkeypatch.setattr(build, "source_hash", refuse)
+    monkeypatch.setattr(build, "build_fmu", refuse)
+    assert fmus.build_if_stale("DifferentialDrive", sources, cache_dir) == built
+
+
+def test_same_size_c_edit_after_the_racy_window_is_rebuilt(tmp_path):
+    """An edit that keeps the file's size, long after the build, changes its time: rebuilt."""
+    sources = copy_sources(REPO / "fmus", tmp_path / "fmus")
+    cache_dir = tmp_path / "cache"
+    for path in sources.rglob("*"):
+        if path.is_file():
+            _age(path, 120)
+    first_bytes = fmus.build_if_stale("DifferentialDrive", sources, cache_dir).read_bytes()
+    _age(cache_dir / "DifferentialDrive.stamp", 60)  # the build was a minute ago
+    model = sources / "DifferentialDrive" / "model.c"
+    text = model.read_text()
+    model.write_text(text.replace("m->wheel_radius = 0.05;", "m->wheel_radius = 0.07;"))
+    assert len(model.read_text()) == len(text)
+    rebuilt = fmus.build_if_stale("DifferentialDrive", sources, cache_dir)
+    assert rebuilt.read_bytes() != first_bytes
+    import fmpy
+
+    result = fmpy.simulate_fmu(
+        str(rebuilt),
+        start_values={"input_mode": 1, "wheel_speed_left": 10.0, "wheel_speed_right": 10.0},
+        stop_time=1.0,
+    )
+    assert result["x"][-1] == pytest.approx(0.7, abs=1e-12)  # r = 0.07 m, 10 rad/s, 1 s
+
+
+def test_touched_source_renews_the_stamp_without_a_rebuild(tmp_path, monkeypatch):
+    sources = copy_sources(REPO / "fmus", tmp_path / "fmus")
+    cache_dir = tmp_path / "cache"
+    built = fmus.build_if_stale("DifferentialDrive", sources, cache_dir)
+    _age(sources / "DifferentialDrive" / "model.c", 30)  # same bytes, another time
+    build = fmus._build_module(sources)
+
+    def refuse(*_args, **_kwargs):
+        raise AssertionError("rebuilt for a time-only change")
+
+    monkeypatch.setattr(build, "build_fmu", refuse)
+    assert fmus.build_if_stale("DifferentialDrive", sources, cache_dir) == built
+    recorded = (cache_dir / "DifferentialDrive.stamp").read_text()
+    status = (sources / "DifferentialDrive" / "model.c").stat()
+    assert f"{status.st_mtime_ns} {status.st_size} " in recorded

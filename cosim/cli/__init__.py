@@ -12,13 +12,15 @@ from planner.errors import NavcosimError
 COMMANDS = ("fmu", "plan", "run", "system", "log", "ssp", "sweep")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The `cosim` parser with every sub-command, or only `command` (what `main` needs to run it:
+    each sub-command module is imported to register it, so registering one imports one)."""
     parser = argparse.ArgumentParser(
         prog="cosim",
         description="Scenario co-simulation of mobile robots: plan, run, inspect logs.",
     )
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name in COMMANDS:
+    for name in COMMANDS if command is None else (command,):
         importlib.import_module(f"cosim.cli.{name}").register(subparsers)
     return parser
 
@@ -35,7 +37,9 @@ def main(argv: list[str] | None = None) -> int:
         # Called without arguments, main() is the program (`cosim`, `python -m cosim`): signals stay
         # handled until the process exits. Called with a list (tests, scripts), they are given back.
         with catching_signals(until_exit=argv is None):
-            parser = build_parser()
+            arguments = sys.argv[1:] if argv is None else argv
+            command = _command(arguments)
+            parser = build_parser(command) if command else build_parser()
             args = parser.parse_args(argv)
             return int(args.handler(args) or 0)
     except NavcosimError as error:
@@ -52,6 +56,13 @@ def main(argv: list[str] | None = None) -> int:
         # The reader of our output went away (`cosim … | head`): stop quietly, as a shell tool does.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
+
+
+def _command(arguments: list[str]) -> str | None:
+    """The sub-command `arguments` name first, or None (help, a typo, nothing): then the parser gets
+    every sub-command, for the help text and argparse's "invalid choice" message."""
+    first = arguments[0] if arguments else None
+    return first if first in COMMANDS else None
 
 
 if __name__ == "__main__":

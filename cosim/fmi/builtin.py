@@ -4,7 +4,8 @@ Each FMU exists as FMI 2.0 and as FMI 3.0 (`builtin_fmu(name, fmi_version=3)`), 
 same C model. A wheel ships the FMUs prebuilt in `cosim/_fmus/` (FMI 3.0 in `cosim/_fmus/fmi3/`).
 A source checkout (editable install) builds them on first use into a cache (`<repo>/build/fmus/`,
 or `$NAVCOSIM_FMU_CACHE`; FMI 3.0 in its `fmi3/`) and rebuilds one when the hash of its sources
-changes, so an edit to the C code is picked up on the next call
+changes (checked by the files' times and sizes first: `build_if_stale`), so an edit to the C code
+is picked up on the next call
 whatever installed the package (pip never rebuilds an editable install; uv only with cache-keys).
 """
 
@@ -84,9 +85,51 @@ def version_dir(directory: Path, fmi_version: int) -> Path:
     return directory if fmi_version == 2 else directory / "fmi3"
 
 
+RACY_SECONDS = 2.0  # a source modified this close to its stamp may hide an edit from (mtime, size)
+
+
+def _stat_lines(files: list[Path]) -> list[str]:
+    """One line per source file: modification time [ns], size, path: what the cheap check compares."""
+    lines = []
+    for path in files:
+        if "__pycache__" in path.parts or not path.is_file():
+            continue
+        status = path.stat()
+        lines.append(f"{status.st_mtime_ns} {status.st_size} {path}")
+    return lines
+
+
+def _environment_line(build, model_dir: Path, fmi_version: int) -> str:
+    """What the hash covers besides the files: the FMI header folder and $CC."""
+    headers = build.fmi_header_dir(model_dir.parent / "common", fmi_version)
+    return f"env {headers} CC={os.environ.get('CC', '')}"
+
+
+def _stamp_is_fresh(stamp: Path, target: Path, lines: list[str], environment: str) -> bool:
+    """True when the stamp lists exactly these files with these times and sizes (and the same
+    environment), and none of them was modified within RACY_SECONDS of the stamp's writing (an edit
+    in the same clock tick as the build could keep both): the sources are those of the build."""
+    try:
+        recorded = stamp.read_text().splitlines()
+        stamp_ns = stamp.stat().st_mtime_ns
+        if not target.is_file():
+            return False
+    except OSError:
+        return False
+    if recorded[1:] != [environment, *lines]:
+        return False
+    newest = max((int(line.split(" ", 1)[0]) for line in lines), default=0)
+    return newest < stamp_ns - RACY_SECONDS * 1e9
+
+
 def build_if_stale(name: str, source_root: Path, cache_dir: Path, fmi_version: int = 2) -> Path:
     """Build FMU `name` (FMI `fmi_version`) from `source_root` into `cache_dir` (FMI 3.0: its `fmi3/`
     subfolder) unless its stamp matches the sources.
+
+    The stamp holds the SHA-256 of the sources (`source_hash`) and each source file's modification
+    time and size. When every file's time and size match (and none is within RACY_SECONDS of the
+    stamp, where an edit could keep both), the FMU is up to date without reading a source; otherwise
+    the hash decides: equal, the stamp's times are renewed; different, the FMU is rebuilt.
 
     Safe with concurrent callers: one process builds under a file lock while the others wait,
     and the archive and stamp are renamed into place atomically.
@@ -96,15 +139,21 @@ def build_if_stale(name: str, source_root: Path, cache_dir: Path, fmi_version: i
     cache_dir = version_dir(cache_dir, _check_version(fmi_version))
     target, stamp = cache_dir / f"{name}.fmu", cache_dir / f"{name}.stamp"
     try:
+        environment = _environment_line(build, model_dir, fmi_version)
+        lines = _stat_lines(build.source_files(model_dir, fmi_version))
+        if _stamp_is_fresh(stamp, target, lines, environment):
+            return target
         cache_dir.mkdir(parents=True, exist_ok=True)
         with open(cache_dir / f"{name}.lock", "w") as lock:
             fcntl.flock(lock, fcntl.LOCK_EX)
             digest = build.source_hash(model_dir, fmi_version)
-            if target.is_file() and stamp.is_file() and stamp.read_text().strip() == digest:
-                return target
-            build.build_fmu(model_dir, cache_dir, fmi_version=fmi_version)
+            recorded = stamp.read_text().splitlines()[:1] if stamp.is_file() else []
+            if not (target.is_file() and recorded == [digest]):
+                build.build_fmu(model_dir, cache_dir, fmi_version=fmi_version)
+            # Times read after the hash: a file edited in between hashes differently next time.
+            lines = _stat_lines(build.source_files(model_dir, fmi_version))
             temporary_stamp = cache_dir / f".{name}.stamp.{os.getpid()}"
-            temporary_stamp.write_text(digest + "\n")
+            temporary_stamp.write_text("\n".join([digest, environment, *lines]) + "\n")
             os.replace(temporary_stamp, stamp)
     except build.FmuBuildError as error:
         raise CosimError(f"building FMU {name}: {error}") from None
