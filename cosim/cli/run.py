@@ -117,7 +117,7 @@ def _handler(args) -> int:
             )
             return 2
         if scenario.plot and not args.no_plot:
-            _plot(result.log_path, args.quiet)
+            _plot(result.log_path, args.quiet, result.trace)
         if args.live and result.outcome.reason != "interrupted":
             wait = "until Ctrl-C" if args.linger is None else f"for {args.linger:g} s"
             print(f"live view: run ended; serving {sink.url} {wait}", file=sys.stderr, flush=True)
@@ -151,9 +151,11 @@ def _run_ssp(args) -> int:
     return result.exit_code
 
 
-def _plot(log_path: Path, quiet: bool) -> None:
+def _plot(log_path: Path, quiet: bool, trace=None) -> None:
+    """Draw the PNG beside the log: from the run's in-memory trace when it has one (the same picture
+    as from the log, without reading it back), else from the log."""
     try:
-        from cosim.logs.plot import plot_run
+        from cosim.logs.plot import plot_run, plot_trace, skip_matplotlib_docstrings
     except ImportError:
         print("cosim: note: no plot (cosim.logs.plot is not available)", file=sys.stderr)
         return
@@ -161,7 +163,11 @@ def _plot(log_path: Path, quiet: bool) -> None:
     # Drawn beside and renamed into place, so an interrupt never leaves half a PNG.
     partial = png_path.with_name(f".{png_path.stem}.{os.getpid()}.png")
     try:
-        plot_run(log_path, partial)
+        skip_matplotlib_docstrings()  # this process draws and exits: no help() text needed
+        if trace is not None and not trace.dropped:
+            plot_trace(trace, partial)
+        else:
+            plot_run(log_path, partial)
         os.replace(partial, png_path)
     except (CosimError, OSError) as error:
         print(f"cosim: note: no plot: {error}", file=sys.stderr)

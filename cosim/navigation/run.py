@@ -72,6 +72,7 @@ class RunResult:
     steps: int
     wall_time: float  # [s]
     failure: str | None = None  # message of a failed FMU
+    trace: object | None = None  # the recorder's `RunTrace`: what the default plot draws
 
     @property
     def exit_code(self) -> int:
@@ -496,7 +497,7 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     except CosimError as error:
         failure = failure or f"terminating the system failed: {error}"
     recorder.close(metadata)
-    return RunResult(outcome, log_path, master.step_index, wall_time, failure)
+    return RunResult(outcome, log_path, master.step_index, wall_time, failure, recorder.trace)
 
 
 def _goal_poll(goals, built: BuiltRun, monitor: OutcomeMonitor, recorder, recording: _Recording):

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import struct
 import time
 from importlib.metadata import PackageNotFoundError, version
@@ -86,6 +87,128 @@ def _library() -> str:
         return "navcosim"
 
 
+# The signals a run's default plot draws (`cosim.logs.plot`), kept in memory by `RunTrace`.
+TRACE_SIGNALS = {
+    "vehicle": ("x", "y", "theta", "v_actual", "v", "omega_actual", "yaw_rate", "steering_angle_actual"),
+    "mixer": ("mode", "v", "omega", "steering_angle"),
+    "pure_pursuit": ("target_dir",),
+    "vfh": ("steering_dir",),
+}
+TRACE_LIMIT = 20_000_000  # values kept at most; a longer run's plot reads its log instead
+
+
+class RunTrace:
+    """What the default plot of a run draws, kept as the run writes its log: the last grid of each
+    map topic, the last plan and goal, the obstacle frames (marker centres), per scan the shortest
+    valid range, the /pose rows and the `TRACE_SIGNALS` columns of each signal channel, appended a
+    block at a time. Every value is the one the log holds, computed as `cosim.logs.reader` decodes
+    it, so a plot drawn from the trace is the plot of the log (`cosim.logs.plot.plot_trace`).
+
+    `complete` is False until the log was closed; `dropped` is True when the run wrote more than
+    `TRACE_LIMIT` values (the trace then stops growing and the plot reads the log)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        self.metadata: dict[str, dict[str, str]] = {}
+        self.grids: dict[
+            str, tuple[np.ndarray, float, tuple[float, float]]
+        ] = {}  # topic -> (occupied, res, origin)
+        self.plan: np.ndarray | None = None  # N x 2 [m]
+        self.goal: tuple[float, float] | None = None
+        self.obstacle_markers: list[
+            tuple[int, int, float, float]
+        ] = []  # (t_ns, id, x, y) of each frame's markers
+        self.obstacle_messages = 0  # /obstacles messages written
+        self.last_obstacles: tuple[int, list] | None = None  # (t_ns, shapes) of the last message
+        self.scan_t_ns: list[int] = []
+        self.scan_minima: list[float] = []
+        self.poses: list[np.ndarray] = []  # blocks of rows (t_ns, x, y, qz, qw)
+        self.components: list[str] = []  # every signal channel's component
+        self.columns: dict[int, tuple[str, list[str], list[int]]] = {}  # channel -> component, names, indices
+        self.signal_blocks: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}  # component -> (t_ns, rows)
+        self.complete = False
+        self.dropped = False
+        self._values = 0
+
+    def _count(self, values: int) -> bool:
+        """Account for `values` more kept values; False (and the trace dropped) past the limit."""
+        self._values += values
+        if self._values > TRACE_LIMIT:
+            self.dropped = True
+            self.poses, self.signal_blocks, self.obstacle_markers = [], {}, []
+            self.scan_t_ns, self.scan_minima = [], []
+        return not self.dropped
+
+    def add_channel(self, channel: int, component: str, names: list[str]) -> None:
+        self.components.append(component)
+        wanted = TRACE_SIGNALS.get(component, ())
+        kept = [name for name in names if name in wanted]
+        if kept:
+            self.columns[channel] = (component, kept, [names.index(name) for name in kept])
+            self.signal_blocks[component] = []
+
+    def take_block(self, block: MessageBlock) -> None:
+        """The signal records and poses `block` is about to pack (exactly the logged values)."""
+        if self.dropped:
+            return
+        for channel, (component, _, indices) in self.columns.items():
+            stream = block.signals[channel]
+            count = len(stream.times)
+            if count and self._count(count * (len(indices) + 1)):
+                rows = stream.rows[:count, indices]
+                self.signal_blocks[component].append((np.array(stream.times, dtype=np.int64), rows))
+        pose = block.pose
+        if pose is not None and pose.rows and self._count(5 * len(pose.rows)):
+            rows = np.array(pose.rows)
+            half = rows[:, 3] / 2.0
+            self.poses.append(np.column_stack((rows[:, :3], np.sin(half), np.cos(half))))
+
+    def add_scan(self, t_ns: int, ranges: np.ndarray, range_min: float, range_max: float) -> None:
+        """`ranges`: the float32 ranges as written; the shortest within the float32 limits, or NaN."""
+        if self.dropped or not self._count(2):
+            return
+        valid = ranges[
+            np.isfinite(ranges) & (ranges >= np.float32(range_min)) & (ranges <= np.float32(range_max))
+        ]
+        self.scan_t_ns.append(int(t_ns))
+        self.scan_minima.append(float(valid.min()) if len(valid) else math.nan)
+
+    def add_obstacles(self, t_ns: int, obstacles: list) -> None:
+        """The obstacles of an /obstacles message: each marker's centre as the reader takes it from
+        the message (a polygon's vertex mean, else the marker's position), and the last frame."""
+        self.last_obstacles = (int(t_ns), list(obstacles))
+        self.obstacle_messages += 1
+        if self.dropped or not self._count(4 * len(obstacles)):
+            return
+        for index, obstacle in enumerate(obstacles):
+            if getattr(obstacle, "kind", None) == "polygon":
+                vertices = [(float(px), float(py)) for px, py in np.asarray(obstacle.polygon(), dtype=float)]
+                x = sum(px for px, _ in vertices) / len(vertices)
+                y = sum(py for _, py in vertices) / len(vertices)
+            else:
+                x, y = (float(value) for value in obstacle.center)
+            self.obstacle_markers.append((int(t_ns), index, x, y))
+
+    def obstacles_message(self):
+        """The last /obstacles message as written (a MarkerArray), or None."""
+        if self.last_obstacles is None:
+            return None
+        t_ns, obstacles = self.last_obstacles
+        markers = [_marker(t_ns, index, obstacle) for index, obstacle in enumerate(obstacles)]
+        return rosmsg.make("visualization_msgs/msg/MarkerArray", markers=markers)
+
+
+class _TracedBlock(MessageBlock):
+    """The recorder's block: hands what it packs to the run's trace first."""
+
+    trace: RunTrace | None = None
+
+    def pack(self) -> None:
+        if self.count and self.trace is not None:
+            self.trace.take_block(self)
+        super().pack()
+
+
 class Recorder:
     """Writes one run to `path` (parent folders created). Use as a context manager: leaving the
     `with` block, normally or by an exception, finalises the file."""
@@ -99,11 +222,13 @@ class Recorder:
         sink=None,
         topics: dict[str, str] | None = None,
         stream: BinaryIO | None = None,
+        trace: bool = True,
     ) -> None:
         """`sink` (`cosim.record.live.Sink`): also gets every schema, channel and message written.
         `topics`: a topic's name in the log, by its name here ("/odom" -> "/ground-truth-pose").
         `stream`: the file already opened for `path` (`cosim.record.logfile.claim_log`); it is
-        closed by `close()`. Without it `path` is opened (and truncated) here."""
+        closed by `close()`. Without it `path` is opened (and truncated) here.
+        `trace`: keep a `RunTrace` (`self.trace`) of what the default plot draws (None without)."""
         self.path = Path(path)
         self.topics = dict(topics or {})
         try:
@@ -133,7 +258,9 @@ class Recorder:
         self._obstacle_templates: dict[tuple, _ObstacleTemplate] = {}  # shapes -> template
         # Signals, poses, commands and scans are held for a block of steps and packed at once
         # (`cosim.record.batch`); any other write, a flush and close pack the block first.
-        self._block = MessageBlock(self._writer, self._sequences, window_ns=window_ns)
+        self._block = _TracedBlock(self._writer, self._sequences, window_ns=window_ns)
+        self.trace = RunTrace(self.path) if trace else None
+        self._block.trace = self.trace
         self._pose_channels: tuple[int, int, int] | None = None
         self._until_clock = 1
         self._last_scan: tuple | None = None  # (angles, range_min, range_max, layout) of the last sweep
@@ -144,7 +271,10 @@ class Recorder:
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         """A named metadata record (string keys and values)."""
         self._block.pack()
-        self._writer.add_metadata(name, {str(key): str(value) for key, value in data.items()})
+        record = {str(key): str(value) for key, value in data.items()}
+        self._writer.add_metadata(name, record)
+        if self.trace is not None:
+            self.trace.metadata[name] = record
 
     def add_attachment(self, name: str, media_type: str, data: bytes, t_ns: int = 0) -> None:
         """An attached file (the scenario, the map) stored as-is; its create and log time are the
@@ -181,6 +311,8 @@ class Recorder:
             if outcome is not None:
                 self.add_metadata("outcome", outcome)
             self._writer.finish()
+            if self.trace is not None:
+                self.trace.complete = True
         finally:
             self._file.close()
 
@@ -277,6 +409,8 @@ class Recorder:
         self._sequences[channel] = 0
         self._signal_sizes[channel] = len(names)
         self._block.add_signal_channel(channel, len(names), inputs, initial, period_ns)
+        if self.trace is not None:
+            self.trace.add_channel(channel, component, names)
         return channel
 
     def write_signals(self, channel: int, t_ns: int, values: np.ndarray) -> None:
@@ -339,7 +473,10 @@ class Recorder:
 
     def write_goal(self, t_ns: int, x: float, y: float, theta: float | None) -> None:
         """The goal [m] on /goal; without a heading the orientation is the identity."""
-        self._write_message("/goal", t_ns, rosmsg.pose_stamped(t_ns, x, y, 0.0 if theta is None else theta))
+        message = rosmsg.pose_stamped(t_ns, x, y, 0.0 if theta is None else theta)
+        self._write_message("/goal", t_ns, message)
+        if self.trace is not None:
+            self.trace.goal = (message.pose.position.x, message.pose.position.y)
 
     def write_path(self, t_ns: int, path: np.ndarray) -> None:
         """The planned path, N x 2 (x, y) or N x 3 (x, y, theta) [m, m, rad], on /plan. Without
@@ -361,6 +498,8 @@ class Recorder:
         ]
         message = rosmsg.make("nav_msgs/msg/Path", header=rosmsg.header(t_ns, MAP_FRAME), poses=poses)
         self._write_message("/plan", t_ns, message)
+        if self.trace is not None:
+            self.trace.plan = np.array([(p.pose.position.x, p.pose.position.y) for p in poses]).reshape(-1, 2)
 
     def write_grid(self, t_ns: int, grid, topic: str = "/map") -> None:
         """An occupancy grid (`planner.OccupancyGrid`: `.occupied` [row, col] with row 0 at the top,
@@ -385,6 +524,10 @@ class Recorder:
             "nav_msgs/msg/OccupancyGrid", header=rosmsg.header(t_ns, MAP_FRAME), info=info, data=data
         )
         self._write_message(topic, t_ns, message)
+        if self.trace is not None:  # as the reader decodes it: cells >= 50, a float32 resolution
+            resolution = float(f"{float(np.float32(grid.resolution)):.7g}")
+            origin_xy = (info.origin.position.x, info.origin.position.y)
+            self.trace.grids[topic] = (cells >= 50, resolution, origin_xy)
 
     def write_scan(
         self,
@@ -429,6 +572,8 @@ class Recorder:
         stamp = _STAMP.pack(*divmod(int(t_ns), 1_000_000_000))
         payload = b"".join((head[:4], stamp, head[12:], binned.tobytes(), tail))
         self._hold(self._channels["/scan"], t_ns, payload)
+        if self.trace is not None:
+            self.trace.add_scan(t_ns, binned, range_min, range_max)
 
     def _scan_template(
         self, angles: np.ndarray, range_min: float, range_max: float, scan_time: float
@@ -478,6 +623,8 @@ class Recorder:
                 self._obstacle_templates[key] = template
             payload = template.fill(t_ns, obstacles)
         self._hold(self._channel("/obstacles"), t_ns, payload)
+        if self.trace is not None:
+            self.trace.add_obstacles(t_ns, obstacles)
 
 
 def _serialize_obstacles(t_ns: int, obstacles: list) -> bytes:
@@ -615,4 +762,4 @@ def _marker(t_ns: int, index: int, obstacle):
     )
 
 
-__all__ = ["Recorder", "scan_layout", "TOPIC_TYPES"]
+__all__ = ["Recorder", "RunTrace", "TRACE_SIGNALS", "scan_layout", "TOPIC_TYPES"]
