@@ -88,14 +88,16 @@ def version_dir(directory: Path, fmi_version: int) -> Path:
 RACY_SECONDS = 2.0  # a source modified this close to its stamp may hide an edit from (mtime, size)
 
 
-def _stat_lines(files: list[Path]) -> list[str]:
-    """One line per source file: modification time [ns], size, path: what the cheap check compares."""
+def _stat_lines(files: list[Path], source_root: Path) -> list[str]:
+    """One line per source file: modification time [ns], size, path (relative to the source root, so
+    a checkout copied with its times keeps its stamps): what the cheap check compares."""
     lines = []
     for path in files:
         if "__pycache__" in path.parts or not path.is_file():
             continue
         status = path.stat()
-        lines.append(f"{status.st_mtime_ns} {status.st_size} {path}")
+        name = path.relative_to(source_root) if path.is_relative_to(source_root) else path
+        lines.append(f"{status.st_mtime_ns} {status.st_size} {name}")
     return lines
 
 
@@ -140,7 +142,7 @@ def build_if_stale(name: str, source_root: Path, cache_dir: Path, fmi_version: i
     target, stamp = cache_dir / f"{name}.fmu", cache_dir / f"{name}.stamp"
     try:
         environment = _environment_line(build, model_dir, fmi_version)
-        lines = _stat_lines(build.source_files(model_dir, fmi_version))
+        lines = _stat_lines(build.source_files(model_dir, fmi_version), source_root)
         if _stamp_is_fresh(stamp, target, lines, environment):
             return target
         cache_dir.mkdir(parents=True, exist_ok=True)
@@ -151,7 +153,7 @@ def build_if_stale(name: str, source_root: Path, cache_dir: Path, fmi_version: i
             if not (target.is_file() and recorded == [digest]):
                 build.build_fmu(model_dir, cache_dir, fmi_version=fmi_version)
             # Times read after the hash: a file edited in between hashes differently next time.
-            lines = _stat_lines(build.source_files(model_dir, fmi_version))
+            lines = _stat_lines(build.source_files(model_dir, fmi_version), source_root)
             temporary_stamp = cache_dir / f".{name}.stamp.{os.getpid()}"
             temporary_stamp.write_text("\n".join([digest, environment, *lines]) + "\n")
             os.replace(temporary_stamp, stamp)
