@@ -277,3 +277,11 @@ def test_touched_source_renews_the_stamp_without_a_rebuild(tmp_path, monkeypatch
     recorded = (cache_dir / "DifferentialDrive.stamp").read_text()
     status = (sources / "DifferentialDrive" / "model.c").stat()
     assert f"{status.st_mtime_ns} {status.st_size} " in recorded
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_stamp_environment_names_the_headers_the_build_uses(version):
+    """The cheap check finds the FMI headers without importing fmpy: the folder the build picks."""
+    build = fmus._build_module(REPO / "fmus")
+    headers = build.fmi_header_dir(REPO / "fmus" / "common", version)
+    assert fmus._environment_line(REPO / "fmus" / "Bicycle", version).startswith(f"env {headers} CC=")

@@ -101,9 +101,15 @@ def _stat_lines(files: list[Path], source_root: Path) -> list[str]:
     return lines
 
 
-def _environment_line(build, model_dir: Path, fmi_version: int) -> str:
-    """What the hash covers besides the files: the FMI header folder and $CC."""
-    headers = build.fmi_header_dir(model_dir.parent / "common", fmi_version)
+def _environment_line(model_dir: Path, fmi_version: int) -> str:
+    """What the hash covers besides the files: the FMI header folder (fmpy's, else ours, as
+    `fmus/build.py` chooses it; found without importing fmpy) and $CC."""
+    headers = model_dir.parent / "common" / f"fmi{fmi_version}"
+    spec = importlib.util.find_spec("fmpy")
+    if spec is not None and spec.origin:
+        shipped = Path(spec.origin).parent / "c-code"
+        if (shipped / f"fmi{fmi_version}Functions.h").is_file():
+            headers = shipped
     return f"env {headers} CC={os.environ.get('CC', '')}"
 
 
@@ -141,7 +147,7 @@ def build_if_stale(name: str, source_root: Path, cache_dir: Path, fmi_version: i
     cache_dir = version_dir(cache_dir, _check_version(fmi_version))
     target, stamp = cache_dir / f"{name}.fmu", cache_dir / f"{name}.stamp"
     try:
-        environment = _environment_line(build, model_dir, fmi_version)
+        environment = _environment_line(model_dir, fmi_version)
         lines = _stat_lines(build.source_files(model_dir, fmi_version), source_root)
         if _stamp_is_fresh(stamp, target, lines, environment):
             return target
