@@ -107,3 +107,33 @@ def test_a_trace_past_its_limit_is_dropped_and_the_run_plots_its_log(tmp_path, m
     args = ["run", str(scenario), "--out", str(out), "--set", "simulation.stop_time=3", "--quiet"]
     assert main(args) == 1  # stopped before the goal
     assert out.with_suffix(".png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_obstacle_shapes_and_tracks_of_every_kind_match_the_log(tmp_path):
+    """Circles, rectangles (a yaw through its quaternion) and polygons (a vertex mean), moving:
+    the trace's obstacles and tracks are the reader's, to the bit."""
+    from cosim.world.shapes import Circle, Polygon, Rectangle
+
+    path = tmp_path / "obstacles.mcap"
+    with recorder.Recorder(path) as log:
+        for step in range(4):
+            shift = 0.1 * step / 3.0
+            log.write_obstacles(
+                step * 100_000_000,
+                [
+                    Circle((1.0 + shift, 2.0), 0.3),
+                    Rectangle((4.0, 5.0 - shift), (1.0, 0.5), yaw=0.7),
+                    Polygon(((0.0, 0.0), (1.0 / 3.0, 0.1 + shift), (0.2, 0.9))),
+                ],
+            )
+        trace = log.trace
+    source = plot.TraceSource(trace)
+    with open_log(path) as read:
+        tracks, shapes = read.obstacle_tracks(), read.obstacles()
+        _same(source.obstacle_tracks(), tracks, "tracks")
+        assert len(tracks) == 3 and all(len(track) == 4 for track in tracks)
+        _same(
+            [np.asarray(s.polygon()) for s in source.obstacles()],
+            [np.asarray(s.polygon()) for s in shapes],
+            "shapes",
+        )
