@@ -167,11 +167,13 @@ class RunTrace:
         """`ranges`: the float32 ranges as written; the shortest within the float32 limits, or NaN."""
         if self.dropped or not self._count(2):
             return
-        valid = ranges[
-            np.isfinite(ranges) & (ranges >= np.float32(range_min)) & (ranges <= np.float32(range_max))
-        ]
+        # NaN fails both comparisons; +inf (no return) passes only an infinite range_max
+        valid = (ranges >= np.float32(range_min)) & (ranges <= np.float32(range_max))
+        if math.isinf(range_max):
+            valid &= np.isfinite(ranges)
+        kept = ranges[valid]
         self.scan_t_ns.append(int(t_ns))
-        self.scan_minima.append(float(valid.min()) if len(valid) else math.nan)
+        self.scan_minima.append(float(kept.min()) if len(kept) else math.nan)
 
     def add_obstacles(self, t_ns: int, obstacles: list) -> None:
         """The obstacles of an /obstacles message: each marker's centre as the reader takes it from
