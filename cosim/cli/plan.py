@@ -251,8 +251,6 @@ def _timing_note(repeat: int) -> str:
 
 
 def _plan_one(args: argparse.Namespace, map_path: Path) -> int:
-    from cosim.cli import plan_plot
-
     hybrid = args.planner == "hybrid"
     grid = _load_grid(args, map_path)
     start, goal = _endpoints(args, map_path, with_heading=hybrid)
@@ -264,6 +262,8 @@ def _plan_one(args: argparse.Namespace, map_path: Path) -> int:
     print(format_table(list(METRICS), {"value": _metric_cells(result, elapsed)}))
     print(_timing_note(args.repeat))
     if args.png is not None:
+        from cosim.cli import plan_plot
+
         panel = plan_panel(
             f"{args.planner} ({args.configuration or 'default'} configuration)", grid, result, options
         )

@@ -2,7 +2,8 @@
 
 One panel per plan; `save_plan_png` draws one, `save_comparison_png` draws several side by side
 (`cosim plan compare`). Figures have a fixed size in pixels (see `figure_size_px`) so a caller
-knows what it gets. Uses matplotlib's Agg backend: no display needed.
+knows what it gets. Uses matplotlib's Agg backend: no display needed; matplotlib is imported when
+a PNG is drawn, so `cosim plan` without `--png` does not load it.
 """
 
 from __future__ import annotations
@@ -11,23 +12,16 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")  # files only; never needs a display
-import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first)
-import numpy as np  # noqa: E402
-from matplotlib.colors import ListedColormap  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
-from matplotlib.patches import Patch  # noqa: E402
-
-from cosim.errors import CosimError  # noqa: E402
+from cosim.errors import CosimError
 
 DPI = 100
 PANEL_SIZE_IN = (7.0, 5.0)  # one panel, inches (at DPI: 700 x 500 px)
 MAX_PANELS_PER_ROW = 3
 
 # Cell classes drawn as one image: 0 free, 1 explored, 2 untrusted point, 3 inflated zone, 4 obstacle.
-_CELL_COLOURS = ListedColormap(["#ffffff", "#9ecae1", "#d9d9d9", "#fdd0a2", "#252525"])
+_CELL_COLOURS = ["#ffffff", "#9ecae1", "#d9d9d9", "#fdd0a2", "#252525"]
 _PATH_COLOUR = "#d62728"
 
 
@@ -67,13 +61,15 @@ def _cell_classes(grid, panel: PlanPanel) -> np.ndarray:
 
 
 def _draw_panel(axes, grid, panel: PlanPanel, start, goal) -> None:
+    from matplotlib.colors import ListedColormap
+
     rows, cols = grid.shape
     left, bottom = grid.origin
     extent = (left, left + cols * grid.resolution, bottom, bottom + rows * grid.resolution)
     # Row 0 is the top of the map, which is what imshow's origin="upper" draws at the top.
     axes.imshow(
         _cell_classes(grid, panel),
-        cmap=_CELL_COLOURS,
+        cmap=ListedColormap(_CELL_COLOURS),
         vmin=0,
         vmax=4,
         extent=extent,
@@ -99,6 +95,9 @@ def _draw_panel(axes, grid, panel: PlanPanel, start, goal) -> None:
 
 
 def _legend_handles(with_inflation: bool, with_untrusted: bool) -> list:
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
     handles = [
         Patch(facecolor="#252525", label="obstacle"),
         Patch(facecolor="#9ecae1", label="explored (searched) cell"),
@@ -119,6 +118,11 @@ def save_comparison_png(
     """Draw one panel per plan (side by side, see panel_layout) into a PNG; returns its path."""
     if not panels:
         raise CosimError("nothing to draw: no plan")
+    import matplotlib
+
+    matplotlib.use("Agg")  # files only; never needs a display
+    import matplotlib.pyplot as plt
+
     path = Path(path)
     width_px, height_px = figure_size_px(len(panels))
     rows, columns = panel_layout(len(panels))
