@@ -113,8 +113,9 @@ def _info(args) -> int:
 
 
 def _plot(args) -> int:
-    from cosim.logs.plot import plot_log
+    from cosim.logs.plot import plot_log, skip_matplotlib_docstrings
 
+    skip_matplotlib_docstrings()  # this process draws and exits: no help() text needed
     log = _open(args.log)
     png = args.png or args.log.with_suffix(".png")
     written = _guard(args.log, lambda: plot_log(log, png, args.signals))
