@@ -1,10 +1,12 @@
 """What a user waits for around the simulation: fresh `cosim` processes, as ratios to the import floor.
 
-Every figure is the fastest of `--repeat` fresh processes (wall time, and the max RSS of that run),
-measured in this run beside the import floor `python3 -c "import numpy, scipy.ndimage, fmpy, mcap"`
-(the libraries any run must load). The floor and the warm runs are measured in rounds (floor, run,
-run with plot, floor, ...), so a load that comes and goes hits them alike and the ratios hold on a
-noisy machine:
+Every figure is the fastest of `--repeat` fresh processes (wall time, and the max RSS of that run;
+CPU time, user + system, the least of them), measured in this run beside the import floor
+`python3 -c "import numpy, scipy.ndimage, fmpy, mcap"` (the libraries any run must load). The floor
+and the warm runs are measured in rounds (floor, run, run with plot, the same for a `--baseline`
+checkout, floor, ...), so a load that comes and goes hits them alike. Wall time is the issue's
+measure; CPU time depends far less on other processes, so its ratios are the ones to read on a busy
+machine:
 
 - `run --no-plot, warm`: `cosim run SCENARIO --no-plot` with warm caches (numba's, the FMU builds,
   Python's bytecode: `PYTHONDONTWRITEBYTECODE` is dropped for every process measured, as a user's
@@ -120,32 +122,41 @@ def _cosim_run(scenario: str, *extra: str):
 
 
 def measure(
-    checkout: Path, scenario: str, repeat: int, cold_repeat: int
-) -> dict[str, tuple[float, float, float]]:
-    """Wall seconds, MiB and CPU seconds of each figure, and the floor measured in the same rounds
-    (each the fastest of its processes; CPU the least of its processes')."""
-    env = _environment(checkout)
+    checkouts: dict[str, Path], scenario: str, repeat: int, cold_repeat: int
+) -> tuple[tuple[float, float, float], dict[str, dict[str, tuple[float, float, float]]]]:
+    """The floor, and per checkout the wall seconds, MiB and CPU seconds of each figure (the fastest
+    of its processes; CPU the least of its processes'). Every checkout is measured in the same rounds
+    as the floor, one after the other, so a changing load hits them alike."""
+    envs = {name: _environment(path) for name, path in checkouts.items()}
+    floor: list = []
+    warm: dict[str, list] = {name: [] for name in checkouts}
+    plotted: dict[str, list] = {name: [] for name in checkouts}
     with tempfile.TemporaryDirectory() as scratch:
         scratch = Path(scratch)
-        _timed(_cosim_run(scenario, "--no-plot")(scratch), checkout, env)  # warm every cache
-        _timed([sys.executable, "-c", HYBRID], checkout, env)
-        floor, warm, plotted = [], [], []
-        for _ in range(repeat):  # rounds: a passing load hits the floor and the runs alike
-            floor.append(_timed(FLOOR, checkout, env))
-            warm.append(_timed(_cosim_run(scenario, "--no-plot", "--force")(scratch), checkout, env))
-            plotted.append(_timed(_cosim_run(scenario, "--force")(scratch), checkout, env))
-            floor.append(_timed(FLOOR, checkout, env))
-    warm_best, plot_best = _best(warm), _best(plotted)
-    return {
-        "floor": _best(floor),
-        "run --no-plot, warm": warm_best,
-        "plot added": tuple(
-            with_plot - without for with_plot, without in zip(plot_best, warm_best, strict=True)
-        ),
-        "first run, cold caches": _cold(checkout, _cosim_run(scenario, "--no-plot"), cold_repeat, True),
-        "first run, cold caches + FMUs": _cold(checkout, _cosim_run(scenario, "--no-plot"), 1, False),
-        "hybrid first call, cold": _cold(checkout, lambda _: [sys.executable, "-c", HYBRID], 1, True),
+        for name, path in checkouts.items():  # warm every cache
+            _timed(_cosim_run(scenario, "--no-plot", "--force")(scratch), path, envs[name])
+            _timed([sys.executable, "-c", HYBRID], path, envs[name])
+        for _ in range(repeat):
+            floor.append(_timed(FLOOR, REPO, envs["now"]))
+            for name, path in checkouts.items():
+                run = _cosim_run(scenario, "--no-plot", "--force")(scratch)
+                warm[name].append(_timed(run, path, envs[name]))
+                plotted[name].append(_timed(_cosim_run(scenario, "--force")(scratch), path, envs[name]))
+            floor.append(_timed(FLOOR, REPO, envs["now"]))
+    results: dict[str, dict[str, tuple[float, float, float]]] = {}
+    for name in checkouts:
+        warm_best, plot_best = _best(warm[name]), _best(plotted[name])
+        added = tuple(with_plot - without for with_plot, without in zip(plot_best, warm_best, strict=True))
+        results[name] = {"run --no-plot, warm": warm_best, "plot added": added}
+    cold = {
+        "first run, cold caches": (_cosim_run(scenario, "--no-plot"), cold_repeat, True),
+        "first run, cold caches + FMUs": (_cosim_run(scenario, "--no-plot"), 1, False),
+        "hybrid first call, cold": (lambda _: [sys.executable, "-c", HYBRID], 1, True),
     }
+    for what, (command, times, with_fmus) in cold.items():
+        for name, path in checkouts.items():
+            results[name][what] = _cold(path, command, times, with_fmus)
+    return _best(floor), results
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -157,23 +168,19 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     checkouts = {"now": REPO} | ({"baseline": args.baseline.resolve()} if args.baseline else {})
     load = os.getloadavg()
-    results = {
-        name: measure(path, args.scenario, args.repeat, args.cold_repeat) for name, path in checkouts.items()
-    }
+    floor, results = measure(checkouts, args.scenario, args.repeat, args.cold_repeat)
+    floor_wall, floor_rss, floor_cpu = floor
     print(f"scenario {args.scenario}; load average at start {load[0]:.2f}, at end {os.getloadavg()[0]:.2f}")
-    for name, figures in results.items():
-        wall, rss, cpu = figures["floor"]
-        print(f"import floor ({name}): {wall:.3f} s wall, {cpu:.3f} s CPU, {rss:.0f} MiB")
+    print(f"import floor: {floor_wall:.3f} s wall, {floor_cpu:.3f} s CPU, {floor_rss:.0f} MiB")
     header = f"{'what':<30}" + "".join(
-        f"{name + ' wall':>11}{'/ floor':>8}{'CPU':>8}{'/ floor':>8}{'MiB':>6}" for name in results
+        f"{name + ' wall':>14}{'/ floor':>8}{'CPU':>8}{'/ floor':>8}{'MiB':>6}" for name in results
     )
     print(header + f"{'issue before':>14}{'goal':>9}")
     for what in ISSUE_BEFORE:
         row = f"{what:<30}"
         for figures in results.values():
             wall, rss, cpu = figures[what]
-            floor_wall, _, floor_cpu = figures["floor"]
-            row += f"{wall:>10.3f}s{wall / floor_wall:>7.2f}x{cpu:>7.3f}s{cpu / floor_cpu:>7.2f}x{rss:>6.0f}"
+            row += f"{wall:>13.3f}s{wall / floor_wall:>7.2f}x{cpu:>7.3f}s{cpu / floor_cpu:>7.2f}x{rss:>6.0f}"
         print(row + f"{ISSUE_BEFORE[what]:>14}{GOALS[what]:>9}")
     return 0
 
