@@ -232,18 +232,24 @@ class ChunkWriter:
         begin = int(offsets[0])
         base = len(self._chunk) - begin
         self._chunk += memoryview(records)[begin:end]
+        # Index entries grouped by channel (a stable sort keeps each channel's write order): one
+        # contiguous run of (time, offset) pairs per channel instead of a mask per channel.
+        by_channel = np.argsort(channels, kind="stable")
         pairs = np.empty((len(times), 2), dtype="<u8")
-        pairs[:, 0] = times
-        pairs[:, 1] = offsets + base
+        pairs[:, 0] = times[by_channel]
+        pairs[:, 1] = offsets[by_channel] + base
+        grouped = channels[by_channel]
+        starts = np.flatnonzero(grouped[1:] != grouped[:-1]) + 1
+        bounds = [0, *starts.tolist(), len(grouped)]
+        data = pairs.tobytes()
         first, last = int(times.min()), int(times.max())
-        for channel in np.unique(channels):
-            channel = int(channel)
-            selected = channels == channel
+        for begin_row, end_row in zip(bounds[:-1], bounds[1:], strict=True):
+            channel = int(grouped[begin_row])
             index = self._index.get(channel)
             if index is None:
                 index = self._index[channel] = array("Q")
-            index.frombytes(pairs[selected].tobytes())
-            self._count(channel, int(np.count_nonzero(selected)), first, last)
+            index.frombytes(data[begin_row * 16 : end_row * 16])
+            self._count(channel, end_row - begin_row, first, last)
 
     def _count(self, channel: int, count: int, first: int, last: int) -> None:
         self._count_file(channel, count, first, last)
