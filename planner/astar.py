@@ -57,6 +57,11 @@ PARAMETERS = (
 P_WIDTH, P_HEURISTIC, P_TIE, P_DECREASE, P_H_SCALE, P_COST_WEIGHT = range(6)
 P_ROWS, P_COLS, P_RESOLUTION, P_ORIGIN_X, P_ORIGIN_Y = range(6, 11)
 
+# The cost argument of a search without a cost gradient (cost_weight 0: never read). An array rather
+# than None so that every search is one compiled specialisation: None and an array compiled apart,
+# and a run that replans with the cost gradient compiled the whole search twice on a cold cache.
+NO_COST = np.zeros(1)
+
 # Status codes of astar_search / astar_plan.
 FOUND, NO_PATH, HEAP_FULL, ROUTE_FULL, BAD_START, BAD_GOAL = 1, 0, -1, -2, -3, -4
 
@@ -218,7 +223,8 @@ def astar_search(moves, cost, parameters, start, goal, generation, g, nodes, hea
 
     moves: uint8 per padded cell, bit k set when move k (neighbour_tables order) leaves the cell
     (planner.searchspace.SearchMap.moves: connectivity, corner rule and untrusted points are in it,
-    so the loop tests one bit per neighbour). cost: None or the padded cost gradient.
+    so the loop tests one bit per neighbour). cost: the padded cost gradient, or NO_COST when the
+    cost weight is 0 (then it is never read).
     parameters: PARAMETERS. nodes: int32 [3, size] = parent, stamp, and the expanded nodes in the
     order they were closed. heap: int64 [2, capacity], keys and nodes of OPEN.
     Returns (status, number of expanded nodes): FOUND, NO_PATH (OPEN ran empty; with goal == -1,
@@ -236,6 +242,7 @@ def astar_search(moves, cost, parameters, start, goal, generation, g, nodes, hea
     decrease_key = parameters[P_DECREASE] != 0.0
     h_scale = parameters[P_H_SCALE]
     cost_weight = parameters[P_COST_WEIGHT]
+    weighted = cost_weight != 0.0
     parent = nodes[0]
     stamp = nodes[1]
     expanded = nodes[2]
@@ -283,7 +290,7 @@ def astar_search(moves, cost, parameters, start, goal, generation, g, nodes, hea
             if seen == closed:
                 continue
             step = steps[k]
-            if cost is not None:  # decided at compile time: None and an array compile apart
+            if weighted:
                 step *= 1.0 + cost_weight * cost[slot]
             g_new = g_node + step
             if seen == generation:

@@ -92,7 +92,7 @@ def _expand(
         if seen == closed:
             continue
         step = steps[k]
-        if cost is not None:  # decided at compile time (None or an array)
+        if cost_weight != 0.0:  # cost is NO_COST (never read) when the weight is 0
             step *= 1.0 + cost_weight * cost[here if backward else slot]
         g_new = g_node + step
         other = other_stamp[slot]
@@ -245,14 +245,14 @@ def join_paths(nodes_forward, nodes_backward, start, goal, meet_forward, meet_ba
 
 
 def search_bidirectional(
-    space: SearchMap, moves: np.ndarray, cost: np.ndarray | None, parameters: np.ndarray, start_node: int,
+    space: SearchMap, moves: np.ndarray, cost: np.ndarray, parameters: np.ndarray, start_node: int,
     goal_node: int,
 ):  # fmt: skip
     """Bidirectional A*; returns (found, cells, path [m], length [m], searched, elapsed [s], explored).
 
-    moves: the move masks (SearchMap.moves, endpoints opened); cost: None or the padded cost
-    gradient; parameters: planner.astar.PARAMETERS; explored: (expanded nodes, width, shape) as
-    planner.result.PlanResult takes it."""
+    moves: the move masks (SearchMap.moves, endpoints opened); cost: the padded cost gradient, or
+    planner.astar.NO_COST when the cost weight is 0; parameters: planner.astar.PARAMETERS;
+    explored: (expanded nodes, width, shape) as planner.result.PlanResult takes it."""
     size = len(space.blocked)
     forward, backward = workspace(size, 0), workspace(size, 1)
     heuristic = int(parameters[P_HEURISTIC])

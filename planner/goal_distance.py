@@ -11,6 +11,7 @@ import numpy as np
 from planner.astar import (
     HEAP_FULL,
     HEURISTICS,
+    NO_COST,
     TIE_BREAKERS,
     astar_search,
     search_parameters,
@@ -44,7 +45,7 @@ def distance_to_goal(
     work = workspace(len(space.blocked))
     while True:
         generation = work.next_generation()
-        status, _ = astar_search(moves, None, parameters, space.node(row, col), -1, generation, work.g,
+        status, _ = astar_search(moves, NO_COST, parameters, space.node(row, col), -1, generation, work.g,
                                  work.nodes, work.heap)  # fmt: skip
         if status != HEAP_FULL:
             break

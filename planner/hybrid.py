@@ -43,7 +43,7 @@ from planner.goal_distance import distance_to_goal
 from planner.grid import OccupancyGrid
 from planner.hybrid_geometry import sample_segments
 from planner.hybrid_primitives import build_primitives
-from planner.hybrid_search import FOUND_ANALYTIC, ITERATION_CAP, TIED, hybrid_search
+from planner.hybrid_search import FOUND_ANALYTIC, ITERATION_CAP, TIED, argsort_order, hybrid_search
 from planner.result import PlanResult
 
 OPTIONS = (
@@ -251,22 +251,28 @@ def _plan_hybrid(grid: OccupancyGrid, start, goal, **options) -> PlanResult:
         np.empty(capacity, dtype=np.int64) for _ in range(4)
     )
     candidates = reeds_shepp.MAX_CANDIDATES
-    scratch = (
+    tie_orders = np.zeros((4, candidates), dtype=np.int64)
+    ties = np.zeros(2, dtype=np.int64)  # tie orders given, ties met
+    scratch = [
         np.zeros((candidates, 5), dtype=np.int64),
         np.zeros((candidates, 5)),
         np.empty(candidates),
         np.empty(candidates, dtype=np.int64),
         np.empty(5),
         np.empty(5),
-    )
+        tie_orders,
+        ties,
+    ]
     analytic_curvature = np.zeros(5)
     analytic_length = np.zeros(5)
     search_began = time.perf_counter()
-    # None, not False: the kernel then compiles only the curves (Reeds-Shepp or Dubins) and the
-    # sort it uses; a search that meets an exact tie between analytic curves runs once more with
-    # the sort that orders ties (see planner.hybrid_search._analytic_expansion).
+    # None, not False: the kernel then compiles only the curves it uses (Reeds-Shepp or Dubins).
     forward_only = None if settings["reverse"] else True
-    for exact_ties in (None, True):
+    while True:
+        # A search that meets an exact cost tie between analytic curves beyond the tie orders it
+        # was given returns TIED; the tie is ordered here and the search runs again (see
+        # planner.hybrid_search._analytic_expansion).
+        ties[1] = 0
         closed = np.zeros(capacity, dtype=bool)
         explored = np.zeros(grid.shape, dtype=bool)
         status, final, searched, analytic_count, _ = hybrid_search(
@@ -277,13 +283,19 @@ def _plan_hybrid(grid: OccupancyGrid, start, goal, **options) -> PlanResult:
             settings["heading_bins"], radius, forward_only, settings["reverse_cost"],
             settings["steering_cost"], settings["direction_switch_cost"], settings["analytic_interval"],
             settings["analytic_distance"], settings["goal_tolerance"], settings["heading_tolerance"],
-            settings["collision_step"], exact_ties,
+            settings["collision_step"],
             settings["max_iterations"],
             node_x, node_y, node_theta, node_g, node_parent, node_primitive, node_direction,
-            closed, heap_f, heap_h, heap_node, scratch, explored, analytic_curvature, analytic_length,
+            closed, heap_f, heap_h, heap_node, tuple(scratch), explored, analytic_curvature, analytic_length,
         )  # fmt: skip
         if status != TIED:
             break
+        given = int(ties[0])
+        if given == len(tie_orders):
+            tie_orders = np.concatenate((tie_orders, np.zeros_like(tie_orders)))
+            scratch[6] = tie_orders
+        tie_orders[given, :analytic_count] = argsort_order(scratch[2][:analytic_count])
+        ties[0] = given + 1
     searched_at = time.perf_counter()
     if status <= 0:
         reason = (

@@ -18,6 +18,8 @@ import math
 
 import numpy as np
 from numba import njit
+from numba.misc.quicksort import make_py_quicksort
+from numba.np.numpy_support import lt_floats
 
 from planner import dubins, reeds_shepp
 from planner.hybrid_geometry import TWO_PI, point_free, segments_free, wrap_angle
@@ -26,10 +28,20 @@ FOUND_AT_GOAL = 1  # a primitive ended within the goal tolerance
 FOUND_ANALYTIC = 2  # an analytic curve reached the goal exactly
 EXHAUSTED = 0  # OPEN became empty: no path for this vehicle
 ITERATION_CAP = -1  # max_iterations expansions without reaching the goal
-TIED = -2  # exact cost tie among analytic curves with exact_ties None: search again with True
+TIED = -2  # an exact cost tie among analytic curves beyond the given tie orders: order it, search again
 # Poses farther than this many turning radii from the goal use the Euclidean distance in place
 # of the Reeds-Shepp/Dubins length in the heuristic (both are lower bounds of the path length).
 CURVE_HEURISTIC_RANGE = 6.0
+
+
+# numba's np.argsort (quicksort) as plain Python: the order of candidates with equal costs is
+# numba's, and it is computed only when a search meets such a tie (see _analytic_expansion).
+_QUICKSORT = make_py_quicksort(lt=lt_floats, is_argsort=True, is_np_array=True)
+
+
+def argsort_order(costs: np.ndarray) -> np.ndarray:
+    """The permutation numba's np.argsort(costs) (quicksort) returns, without compiling it."""
+    return np.asarray(_QUICKSORT.run_quicksort(np.array(costs, dtype=np.float64)), dtype=np.int64)
 
 
 @njit(cache=True)
@@ -173,17 +185,21 @@ def _heap_pop(heap_f, heap_h, heap_node, size):
 @njit(cache=True)
 def _analytic_expansion(
     x, y, theta, direction, goal, radius, forward_only, reverse_cost, steering_cost, switch_cost,
-    occupied, resolution, origin_x, origin_y, collision_step, exact_ties, scratch, out_curvature, out_length,
+    occupied, resolution, origin_x, origin_y, collision_step, scratch, out_curvature, out_length,
 ):  # fmt: skip
     """Cheapest collision-free curve to the goal; writes its segments, returns (count, cost).
 
-    Candidates are tried cheapest first, in np.argsort's order: mirror-image curves (a goal right
-    behind, facing back) cost exactly the same, and the order decides which of them is taken.
-    exact_ties: None = sort without np.argsort and return count -1 on an exact tie; True = use it.
+    Candidates are tried cheapest first, in the order numba's np.argsort gives: mirror-image curves
+    (a goal right behind, facing back) cost exactly the same, and the order decides which of them
+    is taken. Distinct costs have one order, found here by insertion; an exact tie takes the
+    caller's order (tie_orders[t] for the t-th tie of this search, t < ties[0]; ties[1] counts them)
+    or, beyond those, returns -count (TIED: the caller orders costs[:count] as np.argsort does and
+    searches again, which meets the same ties in the same order). np.argsort itself is not compiled
+    here: its quicksort cost as much compile time as the rest of this function.
     scratch: (letters int64 [K, 5], lengths [K, 5], costs [K], order int64 [K], curvatures [5],
-    signed lengths [5]) with K >= reeds_shepp.MAX_CANDIDATES; the letter and length buffers start
-    zeroed (a Dubins word fills 3 of the 5 columns)."""
-    letters, lengths, costs, order, curvatures, signed = scratch
+    signed lengths [5], tie_orders int64 [T, K], ties int64 [2]) with K >= reeds_shepp.MAX_CANDIDATES;
+    the letter and length buffers start zeroed (a Dubins word fills 3 of the 5 columns)."""
+    letters, lengths, costs, order, curvatures, signed, tie_orders, ties = scratch
     nx, ny, nphi = reeds_shepp.normalize(x, y, theta, goal[0], goal[1], goal[2], radius)
     if forward_only is None:
         count = reeds_shepp.enumerate_normalized(nx, ny, nphi, letters, lengths)
@@ -205,22 +221,21 @@ def _analytic_expansion(
                 cost += switch_cost
             previous = sign
         costs[k] = cost
-    if exact_ties is None:
-        # Cheapest first by insertion (a few dozen candidates). With distinct costs that is the one
-        # order there is; an exact tie (mirror-image curves) is ordered by np.argsort's quicksort,
-        # compiled only for the rare search that meets one (TIED: the caller searches again).
-        for k in range(count):
-            position = k
-            while position > 0 and costs[order[position - 1]] > costs[k]:
-                order[position] = order[position - 1]
-                position -= 1
-            if position > 0 and costs[order[position - 1]] == costs[k]:
-                return -1, 0.0
-            order[position] = k
-    else:
-        sorted_order = np.argsort(costs[:count])
-        for rank in range(count):
-            order[rank] = sorted_order[rank]
+    # Cheapest first by insertion (a few dozen candidates).
+    for k in range(count):
+        position = k
+        while position > 0 and costs[order[position - 1]] > costs[k]:
+            order[position] = order[position - 1]
+            position -= 1
+        if position > 0 and costs[order[position - 1]] == costs[k]:
+            tie = ties[1]
+            ties[1] = tie + 1
+            if tie >= ties[0]:
+                return -count, 0.0
+            for rank in range(count):
+                order[rank] = tie_orders[tie, rank]
+            break
+        order[position] = k
     for rank in range(count):
         k = order[rank]
         for j in range(5):
@@ -241,19 +256,19 @@ def hybrid_search(
     occupied, resolution, origin_x, origin_y, distance_grid, start, goal,
     prim_curvature, prim_cost, prim_direction, prim_samples, prim_sample_count,
     heading_bins, radius, forward_only, reverse_cost, steering_cost, switch_cost,
-    analytic_interval, analytic_distance, goal_tolerance, heading_tolerance, collision_step, exact_ties,
+    analytic_interval, analytic_distance, goal_tolerance, heading_tolerance, collision_step,
     max_iterations, node_x, node_y, node_theta, node_g, node_parent, node_primitive, node_direction,
     closed, heap_f, heap_h, heap_node, scratch, explored, analytic_curvature, analytic_length,
 ):  # fmt: skip
     """Run hybrid A* from `start` to `goal` (x, y, theta).
 
     forward_only: None when the car may reverse (Reeds-Shepp curves), True when it may not
-    (Dubins); exact_ties: see _analytic_expansion. None rather than False in both: numba drops an
-    `is None` branch at compile time, so a search compiles only the curves and the sort it uses.
+    (Dubins). None rather than False: numba drops an `is None` branch at compile time, so a search
+    compiles only the curves it uses.
     Node arrays (node_*, closed (False), heap_*) have room for max_iterations x P + 1 nodes;
     scratch: see _analytic_expansion. Returns (status, final node, expanded nodes, analytic segment
-    count, analytic cost); the path is the parent chain of the final node followed by the analytic
-    segments (if any).
+    count (TIED: the number of candidates, whose costs are in scratch[2]), analytic cost); the path
+    is the parent chain of the final node followed by the analytic segments (if any).
     """
     rows, cols = occupied.shape
     primitives = len(prim_cost)
@@ -308,13 +323,13 @@ def hybrid_search(
         ):
             count, cost = _analytic_expansion(
                 x, y, theta, node_direction[node], goal, radius, forward_only, reverse_cost, steering_cost,
-                switch_cost, occupied, resolution, origin_x, origin_y, collision_step, exact_ties, scratch,
+                switch_cost, occupied, resolution, origin_x, origin_y, collision_step, scratch,
                 analytic_curvature, analytic_length,
             )  # fmt: skip
             if count > 0:
                 return FOUND_ANALYTIC, node, expanded, count, node_g[node] + cost
             if count < 0:
-                return TIED, node, expanded, 0, 0.0
+                return TIED, node, expanded, -count, 0.0
         if expanded >= max_iterations:
             return ITERATION_CAP, node, expanded, 0, 0.0
         cos_t, sin_t = math.cos(theta), math.sin(theta)

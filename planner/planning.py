@@ -18,6 +18,7 @@ from planner.astar import (
     FOUND,
     HEAP_FULL,
     HEURISTICS,
+    NO_COST,
     NO_PATH,
     ROUTE_FULL,
     TIE_BREAKERS,
@@ -130,7 +131,7 @@ class GridSearch:
         self.general = self.untrusted or self.name == "bidirectional" or settings["smoothing"] is not None
         self.moves = space.moves(self.connectivity, self.corner_cutting, self.untrusted)
         cost_weight = settings["cost_weight"]
-        self.cost = space.costs(settings["cost_scaling_factor"]) if cost_weight > 0.0 else None
+        self.cost = space.costs(settings["cost_scaling_factor"]) if cost_weight > 0.0 else NO_COST
         matlab = settings["tie_breaker"] == "matlab"
         self.parameters = search_parameters(
             space.width,
