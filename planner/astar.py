@@ -86,7 +86,7 @@ def search_parameters(
     )  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def heuristic_cells(row_offset, col_offset, kind):
     """h in cells for a (row, col) offset to the goal: 3.1 Manhattan, 3.2 Euclid, 3.3 Chebyshev,
     3.4 octile (diagonal distance), 3.6 the thesis's Euclid + 2 Chebyshev, or 0."""
@@ -189,7 +189,7 @@ def heap_pop(heap_key, heap_node, size):
     return top, size
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def heap_key_of(f, h, tie_breaker):
     """One int64 key: f on a 2^-24 cell grid in the high bits, h (quarter cells) below for low_h ties."""
     key = np.int64(f * _F_SCALE + 0.5) << _H_BITS
@@ -198,7 +198,7 @@ def heap_key_of(f, h, tie_breaker):
     return key
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def neighbour_tables(width):
     """Offsets, row/col steps and lengths [cells] of the 8 moves, in the bit order of the move masks
     (planner.searchspace.MOVES): the 4 straight moves first. Filled element by element: np.array of
@@ -217,7 +217,7 @@ def neighbour_tables(width):
     return offsets, row_steps, col_steps, steps
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def astar_search(moves, cost, parameters, start, goal, generation, g, nodes, heap):
     """A* (or Dijkstra with heuristic 5 and goal -1) on a padded flat grid.
 
@@ -319,7 +319,7 @@ def astar_search(moves, cost, parameters, start, goal, generation, g, nodes, hea
             size = heap_push(heap_key, heap_node, size, key, neighbour)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def endpoint_node(blocked, parameters, x, y):
     """Padded node of the cell that contains (x, y) [m], or -1 when that is outside the map, not a
     number, or a blocked cell (obstacle, inflated, border). Same arithmetic as

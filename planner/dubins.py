@@ -23,7 +23,7 @@ MAX_CANDIDATES = 8
 _FULL_TURN_TOL = 1e-9
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _mod_turn(angle: float) -> float:
     """Angle [rad] in [0, 2pi), with values within rounding of 2pi mapped to 0."""
     wrapped = angle % TWO_PI

@@ -16,14 +16,14 @@ from numba import njit
 TWO_PI = 2.0 * math.pi
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def wrap_angle(angle: float) -> float:
     """Angle [rad] wrapped into (-pi, pi]."""
     # -(angle) mod 2pi in [0, 2pi) maps to angle wrapped into (-pi, pi]
     return math.pi - (math.pi - angle) % TWO_PI
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def advance(x: float, y: float, theta: float, curvature: float, signed_length: float):
     """Pose reached after driving `signed_length` [m] at `curvature` [1/m] from (x, y, theta)."""
     if curvature == 0.0:
@@ -35,7 +35,7 @@ def advance(x: float, y: float, theta: float, curvature: float, signed_length: f
     return new_x, new_y, new_theta
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def point_free(
     occupied: np.ndarray, resolution: float, origin_x: float, origin_y: float, x: float, y: float
 ) -> bool:

@@ -44,14 +44,14 @@ def argsort_order(costs: np.ndarray) -> np.ndarray:
     return np.asarray(_QUICKSORT.run_quicksort(np.array(costs, dtype=np.float64)), dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _cell(x, y, resolution, origin_x, origin_y, rows):
     col = int(math.floor((x - origin_x) / resolution))
     row = rows - 1 - int(math.floor((y - origin_y) / resolution))
     return row, col
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _state_key(row, col, theta, cols, heading_bins):
     """Closed-set key of (row, col, heading bin); bins are centred on multiples of 2pi/bins."""
     heading_bin = int(round((theta % TWO_PI) / (TWO_PI / heading_bins))) % heading_bins
@@ -99,7 +99,7 @@ def _index_new(capacity):
     return keys, np.empty(capacity, dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _index_slot(keys, key):
     """The slot holding `key`, or the empty slot where it belongs."""
     mask = np.uint64(len(keys) - 1)
@@ -121,7 +121,7 @@ def _index_grown(keys, values):
     return new_keys, new_values
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _before(f_a, h_a, node_a, f_b, h_b, node_b):
     """(f, h, node) of a orders before that of b: by f, then h, then node (which is unique)."""
     if f_a != f_b:

@@ -52,7 +52,7 @@ _HAS_BACKWARDS = np.array([False, False, True, False, False, False, True, True, 
 MAX_CANDIDATES = 64
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _polar(x: float, y: float):
     return math.hypot(x, y), math.atan2(y, x)
 
@@ -197,7 +197,7 @@ def shortest_length_normalized(
     return best
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def normalize(start_x, start_y, start_theta, goal_x, goal_y, goal_theta, radius):
     """Goal in the start's frame, scaled by 1/radius: (x, y, phi) for the R = 1 formulas."""
     dx = goal_x - start_x

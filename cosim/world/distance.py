@@ -40,7 +40,8 @@ def distance_to_obstacle(x: float, y: float, obstacle: Obstacle) -> float:
     if isinstance(obstacle, Circle):
         return max(0.0, math.hypot(x - obstacle.center[0], y - obstacle.center[1]) - obstacle.radius)
     vertices = np.ascontiguousarray(obstacle.polygon(), dtype=np.float64)
-    return polygon_distance(float(x), float(y), vertices, 0, len(vertices))
+    # Interpreted (a start/goal check, once per obstacle): compiled, it is inlined in _world_distance only.
+    return polygon_distance.py_func(float(x), float(y), vertices, 0, len(vertices))
 
 
 class WorldDistance:
