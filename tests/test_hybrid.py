@@ -136,14 +136,29 @@ def test_empty_map_gives_the_optimal_curve():
 
 def test_mirror_image_curves_of_equal_cost():
     """A goal right behind the car, facing back: the turn to the left and the turn to the right
-    cost exactly the same (the search then orders the candidate curves by np.argsort, as a run of
-    its own); either is a shortest Reeds-Shepp path, pi R long."""
+    cost exactly the same (the search then orders the candidate curves as numba's np.argsort does
+    and runs again); either is a shortest Reeds-Shepp path, pi R long."""
     grid = OccupancyGrid(np.zeros((60, 60), dtype=bool), resolution=0.5)
     start, goal = (15.0, 15.0, 0.0), (11.0, 15.0, math.pi)
     result = plan_hybrid(grid, start, goal, min_turning_radius=2.0)
     assert result.length == pytest.approx(math.pi * 2.0, abs=1e-9)
     assert result.length == pytest.approx(reeds_shepp.path_length(start, goal, 2.0), abs=1e-9)
     assert_drivable(result, grid, start, goal, 2.0, 0.0)
+
+
+def test_tie_order_is_numba_argsort():
+    """Exact ties between analytic curves are ordered as numba's compiled np.argsort orders them
+    (what the search used before), by numba's quicksort run as Python: same permutation."""
+    from numba import njit
+
+    from planner.hybrid_search import argsort_order
+
+    compiled = njit(lambda values: np.argsort(values))
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        size = int(rng.integers(1, reeds_shepp.MAX_CANDIDATES + 1))
+        costs = rng.integers(0, int(rng.integers(1, 8)), size) * 0.25 + 3.0  # many exact ties
+        assert np.array_equal(argsort_order(costs), compiled(costs))
 
 
 def test_goal_tolerance_without_analytic_expansion():
