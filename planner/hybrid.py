@@ -67,6 +67,10 @@ OPTIONS = (
     "max_iterations",
 )
 DEFAULT_TURNING_RADIUS = 3.5
+# Exact ties between analytic curves a search orders by restarting (no compile); beyond that many,
+# the search runs with the compiled np.argsort (compiled once, on the first such search). Most
+# queries meet no tie, some one or two, a few (goals right behind a pose) dozens.
+PYTHON_TIES = 2
 
 
 def _number(name: str, value, minimum: float = 0.0, strict: bool = True, maximum: float = math.inf) -> float:
@@ -251,9 +255,9 @@ def _plan_hybrid(grid: OccupancyGrid, start, goal, **options) -> PlanResult:
         np.empty(capacity, dtype=np.int64) for _ in range(4)
     )
     candidates = reeds_shepp.MAX_CANDIDATES
-    tie_orders = np.zeros((4, candidates), dtype=np.int64)
+    tie_orders = np.zeros((PYTHON_TIES, candidates), dtype=np.int64)
     ties = np.zeros(2, dtype=np.int64)  # tie orders given, ties met
-    scratch = [
+    scratch = (
         np.zeros((candidates, 5), dtype=np.int64),
         np.zeros((candidates, 5)),
         np.empty(candidates),
@@ -262,16 +266,18 @@ def _plan_hybrid(grid: OccupancyGrid, start, goal, **options) -> PlanResult:
         np.empty(5),
         tie_orders,
         ties,
-    ]
+    )
     analytic_curvature = np.zeros(5)
     analytic_length = np.zeros(5)
     search_began = time.perf_counter()
-    # None, not False: the kernel then compiles only the curves it uses (Reeds-Shepp or Dubins).
+    # None, not False: the kernel then compiles only the curves (Reeds-Shepp or Dubins) and the
+    # sort it uses. A search that meets an exact cost tie between analytic curves beyond the tie
+    # orders it was given returns TIED; the tie is ordered here and the search runs again, up to
+    # PYTHON_TIES times; a search with more ties runs once more with the compiled np.argsort
+    # (see planner.hybrid_search._analytic_expansion).
     forward_only = None if settings["reverse"] else True
+    exact_ties = None
     while True:
-        # A search that meets an exact cost tie between analytic curves beyond the tie orders it
-        # was given returns TIED; the tie is ordered here and the search runs again (see
-        # planner.hybrid_search._analytic_expansion).
         ties[1] = 0
         closed = np.zeros(capacity, dtype=bool)
         explored = np.zeros(grid.shape, dtype=bool)
@@ -283,19 +289,19 @@ def _plan_hybrid(grid: OccupancyGrid, start, goal, **options) -> PlanResult:
             settings["heading_bins"], radius, forward_only, settings["reverse_cost"],
             settings["steering_cost"], settings["direction_switch_cost"], settings["analytic_interval"],
             settings["analytic_distance"], settings["goal_tolerance"], settings["heading_tolerance"],
-            settings["collision_step"],
+            settings["collision_step"], exact_ties,
             settings["max_iterations"],
             node_x, node_y, node_theta, node_g, node_parent, node_primitive, node_direction,
-            closed, heap_f, heap_h, heap_node, tuple(scratch), explored, analytic_curvature, analytic_length,
+            closed, heap_f, heap_h, heap_node, scratch, explored, analytic_curvature, analytic_length,
         )  # fmt: skip
         if status != TIED:
             break
         given = int(ties[0])
-        if given == len(tie_orders):
-            tie_orders = np.concatenate((tie_orders, np.zeros_like(tie_orders)))
-            scratch[6] = tie_orders
-        tie_orders[given, :analytic_count] = argsort_order(scratch[2][:analytic_count])
-        ties[0] = given + 1
+        if given == PYTHON_TIES:
+            exact_ties = True
+        else:
+            tie_orders[given, :analytic_count] = argsort_order(scratch[2][:analytic_count])
+            ties[0] = given + 1
     searched_at = time.perf_counter()
     if status <= 0:
         reason = (

@@ -185,17 +185,18 @@ def _heap_pop(heap_f, heap_h, heap_node, size):
 @njit(cache=True)
 def _analytic_expansion(
     x, y, theta, direction, goal, radius, forward_only, reverse_cost, steering_cost, switch_cost,
-    occupied, resolution, origin_x, origin_y, collision_step, scratch, out_curvature, out_length,
+    occupied, resolution, origin_x, origin_y, collision_step, exact_ties, scratch, out_curvature, out_length,
 ):  # fmt: skip
     """Cheapest collision-free curve to the goal; writes its segments, returns (count, cost).
 
     Candidates are tried cheapest first, in the order numba's np.argsort gives: mirror-image curves
     (a goal right behind, facing back) cost exactly the same, and the order decides which of them
-    is taken. Distinct costs have one order, found here by insertion; an exact tie takes the
-    caller's order (tie_orders[t] for the t-th tie of this search, t < ties[0]; ties[1] counts them)
-    or, beyond those, returns -count (TIED: the caller orders costs[:count] as np.argsort does and
-    searches again, which meets the same ties in the same order). np.argsort itself is not compiled
-    here: its quicksort cost as much compile time as the rest of this function.
+    is taken. exact_ties None: distinct costs have one order, found here by insertion; an exact tie
+    takes the caller's order (tie_orders[t] for the t-th tie of this search, t < ties[0]; ties[1]
+    counts them) or, beyond those, returns -count (TIED: the caller orders costs[:count] as
+    np.argsort does and searches again, which meets the same ties in the same order). np.argsort
+    is compiled only with exact_ties True (for a search that meets many ties): its quicksort costs
+    about as much compile time as the rest of this function.
     scratch: (letters int64 [K, 5], lengths [K, 5], costs [K], order int64 [K], curvatures [5],
     signed lengths [5], tie_orders int64 [T, K], ties int64 [2]) with K >= reeds_shepp.MAX_CANDIDATES;
     the letter and length buffers start zeroed (a Dubins word fills 3 of the 5 columns)."""
@@ -221,21 +222,26 @@ def _analytic_expansion(
                 cost += switch_cost
             previous = sign
         costs[k] = cost
-    # Cheapest first by insertion (a few dozen candidates).
-    for k in range(count):
-        position = k
-        while position > 0 and costs[order[position - 1]] > costs[k]:
-            order[position] = order[position - 1]
-            position -= 1
-        if position > 0 and costs[order[position - 1]] == costs[k]:
-            tie = ties[1]
-            ties[1] = tie + 1
-            if tie >= ties[0]:
-                return -count, 0.0
-            for rank in range(count):
-                order[rank] = tie_orders[tie, rank]
-            break
-        order[position] = k
+    if exact_ties is None:
+        # Cheapest first by insertion (a few dozen candidates).
+        for k in range(count):
+            position = k
+            while position > 0 and costs[order[position - 1]] > costs[k]:
+                order[position] = order[position - 1]
+                position -= 1
+            if position > 0 and costs[order[position - 1]] == costs[k]:
+                tie = ties[1]
+                ties[1] = tie + 1
+                if tie >= ties[0]:
+                    return -count, 0.0
+                for rank in range(count):
+                    order[rank] = tie_orders[tie, rank]
+                break
+            order[position] = k
+    else:
+        sorted_order = np.argsort(costs[:count])
+        for rank in range(count):
+            order[rank] = sorted_order[rank]
     for rank in range(count):
         k = order[rank]
         for j in range(5):
@@ -256,15 +262,15 @@ def hybrid_search(
     occupied, resolution, origin_x, origin_y, distance_grid, start, goal,
     prim_curvature, prim_cost, prim_direction, prim_samples, prim_sample_count,
     heading_bins, radius, forward_only, reverse_cost, steering_cost, switch_cost,
-    analytic_interval, analytic_distance, goal_tolerance, heading_tolerance, collision_step,
+    analytic_interval, analytic_distance, goal_tolerance, heading_tolerance, collision_step, exact_ties,
     max_iterations, node_x, node_y, node_theta, node_g, node_parent, node_primitive, node_direction,
     closed, heap_f, heap_h, heap_node, scratch, explored, analytic_curvature, analytic_length,
 ):  # fmt: skip
     """Run hybrid A* from `start` to `goal` (x, y, theta).
 
     forward_only: None when the car may reverse (Reeds-Shepp curves), True when it may not
-    (Dubins). None rather than False: numba drops an `is None` branch at compile time, so a search
-    compiles only the curves it uses.
+    (Dubins); exact_ties: see _analytic_expansion. None rather than False in both: numba drops an
+    `is None` branch at compile time, so a search compiles only the curves and the sort it uses.
     Node arrays (node_*, closed (False), heap_*) have room for max_iterations x P + 1 nodes;
     scratch: see _analytic_expansion. Returns (status, final node, expanded nodes, analytic segment
     count (TIED: the number of candidates, whose costs are in scratch[2]), analytic cost); the path
@@ -323,7 +329,7 @@ def hybrid_search(
         ):
             count, cost = _analytic_expansion(
                 x, y, theta, node_direction[node], goal, radius, forward_only, reverse_cost, steering_cost,
-                switch_cost, occupied, resolution, origin_x, origin_y, collision_step, scratch,
+                switch_cost, occupied, resolution, origin_x, origin_y, collision_step, exact_ties, scratch,
                 analytic_curvature, analytic_length,
             )  # fmt: skip
             if count > 0:
