@@ -217,7 +217,7 @@ def neighbour_tables(width):
     return offsets, row_steps, col_steps, steps
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def astar_search(moves, cost, parameters, start, goal, generation, g, nodes, heap):
     """A* (or Dijkstra with heuristic 5 and goal -1) on a padded flat grid.
 
