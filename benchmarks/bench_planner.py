@@ -318,7 +318,7 @@ def print_table(rows: list[dict]) -> None:
         or row["overhead"] > 4e-6
     ]
     print(
-        f"\nGoal (issue 9: <= 0.7x pyastar2d, 100 % optimal, a call between adjacent cells <= 4 us): met on "
+        f"\nGoal (issue 15: <= 0.7x pyastar2d, 100 % optimal, a call between adjacent cells <= 4 us): met on "
         f"{len(rows) - len(missed)} of {len(rows)} maps"
         + (f"; missed on {', '.join(missed)}" if missed else "")
     )
