@@ -26,7 +26,7 @@ where a name is close to a known one:
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from cosim.core.component import closest_names
@@ -178,13 +178,12 @@ class _Composer:
         """Read the FMU's interface (through the port map); check the map and the values. The
         archive may unpack to [simulation] fmu_max_size MiB."""
         from cosim.fmi.archive import MIB
-        from cosim.fmi.component import FmuComponent
 
         where = component.where
         max_size = round(self.scenario.fmu_max_size * MIB)
         try:
             path = fmu_path(spec, self.scenario.fmi_version)
-            plain = FmuComponent(path, component.name, max_unpacked_size=max_size)
+            plain = _fmu_interface(path, component.name, {}, max_size)
         except CosimError as error:
             self.problems.add(f"{where}.fmu", str(error))
             self.broken.add(component.name)
@@ -199,10 +198,10 @@ class _Composer:
         fmu = plain
         if port_map:
             mapped = {port: {"name": m.variable, "scale": m.scale} for port, m in port_map.items()}
-            fmu = FmuComponent(path, component.name, port_map=mapped, max_unpacked_size=max_size)
+            fmu = _fmu_interface(path, component.name, mapped, max_size)
         # A state output: the template says it is one and the FMU declares no dependencies for it.
         declared = {u.variable.name for u in description.outputs if u.dependencies is not None}
-        feedthrough = {output: tuple(depends) for output, depends in fmu.feedthrough.items()}
+        feedthrough = dict(fmu.feedthrough)
         for port in component.state_outputs:
             variable = port_map[port].variable if port in port_map else port
             if port in feedthrough and variable not in declared:
@@ -213,9 +212,9 @@ class _Composer:
             fmi_version=fmu.fmi_version,
             model_name=description.modelName or "",
             port_map=port_map,
-            inputs=tuple(p.name for p in fmu.inputs),
-            outputs=tuple(p.name for p in fmu.outputs),
-            parameter_names=tuple(p.name for p in fmu.parameters),
+            inputs=fmu.inputs,
+            outputs=fmu.outputs,
+            parameter_names=fmu.parameters,
             feedthrough=feedthrough,
         )
         self.components[component.name] = self._values(described, spec, variables)
@@ -491,7 +490,7 @@ class _Composer:
 
     def _check_loops(self, connections: list[ConnectionDescription]) -> None:
         feedthrough = {name: component.feedthrough for name, component in self.components.items()}
-        loop = find_algebraic_loop([(c.source, c.target) for c in connections], feedthrough)
+        loop = _algebraic_loop([(c.source, c.target) for c in connections], feedthrough)
         if loop is None:
             return
         names = list(dict.fromkeys(reference.split(".", 1)[0] for reference in loop))
@@ -504,6 +503,81 @@ class _Composer:
             "depends on every input): break it with a component whose output is a state, or use "
             '[simulation] master = "jacobi"',
         )
+
+
+@dataclass(frozen=True)
+class _FmuInterface:
+    """What describing a system reads of an FMU component: its ports through a port map."""
+
+    model_description: object  # fmpy's, shared and read-only (`cosim.fmi.component`)
+    fmi_version: int
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    parameters: tuple[str, ...]
+    feedthrough: dict[str, tuple[str, ...]]  # output port -> input ports it depends on directly
+
+
+# The interfaces of the last few FMU components described, keyed by everything `FmuComponent` reads
+# to make them: the file's path and version (modification time and size, as its description cache),
+# the component's name, the port map and the unpacked-size limit. A sweep describes the same FMUs
+# once per run in each worker process (each read opens the archive and makes every port).
+_INTERFACES: dict[tuple, _FmuInterface] = {}
+_INTERFACES_KEPT = 32
+
+
+def _fmu_interface(path: Path, name: str, port_map: dict, max_size: int) -> _FmuInterface:
+    """The interface of `FmuComponent(path, name, port_map=port_map, max_unpacked_size=max_size)`;
+    `CosimError` as it raises (never remembered)."""
+    from cosim.fmi.component import FmuComponent
+
+    try:
+        status = Path(path).stat()
+    except OSError:
+        status = None  # FmuComponent says what is wrong
+    key = None
+    if status is not None:
+        mapping = tuple((port, m["name"], m["scale"]) for port, m in port_map.items())
+        key = (str(Path(path).resolve()), status.st_mtime_ns, status.st_size, name, mapping, max_size)
+        if key in _INTERFACES:
+            return _INTERFACES[key]
+    fmu = FmuComponent(path, name, port_map=port_map or None, max_unpacked_size=max_size)
+    interface = _FmuInterface(
+        fmu.model_description,
+        fmu.fmi_version,
+        tuple(p.name for p in fmu.inputs),
+        tuple(p.name for p in fmu.outputs),
+        tuple(p.name for p in fmu.parameters),
+        {output: tuple(depends) for output, depends in fmu.feedthrough.items()},
+    )
+    if key is not None:
+        if len(_INTERFACES) >= _INTERFACES_KEPT:
+            _INTERFACES.pop(next(iter(_INTERFACES)))
+        _INTERFACES[key] = interface
+    return interface
+
+
+# `find_algebraic_loop` of the last few connection graphs, keyed by the graph itself (the connection
+# pairs and every component's feedthrough, in order: the order decides which loop is named). A sweep
+# describes the same system once per run in each worker process; the search costs ~0.05 s there.
+_LOOPS: dict[tuple, list[str] | None] = {}
+_LOOPS_KEPT = 8
+
+
+def _algebraic_loop(pairs: list[tuple[str, str]], feedthrough: dict) -> list[str] | None:
+    """`find_algebraic_loop(pairs, feedthrough)`, remembered for the same arguments."""
+    key = (
+        tuple(pairs),
+        tuple(
+            (name, tuple((output, tuple(depends)) for output, depends in outputs.items()))
+            for name, outputs in feedthrough.items()
+        ),
+    )
+    if key not in _LOOPS:
+        if len(_LOOPS) >= _LOOPS_KEPT:
+            _LOOPS.pop(next(iter(_LOOPS)))
+        _LOOPS[key] = find_algebraic_loop(pairs, feedthrough)
+    loop = _LOOPS[key]
+    return None if loop is None else list(loop)
 
 
 def _value_problem(variable, value: float, given) -> str | None:
