@@ -433,6 +433,8 @@ def run_sweep(
             results.rewrite(ordered())
             writing = True
 
+        # On an error or an interrupt the fork server is left to stop with this process (as it
+        # would, being told by its closed pipe): it may still be warming up, and waiting is slower.
         stopping = None
         try:
             with ThreadPoolExecutor(2) as pool:
@@ -467,8 +469,6 @@ def run_sweep(
         finally:
             if writing:
                 results.rewrite(ordered())
-            if options.scheduler is None and stopping is None:  # an error or an interrupt
-                stop_fork_server()
     else:
         results.rewrite(ordered())
         plot_path = draw() if plot else None
