@@ -190,6 +190,15 @@ def test_50_mb_value_is_quoted_short(tmp_path, capsys):
     assert quoted is not None and len(quoted.group(0)) - len("got ") == 80  # with its quote and ellipsis
 
 
+def test_long_unknown_project_fmu_name_is_quoted_short(tmp_path, capsys):
+    # Found by the scenario mutator: a 2000-character FMU name that is no path was echoed in full.
+    name = "[" * 2000
+    text = example_text(**{'fmu = "DifferentialDrive"': f"fmu = '{name}'"})
+    message = reject(tmp_path, capsys, text)
+    assert "[vehicle].fmu: unknown project FMU '[[[" in message and "or give a path" in message
+    assert len(message) < 300 + len(str(tmp_path))
+
+
 def test_5_mb_unknown_key_is_quoted_short(tmp_path, capsys):
     text = example_text() + f"\n[simulation.x]\n'{'k' * (5 * 1024 * 1024)}' = 1\n"
     assert "[simulation].x: unknown key" in reject(tmp_path, capsys, text)

@@ -18,7 +18,7 @@ from functools import cache
 from pathlib import Path
 from types import ModuleType
 
-from cosim.errors import CosimError
+from cosim.errors import CosimError, shorten
 
 GENERATION_TOOL = "navcosim"  # how the project FMUs' generationTool starts
 
@@ -181,7 +181,7 @@ def builtin_fmu(name: str, fmi_version: int = 2) -> Path:
     fmi_version = _check_version(fmi_version)
     names = known_names()
     if name not in names:
-        raise CosimError(f"unknown project FMU {name!r}; known: {', '.join(names) or '(none)'}")
+        raise CosimError(f"unknown project FMU {shorten(name)!r}; known: {', '.join(names) or '(none)'}")
     if _has_sources(SOURCE_ROOT):
         return build_if_stale(name, SOURCE_ROOT, default_cache_dir(), fmi_version)
     return version_dir(SHIPPED_DIR, fmi_version) / f"{name}.fmu"

@@ -497,7 +497,7 @@ def _fmu_name(table: TableReader, default: str | None, base_dir: Path) -> str:
         return fmu
     if "/" not in fmu and not fmu.endswith(".fmu"):
         raise table.error(
-            "fmu", f"unknown project FMU '{fmu}'{did_you_mean(fmu, BUILTIN_FMUS)}; or give a path"
+            "fmu", f"unknown project FMU '{shorten(fmu)}'{did_you_mean(fmu, BUILTIN_FMUS)}; or give a path"
         )
     return str(_existing_file(table, "fmu", base_dir, "FMU file", fmu))
 
