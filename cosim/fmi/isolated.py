@@ -9,21 +9,38 @@ loads the FMU with the same code, so values, checks (finite outputs) and message
 
 Exchange
 --------
-Both processes map one shared memory block (a memfd): a header with t and h [s] and the FMI call
-the child is in, then the component's input buffer, then its output buffer. The host's
-`input_buffer`/`output_buffer` and the child's FmuComponent buffers ARE these views, so the master
-writes inputs straight into the child's buffer and reads outputs from it: no copies. Signalling is
-one datagram each way on a Unix SOCK_SEQPACKET socket pair, one exchange per step: the host writes
-t and h and sends "step" (with "push the inputs first" when `push_inputs` was called since the last
-step); the child sets the inputs, calls doStep, gets the outputs and answers one byte.
+Both processes map one shared memory block (a memfd): a header with t and h [s], the FMI call the
+child is in and the step handshake, then the component's input buffer, then its output buffer.
+The host's `input_buffer`/`output_buffer` and the child's FmuComponent buffers ARE these views, so
+the master writes inputs straight into the child's buffer and reads outputs from it: no copies.
+Commands other than a step (instantiate, setup, ..., free: rare) are one datagram each way on a
+Unix SOCK_SEQPACKET socket pair.
 
-Why a socket, not a futex: measured on this project's 2-core machine, a Python-to-Python round
-trip costs 8.7 us through a futex pair and 9.5 us through the socket pair, but the socket gives
-the two things a futex does not: the kernel ends a wait after `timeout` by itself (SO_RCVTIMEO, no
-extra poll call), and a dead child shows at once as end-of-file instead of as a timeout. The host
-blocks in read: spinning on a reply counter in the shared header first was measured slower (14.5 us
-extra per isolated step in benchmarks/bench_isolation.py without, 16-18 us with 200-1000 polls),
-as the spinning host takes the core the child needs.
+A step is a spin-then-block handshake through the header: the host writes t, h, "push the inputs
+first" and then a new request sequence number; the child sets the inputs, calls doStep, gets the
+outputs, writes the status and then the request's number as its reply number. Each waiter polls
+the other's number for a short bounded time (the host HOST_SPIN for the reply; the child, right
+after a step, CHILD_SPIN for the next request, which in a tight master loop follows within
+microseconds), then announces "asleep" in the header, reads the number again, and blocks in a
+read on the socket. The other side sends a one-byte HINT datagram only when its peer has announced
+sleep; a HINT is only "look at the header" (a stale one costs a loop). A wake-up lost to x86's
+store->load reordering between "asleep" and the sequence number is bounded: a blocked read times
+out after SLICE (1 ms, SO_RCVTIMEO) and looks at the header again. A step error is sent as a
+datagram before the reply number, and the status word says to read it.
+
+Polling is bounded for the 2-core machines this runs on: the child polls only while the host has
+fewer children than usable cores (with 2 children on 2 cores, host + 2 pollers would fight for the
+cores: measured 22.7 us extra per step instead of 14.7), and a poll that runs out of time (a slow
+FMU, a busy machine) turns polling off for the next COOLDOWN (64) steps of that side.
+`host_spin` and `child_spin` (attributes, seconds; None = these defaults) override it.
+
+Measured (benchmarks/bench_isolation.py, quiet 2-core machine, one run, extra us per isolated
+component step over in-process): vehicle isolated 13.9 before (one blocking round trip per step)
+-> 3.8 now; both isolated 19.2 -> 14.7 (the children block, the host polls). A blocking round
+trip costs two wake-ups through the kernel; a polled one none. Why a socket at all, not a futex,
+for the blocking side: measured here, a Python-to-Python round trip costs 8.7 us through a futex
+pair and 9.5 us through the socket pair, but the socket gives what a futex does not: a kernel
+timeout without an extra poll call (SO_RCVTIMEO), and a dead child shows at once as end-of-file.
 
 Failures (each a one-line `CosimError` naming the component, the model, the FMI call and the
 simulation time; the component is then FAILED and the child gone):
@@ -50,6 +67,7 @@ import struct
 import subprocess
 import sys
 import tempfile
+import time
 import weakref
 from collections.abc import Collection, Mapping
 from pathlib import Path
@@ -66,9 +84,20 @@ DEFAULT_TIMEOUT = 10.0  # [s] longest FMI call ([simulation] fmu_timeout)
 STARTUP_TIMEOUT = 120.0  # [s] for the child's Python to start and read the model description
 FREE_TIMEOUT = 5.0  # [s] for a child to free its instance and exit before it is killed
 
-# Shared memory: t [s], h [s] (doubles at 0, 8), the call the child is in (int32 at 16), then the
-# input and output buffers (doubles) from BUFFERS_OFFSET on.
+# Shared memory: t [s], h [s] (doubles at 0, 8), then int32 words (`HEADER` indexes them as a
+# memoryview of int32: word i at byte 4 i): the call the child is in, the step handshake (see the
+# module docstring), and the child's spin budget [ns]; the input and output buffers (doubles)
+# follow from BUFFERS_OFFSET on.
 TIMES_OFFSET, CALL_OFFSET, BUFFERS_OFFSET = 0, 16, 64
+W_CALL = 4  # int32 word of CALL_OFFSET
+W_PUSH = 5  # host: 1 when the step pushes the inputs first
+W_REQUEST = 6  # host: sequence number of the last step asked for
+W_REPLY = 7  # child: sequence number of the last step done (after W_STATUS and the outputs)
+W_STATUS = 8  # child: 0 the step went well, 1 its error datagram is on the socket
+W_HOST_ASLEEP = 9  # host: 1 while it may block in read for the reply (wake it with HINT)
+W_CHILD_ASLEEP = 10  # child: 1 while it may block in read for a request (wake it with HINT)
+W_CHILD_SPIN = 11  # host: how long the child polls W_REQUEST after a step [ns]
+HEADER_WORDS = BUFFERS_OFFSET // 4
 MAX_PACKET = 1 << 16
 
 # Host -> child commands (first byte of a datagram; JSON arguments follow where needed).
@@ -76,6 +105,18 @@ STEP, STEP_PUSHED = b"s", b"S"  # doStep (after sending the inputs), then get th
 INSTANTIATE, SETUP, INITIALIZE, RESTRICT, TERMINATE, FREE = b"I", b"U", b"N", b"R", b"T", b"F"
 # Child -> host: OK alone, or ERROR + the component's state (one byte) + the message (UTF-8).
 OK, ERROR = b"\x00", b"\x01"
+# Either way: "look at the shared header" (a wake-up for a sleeping peer; may be stale: ignored).
+HINT = b"w"
+
+# Spin-then-block handshake of a step (see the module docstring); measured by
+# benchmarks/bench_isolation.py. A blocked waiter wakes every SLICE to re-read the header, so a
+# wake-up lost to store->load reordering between "asleep" and the sequence number costs <= SLICE.
+HOST_SPIN = 30e-6  # [s] the host polls for the reply this long before it blocks
+CHILD_SPIN = 30e-6  # [s] the child polls for the next request this long after a step
+SLICE = 1e-3  # [s] receive timeout of a blocked waiter (both sides)
+COOLDOWN = 64  # steps without polling after a poll ran out of time (a slow FMU, a busy machine)
+CORES = len(os.sched_getaffinity(0))
+_live: set[int] = set()  # ids of this process's running children (`_Child`)
 
 # What the child is doing, as it records it in the shared header before each call.
 CALL_IDLE, CALL_SET, CALL_STEP, CALL_GET = 0, 1, 2, 3
@@ -125,6 +166,7 @@ class _Child:
         return self.stderr.read().decode(errors="replace")
 
     def close(self) -> None:
+        _live.discard(id(self))
         self.kill()
         self.sock.close()
         self.stderr.close()
@@ -181,6 +223,13 @@ class IsolatedFmuComponent(Component):
         self.input_buffer[:], self.output_buffer[:] = starts
         self._times = (ctypes.c_double * 2).from_buffer(self._memory, TIMES_OFFSET)
         self._call = ctypes.c_int32.from_buffer(self._memory, CALL_OFFSET)
+        self._header = memoryview(self._memory)[:BUFFERS_OFFSET].cast("i")
+        self._sequence = 0
+        # Polling budgets [s]; None: HOST_SPIN, and CHILD_SPIN while this process has fewer children
+        # than usable cores (the host and the polling child each have a core), else 0 (block at once).
+        self.host_spin: float | None = None
+        self.child_spin: float | None = None
+        self._cooldown = 0
         self._child: _Child | None = None
         self._finalizer: weakref.finalize | None = None
         self._fd = -1
@@ -237,18 +286,45 @@ class IsolatedFmuComponent(Component):
             child_end.close()
             self._memory_fd_closer()  # the child has its own descriptor; the mapping stays
         self._child = _Child(process, host_end, stderr)
+        _live.add(id(self._child))
         self._finalizer = weakref.finalize(self, self._child.close)
         self._fd = host_end.fileno()
-        _set_receive_timeout(host_end, STARTUP_TIMEOUT)
+        _set_receive_timeout(host_end, SLICE)
         try:
             process.stdin.write(json.dumps(self._arguments).encode())
             process.stdin.close()
-            reply = os.read(self._fd, MAX_PACKET)
-        except OSError as error:  # the child ended before reading them, or did not answer
+        except OSError as error:  # the child ended before reading them
             reply = error
+        else:
+            reply = self._receive(STARTUP_TIMEOUT)
         if reply != OK:
             self._failed(reply, "load", STARTUP_TIMEOUT)
-        _set_receive_timeout(host_end, self.timeout)
+
+    def _receive_abandonable(self, timeout: float) -> bytes | OSError:
+        """`_receive` that SIGINT/SIGTERM end (`Interrupted`; the child is killed)."""
+        try:
+            with abandonable:
+                return self._receive(timeout)
+        except Interrupted:
+            self.state = State.FAILED
+            self._child.kill()
+            raise
+
+    def _receive(self, timeout: float) -> bytes | OSError:
+        """The child's next datagram other than a HINT, or the error that ended the wait
+        (BlockingIOError after `timeout` seconds)."""
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                packet = os.read(self._fd, MAX_PACKET)
+            except BlockingIOError as error:  # one SLICE passed
+                if time.monotonic() >= deadline:
+                    return error
+                continue
+            except OSError as error:
+                return error
+            if packet != HINT:
+                return packet
 
     def _exchange(self, packet: bytes, what: str) -> bytes:
         """Send one command and return the child's answer (after OK); raise on any failure."""
@@ -256,10 +332,11 @@ class IsolatedFmuComponent(Component):
             raise CosimError(f"FMU '{self.name}': {what} needs {len(packet)} bytes, more than {MAX_PACKET}")
         try:
             os.write(self._fd, packet)
-            reply = os.read(self._fd, MAX_PACKET)
         except OSError as error:
             reply = error
-        if reply[:1] != OK:
+        else:
+            reply = self._receive_abandonable(self.timeout)
+        if not isinstance(reply, bytes) or reply[:1] != OK:
             self._failed(reply, what)
         return reply[1:]
 
@@ -352,23 +429,78 @@ class IsolatedFmuComponent(Component):
         times[0] = t
         times[1] = h
         self._time = t
+        header = self._header
         if self._push_pending:
             self._push_pending = False
-            command = STEP_PUSHED
+            header[W_PUSH] = 1
         else:
-            command = STEP
+            header[W_PUSH] = 0
+        host_spin, child_spin = self.host_spin, self.child_spin
+        if host_spin is None:
+            host_spin = HOST_SPIN
+        if child_spin is None:
+            child_spin = CHILD_SPIN if len(_live) < CORES else 0.0
+        header[W_CHILD_SPIN] = int(child_spin * 1e9)
+        sequence = self._sequence = (self._sequence + 1) & 0x7FFFFFFF
+        header[W_REQUEST] = sequence
+        if header[W_CHILD_ASLEEP]:
+            try:
+                os.write(self._fd, HINT)
+            except OSError as error:  # the child is gone
+                self._failed(error, "step")
+        if header[W_REPLY] != sequence:
+            try:
+                with abandonable:  # SIGINT/SIGTERM end the wait: the child may hang in the FMU for good
+                    if host_spin and not self._cooldown:
+                        # Poll first: a step of a small FMU takes a few us, less than a wake-up
+                        # through the kernel. perf_counter is read every 16 polls (~0.1 us each).
+                        clock = time.perf_counter
+                        give_up = clock() + host_spin
+                        polls = 0
+                        while header[W_REPLY] != sequence:
+                            polls += 1
+                            if not polls & 15 and clock() >= give_up:
+                                self._cooldown = COOLDOWN
+                                self._wait_reply(sequence)
+                                break
+                    else:
+                        self._cooldown -= self._cooldown > 0
+                        self._wait_reply(sequence)
+            except Interrupted:
+                self._header[W_HOST_ASLEEP] = 0
+                self.state = State.FAILED  # mid-step: the child is ended, never asked for more
+                self._child.kill()
+                raise
+        if header[W_STATUS]:
+            self._failed(self._receive_abandonable(self.timeout), "step")
+
+    def _wait_reply(self, sequence: int) -> None:
+        """Block until the child has done step `sequence`; raise when it dies or hangs (inside
+        `abandonable`: a signal raises `Interrupted` here)."""
+        header = self._header
+        fd = self._fd
+        deadline = time.monotonic() + self.timeout
         try:
-            with abandonable:  # SIGINT/SIGTERM end the wait: the child may hang in the FMU for good
-                os.write(self._fd, command)
-                reply = os.read(self._fd, MAX_PACKET)
-        except OSError as error:  # a timeout (BlockingIOError), or the child is gone
-            reply = error
-        except Interrupted:
-            self.state = State.FAILED  # mid-step: the child is ended, never asked for more
-            self._child.kill()
-            raise
-        if reply != OK:
-            self._failed(reply, "step")
+            while True:
+                header[W_HOST_ASLEEP] = 1
+                if header[W_REPLY] == sequence:  # re-read after announcing: no lost wake-up
+                    break
+                try:
+                    packet = os.read(fd, MAX_PACKET)
+                except BlockingIOError as error:  # one SLICE passed
+                    if header[W_REPLY] == sequence:
+                        break
+                    if time.monotonic() >= deadline:
+                        packet = error
+                    else:
+                        continue
+                if packet != HINT:  # end of file: the child is gone; or the timeout
+                    header[W_HOST_ASLEEP] = 0
+                    self._failed(packet, "step")
+        except OSError as error:  # the socket failed
+            header[W_HOST_ASLEEP] = 0
+            self._failed(error, "step")
+        header[W_HOST_ASLEEP] = 0
 
     def get_outputs(self) -> np.ndarray:
         if self.state is not State.STEPPING:
@@ -387,9 +519,8 @@ class IsolatedFmuComponent(Component):
         if child is not None:
             if child.process.poll() is None:
                 try:
-                    _set_receive_timeout(child.sock, min(self.timeout, FREE_TIMEOUT))
                     os.write(self._fd, FREE)
-                    os.read(self._fd, MAX_PACKET)
+                    self._receive(min(self.timeout, FREE_TIMEOUT))
                     child.process.wait(FREE_TIMEOUT)
                 except (OSError, subprocess.TimeoutExpired):
                     pass

@@ -16,7 +16,10 @@ import json
 import mmap
 import os
 import signal
+import socket
+import struct
 import sys
+import time
 
 from cosim.errors import CosimError
 from cosim.fmi import isolated as protocol
@@ -38,6 +41,10 @@ def _error(component: FmuComponent | None, message: str) -> bytes:
     return protocol.ERROR + bytes([int(state)]) + message.encode(errors="replace")[: protocol.MAX_PACKET - 2]
 
 
+def _bug(component: FmuComponent, error: Exception) -> bytes:
+    return _error(component, f"FMU '{component.name}' in its process: {type(error).__name__}: {error}")
+
+
 def serve(fd: int, memory: mmap.mmap) -> int:
     """Answer the host's commands on socket `fd`; return the exit status."""
     read, write = os.read, os.write
@@ -50,21 +57,65 @@ def serve(fd: int, memory: mmap.mmap) -> int:
     write(fd, protocol.OK)
     times = (ctypes.c_double * 2).from_buffer(memory, protocol.TIMES_OFFSET)
     call = ctypes.c_int32.from_buffer(memory, protocol.CALL_OFFSET)
-    step, step_pushed = protocol.STEP, protocol.STEP_PUSHED
+    header = memoryview(memory)[: protocol.BUFFERS_OFFSET].cast("i")
+    W_REQUEST, W_REPLY, W_STATUS = protocol.W_REQUEST, protocol.W_REPLY, protocol.W_STATUS
+    W_CHILD_ASLEEP, W_HOST_ASLEEP = protocol.W_CHILD_ASLEEP, protocol.W_HOST_ASLEEP
+    HINT, MAX_PACKET = protocol.HINT, protocol.MAX_PACKET
+    clock = time.perf_counter
+    done = 0  # sequence number of the last step done
+    polling = False  # right after a step: poll for the next request before blocking
+    cooldown = 0  # steps left without polling after a poll ran out of time
     while True:
-        packet = read(fd, protocol.MAX_PACKET)
-        try:
-            if packet == step or packet == step_pushed:  # the hot path: one macro step
-                if packet == step_pushed:
+        if header[W_REQUEST] == done:
+            spin = header[protocol.W_CHILD_SPIN]
+            if polling and spin and not cooldown:
+                polling = False
+                give_up = clock() + spin * 1e-9
+                polls = 0
+                while header[W_REQUEST] == done:
+                    polls += 1
+                    if not polls & 15 and clock() >= give_up:
+                        cooldown = protocol.COOLDOWN
+                        break
+                else:
+                    continue
+            header[W_CHILD_ASLEEP] = 1
+            if header[W_REQUEST] != done:  # re-read after announcing: no lost wake-up
+                header[W_CHILD_ASLEEP] = 0
+                continue
+            try:
+                packet = read(fd, MAX_PACKET)
+            except BlockingIOError:  # one SLICE passed: look again
+                packet = HINT
+            header[W_CHILD_ASLEEP] = 0
+            if packet == HINT:
+                continue
+        else:  # the hot path: one macro step
+            sequence = header[W_REQUEST]
+            try:
+                if header[protocol.W_PUSH]:
                     call.value = protocol.CALL_SET
                     component.push_inputs()
                 call.value = protocol.CALL_STEP
                 component.do_step(times[0], times[1])
                 call.value = protocol.CALL_GET
                 component.get_outputs()
-                call.value = protocol.CALL_IDLE
-                write(fd, protocol.OK)
-                continue
+                header[W_STATUS] = 0
+            except CosimError as error:
+                write(fd, _error(component, str(error)))
+                header[W_STATUS] = 1
+            except Exception as error:  # a bug here, not the FMU's: still one line for the host
+                write(fd, _bug(component, error))
+                header[W_STATUS] = 1
+            call.value = protocol.CALL_IDLE
+            done = sequence
+            header[W_REPLY] = sequence
+            if header[W_HOST_ASLEEP]:
+                write(fd, HINT)
+            polling = True
+            cooldown -= cooldown > 0
+            continue
+        try:
             if not packet:
                 return 0  # the host has gone
             command, argument = packet[:1], packet[1:]
@@ -106,10 +157,7 @@ def serve(fd: int, memory: mmap.mmap) -> int:
             write(fd, _error(component, str(error)))
         except Exception as error:  # a bug here, not the FMU's: still one line for the host
             call.value = protocol.CALL_IDLE
-            write(
-                fd,
-                _error(component, f"FMU '{component.name}' in its process: {type(error).__name__}: {error}"),
-            )
+            write(fd, _bug(component, error))
 
 
 def main(argv: list[str]) -> int:
@@ -118,6 +166,9 @@ def main(argv: list[str]) -> int:
     _die_with(parent)
     memory = mmap.mmap(memory_fd, 0)
     os.close(memory_fd)
+    seconds = protocol.SLICE  # a blocked read wakes this often to re-read the header
+    with socket.socket(fileno=os.dup(fd)) as sock:  # the option is the socket's, shared by fd
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, struct.pack("ll", 0, int(seconds * 1e6)))
     try:
         return serve(fd, memory)
     except (BrokenPipeError, ConnectionResetError):
