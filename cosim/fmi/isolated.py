@@ -34,12 +34,13 @@ cores: measured 22.7 us extra per step instead of 14.7), and a poll that runs ou
 FMU, a busy machine) turns polling off for the next COOLDOWN (64) steps of that side.
 `host_spin` and `child_spin` (attributes, seconds; None = these defaults) override it.
 
-Measured (benchmarks/bench_isolation.py, quiet 2-core machine, one run, extra us per isolated
-component step over in-process): vehicle isolated 13.9 before (one blocking round trip per step)
--> 3.8 now; both isolated 19.2 -> 14.7 (the children block, the host polls). A blocking round
-trip costs two wake-ups through the kernel; a polled one none. Why a socket at all, not a futex,
-for the blocking side: measured here, a Python-to-Python round trip costs 8.7 us through a futex
-pair and 9.5 us through the socket pair, but the socket gives what a futex does not: a kernel
+Measured (benchmarks/bench_isolation.py --baseline <the blocking handshake's tree> --spin auto,
+quiet 2-core machine, extra us per isolated component step over in-process, two runs): vehicle
+isolated 27.4 / 23.5 before (one blocking round trip per step) -> 5.1 / 7.3 now; both isolated 21.0
+/ 22.8 -> 22.7 / 15.5 (the children block, the host polls; one earlier run 19.2 -> 14.7). A blocking
+round trip costs two wake-ups through the kernel; a polled one none. Why a socket at all, not a
+futex, for the blocking side: measured here, a Python-to-Python round trip costs 8.7 us through a
+futex pair and 9.5 us through the socket pair, but the socket gives what a futex does not: a kernel
 timeout without an extra poll call (SO_RCVTIMEO), and a dead child shows at once as end-of-file.
 
 Failures (each a one-line `CosimError` naming the component, the model, the FMI call and the
@@ -442,15 +443,17 @@ class IsolatedFmuComponent(Component):
             child_spin = CHILD_SPIN if len(_live) < CORES else 0.0
         header[W_CHILD_SPIN] = int(child_spin * 1e9)
         sequence = self._sequence = (self._sequence + 1) & 0x7FFFFFFF
-        header[W_REQUEST] = sequence
-        if header[W_CHILD_ASLEEP]:
-            try:
-                os.write(self._fd, HINT)
-            except OSError as error:  # the child is gone
-                self._failed(error, "step")
-        if header[W_REPLY] != sequence:
-            try:
-                with abandonable:  # SIGINT/SIGTERM end the wait: the child may hang in the FMU for good
+        try:
+            # Entered before the request is made: a signal that comes after it (the child may already
+            # hang in the FMU) must end the wait, never only be recorded for the next step.
+            with abandonable:  # SIGINT/SIGTERM end the wait: the child may hang in the FMU for good
+                header[W_REQUEST] = sequence
+                if header[W_CHILD_ASLEEP]:
+                    try:
+                        os.write(self._fd, HINT)
+                    except OSError as error:  # the child is gone
+                        self._failed(error, "step")
+                if header[W_REPLY] != sequence:
                     if host_spin and not self._cooldown:
                         # Poll first: a step of a small FMU takes a few us, less than a wake-up
                         # through the kernel. perf_counter is read every 16 polls (~0.1 us each).
@@ -466,11 +469,11 @@ class IsolatedFmuComponent(Component):
                     else:
                         self._cooldown -= self._cooldown > 0
                         self._wait_reply(sequence)
-            except Interrupted:
-                self._header[W_HOST_ASLEEP] = 0
-                self.state = State.FAILED  # mid-step: the child is ended, never asked for more
-                self._child.kill()
-                raise
+        except Interrupted:
+            self._header[W_HOST_ASLEEP] = 0
+            self.state = State.FAILED  # mid-step: the child is ended, never asked for more
+            self._child.kill()
+            raise
         if header[W_STATUS]:
             self._failed(self._receive_abandonable(self.timeout), "step")
 
