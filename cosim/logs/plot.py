@@ -21,7 +21,15 @@ from pathlib import Path
 import numpy as np
 
 from cosim.errors import CosimError
-from cosim.logs.reader import Log, Signals, Trajectory, _marker_shapes, open_log
+from cosim.logs.reader import (
+    Log,
+    Signals,
+    Trajectory,
+    _marker_shapes,
+    metadata_goal,
+    open_log,
+    start_pose,
+)
 
 MODE_AVOID, MODE_RECOVER = 1, 2
 MODE_COLORS = {MODE_AVOID: "#ff9f1c", MODE_RECOVER: "#d62828"}
@@ -165,33 +173,15 @@ class TraceSource:
         return Trajectory(rows[:, 0] / 1e9, rows[:, 1], rows[:, 2], theta)
 
     def goal(self) -> tuple[float, float] | None:
-        goal = _floats(self.metadata.get("navcosim", {}).get("goal"))
-        if goal is not None and len(goal) >= 2:
-            return goal[0], goal[1]
-        return self.trace.goal
+        return metadata_goal(self.metadata) or self.trace.goal
 
     def start(self) -> tuple[float, float, float] | None:
-        start = _floats(self.metadata.get("navcosim", {}).get("start"))
-        if start is not None and len(start) >= 2:
-            return start[0], start[1], start[2] if len(start) > 2 else 0.0
-        trajectory = self.trajectory()
-        if trajectory is None or len(trajectory.t) == 0:
-            return None
-        return float(trajectory.x[0]), float(trajectory.y[0]), float(trajectory.theta[0])
+        return start_pose(self.metadata, self.trajectory)
 
     def min_ranges(self) -> tuple[np.ndarray, np.ndarray] | None:
         if not self.trace.scan_t_ns:
             return None
         return np.array(self.trace.scan_t_ns) / 1e9, np.array(self.trace.scan_minima)
-
-
-def _floats(text: str | None) -> tuple[float, ...] | None:
-    if not text:
-        return None
-    try:
-        return tuple(float(part) for part in text.split(","))
-    except ValueError:
-        return None
 
 
 # --- what is drawn ----------------------------------------------------------------------------

@@ -395,21 +395,33 @@ class Log:
 
     def goal(self) -> tuple[float, float] | None:
         """Goal (x, y) [m] from the run's metadata, else the last /goal message."""
-        goal = _floats(self.metadata.get("navcosim", {}).get("goal"))
-        if goal is not None and len(goal) >= 2:
-            return goal[0], goal[1]
+        goal = metadata_goal(self.metadata)
+        if goal is not None:
+            return goal
         message = self.last_message("/goal")
         return (message.pose.position.x, message.pose.position.y) if message else None
 
     def start(self) -> tuple[float, float, float] | None:
         """Start pose (x, y [m], theta [rad]) from the run's metadata, else the first trajectory point."""
-        start = _floats(self.metadata.get("navcosim", {}).get("start"))
-        if start is not None and len(start) >= 2:
-            return start[0], start[1], start[2] if len(start) > 2 else 0.0
-        trajectory = self.trajectory()
-        if trajectory is None or len(trajectory.t) == 0:
-            return None
-        return float(trajectory.x[0]), float(trajectory.y[0]), float(trajectory.theta[0])
+        return start_pose(self.metadata, self.trajectory)
+
+
+def metadata_goal(metadata: dict) -> tuple[float, float] | None:
+    """Goal (x, y) [m] in a run's `navcosim` metadata, or None."""
+    goal = _floats(metadata.get("navcosim", {}).get("goal"))
+    return (goal[0], goal[1]) if goal is not None and len(goal) >= 2 else None
+
+
+def start_pose(metadata: dict, trajectory) -> tuple[float, float, float] | None:
+    """Start pose from a run's `navcosim` metadata, else the first point of `trajectory()` (called
+    only then: a log reads it from the file)."""
+    start = _floats(metadata.get("navcosim", {}).get("start"))
+    if start is not None and len(start) >= 2:
+        return start[0], start[1], start[2] if len(start) > 2 else 0.0
+    points = trajectory()
+    if points is None or len(points.t) == 0:
+        return None
+    return float(points.x[0]), float(points.y[0]), float(points.theta[0])
 
 
 def _path_points(message) -> np.ndarray:
