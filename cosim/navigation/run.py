@@ -435,16 +435,19 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
             _update_bar(bar, sim_time, now - wall_start, last_update)
             last_update[0] = now
 
-    def after_step(current: Master) -> bool:
-        reason = finish_step(current.step_index - 1)
-        if reason is None and take_signal() is not None:
+    def stop(reason: str | None, poll_signal: bool, sim_time: float) -> bool:
+        """After a step (Python loop) or a block (kernel): whether the run ends, and why."""
+        if reason is None and poll_signal and take_signal() is not None:
             reason = "interrupted"
         if bar is not None:
-            show_progress(current.time)
+            show_progress(sim_time)
         if reason is not None:
             state["reason"] = reason
             return True
         return False
+
+    def after_step(current: Master) -> bool:
+        return stop(finish_step(current.step_index - 1), True, current.time)
 
     failure = None
     try:
@@ -454,15 +457,7 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
             blocks = _KernelBlocks(built, master, tables, monitor, finish_step)
 
             def on_block(first: int, end: int, histories, clean: bool) -> bool:
-                reason = blocks.replay(first, end, histories, clean)
-                if reason is None and clean and take_signal() is not None:
-                    reason = "interrupted"
-                if bar is not None:
-                    show_progress(master.time)
-                if reason is not None:
-                    state["reason"] = reason
-                    return True
-                return False
+                return stop(blocks.replay(first, end, histories, clean), clean, master.time)
 
             master.run_blocks(total_steps, tables, on_block, block=blocks.block, before_block=blocks.watch)
     except CosimError as error:
