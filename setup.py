@@ -1,8 +1,10 @@
-"""Build hook: a wheel (`pip install .`) ships the project's FMUs prebuilt in `cosim/_fmus/`.
+"""Build hook: a wheel (`pip install .`) ships the project's FMUs prebuilt in `cosim/_fmus/` and its
+C kernels (`planner/native.py`) prebuilt in `cosim/_native/` and `planner/_native/`.
 
-Metadata lives in pyproject.toml; this file only adds the FMU build to `build_py`. An editable
-install (`pip install -e .`, uv too) builds them on first use instead (`cosim.fmi.builtin`, with a
-source-hash stamp), because an editable install is never rebuilt after a C edit.
+Metadata lives in pyproject.toml; this file only adds those builds to `build_py`. An editable
+install (`pip install -e .`, uv too) builds them on first use instead (`cosim.fmi.builtin` and
+`planner.native`, keyed by a hash of the sources), because an editable install is never rebuilt
+after a C edit.
 """
 
 import importlib.util
@@ -15,8 +17,8 @@ from setuptools.command.build_py import build_py
 ROOT = Path(__file__).resolve().parent
 
 
-def _fmu_build_module():
-    spec = importlib.util.spec_from_file_location("navcosim_fmu_build", ROOT / "fmus" / "build.py")
+def _module(name: str, path: Path):
+    spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -27,11 +29,16 @@ class BuildPyWithFmus(build_py):
         super().run()
         if getattr(self, "editable_mode", False):
             return
-        build = _fmu_build_module()
+        build = _module("navcosim_fmu_build", ROOT / "fmus" / "build.py")
         try:
             build.build_all(Path(self.build_lib) / "cosim" / "_fmus")
         except build.FmuBuildError as error:
             sys.exit(f"navcosim: cannot build the FMUs: {error}")
+        native = _module("navcosim_native", ROOT / "planner" / "native.py")
+        try:
+            native.build_all({ROOT / name: Path(self.build_lib) / name for name in ("cosim", "planner")})
+        except native.NativeBuildError as error:
+            sys.exit(f"navcosim: cannot build the C kernels: {error}")
 
 
 setup(cmdclass={"build_py": BuildPyWithFmus})
