@@ -13,7 +13,8 @@ machine:
   shell does not set it);
 - `plot added`: the same run drawing its default PNG, minus the run without it;
 - `first run, cold caches`: a fresh copy of the checkout (no `__pycache__`, `build/` or logs, so no
-  bytecode and no in-tree numba index files) with an empty `NUMBA_CACHE_DIR` and the FMUs already
+  bytecode, no in-tree numba index files and no built C kernels: `planner.native` compiles them into
+  the copy's `build/native/`) with an empty `NUMBA_CACHE_DIR` and the FMUs already
   built (the user's FMU build cache copied in): the first run of a fresh install. The user's own
   caches are never touched;
 - `first run, cold caches + FMUs`: the same without built FMUs (a fresh source checkout builds them);
@@ -75,14 +76,18 @@ def _timed(command: list[str], cwd: Path, env: dict[str, str]) -> tuple[float, f
 
 def _environment(checkout: Path) -> dict[str, str]:
     env = {**os.environ, "PYTHONPATH": str(checkout)}
-    for name in ("NUMBA_CACHE_DIR", "NAVCOSIM_FMU_CACHE", "PYTHONDONTWRITEBYTECODE", "PYTHONPYCACHEPREFIX"):
+    for name in (
+        "NUMBA_CACHE_DIR", "NAVCOSIM_FMU_CACHE", "NAVCOSIM_NATIVE_CACHE", "PYTHONDONTWRITEBYTECODE",
+        "PYTHONPYCACHEPREFIX",
+    ):  # fmt: skip
         env.pop(name, None)
     return env
 
 
 SKIP = shutil.ignore_patterns(
-    ".git", "__pycache__", "*.nbi", "*.nbc", "build", "logs", "*.egg-info", ".pytest_cache", ".ruff_cache"
-)
+    ".git", "__pycache__", "*.nbi", "*.nbc", "build", "_native", "logs", "*.egg-info", ".pytest_cache",
+    ".ruff_cache",
+)  # fmt: skip
 
 
 def _fresh_copy(checkout: Path, into: Path, with_fmus: bool) -> Path:
