@@ -98,6 +98,7 @@ W_STATUS = 8  # child: 0 the step went well, 1 its error datagram is on the sock
 W_HOST_ASLEEP = 9  # host: 1 while it may block in read for the reply (wake it with HINT)
 W_CHILD_ASLEEP = 10  # child: 1 while it may block in read for a request (wake it with HINT)
 W_CHILD_SPIN = 11  # host: how long the child polls W_REQUEST after a step [ns]
+W_PREPARE = 12  # host: "your request comes next": poll for it this long [ns], giving the core away
 HEADER_WORDS = BUFFERS_OFFSET // 4
 MAX_PACKET = 1 << 16
 
@@ -115,9 +116,11 @@ HINT = b"w"
 HOST_SPIN = 30e-6  # [s] the host polls for the reply this long before it blocks
 CHILD_SPIN = 30e-6  # [s] the child polls for the next request this long after a step
 SLICE = 1e-3  # [s] receive timeout of a blocked waiter (both sides)
+PREPARE_SPIN = 100e-6  # [s] a child told its request comes next polls this long (yielding its core)
 COOLDOWN = 64  # steps without polling after a poll ran out of time (a slow FMU, a busy machine)
 CORES = len(os.sched_getaffinity(0))
 _live: set[int] = set()  # ids of this process's running children (`_Child`)
+_last: list = [None]  # weak reference to the isolated component stepped last (learns the order)
 
 # What the child is doing, as it records it in the shared header before each call.
 CALL_IDLE, CALL_SET, CALL_STEP, CALL_GET = 0, 1, 2, 3
@@ -231,6 +234,7 @@ class IsolatedFmuComponent(Component):
         self.host_spin: float | None = None
         self.child_spin: float | None = None
         self._cooldown = 0
+        self._next = None  # weak reference to the isolated component stepped after this one
         self._child: _Child | None = None
         self._finalizer: weakref.finalize | None = None
         self._fd = -1
@@ -442,6 +446,13 @@ class IsolatedFmuComponent(Component):
         if child_spin is None:
             child_spin = CHILD_SPIN if len(_live) < CORES else 0.0
         header[W_CHILD_SPIN] = int(child_spin * 1e9)
+        # The order of isolated steps, learned: the one stepped before this one is followed by it.
+        last = _last[0]
+        if last is not None and (previous := last()) is not None and previous is not self:
+            if previous._next is None or previous._next() is not self:
+                previous._next = weakref.ref(self)
+        if last is None or last() is not self:
+            _last[0] = weakref.ref(self)
         sequence = self._sequence = (self._sequence + 1) & 0x7FFFFFFF
         try:
             # Entered before the request is made: a signal that comes after it (the child may already
@@ -453,6 +464,8 @@ class IsolatedFmuComponent(Component):
                         os.write(self._fd, HINT)
                     except OSError as error:  # the child is gone
                         self._failed(error, "step")
+                if not child_spin and self._next is not None:
+                    self._prepare_next()
                 if header[W_REPLY] != sequence:
                     if host_spin and not self._cooldown:
                         # Poll first: a step of a small FMU takes a few us, less than a wake-up
@@ -476,6 +489,20 @@ class IsolatedFmuComponent(Component):
             raise
         if header[W_STATUS]:
             self._failed(self._receive_abandonable(self.timeout), "step")
+
+    def _prepare_next(self) -> None:
+        """Wake the child whose step follows this one, so that it polls for its request while
+        this step runs instead of being woken through the kernel when the request comes."""
+        following = self._next()
+        if following is None or following._child is None or following.state is not State.STEPPING:
+            return
+        header = following._header
+        header[W_PREPARE] = int(PREPARE_SPIN * 1e9)
+        if header[W_CHILD_ASLEEP]:
+            try:
+                os.write(following._fd, HINT)
+            except OSError:
+                pass  # that child is gone: its own step reports it
 
     def _wait_reply(self, sequence: int) -> None:
         """Block until the child has done step `sequence`; raise when it dies or hangs (inside

@@ -60,6 +60,7 @@ def serve(fd: int, memory: mmap.mmap) -> int:
     header = memoryview(memory)[: protocol.BUFFERS_OFFSET].cast("i")
     W_REQUEST, W_REPLY, W_STATUS = protocol.W_REQUEST, protocol.W_REPLY, protocol.W_STATUS
     W_CHILD_ASLEEP, W_HOST_ASLEEP = protocol.W_CHILD_ASLEEP, protocol.W_HOST_ASLEEP
+    W_PREPARE, pause = protocol.W_PREPARE, os.sched_yield
     HINT, MAX_PACKET = protocol.HINT, protocol.MAX_PACKET
     clock = time.perf_counter
     done = 0  # sequence number of the last step done
@@ -79,6 +80,18 @@ def serve(fd: int, memory: mmap.mmap) -> int:
                         break
                 else:
                     continue
+            prepare = header[W_PREPARE]
+            if prepare:
+                # Our request comes next (another child's step runs now): poll, giving the core
+                # away between polls, as the host and the stepping child need theirs.
+                header[W_PREPARE] = 0
+                give_up = clock() + prepare * 1e-9
+                while header[W_REQUEST] == done:
+                    pause()
+                    if clock() >= give_up:
+                        break
+                else:
+                    continue
             header[W_CHILD_ASLEEP] = 1
             if header[W_REQUEST] != done:  # re-read after announcing: no lost wake-up
                 header[W_CHILD_ASLEEP] = 0
@@ -92,6 +105,7 @@ def serve(fd: int, memory: mmap.mmap) -> int:
                 continue
         else:  # the hot path: one macro step
             sequence = header[W_REQUEST]
+            header[W_PREPARE] = 0  # set for this request, if at all (none is set during our step)
             try:
                 if header[protocol.W_PUSH]:
                     call.value = protocol.CALL_SET
