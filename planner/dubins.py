@@ -8,94 +8,29 @@ reflections (x, y, phi) -> (x, -y, -phi) of LSL, LSR and LRL. Arc lengths lie in
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
-from numba import njit
 
-from planner.hybrid_geometry import TWO_PI
+from planner.hybrid_geometry import candidate_buffers, library
 from planner.reeds_shepp import CurvePath, normalize
 
-# +1 left arc, 0 straight, -1 right arc; the three base words then their reflections.
-_LETTERS = np.array([[1, 0, 1], [1, 0, -1], [1, -1, 1], [1, -1, 1]], dtype=np.int64)
-MAX_CANDIDATES = 8
-# A turn this close to a full circle is a rounding artefact of a zero-length arc.
-_FULL_TURN_TOL = 1e-9
+MAX_CANDIDATES = 8  # candidates (words) of one query at most
 
 
-@njit(cache=True, inline="always")
-def _mod_turn(angle: float) -> float:
-    """Angle [rad] in [0, 2pi), with values within rounding of 2pi mapped to 0."""
-    wrapped = angle % TWO_PI
-    if wrapped > TWO_PI - _FULL_TURN_TOL:
-        return 0.0
-    return wrapped
-
-
-@njit(cache=True)
-def _base(family: int, x: float, y: float, phi: float, out: np.ndarray) -> bool:
-    """Solve base word `family` (0 LSL, 1 LSR, 2/3 LRL) for goal (x, y, phi), R = 1."""
-    sin_phi = math.sin(phi)
-    cos_phi = math.cos(phi)
-    if family == 0:  # centres of both left circles; the straight is parallel to their line
-        dx = x - sin_phi
-        dy = y - 1.0 + cos_phi
-        t = _mod_turn(math.atan2(dy, dx))
-        out[0], out[1], out[2] = t, math.hypot(dx, dy), _mod_turn(phi - t)
-        return True
-    if family == 1:  # inner tangent of a left and a right circle: centre distance^2 = u^2 + 4
-        dx = x + sin_phi
-        dy = y - 1.0 - cos_phi
-        distance = math.hypot(dx, dy)
-        if distance < 2.0:
-            return False
-        u = math.sqrt(max(distance * distance - 4.0, 0.0))
-        t = _mod_turn(math.atan2(dy, dx) + math.atan2(2.0, u))
-        out[0], out[1], out[2] = t, u, _mod_turn(t - phi)
-        return True
-    # LRL: the outer centres are 4 sin(u/2) apart, u in (0, 2pi); two solutions for u
-    dx = x - sin_phi
-    dy = y - 1.0 + cos_phi
-    distance = math.hypot(dx, dy)
-    if distance > 4.0:
-        return False
-    u = 2.0 * math.asin(distance / 4.0)
-    if family == 3:
-        u = TWO_PI - u
-    t = _mod_turn(math.atan2(dy, dx) + 0.5 * u)
-    out[0], out[1], out[2] = t, u, _mod_turn(phi - t + u)
-    return True
-
-
-@njit(cache=True)
 def enumerate_normalized(x: float, y: float, phi: float, letters: np.ndarray, lengths: np.ndarray) -> int:
-    """All Dubins candidates from the origin to (x, y, phi) for R = 1 into the buffers (K x 3)."""
-    count = 0
-    base_lengths = np.zeros(3)
-    for family in range(4):
-        for reflect in range(2):
-            fy = -y if reflect else y
-            fphi = -phi if reflect else phi
-            if not _base(family, x, fy, fphi, base_lengths):
-                continue
-            for k in range(3):
-                lengths[count, k] = base_lengths[k]
-                letters[count, k] = -_LETTERS[family, k] if reflect else _LETTERS[family, k]
-            count += 1
-    return count
+    """All Dubins candidates from the origin to (x, y, phi) for R = 1 into the buffers (int64 and
+    float64, C-contiguous, at least MAX_CANDIDATES x 3; the first 3 columns are written); returns
+    their number. The formulas are C (`planner/native/hybrid_curves.h`, hy_dubins_base)."""
+    buffers = candidate_buffers(letters, lengths, MAX_CANDIDATES, 3)
+    return int(library().hy_dubins_enumerate_normalized(x, y, phi, *buffers))
 
 
-@njit(cache=True)
 def shortest_length_normalized(
     x: float, y: float, phi: float, letters: np.ndarray, lengths: np.ndarray
 ) -> float:
     """Length of the shortest Dubins path from the origin to (x, y, phi) for R = 1; letters and
     lengths are enumerate_normalized's buffers (K x 3 or wider; only the first 3 columns are used)."""
-    count = enumerate_normalized(x, y, phi, letters, lengths)
-    best = np.inf
-    for k in range(count):
-        best = min(best, lengths[k, 0] + lengths[k, 1] + lengths[k, 2])
-    return best
+    buffers = candidate_buffers(letters, lengths, MAX_CANDIDATES, 3)
+    return float(library().hy_dubins_shortest_length(x, y, phi, *buffers))
 
 
 def all_paths(start, goal, turning_radius: float) -> list[CurvePath]:

@@ -36,14 +36,14 @@ import time
 
 import numpy as np
 
-from planner import reeds_shepp
+from planner import native
 from planner.endpoints import check_endpoint_cell
 from planner.errors import PlannerError
 from planner.goal_distance import distance_to_goal
 from planner.grid import OccupancyGrid
-from planner.hybrid_geometry import sample_segments
+from planner.hybrid_geometry import library, sample_segments
 from planner.hybrid_primitives import build_primitives
-from planner.hybrid_search import FOUND_ANALYTIC, ITERATION_CAP, TIED, argsort_order, hybrid_search
+from planner.hybrid_search import FOUND_ANALYTIC, ITERATION_CAP, hybrid_search
 from planner.result import PlanResult
 
 OPTIONS = (
@@ -67,10 +67,6 @@ OPTIONS = (
     "max_iterations",
 )
 DEFAULT_TURNING_RADIUS = 3.5
-# Exact ties between analytic curves a search orders by restarting (no compile); beyond that many,
-# the search runs with the compiled np.argsort (compiled once, on the first such search). Most
-# queries meet no tie, some one or two, a few (goals right behind a pose) dozens.
-PYTHON_TIES = 2
 
 
 def _number(name: str, value, minimum: float = 0.0, strict: bool = True, maximum: float = math.inf) -> float:
@@ -185,21 +181,20 @@ def _pose(value, role: str) -> tuple[float, float, float]:
     return x, y, theta
 
 
-def _compiled_kernels() -> int:
-    """How many compiled specialisations the numba kernels a hybrid plan calls hold so far."""
-    from planner import astar, dubins, hybrid_geometry, hybrid_search, reeds_shepp
+def _compiled_kernels() -> tuple[int, int]:
+    """(compiled specialisations of the numba kernels a hybrid plan may call, C libraries loaded) so
+    far: the heuristic grid comes from grid A*'s search (planner.astar), which may be numba's."""
+    from planner import astar
 
-    return sum(
-        len(kernel.overloads)
-        for module in (astar, dubins, hybrid_geometry, hybrid_search, reeds_shepp)
-        for kernel in vars(module).values()
-        if hasattr(kernel, "overloads")
-    )
+    compiled = sum(len(kernel.overloads) for kernel in vars(astar).values() if hasattr(kernel, "overloads"))
+    return compiled, len(native._loaded)
 
 
 def plan_hybrid(grid: OccupancyGrid, start, goal, **options) -> PlanResult:
-    """See `_plan_hybrid`. A call that compiled kernels (or loaded them from numba's cache), as the
-    first one in a process does, is run again so that `elapsed` excludes JIT compilation."""
+    """See `_plan_hybrid`. The hybrid A* kernels are loaded first (built on a fresh install); a call
+    that still compiled or loaded kernels (grid A*'s, for the heuristic), as the first one in a
+    process does, is run again so that `elapsed` excludes building and loading them."""
+    library()
     compiled = _compiled_kernels()
     result = _plan_hybrid(grid, start, goal, **options)
     if _compiled_kernels() != compiled:
@@ -246,62 +241,16 @@ def _plan_hybrid(grid: OccupancyGrid, start, goal, **options) -> PlanResult:
         settings["steering_cost"],
         settings["collision_step"],
     )
-    capacity = settings["max_iterations"] * len(primitives.cost) + 1
-    # Allocated here rather than in the compiled search: every np.empty/np.zeros signature there
-    # is one more thing to compile on a cold cache. np.empty and np.zeros only reserve memory;
-    # pages are touched as the search reaches them.
-    node_x, node_y, node_theta, node_g, heap_f, heap_h = (np.empty(capacity) for _ in range(6))
-    node_parent, node_primitive, node_direction, heap_node = (
-        np.empty(capacity, dtype=np.int64) for _ in range(4)
-    )
-    candidates = reeds_shepp.MAX_CANDIDATES
-    tie_orders = np.zeros((PYTHON_TIES, candidates), dtype=np.int64)
-    ties = np.zeros(2, dtype=np.int64)  # tie orders given, ties met
-    scratch = (
-        np.zeros((candidates, 5), dtype=np.int64),
-        np.zeros((candidates, 5)),
-        np.empty(candidates),
-        np.empty(candidates, dtype=np.int64),
-        np.empty(5),
-        np.empty(5),
-        tie_orders,
-        ties,
-    )
-    analytic_curvature = np.zeros(5)
-    analytic_length = np.zeros(5)
     search_began = time.perf_counter()
-    # None, not False: the kernel then compiles only the curves (Reeds-Shepp or Dubins) and the
-    # sort it uses. A search that meets an exact cost tie between analytic curves beyond the tie
-    # orders it was given returns TIED; the tie is ordered here and the search runs again, up to
-    # PYTHON_TIES times; a search with more ties runs once more with the compiled np.argsort
-    # (see planner.hybrid_search._analytic_expansion).
-    forward_only = None if settings["reverse"] else True
-    exact_ties = None
-    while True:
-        ties[1] = 0
-        closed = np.zeros(capacity, dtype=bool)
-        explored = np.zeros(grid.shape, dtype=bool)
-        status, final, searched, analytic_count, _ = hybrid_search(
-            inflated.occupied, grid.resolution, float(grid.origin[0]), float(grid.origin[1]), distances,
-            np.array(start), np.array(goal),
-            primitives.curvature, primitives.cost, primitives.direction, primitives.samples,
-            primitives.sample_count,
-            settings["heading_bins"], radius, forward_only, settings["reverse_cost"],
-            settings["steering_cost"], settings["direction_switch_cost"], settings["analytic_interval"],
-            settings["analytic_distance"], settings["goal_tolerance"], settings["heading_tolerance"],
-            settings["collision_step"], exact_ties,
-            settings["max_iterations"],
-            node_x, node_y, node_theta, node_g, node_parent, node_primitive, node_direction,
-            closed, heap_f, heap_h, heap_node, scratch, explored, analytic_curvature, analytic_length,
-        )  # fmt: skip
-        if status != TIED:
-            break
-        given = int(ties[0])
-        if given == PYTHON_TIES:
-            exact_ties = True
-        else:
-            tie_orders[given, :analytic_count] = argsort_order(scratch[2][:analytic_count])
-            ties[0] = given + 1
+    search = hybrid_search(
+        inflated.occupied, grid.resolution, float(grid.origin[0]), float(grid.origin[1]), distances,
+        start, goal, primitives,
+        settings["heading_bins"], radius, not settings["reverse"], settings["reverse_cost"],
+        settings["steering_cost"], settings["direction_switch_cost"], settings["analytic_interval"],
+        settings["analytic_distance"], settings["goal_tolerance"], settings["heading_tolerance"],
+        settings["collision_step"], settings["max_iterations"],
+    )  # fmt: skip
+    status, searched = search.status, search.expanded
     searched_at = time.perf_counter()
     if status <= 0:
         reason = (
@@ -315,16 +264,16 @@ def _plan_hybrid(grid: OccupancyGrid, start, goal, **options) -> PlanResult:
         )
 
     chain = []
-    node = final
-    while node_parent[node] >= 0:
-        chain.append(node_primitive[node])
-        node = node_parent[node]
+    node = search.final
+    while search.node_parent[node] >= 0:
+        chain.append(search.node_primitive[node])
+        node = search.node_parent[node]
     chain.reverse()
     curvatures = [primitives.curvature[p] for p in chain]
     lengths = [primitives.signed_length[p] for p in chain]
     if status == FOUND_ANALYTIC:
-        curvatures.extend(analytic_curvature[:analytic_count])
-        lengths.extend(analytic_length[:analytic_count])
+        curvatures.extend(search.analytic_curvature[: search.analytic_count])
+        lengths.extend(search.analytic_length[: search.analytic_count])
     path, directions = sample_segments(
         start,
         np.array(curvatures, dtype=float),
@@ -351,7 +300,7 @@ def _plan_hybrid(grid: OccupancyGrid, start, goal, **options) -> PlanResult:
         path_nodes=len(path),
         searched_nodes=int(searched),
         elapsed=finished - began,
-        explored=explored,
+        explored=search.explored,
         directions=directions.astype(np.int8),
         planner="hybrid",
         info=info,

@@ -3,27 +3,83 @@
 A path is a list of segments, each a curvature kappa [1/m] (0 for straight, +1/R left,
 -1/R right) and a signed length [m] (negative = driven in reverse). The functions here place
 poses (x, y, theta) [m, m, rad] along such a path and check it against an occupancy grid.
-They are compiled with numba because the hybrid A* search calls them in its inner loop.
+
+The hybrid A* search runs them in C (`planner/native/hybrid_geometry.h`, part of the library
+`planner/native/hybrid.c`, which `library()` loads); the Python functions here do the same
+operations in the same order, so both give the same floats.
 """
 
 from __future__ import annotations
 
+import ctypes
 import math
+from pathlib import Path
 
 import numpy as np
-from numba import njit
+
+from planner import native
 
 TWO_PI = 2.0 * math.pi
+SOURCE = Path(__file__).resolve().parent / "native" / "hybrid.c"
+_library: ctypes.CDLL | None = None
+
+_P = ctypes.c_void_p
+_I = ctypes.c_int64
+_D = ctypes.c_double
+# name: (restype, argtypes) of the functions of hybrid.c called from Python
+_SIGNATURES = {
+    "hy_search": (_I, [_P]),
+    "hy_argsort": (None, [_P, _I, _P]),
+    "hy_reeds_shepp_enumerate": (_I, [_D, _D, _D, _P, _P, _I]),
+    "hy_reeds_shepp_shortest": (_D, [_D, _D, _D, _P, _P, _I]),
+    "hy_dubins_enumerate_normalized": (_I, [_D, _D, _D, _P, _P, _I]),
+    "hy_dubins_shortest_length": (_D, [_D, _D, _D, _P, _P, _I]),
+    "hy_segments_free_grid": (_I, [_P, _I, _I, _D, _D, _D, _D, _D, _D, _P, _P, _I, _D]),
+}
 
 
-@njit(cache=True, inline="always")
+def library() -> ctypes.CDLL:
+    """The hybrid A* kernels (`planner/native/hybrid.c`), built on first use, loaded once."""
+    global _library
+    if _library is None:
+        loaded = native.load(SOURCE)
+        for name, (restype, argtypes) in _SIGNATURES.items():
+            function = getattr(loaded, name)
+            function.restype = restype
+            function.argtypes = argtypes
+        _library = loaded
+    return _library
+
+
+def candidate_buffers(letters, lengths, rows: int, columns: int) -> tuple[int, int, int]:
+    """(address of letters, address of lengths, their row stride) for a kernel that writes up to
+    `rows` candidates of `columns` segments into them: int64 and float64 arrays, C-contiguous,
+    writeable, 2-D, at least rows x columns and of one width. ValueError otherwise."""
+    for name, array, dtype in (("letters", letters, np.int64), ("lengths", lengths, np.float64)):
+        if (
+            not isinstance(array, np.ndarray)
+            or array.dtype != dtype
+            or array.ndim != 2
+            or not array.flags.c_contiguous
+            or not array.flags.writeable
+            or array.shape[0] < rows
+            or array.shape[1] < columns
+        ):
+            raise ValueError(
+                f"{name} must be a writeable C-contiguous {np.dtype(dtype).name} array of at least "
+                f"{rows} x {columns}"
+            )
+    if letters.shape[1] != lengths.shape[1]:
+        raise ValueError("letters and lengths must have the same number of columns")
+    return letters.ctypes.data, lengths.ctypes.data, letters.shape[1]
+
+
 def wrap_angle(angle: float) -> float:
     """Angle [rad] wrapped into (-pi, pi]."""
     # -(angle) mod 2pi in [0, 2pi) maps to angle wrapped into (-pi, pi]
     return math.pi - (math.pi - angle) % TWO_PI
 
 
-@njit(cache=True, inline="always")
 def advance(x: float, y: float, theta: float, curvature: float, signed_length: float):
     """Pose reached after driving `signed_length` [m] at `curvature` [1/m] from (x, y, theta)."""
     if curvature == 0.0:
@@ -35,7 +91,6 @@ def advance(x: float, y: float, theta: float, curvature: float, signed_length: f
     return new_x, new_y, new_theta
 
 
-@njit(cache=True, inline="always")
 def point_free(
     occupied: np.ndarray, resolution: float, origin_x: float, origin_y: float, x: float, y: float
 ) -> bool:
@@ -49,7 +104,6 @@ def point_free(
     return not occupied[row, col]
 
 
-@njit(cache=True)
 def segments_free(
     occupied: np.ndarray,
     resolution: float,
@@ -63,20 +117,17 @@ def segments_free(
     count: int,
     step: float,
 ) -> bool:
-    """True if every sample every <= `step` [m] along the segments lies in a free cell."""
-    if not point_free(occupied, resolution, origin_x, origin_y, x, y):
-        return False
-    for k in range(count):
-        length = signed_lengths[k]
-        if length == 0.0:
-            continue
-        pieces = max(1, int(math.ceil(abs(length) / step - 1e-9)))
-        for piece in range(1, pieces + 1):
-            px, py, _ = advance(x, y, theta, curvatures[k], length * piece / pieces)
-            if not point_free(occupied, resolution, origin_x, origin_y, px, py):
-                return False
-        x, y, theta = advance(x, y, theta, curvatures[k], length)
-    return True
+    """True if every sample every <= `step` [m] along the first `count` segments lies in a free cell."""
+    occupied = np.ascontiguousarray(occupied, dtype=bool)
+    curvatures = np.ascontiguousarray(curvatures, dtype=np.float64)
+    signed_lengths = np.ascontiguousarray(signed_lengths, dtype=np.float64)
+    count = int(count)
+    if occupied.ndim != 2 or not 0 <= count <= min(len(curvatures), len(signed_lengths)):
+        raise ValueError("segments_free needs a 2-D grid and count <= the number of segments")
+    rows, cols = occupied.shape
+    grid = (occupied.ctypes.data, rows, cols, resolution, origin_x, origin_y)
+    path = (x, y, theta, curvatures.ctypes.data, signed_lengths.ctypes.data, count, step)
+    return bool(library().hy_segments_free_grid(*grid, *path))
 
 
 def sample_segments(
@@ -89,10 +140,8 @@ def sample_segments(
 
     Every segment end is a sample, so cusps (direction changes) are exact poses. directions[i] is
     the driving direction (+1 / -1) of the segment that reaches pose i (pose 0 takes the first
-    segment's). Run by the interpreter (`advance.py_func`, the same arithmetic as the compiled
-    `advance`): a plan samples a few hundred poses once, which is not worth a kernel to compile.
+    segment's). Run by the interpreter: a plan samples a few hundred poses once.
     """
-    move = advance.py_func
     x, y, theta = float(start[0]), float(start[1]), float(start[2])
     poses = [(x, y, theta)]
     directions = [1]
@@ -108,7 +157,7 @@ def sample_segments(
             first = False
         pieces = max(1, int(math.ceil(abs(length) / step - 1e-9)))
         for piece in range(1, pieces + 1):
-            poses.append(move(x, y, theta, curvature, length * piece / pieces))
+            poses.append(advance(x, y, theta, curvature, length * piece / pieces))
             directions.append(sign)
         x, y, theta = poses[-1]
     return np.array(poses, dtype=np.float64).reshape(-1, 3), np.array(directions, dtype=np.int8)
