@@ -9,6 +9,8 @@ the three-point curvature check only.
 """
 
 import math
+import subprocess
+import sys
 import tomllib
 
 import numpy as np
@@ -136,8 +138,8 @@ def test_empty_map_gives_the_optimal_curve():
 
 def test_mirror_image_curves_of_equal_cost():
     """A goal right behind the car, facing back: the turn to the left and the turn to the right
-    cost exactly the same (the search then orders the candidate curves as numba's np.argsort does
-    and runs again); either is a shortest Reeds-Shepp path, pi R long."""
+    cost exactly the same (the search then orders the candidate curves as numba's np.argsort does);
+    either is a shortest Reeds-Shepp path, pi R long."""
     grid = OccupancyGrid(np.zeros((60, 60), dtype=bool), resolution=0.5)
     start, goal = (15.0, 15.0, 0.0), (11.0, 15.0, math.pi)
     result = plan_hybrid(grid, start, goal, min_turning_radius=2.0)
@@ -148,7 +150,7 @@ def test_mirror_image_curves_of_equal_cost():
 
 def test_tie_order_is_numba_argsort():
     """Exact ties between analytic curves are ordered as numba's compiled np.argsort orders them
-    (what the search used before), by numba's quicksort run as Python: same permutation."""
+    (what the search used before), by the C port of numba's quicksort: same permutation."""
     from numba import njit
 
     from planner.hybrid_search import argsort_order
@@ -159,6 +161,34 @@ def test_tie_order_is_numba_argsort():
         size = int(rng.integers(1, reeds_shepp.MAX_CANDIDATES + 1))
         costs = rng.integers(0, int(rng.integers(1, 8)), size) * 0.25 + 3.0  # many exact ties
         assert np.array_equal(argsort_order(costs), compiled(costs))
+
+
+def test_curves_and_search_run_without_numba():
+    """The hybrid search and the curves are C kernels: importing and running them loads no numba."""
+    code = (
+        "import sys, math\n"
+        "from planner import dubins, reeds_shepp, hybrid_search\n"
+        "assert reeds_shepp.path_length((0, 0, 0), (3, 1, 1), 1.0) > 0\n"
+        "assert dubins.path_length((0, 0, 0), (3, 1, 1), 1.0) > 0\n"
+        "assert list(hybrid_search.argsort_order([2.0, 1.0])) == [1, 0]\n"
+        "print('numba' in sys.modules)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "False"
+
+
+def test_curve_buffers_are_checked():
+    """The curve kernels write into the caller's buffers: a wrong dtype or size is a ValueError, not
+    a write out of bounds."""
+    with pytest.raises(ValueError, match="letters must be .* int64 .* 64 x 5"):
+        reeds_shepp.enumerate_normalized(1.0, 1.0, 0.0, np.zeros((64, 5)), np.zeros((64, 5)))
+    with pytest.raises(ValueError, match="lengths must be .* float64 .* 8 x 3"):
+        dubins.enumerate_normalized(1.0, 1.0, 0.0, np.zeros((8, 3), dtype=np.int64), np.zeros((7, 3)))
+    letters, lengths = np.zeros((8, 5), dtype=np.int64), np.zeros((8, 5))
+    count = dubins.enumerate_normalized(3.0, 1.0, 1.0, letters, lengths)  # wider rows: stride 5
+    assert 1 <= count <= dubins.MAX_CANDIDATES and not lengths[:, 3:].any()
+    best = min(lengths[k, :3].sum() for k in range(count))
+    assert best == dubins.path_length((0, 0, 0), (3.0, 1.0, 1.0), 1.0)
 
 
 def test_goal_tolerance_without_analytic_expansion():
