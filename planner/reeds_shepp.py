@@ -11,7 +11,7 @@ three symmetries of the problem:
 - backwards: read the word in reverse order,
   (x, y, phi) -> (x cos phi + y sin phi, x sin phi - y cos phi, phi).
 
-Each base formula below is solved from the geometry of the turning circles' centres: the centre
+Each base formula (`hy_rs_base`) is solved from the geometry of the turning circles' centres: the centre
 of a left circle is the pose plus i*e^{i theta} (complex notation), of a right circle minus it,
 and consecutive tangent circles have centres 2 apart. Segment lengths are signed (negative =
 reverse); arcs are in radians of the unit circle, i.e. metres / R.
