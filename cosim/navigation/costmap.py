@@ -11,95 +11,48 @@ NaN beam is not used to clear (the obstacle may be closer than the sensor sees).
 rule (a cell is blocked when its centre is within `radius` of an obstacle cell's centre).
 `new_marks_near(points, radius, since)` says whether a cell marked after the snapshot `since`
 lies within `radius` of any of the points: a newly seen obstacle on the plan.
+
+Both run in C (native/costmap.c: Amanatides-Woo traversal of each beam), given the marks, the
+known cells and the beams once as a struct; `marked` stays the same array for the costmap's life.
 """
 
 from __future__ import annotations
 
-import math
+import ctypes
+from pathlib import Path
 
-import numba
 import numpy as np
 
+from planner import native
 from planner.grid import OccupancyGrid
 
-
-@numba.njit(cache=True)
-def _integrate_scan(marked, known, origin_x, origin_y, resolution, x, y, theta, angles, ranges, clear_to):
-    """Mark each return's cell and clear the marked cells before it (see the module docstring).
-
-    `marked`/`known` are [row, col] with row 0 at the top (the grid's convention); `clear_to` [m]
-    is how far a beam without a return clears (0: not at all). Returns the number of changed cells.
-    """
-    rows, cols = marked.shape
-    gx = (x - origin_x) / resolution
-    gy = (y - origin_y) / resolution
-    changed = 0
-    for beam in range(angles.shape[0]):
-        distance = ranges[beam]
-        hit = math.isfinite(distance)
-        if not hit:
-            distance = clear_to
-            if distance <= 0.0:
-                continue
-        dx = math.cos(theta + angles[beam])
-        dy = math.sin(theta + angles[beam])
-        # Cells the ray crosses before reaching `distance` (Amanatides-Woo, in cell units).
-        limit = distance / resolution
-        ix, iy = int(math.floor(gx)), int(math.floor(gy))
-        step_x = 1 if dx > 0 else -1
-        step_y = 1 if dy > 0 else -1
-        next_x = ((ix + 1) - gx) / dx if dx > 0 else ((gx - ix) / -dx if dx < 0 else np.inf)
-        next_y = ((iy + 1) - gy) / dy if dy > 0 else ((gy - iy) / -dy if dy < 0 else np.inf)
-        delta_x = 1.0 / abs(dx) if dx != 0 else np.inf
-        delta_y = 1.0 / abs(dy) if dy != 0 else np.inf
-        while True:
-            leaving = min(next_x, next_y)  # where the ray leaves cell (ix, iy)
-            if hit and leaving >= limit:
-                break  # the return's own cell
-            if 0 <= ix < cols and 0 <= iy < rows:
-                row = rows - 1 - iy
-                if marked[row, ix] and not known[row, ix]:
-                    marked[row, ix] = False
-                    changed += 1
-            if leaving >= limit:
-                break
-            if next_x < next_y:
-                next_x += delta_x
-                ix += step_x
-            else:
-                next_y += delta_y
-                iy += step_y
-        if hit:
-            # Just past the surface, so a return on a cell boundary marks the cell behind it.
-            px = gx + dx * (limit + 1e-6)
-            py = gy + dy * (limit + 1e-6)
-            cx, cy = int(math.floor(px)), int(math.floor(py))
-            if 0 <= cx < cols and 0 <= cy < rows:
-                row = rows - 1 - cy
-                if not marked[row, cx] and not known[row, cx]:
-                    marked[row, cx] = True
-                    changed += 1
-    return changed
+_p, _i64, _f64 = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double
 
 
-@numba.njit(cache=True)
-def _new_marks_near(marked, since, origin_x, origin_y, resolution, points, radius):
-    """True when a cell marked now but not in `since` has its centre within `radius` [m] of a point."""
-    rows, cols = marked.shape
-    reach = int(math.ceil(radius / resolution)) + 1
-    for index in range(points.shape[0]):
-        px, py = points[index, 0], points[index, 1]
-        col = int(math.floor((px - origin_x) / resolution))
-        iy = int(math.floor((py - origin_y) / resolution))
-        for cy in range(max(iy - reach, 0), min(iy + reach + 1, rows)):
-            row = rows - 1 - cy
-            centre_y = origin_y + (cy + 0.5) * resolution
-            for cx in range(max(col - reach, 0), min(col + reach + 1, cols)):
-                if marked[row, cx] and not since[row, cx]:
-                    centre_x = origin_x + (cx + 0.5) * resolution
-                    if math.hypot(centre_x - px, centre_y - py) <= radius:
-                        return True
-    return False
+class _Arrays(ctypes.Structure):
+    """`Costmap` of native/costmap.c: the marks, the known cells, the beams and the scan buffer."""
+
+    _fields_ = [
+        ("marked", _p), ("known", _p), ("rows", _i64), ("cols", _i64),
+        ("origin_x", _f64), ("origin_y", _f64), ("resolution", _f64),
+        ("angles", _p), ("count", _i64), ("ranges", _p), ("clear_to", _f64),
+    ]  # fmt: skip
+
+
+_library: ctypes.CDLL | None = None
+
+
+def _kernels() -> ctypes.CDLL:
+    """native/costmap.c built (if needed) and loaded, its functions typed; once per process."""
+    global _library
+    if _library is None:
+        library = native.load(Path(__file__).parent / "native" / "costmap.c")
+        library.costmap_integrate_scan.argtypes = [_p, _f64, _f64, _f64]
+        library.costmap_integrate_scan.restype = _i64
+        library.costmap_new_marks_near.argtypes = [_p, _p, _p, _i64, _f64]
+        library.costmap_new_marks_near.restype = ctypes.c_int
+        _library = library
+    return _library
 
 
 class Costmap:
@@ -107,19 +60,35 @@ class Costmap:
 
     def __init__(self, known: OccupancyGrid, angles: np.ndarray, range_min: float, range_max: float):
         self.known = known
-        self.marked = np.zeros(known.shape, dtype=np.bool_)
+        self._marked = np.zeros(known.shape, dtype=np.bool_)
         self._known = np.ascontiguousarray(known.occupied, dtype=np.bool_)
         self.angles = np.ascontiguousarray(angles, dtype=float)
         self.clear_to = float(range_max) if range_min == 0.0 else 0.0
+        self._ranges = np.empty(len(self.angles))  # each scan is copied in: one address for the kernel
+        origin_x, origin_y = known.origin
+        rows, cols = known.shape
+        self._arrays = _Arrays(
+            marked=self._marked.ctypes.data, known=self._known.ctypes.data, rows=rows, cols=cols,
+            origin_x=float(origin_x), origin_y=float(origin_y), resolution=float(known.resolution),
+            angles=self.angles.ctypes.data, count=len(self.angles), ranges=self._ranges.ctypes.data,
+            clear_to=self.clear_to,
+        )  # fmt: skip
+        self._address = ctypes.addressof(self._arrays)
+        library = _kernels()
+        self._integrate, self._new_marks_near = library.costmap_integrate_scan, library.costmap_new_marks_near
+
+    @property
+    def marked(self) -> np.ndarray:
+        """The lidar's marks (bool, the grid's shape); the kernels write this array in place."""
+        return self._marked
 
     def integrate(self, x: float, y: float, theta: float, ranges: np.ndarray) -> int:
         """Add one scan taken at pose (x, y [m], theta [rad]); returns the number of changed cells."""
-        ranges = np.ascontiguousarray(ranges[: len(self.angles)], dtype=float)
-        origin_x, origin_y = self.known.origin
-        return _integrate_scan(
-            self.marked, self._known, float(origin_x), float(origin_y), float(self.known.resolution),
-            float(x), float(y), float(theta), self.angles, ranges, self.clear_to,
-        )  # fmt: skip
+        ranges = ranges[: len(self._ranges)]
+        if len(ranges) != len(self._ranges):
+            raise ValueError(f"a scan needs {len(self._ranges)} ranges, got {len(ranges)}")
+        self._ranges[:] = ranges
+        return self._integrate(self._address, float(x), float(y), float(theta))
 
     def grid(self) -> OccupancyGrid:
         """Known obstacles plus the marks, as a grid."""
@@ -138,10 +107,14 @@ class Costmap:
         """True when a cell marked after `since` has its centre within `radius` [m] of a point (N x 2)."""
         if len(points) == 0:
             return False
-        origin_x, origin_y = self.known.origin
+        since = np.ascontiguousarray(since, dtype=np.bool_)
+        if since.shape != self._marked.shape:
+            raise ValueError(f"since must have the costmap's shape {self._marked.shape}, got {since.shape}")
+        points = np.ascontiguousarray(points, dtype=float)
+        if points.ndim != 2 or points.shape[1] != 2:
+            raise ValueError(f"points must be an (N, 2) array, got shape {points.shape}")
         return bool(
-            _new_marks_near(
-                self.marked, since, float(origin_x), float(origin_y), float(self.known.resolution),
-                np.ascontiguousarray(points, dtype=float), float(radius),
+            self._new_marks_near(
+                self._address, since.ctypes.data, points.ctypes.data, len(points), float(radius)
             )
-        )  # fmt: skip
+        )

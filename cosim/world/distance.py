@@ -8,13 +8,14 @@ obstacle. Outside the map counts as an obstacle (a robot leaving the map has cra
 
 from __future__ import annotations
 
+import ctypes
 import math
 
-import numba
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 from cosim.errors import CosimError
+from cosim.world import kernels
 from cosim.world.geometry import polygon_distance
 from cosim.world.obstacles import ObstacleArrays
 from cosim.world.shapes import Circle, Obstacle
@@ -40,8 +41,7 @@ def distance_to_obstacle(x: float, y: float, obstacle: Obstacle) -> float:
     if isinstance(obstacle, Circle):
         return max(0.0, math.hypot(x - obstacle.center[0], y - obstacle.center[1]) - obstacle.radius)
     vertices = np.ascontiguousarray(obstacle.polygon(), dtype=np.float64)
-    # Interpreted (a start/goal check, once per obstacle): compiled, it is inlined in _world_distance only.
-    return polygon_distance.py_func(float(x), float(y), vertices, 0, len(vertices))
+    return polygon_distance(float(x), float(y), vertices, 0, len(vertices))
 
 
 class WorldDistance:
@@ -50,7 +50,8 @@ class WorldDistance:
 
     Speed: a per-cell field of the distance from each cell centre to the nearest occupied cell
     centre bounds the search. `lower_bound` is cheap; `distance` looks only at the occupied cells
-    of a small window that must contain the nearest one, as exact point-to-square distances.
+    of a small window that must contain the nearest one, as exact point-to-square distances (in C:
+    `world_distance` of native/world.c, given the grid and shapes once as a struct).
     """
 
     def __init__(self, grid: OccupancyGrid, obstacles: tuple[Obstacle, ...] = ()):
@@ -73,6 +74,18 @@ class WorldDistance:
         # circles give cheap lower bounds.
         self.shapes = ObstacleArrays(self.obstacles)
         self._occupied_u8 = np.ascontiguousarray(grid.occupied, dtype=np.uint8)
+        # The kernel's view of the grid and shapes (`at` moves the shapes in place: same arrays).
+        refs = self._refs = kernels.ArrayRefs()
+        shapes = self.shapes
+        self._arrays = kernels.WorldArrays(
+            occupied=refs.pointer(self._occupied_u8, np.uint8), rows=rows, cols=cols,
+            x_min=self.x_min, y_min=self.y_min, resolution=self.resolution,
+            circles=refs.pointer(shapes.circles, np.float64), n_circles=len(shapes.circles),
+            vertices=refs.pointer(shapes.vertices, np.float64),
+            starts=refs.pointer(shapes.starts, np.int64), n_starts=len(shapes.starts),
+        )  # fmt: skip
+        self._address = ctypes.addressof(self._arrays)
+        self._kernel = kernels.library().world_distance
 
     @property
     def moving(self) -> bool:
@@ -118,46 +131,14 @@ class WorldDistance:
         if not self.inside_map(x, y):
             return 0.0
         row, col, offset = self._cell(x, y)
-        return _world_distance(
-            float(x), float(y), row, col, offset, self.distance_to_edge(x, y), self._occupied_u8,
-            float(self.centre_field[row, col]), self.x_min, self.y_min, self.resolution,
-            self.shapes.circles, self.shapes.vertices, self.shapes.starts,
+        return self._kernel(
+            self._address, float(x), float(y), row, col, offset, self.distance_to_edge(x, y),
+            float(self.centre_field[row, col]),
         )  # fmt: skip
 
     def distance_to_edge(self, x: float, y: float) -> float:
         """Distance [m] to the edge of the map (beyond it counts as obstacle)."""
         return min(x - self.x_min, self.x_max - x, y - self.y_min, self.y_max - y)
-
-
-@numba.njit(cache=True)
-def _world_distance(
-    x, y, row, col, offset, best, occupied, field, x_min, y_min, resolution, circles, vertices, starts
-):  # fmt: skip
-    """`WorldDistance.distance` inside the map: (row, col) holds (x, y) at `offset` [m] from its
-    centre, `best` is the distance to the map edge, `field` the cell's centre field value."""
-    half = resolution / 2.0
-    rows, cols = occupied.shape
-    if math.isfinite(field):
-        # The nearest centre's square is within field + offset; any square that close has its
-        # centre within that plus a half diagonal, so a window of that reach holds the nearest one.
-        reach = min(best, field + offset) + math.sqrt(2.0) * half
-        k = int(math.ceil(reach / resolution))
-        nearest_sq = math.inf
-        for r in range(max(row - k, 0), min(row + k + 1, rows)):
-            centre_y = y_min + (rows - 1 - r + 0.5) * resolution
-            dy = max(abs(centre_y - y) - half, 0.0)
-            for c in range(max(col - k, 0), min(col + k + 1, cols)):
-                if occupied[r, c]:
-                    centre_x = x_min + (c + 0.5) * resolution
-                    dx = max(abs(centre_x - x) - half, 0.0)
-                    nearest_sq = min(nearest_sq, dx * dx + dy * dy)
-        best = min(best, math.sqrt(nearest_sq))
-    for index in range(circles.shape[0]):
-        gap = math.hypot(x - circles[index, 0], y - circles[index, 1]) - circles[index, 2]
-        best = min(best, max(0.0, gap))
-    for polygon in range(starts.shape[0] - 1):
-        best = min(best, polygon_distance(x, y, vertices, starts[polygon], starts[polygon + 1]))
-    return best
 
 
 def check_start_goal(scenario) -> None:

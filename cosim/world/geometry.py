@@ -1,44 +1,36 @@
-"""Compiled point-polygon geometry shared by the lidar (is the sensor inside an obstacle?) and the
-outcome checks (distance to the true obstacles).
+"""Point-polygon geometry shared by the lidar (is the sensor inside an obstacle?) and the outcome
+checks (distance to the true obstacles), in C (native/geometry.h, inlined into the kernels of
+native/world.c that use them); these are the same functions for Python callers.
 
 Polygons are rows `first` to `stop - 1` of an (N, 2) vertex array, closed implicitly, so many
 polygons can share one array.
-
-Both are inlined into the kernels that call them (numba IR, inline="always"): on a cold cache a
-separately compiled helper costs a compile of its own plus one more optimisation in every caller.
 """
 
 from __future__ import annotations
 
-import math
+import numpy as np
 
-import numba
+from cosim.world import kernels
 
 
-@numba.njit(cache=True, inline="always")
-def inside_polygon(x, y, vertices, first, stop):
+def _checked(vertices: np.ndarray, first: int, stop: int) -> tuple[np.ndarray, int, int]:
+    """The vertices as float64 (N, 2) in C order (the caller holds them through the call) and the rows."""
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    if vertices.ndim != 2 or vertices.shape[1] != 2:
+        raise ValueError(f"vertices must be an (N, 2) array, got shape {vertices.shape}")
+    first, stop = int(first), int(stop)
+    if not 0 <= first <= stop <= len(vertices):
+        raise ValueError(f"rows {first}..{stop} are not rows of {len(vertices)} vertices")
+    return vertices, first, stop
+
+
+def inside_polygon(x: float, y: float, vertices: np.ndarray, first: int, stop: int) -> bool:
     """Even-odd rule; a point on an edge may fall either way (its distance is 0 anyway)."""
-    inside = False
-    for index in range(first, stop):
-        ax, ay = vertices[index, 0], vertices[index, 1]
-        following = index + 1 if index + 1 < stop else first
-        bx, by = vertices[following, 0], vertices[following, 1]
-        if (ay > y) != (by > y) and x < ax + (y - ay) * (bx - ax) / (by - ay):
-            inside = not inside
-    return inside
+    vertices, first, stop = _checked(vertices, first, stop)
+    return bool(kernels.library().world_inside_polygon(float(x), float(y), vertices.ctypes.data, first, stop))
 
 
-@numba.njit(cache=True, inline="always")
-def polygon_distance(x, y, vertices, first, stop):
+def polygon_distance(x: float, y: float, vertices: np.ndarray, first: int, stop: int) -> float:
     """Exact distance [m] from (x, y) to the polygon's boundary; 0 inside it."""
-    if inside_polygon(x, y, vertices, first, stop):
-        return 0.0
-    nearest = math.inf
-    for index in range(first, stop):
-        ax, ay = vertices[index, 0], vertices[index, 1]
-        following = index + 1 if index + 1 < stop else first
-        dx, dy = vertices[following, 0] - ax, vertices[following, 1] - ay
-        length_sq = dx * dx + dy * dy
-        t = 0.0 if length_sq == 0 else min(1.0, max(0.0, ((x - ax) * dx + (y - ay) * dy) / length_sq))
-        nearest = min(nearest, math.hypot(x - ax - t * dx, y - ay - t * dy))
-    return nearest
+    vertices, first, stop = _checked(vertices, first, stop)
+    return kernels.library().world_polygon_distance(float(x), float(y), vertices.ctypes.data, first, stop)

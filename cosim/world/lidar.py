@@ -17,142 +17,24 @@ Semantics follow MATLAB's `rangeSensor` (reference/matlab-blocks.md §1.7):
 
 Outputs `ranges[k]` and `angles[k]`, k = 1..capacity (capacity >= beam count, the rest NaN), so
 the ports match VFH inputs of a fixed size. Inputs `x`, `y`, `theta`.
+
+The sweep is C (`lidar_scan` of native/world.c: Amanatides-Woo traversal of the grid, exact
+intersections with the shapes), given the grid, beams, shapes and buffers once as a struct.
 """
 
 from __future__ import annotations
 
+import ctypes
 import math
 from collections.abc import Mapping, Sequence
 
-import numba
 import numpy as np
 
 from cosim.core.component import Port, PythonComponent, array_ports
 from cosim.errors import CosimError
-from cosim.world.geometry import inside_polygon
+from cosim.world import kernels
 from cosim.world.obstacles import ObstacleArrays
 from cosim.world.shapes import Obstacle
-
-
-@numba.njit(cache=True)
-def _cast_grid(occupied_up, origin_x, origin_y, resolution, x, y, directions, max_range, out):
-    """Distance [m] to the first occupied cell along each direction (inf when none within max_range).
-
-    `occupied_up[iy, ix]` has row 0 at the bottom (y grows with iy). Amanatides-Woo traversal:
-    the ray visits cells in order, always crossing the nearer of the next vertical or
-    horizontal cell boundary.
-    """
-    rows, cols = occupied_up.shape
-    gx = (x - origin_x) / resolution
-    gy = (y - origin_y) / resolution
-    limit = max_range / resolution
-    start_x = int(math.floor(gx))
-    start_y = int(math.floor(gy))
-    for beam in range(directions.shape[0]):
-        dx = directions[beam, 0]
-        dy = directions[beam, 1]
-        ix, iy = start_x, start_y
-        step_x = 1 if dx > 0 else -1
-        step_y = 1 if dy > 0 else -1
-        next_x = ((ix + 1) - gx) / dx if dx > 0 else ((gx - ix) / -dx if dx < 0 else np.inf)
-        next_y = ((iy + 1) - gy) / dy if dy > 0 else ((gy - iy) / -dy if dy < 0 else np.inf)
-        delta_x = 1.0 / abs(dx) if dx != 0 else np.inf
-        delta_y = 1.0 / abs(dy) if dy != 0 else np.inf
-        travelled = 0.0
-        out[beam] = np.inf
-        while travelled <= limit:
-            if 0 <= ix < cols and 0 <= iy < rows:
-                if occupied_up[iy, ix]:
-                    out[beam] = travelled * resolution
-                    break
-            elif (ix < 0 and step_x < 0) or (ix >= cols and step_x > 0):
-                break  # left the grid for good in x
-            elif (iy < 0 and step_y < 0) or (iy >= rows and step_y > 0):
-                break
-            if next_x < next_y:
-                travelled = next_x
-                next_x += delta_x
-                ix += step_x
-            else:
-                travelled = next_y
-                next_y += delta_y
-                iy += step_y
-
-
-@numba.njit(cache=True)
-def _cast_shapes(x, y, directions, circles, segments, out):
-    """Lower `out` to the nearest hit [m] with circles (C x 3: cx, cy, r) and polygon edges
-    (S x 4: ax, ay, bx, by) along each unit direction; 0 when the sensor is inside a circle or a
-    tangent ray starts on its outline."""
-    for beam in range(directions.shape[0]):
-        dx = directions[beam, 0]
-        dy = directions[beam, 1]
-        best = out[beam]
-        for index in range(circles.shape[0]):
-            offset_x = x - circles[index, 0]
-            offset_y = y - circles[index, 1]
-            b = dx * offset_x + dy * offset_y
-            c = offset_x**2 + offset_y**2 - circles[index, 2] ** 2
-            if c <= 0:
-                best = 0.0
-                continue
-            discriminant = b**2 - c
-            if discriminant < 0:
-                continue
-            root = math.sqrt(discriminant)
-            near, far = -b - root, -b + root
-            if near >= 0:
-                best = min(best, near)
-            elif far >= 0:
-                best = 0.0
-        for index in range(segments.shape[0]):
-            ax = segments[index, 0] - x
-            ay = segments[index, 1] - y
-            ex = segments[index, 2] - segments[index, 0]
-            ey = segments[index, 3] - segments[index, 1]
-            # Solve t d = a + u e  ->  cross products (2-D determinant of [d, -e]).
-            denominator = dx * ey - dy * ex
-            if denominator == 0:
-                continue
-            t = (ax * ey - ay * ex) / denominator
-            u = (ax * dy - ay * dx) / denominator
-            if t >= 0 and u >= 0 and u <= 1:
-                best = min(best, t)
-        out[beam] = best
-
-
-@numba.njit(cache=True)
-def _inside_polygons(x, y, vertices, starts):
-    """True when (x, y) is inside one of the polygons; polygon p is vertices[starts[p]:starts[p + 1]]."""
-    for polygon in range(starts.shape[0] - 1):
-        if inside_polygon(x, y, vertices, starts[polygon], starts[polygon + 1]):
-            return True
-    return False
-
-
-@numba.njit(cache=True)
-def _scan(
-    occupied_up, origin_x, origin_y, resolution, x, y, theta, beam_angles, angle_jitter, range_jitter,
-    range_min, range_max, circles, segments, vertices, starts, directions, ranges,
-):  # fmt: skip
-    """One sweep into `ranges` (NaN for missed beams): cast directions from the nominal angles plus
-    theta plus `angle_jitter` (same length, zeros without noise), true distances, then the range
-    limits, then `range_jitter` added to the hits."""
-    count = beam_angles.shape[0]
-    for beam in range(count):
-        cast = beam_angles[beam] + theta + angle_jitter[beam]
-        directions[beam, 0] = math.cos(cast)
-        directions[beam, 1] = math.sin(cast)
-    _cast_grid(occupied_up, origin_x, origin_y, resolution, x, y, directions, range_max, ranges)
-    _cast_shapes(x, y, directions, circles, segments, ranges)
-    inside = _inside_polygons(x, y, vertices, starts)
-    for beam in range(count):
-        distance = 0.0 if inside else ranges[beam]
-        if distance < range_min or distance > range_max or not math.isfinite(distance):
-            ranges[beam] = np.nan
-        else:
-            ranges[beam] = distance + range_jitter[beam]
-
 
 MAX_BEAMS = 100_000  # beams of one sweep (two output ports each); a scenario allows fewer (the VFH's 720)
 
@@ -225,12 +107,34 @@ class Lidar(PythonComponent):
         self.world = ObstacleArrays(self.obstacles)
         count = len(self.beam_angles)
         self._directions = np.empty((count, 2))  # scratch of the kernel, reused every scan
-        self._no_jitter = np.zeros(count)
+        # Each scan's noise is copied in here (zeros without noise), so the kernel keeps one address.
+        self._angle_jitter = np.zeros(count)
+        self._range_jitter = np.zeros(count)
         outputs = array_ports("ranges", capacity, unit="m") + array_ports("angles", capacity, unit="rad")
         inputs = [Port("x", unit="m"), Port("y", unit="m"), Port("theta", unit="rad")]
         super().__init__(name, inputs, outputs, period=period)
         self._ranges = self.output_buffer[:capacity]
         self._angles = self.output_buffer[capacity:]
+        refs = self._refs = kernels.ArrayRefs()
+        world = self.world
+        self._arrays = kernels.LidarArrays(
+            occupied_up=refs.pointer(self.occupied_up.view(np.uint8), np.uint8),
+            rows=self.occupied_up.shape[0], cols=self.occupied_up.shape[1],
+            origin_x=self.origin[0], origin_y=self.origin[1], resolution=self.resolution,
+            range_min=self.range_min, range_max=self.range_max,
+            beam_angles=refs.pointer(self.beam_angles, np.float64), count=count,
+            angle_jitter=refs.pointer(self._angle_jitter, np.float64),
+            range_jitter=refs.pointer(self._range_jitter, np.float64),
+            circles=refs.pointer(world.circles, np.float64), n_circles=len(world.circles),
+            segments=refs.pointer(world.segments, np.float64), n_segments=len(world.segments),
+            vertices=refs.pointer(world.vertices, np.float64),
+            starts=refs.pointer(world.starts, np.int64), n_starts=len(world.starts),
+            directions=refs.pointer(self._directions, np.float64, writable=True),
+            ranges=refs.pointer(self._ranges, np.float64, writable=True),
+        )  # fmt: skip
+        self._address = ctypes.addressof(self._arrays)
+        library = kernels.library()
+        self._scan, self._measure = library.lidar_scan, library.lidar_measure
 
     def on_setup(self, t0: float, parameters: Mapping[str, float]) -> None:
         self._rng = np.random.default_rng(self.seed)
@@ -247,38 +151,27 @@ class Lidar(PythonComponent):
     def measure(self, x: float, y: float, theta: float, directions: np.ndarray, t: float = 0.0) -> np.ndarray:
         """True distances [m] along unit `directions` (N x 2, world frame) at time t [s]; inf for no hit."""
         self.world.at(t)
-        world = self.world
         directions = np.ascontiguousarray(directions, dtype=float)
+        if directions.ndim != 2 or directions.shape[1] != 2:
+            raise ValueError(f"directions must be an (N, 2) array, got shape {directions.shape}")
         distances = np.empty(len(directions))
-        x, y = float(x), float(y)
-        _cast_grid(
-            self.occupied_up, self.origin[0], self.origin[1], self.resolution, x, y, directions,
-            self.range_max, distances,
-        )  # fmt: skip
-        _cast_shapes(x, y, directions, world.circles, world.segments, distances)
-        if _inside_polygons(x, y, world.vertices, world.starts):
-            distances[:] = 0.0
+        self._measure(
+            self._address, float(x), float(y), directions.ctypes.data, len(directions), distances.ctypes.data
+        )
         return distances
 
     def scan(self, x: float, y: float, theta: float, t: float = 0.0) -> None:
         """Fill `ranges[k]`/`angles[k]` for the pose (x, y [m], theta [rad]) at time t [s]."""
-        world = self.world
-        world.at(t)
-        count = len(self.beam_angles)
+        self.world.at(t)
         # The generator is drawn in the same order as always (angles, then ranges), so a seed
         # gives the same noise whatever computes the sweep.
-        angle_jitter = (
-            self._rng.normal(0.0, self.angle_noise, count) if self.angle_noise > 0 else self._no_jitter
-        )
-        range_jitter = (
-            self._rng.normal(0.0, self.range_noise, count) if self.range_noise > 0 else self._no_jitter
-        )
-        _scan(
-            self.occupied_up, self.origin[0], self.origin[1], self.resolution, float(x), float(y),
-            float(theta), self.beam_angles, angle_jitter, range_jitter, self.range_min, self.range_max,
-            world.circles, world.segments, world.vertices, world.starts, self._directions, self._ranges,
-        )  # fmt: skip
+        if self.angle_noise > 0:
+            self._angle_jitter[:] = self._rng.normal(0.0, self.angle_noise, len(self._angle_jitter))
+        if self.range_noise > 0:
+            self._range_jitter[:] = self._rng.normal(0.0, self.range_noise, len(self._range_jitter))
+        self._scan(self._address, float(x), float(y), float(theta))
         if not self._angles_written:
+            count = len(self.beam_angles)
             self._ranges[count:] = np.nan
             self._angles[:count] = self.beam_angles
             self._angles[count:] = np.nan

@@ -1,0 +1,92 @@
+"""The C kernels of `cosim.world` (native/world.c), loaded with `planner.native` on first use.
+
+`library()` returns the loaded library with every function's `argtypes`/`restype` set once.
+`LidarArrays` and `WorldArrays` mirror the structs of world.c: the long-lived arrays (as cached
+addresses) and constants of one lidar or one world, filled once, so a call passes the struct's
+address and a few numbers. The arrays must stay alive and in place as long as the struct is used:
+`ArrayRefs.pointer` keeps a reference to each array it takes the address of.
+"""
+
+from __future__ import annotations
+
+import ctypes
+from pathlib import Path
+
+import numpy as np
+
+from planner import native
+
+SOURCE = Path(__file__).parent / "native" / "world.c"
+_library: ctypes.CDLL | None = None
+
+_p = ctypes.c_void_p
+_i64 = ctypes.c_int64
+_f64 = ctypes.c_double
+
+
+class WorldArrays(ctypes.Structure):
+    """`World` of world.c: the grid and the unknown shapes of a `WorldDistance`."""
+
+    _fields_ = [
+        ("occupied", _p), ("rows", _i64), ("cols", _i64),
+        ("x_min", _f64), ("y_min", _f64), ("resolution", _f64),
+        ("circles", _p), ("n_circles", _i64),
+        ("vertices", _p), ("starts", _p), ("n_starts", _i64),
+    ]  # fmt: skip
+
+
+class LidarArrays(ctypes.Structure):
+    """`Lidar` of world.c: the grid, beams, noise buffers, shapes, scratch and output of a `Lidar`."""
+
+    _fields_ = [
+        ("occupied_up", _p), ("rows", _i64), ("cols", _i64),
+        ("origin_x", _f64), ("origin_y", _f64), ("resolution", _f64),
+        ("range_min", _f64), ("range_max", _f64),
+        ("beam_angles", _p), ("count", _i64),
+        ("angle_jitter", _p), ("range_jitter", _p),
+        ("circles", _p), ("n_circles", _i64),
+        ("segments", _p), ("n_segments", _i64),
+        ("vertices", _p), ("starts", _p), ("n_starts", _i64),
+        ("directions", _p), ("ranges", _p),
+    ]  # fmt: skip
+
+
+class ArrayRefs:
+    """Addresses of arrays checked once (dtype, C order), each array kept alive by this object."""
+
+    def __init__(self) -> None:
+        self._held: list[np.ndarray] = []
+
+    def pointer(self, array: np.ndarray, dtype, writable: bool = False) -> int:
+        if array.dtype != np.dtype(dtype) or not array.flags.c_contiguous:
+            raise TypeError(f"a kernel needs a C-contiguous {np.dtype(dtype)} array, got {array.dtype}")
+        if writable and not array.flags.writeable:
+            raise TypeError("a kernel writes this array: it must be writable")
+        self._held.append(array)
+        return array.ctypes.data
+
+
+def pointer(array: np.ndarray, dtype) -> int:
+    """The address of a per-call array after the same checks (no reference kept: the caller's)."""
+    if array.dtype != np.dtype(dtype) or not array.flags.c_contiguous:
+        raise TypeError(f"a kernel needs a C-contiguous {np.dtype(dtype)} array, got {array.dtype}")
+    return array.ctypes.data
+
+
+def library() -> ctypes.CDLL:
+    """world.c built (if needed) and loaded, its functions typed; once per process."""
+    global _library
+    if _library is None:
+        lib = native.load(SOURCE)
+        lib.world_inside_polygon.argtypes = [_f64, _f64, _p, _i64, _i64]
+        lib.world_inside_polygon.restype = ctypes.c_int
+        lib.world_polygon_distance.argtypes = [_f64, _f64, _p, _i64, _i64]
+        lib.world_polygon_distance.restype = _f64
+        lib.world_distance.argtypes = [_p, _f64, _f64, _i64, _i64, _f64, _f64, _f64]
+        lib.world_distance.restype = _f64
+        lib.lidar_measure.argtypes = [_p, _f64, _f64, _p, _i64, _p]
+        lib.lidar_measure.restype = None
+        lib.lidar_scan.argtypes = [_p, _f64, _f64, _f64]
+        lib.lidar_scan.restype = None
+        _library = lib
+    return _library

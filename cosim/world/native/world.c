@@ -1,0 +1,234 @@
+/* Kernels of cosim.world: the exact clearance (distance.py), the lidar's ray casting (lidar.py)
+ * and the point-polygon geometry they share (geometry.h, exported for geometry.py).
+ *
+ * Built by planner/native.py (C99, -ffp-contract=off, no fast-math): every floating-point
+ * operation is the one the Python docstrings describe, in the same order, so the results are
+ * those of the numba kernels these replaced, bit for bit. The long-lived arrays and constants of
+ * a lidar or a world come in one struct set up once in Python (the `ctypes.Structure`s of
+ * cosim/world/kernels.py mirror them field for field); a call passes its address and the pose. */
+#include <math.h>
+#include <stdint.h>
+
+#include "geometry.h"
+
+int world_inside_polygon(double x, double y, const double *vertices, int64_t first, int64_t stop)
+{
+    return inside_polygon(x, y, vertices, first, stop);
+}
+
+double world_polygon_distance(double x, double y, const double *vertices, int64_t first, int64_t stop)
+{
+    return polygon_distance(x, y, vertices, first, stop);
+}
+
+/* ---------------------------------------------------------------- exact clearance (distance.py) */
+
+typedef struct {
+    const uint8_t *occupied; /* rows x cols, row 0 at the top (the grid's convention) */
+    int64_t rows, cols;
+    double x_min, y_min, resolution;
+    const double *circles; /* n_circles x 3: cx, cy, r */
+    int64_t n_circles;
+    const double *vertices; /* polygon p is vertices[starts[p]:starts[p + 1]] */
+    const int64_t *starts;
+    int64_t n_starts;
+} World;
+
+/* `WorldDistance.distance` inside the map: (row, col) holds (x, y) at `offset` [m] from its
+ * centre, `best` is the distance to the map edge, `field` the cell's centre field value (the
+ * distance [m] from its centre to the nearest occupied centre). */
+double world_distance(const World *w, double x, double y, int64_t row, int64_t col, double offset, double best,
+                      double field)
+{
+    double resolution = w->resolution;
+    double half = resolution / 2.0;
+    int64_t rows = w->rows, cols = w->cols;
+    if (isfinite(field)) {
+        /* The nearest centre's square is within field + offset; any square that close has its
+         * centre within that plus a half diagonal, so a window of that reach holds the nearest one. */
+        double reach = py_min(best, field + offset) + sqrt(2.0) * half;
+        int64_t k = (int64_t)ceil(reach / resolution);
+        double nearest_sq = INFINITY;
+        int64_t r_stop = int_min(row + k + 1, rows), c_stop = int_min(col + k + 1, cols);
+        for (int64_t r = int_max(row - k, 0); r < r_stop; r++) {
+            double centre_y = w->y_min + ((double)(rows - 1 - r) + 0.5) * resolution;
+            double dy = py_max(fabs(centre_y - y) - half, 0.0);
+            const uint8_t *line = w->occupied + r * cols;
+            for (int64_t c = int_max(col - k, 0); c < c_stop; c++) {
+                if (line[c]) {
+                    double centre_x = w->x_min + ((double)c + 0.5) * resolution;
+                    double dx = py_max(fabs(centre_x - x) - half, 0.0);
+                    nearest_sq = py_min(nearest_sq, dx * dx + dy * dy);
+                }
+            }
+        }
+        best = py_min(best, sqrt(nearest_sq));
+    }
+    for (int64_t index = 0; index < w->n_circles; index++) {
+        const double *circle = w->circles + 3 * index;
+        double gap = hypot(x - circle[0], y - circle[1]) - circle[2];
+        best = py_min(best, py_max(0.0, gap));
+    }
+    for (int64_t polygon = 0; polygon < w->n_starts - 1; polygon++)
+        best = py_min(best, polygon_distance(x, y, w->vertices, w->starts[polygon], w->starts[polygon + 1]));
+    return best;
+}
+
+/* ---------------------------------------------------------------------------- lidar (lidar.py) */
+
+typedef struct {
+    const uint8_t *occupied_up; /* rows x cols, row 0 at the bottom (y grows with the row) */
+    int64_t rows, cols;
+    double origin_x, origin_y, resolution;
+    double range_min, range_max;
+    const double *beam_angles; /* count nominal angles [rad] in the sensor frame */
+    int64_t count;
+    const double *angle_jitter, *range_jitter; /* count each; zeros without noise */
+    const double *circles;                     /* n_circles x 3: cx, cy, r */
+    int64_t n_circles;
+    const double *segments; /* n_segments x 4: ax, ay, bx, by (polygon edges) */
+    int64_t n_segments;
+    const double *vertices; /* polygon p is vertices[starts[p]:starts[p + 1]] */
+    const int64_t *starts;
+    int64_t n_starts;
+    double *directions; /* count x 2 scratch */
+    double *ranges;     /* the output, >= count */
+} Lidar;
+
+/* Distance [m] to the first occupied cell along each direction (inf when none within max_range).
+ * Amanatides-Woo traversal: the ray visits cells in order, always crossing the nearer of the next
+ * vertical or horizontal cell boundary. */
+static void cast_grid(const Lidar *s, double x, double y, const double *directions, int64_t n, double max_range,
+                      double *out)
+{
+    int64_t rows = s->rows, cols = s->cols;
+    double resolution = s->resolution;
+    double gx = (x - s->origin_x) / resolution;
+    double gy = (y - s->origin_y) / resolution;
+    double limit = max_range / resolution;
+    int64_t start_x = (int64_t)floor(gx);
+    int64_t start_y = (int64_t)floor(gy);
+    for (int64_t beam = 0; beam < n; beam++) {
+        double dx = directions[2 * beam], dy = directions[2 * beam + 1];
+        int64_t ix = start_x, iy = start_y;
+        int64_t step_x = dx > 0 ? 1 : -1;
+        int64_t step_y = dy > 0 ? 1 : -1;
+        double next_x = dx > 0 ? ((double)(ix + 1) - gx) / dx : (dx < 0 ? (gx - (double)ix) / -dx : INFINITY);
+        double next_y = dy > 0 ? ((double)(iy + 1) - gy) / dy : (dy < 0 ? (gy - (double)iy) / -dy : INFINITY);
+        double delta_x = dx != 0 ? 1.0 / fabs(dx) : INFINITY;
+        double delta_y = dy != 0 ? 1.0 / fabs(dy) : INFINITY;
+        double travelled = 0.0;
+        out[beam] = INFINITY;
+        while (travelled <= limit) {
+            if (0 <= ix && ix < cols && 0 <= iy && iy < rows) {
+                if (s->occupied_up[iy * cols + ix]) {
+                    out[beam] = travelled * resolution;
+                    break;
+                }
+            } else if ((ix < 0 && step_x < 0) || (ix >= cols && step_x > 0)) {
+                break; /* left the grid for good in x */
+            } else if ((iy < 0 && step_y < 0) || (iy >= rows && step_y > 0)) {
+                break;
+            }
+            if (next_x < next_y) {
+                travelled = next_x;
+                next_x += delta_x;
+                ix += step_x;
+            } else {
+                travelled = next_y;
+                next_y += delta_y;
+                iy += step_y;
+            }
+        }
+    }
+}
+
+/* Lower `out` to the nearest hit [m] with the circles and polygon edges along each unit
+ * direction; 0 when the sensor is inside a circle or a tangent ray starts on its outline. */
+static void cast_shapes(const Lidar *s, double x, double y, const double *directions, int64_t n, double *out)
+{
+    for (int64_t beam = 0; beam < n; beam++) {
+        double dx = directions[2 * beam], dy = directions[2 * beam + 1];
+        double best = out[beam];
+        for (int64_t index = 0; index < s->n_circles; index++) {
+            const double *circle = s->circles + 3 * index;
+            double offset_x = x - circle[0];
+            double offset_y = y - circle[1];
+            double b = dx * offset_x + dy * offset_y;
+            double c = offset_x * offset_x + offset_y * offset_y - circle[2] * circle[2];
+            if (c <= 0) {
+                best = 0.0;
+                continue;
+            }
+            double discriminant = b * b - c;
+            if (discriminant < 0)
+                continue;
+            double root = sqrt(discriminant);
+            double near = -b - root, far = -b + root;
+            if (near >= 0)
+                best = py_min(best, near);
+            else if (far >= 0)
+                best = 0.0;
+        }
+        for (int64_t index = 0; index < s->n_segments; index++) {
+            const double *segment = s->segments + 4 * index;
+            double ax = segment[0] - x;
+            double ay = segment[1] - y;
+            double ex = segment[2] - segment[0];
+            double ey = segment[3] - segment[1];
+            /* Solve t d = a + u e  ->  cross products (2-D determinant of [d, -e]). */
+            double denominator = dx * ey - dy * ex;
+            if (denominator == 0)
+                continue;
+            double t = (ax * ey - ay * ex) / denominator;
+            double u = (ax * dy - ay * dx) / denominator;
+            if (t >= 0 && u >= 0 && u <= 1)
+                best = py_min(best, t);
+        }
+        out[beam] = best;
+    }
+}
+
+/* True when (x, y) is inside one of the polygons. */
+static int inside_polygons(const Lidar *s, double x, double y)
+{
+    for (int64_t polygon = 0; polygon < s->n_starts - 1; polygon++)
+        if (inside_polygon(x, y, s->vertices, s->starts[polygon], s->starts[polygon + 1]))
+            return 1;
+    return 0;
+}
+
+/* `Lidar.measure`: true distances [m] along n unit directions (n x 2, world frame) into `out`;
+ * inf for no hit within range_max, all 0 inside a polygon. */
+void lidar_measure(const Lidar *s, double x, double y, const double *directions, int64_t n, double *out)
+{
+    cast_grid(s, x, y, directions, n, s->range_max, out);
+    cast_shapes(s, x, y, directions, n, out);
+    if (inside_polygons(s, x, y))
+        for (int64_t beam = 0; beam < n; beam++)
+            out[beam] = 0.0;
+}
+
+/* One sweep into `ranges` (NaN for missed beams): cast directions from the nominal angles plus
+ * theta plus the angle jitter, true distances, then the range limits, then the range jitter
+ * added to the hits. */
+void lidar_scan(const Lidar *s, double x, double y, double theta)
+{
+    int64_t count = s->count;
+    double *directions = s->directions, *ranges = s->ranges;
+    for (int64_t beam = 0; beam < count; beam++) {
+        double cast = s->beam_angles[beam] + theta + s->angle_jitter[beam];
+        directions[2 * beam] = cos(cast);
+        directions[2 * beam + 1] = sin(cast);
+    }
+    cast_grid(s, x, y, directions, count, s->range_max, ranges);
+    cast_shapes(s, x, y, directions, count, ranges);
+    int inside = inside_polygons(s, x, y);
+    for (int64_t beam = 0; beam < count; beam++) {
+        double distance = inside ? 0.0 : ranges[beam];
+        if (distance < s->range_min || distance > s->range_max || !isfinite(distance))
+            ranges[beam] = NAN;
+        else
+            ranges[beam] = distance + s->range_jitter[beam];
+    }
+}
