@@ -13,7 +13,9 @@ rule (a cell is blocked when its centre is within `radius` of an obstacle cell's
 lies within `radius` of any of the points: a newly seen obstacle on the plan.
 
 Both run in C (native/costmap.c: Amanatides-Woo traversal of each beam), given the marks, the
-known cells and the beams once as a struct; `marked` stays the same array for the costmap's life.
+known cells and the beams once as a struct. Only marked cells can be cleared, so a beam is
+traversed only when it passes near the box of the marks (kept from per-row and per-column counts
+of the marks); `marked` is therefore read-only outside `integrate`.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ class _Arrays(ctypes.Structure):
         ("marked", _p), ("known", _p), ("rows", _i64), ("cols", _i64),
         ("origin_x", _f64), ("origin_y", _f64), ("resolution", _f64),
         ("angles", _p), ("count", _i64), ("ranges", _p), ("clear_to", _f64),
+        ("row_marks", _p), ("col_marks", _p),
     ]  # fmt: skip
 
 
@@ -67,11 +70,16 @@ class Costmap:
         self._ranges = np.empty(len(self.angles))  # each scan is copied in: one address for the kernel
         origin_x, origin_y = known.origin
         rows, cols = known.shape
+        # Marked cells per row and per column, kept by the kernel: the box of the marks, which
+        # only the beams passing near it can clear.
+        self._row_marks = np.zeros(rows, dtype=np.int64)
+        self._col_marks = np.zeros(cols, dtype=np.int64)
         self._arrays = _Arrays(
             marked=self._marked.ctypes.data, known=self._known.ctypes.data, rows=rows, cols=cols,
             origin_x=float(origin_x), origin_y=float(origin_y), resolution=float(known.resolution),
             angles=self.angles.ctypes.data, count=len(self.angles), ranges=self._ranges.ctypes.data,
             clear_to=self.clear_to,
+            row_marks=self._row_marks.ctypes.data, col_marks=self._col_marks.ctypes.data,
         )  # fmt: skip
         self._address = ctypes.addressof(self._arrays)
         library = _kernels()
@@ -79,8 +87,11 @@ class Costmap:
 
     @property
     def marked(self) -> np.ndarray:
-        """The lidar's marks (bool, the grid's shape); the kernels write this array in place."""
-        return self._marked
+        """The lidar's marks (bool, the grid's shape), read-only: only `integrate` changes them (it
+        keeps the per-row and per-column counts of the marks with them)."""
+        view = self._marked.view()
+        view.flags.writeable = False
+        return view
 
     def integrate(self, x: float, y: float, theta: float, ranges: np.ndarray) -> int:
         """Add one scan taken at pose (x, y [m], theta [rad]); returns the number of changed cells."""
@@ -92,7 +103,7 @@ class Costmap:
 
     def grid(self) -> OccupancyGrid:
         """Known obstacles plus the marks, as a grid."""
-        return OccupancyGrid(self._known | self.marked, self.known.resolution, self.known.origin)
+        return OccupancyGrid(self._known | self._marked, self.known.resolution, self.known.origin)
 
     def inflated(self, radius: float) -> OccupancyGrid:
         """`grid()` inflated by `radius` [m] (the planner's rule)."""
@@ -101,7 +112,7 @@ class Costmap:
 
     def snapshot(self) -> np.ndarray:
         """A copy of the marks, for `new_marks_near` later."""
-        return self.marked.copy()
+        return self._marked.copy()
 
     def new_marks_near(self, points: np.ndarray, radius: float, since: np.ndarray) -> bool:
         """True when a cell marked after `since` has its centre within `radius` [m] of a point (N x 2)."""

@@ -16,23 +16,97 @@ typedef struct {
     int64_t count;
     const double *ranges;  /* count ranges [m] of the scan (NaN: no return) */
     double clear_to;       /* how far a beam without a return clears [m] (0: not at all) */
+    int64_t *row_marks;    /* rows: marked cells in each row (kept by the kernel, with `marked`) */
+    int64_t *col_marks;    /* cols: marked cells in each column */
 } Costmap;
 
 static inline int64_t int_min(int64_t a, int64_t b) { return b < a ? b : a; }
 static inline int64_t int_max(int64_t a, int64_t b) { return b > a ? b : a; }
 static inline double py_min(double a, double b) { return b < a ? b : a; }
 
+/* Can the ray from (gx, gy) along (dx, dy), up to `limit` (cell units), come within a cell of the
+ * box [x_lo, x_hi] x [y_lo, y_hi] of cells? A clip of the segment against the box grown by one
+ * cell on every side: the traversal's cells all touch the segment (its rounding errors are many
+ * orders of magnitude below a cell), so a "no" means the ray visits no cell of the box. */
+static int ray_near_box(double gx, double gy, double dx, double dy, double limit, int64_t x_lo, int64_t x_hi,
+                        int64_t y_lo, int64_t y_hi)
+{
+    double t_lo = 0.0, t_hi = limit;
+    double left = (double)x_lo - 1.0, right = (double)x_hi + 2.0;
+    double bottom = (double)y_lo - 1.0, top = (double)y_hi + 2.0;
+    if (dx != 0) {
+        double a = (left - gx) / dx, b = (right - gx) / dx;
+        if (a > b) {
+            double swap = a;
+            a = b;
+            b = swap;
+        }
+        if (a > t_lo)
+            t_lo = a;
+        if (b < t_hi)
+            t_hi = b;
+    } else if (gx < left || gx > right) {
+        return 0;
+    }
+    if (dy != 0) {
+        double a = (bottom - gy) / dy, b = (top - gy) / dy;
+        if (a > b) {
+            double swap = a;
+            a = b;
+            b = swap;
+        }
+        if (a > t_lo)
+            t_lo = a;
+        if (b < t_hi)
+            t_hi = b;
+    } else if (gy < bottom || gy > top) {
+        return 0;
+    }
+    return t_lo <= t_hi;
+}
+
 /* Mark each return's cell and clear the marked cells before it (see costmap.py's docstring), for
- * the scan in `ranges` taken at pose (x, y, theta). Returns the number of changed cells. */
+ * the scan in `ranges` taken at pose (x, y, theta). Returns the number of changed cells.
+ *
+ * Only marked cells can be cleared, so a beam is traversed only when it passes within a cell of the
+ * box of the marked cells (the box grows with each mark of this scan): the cells a skipped beam
+ * would visit are all unmarked. A pose that is not finite (or absurdly far, 1e15 cells) changes
+ * nothing. */
 int64_t costmap_integrate_scan(const Costmap *m, double x, double y, double theta)
 {
     int64_t rows = m->rows, cols = m->cols;
     uint8_t *marked = m->marked;
     const uint8_t *known = m->known;
+    int64_t *row_marks = m->row_marks, *col_marks = m->col_marks;
     double resolution = m->resolution;
     double gx = (x - m->origin_x) / resolution;
     double gy = (y - m->origin_y) / resolution;
     int64_t changed = 0;
+    if (!(fabs(gx) < 1e15 && fabs(gy) < 1e15))
+        return 0;
+    /* The box of the marked cells in traversal units (ix = column, iy = rows - 1 - row); empty
+     * when x_lo > x_hi. */
+    int64_t x_lo = 0, x_hi = -1, y_lo = 0, y_hi = -1;
+    for (int64_t c = 0; c < cols; c++)
+        if (col_marks[c]) {
+            x_lo = c;
+            break;
+        }
+    for (int64_t c = cols - 1; c >= 0; c--)
+        if (col_marks[c]) {
+            x_hi = c;
+            break;
+        }
+    for (int64_t r = rows - 1; r >= 0; r--)
+        if (row_marks[r]) {
+            y_lo = rows - 1 - r;
+            break;
+        }
+    for (int64_t r = 0; r < rows; r++)
+        if (row_marks[r]) {
+            y_hi = rows - 1 - r;
+            break;
+        }
     for (int64_t beam = 0; beam < m->count; beam++) {
         double distance = m->ranges[beam];
         int hit = isfinite(distance);
@@ -52,7 +126,8 @@ int64_t costmap_integrate_scan(const Costmap *m, double x, double y, double thet
         double next_y = dy > 0 ? ((double)(iy + 1) - gy) / dy : (dy < 0 ? (gy - (double)iy) / -dy : INFINITY);
         double delta_x = dx != 0 ? 1.0 / fabs(dx) : INFINITY;
         double delta_y = dy != 0 ? 1.0 / fabs(dy) : INFINITY;
-        for (;;) {
+        int traverse = x_lo <= x_hi && ray_near_box(gx, gy, dx, dy, limit, x_lo, x_hi, y_lo, y_hi);
+        while (traverse) {
             double leaving = py_min(next_x, next_y); /* where the ray leaves cell (ix, iy) */
             if (hit && leaving >= limit)
                 break; /* the return's own cell */
@@ -60,6 +135,8 @@ int64_t costmap_integrate_scan(const Costmap *m, double x, double y, double thet
                 int64_t cell = (rows - 1 - iy) * cols + ix;
                 if (marked[cell] && !known[cell]) {
                     marked[cell] = 0;
+                    row_marks[rows - 1 - iy]--;
+                    col_marks[ix]--;
                     changed++;
                 }
             }
@@ -77,11 +154,23 @@ int64_t costmap_integrate_scan(const Costmap *m, double x, double y, double thet
             /* Just past the surface, so a return on a cell boundary marks the cell behind it. */
             double px = gx + dx * (limit + 1e-6);
             double py = gy + dy * (limit + 1e-6);
-            int64_t cx = (int64_t)floor(px), cy = (int64_t)floor(py);
-            if (0 <= cx && cx < cols && 0 <= cy && cy < rows) {
+            /* 0 <= floor(p) < n exactly when 0 <= p < n (n an integer): no cast of a far point. */
+            if (px >= 0 && px < (double)cols && py >= 0 && py < (double)rows) {
+                int64_t cx = (int64_t)floor(px), cy = (int64_t)floor(py);
                 int64_t cell = (rows - 1 - cy) * cols + cx;
                 if (!marked[cell] && !known[cell]) {
                     marked[cell] = 1;
+                    row_marks[rows - 1 - cy]++;
+                    col_marks[cx]++;
+                    if (x_lo > x_hi) {
+                        x_lo = x_hi = cx;
+                        y_lo = y_hi = cy;
+                    } else {
+                        x_lo = int_min(x_lo, cx);
+                        x_hi = int_max(x_hi, cx);
+                        y_lo = int_min(y_lo, cy);
+                        y_hi = int_max(y_hi, cy);
+                    }
                     changed++;
                 }
             }
