@@ -9,7 +9,9 @@ obstacle. Outside the map counts as an obstacle (a robot leaving the map has cra
 from __future__ import annotations
 
 import ctypes
+import functools
 import math
+import struct
 
 import numpy as np
 from scipy.ndimage import distance_transform_edt
@@ -79,12 +81,16 @@ class WorldDistance:
         shapes = self.shapes
         self._arrays = kernels.WorldArrays(
             occupied=refs.pointer(self._occupied_u8, np.uint8), rows=rows, cols=cols,
-            x_min=self.x_min, y_min=self.y_min, resolution=self.resolution,
+            x_min=self.x_min, y_min=self.y_min, x_max=self.x_max, y_max=self.y_max,
+            resolution=self.resolution,
             circles=refs.pointer(shapes.circles, np.float64), n_circles=len(shapes.circles),
             vertices=refs.pointer(shapes.vertices, np.float64),
             starts=refs.pointer(shapes.starts, np.int64), n_starts=len(shapes.starts),
         )  # fmt: skip
         self._address = ctypes.addressof(self._arrays)
+        self._query = functools.partial(
+            struct.Struct(kernels.WorldArrays.QUERY).pack_into, self._arrays, kernels.WorldArrays.x.offset
+        )
         self._kernel = kernels.library().world_distance
 
     @property
@@ -131,10 +137,9 @@ class WorldDistance:
         if not self.inside_map(x, y):
             return 0.0
         row, col, offset = self._cell(x, y)
-        return self._kernel(
-            self._address, float(x), float(y), row, col, offset, self.distance_to_edge(x, y),
-            float(self.centre_field[row, col]),
-        )  # fmt: skip
+        # The kernel adds the distance to the map edge (`distance_to_edge`, same arithmetic).
+        self._query(x, y, row, col, offset, self.centre_field[row, col])
+        return self._kernel(self._address)
 
     def distance_to_edge(self, x: float, y: float) -> float:
         """Distance [m] to the edge of the map (beyond it counts as obstacle)."""

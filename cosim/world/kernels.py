@@ -3,8 +3,10 @@
 `library()` returns the loaded library with every function's `argtypes`/`restype` set once.
 `LidarArrays` and `WorldArrays` mirror the structs of world.c: the long-lived arrays (as cached
 addresses) and constants of one lidar or one world, filled once, so a call passes the struct's
-address and a few numbers. The arrays must stay alive and in place as long as the struct is used:
-`ArrayRefs.pointer` keeps a reference to each array it takes the address of.
+address and a few numbers (a world's query is packed into the struct: a call of one argument;
+so one `WorldDistance` serves one thread at a time). The arrays must stay alive and in place as
+long as the struct is used: `ArrayRefs.pointer` keeps a reference to each array it takes the
+address of.
 """
 
 from __future__ import annotations
@@ -25,14 +27,19 @@ _f64 = ctypes.c_double
 
 
 class WorldArrays(ctypes.Structure):
-    """`World` of world.c: the grid and the unknown shapes of a `WorldDistance`."""
+    """`World` of world.c: the grid and the unknown shapes of a `WorldDistance`, and the query."""
 
     _fields_ = [
         ("occupied", _p), ("rows", _i64), ("cols", _i64),
-        ("x_min", _f64), ("y_min", _f64), ("resolution", _f64),
+        ("x_min", _f64), ("y_min", _f64), ("x_max", _f64), ("y_max", _f64), ("resolution", _f64),
         ("circles", _p), ("n_circles", _i64),
         ("vertices", _p), ("starts", _p), ("n_starts", _i64),
+        ("x", _f64), ("y", _f64), ("row", _i64), ("col", _i64), ("offset", _f64), ("field", _f64),
     ]  # fmt: skip
+
+    # The query fields x .. field, in order, for `struct.pack_into` (one call, cheaper than as many
+    # ctypes arguments or field assignments).
+    QUERY = "=ddqqdd"
 
 
 class LidarArrays(ctypes.Structure):
@@ -82,7 +89,7 @@ def library() -> ctypes.CDLL:
         lib.world_inside_polygon.restype = ctypes.c_int
         lib.world_polygon_distance.argtypes = [_f64, _f64, _p, _i64, _i64]
         lib.world_polygon_distance.restype = _f64
-        lib.world_distance.argtypes = [_p, _f64, _f64, _i64, _i64, _f64, _f64, _f64]
+        lib.world_distance.argtypes = [_p]
         lib.world_distance.restype = _f64
         lib.lidar_measure.argtypes = [_p, _f64, _f64, _p, _i64, _p]
         lib.lidar_measure.restype = None

@@ -26,20 +26,28 @@ double world_polygon_distance(double x, double y, const double *vertices, int64_
 typedef struct {
     const uint8_t *occupied; /* rows x cols, row 0 at the top (the grid's convention) */
     int64_t rows, cols;
-    double x_min, y_min, resolution;
+    double x_min, y_min, x_max, y_max, resolution;
     const double *circles; /* n_circles x 3: cx, cy, r */
     int64_t n_circles;
     const double *vertices; /* polygon p is vertices[starts[p]:starts[p + 1]] */
     const int64_t *starts;
     int64_t n_starts;
+    /* The query, written by the caller before each call (packing them costs Python less than
+     * passing them as ctypes arguments): the point, the cell (row, col) holding it, its distance
+     * `offset` [m] from that cell's centre and the cell's centre field value `field` (the distance
+     * [m] from its centre to the nearest occupied centre). */
+    double x, y;
+    int64_t row, col;
+    double offset, field;
 } World;
 
-/* `WorldDistance.distance` inside the map: (row, col) holds (x, y) at `offset` [m] from its
- * centre, `best` is the distance to the map edge, `field` the cell's centre field value (the
- * distance [m] from its centre to the nearest occupied centre). */
-double world_distance(const World *w, double x, double y, int64_t row, int64_t col, double offset, double best,
-                      double field)
+/* `WorldDistance.distance` for a point inside the map (the query of `w`). */
+double world_distance(const World *w)
 {
+    double x = w->x, y = w->y, offset = w->offset, field = w->field;
+    int64_t row = w->row, col = w->col;
+    /* The distance to the map edge: Python's min(x - x_min, x_max - x, y - y_min, y_max - y). */
+    double best = py_min(py_min(py_min(x - w->x_min, w->x_max - x), y - w->y_min), w->y_max - y);
     double resolution = w->resolution;
     double half = resolution / 2.0;
     int64_t rows = w->rows, cols = w->cols;

@@ -1,0 +1,105 @@
+"""The costmap's C kernel (cosim/navigation/native/costmap.c) against a plain traversal in Python.
+
+The kernel traverses a beam only when it passes near the box of the marks (only marked cells can
+be cleared). The reference below traverses every beam, cell by cell, with the same arithmetic, so
+the marks and change counts must be equal exactly, scan after scan, while marks come and go."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cosim.navigation.costmap import Costmap
+from planner.grid import OccupancyGrid
+
+
+def _reference_integrate(marked, known, origin, resolution, x, y, theta, angles, ranges, clear_to):
+    """Every beam: clear the marked cells it crosses before its return (or up to clear_to without
+    one), then mark the return's cell; cells of [row, col] with row 0 at the top."""
+    rows, cols = marked.shape
+    gx, gy = (x - origin[0]) / resolution, (y - origin[1]) / resolution
+    changed = 0
+    for angle, distance in zip(angles, ranges, strict=True):
+        hit = math.isfinite(distance)
+        if not hit:
+            distance = clear_to
+            if distance <= 0.0:
+                continue
+        dx, dy = math.cos(theta + angle), math.sin(theta + angle)
+        limit = distance / resolution
+        ix, iy = math.floor(gx), math.floor(gy)
+        step_x, step_y = (1 if dx > 0 else -1), (1 if dy > 0 else -1)
+        next_x = ((ix + 1) - gx) / dx if dx > 0 else ((gx - ix) / -dx if dx < 0 else math.inf)
+        next_y = ((iy + 1) - gy) / dy if dy > 0 else ((gy - iy) / -dy if dy < 0 else math.inf)
+        delta_x = 1.0 / abs(dx) if dx != 0 else math.inf
+        delta_y = 1.0 / abs(dy) if dy != 0 else math.inf
+        while True:
+            leaving = min(next_x, next_y)
+            if hit and leaving >= limit:
+                break
+            if (
+                0 <= ix < cols
+                and 0 <= iy < rows
+                and marked[rows - 1 - iy, ix]
+                and not known[rows - 1 - iy, ix]
+            ):
+                marked[rows - 1 - iy, ix] = False
+                changed += 1
+            if leaving >= limit:
+                break
+            if next_x < next_y:
+                next_x, ix = next_x + delta_x, ix + step_x
+            else:
+                next_y, iy = next_y + delta_y, iy + step_y
+        if hit:
+            cx = math.floor(gx + dx * (limit + 1e-6))
+            cy = math.floor(gy + dy * (limit + 1e-6))
+            if (
+                0 <= cx < cols
+                and 0 <= cy < rows
+                and not marked[rows - 1 - cy, cx]
+                and not known[rows - 1 - cy, cx]
+            ):
+                marked[rows - 1 - cy, cx] = True
+                changed += 1
+    return changed
+
+
+@pytest.mark.parametrize("range_min", [0.0, 0.2])
+def test_integrate_equals_a_full_traversal_while_marks_come_and_go(range_min):
+    rng = np.random.default_rng(7)
+    occupied = np.zeros((30, 44), dtype=bool)
+    occupied[0, :] = occupied[-1, :] = occupied[:, 0] = occupied[:, -1] = True
+    occupied[10:14, 20:23] = True
+    grid = OccupancyGrid(occupied, 0.25, (-1.0, 2.0))
+    angles = np.linspace(-math.pi, math.pi, 37)
+    range_max = 6.0
+    costmap = Costmap(grid, angles, range_min, range_max)
+    marked = np.zeros_like(occupied)
+    clear_to = range_max if range_min == 0.0 else 0.0
+    changes = 0
+    for _ in range(120):
+        x, y = rng.uniform(-1.5, 10.5), rng.uniform(1.5, 10.0)  # sometimes off the map
+        theta = rng.uniform(-4.0, 4.0)
+        ranges = rng.uniform(0.0, range_max, len(angles))
+        ranges[rng.random(len(angles)) < 0.3] = np.nan  # no return: clears when range_min is 0
+        if rng.random() < 0.2:
+            ranges[:] = np.nan  # an empty scan clears every beam's ray
+        expected = _reference_integrate(
+            marked, occupied, grid.origin, grid.resolution, x, y, theta, angles, ranges, clear_to
+        )
+        assert costmap.integrate(x, y, theta, ranges) == expected
+        assert np.array_equal(costmap.marked, marked)
+        changes += expected
+    assert changes > 500 and marked.any()  # marks were set and cleared all along
+
+
+def test_marks_change_only_through_integrate():
+    grid = OccupancyGrid(np.zeros((8, 8), dtype=bool), 0.5, (0.0, 0.0))
+    costmap = Costmap(grid, np.array([0.0]), 0.0, 3.0)
+    with pytest.raises(ValueError):
+        costmap.marked[2, 2] = True  # the kernel keeps counts of the marks: no writes from outside
+    with pytest.raises(ValueError, match="needs 1 ranges"):
+        costmap.integrate(1.0, 1.0, 0.0, np.array([]))
