@@ -38,7 +38,7 @@ class _Arrays(ctypes.Structure):
         ("marked", _p), ("known", _p), ("rows", _i64), ("cols", _i64),
         ("origin_x", _f64), ("origin_y", _f64), ("resolution", _f64),
         ("angles", _p), ("count", _i64), ("ranges", _p), ("clear_to", _f64),
-        ("row_marks", _p), ("col_marks", _p),
+        ("row_marks", _p), ("col_marks", _p), ("cos_angles", _p), ("sin_angles", _p),
     ]  # fmt: skip
 
 
@@ -74,12 +74,15 @@ class Costmap:
         # only the beams passing near it can clear.
         self._row_marks = np.zeros(rows, dtype=np.int64)
         self._col_marks = np.zeros(cols, dtype=np.int64)
+        # The beams' directions to a few ulp, for the kernel's cheap first look at each beam.
+        self._cos_angles, self._sin_angles = np.cos(self.angles), np.sin(self.angles)
         self._arrays = _Arrays(
             marked=self._marked.ctypes.data, known=self._known.ctypes.data, rows=rows, cols=cols,
             origin_x=float(origin_x), origin_y=float(origin_y), resolution=float(known.resolution),
             angles=self.angles.ctypes.data, count=len(self.angles), ranges=self._ranges.ctypes.data,
             clear_to=self.clear_to,
             row_marks=self._row_marks.ctypes.data, col_marks=self._col_marks.ctypes.data,
+            cos_angles=self._cos_angles.ctypes.data, sin_angles=self._sin_angles.ctypes.data,
         )  # fmt: skip
         self._address = ctypes.addressof(self._arrays)
         library = _kernels()
