@@ -132,6 +132,23 @@ def test_a_sensor_inside_a_rectangle_reads_zero():
     assert ranges[0] == 0.0  # inside a rectangle obstacle
 
 
+def test_measure_gives_true_distances_along_world_directions():
+    occupied = np.zeros((100, 100), dtype=bool)
+    occupied[:, 80] = True  # a wall at x = 8.0 m (0.1 m cells, origin (0, 0))
+    lidar = Lidar(occupied=occupied, resolution=0.1, obstacles=[Circle((2.0, 8.0), 1.0)], range_max=20.0)
+    directions = np.array([[1.0, 0.0], [0.8, 0.6], [0.0, 1.0], [-1.0, 0.0]])
+    distances = lidar.measure(2.05, 5.0, 0.0, directions)
+    # The wall along +x and (0.8, 0.6); the circle straight up (its lowest point y = 7 is 2 m away,
+    # 0.05 m off its centre line); nothing along -x (inf, not NaN: no range limits here).
+    circle = 3.0 - math.sqrt(1.0 - 0.05**2)
+    assert distances[:3] == pytest.approx([5.95, 5.95 / 0.8, circle], abs=1e-9)
+    assert distances[3] == math.inf
+    inside = lidar.measure(2.0, 8.2, 0.0, directions)  # inside the circle: every beam 0
+    assert np.array_equal(inside, np.zeros(4))
+    with pytest.raises(ValueError, match=r"\(N, 2\)"):
+        lidar.measure(2.05, 5.0, 0.0, np.ones(3))
+
+
 def test_bad_settings_are_errors():
     with pytest.raises(CosimError, match="range limits"):
         Lidar(range_min=3.0, range_max=2.0)
