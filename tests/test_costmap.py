@@ -6,7 +6,9 @@ the marks and change counts must be equal exactly, scan after scan, while marks 
 
 from __future__ import annotations
 
+import copy
 import math
+import pickle
 
 import numpy as np
 import pytest
@@ -103,3 +105,14 @@ def test_marks_change_only_through_integrate():
         costmap.marked[2, 2] = True  # the kernel keeps counts of the marks: no writes from outside
     with pytest.raises(ValueError, match="needs 1 ranges"):
         costmap.integrate(1.0, 1.0, 0.0, np.array([]))
+
+
+def test_a_copy_has_its_own_marks():
+    """The kernel's struct holds the addresses of the costmap's arrays: a copy binds to its own."""
+    grid = OccupancyGrid(np.zeros((20, 20), dtype=bool), 0.5, (0.0, 0.0))
+    costmap = Costmap(grid, np.array([0.0]), 0.0, 8.0)
+    costmap.integrate(1.25, 5.1, 0.0, np.array([3.0]))
+    for twin in (copy.deepcopy(costmap), pickle.loads(pickle.dumps(costmap))):
+        assert twin.integrate(1.25, 5.1, 0.0, np.array([6.0])) == 2  # clears the mark, marks a new one
+        assert costmap.marked.sum() == 1 and twin.marked.sum() == 1
+        assert not np.array_equal(costmap.marked, twin.marked)

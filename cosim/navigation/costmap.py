@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cosim.world import kernels
 from planner import native
 from planner.grid import OccupancyGrid
 
@@ -58,17 +59,17 @@ def _kernels() -> ctypes.CDLL:
     return _library
 
 
-class Costmap:
+class Costmap(kernels.Bound):
     """The known map (`planner.OccupancyGrid`) plus lidar marks; see the module docstring."""
 
     def __init__(self, known: OccupancyGrid, angles: np.ndarray, range_min: float, range_max: float):
         self.known = known
         self._marked = np.zeros(known.shape, dtype=np.bool_)
         self._known = np.ascontiguousarray(known.occupied, dtype=np.bool_)
-        self.angles = np.ascontiguousarray(angles, dtype=float)
+        self.angles = np.array(angles, dtype=float)  # a read-only copy: the kernel keeps cos and sin of them
+        self.angles.flags.writeable = False
         self.clear_to = float(range_max) if range_min == 0.0 else 0.0
         self._ranges = np.empty(len(self.angles))  # each scan is copied in: one address for the kernel
-        origin_x, origin_y = known.origin
         rows, cols = known.shape
         # Marked cells per row and per column, kept by the kernel: the box of the marks, which
         # only the beams passing near it can clear.
@@ -76,9 +77,17 @@ class Costmap:
         self._col_marks = np.zeros(cols, dtype=np.int64)
         # The beams' directions to a few ulp, for the kernel's cheap first look at each beam.
         self._cos_angles, self._sin_angles = np.cos(self.angles), np.sin(self.angles)
+        self._bind()
+
+    _BOUND = ("_arrays", "_address", "_integrate", "_new_marks_near")
+
+    def _bind(self) -> None:
+        """The kernel's struct: addresses of the marks, known cells, beams, scan buffer and counts."""
+        origin_x, origin_y = self.known.origin
+        rows, cols = self._marked.shape
         self._arrays = _Arrays(
             marked=self._marked.ctypes.data, known=self._known.ctypes.data, rows=rows, cols=cols,
-            origin_x=float(origin_x), origin_y=float(origin_y), resolution=float(known.resolution),
+            origin_x=float(origin_x), origin_y=float(origin_y), resolution=float(self.known.resolution),
             angles=self.angles.ctypes.data, count=len(self.angles), ranges=self._ranges.ctypes.data,
             clear_to=self.clear_to,
             row_marks=self._row_marks.ctypes.data, col_marks=self._col_marks.ctypes.data,

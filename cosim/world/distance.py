@@ -46,7 +46,7 @@ def distance_to_obstacle(x: float, y: float, obstacle: Obstacle) -> float:
     return polygon_distance(float(x), float(y), vertices, 0, len(vertices))
 
 
-class WorldDistance:
+class WorldDistance(kernels.Bound):
     """Exact distance [m] from a point to the nearest true obstacle (grid cells + unknown shapes,
     moving ones at their pose at the time last given to `at`).
 
@@ -76,9 +76,15 @@ class WorldDistance:
         # circles give cheap lower bounds.
         self.shapes = ObstacleArrays(self.obstacles)
         self._occupied_u8 = np.ascontiguousarray(grid.occupied, dtype=np.uint8)
-        # The kernel's view of the grid and shapes (`at` moves the shapes in place: same arrays).
+        self._bind()
+
+    _BOUND = ("_refs", "_arrays", "_address", "_query", "_kernel")
+
+    def _bind(self) -> None:
+        """The kernel's view of the grid and shapes (`at` moves the shapes in place: same arrays)."""
         refs = self._refs = kernels.ArrayRefs()
         shapes = self.shapes
+        rows, cols = self.rows, self.cols
         self._arrays = kernels.WorldArrays(
             occupied=refs.pointer(self._occupied_u8, np.uint8), rows=rows, cols=cols,
             x_min=self.x_min, y_min=self.y_min, x_max=self.x_max, y_max=self.y_max,

@@ -73,6 +73,27 @@ class ArrayRefs:
         return array.ctypes.data
 
 
+class Bound:
+    """Base of an object whose kernel struct holds addresses of its own arrays (`_bind` builds the
+    struct and everything derived from it, named in `_BOUND`): a copy or a pickle leaves those
+    out and binds anew, to its own arrays, instead of carrying addresses into the original's."""
+
+    _BOUND: tuple[str, ...] = ()
+
+    def _bind(self) -> None:
+        raise NotImplementedError
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        for name in self._BOUND:
+            state.pop(name, None)
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._bind()
+
+
 def pointer(array: np.ndarray, dtype) -> int:
     """The address of a per-call array after the same checks (no reference kept: the caller's)."""
     if array.dtype != np.dtype(dtype) or not array.flags.c_contiguous:

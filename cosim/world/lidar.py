@@ -39,7 +39,7 @@ from cosim.world.shapes import Obstacle
 MAX_BEAMS = 100_000  # beams of one sweep (two output ports each); a scenario allows fewer (the VFH's 720)
 
 
-class Lidar(PythonComponent):
+class Lidar(kernels.Bound, PythonComponent):
     """Lidar component (see the module docstring). Lengths [m], angles [rad], period [s]."""
 
     def __init__(
@@ -115,6 +115,12 @@ class Lidar(PythonComponent):
         super().__init__(name, inputs, outputs, period=period)
         self._ranges = self.output_buffer[:capacity]
         self._angles = self.output_buffer[capacity:]
+        self._bind()
+
+    _BOUND = ("_refs", "_arrays", "_address", "_scan", "_measure")
+
+    def _bind(self) -> None:
+        """The kernel's struct: addresses of the grid, beams, noise buffers, shapes and outputs."""
         refs = self._refs = kernels.ArrayRefs()
         world = self.world
         self._arrays = kernels.LidarArrays(
@@ -122,7 +128,7 @@ class Lidar(PythonComponent):
             rows=self.occupied_up.shape[0], cols=self.occupied_up.shape[1],
             origin_x=self.origin[0], origin_y=self.origin[1], resolution=self.resolution,
             range_min=self.range_min, range_max=self.range_max,
-            beam_angles=refs.pointer(self.beam_angles, np.float64), count=count,
+            beam_angles=refs.pointer(self.beam_angles, np.float64), count=len(self.beam_angles),
             angle_jitter=refs.pointer(self._angle_jitter, np.float64),
             range_jitter=refs.pointer(self._range_jitter, np.float64),
             circles=refs.pointer(world.circles, np.float64), n_circles=len(world.circles),
