@@ -1,13 +1,15 @@
 """The front door: `plan(grid, start, goal, **options) -> PlanResult` (options: planner.options).
 
 plan() keeps one prepared search per grid and option set (`GridSearch`: the checked options, the
-move masks, the compiled kernel's parameters and its reusable work arrays), so a repeated query
-costs a dictionary look-up, one compiled call and the result object: a few microseconds on any
-map size, with no array of the map's size allocated or cleared per call.
+move masks, the C kernel's parameters and its reusable work arrays, their addresses in one
+planner.astar.Query), so a repeated query costs a dictionary look-up, one ctypes call of five
+arguments and the result object: a few microseconds on any map size, with no array of the map's
+size allocated or cleared per call.
 """
 
 from __future__ import annotations
 
+import ctypes
 from time import perf_counter
 
 import numpy as np
@@ -22,7 +24,8 @@ from planner.astar import (
     NO_PATH,
     ROUTE_FULL,
     TIE_BREAKERS,
-    astar_plan,
+    plan_kernel,
+    query,
     search_parameters,
 )
 from planner.endpoints import check_grid, endpoint_error, endpoint_node
@@ -78,26 +81,11 @@ def _prepare(grid: OccupancyGrid, options: dict, key: tuple | None):
     return search
 
 
-def _compiled_entry(dispatcher, arguments: tuple):
-    """The compiled entry point of numba `dispatcher` for the types of `arguments` (compiled
-    already), or the dispatcher itself where numba does not expose it.
-
-    Calling the entry point skips the dispatcher's type resolution, ~0.3 us of a 3 us query. It
-    does not check the types it is given, so a caller must always pass arguments of these types,
-    as GridSearch does: its arrays never change dtype or dimensions, its scalars go through float().
-    """
-    try:
-        signature = tuple(dispatcher.typeof_pyval(argument) for argument in arguments)
-        return dispatcher.overloads[signature].entry_point
-    except (AttributeError, KeyError, TypeError):
-        return dispatcher
-
-
 class GridSearch:
     """Grid A* or bidirectional A* with one resolved option set on one grid; call it with (start, goal).
 
-    The first call compiles the kernel (or loads it from numba's cache): that happens here, in the
-    constructor, so that `elapsed` never includes it.
+    The kernel's library is built (first use after an install or an edit) or loaded when
+    planner.astar is imported, so `elapsed` never includes it.
     """
 
     __slots__ = (
@@ -114,7 +102,8 @@ class GridSearch:
         "connectivity",
         "corner_cutting",
         "general",
-        "kernel",
+        "query",
+        "address",
     )
 
     def __init__(self, grid: OccupancyGrid, settings: dict) -> None:
@@ -146,34 +135,24 @@ class GridSearch:
             grid.origin,
         )
         self.work = workspace(len(space.blocked))
-        self.kernel = astar_plan
-        if self.name == "astar":
-            self._search(np.nan, np.nan, np.nan, np.nan)  # compile: BAD_START without searching
-            work = self.work
-            arguments = (
-                self.moves, space.blocked, self.cost, self.parameters, np.nan, np.nan, np.nan, np.nan,
-                work.generation, work.g, work.nodes, work.heap, work.path, work.cells,
-            )  # fmt: skip
-            self.kernel = _compiled_entry(astar_plan, arguments)
+        # The kernel's one argument besides the endpoints; the arrays it points to live as long as self.
+        self.query = query(self.moves, space.blocked, self.cost, self.parameters, self.work.state)
+        self.address = ctypes.addressof(self.query)
 
     def _search(self, start_x: float, start_y: float, goal_x: float, goal_y: float) -> tuple:
         """astar_plan into the workspace, growing its buffers until they suffice;
         returns (status, searched, path nodes, length [m], elapsed [s])."""
-        work = self.work
         while True:
-            generation = work.next_generation()
             began = perf_counter()
-            status, searched, count, length = self.kernel(
-                self.moves, self.space.blocked, self.cost, self.parameters, start_x, start_y, goal_x, goal_y,
-                generation, work.g, work.nodes, work.heap, work.path, work.cells,
-            )  # fmt: skip
+            status = plan_kernel(self.address, start_x, start_y, goal_x, goal_y)
             elapsed = perf_counter() - began
+            answer = self.query
             if status == HEAP_FULL:
-                work.grow_heap()
+                self.work.grow_heap()
             elif status == ROUTE_FULL:
-                work.grow_path(count)
+                self.work.grow_path(answer.count)
             else:
-                return status, searched, count, length, elapsed
+                return status, answer.searched, answer.count, answer.length, elapsed
 
     def __call__(self, start, goal) -> PlanResult:
         if self.general:

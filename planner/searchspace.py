@@ -2,7 +2,7 @@
 
 Both are cached, so a query on a map already seen allocates nothing of the map's size:
 the blocked map per (grid, expansion distance) on the grid itself, the work arrays per padded
-size in this module (the GIL serialises compiled searches, so sharing them is safe).
+size in this module (the C kernels hold the GIL, so sharing them is safe).
 """
 
 from __future__ import annotations
@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import binary_dilation
 
+from planner.astar import WorkState
 from planner.grid import OccupancyGrid
 from planner.inflation import cost_gradient, inflation_mask
 
@@ -143,33 +144,49 @@ class Workspace:
     node, which the caller copies out.
     """
 
-    __slots__ = ("g", "nodes", "generation", "heap", "path", "cells")
+    __slots__ = ("g", "nodes", "heap", "path", "cells", "state")
 
     def __init__(self, size: int) -> None:
         self.g = np.empty(size)
         self.nodes = np.zeros((3, size), dtype=np.int32)
-        self.generation = 0
         self.heap = np.empty((2, size), dtype=np.int64)
         self.path = np.empty((_PATH_ROWS, 2))
         self.cells = np.empty((_PATH_ROWS, 2), dtype=np.int64)
+        # The arrays' addresses and the generation, for the C kernel (planner.astar.WorkState): a
+        # prepared search hands the kernel this one structure, which stays valid as the arrays grow.
+        self.state = WorkState(
+            self.g.ctypes.data, self.nodes.ctypes.data, size, self.heap.ctypes.data, size,
+            self.path.ctypes.data, self.cells.ctypes.data, _PATH_ROWS, 0,
+        )  # fmt: skip
+
+    @property
+    def generation(self) -> int:
+        """The generation of the last search (the C kernel advances it itself)."""
+        return self.state.generation
 
     def grow_path(self, count: int) -> None:
         """Path buffers of at least `count` rows (a search's path did not fit)."""
         rows = max(count, 2 * len(self.path))
         self.path = np.empty((rows, 2))
         self.cells = np.empty((rows, 2), dtype=np.int64)
+        self.state.path = self.path.ctypes.data
+        self.state.cells = self.cells.ctypes.data
+        self.state.path_rows = rows
 
     def grow_heap(self) -> None:
         """Double the heap arrays (a search returned HEAP_FULL: OPEN outgrew them)."""
         self.heap = np.empty((2, 2 * self.heap.shape[1]), dtype=np.int64)
+        self.state.heap = self.heap.ctypes.data
+        self.state.capacity = self.heap.shape[1]
 
     def next_generation(self) -> int:
         """A fresh generation (OPEN = generation, CLOSED = generation + 1) with no stale stamps."""
-        self.generation += 2
-        if self.generation >= _STAMP_LIMIT:
+        generation = self.state.generation + 2
+        if generation >= _STAMP_LIMIT:
             self.nodes[1] = 0
-            self.generation = 2
-        return self.generation
+            generation = 2
+        self.state.generation = generation
+        return generation
 
 
 _workspaces: dict[tuple[int, int], Workspace] = {}

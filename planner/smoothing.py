@@ -14,112 +14,68 @@ whole path. The curve is convex and lies in the triangle (B0, W, E0), so it is s
 2 d it replaces. d starts at half the shorter leg and is halved until the sampled curve is clear;
 below half a cell the triangle lies inside W's own free cell, so the halving always ends.
 
-Cells that the search only treated as untrusted points are not obstacles here.
+Cells that the search only treated as untrusted points are not obstacles here. The line-of-sight
+walks are C (planner/native/smoothing.c).
 """
 
 from __future__ import annotations
 
+import ctypes
 import math
+from pathlib import Path
 
 import numpy as np
-from numba import njit
 
+from planner import native
+from planner.astar import address
 from planner.errors import PlannerError
 from planner.searchspace import SearchMap
 
 _INNER = (0.6, 0.3)  # B1, B2 as fractions of d from the corner
 
 
-@njit(cache=True)
+_LIBRARY = native.load(Path(__file__).parent / "native" / "smoothing.c")
+_KERNELS = ctypes.PyDLL(_LIBRARY._name, handle=_LIBRARY._handle)  # holds the GIL, as planner.astar's
+_segment_clear = _KERNELS.navcosim_segment_clear
+_segment_clear.restype = ctypes.c_int64
+_segment_clear.argtypes = (ctypes.c_void_p, ctypes.c_int64) + (ctypes.c_double,) * 4
+_polyline_clear = _KERNELS.navcosim_polyline_clear
+_polyline_clear.restype = ctypes.c_int64
+_polyline_clear.argtypes = (ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64)
+_prune = _KERNELS.navcosim_prune_line_of_sight
+_prune.restype = ctypes.c_int64
+_prune.argtypes = (ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p)
+
+
+def _points(points_uv) -> np.ndarray:
+    points = np.ascontiguousarray(points_uv, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 2:
+        raise ValueError(f"points must be n x 2 (u, v), got shape {points.shape}")
+    return points
+
+
 def segment_clear(blocked, width, u0, v0, u1, v1):
     """True when every cell touched by the segment (u, v in cells: u = column axis, v = row axis
     pointing down, cell (row, col) = [col, col+1) x [row, row+1)) is free in the padded map."""
-    col = int(math.floor(u0))
-    row = int(math.floor(v0))
-    end_col = int(math.floor(u1))
-    end_row = int(math.floor(v1))
-    du = u1 - u0
-    dv = v1 - v0
-    step_col = 1 if du > 0 else -1
-    step_row = 1 if dv > 0 else -1
-    t_delta_u = abs(1.0 / du) if du != 0.0 else np.inf
-    t_delta_v = abs(1.0 / dv) if dv != 0.0 else np.inf
-    if du > 0:
-        t_max_u = (col + 1 - u0) / du
-    elif du < 0:
-        t_max_u = (col - u0) / du
-    else:
-        t_max_u = np.inf
-    if dv > 0:
-        t_max_v = (row + 1 - v0) / dv
-    elif dv < 0:
-        t_max_v = (row - v0) / dv
-    else:
-        t_max_v = np.inf
-    for _ in range(abs(end_col - col) + abs(end_row - row) + 2):
-        if blocked[(row + 1) * width + col + 1] == 1:
-            return False
-        if col == end_col and row == end_row:
-            return True
-        if abs(t_max_u - t_max_v) < 1e-12:
-            # Through a corner: both side cells count as touched.
-            if blocked[(row + 1) * width + col + step_col + 1] == 1:
-                return False
-            if blocked[(row + step_row + 1) * width + col + 1] == 1:
-                return False
-            col += step_col
-            row += step_row
-            t_max_u += t_delta_u
-            t_max_v += t_delta_v
-        elif t_max_u < t_max_v:
-            col += step_col
-            t_max_u += t_delta_u
-        else:
-            row += step_row
-            t_max_v += t_delta_v
-    return False  # rounding kept the walk from reaching the end cell: refuse, to stay safe
+    blocked_address = address(blocked, np.uint8, "blocked")
+    return bool(_segment_clear(blocked_address, int(width), float(u0), float(v0), float(u1), float(v1)))
 
 
-@njit(cache=True)
 def polyline_clear(blocked, width, points_uv):
-    for index in range(len(points_uv) - 1):
-        if not segment_clear(
-            blocked,
-            width,
-            points_uv[index, 0],
-            points_uv[index, 1],
-            points_uv[index + 1, 0],
-            points_uv[index + 1, 1],
-        ):
-            return False
-    return True
+    """True when every segment between consecutive points (n x 2, u v) is clear (segment_clear)."""
+    points = _points(points_uv)
+    blocked_address = address(blocked, np.uint8, "blocked")
+    return bool(_polyline_clear(blocked_address, int(width), points.ctypes.data, len(points)))
 
 
-@njit(cache=True)
 def prune_line_of_sight(blocked, width, points_uv):
     """Indices of the waypoints kept by greedy farthest-visible pruning."""
-    count = len(points_uv)
-    keep = np.empty(count, dtype=np.int64)
-    kept = 0
-    anchor = 0
-    keep[kept] = 0
-    kept += 1
-    while anchor < count - 1:
-        chosen = anchor + 1
-        for candidate in range(count - 1, anchor + 1, -1):
-            if segment_clear(
-                blocked,
-                width,
-                points_uv[anchor, 0],
-                points_uv[anchor, 1],
-                points_uv[candidate, 0],
-                points_uv[candidate, 1],
-            ):
-                chosen = candidate
-                break
-        keep[kept] = chosen
-        kept += 1
-        anchor = chosen
+    points = _points(points_uv)
+    keep = np.empty(len(points), dtype=np.int64)
+    if len(points) == 0:
+        return keep
+    blocked_address = address(blocked, np.uint8, "blocked")
+    kept = _prune(blocked_address, int(width), points.ctypes.data, len(points), keep.ctypes.data)
     return keep[:kept]
 
 

@@ -1,0 +1,579 @@
+/* Grid A* of chapter 3 (planner.astar): heuristics 3.1-3.4 and 3.6, the thesis's improvements, and
+ * the bidirectional search of planner.bidirectional. Loaded with planner.native; the Python side
+ * (planner/astar.py) documents the data layout, the heap keys and the status codes.
+ *
+ * Every floating-point operation is the one the Python reference does, in its order (the library is
+ * built with -ffp-contract=off, no fast-math), so plans are bit-identical to it; the 4-ary heap pops
+ * equal keys in the same order, so the same nodes are expanded.
+ */
+#include <math.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#define SQRT2 1.4142135623730951 /* math.sqrt(2.0) */
+
+enum { NO_PATH = 0, FOUND = 1, HEAP_FULL = -1, ROUTE_FULL = -2, BAD_START = -3, BAD_GOAL = -4 };
+enum { BLOCKED = 1 };
+/* Heap keys pack f (2^-24 cell steps) over h (quarter cells, saturating at 2^16 - 1). */
+#define H_BITS 16
+#define F_SCALE 16777216.0
+#define H_SCALE 4.0
+#define H_MAX 65535
+/* Indices of the parameters array (planner.astar.PARAMETERS). */
+enum { P_WIDTH, P_HEURISTIC, P_TIE, P_DECREASE, P_H_SCALE, P_COST_WEIGHT, P_ROWS, P_COLS, P_RESOLUTION,
+       P_ORIGIN_X, P_ORIGIN_Y };
+
+/* (row, col) steps of the 8 moves, in the bit order of the move masks (planner.searchspace.MOVES). */
+static const int64_t ROW_STEPS[8] = {-1, 1, 0, 0, -1, -1, 1, 1};
+static const int64_t COL_STEPS[8] = {0, 0, -1, 1, -1, 1, -1, 1};
+
+/* The work arrays of one search direction (planner.searchspace.Workspace). */
+typedef struct {
+    double *g;        /* [size] g in cells */
+    int32_t *parent;  /* nodes[0] */
+    int32_t *stamp;   /* nodes[1]: generation = OPEN, generation + 1 = CLOSED */
+    int32_t *expanded;/* nodes[2]: expanded nodes in closing order */
+    int64_t *heap_key;
+    int64_t *heap_node;
+    int64_t capacity;
+} Work;
+
+static inline int64_t absolute(int64_t value) { return value < 0 ? -value : value; }
+static inline int64_t larger(int64_t a, int64_t b) { return a > b ? a : b; }
+
+/* h in cells for a (row, col) offset to the goal; kind: planner.astar.HEURISTICS. */
+static inline double heuristic_cells(int64_t row_offset, int64_t col_offset, int64_t kind) {
+    int64_t dr = absolute(row_offset);
+    int64_t dc = absolute(col_offset);
+    if (kind == 3) {
+        if (dr > dc) return (double)dr + (SQRT2 - 1.0) * (double)dc;
+        return (double)dc + (SQRT2 - 1.0) * (double)dr;
+    }
+    if (kind == 0) return (double)(dr + dc);
+    if (kind == 1) return sqrt((double)(dr * dr + dc * dc));
+    if (kind == 2) return (double)larger(dr, dc);
+    if (kind == 4) return sqrt((double)(dr * dr + dc * dc)) + 2.0 * (double)larger(dr, dc);
+    return 0.0;
+}
+
+double navcosim_heuristic_cells(int64_t row_offset, int64_t col_offset, int64_t kind) {
+    return heuristic_cells(row_offset, col_offset, kind);
+}
+
+/* One int64 key: f on a 2^-24 cell grid in the high bits, h (quarter cells) below for low_h ties. */
+static inline int64_t heap_key_of(double f, double h, int64_t tie_breaker) {
+    int64_t key = (int64_t)((uint64_t)(int64_t)(f * F_SCALE + 0.5) << H_BITS);
+    if (tie_breaker == 2) {
+        int64_t low = (int64_t)(h * H_SCALE + 0.5);
+        key += low < H_MAX ? low : H_MAX;
+    }
+    return key;
+}
+
+int64_t navcosim_heap_key_of(double f, double h, int64_t tie_breaker) { return heap_key_of(f, h, tie_breaker); }
+
+/* Push on the 4-ary min-heap (the caller checks the capacity); the new size. */
+static inline int64_t heap_push(int64_t *restrict heap_key, int64_t *restrict heap_node, int64_t size, int64_t key,
+                                int64_t node) {
+    int64_t index = size;
+    while (index > 0) {
+        int64_t parent = (index - 1) >> 2;
+        if (heap_key[parent] <= key) break;
+        heap_key[index] = heap_key[parent];
+        heap_node[index] = heap_node[parent];
+        index = parent;
+    }
+    heap_key[index] = key;
+    heap_node[index] = node;
+    return size + 1;
+}
+
+/* Remove the top; *size shrinks by one. The hole sinks along the smallest children (the first of
+ * equal ones, by a branch-free tournament), then the last entry rises into it. */
+static inline int64_t heap_pop(int64_t *restrict heap_key, int64_t *restrict heap_node, int64_t *size_io) {
+    int64_t top = heap_node[0];
+    int64_t size = *size_io - 1;
+    int64_t key = heap_key[size];
+    int64_t node = heap_node[size];
+    int64_t index = 0;
+    for (;;) {
+        int64_t first = 4 * index + 1;
+        int64_t child, smallest;
+        if (first + 3 < size) {
+            int64_t key0 = heap_key[first], key1 = heap_key[first + 1];
+            int64_t key2 = heap_key[first + 2], key3 = heap_key[first + 3];
+            int64_t child_a = key1 < key0 ? first + 1 : first;
+            int64_t key_a = key1 < key0 ? key1 : key0;
+            int64_t child_b = key3 < key2 ? first + 3 : first + 2;
+            int64_t key_b = key3 < key2 ? key3 : key2;
+            child = key_b < key_a ? child_b : child_a;
+            smallest = key_b < key_a ? key_b : key_a;
+        } else if (first < size) {
+            child = first;
+            smallest = heap_key[first];
+            for (int64_t other = first + 1; other < size; other++) {
+                int64_t candidate = heap_key[other];
+                if (candidate < smallest) {
+                    smallest = candidate;
+                    child = other;
+                }
+            }
+        } else {
+            break;
+        }
+        heap_key[index] = smallest;
+        heap_node[index] = heap_node[child];
+        index = child;
+    }
+    while (index > 0) {
+        int64_t parent = (index - 1) >> 2;
+        int64_t parent_key = heap_key[parent];
+        if (parent_key < key) break;
+        heap_key[index] = parent_key;
+        heap_node[index] = heap_node[parent];
+        index = parent;
+    }
+    heap_key[index] = key;
+    heap_node[index] = node;
+    *size_io = size;
+    return top;
+}
+
+/* The search loop, specialised by the compiler for each (heuristic, weighted) pair it is inlined with. */
+static inline __attribute__((always_inline)) int64_t search_loop(
+    const uint8_t *restrict moves, const double *restrict cost, int64_t width, int64_t heuristic,
+    int64_t tie_breaker, int decrease_key, double h_scale, double cost_weight, int weighted, int64_t start,
+    int64_t goal, int32_t generation, const Work *work, int64_t *searched_out) {
+    double *restrict g = work->g;
+    int32_t *restrict parent = work->parent;
+    int32_t *restrict stamp = work->stamp;
+    int32_t *restrict expanded = work->expanded;
+    int64_t *restrict heap_key = work->heap_key;
+    int64_t *restrict heap_node = work->heap_node;
+    const int64_t capacity = work->capacity;
+    int64_t offsets[8];
+    double steps[8];
+    for (int k = 0; k < 8; k++) {
+        offsets[k] = ROW_STEPS[k] * width + COL_STEPS[k];
+        steps[k] = ROW_STEPS[k] != 0 && COL_STEPS[k] != 0 ? SQRT2 : 1.0;
+    }
+    int64_t goal_row = goal >= 0 ? goal / width : 0;
+    int64_t goal_col = goal >= 0 ? goal % width : 0;
+    const int32_t closed = generation + 1;
+
+    g[start] = 0.0;
+    parent[start] = (int32_t)start;
+    stamp[start] = generation;
+    int64_t size = 0;
+    int64_t next_node = start; /* the candidate that skips the heap; -1 = none */
+    int64_t next_key = 0;
+    int64_t searched = 0;
+    for (;;) {
+        int64_t node;
+        if (next_node >= 0) {
+            node = next_node;
+            next_node = -1;
+        } else if (size > 0) {
+            node = heap_pop(heap_key, heap_node, &size);
+            if (stamp[node] == closed) continue; /* a stale entry left behind by a decrease-key */
+        } else {
+            *searched_out = searched;
+            return NO_PATH;
+        }
+        stamp[node] = closed;
+        expanded[searched] = (int32_t)node;
+        searched++;
+        if (node == goal) {
+            *searched_out = searched;
+            return FOUND;
+        }
+        double g_node = g[node];
+        int64_t row_offset = node / width - goal_row;
+        int64_t col_offset = node % width - goal_col;
+        unsigned allowed = moves[node];
+        for (int k = 0; k < 8; k++) {
+            if (!((allowed >> k) & 1u)) continue;
+            int64_t neighbour = node + offsets[k];
+            int32_t seen = stamp[neighbour];
+            if (seen == closed) continue;
+            double step = steps[k];
+            if (weighted) step *= 1.0 + cost_weight * cost[neighbour];
+            double g_new = g_node + step;
+            if (seen == generation) {
+                if (g_new >= g[neighbour]) continue;
+                g[neighbour] = g_new;
+                parent[neighbour] = (int32_t)node;
+                if (!decrease_key) continue; /* plannerAStarGrid: the key in OPEN does not change */
+            } else {
+                stamp[neighbour] = generation;
+                g[neighbour] = g_new;
+                parent[neighbour] = (int32_t)node;
+            }
+            double h = heuristic_cells(row_offset + ROW_STEPS[k], col_offset + COL_STEPS[k], heuristic) * h_scale;
+            int64_t key = heap_key_of(g_new + h, h, tie_breaker);
+            if (next_node < 0) {
+                if (size == 0 || key <= heap_key[0]) {
+                    next_node = neighbour;
+                    next_key = key;
+                    continue;
+                }
+            } else if (key < next_key) {
+                int64_t swap_key = key, swap_node = neighbour;
+                key = next_key;
+                neighbour = next_node;
+                next_key = swap_key;
+                next_node = swap_node;
+            }
+            if (size == capacity) {
+                *searched_out = searched;
+                return HEAP_FULL;
+            }
+            size = heap_push(heap_key, heap_node, size, key, neighbour);
+        }
+    }
+}
+
+#define SEARCH(H, W)                                                                                          \
+    search_loop(moves, cost, width, H, tie_breaker, decrease_key, h_scale, cost_weight, W, start, goal,       \
+                generation, work, searched)
+
+static int64_t search(const uint8_t *moves, const double *cost, const double *parameters, int64_t start,
+                      int64_t goal, int32_t generation, const Work *work, int64_t *searched) {
+    int64_t width = (int64_t)parameters[P_WIDTH];
+    int64_t heuristic = (int64_t)parameters[P_HEURISTIC];
+    int64_t tie_breaker = (int64_t)parameters[P_TIE];
+    int decrease_key = parameters[P_DECREASE] != 0.0;
+    double h_scale = parameters[P_H_SCALE];
+    double cost_weight = parameters[P_COST_WEIGHT];
+    if (cost_weight != 0.0) return SEARCH(heuristic, 1);
+    switch (heuristic) { /* constant heuristics: the compiler drops the others' code from the loop */
+    case 3: return SEARCH(3, 0);
+    case 0: return SEARCH(0, 0);
+    case 1: return SEARCH(1, 0);
+    case 2: return SEARCH(2, 0);
+    case 4: return SEARCH(4, 0);
+    default: return SEARCH(5, 0);
+    }
+}
+
+/* planner.astar.astar_search: A* (or Dijkstra with heuristic 5 and goal -1) on a padded flat grid.
+ * nodes: int32 [3, size]; heap: int64 [2, capacity]. Returns the status; *searched the expanded count. */
+int64_t navcosim_astar_search(const uint8_t *moves, const double *cost, const double *parameters, int64_t start,
+                              int64_t goal, int64_t generation, double *g, int32_t *nodes, int64_t size,
+                              int64_t *heap, int64_t capacity, int64_t *searched) {
+    Work work = {g, nodes, nodes + size, nodes + 2 * size, heap, heap + capacity, capacity};
+    return search(moves, cost, parameters, start, goal, (int32_t)generation, &work, searched);
+}
+
+/* Padded node of the cell that holds (x, y) [m], or -1: outside the map, NaN, or a blocked cell. */
+static int64_t endpoint_node(const uint8_t *blocked, const double *parameters, double x, double y) {
+    double resolution = parameters[P_RESOLUTION];
+    double column = floor((x - parameters[P_ORIGIN_X]) / resolution);
+    double row_from_bottom = floor((y - parameters[P_ORIGIN_Y]) / resolution);
+    double rows = parameters[P_ROWS];
+    if (!(0.0 <= column && column < parameters[P_COLS] && 0.0 <= row_from_bottom && row_from_bottom < rows))
+        return -1; /* also NaN, which fails every comparison */
+    int64_t node = ((int64_t)rows - (int64_t)row_from_bottom) * (int64_t)parameters[P_WIDTH] + (int64_t)column + 1;
+    if (blocked[node] == BLOCKED) return -1;
+    return node;
+}
+
+int64_t navcosim_endpoint_node(const uint8_t *blocked, const double *parameters, double x, double y) {
+    return endpoint_node(blocked, parameters, x, y);
+}
+
+/* The work arrays of planner.searchspace.Workspace (planner.astar.WorkState). */
+typedef struct {
+    double *g;
+    int32_t *nodes; /* [3, size] */
+    int64_t size;   /* padded cells */
+    int64_t *heap;  /* [2, capacity] */
+    int64_t capacity;
+    double *path;   /* [path_rows, 2] x, y [m] */
+    int64_t *cells; /* [path_rows, 2] row, col */
+    int64_t path_rows;
+    int64_t generation; /* of the last search */
+} WorkState;
+
+/* One prepared grid A* of planner.planning.GridSearch, every pointer set once (planner.astar.Query). */
+typedef struct {
+    const uint8_t *moves;
+    const uint8_t *blocked;
+    const double *cost;
+    const double *parameters;
+    WorkState *work;
+    /* the answer */
+    int64_t searched;
+    int64_t count;
+    double length;
+} Query;
+
+#define STAMP_LIMIT (2147483647 - 7) /* planner.searchspace._STAMP_LIMIT */
+
+/* planner.astar.astar_plan: a fresh generation (Workspace.next_generation), endpoints, search and
+ * path in one call. Returns the status; the query's searched, count (path nodes: on ROUTE_FULL the
+ * rows needed) and length [m]. */
+int64_t navcosim_astar_plan(Query *q, double start_x, double start_y, double goal_x, double goal_y) {
+    const double *parameters = q->parameters;
+    WorkState *state = q->work;
+    q->searched = 0;
+    q->count = 0;
+    q->length = 0.0;
+    state->generation += 2;
+    if (state->generation >= STAMP_LIMIT) {
+        int32_t *stamp = state->nodes + state->size;
+        for (int64_t i = 0; i < state->size; i++) stamp[i] = 0;
+        state->generation = 2;
+    }
+    int64_t start = endpoint_node(q->blocked, parameters, start_x, start_y);
+    if (start < 0) return BAD_START;
+    int64_t goal = endpoint_node(q->blocked, parameters, goal_x, goal_y);
+    if (goal < 0) return BAD_GOAL;
+    Work work = {state->g,    state->nodes + 0,           state->nodes + state->size,
+                 state->nodes + 2 * state->size, state->heap, state->heap + state->capacity,
+                 state->capacity};
+    int64_t status = search(q->moves, q->cost, parameters, start, goal, (int32_t)state->generation, &work,
+                            &q->searched);
+    if (status != FOUND) return status;
+    const int32_t *parent = work.parent;
+    int64_t count = 1;
+    int64_t node = goal;
+    while (node != start) {
+        node = parent[node];
+        count++;
+    }
+    q->count = count;
+    if (count > state->path_rows) return ROUTE_FULL;
+    int64_t width = (int64_t)parameters[P_WIDTH];
+    double rows = parameters[P_ROWS];
+    double resolution = parameters[P_RESOLUTION];
+    double origin_x = parameters[P_ORIGIN_X];
+    double origin_y = parameters[P_ORIGIN_Y];
+    double length = 0.0;
+    double *path = state->path;
+    int64_t *cells = state->cells;
+    node = goal;
+    for (int64_t index = count - 1; index >= 0; index--) {
+        int64_t row = node / width - 1;
+        int64_t col = node % width - 1;
+        path[2 * index] = origin_x + ((double)col + 0.5) * resolution;
+        path[2 * index + 1] = origin_y + ((rows - 1.0 - (double)row) + 0.5) * resolution;
+        cells[2 * index] = row;
+        cells[2 * index + 1] = col;
+        int64_t previous = parent[node];
+        if (node != start) {
+            int64_t difference = absolute(previous - node);
+            length += difference == 1 || difference == width ? resolution : SQRT2 * resolution;
+        }
+        node = previous;
+    }
+    q->length = length;
+    return FOUND;
+}
+
+/* ---- bidirectional A* (planner.bidirectional) ---- */
+
+typedef struct {
+    Work work;
+    int32_t generation;
+    int64_t size;
+    int64_t searched;
+} Side;
+
+/* best: mu [cells]; meet[1] forward, meet[2] backward meeting nodes. */
+typedef struct {
+    double mu;
+    int64_t meet[3];
+} Best;
+
+/* Pop and expand one node of one side; -1 = heap full, 0 = popped a stale entry or expanded, 1 = empty. */
+static int64_t expand(const uint8_t *moves, int64_t width, int64_t target, int backward, int64_t heuristic,
+                      double h_scale, int64_t tie_breaker, int decrease_key, const double *cost,
+                      double cost_weight, Side *side, const Side *other_side, Best *best, int mine) {
+    double *g = side->work.g;
+    int32_t *parent = side->work.parent;
+    int32_t *stamp = side->work.stamp;
+    const double *other_g = other_side->work.g;
+    const int32_t *other_stamp = other_side->work.stamp;
+    const int32_t other_generation = other_side->generation;
+    const int32_t generation = side->generation;
+    const int32_t closed = generation + 1;
+    if (side->size == 0) return 1;
+    int64_t node = heap_pop(side->work.heap_key, side->work.heap_node, &side->size);
+    if (stamp[node] == closed) return 0;
+    stamp[node] = closed;
+    side->work.expanded[side->searched] = (int32_t)node;
+    side->searched++;
+    double g_node = g[node];
+    int64_t row_offset = node / width - target / width;
+    int64_t col_offset = node % width - target % width;
+    unsigned allowed = moves[node];
+    for (int k = 0; k < 8; k++) {
+        if (!((allowed >> k) & 1u)) continue;
+        int64_t offset = ROW_STEPS[k] * width + COL_STEPS[k];
+        int64_t neighbour = node + offset;
+        int32_t seen = stamp[neighbour];
+        if (seen == closed) continue;
+        double step = ROW_STEPS[k] != 0 && COL_STEPS[k] != 0 ? SQRT2 : 1.0;
+        if (cost_weight != 0.0) step *= 1.0 + cost_weight * cost[backward ? node : neighbour];
+        double g_new = g_node + step;
+        int32_t other = other_stamp[neighbour];
+        int reached_by_other = other == other_generation || other == other_generation + 1;
+        if (reached_by_other && g_new + other_g[neighbour] < best->mu) {
+            best->mu = g_new + other_g[neighbour];
+            best->meet[mine] = node;
+            best->meet[3 - mine] = neighbour;
+        }
+        if (seen == generation) {
+            if (g_new >= g[neighbour]) continue;
+            g[neighbour] = g_new;
+            parent[neighbour] = (int32_t)node;
+            if (!decrease_key) continue;
+        } else {
+            stamp[neighbour] = generation;
+            g[neighbour] = g_new;
+            parent[neighbour] = (int32_t)node;
+        }
+        if (side->size == side->work.capacity) return -1;
+        double h = heuristic_cells(row_offset + ROW_STEPS[k], col_offset + COL_STEPS[k], heuristic) * h_scale;
+        side->size =
+            heap_push(side->work.heap_key, side->work.heap_node, side->size, heap_key_of(g_new + h, h, tie_breaker),
+                      neighbour);
+    }
+    return 0;
+}
+
+static void root(int64_t width, int64_t node, int64_t target, int64_t heuristic, double h_scale,
+                 int64_t tie_breaker, Side *side) {
+    side->work.g[node] = 0.0;
+    side->work.parent[node] = (int32_t)node;
+    side->work.stamp[node] = side->generation;
+    double h = heuristic_cells(node / width - target / width, node % width - target % width, heuristic) * h_scale;
+    side->size = heap_push(side->work.heap_key, side->work.heap_node, 0, heap_key_of(h, h, tie_breaker), node);
+}
+
+/* planner.bidirectional.bidirectional_search. out: searched forward, searched backward, meet forward,
+ * meet backward; *mu [cells]. Each side's heap: keys and nodes of `capacity` entries. Returns 1 found, 0 none, -1 a heap is full (enlarge both, search again). */
+int64_t navcosim_bidirectional_search(const uint8_t *moves, const double *cost, const double *parameters,
+                                      int64_t start, int64_t goal, int64_t size, double *g_forward,
+                                      int32_t *nodes_forward, int64_t generation_forward,
+                                      int64_t *heap_key_forward, int64_t *heap_node_forward,
+                                      int64_t capacity_forward, double *g_backward, int32_t *nodes_backward,
+                                      int64_t generation_backward, int64_t *heap_key_backward,
+                                      int64_t *heap_node_backward, int64_t capacity_backward, int64_t *out,
+                                      double *mu) {
+    int64_t width = (int64_t)parameters[P_WIDTH];
+    int64_t heuristic = (int64_t)parameters[P_HEURISTIC];
+    int64_t tie_breaker = (int64_t)parameters[P_TIE];
+    int decrease_key = parameters[P_DECREASE] != 0.0;
+    double h_scale = parameters[P_H_SCALE];
+    double cost_weight = parameters[P_COST_WEIGHT];
+    Side forward = {{g_forward, nodes_forward, nodes_forward + size, nodes_forward + 2 * size, heap_key_forward,
+                     heap_node_forward, capacity_forward},
+                    (int32_t)generation_forward, 0, 0};
+    Side backward = {{g_backward, nodes_backward, nodes_backward + size, nodes_backward + 2 * size,
+                      heap_key_backward, heap_node_backward, capacity_backward},
+                     (int32_t)generation_backward, 0, 0};
+    Best best = {INFINITY, {0, -1, -1}};
+    out[0] = out[1] = 0;
+    out[2] = out[3] = -1;
+    *mu = 0.0;
+    root(width, start, goal, heuristic, h_scale, tie_breaker, &forward);
+    root(width, goal, start, heuristic, h_scale, tie_breaker, &backward);
+    if (start == goal) {
+        forward.work.expanded[0] = (int32_t)start;
+        out[0] = 1;
+        out[2] = start;
+        return 1;
+    }
+    while (forward.size > 0 && backward.size > 0) {
+        double top_forward = (double)(forward.work.heap_key[0] >> H_BITS) / F_SCALE;
+        double top_backward = (double)(backward.work.heap_key[0] >> H_BITS) / F_SCALE;
+        if (top_forward >= best.mu || top_backward >= best.mu) break;
+        int64_t status;
+        if (forward.size > backward.size)
+            status = expand(moves, width, start, 1, heuristic, h_scale, tie_breaker, decrease_key, cost, cost_weight,
+                            &backward, &forward, &best, 2);
+        else
+            status = expand(moves, width, goal, 0, heuristic, h_scale, tie_breaker, decrease_key, cost, cost_weight,
+                            &forward, &backward, &best, 1);
+        if (status < 0) {
+            out[0] = forward.searched;
+            out[1] = backward.searched;
+            return -1;
+        }
+    }
+    out[0] = forward.searched;
+    out[1] = backward.searched;
+    if (best.mu == INFINITY) return 0;
+    out[2] = best.meet[1];
+    out[3] = best.meet[2];
+    *mu = best.mu;
+    return 1;
+}
+
+/* planner.bidirectional.join_paths, given the node count: fills cells [count, 2], path [count, 2] [m];
+ * returns the length [m]. count: navcosim_join_count. */
+int64_t navcosim_join_count(const int32_t *parent_forward, const int32_t *parent_backward, int64_t start,
+                            int64_t goal, int64_t meet_forward, int64_t meet_backward) {
+    int64_t forward_count = 1;
+    int64_t node = meet_forward;
+    while (node != start) {
+        node = parent_forward[node];
+        forward_count++;
+    }
+    int64_t backward_count = 0;
+    if (meet_backward >= 0) {
+        backward_count = 1;
+        node = meet_backward;
+        while (node != goal) {
+            node = parent_backward[node];
+            backward_count++;
+        }
+    }
+    return forward_count + backward_count;
+}
+
+double navcosim_join_paths(const int32_t *parent_forward, const int32_t *parent_backward, int64_t start,
+                           int64_t meet_forward, int64_t meet_backward, int64_t count, const double *parameters,
+                           int64_t *cells, double *path) {
+    int64_t forward_count = 1;
+    int64_t node = meet_forward;
+    while (node != start) {
+        node = parent_forward[node];
+        forward_count++;
+    }
+    /* cells' first column holds the node sequence until the second pass converts it */
+    node = meet_forward;
+    for (int64_t index = forward_count - 1; index >= 0; index--) {
+        cells[2 * index] = node;
+        node = parent_forward[node];
+    }
+    node = meet_backward;
+    for (int64_t index = forward_count; index < count; index++) {
+        cells[2 * index] = node;
+        node = parent_backward[node];
+    }
+    int64_t width = (int64_t)parameters[P_WIDTH];
+    double rows = parameters[P_ROWS];
+    double resolution = parameters[P_RESOLUTION];
+    double origin_x = parameters[P_ORIGIN_X];
+    double origin_y = parameters[P_ORIGIN_Y];
+    double length = 0.0;
+    int64_t previous = 0;
+    for (int64_t index = 0; index < count; index++) {
+        node = cells[2 * index];
+        int64_t row = node / width - 1;
+        int64_t col = node % width - 1;
+        cells[2 * index] = row;
+        cells[2 * index + 1] = col;
+        path[2 * index] = origin_x + ((double)col + 0.5) * resolution;
+        path[2 * index + 1] = origin_y + ((rows - 1.0 - (double)row) + 0.5) * resolution;
+        if (index > 0) {
+            int64_t difference = absolute(node - previous);
+            length += difference == 1 || difference == width ? resolution : SQRT2 * resolution;
+        }
+        previous = node;
+    }
+    return length;
+}
