@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import ctypes
 import math
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -108,8 +109,16 @@ _heuristic_cells = _kernel("heuristic_cells", _D, _I, _I, _I)
 _heap_key_of = _kernel("heap_key_of", _I, _D, _D, _I)
 _endpoint_node = _kernel("endpoint_node", _I, _P, _P, _D, _D)
 _astar_search = _kernel("astar_search", _I, _P, _P, _P, _I, _I, _I, _P, _P, _I, _P, _I, _P)
-# astar_plan(Query *, start_x, start_y, goal_x, goal_y): the thin call of planner.planning.GridSearch.
+# astar_plan(Query *, start_x, start_y, goal_x, goal_y)
 plan_kernel = _kernel("astar_plan", _I, _P, _D, _D, _D, _D)
+# The thin call of planner.planning.GridSearch: call_in(call_io, 0, address of a Query, start_x,
+# start_y, goal_x, goal_y); plan_call(); call_out(call_io, CALL_OUT) = (status, searched, count,
+# length [m]). Five converted ctypes arguments cost about three times this.
+plan_call = _kernel("astar_call", None)
+call_io = (ctypes.c_char * 72).in_dll(_KERNELS, "navcosim_astar_io")
+call_in = struct.Struct("=q4d").pack_into
+call_out = struct.Struct("=qqqd").unpack_from
+CALL_OUT = 40
 bidirectional_kernel = _kernel(
     "bidirectional_search", _I, _P, _P, _P, _I, _I, _I, _P, _P, _I, _P, _P, _I, _P, _P, _I, _P, _P, _I, _P, _P
 )

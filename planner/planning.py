@@ -2,14 +2,15 @@
 
 plan() keeps one prepared search per grid and option set (`GridSearch`: the checked options, the
 move masks, the C kernel's parameters and its reusable work arrays, their addresses in one
-planner.astar.Query), so a repeated query costs a dictionary look-up, one ctypes call of five
-arguments and the result object: a few microseconds on any map size, with no array of the map's
-size allocated or cleared per call.
+planner.astar.Query), so a repeated query costs a dictionary look-up, one ctypes call without
+arguments (planner.astar.plan_call) and the result object: a few microseconds on any map size,
+with no array of the map's size allocated or cleared per call.
 """
 
 from __future__ import annotations
 
 import ctypes
+import struct
 from time import perf_counter
 
 import numpy as np
@@ -17,6 +18,7 @@ import numpy as np
 from planner.astar import (
     BAD_GOAL,
     BAD_START,
+    CALL_OUT,
     FOUND,
     HEAP_FULL,
     HEURISTICS,
@@ -24,7 +26,10 @@ from planner.astar import (
     NO_PATH,
     ROUTE_FULL,
     TIE_BREAKERS,
-    plan_kernel,
+    call_in,
+    call_io,
+    call_out,
+    plan_call,
     query,
     search_parameters,
 )
@@ -104,6 +109,7 @@ class GridSearch:
         "general",
         "query",
         "address",
+        "expanded",
     )
 
     def __init__(self, grid: OccupancyGrid, settings: dict) -> None:
@@ -138,38 +144,49 @@ class GridSearch:
         # The kernel's one argument besides the endpoints; the arrays it points to live as long as self.
         self.query = query(self.moves, space.blocked, self.cost, self.parameters, self.work.state)
         self.address = ctypes.addressof(self.query)
+        self.expanded = self.work.nodes[2]  # the expanded nodes of the last search (never reallocated)
 
     def _search(self, start_x: float, start_y: float, goal_x: float, goal_y: float) -> tuple:
         """astar_plan into the workspace, growing its buffers until they suffice;
         returns (status, searched, path nodes, length [m], elapsed [s])."""
         while True:
+            call_in(call_io, 0, self.address, start_x, start_y, goal_x, goal_y)
             began = perf_counter()
-            status = plan_kernel(self.address, start_x, start_y, goal_x, goal_y)
+            plan_call()
             elapsed = perf_counter() - began
-            answer = self.query
+            status, searched, count, length = call_out(call_io, CALL_OUT)
             if status == HEAP_FULL:
                 self.work.grow_heap()
             elif status == ROUTE_FULL:
-                self.work.grow_path(answer.count)
+                self.work.grow_path(count)
             else:
-                return status, answer.searched, answer.count, answer.length, elapsed
+                return status, searched, count, length, elapsed
 
     def __call__(self, start, goal) -> PlanResult:
         if self.general:
             return self._plan_general(start, goal)
+        # The common case inline (each Python call and conversion costs a tenth of a query): the
+        # struct packing converts the endpoints as float() does and raises where float() would.
         try:
-            start_x, start_y = float(start[0]), float(start[1])
-            goal_x, goal_y = float(goal[0]), float(goal[1])
-        except (TypeError, ValueError, IndexError, OverflowError):
+            call_in(call_io, 0, self.address, start[0], start[1], goal[0], goal[1])
+        except (TypeError, ValueError, IndexError, OverflowError, struct.error):
             return self._plan_general(start, goal)  # which names the bad endpoint
-        status, searched, count, length, elapsed = self._search(start_x, start_y, goal_x, goal_y)
+        began = perf_counter()
+        plan_call()
+        elapsed = perf_counter() - began
+        status, searched, count, length = call_out(call_io, CALL_OUT)
         if status != FOUND:
-            self._fail(status, start, goal, searched)
+            if status == HEAP_FULL or status == ROUTE_FULL:
+                status, searched, count, length, elapsed = self._search(
+                    float(start[0]), float(start[1]), float(goal[0]), float(goal[1])
+                )
+            if status != FOUND:
+                self._fail(status, start, goal, searched)
         work = self.work
-        explored = (work.nodes[2, :searched].copy(), self.space.width, self.grid.shape)
         # Positional, in the order of PlanResult's parameters: keywords cost ~1 us more per plan.
         return PlanResult(
-            work.path[:count].copy(), work.cells[:count].copy(), length, count, searched, elapsed, explored,
+            work.path[:count].copy(), work.cells[:count].copy(), length, count, searched, elapsed,
+            (self.expanded[:searched].copy(), self.space.width, self.grid.shape),
             None, "astar", {"configuration": self.configuration, "options": self.settings.copy()},
         )  # fmt: skip
 

@@ -577,3 +577,25 @@ double navcosim_join_paths(const int32_t *parent_forward, const int32_t *parent_
     }
     return length;
 }
+
+/* The thin call of planner.planning.GridSearch: ctypes converts each argument at some cost (a call
+ * of five arguments costs about three times one of none), so the query's address and endpoints
+ * go in, and the answer comes out, through this block, packed and unpacked by one struct call
+ * each. The kernels hold the GIL (ctypes.PyDLL), so one block serves every caller. */
+struct {
+    int64_t query;     /* Query * */
+    double endpoints[4]; /* start x, y, goal x, y [m] */
+    int64_t status;
+    int64_t searched;
+    int64_t count;
+    double length;
+} navcosim_astar_io;
+
+void navcosim_astar_call(void) {
+    Query *q = (Query *)(intptr_t)navcosim_astar_io.query;
+    const double *e = navcosim_astar_io.endpoints;
+    navcosim_astar_io.status = navcosim_astar_plan(q, e[0], e[1], e[2], e[3]);
+    navcosim_astar_io.searched = q->searched;
+    navcosim_astar_io.count = q->count;
+    navcosim_astar_io.length = q->length;
+}
