@@ -90,7 +90,7 @@ static inline int64_t heap_push(int64_t *restrict heap_key, int64_t *restrict he
 
 /* Remove the top; *size shrinks by one. The hole sinks along the smallest children (the first of
  * equal ones, by a branch-free tournament), then the last entry rises into it. */
-static inline int64_t heap_pop(int64_t *restrict heap_key, int64_t *restrict heap_node, int64_t *size_io) {
+static inline __attribute__((always_inline)) int64_t heap_pop(int64_t *restrict heap_key, int64_t *restrict heap_node, int64_t *size_io) {
     int64_t top = heap_node[0];
     int64_t size = *size_io - 1;
     int64_t key = heap_key[size];
@@ -188,11 +188,14 @@ static inline __attribute__((always_inline)) int64_t search_loop(
             return FOUND;
         }
         double g_node = g[node];
-        int64_t row_offset = node / width - goal_row;
-        int64_t col_offset = node % width - goal_col;
+        /* 32-bit division (nodes and width are < 2^31): a 64-bit one costs several times more */
+        int64_t row = (uint32_t)node / (uint32_t)width;
+        int64_t row_offset = row - goal_row;
+        int64_t col_offset = node - row * width - goal_col;
         unsigned allowed = moves[node];
-        for (int k = 0; k < 8; k++) {
-            if (!((allowed >> k) & 1u)) continue;
+        while (allowed) { /* the set bits, lowest first: the moves in table order */
+            int k = __builtin_ctz(allowed);
+            allowed &= allowed - 1;
             int64_t neighbour = node + offsets[k];
             int32_t seen = stamp[neighbour];
             if (seen == closed) continue;
