@@ -19,8 +19,8 @@ For every query of every `.scen` file in `<repo>/../shared/data/movingai`:
   before/pyastar2d is a ratio of one process and one moment, as after/pyastar2d is.
 Per map, the objects a user builds once per map (our OccupancyGrid, tcod's graph, pyastar2d's
 weights) are built outside the timed call; their build time is printed separately. Each planner
-runs once before timing (our JIT compile, the peers' first-call costs), then every query is timed once
-per planner, planners interleaved per query so they see the same machine state.
+runs once before timing (our kernels' build or load, the peers' first-call costs), then every query
+is timed once per planner, planners interleaved per query so they see the same machine state.
 The per-call overhead column is a query between two adjacent free cells (the first free cell, in
 row-major order, whose right neighbour is free): the fixed cost of a call, which grew with the map
 before (a grid-sized array per call).
@@ -211,7 +211,7 @@ def bench_map(
         begin = time.perf_counter()
         runners[name] = FACTORIES[name](occupied)
         build_times[name] = time.perf_counter() - begin
-    for run in runners.values():  # first call outside the timing: JIT compile, caches
+    for run in runners.values():  # first call outside the timing: kernel load, caches
         run(queries[0].start, queries[0].goal)
     stats = {name: PlannerStats() for name in runners}
     pyastar_cuts = 0
@@ -396,21 +396,23 @@ STARTUP_SCRIPT = textwrap.dedent(
 
 
 def startup_report(map_path: Path, query: Query, baseline: Path | None) -> None:
-    """First plan() call in a fresh process with an empty numba cache, then with a warm one; memory.
-    For this tree and, when given, the baseline ("before")."""
+    """First plan() call in a fresh process with empty kernel caches (numba's for the baseline, the C
+    kernels' for this tree), then with warm ones; memory. For this tree and, when given, the baseline
+    ("before")."""
     import json
     import tempfile
 
     print(f"\nFirst-call time and memory on {map_path.name} (fresh process each; query {query}):")
     trees = [("before", baseline)] if baseline is not None else []
     for tree_label, tree in [*trees, ("after", REPO)]:
-        with tempfile.TemporaryDirectory(prefix="navcosim-numba-cache-") as cache_dir:
-            # A private NUMBA_CACHE_DIR gives a cleared cache without touching a tree's __pycache__;
-            # `python -c` imports `planner` from its working directory, the tree.
-            environment = dict(os.environ, NUMBA_CACHE_DIR=cache_dir, PYTHONDONTWRITEBYTECODE="1")
+        with tempfile.TemporaryDirectory(prefix="navcosim-kernel-cache-") as cache_dir:
+            # A private NUMBA_CACHE_DIR and NAVCOSIM_NATIVE_CACHE give cleared caches without touching a
+            # tree's __pycache__ or build/; `python -c` imports `planner` from its working directory.
+            environment = dict(os.environ, NUMBA_CACHE_DIR=cache_dir, NAVCOSIM_NATIVE_CACHE=cache_dir)
+            environment["PYTHONDONTWRITEBYTECODE"] = "1"
             environment.pop("PYTHONPATH", None)
             arguments = [str(map_path), *map(str, query.start), *map(str, query.goal)]
-            for label in ("cold numba cache (compiles)", "warm numba cache"):
+            for label in ("cold kernel cache (compiles)", "warm kernel cache"):
                 completed = subprocess.run(
                     [sys.executable, "-c", STARTUP_SCRIPT, *arguments],
                     env=environment,
@@ -425,7 +427,7 @@ def startup_report(map_path: Path, query: Query, baseline: Path | None) -> None:
                 numbers = json.loads(completed.stdout.strip().splitlines()[-1])
                 print(
                     f"  {tree_label}, {label}: import planner {numbers['import_time']:.2f} s; first plan() "
-                    f"{numbers['first']:.2f} s (numba import, compile or cache load, search); plan() on a "
+                    f"{numbers['first']:.2f} s (kernels' compile or load, search); plan() on a "
                     f"new grid {numbers['new_grid'] * 1e3:.1f} ms, repeated {numbers['repeat'] * 1e3:.1f} ms"
                 )
                 print(
