@@ -249,6 +249,13 @@ static int64_t search(const uint8_t *moves, const double *cost, const double *pa
     double h_scale = parameters[P_H_SCALE];
     double cost_weight = parameters[P_COST_WEIGHT];
     if (cost_weight != 0.0) return SEARCH(heuristic, 1);
+    if (tie_breaker == 2 && decrease_key && h_scale == 1.0 && (heuristic == 3 || heuristic == 0)) {
+        /* the defaults (octile with 8 neighbours, Manhattan with 4) with every setting a constant;
+         * h * 1.0 is h, so the product is left out without changing a bit */
+        if (heuristic == 3)
+            return search_loop(moves, cost, width, 3, 2, 1, 1.0, 0.0, 0, start, goal, generation, work, searched);
+        return search_loop(moves, cost, width, 0, 2, 1, 1.0, 0.0, 0, start, goal, generation, work, searched);
+    }
     switch (heuristic) { /* constant heuristics: the compiler drops the others' code from the loop */
     case 3: return SEARCH(3, 0);
     case 0: return SEARCH(0, 0);
