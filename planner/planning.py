@@ -52,9 +52,10 @@ def plan(grid: OccupancyGrid, start, goal, **options) -> PlanResult:
     or inside the inflation, and when no path exists.
     """
     # The key holds each value's type, so True and 1 (which compare equal) stay apart: an option
-    # that must be a bool is rejected for 1 even after True has been cached. The key's shape (a
-    # pair of tuples) cannot collide with the grid's other cache entries (names, tagged tuples).
-    key = (tuple(options.items()), tuple(map(type, options.values())))
+    # that must be a bool is rejected for 1 even after True has been cached. The key's shape (the
+    # (name, value) pairs, then the types: one flat tuple, built faster than a pair of tuples)
+    # cannot collide with the grid's other cache entries (names, tuples that start with a name).
+    key = (*options.items(), *map(type, options.values()))
     try:
         search = grid._cache[key]
     except KeyError:
@@ -62,6 +63,12 @@ def plan(grid: OccupancyGrid, start, goal, **options) -> PlanResult:
     except (AttributeError, TypeError):  # not an OccupancyGrid, or an unhashable option value
         search = _prepare(check_grid(grid), options, None)
     return search(start, goal)
+
+
+def _is_search_key(name) -> bool:
+    """Whether `name` in a grid's cache is the key of a prepared search: a tuple of (option, value)
+    pairs and types (empty for no options); the other entries are names or tuples led by a name."""
+    return isinstance(name, tuple) and (not name or isinstance(name[0], tuple))
 
 
 def _prepare(grid: OccupancyGrid, options: dict, key: tuple | None):
@@ -79,7 +86,7 @@ def _prepare(grid: OccupancyGrid, options: dict, key: tuple | None):
     else:
         search = GridSearch(grid, resolve(options))
     if key is not None:
-        searches = [name for name in grid._cache if isinstance(name, tuple) and isinstance(name[0], tuple)]
+        searches = [name for name in grid._cache if _is_search_key(name)]
         if len(searches) >= _SEARCHES_PER_GRID:
             del grid._cache[searches[0]]
         grid._cache[key] = search
@@ -110,6 +117,7 @@ class GridSearch:
         "query",
         "address",
         "expanded",
+        "shape",
     )
 
     def __init__(self, grid: OccupancyGrid, settings: dict) -> None:
@@ -145,6 +153,7 @@ class GridSearch:
         self.query = query(self.moves, space.blocked, self.cost, self.parameters, self.work.state)
         self.address = ctypes.addressof(self.query)
         self.expanded = self.work.nodes[2]  # the expanded nodes of the last search (never reallocated)
+        self.shape = grid.shape
 
     def _search(self, start_x: float, start_y: float, goal_x: float, goal_y: float) -> tuple:
         """astar_plan into the workspace, growing its buffers until they suffice;
@@ -186,7 +195,7 @@ class GridSearch:
         # Positional, in the order of PlanResult's parameters: keywords cost ~1 us more per plan.
         return PlanResult(
             work.path[:count].copy(), work.cells[:count].copy(), length, count, searched, elapsed,
-            (self.expanded[:searched].copy(), self.space.width, self.grid.shape),
+            (self.expanded[:searched].copy(), self.space.width, self.shape),
             None, "astar", {"configuration": self.configuration, "options": self.settings.copy()},
         )  # fmt: skip
 
