@@ -591,7 +591,9 @@ double navcosim_join_paths(const int32_t *parent_forward, const int32_t *parent_
 /* The thin call of planner.planning.GridSearch: ctypes converts each argument at some cost (a call
  * of five arguments costs about three times one of none), so the query's address and endpoints
  * go in, and the answer comes out, through this block, packed and unpacked by one struct call
- * each. The kernels hold the GIL (ctypes.PyDLL), so one block serves every caller. */
+ * each. One block for every caller: like the work arrays that plan() shares between grids of one
+ * size, it assumes one thread plans at a time (the kernels hold the GIL, ctypes.PyDLL, but a thread
+ * switch can fall between packing, the call and unpacking). */
 struct {
     int64_t query;     /* Query * */
     double endpoints[4]; /* start x, y, goal x, y [m] */
