@@ -34,7 +34,12 @@ import sys
 import tempfile
 from pathlib import Path
 
-FLAGS = ("-std=c99", "-O2", "-ffp-contract=off", "-fPIC", "-shared", "-Wall", "-Wextra")
+# An undeclared function is an error everywhere (GCC >= 14 already makes it one; older compilers
+# would only warn, and a kernel calling a function as int-returning computes garbage).
+FLAGS = (
+    "-std=c99", "-O2", "-ffp-contract=off", "-fPIC", "-shared", "-Wall", "-Wextra",
+    "-Werror=implicit-function-declaration",
+)  # fmt: skip
 LINK = ("-lm",)
 SHIPPED = "_native"  # <package>/_native/: a wheel's prebuilt libraries
 SUFFIX = ".dylib" if sys.platform == "darwin" else ".so"
