@@ -46,11 +46,12 @@ initialises, and has its outputs read. Jacobi mode uses the same initialisation.
 Loops
 -----
 `Master.run` steps in Python (with a per-step callback, or always when `compiled=False`) or, for a
-system made only of FMUs with plain real ports and nobody observing the steps, in a loop generated
-and compiled for the system (`cosim.core.fast_loop`). `Master.run_blocks` steps through the
-compiled kernel (`cosim.core.kernel`, cached), handing components that need Python back where
-they are due, recording the FMUs' buffers and watching a position; its callback runs per block of
-steps. All loops give bit-identical values.
+system whose stepped components are all FMUs stepped by C calls and nobody observing the steps,
+in the compiled kernel (`cosim.core.kernel`, C, reading tables filled by `cosim.core.fast_loop`);
+`Master.run_recorded` likewise, keeping the rows per block. `Master.run_blocks` steps through the
+same kernel, handing components that need Python back where they are due, recording the FMUs'
+buffers and watching a position; its callback runs per block of steps. All loops give
+bit-identical values.
 
 Failures
 --------
@@ -76,8 +77,9 @@ NS_PER_S = 1_000_000_000
 MODES = ("gauss-seidel", "jacobi")
 # Below this many values from one producer, per-value ctypes copies beat one NumPy fancy-index copy.
 _SCALAR_COPY_LIMIT = 4
-# Compiling the loop of an FMU-only system costs about a second; worth it for long runs only.
-COMPILED_MIN_STEPS = 200_000
+# `run`/`run_recorded` with `compiled=None` step through the kernel from this many steps on: fewer
+# do not repay filling its tables (about the cost of 20 Python-loop steps of two FMUs).
+COMPILED_MIN_STEPS = 100
 # Most steps per call of the compiled kernel (`Master.run_blocks`).
 KERNEL_BLOCK = 1000
 
@@ -380,8 +382,7 @@ class Master:
         self.failure: CosimError | None = None
         self._initialized = False
         self._closed = False
-        self._compiled_loop = None
-        self._recording_loop = None
+        self._kernels: dict[tuple[bool, int], fast_loop.KernelTables | None] = {}
         self._plan = [
             (component, system.period_steps(component), _gather(system, component))
             for component in self.order
@@ -477,17 +478,19 @@ class Master:
         """Advance `steps` macro steps; return the number done.
 
         With `callback`, it is called after every step and a true return stops early. Without
-        it the loop has no per-step Python callback, and a system made only of FMUs with plain
-        real ports runs in a compiled loop (`cosim.core.fast_loop`): `compiled=None` chooses it for
-        runs of at least `COMPILED_MIN_STEPS`, True forces it where possible, False never.
+        it the loop has no per-step Python callback, and a system whose stepped components are
+        all FMUs stepped by C calls runs in the compiled kernel (`cosim.core.kernel`):
+        `compiled=None` chooses it for runs of at least `COMPILED_MIN_STEPS`, True forces it where
+        possible, False never.
         """
         self._check_running()
         if steps < 0:
             raise CosimError(f"number of steps must be >= 0, got {steps}")
         if callback is None:
             wanted = steps >= COMPILED_MIN_STEPS if compiled is None else compiled
-            if wanted and self._native() is not None:
-                self._run_compiled(steps)
+            tables = self._kernel(record=False, block=KERNEL_BLOCK) if wanted else None
+            if tables is not None:
+                self.run_blocks(steps, tables)
             else:
                 self._advance(steps)
             return steps
@@ -506,42 +509,48 @@ class Master:
         component in the block, k = first_step .. first_step + count - 1 with k % period == 0:
         its inputs, then its outputs. Returns the steps done.
 
-        A system made only of FMUs with plain real ports runs the blocks in a compiled loop that
-        fills the rows itself (`compiled` as in `run`); otherwise the Python loop copies them.
+        A system whose stepped components are all FMUs stepped by C calls runs the blocks in the
+        compiled kernel, which fills the rows itself (`compiled` as in `run`); otherwise the Python
+        loop copies them.
         """
         self._check_running()
         if steps < 0:
             raise CosimError(f"number of steps must be >= 0, got {steps}")
+        if block < 1:
+            raise CosimError(f"block must be >= 1 step, got {block}")
+        wanted = steps >= COMPILED_MIN_STEPS if compiled is None else compiled
+        tables = self._kernel(record=True, block=block) if wanted else None
+        if tables is not None:
+            # Components never stepped (constant outputs) have no rows, as in the Python loop.
+            empty = [np.empty((0, len(c.inputs) + len(c.outputs))) for c, _, _ in self._plan]
+
+            def forward(first: int, end: int, delivered: list, clean: bool) -> None:
+                kept = [empty[i] if rows is None else rows for i, rows in enumerate(delivered)]
+                on_block(first, end - first, kept)
+
+            # All components are stepped by the kernel: its stretches are the blocks.
+            self.run_blocks(steps, tables, forward, block=block)
+            return steps
         histories = [
             np.empty((block // period + 1, len(c.inputs) + len(c.outputs))) for c, period, _ in self._plan
         ]
         rows = np.zeros(len(histories), dtype=np.int64)
-        wanted = steps >= COMPILED_MIN_STEPS if compiled is None else compiled
-        use_compiled = wanted and self._native() is not None
-        if use_compiled and self._recording_loop is None:
-            self._recording_loop = self._compile(record=True)
         done = 0
         while done < steps:
             count = min(block, steps - done)
             first = self.step_index
             rows[:] = 0
-            if use_compiled:
-                try:
-                    self._run_compiled(count, self._recording_loop, rows, histories)
-                finally:
-                    self._deliver(first, on_block, histories, rows)
-            else:
-                try:
-                    for k in range(first, first + count):
-                        self._advance(1)
-                        for i, (component, period, _) in enumerate(self._plan):
-                            if not component.constant_outputs and (period == 1 or k % period == 0):
-                                row = histories[i][rows[i]]
-                                row[: len(component.inputs)] = component.input_buffer
-                                row[len(component.inputs) :] = component.output_buffer
-                                rows[i] += 1
-                finally:
-                    self._deliver(first, on_block, histories, rows)
+            try:
+                for k in range(first, first + count):
+                    self._advance(1)
+                    for i, (component, period, _) in enumerate(self._plan):
+                        if not component.constant_outputs and (period == 1 or k % period == 0):
+                            row = histories[i][rows[i]]
+                            row[: len(component.inputs)] = component.input_buffer
+                            row[len(component.inputs) :] = component.output_buffer
+                            rows[i] += 1
+            finally:
+                self._deliver(first, on_block, histories, rows)
             done += count
         return steps
 
@@ -673,28 +682,19 @@ class Master:
         ]
         on_block(first, end - first, kept)
 
-    def _native(self):
-        """The components' C-level steps in plan order, or None when one needs Python."""
-        return fast_loop.native_steps([component for component, _, _ in self._plan])
-
-    def _compile(self, record: bool = False):
-        native = self._native()
-        return fast_loop.compile_loop(self._plan, self.system, self.start_time_ns, native, record=record)
-
-    def _run_compiled(self, steps: int, loop=None, *recording) -> None:
-        if loop is None:
-            if self._compiled_loop is None:
-                self._compiled_loop = self._compile()
-            loop = self._compiled_loop
-        next_step, failed, call, status = loop(self.step_index, steps, *recording)
-        self.step_index = next_step
-        if failed < 0:
-            return
-        try:
-            self._native()[failed].fail(call, status, self.time)
-        except CosimError as error:
-            self.failure = error
-            raise
+    def _kernel(self, record: bool, block: int) -> fast_loop.KernelTables | None:
+        """Tables for `run`/`run_recorded` (kept for the next call), or None when a component that
+        is stepped needs Python (or none is stepped by C calls)."""
+        key = (record, block)
+        if key not in self._kernels:
+            tables = self.kernel_tables(record=record, block=block)
+            if tables is not None and any(
+                native is None and not component.constant_outputs
+                for native, (component, _, _) in zip(tables.native, self._plan, strict=True)
+            ):
+                tables = None
+            self._kernels[key] = tables
+        return self._kernels[key]
 
     def _advance(self, steps: int, callback: Callable[[Master], bool | None] | None = None) -> int:
         """Step `steps` times (or until `callback`, called after each step, returns true); return

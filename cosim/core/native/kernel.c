@@ -1,0 +1,335 @@
+/* The master's stepping kernel (`cosim.core.kernel`): FMUs stepped by C calls, Python components
+ * handed back, read from the tables of `cosim.core.fast_loop.KernelTables`.
+ *
+ * Every table is a C-contiguous NumPy array; addresses (FMI functions, instances, value arrays,
+ * the components' float64 buffers) are stored as int64. The arithmetic is the master's Python
+ * loop's, in its order (`value * scale + offset`, the integer time base divided once by 1e9), and
+ * the library is built with -ffp-contract=off and no fast-math (`planner/native.py`), so both loops
+ * give bit-identical values. See kernel.py for the return codes and the tables' columns.
+ */
+#include <math.h>
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+/* Return codes (first element of the result). */
+enum { DONE = 0, HAND_BACK = 1, WATCH = 2, FAILED = 3 };
+
+/* Columns of the component table. */
+enum {
+    C_KIND, C_PERIOD, C_VERSION, C_HANDLE, C_STEP, C_FLAGS, C_LAST_TIME, C_LINK_FIRST, C_LINK_COUNT,
+    C_SET_FIRST, C_SET_COUNT, C_GET_FIRST, C_GET_COUNT, C_CHECK_FIRST, C_CHECK_COUNT,
+    C_IN_ADDRESS, C_IN_COUNT, C_OUT_ADDRESS, C_OUT_COUNT, C_RECORD, C_RECORD_OFFSET,
+    COMPONENT_COLUMNS
+};
+enum { KIND_IDLE = 0, KIND_NATIVE = 1, KIND_PYTHON = 2 };
+
+/* Columns of the transfer-group table. */
+enum {
+    G_KIND, G_FUNCTION, G_REFERENCES, G_REFERENCE_COUNT, G_VALUE_COUNT, G_VALUES, G_DIRECT,
+    G_SLOT_FIRST, G_SLOT_COUNT, GROUP_COLUMNS
+};
+enum { KIND_REAL = 0, KIND_INTEGER = 1, KIND_BOOLEAN = 2 };
+
+/* Elements of the result. */
+enum { R_CODE, R_STEP, R_POSITION, R_COMPONENT, R_CALL, R_STATUS, R_KIND, RESULT_SIZE };
+
+/* fmi2Set/Get<T>(instance, value references, count, values). */
+typedef int (*Transfer2)(void *, const void *, size_t, void *);
+/* fmi3Set/Get<T>(instance, value references, count, values, value count). */
+typedef int (*Transfer3)(void *, const void *, size_t, void *, size_t);
+/* fmi2DoStep(instance, t, h, noSetFMUStatePriorToCurrentPoint). */
+typedef int (*Step2)(void *, double, double, int);
+/* fmi3DoStep(instance, t, h, noSetFMUStatePriorToCurrentPoint, &eventHandlingNeeded,
+ * &terminateSimulation, &earlyReturn, &lastSuccessfulTime). */
+typedef int (*Step3)(void *, double, double, bool, bool *, bool *, bool *, double *);
+
+/* The tables of one system (kernel.py's `Tables`, filled once per `KernelTables`). */
+typedef struct {
+    int64_t n;                       /* components (rows of `components`) */
+    const int64_t *components;       /* n x COMPONENT_COLUMNS */
+    const double *step_sizes;        /* n: each component's step [s] */
+    const int64_t *link_addresses;   /* links x 3: source address, target address, kind */
+    const double *link_numbers;      /* links x 2: scale, offset */
+    const int64_t *groups;           /* groups x GROUP_COLUMNS */
+    const int64_t *slot_addresses;   /* slots: buffer address of each value of a group */
+    const double *slot_scales;       /* slots */
+    const int64_t *checks;           /* checks x 3: address, 1 = infinite only, slot */
+    double *history;                 /* recorded rows, per component at its C_RECORD_OFFSET */
+    int64_t *rows;                   /* n: rows recorded so far */
+    const int64_t *watch_addresses;  /* 3: nonzero = watching; address of x; address of y */
+    const double *watch_numbers;     /* 6: goal x, y, radius^2; free zone x, y, radius^2 */
+} Tables;
+
+#define AT(table, row, columns, column) ((table)[(row) * (columns) + (column)])
+#define COMPONENT(t, i, column) AT((t)->components, (i), COMPONENT_COLUMNS, (column))
+#define GROUP(t, g, column) AT((t)->groups, (g), GROUP_COLUMNS, (column))
+
+static inline double load_f64(int64_t address) { return *(const double *)(intptr_t)address; }
+static inline void store_f64(int64_t address, double value) { *(double *)(intptr_t)address = value; }
+static inline void *pointer(int64_t address) { return (void *)(intptr_t)address; }
+
+static int64_t transfer(int64_t function, int64_t handle, int64_t references, int64_t count,
+                        int64_t values, int64_t value_count, int64_t version) {
+    if (version == 2) {
+        return ((Transfer2)(intptr_t)function)(pointer(handle), pointer(references), (size_t)count,
+                                              pointer(values));
+    }
+    return ((Transfer3)(intptr_t)function)(pointer(handle), pointer(references), (size_t)count,
+                                          pointer(values), (size_t)value_count);
+}
+
+/* Copy the component's connected inputs from their producers' outputs. */
+static void gather(const Tables *t, int64_t i) {
+    int64_t first = COMPONENT(t, i, C_LINK_FIRST), end = first + COMPONENT(t, i, C_LINK_COUNT);
+    for (int64_t j = first; j < end; j++) {
+        const int64_t *link = &t->link_addresses[j * 3];
+        double value = load_f64(link[0]);
+        if (link[2] == 1) {
+            value = value * t->link_numbers[j * 2];
+        } else if (link[2] == 2) {
+            value = value * t->link_numbers[j * 2] + t->link_numbers[j * 2 + 1];
+        }
+        store_f64(link[1], value);
+    }
+}
+
+/* Copy the inputs into the FMI value arrays (converting), then call the setters: the status of
+ * the first failing call (> 1, its group's kind in *kind), or 0. */
+static int64_t set_inputs(const Tables *t, int64_t i, int64_t *kind_out) {
+    int64_t handle = COMPONENT(t, i, C_HANDLE), version = COMPONENT(t, i, C_VERSION);
+    int64_t first = COMPONENT(t, i, C_SET_FIRST), end = first + COMPONENT(t, i, C_SET_COUNT);
+    for (int64_t g = first; g < end; g++) {
+        int64_t kind = GROUP(t, g, G_KIND), values = GROUP(t, g, G_VALUES);
+        if (GROUP(t, g, G_DIRECT) == 0) {
+            int64_t first_slot = GROUP(t, g, G_SLOT_FIRST), count = GROUP(t, g, G_SLOT_COUNT);
+            for (int64_t position = 0; position < count; position++) {
+                int64_t s = first_slot + position;
+                double value = load_f64(t->slot_addresses[s]);
+                if (t->slot_scales[s] != 1.0) {
+                    value = value * t->slot_scales[s];
+                }
+                if (kind == KIND_REAL) {
+                    ((double *)pointer(values))[position] = value;
+                } else if (kind == KIND_INTEGER) {
+                    ((int32_t *)pointer(values))[position] = (int32_t)(int64_t)rint(value);
+                } else if (version == 2) {
+                    ((int32_t *)pointer(values))[position] = value != 0.0 ? 1 : 0;
+                } else {
+                    ((uint8_t *)pointer(values))[position] = value != 0.0 ? 1 : 0;
+                }
+            }
+        }
+        int64_t status = transfer(GROUP(t, g, G_FUNCTION), handle, GROUP(t, g, G_REFERENCES),
+                                  GROUP(t, g, G_REFERENCE_COUNT), values, GROUP(t, g, G_VALUE_COUNT),
+                                  version);
+        if (status > 1) {
+            *kind_out = kind;
+            return status;
+        }
+    }
+    return 0;
+}
+
+/* Call the getters, then copy the FMI value arrays into the output buffer (converting). */
+static int64_t get_outputs(const Tables *t, int64_t i, int64_t *kind_out) {
+    int64_t handle = COMPONENT(t, i, C_HANDLE), version = COMPONENT(t, i, C_VERSION);
+    int64_t first = COMPONENT(t, i, C_GET_FIRST), end = first + COMPONENT(t, i, C_GET_COUNT);
+    for (int64_t g = first; g < end; g++) {
+        int64_t kind = GROUP(t, g, G_KIND), values = GROUP(t, g, G_VALUES);
+        int64_t status = transfer(GROUP(t, g, G_FUNCTION), handle, GROUP(t, g, G_REFERENCES),
+                                  GROUP(t, g, G_REFERENCE_COUNT), values, GROUP(t, g, G_VALUE_COUNT),
+                                  version);
+        if (status > 1) {
+            *kind_out = kind;
+            return status;
+        }
+        if (GROUP(t, g, G_DIRECT) == 0) {
+            int64_t first_slot = GROUP(t, g, G_SLOT_FIRST), count = GROUP(t, g, G_SLOT_COUNT);
+            for (int64_t position = 0; position < count; position++) {
+                int64_t s = first_slot + position;
+                double value;
+                if (kind == KIND_REAL) {
+                    value = ((const double *)pointer(values))[position];
+                } else if (kind == KIND_INTEGER || version == 2) {
+                    value = (double)((const int32_t *)pointer(values))[position];
+                } else {
+                    value = (double)((const uint8_t *)pointer(values))[position];
+                }
+                if (t->slot_scales[s] != 1.0) {
+                    value = value * t->slot_scales[s];
+                }
+                store_f64(t->slot_addresses[s], value);
+            }
+        }
+    }
+    return 0;
+}
+
+/* Slot of the first checked output that is NaN or infinite (infinite only when the check says
+ * so), or -1. */
+static int64_t check_outputs(const Tables *t, int64_t i) {
+    int64_t first = COMPONENT(t, i, C_CHECK_FIRST), end = first + COMPONENT(t, i, C_CHECK_COUNT);
+    for (int64_t c = first; c < end; c++) {
+        const int64_t *check = &t->checks[c * 3];
+        double value = load_f64(check[0]);
+        if (check[1] == 0) {
+            if (value - value != 0.0) { /* NaN exactly when value is NaN or infinite */
+                return check[2];
+            }
+        } else if (fabs(value) == INFINITY) {
+            return check[2];
+        }
+    }
+    return -1;
+}
+
+/* Keep the component's inputs then outputs as its next row. */
+static void record(const Tables *t, int64_t i) {
+    if (COMPONENT(t, i, C_RECORD) == 0) {
+        return;
+    }
+    int64_t n_in = COMPONENT(t, i, C_IN_COUNT), n_out = COMPONENT(t, i, C_OUT_COUNT);
+    double *row = t->history + COMPONENT(t, i, C_RECORD_OFFSET) + t->rows[i] * (n_in + n_out);
+    const double *inputs = pointer(COMPONENT(t, i, C_IN_ADDRESS));
+    const double *outputs = pointer(COMPONENT(t, i, C_OUT_ADDRESS));
+    for (int64_t j = 0; j < n_in; j++) {
+        row[j] = inputs[j];
+    }
+    for (int64_t j = 0; j < n_out; j++) {
+        row[n_in + j] = outputs[j];
+    }
+    t->rows[i] += 1;
+}
+
+/* doStep, then FMI 3.0's terminateSimulation flag: the failing call (1 doStep, 3 asked to
+ * terminate) with its status, or -1. */
+static int64_t advance(const Tables *t, int64_t i, double time, double h, int64_t *status_out) {
+    int64_t handle = COMPONENT(t, i, C_HANDLE), function = COMPONENT(t, i, C_STEP);
+    int64_t status;
+    if (COMPONENT(t, i, C_VERSION) == 2) {
+        status = ((Step2)(intptr_t)function)(pointer(handle), time, h, 1);
+    } else {
+        bool *flags = pointer(COMPONENT(t, i, C_FLAGS));
+        status = ((Step3)(intptr_t)function)(pointer(handle), time, h, true, flags, flags + 1, flags + 2,
+                                            pointer(COMPONENT(t, i, C_LAST_TIME)));
+    }
+    if (status > 1) {
+        *status_out = status;
+        return 1;
+    }
+    if (COMPONENT(t, i, C_VERSION) == 3 && ((const uint8_t *)pointer(COMPONENT(t, i, C_FLAGS)))[1] != 0) {
+        *status_out = 0;
+        return 3;
+    }
+    return -1;
+}
+
+static int64_t finish(int64_t *result, int64_t code, int64_t step, int64_t position, int64_t component,
+                      int64_t call, int64_t status, int64_t kind) {
+    result[R_CODE] = code;
+    result[R_STEP] = step;
+    result[R_POSITION] = position;
+    result[R_COMPONENT] = component;
+    result[R_CALL] = call;
+    result[R_STATUS] = status;
+    result[R_KIND] = kind;
+    return code;
+}
+
+/* Set inputs, step, get and check outputs, record: FAILED (result filled) or DONE. */
+static int64_t step_native(const Tables *t, int64_t i, int64_t k, double time, int64_t *result,
+                           bool set_first) {
+    int64_t status = 0, kind = 0, call;
+    if (set_first) {
+        status = set_inputs(t, i, &kind);
+        if (status > 1) {
+            return finish(result, FAILED, k, i, i, 0, status, kind);
+        }
+    }
+    call = advance(t, i, time, t->step_sizes[i], &status);
+    if (call >= 0) {
+        return finish(result, FAILED, k, i, i, call, status, 0);
+    }
+    status = get_outputs(t, i, &kind);
+    if (status > 1) {
+        return finish(result, FAILED, k, i, i, 2, status, kind);
+    }
+    int64_t slot = check_outputs(t, i);
+    if (slot >= 0) {
+        return finish(result, FAILED, k, i, i, 4, slot, 0);
+    }
+    record(t, i);
+    return DONE;
+}
+
+/* Step from component `first_position` of step `first_step` up to the end of step
+ * `first_step + steps - 1`; the result (7 int64) as kernel.py's `step_kernel` returns it. */
+int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_position, int64_t start_ns,
+                             int64_t h_ns, int64_t jacobi, const Tables *t, int64_t *result) {
+    int64_t n = t->n;
+    int64_t k = first_step;
+    int64_t position = first_position;
+    int64_t end = first_step + steps;
+    bool watching = t->watch_addresses[0] != 0;
+    while (k < end) {
+        double time = (double)(start_ns + k * h_ns) / 1e9;
+        if (jacobi) {
+            for (int64_t i = 0; i < n; i++) {
+                if (COMPONENT(t, i, C_KIND) != KIND_IDLE && k % COMPONENT(t, i, C_PERIOD) == 0) {
+                    if (COMPONENT(t, i, C_KIND) == KIND_PYTHON) {
+                        return finish(result, HAND_BACK, k, i, i, 0, 0, 0);
+                    }
+                    gather(t, i);
+                    int64_t kind = 0, status = set_inputs(t, i, &kind);
+                    if (status > 1) {
+                        return finish(result, FAILED, k, i, i, 0, status, kind);
+                    }
+                }
+            }
+            for (int64_t i = 0; i < n; i++) {
+                if (COMPONENT(t, i, C_KIND) == KIND_NATIVE && k % COMPONENT(t, i, C_PERIOD) == 0) {
+                    if (step_native(t, i, k, time, result, false) == FAILED) {
+                        return FAILED;
+                    }
+                }
+            }
+        } else {
+            while (position < n) {
+                int64_t i = position;
+                if (COMPONENT(t, i, C_KIND) != KIND_IDLE && k % COMPONENT(t, i, C_PERIOD) == 0) {
+                    if (COMPONENT(t, i, C_KIND) == KIND_PYTHON) {
+                        return finish(result, HAND_BACK, k, i, i, 0, 0, 0);
+                    }
+                    gather(t, i);
+                    if (step_native(t, i, k, time, result, true) == FAILED) {
+                        return FAILED;
+                    }
+                }
+                position += 1;
+            }
+        }
+        position = 0;
+        k += 1;
+        if (watching) {
+            double x = load_f64(t->watch_addresses[1]);
+            double y = load_f64(t->watch_addresses[2]);
+            if (x - x != 0.0 || y - y != 0.0) {
+                return finish(result, WATCH, k, 0, -1, 0, 0, 0);
+            }
+            double dx = x - t->watch_numbers[0], dy = y - t->watch_numbers[1];
+            if (dx * dx + dy * dy <= t->watch_numbers[2]) {
+                return finish(result, WATCH, k, 0, -1, 0, 0, 0);
+            }
+            dx = x - t->watch_numbers[3];
+            dy = y - t->watch_numbers[4];
+            if (dx * dx + dy * dy >= t->watch_numbers[5]) {
+                return finish(result, WATCH, k, 0, -1, 0, 0, 0);
+            }
+        }
+    }
+    return finish(result, DONE, k, 0, -1, 0, 0, 0);
+}
+
+/* sizeof(Tables), so the Python side can check its mirror of the struct. */
+int64_t navcosim_tables_size(void) { return (int64_t)sizeof(Tables); }
