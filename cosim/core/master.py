@@ -82,6 +82,9 @@ _SCALAR_COPY_LIMIT = 4
 COMPILED_MIN_STEPS = 100
 # Most steps per call of the compiled kernel (`Master.run_blocks`).
 KERNEL_BLOCK = 1000
+# `Master.run` without a callback: nobody looks between blocks, so longer ones (about 0.1 s each,
+# after which a KeyboardInterrupt gets through).
+_RUN_BLOCK = 100_000
 
 
 def seconds_to_ns(seconds: float | Fraction | int, what: str) -> int:
@@ -490,7 +493,7 @@ class Master:
             wanted = steps >= COMPILED_MIN_STEPS if compiled is None else compiled
             tables = self._kernel(record=False, block=KERNEL_BLOCK) if wanted else None
             if tables is not None:
-                self.run_blocks(steps, tables)
+                self.run_blocks(steps, tables, block=_RUN_BLOCK)
             else:
                 self._advance(steps)
             return steps
