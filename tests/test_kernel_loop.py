@@ -201,3 +201,27 @@ def test_the_kernel_warms_up_without_a_system(tmp_path):
         master.run_blocks(10, tables, lambda *block: False)
         assert master.step_index == 10
     assert kernel._kernel() is loaded
+
+
+def test_stepping_through_the_kernel_never_imports_numba():
+    """The kernel is C loaded with ctypes: a process that steps an FMU system through every kernel
+    path (`run`, `run_recorded`, `run_blocks`) has not imported numba (its import and set-up cost
+    every run ~0.7 s)."""
+    import subprocess
+
+    script = f"""
+import sys
+from cosim.core.master import Master, System
+from cosim.fmi.component import FmuComponent
+system = System(0.01)
+system.add(FmuComponent({str(fixture_fmu("diffdrive_plain_fmi2"))!r}, "vehicle"))
+with Master(system) as master:
+    master.initialize()
+    master.run(300, compiled=True)
+    master.run_recorded(300, lambda *block: None, compiled=True)
+    master.run_blocks(300, master.kernel_tables(record=True))
+    assert master.step_index == 900
+print("numba" in sys.modules)
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    assert done.stdout.split() == ["False"]

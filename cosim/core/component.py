@@ -39,41 +39,27 @@ _ARRAY_ELEMENT = re.compile(r"^(?P<base>.+)\[(?P<index>\d+(?:\s*,\s*\d+)*)\]$")
 
 @dataclass(frozen=True)
 class NativeStep:
-    """How the compiled loop (`cosim.core.fast_loop`) steps a component by C calls alone.
+    """How the compiled kernel (`cosim.core.kernel`) steps a component by C calls alone.
 
     Addresses are plain integers (C pointers). `fmi_version` selects the calling convention of the
-    FMI get/set/doStep functions. The loop copies connected inputs into `input_values` and reads
-    outputs from `output_values`: the C buffers behind the component's `input_buffer` and
-    `output_buffer`. `fail(call, status, t)` raises the component's `CosimError` for a call
-    (0 set, 1 doStep, 2 get, 3 asked to terminate, 4 an output not finite: `status` is its slot)
-    that the loop stopped at. After each get the loop checks that the outputs at `finite_outputs`
-    are finite and those at `nan_outputs` are not infinite.
+    FMI get/set/doStep functions. `groups` lists every get/set call of a step: (direction "set" or
+    "get", kind "real"/"integer"/"boolean", function, value references, reference count, value
+    count, FMI value array, direct (the array is the component's buffer), buffer slots, scales).
+    `fail(call, status, t, kind)` raises the component's `CosimError` for a call (0 set, 1 doStep,
+    2 get, 3 asked to terminate, 4 an output not finite: `status` is its slot) that the kernel
+    stopped at. After each get the kernel checks that the outputs at `finite_outputs` are finite
+    and those at `nan_outputs` are not infinite.
     """
 
     fmi_version: int
     handle: int
-    set_real: int
     do_step: int
-    get_real: int
-    input_references: int
-    output_references: int
-    input_values: int
-    output_values: int
     step_flags: np.ndarray  # FMI 3.0: eventHandlingNeeded, terminateSimulation, earlyReturn
     last_successful_time: int  # FMI 3.0: address of the double doStep writes
-    fail: Callable[[int, int, float], None]
-    # Value references per get/set call; fewer than the ports when FMI 3.0 arrays move whole.
-    input_reference_count: int = -1  # -1: one per input port
-    output_reference_count: int = -1
+    fail: Callable[..., None]
+    groups: tuple = ()
     finite_outputs: tuple[int, ...] = ()
     nan_outputs: tuple[int, ...] = ()
-    # Every get/set call of a step, for `cosim.core.kernel`: (direction "set" or "get", kind
-    # "real"/"integer"/"boolean", function, value references, reference count, value count, FMI
-    # value array, direct (the array is the component's buffer), buffer slots, scales); `plain` is
-    # False when the fields above do not describe the step (integer or boolean ports, scales, a
-    # restricted push): then only the kernel can step it.
-    groups: tuple = ()
-    plain: bool = True
 
 
 @dataclass(frozen=True)

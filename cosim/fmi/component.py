@@ -491,7 +491,7 @@ class FmuComponent(Component):
                 c_int, c_void_p, c_double, c_double, ctypes.c_bool, flag, flag, flag, ctypes.POINTER(c_double)
             )
             self._raw_do_step = prototype(("fmi3DoStep", dll))
-            # eventHandlingNeeded, terminateSimulation, earlyReturn: contiguous for the compiled loop.
+            # eventHandlingNeeded, terminateSimulation, earlyReturn: contiguous for the compiled kernel.
             self._step_flags = (ctypes.c_bool * 3)()
             self._last_successful_time = ctypes.c_double()
             first = ctypes.addressof(self._step_flags)
@@ -582,22 +582,10 @@ class FmuComponent(Component):
         return self._compiled["get_outputs"]()
 
     def native_step(self) -> NativeStep | None:
-        """C-level stepping for the compiled loops: every get/set call as a group (`NativeStep.groups`);
-        `plain` when every input and output is an unscaled real sent whole (the generated loop's case)."""
-        plain = True
-        for groups in (self._input_groups, self._output_groups):
-            if any(
-                kind != "real" or any(scale != 1.0 for scale in scales) for kind, _, _, _, scales in groups
-            ):
-                plain = False
-        if self._input_groups and self._input_groups[0][1] != list(range(len(self.inputs))):
-            plain = False  # `restrict_push` left only some inputs to send
+        """C-level stepping for the compiled kernel: every get/set call as a group (`NativeStep.groups`)."""
 
         def address(function) -> int:
             return ctypes.cast(function, ctypes.c_void_p).value
-
-        def references(groups) -> int:
-            return ctypes.addressof(groups[0][2]) if groups else 0
 
         version = self.fmi_version
         calls = []
@@ -617,25 +605,17 @@ class FmuComponent(Component):
                         tuple(slots), tuple(float(scale) for scale in scales),
                     )
                 )  # fmt: skip
+        finite_outputs, nan_outputs = self._checked_outputs()
         return NativeStep(
             fmi_version=version,
             handle=self._handle if isinstance(self._handle, int) else self._handle.value,
-            set_real=address(self._setters["real"]),
             do_step=address(self._raw_do_step),
-            get_real=address(self._getters["real"]),
-            input_references=references(self._input_groups),
-            output_references=references(self._output_groups),
-            input_reference_count=len(self._input_groups[0][2]) if self._input_groups else 0,
-            output_reference_count=len(self._output_groups[0][2]) if self._output_groups else 0,
-            input_values=ctypes.addressof(self.input_cbuffer),
-            output_values=ctypes.addressof(self.output_cbuffer),
             step_flags=np.ctypeslib.as_array(self._step_flags) if version == 3 else np.zeros(3, bool),
             last_successful_time=ctypes.addressof(self._last_successful_time) if version == 3 else 0,
             fail=self._native_failure,
-            finite_outputs=tuple(self._checked_outputs()[0]),
-            nan_outputs=tuple(self._checked_outputs()[1]),
             groups=tuple(calls),
-            plain=plain,
+            finite_outputs=tuple(finite_outputs),
+            nan_outputs=tuple(nan_outputs),
         )
 
     def _native_failure(self, call: int, status: int, t: float, kind: str = "real") -> None:
