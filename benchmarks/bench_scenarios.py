@@ -4,7 +4,7 @@
     the `controller_fmi2` fixture, 1 ms macro step) with every signal of both FMUs written to an
     MCAP log by `cosim.record.recorder.Recorder` at every step (one `/signals/<component>` message per
     component per step, as `cosim run` writes them): `Master.run_recorded` keeps the rows in the
-    compiled loop and the recorder packs them per block of 1000 steps. Goal: >= 50k steps/s.
+    compiled kernel and the recorder packs them per block of 1000 steps. Goal: >= 50k steps/s.
 (c) Each shipped scenario (`scenarios/*.toml`; the commented example too, it is short) at its
     full settings through `cosim.navigation.run.run_scenario` with full logging: simulated time, wall time
     of the stepping loop, real-time factor, goal reached, distance and minimum clearance (the
@@ -67,7 +67,7 @@ def part_b(steps: int) -> list[Row]:
                     blocks.append((channel, times, rows))
                 recorder.hold_signal_rows(blocks)
 
-            master.run_recorded(1, record, compiled=True)  # compile once, outside the timing
+            master.run_recorded(1, record, compiled=True)  # fill the kernel tables once, outside the timing
             start = time.perf_counter()
             master.run_recorded(steps - 1, record, compiled=True)
             recorder.end_steps(master.time_ns)
