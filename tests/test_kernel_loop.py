@@ -225,3 +225,18 @@ print("numba" in sys.modules)
 """
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
     assert done.stdout.split() == ["False"]
+
+
+def test_blocks_longer_than_the_recorded_rows_are_refused(tmp_path):
+    """Tables that record hold the rows of `block` steps: a longer block would write past them."""
+    from cosim.errors import CosimError
+
+    system, _ = _closed_loop(tmp_path)
+    with Master(system) as master:
+        master.initialize()
+        tables = master.kernel_tables(record=True, block=100)
+        with pytest.raises(CosimError, match="block must be 1 to 100 steps, got 101"):
+            master.run_blocks(500, tables, block=101)
+        with pytest.raises(CosimError, match="block must be 1 to 100 steps, got 0"):
+            master.run_blocks(500, tables, block=0)
+        assert master.run_blocks(500, tables, block=100) == 500

@@ -143,6 +143,7 @@ class KernelTables:
         self.slot_scales = np.array(scales, dtype=np.float64)
         self.checks = np.array(checks, dtype=np.int64).reshape(-1, 3)
         self.history = np.zeros(max(1, record_offset))
+        self.record_block = block if record else None  # the most steps per kernel call the rows hold
         self.rows = np.zeros(n, dtype=np.int64)
         self._blocks: list[np.ndarray | None] | None = None
         self.watch_addresses = np.zeros(3, dtype=np.int64)

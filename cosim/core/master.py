@@ -595,6 +595,9 @@ class Master:
         self._check_running()
         if steps < 0:
             raise CosimError(f"number of steps must be >= 0, got {steps}")
+        most = tables.record_block or block  # recorded: the rows the tables hold
+        if not 1 <= block <= most:
+            raise CosimError(f"block must be 1 to {max(1, most)} steps, got {block}")
         from cosim.core import kernel
 
         h_ns, start_ns = self.system.macro_step_ns, self.start_time_ns
