@@ -61,6 +61,12 @@ typedef struct {
     const double *watch_numbers;     /* 6: goal x, y, radius^2; free zone x, y, radius^2 */
 } Tables;
 
+#if defined(__GNUC__)
+#define HOT static inline __attribute__((always_inline))
+#else
+#define HOT static inline
+#endif
+
 #define AT(table, row, columns, column) ((table)[(row) * (columns) + (column)])
 #define COMPONENT(t, i, column) AT((t)->components, (i), COMPONENT_COLUMNS, (column))
 #define GROUP(t, g, column) AT((t)->groups, (g), GROUP_COLUMNS, (column))
@@ -69,8 +75,8 @@ static inline double load_f64(int64_t address) { return *(const double *)(intptr
 static inline void store_f64(int64_t address, double value) { *(double *)(intptr_t)address = value; }
 static inline void *pointer(int64_t address) { return (void *)(intptr_t)address; }
 
-static int64_t transfer(int64_t function, int64_t handle, int64_t references, int64_t count,
-                        int64_t values, int64_t value_count, int64_t version) {
+HOT int64_t transfer(int64_t function, int64_t handle, int64_t references, int64_t count,
+                     int64_t values, int64_t value_count, int64_t version) {
     if (version == 2) {
         return ((Transfer2)(intptr_t)function)(pointer(handle), pointer(references), (size_t)count,
                                               pointer(values));
@@ -80,7 +86,7 @@ static int64_t transfer(int64_t function, int64_t handle, int64_t references, in
 }
 
 /* Copy the component's connected inputs from their producers' outputs. */
-static void gather(const Tables *t, int64_t i) {
+HOT void gather(const Tables *t, int64_t i) {
     int64_t first = COMPONENT(t, i, C_LINK_FIRST), end = first + COMPONENT(t, i, C_LINK_COUNT);
     for (int64_t j = first; j < end; j++) {
         const int64_t *link = &t->link_addresses[j * 3];
@@ -96,7 +102,7 @@ static void gather(const Tables *t, int64_t i) {
 
 /* Copy the inputs into the FMI value arrays (converting), then call the setters: the status of
  * the first failing call (> 1, its group's kind in *kind), or 0. */
-static int64_t set_inputs(const Tables *t, int64_t i, int64_t *kind_out) {
+HOT int64_t set_inputs(const Tables *t, int64_t i, int64_t *kind_out) {
     int64_t handle = COMPONENT(t, i, C_HANDLE), version = COMPONENT(t, i, C_VERSION);
     int64_t first = COMPONENT(t, i, C_SET_FIRST), end = first + COMPONENT(t, i, C_SET_COUNT);
     for (int64_t g = first; g < end; g++) {
@@ -132,7 +138,7 @@ static int64_t set_inputs(const Tables *t, int64_t i, int64_t *kind_out) {
 }
 
 /* Call the getters, then copy the FMI value arrays into the output buffer (converting). */
-static int64_t get_outputs(const Tables *t, int64_t i, int64_t *kind_out) {
+HOT int64_t get_outputs(const Tables *t, int64_t i, int64_t *kind_out) {
     int64_t handle = COMPONENT(t, i, C_HANDLE), version = COMPONENT(t, i, C_VERSION);
     int64_t first = COMPONENT(t, i, C_GET_FIRST), end = first + COMPONENT(t, i, C_GET_COUNT);
     for (int64_t g = first; g < end; g++) {
@@ -167,14 +173,26 @@ static int64_t get_outputs(const Tables *t, int64_t i, int64_t *kind_out) {
 }
 
 /* Slot of the first checked output that is NaN or infinite (infinite only when the check says
- * so), or -1. */
-static int64_t check_outputs(const Tables *t, int64_t i) {
+ * so), or -1. One branch-free pass says whether any fails (the usual answer: none); only then the
+ * ordered search for the first. */
+HOT int64_t check_outputs(const Tables *t, int64_t i) {
     int64_t first = COMPONENT(t, i, C_CHECK_FIRST), end = first + COMPONENT(t, i, C_CHECK_COUNT);
+    const int64_t *checks = t->checks;
+    int bad = 0;
     for (int64_t c = first; c < end; c++) {
-        const int64_t *check = &t->checks[c * 3];
+        double value = load_f64(checks[c * 3]);
+        int not_finite = value - value != 0.0; /* NaN exactly when value is NaN or infinite */
+        int infinite = fabs(value) == INFINITY;
+        bad |= checks[c * 3 + 1] == 0 ? not_finite : infinite;
+    }
+    if (!bad) {
+        return -1;
+    }
+    for (int64_t c = first; c < end; c++) {
+        const int64_t *check = &checks[c * 3];
         double value = load_f64(check[0]);
         if (check[1] == 0) {
-            if (value - value != 0.0) { /* NaN exactly when value is NaN or infinite */
+            if (value - value != 0.0) {
                 return check[2];
             }
         } else if (fabs(value) == INFINITY) {
@@ -185,7 +203,7 @@ static int64_t check_outputs(const Tables *t, int64_t i) {
 }
 
 /* Keep the component's inputs then outputs as its next row. */
-static void record(const Tables *t, int64_t i) {
+HOT void record(const Tables *t, int64_t i) {
     if (COMPONENT(t, i, C_RECORD) == 0) {
         return;
     }
@@ -204,7 +222,7 @@ static void record(const Tables *t, int64_t i) {
 
 /* doStep, then FMI 3.0's terminateSimulation flag: the failing call (1 doStep, 3 asked to
  * terminate) with its status, or -1. */
-static int64_t advance(const Tables *t, int64_t i, double time, double h, int64_t *status_out) {
+HOT int64_t advance(const Tables *t, int64_t i, double time, double h, int64_t *status_out) {
     int64_t handle = COMPONENT(t, i, C_HANDLE), function = COMPONENT(t, i, C_STEP);
     int64_t status;
     if (COMPONENT(t, i, C_VERSION) == 2) {
@@ -225,7 +243,7 @@ static int64_t advance(const Tables *t, int64_t i, double time, double h, int64_
     return -1;
 }
 
-static int64_t finish(int64_t *result, int64_t code, int64_t step, int64_t position, int64_t component,
+HOT int64_t finish(int64_t *result, int64_t code, int64_t step, int64_t position, int64_t component,
                       int64_t call, int64_t status, int64_t kind) {
     result[R_CODE] = code;
     result[R_STEP] = step;
@@ -238,7 +256,7 @@ static int64_t finish(int64_t *result, int64_t code, int64_t step, int64_t posit
 }
 
 /* Set inputs, step, get and check outputs, record: FAILED (result filled) or DONE. */
-static int64_t step_native(const Tables *t, int64_t i, int64_t k, double time, int64_t *result,
+HOT int64_t step_native(const Tables *t, int64_t i, int64_t k, double time, int64_t *result,
                            bool set_first) {
     int64_t status = 0, kind = 0, call;
     if (set_first) {
@@ -263,6 +281,13 @@ static int64_t step_native(const Tables *t, int64_t i, int64_t k, double time, i
     return DONE;
 }
 
+/* Whether component i steps at step k (k % period == 0; a 64-bit division costs tens of cycles,
+ * so not for the components stepped every step). */
+HOT bool due(const Tables *t, int64_t i, int64_t k) {
+    int64_t period = COMPONENT(t, i, C_PERIOD);
+    return period == 1 || k % period == 0;
+}
+
 /* Step from component `first_position` of step `first_step` up to the end of step
  * `first_step + steps - 1`; the result (7 int64) as kernel.py's `step_kernel` returns it. */
 int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_position, int64_t start_ns,
@@ -276,7 +301,7 @@ int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_po
         double time = (double)(start_ns + k * h_ns) / 1e9;
         if (jacobi) {
             for (int64_t i = 0; i < n; i++) {
-                if (COMPONENT(t, i, C_KIND) != KIND_IDLE && k % COMPONENT(t, i, C_PERIOD) == 0) {
+                if (COMPONENT(t, i, C_KIND) != KIND_IDLE && due(t, i, k)) {
                     if (COMPONENT(t, i, C_KIND) == KIND_PYTHON) {
                         return finish(result, HAND_BACK, k, i, i, 0, 0, 0);
                     }
@@ -288,7 +313,7 @@ int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_po
                 }
             }
             for (int64_t i = 0; i < n; i++) {
-                if (COMPONENT(t, i, C_KIND) == KIND_NATIVE && k % COMPONENT(t, i, C_PERIOD) == 0) {
+                if (COMPONENT(t, i, C_KIND) == KIND_NATIVE && due(t, i, k)) {
                     if (step_native(t, i, k, time, result, false) == FAILED) {
                         return FAILED;
                     }
@@ -297,7 +322,7 @@ int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_po
         } else {
             while (position < n) {
                 int64_t i = position;
-                if (COMPONENT(t, i, C_KIND) != KIND_IDLE && k % COMPONENT(t, i, C_PERIOD) == 0) {
+                if (COMPONENT(t, i, C_KIND) != KIND_IDLE && due(t, i, k)) {
                     if (COMPONENT(t, i, C_KIND) == KIND_PYTHON) {
                         return finish(result, HAND_BACK, k, i, i, 0, 0, 0);
                     }
