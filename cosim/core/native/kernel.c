@@ -11,6 +11,7 @@
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <string.h>
 
 /* Return codes (first element of the result). */
 enum { DONE = 0, HAND_BACK = 1, WATCH = 2, FAILED = 3 };
@@ -30,6 +31,9 @@ enum {
     G_SLOT_FIRST, G_SLOT_COUNT, GROUP_COLUMNS
 };
 enum { KIND_REAL = 0, KIND_INTEGER = 1, KIND_BOOLEAN = 2 };
+
+/* Most components whose table the kernel copies onto its stack. */
+#define MAX_COPIED 64
 
 /* Elements of the result. */
 enum { R_CODE, R_STEP, R_POSITION, R_COMPONENT, R_CALL, R_STATUS, R_KIND, RESULT_SIZE };
@@ -173,30 +177,15 @@ HOT int64_t get_outputs(const Tables *t, int64_t i, int64_t *kind_out) {
 }
 
 /* Slot of the first checked output that is NaN or infinite (infinite only when the check says
- * so), or -1. One branch-free pass says whether any fails (the usual answer: none); only then the
- * ordered search for the first. */
+ * so), or -1. value - value is NaN exactly when value is NaN or infinite, so the usual case (a
+ * finite value) costs one subtraction and one comparison, without reading the check's kind. */
 HOT int64_t check_outputs(const Tables *t, int64_t i) {
     int64_t first = COMPONENT(t, i, C_CHECK_FIRST), end = first + COMPONENT(t, i, C_CHECK_COUNT);
     const int64_t *checks = t->checks;
-    int bad = 0;
     for (int64_t c = first; c < end; c++) {
         double value = load_f64(checks[c * 3]);
-        int not_finite = value - value != 0.0; /* NaN exactly when value is NaN or infinite */
-        int infinite = fabs(value) == INFINITY;
-        bad |= checks[c * 3 + 1] == 0 ? not_finite : infinite;
-    }
-    if (!bad) {
-        return -1;
-    }
-    for (int64_t c = first; c < end; c++) {
-        const int64_t *check = &checks[c * 3];
-        double value = load_f64(check[0]);
-        if (check[1] == 0) {
-            if (value - value != 0.0) {
-                return check[2];
-            }
-        } else if (fabs(value) == INFINITY) {
-            return check[2];
+        if (value - value != 0.0 && (checks[c * 3 + 1] == 0 || fabs(value) == INFINITY)) {
+            return checks[c * 3 + 2];
         }
     }
     return -1;
@@ -291,8 +280,18 @@ HOT bool due(const Tables *t, int64_t i, int64_t k) {
 /* Step from component `first_position` of step `first_step` up to the end of step
  * `first_step + steps - 1`; the result (7 int64) as kernel.py's `step_kernel` returns it. */
 int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_position, int64_t start_ns,
-                             int64_t h_ns, int64_t jacobi, const Tables *t, int64_t *result) {
-    int64_t n = t->n;
+                             int64_t h_ns, int64_t jacobi, const Tables *tables, int64_t *result) {
+    /* Copies the FMI calls cannot reach (their addresses never leave this function), so the
+     * compiler need not read them again after each call: the tables' pointers, and the component
+     * table of a plan of up to MAX_COPIED components (on the stack). */
+    Tables local = *tables;
+    int64_t n = local.n;
+    int64_t components[MAX_COPIED * COMPONENT_COLUMNS];
+    if (n <= MAX_COPIED) {
+        memcpy(components, tables->components, sizeof(int64_t) * (size_t)(n * COMPONENT_COLUMNS));
+        local.components = components;
+    }
+    const Tables *t = &local;
     int64_t k = first_step;
     int64_t position = first_position;
     int64_t end = first_step + steps;
