@@ -51,6 +51,7 @@ import weakref
 import zipfile
 from collections import deque
 from collections.abc import Collection, Mapping
+from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 
@@ -146,6 +147,166 @@ def _parse_port_map(port_map: Mapping[str, object], path: Path) -> dict[str, tup
     return parsed
 
 
+@dataclass(frozen=True)
+class FmuLayout:
+    """What `FmuComponent` makes of one FMU file version through a port map: its ports, what each
+    one reaches in the FMU, and the declared dependencies (`fmu_layout`). Shared by every component
+    made from the same file, name, port map and size limit in this process (describing a system and
+    then building it made each FMU's thousands of ports twice); read-only."""
+
+    model_description: object  # fmpy's
+    fmi_version: int
+    inputs: tuple[Port, ...]
+    outputs: tuple[Port, ...]
+    parameters: tuple[Port, ...]
+    variables: Mapping[str, tuple[object, float]]  # port name -> (fmpy variable, scale)
+    elements: Mapping[str, int]  # element port of an FMI 3.0 array -> row-major index
+    feedthrough: Mapping[str, tuple[str, ...]]  # output port -> input ports, as <ModelStructure> declares
+    documented_nan: tuple[str, ...]  # output ports of the FMU's documented NaN outputs
+
+
+# Checked archives (`_read_description`) and layouts, keyed by the file's resolved path and version
+# (modification time and size) and the unpacked-size limit; a layout also by the component's name
+# (its error messages) and the parsed port map. A sweep's worker makes the same few FMUs once per
+# run; a changed file is another key. Failures are never remembered.
+_DESCRIPTIONS: dict[tuple, tuple[object, int]] = {}
+_LAYOUTS: dict[tuple, FmuLayout] = {}
+_KEPT = 32
+
+
+def _remember(cache: dict, key: tuple, value):
+    if len(cache) >= _KEPT:
+        cache.pop(next(iter(cache)))
+    cache[key] = value
+    return value
+
+
+def fmu_layout(
+    path: str | Path,
+    name: str,
+    port_map: Mapping[str, object] | None = None,
+    max_unpacked_size: int | None = None,
+) -> FmuLayout:
+    """The ports `FmuComponent(path, name, port_map=..., max_unpacked_size=...)` has, without making
+    the component (a system description needs no more); the same `CosimError` otherwise (the
+    archive's problems before the port map's). Made once per file version in a process."""
+    path = Path(path)
+    port_map = port_map or {}
+    try:
+        identity: tuple | None = (str(path.resolve()), *_file_identity(path), max_unpacked_size)
+    except (OSError, RuntimeError):
+        identity = None  # `_read_description` says what is wrong
+    if identity is not None and identity in _DESCRIPTIONS:
+        description, version = _DESCRIPTIONS[identity]
+    else:
+        description, version = _read_description(path, max_unpacked_size)
+        if identity is not None:
+            _remember(_DESCRIPTIONS, identity, (description, version))
+    mapping = _parse_port_map(port_map, path)
+    key = None if identity is None else (identity, name, tuple(mapping.items()))
+    if key is not None and key in _LAYOUTS:
+        return _LAYOUTS[key]
+    layout = _make_layout(path, name, description, version, mapping)
+    return layout if key is None else _remember(_LAYOUTS, key, layout)
+
+
+def _make_layout(
+    path: Path, name: str, description, version: int, mapping: dict[str, tuple[str, float]]
+) -> FmuLayout:
+    variables = {v.name: v for v in description.modelVariables}
+    for port, (variable, _) in mapping.items():
+        if variable not in variables:
+            raise CosimError(
+                f"FMU '{path}' (component '{name}') has no variable '{variable}' "
+                f"(mapped to port '{port}'); variables: {closest_names(variable, variables)}"
+            )
+    by_variable: dict[str, list[tuple[str, float]]] = {}
+    for port, (variable, scale) in mapping.items():
+        by_variable.setdefault(variable, []).append((port, scale))
+    reaches: dict[str, tuple[object, float]] = {}
+    elements: dict[str, int] = {}
+    ports: dict[str, list[Port]] = {"input": [], "output": [], "parameter": []}
+    for variable in description.modelVariables:
+        causality = variable.causality if variable.causality != "structuralParameter" else "parameter"
+        kind = _TYPES.get(variable.type)
+        if causality not in ports or kind is None:
+            continue
+        unit = getattr(variable, "unit", None) or getattr(
+            getattr(variable, "declaredType", None), "unit", None
+        )
+        if getattr(variable, "dimensions", None):
+            shape = _array_shape(variable, description)
+            if shape is None:
+                continue  # sized by a tunable structural parameter: the ports would change size
+            if variable.name in by_variable:
+                raise CosimError(
+                    f"FMU '{path}' (component '{name}'): port map entry "
+                    f"'{by_variable[variable.name][0][0]}' names array variable '{variable.name}'; "
+                    "only scalar variables can be mapped"
+                )
+            made = _array_ports(path, name, variable, kind, unit or "", shape, mapping)
+            ports[causality] += made
+            for element, port in enumerate(made):
+                reaches[port.name] = (variable, 1.0)
+                elements[port.name] = element
+            continue
+        if variable.name not in by_variable and variable.name in mapping:
+            continue  # a mapped port already took this name
+        start = _start_value(variable.start, kind)
+        for port_name, scale in by_variable.get(variable.name, [(variable.name, 1.0)]):
+            ports[causality].append(
+                Port(port_name, kind, unit or "", variable.description or "", start * scale)
+            )
+            reaches[port_name] = (variable, scale)
+    for causality, declared in ports.items():  # as `Component` checks them: here, so describing finds it
+        names = [port.name for port in declared]
+        if len(set(names)) != len(names):
+            duplicate = next(n for n in names if names.count(n) > 1)
+            raise CosimError(f"component '{name}': {causality} '{duplicate}' declared twice")
+    ports_of: dict[str, list[str]] = {}
+    for port, (variable, _) in reaches.items():
+        ports_of.setdefault(variable.name, []).append(port)
+    feedthrough = {}
+    for unknown in description.outputs:
+        if unknown.dependencies is not None and unknown.variable.name in ports_of:
+            depends = tuple(
+                port
+                for d in unknown.dependencies
+                if d.causality == "input" and d.name in ports_of
+                for port in ports_of[d.name]
+            )
+            for port in ports_of[unknown.variable.name]:
+                feedthrough[port] = depends
+    documented = documented_nan_variables(description)
+    return FmuLayout(
+        description,
+        version,
+        tuple(ports["input"]),
+        tuple(ports["output"]),
+        tuple(ports["parameter"]),
+        reaches,
+        elements,
+        feedthrough,
+        tuple(port for variable in documented for port in ports_of.get(variable, ())),
+    )
+
+
+def _array_ports(path: Path, name: str, variable, kind: str, unit: str, shape, mapping) -> list[Port]:
+    """One port per element of FMI 3.0 array `variable`, named `name[i]` / `name[i,j]`."""
+    starts = str(variable.start).split() if variable.start not in (None, "") else []
+    ports = []
+    for element, index in enumerate(np.ndindex(*shape)):
+        port_name = f"{variable.name}[{','.join(str(i + 1) for i in index)}]"
+        if port_name in mapping:
+            raise CosimError(
+                f"FMU '{path}' (component '{name}'): mapped port '{port_name}' "
+                f"is also an element of array variable '{variable.name}'"
+            )
+        text = starts[element if len(starts) > 1 else 0] if starts else None
+        ports.append(Port(port_name, kind, unit, variable.description or "", _start_value(text, kind)))
+    return ports
+
+
 class FmuComponent(Component):
     """A co-simulation FMU (FMI 2.0 or 3.0) as a component.
 
@@ -174,91 +335,22 @@ class FmuComponent(Component):
     ) -> None:
         super().__init__(name, period=period)
         self.path = Path(path)
-        self.model_description, self.fmi_version = _read_description(self.path, max_unpacked_size)
+        layout = fmu_layout(self.path, name, port_map or {}, max_unpacked_size)
+        self.model_description, self.fmi_version = layout.model_description, layout.fmi_version
         self.default_parameters = dict(parameters or {})
-        mapping = _parse_port_map(port_map or {}, self.path)
-        variables = {v.name: v for v in self.model_description.modelVariables}
-        for port, (variable, _) in mapping.items():
-            if variable not in variables:
-                raise CosimError(
-                    f"FMU '{self.path}' (component '{name}') has no variable '{variable}' "
-                    f"(mapped to port '{port}'); variables: {closest_names(variable, variables)}"
-                )
-        by_variable: dict[str, list[tuple[str, float]]] = {}
-        for port, (variable, scale) in mapping.items():
-            by_variable.setdefault(variable, []).append((port, scale))
-        self._variables: dict[str, tuple[object, float]] = {}  # port name -> (fmpy variable, scale)
-        self._elements: dict[str, int] = {}  # element port of an FMI 3.0 array -> row-major index
-        ports: dict[str, list[Port]] = {"input": [], "output": [], "parameter": []}
-        for variable in self.model_description.modelVariables:
-            causality = variable.causality if variable.causality != "structuralParameter" else "parameter"
-            kind = _TYPES.get(variable.type)
-            if causality not in ports or kind is None:
-                continue
-            unit = getattr(variable, "unit", None) or getattr(
-                getattr(variable, "declaredType", None), "unit", None
-            )
-            if getattr(variable, "dimensions", None):
-                self._add_array_ports(variable, kind, unit or "", ports[causality], mapping, by_variable)
-                continue
-            if variable.name not in by_variable and variable.name in mapping:
-                continue  # a mapped port already took this name
-            start = _start_value(variable.start, kind)
-            for port_name, scale in by_variable.get(variable.name, [(variable.name, 1.0)]):
-                port = Port(port_name, kind, unit or "", variable.description or "", start * scale)
-                ports[causality].append(port)
-                self._variables[port_name] = (variable, scale)
-        ports_of: dict[str, list[str]] = {}
-        for port, (variable, _) in self._variables.items():
-            ports_of.setdefault(variable.name, []).append(port)
-        feedthrough = {}
-        for unknown in self.model_description.outputs:
-            if unknown.dependencies is not None and unknown.variable.name in ports_of:
-                depends = [
-                    port
-                    for d in unknown.dependencies
-                    if d.causality == "input" and d.name in ports_of
-                    for port in ports_of[d.name]
-                ]
-                for port in ports_of[unknown.variable.name]:
-                    feedthrough[port] = list(depends)
+        self._variables = layout.variables  # port name -> (fmpy variable, scale); shared, read-only
+        self._elements = layout.elements  # element port of an FMI 3.0 array -> row-major index
+        feedthrough = dict(layout.feedthrough)
         feedthrough.update(feedthrough_override or {})
-        self._set_ports(ports["input"], ports["output"], ports["parameter"], feedthrough)
+        self._set_ports(layout.inputs, layout.outputs, layout.parameters, feedthrough)
         self.nan_outputs: frozenset[str] = frozenset()
-        documented = documented_nan_variables(self.model_description)
-        self.allow_nan(*nan_outputs, *(port for name in documented for port in ports_of.get(name, ())))
+        self.allow_nan(*nan_outputs, *layout.documented_nan)
         self._step_time: list[float | None] = [None]  # start of the last doStep [s], for messages
         self._plan_transfers()
         self._slave = None
         self._unzip_dir: str | None = None
         self._fatal = False
         self.log_messages: deque[str] = deque(maxlen=20)
-
-    def _add_array_ports(
-        self, variable, kind: str, unit: str, ports: list[Port], mapping, by_variable
-    ) -> None:
-        """One port per element of FMI 3.0 array `variable`, named `name[i]` / `name[i,j]`."""
-        shape = _array_shape(variable, self.model_description)
-        if shape is None:
-            return  # sized by a tunable structural parameter: the ports would change size
-        if variable.name in by_variable:
-            raise CosimError(
-                f"FMU '{self.path}' (component '{self.name}'): port map entry "
-                f"'{by_variable[variable.name][0][0]}' names array variable '{variable.name}'; "
-                "only scalar variables can be mapped"
-            )
-        starts = str(variable.start).split() if variable.start not in (None, "") else []
-        for element, index in enumerate(np.ndindex(*shape)):
-            port_name = f"{variable.name}[{','.join(str(i + 1) for i in index)}]"
-            if port_name in mapping:
-                raise CosimError(
-                    f"FMU '{self.path}' (component '{self.name}'): mapped port '{port_name}' "
-                    f"is also an element of array variable '{variable.name}'"
-                )
-            text = starts[element if len(starts) > 1 else 0] if starts else None
-            ports.append(Port(port_name, kind, unit, variable.description or "", _start_value(text, kind)))
-            self._variables[port_name] = (variable, 1.0)
-            self._elements[port_name] = element
 
     def _plan_transfers(self) -> None:
         """Per FMI type: buffer slots, value references, FMI value array, scales."""

@@ -528,26 +528,31 @@ _INTERFACES_KEPT = 32
 def _fmu_interface(path: Path, name: str, port_map: dict, max_size: int) -> _FmuInterface:
     """The interface of `FmuComponent(path, name, port_map=port_map, max_unpacked_size=max_size)`;
     `CosimError` as it raises (never remembered)."""
-    from cosim.fmi.component import FmuComponent
+    from cosim.fmi.component import fmu_layout
 
     try:
         status = Path(path).stat()
     except OSError:
-        status = None  # FmuComponent says what is wrong
+        status = None  # fmu_layout says what is wrong
     key = None
     if status is not None:
         mapping = tuple((port, m["name"], m["scale"]) for port, m in port_map.items())
         key = (str(Path(path).resolve()), status.st_mtime_ns, status.st_size, name, mapping, max_size)
         if key in _INTERFACES:
             return _INTERFACES[key]
-    fmu = FmuComponent(path, name, port_map=port_map or None, max_unpacked_size=max_size)
+    layout = fmu_layout(path, name, port_map, max_size)
+    inputs = tuple(p.name for p in layout.inputs)
+    # As `Component` completes it: the declared dependencies, then every other output on all inputs.
+    feedthrough = dict(layout.feedthrough)
+    for port in layout.outputs:
+        feedthrough.setdefault(port.name, inputs)
     interface = _FmuInterface(
-        fmu.model_description,
-        fmu.fmi_version,
-        tuple(p.name for p in fmu.inputs),
-        tuple(p.name for p in fmu.outputs),
-        tuple(p.name for p in fmu.parameters),
-        {output: tuple(depends) for output, depends in fmu.feedthrough.items()},
+        layout.model_description,
+        layout.fmi_version,
+        inputs,
+        tuple(p.name for p in layout.outputs),
+        tuple(p.name for p in layout.parameters),
+        feedthrough,
     )
     if key is not None:
         if len(_INTERFACES) >= _INTERFACES_KEPT:
