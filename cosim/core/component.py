@@ -24,6 +24,7 @@ from __future__ import annotations
 import ctypes
 import difflib
 import enum
+import functools
 import re
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -62,7 +63,7 @@ class NativeStep:
     nan_outputs: tuple[int, ...] = ()
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class Port:
     """A scalar port: name, FMI-like type (`real`, `integer`, `boolean`), unit, start value."""
 
@@ -74,19 +75,37 @@ class Port:
     array_name: str | None = field(default=None, init=False, compare=False)
     array_index: tuple[int, ...] | None = field(default=None, init=False, compare=False)
 
-    def __post_init__(self) -> None:
-        if self.type not in PORT_TYPES:
-            raise CosimError(f"port '{self.name}': type '{self.type}' is not one of {', '.join(PORT_TYPES)}")
-        match = _ARRAY_ELEMENT.match(self.name)
-        if match:
-            indices = tuple(int(part) for part in match["index"].split(","))
-            object.__setattr__(self, "array_name", match["base"])
-            object.__setattr__(self, "array_index", indices)
+    def __init__(
+        self, name: str, type: str = "real", unit: str = "", description: str = "", start: float = 0.0
+    ) -> None:
+        # Written out (not generated) because a run makes ~10,000 ports: the generated __init__ of a
+        # frozen dataclass sets each field through object.__setattr__ and parsed every name anew.
+        if type not in PORT_TYPES:
+            raise CosimError(f"port '{name}': type '{type}' is not one of {', '.join(PORT_TYPES)}")
+        array_name, array_index = _array_element(name) if name[-1:] == "]" else (None, None)
+        self.__dict__.update(
+            name=name,
+            type=type,
+            unit=unit,
+            description=description,
+            start=start,
+            array_name=array_name,
+            array_index=array_index,
+        )
 
     @property
     def is_array_element(self) -> bool:
         """True for ports such as `ranges[3]` that are one element of an array signal."""
         return self.array_name is not None
+
+
+@functools.lru_cache(maxsize=1 << 16)
+def _array_element(name: str) -> tuple[str | None, tuple[int, ...] | None]:
+    """(`ranges`, (3,)) of an array element port's name `ranges[3]`; (None, None) of any other."""
+    match = _ARRAY_ELEMENT.match(name)
+    if match is None:
+        return None, None
+    return match["base"], tuple(int(part) for part in match["index"].split(","))
 
 
 def array_ports(base: str, count: int, columns: int = 0, unit: str = "", start: float = np.nan) -> list[Port]:
