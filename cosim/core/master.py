@@ -126,6 +126,10 @@ class Connection:
         return self.target.split(".", 1)[0]
 
 
+# A connection into a component, resolved (`System.links`): connection, producer, output index, input index.
+Link = tuple[Connection, str, int, int]
+
+
 class System:
     """Components, connections, the macro step [s] and the master algorithm (`mode`)."""
 
@@ -139,6 +143,7 @@ class System:
         self.components: dict[str, Component] = {}
         self.connections: list[Connection] = []
         self._targets: set[str] = set()  # connected inputs: a set, so connecting N inputs is O(N)
+        self._links: tuple[list[Connection], dict[str, list[Link]]] = ([], {})
 
     @property
     def macro_step(self) -> float:
@@ -185,6 +190,23 @@ class System:
         self._targets.add(target)
         return connection
 
+    def links(self) -> dict[str, list[Link]]:
+        """The connections into each component (by name, in connection order), their ends resolved:
+        (connection, producer name, output index, input index). Resolved once for the connections
+        as they are (`connect` checked both ends, and a component's ports never change); the master
+        reads them a dozen times while ordering and initialising a system of thousands."""
+        resolved_for, incoming = self._links
+        if resolved_for != self.connections:  # a list compare: the same objects, element by element
+            incoming = {}
+            for c in self.connections:
+                source_name, _, output = c.source.partition(".")
+                target_name, _, input_ = c.target.partition(".")
+                source_index = self.components[source_name].output_index[output]
+                target_index = self.components[target_name].input_index[input_]
+                incoming.setdefault(target_name, []).append((c, source_name, source_index, target_index))
+            self._links = (list(self.connections), incoming)
+        return incoming
+
     def period_steps(self, component: Component) -> int:
         """The component's period as a whole number of macro steps (>= 1)."""
         if component.period == 0:
@@ -199,10 +221,6 @@ class System:
         return steps
 
     # ---- ordering ----------------------------------------------------------------------------
-
-    def _is_direct(self, reference: str) -> bool:
-        component, index = self.resolve(reference, "output")
-        return bool(component.feedthrough[component.outputs[index].name])
 
     def _topological(self, edges: set[tuple[str, str]]) -> list[str]:
         """Kahn's algorithm; ready components are taken in the order they were added."""
@@ -236,10 +254,13 @@ class System:
         """Step order (see the module docstring); checks algebraic loops in Gauss-Seidel mode."""
         if self.mode == "gauss-seidel":
             self.check_algebraic_loops()
+        components = self.components
         edges = {
-            (c.source_component, c.target_component)
-            for c in self.connections
-            if c.source_component != c.target_component and self._is_direct(c.source)
+            (producer, consumer)
+            for consumer, links in self.links().items()
+            for _, producer, output, _ in links
+            if producer != consumer
+            and components[producer].feedthrough[components[producer].outputs[output].name]
         }
         return [self.components[name] for name in self._topological(edges)]
 
@@ -262,12 +283,11 @@ class System:
                 if f"{name}.{output}" in consumed:
                     feeding[name].update(depends)
         edges = set()
-        for c in self.connections:
-            if c.source_component == c.target_component:
-                continue
-            consumer, index = self.resolve(c.target, "input")
-            if consumer.inputs[index].name in feeding[consumer.name]:
-                edges.add((c.source_component, c.target_component))
+        for name, links in self.links().items():
+            inputs = self.components[name].inputs
+            for _, producer, _, index in links:
+                if producer != name and inputs[index].name in feeding[name]:
+                    edges.add((producer, name))
         return [self.components[name] for name in self._topological(edges)]
 
 
@@ -278,13 +298,40 @@ def find_algebraic_loop(
 
     `connections` are (source output, target input) pairs; `feedthrough[component][output]` names
     the inputs that output depends on directly. Works on names alone, so a system description can
-    be checked before any component exists (`cosim.scenario.system`).
+    be checked before any component exists (`cosim.scenario.system`). The answer for the last few
+    graphs is remembered: a scenario's description is checked, then the system built from it (the
+    same graph), and a sweep's worker builds the same system for every run.
     """
+    pairs = tuple((source, target) for source, target in connections)
+    dependencies = tuple(
+        (component, tuple((output, tuple(depends)) for output, depends in outputs.items()))
+        for component, outputs in feedthrough.items()
+    )
+    key = (pairs, dependencies)
+    if key not in _LOOPS:
+        if len(_LOOPS) >= _LOOPS_KEPT:
+            _LOOPS.pop(next(iter(_LOOPS)))
+        loop = _search_algebraic_loop(pairs, dependencies)
+        _LOOPS[key] = None if loop is None else tuple(loop)
+    loop = _LOOPS[key]
+    return None if loop is None else list(loop)
+
+
+# `find_algebraic_loop` of the last few graphs, keyed by the graph itself (the connection pairs and
+# every component's feedthrough, in order: the order decides which loop is named).
+_LOOPS: dict[tuple, tuple[str, ...] | None] = {}
+_LOOPS_KEPT = 8
+
+
+def _search_algebraic_loop(
+    pairs: tuple[tuple[str, str], ...], dependencies: tuple[tuple[str, tuple], ...]
+) -> list[str] | None:
+    """A depth-first search of the graph of ports for a cycle (`find_algebraic_loop`)."""
     graph: dict[str, list[str]] = {}
-    for source, target in connections:
+    for source, target in pairs:
         graph.setdefault(source, []).append(target)
-    for component, outputs in feedthrough.items():
-        for output, depends in outputs.items():
+    for component, outputs in dependencies:
+        for output, depends in outputs:
             for name in depends:
                 graph.setdefault(f"{component}.{name}", []).append(f"{component}.{output}")
     colour: dict[str, int] = {}  # 1 = on the current path, 2 = finished
@@ -318,15 +365,11 @@ def _gather(
     consumer has no connected input (from `producers`, when given).
     """
     groups: dict[str, list[tuple[int, int, float, float]]] = {}
-    for connection in system.connections:
-        if connection.target_component != consumer.name:
+    for connection, producer, source_index, target_index in system.links().get(consumer.name, ()):
+        if producers is not None and producer not in producers:
             continue
-        if producers is not None and connection.source_component not in producers:
-            continue
-        producer, source_index = system.resolve(connection.source, "output")
-        _, target_index = system.resolve(connection.target, "input")
         link = (source_index, target_index, connection.scale, connection.offset)
-        groups.setdefault(producer.name, []).append(link)
+        groups.setdefault(producer, []).append(link)
     if not groups:
         return None
     names: dict[str, object] = {"target": consumer.input_cbuffer, "target_array": consumer.input_buffer}
@@ -450,12 +493,10 @@ class Master:
         dynamic = set(self.system.components) - constant
         plan = []
         for component, period, gather in self._plan:
-            fed = [c for c in self.system.connections if c.target_component == component.name]
-            if any(c.source_component in constant for c in fed):
+            fed = self.system.links().get(component.name, ())
+            if any(producer in constant for _, producer, _, _ in fed):
                 gather = _gather(self.system, component, producers=dynamic)
-                static = {
-                    self.system.resolve(c.target, "input")[1] for c in fed if c.source_component in constant
-                }
+                static = {index for _, producer, _, index in fed if producer in constant}
                 if hasattr(component, "restrict_push"):
                     component.restrict_push([i for i in range(len(component.inputs)) if i not in static])
             plan.append((component, period, gather))

@@ -561,28 +561,10 @@ def _fmu_interface(path: Path, name: str, port_map: dict, max_size: int) -> _Fmu
     return interface
 
 
-# `find_algebraic_loop` of the last few connection graphs, keyed by the graph itself (the connection
-# pairs and every component's feedthrough, in order: the order decides which loop is named). A sweep
-# describes the same system once per run in each worker process; the search costs ~0.05 s there.
-_LOOPS: dict[tuple, list[str] | None] = {}
-_LOOPS_KEPT = 8
-
-
 def _algebraic_loop(pairs: list[tuple[str, str]], feedthrough: dict) -> list[str] | None:
-    """`find_algebraic_loop(pairs, feedthrough)`, remembered for the same arguments."""
-    key = (
-        tuple(pairs),
-        tuple(
-            (name, tuple((output, tuple(depends)) for output, depends in outputs.items()))
-            for name, outputs in feedthrough.items()
-        ),
-    )
-    if key not in _LOOPS:
-        if len(_LOOPS) >= _LOOPS_KEPT:
-            _LOOPS.pop(next(iter(_LOOPS)))
-        _LOOPS[key] = find_algebraic_loop(pairs, feedthrough)
-    loop = _LOOPS[key]
-    return None if loop is None else list(loop)
+    """`find_algebraic_loop(pairs, feedthrough)` (which remembers the last few graphs: a sweep's
+    worker describes the same system for every run, and building it checks the same graph again)."""
+    return find_algebraic_loop(pairs, feedthrough)
 
 
 def _value_problem(variable, value: float, given) -> str | None:
