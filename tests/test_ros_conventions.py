@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
+from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_typestore
 
 from cosim.errors import CosimError
@@ -118,3 +119,53 @@ def test_foxglove_layout_frames_the_whole_map():
     assert seen_height >= height and seen_height * 16 / 9 >= width
     assert seen_height < 1.5 * max(height, width * 9 / 16)  # and not lost in the distance
     assert {"frame:map", "frame:odom", "frame:base_link"} <= set(panel["transforms"])
+
+
+def test_the_log_types_are_rosbags_humble_definitions():
+    """The messages a log is made of are held without rosbags' whole Humble store (`rosmsg.LOG_TYPES`):
+    each has Humble's definition, so the schema a log carries and the bytes are Humble's."""
+    from cosim.record import rosmsg
+
+    humble = get_typestore(Stores.ROS2_HUMBLE)
+    assert rosmsg.log_fielddefs() == {name: humble.fielddefs[name] for name in rosmsg.LOG_TYPES}
+    for name in rosmsg.LOG_TYPES:
+        assert rosmsg.message_definition(name) == humble.generate_msgdef(name, ros_version=2)[0]
+    # Every message a log contains is there (a type outside would need the whole store).
+    from cosim.record.recorder import TOPIC_TYPES
+
+    contained, pending = set(), list(TOPIC_TYPES.values())
+    while pending:
+        name = pending.pop()
+        contained.add(name)
+        for _, (kind, detail) in humble.fielddefs[name][1]:
+            while kind in (Nodetype.ARRAY, Nodetype.SEQUENCE):
+                kind, detail = detail[0]
+            if kind == Nodetype.NAME and detail not in contained:
+                pending.append(detail)
+    assert contained <= set(rosmsg.LOG_TYPES)
+
+
+def test_a_message_outside_the_log_types_comes_from_the_humble_store():
+    from cosim.record import rosmsg
+
+    humble = get_typestore(Stores.ROS2_HUMBLE)
+    name = "sensor_msgs/msg/NavSatFix"
+    assert name not in rosmsg.LOG_TYPES
+    fields = {
+        "header": rosmsg.header(1_500_000_000, "gps"),
+        "latitude": 48.1,
+        "longitude": 11.6,
+        "altitude": 0.5,
+    }
+    fields.update(status=rosmsg.make("sensor_msgs/msg/NavSatStatus", status=0, service=1))
+    fields.update(position_covariance=np.arange(9.0), position_covariance_type=2)
+    ours = rosmsg.serialize(rosmsg.make(name, **fields), name)
+    message = humble.deserialize_cdr(ours, name)
+    assert (message.header.stamp.sec, message.header.stamp.nanosec, message.header.frame_id) == (
+        1,
+        500_000_000,
+        "gps",
+    )
+    assert (message.latitude, message.status.service, message.position_covariance_type) == (48.1, 1, 2)
+    assert list(message.position_covariance) == list(range(9))
+    assert rosmsg.message_definition(name) == humble.generate_msgdef(name, ros_version=2)[0]

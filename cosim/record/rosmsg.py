@@ -2,7 +2,9 @@
 
 Every channel of a navcosim log is a ROS 2 message (``cdr`` encoding, ``ros2msg`` schema) so
 Foxglove, ``ros2 bag``, rosbags and @mcap/core read the whole file (`reference/mcap.md`).
-Standard messages come from rosbags' ROS 2 Humble type store. Each component's signals get one
+Standard messages are ROS 2 Humble's, serialised by a rosbags type store that holds only those a log
+is made of (`LOG_TYPES`; rosbags' whole Humble store, hundreds of types, costs ~0.2 s to import,
+and is loaded only when a message outside them is asked for). Each component's signals get one
 generated struct, ``navcosim_msgs/msg/<Component>Signals``: a ``builtin_interfaces/Time stamp``
 followed by one ``float64`` per variable, so every record of a channel has the same size and
 NumPy loads a whole channel with one ``frombuffer``.
@@ -16,6 +18,7 @@ import re
 import struct
 
 import numpy as np
+from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 TYPESTORE_NAME = Stores.ROS2_HUMBLE
@@ -39,7 +42,121 @@ def new_typestore():
     return get_typestore(TYPESTORE_NAME)
 
 
-TYPESTORE = new_typestore()
+# The ROS 2 Humble messages a navcosim log is made of, with every message they contain, as in
+# rosbags' Humble store (`tests/test_ros_conventions.py` compares them): "type name" fields and
+# "type NAME=value" constants; `T[N]` is an array of N, `T[]` a sequence.
+LOG_TYPES = {
+    "builtin_interfaces/msg/Time": "int32 sec; uint32 nanosec",
+    "builtin_interfaces/msg/Duration": "int32 sec; uint32 nanosec",
+    "std_msgs/msg/Header": "builtin_interfaces/msg/Time stamp; string frame_id",
+    "std_msgs/msg/ColorRGBA": "float32 r; float32 g; float32 b; float32 a",
+    "geometry_msgs/msg/Point": "float64 x; float64 y; float64 z",
+    "geometry_msgs/msg/Quaternion": "float64 x; float64 y; float64 z; float64 w",
+    "geometry_msgs/msg/Vector3": "float64 x; float64 y; float64 z",
+    "geometry_msgs/msg/Pose": "geometry_msgs/msg/Point position; geometry_msgs/msg/Quaternion orientation",
+    "geometry_msgs/msg/PoseStamped": "std_msgs/msg/Header header; geometry_msgs/msg/Pose pose",
+    "geometry_msgs/msg/PoseWithCovariance": "geometry_msgs/msg/Pose pose; float64[36] covariance",
+    "geometry_msgs/msg/Twist": "geometry_msgs/msg/Vector3 linear; geometry_msgs/msg/Vector3 angular",
+    "geometry_msgs/msg/TwistWithCovariance": "geometry_msgs/msg/Twist twist; float64[36] covariance",
+    "geometry_msgs/msg/Transform": (
+        "geometry_msgs/msg/Vector3 translation; geometry_msgs/msg/Quaternion rotation"
+    ),
+    "geometry_msgs/msg/TransformStamped": (
+        "std_msgs/msg/Header header; string child_frame_id; geometry_msgs/msg/Transform transform"
+    ),
+    "tf2_msgs/msg/TFMessage": "geometry_msgs/msg/TransformStamped[] transforms",
+    "nav_msgs/msg/Odometry": (
+        "std_msgs/msg/Header header; string child_frame_id; geometry_msgs/msg/PoseWithCovariance pose; "
+        "geometry_msgs/msg/TwistWithCovariance twist"
+    ),
+    "nav_msgs/msg/Path": "std_msgs/msg/Header header; geometry_msgs/msg/PoseStamped[] poses",
+    "nav_msgs/msg/MapMetaData": (
+        "builtin_interfaces/msg/Time map_load_time; float32 resolution; uint32 width; uint32 height; "
+        "geometry_msgs/msg/Pose origin"
+    ),
+    "nav_msgs/msg/OccupancyGrid": "std_msgs/msg/Header header; nav_msgs/msg/MapMetaData info; int8[] data",
+    "sensor_msgs/msg/LaserScan": (
+        "std_msgs/msg/Header header; float32 angle_min; float32 angle_max; float32 angle_increment; "
+        "float32 time_increment; float32 scan_time; float32 range_min; float32 range_max; "
+        "float32[] ranges; float32[] intensities"
+    ),
+    "sensor_msgs/msg/CompressedImage": "std_msgs/msg/Header header; string format; uint8[] data",
+    "visualization_msgs/msg/UVCoordinate": "float32 u; float32 v",
+    "visualization_msgs/msg/MeshFile": "string filename; uint8[] data",
+    "visualization_msgs/msg/Marker": (
+        "int32 ARROW=0; int32 CUBE=1; int32 SPHERE=2; int32 CYLINDER=3; int32 LINE_STRIP=4; "
+        "int32 LINE_LIST=5; int32 CUBE_LIST=6; int32 SPHERE_LIST=7; int32 POINTS=8; "
+        "int32 TEXT_VIEW_FACING=9; int32 MESH_RESOURCE=10; int32 TRIANGLE_LIST=11; int32 ADD=0; "
+        "int32 MODIFY=0; int32 DELETE=2; int32 DELETEALL=3; "
+        "std_msgs/msg/Header header; string ns; int32 id; int32 type; int32 action; "
+        "geometry_msgs/msg/Pose pose; geometry_msgs/msg/Vector3 scale; std_msgs/msg/ColorRGBA color; "
+        "builtin_interfaces/msg/Duration lifetime; bool frame_locked; geometry_msgs/msg/Point[] points; "
+        "std_msgs/msg/ColorRGBA[] colors; string texture_resource; sensor_msgs/msg/CompressedImage texture; "
+        "visualization_msgs/msg/UVCoordinate[] uv_coordinates; string text; string mesh_resource; "
+        "visualization_msgs/msg/MeshFile mesh_file; bool mesh_use_embedded_materials"
+    ),
+    "visualization_msgs/msg/MarkerArray": "visualization_msgs/msg/Marker[] markers",
+}
+
+
+def _field_type(text: str):
+    """rosbags' description of a field type written as in `LOG_TYPES`."""
+    if text.endswith("]"):
+        element, _, size = text[:-1].partition("[")
+        kind = Nodetype.ARRAY if size else Nodetype.SEQUENCE
+        return (kind, (_field_type(element), int(size or 0)))
+    if "/" in text:
+        return (Nodetype.NAME, text)
+    return (Nodetype.BASE, (text, 0))
+
+
+def log_fielddefs() -> dict:
+    """`LOG_TYPES` as rosbags' type definitions (what `Typestore.register` takes)."""
+    definitions = {}
+    for typename, text in LOG_TYPES.items():
+        constants, fields = [], []
+        for entry in text.split("; "):
+            kind, _, name = entry.partition(" ")
+            name, equals, value = name.partition("=")
+            if equals:
+                constants.append((name, kind, int(value)))
+            else:
+                fields.append((name, _field_type(kind)))
+        definitions[typename] = (constants, fields)
+    return definitions
+
+
+def _log_typestore():
+    store = get_typestore(Stores.EMPTY)
+    store.register(log_fielddefs())
+    return store
+
+
+TYPESTORE = _log_typestore()
+_humble = None  # rosbags' whole Humble store, loaded for a message outside `LOG_TYPES`
+
+
+def _known(typename: str) -> str:
+    """`typename`, after registering it (and what it contains) from rosbags' Humble store into
+    `TYPESTORE` when it is not one of `LOG_TYPES`; an unknown name is left for rosbags to refuse."""
+    global _humble
+    if typename not in TYPESTORE.fielddefs:
+        if _humble is None:
+            _humble = new_typestore()
+        wanted, pending = {}, [typename]
+        while pending:
+            name = pending.pop()
+            if name in wanted or name in TYPESTORE.fielddefs or name not in _humble.fielddefs:
+                continue
+            wanted[name] = _humble.fielddefs[name]
+            for _, description in wanted[name][1]:
+                while description[0] in (Nodetype.ARRAY, Nodetype.SEQUENCE):
+                    description = description[1][0]
+                if description[0] == Nodetype.NAME:
+                    pending.append(description[1])
+        if wanted:
+            TYPESTORE.register(wanted)
+    return typename
 
 
 def split_time(t_ns: int) -> tuple[int, int]:
@@ -102,7 +219,7 @@ def signals_definition(fields: list[str]) -> str:
 
 def message_definition(typename: str) -> str:
     """ros2msg schema text of a standard message (with its dependencies)."""
-    return TYPESTORE.generate_msgdef(typename, ros_version=2)[0]
+    return TYPESTORE.generate_msgdef(_known(typename), ros_version=2)[0]
 
 
 def register_definition(typestore, typename: str, definition: str) -> None:
@@ -171,12 +288,12 @@ def color(r: float, g: float, b: float, a: float = 1.0):
 
 def make(typename: str, **fields):
     """A message of a standard type from keyword fields."""
-    return _types[typename](**fields)
+    return _types[_known(typename)](**fields)
 
 
 def serialize(message, typename: str) -> bytes:
     """CDR bytes (little endian, with encapsulation header) of a message."""
-    return bytes(TYPESTORE.serialize_cdr(message, typename))
+    return bytes(TYPESTORE.serialize_cdr(message, _known(typename)))
 
 
 # --- hot paths: fixed-layout messages packed directly --------------------------------------
