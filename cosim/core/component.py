@@ -216,8 +216,10 @@ class Component(ABC):
                         f"component '{self.name}': output '{output}' depends on unknown input '{name}'"
                     )
             complete[output] = list(depends)
+        every_input = [p.name for p in self.inputs]
         for port in self.outputs:
-            complete.setdefault(port.name, [p.name for p in self.inputs])
+            if port.name not in complete:  # (each its own list, as callers may change one)
+                complete[port.name] = every_input.copy()
         return complete
 
     def port(self, name: str) -> tuple[str, int]:

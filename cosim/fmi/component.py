@@ -34,7 +34,7 @@ The archive's total uncompressed size is checked before anything is extracted
 (`cosim.fmi.archive`; default limit 1 GiB, `max_unpacked_size` raises it).
 
 fmpy behaviour owned here: each instance is extracted into its own directory (static state inside
-a shared library is not shared between instances); the working directory is restored after a
+a shared library is not shared between instances), all but sources/ and documentation/; the working directory is restored after a
 failed load; status Discard, Error and Fatal become `CosimError` naming the component, the model
 and the time. After Error the instance is only freed; after Fatal nothing more is called (the
 standard forbids it), and `free()` just forgets the instance.
@@ -507,7 +507,8 @@ class FmuComponent(Component):
         description = self.model_description
         work_dir = os.getcwd()
         try:
-            fmpy.extract(str(self.path), unzipdir=self._unzip_dir)
+            # What the instance can use: its binaries and resources (not sources/ or documentation/).
+            fmpy.extract(str(self.path), unzipdir=self._unzip_dir, include=_needed_at_run_time)
             slave_class = FMU2Slave if self.fmi_version == 2 else FMU3Slave
             guid = description.guid if self.fmi_version == 2 else description.instantiationToken
             self._slave = slave_class(
@@ -780,6 +781,13 @@ class FmuComponent(Component):
 
 
 _LOG_TARGETS: dict[int, weakref.ref] = {}
+
+
+def _needed_at_run_time(member: str) -> bool:
+    """Whether an instance's directory gets this archive member: all but the FMU's C sources and its
+    documentation, which the FMI standard gives the model no use of at run time (its own files are
+    in resources/); extracting them was most of the files an instance wrote."""
+    return not member.startswith(("sources/", "documentation/"))
 
 
 @cache

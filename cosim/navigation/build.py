@@ -56,13 +56,14 @@ def make_fmu(
     this process (`isolation` "none") or in a child process ("process", calls limited to `timeout`
     seconds); `nan_outputs` may be NaN."""
     from cosim.fmi.component import FmuComponent
-    from cosim.fmi.isolated import IsolatedFmuComponent
 
     port_map = {port: {"name": m.variable, "scale": m.scale} for port, m in component.port_map.items()}
     override = {output: list(depends) for output, depends in component.feedthrough.items()}
     options = {"port_map": port_map, "period": component.period, "feedthrough_override": override}
     options.update(max_unpacked_size=max_unpacked_size, nan_outputs=nan_outputs)
     if isolation == "process":
+        from cosim.fmi.isolated import IsolatedFmuComponent
+
         fmu = IsolatedFmuComponent(component.fmu, component.name, timeout=timeout, **options)
     else:
         fmu = FmuComponent(component.fmu, component.name, **options)
