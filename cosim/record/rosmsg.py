@@ -126,8 +126,82 @@ def log_fielddefs() -> dict:
     return definitions
 
 
+class _LazyMsgdef:
+    """A rosbags `Msgdef` whose 13 generated functions (CDR and ROS 1, each endianness, sizes and
+    conversions) are made one by one on first use, not all at once: a run serialises a handful of
+    types little-endian, and generating every function of a Marker and what it contains cost ~0.1 s."""
+
+    def __init__(self, store, typename: str) -> None:
+        self.name = typename
+        self.fields = [(normalize_fieldname(name), desc) for name, desc in store.fielddefs[typename][1]]
+        self.cls = store.types[typename]
+        self._store = store
+
+    def __getattr__(self, attribute: str):  # called for what is not made yet
+        if attribute not in _MSGDEF_MAKERS:
+            raise AttributeError(attribute)
+        made = _MSGDEF_MAKERS[attribute](self.fields, self.name, self._store)
+        for name, value in made.items():
+            setattr(self, name, value)
+        return made[attribute]
+
+
+def _sizes(generate, prefix: str):
+    def make(fields, typename, store):
+        function, size = generate(fields, store)
+        return {f"getsize_{prefix}": function, f"size_{prefix}": size}
+
+    return make
+
+
+try:  # rosbags' generators (internal): where they are not as expected, the stock store is used
+    from dataclasses import fields as _dataclass_fields
+
+    from rosbags.interfaces import Msgdef
+    from rosbags.serde import cdr as _cdr
+    from rosbags.serde import ros1 as _ros1
+    from rosbags.typesys.base import normalize_fieldname
+    from rosbags.typesys.store import Typestore
+
+    _MSGDEF_MAKERS = {
+        **dict.fromkeys(("getsize_cdr", "size_cdr"), _sizes(_cdr.generate_getsize_cdr, "cdr")),
+        **dict.fromkeys(("getsize_ros1", "size_ros1"), _sizes(_ros1.generate_getsize_ros1, "ros1")),
+        "serialize_cdr_le": lambda f, t, s: {"serialize_cdr_le": _cdr.generate_serialize_cdr(f, s, "le")},
+        "serialize_cdr_be": lambda f, t, s: {"serialize_cdr_be": _cdr.generate_serialize_cdr(f, s, "be")},
+        "deserialize_cdr_le": lambda f, t, s: {
+            "deserialize_cdr_le": _cdr.generate_deserialize_cdr(f, s, "le")
+        },
+        "deserialize_cdr_be": lambda f, t, s: {
+            "deserialize_cdr_be": _cdr.generate_deserialize_cdr(f, s, "be")
+        },
+        "serialize_ros1": lambda f, t, s: {"serialize_ros1": _ros1.generate_serialize_ros1(f, s)},
+        "deserialize_ros1": lambda f, t, s: {"deserialize_ros1": _ros1.generate_deserialize_ros1(f, s)},
+        "getsize_ros1_to_cdr": lambda f, t, s: {
+            "getsize_ros1_to_cdr": _ros1.generate_ros1_to_cdr(f, t, s, copy=False)
+        },
+        "ros1_to_cdr": lambda f, t, s: {"ros1_to_cdr": _ros1.generate_ros1_to_cdr(f, t, s, copy=True)},
+        "getsize_cdr_to_ros1": lambda f, t, s: {
+            "getsize_cdr_to_ros1": _ros1.generate_cdr_to_ros1(f, t, s, copy=False)
+        },
+        "cdr_to_ros1": lambda f, t, s: {"cdr_to_ros1": _ros1.generate_cdr_to_ros1(f, t, s, copy=True)},
+    }
+    _LAZY = {field.name for field in _dataclass_fields(Msgdef)} == {"name", "fields", "cls", *_MSGDEF_MAKERS}
+except (ImportError, AttributeError, TypeError):
+    _LAZY = False
+
+if _LAZY:
+
+    class _LogTypestore(Typestore):
+        """rosbags' type store, making each type's functions as they are used (`_LazyMsgdef`)."""
+
+        def get_msgdef(self, typename: str):
+            if typename not in self.cache:
+                self.cache[typename] = _LazyMsgdef(self, typename)
+            return self.cache[typename]
+
+
 def _log_typestore():
-    store = get_typestore(Stores.EMPTY)
+    store = _LogTypestore() if _LAZY else get_typestore(Stores.EMPTY)
     store.register(log_fielddefs())
     return store
 
