@@ -1,5 +1,7 @@
 """The Component interface: ports, array-element names, feedthrough, lifecycle and misuse."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -41,6 +43,29 @@ def test_array_element_ports_are_told_apart_from_scalars():
     ports = array_ports("waypoints", 2, columns=2)
     assert [p.name for p in ports] == ["waypoints[1,1]", "waypoints[1,2]", "waypoints[2,1]", "waypoints[2,2]"]
     assert all(np.isnan(p.start) for p in ports)
+
+
+def test_a_port_is_a_frozen_value():
+    """Port's own __init__ keeps the dataclass contract: fields, equality, hashing, replace, frozen."""
+    port = Port("waypoints[3, 2]", "real", "m", "a corner", 1.5)
+    assert port == Port("waypoints[3, 2]", "real", "m", "a corner", 1.5)
+    assert hash(port) == hash(
+        Port(name="waypoints[3, 2]", type="real", unit="m", description="a corner", start=1.5)
+    )
+    assert port != Port("waypoints[3, 2]", "real", "m", "a corner", 2.5)
+    assert [f.name for f in dataclasses.fields(Port)][:5] == ["name", "type", "unit", "description", "start"]
+    moved = dataclasses.replace(port, name="x")
+    assert (moved.name, moved.unit, moved.start, moved.array_name, moved.array_index) == (
+        "x",
+        "m",
+        1.5,
+        None,
+        None,
+    )
+    assert (port.array_name, port.array_index) == ("waypoints", (3, 2))
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        port.name = "y"
+    assert Port("v").type == "real" and Port("v").start == 0.0
 
 
 def test_port_type_is_checked():

@@ -81,3 +81,32 @@ def test_the_algebraic_loop_is_searched_again_for_another_graph():
     assert compose._algebraic_loop(pairs, {"a": {"y": ("w",)}, "b": {"v": ()}}) is None
     assert compose._algebraic_loop(pairs[:1], looping) is None
     assert compose._algebraic_loop(pairs, looping) is not None
+
+
+def test_a_component_built_after_describing_shares_its_ports(tmp_path):
+    """Describing a system and building it read each FMU's ports once (`fmu_layout`); every component
+    keeps its own buffers, and a new version of the file is read again."""
+    from cosim.fmi.component import FmuComponent
+
+    path = tmp_path / "robot.fmu"
+    shutil.copyfile(builtin_fmu("DifferentialDrive", 2), path)
+    interface = compose._fmu_interface(path, "vehicle", {}, LIMIT)
+    built = FmuComponent(path, "vehicle", max_unpacked_size=LIMIT)
+    again = FmuComponent(path, "vehicle", max_unpacked_size=LIMIT)
+    assert tuple(port.name for port in built.inputs) == interface.inputs
+    assert all(
+        a is b for a, b in zip(built.inputs + built.outputs, again.inputs + again.outputs, strict=True)
+    )
+    assert built.input_buffer is not again.input_buffer
+    assert {port: tuple(depends) for port, depends in built.feedthrough.items()} == interface.feedthrough
+    starts = {v.name: v.start for v in fmpy.read_model_description(str(path)).modelVariables}
+    assert [port.start for port in built.parameters] == [
+        float(starts[port.name]) for port in built.parameters
+    ]
+
+    before = path.stat().st_mtime_ns
+    shutil.copyfile(builtin_fmu("PurePursuit", 2), path)
+    os.utime(path, ns=(before + 2_000_000_000, before + 2_000_000_000))
+    changed = FmuComponent(path, "vehicle", max_unpacked_size=LIMIT)
+    assert {port.name for port in changed.inputs} == _causality(path, "input")
+    assert changed.model_description.modelName == "PurePursuit"
