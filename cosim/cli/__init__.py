@@ -59,6 +59,13 @@ def main(argv: list[str] | None = None) -> int:
         # The reader of our output went away (`cosim … | head`): stop quietly, as a shell tool does.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
+    finally:
+        if argv is None:
+            # The process ends now. Python's shutdown runs full collections over every object left
+            # (~0.3 s of CPU after a run, more than the import floor's whole shutdown); frozen, they
+            # are skipped, and the memory goes back to the system with the process. The log, the
+            # FMUs and the output streams are closed and flushed without the collector.
+            gc.freeze()
 
 
 def _collect_young_objects_rarely() -> None:
