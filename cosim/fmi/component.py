@@ -34,10 +34,10 @@ The archive's total uncompressed size is checked before anything is extracted
 (`cosim.fmi.archive`; default limit 1 GiB, `max_unpacked_size` raises it).
 
 fmpy behaviour owned here: each instance is extracted into its own directory (static state inside
-a shared library is not shared between instances), all but sources/ and documentation/; the working directory is restored after a
-failed load; status Discard, Error and Fatal become `CosimError` naming the component, the model
-and the time. After Error the instance is only freed; after Fatal nothing more is called (the
-standard forbids it), and `free()` just forgets the instance.
+a shared library is not shared between instances), all but sources/ and documentation/; the working
+directory is restored after a failed load; status Discard, Error and Fatal become `CosimError`
+naming the component, the model and the time. After Error the instance is only freed; after Fatal
+nothing more is called (the standard forbids it), and `free()` just forgets the instance.
 """
 
 from __future__ import annotations
