@@ -7,8 +7,7 @@ primitive; every few pops, and at every pop near the goal, an obstacle-checked R
 Dubins) curve to the goal is tried and ends the search when it is free (analytic expansion).
 
 Candidate curves are tried cheapest first; curves of exactly equal cost (mirror images: a goal
-right behind, facing back) in the order numba's np.argsort (a quicksort) gives, which the search
-used when it was compiled with numba: hy_argsort is that quicksort.
+right behind, facing back) in the order they were enumerated (hy_argsort is a stable sort).
 """
 
 from __future__ import annotations
@@ -80,7 +79,8 @@ class SearchOutcome:
 
 
 def argsort_order(costs: np.ndarray) -> np.ndarray:
-    """The permutation numba's np.argsort(costs) (quicksort) returns: the order of exact ties."""
+    """The order in which candidates of these costs are tried: increasing cost, exact ties in index
+    order (a stable sort)."""
     values = np.ascontiguousarray(costs, dtype=np.float64).ravel()
     order = np.empty(len(values), dtype=np.int64)
     library().hy_argsort(values.ctypes.data, len(values), order.ctypes.data)

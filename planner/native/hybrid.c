@@ -22,70 +22,18 @@
  * place of the curve length (both are lower bounds of the path length). */
 #define HY_CURVE_HEURISTIC_RANGE 6.0
 
-/* ---- numba's np.argsort (numba/misc/quicksort.py, argsort of floats): the order of exact ties ---- */
+/* ---- the order in which candidate curves are tried: cheapest first, exact ties in enumeration order ---- */
 
-#define HY_SMALL_QUICKSORT 15
-#define HY_MAX_STACK 100
-
-static inline int hy_lt_floats(double a, double b) { return a < b || (b != b && !(a != a)); }
-
-static void hy_insertion_sort(const double *a, int64_t *r, int64_t low, int64_t high) {
-    if (high <= low) return;
-    for (int64_t i = low + 1; i <= high; i++) {
-        int64_t k = r[i];
-        double v = a[k];
-        int64_t j = i;
-        while (j > low && hy_lt_floats(v, a[r[j - 1]])) {
-            r[j] = r[j - 1];
-            j--;
-        }
-        r[j] = k;
-    }
-}
-
-static int64_t hy_partition(const double *a, int64_t *r, int64_t low, int64_t high) {
-    int64_t mid = (low + high) >> 1, swap;
-#define HY_SWAP(i, j) (swap = r[i], r[i] = r[j], r[j] = swap)
-    if (hy_lt_floats(a[r[mid]], a[r[low]])) HY_SWAP(low, mid);
-    if (hy_lt_floats(a[r[high]], a[r[mid]])) HY_SWAP(high, mid);
-    if (hy_lt_floats(a[r[mid]], a[r[low]])) HY_SWAP(low, mid);
-    double pivot = a[r[mid]];
-    HY_SWAP(high, mid);
-    int64_t i = low, j = high - 1;
-    for (;;) {
-        while (i < high && hy_lt_floats(a[r[i]], pivot)) i++;
-        while (j >= low && hy_lt_floats(pivot, a[r[j]])) j--;
-        if (i >= j) break;
-        HY_SWAP(i, j);
-        i++;
-        j--;
-    }
-    HY_SWAP(i, high);
-#undef HY_SWAP
-    return i;
-}
-
-/* out[0:n] = the permutation numba's np.argsort(a[0:n]) returns (its quicksort). */
+/* out[0:n] = the indices of a[0:n] by increasing value, equal values in index order (a stable
+ * insertion sort: a few dozen candidates). NaN never occurs (costs are sums of finite lengths). */
 void hy_argsort(const double *a, int64_t n, int64_t *out) {
-    for (int64_t i = 0; i < n; i++) out[i] = i;
-    if (n < 2) return;
-    int64_t stack_low[HY_MAX_STACK], stack_high[HY_MAX_STACK];
-    stack_low[0] = 0, stack_high[0] = n - 1;
-    int64_t depth = 1;
-    while (depth > 0) {
-        depth--;
-        int64_t low = stack_low[depth], high = stack_high[depth];
-        while (high - low >= HY_SMALL_QUICKSORT) {
-            int64_t i = hy_partition(a, out, low, high);
-            if (high - i > i - low) {
-                if (high > i) stack_low[depth] = i + 1, stack_high[depth] = high, depth++;
-                high = i - 1;
-            } else {
-                if (i > low) stack_low[depth] = low, stack_high[depth] = i - 1, depth++;
-                low = i + 1;
-            }
+    for (int64_t k = 0; k < n; k++) {
+        int64_t position = k;
+        while (position > 0 && a[out[position - 1]] > a[k]) {
+            out[position] = out[position - 1];
+            position--;
         }
-        hy_insertion_sort(a, out, low, high);
+        out[position] = k;
     }
 }
 
@@ -269,7 +217,7 @@ static int64_t hy_heap_pop(HySearch *s, int64_t *size) {
 /* Cheapest collision-free curve from (x, y, theta), driven after `direction`, to the goal: its
  * segments into s->analytic_*, its cost into *cost; returns the segment count (5) or 0 (none free).
  * Candidates are tried cheapest first; candidates of exactly equal cost (mirror images: a goal
- * right behind, facing back) in the order numba's np.argsort gives, which the search used before. */
+ * right behind, facing back) in the order they were enumerated. */
 static int64_t hy_analytic_expansion(HySearch *s, double x, double y, double theta, int64_t direction,
                                      HyScratch *scratch, double *cost_out) {
     const int64_t *letters = scratch->letters;
@@ -295,19 +243,7 @@ static int64_t hy_analytic_expansion(HySearch *s, double x, double y, double the
         }
         costs[k] = cost;
     }
-    /* cheapest first by insertion (a few dozen candidates); on an exact tie, numba's argsort */
-    for (int64_t k = 0; k < count; k++) {
-        int64_t position = k;
-        while (position > 0 && costs[order[position - 1]] > costs[k]) {
-            order[position] = order[position - 1];
-            position--;
-        }
-        if (position > 0 && costs[order[position - 1]] == costs[k]) {
-            hy_argsort(costs, count, order);
-            break;
-        }
-        order[position] = k;
-    }
+    hy_argsort(costs, count, order);
     double curvatures[5], signed_lengths[5];
     HyGrid grid = {s->occupied, s->rows, s->cols, s->resolution, s->origin_x, s->origin_y};
     for (int64_t rank = 0; rank < count; rank++) {
