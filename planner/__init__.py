@@ -2,7 +2,7 @@
 
 This package never imports `cosim`. Its names are imported on first use, so that
 `import planner` (and everything that only needs `planner.errors`) stays fast: the
-compiled search pulls in numba, which costs over a second to import.
+search modules load their C kernels (`planner.native`) and scipy.ndimage.
 """
 
 from __future__ import annotations

@@ -181,23 +181,19 @@ def _pose(value, role: str) -> tuple[float, float, float]:
     return x, y, theta
 
 
-def _compiled_kernels() -> tuple[int, int]:
-    """(compiled specialisations of the numba kernels a hybrid plan may call, C libraries loaded) so
-    far: the heuristic grid comes from grid A*'s search (planner.astar), which may be numba's."""
-    from planner import astar
-
-    compiled = sum(len(kernel.overloads) for kernel in vars(astar).values() if hasattr(kernel, "overloads"))
-    return compiled, len(native._loaded)
+def _loaded_kernels() -> int:
+    """C libraries loaded so far (the heuristic grid comes from grid A*'s search, another library)."""
+    return len(native._loaded)
 
 
 def plan_hybrid(grid: OccupancyGrid, start, goal, **options) -> PlanResult:
     """See `_plan_hybrid`. The hybrid A* kernels are loaded first (built on a fresh install); a call
-    that still compiled or loaded kernels (grid A*'s, for the heuristic), as the first one in a
-    process does, is run again so that `elapsed` excludes building and loading them."""
+    that still loaded kernels (grid A*'s, for the heuristic), as the first one in a process does, is
+    run again so that `elapsed` excludes building and loading them."""
     library()
-    compiled = _compiled_kernels()
+    loaded = _loaded_kernels()
     result = _plan_hybrid(grid, start, goal, **options)
-    if _compiled_kernels() != compiled:
+    if _loaded_kernels() != loaded:
         result = _plan_hybrid(grid, start, goal, **options)
     return result
 

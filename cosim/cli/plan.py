@@ -4,9 +4,9 @@
     cosim plan MAP --query NAME [options]          (named start/goal from MAP's <stem>.queries.toml)
     cosim plan compare MAP --start X,Y --goal X,Y [--expansion-distance M] [--png OUT]
 
-Metrics: path length [m], path nodes, searched nodes (expanded cells), elapsed time [s]. The search is
-compiled on first use (numba), so every configuration runs once untimed and the elapsed time printed
-is the median of --repeat timed runs of the search as the planner measures it.
+Metrics: path length [m], path nodes, searched nodes (expanded cells), elapsed time [s]. The search is a
+C kernel built on first use and loaded once per process, so every configuration runs once untimed and
+the elapsed time printed is the median of --repeat timed runs of the search as the planner measures it.
 """
 
 from __future__ import annotations
@@ -245,8 +245,8 @@ def _header(map_path: Path, grid, start, goal) -> str:
 
 def _timing_note(repeat: int) -> str:
     return (
-        f"elapsed time: search only, median of {repeat} runs after one untimed run that compiles "
-        "the search (numba JIT)"
+        f"elapsed time: search only, median of {repeat} runs after one untimed run that loads "
+        "the search's C kernel"
     )
 
 

@@ -201,7 +201,7 @@ def stop_fork_server() -> None:
     """Stop the local cluster's fork server (started by `start_fork_server`) and wait for it.
 
     Left running, it would only stop when this process exits, and then take its time (it holds the
-    whole run stage: numba, llvmlite, the FMUs) with this process's stdout and stderr still open, so
+    whole run stage: its C kernels, the FMUs) with this process's stdout and stderr still open, so
     whoever reads them waits for it too (about 0.4 s on an idle 2-core machine). Stopped here, it
     goes while the sweep draws its plot. A later sweep of this process starts a new one (warmed up
     on its own scenario). Uses `ForkServer._stop` (CPython's, since 3.8; nothing when not running).

@@ -5,8 +5,8 @@ A `LocalCluster` of the sweep starts its worker processes by forking them from o
 anything. This module is one of them: when the sweep set `WARM_ENV` (the scenario path and the
 overrides of its first run, as JSON) in the server's environment, importing it makes a short run of
 that scenario (`WARM_STOP_TIME` simulated seconds) into a scratch folder, which imports the whole
-run stage, loads every numba kernel the run uses from numba's cache (or compiles it) and loads the
-FMUs' descriptions. Each forked worker inherits all of that, so the work is done once per sweep,
+run stage, loads every C kernel the run uses (building any that is missing) and loads the FMUs'
+descriptions. Each forked worker inherits all of that, so the work is done once per sweep,
 while the client is still importing Dask and planning, instead of once per worker in its first run.
 
 Best effort: whatever goes wrong here is swallowed (the sweep's check of its first run, on a

@@ -1,7 +1,7 @@
 """What runs on a Dask worker: the plugin that unpacks a sweep's files once, and the task of one run.
 
 A worker process keeps running between tasks, so what a first run compiles or builds stays for the
-next ones: numba kernels (in memory, and in numba's on-disk cache), the project FMUs built from
+next ones: the C kernels (loaded, and built once into their cache), the project FMUs built from
 their sources (in the FMU cache), the imported modules. The bundle arrives once per worker, with
 the plugin (`Client.register_plugin` sends it to every worker, present or joining later), and its
 files are removed when the plugin is unregistered or the worker stops.
