@@ -36,6 +36,7 @@ MODE_COLORS = {MODE_AVOID: "#ff9f1c", MODE_RECOVER: "#d62828"}
 MODE_NAMES = {MODE_AVOID: "VFH avoiding (mode 1)", MODE_RECOVER: "recovering (mode 2)"}
 ZONE_RGBA = (0.55, 0.7, 0.95, 0.55)  # the inflated zone over free cells
 DPI = 110
+GRID_ALPHA = 0.3  # the panels' grid lines
 
 # Where the default series come from, in order of preference (each must be in the trace's
 # `TRACE_SIGNALS`, so that the plot of a run's trace is the plot of its log).
@@ -411,10 +412,12 @@ def _render(data: PlotData, png_path: Path) -> Path:
         hspace=0.12,
     )
     _draw_map(figure.add_subplot(grid[:, 0]), data)
-    _draw_series(figure, grid, panels, data.modes)
+    panel_axes = _draw_series(figure, grid, panels, data.modes)
     figure.suptitle(data.title, fontsize=13)
     for axes in figure.axes:
         _ticks_in_view(axes)
+    for axes in panel_axes[:-1]:  # the bottom panel labels the time axis they share
+        _unlabelled_x_ticks(axes)
     canvas.draw()
     png_path.parent.mkdir(parents=True, exist_ok=True)
     # The figure is opaque, so RGB holds every pixel (a quarter fewer bytes to compress than RGBA);
@@ -437,6 +440,53 @@ def _ticks_in_view(axes) -> None:
         slack = 1e-10 * (high - low)  # as matplotlib's own test of which ticks to draw
         locations = [loc for loc in axis.get_majorticklocs() if low - slack <= loc <= high + slack]
         axis.set_major_locator(FixedLocator(locations))
+
+
+def _unlabelled_x_ticks(axes) -> None:
+    """Draw the x grid lines (the panels have their grid on) and tick marks of a panel whose time
+    axis has no labels as one line artist each, and hide its x axis: an axis builds five artists
+    per tick (two of them texts that would not be shown), and these were a third of the figure's
+    ticks. The same lines, styles, clipping and drawing order (an axis draws at zorder 1.5), so
+    the same pixels."""
+    import matplotlib as mpl
+    from matplotlib.lines import TICKDOWN, TICKUP, Line2D
+
+    rc = mpl.rcParams
+    locations = np.asarray(axes.xaxis.get_majorticklocs(), dtype=float)
+    axes.xaxis.set_visible(False)
+    if not len(locations):
+        return
+    grid_x = np.repeat(locations, 3)  # one path: x, x, NaN per grid line
+    grid_x[2::3] = np.nan
+    grid_y = np.tile([0.0, 1.0, np.nan], len(locations))
+    axes.add_artist(
+        Line2D(
+            grid_x,
+            grid_y,
+            transform=axes.get_xaxis_transform("grid"),
+            color=rc["grid.color"],
+            alpha=GRID_ALPHA,
+            linestyle=rc["grid.linestyle"],
+            linewidth=rc["grid.linewidth"],
+            zorder=1.5,
+        )
+    )
+    marker = {"out": TICKDOWN, "in": TICKUP, "inout": "|"}[rc["xtick.direction"]]
+    axes.add_artist(
+        Line2D(
+            locations,
+            np.zeros(len(locations)),
+            transform=axes.get_xaxis_transform("tick1"),
+            linestyle="none",
+            marker=marker,
+            color=rc["xtick.color"],
+            markeredgecolor=rc["xtick.color"],
+            markersize=rc["xtick.major.size"],
+            markeredgewidth=rc["xtick.major.width"],
+            clip_on=False,
+            zorder=1.5,
+        )
+    )
 
 
 def _draw_map(axes, data: PlotData) -> None:
@@ -530,11 +580,14 @@ def _draw_map(axes, data: PlotData) -> None:
         axes.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, fontsize=8)
 
 
-def _draw_series(figure, grid, panels: dict[str, list[Series]], modes) -> None:
+def _draw_series(figure, grid, panels: dict[str, list[Series]], modes) -> list:
+    """One panel (axes) per entry of `panels`, top to bottom, sharing the time axis; returns them."""
     first_axes = None
+    drawn = []
     for row, items in enumerate(panels.values()):
         axes = figure.add_subplot(grid[row, 1], sharex=first_axes)
         first_axes = first_axes or axes
+        drawn.append(axes)
         lines = [axes.plot(item.t, item.values, lw=1.2)[0] for item in items]
         shaded = _shade_modes(axes, modes)
         unit = items[0].unit
@@ -543,10 +596,8 @@ def _draw_series(figure, grid, panels: dict[str, list[Series]], modes) -> None:
         if row == 0:  # explain the shading once
             entries += [(MODE_NAMES[mode], "black", MODE_COLORS[mode]) for mode in shaded]
         _label_panel(axes, entries)
-        axes.grid(alpha=0.3)
-        if row < len(panels) - 1:
-            axes.tick_params(labelbottom=False)
-        else:
+        axes.grid(alpha=GRID_ALPHA)
+        if row == len(panels) - 1:  # the others draw their ticks unlabelled: `_unlabelled_x_ticks`
             axes.set_xlabel("time [s]")
     if not panels:
         axes = figure.add_subplot(grid[0, 1])
@@ -554,6 +605,7 @@ def _draw_series(figure, grid, panels: dict[str, list[Series]], modes) -> None:
             0.5, 0.5, "no navcosim signals in this log", ha="center", va="center", transform=axes.transAxes
         )
         axes.set_axis_off()
+    return drawn
 
 
 def _label_panel(axes, entries: list[tuple[str, str, str | None]]) -> None:
