@@ -1,0 +1,103 @@
+"""How `cosim.logs.plot.draw` renders: the shortcuts it takes past matplotlib's axes (ticks only
+inside the view, the upper panels' unlabelled time ticks and grid lines drawn as two lines) must give
+the pixels matplotlib's own axes give, and the PNG must show every part of the picture in its
+colour. matplotlib, drawing the same figure the plain way, is the truth."""
+
+from __future__ import annotations
+
+import gc
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from cosim.logs import plot
+
+
+def _data(panels: int = 5) -> plot.PlotData:
+    """A small run's picture: a walled map with an inflated zone, an obstacle, a plan, a driven
+    trajectory partly under VFH, start and goal, and `panels` panels of signals (one with two)."""
+    occupied = np.zeros((40, 60), dtype=bool)
+    occupied[[0, -1], :] = occupied[:, [0, -1]] = True
+    occupied[15:25, 28:32] = True
+    zone = np.zeros_like(occupied)
+    zone[1:4, 1:-1] = zone[-4:-1, 1:-1] = zone[12:28, 25:35] = True
+    grid = type("Grid", (), {"shape": occupied.shape, "occupied": occupied})
+    inflated = type("Grid", (), {"shape": occupied.shape, "occupied": occupied | zone})
+    t = np.linspace(0.0, 30.0, 3001)
+    x, y = 5.0 + 0.8 * t, 10.0 + 6.0 * np.sin(t / 9.0)
+    trajectory = np.column_stack((x, y))
+    mode = np.where((t > 8.0) & (t < 12.5), plot.MODE_AVOID, 0)
+    values = [0.8 + 0.1 * np.sin(t), 0.3 * np.cos(t / 3.0), np.sin(t / 4.0), 2.0 + np.cos(t / 2.0), 30.0 - t]
+    series = [
+        plot.Series(f"signal {index}", "m", t, value, f"panel {index}")
+        for index, value in enumerate(values[:panels])
+    ]
+    series.insert(1, plot.Series("second signal of panel 0", "m", t, 0.5 * values[0], "panel 0"))
+    data = plot.PlotData(
+        "synthetic: goal reached at t = 30.0 s\nsynthetic.mcap",
+        image=plot.map_image(grid, inflated),
+        extent=(0.0, 30.0, 0.0, 20.0),
+        has_zone=True,
+        obstacles=[np.array([[20.0, 4.0], [21.0, 4.0], [21.0, 5.0], [20.0, 5.0]])],
+        plan=np.array([[5.0, 10.0], [12.0, 14.0], [20.0, 15.0], [29.0, 12.0]]),
+        trajectory=trajectory,
+        mode_points={plot.MODE_AVOID: trajectory[mode == plot.MODE_AVOID]},
+        start=(5.0, 10.0, 0.5),
+        goal=(29.0, 12.0),
+        tolerance=0.6,
+        limits=(-0.9, 30.9, -0.9, 20.9),
+        series=series,
+        modes=(t, mode),
+    )
+    return data
+
+
+def _pixels(path) -> np.ndarray:
+    with Image.open(path) as image:
+        return np.asarray(image.convert("RGB"))
+
+
+@pytest.mark.parametrize("panels", [5, 2, 1])
+def test_the_shortcuts_draw_the_pixels_of_matplotlibs_own_axes(panels, tmp_path, monkeypatch):
+    drawn = _pixels(plot.draw(_data(panels), tmp_path / "drawn.png"))
+    # matplotlib's way: its default locator, every panel's x axis with its labels hidden
+    monkeypatch.setattr(plot, "_ticks_in_view", lambda axes: None)
+    monkeypatch.setattr(plot, "_unlabelled_x_ticks", lambda axes: axes.tick_params(labelbottom=False))
+    plain = _pixels(plot.draw(_data(panels), tmp_path / "plain.png"))
+    assert drawn.shape == plain.shape
+    assert np.array_equal(drawn, plain)
+
+
+def _has(pixels: np.ndarray, colour: str, at_least: int = 4) -> bool:
+    rgb = np.array([int(colour[i : i + 2], 16) for i in (1, 3, 5)])
+    return int(np.all(pixels == rgb, axis=2).sum()) >= at_least
+
+
+def test_the_png_shows_every_part_in_its_colour(tmp_path):
+    path = plot.draw(_data(), tmp_path / "run.png")
+    with Image.open(path) as image:
+        assert image.format == "PNG" and image.mode == "RGB"
+        # 15 x 9.5 inches (five panels of 1.9 in) at the plot's dpi, recorded in the file
+        assert image.size == (15 * plot.DPI, round(9.5 * plot.DPI))
+        assert np.allclose(image.info["dpi"], (plot.DPI, plot.DPI), atol=0.01)
+    pixels = _pixels(path)
+    for colour in ("#1d4ed8", "#2a9d8f", "#e76f51", plot.MODE_COLORS[plot.MODE_AVOID], "#1f77b4", "#ff7f0e"):
+        assert _has(pixels, colour), f"no {colour} pixels"  # plan, start, goal, VFH points, signals
+    assert _has(pixels, "#262626", 100)  # occupied cells, 0.15 grey
+    zone = 255 * (plot.ZONE_RGBA[3] * np.array(plot.ZONE_RGBA[:3]) + 1.0 - plot.ZONE_RGBA[3])
+    assert int(np.all(np.abs(pixels - zone) <= 1, axis=2).sum()) >= 100  # the inflated zone
+    # the shading's entry: its box in the shading's colour at alpha 0.3 over white, opaque
+    face = np.array([int(plot.MODE_COLORS[plot.MODE_AVOID][i : i + 2], 16) for i in (1, 3, 5)])
+    assert int(np.all(np.abs(pixels - (0.3 * face + 0.7 * 255)) <= 1, axis=2).sum()) >= 100
+
+
+@pytest.mark.parametrize("enabled", [True, False])
+def test_drawing_leaves_the_garbage_collector_as_it_found_it(enabled, tmp_path):
+    was = gc.isenabled()
+    try:
+        (gc.enable if enabled else gc.disable)()
+        plot.draw(_data(1), tmp_path / "one.png")
+        assert gc.isenabled() is enabled
+    finally:
+        (gc.enable if was else gc.disable)()
