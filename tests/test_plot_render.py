@@ -101,3 +101,16 @@ def test_drawing_leaves_the_garbage_collector_as_it_found_it(enabled, tmp_path):
         assert gc.isenabled() is enabled
     finally:
         (gc.enable if was else gc.disable)()
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (7, 13), (64, 300)])
+def test_write_png_is_read_back_by_pillow_as_written(shape, tmp_path):
+    pixels = np.random.default_rng(sum(shape)).integers(0, 256, (*shape, 3), dtype=np.uint8)
+    path = tmp_path / "random.png"
+    plot.write_png(path, pixels[:, ::-1], 72.0)  # a strided view, as the canvas' RGB is
+    with Image.open(path) as image:
+        image.verify()
+    with Image.open(path) as image:
+        assert image.mode == "RGB" and image.size == (shape[1], shape[0])
+        assert np.allclose(image.info["dpi"], (72.0, 72.0), atol=0.01)
+        assert np.array_equal(np.asarray(image), pixels[:, ::-1])

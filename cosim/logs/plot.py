@@ -389,7 +389,6 @@ def draw(data: PlotData, png_path: str | Path) -> Path:
 def _render(data: PlotData, png_path: Path) -> Path:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-    from PIL import Image
 
     panels: dict[str, list[Series]] = {}
     for item in data.series:
@@ -420,13 +419,33 @@ def _render(data: PlotData, png_path: Path) -> Path:
         _unlabelled_x_ticks(axes)
     canvas.draw()
     png_path.parent.mkdir(parents=True, exist_ok=True)
-    # The figure is opaque, so RGB holds every pixel (a quarter fewer bytes to compress than RGBA);
-    # zlib level 1: a third more bytes than the default 6, a tenth of its time (a run's plot is
-    # mostly flat colour).
-    width, height_px = canvas.get_width_height(physical=True)
-    image = Image.frombuffer("RGBA", (width, height_px), canvas.buffer_rgba(), "raw", "RGBA", 0, 1)
-    image.convert("RGB").save(png_path, format="png", compress_level=1, dpi=(DPI, DPI))
+    write_png(png_path, np.asarray(canvas.buffer_rgba())[:, :, :3], DPI)  # the figure is opaque
     return png_path
+
+
+def write_png(path: Path, pixels: np.ndarray, dpi: float) -> None:
+    """Write an 8-bit RGB image (rows x columns x 3, row 0 at the top) as a PNG: no filter on the
+    rows and zlib level 1. A plot is mostly flat colour, so this is a quarter larger than Pillow's
+    default (adaptive filters, level 6) in a tenth of its time, and a third of Pillow's time at
+    level 1. The pixel density (`dpi`) is recorded as Pillow and matplotlib record it."""
+    import struct
+    import zlib
+
+    height, width, _ = pixels.shape
+    rows = np.zeros((height, 1 + 3 * width), dtype=np.uint8)  # a filter byte (0: none) per row
+    rows[:, 1:] = pixels.reshape(height, 3 * width)
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+
+    per_metre = int(dpi / 0.0254 + 0.5)
+    path.write_bytes(
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0))  # 8-bit RGB
+        + chunk(b"pHYs", struct.pack(">IIB", per_metre, per_metre, 1))
+        + chunk(b"IDAT", zlib.compress(rows.tobytes(), 1))
+        + chunk(b"IEND", b"")
+    )
 
 
 def _ticks_in_view(axes) -> None:
