@@ -15,6 +15,7 @@ matplotlib is imported when a plot is drawn, not with this module.
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -359,6 +360,23 @@ def _min_range(log: Log) -> tuple[np.ndarray, np.ndarray] | None:
 # --- drawing ----------------------------------------------------------------------------------
 
 
+@contextmanager
+def collector_paused():
+    """Pause Python's cyclic garbage collector for the block, then restore it as it was. Importing
+    matplotlib and drawing one figure make ~100k objects: in a process that holds many (a run's),
+    the collector would walk them all a few times over (0.1-0.2 s here). The figure is freed by
+    reference counting, its cycles when the collector runs again."""
+    import gc
+
+    collecting = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if collecting:
+            gc.enable()
+
+
 def skip_matplotlib_docstrings() -> None:
     """For a process that draws and exits (`cosim run`): before matplotlib is imported, have it skip
     writing the property list into each artist class's `set()` docstring (matplotlib builds them
@@ -368,7 +386,8 @@ def skip_matplotlib_docstrings() -> None:
 
     if "matplotlib.figure" in sys.modules:
         return
-    import matplotlib.artist
+    with collector_paused():
+        import matplotlib.artist
 
     if callable(getattr(matplotlib.artist, "kwdoc", None)):
         matplotlib.artist.kwdoc = lambda artist: ""
@@ -376,18 +395,8 @@ def skip_matplotlib_docstrings() -> None:
 
 def draw(data: PlotData, png_path: str | Path) -> Path:
     """Render `data` to a PNG (Agg, no pyplot, no display); returns its path."""
-    import gc
-
-    # One figure is ~100k short-lived Python objects: in a process that holds many (a run's), the
-    # cyclic collector would walk them all a few times over (0.1-0.2 s here). The figure is freed by
-    # reference counting, or by the collector once it runs again.
-    collecting = gc.isenabled()
-    gc.disable()
-    try:
+    with collector_paused():
         return _render(data, Path(png_path))
-    finally:
-        if collecting:
-            gc.enable()
 
 
 def _render(data: PlotData, png_path: Path) -> Path:
