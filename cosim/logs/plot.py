@@ -9,7 +9,10 @@ Two sources give the same picture: a log (`plot_run`, `plot_log`: `cosim log plo
 `cosim run` draws, without reading the log back). Both are first reduced to a `PlotData` (the
 arrays drawn) by the same code; then `draw` makes the figure: matplotlib's Agg canvas without
 pyplot, fixed margins (no layout engine), and one artist per kind of thing (a single RGBA image for
-the map and its inflated zone, one collection for the obstacles, their tracks, each mode's shading).
+the map and its inflated zone, one collection for the obstacles, their tracks, each mode's shading),
+text boxes naming each panel's series (no legend per panel), ticks only inside the view, the upper
+panels' unlabelled time ticks as two lines (matplotlib's own pixels: tests/test_plot_render.py), the
+cyclic garbage collector paused, and the PNG written straight from the canvas (`write_png`).
 matplotlib is imported when a plot is drawn, not with this module.
 """
 
