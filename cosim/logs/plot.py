@@ -467,14 +467,22 @@ def write_png(path: Path, pixels: np.ndarray, dpi: float) -> None:
 def _ticks_in_view(axes) -> None:
     """Fix each axis' major ticks to the locations its default locator gives inside the view.
     That locator also returns a location beyond each end, never drawn, but matplotlib builds a
-    tick (five artists) for each: a quarter of the figure's ticks. The ticks drawn are the same."""
+    tick (five artists) for each: a quarter of the figure's ticks. The ticks drawn are the same.
+    An axis with fewer than two ticks in view keeps its locator: the tick labels' number format
+    then depends on the ticks outside the view too."""
     from matplotlib.ticker import FixedLocator
 
     for axis, limits in ((axes.xaxis, axes.get_xlim()), (axes.yaxis, axes.get_ylim())):
-        low, high = sorted(limits)
-        slack = 1e-10 * (high - low)  # as matplotlib's own test of which ticks to draw
-        locations = [loc for loc in axis.get_majorticklocs() if low - slack <= loc <= high + slack]
-        axis.set_major_locator(FixedLocator(locations))
+        locations = _in_view(axis.get_majorticklocs(), limits)
+        if len(locations) >= 2:
+            axis.set_major_locator(FixedLocator(locations))
+
+
+def _in_view(locations, limits) -> list[float]:
+    """The tick `locations` matplotlib draws for an axis showing `limits`."""
+    low, high = sorted(limits)
+    slack = 1e-10 * (high - low)  # as matplotlib's own test of which ticks to draw
+    return [float(loc) for loc in locations if low - slack <= loc <= high + slack]
 
 
 def _unlabelled_x_ticks(axes) -> None:
@@ -487,7 +495,7 @@ def _unlabelled_x_ticks(axes) -> None:
     from matplotlib.lines import TICKDOWN, TICKUP, Line2D
 
     rc = mpl.rcParams
-    locations = np.asarray(axes.xaxis.get_majorticklocs(), dtype=float)
+    locations = np.array(_in_view(axes.xaxis.get_majorticklocs(), axes.get_xlim()))
     axes.xaxis.set_visible(False)
     if not len(locations):
         return
