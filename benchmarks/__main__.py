@@ -25,6 +25,7 @@ BENCHMARKS = {
     "sweep": ["bench_sweep.py"],
     "live": ["bench_live.py"],
     "mcap_writers": ["bench_mcap_writers.py"],
+    "png": ["bench_png.py"],
 }
 
 
