@@ -159,6 +159,8 @@ def measure(
         "hybrid first call, cold": (lambda _: [sys.executable, "-c", HYBRID], 1, True),
     }
     for what, (command, times, with_fmus) in cold.items():
+        if cold_repeat == 0:
+            break  # --cold-repeat 0: the warm figures only
         for name, path in checkouts.items():
             results[name][what] = _cold(path, command, times, with_fmus)
     return _best(floor), results
@@ -168,7 +170,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", default="scenarios/warehouse_diff_drive_one_obstacle.toml")
     parser.add_argument("--repeat", type=int, default=5, help="rounds of warm processes (fastest)")
-    parser.add_argument("--cold-repeat", type=int, default=2, help="cold first runs (fastest)")
+    parser.add_argument(
+        "--cold-repeat", type=int, default=2, help="cold first runs (fastest); 0 leaves out every cold figure"
+    )
     parser.add_argument("--baseline", type=Path, help="another checkout to measure beside this one")
     args = parser.parse_args(argv)
     checkouts = {"now": REPO} | ({"baseline": args.baseline.resolve()} if args.baseline else {})
@@ -182,6 +186,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     print(header + f"{'issue before':>14}{'goal':>9}")
     for what in ISSUE_BEFORE:
+        if what not in results["now"]:
+            continue
         row = f"{what:<30}"
         for figures in results.values():
             wall, rss, cpu = figures[what]
