@@ -57,7 +57,6 @@ from cosim.core.master import NS_PER_S, Master
 from cosim.errors import PATH_LIMIT, CosimError, shorten
 from cosim.navigation.build import BuiltRun, build_run
 from cosim.navigation.outcome import Outcome, OutcomeMonitor, outcome_metadata
-from cosim.record import batch as recorder_batch
 from cosim.record.logfile import claim_default_log, claim_log, is_regular_file
 from cosim.scenario.load import Scenario
 from cosim.world.shapes import moves
@@ -390,7 +389,6 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     # Compile (or load from numba's cache) the kernels that would first run inside the loop, so the
     # real-time factor measures the simulation, not a first run's JIT compilation.
     monitor.world.distance(*scenario.start[:2])
-    recorder_batch.warm_up()
     tables = master.kernel_tables(record=True) if _use_kernel(scenario) else None
     if tables is not None:
         tables.warm_up()

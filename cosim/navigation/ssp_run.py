@@ -145,7 +145,6 @@ def _record(
     ssp: SspSystem, run: Experiment, master: Master, system, out_path: Path | None, force: bool
 ) -> SspRunResult:
     """Step and log, with signals deferred: an interrupt ends the run with a finalised log."""
-    from cosim.record import batch as recorder_batch
     from cosim.record.recorder import Recorder
 
     try:
@@ -159,7 +158,6 @@ def _record(
         raise
     h_ns = system.macro_step_ns
     total = round((seconds_to_ns(run.stop_time, "stop time") - master.start_time_ns) / h_ns)
-    recorder_batch.warm_up()  # compile (or load) the packing kernels outside the timed run
     wall_start = time.perf_counter()
     failure = None
     with recorder:

@@ -6,13 +6,17 @@ record of the block with NumPy (MCAP message head + CDR payload, the template by
 varying fields written through a structured view), lays them out in the order they were written
 and hands them to `ChunkWriter.add_records`. The bytes are exactly what the per-message path writes
 (`rosmsg.signals_payload`, `odometry_cdr`, `tf_cdr`, `pose_stamped_cdr`, any ready CDR bytes).
+
+`MessageBlock.add_batch` takes the messages of many steps at once (arrays in write order) and
+packs exactly where holding them one at a time would have packed (a stream's block full, or a
+message past the first held message's chunk window), so a schema or channel registered between
+two messages lands where it would have.
 """
 
 from __future__ import annotations
 
 import struct
 
-import numba
 import numpy as np
 
 from cosim.errors import CosimError
@@ -33,22 +37,15 @@ RAW = "raw"  # the stream of messages held as ready payload bytes
 RAW_STREAM = 0
 
 
-@numba.njit(cache=True)
-def _scatter(out, starts, records):
-    """Copy row j of `records` (bytes) to out[starts[j]:]; one compiled loop instead of a NumPy
-    fancy index per byte (a block of odometry records is ~400 kB). Byte by byte, not a slice
-    assignment: that pulls in numba's shape-mismatch error formatting, ~90 % of the compile."""
+def _scatter(out: np.ndarray, starts: np.ndarray, records: np.ndarray) -> None:
+    """Copy row j of `records` (bytes) to out[starts[j]:]: one fancy-index assignment of whole
+    rows, through a view of `out` whose row r starts at byte r (rows overlap; the rows written
+    do not)."""
     size = records.shape[1]
-    for row in range(records.shape[0]):
-        start = starts[row]
-        for column in range(size):
-            out[start + column] = records[row, column]
-
-
-def warm_up() -> None:
-    """Compile `_scatter` (or load it from numba's cache) for the argument types a flush uses, so
-    the first block written inside a timed run does not pay for it."""
-    _scatter(np.zeros(4, dtype=np.uint8), np.zeros(1, dtype=np.int64), np.zeros((1, 4), dtype=np.uint8))
+    if size == 0 or len(starts) == 0:
+        return
+    rows = np.ndarray((len(out) - size + 1, size), np.uint8, out, 0, (1, 1))
+    rows[starts] = records
 
 
 def _record_dtype(payload_fields: dict[str, tuple], payload_size: int) -> np.dtype:
@@ -170,7 +167,36 @@ class PoseStream:
         }
         pose_fields |= {"qz": ("<f8", stamped_offset + 40), "qw": ("<f8", stamped_offset + 48)}
         self.pose = _Records(pose, rosmsg.pose_stamped_cdr(0, *zero_pose), pose_fields)
-        self.rows: list[tuple] = []  # (t_ns, x, y, theta, v, omega)
+        self.rows: list[tuple] = []  # (t_ns, x, y, theta, v, omega) held one at a time, not yet in `blocks`
+        self.blocks: list[tuple[np.ndarray, np.ndarray]] = []  # (t_ns, rows of x, y, theta, v, omega)
+        self.count = 0  # poses held
+
+    def add_rows(self, times: np.ndarray, values: np.ndarray) -> None:
+        self.settle()
+        self.blocks.append((times, values))
+        self.count += len(times)
+
+    def settle(self) -> None:
+        """The poses held one at a time as a block."""
+        if self.rows:
+            times = np.array([row[0] for row in self.rows], dtype=np.int64)
+            self.blocks.append((times, np.array([row[1:] for row in self.rows], dtype=np.float64)))
+            self.rows = []
+
+    def take(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every held pose: (t_ns, rows of x, y, theta, v, omega); none held after."""
+        self.held()
+        (times, values), self.blocks, self.count = self.blocks[0], [], 0
+        return times, values
+
+    def held(self) -> tuple[np.ndarray, np.ndarray]:
+        """The held poses as one block, still held."""
+        self.settle()
+        if len(self.blocks) != 1:
+            self.blocks = [
+                (np.concatenate([t for t, _ in self.blocks]), np.concatenate([v for _, v in self.blocks]))
+            ]
+        return self.blocks[0]
 
 
 class MessageBlock:
@@ -297,24 +323,141 @@ class MessageBlock:
             self.count += 1
         self.pack()
 
-    def add_pose(self, channels: tuple[int, int, int], row: tuple) -> bool:
+    def pose_stream(self, channels: tuple[int, int, int]) -> tuple[int, int, int]:
+        """The stream numbers of /odom, /tf, /pose (made on first use)."""
         if self.pose is None:
             self.pose = PoseStream(*channels)
             first = len(self.streams)
             self.streams += ["odom", "tf", "pose"]
             self.pose_streams = (first, first + 1, first + 2)
+        return self.pose_streams
+
+    def add_pose(self, channels: tuple[int, int, int], row: tuple) -> bool:
+        self.pose_stream(channels)
         self.pose.rows.append(row)
+        self.pose.count += 1
         self.order.extend(self.pose_streams)
         self.count += 3
         if self.count == 3 and self.window_ns:  # the first held messages
             self.deadline = (row[0] // self.window_ns + 1) * self.window_ns
-        return len(self.pose.rows) == self.capacity or self._due(row[0])
+        return self.pose.count == self.capacity or self._due(row[0])
 
     def add_raw(self, channel: int, t_ns: int, payload: bytes) -> bool:
         self.raw.append((channel, t_ns, payload))
         self.order.append(RAW_STREAM)
         self.count += 1
         return len(self.raw) == self.capacity or self._due(t_ns)
+
+    def add_batch(
+        self,
+        order: np.ndarray,
+        times: np.ndarray,
+        signal_rows: dict[int, np.ndarray],
+        pose_rows: np.ndarray | None = None,
+        raw: list[tuple[int, bytes]] = (),
+    ) -> None:
+        """Hold many messages at once, packing where holding them one at a time would have
+        (`add_signals`, `add_pose`, `add_raw` and a pack whenever one returned True).
+
+        `order`: the stream number of each message in write order (a pose is its three streams,
+        `pose_stream`, one after the other); `times` [ns]: each message's stamp, never decreasing;
+        `signal_rows`: per signal stream number, its rows in order (a step stream's row: the
+        step's inputs, then its end outputs); `pose_rows`: per pose, x, y, theta, v, omega;
+        `raw`: per RAW_STREAM message, (channel, payload)."""
+        order = np.asarray(order, dtype=np.int64)
+        times = np.asarray(times, dtype=np.int64)
+        cursors = dict.fromkeys(signal_rows, 0)
+        cursors[RAW_STREAM] = 0
+        cursors[self.pose_streams[0]] = 0
+        count = len(order)
+        window = self.window_ns
+        i = 0
+        while i < count:
+            end, full = count, False
+            if window:
+                if self.count == 0:
+                    deadline, low = (int(times[i]) // window + 1) * window, i + 1
+                else:
+                    deadline, low = self.deadline, i
+                later = np.flatnonzero(times[low:] >= deadline)
+                if len(later):
+                    end, full = low + int(later[0]) + 1, True
+            room = self._room()
+            if end - i >= room:  # a stream may fill its block first
+                stop = self._filled(order, i, end)
+                if stop is not None and stop < end:
+                    end, full = stop, True
+            if full and order[end - 1] == self.pose_streams[0]:
+                end += 2  # a pose's three messages are held together
+            self._hold_batch(order, times, i, end, signal_rows, pose_rows, raw, cursors)
+            if full:
+                self.pack()
+            i = end
+
+    def _room(self) -> int:
+        """Messages that can be held before some stream's block is full, at least."""
+        room = self.capacity - len(self.raw)
+        if self.pose is not None:
+            room = min(room, self.capacity - self.pose.count)
+        for stream in self.signals.values():
+            room = min(room, self.capacity - len(stream.times))
+        return room
+
+    def _filled(self, order: np.ndarray, first: int, end: int) -> int | None:
+        """End (exclusive) of the first message in order[first:end] that fills its stream's block."""
+        stop = None
+        part = order[first:end]
+        ends = [(RAW_STREAM, self.capacity - len(self.raw))]
+        if self.pose is not None:
+            ends.append((self.pose_streams[2], self.capacity - self.pose.count))
+        ends += [(self.stream_of[c], self.capacity - len(s.times)) for c, s in self.signals.items()]
+        for number, room in ends:
+            where = np.flatnonzero(part == number)
+            if len(where) >= room > 0:
+                candidate = first + int(where[room - 1]) + 1
+                stop = candidate if stop is None else min(stop, candidate)
+        return stop
+
+    def _hold_batch(self, order, times, first, end, signal_rows, pose_rows, raw, cursors) -> None:
+        """Hold messages order[first:end] (no pack)."""
+        if first >= end:
+            return
+        part = order[first:end]
+        stamps = times[first:end]
+        if self.count == 0 and self.window_ns:
+            self.deadline = (int(stamps[0]) // self.window_ns + 1) * self.window_ns
+        counts = np.bincount(part, minlength=len(self.streams)).tolist()
+        for number, n in enumerate(counts):
+            if not n:
+                continue
+            stream = self.streams[number]
+            if number == RAW_STREAM:
+                at = cursors[RAW_STREAM]
+                for (channel, payload), t_ns in zip(
+                    raw[at : at + n], stamps[part == RAW_STREAM].tolist(), strict=True
+                ):
+                    self.raw.append((channel, t_ns, payload))
+                cursors[RAW_STREAM] = at + n
+            elif number == self.pose_streams[0]:
+                at = cursors[number]
+                self.pose.add_rows(stamps[part == number], pose_rows[at : at + n])
+                cursors[number] = at + n
+            elif isinstance(stream, SignalStream):
+                at = cursors[number]
+                rows = signal_rows[number][at : at + n]
+                cursors[number] = at + n
+                held = len(stream.times)
+                split = stream.split
+                if split is None:
+                    stream.rows[held : held + n] = rows
+                else:
+                    if stream.ended:
+                        raise CosimError(f"signal channel {stream.records.channel}: a step after end_steps")
+                    stream.rows[held : held + n, :split] = rows[:, :split]
+                    stream.rows[held + 1 : held + n + 1, split:] = rows[:, split:]
+                stream.times.extend(stamps[part == number].tolist())
+        self.order.extend(part.tolist())
+        self.count += end - first
 
     def _sequence(self, channel: int, count: int) -> int:
         first = self.sequences[channel]
@@ -335,24 +478,23 @@ class MessageBlock:
                     records["values"] = stream.rows[: len(times)]
                 parts[number] = (records, times, stream.records.channel)
                 stream.carry()
-        if self.pose is not None and self.pose.rows:
-            rows = np.array(self.pose.rows)
-            times = np.array([row[0] for row in self.pose.rows], dtype=np.uint64)
-            half = rows[:, 3] / 2.0
+        if self.pose is not None and self.pose.count:
+            times, rows = self.pose.take()
+            times = times.astype(np.uint64)
+            half = rows[:, 2] / 2.0
             qz, qw = np.sin(half), np.cos(half)
             for number, records_of in zip(
                 self.pose_streams, (self.pose.odom, self.pose.tf, self.pose.pose), strict=True
             ):
                 records = records_of.build(times, self._sequence(records_of.channel, len(times)))
-                records["pose"] = rows[:, 1]
-                records["pose_y"] = rows[:, 2]
+                records["pose"] = rows[:, 0]
+                records["pose_y"] = rows[:, 1]
                 records["qz"] = qz
                 records["qw"] = qw
                 if records_of is self.pose.odom:
-                    records["v"] = rows[:, 4]
-                    records["omega"] = rows[:, 5]
+                    records["v"] = rows[:, 3]
+                    records["omega"] = rows[:, 4]
                 parts[number] = (records, times, records_of.channel)
-            self.pose.rows = []
         sizes = np.zeros(len(self.streams), dtype=np.int64)
         for number, (records, _, _) in parts.items():
             sizes[number] = records.dtype.itemsize

@@ -45,7 +45,7 @@ import numpy as np
 
 from cosim.errors import CosimError
 from cosim.record import rosmsg
-from cosim.record.batch import MessageBlock
+from cosim.record.batch import RAW_STREAM, MessageBlock
 from cosim.record.writer import ChunkWriter
 
 CHUNK_SIZE = 512 * 1024  # bytes of uncompressed records after which a chunk ends
@@ -158,10 +158,12 @@ class RunTrace:
                 rows = stream.rows[:count, indices]
                 self.signal_blocks[component].append((np.array(stream.times, dtype=np.int64), rows))
         pose = block.pose
-        if pose is not None and pose.rows and self._count(5 * len(pose.rows)):
-            rows = np.array(pose.rows)
-            half = rows[:, 3] / 2.0
-            self.poses.append(np.column_stack((rows[:, :3], np.sin(half), np.cos(half))))
+        if pose is not None and pose.count and self._count(5 * pose.count):
+            times, rows = pose.held()
+            half = rows[:, 2] / 2.0
+            self.poses.append(
+                np.column_stack((times.astype(np.float64), rows[:, :2], np.sin(half), np.cos(half)))
+            )
 
     def add_scan(self, t_ns: int, ranges: np.ndarray, range_min: float, range_max: float) -> None:
         """`ranges`: the float32 ranges as written; the shortest within the float32 limits, or NaN."""
@@ -453,6 +455,68 @@ class Recorder:
         self._block.add_signal_rows(blocks)
         self._held(True)
 
+    def has_channel(self, topic: str) -> bool:
+        """Whether `topic` (a name of `TOPIC_TYPES` or "/signals/<component>") is registered."""
+        return topic in self._channels
+
+    def hold_steps(
+        self,
+        signals: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]],
+        poses: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+        others: tuple[np.ndarray, np.ndarray, list[tuple[str, bytes]]] | None = None,
+    ) -> None:
+        """The messages of many steps at once, with the bytes, order and chunks of writing them one
+        at a time (`hold_signals`, `write_pose`, `write_scan`, ...). Each message has an integer
+        key; they are written in key order (keys are distinct).
+
+        `signals`: per signal channel (channel, keys, t_ns, rows) as for `hold_signal_rows`;
+        `poses`: (keys, t_ns, rows of x, y, theta, v, omega) of /odom, /tf and /pose (one pose:
+        keys key, key + 1, key + 2); `others`: (keys, t_ns, [(topic, CDR payload)]) of messages
+        of registered topics (`scan_payload`, `obstacles_payload`, ...). Stamps must not
+        decrease in key order."""
+        if self._closed:
+            raise CosimError(f"{self.path}: the log is already closed")
+        block = self._block
+        keys, streams, stamps = [], [], []
+        signal_rows = {}
+        for channel, channel_keys, times, rows in signals:
+            if not len(channel_keys):
+                continue
+            number = block.stream_of[channel]
+            if number in signal_rows:
+                raise CosimError(f"{self.path}: channel {channel} given twice")
+            if rows.ndim != 2 or rows.shape[1] != self._signal_sizes[channel] or len(rows) != len(times):
+                raise CosimError(f"{self.path}: signal rows of shape {rows.shape} for channel {channel}")
+            signal_rows[number] = rows
+            keys.append(channel_keys)
+            streams.append(np.full(len(channel_keys), number))
+            stamps.append(times)
+        pose_rows = None
+        if poses is not None and len(poses[0]):
+            if self._pose_channels is None:
+                self._pose_channels = (self._channel("/odom"), self._channel("/tf"), self._channel("/pose"))
+            pose_keys, times, pose_rows = poses
+            numbers = block.pose_stream(self._pose_channels)
+            keys.append((pose_keys[:, None] + np.arange(3)).reshape(-1))
+            streams.append(np.tile(numbers, len(pose_keys)))
+            stamps.append(np.repeat(times, 3))
+        raw = []
+        if others is not None and len(others[0]):
+            other_keys, times, messages = others
+            by_key = np.argsort(other_keys, kind="stable")
+            raw = [(self._channels[messages[j][0]], messages[j][1]) for j in by_key.tolist()]
+            keys.append(other_keys)
+            streams.append(np.full(len(other_keys), RAW_STREAM))
+            stamps.append(times)
+        if not keys:
+            return
+        order = np.argsort(np.concatenate(keys), kind="stable")
+        block.add_batch(
+            np.concatenate(streams)[order], np.concatenate(stamps)[order], signal_rows, pose_rows, raw
+        )
+        if time.monotonic() - self._last_flush >= self.flush_interval:
+            self._sync()
+
     # --- robot topics --------------------------------------------------------------------
 
     def write_pose(self, t_ns: int, x: float, y: float, theta: float, v: float, omega: float) -> None:
@@ -540,11 +604,25 @@ class Recorder:
         range_max: float,
         scan_time: float = 0.0,
     ) -> None:
+        """A lidar sweep on /scan (`scan_payload`)."""
+        payload = self.scan_payload(t_ns, angles, ranges, range_min, range_max, scan_time)
+        self._hold(self._channels["/scan"], t_ns, payload)
+
+    def scan_payload(
+        self,
+        t_ns: int,
+        angles: np.ndarray,
+        ranges: np.ndarray,
+        range_min: float,
+        range_max: float,
+        scan_time: float = 0.0,
+    ) -> bytes:
         """A lidar sweep on /scan: beam angles [rad] in the robot frame and ranges [m]; `scan_time`
         [s] between sweeps (1 / rate). REP-117: a beam without a return (NaN from the lidar) is
         +inf. All beams are taken at the stamp, so `time_increment` is 0. LaserScan needs equally
         spaced angles, so beams go into bins of a uniform grid (see `scan_layout`); bins without a
-        beam hold NaN (no measurement)."""
+        beam hold NaN (no measurement). Returns the message's CDR bytes (the first sweep registers
+        /scan), for `write_scan` or `hold_steps`."""
         last = self._last_scan
         if (
             last is not None
@@ -573,9 +651,9 @@ class Recorder:
         # empty intensities.
         stamp = _STAMP.pack(*divmod(int(t_ns), 1_000_000_000))
         payload = b"".join((head[:4], stamp, head[12:], binned.tobytes(), tail))
-        self._hold(self._channels["/scan"], t_ns, payload)
         if self.trace is not None:
             self.trace.add_scan(t_ns, binned, range_min, range_max)
+        return payload
 
     def _scan_template(
         self, angles: np.ndarray, range_min: float, range_max: float, scan_time: float
@@ -613,6 +691,10 @@ class Recorder:
         bytes of the first message of the same shapes (`_ObstacleTemplate`): only the stamps and
         the centres change. The message is held in the block like /scan (a direct write packs the
         block first); the block keeps the order of the messages, so the log reads the same."""
+        self._hold(self._channel("/obstacles"), t_ns, self.obstacles_payload(t_ns, obstacles))
+
+    def obstacles_payload(self, t_ns: int, obstacles: list) -> bytes:
+        """The CDR bytes of the /obstacles message of `write_obstacles` (for it or `hold_steps`)."""
         key = tuple(_marker_key(obstacle) for obstacle in obstacles)
         if None in key:  # a polygon: its points change when it moves
             payload = _serialize_obstacles(t_ns, obstacles)
@@ -624,9 +706,9 @@ class Recorder:
                     raise CosimError(f"{self.path}: unexpected MarkerArray CDR layout")
                 self._obstacle_templates[key] = template
             payload = template.fill(t_ns, obstacles)
-        self._hold(self._channel("/obstacles"), t_ns, payload)
         if self.trace is not None:
             self.trace.add_obstacles(t_ns, obstacles)
+        return payload
 
 
 def _serialize_obstacles(t_ns: int, obstacles: list) -> bytes:
