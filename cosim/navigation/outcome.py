@@ -62,39 +62,62 @@ class OutcomeMonitor:
 
     def check_position(self, t: float, x: float, y: float) -> str | None:
         """Update at time t [s] with the vehicle at (x, y) [m]; return why the run ends, or None."""
+        return self.check_positions((t,), (x,), (y,))[1]
+
+    def check_positions(self, times, xs, ys) -> tuple[int, str | None]:
+        """`check_position` for consecutive steps (sequences of Python floats): (index of the step
+        that ends the run, why) or (len(times), None); no step after the one that ends it is
+        looked at."""
         outcome = self.outcome
-        outcome.time = t
+        radius = self.radius
+        speed = self._speed
+        moving = self._moving
+        world = self.world
+        goal_x, goal_y = self.goal
+        tolerance = self.tolerance
+        hypot, isfinite = math.hypot, math.isfinite
         last_x, last_y = self.last_xy
-        outcome.distance += math.hypot(x - last_x, y - last_y)
-        self.last_xy = (x, y)
-        if not (math.isfinite(x) and math.isfinite(y)):
-            outcome.reason = "collision"
-            outcome.collision_point = (x, y)
-            return outcome.reason
-        # The exact distance only matters when it could set a new minimum (or a collision).
+        distance = outcome.distance
         anchor_x, anchor_y, anchor_t, anchor_bound = self._anchor
-        margin = outcome.min_clearance + self.radius
-        drift = self._speed * (t - anchor_t) if self._speed else 0.0
-        if anchor_bound - math.hypot(x - anchor_x, y - anchor_y) - drift < margin:
-            if self._moving:
-                self.world.at(t)
-            bound = self.world.lower_bound(x, y)
-            self._anchor = (x, y, t, bound)
-            if bound < margin:
-                distance = self.world.distance(x, y)
-                self._anchor = (x, y, t, distance)
-                clearance = distance - self.radius
-                if clearance < outcome.min_clearance:
-                    outcome.min_clearance = clearance
-                if clearance < 0.0:
-                    outcome.reason = "collision"
-                    outcome.collision_point = (x, y)
-                    return outcome.reason
-        if math.hypot(x - self.goal[0], y - self.goal[1]) <= self.tolerance:
-            outcome.reached = True
-            outcome.reason = "goal_reached"
-            return outcome.reason
-        return None
+        index, reason = len(times), None
+        for i, (t, x, y) in enumerate(zip(times, xs, ys, strict=True)):
+            distance += hypot(x - last_x, y - last_y)
+            last_x, last_y = x, y
+            if not (isfinite(x) and isfinite(y)):
+                outcome.reason = "collision"
+                outcome.collision_point = (x, y)
+                index, reason = i, "collision"
+                break
+            # The exact distance only matters when it could set a new minimum (or a collision).
+            margin = outcome.min_clearance + radius
+            drift = speed * (t - anchor_t) if speed else 0.0
+            if anchor_bound - hypot(x - anchor_x, y - anchor_y) - drift < margin:
+                if moving:
+                    world.at(t)
+                bound = world.lower_bound(x, y)
+                anchor_x, anchor_y, anchor_t, anchor_bound = x, y, t, bound
+                if bound < margin:
+                    exact = world.distance(x, y)
+                    anchor_bound = exact
+                    clearance = exact - radius
+                    if clearance < outcome.min_clearance:
+                        outcome.min_clearance = clearance
+                    if clearance < 0.0:
+                        outcome.reason = "collision"
+                        outcome.collision_point = (x, y)
+                        index, reason = i, "collision"
+                        break
+            if hypot(x - goal_x, y - goal_y) <= tolerance:
+                outcome.reached = True
+                outcome.reason = "goal_reached"
+                index, reason = i, "goal_reached"
+                break
+        if len(times):
+            outcome.time = times[min(index, len(times) - 1)]
+        outcome.distance = distance
+        self.last_xy = (last_x, last_y)
+        self._anchor = (anchor_x, anchor_y, anchor_t, anchor_bound)
+        return index, reason
 
     def check_mode(self, mode: float, period: float) -> None:
         """Update with the mixer's mode after a mixer step of `period` [s]."""

@@ -111,6 +111,7 @@ class _Recording:
         self.recorder = recorder
         system = built.system
         self.entries = []
+        self.entry_ports = []  # per entry: (component, scalar input slots, output slots)
         self.constant = []  # (channel, record) of components whose outputs never change: once, at t = 0
         arrays = built.scenario.signal_arrays
         for component in master.order:
@@ -144,6 +145,7 @@ class _Recording:
             )
             if first is not None and second is not None:
                 self.entries.append((system.period_steps(component), channel, first, second, None))
+                self.entry_ports.append((component, inputs, outputs))
                 continue
             values = np.empty(len(names))  # the record, gathered; reused, no allocation per step
             gather = (
@@ -155,6 +157,7 @@ class _Recording:
                 values[len(inputs) :],
             )
             self.entries.append((system.period_steps(component), channel, values, None, gather))
+            self.entry_ports.append((component, inputs, outputs))
         observed = built.description.observed
         (self.pose_x, self.x), (self.pose_y, self.y), (self.pose_theta, self.theta) = (
             _output(system, reference) for reference in observed.pose
@@ -415,10 +418,20 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
         if mode_steps and k % mode_steps == 0:
             monitor.check_mode(mode_buffer.item(mode_index), mode_period)
         reason = monitor.check_position((t_ns + h_ns) / NS_PER_S, x_item(index_x), y_item(index_y))
+        return finish_checks(k, reason)
+
+    def finish_checks(k: int, reason: str | None, before_write=None) -> str | None:
+        """The end of step k after its position check: a new goal, a new plan (`before_write()`
+        first when either may write to the log); why the run ends after it, or None."""
+        t_ns = start_ns + k * h_ns
         if goal_poll is not None and reason is None and k % goal_steps == 0:
+            if before_write is not None:
+                before_write()
             goal_poll(t_ns, h_ns)
         if planner is not None:
             if planner.plan_version != plan_version[0]:
+                if before_write is not None:
+                    before_write()
                 plan_version[0] = planner.plan_version
                 recorder.write_path(t_ns, planner.result.path)  # the plan made in step k
             monitor.outcome.replans = len(planner.replans)
@@ -448,11 +461,14 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
         return stop(finish_step(current.step_index - 1), True, current.time)
 
     failure = None
+    blocks = None
     try:
         if tables is None:
             master.run(total_steps, after_step)
         else:
+            polled = goal_steps if goal_poll is not None else 0
             blocks = _KernelBlocks(built, master, tables, monitor, finish_step)
+            blocks.fast = _BlockRecording(built, master, recording, monitor, finish_checks, polled)
 
             def on_block(first: int, end: int, histories, clean: bool) -> bool:
                 return stop(blocks.replay(first, end, histories, clean), clean, master.time)
@@ -463,6 +479,9 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     except interrupt.Interrupted:  # a signal while an FMU in a child process did not answer
         take_signal()
         state["reason"] = "interrupted"
+    finally:
+        if blocks is not None and blocks.fast is not None:
+            blocks.fast.flush()  # the steps recorded but not yet handed to the log
     wall_time = time.perf_counter() - wall_start
     end_ns = master.time_ns
     # The pose at end_ns is the vehicle's after the last completed step (after a failure too; the
@@ -581,6 +600,7 @@ class _KernelBlocks:
         self.moving = bool(getattr(self.world, "moving", False))
         # Moving obstacles: short blocks, so the reach of the obstacles in one block stays small.
         self.block = 50 if self.speed > 0.0 else 1000
+        self.fast: _BlockRecording | None = None  # recording and checks from the rows, when set
         self.h = system.macro_step
         self.anchor: tuple[float, float] | None = None
         # Per component: period, its scalar inputs (a view of the buffer; array inputs are not
@@ -628,6 +648,33 @@ class _KernelBlocks:
         numbers[3:] = (x, y, free * free if free > 0.0 else -1.0)
 
     def replay(self, first: int, end: int, histories, clean: bool) -> str | None:
+        """Steps [first, end): recorded and checked from their rows (`_BlockRecording`), or, for a
+        block that needs it, step by step (`replay_steps`)."""
+        fast = self.fast
+        if fast is None:
+            return self.replay_steps(first, end, histories, clean)
+        if fast.accepts(first, end, histories):
+            return fast.block(first, end, histories, clean)
+        if not fast.usable:
+            return self.replay_steps(first, end, histories, clean)
+        fast.flush()
+        rows = {}
+        for i, part in enumerate(self.parts):
+            if i in fast.buffers:
+                _, _, where, outputs, held_inputs, held_outputs = part
+                row = fast.held(i)
+                held_inputs[:] = row[where]
+                held_outputs[:] = row[len(row) - len(outputs) :]
+                rows[i] = row
+        try:
+            return self.replay_steps(first, end, histories, clean)
+        finally:
+            for i, row in rows.items():
+                _, _, where, outputs, held_inputs, held_outputs = self.parts[i]
+                row[where] = held_inputs
+                row[len(row) - len(outputs) :] = held_outputs
+
+    def replay_steps(self, first: int, end: int, histories, clean: bool) -> str | None:
         """Steps [first, end) as the Python loop's callback sees them: each recorded component's
         buffers (its scalar inputs and its outputs, what the recording reads) are set to what they
         held after each step (its rows, held between its steps), then put back as they are now."""
@@ -671,6 +718,308 @@ class _KernelBlocks:
                 inputs[:] = live_inputs
                 outputs[:] = live_outputs
         return reason
+
+
+class _BlockRecording:
+    """The kernel path's recording and checks, a block of steps at a time (`_KernelBlocks.replay`).
+
+    Within a block only the kernel's components step (a component stepped by Python is due at most
+    at the block's last step, whose buffers are live), so what the Python loop's `finish_step`
+    does step by step can be done over the block's rows: the positions are checked in one call of
+    `OutcomeMonitor.check_positions` (the same arithmetic, step by step, in Python floats), and
+    the rows are copied into buffers that collect the steps of several blocks. `flush()` turns
+    those steps into their messages with NumPy (signal records, /odom /tf /pose at the pose rate,
+    /cmd_vel and the mixer's mode at the mixer's rate; scans and moved obstacles were made at their
+    steps) and hands them to `Recorder.hold_steps`, which writes the bytes of the per-step path.
+    Steps are flushed once a chunk window has ended (so a killed run loses what it lost before),
+    before anything else is written (a new plan, a goal), when the buffers are full, and at the end
+    of the run. A block the rows cannot describe (a component stepped by Python due before its last
+    step, a topic's first message) is flushed and replayed step by step (`_KernelBlocks`).
+    """
+
+    STEPS = 2048  # steps collected at most between two flushes
+
+    def __init__(
+        self, built: BuiltRun, master: Master, recording: _Recording, monitor, finish_checks, polled
+    ):
+        system = built.system
+        self.system = system
+        self.recording = recording
+        self.recorder = recording.recorder
+        self.monitor = monitor
+        self.finish_checks = finish_checks
+        self.polled = polled  # period [steps] of the goal poll, 0 without
+        self.components = [component for component, _, _ in master._plan]
+        self.periods = [period for _, period, _ in master._plan]
+        self.index = {component.name: i for i, component in enumerate(self.components)}
+        self.start_ns = master.start_time_ns
+        self.h_ns = system.macro_step_ns
+        self.window_ns = self.recorder.window_ns
+        self.observed = built.description.observed
+        self.ready = False
+        self.usable = True
+        self.first = self.end = None  # steps collected, not yet flushed: [first, end)
+        self.buffers: dict[int, np.ndarray] = {}
+        from cosim.record.rosmsg import twist_cdr
+
+        self.twist = twist_cdr
+
+    def _setup(self, histories) -> None:
+        """On the first block: which components have rows, the buffers, the message layout."""
+        self.ready = True
+        recorded = [history is not None for history in histories]
+        self.recorded = recorded
+        system, recording = self.system, self.recording
+        self.python = [  # stepped by Python: (plan index, period)
+            (i, self.periods[i])
+            for i, component in enumerate(self.components)
+            if not recorded[i] and not component.constant_outputs
+        ]
+
+        def where(reference):
+            component, slot = system.resolve(reference, "output")
+            i = self.index[component.name]
+            return i, len(component.inputs) + slot
+
+        observed = self.observed
+        needed = (
+            list(observed.pose) + list(observed.command or ()) + ([observed.mode] if observed.mode else [])
+        )
+        if not all(recorded[where(reference)[0]] for reference in needed):
+            self.usable = False
+            return
+        lidar = None
+        if recording.scan is not None:
+            lidar = self.index[observed.scan.component]
+            if recorded[lidar]:  # ranges inside the rows: replayed step by step
+                self.usable = False
+                return
+        self.pose_columns = [where(reference) for reference in observed.pose]
+        self.command_columns = (
+            [where(reference) for reference in observed.command] if observed.command else None
+        )
+        self.mode_column = where(observed.mode) if observed.mode else None
+        # Rows collected: per recorded component, row 0 the last row before the collected steps.
+        self.buffers = {}
+        for i, component in enumerate(self.components):
+            if recorded[i]:
+                rows = np.empty(
+                    (self.STEPS // self.periods[i] + 3, len(component.inputs) + len(component.outputs))
+                )
+                rows[0, : len(component.inputs)] = component.input_buffer
+                rows[0, len(component.inputs) :] = component.output_buffer
+                self.buffers[i] = rows
+        self.counts = dict.fromkeys(self.buffers, 0)
+        # Per signal record of a step: (slot in the step's order, channel, plan index, columns of a
+        # row or None for a component stepped by Python (its record taken from the live buffers)).
+        self.entries = []
+        for slot, (entry, (component, inputs, outputs)) in enumerate(
+            zip(recording.entries, recording.entry_ports, strict=True)
+        ):
+            i = self.index[component.name]
+            columns = None
+            if recorded[i]:
+                n_in = len(component.inputs)
+                columns = np.array(list(inputs) + [n_in + slot_ for slot_ in outputs], dtype=np.intp)
+                if np.array_equal(columns, np.arange(n_in + len(component.outputs))):
+                    columns = slice(None)
+            self.entries.append((slot, entry[1], i, columns, entry))
+        slots = len(self.entries)
+        self.scan_slot, self.obstacle_slot, self.command_slot, self.pose_slot = (
+            slots,
+            slots + 1,
+            slots + 2,
+            slots + 3,
+        )
+        self.slots = slots + 6
+        self.first = None  # first step collected
+        self.end = None
+        self.flush_at = 0
+        self.live = {
+            slot: [] for slot, _, i, columns, _ in self.entries if columns is None
+        }  # slot -> (k, row)
+        self.others = []  # (key, t_ns, (topic, payload))
+
+    def accepts(self, first: int, end: int, histories) -> bool:
+        """Whether the block [first, end) can be recorded from its rows (else: step by step)."""
+        if not self.ready:
+            self._setup(histories)
+        if not self.usable:
+            return False
+        for _, period in self.python:
+            if -(-first // period) * period < end - 1:
+                return False
+        if self.polled and -(-first // self.polled) * self.polled < end - 1:
+            return False
+        recording, recorder = self.recording, self.recorder
+        if recording.scan is not None and not recorder.has_channel("/scan"):
+            if -(-first // recording.scan[0]) * recording.scan[0] < end:
+                return False
+        if recording.command is not None and not recorder.has_channel("/cmd_vel"):
+            if -(-first // recording.command[0]) * recording.command[0] < end:
+                return False
+        return True
+
+    def block(self, first: int, end: int, histories, clean: bool) -> str | None:
+        """Record and check the steps [first, end) from their rows; why the run ends, or None."""
+        if self.first is not None and end - self.first > self.STEPS:
+            self.flush()
+        if self.first is None:
+            self.first = first
+            if self.window_ns:
+                self.flush_at = ((self.start_ns + first * self.h_ns) // self.window_ns + 1) * self.window_ns
+        start_ns, h_ns = self.start_ns, self.h_ns
+        before = dict(self.counts)
+        for i, rows in self.buffers.items():
+            history = histories[i]
+            n = len(history)
+            if n:
+                at = self.counts[i] + 1
+                rows[at : at + n] = history
+                self.counts[i] += n
+        self.end = end
+        last = end - 1
+        t_last = start_ns + last * h_ns
+        # Records of components stepped by Python: due at most at the last step, from live buffers.
+        for slot, _, i, columns, entry in self.entries:
+            if columns is None and last % self.periods[i] == 0:
+                period, channel, first_view, second, gather = entry
+                if gather is not None:
+                    inputs, input_index, input_part, outputs, output_index, output_part = gather
+                    np.take(inputs, input_index, out=input_part, mode="clip")
+                    np.take(outputs, output_index, out=output_part, mode="clip")
+                    row = first_view.copy()
+                else:
+                    row = np.concatenate((first_view, second))
+                self.live[slot].append((last, row))
+        recording, recorder = self.recording, self.recorder
+        scan = recording.scan
+        if scan is not None and last % scan[0] == 0:
+            _, buffer, ranges, gather, angles, limits = scan
+            payload = recorder.scan_payload(
+                t_last, angles, ranges if gather is None else buffer[gather], *limits
+            )
+            self.others.append((last * self.slots + self.scan_slot, t_last, ("/scan", payload)))
+        if recording.moving:
+            steps = recording.obstacle_steps
+            for k in range(-(-first // steps) * steps, end, steps):
+                t_ns = start_ns + k * h_ns
+                t = t_ns / NS_PER_S
+                offsets = tuple(motion.offset(t) for motion in recording.moving)
+                if offsets != recording.obstacle_offsets:
+                    recording.obstacle_offsets = offsets
+                    payload = recorder.obstacles_payload(
+                        t_ns, [obstacle.at(t) for obstacle in recording.obstacles]
+                    )
+                    self.others.append((k * self.slots + self.obstacle_slot, t_ns, ("/obstacles", payload)))
+        # The positions after each step, as the monitor checks them.
+        (i, column_x), (j, column_y) = self.pose_columns[:2]
+        xs = self._values(i, column_x, first, end, before[i])
+        ys = self._values(j, column_y, first, end, before[j])
+        times = [(start_ns + (k + 1) * h_ns) / NS_PER_S for k in range(first, end)]
+        index, reason = self.monitor.check_positions(times, xs, ys)
+        if reason is not None and (index != end - first - 1 or not clean):
+            raise RuntimeError(
+                f"the compiled loop ran past step {first + index}, where the run ends ({reason})"
+            )
+        reason = self.finish_checks(last, reason, self.flush)
+        if reason is not None or (self.window_ns and t_last >= self.flush_at):
+            self.flush()
+        return reason
+
+    def _values(self, i: int, column: int, first: int, end: int, before: int) -> list[float]:
+        """Column `column` of component i after each step in [first, end) (held between its steps)."""
+        rows = self.buffers[i]
+        period = self.periods[i]
+        if period == 1:
+            return rows[before + 1 : before + 1 + end - first, column].tolist()
+        due = -(-first // period) * period
+        at = before + 1 + (np.arange(first, end) - due) // period
+        return rows[at, column].tolist()
+
+    def _latest(self, i: int, steps: np.ndarray) -> np.ndarray:
+        """Row index (in the collected rows of component i) of its values after each of `steps`."""
+        period = self.periods[i]
+        due = -(-self.first // period) * period
+        return (steps - due) // period + 1
+
+    def flush(self) -> None:
+        """Hand the collected steps to the recorder (and the modes to the monitor)."""
+        if self.first is None:
+            return
+        first, end = self.first, self.end
+        start_ns, h_ns, slots = self.start_ns, self.h_ns, self.slots
+        recording = self.recording
+        signals = []
+        for slot, channel, i, columns, _ in self.entries:
+            if columns is None:
+                taken = self.live[slot]
+                if not taken:
+                    continue
+                steps = np.array([k for k, _ in taken], dtype=np.int64)
+                rows = np.array([row for _, row in taken])
+                taken.clear()
+            else:
+                period = self.periods[i]
+                n = self.counts[i]
+                due = -(-first // period) * period
+                steps = due + period * np.arange(n, dtype=np.int64)
+                rows = self.buffers[i][1 : n + 1]
+                rows = rows[:, columns] if not isinstance(columns, slice) else rows
+            signals.append((channel, steps * slots + slot, start_ns + steps * h_ns, rows))
+        others = self.others
+        if recording.command is not None:
+            period = recording.command[0]
+            steps = np.arange(-(-first // period) * period, end, period, dtype=np.int64)
+            if len(steps):
+                (i, column_v), (j, column_omega) = self.command_columns
+                v = self.buffers[i][self._latest(i, steps), column_v].tolist()
+                omega = self.buffers[j][self._latest(j, steps), column_omega].tolist()
+                twist = self.twist
+                for k, t_ns, a, b in zip(
+                    (steps * slots + self.command_slot).tolist(),
+                    (start_ns + steps * h_ns).tolist(),
+                    v,
+                    omega,
+                    strict=True,
+                ):
+                    others.append((k, t_ns, ("/cmd_vel", twist(a, b))))
+        if self.mode_column is not None:
+            period, mode_period, _, _ = recording.mode
+            steps = np.arange(-(-first // period) * period, end, period, dtype=np.int64)
+            i, column = self.mode_column
+            for mode in self.buffers[i][self._latest(i, steps), column].tolist():
+                self.monitor.check_mode(mode, mode_period)
+        poses = None
+        every = recording.pose_steps
+        steps = np.arange(-(-(first + 1) // every) * every - 1, end, every, dtype=np.int64)
+        if len(steps):
+            values = np.empty((len(steps), 5))
+            for column, (i, where_) in enumerate(self.pose_columns):
+                values[:, column] = self.buffers[i][self._latest(i, steps), where_]
+            if self.command_columns is None:
+                values[:, 3:] = math.nan
+            else:
+                for column, (i, where_) in enumerate(self.command_columns, start=3):
+                    values[:, column] = self.buffers[i][self._latest(i, steps), where_]
+            poses = (steps * slots + self.pose_slot, start_ns + (steps + 1) * h_ns, values)
+        other = None
+        if others:
+            other = (
+                np.array([key for key, _, _ in others], dtype=np.int64),
+                np.array([t for _, t, _ in others], dtype=np.int64),
+                [message for _, _, message in others],
+            )
+        self.others = []
+        for i, rows in self.buffers.items():
+            rows[0] = rows[self.counts[i]]
+            self.counts[i] = 0
+        self.first = self.end = None
+        self.recorder.hold_steps(signals, poses, other)
+
+    def held(self, i: int) -> np.ndarray:
+        """Component i's row after the last step handed over (flushed)."""
+        return self.buffers[i][0]
 
 
 def _progress_bar(stop_time: float):

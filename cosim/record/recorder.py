@@ -246,6 +246,7 @@ class Recorder:
             self._file.close()
             raise CosimError(f"{self.path}: chunk_duration must be > 0 s, got {chunk_duration}")
         window_ns = round(chunk_duration * 1e9)
+        self.window_ns = window_ns  # [ns] chunk window (`CHUNK_DURATION`)
         self._writer = ChunkWriter(self._file, chunk_size=CHUNK_SIZE, chunk_duration_ns=window_ns)
         self._writer.start(profile="ros2", library=_library())
         if sink is not None:  # the live view: same channels, same bytes as the file
