@@ -386,3 +386,102 @@ def test_held_messages_are_the_bytes_and_order_of_one_message_at_a_time(tmp_path
         ]
     assert len(written) == len(expected)
     assert written == expected
+
+
+@pytest.mark.parametrize("chunk_duration", [0.05, 1000.0])
+def test_steps_held_at_once_write_the_bytes_of_one_message_at_a_time(tmp_path, chunk_duration):
+    """`Recorder.hold_steps` (the kernel path's recording) against the per-message path: the same
+    file, byte for byte, with chunks cut by short windows (0.05 s) or by full blocks (a long
+    window: more than 512 records of a channel), and a signal channel and /plan registered
+    mid-run while held steps skipped packs (their records go where the per-message path puts them)."""
+    from cosim.record.recorder import TOPIC_TYPES  # noqa: F401
+
+    h_ns = 10_000_000
+    angles = np.linspace(-1.0, 1.0, 9)
+    angles.flags.writeable = False
+
+    def row(k, size, scale):
+        return np.array([math.sin(k * scale + j) for j in range(size)])
+
+    def scan(k):
+        return np.where(np.arange(9) == k % 9, np.nan, 0.01 * k + np.arange(9))
+
+    late_at, path_at, steps = 700, 900, 1400
+    paths = {}
+    for way in ("one", "batch"):
+        target = tmp_path / f"{way}.mcap"
+        paths[way] = target
+        with Recorder(target, flush_interval=1e9, chunk_duration=chunk_duration) as recorder:
+            a = recorder.signal_channel(
+                "a", ["u", "x", "y"], inputs=1, initial=row(-1, 3, 0.1), period_ns=h_ns
+            )
+            b = recorder.signal_channel(
+                "b", ["p", "q"], inputs=1, initial=row(-1, 2, 0.2), period_ns=3 * h_ns
+            )
+            late = None
+            recorder.write_pose(0, 0.0, 0.0, 0.0, 0.0, 0.0)
+            k = 0
+            while k < steps:
+                if k == late_at:
+                    late = recorder.signal_channel(
+                        "late", ["w"], inputs=0, initial=row(-2, 1, 0.3), period_ns=h_ns
+                    )
+                if k == path_at:
+                    recorder.write_path(k * h_ns, np.array([[0.0, 0.0], [1.0, 2.0], [3.0, 2.5]]))
+                end = k + 1 if way == "one" or k == 0 else min(steps, k + 1 + k % 37)
+                end = min(end, late_at) if k < late_at else end
+                end = min(end, path_at) if k < path_at else end
+                if way == "one" or k == 0:
+                    t_ns = k * h_ns
+                    recorder.hold_signals(a, t_ns, row(k, 3, 0.1))
+                    if k % 3 == 0:
+                        recorder.hold_signals(b, t_ns, row(k, 2, 0.2))
+                    if late is not None:
+                        recorder.hold_signals(late, t_ns, row(k, 1, 0.3))
+                    if k % 5 == 0:
+                        recorder.write_scan(t_ns, angles, scan(k), 0.0, 10.0)
+                    if k % 2 == 0:
+                        recorder.write_cmd_vel(t_ns, 0.5, k * 0.01)
+                    if k % 2 == 1:
+                        recorder.write_pose(t_ns + h_ns, *row(k, 3, 0.4), 0.7, k * 0.02)
+                else:
+                    ks = np.arange(k, end)
+                    signals = [(a, ks * 10, ks * h_ns, np.array([row(j, 3, 0.1) for j in ks]))]
+                    kb = ks[ks % 3 == 0]
+                    signals.append(
+                        (b, kb * 10 + 1, kb * h_ns, np.array([row(j, 2, 0.2) for j in kb]).reshape(-1, 2))
+                    )
+                    if late is not None:
+                        signals.append((late, ks * 10 + 2, ks * h_ns, np.array([row(j, 1, 0.3) for j in ks])))
+                    keys, stamps, messages = [], [], []
+                    for j in ks.tolist():
+                        if j % 5 == 0:
+                            payload = recorder.scan_payload(j * h_ns, angles, scan(j), 0.0, 10.0)
+                            (
+                                keys.append(j * 10 + 3),
+                                stamps.append(j * h_ns),
+                                messages.append(("/scan", payload)),
+                            )
+                        if j % 2 == 0:
+                            payload = rosmsg.twist_cdr(0.5, j * 0.01)
+                            (
+                                keys.append(j * 10 + 4),
+                                stamps.append(j * h_ns),
+                                messages.append(("/cmd_vel", payload)),
+                            )
+                    kp = ks[ks % 2 == 1]
+                    poses = np.array([(*row(j, 3, 0.4), 0.7, j * 0.02) for j in kp]).reshape(-1, 5)
+                    recorder.hold_steps(
+                        signals,
+                        (kp * 10 + 5, (kp + 1) * h_ns, poses),
+                        (np.array(keys, dtype=np.int64), np.array(stamps, dtype=np.int64), messages),
+                    )
+                k = end
+            recorder.end_steps(steps * h_ns)
+    one, batch = paths["one"].read_bytes(), paths["batch"].read_bytes()
+    assert len(one) == len(batch) and one == batch
+    with open(paths["one"], "rb") as stream:
+        reader = make_reader(stream)
+        chunks = list(reader.get_summary().chunk_indexes)
+        counts = reader.get_summary().statistics.channel_message_counts
+    assert len(chunks) >= 2 and sum(counts.values()) > 4000

@@ -220,12 +220,52 @@ class MessageBlock:
         self.raw: list[tuple[int, int, bytes]] = []  # (channel, t_ns, payload) of any other message
         self.order: list[int] = []  # stream number of each message, in write order
         self.count = 0  # messages held
+        # Packs skipped (`add_batch`): the held messages before `mark` would have been packed, the
+        # others form the current group, `group` messages, `group_sizes` per stream number (poses
+        # counted once, at the /odom stream). A schema or channel registered while a group is
+        # open after the mark goes before that group's first message (`definitions`).
+        self.mark = 0
+        self.group = 0
+        self.group_sizes: dict[int, int] = {}
+        self.definitions: list[tuple[int, list]] = []  # (message position, schema/channel records)
+        self.batch_limit = 0  # messages held across skipped packs at most (0: pack every time)
+
+    def _grouped(self, number: int, messages: int) -> bool:
+        """Account for a message of stream `number` (`messages` records) in the group; True when
+        its stream's block is full."""
+        self.count += messages
+        self.group += messages
+        size = self.group_sizes.get(number, 0) + 1
+        self.group_sizes[number] = size
+        return size == self.capacity
+
+    def skip_pack(self) -> None:
+        """Where a pack was due (a stream's block full, a window passed): the held messages count
+        as packed for what follows, and are packed when enough are held (`batch_limit`) or a
+        pack is asked for."""
+        self.mark = self.count
+        self.group = 0
+        self.group_sizes = {}
+        if self.count >= self.batch_limit or self.writer.has_definitions():
+            self.pack()
+
+    def registered(self) -> None:
+        """After a schema or channel was registered: it goes before the current group."""
+        if self.mark:
+            self.definitions.append((self.mark, self.writer.take_definitions()))
+
+    def _grow(self, stream: SignalStream, rows: int) -> None:
+        """Room for `rows` held rows (plus the pending one) in `stream.rows`."""
+        if rows + 1 > len(stream.rows):
+            grown = np.empty((max(rows + 1, 2 * len(stream.rows)), stream.rows.shape[1]))
+            grown[: len(stream.rows)] = stream.rows
+            stream.rows = grown
 
     def _due(self, t_ns: int) -> bool:
         """True when `t_ns` (of the message just held) is past the first held message's window."""
         if not self.window_ns:
             return False
-        if self.count == 1:
+        if self.group == 1:
             self.deadline = (t_ns // self.window_ns + 1) * self.window_ns
             return False
         return t_ns >= self.deadline
@@ -249,6 +289,7 @@ class MessageBlock:
         (the caller packs it). On a step stream: a step's inputs and end outputs (`SignalStream`)."""
         stream = self.signals[channel]
         held = len(stream.times)
+        self._grow(stream, held + 1)
         split = stream.split
         if split is not None:
             if stream.ended:
@@ -267,9 +308,9 @@ class MessageBlock:
             row[:split] = values
             row[split:] = more
         stream.times.append(t_ns)
-        self.order.append(self.stream_of[channel])
-        self.count += 1
-        return held + 1 == self.capacity or self._due(t_ns)
+        number = self.stream_of[channel]
+        self.order.append(number)
+        return self._grouped(number, 1) or self._due(t_ns)
 
     def add_signal_rows(self, blocks: list[tuple[int, np.ndarray, np.ndarray]]) -> None:
         """Hold many records at once: (channel, times [ns], rows) per channel, in the order one
@@ -337,16 +378,15 @@ class MessageBlock:
         self.pose.rows.append(row)
         self.pose.count += 1
         self.order.extend(self.pose_streams)
-        self.count += 3
-        if self.count == 3 and self.window_ns:  # the first held messages
+        full = self._grouped(self.pose_streams[0], 3)
+        if self.group == 3 and self.window_ns:  # the first messages of the group
             self.deadline = (row[0] // self.window_ns + 1) * self.window_ns
-        return self.pose.count == self.capacity or self._due(row[0])
+        return full or self._due(row[0])
 
     def add_raw(self, channel: int, t_ns: int, payload: bytes) -> bool:
         self.raw.append((channel, t_ns, payload))
         self.order.append(RAW_STREAM)
-        self.count += 1
-        return len(self.raw) == self.capacity or self._due(t_ns)
+        return self._grouped(RAW_STREAM, 1) or self._due(t_ns)
 
     def add_batch(
         self,
@@ -375,7 +415,7 @@ class MessageBlock:
         while i < count:
             end, full = count, False
             if window:
-                if self.count == 0:
+                if self.group == 0:
                     deadline, low = (int(times[i]) // window + 1) * window, i + 1
                 else:
                     deadline, low = self.deadline, i
@@ -391,26 +431,22 @@ class MessageBlock:
                 end += 2  # a pose's three messages are held together
             self._hold_batch(order, times, i, end, signal_rows, pose_rows, raw, cursors)
             if full:
-                self.pack()
+                self.skip_pack()
             i = end
 
     def _room(self) -> int:
         """Messages that can be held before some stream's block is full, at least."""
-        room = self.capacity - len(self.raw)
-        if self.pose is not None:
-            room = min(room, self.capacity - self.pose.count)
-        for stream in self.signals.values():
-            room = min(room, self.capacity - len(stream.times))
-        return room
+        return self.capacity - max(self.group_sizes.values(), default=0)
 
     def _filled(self, order: np.ndarray, first: int, end: int) -> int | None:
         """End (exclusive) of the first message in order[first:end] that fills its stream's block."""
         stop = None
         part = order[first:end]
-        ends = [(RAW_STREAM, self.capacity - len(self.raw))]
+        sizes = self.group_sizes
+        ends = [(RAW_STREAM, self.capacity - sizes.get(RAW_STREAM, 0))]
         if self.pose is not None:
-            ends.append((self.pose_streams[2], self.capacity - self.pose.count))
-        ends += [(self.stream_of[c], self.capacity - len(s.times)) for c, s in self.signals.items()]
+            ends.append((self.pose_streams[2], self.capacity - sizes.get(self.pose_streams[0], 0)))
+        ends += [(n, self.capacity - sizes.get(n, 0)) for n in self.stream_of.values()]
         for number, room in ends:
             where = np.flatnonzero(part == number)
             if len(where) >= room > 0:
@@ -424,12 +460,16 @@ class MessageBlock:
             return
         part = order[first:end]
         stamps = times[first:end]
-        if self.count == 0 and self.window_ns:
+        if self.group == 0 and self.window_ns:
             self.deadline = (int(stamps[0]) // self.window_ns + 1) * self.window_ns
         counts = np.bincount(part, minlength=len(self.streams)).tolist()
+        sizes = self.group_sizes
         for number, n in enumerate(counts):
             if not n:
                 continue
+            if number == self.pose_streams[1] or number == self.pose_streams[2]:
+                continue
+            sizes[number] = sizes.get(number, 0) + n
             stream = self.streams[number]
             if number == RAW_STREAM:
                 at = cursors[RAW_STREAM]
@@ -447,6 +487,7 @@ class MessageBlock:
                 rows = signal_rows[number][at : at + n]
                 cursors[number] = at + n
                 held = len(stream.times)
+                self._grow(stream, held + n)
                 split = stream.split
                 if split is None:
                     stream.rows[held : held + n] = rows
@@ -458,6 +499,7 @@ class MessageBlock:
                 stream.times.extend(stamps[part == number].tolist())
         self.order.extend(part.tolist())
         self.count += end - first
+        self.group += end - first
 
     def _sequence(self, channel: int, count: int) -> int:
         first = self.sequences[channel]
@@ -525,5 +567,27 @@ class MessageBlock:
                 times[position] = t_ns
             self.raw = []
         self.order = []
-        self.count = 0
-        self.writer.add_records(out.tobytes(), channels, times, offsets)
+        self.count = self.mark = self.group = 0
+        self.group_sizes = {}
+        data = out.tobytes()
+        first = 0
+        for position, definitions in self.definitions:
+            if position > first:
+                self._add_records(data, channels, times, offsets, first, position)
+            self.writer.put_definitions(definitions)
+            first = position
+        self.definitions = []
+        self._add_records(data, channels, times, offsets, first, len(offsets))
+
+    def _add_records(self, data: bytes, channels, times, offsets, first: int, end: int) -> None:
+        """Records first..end (exclusive) of a pack to the writer."""
+        if first >= end:
+            return
+        if first == 0 and end == len(offsets):
+            self.writer.add_records(data, channels, times, offsets)
+            return
+        begin = int(offsets[first])
+        stop = int(offsets[end]) if end < len(offsets) else len(data)
+        self.writer.add_records(
+            data[begin:stop], channels[first:end], times[first:end], offsets[first:end] - begin
+        )

@@ -126,6 +126,19 @@ class ChunkWriter:
         self._unwritten.append(channel)
         return channel.id
 
+    def has_definitions(self) -> bool:
+        """Whether schemas or channels wait for the next message."""
+        return bool(self._unwritten)
+
+    def take_definitions(self) -> list:
+        """The schemas and channels waiting for the next message, no longer waiting."""
+        taken, self._unwritten = self._unwritten, []
+        return taken
+
+    def put_definitions(self, records: list) -> None:
+        """Schemas and channels (`take_definitions`) to write before the next message."""
+        self._unwritten.extend(records)
+
     def write_definitions(self) -> None:
         """Write the schemas and channels registered since the last chunk as top-level records now
         (for chunks copied with `copy_chunk`, which may not hold them)."""
