@@ -14,11 +14,18 @@
     `--repeat R` keeps the fastest of R runs of each (on a shared machine the load of other
     processes only ever slows a run down). Goals: >= 100x real time; issue 15:
     warehouse_diff_drive_one_obstacle >= 500x (was 110-395x).
+    `--baseline DIR`: each scenario also runs from the checkout DIR (e.g. the main branch), both
+    trees in fresh processes (`python3 -c`, the tree first on sys.path), interleaved run by run, the
+    fastest of R per tree: "before" (DIR) and "after" (this tree) measured in the same minutes on a
+    shared machine, their ratio, and a check that both give the same outcome (time, distance).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import subprocess
 import sys
 import tempfile
 import time
@@ -127,6 +134,73 @@ def part_c(_steps: int = 0, repeat: int = 1, only: list[str] | None = None) -> l
     return rows
 
 
+# One timed run in a fresh process of a given tree: a first run (imports, FMU builds, caches) is
+# not timed, the second is; prints the RunResult's figures as JSON.
+_ONE_RUN = """
+import json, sys, tempfile
+from pathlib import Path
+from cosim.navigation.run import run_scenario
+from cosim.scenario.load import load_scenario
+scenario = load_scenario(Path(sys.argv[1]))
+with tempfile.TemporaryDirectory() as scratch:
+    out = Path(scratch) / "run.mcap"
+    run_scenario(scenario, out, force=True)
+    result = run_scenario(scenario, out, force=True)
+outcome = result.outcome
+print(json.dumps({"wall": result.wall_time, "time": outcome.time, "distance": outcome.distance,
+                  "reached": outcome.reached, "steps": result.steps}))
+"""
+
+
+def _run_in(tree: Path, scenario: Path) -> dict:
+    environment = dict(os.environ, PYTHONPATH=str(tree), NAVCOSIM_LOOP="kernel")
+    completed = subprocess.run(
+        [sys.executable, "-c", _ONE_RUN, str(scenario)],
+        cwd=tree,
+        env=environment,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if completed.returncode != 0:
+        raise SystemExit(f"{scenario.stem} in {tree}: {completed.stderr.strip().splitlines()[-1:]}")
+    return json.loads(completed.stdout.strip().splitlines()[-1])
+
+
+def part_c_baseline(baseline: Path, repeat: int = 1, only: list[str] | None = None) -> list[Row]:
+    """Each shipped scenario with full logging from this tree (after) and from `baseline`
+    (before), fresh processes interleaved, the fastest of `repeat` runs per tree."""
+    rows = []
+    for path in sorted((REPO / "scenarios").glob("*.toml")):
+        if only and path.stem not in only:
+            continue
+        runs: dict[str, list[dict]] = {"after": [], "before": []}
+        for _ in range(repeat):
+            runs["after"].append(_run_in(REPO, path))
+            runs["before"].append(_run_in(baseline, path))
+        after = min(runs["after"], key=lambda r: r["wall"])
+        before = min(runs["before"], key=lambda r: r["wall"])
+        every = runs["after"] + runs["before"]
+        if any(
+            abs(r["time"] - after["time"]) > 1e-9 or abs(r["distance"] - after["distance"]) > 1e-9
+            for r in every
+        ):
+            raise SystemExit(f"{path.stem}: the two trees' outcomes differ")
+        rate_after, rate_before = after["time"] / after["wall"], before["time"] / before["wall"]
+        goal = ""
+        if path.stem == "warehouse_diff_drive_one_obstacle":
+            goal = f"; goal (issue 15) >= 500x: {'met' if rate_after >= 500 else 'not met'}"
+        note = (
+            f"simulated {after['time']:.2f} s, {rate_after:.0f}x real time after "
+            f"(wall {after['wall']:.3f} s), "
+            f"{rate_before:.0f}x before ({before['wall']:.3f} s; {baseline}), after/before "
+            f"{before['wall'] / after['wall']:.2f}{goal}, reached: {'yes' if after['reached'] else 'no'}, "
+            f"distance {after['distance']:.3f} m (same in both trees)"
+        )
+        rows.append(Row("c", path.stem, after["steps"], after["wall"], note))
+    return rows
+
+
 PARTS = {"b": part_b, "c": part_c}
 
 
@@ -136,12 +210,17 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=200_000, help="macro steps of part (b)")
     parser.add_argument("--repeat", type=int, default=1, help="part (c): fastest of R runs per scenario")
     parser.add_argument("--scenarios", nargs="*", help="part (c): only these scenarios (file stems)")
+    parser.add_argument(
+        "--baseline", type=Path, help="part (c): also run each scenario from this checkout (before/after)"
+    )
     arguments = parser.parse_args()
     print("| part | engine / scenario | steps | steps/s | note |\n|---|---|---:|---:|---|")
     for part in arguments.parts.split(","):
         if part not in PARTS:
             parser.error(f"unknown part '{part}'; parts: {', '.join(PARTS)}")
-        if part == "c":
+        if part == "c" and arguments.baseline is not None:
+            rows = part_c_baseline(arguments.baseline.resolve(), arguments.repeat, arguments.scenarios)
+        elif part == "c":
             rows = part_c(repeat=arguments.repeat, only=arguments.scenarios)
         else:
             rows = PARTS[part](arguments.steps)
