@@ -738,6 +738,7 @@ class _BlockRecording:
     """
 
     STEPS = 2048  # steps collected at most between two flushes
+    WINDOWS = 8  # chunk windows collected at most between two flushes (1 with a live view)
 
     def __init__(
         self, built: BuiltRun, master: Master, recording: _Recording, monitor, finish_checks, polled
@@ -867,7 +868,10 @@ class _BlockRecording:
         if self.first is None:
             self.first = first
             if self.window_ns:
-                self.flush_at = ((self.start_ns + first * self.h_ns) // self.window_ns + 1) * self.window_ns
+                windows = self.WINDOWS if self.recorder.batching else 1
+                self.flush_at = (
+                    (self.start_ns + first * self.h_ns) // self.window_ns + windows
+                ) * self.window_ns
         start_ns, h_ns = self.start_ns, self.h_ns
         before = dict(self.counts)
         for i, rows in self.buffers.items():

@@ -33,6 +33,14 @@ _HEAD_FIELDS = {
     "publish_time": ("<u8", 23),
 }
 _CDR = len(rosmsg.CDR_HEADER)
+_HEAD_DTYPE = np.dtype(
+    {
+        "names": ["opcode", *_HEAD_FIELDS],
+        "formats": ["u1", *(fmt for fmt, _ in _HEAD_FIELDS.values())],
+        "offsets": [0, *(offset for _, offset in _HEAD_FIELDS.values())],
+        "itemsize": MESSAGE_HEAD_SIZE,
+    }
+)  # one message head (MESSAGE_HEAD) as a structured record
 RAW = "raw"  # the stream of messages held as ready payload bytes
 RAW_STREAM = 0
 
@@ -540,13 +548,17 @@ class MessageBlock:
         sizes = np.zeros(len(self.streams), dtype=np.int64)
         for number, (records, _, _) in parts.items():
             sizes[number] = records.dtype.itemsize
-        raw_records = []
-        for channel, t_ns, payload in self.raw:
-            head = MESSAGE_HEAD.pack(5, 22 + len(payload), channel, self._sequence(channel, 1), t_ns, t_ns)
-            raw_records.append(head + payload)
+        raw = self.raw
         message_sizes = sizes[order]
-        if raw_records:
-            message_sizes[order == RAW_STREAM] = [len(record) for record in raw_records]
+        if raw:
+            raw_channels = np.array([channel for channel, _, _ in raw], dtype=np.int64)
+            raw_times = np.array([t_ns for _, t_ns, _ in raw], dtype=np.uint64)
+            raw_sizes = np.array([len(payload) for _, _, payload in raw], dtype=np.int64)
+            sequences = np.empty(len(raw), dtype=np.int64)
+            for channel in np.unique(raw_channels).tolist():  # per channel, in write order
+                at = np.flatnonzero(raw_channels == channel)
+                sequences[at] = self._sequence(channel, len(at)) + np.arange(len(at))
+            message_sizes[order == RAW_STREAM] = MESSAGE_HEAD_SIZE + raw_sizes
         offsets = np.zeros(len(order), dtype=np.int64)
         np.cumsum(message_sizes[:-1], out=offsets[1:])
         out = np.empty(int(offsets[-1] + message_sizes[-1]), dtype=np.uint8)
@@ -558,13 +570,29 @@ class MessageBlock:
             _scatter(out, offsets[where], records.view(np.uint8).reshape(-1, size))
             channels[where] = channel
             times[where] = record_times
-        if raw_records:
+        if raw:
+            # Messages of equal size as the rows of one array: head fields, then the payload bytes.
             where = np.flatnonzero(order == RAW_STREAM)
-            for position, record, (channel, t_ns, _) in zip(where, raw_records, self.raw, strict=True):
-                start = offsets[position]
-                out[start : start + len(record)] = np.frombuffer(record, np.uint8)
-                channels[position] = channel
-                times[position] = t_ns
+            for size in np.unique(raw_sizes).tolist():
+                at = np.flatnonzero(raw_sizes == size)
+                heads = np.zeros(len(at), dtype=_HEAD_DTYPE)
+                heads["opcode"] = 5
+                heads["length"] = 22 + size
+                heads["channel"] = raw_channels[at]
+                heads["sequence"] = sequences[at]
+                heads["log_time"] = raw_times[at]
+                heads["publish_time"] = raw_times[at]
+                payloads = np.frombuffer(b"".join([raw[j][2] for j in at.tolist()]), np.uint8)
+                records = np.concatenate(
+                    (
+                        heads.view(np.uint8).reshape(len(at), MESSAGE_HEAD_SIZE),
+                        payloads.reshape(len(at), size),
+                    ),
+                    axis=1,
+                )
+                _scatter(out, offsets[where[at]], records)
+            channels[where] = raw_channels
+            times[where] = raw_times
             self.raw = []
         self.order = []
         self.count = self.mark = self.group = 0

@@ -267,7 +267,8 @@ class Recorder:
         self._block = _TracedBlock(self._writer, self._sequences, window_ns=window_ns)
         # Steps held at once (`hold_steps`) are packed every BATCH_MESSAGES messages instead of at
         # each chunk window: same bytes, fewer packs; a live view gets them at each window.
-        self._block.batch_limit = BATCH_MESSAGES if sink is None else 0
+        self.batching = sink is None
+        self._block.batch_limit = BATCH_MESSAGES if self.batching else 0
         self.trace = RunTrace(self.path) if trace else None
         self._block.trace = self.trace
         self._pose_channels: tuple[int, int, int] | None = None
@@ -651,9 +652,13 @@ class Recorder:
             frozen = isinstance(angles, np.ndarray) and not angles.flags.writeable
             self._last_scan = (angles, range_min, range_max, layout, scan_time) if frozen else None
         bins, binned, head, tail = layout
-        binned[bins] = ranges
-        beams = binned[bins]
-        binned[bins[np.isnan(beams)]] = np.inf
+        if bins is None:  # one beam per bin, in order
+            binned[:] = ranges
+            np.copyto(binned, np.inf, where=np.isnan(binned))
+        else:
+            binned[bins] = ranges
+            beams = binned[bins]
+            binned[bins[np.isnan(beams)]] = np.inf
         # Only the stamp and the ranges change between sweeps: the CDR bytes are the template's
         # head (encapsulation, stamp, frame, angles, limits, ranges length), the ranges, and the
         # empty intensities.
@@ -666,7 +671,8 @@ class Recorder:
     def _scan_template(
         self, angles: np.ndarray, range_min: float, range_max: float, scan_time: float
     ) -> tuple:
-        """(bins, NaN-filled float32 ranges to fill, CDR head, CDR tail) of a LaserScan layout."""
+        """(bins, NaN-filled float32 ranges to fill, CDR head, CDR tail) of a LaserScan layout;
+        bins None when beam i is bin i."""
         angle_min, increment, bins, description = scan_layout(angles)
         if "/scan" not in self._channels:
             self._channel("/scan", {SCAN_LAYOUT_KEY: description})
@@ -689,6 +695,8 @@ class Recorder:
         head = template[: len(template) - binned.nbytes - len(tail)]
         if head + binned.tobytes() + tail != template:  # the layout the fast path relies on
             raise CosimError(f"{self.path}: unexpected LaserScan CDR layout")
+        if np.array_equal(bins, np.arange(len(binned))):
+            bins = None  # each beam its own bin, in order: filled by a slice
         return bins, binned, head, tail
 
     def write_obstacles(self, t_ns: int, obstacles: list) -> None:
