@@ -25,12 +25,18 @@ The loop: the FMUs step in the compiled kernel (`Master.run_blocks`, `cosim.core
 their buffers after each step and hands the Python components (lidar, planner) back where they are
 due. After each block of steps (cut at every Python component's step, at the end of a step in which
 one stepped, and after any step whose position may end the run: not finite, near the goal, or
-outside a circle that the true obstacles cannot reach) `_KernelBlocks.replay` sets the buffers
-to each step's values in turn and calls `finish_step` (recording, mode, outcome, planner) for it,
-as the Python loop's per-step callback does; so the log and the outcome are the same bytes and
-numbers, and the run ends at the same step. Hooks: `finish_step(k)` runs once per step (both
-loops), `on_block` once per block (kernel; interrupts are noticed there, at most one block late),
-`_KernelBlocks.watch` before each kernel call (it re-reads the monitor's goal). A system the
+outside a circle that the true obstacles cannot reach) `_BlockRecording` takes the block's rows:
+the positions of all its steps go through `OutcomeMonitor.check_positions` (the arithmetic of the
+per-step check, step by step), and the rows are collected over blocks and turned into their
+messages with NumPy every few chunk windows (`Recorder.hold_steps`: the bytes of writing them one at
+a time). A block the rows cannot describe (a topic's first message, a Python component due before
+the block's last step) is replayed step by step: `_KernelBlocks.replay_steps` sets the buffers to
+each step's values in turn and calls `finish_step` (recording, mode, outcome, planner) for it, as
+the Python loop's per-step callback does. Either way the log and the outcome are the same bytes and
+numbers, and the run ends at the same step. Hooks: `finish_step(k)` runs once per step (Python
+loop, blocks replayed step by step), `finish_checks` (goal poll, new plan) after a step's position
+check in both, `on_block` once per block (kernel; interrupts are noticed there, at most one block
+late), `_KernelBlocks.watch` before each kernel call (it re-reads the monitor's goal). A system the
 kernel cannot step (Jacobi mode with Python components) and NAVCOSIM_LOOP=python use the master's
 Python loop with the per-step callback.
 
@@ -760,6 +766,7 @@ class _BlockRecording:
         self.ready = False
         self.usable = True
         self.first = self.end = None  # steps collected, not yet flushed: [first, end)
+        self.handed = time.monotonic()  # [s] wall clock of the last flush
         self.buffers: dict[int, np.ndarray] = {}
         from cosim.record.rosmsg import twist_cdr
 
@@ -839,6 +846,12 @@ class _BlockRecording:
         self.live = {
             slot: [] for slot, _, i, columns, _ in self.entries if columns is None
         }  # slot -> (k, row)
+        # Entries of components stepped by Python: (their records, period, the entry).
+        self.live_entries = [
+            (self.live[slot], self.periods[i], entry)
+            for slot, _, i, columns, entry in self.entries
+            if columns is None
+        ]
         self.others = []  # (key, t_ns, (topic, payload))
 
     def accepts(self, first: int, end: int, histories) -> bool:
@@ -885,9 +898,9 @@ class _BlockRecording:
         last = end - 1
         t_last = start_ns + last * h_ns
         # Records of components stepped by Python: due at most at the last step, from live buffers.
-        for slot, _, i, columns, entry in self.entries:
-            if columns is None and last % self.periods[i] == 0:
-                period, channel, first_view, second, gather = entry
+        for taken, period, entry in self.live_entries:
+            if last % period == 0:
+                _, _, first_view, second, gather = entry
                 if gather is not None:
                     inputs, input_index, input_part, outputs, output_index, output_part = gather
                     np.take(inputs, input_index, out=input_part, mode="clip")
@@ -895,7 +908,7 @@ class _BlockRecording:
                     row = first_view.copy()
                 else:
                     row = np.concatenate((first_view, second))
-                self.live[slot].append((last, row))
+                taken.append((last, row))
         recording, recorder = self.recording, self.recorder
         scan = recording.scan
         if scan is not None and last % scan[0] == 0:
@@ -929,6 +942,8 @@ class _BlockRecording:
         reason = self.finish_checks(last, reason, self.flush)
         if reason is not None or (self.window_ns and t_last >= self.flush_at):
             self.flush()
+        elif time.monotonic() - self.handed >= self.recorder.flush_interval:
+            self.flush()  # a killed run loses no more wall time of steps than the recorder's flushes
         return reason
 
     def _values(self, i: int, column: int, first: int, end: int, before: int) -> list[float]:
@@ -1019,6 +1034,7 @@ class _BlockRecording:
             rows[0] = rows[self.counts[i]]
             self.counts[i] = 0
         self.first = self.end = None
+        self.handed = time.monotonic()
         self.recorder.hold_steps(signals, poses, other)
 
     def held(self, i: int) -> np.ndarray:

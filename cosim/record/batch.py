@@ -237,6 +237,7 @@ class MessageBlock:
         self.group_sizes: dict[int, int] = {}
         self.definitions: list[tuple[int, list]] = []  # (message position, schema/channel records)
         self.batch_limit = 0  # messages held across skipped packs at most (0: pack every time)
+        self.clock_due = None  # () -> True when held messages are to reach the file now (wall clock)
 
     def _grouped(self, number: int, messages: int) -> bool:
         """Account for a message of stream `number` (`messages` records) in the group; True when
@@ -255,6 +256,8 @@ class MessageBlock:
         self.group = 0
         self.group_sizes = {}
         if self.count >= self.batch_limit or self.writer.has_definitions():
+            self.pack()
+        elif self.clock_due is not None and self.clock_due():
             self.pack()
 
     def registered(self) -> None:

@@ -7,7 +7,10 @@ per component; see `cosim.record.rosmsg`). The run loop writes messages in time 
 Speed: signals, poses, commands and scans (the per-step topics) are held in a
 `cosim.record.batch.MessageBlock` and packed into MCAP records with NumPy, a block at a time
 (at most 512 records of a channel); the records and their order are exactly those of writing one
-message at a time. Any other write, `flush()` and `close()` pack the held messages first.
+message at a time. Any other write, `flush()` and `close()` pack the held messages first. The run
+loop's kernel path hands over many steps at once (`hold_steps`): their packs are skipped where they
+were due and done every `BATCH_MESSAGES` messages, with the same bytes (a schema or channel
+registered meanwhile is written where the skipped pack would have put it).
 
 Same run, same bytes: nothing in the file comes from the wall clock or the machine. Attachments
 carry the simulation time they were attached at; chunks end by content alone (`CHUNK_SIZE` bytes
@@ -16,7 +19,10 @@ of records, or `CHUNK_DURATION` of simulated time: a chunk holds one window [n D
 A killed run: every `flush_interval` seconds of wall time (the clock is read every 16 held
 messages) the chunks already ended are handed to the OS (`file.flush()`, which does not change
 the bytes). So SIGKILL loses the open chunk (at most `CHUNK_DURATION` of simulated time, or
-`CHUNK_SIZE` bytes) plus at most `flush_interval` of wall time of ended chunks. A smaller
+`CHUNK_SIZE` bytes) plus at most `flush_interval` of wall time of ended chunks; on the run loop's
+kernel path also the steps not yet handed over or packed: at most 8 windows of steps or
+`flush_interval` of wall time, and `BATCH_MESSAGES` messages or `flush_interval` of wall time
+(with a live view, `sink`: one window, no skipped packs). A smaller
 `CHUNK_DURATION` loses less but makes more, smaller chunks (more per-chunk overhead when reading,
 slightly worse compression). Only `close()` writes the summary and footer, so a file without them
 is a run that did not end normally (`cosim.logs.reader` reads it up to its last complete record;
@@ -170,13 +176,23 @@ class RunTrace:
         """`ranges`: the float32 ranges as written; the shortest within the float32 limits, or NaN."""
         if self.dropped or not self._count(2):
             return
-        # NaN fails both comparisons; +inf (no return) passes only an infinite range_max
-        valid = (ranges >= np.float32(range_min)) & (ranges <= np.float32(range_max))
-        if math.isinf(range_max):
-            valid &= np.isfinite(ranges)
-        kept = ranges[valid]
+        # The shortest range >= range_min (NaN fails the comparison) is the answer when it is within
+        # range_max (+inf, no return, counts only below an infinite range_max: then the full test).
+        above = ranges[ranges >= np.float32(range_min)]
+        shortest = math.nan
+        if len(above):
+            candidate = float(above.min())
+            if math.isinf(candidate) and math.isinf(range_max):
+                valid = (
+                    (ranges >= np.float32(range_min))
+                    & (ranges <= np.float32(range_max))
+                    & np.isfinite(ranges)
+                )
+                shortest = float(ranges[valid].min()) if valid.any() else math.nan
+            elif candidate <= np.float32(range_max):
+                shortest = candidate
         self.scan_t_ns.append(int(t_ns))
-        self.scan_minima.append(float(kept.min()) if len(kept) else math.nan)
+        self.scan_minima.append(shortest)
 
     def add_obstacles(self, t_ns: int, obstacles: list) -> None:
         """The obstacles of an /obstacles message: each marker's centre as the reader takes it from
@@ -269,6 +285,7 @@ class Recorder:
         # each chunk window: same bytes, fewer packs; a live view gets them at each window.
         self.batching = sink is None
         self._block.batch_limit = BATCH_MESSAGES if self.batching else 0
+        self._block.clock_due = lambda: time.monotonic() - self._last_flush >= self.flush_interval
         self.trace = RunTrace(self.path) if trace else None
         self._block.trace = self.trace
         self._pose_channels: tuple[int, int, int] | None = None
