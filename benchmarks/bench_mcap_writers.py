@@ -222,6 +222,19 @@ class SdkWriter:
         self._writer.flush()
         self._stream.flush()
 
+    def hand_over(self) -> None:
+        self._stream.flush()
+
+    # The SDK writes a schema or channel when it is registered: none wait for a message.
+    def has_definitions(self) -> bool:
+        return False
+
+    def take_definitions(self) -> list:
+        return []
+
+    def put_definitions(self, records: list) -> None:
+        pass
+
     def finish(self) -> None:
         self._writer.close()
         self._stream.flush()

@@ -318,7 +318,7 @@ class Recorder:
 
     def _sync(self) -> None:
         """Hand the chunks already ended to the OS; the bytes of the file do not change."""
-        self._file.flush()
+        self._writer.hand_over()
         self._last_flush = time.monotonic()
 
     def end_steps(self, end_ns: int) -> None:

@@ -21,6 +21,7 @@ from __future__ import annotations
 import struct
 import zlib
 from array import array
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import zstandard
@@ -79,11 +80,14 @@ class ChunkWriter:
         self._attachment_indexes: list[AttachmentIndex] = []
         self._metadata_indexes: list[MetadataIndex] = []
         self._builder = RecordBuilder()
+        self._pool: ThreadPoolExecutor | None = None  # compresses the ended chunk (`_finish_chunk`)
+        self._pending: tuple | None = None  # that chunk, until written (`_drain`)
 
     # --- records outside chunks -----------------------------------------------------------
 
     def _write_record(self, record) -> tuple[int, int]:
         """Write one `mcap.records` record at the end of the file; returns (offset, length)."""
+        self._drain()
         offset = self._stream.tell()
         record.write(self._builder)
         data = self._builder.end()
@@ -279,37 +283,43 @@ class ChunkWriter:
         self._end_time = max(self._end_time, last)
 
     def _finish_chunk(self) -> None:
+        """End the open chunk: it is compressed on a worker thread (zstd releases the GIL) while the
+        caller goes on, and written, with its message indexes, before anything else is written
+        (`_drain`); one chunk at a time, so the file is the same bytes as compressing here."""
         if self._chunk_messages == 0:
             return
         data = bytes(self._chunk)
-        compressed = self._compressor.compress(data)
-        stream = self._stream
-        start = stream.tell()
-        length = 8 + 8 + 8 + 4 + 4 + 4 + 8 + len(compressed)
-        stream.write(
-            _CHUNK_HEAD.pack(
-                Opcode.CHUNK, length, self._chunk_start, self._chunk_end, len(data), zlib.crc32(data)
-            )
-        )
-        stream.write(struct.pack("<I4sQ", 4, b"zstd", len(compressed)))
-        stream.write(compressed)
         index = {
             channel: np.frombuffer(pairs, dtype="<u8").reshape(-1, 2)
             for channel, pairs in self._index.items()
         }
-        self._write_message_indexes(
-            index,
-            start,
-            1 + 8 + length,
-            self._chunk_start,
-            self._chunk_end,
-            "zstd",
-            len(compressed),
-            len(data),
-        )
+        self._drain()
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="mcap-zstd")
+        compressed = self._pool.submit(self._compressor.compress, data)
+        self._pending = (compressed, data, index, self._chunk_start, self._chunk_end)
         self._chunk = bytearray()
         self._index = {}
         self._chunk_messages = 0
+
+    def _drain(self) -> None:
+        """Write the chunk being compressed, if any (then the file holds every ended chunk)."""
+        if self._pending is None:
+            return
+        future, data, index, chunk_start, chunk_end = self._pending
+        self._pending = None
+        compressed = future.result()
+        stream = self._stream
+        start = stream.tell()
+        length = 8 + 8 + 8 + 4 + 4 + 4 + 8 + len(compressed)
+        stream.write(
+            _CHUNK_HEAD.pack(Opcode.CHUNK, length, chunk_start, chunk_end, len(data), zlib.crc32(data))
+        )
+        stream.write(struct.pack("<I4sQ", 4, b"zstd", len(compressed)))
+        stream.write(compressed)
+        self._write_message_indexes(
+            index, start, 1 + 8 + length, chunk_start, chunk_end, "zstd", len(compressed), len(data)
+        )
 
     def _write_message_indexes(
         self,
@@ -363,6 +373,7 @@ class ChunkWriter:
         """Write a whole Chunk record (opcode to end) as it is, then message indexes from `index`
         (channel -> (n, 2) log time [ns], offset pairs); the open chunk is ended first."""
         self._finish_chunk()
+        self._drain()
         self.write_definitions()
         start = self._stream.tell()
         self._stream.write(record)
@@ -378,11 +389,21 @@ class ChunkWriter:
     def flush(self) -> None:
         """End the open chunk (if it holds messages) and hand everything to the OS."""
         self._finish_chunk()
+        self._drain()
+        self._stream.flush()
+
+    def hand_over(self) -> None:
+        """Hand the chunks ended so far to the OS (the open chunk stays open)."""
+        self._drain()
         self._stream.flush()
 
     def finish(self) -> None:
         """End the data section; write the summary, its offsets and the footer."""
         self._finish_chunk()
+        self._drain()
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
         self._write_record(DataEnd(data_section_crc=0))
         summary_start = self._stream.tell()
         builder = RecordBuilder()
