@@ -737,9 +737,10 @@ class _BlockRecording:
     those steps into their messages with NumPy (signal records, /odom /tf /pose at the pose rate,
     /cmd_vel and the mixer's mode at the mixer's rate; scans and moved obstacles were made at their
     steps) and hands them to `Recorder.hold_steps`, which writes the bytes of the per-step path.
-    Steps are flushed once a chunk window has ended (so a killed run loses what it lost before),
-    before anything else is written (a new plan, a goal), when the buffers are full, and at the end
-    of the run. A block the rows cannot describe (a component stepped by Python due before its last
+    Steps are flushed every `WINDOWS` chunk windows of simulated time or the recorder's
+    `flush_interval` of wall time, whichever comes first (every window with a live view), before
+    anything else is written (a new plan, a goal), when the buffers are full, and at the end of the
+    run. A block the rows cannot describe (a component stepped by Python due before its last
     step, a topic's first message) is flushed and replayed step by step (`_KernelBlocks`).
     """
 
@@ -776,7 +777,6 @@ class _BlockRecording:
         """On the first block: which components have rows, the buffers, the message layout."""
         self.ready = True
         recorded = [history is not None for history in histories]
-        self.recorded = recorded
         system, recording = self.system, self.recording
         self.python = [  # stepped by Python: (plan index, period)
             (i, self.periods[i])
@@ -796,7 +796,6 @@ class _BlockRecording:
         if not all(recorded[where(reference)[0]] for reference in needed):
             self.usable = False
             return
-        lidar = None
         if recording.scan is not None:
             lidar = self.index[observed.scan.component]
             if recorded[lidar]:  # ranges inside the rows: replayed step by step
@@ -840,9 +839,7 @@ class _BlockRecording:
             slots + 3,
         )
         self.slots = slots + 6
-        self.first = None  # first step collected
-        self.end = None
-        self.flush_at = 0
+        self.flush_at = 0  # [ns] flush once a step starting at or after it is collected
         self.live = {
             slot: [] for slot, _, i, columns, _ in self.entries if columns is None
         }  # slot -> (k, row)
