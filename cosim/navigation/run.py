@@ -395,8 +395,8 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     recording.write_pose(0)
     h_ns = system.macro_step_ns
     total_steps = round(scenario.stop_time * NS_PER_S / h_ns)
-    # Compile (or load from numba's cache) the kernels that would first run inside the loop, so the
-    # real-time factor measures the simulation, not a first run's JIT compilation.
+    # Build (or load) the C kernels that would first run inside the loop, so the real-time factor
+    # measures the simulation, not a first run's compilation.
     monitor.world.distance(*scenario.start[:2])
     tables = master.kernel_tables(record=True) if _use_kernel(scenario) else None
     if tables is not None:
