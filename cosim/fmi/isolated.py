@@ -473,8 +473,13 @@ class IsolatedFmuComponent(Component):
                         clock = time.perf_counter
                         give_up = clock() + host_spin
                         polls = 0
+                        # With as many children as cores, a child told its request comes next may
+                        # be queued on this core: give it the core between polls.
+                        pause = None if child_spin else os.sched_yield
                         while header[W_REPLY] != sequence:
                             polls += 1
+                            if pause is not None:
+                                pause()
                             if not polls & 15 and clock() >= give_up:
                                 self._cooldown = COOLDOWN
                                 self._wait_reply(sequence)
