@@ -28,20 +28,26 @@ store->load reordering between "asleep" and the sequence number is bounded: a bl
 out after SLICE (1 ms, SO_RCVTIMEO) and looks at the header again. A step error is sent as a
 datagram before the reply number, and the status word says to read it.
 
-Polling is bounded for the 2-core machines this runs on: the child polls only while the host has
-fewer children than usable cores (with 2 children on 2 cores, host + 2 pollers would fight for the
-cores: measured 22.7 us extra per step instead of 14.7), and a poll that runs out of time (a slow
-FMU, a busy machine) turns polling off for the next COOLDOWN (64) steps of that side.
+Polling is bounded for the 2-core machines this runs on: the child polls after a step only while
+the host has fewer children than usable cores, and a poll that runs out of time (a slow FMU, a busy
+machine) turns polling off for the next COOLDOWN (64) steps of that side. With as many children as
+cores (2 children on 2 cores: host + 2 pollers would fight for the cores), the children block after
+a step, and the host prepares the child whose step comes next (the order of isolated steps is
+learned from the steps themselves): while it waits for one child's reply it sets the next one's
+W_PREPARE and wakes it, so that child polls for its request (giving its core away between polls)
+while the other child steps, and its wake-up overlaps that step instead of adding to the round trip;
+the host then gives its core away between its own polls too, for a prepared child queued on it.
 `host_spin` and `child_spin` (attributes, seconds; None = these defaults) override it.
 
-Measured (benchmarks/bench_isolation.py --baseline <the blocking handshake's tree> --spin auto,
-quiet 2-core machine, extra us per isolated component step over in-process, two runs): vehicle
-isolated 27.4 / 23.5 before (one blocking round trip per step) -> 5.1 / 7.3 now; both isolated 21.0
-/ 22.8 -> 22.7 / 15.5 (the children block, the host polls; one earlier run 19.2 -> 14.7). A blocking
-round trip costs two wake-ups through the kernel; a polled one none. Why a socket at all, not a
-futex, for the blocking side: measured here, a Python-to-Python round trip costs 8.7 us through a
-futex pair and 9.5 us through the socket pair, but the socket gives what a futex does not: a kernel
-timeout without an extra poll call (SO_RCVTIMEO), and a dead child shows at once as end-of-file.
+Measured (benchmarks/bench_isolation.py --baseline <the previous tree> --spin auto, extra us per
+isolated component step over in-process, 2-core VM): vehicle isolated 5-10 (one blocking round
+trip per step, before the spin-then-block handshake: 23.5-27.4); both isolated, this handshake
+against the one without prepared children in the same run: 13.0/18.2, 13.9/18.0, 16.2/18.4,
+13.2/17.9, 18.9/21.0. A blocking round trip costs two wake-ups through the kernel; a polled one
+none. Why a socket at all, not a futex, for the blocking side: measured here, a Python-to-Python
+round trip costs 8.7 us through a futex pair and 9.5 us through the socket pair, but the socket
+gives what a futex does not: a kernel timeout without an extra poll call (SO_RCVTIMEO), and a dead
+child shows at once as end-of-file.
 
 Failures (each a one-line `CosimError` naming the component, the model, the FMI call and the
 simulation time; the component is then FAILED and the child gone):
