@@ -81,3 +81,20 @@ def test_missing_compiler_says_what_to_do(tmp_path, monkeypatch):
     monkeypatch.setenv("PATH", str(tmp_path))
     with pytest.raises(native.NativeBuildError, match="no C compiler found"):
         native.compiler()
+
+
+def test_cli_without_a_compiler_says_so_in_one_line(tmp_path):
+    """A fresh install on a machine without a C compiler: `cosim plan` exits 2 with one line, no
+    traceback, and names what to do."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parent.parent
+    environment = dict(os.environ, NAVCOSIM_NATIVE_CACHE=str(tmp_path / "cache"), CC=str(tmp_path / "no-cc"))
+    command = [sys.executable, "-m", "cosim", "plan", str(repo / "scenarios/maps/warehouse.yaml")]
+    command += ["--start", "6,6", "--goal", "84,53", "--repeat", "1"]
+    done = subprocess.run(command, capture_output=True, text=True, env=environment, cwd=tmp_path, timeout=120)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.startswith("cosim: error: cannot run the C compiler") and done.stderr.count("\n") == 1

@@ -9,6 +9,7 @@ import os
 import sys
 
 from planner.errors import NavcosimError
+from planner.native import NativeBuildError
 
 COMMANDS = ("fmu", "plan", "run", "system", "log", "ssp", "sweep")
 
@@ -48,6 +49,9 @@ def main(argv: list[str] | None = None) -> int:
     except NavcosimError as error:
         for line in str(error).splitlines() or [""]:  # a scenario's problems come all at once
             print(f"cosim: error: {line}", file=sys.stderr)
+        return 2
+    except NativeBuildError as error:  # no C compiler, or it failed: the kernels cannot be built
+        print(f"cosim: error: {error}", file=sys.stderr)
         return 2
     except Interrupted as interrupt:
         print(f"cosim: interrupted ({interrupt.signal_name})", file=sys.stderr)
