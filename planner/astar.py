@@ -92,38 +92,41 @@ def search_parameters(
 _LIBRARY = native.load(Path(__file__).parent / "native" / "astar.c")
 # PyDLL: the kernels hold the GIL, as the compiled searches always did, so the shared work arrays
 # (planner.searchspace.workspace) are never used by two threads at once.
-_KERNELS = ctypes.PyDLL(_LIBRARY._name, handle=_LIBRARY._handle)
 _P = ctypes.c_void_p
 _I = ctypes.c_int64
 _D = ctypes.c_double
-
-
-def _kernel(name: str, restype, *argtypes):
-    function = getattr(_KERNELS, "navcosim_" + name)
-    function.restype = restype
-    function.argtypes = argtypes
-    return function
-
-
-_heuristic_cells = _kernel("heuristic_cells", _D, _I, _I, _I)
-_heap_key_of = _kernel("heap_key_of", _I, _D, _D, _I)
-_endpoint_node = _kernel("endpoint_node", _I, _P, _P, _D, _D)
-_astar_search = _kernel("astar_search", _I, _P, _P, _P, _I, _I, _I, _P, _P, _I, _P, _I, _P)
-# astar_plan(Query *, start_x, start_y, goal_x, goal_y)
-plan_kernel = _kernel("astar_plan", _I, _P, _D, _D, _D, _D)
+_SIGNATURES = {  # name (after navcosim_): restype, argtypes
+    "heuristic_cells": (_D, (_I, _I, _I)),
+    "heap_key_of": (_I, (_D, _D, _I)),
+    "endpoint_node": (_I, (_P, _P, _D, _D)),
+    "astar_search": (_I, (_P, _P, _P, _I, _I, _I, _P, _P, _I, _P, _I, _P)),
+    "astar_plan": (_I, (_P, _D, _D, _D, _D)),  # (Query *, start_x, start_y, goal_x, goal_y)
+    "astar_call": (None, ()),
+    "bidirectional_search": (
+        _I, (_P, _P, _P, _I, _I, _I, _P, _P, _I, _P, _P, _I, _P, _P, _I, _P, _P, _I, _P, _P),
+    ),
+    "join_count": (_I, (_P, _P, _I, _I, _I, _I)),
+    "join_paths": (_D, (_P, _P, _I, _I, _I, _I, _P, _P, _P)),
+}  # fmt: skip
+_KERNELS = native.bind(
+    _LIBRARY, {"navcosim_" + name: typed for name, typed in _SIGNATURES.items()}, hold_gil=True
+)
+_heuristic_cells = _KERNELS.navcosim_heuristic_cells
+_heap_key_of = _KERNELS.navcosim_heap_key_of
+_endpoint_node = _KERNELS.navcosim_endpoint_node
+_astar_search = _KERNELS.navcosim_astar_search
+plan_kernel = _KERNELS.navcosim_astar_plan
 # The thin call of planner.planning.GridSearch: call_in(call_io, 0, address of a Query, start_x,
 # start_y, goal_x, goal_y); plan_call(); call_out(call_io, CALL_OUT) = (status, searched, count,
 # length [m]). Five converted ctypes arguments cost about three times this.
-plan_call = _kernel("astar_call", None)
+plan_call = _KERNELS.navcosim_astar_call
 call_io = (ctypes.c_char * 72).in_dll(_KERNELS, "navcosim_astar_io")
 call_in = struct.Struct("=q4d").pack_into
 call_out = struct.Struct("=qqqd").unpack_from
 CALL_OUT = 40
-bidirectional_kernel = _kernel(
-    "bidirectional_search", _I, _P, _P, _P, _I, _I, _I, _P, _P, _I, _P, _P, _I, _P, _P, _I, _P, _P, _I, _P, _P
-)
-join_count_kernel = _kernel("join_count", _I, _P, _P, _I, _I, _I, _I)
-join_paths_kernel = _kernel("join_paths", _D, _P, _P, _I, _I, _I, _I, _P, _P, _P)
+bidirectional_kernel = _KERNELS.navcosim_bidirectional_search
+join_count_kernel = _KERNELS.navcosim_join_count
+join_paths_kernel = _KERNELS.navcosim_join_paths
 
 
 class WorkState(ctypes.Structure):

@@ -42,12 +42,7 @@ def library() -> ctypes.CDLL:
     """The hybrid A* kernels (`planner/native/hybrid.c`), built on first use, loaded once."""
     global _library
     if _library is None:
-        loaded = native.load(SOURCE)
-        for name, (restype, argtypes) in _SIGNATURES.items():
-            function = getattr(loaded, name)
-            function.restype = restype
-            function.argtypes = argtypes
-        _library = loaded
+        _library = native.bind(native.load(SOURCE), _SIGNATURES)
     return _library
 
 

@@ -171,6 +171,19 @@ def load(source: str | Path) -> ctypes.CDLL:
     return library
 
 
+def bind(library: ctypes.CDLL, signatures: dict, hold_gil: bool = False) -> ctypes.CDLL:
+    """`library` with the functions of `signatures` ({name: (restype, argtypes)}) typed; with
+    `hold_gil`, a view of it whose calls keep the GIL (`ctypes.PyDLL`: kernels that use buffers
+    shared across calls, which another thread must not enter meanwhile). Typed once per view."""
+    if hold_gil:
+        library = ctypes.PyDLL(library._name, handle=library._handle)
+    for name, (restype, argtypes) in signatures.items():
+        function = getattr(library, name)
+        function.restype = restype
+        function.argtypes = argtypes
+    return library
+
+
 def build_all(packages: dict[Path, Path]) -> list[Path]:
     """Build every kernel (each `*.c` in a folder named `native`) of the source package folders
     in `packages` into the `_native/` of the package folder each maps to. For `setup.py` (wheels)."""

@@ -34,17 +34,19 @@ from planner.searchspace import SearchMap
 _INNER = (0.6, 0.3)  # B1, B2 as fractions of d from the corner
 
 
-_LIBRARY = native.load(Path(__file__).parent / "native" / "smoothing.c")
-_KERNELS = ctypes.PyDLL(_LIBRARY._name, handle=_LIBRARY._handle)  # holds the GIL, as planner.astar's
+_P, _I, _D = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double
+_KERNELS = native.bind(  # holds the GIL, as planner.astar's
+    native.load(Path(__file__).parent / "native" / "smoothing.c"),
+    {
+        "navcosim_segment_clear": (_I, (_P, _I, _D, _D, _D, _D)),
+        "navcosim_polyline_clear": (_I, (_P, _I, _P, _I)),
+        "navcosim_prune_line_of_sight": (_I, (_P, _I, _P, _I, _P)),
+    },
+    hold_gil=True,
+)
 _segment_clear = _KERNELS.navcosim_segment_clear
-_segment_clear.restype = ctypes.c_int64
-_segment_clear.argtypes = (ctypes.c_void_p, ctypes.c_int64) + (ctypes.c_double,) * 4
 _polyline_clear = _KERNELS.navcosim_polyline_clear
-_polyline_clear.restype = ctypes.c_int64
-_polyline_clear.argtypes = (ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64)
 _prune = _KERNELS.navcosim_prune_line_of_sight
-_prune.restype = ctypes.c_int64
-_prune.argtypes = (ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p)
 
 
 def _points(points_uv) -> np.ndarray:

@@ -98,3 +98,13 @@ def test_cli_without_a_compiler_says_so_in_one_line(tmp_path):
     done = subprocess.run(command, capture_output=True, text=True, env=environment, cwd=tmp_path, timeout=120)
     assert done.returncode == 2, done.stderr
     assert done.stderr.startswith("cosim: error: cannot run the C compiler") and done.stderr.count("\n") == 1
+
+
+def test_bind_types_the_functions_and_can_hold_the_gil(tmp_path, monkeypatch):
+    monkeypatch.setattr(native, "_loaded", {})
+    monkeypatch.setenv("NAVCOSIM_NATIVE_CACHE", str(tmp_path / "cache"))
+    library = native.load(_package(tmp_path, HYPOT))
+    typed = native.bind(library, {"hyp": (ctypes.c_double, [ctypes.c_double, ctypes.c_double])})
+    assert typed is library and typed.hyp(3, 4) == 5.0  # ints converted: the argtypes are set
+    held = native.bind(library, {"hyp": (ctypes.c_double, [ctypes.c_double, ctypes.c_double])}, hold_gil=True)
+    assert isinstance(held, ctypes.PyDLL) and held._handle == library._handle and held.hyp(6, 8) == 10.0

@@ -94,10 +94,8 @@ def _kernel():
         library = native.load(_SOURCE)
         if library.navcosim_tables_size() != ctypes.sizeof(_Tables):
             raise RuntimeError(f"{_SOURCE.name}: its Tables struct does not match kernel.py's _Tables")
-        function = library.navcosim_step_kernel
-        function.argtypes = [_I64] * 6 + [ctypes.POINTER(_Tables), ctypes.POINTER(_I64)]
-        function.restype = _I64
-        _function = function
+        signature = (_I64, [_I64] * 6 + [ctypes.POINTER(_Tables), ctypes.POINTER(_I64)])
+        _function = native.bind(library, {"navcosim_step_kernel": signature}).navcosim_step_kernel
     return _function
 
 

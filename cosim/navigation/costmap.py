@@ -50,12 +50,13 @@ def _kernels() -> ctypes.CDLL:
     """native/costmap.c built (if needed) and loaded, its functions typed; once per process."""
     global _library
     if _library is None:
-        library = native.load(Path(__file__).parent / "native" / "costmap.c")
-        library.costmap_integrate_scan.argtypes = [_p, _f64, _f64, _f64]
-        library.costmap_integrate_scan.restype = _i64
-        library.costmap_new_marks_near.argtypes = [_p, _p, _p, _i64, _f64]
-        library.costmap_new_marks_near.restype = ctypes.c_int
-        _library = library
+        _library = native.bind(
+            native.load(Path(__file__).parent / "native" / "costmap.c"),
+            {
+                "costmap_integrate_scan": (_i64, [_p, _f64, _f64, _f64]),
+                "costmap_new_marks_near": (ctypes.c_int, [_p, _p, _p, _i64, _f64]),
+            },
+        )
     return _library
 
 

@@ -105,16 +105,14 @@ def library() -> ctypes.CDLL:
     """world.c built (if needed) and loaded, its functions typed; once per process."""
     global _library
     if _library is None:
-        lib = native.load(SOURCE)
-        lib.world_inside_polygon.argtypes = [_f64, _f64, _p, _i64, _i64]
-        lib.world_inside_polygon.restype = ctypes.c_int
-        lib.world_polygon_distance.argtypes = [_f64, _f64, _p, _i64, _i64]
-        lib.world_polygon_distance.restype = _f64
-        lib.world_distance.argtypes = [_p]
-        lib.world_distance.restype = _f64
-        lib.lidar_measure.argtypes = [_p, _f64, _f64, _p, _i64, _p]
-        lib.lidar_measure.restype = None
-        lib.lidar_scan.argtypes = [_p, _f64, _f64, _f64]
-        lib.lidar_scan.restype = None
-        _library = lib
+        _library = native.bind(
+            native.load(SOURCE),
+            {
+                "world_inside_polygon": (ctypes.c_int, [_f64, _f64, _p, _i64, _i64]),
+                "world_polygon_distance": (_f64, [_f64, _f64, _p, _i64, _i64]),
+                "world_distance": (_f64, [_p]),
+                "lidar_measure": (None, [_p, _f64, _f64, _p, _i64, _p]),
+                "lidar_scan": (None, [_p, _f64, _f64, _f64]),
+            },
+        )
     return _library
