@@ -39,6 +39,27 @@ static inline double floor_near(double v)
     return truncated > v ? truncated - 1.0 : truncated;
 }
 
+/* Narrow [*t_lo, *t_hi] to where g + t d lies within [low, high] on one axis; 0 when a ray parallel
+ * to the axis (d == 0) lies outside. */
+static inline int clip_to_slab(double g, double d, double low, double high, double *t_lo, double *t_hi)
+{
+    if (d != 0) {
+        double inverse = 1.0 / d;
+        double a = (low - g) * inverse, b = (high - g) * inverse;
+        if (a > b) {
+            double swap = a;
+            a = b;
+            b = swap;
+        }
+        if (a > *t_lo)
+            *t_lo = a;
+        if (b < *t_hi)
+            *t_hi = b;
+        return 1;
+    }
+    return !(g < low || g > high);
+}
+
 /* Can the ray from (gx, gy) along (dx, dy), up to `limit` (cell units), come within a cell of the
  * box [x_lo, x_hi] x [y_lo, y_hi] of cells? A clip of the segment against the box grown by one
  * cell on every side: the traversal's cells all touch the segment (its rounding errors are many
@@ -47,38 +68,10 @@ static int ray_near_box(double gx, double gy, double dx, double dy, double limit
                         int64_t y_lo, int64_t y_hi)
 {
     double t_lo = 0.0, t_hi = limit;
-    double left = (double)x_lo - 1.0, right = (double)x_hi + 2.0;
-    double bottom = (double)y_lo - 1.0, top = (double)y_hi + 2.0;
-    if (dx != 0) {
-        double inverse = 1.0 / dx;
-        double a = (left - gx) * inverse, b = (right - gx) * inverse;
-        if (a > b) {
-            double swap = a;
-            a = b;
-            b = swap;
-        }
-        if (a > t_lo)
-            t_lo = a;
-        if (b < t_hi)
-            t_hi = b;
-    } else if (gx < left || gx > right) {
+    if (!clip_to_slab(gx, dx, (double)x_lo - 1.0, (double)x_hi + 2.0, &t_lo, &t_hi))
         return 0;
-    }
-    if (dy != 0) {
-        double inverse = 1.0 / dy;
-        double a = (bottom - gy) * inverse, b = (top - gy) * inverse;
-        if (a > b) {
-            double swap = a;
-            a = b;
-            b = swap;
-        }
-        if (a > t_lo)
-            t_lo = a;
-        if (b < t_hi)
-            t_hi = b;
-    } else if (gy < bottom || gy > top) {
+    if (!clip_to_slab(gy, dy, (double)y_lo - 1.0, (double)y_hi + 2.0, &t_lo, &t_hi))
         return 0;
-    }
     return t_lo <= t_hi;
 }
 
