@@ -7,6 +7,8 @@
 #include <math.h>
 #include <stdint.h>
 
+#include "../../world/native/geometry.h" /* py_min, int_min, int_max */
+
 typedef struct {
     uint8_t *marked;       /* rows x cols, row 0 at the top (the grid's convention) */
     const uint8_t *known;  /* rows x cols: known occupied cells, never cleared */
@@ -28,9 +30,6 @@ typedef struct {
 #define FAST_COORDINATE 1e6
 #define MARK_SLACK 1e-7
 
-static inline int64_t int_min(int64_t a, int64_t b) { return b < a ? b : a; }
-static inline int64_t int_max(int64_t a, int64_t b) { return b > a ? b : a; }
-static inline double py_min(double a, double b) { return b < a ? b : a; }
 
 /* floor(v) for |v| < 2^52 without a call to libm (C99's floor is one on baseline x86-64). */
 static inline double floor_near(double v)

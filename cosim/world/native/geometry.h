@@ -1,5 +1,6 @@
 /* Point-polygon geometry shared by the lidar (is the sensor inside an obstacle?) and the exact
- * clearance (distance to the true obstacles); see cosim/world/geometry.py.
+ * clearance (distance to the true obstacles); see cosim/world/geometry.py. The costmap
+ * (cosim/navigation/native/costmap.c) includes it for the min/max below.
  *
  * A polygon is rows `first` to `stop - 1` of an (N, 2) row-major vertex array, closed implicitly,
  * so many polygons share one array. `py_min`/`py_max` are Python's two-argument min/max
