@@ -116,3 +116,43 @@ def test_a_copy_has_its_own_marks():
         assert twin.integrate(1.25, 5.1, 0.0, np.array([6.0])) == 2  # clears the mark, marks a new one
         assert costmap.marked.sum() == 1 and twin.marked.sum() == 1
         assert not np.array_equal(costmap.marked, twin.marked)
+
+
+def _progress_numpy(points, arc, first, stop, x, y):
+    """The planner's progress as NumPy computed it before native/costmap.c took it over."""
+    a, b = points[first:stop], points[first + 1 : stop + 1]
+    edge = b - a
+    length_sq = (edge * edge).sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        fraction = np.clip(((x - a[:, 0]) * edge[:, 0] + (y - a[:, 1]) * edge[:, 1]) / length_sq, 0.0, 1.0)
+    fraction = np.nan_to_num(fraction)
+    nearest = a + fraction[:, None] * edge
+    best = int(np.argmin(np.hypot(nearest[:, 0] - x, nearest[:, 1] - y)))
+    return first + best, arc[first + best] + fraction[best] * math.sqrt(length_sq[best])
+
+
+def test_path_progress_is_the_numpy_description_bit_for_bit():
+    import ctypes
+
+    from cosim.navigation.costmap import path_progress
+
+    function = path_progress()
+    rng = np.random.default_rng(7)
+    segment = ctypes.c_int64()
+    for trial in range(400):
+        n = int(rng.integers(2, 80))
+        points = np.cumsum(rng.normal(0.0, 1.0, (n, 2)), axis=0)
+        if trial % 3 == 0:  # repeated points: zero-length segments
+            points[rng.integers(1, n, size=n // 4)] = points[0]
+        if trial % 5 == 0:  # a grid-like plan: ties between segments at equal distances
+            points = np.round(points)
+        points = np.ascontiguousarray(points)
+        arc = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))))
+        first = int(rng.integers(0, n - 1))
+        stop = min(first + int(rng.integers(1, 70)), n - 1)
+        x, y = (float(v) for v in rng.normal(points[first], 2.0))
+        if trial % 7 == 0:
+            x, y = float(points[first][0]), float(points[first][1])  # on a point exactly
+        progress = function(points.ctypes.data, arc.ctypes.data, first, stop, x, y, ctypes.byref(segment))
+        expected_segment, expected = _progress_numpy(points, arc, first, stop, x, y)
+        assert (segment.value, progress) == (expected_segment, expected)

@@ -55,9 +55,16 @@ def _kernels() -> ctypes.CDLL:
             {
                 "costmap_integrate_scan": (_i64, [_p, _f64, _f64, _f64]),
                 "costmap_new_marks_near": (ctypes.c_int, [_p, _p, _p, _i64, _f64]),
+                "path_progress": (_f64, [_p, _p, _i64, _i64, _f64, _f64, ctypes.POINTER(_i64)]),
             },
         )
     return _library
+
+
+def path_progress():
+    """native/costmap.c's `path_progress(points, arc, first, stop, x, y, &segment)` (addresses of
+    C-contiguous float64 arrays; see there), for the planner's progress along its plan."""
+    return _kernels().path_progress
 
 
 class Costmap(kernels.Bound):

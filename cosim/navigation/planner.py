@@ -37,6 +37,7 @@ new waypoints are the component's outputs from that step on (`constant_outputs` 
 
 from __future__ import annotations
 
+import ctypes
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -45,7 +46,7 @@ import numpy as np
 
 from cosim.core.component import Port, PythonComponent, array_ports
 from cosim.errors import CosimError
-from cosim.navigation.costmap import Costmap
+from cosim.navigation.costmap import Costmap, path_progress
 from cosim.scenario.template import WAYPOINT_CAPACITY
 from planner.errors import PlannerError
 from planner.grid import OccupancyGrid
@@ -201,6 +202,9 @@ class PlannerComponent(PythonComponent):
         self.plan_version = 0  # counts the plans made (1 after plan_path)
         if replanning is not None:
             self.costmap = Costmap(grid, replanning.angles, replanning.range_min, replanning.range_max)
+            self._path_progress = path_progress()
+            self._nearest = ctypes.c_int64()  # the segment `path_progress` found
+            self._nearest_ref = ctypes.byref(self._nearest)
 
     def plan_path(self):
         """Plan from start to goal; returns the `PlanResult`. Raises `CosimError` when there is no path."""
@@ -223,11 +227,12 @@ class PlannerComponent(PythonComponent):
         """Make `result` the plan: waypoints, outputs, the progress along it."""
         self.result = result
         path = end_at_goal(np.asarray(result.path, dtype=float)[:, :2], self.goal[:2])
-        self.waypoints = downsample_path(path)
+        self.waypoints = np.ascontiguousarray(downsample_path(path), dtype=float)
         self.output_buffer[:] = np.nan
         self.output_buffer[: 2 * len(self.waypoints)] = self.waypoints.reshape(-1)
         self.plan_version += 1
         self._arc = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(self.waypoints, axis=0).T))))
+        self._arc_addresses = (self.waypoints.ctypes.data, self._arc.ctypes.data)  # for path_progress
         self._segment = 0  # index of the plan segment the progress lies on
         self._progress = 0.0  # [m] along the plan
         if self.replanning is not None:
@@ -258,25 +263,16 @@ class PlannerComponent(PythonComponent):
             self.replan(t, (x, y, theta), reason)
 
     def _advance_progress(self, x: float, y: float) -> None:
-        """Move the progress to the closest point of the plan ahead (never backwards)."""
-        points = self.waypoints
+        """Move the progress to the closest point of the plan ahead (never backwards): of the next
+        `SEARCH_WINDOW` segments, the one nearest to (x, y) (`path_progress` of native/costmap.c)."""
         first = self._segment
-        stop = min(first + SEARCH_WINDOW, len(points) - 1)
+        stop = min(first + SEARCH_WINDOW, len(self.waypoints) - 1)
         if stop <= first:
             return
-        a, b = points[first:stop], points[first + 1 : stop + 1]
-        edge = b - a
-        length_sq = (edge * edge).sum(axis=1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            fraction = np.clip(
-                ((x - a[:, 0]) * edge[:, 0] + (y - a[:, 1]) * edge[:, 1]) / length_sq, 0.0, 1.0
-            )
-        fraction = np.nan_to_num(fraction)
-        nearest = a + fraction[:, None] * edge
-        best = int(np.argmin(np.hypot(nearest[:, 0] - x, nearest[:, 1] - y)))
-        progress = self._arc[first + best] + fraction[best] * math.sqrt(length_sq[best])
+        points, arc = self._arc_addresses
+        progress = self._path_progress(points, arc, first, stop, x, y, self._nearest_ref)
         if progress > self._progress:
-            self._segment, self._progress = first + best, progress
+            self._segment, self._progress = self._nearest.value, progress
 
     def _trigger(self, t: float, steering: float, new_marks: bool) -> str | None:
         """Why to replan now, or None (see the module docstring)."""

@@ -244,3 +244,36 @@ int costmap_new_marks_near(const Costmap *m, const uint8_t *since, const double 
     }
     return 0;
 }
+
+/* The planner's progress along its plan (`PlannerComponent._advance_progress`): of the segments
+ * points[first..stop] (points n x 2, segment j from point j to j + 1), the one whose closest point
+ * is nearest to (x, y), the first of equals. Its index goes to *segment; returns the progress [m]
+ * there: arc[j] + fraction * |segment j|. A zero-length segment's fraction is 0; a fraction is
+ * clipped to [0, 1]. Operations in the order of the NumPy description it replaced. */
+double path_progress(const double *points, const double *arc, int64_t first, int64_t stop, double x,
+                     double y, int64_t *segment)
+{
+    int64_t best = first;
+    double best_distance = INFINITY, best_fraction = 0.0, best_length_sq = 0.0;
+    for (int64_t j = first; j < stop; j++) {
+        double ax = points[2 * j], ay = points[2 * j + 1];
+        double ex = points[2 * j + 2] - ax, ey = points[2 * j + 3] - ay;
+        double length_sq = ex * ex + ey * ey;
+        double fraction = ((x - ax) * ex + (y - ay) * ey) / length_sq;
+        if (fraction != fraction)
+            fraction = 0.0; /* 0 / 0 */
+        else
+            fraction = fraction < 0.0 ? 0.0 : (fraction > 1.0 ? 1.0 : fraction);
+        double distance = hypot(ax + fraction * ex - x, ay + fraction * ey - y);
+        if (j == first || !(distance >= best_distance)) { /* nearer, or NaN */
+            best = j;
+            best_distance = distance;
+            best_fraction = fraction;
+            best_length_sq = length_sq;
+            if (distance != distance)
+                break; /* NaN: NumPy's argmin takes the first */
+        }
+    }
+    *segment = best;
+    return arc[best] + best_fraction * sqrt(best_length_sq);
+}
