@@ -745,7 +745,7 @@ class _BlockRecording:
     """
 
     STEPS = 2048  # steps collected at most between two flushes
-    WINDOWS = 8  # chunk windows collected at most between two flushes (1 with a live view)
+    WINDOWS = 2  # chunk windows collected at most between two flushes (1 with a live view): 4 s
 
     def __init__(
         self, built: BuiltRun, master: Master, recording: _Recording, monitor, finish_checks, polled
