@@ -620,6 +620,7 @@ class Master:
         on_block: Callable[[int, int, list, bool], bool | None] | None = None,
         block: int = KERNEL_BLOCK,
         before_block: Callable[[], None] | None = None,
+        cut_after_python: Callable[[int], bool] | None = None,
     ) -> int:
         """Advance up to `steps` macro steps through the compiled kernel (`cosim.core.kernel`);
         components that need Python are stepped here where they are due. Returns the steps done.
@@ -632,6 +633,11 @@ class Master:
         `clean` is True when no component has stepped yet in step `end`: then a true return
         stops the run at `end` (the same place as the Python loop's callback would); otherwise
         the return is ignored. `before_block()` is called before each call of the kernel.
+
+        `cut_after_python(k)`, when given, is asked after the Python components of step k have
+        stepped: False lets the stretch go on past step k (so Python components step only in the
+        first step of a stretch, and hold their buffers to its end); True, or no callable, ends
+        the stretch with step k.
         """
         self._check_running()
         if steps < 0:
@@ -714,7 +720,7 @@ class Master:
                     if following is None or tables.native[following] is not None:
                         break
                     position = following
-                finish_step = True
+                finish_step = cut_after_python is None or cut_after_python(k)
         return self.step_index - (end - steps)
 
     def _deliver(self, first: int, on_block, histories: list[np.ndarray], rows: np.ndarray) -> None:

@@ -479,7 +479,22 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
             def on_block(first: int, end: int, histories, clean: bool) -> bool:
                 return stop(blocks.replay(first, end, histories, clean), clean, master.time)
 
-            master.run_blocks(total_steps, tables, on_block, block=blocks.block, before_block=blocks.watch)
+            def cut_after_python(k: int) -> bool:
+                # The block may go on past step k unless step k's end has something to do: a new
+                # plan to write, a planner that found no path, a goal to poll for.
+                return goal_poll is not None or (
+                    planner is not None
+                    and (planner.plan_version != plan_version[0] or planner.no_path is not None)
+                )
+
+            master.run_blocks(
+                total_steps,
+                tables,
+                on_block,
+                block=blocks.block,
+                before_block=blocks.watch,
+                cut_after_python=cut_after_python,
+            )
     except CosimError as error:
         failure = str(error) if " at t = " in str(error) else f"{error} (at t = {master.time:.3f} s)"
     except interrupt.Interrupted:  # a signal while an FMU in a child process did not answer
@@ -857,14 +872,20 @@ class _BlockRecording:
             self._setup(histories)
         if not self.usable:
             return False
+        # A component stepped by Python steps at most in the block's first step (`run_blocks`
+        # ends a block before it is due, and after its step unless `cut_after_python` lets the
+        # block go on); its buffers hold that step's values to the end of the block.
         for _, period in self.python:
-            if -(-first // period) * period < end - 1:
+            if -(-(first + 1) // period) * period < end:
                 return False
         if self.polled and -(-first // self.polled) * self.polled < end - 1:
             return False
         recording, recorder = self.recording, self.recorder
-        if recording.scan is not None and not recorder.has_channel("/scan"):
-            if -(-first // recording.scan[0]) * recording.scan[0] < end:
+        if recording.scan is not None:
+            period = recording.scan[0]
+            if -(-(first + 1) // period) * period < end:
+                return False  # a scan after the first step: its ranges are not held
+            if not recorder.has_channel("/scan") and first % period == 0:
                 return False
         if recording.command is not None and not recorder.has_channel("/cmd_vel"):
             if -(-first // recording.command[0]) * recording.command[0] < end:
@@ -894,9 +915,9 @@ class _BlockRecording:
         self.end = end
         last = end - 1
         t_last = start_ns + last * h_ns
-        # Records of components stepped by Python: due at most at the last step, from live buffers.
+        # Records of components stepped by Python: due at most at the first step, from live buffers.
         for taken, period, entry in self.live_entries:
-            if last % period == 0:
+            if first % period == 0:
                 _, _, first_view, second, gather = entry
                 if gather is not None:
                     inputs, input_index, input_part, outputs, output_index, output_part = gather
@@ -905,15 +926,16 @@ class _BlockRecording:
                     row = first_view.copy()
                 else:
                     row = np.concatenate((first_view, second))
-                taken.append((last, row))
+                taken.append((first, row))
         recording, recorder = self.recording, self.recorder
         scan = recording.scan
-        if scan is not None and last % scan[0] == 0:
+        if scan is not None and first % scan[0] == 0:
             _, buffer, ranges, gather, angles, limits = scan
+            t_first = start_ns + first * h_ns
             payload = recorder.scan_payload(
-                t_last, angles, ranges if gather is None else buffer[gather], *limits
+                t_first, angles, ranges if gather is None else buffer[gather], *limits
             )
-            self.others.append((last * self.slots + self.scan_slot, t_last, ("/scan", payload)))
+            self.others.append((first * self.slots + self.scan_slot, t_first, ("/scan", payload)))
         if recording.moving:
             steps = recording.obstacle_steps
             for k in range(-(-first // steps) * steps, end, steps):
