@@ -23,14 +23,15 @@ Log contents and rates (t = simulated time, integer nanoseconds):
 
 The loop: the FMUs step in the compiled kernel (`Master.run_blocks`, `cosim.core.kernel`), which keeps
 their buffers after each step and hands the Python components (lidar, planner) back where they are
-due. After each block of steps (cut at every Python component's step, at the end of a step in which
-one stepped, and after any step whose position may end the run: not finite, near the goal, or
+due. After each block of steps (cut before every Python component's step, at the end of a step in
+which one stepped when that step has something to write (a new plan, no path, a goal poll; else the
+block goes on), and after any step whose position may end the run: not finite, near the goal, or
 outside a circle that the true obstacles cannot reach) `_BlockRecording` takes the block's rows:
 the positions of all its steps go through `OutcomeMonitor.check_positions` (the arithmetic of the
 per-step check, step by step), and the rows are collected over blocks and turned into their
 messages with NumPy every few chunk windows (`Recorder.hold_steps`: the bytes of writing them one at
-a time). A block the rows cannot describe (a topic's first message, a Python component due before
-the block's last step) is replayed step by step: `_KernelBlocks.replay_steps` sets the buffers to
+a time). A block the rows cannot describe (a topic's first message, a Python component due after
+the block's first step) is replayed step by step: `_KernelBlocks.replay_steps` sets the buffers to
 each step's values in turn and calls `finish_step` (recording, mode, outcome, planner) for it, as
 the Python loop's per-step callback does. Either way the log and the outcome are the same bytes and
 numbers, and the run ends at the same step. Hooks: `finish_step(k)` runs once per step (Python
@@ -744,8 +745,9 @@ class _KernelBlocks:
 class _BlockRecording:
     """The kernel path's recording and checks, a block of steps at a time (`_KernelBlocks.replay`).
 
-    Within a block only the kernel's components step (a component stepped by Python is due at most
-    at the block's last step, whose buffers are live), so what the Python loop's `finish_step`
+    Within a block only the kernel's components step (a component stepped by Python steps at most
+    in the block's first step, and its live buffers hold that step's values to the block's end), so
+    what the Python loop's `finish_step`
     does step by step can be done over the block's rows: the positions are checked in one call of
     `OutcomeMonitor.check_positions` (the same arithmetic, step by step, in Python floats), and
     the rows are copied into buffers that collect the steps of several blocks. `flush()` turns
@@ -755,7 +757,7 @@ class _BlockRecording:
     Steps are flushed every `WINDOWS` chunk windows of simulated time or the recorder's
     `flush_interval` of wall time, whichever comes first (every window with a live view), before
     anything else is written (a new plan, a goal), when the buffers are full, and at the end of the
-    run. A block the rows cannot describe (a component stepped by Python due before its last
+    run. A block the rows cannot describe (a component stepped by Python due after its first
     step, a topic's first message) is flushed and replayed step by step (`_KernelBlocks`).
     """
 
