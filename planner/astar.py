@@ -8,10 +8,11 @@ g, parent and a per-cell `stamp` live in arrays that are reused from query to qu
 `stamp[n] == generation` means n is in OPEN, `generation + 1` means CLOSED, anything else means
 unseen, so a new query costs no clearing of grid-size arrays.
 
-OPEN is a 4-ary heap of (int64 key, node); the key packs f = g + h (rounded to 2^-24 cell) over h
-(quarter cells), so one integer comparison orders by f and, among equal f, by smaller h (the
-"low_h" tie breaker, which keeps optimality; rounding f puts ties that octile costs make equal in
-exact arithmetic on the same key). The thesis's second improvement, OPEN-list replacement, is a
+OPEN is a 4-ary heap of (int64 key, node) that keeps HEAP_SLACK spare slots after its last entry
+(so a heap array of C entries holds C - HEAP_SLACK); the key packs f = g + h (rounded to 2^-24
+cell) over h (quarter cells), so one integer comparison orders by f and, among equal f, by smaller
+h (the "low_h" tie breaker, which keeps optimality; rounding f puts ties that octile costs make
+equal in exact arithmetic on the same key). The thesis's second improvement, OPEN-list replacement, is a
 decrease-key done lazily: a node reached again with a lower g gets the new g and parent and is
 pushed again with its lower key; the stale entry is skipped when popped. Without it
 (`decrease_key=False`) g, f and parent change but the key in OPEN does not, as in plannerAStarGrid.
@@ -61,6 +62,9 @@ PARAMETERS = (
 )
 P_WIDTH, P_HEURISTIC, P_TIE, P_DECREASE, P_H_SCALE, P_COST_WEIGHT = range(6)
 P_ROWS, P_COLS, P_RESOLUTION, P_ORIGIN_X, P_ORIGIN_Y = range(6, 11)
+
+# Spare slots the kernel keeps after the heap's last entry (astar.c's HEAP_SLACK).
+HEAP_SLACK = 3
 
 # The cost argument of a search without a cost gradient (cost_weight 0: never read).
 NO_COST = np.zeros(1)
@@ -221,7 +225,8 @@ def astar_search(moves, cost, parameters, start, goal, generation, g, nodes, hea
     so the loop tests one bit per neighbour). cost: the padded cost gradient, or NO_COST when the
     cost weight is 0 (then it is never read).
     parameters: PARAMETERS. g: float64 [size]. nodes: int32 [3, size] = parent, stamp, and the
-    expanded nodes in the order they were closed. heap: int64 [2, capacity], keys and nodes of OPEN.
+    expanded nodes in the order they were closed. heap: int64 [2, capacity], keys and nodes of OPEN
+    (at most capacity - HEAP_SLACK entries).
     Returns (status, number of expanded nodes): FOUND, NO_PATH (OPEN ran empty; with goal == -1,
     the Dijkstra mode, this is the normal end) or HEAP_FULL (give larger heap arrays and search
     again: growing them here would slow every push down).

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import binary_dilation
 
-from planner.astar import WorkState
+from planner.astar import HEAP_SLACK, WorkState
 from planner.grid import OccupancyGrid
 from planner.inflation import cost_gradient, inflation_mask
 
@@ -138,10 +138,11 @@ class Workspace:
     """Reusable arrays of one search direction over a padded map of `size` cells.
 
     g [cells] per node; nodes int32 [3, size]: parent, stamp, expanded nodes in closing order;
-    heap int64 [2, capacity]: keys and nodes of OPEN, one entry per cell at first, doubled if OPEN
-    ever outgrows them (decrease-keys push a node again, so OPEN can in theory hold up to 8 entries
-    per cell); path float64 and cells int64 [C, 2]: the last path, (x, y) [m] and (row, col) per
-    node, which the caller copies out.
+    heap int64 [2, capacity + HEAP_SLACK]: keys and nodes of OPEN (the kernel keeps HEAP_SLACK spare
+    slots after the last entry), room for one entry per cell at first, doubled if OPEN ever outgrows
+    it (decrease-keys push a node again, so OPEN can in theory hold up to 8 entries per cell); path
+    float64 and cells int64 [C, 2]: the last path, (x, y) [m] and (row, col) per node, which the
+    caller copies out.
     """
 
     __slots__ = ("g", "nodes", "heap", "path", "cells", "state")
@@ -149,13 +150,13 @@ class Workspace:
     def __init__(self, size: int) -> None:
         self.g = np.empty(size)
         self.nodes = np.zeros((3, size), dtype=np.int32)
-        self.heap = np.empty((2, size), dtype=np.int64)
+        self.heap = np.empty((2, size + HEAP_SLACK), dtype=np.int64)
         self.path = np.empty((_PATH_ROWS, 2))
         self.cells = np.empty((_PATH_ROWS, 2), dtype=np.int64)
         # The arrays' addresses and the generation, for the C kernel (planner.astar.WorkState): a
         # prepared search hands the kernel this one structure, which stays valid as the arrays grow.
         self.state = WorkState(
-            self.g.ctypes.data, self.nodes.ctypes.data, size, self.heap.ctypes.data, size,
+            self.g.ctypes.data, self.nodes.ctypes.data, size, self.heap.ctypes.data, self.heap.shape[1],
             self.path.ctypes.data, self.cells.ctypes.data, _PATH_ROWS, 0,
         )  # fmt: skip
 
@@ -175,7 +176,7 @@ class Workspace:
 
     def grow_heap(self) -> None:
         """Double the heap arrays (a search returned HEAP_FULL: OPEN outgrew them)."""
-        self.heap = np.empty((2, 2 * self.heap.shape[1]), dtype=np.int64)
+        self.heap = np.empty((2, 2 * (self.heap.shape[1] - HEAP_SLACK) + HEAP_SLACK), dtype=np.int64)
         self.state.heap = self.heap.ctypes.data
         self.state.capacity = self.heap.shape[1]
 

@@ -329,3 +329,27 @@ def test_paths_longer_than_the_first_path_buffer():
     assert result.path_nodes == 3000 and result.length == 2999.0
     assert np.array_equal(result.cells[:, 1], np.arange(3000)) and (result.cells[:, 0] == 0).all()
     assert np.array_equal(result.path[:, 0], np.arange(3000) + 0.5)
+
+
+@pytest.mark.parametrize("search", ["astar", "bidirectional"])
+def test_an_open_list_that_outgrows_the_heap_grows_it(search):
+    """A heap with room for 2 entries (plus the kernel's spare slots): the search reports a full heap,
+    the workspace doubles it until OPEN fits, and the plan is the one a roomy heap gives."""
+    from planner.astar import HEAP_SLACK
+    from planner.searchspace import workspace
+
+    grid = OccupancyGrid(_random_map(5))
+    free = np.argwhere(~grid.occupied)
+    start, goal = grid.cell_to_world(tuple(free[0])), grid.cell_to_world(tuple(free[-1]))
+    options = {"bidirectional": search == "bidirectional"}
+    roomy = planner.plan(grid, start, goal, **options)
+    size = (grid.shape[0] + 2) * (grid.shape[1] + 2)
+    for direction in (0, 1):
+        work = workspace(size, direction)
+        work.heap = np.empty((2, 2 + HEAP_SLACK), dtype=np.int64)
+        work.state.heap, work.state.capacity = work.heap.ctypes.data, work.heap.shape[1]
+    tight = planner.plan(grid, start, goal, **options)
+    assert workspace(size).heap.shape[1] >= 16 + HEAP_SLACK  # grown at least three times
+    assert np.array_equal(tight.cells, roomy.cells) and tight.length == roomy.length
+    assert tight.searched_nodes == roomy.searched_nodes
+    assert np.array_equal(tight.explored, roomy.explored)

@@ -26,6 +26,7 @@ enum { P_WIDTH, P_HEURISTIC, P_TIE, P_DECREASE, P_H_SCALE, P_COST_WEIGHT, P_ROWS
 /* (row, col) steps of the 8 moves, in the bit order of the move masks (planner.searchspace.MOVES). */
 static const int64_t ROW_STEPS[8] = {-1, 1, 0, 0, -1, -1, 1, 1};
 static const int64_t COL_STEPS[8] = {0, 0, -1, 1, -1, 1, -1, 1};
+#define ALL_MOVES 0xFFu
 
 /* The work arrays of one search direction (planner.searchspace.Workspace). */
 typedef struct {
@@ -35,7 +36,7 @@ typedef struct {
     int32_t *expanded;/* nodes[2]: expanded nodes in closing order */
     int64_t *heap_key;
     int64_t *heap_node;
-    int64_t capacity;
+    int64_t capacity; /* entries the heap holds: its arrays' length - HEAP_SLACK */
 } Work;
 
 static inline int64_t absolute(int64_t value) { return value < 0 ? -value : value; }
@@ -72,9 +73,19 @@ static inline int64_t heap_key_of(double f, double h, int64_t tie_breaker) {
 
 int64_t navcosim_heap_key_of(double f, double h, int64_t tie_breaker) { return heap_key_of(f, h, tie_breaker); }
 
-/* Push on the 4-ary min-heap (the caller checks the capacity); the new size. */
+/* OPEN is a 4-ary min-heap of keys and nodes (two arrays) that keeps NO_KEY in the HEAP_SLACK slots
+ * after its last entry: every entry with a child then has four, the missing ones never the smallest,
+ * so a pop compares four keys per level without a branch (a branch on how many children there are
+ * is mispredicted at the bottom of the heap). A heap buffer of c entries holds c - HEAP_SLACK. */
+#define NO_KEY INT64_MAX
+#define HEAP_SLACK 3
+
+static inline void heap_clear(int64_t *heap_key) { heap_key[0] = heap_key[1] = heap_key[2] = NO_KEY; }
+
+/* Push (the caller checks the capacity); the new size. */
 static inline int64_t heap_push(int64_t *restrict heap_key, int64_t *restrict heap_node, int64_t size, int64_t key,
                                 int64_t node) {
+    heap_key[size + HEAP_SLACK] = NO_KEY;
     int64_t index = size;
     while (index > 0) {
         int64_t parent = (index - 1) >> 2;
@@ -90,38 +101,25 @@ static inline int64_t heap_push(int64_t *restrict heap_key, int64_t *restrict he
 
 /* Remove the top; *size shrinks by one. The hole sinks along the smallest children (the first of
  * equal ones, by a branch-free tournament), then the last entry rises into it. */
-static inline __attribute__((always_inline)) int64_t heap_pop(int64_t *restrict heap_key, int64_t *restrict heap_node, int64_t *size_io) {
+static inline __attribute__((always_inline)) int64_t heap_pop(int64_t *restrict heap_key, int64_t *restrict heap_node,
+                                                              int64_t *size_io) {
     int64_t top = heap_node[0];
     int64_t size = *size_io - 1;
+    *size_io = size;
     int64_t key = heap_key[size];
     int64_t node = heap_node[size];
+    heap_key[size] = NO_KEY;
+    if (size == 0) return top; /* the top was the last entry */
     int64_t index = 0;
-    for (;;) {
-        int64_t first = 4 * index + 1;
-        int64_t child, smallest;
-        if (first + 3 < size) {
-            int64_t key0 = heap_key[first], key1 = heap_key[first + 1];
-            int64_t key2 = heap_key[first + 2], key3 = heap_key[first + 3];
-            int64_t child_a = key1 < key0 ? first + 1 : first;
-            int64_t key_a = key1 < key0 ? key1 : key0;
-            int64_t child_b = key3 < key2 ? first + 3 : first + 2;
-            int64_t key_b = key3 < key2 ? key3 : key2;
-            child = key_b < key_a ? child_b : child_a;
-            smallest = key_b < key_a ? key_b : key_a;
-        } else if (first < size) {
-            child = first;
-            smallest = heap_key[first];
-            for (int64_t other = first + 1; other < size; other++) {
-                int64_t candidate = heap_key[other];
-                if (candidate < smallest) {
-                    smallest = candidate;
-                    child = other;
-                }
-            }
-        } else {
-            break;
-        }
-        heap_key[index] = smallest;
+    for (int64_t first = 1; first < size; first = 4 * index + 1) {
+        int64_t key0 = heap_key[first], key1 = heap_key[first + 1];
+        int64_t key2 = heap_key[first + 2], key3 = heap_key[first + 3];
+        int64_t child_a = key1 < key0 ? first + 1 : first;
+        int64_t key_a = key1 < key0 ? key1 : key0;
+        int64_t child_b = key3 < key2 ? first + 3 : first + 2;
+        int64_t key_b = key3 < key2 ? key3 : key2;
+        int64_t child = key_b < key_a ? child_b : child_a;
+        heap_key[index] = key_b < key_a ? key_b : key_a;
         heap_node[index] = heap_node[child];
         index = child;
     }
@@ -135,8 +133,32 @@ static inline __attribute__((always_inline)) int64_t heap_pop(int64_t *restrict 
     }
     heap_key[index] = key;
     heap_node[index] = node;
-    *size_io = size;
     return top;
+}
+
+/* A reached neighbour (its g and parent set) into OPEN: as the candidate that skips the heap when its
+ * key is <= every key in OPEN (NO_KEY when OPEN is empty) and no candidate is waiting, else into the
+ * heap (the smaller of it and the candidate stays the candidate). Returns 0 when the heap is full. */
+static inline __attribute__((always_inline)) int enter_open(int64_t neighbour, int64_t key, int64_t *next_node,
+                                                            int64_t *next_key, int64_t *restrict heap_key,
+                                                            int64_t *restrict heap_node, int64_t *size,
+                                                            int64_t capacity) {
+    if (*next_node < 0) {
+        if (key <= heap_key[0]) {
+            *next_node = neighbour;
+            *next_key = key;
+            return 1;
+        }
+    } else if (key < *next_key) {
+        int64_t swap_key = key, swap_node = neighbour;
+        key = *next_key;
+        neighbour = *next_node;
+        *next_key = swap_key;
+        *next_node = swap_node;
+    }
+    if (*size == capacity) return 0;
+    *size = heap_push(heap_key, heap_node, *size, key, neighbour);
+    return 1;
 }
 
 /* The search loop, specialised by the compiler for each (heuristic, weighted) pair it is inlined with. */
@@ -165,6 +187,7 @@ static inline __attribute__((always_inline)) int64_t search_loop(
     parent[start] = (int32_t)start;
     stamp[start] = generation;
     int64_t size = 0;
+    heap_clear(heap_key);
     int64_t next_node = start; /* the candidate that skips the heap; -1 = none */
     int64_t next_key = 0;
     int64_t searched = 0;
@@ -193,45 +216,73 @@ static inline __attribute__((always_inline)) int64_t search_loop(
         int64_t row_offset = row - goal_row;
         int64_t col_offset = node - row * width - goal_col;
         unsigned allowed = moves[node];
-        while (allowed) { /* the set bits, lowest first: the moves in table order */
-            int k = __builtin_ctz(allowed);
-            allowed &= allowed - 1;
-            int64_t neighbour = node + offsets[k];
-            int32_t seen = stamp[neighbour];
-            if (seen == closed) continue;
-            double step = steps[k];
-            if (weighted) step *= 1.0 + cost_weight * cost[neighbour];
-            double g_new = g_node + step;
-            if (seen == generation) {
-                if (g_new >= g[neighbour]) continue;
-                g[neighbour] = g_new;
-                parent[neighbour] = (int32_t)node;
-                if (!decrease_key) continue; /* plannerAStarGrid: the key in OPEN does not change */
-            } else {
+        if (allowed == ALL_MOVES) {
+            /* Open ground: which neighbours are CLOSED, in OPEN or new follows a pattern here that
+             * the branch predictor learns, so a branch per neighbour is the cheaper way. */
+            for (unsigned bits = allowed; bits; bits &= bits - 1) { /* lowest first: table order */
+                int k = __builtin_ctz(bits);
+                int64_t neighbour = node + offsets[k];
+                int32_t seen = stamp[neighbour];
+                if (seen == closed) continue;
+                double step = steps[k];
+                if (weighted) step *= 1.0 + cost_weight * cost[neighbour];
+                double g_new = g_node + step;
+                if (seen == generation) {
+                    if (g_new >= g[neighbour]) continue;
+                    if (!decrease_key) { /* plannerAStarGrid: the key in OPEN does not change */
+                        g[neighbour] = g_new;
+                        parent[neighbour] = (int32_t)node;
+                        continue;
+                    }
+                }
                 stamp[neighbour] = generation;
                 g[neighbour] = g_new;
                 parent[neighbour] = (int32_t)node;
-            }
-            double h = heuristic_cells(row_offset + ROW_STEPS[k], col_offset + COL_STEPS[k], heuristic) * h_scale;
-            int64_t key = heap_key_of(g_new + h, h, tie_breaker);
-            if (next_node < 0) {
-                if (size == 0 || key <= heap_key[0]) {
-                    next_node = neighbour;
-                    next_key = key;
-                    continue;
+                double h = heuristic_cells(row_offset + ROW_STEPS[k], col_offset + COL_STEPS[k], heuristic) * h_scale;
+                if (!enter_open(neighbour, heap_key_of(g_new + h, h, tie_breaker), &next_node, &next_key, heap_key,
+                                heap_node, &size, capacity)) {
+                    *searched_out = searched;
+                    return HEAP_FULL;
                 }
-            } else if (key < next_key) {
-                int64_t swap_key = key, swap_node = neighbour;
-                key = next_key;
-                neighbour = next_node;
-                next_key = swap_key;
-                next_node = swap_node;
             }
-            if (size == capacity) {
+            continue;
+        }
+        /* Among walls (corridors, doorways) that pattern is irregular: first decide for every move,
+         * without a branch, whether it improves its neighbour (not CLOSED, and new or with a lower g
+         * than in OPEN), then walk the improving ones only. The same neighbours in the same order as
+         * above, so the same search. */
+        unsigned improving = 0;
+        double g_news[8];
+        for (unsigned bits = allowed; bits; bits &= bits - 1) {
+            int k = __builtin_ctz(bits);
+            int64_t neighbour = node + offsets[k];
+            int32_t seen = stamp[neighbour];
+            double step = steps[k];
+            if (weighted) step *= 1.0 + cost_weight * cost[neighbour];
+            double g_new = g_node + step;
+            g_news[k] = g_new;
+            /* g of a node not in OPEN is read but not used */
+            unsigned better = (seen != closed) & ((seen != generation) | !(g_new >= g[neighbour]));
+            improving |= better << k;
+        }
+        for (; improving; improving &= improving - 1) {
+            int k = __builtin_ctz(improving);
+            int64_t neighbour = node + offsets[k];
+            double g_new = g_news[k];
+            if (!decrease_key && stamp[neighbour] == generation) {
+                g[neighbour] = g_new;
+                parent[neighbour] = (int32_t)node;
+                continue;
+            }
+            stamp[neighbour] = generation;
+            g[neighbour] = g_new;
+            parent[neighbour] = (int32_t)node;
+            double h = heuristic_cells(row_offset + ROW_STEPS[k], col_offset + COL_STEPS[k], heuristic) * h_scale;
+            if (!enter_open(neighbour, heap_key_of(g_new + h, h, tie_breaker), &next_node, &next_key, heap_key,
+                            heap_node, &size, capacity)) {
                 *searched_out = searched;
                 return HEAP_FULL;
             }
-            size = heap_push(heap_key, heap_node, size, key, neighbour);
         }
     }
 }
@@ -267,11 +318,14 @@ static int64_t search(const uint8_t *moves, const double *cost, const double *pa
 }
 
 /* planner.astar.astar_search: A* (or Dijkstra with heuristic 5 and goal -1) on a padded flat grid.
- * nodes: int32 [3, size]; heap: int64 [2, capacity]. Returns the status; *searched the expanded count. */
+ * nodes: int32 [3, size]; heap: int64 [2, capacity] (capacity - HEAP_SLACK entries in use). Returns the
+ * status; *searched the expanded count. */
 int64_t navcosim_astar_search(const uint8_t *moves, const double *cost, const double *parameters, int64_t start,
                               int64_t goal, int64_t generation, double *g, int32_t *nodes, int64_t size,
                               int64_t *heap, int64_t capacity, int64_t *searched) {
-    Work work = {g, nodes, nodes + size, nodes + 2 * size, heap, heap + capacity, capacity};
+    *searched = 0;
+    if (capacity <= HEAP_SLACK) return HEAP_FULL;
+    Work work = {g, nodes, nodes + size, nodes + 2 * size, heap, heap + capacity, capacity - HEAP_SLACK};
     return search(moves, cost, parameters, start, goal, (int32_t)generation, &work, searched);
 }
 
@@ -341,7 +395,8 @@ int64_t navcosim_astar_plan(Query *q, double start_x, double start_y, double goa
     if (goal < 0) return BAD_GOAL;
     Work work = {state->g,    state->nodes + 0,           state->nodes + state->size,
                  state->nodes + 2 * state->size, state->heap, state->heap + state->capacity,
-                 state->capacity};
+                 state->capacity - HEAP_SLACK};
+    if (work.capacity <= 0) return HEAP_FULL;
     int64_t status = search(q->moves, q->cost, parameters, start, goal, (int32_t)state->generation, &work,
                             &q->searched);
     if (status != FOUND) return status;
@@ -458,12 +513,14 @@ static void root(int64_t width, int64_t node, int64_t target, int64_t heuristic,
     side->work.g[node] = 0.0;
     side->work.parent[node] = (int32_t)node;
     side->work.stamp[node] = side->generation;
+    heap_clear(side->work.heap_key);
     double h = heuristic_cells(node / width - target / width, node % width - target % width, heuristic) * h_scale;
     side->size = heap_push(side->work.heap_key, side->work.heap_node, 0, heap_key_of(h, h, tie_breaker), node);
 }
 
 /* planner.bidirectional.bidirectional_search. out: searched forward, searched backward, meet forward,
- * meet backward; *mu [cells]. Each side's heap: keys and nodes of `capacity` entries. Returns 1 found, 0 none, -1 a heap is full (enlarge both, search again). */
+ * meet backward; *mu [cells]. Each side's heap: keys and nodes of `capacity` entries (capacity -
+ * HEAP_SLACK in use). Returns 1 found, 0 none, -1 a heap is full (enlarge both, search again). */
 int64_t navcosim_bidirectional_search(const uint8_t *moves, const double *cost, const double *parameters,
                                       int64_t start, int64_t goal, int64_t size, double *g_forward,
                                       int32_t *nodes_forward, int64_t generation_forward,
@@ -479,15 +536,16 @@ int64_t navcosim_bidirectional_search(const uint8_t *moves, const double *cost, 
     double h_scale = parameters[P_H_SCALE];
     double cost_weight = parameters[P_COST_WEIGHT];
     Side forward = {{g_forward, nodes_forward, nodes_forward + size, nodes_forward + 2 * size, heap_key_forward,
-                     heap_node_forward, capacity_forward},
+                     heap_node_forward, capacity_forward - HEAP_SLACK},
                     (int32_t)generation_forward, 0, 0};
     Side backward = {{g_backward, nodes_backward, nodes_backward + size, nodes_backward + 2 * size,
-                      heap_key_backward, heap_node_backward, capacity_backward},
+                      heap_key_backward, heap_node_backward, capacity_backward - HEAP_SLACK},
                      (int32_t)generation_backward, 0, 0};
     Best best = {INFINITY, {0, -1, -1}};
     out[0] = out[1] = 0;
     out[2] = out[3] = -1;
     *mu = 0.0;
+    if (forward.work.capacity <= 0 || backward.work.capacity <= 0) return -1;
     root(width, start, goal, heuristic, h_scale, tie_breaker, &forward);
     root(width, goal, start, heuristic, h_scale, tie_breaker, &backward);
     if (start == goal) {
