@@ -46,9 +46,9 @@ static inline int64_t larger(int64_t a, int64_t b) { return a > b ? a : b; }
 static inline double heuristic_cells(int64_t row_offset, int64_t col_offset, int64_t kind) {
     int64_t dr = absolute(row_offset);
     int64_t dc = absolute(col_offset);
-    if (kind == 3) {
-        if (dr > dc) return (double)dr + (SQRT2 - 1.0) * (double)dc;
-        return (double)dc + (SQRT2 - 1.0) * (double)dr;
+    if (kind == 3) { /* the longer offset plus (sqrt 2 - 1) times the shorter, selected without a branch */
+        int64_t longer = dr > dc ? dr : dc, shorter = dr > dc ? dc : dr;
+        return (double)longer + (SQRT2 - 1.0) * (double)shorter;
     }
     if (kind == 0) return (double)(dr + dc);
     if (kind == 1) return sqrt((double)(dr * dr + dc * dc));
