@@ -80,7 +80,10 @@ int64_t navcosim_heap_key_of(double f, double h, int64_t tie_breaker) { return h
 #define NO_KEY INT64_MAX
 #define HEAP_SLACK 3
 
-static inline void heap_clear(int64_t *heap_key) { heap_key[0] = heap_key[1] = heap_key[2] = NO_KEY; }
+/* An empty heap: NO_KEY in its first HEAP_SLACK slots. */
+static inline void heap_clear(int64_t *heap_key) {
+    for (int slot = 0; slot < HEAP_SLACK; slot++) heap_key[slot] = NO_KEY;
+}
 
 /* Push (the caller checks the capacity); the new size. */
 static inline int64_t heap_push(int64_t *restrict heap_key, int64_t *restrict heap_node, int64_t size, int64_t key,
