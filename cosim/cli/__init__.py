@@ -45,6 +45,7 @@ def main(argv: list[str] | None = None) -> int:
             command = _command(arguments)
             parser = build_parser(command) if command else build_parser()
             args = parser.parse_args(argv)
+            args.program = argv is None  # this process is `cosim`: it ends when the command does
             return int(args.handler(args) or 0)
     except NavcosimError as error:
         for line in str(error).splitlines() or [""]:  # a scenario's problems come all at once

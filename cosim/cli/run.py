@@ -8,6 +8,7 @@ collision, interrupted), 2 bad input or a failed FMU (one line on stderr, no tra
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import sys
 from pathlib import Path
@@ -95,6 +96,10 @@ def _live_sink(args):
 def _handler(args) -> int:
     if args.scenario.suffix.lower() == ".ssp":
         return _run_ssp(args)
+    if getattr(args, "program", False):
+        from cosim import hold_collector
+
+        hold_collector()  # until the run's loop starts (`cosim.setup_done`)
     from cosim.navigation.outcome import format_summary
     from cosim.navigation.run import run_scenario
     from cosim.scenario.load import load_scenario
@@ -104,6 +109,11 @@ def _handler(args) -> int:
         overrides.append(f"simulation.max_steps={args.max_steps}")
     scenario = load_scenario(args.scenario, overrides)
     sink = _live_sink(args)
+    plotter = None
+    if scenario.plot and not args.no_plot and getattr(args, "program", False):
+        from cosim.cli.plotter import PlotProcess
+
+        plotter = PlotProcess.start()  # prepares the plot while the run goes
     try:
         goals = sink if args.live else None  # a client's /goal_pose sets a new goal
         result = run_scenario(
@@ -117,13 +127,15 @@ def _handler(args) -> int:
             )
             return 2
         if scenario.plot and not args.no_plot:
-            _plot(result.log_path, args.quiet, result.trace)
+            _plot(result.log_path, args.quiet, result.trace, getattr(args, "program", False), plotter)
         if args.live and result.outcome.reason != "interrupted":
             wait = "until Ctrl-C" if args.linger is None else f"for {args.linger:g} s"
             print(f"live view: run ended; serving {sink.url} {wait}", file=sys.stderr, flush=True)
             sink.linger(args.linger)
         return result.exit_code
     finally:
+        if plotter is not None:
+            plotter.cancel()  # a no-op after it drew
         if args.live:
             sink.stop()
 
@@ -151,11 +163,26 @@ def _run_ssp(args) -> int:
     return result.exit_code
 
 
-def _plot(log_path: Path, quiet: bool, trace=None) -> None:
+def _plot(log_path: Path, quiet: bool, trace=None, program: bool = False, plotter=None) -> None:
     """Draw the PNG beside the log: from the run's in-memory trace when it has one (the same picture
-    as from the log, without reading it back), else from the log."""
+    as from the log, without reading it back), else from the log. In `cosim` itself (`program`),
+    the ~10^5 objects of matplotlib and the figure are never walked by the cyclic collector: it is
+    off while they are made, and they are frozen (`gc.freeze`) before it is on again (~25 ms
+    of collections otherwise, just before the process exits). `plotter` (`cosim.cli.plotter`)
+    draws it when given."""
+    if program:
+        gc.disable()
     try:
-        from cosim.logs.plot import plot_run, plot_trace, skip_matplotlib_docstrings
+        _draw_plot(log_path, quiet, trace, plotter)
+    finally:
+        if program:
+            gc.freeze()
+            gc.enable()
+
+
+def _draw_plot(log_path: Path, quiet: bool, trace, plotter) -> None:
+    try:
+        from cosim.logs import plot
     except ImportError:
         print("cosim: note: no plot (cosim.logs.plot is not available)", file=sys.stderr)
         return
@@ -163,11 +190,20 @@ def _plot(log_path: Path, quiet: bool, trace=None) -> None:
     # Drawn beside and renamed into place, so an interrupt never leaves half a PNG.
     partial = png_path.with_name(f".{png_path.stem}.{os.getpid()}.png")
     try:
-        skip_matplotlib_docstrings()  # this process draws and exits: no help() text needed
+        if plotter is None:
+            plot.skip_matplotlib_docstrings()  # this process draws and exits: no help() text needed
         if trace is not None and not trace.dropped:
-            plot_trace(trace, partial)
+            data = plot.collect(plot.TraceSource(trace))
         else:
-            plot_run(log_path, partial)
+            from cosim.logs.reader import open_log
+
+            with open_log(log_path) as log:
+                data = plot.collect(log)
+        if plotter is None:
+            plot.draw(data, partial)
+        elif (problem := plotter.draw(data, partial)) is not None:
+            print(f"cosim: note: no plot: {problem}", file=sys.stderr)
+            return
         os.replace(partial, png_path)
     except (CosimError, OSError) as error:
         print(f"cosim: note: no plot: {error}", file=sys.stderr)

@@ -21,19 +21,14 @@ from __future__ import annotations
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from cosim.errors import CosimError
-from cosim.logs.reader import (
-    Log,
-    Signals,
-    Trajectory,
-    _marker_shapes,
-    metadata_goal,
-    open_log,
-    start_pose,
-)
+
+if TYPE_CHECKING:
+    from cosim.logs.reader import Log, Signals, Trajectory
 
 MODE_AVOID, MODE_RECOVER = 1, 2
 MODE_COLORS = {MODE_AVOID: "#ff9f1c", MODE_RECOVER: "#d62828"}
@@ -88,6 +83,8 @@ class PlotData:
 
 def plot_run(log_path: str | Path, png_path: str | Path) -> Path:
     """Write the run's overview PNG (trajectory over the map and the default signals) from its log."""
+    from cosim.logs.reader import open_log
+
     with open_log(log_path) as log:
         return plot_log(log, Path(png_path))
 
@@ -138,6 +135,8 @@ class TraceSource:
         return self.metadata.get("outcome")
 
     def signals(self, component: str) -> Signals:
+        from cosim.logs.reader import Signals
+
         if component not in self._signals:
             blocks = self.trace.signal_blocks.get(component, [])
             names = next((names for c, names, _ in self.trace.columns.values() if c == component), [])
@@ -158,6 +157,8 @@ class TraceSource:
         return self.trace.plan
 
     def obstacles(self) -> list:
+        from cosim.logs.reader import _marker_shapes
+
         message = self.trace.obstacles_message()
         return [] if message is None else _marker_shapes(message)
 
@@ -168,6 +169,8 @@ class TraceSource:
         return [np.array(tracks[key], dtype=float) for key in sorted(tracks)]
 
     def trajectory(self) -> Trajectory | None:
+        from cosim.logs.reader import Trajectory
+
         if "vehicle" in self.components:
             vehicle = self.signals("vehicle")
             if all(name in vehicle for name in ("x", "y", "theta")):
@@ -180,9 +183,13 @@ class TraceSource:
         return Trajectory(rows[:, 0] / 1e9, rows[:, 1], rows[:, 2], theta)
 
     def goal(self) -> tuple[float, float] | None:
+        from cosim.logs.reader import metadata_goal
+
         return metadata_goal(self.metadata) or self.trace.goal
 
     def start(self) -> tuple[float, float, float] | None:
+        from cosim.logs.reader import start_pose
+
         return start_pose(self.metadata, self.trajectory)
 
     def min_ranges(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -394,6 +401,20 @@ def skip_matplotlib_docstrings() -> None:
 
     if callable(getattr(matplotlib.artist, "kwdoc", None)):
         matplotlib.artist.kwdoc = lambda artist: ""
+
+
+def prepare_drawing() -> None:
+    """Import what `draw` uses and load the font its texts are set in: the work of a plot that
+    does not depend on the data (`cosim.cli.plotter` does it while the run goes)."""
+    import importlib
+
+    skip_matplotlib_docstrings()
+    with collector_paused():
+        for module in ("backends.backend_agg", "figure", "collections", "lines", "patches", "ticker"):
+            importlib.import_module(f"matplotlib.{module}")
+        from matplotlib.font_manager import FontProperties, findfont, get_font
+
+        get_font(findfont(FontProperties()))
 
 
 def draw(data: PlotData, png_path: str | Path) -> Path:

@@ -59,6 +59,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cosim import setup_done
 from cosim.core import interrupt
 from cosim.core.master import NS_PER_S, Master
 from cosim.errors import PATH_LIMIT, CosimError, shorten
@@ -301,6 +302,7 @@ def _write_header(built: BuiltRun, master: Master, recorder) -> None:
         recorder.write_path(0, built.plan.path)
     recorder.write_obstacles(0, [obstacle.at(0.0) for obstacle in scenario.obstacles])
     recorder.write_goal(0, scenario.goal[0], scenario.goal[1], None)
+    setup_done()  # the loop starts: the collector is on again (`cosim.hold_collector`)
 
 
 def run_scenario(
