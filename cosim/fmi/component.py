@@ -90,8 +90,74 @@ def _file_identity(path: Path) -> tuple[int, int]:
 def _parsed_description(path: str, mtime_ns: int, size: int):
     """fmpy's parse of an FMU's modelDescription.xml, once per file version: describing a system and
     then building it reads every FMU twice, and a 2000-variable description takes ~25 ms to parse.
-    Callers treat the result as read-only."""
-    return fmpy.read_model_description(path)
+    A project FMU's parse is also kept on disk beside it (`_kept_description`). Callers treat the
+    result as read-only."""
+    kept = _kept_description(Path(path))
+    if kept is not None:
+        description = _read_kept(kept, path)
+        if description is not None:
+            return description
+    description = fmpy.read_model_description(path)
+    if kept is not None:
+        _keep(kept, path, description)
+    return description
+
+
+_KEPT_FORMAT = b"navcosim fmpy description 1"
+
+
+def _kept_description(path: Path) -> Path | None:
+    """Where the parse of `path` is kept: beside a project FMU in the FMU build cache
+    (`cosim.fmi.builtin`, a folder navcosim writes and whose binaries it runs anyway), else nowhere
+    (a user's FMU is parsed each time: nothing is written next to it). Unpickling fmpy's objects
+    takes about half of parsing the XML again (and no lxml import, no schema validation: the file
+    was validated when it was parsed)."""
+    from cosim.fmi.builtin import default_cache_dir
+
+    try:
+        cache = default_cache_dir().resolve()
+    except OSError:
+        return None
+    if path.parent != cache and path.parent != cache / "fmi3":
+        return None
+    return path.with_name(f".{path.stem}.description.pickle")
+
+
+def _kept_key(path: str) -> bytes:
+    """What the kept parse must have been made from: this file (time, size, inode) and fmpy version."""
+    status = os.stat(path)
+    version = getattr(fmpy, "__version__", "")
+    return b" ".join(
+        [_KEPT_FORMAT, version.encode(), *(str(n).encode() for n in (status.st_mtime_ns, status.st_size))]
+        + [str(status.st_ino).encode()]
+    )
+
+
+def _read_kept(kept: Path, path: str):
+    """The kept parse of `path`, or None (none, another file version, another fmpy, unreadable)."""
+    import pickle
+
+    try:
+        with open(kept, "rb") as stream:
+            if stream.readline().rstrip(b"\n") != _kept_key(path):
+                return None
+            return pickle.load(stream)
+    except Exception:  # noqa: BLE001 - whatever is wrong with the kept copy, the FMU is parsed again
+        return None
+
+
+def _keep(kept: Path, path: str, description) -> None:
+    """Keep the parse beside the FMU (written aside and renamed: readers never see half of it); a
+    failure only means the next run parses again."""
+    import pickle
+
+    partial = kept.with_name(f"{kept.name}.{os.getpid()}")
+    try:
+        payload = pickle.dumps(description, protocol=pickle.HIGHEST_PROTOCOL)
+        partial.write_bytes(_kept_key(path) + b"\n" + payload)
+        os.replace(partial, kept)
+    except Exception:  # noqa: BLE001 - not kept; nothing else changes
+        partial.unlink(missing_ok=True)
 
 
 def _read_description(path: Path, max_unpacked_size: int | None = None):

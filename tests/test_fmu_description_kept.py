@@ -1,0 +1,70 @@
+"""A project FMU's parsed modelDescription.xml is kept beside it in the FMU build cache
+(`cosim.fmi.component._parsed_description`): read back, it is the parse; any other file version,
+or a kept copy that cannot be read, means a fresh parse; nothing is written beside a user's FMU."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import fmpy
+import pytest
+
+from cosim.fmi import component
+from cosim.fmi.builtin import builtin_fmu
+
+FIELDS = ("name", "valueReference", "type", "causality", "variability", "start", "unit", "description")
+
+
+def _summary(description) -> tuple:
+    variables = [tuple(getattr(v, f) for f in FIELDS) for v in description.modelVariables]
+    outputs = [(u.variable.name, [d.name for d in u.dependencies or []]) for u in description.outputs]
+    return description.guid, description.coSimulation.modelIdentifier, variables, outputs
+
+
+@pytest.fixture
+def cache(tmp_path: Path, monkeypatch) -> Path:
+    """A project FMU cache holding a built PurePursuit (its many variables)."""
+    folder = tmp_path / "fmus"
+    folder.mkdir()
+    shutil.copy2(builtin_fmu("PurePursuit"), folder / "PurePursuit.fmu")
+    monkeypatch.setenv("NAVCOSIM_FMU_CACHE", str(folder))
+    return folder
+
+
+def _parse(path: Path):
+    return component._parsed_description.__wrapped__(str(path.resolve()), *component._file_identity(path))
+
+
+def test_the_kept_parse_is_the_parse(cache: Path):
+    fmu = cache / "PurePursuit.fmu"
+    first = _parse(fmu)
+    kept = cache / ".PurePursuit.description.pickle"
+    assert kept.is_file()
+    again = _parse(fmu)
+    assert again is not first
+    assert _summary(again) == _summary(first) == _summary(fmpy.read_model_description(str(fmu)))
+
+
+def test_another_file_version_is_parsed_again(cache: Path, monkeypatch):
+    fmu = cache / "PurePursuit.fmu"
+    _parse(fmu)
+    kept = cache / ".PurePursuit.description.pickle"
+    calls = []
+    monkeypatch.setattr(fmpy, "read_model_description", lambda path: calls.append(path) or "parsed")
+    assert _parse(fmu) != "parsed" and calls == []  # the kept one
+    os.utime(fmu, ns=(fmu.stat().st_atime_ns, fmu.stat().st_mtime_ns + 1))  # "rebuilt"
+    assert _parse(fmu) == "parsed" and len(calls) == 1
+    key, _, payload = kept.read_bytes().partition(b"\n")
+    assert key == component._kept_key(str(fmu.resolve()))
+    kept.write_bytes(key + b"\n" + payload[: len(payload) // 2])  # cut short
+    assert _parse(fmu) == "parsed" and len(calls) == 2
+
+
+def test_nothing_is_kept_beside_a_users_fmu(cache: Path, tmp_path: Path):
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    shutil.copy2(cache / "PurePursuit.fmu", mine / "PurePursuit.fmu")
+    _parse(mine / "PurePursuit.fmu")
+    assert sorted(p.name for p in mine.iterdir()) == ["PurePursuit.fmu"]
