@@ -64,7 +64,6 @@ from cosim.core.component import Component, NativeStep, Port, State, closest_nam
 from cosim.errors import CosimError
 from cosim.fmi.archive import check_unpacked_size
 from cosim.fmi.builtin import documented_nan_variables
-from cosim.fmi.diagnose import dangling_reference, missing_binary
 
 _STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
 _TYPES = {
@@ -177,6 +176,8 @@ def _read_description(path: Path, max_unpacked_size: int | None = None):
     try:
         description = _parsed_description(str(path.resolve()), *_file_identity(path))
     except Exception as error:  # fmpy raises plain Exceptions with multi-line text
+        from cosim.fmi.diagnose import dangling_reference  # (and its XML parser) only for a broken FMU
+
         problem = dangling_reference(path) if isinstance(error, IndexError | KeyError) else None
         first_line = problem or " ".join(str(error).split())[:300]
         raise CosimError(f"FMU '{path}': invalid modelDescription.xml: {first_line}") from None
@@ -192,6 +193,8 @@ def _read_description(path: Path, max_unpacked_size: int | None = None):
     binary = f"binaries/{platform}/{description.coSimulation.modelIdentifier}{fmpy.sharedLibraryExtension}"
     if binary not in names:
         identifier = description.coSimulation.modelIdentifier
+        from cosim.fmi.diagnose import missing_binary
+
         raise CosimError(missing_binary(path, names, platform, identifier, fmpy.sharedLibraryExtension))
     return description, version
 
