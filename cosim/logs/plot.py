@@ -638,7 +638,7 @@ def _draw_map(axes, data: PlotData) -> None:
     axes.set_aspect("equal", adjustable="box")
     axes.set_xlabel("x [m]")
     axes.set_ylabel("y [m]")
-    axes.set_title("trajectory over the map")
+    axes.set_title("trajectory over the map", y=1.0)  # y given: no search for what might be above
     axes.grid(alpha=0.25)
     if handles:  # below the map, so it never hides part of it
         axes.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, fontsize=8)
