@@ -81,12 +81,27 @@ def test_a_problem_of_the_child_is_its_answer(cosim_run, tmp_path: Path):
     assert _not_running(pid)
 
 
-def test_a_cancelled_child_leaves(tmp_path: Path):
+def test_a_cancelled_child_is_ended_at_once(tmp_path: Path):
     process = PlotProcess.start()
     pid = process.pid
     process.cancel()
+    assert process.exit_status == -signal.SIGKILL  # not left to finish importing matplotlib
     assert _not_running(pid)
     process.cancel()  # twice: nothing left to do
+
+
+def test_a_run_that_fails_to_build_leaves_no_child(tmp_path: Path):
+    log = tmp_path / "refused.mcap"
+    completed = subprocess.run(
+        [sys.executable, "-m", "cosim", "run", str(EXAMPLE), "--out", str(log), "--quiet"]
+        + ["--set", "goal.x=0.1", "--set", "goal.y=0.1"],
+        capture_output=True,
+        text=True,
+    )
+    assert completed.returncode == 2, completed.stderr
+    assert "inside an obstacle" in completed.stderr and "Traceback" not in completed.stderr
+    assert not log.exists() and not log.with_suffix(".png").exists()
+    assert _processes_naming(str(log)) == []
 
 
 def test_a_child_that_fails_is_drawn_for_here(cosim_run, tmp_path: Path, monkeypatch):

@@ -6,8 +6,9 @@ with a free core it is done by the time the run ends. The run's `PlotData` (arra
 most) then goes to the child through a pipe, the child draws the PNG and answers with one line;
 the parent waits for it. The child ignores SIGINT and SIGTERM (the parent decides), leaves with
 `os._exit` (no clean-up of the parent's objects it shares), and gives up when the pipe closes
-without data: the parent did not plot, or died. Only where `os.fork` is safe and cheap (Linux),
-and only in `cosim` itself, never in a process that calls `cosim.cli.main([...])`.
+without data (the parent died); a parent that will not plot ends it (`cancel`). Only where
+`os.fork` is safe and cheap (Linux), and only in `cosim` itself, never in a process that calls
+`cosim.cli.main([...])`.
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ class PlotProcess:
 
     def __init__(self, pid: int, data_write: int, reply_read: int) -> None:
         self.pid = pid
+        self.exit_status: int | None = None  # the child's, once reaped (negative: killed by a signal)
         self._data = data_write
         self._reply = reply_read
 
@@ -77,7 +79,13 @@ class PlotProcess:
         return None
 
     def cancel(self) -> None:
-        """No plot: the child leaves (its pipe closes without data)."""
+        """No plot (the run failed, or was refused): the child is ended at once, wherever its
+        preparation is (it has written nothing), so an error exits without waiting for it."""
+        if self.pid and self._data is not None:
+            try:
+                os.kill(self.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
         self._reap()
 
     def _reap(self) -> None:
@@ -87,7 +95,7 @@ class PlotProcess:
         self._data = self._reply = None
         if self.pid:
             try:
-                os.waitpid(self.pid, 0)
+                self.exit_status = os.waitstatus_to_exitcode(os.waitpid(self.pid, 0)[1])
             except ChildProcessError:
                 pass
             self.pid = 0
