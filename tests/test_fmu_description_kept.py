@@ -10,6 +10,7 @@ from pathlib import Path
 
 import fmpy
 import pytest
+from fmpy.model_description import ModelVariable
 
 from cosim.fmi import component
 from cosim.fmi.builtin import builtin_fmu
@@ -45,6 +46,15 @@ def test_the_kept_parse_is_the_parse(cache: Path):
     again = _parse(fmu)
     assert again is not first
     assert _summary(again) == _summary(first) == _summary(fmpy.read_model_description(str(fmu)))
+    # Every field of every variable, each a fmpy ModelVariable (kept in the compact form).
+    fields = list(component._variable_defaults())
+    for kept_variable, variable in zip(again.modelVariables, first.modelVariables, strict=True):
+        assert isinstance(kept_variable, ModelVariable)
+        for name in fields:
+            kept_value, value = getattr(kept_variable, name), getattr(variable, name)
+            assert type(kept_value) is type(value) and (kept_value == value or name == "declaredType"), name
+    dependency = again.outputs[0].variable
+    assert any(dependency is variable for variable in again.modelVariables)  # shared, not copied
 
 
 def test_another_file_version_is_parsed_again(cache: Path, monkeypatch):
