@@ -153,3 +153,34 @@ def test_a_signalled_run_leaves_no_child(signal_number, tmp_path: Path):
     assert "Traceback" not in err
     assert log.with_suffix(".png").exists()
     assert _processes_naming(str(log)) == []
+
+
+def test_an_interrupt_while_the_child_draws_ends_the_child(cosim_run, tmp_path: Path, monkeypatch):
+    """A signal in the parent while it waits for the picture (`cosim.core.interrupt` raises there):
+    the child is ended before the exception leaves `draw`, so the caller's clean-up (unlinking the
+    partial PNG) is not followed by the child writing it."""
+    parent = os.getpid()
+    draw = plot.draw
+
+    def slow_in_the_child(data, png_path):
+        if os.getpid() != parent:
+            time.sleep(60)
+        return draw(data, png_path)
+
+    def interrupt(number, frame):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(plot, "draw", slow_in_the_child)
+    process = PlotProcess.start()
+    pid = process.pid
+    previous = signal.signal(signal.SIGALRM, interrupt)
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 0.5)
+        with pytest.raises(KeyboardInterrupt):
+            process.draw(_data(cosim_run), tmp_path / "x.png")
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+    assert process.exit_status == -signal.SIGKILL
+    assert _not_running(pid)
+    assert not (tmp_path / "x.png").exists()

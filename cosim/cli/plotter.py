@@ -68,6 +68,10 @@ class PlotProcess:
                 answer = pipe.read().decode(errors="replace")
         except OSError:
             answer = ""
+        except BaseException:  # interrupted while it draws: it is ended before the caller cleans up
+            self._kill()
+            self._reap()
+            raise
         self._reap()
         if answer == "ok":
             return None
@@ -81,12 +85,16 @@ class PlotProcess:
     def cancel(self) -> None:
         """No plot (the run failed, or was refused): the child is ended at once, wherever its
         preparation is (it has written nothing), so an error exits without waiting for it."""
-        if self.pid and self._data is not None:
+        if self._data is not None:
+            self._kill()
+        self._reap()
+
+    def _kill(self) -> None:
+        if self.pid:
             try:
                 os.kill(self.pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
-        self._reap()
 
     def _reap(self) -> None:
         for fd in (self._data, self._reply):
