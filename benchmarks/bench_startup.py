@@ -11,7 +11,10 @@ machine:
 - `run --no-plot, warm`: `cosim run SCENARIO --no-plot` with warm caches (numba's, the FMU builds,
   Python's bytecode: `PYTHONDONTWRITEBYTECODE` is dropped for every process measured, as a user's
   shell does not set it);
-- `plot added`: the same run drawing its default PNG, minus the run without it;
+- `plot added`: the same run drawing its default PNG, minus the run without it. On Linux the PNG
+  is drawn by a child forked before the run (`cosim.cli.plotter`), which imports matplotlib while
+  the run goes: with a free core that is off the wall time, not off the CPU time (the child's
+  CPU is in the figure: `wait4` counts the children a process has reaped);
 - `first run, cold caches`: a fresh copy of the checkout (no `__pycache__`, `build/` or logs, so no
   bytecode, no in-tree numba index files and no built C kernels: `planner.native` compiles them into
   the copy's `build/native/`) with an empty `NUMBA_CACHE_DIR` and the FMUs already
