@@ -118,3 +118,45 @@ def test_bad_yaml_and_images(tmp_path):
         OccupancyGrid.from_file(_write_yaml(tmp_path, "ok.png").rename(tmp_path / "m.txt"))
     with pytest.raises(PlannerError, match="resolution must be > 0"):
         OccupancyGrid.from_file(tmp_path / "ok.png", resolution=0)
+
+
+@pytest.mark.parametrize(
+    "header",
+    [
+        "P5\n{w} {h}\n255\n",
+        "P5 # a comment after the magic\n# a whole comment line\n{w}\t{h} 255\r",
+        "P5\n#x\n{w}\n{h}\n#y\n255 ",
+    ],
+)
+@pytest.mark.parametrize("shape", [(1, 1), (3, 5), (120, 200), (7, 1)])
+def test_binary_pgm_reads_as_pillow_does(tmp_path, header, shape):
+    """8-bit binary PGMs are read without PIL; the grey levels are PIL's, header comments and all."""
+    from PIL import Image
+
+    from planner.mapio import _image_gray
+
+    rows, cols = shape
+    pixels = np.random.default_rng(rows * cols).integers(0, 256, shape, dtype=np.uint8)
+    path = tmp_path / "map.pgm"
+    path.write_bytes(header.format(w=cols, h=rows).encode("ascii") + pixels.tobytes())
+    expected = np.asarray(Image.open(path).convert("RGB"), dtype=np.float64).mean(axis=2)
+    gray = _image_gray(path)
+    assert gray.shape == expected.shape and np.array_equal(gray, expected)
+
+
+def test_pgm_files_the_fast_reader_does_not_take_still_read(tmp_path):
+    """A 16-bit PGM, an ASCII PGM and a PGM with missing pixels go to PIL as before."""
+    from planner.mapio import _binary_pgm, _image_gray
+
+    wide = tmp_path / "wide.pgm"
+    wide.write_bytes(b"P5\n2 1\n65535\n" + np.array([0, 65535], dtype=">u2").tobytes())
+    ascii_ = tmp_path / "ascii.pgm"
+    ascii_.write_bytes(b"P2\n2 1\n255\n0 255\n")
+    for path in (wide, ascii_):
+        assert _binary_pgm(path) is None
+        assert np.array_equal(_image_gray(path), [[0.0, 255.0]])
+    short = tmp_path / "short.pgm"
+    short.write_bytes(b"P5\n4 4\n255\n" + bytes(3))
+    assert _binary_pgm(short) is None
+    with pytest.raises(PlannerError, match="unreadable image"):
+        _image_gray(short)
