@@ -65,13 +65,16 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from fractions import Fraction
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from cosim.core import fast_loop
 from cosim.core.component import Component, State, closest_names
 from cosim.errors import CosimError
+
+if TYPE_CHECKING:
+    from fractions import Fraction
 
 NS_PER_S = 1_000_000_000
 MODES = ("gauss-seidel", "jacobi")
@@ -89,16 +92,21 @@ _RUN_BLOCK = 100_000
 
 def seconds_to_ns(seconds: float | Fraction | int, what: str) -> int:
     """Convert a duration [s] to integer nanoseconds; `CosimError` if not a whole number of ns."""
-    if isinstance(seconds, bool) or not isinstance(seconds, int | float | Fraction):
+    if isinstance(seconds, float):
+        if not math.isfinite(seconds):
+            raise CosimError(f"{what} must be finite, got {seconds}")
+        # A float such as 0.001 is not exactly 1e6 ns; accept it when it is the nearest float.
+        nanoseconds = round(seconds * NS_PER_S)
+        if abs(nanoseconds - seconds * NS_PER_S) > 1e-6 * max(1.0, abs(seconds * NS_PER_S)):
+            raise CosimError(f"{what} {seconds} s is not a whole number of nanoseconds")
+        return nanoseconds
+    from fractions import Fraction  # exact durations only (its import costs a run ~4 ms)
+
+    if isinstance(seconds, bool) or not isinstance(seconds, int | Fraction):
         raise CosimError(f"{what} must be a number of seconds, got {seconds!r}")
-    if isinstance(seconds, float) and not math.isfinite(seconds):
-        raise CosimError(f"{what} must be finite, got {seconds}")
-    exact = Fraction(seconds) * NS_PER_S if not isinstance(seconds, float) else None
-    nanoseconds = round(seconds * NS_PER_S) if exact is None else round(exact)
-    # A float such as 0.001 is not exactly 1e6 ns; accept it when it is the nearest float.
-    if exact is not None and exact != nanoseconds:
-        raise CosimError(f"{what} {seconds} s is not a whole number of nanoseconds")
-    if exact is None and abs(nanoseconds - seconds * NS_PER_S) > 1e-6 * max(1.0, abs(seconds * NS_PER_S)):
+    exact = Fraction(seconds) * NS_PER_S
+    nanoseconds = round(exact)
+    if exact != nanoseconds:
         raise CosimError(f"{what} {seconds} s is not a whole number of nanoseconds")
     return nanoseconds
 
