@@ -108,12 +108,19 @@ def _handler(args) -> int:
     if args.max_steps is not None:
         overrides.append(f"simulation.max_steps={args.max_steps}")
     scenario = load_scenario(args.scenario, overrides)
-    sink = _live_sink(args)
     plotter = None
     if scenario.plot and not args.no_plot and getattr(args, "program", False):
         from cosim.cli.plotter import PlotProcess
 
-        plotter = PlotProcess.start()  # prepares the plot while the run goes
+        # Forked before the live view's server starts, so the child holds none of its threads
+        # or sockets. It prepares the plot while the run goes.
+        plotter = PlotProcess.start()
+    try:
+        sink = _live_sink(args)
+    except BaseException:
+        if plotter is not None:
+            plotter.cancel()
+        raise
     try:
         goals = sink if args.live else None  # a client's /goal_pose sets a new goal
         result = run_scenario(
