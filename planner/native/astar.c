@@ -194,6 +194,20 @@ static inline __attribute__((always_inline)) int64_t search_loop(
     int64_t next_node = start; /* the candidate that skips the heap; -1 = none */
     int64_t next_key = 0;
     int64_t searched = 0;
+/* Open `neighbour`, move k of `node`, at g_new (both passes below): its stamp, g and parent, and
+ * its OPEN entry; the search ends with HEAP_FULL when OPEN cannot take it. */
+#define OPEN_NEIGHBOUR(neighbour, k, g_new)                                                                 \
+    do {                                                                                                    \
+        stamp[neighbour] = generation;                                                                      \
+        g[neighbour] = (g_new);                                                                             \
+        parent[neighbour] = (int32_t)node;                                                                  \
+        double h_ = heuristic_cells(row_offset + ROW_STEPS[k], col_offset + COL_STEPS[k], heuristic) * h_scale; \
+        if (!enter_open(neighbour, heap_key_of((g_new) + h_, h_, tie_breaker), &next_node, &next_key, heap_key, \
+                        heap_node, &size, capacity)) {                                                      \
+            *searched_out = searched;                                                                       \
+            return HEAP_FULL;                                                                               \
+        }                                                                                                   \
+    } while (0)
     for (;;) {
         int64_t node;
         if (next_node >= 0) {
@@ -238,15 +252,7 @@ static inline __attribute__((always_inline)) int64_t search_loop(
                         continue;
                     }
                 }
-                stamp[neighbour] = generation;
-                g[neighbour] = g_new;
-                parent[neighbour] = (int32_t)node;
-                double h = heuristic_cells(row_offset + ROW_STEPS[k], col_offset + COL_STEPS[k], heuristic) * h_scale;
-                if (!enter_open(neighbour, heap_key_of(g_new + h, h, tie_breaker), &next_node, &next_key, heap_key,
-                                heap_node, &size, capacity)) {
-                    *searched_out = searched;
-                    return HEAP_FULL;
-                }
+                OPEN_NEIGHBOUR(neighbour, k, g_new);
             }
             continue;
         }
@@ -277,17 +283,10 @@ static inline __attribute__((always_inline)) int64_t search_loop(
                 parent[neighbour] = (int32_t)node;
                 continue;
             }
-            stamp[neighbour] = generation;
-            g[neighbour] = g_new;
-            parent[neighbour] = (int32_t)node;
-            double h = heuristic_cells(row_offset + ROW_STEPS[k], col_offset + COL_STEPS[k], heuristic) * h_scale;
-            if (!enter_open(neighbour, heap_key_of(g_new + h, h, tie_breaker), &next_node, &next_key, heap_key,
-                            heap_node, &size, capacity)) {
-                *searched_out = searched;
-                return HEAP_FULL;
-            }
+            OPEN_NEIGHBOUR(neighbour, k, g_new);
         }
     }
+#undef OPEN_NEIGHBOUR
 }
 
 #define SEARCH(H, W)                                                                                          \
