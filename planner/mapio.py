@@ -152,37 +152,43 @@ def read_movingai(path: Path) -> np.ndarray:
 # -- images -----------------------------------------------------------------------------------------
 def _binary_pgm(path: Path) -> np.ndarray | None:
     """Grey levels of an 8-bit binary PGM (P5, maxval 255: what map_server and `write_yaml` write),
-    read without PIL (whose import costs more than the read); None for any other file."""
+    read without PIL (whose import costs more than the read); None for any other file, and for one
+    over the cell limit (PIL's reading says what is wrong with those)."""
     try:
         with open(path, "rb") as stream:
-            data = stream.read()
+            data = stream.read(_PGM_HEADER_BYTES)
+            fields: list[bytes] = []
+            position = 0
+            while len(fields) < 4:  # magic, width, height, maxval; '#' comments run to the line's end
+                while position < len(data) and data[position] in b" \t\r\n":
+                    position += 1
+                if position < len(data) and data[position] == ord("#"):
+                    end = data.find(b"\n", position)
+                    position = len(data) if end < 0 else end + 1
+                    continue
+                start = position
+                while position < len(data) and data[position] not in b" \t\r\n#":
+                    position += 1
+                if start == position:
+                    return None
+                fields.append(data[start:position])
+            if fields[0] != b"P5" or not all(field.isdigit() for field in fields[1:]) or fields[3] != b"255":
+                return None
+            if position >= len(data) or data[position] not in b" \t\r\n":
+                return None
+            width, height = int(fields[1]), int(fields[2])
+            if width == 0 or height == 0 or width * height > MAX_MAP_CELLS:
+                return None
+            pixels = data[position + 1 :] + stream.read(width * height + 1)
     except OSError:
         return None
-    fields: list[bytes] = []
-    position = 0
-    while len(fields) < 4:  # magic, width, height, maxval; '#' comments run to the line's end
-        while position < len(data) and data[position] in b" \t\r\n":
-            position += 1
-        if position < len(data) and data[position] == ord("#"):
-            end = data.find(b"\n", position)
-            position = len(data) if end < 0 else end + 1
-            continue
-        start = position
-        while position < len(data) and data[position] not in b" \t\r\n#":
-            position += 1
-        if start == position:
-            return None
-        fields.append(data[start:position])
-    if fields[0] != b"P5" or not all(field.isdigit() for field in fields[1:]) or fields[3] != b"255":
+    if len(pixels) != width * height:
         return None
-    if position >= len(data) or data[position] not in b" \t\r\n":
-        return None
-    width, height = int(fields[1]), int(fields[2])
-    _check_cells(path, height, width)
-    pixels = data[position + 1 :]
-    if width == 0 or height == 0 or len(pixels) != width * height:
-        return None  # PIL says what is wrong with it
     return np.frombuffer(pixels, dtype=np.uint8).reshape(height, width).astype(np.float64)
+
+
+# Bytes read for a PGM's header (comments included) before the fast reader leaves it to PIL.
+_PGM_HEADER_BYTES = 1 << 16
 
 
 def _image_gray(path: Path) -> np.ndarray:
