@@ -18,17 +18,18 @@ def hold_collector() -> None:
     """For a program that sets up a run and then steps it (`cosim run`): no cyclic garbage
     collection while it imports, loads and builds (~10^5 objects that live as long as the process:
     modules, every FMU's variables and ports; the young-generation collections walked them all once
-    more, ~35 ms of a run, and found little). `setup_done()` ends it."""
+    more, ~35 ms of a run, and found little). `release_collector()` ends it."""
     import gc
 
     gc.disable()
     _collector_held[0] = True
 
 
-def setup_done() -> None:
-    """The run's loop starts: what setup made is moved out of the collector's reach (`gc.freeze`:
-    kept, never walked again) and the collector runs as usual from here on. A no-op unless
-    `hold_collector()` was called (a library caller's collector is left alone)."""
+def release_collector() -> None:
+    """What was made since `hold_collector()` (a run's setup, the plot) is moved out of the
+    collector's reach (`gc.freeze`: kept, never walked again) and the collector runs as usual from
+    here on. A no-op unless `hold_collector()` was called (a library caller's collector is left
+    alone)."""
     if _collector_held[0]:
         import gc
 

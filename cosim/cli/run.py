@@ -8,7 +8,6 @@ collision, interrupted), 2 bad input or a failed FMU (one line on stderr, no tra
 from __future__ import annotations
 
 import argparse
-import gc
 import os
 import sys
 from pathlib import Path
@@ -99,7 +98,7 @@ def _handler(args) -> int:
     if getattr(args, "program", False):
         from cosim import hold_collector
 
-        hold_collector()  # until the run's loop starts (`cosim.setup_done`)
+        hold_collector()  # until the run's loop starts (`cosim.release_collector`)
     from cosim.navigation.outcome import format_summary
     from cosim.navigation.run import run_scenario
     from cosim.scenario.load import load_scenario
@@ -177,14 +176,14 @@ def _plot(log_path: Path, quiet: bool, trace=None, program: bool = False, plotte
     off while they are made, and they are frozen (`gc.freeze`) before it is on again (~25 ms
     of collections otherwise, just before the process exits). `plotter` (`cosim.cli.plotter`)
     draws it when given."""
+    from cosim import hold_collector, release_collector
+
     if program:
-        gc.disable()
+        hold_collector()
     try:
         _draw_plot(log_path, quiet, trace, plotter)
     finally:
-        if program:
-            gc.freeze()
-            gc.enable()
+        release_collector()  # a no-op unless held
 
 
 def _draw_plot(log_path: Path, quiet: bool, trace, plotter) -> None:
