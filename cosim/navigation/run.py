@@ -59,7 +59,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim import setup_done
+from cosim import release_collector
 from cosim.core import interrupt
 from cosim.core.master import NS_PER_S, Master
 from cosim.errors import PATH_LIMIT, CosimError, shorten
@@ -302,7 +302,7 @@ def _write_header(built: BuiltRun, master: Master, recorder) -> None:
         recorder.write_path(0, built.plan.path)
     recorder.write_obstacles(0, [obstacle.at(0.0) for obstacle in scenario.obstacles])
     recorder.write_goal(0, scenario.goal[0], scenario.goal[1], None)
-    setup_done()  # the loop starts: the collector is on again (`cosim.hold_collector`)
+    release_collector()  # the loop starts: the collector is on again (`cosim.hold_collector`)
 
 
 def run_scenario(
@@ -715,7 +715,7 @@ class _KernelBlocks:
                 # Rows of the block as two 2-D views: the scalar inputs, the outputs.
                 input_rows = history[:, row_inputs]
                 output_rows = history[:, history.shape[1] - len(outputs) :]
-                views.append((period, -(-first // period) * period, input_rows, output_rows, inputs, outputs))
+                views.append((period, _due_from(first, period), input_rows, output_rows, inputs, outputs))
         reason = None
         try:
             for k in range(first, end):
@@ -749,10 +749,10 @@ class _BlockRecording:
 
     Within a block only the kernel's components step (a component stepped by Python steps at most
     in the block's first step, and its live buffers hold that step's values to the block's end), so
-    what the Python loop's `finish_step`
-    does step by step can be done over the block's rows: the positions are checked in one call of
-    `OutcomeMonitor.check_positions` (the same arithmetic, step by step, in Python floats), and
-    the rows are copied into buffers that collect the steps of several blocks. `flush()` turns
+    what the Python loop's `finish_step` does step by step can be done over the block's rows: the
+    positions are checked in one call of `OutcomeMonitor.check_positions` (the same arithmetic,
+    step by step, in Python floats), and the rows are copied into buffers that collect the steps of
+    several blocks. `flush()` turns
     those steps into their messages with NumPy (signal records, /odom /tf /pose at the pose rate,
     /cmd_vel and the mixer's mode at the mixer's rate; scans and moved obstacles were made at their
     steps) and hands them to `Recorder.hold_steps`, which writes the bytes of the per-step path.
@@ -880,19 +880,19 @@ class _BlockRecording:
         # ends a block before it is due, and after its step unless `cut_after_python` lets the
         # block go on); its buffers hold that step's values to the end of the block.
         for _, period in self.python:
-            if -(-(first + 1) // period) * period < end:
+            if _due_from(first + 1, period) < end:
                 return False
-        if self.polled and -(-first // self.polled) * self.polled < end - 1:
+        if self.polled and _due_from(first, self.polled) < end - 1:
             return False
         recording, recorder = self.recording, self.recorder
         if recording.scan is not None:
             period = recording.scan[0]
-            if -(-(first + 1) // period) * period < end:
+            if _due_from(first + 1, period) < end:
                 return False  # a scan after the first step: its ranges are not held
             if not recorder.has_channel("/scan") and first % period == 0:
                 return False
         if recording.command is not None and not recorder.has_channel("/cmd_vel"):
-            if -(-first // recording.command[0]) * recording.command[0] < end:
+            if _due_from(first, recording.command[0]) < end:
                 return False
         return True
 
@@ -942,7 +942,7 @@ class _BlockRecording:
             self.others.append((first * self.slots + self.scan_slot, t_first, ("/scan", payload)))
         if recording.moving:
             steps = recording.obstacle_steps
-            for k in range(-(-first // steps) * steps, end, steps):
+            for k in range(_due_from(first, steps), end, steps):
                 t_ns = start_ns + k * h_ns
                 t = t_ns / NS_PER_S
                 offsets = tuple(motion.offset(t) for motion in recording.moving)
@@ -975,14 +975,14 @@ class _BlockRecording:
         period = self.periods[i]
         if period == 1:
             return rows[before + 1 : before + 1 + end - first, column].tolist()
-        due = -(-first // period) * period
+        due = _due_from(first, period)
         at = before + 1 + (np.arange(first, end) - due) // period
         return rows[at, column].tolist()
 
     def _latest(self, i: int, steps: np.ndarray) -> np.ndarray:
         """Row index (in the collected rows of component i) of its values after each of `steps`."""
         period = self.periods[i]
-        due = -(-self.first // period) * period
+        due = _due_from(self.first, period)
         return (steps - due) // period + 1
 
     def flush(self) -> None:
@@ -1004,7 +1004,7 @@ class _BlockRecording:
             else:
                 period = self.periods[i]
                 n = self.counts[i]
-                due = -(-first // period) * period
+                due = _due_from(first, period)
                 steps = due + period * np.arange(n, dtype=np.int64)
                 rows = self.buffers[i][1 : n + 1]
                 rows = rows[:, columns] if not isinstance(columns, slice) else rows
@@ -1012,7 +1012,7 @@ class _BlockRecording:
         others = self.others
         if recording.command is not None:
             period = recording.command[0]
-            steps = np.arange(-(-first // period) * period, end, period, dtype=np.int64)
+            steps = np.arange(_due_from(first, period), end, period, dtype=np.int64)
             if len(steps):
                 (i, column_v), (j, column_omega) = self.command_columns
                 v = self.buffers[i][self._latest(i, steps), column_v].tolist()
@@ -1028,13 +1028,13 @@ class _BlockRecording:
                     others.append((k, t_ns, ("/cmd_vel", twist(a, b))))
         if self.mode_column is not None:
             period, mode_period, _, _ = recording.mode
-            steps = np.arange(-(-first // period) * period, end, period, dtype=np.int64)
+            steps = np.arange(_due_from(first, period), end, period, dtype=np.int64)
             i, column = self.mode_column
             for mode in self.buffers[i][self._latest(i, steps), column].tolist():
                 self.monitor.check_mode(mode, mode_period)
         poses = None
         every = recording.pose_steps
-        steps = np.arange(-(-(first + 1) // every) * every - 1, end, every, dtype=np.int64)
+        steps = np.arange(_due_from(first + 1, every) - 1, end, every, dtype=np.int64)
         if len(steps):
             values = np.empty((len(steps), 5))
             for column, (i, where_) in enumerate(self.pose_columns):
@@ -1063,6 +1063,11 @@ class _BlockRecording:
     def held(self, i: int) -> np.ndarray:
         """Component i's row after the last step handed over (flushed)."""
         return self.buffers[i][0]
+
+
+def _due_from(k: int, period: int) -> int:
+    """The first step at or after step k at which a component of `period` steps is due."""
+    return -(-k // period) * period
 
 
 def _progress_bar(stop_time: float):
