@@ -119,6 +119,14 @@ def array_ports(base: str, count: int, columns: int = 0, unit: str = "", start: 
     return [Port(f"{base}[{row}]", unit=unit, start=start) for row in range(1, count + 1)]
 
 
+def check_unique_ports(component: str, kind: str, ports: Iterable[Port]) -> None:
+    """`CosimError` when two of a component's `kind` ports ("input", "output", "parameter") share a name."""
+    names = [port.name for port in ports]
+    if len(set(names)) != len(names):
+        duplicate = next(n for n in names if names.count(n) > 1)
+        raise CosimError(f"component '{component}': {kind} '{duplicate}' declared twice")
+
+
 def closest_names(name: str, candidates: Iterable[str], limit: int = 12) -> str:
     """The candidates as a comma-separated list, closest to `name` first (for error messages)."""
     candidates = list(candidates)
@@ -189,10 +197,7 @@ class Component(ABC):
         self.outputs = list(outputs)
         self.parameters = list(parameters)
         for kind, ports in (("input", self.inputs), ("output", self.outputs), ("parameter", self.parameters)):
-            names = [p.name for p in ports]
-            if len(set(names)) != len(names):
-                duplicate = next(n for n in names if names.count(n) > 1)
-                raise CosimError(f"component '{self.name}': {kind} '{duplicate}' declared twice")
+            check_unique_ports(self.name, kind, ports)
         self.input_index = {p.name: i for i, p in enumerate(self.inputs)}
         self.output_index = {p.name: i for i, p in enumerate(self.outputs)}
         # ctypes arrays let the master copy single values fast; the NumPy views serve bulk copies.

@@ -61,7 +61,7 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 from fmpy.model_description import ModelVariable
 
-from cosim.core.component import Component, NativeStep, Port, State, closest_names
+from cosim.core.component import Component, NativeStep, Port, State, check_unique_ports, closest_names
 from cosim.errors import CosimError
 from cosim.fmi.archive import check_unpacked_size
 from cosim.fmi.builtin import documented_nan_variables
@@ -331,10 +331,7 @@ def _make_layout(
             )
             reaches[port_name] = (variable, scale)
     for causality, declared in ports.items():  # as `Component` checks them: here, so describing finds it
-        names = [port.name for port in declared]
-        if len(set(names)) != len(names):
-            duplicate = next(n for n in names if names.count(n) > 1)
-            raise CosimError(f"component '{name}': {causality} '{duplicate}' declared twice")
+        check_unique_ports(name, causality, declared)
     ports_of: dict[str, list[str]] = {}
     for port, (variable, _) in reaches.items():
         ports_of.setdefault(variable.name, []).append(port)
@@ -969,7 +966,6 @@ class _KeptVariable(ModelVariable):
 
 for _name, _default in _variable_defaults().items():
     setattr(_KeptVariable, _name, _default)
-_KeptVariable.__qualname__ = _KeptVariable.__name__ = "_KeptVariable"
 
 
 def _new_kept_variable() -> _KeptVariable:
