@@ -46,9 +46,7 @@ class KernelTables:
         links, link_numbers, groups, slots, scales, checks = [], [], [], [], [], []
         self.native: list[NativeStep | None] = []
         record_offset = 0
-        fed: dict[str, list] = {}
-        for connection in system.connections:
-            fed.setdefault(connection.target_component, []).append(connection)
+        fed = system.links()
         self.record_shapes: list[tuple[int, int] | None] = []
         for i, (component, period, _) in enumerate(plan):
             native = component.native_step()
@@ -66,11 +64,10 @@ class KernelTables:
             row[K.C_OUT_ADDRESS] = ctypes.addressof(component.output_cbuffer)
             row[K.C_OUT_COUNT] = len(component.outputs)
             row[K.C_LINK_FIRST] = len(links)
-            for connection in fed.get(component.name, ()):
-                if connection.source_component in skip:
+            for connection, producer_name, source, target in fed.get(component.name, ()):
+                if producer_name in skip:
                     continue
-                producer, source = system.resolve(connection.source, "output")
-                _, target = system.resolve(connection.target, "input")
+                producer = system.components[producer_name]
                 kind = 0 if connection.is_plain else (1 if connection.offset == 0.0 else 2)
                 links.append(
                     (
