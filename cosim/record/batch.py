@@ -272,12 +272,16 @@ class MessageBlock:
             grown[: len(stream.rows)] = stream.rows
             stream.rows = grown
 
+    def _window_end(self, t_ns: int) -> int:
+        """[ns] the end of the chunk window holding `t_ns`."""
+        return (t_ns // self.window_ns + 1) * self.window_ns
+
     def _due(self, t_ns: int) -> bool:
         """True when `t_ns` (of the message just held) is past the first held message's window."""
         if not self.window_ns:
             return False
         if self.group == 1:
-            self.deadline = (t_ns // self.window_ns + 1) * self.window_ns
+            self.deadline = self._window_end(t_ns)
             return False
         return t_ns >= self.deadline
 
@@ -391,7 +395,7 @@ class MessageBlock:
         self.order.extend(self.pose_streams)
         full = self._grouped(self.pose_streams[0], 3)
         if self.group == 3 and self.window_ns:  # the first messages of the group
-            self.deadline = (row[0] // self.window_ns + 1) * self.window_ns
+            self.deadline = self._window_end(row[0])
         return full or self._due(row[0])
 
     def add_raw(self, channel: int, t_ns: int, payload: bytes) -> bool:
@@ -427,7 +431,7 @@ class MessageBlock:
             end, full = count, False
             if window:
                 if self.group == 0:
-                    deadline, low = (int(times[i]) // window + 1) * window, i + 1
+                    deadline, low = self._window_end(int(times[i])), i + 1
                 else:
                     deadline, low = self.deadline, i
                 later = np.flatnonzero(times[low:] >= deadline)
@@ -472,7 +476,7 @@ class MessageBlock:
         part = order[first:end]
         stamps = times[first:end]
         if self.group == 0 and self.window_ns:
-            self.deadline = (int(stamps[0]) // self.window_ns + 1) * self.window_ns
+            self.deadline = self._window_end(int(stamps[0]))
         counts = np.bincount(part, minlength=len(self.streams)).tolist()
         sizes = self.group_sizes
         for number, n in enumerate(counts):

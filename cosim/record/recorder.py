@@ -299,7 +299,7 @@ class Recorder:
         # each chunk window: same bytes, fewer packs; a live view gets them at each window.
         self.batching = sink is None
         self._block.batch_limit = BATCH_MESSAGES if self.batching else 0
-        self._block.clock_due = lambda: time.monotonic() - self._last_flush >= self.flush_interval
+        self._block.clock_due = self._sync_due
         self.trace = RunTrace(self.path) if trace else None
         self._block.trace = self.trace
         self._pose_channels: tuple[int, int, int] | None = None
@@ -329,6 +329,10 @@ class Recorder:
         self._block.pack()
         self._writer.flush()
         self._sync()
+
+    def _sync_due(self) -> bool:
+        """Whether `flush_interval` of wall time has passed since the last `_sync`."""
+        return time.monotonic() - self._last_flush >= self.flush_interval
 
     def _sync(self) -> None:
         """Hand the chunks already ended to the OS; the bytes of the file do not change."""
@@ -390,7 +394,7 @@ class Recorder:
         sequence = self._sequences[channel]
         self._sequences[channel] = sequence + 1
         self._writer.add_message(channel, t_ns, data, sequence)
-        if time.monotonic() - self._last_flush >= self.flush_interval:
+        if self._sync_due():
             self._sync()
 
     def _held(self, full: bool) -> None:
@@ -400,7 +404,7 @@ class Recorder:
         self._until_clock -= 1
         if self._until_clock <= 0:
             self._until_clock = CLOCK_EVERY if self.flush_interval > 0 else 1
-            if time.monotonic() - self._last_flush >= self.flush_interval:
+            if self._sync_due():
                 self._sync()
         if full:
             self._block.pack()
@@ -554,7 +558,7 @@ class Recorder:
         block.add_batch(
             np.concatenate(streams)[order], np.concatenate(stamps)[order], signal_rows, pose_rows, raw
         )
-        if time.monotonic() - self._last_flush >= self.flush_interval:
+        if self._sync_due():
             self._sync()
 
     # --- robot topics --------------------------------------------------------------------

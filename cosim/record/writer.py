@@ -50,7 +50,7 @@ _CHUNK_HEAD = struct.Struct("<BQQQQI")  # opcode, length, start, end, uncompress
 _MESSAGE_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, length, channel, byte length of the pairs
 _LITTLE_ENDIAN = sys.byteorder == "little"  # the index pairs' array("Q") bytes are the file's "<u8"
 # A chunk of fewer bytes is compressed inline: handing it to the thread and back (two wake-ups
-# and GIL hand-offs, ~0.15-0.2 ms) costs more than compressing it (~0.1 ms for 50 kB at level 3).
+# and GIL hand-offs, ~0.15-0.2 ms) costs more than compressing it (~0.1 ms for 50 kB).
 THREADED_BYTES = 256 * 1024
 
 
