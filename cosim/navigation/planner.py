@@ -232,7 +232,7 @@ class PlannerComponent(PythonComponent):
         self.output_buffer[: 2 * len(self.waypoints)] = self.waypoints.reshape(-1)
         self.plan_version += 1
         self._arc = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(self.waypoints, axis=0).T))))
-        self._arc_addresses = (self.waypoints.ctypes.data, self._arc.ctypes.data)  # for path_progress
+        self._plan_addresses = (self.waypoints.ctypes.data, self._arc.ctypes.data)  # for path_progress
         self._segment = 0  # index of the plan segment the progress lies on
         self._progress = 0.0  # [m] along the plan
         if self.replanning is not None:
@@ -269,7 +269,7 @@ class PlannerComponent(PythonComponent):
         stop = min(first + SEARCH_WINDOW, len(self.waypoints) - 1)
         if stop <= first:
             return
-        points, arc = self._arc_addresses
+        points, arc = self._plan_addresses
         progress = self._path_progress(points, arc, first, stop, x, y, self._nearest_ref)
         if progress > self._progress:
             self._segment, self._progress = self._nearest.value, progress
