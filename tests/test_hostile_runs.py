@@ -21,8 +21,7 @@ from cosim.core import interrupt
 from cosim.errors import CosimError
 from cosim.navigation import run as run_module
 from cosim.navigation.outcome import OutcomeMonitor
-from cosim.navigation.run import default_log_path
-from cosim.record.logfile import claim_default_log, claim_log
+from cosim.record.logfile import claim_default_log, claim_log, default_log_path
 from cosim.scenario import load as load_module
 from cosim.scenario.load import load_scenario
 
@@ -50,7 +49,9 @@ def one_line(err: str) -> str:
 # --- names and concurrency -----------------------------------------------------------------------
 def test_default_name_has_milliseconds():
     scenario = load_scenario(EXAMPLE, check_world=False)
-    name = default_log_path(scenario, datetime(2026, 1, 31, 14, 25, 1, 123456)).name
+    name = default_log_path(
+        scenario.log_pattern, scenario.name, datetime(2026, 1, 31, 14, 25, 1, 123456)
+    ).name
     assert name == "example_commented-20260131-142501-123.mcap"
 
 
@@ -273,7 +274,7 @@ def test_ssp_run_refuses_an_existing_out(convoy_ssp, tmp_path, capsys):
 
 @pytest.mark.parametrize("signal_number", SIGNALS, ids=["SIGINT", "SIGTERM"])
 def test_ssp_run_interrupted_after_the_log_opened(signal_number, convoy_ssp, tmp_path, capsys, monkeypatch):
-    from cosim.navigation import ssp_run
+    from cosim.ssp import run as ssp_run
 
     monkeypatch.setattr(ssp_run, "_write_header", _signal_self(signal_number)(ssp_run._write_header))
     log = tmp_path / "convoy.mcap"

@@ -11,7 +11,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parent.parent
 # Top to bottom: data flows down this list (README "Layout").
-STAGES = ("core", "fmi", "world", "scenario", "record", "navigation", "logs", "sweep", "cli")
+STAGES = ("core", "fmi", "world", "scenario", "record", "navigation", "ssp", "logs", "sweep", "cli")
 SHARED = {"cosim", "cosim.errors", "cosim.__main__"}  # entry points and the error base
 
 

@@ -25,8 +25,8 @@ import cosim
 from cosim.cli import main
 from cosim.errors import CosimError
 from cosim.logs import open_log
-from cosim.navigation.ssp_run import run_ssp
-from cosim.scenario.ssp_read import open_ssp
+from cosim.ssp.read import open_ssp
+from cosim.ssp.run import run_ssp
 
 DATA = Path(__file__).resolve().parent / "data"
 CONVOY = DATA / "ssp" / "convoy"

@@ -17,10 +17,10 @@ import xmlschema
 from cosim.cli import main
 from cosim.errors import CosimError
 from cosim.logs import open_log
-from cosim.navigation.ssp_export import export_scenario, scenario_of
-from cosim.navigation.ssp_run import SspRunResult, run_ssp
 from cosim.scenario.load import load_scenario
-from cosim.scenario.ssp_read import open_ssp
+from cosim.ssp.export import export_scenario, scenario_of
+from cosim.ssp.read import open_ssp
+from cosim.ssp.run import SspRunResult, run_ssp
 
 REPO = Path(__file__).resolve().parent.parent
 SCHEMAS = Path(__file__).resolve().parent / "data" / "ssp-1.0.1"

@@ -149,7 +149,7 @@ def _handler(args) -> int:
 def _run_ssp(args) -> int:
     if args.live or args.realtime is not None:
         raise CosimError(f"{args.scenario}: --live and --realtime run scenario files (.toml), not SSP")
-    from cosim.navigation.ssp_run import SspRunResult, run_ssp, summary
+    from cosim.ssp.run import SspRunResult, run_ssp, summary
 
     result = run_ssp(args.scenario, args.out, args.overrides, progress=not args.quiet, force=args.force)
     if isinstance(result, SspRunResult):

@@ -2,7 +2,7 @@
 
 The FMUs go in `resources/`, their parameters in `resources/parameters.ssv`, the navigation parts
 (planner, lidar, world, outcome settings) in a navcosim annotation with the scenario TOML and its
-map as resources (`cosim.navigation.ssp_export`). `cosim run X.ssp` reproduces the scenario's run.
+map as resources (`cosim.ssp.export`). `cosim run X.ssp` reproduces the scenario's run.
 """
 
 from __future__ import annotations
@@ -36,8 +36,8 @@ def register(subparsers) -> None:
 
 
 def _export(args) -> int:
-    from cosim.navigation.ssp_export import export_scenario
     from cosim.scenario.load import load_scenario
+    from cosim.ssp.export import export_scenario
 
     scenario = load_scenario(args.scenario, args.overrides)
     path = export_scenario(scenario, args.out)

@@ -90,6 +90,11 @@ KERNEL_BLOCK = 1000
 _RUN_BLOCK = 100_000
 
 
+def due_from(k: int, period: int) -> int:
+    """The first step at or after step k at which a component of `period` steps is due."""
+    return -(-k // period) * period
+
+
 def seconds_to_ns(seconds: float | Fraction | int, what: str) -> int:
     """Convert a duration [s] to integer nanoseconds; `CosimError` if not a whole number of ns."""
     if isinstance(seconds, float):

@@ -1,4 +1,4 @@
-"""Stage 7, reading logs back: the indexed reader (`open_log`), info, plot, export and diff.
+"""Stage 8, reading logs back: the indexed reader (`open_log`), info, plot, export and diff.
 
 `open_log` and `Log` are imported lazily, so `cosim.logs.index` alone stays cheap."""
 

@@ -54,18 +54,23 @@ import ctypes
 import math
 import time
 from dataclasses import dataclass
-from datetime import datetime
 from pathlib import Path
 
 import numpy as np
 
 from cosim import release_collector
 from cosim.core import interrupt
-from cosim.core.master import NS_PER_S, Master
+from cosim.core.master import NS_PER_S, Master, due_from
 from cosim.errors import PATH_LIMIT, CosimError, shorten
 from cosim.navigation.build import BuiltRun, build_run
 from cosim.navigation.outcome import Outcome, OutcomeMonitor, outcome_metadata
-from cosim.record.logfile import claim_default_log, claim_log, is_regular_file
+from cosim.record.logfile import (
+    claim_default_log,
+    claim_log,
+    default_log_path,
+    is_regular_file,
+    navcosim_version,
+)
 from cosim.scenario.load import Scenario
 from cosim.world.shapes import moves
 
@@ -91,15 +96,6 @@ class RunResult:
     @property
     def real_time_factor(self) -> float:
         return self.outcome.time / self.wall_time if self.wall_time > 0 else math.inf
-
-
-def default_log_path(scenario: Scenario, now: datetime | None = None) -> Path:
-    """`[output].log` with {scenario} and {timestamp} (local time, to the millisecond:
-    20260131-142501-123) filled in. Runs that start in the same millisecond are kept apart when
-    the file is created (`cosim.record.logfile.claim_default_log`)."""
-    now = now or datetime.now()
-    stamp = f"{now:%Y%m%d-%H%M%S}-{now.microsecond // 1000:03d}"
-    return Path(scenario.log_pattern.format(scenario=scenario.name, timestamp=stamp))
 
 
 def _output(system, reference: str) -> tuple[np.ndarray, int]:
@@ -260,19 +256,13 @@ def _run_view(buffer: np.ndarray, slots: list[int]) -> np.ndarray | None:
 
 def _write_header(built: BuiltRun, master: Master, recorder) -> None:
     """Metadata, attachments and the once-only topics at t = 0."""
-    from importlib.metadata import PackageNotFoundError, version
-
     scenario = built.scenario
-    try:
-        navcosim_version = version("navcosim")
-    except PackageNotFoundError:
-        navcosim_version = "unknown"
     x, y, theta = scenario.start
     recorder.add_metadata(
         "navcosim",
         {
             "scenario_name": scenario.name,
-            "navcosim_version": navcosim_version,
+            "navcosim_version": navcosim_version(),
             "start": f"{x},{y},{theta}",
             "goal": f"{scenario.goal[0]},{scenario.goal[1]}",
             "goal_tolerance": str(scenario.goal_tolerance),
@@ -351,7 +341,7 @@ def _build_and_run(
             if out_path is not None:
                 log_path, stream = Path(out_path), claim_log(Path(out_path), force)
             else:
-                log_path, stream = claim_default_log(default_log_path(scenario))
+                log_path, stream = claim_default_log(default_log_path(scenario.log_pattern, scenario.name))
             recorder = Recorder(
                 log_path, flush_interval=flush_interval, sink=sink, topics=scenario.topics, stream=stream
             )
@@ -715,7 +705,7 @@ class _KernelBlocks:
                 # Rows of the block as two 2-D views: the scalar inputs, the outputs.
                 input_rows = history[:, row_inputs]
                 output_rows = history[:, history.shape[1] - len(outputs) :]
-                views.append((period, _due_from(first, period), input_rows, output_rows, inputs, outputs))
+                views.append((period, due_from(first, period), input_rows, output_rows, inputs, outputs))
         reason = None
         try:
             for k in range(first, end):
@@ -880,19 +870,19 @@ class _BlockRecording:
         # ends a block before it is due, and after its step unless `cut_after_python` lets the
         # block go on); its buffers hold that step's values to the end of the block.
         for _, period in self.python:
-            if _due_from(first + 1, period) < end:
+            if due_from(first + 1, period) < end:
                 return False
-        if self.polled and _due_from(first, self.polled) < end - 1:
+        if self.polled and due_from(first, self.polled) < end - 1:
             return False
         recording, recorder = self.recording, self.recorder
         if recording.scan is not None:
             period = recording.scan[0]
-            if _due_from(first + 1, period) < end:
+            if due_from(first + 1, period) < end:
                 return False  # a scan after the first step: its ranges are not held
             if not recorder.has_channel("/scan") and first % period == 0:
                 return False
         if recording.command is not None and not recorder.has_channel("/cmd_vel"):
-            if _due_from(first, recording.command[0]) < end:
+            if due_from(first, recording.command[0]) < end:
                 return False
         return True
 
@@ -942,7 +932,7 @@ class _BlockRecording:
             self.others.append((first * self.slots + self.scan_slot, t_first, ("/scan", payload)))
         if recording.moving:
             steps = recording.obstacle_steps
-            for k in range(_due_from(first, steps), end, steps):
+            for k in range(due_from(first, steps), end, steps):
                 t_ns = start_ns + k * h_ns
                 t = t_ns / NS_PER_S
                 offsets = tuple(motion.offset(t) for motion in recording.moving)
@@ -975,14 +965,14 @@ class _BlockRecording:
         period = self.periods[i]
         if period == 1:
             return rows[before + 1 : before + 1 + end - first, column].tolist()
-        due = _due_from(first, period)
+        due = due_from(first, period)
         at = before + 1 + (np.arange(first, end) - due) // period
         return rows[at, column].tolist()
 
     def _latest(self, i: int, steps: np.ndarray) -> np.ndarray:
         """Row index (in the collected rows of component i) of its values after each of `steps`."""
         period = self.periods[i]
-        due = _due_from(self.first, period)
+        due = due_from(self.first, period)
         return (steps - due) // period + 1
 
     def flush(self) -> None:
@@ -1004,7 +994,7 @@ class _BlockRecording:
             else:
                 period = self.periods[i]
                 n = self.counts[i]
-                due = _due_from(first, period)
+                due = due_from(first, period)
                 steps = due + period * np.arange(n, dtype=np.int64)
                 rows = self.buffers[i][1 : n + 1]
                 rows = rows[:, columns] if not isinstance(columns, slice) else rows
@@ -1012,7 +1002,7 @@ class _BlockRecording:
         others = self.others
         if recording.command is not None:
             period = recording.command[0]
-            steps = np.arange(_due_from(first, period), end, period, dtype=np.int64)
+            steps = np.arange(due_from(first, period), end, period, dtype=np.int64)
             if len(steps):
                 (i, column_v), (j, column_omega) = self.command_columns
                 v = self.buffers[i][self._latest(i, steps), column_v].tolist()
@@ -1028,13 +1018,13 @@ class _BlockRecording:
                     others.append((k, t_ns, ("/cmd_vel", twist(a, b))))
         if self.mode_column is not None:
             period, mode_period, _, _ = recording.mode
-            steps = np.arange(_due_from(first, period), end, period, dtype=np.int64)
+            steps = np.arange(due_from(first, period), end, period, dtype=np.int64)
             i, column = self.mode_column
             for mode in self.buffers[i][self._latest(i, steps), column].tolist():
                 self.monitor.check_mode(mode, mode_period)
         poses = None
         every = recording.pose_steps
-        steps = np.arange(_due_from(first + 1, every) - 1, end, every, dtype=np.int64)
+        steps = np.arange(due_from(first + 1, every) - 1, end, every, dtype=np.int64)
         if len(steps):
             values = np.empty((len(steps), 5))
             for column, (i, where_) in enumerate(self.pose_columns):
@@ -1063,11 +1053,6 @@ class _BlockRecording:
     def held(self, i: int) -> np.ndarray:
         """Component i's row after the last step handed over (flushed)."""
         return self.buffers[i][0]
-
-
-def _due_from(k: int, period: int) -> int:
-    """The first step at or after step k at which a component of `period` steps is due."""
-    return -(-k // period) * period
 
 
 def _progress_bar(stop_time: float):

@@ -17,12 +17,32 @@ import errno
 import fcntl
 import os
 import stat
+from datetime import datetime
 from pathlib import Path
 from typing import BinaryIO
 
 from cosim.errors import PATH_LIMIT, CosimError, shorten
 
 MAX_NAME_TRIES = 1000  # `<stem>-1` … `<stem>-999` after the name itself
+
+
+def default_log_path(pattern: str, name: str, now: datetime | None = None) -> Path:
+    """`pattern` (`[output].log`) with {scenario} = `name` and {timestamp} (local time, to the
+    millisecond: 20260131-142501-123) filled in. Runs that start in the same millisecond are kept
+    apart when the file is created (`claim_default_log`)."""
+    now = now or datetime.now()
+    stamp = f"{now:%Y%m%d-%H%M%S}-{now.microsecond // 1000:03d}"
+    return Path(pattern.format(scenario=name, timestamp=stamp))
+
+
+def navcosim_version() -> str:
+    """The installed navcosim's version, as a log's metadata records it ("unknown" from a bare checkout)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("navcosim")
+    except PackageNotFoundError:
+        return "unknown"
 
 
 def claim_log(path: Path, force: bool = False) -> BinaryIO:

@@ -43,7 +43,6 @@ import json
 import math
 import struct
 import time
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import BinaryIO
 
@@ -52,6 +51,7 @@ import numpy as np
 from cosim.errors import CosimError
 from cosim.record import rosmsg
 from cosim.record.batch import RAW_STREAM, MessageBlock
+from cosim.record.logfile import navcosim_version
 from cosim.record.writer import ChunkWriter
 
 CHUNK_SIZE = 512 * 1024  # bytes of uncompressed records after which a chunk ends
@@ -93,10 +93,7 @@ TOPIC_TYPES = {
 
 
 def _library() -> str:
-    try:
-        return f"navcosim {version('navcosim')}"
-    except PackageNotFoundError:
-        return "navcosim"
+    return f"navcosim {navcosim_version()}"
 
 
 # The signals a run's default plot draws (`cosim.logs.plot`), kept in memory by `RunTrace`.

@@ -53,6 +53,7 @@ PYTHON_COMPONENTS = ("planner", "lidar")
 # Template components a `[components.NAME]` of the same name replaces by any FMU (the vehicle is
 # swapped in [vehicle]: the run reads the robot pose from it).
 REPLACEABLE = ("pure_pursuit", "vfh", "mixer")
+DEFAULT_LOG_PATTERN = "logs/{scenario}-{timestamp}.mcap"  # [output].log when the scenario gives none
 
 
 @dataclass(frozen=True)
@@ -363,7 +364,7 @@ def _build(
     lidar = _lidar(TableReader(source, "[lidar]", top.raw("lidar", {})), macro_step)
 
     output = TableReader(source, "[output]", top.raw("output", {}))
-    log_pattern = output.string("log", "logs/{scenario}-{timestamp}.mcap")
+    log_pattern = output.string("log", DEFAULT_LOG_PATTERN)
     try:
         log_pattern.format(scenario="s", timestamp="t")
     except (KeyError, IndexError, ValueError) as error:

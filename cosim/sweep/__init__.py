@@ -1,4 +1,4 @@
-"""Stage 8, parameter sweeps on Dask: vary scenario keys, run every point on a cluster, collect a table.
+"""Stage 9, parameter sweeps on Dask: vary scenario keys, run every point on a cluster, collect a table.
 
 `cosim.sweep(scenario, vary={...})` runs a sweep and returns its results as a pandas DataFrame;
 `cosim sweep SCENARIO --vary KEY=...` is the same from the command line (README "Sweeps").

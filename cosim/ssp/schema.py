@@ -1,7 +1,7 @@
 """SSP 1.0 XML: namespaces, the normative schemas, parsing and validation with one-line errors.
 
-The schemas in `ssp_schemas/` are the Modelica Association's normative SSP 1.0.1 XSD files (BSD
-2-clause, see `ssp_schemas/LICENSE.txt`), used unchanged. Every file navcosim reads or writes
+The schemas in `schemas/` are the Modelica Association's normative SSP 1.0.1 XSD files (BSD
+2-clause, see `schemas/LICENSE.txt`), used unchanged. Every file navcosim reads or writes
 (SystemStructure.ssd, .ssv parameter sets, inline parameter sets) is checked against them.
 """
 
@@ -13,7 +13,7 @@ from pathlib import Path
 
 from cosim.errors import CosimError
 
-SCHEMA_DIR = Path(__file__).resolve().parent / "ssp_schemas"
+SCHEMA_DIR = Path(__file__).resolve().parent / "schemas"
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
     "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",

@@ -45,8 +45,8 @@ from pathlib import Path, PurePosixPath
 
 from cosim.core.component import closest_names
 from cosim.errors import CosimError
-from cosim.scenario import ssp_xml
-from cosim.scenario.ssp_xml import tag
+from cosim.ssp import schema
+from cosim.ssp.schema import tag
 
 SSD_NAME = "SystemStructure.ssd"
 FMU_TYPE = "application/x-fmu-sharedlibrary"
@@ -144,7 +144,7 @@ def read_ssd(directory: Path, source: str) -> SspSystem:
     ssd_path = directory / SSD_NAME
     data = ssd_path.read_bytes()
     where = f"{source}: {SSD_NAME}"
-    root = ssp_xml.parse(data, "ssd", where)
+    root = schema.parse(data, "ssd", where)
     reader = _Reader(directory, source, where)
     reader.system(root.find(tag("ssd:System")), ())
     components = reader.finish()
@@ -384,14 +384,14 @@ class _Reader:
                 if binding.get("sourceBase", "SSD") != "SSD":
                     raise CosimError(f"{where}: parameter binding sourceBase 'component' is not supported")
                 file_where = f"{self.source}: {uri}"
-                parameter_set = ssp_xml.parse(self._resource(uri, where).read_bytes(), "ssv", file_where)
+                parameter_set = schema.parse(self._resource(uri, where).read_bytes(), "ssv", file_where)
             else:
                 values = binding.find(tag("ssd:ParameterValues"))
                 parameter_set = values.find(tag("ssv:ParameterSet")) if values is not None else None
                 file_where = f"{where}: inline parameter set"
                 if parameter_set is None:
                     raise CosimError(f"{where}: parameter binding without source or inline ssv:ParameterSet")
-                ssp_xml.validate(parameter_set, "ssv", file_where)
+                schema.validate(parameter_set, "ssv", file_where)
             for parameter in parameter_set.iterfind(f"{tag('ssv:Parameters')}/{tag('ssv:Parameter')}"):
                 value = list(parameter)[0]
                 name = path + tuple((prefix + parameter.get("name", "")).split("."))

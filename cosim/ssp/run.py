@@ -1,6 +1,6 @@
 """`cosim run SYSTEM.ssp`: run an SSP 1.0 archive and log every component's variables.
 
-An SSP that navcosim exported runs as the scenario it came from (`cosim.navigation.ssp_export`).
+An SSP that navcosim exported runs as the scenario it came from (`cosim.ssp.export`).
 In any other, the FMU components and connections of the SSD are stepped by the master from the start to the
 stop time, with every scalar input and output of each component on `/signals/<component>` at each
 of its steps, each value stamped at the time it holds (inputs applied at t, outputs at t, a last
@@ -16,16 +16,16 @@ import math
 import time
 import tomllib
 from dataclasses import dataclass
-from datetime import datetime
 from pathlib import Path
 
 import numpy as np
 
 from cosim.core import interrupt
-from cosim.core.master import COMPILED_MIN_STEPS, MODES, Master, seconds_to_ns
+from cosim.core.master import COMPILED_MIN_STEPS, MODES, Master, due_from, seconds_to_ns
 from cosim.errors import CosimError
-from cosim.record.logfile import claim_default_log, claim_log
-from cosim.scenario.ssp_read import SspSystem, build_system, open_ssp
+from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
+from cosim.scenario.load import DEFAULT_LOG_PATTERN
+from cosim.ssp.read import SspSystem, build_system, open_ssp
 
 SIMULATION_KEYS = ("stop_time", "macro_step", "start_time", "master")
 CHUNK_STEPS = 20_000  # steps between checks for an interrupt
@@ -116,18 +116,12 @@ def run_ssp(
     """
     values = parse_overrides(overrides)
     with open_ssp(path) as ssp:
-        from cosim.navigation import ssp_export
+        from cosim.ssp import export
 
-        if ssp_export.SCENARIO_ANNOTATION in ssp.annotations:
-            return ssp_export.run_exported(ssp, values, out_path, progress, force)
+        if export.SCENARIO_ANNOTATION in ssp.annotations:
+            return export.run_exported(ssp, values, out_path, progress, force)
         with interrupt.catching_signals():
             return _run_fmus(ssp, experiment(ssp, values), out_path, force)
-
-
-def default_log_path(name: str) -> Path:
-    """logs/<name>-<timestamp>.mcap, the timestamp to the millisecond (a taken name gets a suffix)."""
-    now = datetime.now()
-    return Path("logs") / f"{name or 'ssp'}-{now:%Y%m%d-%H%M%S}-{now.microsecond // 1000:03d}.mcap"
 
 
 def _run_fmus(ssp: SspSystem, run: Experiment, out_path: Path | None, force: bool) -> SspRunResult:
@@ -151,7 +145,9 @@ def _record(
         if out_path is not None:
             log_path, stream = Path(out_path), claim_log(Path(out_path), force)
         else:
-            log_path, stream = claim_default_log(default_log_path(Path(ssp.source).stem))
+            log_path, stream = claim_default_log(
+                default_log_path(DEFAULT_LOG_PATTERN, Path(ssp.source).stem or "ssp")
+            )
         recorder = Recorder(log_path, stream=stream)
     except BaseException:
         master.close()
@@ -179,7 +175,7 @@ def _record(
         def record(first: int, count: int, histories: list[np.ndarray]) -> None:
             blocks = []
             for channel, period, rows in zip(channels, periods, histories, strict=True):
-                first_k = -(-first // period) * period  # row j is step first_k + j * period
+                first_k = due_from(first, period)  # row j is step first_k + j * period
                 times = master.start_time_ns + (first_k + period * np.arange(len(rows))) * h_ns
                 blocks.append((channel, times, rows))
             recorder.hold_signal_rows(blocks)
@@ -207,17 +203,11 @@ def _record(
 
 
 def _write_header(ssp: SspSystem, run: Experiment, master: Master, recorder) -> None:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        navcosim_version = version("navcosim")
-    except PackageNotFoundError:
-        navcosim_version = "unknown"
     recorder.add_metadata(
         "navcosim",
         {
             "scenario_name": ssp.name,
-            "navcosim_version": navcosim_version,
+            "navcosim_version": navcosim_version(),
             "ssp": Path(ssp.source).name,
             "macro_step": repr(run.macro_step),
             "start_time": repr(run.start_time),

@@ -1,7 +1,7 @@
 """Writing an SSP 1.0 archive: SystemStructure.ssd, one .ssv parameter set, the FMUs in resources/.
 
 `write_ssp` takes a flat system in the reader's terms (`SspComponent`, `SspConnection` of
-`cosim.scenario.ssp_read`: FMU variable names, FMU-level values) and writes what `open_ssp` reads
+`cosim.ssp.read`: FMU variable names, FMU-level values) and writes what `open_ssp` reads
 back to the same system, and what any SSP 1.0 tool reads: every FMU as `resources/<name>.fmu`,
 its connectors (the variables that connections use, typed from its modelDescription.xml), the
 connections with a `LinearTransformation` where factor or offset is not the identity, every value
@@ -18,15 +18,15 @@ import zipfile
 from pathlib import Path
 
 from cosim.errors import CosimError
-from cosim.scenario import ssp_xml
-from cosim.scenario.ssp_read import (
+from cosim.ssp import schema
+from cosim.ssp.read import (
     COMPONENT_ANNOTATION,
     SIMULATION_ANNOTATION,
     SSD_NAME,
     SspComponent,
     SspConnection,
 )
-from cosim.scenario.ssp_xml import tag
+from cosim.ssp.schema import tag
 
 PARAMETERS = "resources/parameters.ssv"
 _SSC_TYPES = {"Real": "Real", "Float64": "Real", "Integer": "Integer", "Int32": "Integer"}
@@ -141,14 +141,14 @@ def write_ssp(
     resources: dict[str, bytes] | None = None,
 ) -> Path:
     """Validate the SSD and SSV and write the archive `out` with the FMUs and other `resources`."""
-    ssp_xml.validate(ssd, "ssd", f"{out}: {SSD_NAME} (as written)")
-    ssp_xml.validate(ssv, "ssv", f"{out}: {PARAMETERS} (as written)")
+    schema.validate(ssd, "ssd", f"{out}: {SSD_NAME} (as written)")
+    schema.validate(ssv, "ssv", f"{out}: {PARAMETERS} (as written)")
     out = Path(out)
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
         with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as archive:
-            archive.writestr(SSD_NAME, ssp_xml.to_bytes(ssd))
-            archive.writestr(PARAMETERS, ssp_xml.to_bytes(ssv))
+            archive.writestr(SSD_NAME, schema.to_bytes(ssd))
+            archive.writestr(PARAMETERS, schema.to_bytes(ssv))
             for component in components:
                 archive.write(component.fmu, f"resources/{component.name}.fmu")
             for name, data in (resources or {}).items():

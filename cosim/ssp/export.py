@@ -3,7 +3,7 @@
 The archive holds the scenario's whole system:
 - the FMU components as `resources/<component>.fmu` (the files that the scenario runs), their
   parameters (as the run sets them, derived ones included) in `resources/parameters.ssv`, the
-  connections between FMUs, the stop time, macro step, master and periods (`cosim.scenario.ssp_write`);
+  connections between FMUs, the stop time, macro step, master and periods (`cosim.ssp.write`);
   any SSP 1.0 tool runs this FMU part;
 - the parts that are not FMUs (planner, lidar, world, outcome settings) as resources, the scenario
   TOML `resources/navcosim/scenario.toml` as written and its map files beside it, described by the
@@ -27,8 +27,8 @@ from pathlib import Path
 
 from cosim.errors import CosimError
 from cosim.scenario.load import Scenario, parse_scenario
-from cosim.scenario.ssp_read import SspComponent, SspConnection, SspSystem
-from cosim.scenario.ssp_xml import tag
+from cosim.ssp.read import SspComponent, SspConnection, SspSystem
+from cosim.ssp.schema import tag
 
 SCENARIO_ANNOTATION = "org.navcosim.scenario"
 SCENARIO_DIR = "resources/navcosim"
@@ -109,7 +109,7 @@ def _map_files(scenario: Scenario) -> list[Path]:
 def export_scenario(scenario: Scenario, out: Path) -> Path:
     """Write the SSP of `scenario` to `out` (see the module docstring); `CosimError` on bad input."""
     from cosim.navigation.build import build_run
-    from cosim.scenario.ssp_write import parameter_set, system_structure, write_ssp
+    from cosim.ssp.write import parameter_set, system_structure, write_ssp
 
     built = build_run(scenario)
     components, connections = flat_system(built)
