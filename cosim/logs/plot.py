@@ -11,7 +11,7 @@ arrays drawn) by the same code; then `draw` makes the figure: matplotlib's Agg c
 pyplot, fixed margins (no layout engine), and one artist per kind of thing (a single RGBA image for
 the map and its inflated zone, one collection for the obstacles, their tracks, each mode's shading),
 text boxes naming each panel's series (no legend per panel), ticks only inside the view, the upper
-panels' unlabelled time ticks as two lines (matplotlib's own pixels: tests/test_plot_render.py), the
+panels' unlabelled time ticks as two lines (matplotlib's own pixels: tests/logs/test_plot_render.py), the
 cyclic garbage collector paused, and the PNG written straight from the canvas (`write_png`).
 matplotlib is imported when a plot is drawn, not with this module.
 """

@@ -43,7 +43,7 @@ def new_typestore():
 
 
 # The ROS 2 Humble messages a navcosim log is made of, with every message they contain, as in
-# rosbags' Humble store (`tests/test_ros_conventions.py` compares them): "type name" fields and
+# rosbags' Humble store (`tests/record/test_ros_conventions.py` compares them): "type name" fields and
 # "type NAME=value" constants; `T[N]` is an array of N, `T[]` a sequence.
 LOG_TYPES = {
     "builtin_interfaces/msg/Time": "int32 sec; uint32 nanosec",

@@ -1,0 +1,193 @@
+"""`cosim run` draws its PNG in a child forked before the run (`cosim.cli.plotter`): the same pixels
+as drawn in-process, its problems reported as the in-process drawing reports them, and no child
+left behind whatever happens."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from cosim.cli.plotter import PlotProcess
+from cosim.logs import plot
+
+REPO = Path(__file__).resolve().parents[2]
+EXAMPLE = REPO / "scenarios" / "example_commented.toml"
+SHORT = ["--set", "simulation.stop_time=3"]
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the child is forked on Linux")
+
+
+@pytest.fixture(scope="module")
+def cosim_run(tmp_path_factory):
+    """`cosim run` as a user runs it (the program: the child draws), and its log."""
+    log = tmp_path_factory.mktemp("plotter") / "run.mcap"
+    completed = subprocess.run(
+        [sys.executable, "-m", "cosim", "run", str(EXAMPLE), "--out", str(log), *SHORT],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+    )
+    assert completed.returncode in (0, 1), completed.stderr
+    assert "Traceback" not in completed.stderr and "note" not in completed.stderr, completed.stderr
+    assert f"plot: {log.with_suffix('.png')}" in completed.stdout
+    return log
+
+
+def _data(log: Path) -> plot.PlotData:
+    from cosim.logs.reader import open_log
+
+    with open_log(log) as opened:
+        return plot.collect(opened)
+
+
+def _not_running(pid: int) -> bool:
+    try:
+        os.waitpid(pid, os.WNOHANG)
+    except ChildProcessError:
+        return True  # reaped: no zombie either
+    return False
+
+
+@pytest.mark.slow
+def test_the_child_draws_what_this_process_draws(cosim_run, tmp_path: Path):
+    png = cosim_run.with_suffix(".png")
+    assert not list(cosim_run.parent.glob(".*.png"))  # the partial file was renamed into place
+    here = plot.plot_run(cosim_run, tmp_path / "here.png")
+    assert png.read_bytes() == here.read_bytes()
+
+
+@pytest.mark.slow
+def test_a_plot_process_draws_and_is_gone(cosim_run, tmp_path: Path):
+    process = PlotProcess.start()
+    pid = process.pid
+    png = tmp_path / "deep" / "x.png"
+    assert process.draw(_data(cosim_run), png) is None
+    assert png.read_bytes() == plot.plot_run(cosim_run, tmp_path / "y.png").read_bytes()
+    assert _not_running(pid)
+
+
+@pytest.mark.slow
+def test_a_problem_of_the_child_is_its_answer(cosim_run, tmp_path: Path):
+    (tmp_path / "file").write_text("not a folder")
+    data, png = _data(cosim_run), tmp_path / "file" / "x.png"
+    with pytest.raises(OSError) as here:
+        plot.draw(data, png)
+    process = PlotProcess.start()
+    pid = process.pid
+    assert process.draw(data, png) == str(here.value)
+    assert _not_running(pid)
+
+
+def test_a_cancelled_child_is_ended_at_once(tmp_path: Path):
+    process = PlotProcess.start()
+    pid = process.pid
+    process.cancel()
+    assert process.exit_status == -signal.SIGKILL  # not left to finish importing matplotlib
+    assert _not_running(pid)
+    process.cancel()  # twice: nothing left to do
+
+
+@pytest.mark.slow
+def test_a_run_that_fails_to_build_leaves_no_child(tmp_path: Path):
+    log = tmp_path / "refused.mcap"
+    completed = subprocess.run(
+        [sys.executable, "-m", "cosim", "run", str(EXAMPLE), "--out", str(log), "--quiet"]
+        + ["--set", "goal.x=0.1", "--set", "goal.y=0.1"],
+        capture_output=True,
+        text=True,
+    )
+    assert completed.returncode == 2, completed.stderr
+    assert "inside an obstacle" in completed.stderr and "Traceback" not in completed.stderr
+    assert not log.exists() and not log.with_suffix(".png").exists()
+    assert _processes_naming(str(log)) == []
+
+
+@pytest.mark.slow
+def test_a_child_that_fails_is_drawn_for_here(cosim_run, tmp_path: Path, monkeypatch):
+    parent = os.getpid()
+    draw = plot.draw
+
+    def draw_here_only(data, png_path):
+        if os.getpid() != parent:
+            raise RuntimeError("a bug in the child")
+        return draw(data, png_path)
+
+    monkeypatch.setattr(plot, "draw", draw_here_only)
+    process = PlotProcess.start()
+    assert process.draw(_data(cosim_run), tmp_path / "x.png") is None
+    assert (tmp_path / "x.png").read_bytes() == plot.plot_run(cosim_run, tmp_path / "y.png").read_bytes()
+
+
+def _processes_naming(text: str) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        try:
+            if entry.name.isdigit() and text in (entry / "cmdline").read_bytes().decode(errors="replace"):
+                found.append(int(entry.name))
+        except OSError:
+            pass
+    return found
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signal_number", [signal.SIGINT, signal.SIGTERM])
+def test_a_signalled_run_leaves_no_child(signal_number, tmp_path: Path):
+    """SIGINT/SIGTERM to the whole process group (a terminal's Ctrl-C, `timeout`): the child ignores
+    them, the run ends "interrupted" and still plots (as without the child), and no process is left."""
+    log = tmp_path / "interrupted.mcap"
+    command = [sys.executable, "-m", "cosim", "run", str(EXAMPLE), "--out", str(log), "--quiet"]
+    process = subprocess.Popen(
+        [*command, "--set", "simulation.macro_step=0.0001"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    while not log.exists() and process.poll() is None:
+        time.sleep(0.1)
+    assert process.poll() is None, process.communicate()[1]
+    time.sleep(0.5)
+    os.killpg(process.pid, signal_number)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 1, err
+    assert "Traceback" not in err
+    assert log.with_suffix(".png").exists()
+    assert _processes_naming(str(log)) == []
+
+
+@pytest.mark.slow
+def test_an_interrupt_while_the_child_draws_ends_the_child(cosim_run, tmp_path: Path, monkeypatch):
+    """A signal in the parent while it waits for the picture (`cosim.core.interrupt` raises there):
+    the child is ended before the exception leaves `draw`, so the caller's clean-up (unlinking the
+    partial PNG) is not followed by the child writing it."""
+    parent = os.getpid()
+    draw = plot.draw
+
+    def slow_in_the_child(data, png_path):
+        if os.getpid() != parent:
+            time.sleep(60)
+        return draw(data, png_path)
+
+    def interrupt(number, frame):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(plot, "draw", slow_in_the_child)
+    process = PlotProcess.start()
+    pid = process.pid
+    previous = signal.signal(signal.SIGALRM, interrupt)
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 0.5)
+        with pytest.raises(KeyboardInterrupt):
+            process.draw(_data(cosim_run), tmp_path / "x.png")
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+    assert process.exit_status == -signal.SIGKILL
+    assert _not_running(pid)
+    assert not (tmp_path / "x.png").exists()

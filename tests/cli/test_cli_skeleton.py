@@ -1,0 +1,63 @@
+"""The CLI's frame: every sub-command is registered, user errors exit 2 with one line."""
+
+import subprocess
+import sys
+
+import pytest
+
+from cosim.cli import COMMANDS, build_parser, main
+from cosim.errors import CosimError
+from planner.errors import NavcosimError, PlannerError
+
+
+def test_every_subcommand_is_registered():
+    help_text = build_parser().format_help()
+    for name in COMMANDS:
+        assert name in help_text
+
+
+def test_project_errors_share_one_base():
+    assert issubclass(CosimError, NavcosimError)
+    assert issubclass(PlannerError, NavcosimError)
+
+
+@pytest.mark.slow
+def test_cli_runs_as_module_and_prints_help():
+    result = subprocess.run([sys.executable, "-m", "cosim", "--help"], capture_output=True, text=True)
+    assert result.returncode == 0
+    assert "COMMAND" in result.stdout
+
+
+def test_missing_command_is_a_usage_error():
+    with pytest.raises(SystemExit) as exit_:
+        main([])
+    assert exit_.value.code == 2
+
+
+LOUD_HANDLER = """
+import sys
+import cosim.cli as cli
+
+def loud(args):
+    for line in range(200_000):
+        print("line", line)
+    return 0
+
+parser = cli.build_parser
+def build_parser():
+    built = parser()
+    built.parse_args = lambda argv=None: type("Args", (), {"handler": staticmethod(loud)})()
+    return built
+cli.build_parser = build_parser
+sys.exit(cli.main([]))
+"""
+
+
+@pytest.mark.slow
+def test_closed_pipe_ends_quietly():
+    """`cosim … | head -1` stops quietly: no BrokenPipeError traceback, SIGPIPE's exit status."""
+    script = f"set -o pipefail; {sys.executable} -c '{LOUD_HANDLER}' | head -1"
+    result = subprocess.run(["bash", "-c", script], capture_output=True, text=True)
+    assert result.stdout == "line 0\n"
+    assert "Traceback" not in result.stderr, result.stderr
+    assert result.returncode == 141

@@ -1,0 +1,289 @@
+"""The FMU build: every project FMU validates, loads in a C host, and rebuilds after a C edit."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import shutil
+import subprocess
+import zipfile
+from pathlib import Path
+
+import pytest
+from fmpy import read_model_description
+from fmpy.validation import validate_fmu
+from fmu_harness import copy_sources
+
+from cosim.cli import main
+from cosim.errors import CosimError
+from cosim.fmi import builtin as fmus
+from cosim.fmi.inspect import FMPY_HEADERS, fmpy_problems, required_functions, validate
+
+REPO = Path(__file__).resolve().parents[2]
+NAMES = fmus.known_names()
+HOST_SOURCE = Path(__file__).resolve().parents[1] / "c_host" / "host.c"
+# (input, value, output, expected after 3 steps of 0.1 s) where the closed form is simple.
+HOST_CHECKS = {
+    "DifferentialDrive": ("v", 1.5, "x", 0.45),
+    "Bicycle": ("v", 2.0, "x", 0.6),
+}
+
+
+def test_every_project_fmu_is_found():
+    assert {"DifferentialDrive", "Bicycle"} <= set(NAMES)
+    assert NAMES == sorted(p.parent.name for p in (REPO / "fmus").glob("*/modelDescription.xml"))
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_fmu_passes_fmpy_validation_and_ours(name):
+    assert validate(fmus.builtin_fmu(name)) == []
+
+
+@pytest.mark.parametrize("name", ["DifferentialDrive", "Bicycle"])
+def test_fmpy_validate_fmu_itself_finds_no_problem(name):
+    """fmpy's own entry point (too slow on 2000 structured names to run on every FMU)."""
+    assert validate_fmu(str(fmus.builtin_fmu(name))) == []
+
+
+def test_fast_name_check_catches_what_fmpy_catches(tmp_path):
+    """The one-parse-per-name-shape check still rejects an illegal structured name."""
+    with zipfile.ZipFile(fmus.builtin_fmu("DifferentialDrive")) as archive:
+        text = archive.read("modelDescription.xml").decode()
+    text = text.replace('variableNamingConvention="flat"', 'variableNamingConvention="structured"')
+    for bad_name in ("track width", "wheel_speed_min[1,]"):
+        broken = tmp_path / "Broken.fmu"
+        with zipfile.ZipFile(broken, "w") as archive:
+            archive.writestr("modelDescription.xml", text.replace('name="track_width"', f'name="{bad_name}"'))
+        slow, fast = validate_fmu(str(broken)), fmpy_problems(broken)
+        assert len(slow) == len(fast) == 1 and "is not a legal variable name" in fast[0]
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_fmu_archive_layout(name):
+    path = fmus.builtin_fmu(name)
+    identifier = read_model_description(str(path)).coSimulation.modelIdentifier
+    with zipfile.ZipFile(path) as archive:
+        members = set(archive.namelist())
+    assert f"binaries/linux64/{identifier}.so" in members
+    assert {"modelDescription.xml", "sources/buildDescription.xml", "sources/fmi2_glue.c"} <= members
+    assert {"sources/model.c", "sources/config.h", "sources/model.h", "sources/fmi2Functions.h"} <= members
+
+
+@pytest.fixture(scope="module")
+def c_host(tmp_path_factory) -> Path:
+    compiler = shutil.which("cc") or shutil.which("gcc")
+    executable = tmp_path_factory.mktemp("host") / "host"
+    command = [compiler, "-std=c99", "-Wall", "-Wextra", "-Werror", f"-I{FMPY_HEADERS}", str(HOST_SOURCE)]
+    subprocess.run([*command, "-o", str(executable), "-ldl", "-lm"], check=True)
+    return executable
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", NAMES)
+def test_binary_runs_in_a_c_host(name, c_host, tmp_path):
+    path = fmus.builtin_fmu(name)
+    description = read_model_description(str(path))
+    with zipfile.ZipFile(path) as archive:
+        archive.extractall(tmp_path)
+    library = tmp_path / "binaries" / "linux64" / f"{description.coSimulation.modelIdentifier}.so"
+    arguments = [str(c_host), str(library), description.guid]
+    if name in HOST_CHECKS:
+        vr = {v.name: v.valueReference for v in description.modelVariables}
+        input_name, value, output_name, expected = HOST_CHECKS[name]
+        arguments += [str(vr[input_name]), repr(value), str(vr[output_name]), repr(expected), "3", "0.1"]
+    result = subprocess.run(arguments, capture_output=True, text=True)
+    assert result.stdout.strip() == "ok", result.stdout + result.stderr
+
+
+@pytest.mark.slow
+def test_c_host_detects_a_wrong_output(c_host, tmp_path):
+    """The host's check can fail: a wrong expectation is reported."""
+    path = fmus.builtin_fmu("DifferentialDrive")
+    with zipfile.ZipFile(path) as archive:
+        archive.extractall(tmp_path)
+    library = tmp_path / "binaries" / "linux64" / "DifferentialDrive.so"
+    guid = read_model_description(str(path)).guid
+    result = subprocess.run(
+        [str(c_host), str(library), guid, "10", "1.5", "20", "0.5", "3", "0.1"], capture_output=True
+    )
+    assert result.returncode == 1
+
+
+def test_all_fmi2_functions_are_required():
+    names = required_functions("2.0")
+    assert len(names) == 44 and "fmi2GetDirectionalDerivative" in names and "fmi2DoStep" in names
+    assert len(required_functions("3.0")) > 60
+
+
+def _build_module(source_root: Path):
+    spec = importlib.util.spec_from_file_location("copied_fmu_build", source_root / "build.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_c_edit_is_rebuilt_on_next_use(tmp_path):
+    sources = copy_sources(REPO / "fmus", tmp_path / "fmus")
+    cache_dir = tmp_path / "cache"
+    first = fmus.build_if_stale("DifferentialDrive", sources, cache_dir)
+    first_bytes = first.read_bytes()
+    assert fmus.build_if_stale("DifferentialDrive", sources, cache_dir).read_bytes() == first_bytes
+
+    model = sources / "DifferentialDrive" / "model.c"
+    model.write_text(model.read_text().replace("m->wheel_radius = 0.05;", "m->wheel_radius = 0.07;"))
+    rebuilt = fmus.build_if_stale("DifferentialDrive", sources, cache_dir)
+    assert rebuilt.read_bytes() != first_bytes
+    import fmpy
+
+    result = fmpy.simulate_fmu(
+        str(rebuilt),
+        start_values={"input_mode": 1, "wheel_speed_left": 10.0, "wheel_speed_right": 10.0},
+        stop_time=1.0,
+    )
+    assert result["x"][-1] == pytest.approx(0.7, abs=1e-12)  # r = 0.07 m, 10 rad/s, 1 s
+
+
+def test_glue_compiles_against_our_minimal_fmi2_header(tmp_path):
+    """pip's isolated wheel build has no fmpy: the fallback header must build the same FMUs."""
+    build = _build_module(REPO / "fmus")
+    for name in ("DifferentialDrive", "Bicycle"):
+        path = build.build_fmu(REPO / "fmus" / name, tmp_path, header_dir=REPO / "fmus" / "common" / "fmi2")
+        assert validate(path) == []
+
+
+def test_build_error_is_one_line(tmp_path):
+    sources = copy_sources(REPO / "fmus", tmp_path / "fmus")
+    model = sources / "Bicycle" / "model.c"
+    model.write_text(model.read_text() + "\nint unused_and_broken(void) { return undefined_name; }\n")
+    with pytest.raises(
+        CosimError, match=r"building FMU Bicycle: compiling Bicycle failed: .*undefined_name"
+    ) as error:
+        fmus.build_if_stale("Bicycle", sources, tmp_path / "cache")
+    assert "\n" not in str(error.value)
+
+
+def test_missing_compiler_is_one_line(tmp_path, monkeypatch):
+    sources = copy_sources(REPO / "fmus", tmp_path / "fmus")
+    monkeypatch.setenv("CC", "no-such-compiler-navcosim")
+    with pytest.raises(CosimError, match="no C compiler found"):
+        fmus.build_if_stale("Bicycle", sources, tmp_path / "cache")
+
+
+def test_unknown_name_lists_known_ones():
+    with pytest.raises(CosimError, match="unknown project FMU 'Unicycle'; known: .*DifferentialDrive"):
+        fmus.builtin_fmu("Unicycle")
+
+
+def test_cli_fmu_path_info_validate(capsys, tmp_path):
+    assert main(["fmu", "path", "Bicycle"]) == 0
+    assert capsys.readouterr().out.strip() == str(fmus.builtin_fmu("Bicycle"))
+    assert main(["fmu", "info", "DifferentialDrive"]) == 0
+    out = capsys.readouterr().out
+    assert "FMI version:     2.0" in out and "{0a1ebf92-88de-4ee3-9d6b-a0fca9cd1c6b}" in out
+    assert any(
+        line.split()[:6] == ["wheel_radius", "parameter", "fixed", "Real", "m", "0.05"]
+        for line in out.splitlines()
+    )
+    assert main(["fmu", "validate", "Bicycle"]) == 0
+
+
+def test_cli_bad_files_exit_2(capsys, tmp_path):
+    not_zip = tmp_path / "a.fmu"
+    not_zip.write_text("hello")
+    no_description = tmp_path / "b.fmu"
+    with zipfile.ZipFile(no_description, "w") as archive:
+        archive.writestr("other.txt", "x")
+    for argument, message in ((not_zip, "not a zip"), (no_description, "no modelDescription.xml")):
+        for action in ("info", "validate"):
+            assert main(["fmu", action, str(argument)]) == 2
+            err = capsys.readouterr().err
+            assert message in err and err.count("\n") == 1
+    assert main(["fmu", "info", "NoSuchThing"]) == 2
+
+
+def test_validate_reports_a_missing_binary(tmp_path, capsys):
+    broken = tmp_path / "Broken.fmu"
+    with (
+        zipfile.ZipFile(fmus.builtin_fmu("DifferentialDrive")) as source,
+        zipfile.ZipFile(broken, "w") as target,
+    ):
+        for item in source.infolist():
+            if not item.filename.startswith("binaries/"):
+                target.writestr(item, source.read(item))
+    assert main(["fmu", "validate", str(broken)]) == 1
+    assert "binaries/linux64/DifferentialDrive.so is missing" in capsys.readouterr().out
+
+
+def _age(path: Path, seconds: float) -> None:
+    """Move `path`'s modification time `seconds` into the past (as if written that long ago)."""
+    status = path.stat()
+    os.utime(path, ns=(status.st_atime_ns, status.st_mtime_ns - int(seconds * 1e9)))
+
+
+def test_up_to_date_fmu_is_found_without_reading_its_sources(tmp_path, monkeypatch):
+    """The freshness check compares the files' times and sizes with the stamp: no hash, no build."""
+    sources = copy_sources(REPO / "fmus", tmp_path / "fmus")
+    cache_dir = tmp_path / "cache"
+    built = fmus.build_if_stale("DifferentialDrive", sources, cache_dir)
+    for path in sources.rglob("*"):
+        if path.is_file():
+            _age(path, 60)  # sources older than the stamp: no racy window
+    fmus.build_if_stale("DifferentialDrive", sources, cache_dir)  # renews the recorded times
+    build = fmus._build_module(sources)
+
+    def refuse(*_args, **_kwargs):
+        raise AssertionError("the fresh check read the sources or built")
+
+    monkeypatch.setattr(build, "source_hash", refuse)
+    monkeypatch.setattr(build, "build_fmu", refuse)
+    assert fmus.build_if_stale("DifferentialDrive", sources, cache_dir) == built
+
+
+def test_same_size_c_edit_after_the_racy_window_is_rebuilt(tmp_path):
+    """An edit that keeps the file's size, long after the build, changes its time: rebuilt."""
+    sources = copy_sources(REPO / "fmus", tmp_path / "fmus")
+    cache_dir = tmp_path / "cache"
+    for path in sources.rglob("*"):
+        if path.is_file():
+            _age(path, 120)
+    first_bytes = fmus.build_if_stale("DifferentialDrive", sources, cache_dir).read_bytes()
+    _age(cache_dir / "DifferentialDrive.stamp", 60)  # the build was a minute ago
+    model = sources / "DifferentialDrive" / "model.c"
+    text = model.read_text()
+    model.write_text(text.replace("m->wheel_radius = 0.05;", "m->wheel_radius = 0.07;"))
+    assert len(model.read_text()) == len(text)
+    rebuilt = fmus.build_if_stale("DifferentialDrive", sources, cache_dir)
+    assert rebuilt.read_bytes() != first_bytes
+    import fmpy
+
+    result = fmpy.simulate_fmu(
+        str(rebuilt),
+        start_values={"input_mode": 1, "wheel_speed_left": 10.0, "wheel_speed_right": 10.0},
+        stop_time=1.0,
+    )
+    assert result["x"][-1] == pytest.approx(0.7, abs=1e-12)  # r = 0.07 m, 10 rad/s, 1 s
+
+
+def test_touched_source_renews_the_stamp_without_a_rebuild(tmp_path, monkeypatch):
+    sources = copy_sources(REPO / "fmus", tmp_path / "fmus")
+    cache_dir = tmp_path / "cache"
+    built = fmus.build_if_stale("DifferentialDrive", sources, cache_dir)
+    _age(sources / "DifferentialDrive" / "model.c", 30)  # same bytes, another time
+    build = fmus._build_module(sources)
+
+    def refuse(*_args, **_kwargs):
+        raise AssertionError("rebuilt for a time-only change")
+
+    monkeypatch.setattr(build, "build_fmu", refuse)
+    assert fmus.build_if_stale("DifferentialDrive", sources, cache_dir) == built
+    recorded = (cache_dir / "DifferentialDrive.stamp").read_text()
+    status = (sources / "DifferentialDrive" / "model.c").stat()
+    assert f"{status.st_mtime_ns} {status.st_size} " in recorded
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_stamp_environment_names_the_headers_the_build_uses(version):
+    """The cheap check finds the FMI headers without importing fmpy: the folder the build picks."""
+    build = fmus._build_module(REPO / "fmus")
+    headers = build.fmi_header_dir(REPO / "fmus" / "common", version)
+    assert fmus._environment_line(REPO / "fmus" / "Bicycle", version).startswith(f"env {headers} CC=")

@@ -1,0 +1,111 @@
+"""planner.native: C kernels built on first use, cached by source hash, loaded with ctypes."""
+
+from __future__ import annotations
+
+import ctypes
+import math
+
+import pytest
+
+from planner import native
+
+
+def _package(tmp_path, body: str, header: str | None = None):
+    (tmp_path / "pkg" / "native").mkdir(parents=True)
+    (tmp_path / "pkg" / "__init__.py").write_text("")
+    (tmp_path / "pyproject.toml").write_text("")
+    if header is not None:
+        (tmp_path / "pkg" / "native" / "k.h").write_text(header)
+    source = tmp_path / "pkg" / "native" / "k.c"
+    source.write_text(body)
+    return source
+
+
+HYPOT = "#include <math.h>\ndouble hyp(double a, double b) { return sqrt(a * a + b * b); }\n"
+
+
+def test_builds_loads_and_computes(tmp_path, monkeypatch):
+    monkeypatch.delenv("NAVCOSIM_NATIVE_CACHE", raising=False)
+    monkeypatch.setattr(native, "_loaded", {})
+    source = _package(tmp_path, HYPOT)
+    library = native.load(source)
+    library.hyp.argtypes = [ctypes.c_double, ctypes.c_double]
+    library.hyp.restype = ctypes.c_double
+    assert library.hyp(3.0, 4.0) == 5.0
+    assert library.hyp(0.1, 0.2) == math.sqrt(0.1 * 0.1 + 0.2 * 0.2)  # IEEE, no FMA contraction
+    built = list((tmp_path / "build" / "native").glob("k-*.so"))
+    assert [p.name for p in built] == [native.library_name(source)]
+    assert native.load(source) is library  # once per process
+
+
+def test_edit_of_source_or_header_gives_new_library(tmp_path, monkeypatch):
+    monkeypatch.setattr(native, "_loaded", {})
+    source = _package(tmp_path, '#include "k.h"\ndouble f(void) { return K; }\n', "#define K 1.0\n")
+    first = native.library_name(source)
+    (source.parent / "k.h").write_text("#define K 2.0\n")
+    second = native.library_name(source)
+    assert first != second
+    library = native.load(source)
+    library.f.restype = ctypes.c_double
+    assert library.f() == 2.0
+
+
+def test_cache_override_and_prebuilt_copy_is_used(tmp_path, monkeypatch):
+    monkeypatch.setattr(native, "_loaded", {})
+    source = _package(tmp_path, HYPOT)
+    monkeypatch.setenv("NAVCOSIM_NATIVE_CACHE", str(tmp_path / "cache"))
+    native.load(source)
+    assert (tmp_path / "cache" / native.library_name(source)).is_file()
+    assert not (tmp_path / "build").exists()
+
+
+def test_compile_error_is_one_line(tmp_path, monkeypatch):
+    monkeypatch.setattr(native, "_loaded", {})
+    monkeypatch.setenv("NAVCOSIM_NATIVE_CACHE", str(tmp_path / "cache"))
+    source = _package(tmp_path, "double f(void) { return undefined_name; }\n")
+    with pytest.raises(native.NativeBuildError) as error:
+        native.load(source)
+    message = str(error.value)
+    assert "\n" not in message and "k.c" in message and "undefined_name" in message
+    assert list((tmp_path / "cache").iterdir()) == []  # no partial library left behind
+
+
+def test_missing_compiler_says_what_to_do(tmp_path, monkeypatch):
+    monkeypatch.setattr(native, "_loaded", {})
+    monkeypatch.setenv("NAVCOSIM_NATIVE_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-cc"))
+    source = _package(tmp_path, HYPOT)
+    with pytest.raises(native.NativeBuildError, match="cannot run the C compiler"):
+        native.load(source)
+    monkeypatch.delenv("CC")
+    monkeypatch.setenv("PATH", str(tmp_path))
+    with pytest.raises(native.NativeBuildError, match="no C compiler found"):
+        native.compiler()
+
+
+@pytest.mark.slow
+def test_cli_without_a_compiler_says_so_in_one_line(tmp_path):
+    """A fresh install on a machine without a C compiler: `cosim plan` exits 2 with one line, no
+    traceback, and names what to do."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[2]
+    environment = dict(os.environ, NAVCOSIM_NATIVE_CACHE=str(tmp_path / "cache"), CC=str(tmp_path / "no-cc"))
+    command = [sys.executable, "-m", "cosim", "plan", str(repo / "scenarios/maps/warehouse.yaml")]
+    command += ["--start", "6,6", "--goal", "84,53", "--repeat", "1"]
+    done = subprocess.run(command, capture_output=True, text=True, env=environment, cwd=tmp_path, timeout=120)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.startswith("cosim: error: cannot run the C compiler") and done.stderr.count("\n") == 1
+
+
+def test_bind_types_the_functions_and_can_hold_the_gil(tmp_path, monkeypatch):
+    monkeypatch.setattr(native, "_loaded", {})
+    monkeypatch.setenv("NAVCOSIM_NATIVE_CACHE", str(tmp_path / "cache"))
+    library = native.load(_package(tmp_path, HYPOT))
+    typed = native.bind(library, {"hyp": (ctypes.c_double, [ctypes.c_double, ctypes.c_double])})
+    assert typed is library and typed.hyp(3, 4) == 5.0  # ints converted: the argtypes are set
+    held = native.bind(library, {"hyp": (ctypes.c_double, [ctypes.c_double, ctypes.c_double])}, hold_gil=True)
+    assert isinstance(held, ctypes.PyDLL) and held._handle == library._handle and held.hyp(6, 8) == 10.0
