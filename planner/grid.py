@@ -1,6 +1,6 @@
 """The occupancy grid: a boolean map with a resolution [m/cell] and an origin [m].
 
-Conventions (DESIGN.md): `occupied[row, col]`, row 0 is the TOP row of the map image or file
+Conventions: `occupied[row, col]`, row 0 is the TOP row of the map image or file
 (as Moving AI and image files store it); the world frame has x to the right and y up, and
 `origin` is the (x, y) of the grid's lower-left corner (ROS map_server convention). So the centre
 of cell (row, col) is at (origin_x + (col + 0.5) * res, origin_y + (rows - 1 - row + 0.5) * res).

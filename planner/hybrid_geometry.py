@@ -86,19 +86,6 @@ def advance(x: float, y: float, theta: float, curvature: float, signed_length: f
     return new_x, new_y, new_theta
 
 
-def point_free(
-    occupied: np.ndarray, resolution: float, origin_x: float, origin_y: float, x: float, y: float
-) -> bool:
-    """True if the point (x, y) [m] lies in a free cell of `occupied` (row 0 = top)."""
-    col = int(math.floor((x - origin_x) / resolution))
-    row_from_bottom = int(math.floor((y - origin_y) / resolution))
-    rows, cols = occupied.shape
-    row = rows - 1 - row_from_bottom
-    if row < 0 or row >= rows or col < 0 or col >= cols:
-        return False
-    return not occupied[row, col]
-
-
 def segments_free(
     occupied: np.ndarray,
     resolution: float,

@@ -311,9 +311,9 @@ def find_algebraic_loop(
 
     `connections` are (source output, target input) pairs; `feedthrough[component][output]` names
     the inputs that output depends on directly. Works on names alone, so a system description can
-    be checked before any component exists (`cosim.scenario.system`). The answer for the last few
-    graphs is remembered: a scenario's description is checked, then the system built from it (the
-    same graph), and a sweep's worker builds the same system for every run.
+    be checked before any component exists (`cosim.scenario.compose.describe_system`). The answer
+    for the last few graphs is remembered: a scenario's description is checked, then the system
+    built from it (the same graph), and a sweep's worker builds the same system for every run.
     """
     pairs = tuple((source, target) for source, target in connections)
     dependencies = tuple(

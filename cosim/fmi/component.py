@@ -2,8 +2,8 @@
 
 fmpy loads the binary and runs the lifecycle calls; the per-step calls (set inputs, do step, get
 outputs) go straight to the FMU's C functions with value references resolved once and values in
-preallocated ctypes arrays: one batched call per FMI type, about 4x faster than fmpy's methods
-(reference/fmpy-pitfalls.md §6).
+preallocated ctypes arrays: one batched call per FMI type, about 4x faster than fmpy's methods,
+which convert lists and check types on every call.
 
 Port mapping lets any FMU fill a role: `port_map = {"v": "u_speed", "omega": {"name": "yawRate",
 "scale": -1}}` exposes FMU variable `u_speed` as port `v` and `yawRate` as port `omega`. The scale

@@ -391,7 +391,7 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     # Build (or load) the C kernels that would first run inside the loop, so the real-time factor
     # measures the simulation, not a first run's compilation.
     monitor.world.distance(*scenario.start[:2])
-    tables = master.kernel_tables(record=True) if _use_kernel(scenario) else None
+    tables = master.kernel_tables(record=True) if _use_kernel() else None
     if tables is not None:
         tables.warm_up()
     bar = _progress_bar(scenario.stop_time) if progress else None
@@ -572,7 +572,7 @@ def _world_at(world, t: float):
     return world
 
 
-def _use_kernel(scenario: Scenario) -> bool:
+def _use_kernel() -> bool:
     """Whether the run steps its FMUs in the compiled kernel (`Master.run_blocks`); both ways give
     the same log. NAVCOSIM_LOOP=python forces the Python loop (tests compare the two)."""
     import os

@@ -1,7 +1,7 @@
 """ROS 2 messages of the logs: definitions, construction and CDR serialisation via `rosbags`.
 
 Every channel of a navcosim log is a ROS 2 message (``cdr`` encoding, ``ros2msg`` schema) so
-Foxglove, ``ros2 bag``, rosbags and @mcap/core read the whole file (`reference/mcap.md`).
+Foxglove, ``ros2 bag``, rosbags and @mcap/core read the whole file.
 Standard messages are ROS 2 Humble's, serialised by a rosbags type store that holds only those a log
 is made of (`LOG_TYPES`; rosbags' whole Humble store, hundreds of types, costs ~0.2 s to import,
 and is loaded only when a message outside them is asked for). Each component's signals get one

@@ -5,7 +5,7 @@ TOML (so they pass the same validation), checks types, ranges and unknown keys, 
 start and goal lie in free space of the true world. `scenarios/example_commented.toml` documents
 every key. What needs the FMU files themselves (does the FMU load, do the variables of the ports,
 parameters and connections exist, is there an algebraic loop) is checked when the scenario is
-turned into a system description (`cosim.scenario.system.describe_system`), still before any log
+turned into a system description (`cosim.scenario.compose.describe_system`), still before any log
 is created.
 """
 
@@ -558,7 +558,8 @@ def _added_components(top: TableReader, base_dir: Path, removed: tuple[str, ...]
     A name in `REPLACEABLE` replaces the template's component of that name.
 
     Whether the rate is a whole number of macro steps, and whether the variables exist, is checked
-    with everything else about the system (`cosim.scenario.system`), so all problems come at once.
+    with everything else about the system (`cosim.scenario.compose.describe_system`), so all
+    problems come at once.
     """
     tables = top.table_of("components")
     components: dict[str, ComponentSpec] = {}

@@ -45,13 +45,6 @@ def raw_toml(text: str, source: str, overrides: tuple[str, ...] | list[str]) -> 
     return raw
 
 
-def scenario_sections() -> tuple[str, ...]:
-    """The top-level tables a scenario may have (a sweep file is told apart by its [sweep])."""
-    from cosim.scenario.load import SECTIONS
-
-    return tuple(SECTIONS)
-
-
 def check_builds(scenario) -> None:
     """Build the system of `scenario` without starting it: the map loads, a path is found, every FMU
     loads and every parameter and port exists. No FMU is instantiated and no log is written."""

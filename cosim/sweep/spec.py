@@ -282,7 +282,7 @@ def make_spec(
     seed: int | None = None,
     overrides: Sequence[str] = (),
 ) -> SweepSpec:
-    """Check the combination of options (not yet the keys: see `cosim.sweep.plan`)."""
+    """Check the combination of options; the keys are checked later, against the scenario."""
     if method not in METHODS:
         from cosim.scenario.schema import did_you_mean
 

@@ -1,6 +1,6 @@
 """Point-polygon geometry shared by the lidar (is the sensor inside an obstacle?) and the outcome
 checks (distance to the true obstacles), in C (native/geometry.h, inlined into the kernels of
-native/world.c that use them); these are the same functions for Python callers.
+native/world.c that use them); `polygon_distance` is the distance for Python callers.
 
 Polygons are rows `first` to `stop - 1` of an (N, 2) vertex array, closed implicitly, so many
 polygons can share one array.
@@ -22,12 +22,6 @@ def _checked(vertices: np.ndarray, first: int, stop: int) -> tuple[np.ndarray, i
     if not 0 <= first <= stop <= len(vertices):
         raise ValueError(f"rows {first}..{stop} are not rows of {len(vertices)} vertices")
     return vertices, first, stop
-
-
-def inside_polygon(x: float, y: float, vertices: np.ndarray, first: int, stop: int) -> bool:
-    """Even-odd rule; a point on an edge may fall either way (its distance is 0 anyway)."""
-    vertices, first, stop = _checked(vertices, first, stop)
-    return bool(kernels.library().world_inside_polygon(float(x), float(y), vertices.ctypes.data, first, stop))
 
 
 def polygon_distance(x: float, y: float, vertices: np.ndarray, first: int, stop: int) -> float:

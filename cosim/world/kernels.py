@@ -108,7 +108,6 @@ def library() -> ctypes.CDLL:
         _library = native.bind(
             native.load(SOURCE),
             {
-                "world_inside_polygon": (ctypes.c_int, [_f64, _f64, _p, _i64, _i64]),
                 "world_polygon_distance": (_f64, [_f64, _f64, _p, _i64, _i64]),
                 "world_distance": (_f64, [_p]),
                 "lidar_measure": (None, [_p, _f64, _f64, _p, _i64, _p]),

@@ -1,6 +1,6 @@
 """A 2-D lidar: ray casting on the true world (occupancy grid plus unknown obstacles).
 
-Semantics follow MATLAB's `rangeSensor` (reference/matlab-blocks.md §1.7):
+Semantics follow MATLAB's `rangeSensor` (Navigation Toolbox):
 * Beams leave the sensor at the robot pose (x, y, theta) at `angles` in the sensor frame
   (counter-clockwise from the heading, radians). Angles are given as a list, or as
   `angle_min`, `angle_max`, `count` (evenly spaced, both ends included).

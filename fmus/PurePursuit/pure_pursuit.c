@@ -1,6 +1,5 @@
 /*
- * Pure pursuit as MATLAB's controllerPurePursuit computes it (see
- * shared/reference/matlab-blocks.md section 1.1): a projection point that only moves forward,
+ * Pure pursuit as MATLAB's controllerPurePursuit computes it: a projection point that only moves forward,
  * an arc-length lookahead from it, omega = 2 sin(alpha) / L.
  */
 #include "pure_pursuit.h"

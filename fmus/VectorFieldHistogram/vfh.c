@@ -1,5 +1,5 @@
 /*
- * VFH+ as MATLAB's controllerVFH computes it (shared/reference/matlab-blocks.md section 1.2):
+ * VFH+ as MATLAB's controllerVFH computes it:
  * polar obstacle density with the enlargement angle, binary histogram with hysteresis,
  * masked histogram with the turning circles, valley candidates and the three-weight cost.
  *

@@ -2,7 +2,7 @@
  * the bidirectional search of planner.bidirectional. Loaded with planner.native; the Python side
  * (planner/astar.py) documents the data layout, the heap keys and the status codes.
  *
- * Every floating-point operation is the one the Python reference does, in its order (the library is
+ * Every floating-point operation is the one planner/astar.py's documented search does, in its order (the library is
  * built with -ffp-contract=off, no fast-math), so plans are bit-identical to it; the 4-ary heap pops
  * equal keys in the same order, so the same nodes are expanded.
  */

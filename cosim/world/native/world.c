@@ -11,11 +11,6 @@
 
 #include "geometry.h"
 
-int world_inside_polygon(double x, double y, const double *vertices, int64_t first, int64_t stop)
-{
-    return inside_polygon(x, y, vertices, first, stop);
-}
-
 double world_polygon_distance(double x, double y, const double *vertices, int64_t first, int64_t stop)
 {
     return polygon_distance(x, y, vertices, first, stop);
