@@ -122,6 +122,8 @@ class PlannerSettings:
     algorithm: str = "astar"
     heuristic: str | None = None
     connectivity: int = 8
+    # [m] The loader's default is the vehicle's radius ([vehicle] radius), not this 0.0, which
+    # only a PlannerSettings built in code without the scenario gets.
     expansion_distance: float = 0.0
     smoothing: str = "line_of_sight"
     min_turning_radius: float | None = None
