@@ -39,9 +39,9 @@ def release_collector() -> None:
 
 
 def builtin_fmu(name: str, fmi_version: int = 2) -> Path:
-    """The built `.fmu` of a project FMU (a folder of `fmus/`: DifferentialDrive, Bicycle, PurePursuit,
-    VectorFieldHistogram, AvoidanceMixer, ArtificialPotentialField) as an
-    FMI 2.0 or (`fmi_version=3`) FMI 3.0 co-simulation FMU, built from its C sources if needed."""
+    """The built `.fmu` of a project FMU (a folder of `fmus/`: DifferentialDrive, Bicycle,
+    PurePursuit, VectorFieldHistogram, AvoidanceMixer, ArtificialPotentialField) as an FMI 2.0 or
+    (`fmi_version=3`) FMI 3.0 co-simulation FMU, built from its C sources if needed."""
     from cosim.fmi.builtin import builtin_fmu as _builtin_fmu
 
     return _builtin_fmu(name, fmi_version)

@@ -18,7 +18,11 @@ os.environ["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), os.environ.g
 def repo_root() -> Path:
     return REPO
 
+
 # Test modules that share helpers import each other by basename (unique across tests/), so every
 # package folder of tests/ is on sys.path, as tests/ itself is.
-sys.path[:0] = [str(folder) for folder in sorted(Path(__file__).resolve().parent.iterdir())
-                if folder.is_dir() and any(folder.glob("test_*.py"))]
+sys.path[:0] = [
+    str(folder)
+    for folder in sorted(Path(__file__).resolve().parent.iterdir())
+    if folder.is_dir() and any(folder.glob("test_*.py"))
+]

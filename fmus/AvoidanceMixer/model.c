@@ -1,7 +1,6 @@
 /*
  * AvoidanceMixer FMU model: fuses the pure-pursuit command with the VFH steering direction
- * (thesis section 4.3.3, Figure 4.12; the steering rule of MathWorks'
- * VFH examples).
+ * (thesis section 4.3.3, Figure 4.12; the steering rule of MathWorks' VFH examples).
  *
  *   stopped (3): goal_reached                       -> v = omega = steering_angle = 0
  *   recover (2): steering_dir is NaN (nothing free)  -> differential drive: turn on the spot,

@@ -1,6 +1,6 @@
 /*
- * Pure pursuit as MATLAB's controllerPurePursuit computes it: a projection point that only moves forward,
- * an arc-length lookahead from it, omega = 2 sin(alpha) / L.
+ * Pure pursuit as MATLAB's controllerPurePursuit computes it: a projection point that only moves
+ * forward, an arc-length lookahead from it, omega = 2 sin(alpha) / L.
  */
 #include "pure_pursuit.h"
 

@@ -2,9 +2,9 @@
  * the bidirectional search of planner.bidirectional. Loaded with planner.native; the Python side
  * (planner/astar.py) documents the data layout, the heap keys and the status codes.
  *
- * Every floating-point operation is the one planner/astar.py's documented search does, in its order (the library is
- * built with -ffp-contract=off, no fast-math), so plans are bit-identical to it; the 4-ary heap pops
- * equal keys in the same order, so the same nodes are expanded.
+ * Every floating-point operation is the one planner/astar.py's documented search does, in its order
+ * (the library is built with -ffp-contract=off, no fast-math), so plans are bit-identical to it; the
+ * 4-ary heap pops equal keys in the same order, so the same nodes are expanded.
  */
 #include <math.h>
 #include <stddef.h>

@@ -363,8 +363,8 @@ avoid_speed_factor = 0.7
 
 def test_replaces_vfh_in_a_shipped_run_and_reaches_the_goal(tmp_path):
     """warehouse_diff_drive_obstacles (three boxes on the planned path) with [vfh] pointing at this
-    FMU (reduced settings as tests/navigation/test_shipped_scenarios.py): goal reached, no collision, the field
-    made the mixer avoid, and the log's vfh component is this FMU."""
+    FMU (reduced settings as tests/navigation/test_shipped_scenarios.py): goal reached, no
+    collision, the field made the mixer avoid, and the log's vfh component is this FMU."""
     text = (SCENARIOS / "warehouse_diff_drive_obstacles.toml").read_text()
     map_file = (SCENARIOS / "maps" / "warehouse.yaml").resolve()
     text = re.sub(r'(?m)^file = "maps/warehouse.yaml"', f'file = "{map_file}"', text)

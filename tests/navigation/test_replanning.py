@@ -10,13 +10,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_shipped_scenarios import REDUCED, densify, distance_to_polygon
 
 from cosim.logs import open_log
 from cosim.navigation.costmap import Costmap
 from cosim.navigation.run import run_scenario
 from cosim.scenario.load import load_scenario
 from planner.grid import OccupancyGrid
-from test_shipped_scenarios import REDUCED, densify, distance_to_polygon
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 

@@ -332,10 +332,11 @@ def test_a_goal_published_on_goal_pose_is_replanned_to_and_reached(tmp_path):
 def test_the_bicycle_replans_to_a_new_goal_with_hybrid_a_star(tmp_path):
     """The run's goal hook (no server): a bicycle given a new goal replans with Hybrid A* from where
     it is and reaches it; refused goals change nothing."""
+    from test_shipped_scenarios import REDUCED
+
     from cosim.logs import open_log
     from cosim.navigation.run import run_scenario
     from cosim.scenario.load import load_scenario
-    from test_shipped_scenarios import REDUCED
 
     class Goals:
         def __init__(self, goals):
