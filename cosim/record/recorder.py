@@ -93,7 +93,9 @@ TOPIC_TYPES = {
 
 
 def _library() -> str:
-    return f"navcosim {navcosim_version()}"
+    """The MCAP header's library: "navcosim <version>", or "navcosim" alone from a bare checkout."""
+    version = navcosim_version()
+    return "navcosim" if version == "unknown" else f"navcosim {version}"
 
 
 # The signals a run's default plot draws (`cosim.logs.plot`), kept in memory by `RunTrace`.
