@@ -31,6 +31,7 @@ from cosim.scenario.limits import (
     check_time_base,
 )
 from cosim.scenario.schema import REQUIRED, TableReader, describe, did_you_mean, is_number, shorten
+from cosim.world.lidar import evenly_spaced_beams
 from cosim.world.motion import MOTIONS, Motion
 from cosim.world.shapes import Circle, Obstacle, Polygon, Rectangle
 
@@ -730,9 +731,7 @@ def _lidar(table: TableReader, macro_step: float) -> LidarSettings:
             raise table.error(
                 "count", f"at most {MAX_LIDAR_BEAMS} beams (the VFH input size), got {describe(count)}"
             )
-        # A full turn would count the beam at -pi twice.
-        full_turn = angle_max - angle_min >= 2 * math.pi - 1e-9
-        angles = np.linspace(angle_min, angle_max, count, endpoint=not full_turn)
+        angles = evenly_spaced_beams(angle_min, angle_max, count)
     if angles.size > MAX_LIDAR_BEAMS:
         raise table.error(
             "angles", f"at most {MAX_LIDAR_BEAMS} beams (the VFH input size), got {angles.size}"

@@ -3,8 +3,10 @@
 The robot pipeline of the thesis (chapter 4) as data. `cosim.scenario.compose.describe_system`
 merges it with the scenario's `[components.NAME]` and `[[connections]]` (a connection into an input
 that the template feeds replaces the template's) and checks the whole; `cosim.navigation.build`
-makes the components. Nothing downstream knows these names: what a run reads besides the
-recording (robot pose, commanded velocity, avoidance mode, scan) is declared here (`Observed`).
+makes the components. What a run reads besides the recording (robot pose, commanded velocity,
+avoidance mode, scan) is declared here (`Observed`). The component names are also known by name to
+what reads a robot log (cosim.logs.plot, .animate, .reader), to the recorder's plot trace
+(cosim.record.recorder) and to cosim.navigation.build: renaming one here renames it there too.
 
 Components, in the order they are added to the system (it breaks ties of the step order):
     planner       Python: the plan on the known map; outputs waypoints[k,c], k = 1..1000, c = 1 (x), 2 (y);

@@ -3,7 +3,8 @@
 Semantics follow MATLAB's `rangeSensor` (Navigation Toolbox):
 * Beams leave the sensor at the robot pose (x, y, theta) at `angles` in the sensor frame
   (counter-clockwise from the heading, radians). Angles are given as a list, or as
-  `angle_min`, `angle_max`, `count` (evenly spaced, both ends included).
+  `angle_min`, `angle_max`, `count` (`evenly_spaced_beams`: both ends included, except that a
+  full turn leaves out its end, the start's own direction).
 * A beam returns the distance to the first occupied cell boundary or obstacle outline it meets.
   A beam whose true distance lies outside [range_min, range_max] is a missed reading: NaN.
   A sensor inside an occupied cell or an obstacle reads 0 (so NaN when range_min > 0).
@@ -39,6 +40,20 @@ from cosim.world.shapes import Obstacle
 MAX_BEAMS = 100_000  # beams of one sweep (two output ports each); a scenario allows fewer (the VFH's 720)
 
 
+def evenly_spaced_beams(angle_min: float, angle_max: float, count: int) -> np.ndarray:
+    """`count` beam angles [rad] from `angle_min` to `angle_max`, both ends included.
+
+    A full turn (angle_max - angle_min >= 2 pi) leaves out its end: that beam would point where the
+    first one does and be counted twice. One beam points at `angle_min`. The scenario's `[lidar]`
+    keys and `Lidar(angle_min=, angle_max=, count=)` both come here, so the same three numbers give
+    the same beams by either path.
+    """
+    if count == 1:
+        return np.array([float(angle_min)])
+    full_turn = angle_max - angle_min >= 2 * math.pi - 1e-9
+    return np.linspace(angle_min, angle_max, count, endpoint=not full_turn)
+
+
 class Lidar(kernels.Bound, PythonComponent):
     """Lidar component (see the module docstring). Lengths [m], angles [rad], period [s]."""
 
@@ -70,7 +85,7 @@ class Lidar(kernels.Bound, PythonComponent):
                 raise CosimError(
                     f"lidar '{name}': count must be an integer in 1..{MAX_BEAMS}, got {count!r:.80}"
                 )
-            angles = np.linspace(angle_min, angle_max, count) if count > 1 else np.array([angle_min])
+            angles = evenly_spaced_beams(angle_min, angle_max, count)
         try:
             self.beam_angles = np.ascontiguousarray(angles, dtype=float)
         except (TypeError, ValueError):

@@ -165,3 +165,22 @@ def test_outcome_monitor_goal_collision_and_interventions():
     assert monitor.check_position(3.0, 8.6, 10.0) == "collision"  # 0.4 m from the circle < 0.5
     other = OutcomeMonitor(world, goal=(15.0, 10.0), tolerance=0.5, radius=0.5, start_xy=(14.0, 5.0))
     assert other.check_position(1.0, 14.7, 10.2) == "goal_reached"
+
+
+@pytest.mark.parametrize(
+    ("angle_min", "angle_max", "count"),
+    [(-math.pi, math.pi, 8), (-math.pi / 2, math.pi / 2, 5), (-1.0, 1.0, 1), (0.0, math.pi, 2)],
+)
+def test_lidar_keys_give_the_same_beams_as_the_lidar_component(angle_min, angle_max, count):
+    from cosim.world.lidar import Lidar
+
+    text = MINIMAL + f"[lidar]\nangle_min = {angle_min!r}\nangle_max = {angle_max!r}\ncount = {count}\n"
+    scenario = parse_scenario(text, "beams.toml", REPO / "scenarios")
+    component = Lidar(angle_min=angle_min, angle_max=angle_max, count=count).beam_angles
+    np.testing.assert_array_equal(np.asarray(scenario.lidar.angles), component)
+    # Both ends are beams, except that a full turn leaves out its end (the start's own direction).
+    full_turn = angle_max - angle_min >= 2 * math.pi - 1e-9
+    expected_step = (angle_max - angle_min) / (count if full_turn else max(count - 1, 1))
+    assert component[0] == angle_min
+    if count > 1:
+        np.testing.assert_allclose(np.diff(component), expected_step)
