@@ -188,7 +188,7 @@ class SdkWriter:
         """Records packed by the recorder (`cosim.record.batch`): each message's payload sliced out
         and logged on its channel (through the SDK's `BaseChannel.log`, skipping the Python
         wrapper's type checks: the fastest way the SDK offers)."""
-        from cosim.record.writer import MESSAGE_HEAD
+        from cosim.record.mcap_format import MESSAGE_HEAD
 
         count = len(times)
         if count == 0:

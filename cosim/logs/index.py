@@ -14,11 +14,7 @@ machine: a chunk declaring more than `MAX_CHUNK_BYTES` uncompressed is skipped (
 declared size (a chunk that expands further is an error, not an allocation). A chunk's CRC, when
 it has one, is checked.
 
-MCAP layout used here (https://mcap.dev/spec): magic, then records `opcode u8 | length u64 |
-body`; a Chunk body is `start u64 | end u64 | uncompressed_size u64 | crc u32 | compression str |
-records_length u64 | records`; each chunk is followed by one MessageIndex per channel
-(`channel u16 | byte_length u32 | (log_time u64, offset u64)*`), offsets into the uncompressed
-records; a Message record is `channel u16 | sequence u32 | log_time u64 | publish_time u64 | data`.
+The record layout is declared in `cosim.record.mcap_format` (shared with the writer).
 """
 
 from __future__ import annotations
@@ -36,14 +32,24 @@ from mcap.data_stream import ReadDataStream
 from mcap.records import Attachment, Channel, Header, Metadata, Schema
 
 from cosim.errors import CosimError
+from cosim.record.mcap_format import (
+    CHUNK_FIELDS,
+    MAGIC,
+    MESSAGE_FIELDS,
+    MESSAGE_HEAD_SIZE,
+    OP_ATTACHMENT,
+    OP_CHANNEL,
+    OP_CHUNK,
+    OP_DATA_END,
+    OP_FOOTER,
+    OP_HEADER,
+    OP_MESSAGE,
+    OP_MESSAGE_INDEX,
+    OP_METADATA,
+    OP_SCHEMA,
+    RECORD_HEAD,
+)
 
-MAGIC = b"\x89MCAP0\r\n"
-OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_MESSAGE_INDEX = 1, 2, 3, 4, 5, 6, 7
-OP_ATTACHMENT, OP_METADATA, OP_DATA_END = 9, 12, 15
-MESSAGE_HEADER_BYTES = 1 + 8 + 2 + 4 + 8 + 8  # opcode, length, channel, sequence, log time, publish time
-_record_head = struct.Struct("<BQ")
-_chunk_head = struct.Struct("<QQQII")  # start, end, uncompressed size, crc, compression string length
-_message_head = struct.Struct("<HIQQ")
 _zstd = zstandard.ZstdDecompressor()
 MAX_CHUNK_BYTES = 256 * 2**20  # largest uncompressed chunk read [bytes]; navcosim writes ~0.5 MiB
 
@@ -114,12 +120,12 @@ def _walk(handle, file_size: int, log: LogIndex) -> None:
     raw_block: Block | None = None
     current: Block | None = None  # the chunk that the message indexes being read belong to
     while True:
-        head = handle.read(_record_head.size)
-        if len(head) < _record_head.size:
+        head = handle.read(RECORD_HEAD.size)
+        if len(head) < RECORD_HEAD.size:
             log.problem = "the file ends without a footer"
             break
-        opcode, length = _record_head.unpack(head)
-        body_start = position + _record_head.size
+        opcode, length = RECORD_HEAD.unpack(head)
+        body_start = position + RECORD_HEAD.size
         if body_start + length > file_size:
             log.problem = "the last record is cut short"
             if opcode == OP_CHUNK:
@@ -130,9 +136,9 @@ def _walk(handle, file_size: int, log: LogIndex) -> None:
                 current.indexed = True
             current = None
         if opcode == OP_CHUNK:
-            current = _admit(_read_chunk_head(handle, position, body_start, length), position, log)
+            current = _admit(_readCHUNK_FIELDS(handle, position, body_start, length), position, log)
         elif opcode == OP_MESSAGE:
-            channel, _, log_time, _ = _message_head.unpack(handle.read(_message_head.size))
+            channel, _, log_time, _ = MESSAGE_FIELDS.unpack(handle.read(MESSAGE_FIELDS.size))
             if raw_block is None or raw_block.data_offset + raw_block.data_size != position:
                 raw_block = _finish_raw(log, raw_block, raw_messages)
                 raw_block = Block(position, 0, 0, "")
@@ -182,11 +188,11 @@ def _admit(block: Block, position: int, log: LogIndex) -> Block | None:
     return block
 
 
-def _read_chunk_head(handle, position: int, body_start: int, length: int) -> Block:
-    start, end, uncompressed_size, crc, name_length = _chunk_head.unpack(handle.read(_chunk_head.size))
+def _readCHUNK_FIELDS(handle, position: int, body_start: int, length: int) -> Block:
+    start, end, uncompressed_size, crc, name_length = CHUNK_FIELDS.unpack(handle.read(CHUNK_FIELDS.size))
     compression = handle.read(name_length).decode()
     (records_length,) = struct.unpack("<Q", handle.read(8))
-    data_offset = body_start + _chunk_head.size + name_length + 8
+    data_offset = body_start + CHUNK_FIELDS.size + name_length + 8
     if data_offset + records_length > body_start + length:
         raise ValueError("chunk records overrun the chunk record")
     return Block(
@@ -196,7 +202,7 @@ def _read_chunk_head(handle, position: int, body_start: int, length: int) -> Blo
         compression,
         crc=crc,
         record_offset=position,
-        record_length=_record_head.size + length,
+        record_length=RECORD_HEAD.size + length,
     )
 
 
@@ -204,14 +210,14 @@ def _salvage_chunk(handle, position: int, body_start: int, file_size: int, log: 
     """The file ends inside a chunk: keep its available compressed prefix as a partial block,
     whose complete records `_reindex_last` indexes."""
     handle.seek(body_start)
-    head = handle.read(_chunk_head.size)
-    if len(head) < _chunk_head.size:
+    head = handle.read(CHUNK_FIELDS.size)
+    if len(head) < CHUNK_FIELDS.size:
         return
-    _, _, uncompressed_size, crc, name_length = _chunk_head.unpack(head)
+    _, _, uncompressed_size, crc, name_length = CHUNK_FIELDS.unpack(head)
     name, size = handle.read(name_length), handle.read(8)
     if len(name) < name_length or len(size) < 8:
         return
-    data_offset = body_start + _chunk_head.size + name_length + 8
+    data_offset = body_start + CHUNK_FIELDS.size + name_length + 8
     available = min(struct.unpack("<Q", size)[0], file_size - data_offset)
     if available > 0:
         compression = name.decode(errors="replace")
@@ -245,13 +251,13 @@ def _reindex_last(handle, log: LogIndex) -> None:
         return
     index: dict[int, list[tuple[int, int]]] = {}
     offset = 0
-    while offset + _record_head.size <= len(records):
-        opcode, length = _record_head.unpack_from(records, offset)
-        body = offset + _record_head.size
+    while offset + RECORD_HEAD.size <= len(records):
+        opcode, length = RECORD_HEAD.unpack_from(records, offset)
+        body = offset + RECORD_HEAD.size
         if body + length > len(records):
             break  # a partial chunk's last record, cut short
-        if opcode == OP_MESSAGE and length >= _message_head.size:
-            channel, _, log_time, _ = _message_head.unpack_from(records, body)
+        if opcode == OP_MESSAGE and length >= MESSAGE_FIELDS.size:
+            channel, _, log_time, _ = MESSAGE_FIELDS.unpack_from(records, body)
             index.setdefault(channel, []).append((log_time, offset))
         elif opcode == OP_CHANNEL:
             channel_record = parse_record(Channel, records[body : body + length])
@@ -320,16 +326,16 @@ def discover_channels_in_blocks(handle, log: LogIndex) -> None:
             continue
         records = records_of(handle, log, block)
         offset = 0
-        while offset + _record_head.size <= len(records):
-            opcode, length = _record_head.unpack_from(records, offset)
-            body = records[offset + _record_head.size : offset + _record_head.size + length]
+        while offset + RECORD_HEAD.size <= len(records):
+            opcode, length = RECORD_HEAD.unpack_from(records, offset)
+            body = records[offset + RECORD_HEAD.size : offset + RECORD_HEAD.size + length]
             if opcode == OP_SCHEMA:
                 schema = parse_record(Schema, body)
                 log.schemas.setdefault(schema.id, schema)
             elif opcode == OP_CHANNEL:
                 channel_record = parse_record(Channel, body)
                 log.channels.setdefault(channel_record.id, channel_record)
-            offset += _record_head.size + length
+            offset += RECORD_HEAD.size + length
 
 
 def fixed_payloads(
@@ -353,13 +359,13 @@ def fixed_payloads(
             skip, width = layouts[channel]
             entries = block.index[channel]
             offsets = entries[:, 1].astype(np.int64)
-            if offsets.max() + MESSAGE_HEADER_BYTES + skip + width > len(records):
+            if offsets.max() + MESSAGE_HEAD_SIZE + skip + width > len(records):
                 raise CosimError(f"{log.path}: message index of channel {channel} points past its chunk")
             lengths = lengths_view[offsets + 1].view("<u8")[:, 0]
-            if np.any(lengths < MESSAGE_HEADER_BYTES - 9 + skip + width):
+            if np.any(lengths < MESSAGE_FIELDS.size + skip + width):
                 raise CosimError(f"{log.path}: messages of channel {channel} are shorter than their schema")
             windows = np.lib.stride_tricks.sliding_window_view(records, width)
-            rows[channel].append(windows[offsets + MESSAGE_HEADER_BYTES + skip])
+            rows[channel].append(windows[offsets + MESSAGE_HEAD_SIZE + skip])
             times[channel].append(entries[:, 0].astype(np.int64))
     result = {}
     for channel, (_, width) in layouts.items():
@@ -388,4 +394,4 @@ def iter_payloads(handle, log: LogIndex, channels: set[int]):
         for log_time, offset in entries.tolist():
             (length,) = struct.unpack_from("<Q", records, offset + 1)
             channel = struct.unpack_from("<H", records, offset + 9)[0]
-            yield channel, log_time, records[offset + MESSAGE_HEADER_BYTES : offset + 9 + length]
+            yield channel, log_time, records[offset + MESSAGE_HEAD_SIZE : offset + RECORD_HEAD.size + length]

@@ -20,7 +20,6 @@ out; so are chunks that do not decompress (each is named in `Recovery.dropped`).
 
 from __future__ import annotations
 
-import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -29,11 +28,9 @@ import zstandard
 
 from cosim.errors import CosimError
 from cosim.logs import index as log_index
-from cosim.logs.index import OP_CHANNEL, OP_MESSAGE, OP_SCHEMA, LogIndex
+from cosim.logs.index import LogIndex
+from cosim.record.mcap_format import MESSAGE_FIELDS, OP_CHANNEL, OP_MESSAGE, OP_SCHEMA, RECORD_HEAD
 from cosim.record.writer import ChunkWriter
-
-_record_head = struct.Struct("<BQ")
-_message_head = struct.Struct("<HIQQ")  # channel, sequence, log time, publish time
 
 
 @dataclass
@@ -178,14 +175,14 @@ def _walk_records(records: bytes) -> tuple[list, list, list[tuple[int, int, int,
 
     schemas, channels, messages = [], [], []
     offset, size = 0, len(records)
-    while offset + _record_head.size <= size:
-        opcode, length = _record_head.unpack_from(records, offset)
-        body = offset + _record_head.size
+    while offset + RECORD_HEAD.size <= size:
+        opcode, length = RECORD_HEAD.unpack_from(records, offset)
+        body = offset + RECORD_HEAD.size
         if body + length > size:
             break
-        if opcode == OP_MESSAGE and length >= _message_head.size:
-            channel, _, log_time, _ = _message_head.unpack_from(records, body)
-            messages.append((channel, log_time, offset, _record_head.size + length))
+        if opcode == OP_MESSAGE and length >= MESSAGE_FIELDS.size:
+            channel, _, log_time, _ = MESSAGE_FIELDS.unpack_from(records, body)
+            messages.append((channel, log_time, offset, RECORD_HEAD.size + length))
         elif opcode == OP_SCHEMA:
             schemas.append(log_index.parse_record(Schema, records[body : body + length]))
         elif opcode == OP_CHANNEL:

@@ -21,7 +21,8 @@ import numpy as np
 
 from cosim.errors import CosimError
 from cosim.record import rosmsg
-from cosim.record.writer import MESSAGE_HEAD, MESSAGE_HEAD_SIZE, ChunkWriter
+from cosim.record.mcap_format import MESSAGE_FIELDS, MESSAGE_HEAD, MESSAGE_HEAD_SIZE, OP_MESSAGE
+from cosim.record.writer import ChunkWriter
 
 NS_PER_S = 1_000_000_000
 # Field offsets of the message head (struct "<BQHIQQ", packed).
@@ -80,7 +81,9 @@ class _Records:
         self.channel = channel
         self.size = MESSAGE_HEAD_SIZE + len(template_payload)
         self.template = np.frombuffer(
-            MESSAGE_HEAD.pack(5, 22 + len(template_payload), channel, 0, 0, 0) + template_payload, np.uint8
+            MESSAGE_HEAD.pack(OP_MESSAGE, MESSAGE_FIELDS.size + len(template_payload), channel, 0, 0, 0)
+            + template_payload,
+            np.uint8,
         )
         self.dtype = _record_dtype(fields, len(template_payload))
 

@@ -30,7 +30,7 @@ from typing import Protocol
 import numpy as np
 
 from cosim.errors import CosimError
-from cosim.record.writer import MESSAGE_HEAD
+from cosim.record.mcap_format import MESSAGE_HEAD, RECORD_HEAD
 
 # Topics published once (or rarely) that a client connecting later must still get: the last
 # message of each is sent again when someone subscribes.
@@ -87,7 +87,8 @@ class _Tee:
         view = memoryview(records)
         for channel, t_ns, offset in zip(channels.tolist(), times.tolist(), offsets.tolist(), strict=True):
             (length,) = _LENGTH.unpack_from(view, offset + 1)  # after the opcode byte
-            self._sink.message(channel, t_ns, bytes(view[offset + MESSAGE_HEAD.size : offset + 9 + length]))
+            data = view[offset + MESSAGE_HEAD.size : offset + RECORD_HEAD.size + length]
+            self._sink.message(channel, t_ns, bytes(data))
 
 
 class GoalSource(Protocol):

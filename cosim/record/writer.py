@@ -43,11 +43,17 @@ from mcap.records import (
     SummaryOffset,
 )
 
-MAGIC = bytes((137, 77, 67, 65, 80, 48, 13, 10))
-MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log time, publish time
-MESSAGE_HEAD_SIZE = MESSAGE_HEAD.size  # 31
-_CHUNK_HEAD = struct.Struct("<BQQQQI")  # opcode, length, start, end, uncompressed size, crc
-_MESSAGE_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, length, channel, byte length of the pairs
+from cosim.record.mcap_format import (
+    CHUNK_HEAD,
+    MAGIC,
+    MESSAGE_FIELDS,
+    MESSAGE_HEAD,
+    MESSAGE_INDEX_HEAD,
+    OP_CHUNK,
+    OP_MESSAGE,
+    OP_MESSAGE_INDEX,
+)
+
 _LITTLE_ENDIAN = sys.byteorder == "little"  # the index pairs' array("Q") bytes are the file's "<u8"
 # A chunk of fewer bytes is compressed inline: handing it to the thread and back (two wake-ups
 # and GIL hand-offs, ~0.15-0.2 ms) costs more than compressing it (~0.1 ms for 50 kB).
@@ -202,7 +208,7 @@ class ChunkWriter:
         self._open_records(t_ns)
         chunk = self._chunk
         offset = len(chunk)
-        chunk += MESSAGE_HEAD.pack(5, 22 + len(data), channel, sequence, t_ns, t_ns)
+        chunk += MESSAGE_HEAD.pack(OP_MESSAGE, MESSAGE_FIELDS.size + len(data), channel, sequence, t_ns, t_ns)
         chunk += data
         index = self._index.get(channel)
         if index is None:
@@ -322,9 +328,7 @@ class ChunkWriter:
         stream = self._stream
         start = stream.tell()
         length = 8 + 8 + 8 + 4 + 4 + 4 + 8 + len(compressed)
-        stream.write(
-            _CHUNK_HEAD.pack(Opcode.CHUNK, length, chunk_start, chunk_end, len(data), zlib.crc32(data))
-        )
+        stream.write(CHUNK_HEAD.pack(OP_CHUNK, length, chunk_start, chunk_end, len(data), zlib.crc32(data)))
         stream.write(struct.pack("<I4sQ", 4, b"zstd", len(compressed)))
         stream.write(compressed)
         self._write_message_indexes(
@@ -357,9 +361,7 @@ class ChunkWriter:
             else:
                 body = np.ascontiguousarray(pairs, dtype="<u8").tobytes()
             offsets[channel] = position
-            part = (
-                _MESSAGE_INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 2 + 4 + len(body), channel, len(body)) + body
-            )
+            part = MESSAGE_INDEX_HEAD.pack(OP_MESSAGE_INDEX, 2 + 4 + len(body), channel, len(body)) + body
             parts.append(part)
             position += len(part)
         stream.write(b"".join(parts))

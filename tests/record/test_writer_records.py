@@ -9,7 +9,8 @@ import io
 import numpy as np
 from mcap.reader import make_reader
 
-from cosim.record.writer import MESSAGE_HEAD, ChunkWriter
+from cosim.record.mcap_format import MESSAGE_HEAD
+from cosim.record.writer import ChunkWriter
 
 
 def _messages(count: int, seed: int) -> list[tuple[int, int, bytes]]:
