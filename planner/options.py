@@ -86,6 +86,9 @@ PRESETS: dict[str, dict[str, object]] = {
 }
 
 PLANNERS = ("astar", "bidirectional", "hybrid")
+CONFIGURATIONS = tuple(PRESETS)
+# The heuristics a user names (planner.astar's "zero" is internal: Dijkstra's goal distances).
+USER_HEURISTICS = tuple(name for name in HEURISTICS if name != "zero")
 SMOOTHING = (None, "line_of_sight", "curvature")
 
 
@@ -139,7 +142,7 @@ def resolve(options: dict) -> dict:
     resolved["connectivity"] = int(resolved["connectivity"])  # 8.0 is 8 (it indexes the move table)
     if resolved["heuristic"] is None:
         resolved["heuristic"] = "octile" if resolved["connectivity"] == 8 else "manhattan"
-    choice("heuristic", resolved["heuristic"], tuple(name for name in HEURISTICS if name != "zero"))
+    choice("heuristic", resolved["heuristic"], USER_HEURISTICS)
     resolved["heuristic_weight"] = number("heuristic_weight", resolved["heuristic_weight"])
     for name in ("corner_cutting", "untrusted_points", "decrease_key"):
         resolved[name] = flag(name, resolved[name])

@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from cosim.errors import CosimError
+from planner.options import CONFIGURATIONS, PLANNERS, USER_HEURISTICS
 
-HEURISTICS = ("manhattan", "euclidean", "chebyshev", "octile", "thesis")
 SMOOTHING = ("none", "line_of_sight", "curvature")
 DEFAULT_COMPARE_EXPANSION = 0.8  # m: the thesis's differential-drive robot (radius 0.5 + safety 0.3)
 
@@ -57,10 +57,10 @@ def register(subparsers) -> None:
     parser.add_argument("--query", metavar="NAME", help="named start/goal from the map's <stem>.queries.toml")
     parser.add_argument("--connectivity", type=int, choices=(4, 8), help="neighbours per cell (8)")
     parser.add_argument(
-        "--heuristic", choices=HEURISTICS, help="h: eqs 3.1, 3.2, 3.3, 3.4 (octile), 3.6 (thesis)"
+        "--heuristic", choices=USER_HEURISTICS, help="h: eqs 3.1, 3.2, 3.3, 3.4 (octile), 3.6 (thesis)"
     )
     parser.add_argument("--heuristic-weight", type=float, metavar="W", help="h multiplier (1.0)")
-    parser.add_argument("--configuration", choices=("basic", "modified"), help="preset (see planner.plan)")
+    parser.add_argument("--configuration", choices=CONFIGURATIONS, help="preset (see planner.plan)")
     parser.add_argument(
         "--expansion-distance", type=float, metavar="M", help="inflation radius [m] (plan: 0; compare: 0.8)"
     )
@@ -68,7 +68,7 @@ def register(subparsers) -> None:
         "--corner-cutting", action="store_true", default=None, help="allow MATLAB-style diagonals"
     )
     parser.add_argument("--untrusted-points", action="store_true", default=None, help="first improvement")
-    parser.add_argument("--planner", choices=("astar", "bidirectional", "hybrid"), default="astar")
+    parser.add_argument("--planner", choices=PLANNERS, default="astar")
     parser.add_argument("--min-turning-radius", type=float, metavar="M", help="hybrid: vehicle's [m]")
     parser.add_argument(
         "--reverse", action=argparse.BooleanOptionalAction, help="hybrid: allow reversing (planner's default)"

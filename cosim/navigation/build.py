@@ -48,7 +48,7 @@ class BuiltRun:
 def make_fmu(
     component: ComponentDescription,
     isolation: str = "none",
-    timeout: float = 10.0,
+    timeout: float = Scenario.fmu_timeout,
     max_unpacked_size: int | None = None,
     nan_outputs: tuple[str, ...] = (),
 ) -> Component:

@@ -47,6 +47,7 @@ import numpy as np
 from cosim.core.component import Port, PythonComponent, array_ports
 from cosim.errors import CosimError
 from cosim.navigation.costmap import Costmap, path_progress
+from cosim.scenario.load import PlannerSettings
 from cosim.scenario.template import WAYPOINT_CAPACITY
 from planner.errors import PlannerError
 from planner.grid import OccupancyGrid
@@ -112,10 +113,11 @@ class Replanning:
     range_max: float
     vehicle_radius: float
     hybrid_turning_radius: float | None = None
-    replan_after: float = 2.0  # [s]
-    replan_stall_time: float = 10.0  # [s]
-    replan_horizon: float = 20.0  # [m]
-    replan_interval: float = 1.0  # [s]
+    # The scenario's [planner] settings and their defaults (declared in PlannerSettings).
+    replan_after: float = PlannerSettings.replan_after  # [s]
+    replan_stall_time: float = PlannerSettings.replan_stall_time  # [s]
+    replan_horizon: float = PlannerSettings.replan_horizon  # [m]
+    replan_interval: float = PlannerSettings.replan_interval  # [s]
 
     @cached_property
     def beam_spacing(self) -> float:

@@ -34,6 +34,7 @@ from cosim.scenario.schema import REQUIRED, TableReader, describe, did_you_mean,
 from cosim.world.lidar import evenly_spaced_beams
 from cosim.world.motion import MOTIONS, Motion
 from cosim.world.shapes import Circle, Obstacle, Polygon, Rectangle
+from planner.options import CONFIGURATIONS, PLANNERS, USER_HEURISTICS
 
 BUILTIN_FMUS = (
     "DifferentialDrive", "Bicycle", "PurePursuit", "VectorFieldHistogram", "ArtificialPotentialField",
@@ -315,7 +316,7 @@ def _build(
     stop_time = simulation.number("stop_time", 300.0, minimum=0.0, exclusive_minimum=True, maximum=MAX_TIME)
     master = simulation.string("master", "gauss-seidel", choices=("gauss-seidel", "jacobi"))
     controller_rate = simulation.number("controller_rate", 20.0, minimum=0.0, exclusive_minimum=True)
-    fmi_version = simulation.integer("fmi_version", 2)
+    fmi_version = simulation.integer("fmi_version", Scenario.fmi_version)
     if fmi_version not in (2, 3):
         raise simulation.error(
             "fmi_version", f"must be 2 or 3 (the project FMUs' builds), got {describe(fmi_version)}"
@@ -325,9 +326,11 @@ def _build(
             "stop_time", f"{stop_time:g} s is shorter than one macro step ({macro_step:g} s)"
         )
     _check_rate(simulation, "controller_rate", controller_rate, macro_step)
-    fmu_isolation = simulation.string("fmu_isolation", "auto", choices=("auto", *ISOLATIONS))
-    fmu_timeout = simulation.number("fmu_timeout", 10.0, minimum=0.0, exclusive_minimum=True)
-    fmu_max_size = simulation.number("fmu_max_size", 1024.0, minimum=0.0, exclusive_minimum=True)
+    fmu_isolation = simulation.string("fmu_isolation", Scenario.fmu_isolation, choices=("auto", *ISOLATIONS))
+    fmu_timeout = simulation.number("fmu_timeout", Scenario.fmu_timeout, minimum=0.0, exclusive_minimum=True)
+    fmu_max_size = simulation.number(
+        "fmu_max_size", Scenario.fmu_max_size, minimum=0.0, exclusive_minimum=True
+    )
     check_run_length(simulation, macro_step, stop_time)
     simulation.finish()
 
@@ -689,22 +692,31 @@ def _motion(table: TableReader) -> Motion | None:
 
 
 def _planner(table: TableReader, vehicle_radius: float) -> PlannerSettings:
+    default = PlannerSettings  # each key's default is the dataclass field's (one declaration)
     settings = PlannerSettings(
-        configuration=table.string("configuration", "modified", choices=("basic", "modified")),
-        algorithm=table.string("algorithm", "astar", choices=("astar", "bidirectional", "hybrid")),
+        configuration=table.string("configuration", default.configuration, choices=CONFIGURATIONS),
+        algorithm=table.string("algorithm", default.algorithm, choices=PLANNERS),
         heuristic=table.string(
-            "heuristic", None, choices=("manhattan", "euclidean", "chebyshev", "octile", "thesis")
+            "heuristic",
+            default.heuristic,
+            choices=USER_HEURISTICS,
         ),
-        connectivity=table.integer("connectivity", 8),
+        connectivity=table.integer("connectivity", default.connectivity),
         expansion_distance=table.number("expansion_distance", vehicle_radius, minimum=0.0),
-        smoothing=table.string("smoothing", "line_of_sight", choices=("none", "line_of_sight", "curvature")),
-        min_turning_radius=table.number("min_turning_radius", None, minimum=0.0, exclusive_minimum=True),
-        reverse=table.boolean("reverse", False),
-        replan=table.boolean("replan", True),
-        replan_after=table.number("replan_after", 2.0, minimum=0.0, exclusive_minimum=True),
-        replan_stall_time=table.number("replan_stall_time", 10.0, minimum=0.0, exclusive_minimum=True),
-        replan_horizon=table.number("replan_horizon", 20.0, minimum=0.0),
-        replan_interval=table.number("replan_interval", 1.0, minimum=0.0),
+        smoothing=table.string(
+            "smoothing", default.smoothing, choices=("none", "line_of_sight", "curvature")
+        ),
+        min_turning_radius=table.number(
+            "min_turning_radius", default.min_turning_radius, minimum=0.0, exclusive_minimum=True
+        ),
+        reverse=table.boolean("reverse", default.reverse),
+        replan=table.boolean("replan", default.replan),
+        replan_after=table.number("replan_after", default.replan_after, minimum=0.0, exclusive_minimum=True),
+        replan_stall_time=table.number(
+            "replan_stall_time", default.replan_stall_time, minimum=0.0, exclusive_minimum=True
+        ),
+        replan_horizon=table.number("replan_horizon", default.replan_horizon, minimum=0.0),
+        replan_interval=table.number("replan_interval", default.replan_interval, minimum=0.0),
     )
     if settings.connectivity not in (4, 8):
         raise table.error("connectivity", f"must be 4 or 8, got {settings.connectivity}")
