@@ -14,12 +14,14 @@ from __future__ import annotations
 import math
 import tomllib
 from dataclasses import dataclass, field
+from functools import cache
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from cosim.errors import PATH_LIMIT, CosimError
+from cosim.fmi.builtin import known_names
 from cosim.scenario.limits import (
     MAX_LIDAR_BEAMS,
     MAX_LINEAR_SPEED,
@@ -36,10 +38,14 @@ from cosim.world.motion import MOTIONS, Motion
 from cosim.world.shapes import Circle, Obstacle, Polygon, Rectangle
 from planner.options import CONFIGURATIONS, PLANNERS, USER_HEURISTICS
 
-BUILTIN_FMUS = (
-    "DifferentialDrive", "Bicycle", "PurePursuit", "VectorFieldHistogram", "ArtificialPotentialField",
-    "AvoidanceMixer",
-)  # fmt: skip
+
+@cache
+def builtin_fmus() -> tuple[str, ...]:
+    """The project FMUs' names (`fmu = "PurePursuit"`): the models in the FMU source folder, or the
+    FMUs a wheel ships."""
+    return tuple(known_names())
+
+
 VEHICLE_TYPES = {"DifferentialDrive": "differential", "Bicycle": "bicycle"}
 DEFAULT_FMUS = {"pure_pursuit": "PurePursuit", "vfh": "VectorFieldHistogram", "mixer": "AvoidanceMixer"}
 # Section keys that are not FMU parameters; every other key of a component section is one.
@@ -95,7 +101,7 @@ class ComponentSpec:
 
     @property
     def is_builtin(self) -> bool:
-        return self.fmu in BUILTIN_FMUS
+        return self.fmu in builtin_fmus()
 
     @property
     def where(self) -> str:
@@ -500,11 +506,11 @@ def _existing_file(table: TableReader, key: str, base_dir: Path, what: str, name
 def _fmu_name(table: TableReader, default: str | None, base_dir: Path) -> str:
     """A project FMU name stays a name; anything else is a path (relative to the scenario file)."""
     fmu = table.string("fmu", REQUIRED if default is None else default)
-    if fmu in BUILTIN_FMUS:
+    if fmu in builtin_fmus():
         return fmu
     if "/" not in fmu and not fmu.endswith(".fmu"):
         raise table.error(
-            "fmu", f"unknown project FMU '{shorten(fmu)}'{did_you_mean(fmu, BUILTIN_FMUS)}; or give a path"
+            "fmu", f"unknown project FMU '{shorten(fmu)}'{did_you_mean(fmu, builtin_fmus())}; or give a path"
         )
     return str(_existing_file(table, "fmu", base_dir, "FMU file", fmu))
 
