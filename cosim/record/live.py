@@ -31,10 +31,8 @@ import numpy as np
 
 from cosim.errors import CosimError
 from cosim.record.mcap_format import MESSAGE_HEAD, RECORD_HEAD
+from cosim.scenario.topics import LATCHED_TOPICS  # a client joining late gets their last message
 
-# Topics published once (or rarely) that a client connecting later must still get: the last
-# message of each is sent again when someone subscribes.
-LATCHED = ("/map", "/map_inflated", "/plan", "/goal", "/obstacles")
 _LENGTH = struct.Struct("<Q")
 LATE = 0.05  # [s] of wall time behind schedule after which the pacer starts again from now
 GOAL_TOPIC = "/goal_pose"
@@ -188,7 +186,7 @@ class FoxgloveLive:
             self._pacer.wait(t_ns)
         channel = self._channels[channel_id]
         topic = channel.topic()
-        if topic in LATCHED:
+        if topic in LATCHED_TOPICS:
             with self._lock:
                 self._latched[topic] = (t_ns, payload)
         channel.log(payload, log_time=t_ns)
@@ -256,7 +254,7 @@ def _listener(live: FoxgloveLive):
 
     class Listener(ServerListener):
         def on_subscribe(self, client, channel) -> None:
-            if channel.topic in LATCHED:
+            if channel.topic in LATCHED_TOPICS:
                 live.replay(channel.topic)
 
         def on_client_advertise(self, client, channel) -> None:

@@ -53,6 +53,7 @@ from cosim.record import rosmsg
 from cosim.record.batch import RAW_STREAM, MessageBlock
 from cosim.record.logfile import navcosim_version
 from cosim.record.writer import ChunkWriter
+from cosim.scenario.topics import TOPIC_TYPES
 
 CHUNK_SIZE = 512 * 1024  # bytes of uncompressed records after which a chunk ends
 CHUNK_DURATION = 2.0  # [s] of simulated time per chunk window: what SIGKILL loses at most
@@ -77,19 +78,6 @@ SIGNAL_UNITS_KEY = rosmsg.SIGNAL_UNITS_KEY
 SIGNAL_INPUTS_KEY = rosmsg.SIGNAL_INPUTS_KEY
 COMPONENT_KEY = rosmsg.COMPONENT_KEY
 SCAN_LAYOUT_KEY = "navcosim.scan_angles"
-
-TOPIC_TYPES = {
-    "/odom": "nav_msgs/msg/Odometry",
-    "/tf": "tf2_msgs/msg/TFMessage",
-    "/pose": "geometry_msgs/msg/PoseStamped",
-    "/scan": "sensor_msgs/msg/LaserScan",
-    "/cmd_vel": "geometry_msgs/msg/Twist",
-    "/plan": "nav_msgs/msg/Path",
-    "/map": "nav_msgs/msg/OccupancyGrid",
-    "/map_inflated": "nav_msgs/msg/OccupancyGrid",
-    "/obstacles": "visualization_msgs/msg/MarkerArray",
-    "/goal": "geometry_msgs/msg/PoseStamped",
-}
 
 
 def _library() -> str:

@@ -33,6 +33,7 @@ from cosim.scenario.limits import (
     check_time_base,
 )
 from cosim.scenario.schema import REQUIRED, TableReader, describe, did_you_mean, is_number, shorten
+from cosim.scenario.topics import REMAPPABLE_TOPICS
 from cosim.world.lidar import evenly_spaced_beams
 from cosim.world.motion import MOTIONS, Motion
 from cosim.world.shapes import Circle, Obstacle, Polygon, Rectangle
@@ -436,11 +437,6 @@ def _removed(top: TableReader) -> tuple[str, ...]:
         raise table.error("remove", f"must be a list of component names, got {describe(removed)}")
     table.finish()
     return tuple(removed)
-
-
-REMAPPABLE_TOPICS = (
-    "odom", "tf", "pose", "scan", "cmd_vel", "plan", "map", "map_inflated", "obstacles", "goal",
-)  # fmt: skip
 
 
 def _topics(table: TableReader) -> dict[str, str]:
