@@ -43,6 +43,7 @@ G_KIND, G_FUNCTION, G_REFERENCES, G_REFERENCE_COUNT, G_VALUE_COUNT, G_VALUES, G_
 G_SLOT_FIRST, G_SLOT_COUNT = 7, 8
 GROUP_COLUMNS = 9
 KIND_REAL, KIND_INTEGER, KIND_BOOLEAN = 0, 1, 2
+RESULT_SIZE = 7  # int64 elements of the result: code, step, position, component, call, status, kind
 # Failure calls (as `NativeStep.fail`): 0 set, 1 doStep, 2 get, 3 asked to terminate, 4 not finite.
 
 
@@ -120,7 +121,7 @@ class Kernel:
                 raise TypeError(f"step_kernel: {name} needs at least {needed} elements")
             pointers.append(array.ctypes.data)
         self._tables = _Tables(len(arrays[0]), *pointers)
-        self._result = (_I64 * 7)()
+        self._result = (_I64 * RESULT_SIZE)()
         self._function = _kernel()
 
     def __call__(

@@ -9,6 +9,7 @@
 #include <math.h>
 #include <stddef.h>
 #include <stdint.h>
+#include "layout.h"
 
 #define SQRT2 1.4142135623730951 /* math.sqrt(2.0) */
 
@@ -670,4 +671,54 @@ void navcosim_astar_call(void) {
     navcosim_astar_io.searched = q->searched;
     navcosim_astar_io.count = q->count;
     navcosim_astar_io.length = q->length;
+}
+
+/* The tables Python mirrors (see layout.h). */
+int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
+{
+    int64_t n = 0;
+    LAYOUT_SIZE(WorkState);
+    LAYOUT_FIELD(WorkState, g);
+    LAYOUT_FIELD(WorkState, nodes);
+    LAYOUT_FIELD(WorkState, size);
+    LAYOUT_FIELD(WorkState, heap);
+    LAYOUT_FIELD(WorkState, capacity);
+    LAYOUT_FIELD(WorkState, path);
+    LAYOUT_FIELD(WorkState, cells);
+    LAYOUT_FIELD(WorkState, path_rows);
+    LAYOUT_FIELD(WorkState, generation);
+    LAYOUT_SIZE(Query);
+    LAYOUT_FIELD(Query, moves);
+    LAYOUT_FIELD(Query, blocked);
+    LAYOUT_FIELD(Query, cost);
+    LAYOUT_FIELD(Query, parameters);
+    LAYOUT_FIELD(Query, work);
+    LAYOUT_FIELD(Query, searched);
+    LAYOUT_FIELD(Query, count);
+    LAYOUT_FIELD(Query, length);
+    LAYOUT_CONSTANT(NO_PATH);
+    LAYOUT_CONSTANT(FOUND);
+    LAYOUT_CONSTANT(HEAP_FULL);
+    LAYOUT_CONSTANT(ROUTE_FULL);
+    LAYOUT_CONSTANT(BAD_START);
+    LAYOUT_CONSTANT(BAD_GOAL);
+    LAYOUT_CONSTANT(BLOCKED);
+    LAYOUT_CONSTANT(H_BITS);
+    LAYOUT_CONSTANT(F_SCALE);
+    LAYOUT_CONSTANT(H_SCALE);
+    LAYOUT_CONSTANT(H_MAX);
+    LAYOUT_CONSTANT(P_WIDTH);
+    LAYOUT_CONSTANT(P_HEURISTIC);
+    LAYOUT_CONSTANT(P_TIE);
+    LAYOUT_CONSTANT(P_DECREASE);
+    LAYOUT_CONSTANT(P_H_SCALE);
+    LAYOUT_CONSTANT(P_COST_WEIGHT);
+    LAYOUT_CONSTANT(P_ROWS);
+    LAYOUT_CONSTANT(P_COLS);
+    LAYOUT_CONSTANT(P_RESOLUTION);
+    LAYOUT_CONSTANT(P_ORIGIN_X);
+    LAYOUT_CONSTANT(P_ORIGIN_Y);
+    LAYOUT_CONSTANT(HEAP_SLACK);
+    LAYOUT_CONSTANT(STAMP_LIMIT);
+    return n;
 }

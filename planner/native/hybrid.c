@@ -11,6 +11,7 @@
 #include <string.h>
 
 #include "hybrid_curves.h"
+#include "layout.h"
 
 /* Search outcomes (planner/hybrid_search.py names them). */
 #define HY_FOUND_AT_GOAL 1  /* a primitive ended within the goal tolerance */
@@ -400,4 +401,63 @@ int64_t hy_segments_free_grid(const uint8_t *occupied, int64_t rows, int64_t col
                               const double *curvatures, const double *signed_lengths, int64_t count, double step) {
     HyGrid grid = {occupied, rows, cols, resolution, origin_x, origin_y};
     return hy_segments_free(&grid, x, y, theta, curvatures, signed_lengths, count, step);
+}
+
+/* The tables Python mirrors (see layout.h). */
+int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
+{
+    int64_t n = 0;
+    LAYOUT_SIZE(HySearch);
+    LAYOUT_FIELD(HySearch, occupied);
+    LAYOUT_FIELD(HySearch, rows);
+    LAYOUT_FIELD(HySearch, cols);
+    LAYOUT_FIELD(HySearch, resolution);
+    LAYOUT_FIELD(HySearch, origin_x);
+    LAYOUT_FIELD(HySearch, origin_y);
+    LAYOUT_FIELD(HySearch, distance);
+    LAYOUT_FIELD(HySearch, start);
+    LAYOUT_FIELD(HySearch, goal);
+    LAYOUT_FIELD(HySearch, prim_cost);
+    LAYOUT_FIELD(HySearch, prim_direction);
+    LAYOUT_FIELD(HySearch, prim_samples);
+    LAYOUT_FIELD(HySearch, prim_sample_count);
+    LAYOUT_FIELD(HySearch, primitives);
+    LAYOUT_FIELD(HySearch, max_samples);
+    LAYOUT_FIELD(HySearch, heading_bins);
+    LAYOUT_FIELD(HySearch, radius);
+    LAYOUT_FIELD(HySearch, forward_only);
+    LAYOUT_FIELD(HySearch, reverse_cost);
+    LAYOUT_FIELD(HySearch, steering_cost);
+    LAYOUT_FIELD(HySearch, switch_cost);
+    LAYOUT_FIELD(HySearch, analytic_interval);
+    LAYOUT_FIELD(HySearch, analytic_distance);
+    LAYOUT_FIELD(HySearch, goal_tolerance);
+    LAYOUT_FIELD(HySearch, heading_tolerance);
+    LAYOUT_FIELD(HySearch, collision_step);
+    LAYOUT_FIELD(HySearch, max_iterations);
+    LAYOUT_FIELD(HySearch, node_x);
+    LAYOUT_FIELD(HySearch, node_y);
+    LAYOUT_FIELD(HySearch, node_theta);
+    LAYOUT_FIELD(HySearch, node_g);
+    LAYOUT_FIELD(HySearch, node_parent);
+    LAYOUT_FIELD(HySearch, node_primitive);
+    LAYOUT_FIELD(HySearch, node_direction);
+    LAYOUT_FIELD(HySearch, closed);
+    LAYOUT_FIELD(HySearch, heap_f);
+    LAYOUT_FIELD(HySearch, heap_h);
+    LAYOUT_FIELD(HySearch, heap_node);
+    LAYOUT_FIELD(HySearch, explored);
+    LAYOUT_FIELD(HySearch, status);
+    LAYOUT_FIELD(HySearch, final_node);
+    LAYOUT_FIELD(HySearch, expanded);
+    LAYOUT_FIELD(HySearch, analytic_count);
+    LAYOUT_FIELD(HySearch, analytic_cost);
+    LAYOUT_FIELD(HySearch, analytic_curvature);
+    LAYOUT_FIELD(HySearch, analytic_length);
+    LAYOUT_CONSTANT(HY_FOUND_AT_GOAL);
+    LAYOUT_CONSTANT(HY_FOUND_ANALYTIC);
+    LAYOUT_CONSTANT(HY_EXHAUSTED);
+    LAYOUT_CONSTANT(HY_ITERATION_CAP);
+    LAYOUT_CONSTANT(HY_NO_MEMORY);
+    return n;
 }

@@ -12,6 +12,7 @@
 #include <stddef.h>
 #include <stdint.h>
 #include <string.h>
+#include "../../../planner/native/layout.h"
 
 /* Return codes (first element of the result). */
 enum { DONE = 0, HAND_BACK = 1, WATCH = 2, FAILED = 3 };
@@ -357,3 +358,67 @@ int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_po
 
 /* sizeof(Tables), so the Python side can check its mirror of the struct. */
 int64_t navcosim_tables_size(void) { return (int64_t)sizeof(Tables); }
+
+/* The tables Python mirrors (see layout.h). */
+int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
+{
+    int64_t n = 0;
+    LAYOUT_SIZE(Tables);
+    LAYOUT_FIELD(Tables, n);
+    LAYOUT_FIELD(Tables, components);
+    LAYOUT_FIELD(Tables, step_sizes);
+    LAYOUT_FIELD(Tables, link_addresses);
+    LAYOUT_FIELD(Tables, link_numbers);
+    LAYOUT_FIELD(Tables, groups);
+    LAYOUT_FIELD(Tables, slot_addresses);
+    LAYOUT_FIELD(Tables, slot_scales);
+    LAYOUT_FIELD(Tables, checks);
+    LAYOUT_FIELD(Tables, history);
+    LAYOUT_FIELD(Tables, rows);
+    LAYOUT_FIELD(Tables, watch_addresses);
+    LAYOUT_FIELD(Tables, watch_numbers);
+    LAYOUT_CONSTANT(DONE);
+    LAYOUT_CONSTANT(HAND_BACK);
+    LAYOUT_CONSTANT(WATCH);
+    LAYOUT_CONSTANT(FAILED);
+    LAYOUT_CONSTANT(C_KIND);
+    LAYOUT_CONSTANT(C_PERIOD);
+    LAYOUT_CONSTANT(C_VERSION);
+    LAYOUT_CONSTANT(C_HANDLE);
+    LAYOUT_CONSTANT(C_STEP);
+    LAYOUT_CONSTANT(C_FLAGS);
+    LAYOUT_CONSTANT(C_LAST_TIME);
+    LAYOUT_CONSTANT(C_LINK_FIRST);
+    LAYOUT_CONSTANT(C_LINK_COUNT);
+    LAYOUT_CONSTANT(C_SET_FIRST);
+    LAYOUT_CONSTANT(C_SET_COUNT);
+    LAYOUT_CONSTANT(C_GET_FIRST);
+    LAYOUT_CONSTANT(C_GET_COUNT);
+    LAYOUT_CONSTANT(C_CHECK_FIRST);
+    LAYOUT_CONSTANT(C_CHECK_COUNT);
+    LAYOUT_CONSTANT(C_IN_ADDRESS);
+    LAYOUT_CONSTANT(C_IN_COUNT);
+    LAYOUT_CONSTANT(C_OUT_ADDRESS);
+    LAYOUT_CONSTANT(C_OUT_COUNT);
+    LAYOUT_CONSTANT(C_RECORD);
+    LAYOUT_CONSTANT(C_RECORD_OFFSET);
+    LAYOUT_CONSTANT(COMPONENT_COLUMNS);
+    LAYOUT_CONSTANT(KIND_IDLE);
+    LAYOUT_CONSTANT(KIND_NATIVE);
+    LAYOUT_CONSTANT(KIND_PYTHON);
+    LAYOUT_CONSTANT(G_KIND);
+    LAYOUT_CONSTANT(G_FUNCTION);
+    LAYOUT_CONSTANT(G_REFERENCES);
+    LAYOUT_CONSTANT(G_REFERENCE_COUNT);
+    LAYOUT_CONSTANT(G_VALUE_COUNT);
+    LAYOUT_CONSTANT(G_VALUES);
+    LAYOUT_CONSTANT(G_DIRECT);
+    LAYOUT_CONSTANT(G_SLOT_FIRST);
+    LAYOUT_CONSTANT(G_SLOT_COUNT);
+    LAYOUT_CONSTANT(GROUP_COLUMNS);
+    LAYOUT_CONSTANT(KIND_REAL);
+    LAYOUT_CONSTANT(KIND_INTEGER);
+    LAYOUT_CONSTANT(KIND_BOOLEAN);
+    LAYOUT_CONSTANT(RESULT_SIZE);
+    return n;
+}

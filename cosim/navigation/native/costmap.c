@@ -8,6 +8,7 @@
 #include <stdint.h>
 
 #include "../../world/native/geometry.h" /* py_min, int_min, int_max */
+#include "../../../planner/native/layout.h"
 
 typedef struct {
     uint8_t *marked;       /* rows x cols, row 0 at the top (the grid's convention) */
@@ -276,4 +277,27 @@ double path_progress(const double *points, const double *arc, int64_t first, int
     }
     *segment = best;
     return arc[best] + best_fraction * sqrt(best_length_sq);
+}
+
+/* The tables Python mirrors (see layout.h). */
+int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
+{
+    int64_t n = 0;
+    LAYOUT_SIZE(Costmap);
+    LAYOUT_FIELD(Costmap, marked);
+    LAYOUT_FIELD(Costmap, known);
+    LAYOUT_FIELD(Costmap, rows);
+    LAYOUT_FIELD(Costmap, cols);
+    LAYOUT_FIELD(Costmap, origin_x);
+    LAYOUT_FIELD(Costmap, origin_y);
+    LAYOUT_FIELD(Costmap, resolution);
+    LAYOUT_FIELD(Costmap, angles);
+    LAYOUT_FIELD(Costmap, count);
+    LAYOUT_FIELD(Costmap, ranges);
+    LAYOUT_FIELD(Costmap, clear_to);
+    LAYOUT_FIELD(Costmap, row_marks);
+    LAYOUT_FIELD(Costmap, col_marks);
+    LAYOUT_FIELD(Costmap, cos_angles);
+    LAYOUT_FIELD(Costmap, sin_angles);
+    return n;
 }

@@ -10,6 +10,7 @@
 #include <stdint.h>
 
 #include "geometry.h"
+#include "../../../planner/native/layout.h"
 
 double world_polygon_distance(double x, double y, const double *vertices, int64_t first, int64_t stop)
 {
@@ -234,4 +235,53 @@ void lidar_scan(const Lidar *s, double x, double y, double theta)
         else
             ranges[beam] = distance + s->range_jitter[beam];
     }
+}
+
+/* The tables Python mirrors (see layout.h). */
+int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
+{
+    int64_t n = 0;
+    LAYOUT_SIZE(World);
+    LAYOUT_FIELD(World, occupied);
+    LAYOUT_FIELD(World, rows);
+    LAYOUT_FIELD(World, cols);
+    LAYOUT_FIELD(World, x_min);
+    LAYOUT_FIELD(World, y_min);
+    LAYOUT_FIELD(World, x_max);
+    LAYOUT_FIELD(World, y_max);
+    LAYOUT_FIELD(World, resolution);
+    LAYOUT_FIELD(World, circles);
+    LAYOUT_FIELD(World, n_circles);
+    LAYOUT_FIELD(World, vertices);
+    LAYOUT_FIELD(World, starts);
+    LAYOUT_FIELD(World, n_starts);
+    LAYOUT_FIELD(World, x);
+    LAYOUT_FIELD(World, y);
+    LAYOUT_FIELD(World, row);
+    LAYOUT_FIELD(World, col);
+    LAYOUT_FIELD(World, offset);
+    LAYOUT_FIELD(World, field);
+    LAYOUT_SIZE(Lidar);
+    LAYOUT_FIELD(Lidar, occupied_up);
+    LAYOUT_FIELD(Lidar, rows);
+    LAYOUT_FIELD(Lidar, cols);
+    LAYOUT_FIELD(Lidar, origin_x);
+    LAYOUT_FIELD(Lidar, origin_y);
+    LAYOUT_FIELD(Lidar, resolution);
+    LAYOUT_FIELD(Lidar, range_min);
+    LAYOUT_FIELD(Lidar, range_max);
+    LAYOUT_FIELD(Lidar, beam_angles);
+    LAYOUT_FIELD(Lidar, count);
+    LAYOUT_FIELD(Lidar, angle_jitter);
+    LAYOUT_FIELD(Lidar, range_jitter);
+    LAYOUT_FIELD(Lidar, circles);
+    LAYOUT_FIELD(Lidar, n_circles);
+    LAYOUT_FIELD(Lidar, segments);
+    LAYOUT_FIELD(Lidar, n_segments);
+    LAYOUT_FIELD(Lidar, vertices);
+    LAYOUT_FIELD(Lidar, starts);
+    LAYOUT_FIELD(Lidar, n_starts);
+    LAYOUT_FIELD(Lidar, directions);
+    LAYOUT_FIELD(Lidar, ranges);
+    return n;
 }
