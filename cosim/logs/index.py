@@ -136,7 +136,7 @@ def _walk(handle, file_size: int, log: LogIndex) -> None:
                 current.indexed = True
             current = None
         if opcode == OP_CHUNK:
-            current = _admit(_readCHUNK_FIELDS(handle, position, body_start, length), position, log)
+            current = _admit(_read_chunk_head(handle, position, body_start, length), position, log)
         elif opcode == OP_MESSAGE:
             channel, _, log_time, _ = MESSAGE_FIELDS.unpack(handle.read(MESSAGE_FIELDS.size))
             if raw_block is None or raw_block.data_offset + raw_block.data_size != position:
@@ -188,7 +188,7 @@ def _admit(block: Block, position: int, log: LogIndex) -> Block | None:
     return block
 
 
-def _readCHUNK_FIELDS(handle, position: int, body_start: int, length: int) -> Block:
+def _read_chunk_head(handle, position: int, body_start: int, length: int) -> Block:
     start, end, uncompressed_size, crc, name_length = CHUNK_FIELDS.unpack(handle.read(CHUNK_FIELDS.size))
     compression = handle.read(name_length).decode()
     (records_length,) = struct.unpack("<Q", handle.read(8))
