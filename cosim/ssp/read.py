@@ -1,17 +1,20 @@
-"""Reading an SSP 1.0 archive as one flat system of FMU components.
+"""Reading an SSP 1.0 or 2.0 archive as one flat system of FMU components.
 
 An SSP is a zip archive with `SystemStructure.ssd` at its root and the files that it references
 (FMUs, .ssv parameter sets) beside it, usually under `resources/`. `open_ssp(path)` unpacks it,
-checks the SSD and every parameter set against the normative SSP 1.0 schemas and returns an
-`SspSystem`: the FMU components (a component inside nested systems is named by its path with
-`_` for the dots, `follower.car` -> `follower_car`), the connections between FMU variables, the
-parameter and start values, and the experiment. Every error is one `CosimError` line naming the
-archive, the file and the element.
+checks the SSD and every parameter set against the normative schemas of its SSP version
+(`cosim.ssp.schema`) and returns an `SspSystem`: the FMU components (a component inside nested
+systems is named by its path with `_` for the dots, `follower.car` -> `follower_car`), the
+connections between FMU variables, the parameter and start values, and the experiment. Every
+error is one `CosimError` line naming the archive, the file and the element; an FMU is named by
+its archive member (`resources/X.fmu`), never by the folder it was unpacked to.
 
-Semantics, as SSP 1.0 defines them:
+Semantics, as SSP 1.0 and 2.0 define them:
 - Connections join connectors of a system and of its direct elements; the data flows from an
   output (or a system's own input) to an input (or a system's own output), whatever the order of
-  start and end. Chains through the connectors of nested systems are followed to the FMU output
+  start and end. A connection end without `startElement`/`endElement`, or with it empty (as
+  OMSimulator writes), is a connector of the system itself. Chains through the connectors of
+  nested systems are followed to the FMU output
   that feeds each FMU input, composing the linear transformations (factor, offset) on the way.
   A system connector that nothing feeds but a parameter binding gives a value, passes that value
   on as a constant (start value of an input, value of a parameter).
@@ -19,20 +22,28 @@ Semantics, as SSP 1.0 defines them:
   `prefix`) set parameters and the start values of inputs. A system's binding names variables
   hierarchically (`car.wheelbase` inside the system holding `car`). Later bindings override
   earlier ones of the same element; a binding higher in the hierarchy overrides lower ones. Names
-  that match no variable are ignored, as the standard says.
-- Time: `DefaultExperiment` gives startTime and stopTime. SSP 1.0 has no step size, so navcosim
-  reads the macro step (and the master algorithm) from its annotation on the DefaultExperiment,
-  `<ssc:Annotation type="org.navcosim.simulation"><nc:Simulation macroStep="0.01"
-  master="gauss-seidel"/>`; a component's period from `<ssc:Annotation type="org.navcosim.component">
-  <nc:Component period="0.05"/>`. Either may be missing: the run then takes them from `--set`.
+  that match no variable are ignored, as the standard says. Values of every numeric SSP type
+  (Real, Integer, Boolean, Enumeration; SSP 2.0's Float32/64, Int8..UInt64) are passed as numbers.
+- Time: `DefaultExperiment` gives startTime and stopTime. SSP has no step size; the macro step is
+  the first of (`--set simulation.macro_step` comes before all, in `cosim.ssp.run`):
+  navcosim's annotation on the DefaultExperiment, `<ssc:Annotation type="org.navcosim.simulation">
+  <nc:Simulation macroStep="0.01" master="gauss-seidel"/>` (which also names the master); the
+  Open Simulation Platform's, `<ssc:Annotation type="com.opensimulationplatform"><osp:Algorithm>
+  <osp:FixedStepAlgorithm baseStepSize="0.01"/>` on the DefaultExperiment (libcosim's); the
+  OpenModelica one on the root system, `<ssc:Annotation type="org.openmodelica"><oms:Annotations>
+  <oms:SimulationInformation><oms:FixedStepMaster stepSize="0.01"/>` (OMSimulator's; matched by
+  local names, as its namespace has changed between versions); else the smallest `stepSize` of the
+  FMUs' own DefaultExperiment. `SspSystem.macro_step_source` says which. A component's period
+  comes from `<ssc:Annotation type="org.navcosim.component"><nc:Component period="0.05"/>`.
 
 Not supported (an error, not a silent change of meaning): referenced SSDs/SSPs as components,
 model-exchange-only FMUs, signal dictionaries, parameter mappings (.ssm), mapping transformations,
-connections that carry a calculated parameter, String and Binary values, unit conversion.
+connections that carry a calculated parameter, String, Binary and array values, unit conversion.
 """
 
 from __future__ import annotations
 
+import math
 import re
 import shutil
 import tempfile
@@ -53,9 +64,15 @@ FMU_TYPE = "application/x-fmu-sharedlibrary"
 PARAMETER_SET_TYPE = "application/x-ssp-parameter-set"
 SIMULATION_ANNOTATION = "org.navcosim.simulation"
 COMPONENT_ANNOTATION = "org.navcosim.component"
+OSP_ANNOTATION = "com.opensimulationplatform"
+OSP_NS = "http://opensimulationplatform.com/SSP/OSPAnnotations"
+OMS_ANNOTATION = "org.openmodelica"
 _SOURCES = ("output", "calculatedParameter")  # kinds that give a value, seen from outside an element
 _CAUSALITY_KINDS = {"input": "input", "output": "output", "parameter": "parameter"}
 _CAUSALITY_KINDS |= {"structuralParameter": "parameter", "calculatedParameter": "calculatedParameter"}
+_CAUSALITY_KINDS |= {"local": "local"}  # SSP 2.0's connector kind for an FMU's local variable
+_REALS = ("Real", "Float64", "Float32")
+_INTEGERS = ("Integer", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64")
 
 
 @dataclass
@@ -66,7 +83,9 @@ class SspComponent:
     path: its hierarchical SSP name ("follower.car");
     fmu: the FMU file inside the unpacked archive;
     parameters: FMU parameter -> value; inputs: FMU input -> start value;
-    period: [s] between its steps, 0 = every macro step.
+    period: [s] between its steps, 0 = every macro step;
+    member: the FMU's archive member ("resources/X.fmu"), as messages and logs name it;
+    default_step: [s] the FMU's own DefaultExperiment stepSize, None when it gives none.
     """
 
     name: str
@@ -76,6 +95,8 @@ class SspComponent:
     inputs: dict[str, float] = field(default_factory=dict)
     period: float = 0.0
     variables: dict = field(default_factory=dict, repr=False)  # FMU variable name -> fmpy variable
+    member: str = ""
+    default_step: float | None = None
 
 
 @dataclass(frozen=True)
@@ -99,16 +120,30 @@ class SspSystem:
     connections: list[SspConnection]
     start_time: float
     stop_time: float | None  # [s] from DefaultExperiment
-    macro_step: float | None  # [s] from the navcosim annotation
+    macro_step: float | None  # [s] from an annotation or the FMUs (see the module docstring)
     master: str | None
     annotations: dict[str, ET.Element]  # SSD-level annotations by type: their content element
     ssd_text: bytes = b""
+    macro_step_source: str = ""  # where macro_step comes from, as the run summary says it
+    version: str = "1.0"  # the SSD's SSP version ('1.0' or '2.0')
 
     def component(self, name: str) -> SspComponent:
         for component in self.components:
             if component.name == name:
                 return component
         raise CosimError(f"{self.source}: no component '{name}'")
+
+    def members(self, text: str) -> str:
+        """`text` with every path into the unpacked archive written as the archive member."""
+        return archive_members(self.directory, text)
+
+
+def archive_members(directory: Path, text: str) -> str:
+    """`text` with the unpacked archive's folder `directory/` taken off the paths into it, so that
+    they read as archive members (`resources/X.fmu`): what the user knows, and the same in every run."""
+    for folder in {str(directory), str(directory.resolve())}:
+        text = text.replace(folder.rstrip("/") + "/", "")
+    return text
 
 
 @contextmanager
@@ -146,9 +181,14 @@ def read_ssd(directory: Path, source: str) -> SspSystem:
     where = f"{source}: {SSD_NAME}"
     root = schema.parse(data, "ssd", where)
     reader = _Reader(directory, source, where)
-    reader.system(root.find(tag("ssd:System")), ())
+    system = root.find(tag("ssd:System"))
+    reader.system(system, ())
     components = reader.finish()
-    start_time, stop_time, macro_step, master = _experiment(root.find(tag("ssd:DefaultExperiment")), where)
+    experiment = root.find(tag("ssd:DefaultExperiment"))
+    start_time, stop_time, macro_step, master = _experiment(experiment, where)
+    source_of_step = "navcosim annotation nc:Simulation macroStep"
+    if macro_step is None:
+        macro_step, source_of_step = _foreign_step(experiment, system, components, where)
     return SspSystem(
         source=source,
         name=root.get("name", ""),
@@ -161,7 +201,48 @@ def read_ssd(directory: Path, source: str) -> SspSystem:
         master=master,
         annotations=annotations_of(root),
         ssd_text=data,
+        macro_step_source=source_of_step if macro_step is not None else "",
+        version=schema.version_of(root),
     )
+
+
+def _foreign_step(experiment: ET.Element | None, system: ET.Element, components, where: str):
+    """(macro step, where it comes from) from the OSP or OMS annotation, else the FMUs' own
+    DefaultExperiment stepSize (the smallest); (None, "") when none gives one."""
+    algorithm = annotations_of(experiment).get(OSP_ANNOTATION)
+    if algorithm is not None:
+        fixed = algorithm.find(f"{{{OSP_NS}}}FixedStepAlgorithm")
+        if fixed is not None and fixed.get("baseStepSize") is not None:
+            step = _positive(fixed, "baseStepSize", f"{where}: annotation {OSP_ANNOTATION}")
+            return step, "OSP annotation osp:FixedStepAlgorithm baseStepSize"
+    oms = annotations_of(system).get(OMS_ANNOTATION)  # oms:Annotations
+    informations = (
+        _children(oms, "SimulationInformation")
+        if oms is not None and _local(oms.tag) == "Annotations"
+        else []
+    )
+    for information in informations:
+        for master in _children(information, "FixedStepMaster"):
+            if master.get("stepSize") is not None:
+                step = _positive(master, "stepSize", f"{where}: annotation {OMS_ANNOTATION}")
+                return step, "OMS annotation oms:FixedStepMaster stepSize"
+    steps = [(c.default_step, c.member) for c in components if c.default_step is not None]
+    if steps:
+        step, member = min(steps)
+        return step, f"smallest FMU DefaultExperiment stepSize, of {member}"
+    return None, ""
+
+
+def _children(element: ET.Element | None, local: str) -> list[ET.Element]:
+    """The children of `element` with this local name, whatever their namespace."""
+    return [child for child in (element if element is not None else ()) if _local(child.tag) == local]
+
+
+def _positive(element: ET.Element, attribute: str, where: str) -> float:
+    value = _number(element, attribute, where)
+    if not (math.isfinite(value) and value > 0):
+        raise CosimError(f"{where}: {_local(element.tag)}.{attribute} must be a number > 0, got {value!r}")
+    return value
 
 
 def annotations_of(element: ET.Element | None) -> dict[str, ET.Element]:
@@ -269,31 +350,45 @@ class _Reader:
         kind = element.get("type", FMU_TYPE)
         if kind != FMU_TYPE:
             raise CosimError(f"{where}: component type '{kind}' is not supported (only FMUs, {FMU_TYPE})")
-        if element.get("implementation", "any") == "ModelExchange":
-            raise CosimError(f"{where}: implementation 'ModelExchange' is not supported (co-simulation only)")
-        fmu_path = self._resource(element.get("source", ""), where)
+        implementation = element.get("implementation", "any")
+        if implementation in ("ModelExchange", "ScheduledExecution"):
+            raise CosimError(
+                f"{where}: implementation '{implementation}' is not supported (co-simulation only)"
+            )
+        member = element.get("source", "")
+        fmu_path = self._resource(member, where)
+        member = PurePosixPath(member).as_posix()
         name = component_name(path)
         try:
             fmu = FmuComponent(fmu_path, name)
         except CosimError as error:
-            raise CosimError(f"{where}: {error}") from None
+            raise CosimError(f"{where}: {archive_members(self.directory, str(error))}") from None
         variables = {v.name: v for v in fmu.model_description.modelVariables}
         period = 0.0
         annotation = annotations_of(element).get(COMPONENT_ANNOTATION)
         if annotation is not None and annotation.get("period") is not None:
             period = _number(annotation, "period", where)
         self.components[path] = SspComponent(
-            name, _dotted(path), fmu_path, period=period, variables=variables
+            name,
+            _dotted(path),
+            fmu_path,
+            period=period,
+            variables=variables,
+            member=member,
+            default_step=_default_step(fmu.model_description),
         )
         for connector in self._connectors(element, path, False):
             variable = variables.get(connector.get("name"))
             if variable is None:
                 raise CosimError(
-                    f"{where}: connector '{connector.get('name')}' is not a variable of {fmu_path.name}; "
+                    f"{where}: connector '{connector.get('name')}' is not a variable of {member}; "
                     f"variables: {closest_names(connector.get('name'), variables)}"
                 )
             expected = _CAUSALITY_KINDS.get(variable.causality)
-            if connector.get("kind") != expected:
+            if connector.get("kind") == "unspecified" and expected is not None:
+                # SSP 2.0: the flow is not given here; the FMU's causality gives it.
+                self.nodes[(path, variable.name)].kind = expected
+            elif connector.get("kind") != expected:
                 raise CosimError(
                     f"{where}: connector '{variable.name}' has kind '{connector.get('kind')}' but the FMU "
                     f"variable's causality is '{variable.causality}'"
@@ -340,8 +435,9 @@ class _Reader:
         return (owner, connector), node, gives
 
     def _connection(self, element: ET.Element, system: tuple[str, ...]) -> None:
-        start = (element.get("startElement"), element.get("startConnector"))
-        end = (element.get("endElement"), element.get("endConnector"))
+        # An empty element name (OMSimulator's way) names the system's own connector, as no name does.
+        start = (element.get("startElement") or None, element.get("startConnector"))
+        end = (element.get("endElement") or None, element.get("endConnector"))
         what = f"{_dotted(system + ((start[0],) if start[0] else ()) + (start[1],))} -> " + _dotted(
             system + ((end[0],) if end[0] else ()) + (end[1],)
         )
@@ -395,7 +491,10 @@ class _Reader:
             for parameter in parameter_set.iterfind(f"{tag('ssv:Parameters')}/{tag('ssv:Parameter')}"):
                 value = list(parameter)[0]
                 name = path + tuple((prefix + parameter.get("name", "")).split("."))
-                entry = (-len(path), order, _dotted(name), _local(value.tag), value.get("value"))
+                text = value.get("value")
+                if text is None:  # SSP 2.0: the values as ssv:Value children
+                    text = " ".join(item.get("value", "") for item in value.iterfind(tag("ssv:Value")))
+                entry = (-len(path), order, _dotted(name), _local(value.tag), text)
                 self.bindings.append(entry + (value.get("unit"), file_where))
 
     def _apply_bindings(self) -> dict[tuple, float]:
@@ -474,11 +573,29 @@ class _Reader:
         return list(self.components.values())
 
 
+def _default_step(model_description) -> float | None:
+    """[s] the FMU's DefaultExperiment stepSize, None when it gives none (or not a positive number)."""
+    experiment = getattr(model_description, "defaultExperiment", None)
+    try:
+        step = float(getattr(experiment, "stepSize", None))
+    except (TypeError, ValueError):
+        return None
+    return step if math.isfinite(step) and step > 0 else None
+
+
 def _value(kind: str, text: str | None, variable, where: str) -> float:
-    """A parameter value as the float navcosim passes (Booleans 0/1, enumerations their integer)."""
-    if kind == "Real":
+    """A parameter value as the float navcosim passes (Booleans 0/1, enumerations their integer);
+    `text` is the value attribute, or the ssv:Value children's values joined by a space (SSP 2.0)."""
+    if kind in ("String", "Binary"):
+        raise CosimError(
+            f"{where}: {kind} values are not supported (navcosim sets numbers: Real, Float32/64, "
+            "Integer, Int8..UInt64, Boolean, Enumeration)"
+        )
+    if text is None or len(text.split()) != 1:
+        raise CosimError(f"{where}: one value expected, got {text!r} (array values are not supported)")
+    if kind in _REALS:
         return float(text)
-    if kind == "Integer":
+    if kind in _INTEGERS:
         return float(int(text))
     if kind == "Boolean":
         return 1.0 if text.strip() in ("true", "1") else 0.0
@@ -533,7 +650,7 @@ def build_system(ssp: SspSystem, macro_step: float, master: str = "gauss-seidel"
             system.add(component)
             system.period_steps(component)
         except CosimError as error:
-            raise CosimError(f"{where}: {error}") from None
+            raise CosimError(f"{where}: {ssp.members(str(error))}") from None
         parameters[spec.name] = dict(spec.parameters)
     for connection in ssp.connections:
         try:

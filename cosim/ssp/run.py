@@ -1,4 +1,4 @@
-"""`cosim run SYSTEM.ssp`: run an SSP 1.0 archive and log every component's variables.
+"""`cosim run SYSTEM.ssp`: run an SSP 1.0 or 2.0 archive and log every component's variables.
 
 An SSP that navcosim exported runs as the scenario it came from (`cosim.ssp.export`).
 In any other, the FMU components and connections of the SSD are stepped by the master from the start to the
@@ -7,7 +7,10 @@ of its steps, each value stamped at the time it holds (inputs applied at t, outp
 record with the final outputs at the end; the convention of `cosim.navigation.run`).
 
 Overrides: `--set simulation.stop_time=S`, `simulation.macro_step=S`, `simulation.start_time=S`,
-`simulation.master=gauss-seidel|jacobi` take precedence over the file.
+`simulation.master=gauss-seidel|jacobi` take precedence over the file (for the macro step, over
+the annotations and the FMUs' step sizes: `cosim.ssp.read`); the summary and the log's metadata
+say where the macro step came from. The log names each FMU by its archive member, so two runs of
+one archive write the same bytes.
 """
 
 from __future__ import annotations
@@ -39,6 +42,8 @@ class SspRunResult:
     wall_time: float  # [s]
     reason: str  # stop_time, interrupted, fmu_failed
     failure: str | None = None
+    macro_step: float = 0.0  # [s]
+    macro_step_source: str = ""  # where the macro step came from
 
     @property
     def exit_code(self) -> int:
@@ -54,6 +59,7 @@ class Experiment:
     stop_time: float
     macro_step: float
     master: str
+    macro_step_source: str = ""
 
 
 def parse_overrides(overrides: list[str] | tuple[str, ...]) -> dict[str, object]:
@@ -88,10 +94,12 @@ def experiment(ssp: SspSystem, overrides: dict[str, object]) -> Experiment:
             f"{where}: DefaultExperiment gives no stopTime; pass --set simulation.stop_time=SECONDS"
         )
     step = overrides.get("macro_step", ssp.macro_step)
+    source = "--set simulation.macro_step" if "macro_step" in overrides else ssp.macro_step_source
     if step is None:
         raise CosimError(
-            f"{where}: no macro step (SSP 1.0 has none; navcosim reads nc:Simulation macroStep from "
-            "the org.navcosim.simulation annotation of DefaultExperiment); "
+            f"{where}: no macro step (SSP has none; navcosim reads its own nc:Simulation macroStep, "
+            "the OSP osp:FixedStepAlgorithm baseStepSize and OMS oms:FixedStepMaster stepSize "
+            "annotations, and the FMUs' DefaultExperiment stepSize: none is there); "
             "pass --set simulation.macro_step=SECONDS"
         )
     master = str(overrides.get("master", ssp.master or "gauss-seidel"))
@@ -101,7 +109,7 @@ def experiment(ssp: SspSystem, overrides: dict[str, object]) -> Experiment:
         raise CosimError(f"{where}: macro step must be > 0 s, got {step}")
     if float(stop) <= start:
         raise CosimError(f"{where}: stop time {stop} s is not after the start time {start} s")
-    return Experiment(start, float(stop), float(step), master)
+    return Experiment(start, float(stop), float(step), master, source)
 
 
 def run_ssp(
@@ -130,7 +138,8 @@ def _run_fmus(ssp: SspSystem, run: Experiment, out_path: Path | None, force: boo
     try:
         master.initialize()
     except CosimError as error:
-        raise CosimError(f"{ssp.source}: initialising the system failed: {error}") from None
+        message = ssp.members(str(error))
+        raise CosimError(f"{ssp.source}: initialising the system failed: {message}") from None
     with interrupt.deferred():
         return _record(ssp, run, master, system, out_path, force)
 
@@ -185,21 +194,30 @@ def _record(
             while master.step_index < total and interrupt.take() is None:
                 master.run_recorded(min(CHUNK_STEPS, total - master.step_index), record, compiled=compiled)
         except CosimError as error:
-            failure = f"{error} (at t = {master.time:.3f} s)"
+            failure = f"{ssp.members(str(error))} (at t = {master.time:.3f} s)"
         except interrupt.Interrupted:  # a signal while an FMU in a child process did not answer
             interrupt.take()
         reason = "fmu_failed" if failure else ("stop_time" if master.step_index >= total else "interrupted")
         try:
             master.close()
         except CosimError as error:
-            failure = failure or f"terminating the system failed: {error}"
+            failure = failure or f"terminating the system failed: {ssp.members(str(error))}"
         outcome = {"reached": "false", "reason": reason, "time": repr(master.time)}
         if failure:
             outcome["failure"] = failure
         recorder.end_steps(master.time_ns)
         recorder.close(outcome)
     wall_time = time.perf_counter() - wall_start
-    return SspRunResult(log_path, master.step_index, master.time, wall_time, reason, failure)
+    return SspRunResult(
+        log_path,
+        master.step_index,
+        master.time,
+        wall_time,
+        reason,
+        failure,
+        run.macro_step,
+        run.macro_step_source,
+    )
 
 
 def _write_header(ssp: SspSystem, run: Experiment, master: Master, recorder) -> None:
@@ -210,14 +228,18 @@ def _write_header(ssp: SspSystem, run: Experiment, master: Master, recorder) -> 
             "navcosim_version": navcosim_version(),
             "ssp": Path(ssp.source).name,
             "macro_step": repr(run.macro_step),
+            "macro_step_source": run.macro_step_source,
             "start_time": repr(run.start_time),
             "stop_time": repr(run.stop_time),
             "master": run.master,
         },
     )
+    members = {spec.name: spec.member for spec in ssp.components}
     for component in master.order:
         description = component.describe()
         if description:
+            # The archive member, not the folder this run unpacked it to (new in every run).
+            description["fmu"] = members.get(component.name, description["fmu"])
             recorder.add_metadata(f"fmu/{component.name}", description)
     recorder.add_attachment("SystemStructure.ssd", "application/x-ssp-definition", ssp.ssd_text)
 
@@ -225,6 +247,7 @@ def _write_header(ssp: SspSystem, run: Experiment, master: Master, recorder) -> 
 def summary(result: SspRunResult) -> str:
     rate = result.end_time / result.wall_time if result.wall_time > 0 else math.inf
     return (
-        f"{result.reason}: {result.steps} steps to t = {result.end_time:.6g} s in {result.wall_time:.2f} s "
+        f"{result.reason}: {result.steps} steps of {result.macro_step:.6g} s (macro step from "
+        f"{result.macro_step_source}) to t = {result.end_time:.6g} s in {result.wall_time:.2f} s "
         f"({rate:.0f}x real time); log: {result.log_path}"
     )

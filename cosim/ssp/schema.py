@@ -1,8 +1,11 @@
-"""SSP 1.0 XML: namespaces, the normative schemas, parsing and validation with one-line errors.
+"""SSP 1.0 and 2.0 XML: namespaces, the normative schemas, parsing and validation with one-line errors.
 
-The schemas in `schemas/` are the Modelica Association's normative SSP 1.0.1 XSD files (BSD
-2-clause, see `schemas/LICENSE.txt`), used unchanged. Every file navcosim reads or writes
-(SystemStructure.ssd, .ssv parameter sets, inline parameter sets) is checked against them.
+The schemas in `schemas/` are the Modelica Association's normative SSP 1.0.1 XSD files, those in
+`schemas/ssp-2.0/` its SSP 2.0 XSD 1.0 files (both BSD 2-clause, see their `LICENSE.txt`), used
+unchanged. SSP 2.0 keeps the SSP 1 namespaces; a document is SSP 2.0 when its root's `version` is
+"2.0" (SSP 2.0 tools also write 1.0 files, which its schemas accept too). Every file navcosim reads
+or writes (SystemStructure.ssd, .ssv parameter sets, inline parameter sets) is checked against the
+schemas of its own version.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ from pathlib import Path
 from cosim.errors import CosimError
 
 SCHEMA_DIR = Path(__file__).resolve().parent / "schemas"
+SCHEMA_DIRS = {"1.0": SCHEMA_DIR, "2.0": SCHEMA_DIR / "ssp-2.0"}  # SSP version -> its schemas
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
     "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
@@ -38,22 +42,31 @@ def tag(qualified: str) -> str:
 
 
 @cache
-def schema(kind: str):
-    """The compiled normative schema `kind` ('ssd', 'ssv', 'ssm'); compiled once per process."""
+def schema(kind: str, version: str = "1.0"):
+    """The compiled normative schema `kind` ('ssd', 'ssv', 'ssm') of SSP `version` ('1.0', '2.0');
+    compiled once per process."""
     import xmlschema
 
-    return xmlschema.XMLSchema(str(SCHEMA_DIR / SCHEMAS[kind]))
+    return xmlschema.XMLSchema(str(SCHEMA_DIRS[version] / SCHEMAS[kind]))
+
+
+def version_of(element: ET.Element) -> str:
+    """The SSP version whose schemas check `element`: '2.0' for version="2.0", else '1.0' (whose
+    schemas refuse any version they do not know)."""
+    return "2.0" if (element.get("version") or "").strip() == "2.0" else "1.0"
 
 
 def validate(element: ET.Element, kind: str, where: str) -> None:
-    """Raise `CosimError` naming `where` and the first invalid element when `element` breaks the schema."""
-    for error in schema(kind).iter_errors(element):
+    """Raise `CosimError` naming `where` and the first invalid element when `element` breaks the
+    schema of its SSP version."""
+    version = version_of(element)
+    for error in schema(kind, version).iter_errors(element):
         reason = " ".join(str(error.reason or error.message).split())
         path = _short(error.path or "/")
         elem = getattr(error, "elem", None)
         if elem is not None and elem.get("name") is not None:
             path += f" (name '{elem.get('name')}')"
-        raise CosimError(f"{where}: not valid SSP 1.0 ({SCHEMAS[kind]}) at {path}: {reason}")
+        raise CosimError(f"{where}: not valid SSP {version} ({SCHEMAS[kind]}) at {path}: {reason}")
 
 
 def _short(path: str) -> str:
