@@ -1,0 +1,444 @@
+"""`cosim fmu simulate X.fmu`: one FMU alone, as `fmpy simulate` and `fmusim` run it.
+
+The FMU becomes a component as a scenario's `[components.NAME]` does: a `ComponentDescription`
+(its interface read from modelDescription.xml, the start values split into parameters and held
+inputs) made into a component by `cosim.navigation.build.make_fmu`. It is the one component of a
+`System` without connections, run by the master as an SSP's FMUs are (`cosim.ssp.run`): every
+step through the compiled kernel, which keeps each step's inputs and outputs in blocks for the log.
+An input keeps its value for the whole run: the one given in `start_values`, else its start value.
+
+Defaults are fmpy's: the start time is the DefaultExperiment's startTime, else 0; the stop time its
+stopTime, else 1 s after the start; the step its stepSize, else the power of ten nearest to a
+thousandth of the run (10 ** (round(log10(stop - start)) - 3) s, fmpy's rule).
+
+The log (`/signals/<name>`, every input and output, stamped as `cosim.record.recorder` says: the
+record at t holds the outputs at t, the first the outputs after initialisation) names the FMU's
+model as the system (`navcosim` metadata `scenario_name`) and keeps the FMU's description
+(metadata `fmu/<name>`) and its modelDescription.xml (an attachment).
+
+The CSV is fmpy's (`fmpy.util.write_csv`): a header of the quoted names, "time" then every output
+in the FMU's order, and a row per communication point t0, t0 + h, ..., stop: reals in Python's
+shortest round-trip form, integers as integers, Booleans as True / False. Its values are those of
+the log's records at the same times.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+import tomllib
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from cosim.core import interrupt
+from cosim.core.component import closest_names
+from cosim.core.master import COMPILED_MIN_STEPS, NS_PER_S, Master, System, seconds_to_ns
+from cosim.errors import CosimError
+from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
+from cosim.scenario.description import ComponentDescription
+from cosim.scenario.limits import MAX_STEPS
+from cosim.scenario.load import DEFAULT_LOG_PATTERN
+
+INTERFACES = ("cs", "me")  # co-simulation, Model Exchange
+SOLVERS = ("cvode", "rk4", "euler")  # Model Exchange integrators
+CHUNK_STEPS = 20_000  # steps between checks for an interrupt
+PROGRESS_INTERVAL = 0.1  # [s] of wall time between progress-bar updates
+_INTEGER_TYPES = {"Integer", "Enumeration", *(f"{s}Int{n}" for s in ("", "U") for n in (8, 16, 32, 64))}
+
+
+@dataclass(frozen=True)
+class Simulation:
+    """What `simulate` runs: the FMU's component, the interface, and the experiment [s]."""
+
+    component: ComponentDescription
+    interface: str  # "cs" | "me"
+    solver: str | None  # Model Exchange integrator; None for co-simulation
+    start_time: float
+    stop_time: float
+    step: float
+    start_values: dict[str, float] = field(default_factory=dict)  # as given, by variable name
+
+    @property
+    def steps(self) -> int:
+        return round((self.stop_time - self.start_time) / self.step)
+
+
+@dataclass
+class SimulationResult:
+    log_path: Path
+    csv_path: Path | None
+    steps: int
+    end_time: float  # [s]
+    wall_time: float  # [s]
+    reason: str  # stop_time, interrupted, fmu_failed
+    failure: str | None = None
+
+    @property
+    def exit_code(self) -> int:
+        """0 the run reached its stop time, 1 interrupted, 2 a failed FMU."""
+        if self.failure is not None:
+            return 2
+        return 0 if self.reason == "stop_time" else 1
+
+
+def parse_start_values(texts: list[str] | tuple[str, ...]) -> dict[str, float | bool]:
+    """`name=value` texts (a number or true/false) as name -> value; `CosimError` on a bad one."""
+    values: dict[str, float | bool] = {}
+    for text in texts:
+        name, separator, literal = text.partition("=")
+        name = name.strip()
+        if not separator or not name:
+            raise CosimError(f"--start-values {text}: expected NAME=VALUE, e.g. x0=1.5")
+        try:
+            value = tomllib.loads(f"value = {literal.strip()}")["value"]
+        except tomllib.TOMLDecodeError:
+            value = None
+        if not isinstance(value, bool) and (not isinstance(value, int | float) or not math.isfinite(value)):
+            raise CosimError(f"--start-values {text}: the value must be a finite number or true/false")
+        values[name] = value
+    return values
+
+
+def prepare(
+    path: str | Path,
+    *,
+    stop_time: float | None = None,
+    step: float | None = None,
+    start_time: float | None = None,
+    start_values: dict[str, float | bool] | None = None,
+    interface: str | None = None,
+    solver: str | None = None,
+) -> Simulation:
+    """Read the FMU at `path` and check the options against it; `CosimError` (one line) otherwise.
+    None takes the default (module docstring); `interface` None: co-simulation when the FMU has it."""
+    from cosim.fmi.component import fmu_layout
+    from cosim.fmi.inspect import read_description
+
+    path = Path(path)
+    if not path.is_file():
+        raise CosimError(f"{path}: no such FMU file")
+    description = read_description(path)
+    interface = interface or ("cs" if description.coSimulation is not None else "me")
+    if interface not in INTERFACES:
+        raise CosimError(f"--interface {interface}: must be one of {', '.join(INTERFACES)}")
+    if solver is not None and interface != "me":
+        raise CosimError(f"--solver {solver}: a solver integrates a Model Exchange FMU; give --interface me")
+    if interface == "me":
+        has = "" if description.modelExchange is not None else " (and the FMU has no <ModelExchange>)"
+        raise CosimError(f"{path}: Model Exchange (--interface me) is not supported yet{has}")
+    if description.coSimulation is None:
+        raise CosimError(f"{path}: the FMU has no <CoSimulation> interface; --interface cs cannot run it")
+    name = component_name(description.modelName or path.stem)
+    layout = fmu_layout(path, name)
+    start, stop, h = _experiment(description, start_time, stop_time, step)
+    parameters, held = _split_start_values(path, description, layout, start_values or {})
+    inputs = tuple(port.name for port in layout.inputs)
+    feedthrough = {port.name: layout.feedthrough.get(port.name, inputs) for port in layout.outputs}
+    component = ComponentDescription(
+        name,
+        "fmu",
+        str(path),
+        fmu=path,
+        fmi_version=layout.fmi_version,
+        model_name=description.modelName or "",
+        parameters=parameters,
+        held_inputs=held,
+        inputs=inputs,
+        outputs=tuple(port.name for port in layout.outputs),
+        parameter_names=tuple(port.name for port in layout.parameters),
+        feedthrough=feedthrough,
+    )
+    return Simulation(component, interface, solver, start, stop, h, dict(start_values or {}))
+
+
+def component_name(model_name: str) -> str:
+    """The component (and `/signals/<name>`) name of a model: its word characters, `_` for the rest."""
+    name = re.sub(r"\W", "_", model_name)
+    return name if name and not name[0].isdigit() else f"fmu_{name}"
+
+
+def _experiment(description, start_time, stop_time, step) -> tuple[float, float, float]:
+    """Start, stop and step [s]: the options, else the DefaultExperiment, else fmpy's defaults."""
+    experiment = description.defaultExperiment
+
+    def default(option, attribute: str):
+        if option is not None:
+            return float(option)
+        value = getattr(experiment, attribute, None) if experiment is not None else None
+        return None if value is None else float(value)
+
+    start = default(start_time, "startTime") or 0.0
+    stop = default(stop_time, "stopTime")
+    stop = start + 1.0 if stop is None else stop
+    for option, value in (("--start-time", start), ("--stop-time", stop)):
+        if not math.isfinite(value):
+            raise CosimError(f"{option} must be finite, got {value}")
+    if not stop > start:
+        raise CosimError(f"--stop-time {stop:g} s is not after the start time {start:g} s")
+    h = default(step, "stepSize")
+    if h is None:
+        h = 10.0 ** (round(math.log10(stop - start)) - 3)
+    if not (math.isfinite(h) and h > 0):
+        raise CosimError(f"--step must be > 0 s, got {h:g}")
+    h_ns = seconds_to_ns(h, "--step")
+    span_ns = seconds_to_ns(stop, "--stop-time") - seconds_to_ns(start, "--start-time")
+    steps, rest = divmod(span_ns, h_ns)
+    if rest:
+        raise CosimError(
+            f"--stop-time {stop:g} s is not a whole number of --step {h:g} s steps after the start "
+            f"time {start:g} s ({span_ns / h_ns:.6g} steps)"
+        )
+    if steps > MAX_STEPS:
+        raise CosimError(f"{steps} steps of {h:g} s: more than {MAX_STEPS}; give a larger --step")
+    return start, stop, h
+
+
+def _split_start_values(path: Path, description, layout, values: dict) -> tuple[dict, dict]:
+    """The start values as parameters and held inputs, each checked against its variable's type and
+    declared min/max; `CosimError` naming the first bad one (with the closest names for a typo)."""
+    parameters = {port.name for port in layout.parameters}
+    inputs = {port.name for port in layout.inputs}
+    variables = {variable.name: variable for variable in description.modelVariables}
+    settable = [port.name for port in (*layout.parameters, *layout.inputs)]
+    split: tuple[dict, dict] = ({}, {})
+    for name, value in values.items():
+        given = f"--start-values {name}={_literal(value)}"
+        if name not in parameters and name not in inputs:
+            raise CosimError(
+                f"{given}: the FMU ({description.modelName}) has no parameter or input '{name}'; "
+                f"closest: {closest_names(name, settable) if settable else 'none (it has neither)'}"
+            )
+        variable = variables.get(name)
+        problem = _value_problem(variable, value) if variable is not None else None
+        if problem:
+            raise CosimError(f"{given}: {problem}")
+        split[0 if name in parameters else 1][name] = float(value)
+    return split
+
+
+def _value_problem(variable, value: float | bool) -> str | None:
+    """Why `value` does not suit the FMU variable (its type, its declared min/max), or None."""
+    kind = variable.type
+    if kind == "Boolean":
+        return None if value in (0, 1) else f"'{variable.name}' is a Boolean: give true or false"
+    if isinstance(value, bool):
+        return f"'{variable.name}' is a {kind}: give a number, not {str(value).lower()}"
+    if kind in _INTEGER_TYPES and value != math.floor(value):
+        return f"'{variable.name}' is an {kind}: give a whole number"
+    low, high = _bound(variable.min), _bound(variable.max)
+    if (low is None or value >= low) and (high is None or value <= high):
+        return None
+    if low is not None and high is not None:
+        return f"'{variable.name}' must be in [{low:g}, {high:g}] (its min and max)"
+    return f"'{variable.name}' must be {'>=' if high is None else '<='} {low if high is None else high:g}"
+
+
+def _bound(text) -> float | None:
+    try:
+        bound = float(text)
+    except (TypeError, ValueError):
+        return None
+    return bound if math.isfinite(bound) else None
+
+
+def _literal(value: float | bool) -> str:
+    return str(value).lower() if isinstance(value, bool) else f"{value:g}"
+
+
+def simulate(
+    simulation: Simulation,
+    out_path: Path | None = None,
+    csv_path: Path | None = None,
+    progress: bool = False,
+    force: bool = False,
+) -> SimulationResult:
+    """Run `simulation`, logging to `out_path` (default logs/<model>-<timestamp>.mcap) and, given
+    `csv_path`, writing the outputs as CSV. `CosimError` on bad input, before any file exists;
+    an FMU that fails while stepping ends the run with its `failure` (the log finalised up to it).
+    Signals are handled as for a scenario run (`cosim.navigation.run.run_scenario`)."""
+    from cosim.navigation.build import make_fmu
+
+    described = simulation.component
+    for path in (out_path, csv_path):
+        if path is not None and not force and Path(path).exists():
+            raise CosimError(f"{path}: already exists; give --force to overwrite it")
+    with interrupt.catching_signals():
+        # Nothing feeds this FMU: its NaN outputs are its values, recorded as they are.
+        real = tuple(port.name for port in _output_ports(described) if port.type == "real")
+        try:
+            component = make_fmu(described, nan_outputs=real)
+        except CosimError as error:
+            raise CosimError(f"{described.fmu}: {error}") from None
+        system = System(simulation.step)
+        system.add(component)
+        master = Master(
+            system, start_time=simulation.start_time, parameters={described.name: described.parameters}
+        )
+        try:
+            master.initialize()
+        except CosimError as error:
+            raise CosimError(f"{described.fmu}: initialising the FMU failed: {error}") from None
+        with interrupt.deferred():
+            return _run(simulation, master, out_path, csv_path, progress, force)
+
+
+def _output_ports(described: ComponentDescription):
+    from cosim.fmi.component import fmu_layout
+
+    return fmu_layout(described.fmu, described.name).outputs
+
+
+def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: bool, force: bool):
+    from cosim.record.recorder import Recorder
+
+    (component,) = master.order
+    try:
+        if out_path is not None:
+            log_path, stream = Path(out_path), claim_log(Path(out_path), force)
+        else:
+            pattern = default_log_path(DEFAULT_LOG_PATTERN, component.name)
+            log_path, stream = claim_default_log(pattern)
+        recorder = Recorder(log_path, stream=stream)
+        csv = _CsvWriter(csv_path, component) if csv_path is not None else None
+    except BaseException:
+        master.close()
+        raise
+    h_ns = master.system.macro_step_ns
+    total = simulation.steps
+    bar = _progress_bar(simulation.stop_time - simulation.start_time) if progress else None
+    wall_start = time.perf_counter()
+    shown = [wall_start]
+    failure = None
+    with recorder:
+        _write_header(simulation, component, recorder)
+        channel = recorder.signal_channel(
+            component.name,
+            component.signal_names(),
+            units=[port.unit for port in (*component.inputs, *component.outputs)],
+            inputs=len(component.inputs),
+            initial=component.signal_values(),
+            period_ns=h_ns,
+        )
+        if csv is not None:
+            csv.write(np.array([master.start_time_ns]), component.output_buffer[None, :])
+
+        def record(first: int, count: int, histories: list[np.ndarray]) -> None:
+            (rows,) = histories
+            times = master.start_time_ns + (first + np.arange(len(rows))) * h_ns
+            recorder.hold_signal_rows([(channel, times, rows)])
+            if csv is not None:
+                csv.write(times + h_ns, rows[:, len(component.inputs) :])  # outputs at each step's end
+            now = time.perf_counter()
+            if bar is not None and now - shown[0] >= PROGRESS_INTERVAL:
+                shown[0] = now
+                _update_bar(bar, (first + count) * h_ns / NS_PER_S, now - wall_start)
+
+        compiled = total >= COMPILED_MIN_STEPS
+        try:
+            while master.step_index < total and interrupt.take() is None:
+                master.run_recorded(min(CHUNK_STEPS, total - master.step_index), record, compiled=compiled)
+        except CosimError as error:
+            failure = f"{error} (at t = {master.time:.6g} s)"
+        except interrupt.Interrupted:  # a signal while an FMU in a child process did not answer
+            interrupt.take()
+        finally:
+            if bar is not None:
+                bar.close()
+            if csv is not None:
+                csv.close()
+        reason = "fmu_failed" if failure else ("stop_time" if master.step_index >= total else "interrupted")
+        try:
+            master.close()
+        except CosimError as error:
+            failure = failure or f"terminating the FMU failed: {error}"
+        outcome = {"reason": reason, "time": repr(master.time)}
+        if failure:
+            outcome["failure"] = failure
+        recorder.end_steps(master.time_ns)
+        recorder.close(outcome)
+    wall_time = time.perf_counter() - wall_start
+    return SimulationResult(log_path, csv_path, master.step_index, master.time, wall_time, reason, failure)
+
+
+def _write_header(simulation: Simulation, component, recorder) -> None:
+    described = simulation.component
+    recorder.add_metadata(
+        "navcosim",
+        {
+            "scenario_name": described.model_name or described.name,
+            "navcosim_version": navcosim_version(),
+            "fmu": Path(described.fmu).name,
+            "interface": simulation.interface,
+            "start_time": repr(simulation.start_time),
+            "stop_time": repr(simulation.stop_time),
+            "macro_step": repr(simulation.step),
+            "start_values": " ".join(f"{k}={_literal(v)}" for k, v in simulation.start_values.items()),
+        },
+    )
+    recorder.add_metadata(f"fmu/{component.name}", component.describe())
+    with zipfile.ZipFile(described.fmu) as archive:
+        text = archive.read("modelDescription.xml")
+    recorder.add_attachment("modelDescription.xml", "application/xml", text)
+
+
+class _CsvWriter:
+    """The outputs as fmpy writes a result (module docstring), a block of rows at a time."""
+
+    def __init__(self, path: Path, component) -> None:
+        self.path = Path(path)
+        kinds = [port.type for port in component.outputs]
+        self.formats = [_FORMATS.get(kind, _FORMATS["real"]) for kind in kinds]
+        try:
+            self.file = open(self.path, "w", encoding="utf-8", newline="")  # noqa: SIM115 (closed by close())
+        except OSError as error:
+            raise CosimError(f"{self.path}: cannot write the CSV ({error.strerror or error})") from None
+        names = ["time", *(port.name for port in component.outputs)]
+        self.file.write(",".join(f'"{name}"' for name in names) + "\n")
+
+    def write(self, times_ns: np.ndarray, outputs: np.ndarray) -> None:
+        columns = [[repr(t / NS_PER_S) for t in times_ns.tolist()]]
+        columns += [fmt(outputs[:, j]) for j, fmt in enumerate(self.formats)]
+        self.file.write("".join(",".join(row) + "\n" for row in zip(*columns, strict=True)))
+
+    def close(self) -> None:
+        self.file.close()
+
+
+_FORMATS = {
+    "real": lambda column: list(map(repr, column.tolist())),
+    "integer": lambda column: list(map(str, column.astype(np.int64).tolist())),
+    "boolean": lambda column: ["True" if value else "False" for value in column.tolist()],
+}
+
+
+def _progress_bar(duration: float):
+    from tqdm import tqdm
+
+    return tqdm(
+        total=round(duration, 3),
+        unit="s",
+        desc="simulated",
+        leave=False,
+        dynamic_ncols=True,
+        bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} s [{elapsed}{postfix}]",
+    )
+
+
+def _update_bar(bar, sim_time: float, wall: float) -> None:
+    bar.n = round(sim_time, 3)
+    if wall > 0:
+        bar.set_postfix_str(f"{sim_time / wall:.0f}x real time", refresh=False)
+    bar.refresh()
+
+
+def summary(result: SimulationResult) -> str:
+    rate = result.end_time / result.wall_time if result.wall_time > 0 else math.inf
+    csv = f"; csv: {result.csv_path}" if result.csv_path is not None else ""
+    return (
+        f"{result.reason}: {result.steps} steps to t = {result.end_time:.6g} s in {result.wall_time:.2f} s "
+        f"({rate:.0f}x real time); log: {result.log_path}{csv}"
+    )
