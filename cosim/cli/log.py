@@ -22,14 +22,19 @@ def register(subparsers) -> None:
     info.add_argument("log", type=Path, help="run log (.mcap)")
     info.set_defaults(handler=_info)
 
-    plot = commands.add_parser("plot", help="trajectory over the map and signals over time (PNG)")
+    plot = commands.add_parser(
+        "plot",
+        help="a robot run: trajectory over the map and signals over time; any other log: its "
+        "signals over time (PNG)",
+    )
     plot.add_argument("log", type=Path, help="run log (.mcap)")
     plot.add_argument(
         "--signals",
         nargs="+",
         metavar="COMPONENT.VAR",
-        help="signals to plot over time, e.g. vehicle.v_actual vfh.steering_dir (default: speed, "
-        "turn rate or steering angle, VFH steering direction, minimum range, distance to goal)",
+        help="signals to plot over time, e.g. vehicle.v_actual vfh.steering_dir (or comma-separated; "
+        "default for a robot run: speed, turn rate or steering angle, VFH steering direction, minimum "
+        "range, distance to goal; for a log without map, goal or trajectory: every signal)",
     )
     plot.add_argument("--png", type=Path, metavar="OUT", help="output image (default: LOG with .png)")
     plot.set_defaults(handler=_plot)
@@ -113,12 +118,14 @@ def _info(args) -> int:
 
 
 def _plot(args) -> int:
-    from cosim.logs.plot import plot_log, skip_matplotlib_docstrings
+    from cosim.logs.plot import skip_matplotlib_docstrings
+    from cosim.logs.signal_plot import plot_any
 
     skip_matplotlib_docstrings()  # this process draws and exits: no help() text needed
     log = _open(args.log)
     png = args.png or args.log.with_suffix(".png")
-    written = _guard(args.log, lambda: plot_log(log, png, args.signals))
+    signals = [name for text in args.signals for name in text.split(",") if name] if args.signals else None
+    written = _guard(args.log, lambda: plot_any(log, png, signals))
     print(f"wrote {written}")
     return 0
 

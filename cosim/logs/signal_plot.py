@@ -1,0 +1,141 @@
+"""Draw a log that is not a robot run (an SSP run, `cosim fmu simulate`, any system without a map,
+goal or trajectory): its signals over time, one panel each, titled by the system's name.
+
+`plot_any` chooses (`cosim log plot`): a log with a map, a goal or a driven trajectory gets the
+robot picture (`cosim.logs.plot.plot_log`, unchanged), any other this one. Every variable of every
+`/signals/<component>` is drawn (`component.variable`, with its unit), or the ones chosen; panels
+go in up to three columns and share the time axis; past `MAX_PANELS` signals the title says how
+many are left out.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from cosim.core.component import closest_names
+from cosim.errors import CosimError
+from cosim.logs.plot import DPI, GRID_ALPHA, collector_paused, plot_log, write_png
+
+if TYPE_CHECKING:
+    from cosim.logs.reader import Log
+
+MAX_PANELS = 48  # a picture of more is unreadable; --signals picks others
+PANEL_HEIGHT = 1.6  # [in]
+COLUMN_WIDTH = 7.0  # [in]
+
+
+@dataclass
+class SignalPanel:
+    label: str  # "component.variable"
+    unit: str
+    t: np.ndarray  # [s]
+    values: np.ndarray
+
+
+def plot_any(log: Log, png_path: str | Path, signals: list[str] | None = None) -> Path:
+    """Draw `log` to `png_path` as a robot's run or as signals over time (module docstring);
+    `signals` ("component.variable") None: the picture's defaults. Returns the PNG path."""
+    if is_robot_log(log):
+        return plot_log(log, Path(png_path), signals)
+    return plot_signals(log, png_path, signals)
+
+
+def is_robot_log(log: Log) -> bool:
+    """Whether `log` is a robot's run: it has a map, a goal or a driven trajectory."""
+    return log.map("/map") is not None or log.goal() is not None or log.trajectory() is not None
+
+
+def signal_panels(log: Log, signals: list[str] | None = None) -> list[SignalPanel]:
+    """The panels of `signals` ("component.variable"; None: every signal of every component, in
+    the log's order); `CosimError` naming an unknown one with the closest names."""
+    if signals is None:
+        chosen = [(component, name) for component in log.components for name in log.signal_names(component)]
+    else:
+        chosen = [_reference(log, text) for text in signals]
+    panels = []
+    for component, name in chosen:
+        recorded = log.signals(component)
+        panels.append(SignalPanel(f"{component}.{name}", recorded.unit(name), recorded.t, recorded[name]))
+    return panels
+
+
+def _reference(log: Log, text: str) -> tuple[str, str]:
+    component, _, name = text.partition(".")
+    if not name:
+        raise CosimError(f"--signals {text!r}: expected COMPONENT.VARIABLE, e.g. vehicle.v_actual")
+    if component not in log.components:
+        known = closest_names(component, log.components) if log.components else "none"
+        raise CosimError(
+            f"--signals {text!r}: no component '{component}' in {log.path.name}; components: {known}"
+        )
+    names = log.signal_names(component)
+    if name not in names:
+        raise CosimError(
+            f"--signals {text!r}: no signal '{name}' of {component}; signals: {closest_names(name, names)}"
+        )
+    return component, name
+
+
+def plot_signals(log: Log, png_path: str | Path, signals: list[str] | None = None) -> Path:
+    """Draw the signals of `log` (all, or `signals`) to `png_path`; returns the PNG path."""
+    panels = signal_panels(log, signals)
+    with collector_paused():
+        return _render(panels[:MAX_PANELS], signal_title(log, len(panels)), Path(png_path))
+
+
+def signal_title(log: Log, signals: int) -> str:
+    """The picture's title: the system's name (the scenario's, the SSP's, the FMU's model), how
+    many of its `signals` are drawn when not all, then the file and how the run ended."""
+    title = log.scenario_name or log.path.stem
+    if signals > MAX_PANELS:
+        title += f" (the first {MAX_PANELS} of {signals} signals; choose others with --signals)"
+    outcome = log.outcome
+    if outcome is None:
+        ended = "no outcome recorded" + ("" if log.is_complete else " (log cut short)")
+    else:
+        at = f" at t = {float(outcome['time']):.6g} s" if outcome.get("time") else ""
+        ended = f"ended{at}: {outcome.get('reason', 'unknown reason')}"
+    return f"{title}\n{log.path.name}, {ended}"
+
+
+def _render(panels: list[SignalPanel], title: str, png_path: Path) -> Path:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    columns = 1 if len(panels) <= 6 else 2 if len(panels) <= 16 else 3
+    rows = max(1, math.ceil(len(panels) / columns))
+    height = 1.3 + PANEL_HEIGHT * rows
+    figure = Figure(figsize=(COLUMN_WIDTH * columns + 1.0, height), dpi=DPI)
+    canvas = FigureCanvasAgg(figure)
+    grid = figure.add_gridspec(
+        rows, columns, left=0.9 / (COLUMN_WIDTH * columns + 1.0), right=0.985, top=1.0 - 0.8 / height,
+        bottom=0.5 / height, wspace=0.22, hspace=0.35,
+    )  # fmt: skip
+    shared = None
+    for index, panel in enumerate(panels):
+        row, column = divmod(index, columns)
+        axes = figure.add_subplot(grid[row, column], sharex=shared)
+        shared = shared or axes
+        axes.plot(panel.t, panel.values, lw=1.2)
+        axes.set_title(panel.label, fontsize=9, loc="left", y=1.0)
+        axes.set_ylabel(f"[{panel.unit}]" if panel.unit else "value", fontsize=8)
+        axes.tick_params(labelsize=8)
+        axes.grid(alpha=GRID_ALPHA)
+        if index + columns >= len(panels):  # the lowest panel of its column
+            axes.set_xlabel("time [s]", fontsize=8)
+    if not panels:
+        axes = figure.add_subplot(grid[0, 0])
+        axes.text(
+            0.5, 0.5, "no navcosim signals in this log", ha="center", va="center", transform=axes.transAxes
+        )
+        axes.set_axis_off()
+    figure.suptitle(title, fontsize=12)
+    canvas.draw()
+    png_path.parent.mkdir(parents=True, exist_ok=True)
+    write_png(png_path, np.asarray(canvas.buffer_rgba())[:, :, :3], DPI)
+    return png_path
