@@ -1,0 +1,187 @@
+"""Multi-agent path finding on an occupancy grid: `solve(grid, starts, goals, time_limit=...)`.
+
+Agents move synchronously on the free cells, 4-connected: each time step every agent moves to a
+neighbour or waits; two agents never share a cell (vertex conflict) nor swap cells in one step
+(swap conflict). The solver (C, planner/native/mapf.c) is LaCAM (Okumura, AAAI 2023): a depth-first
+search over configurations (one cell per agent) whose successors PIBT (Okumura et al. 2022)
+generates under constraints that a lazily grown tree adds agent by agent, so every successor is
+eventually tried and the search is complete. After the first solution it continues as LaCAM*
+(Okumura, IJCAI 2023): configurations met again link the search nodes, their costs are rewired
+along the links, and nodes that cannot beat the best solution are pruned, until `time_limit` or a
+proof of optimality (of the sum of losses: a step costs one per agent not resting on its goal).
+Goal distances are one breadth-first search per agent.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from planner import native
+from planner.errors import PlannerError
+from planner.grid import OccupancyGrid
+
+_INT_P = ctypes.POINTER(ctypes.c_int)
+_KERNELS = native.bind(
+    native.load(Path(__file__).parent / "native" / "mapf.c"),
+    {
+        "mapf_solve": (
+            ctypes.c_void_p,
+            [ctypes.c_int, _INT_P, ctypes.c_int, _INT_P, _INT_P, ctypes.c_double, ctypes.c_ulonglong,
+             ctypes.c_double],
+        ),
+        "mapf_status": (ctypes.c_int, [ctypes.c_void_p]),
+        "mapf_length": (ctypes.c_int, [ctypes.c_void_p]),
+        "mapf_first_time": (ctypes.c_double, [ctypes.c_void_p]),
+        "mapf_nodes": (ctypes.c_int, [ctypes.c_void_p]),
+        "mapf_copy": (None, [ctypes.c_void_p, _INT_P, _INT_P, _INT_P]),
+        "mapf_free": (None, [ctypes.c_void_p]),
+    },
+)  # fmt: skip
+
+OPTIMAL, TIME_LIMIT, UNSOLVED, UNSOLVABLE, OUT_OF_MEMORY = 1, 2, 0, -1, -3
+DEFAULT_MEMORY = 1.0e9  # bytes the search nodes may take (12 bytes per agent and node)
+
+
+@dataclass(frozen=True)
+class MapfResult:
+    """A MAPF solution (or its absence).
+
+    paths: one int array (makespan + 1, 2) of (row, col) per agent, padded with its goal; empty
+        if not solved.
+    sum_of_costs: sum over agents of the time step at which each reaches its goal for the last
+        time (None if not solved).
+    makespan: time steps until every agent rests on its goal (None if not solved).
+    lower_bound: sum of the single-agent shortest distances (time steps).
+    elapsed: wall time of the solve [s]; first_solution: wall time to the first solution [s]
+        (None if none).
+    solved: a solution was found; optimal: the search proved its sum of losses minimal.
+    nodes: configurations the search created.
+    """
+
+    paths: list
+    sum_of_costs: int | None
+    makespan: int | None
+    lower_bound: int
+    elapsed: float
+    solved: bool
+    optimal: bool
+    first_solution: float | None
+    nodes: int
+
+
+def _cells(name: str, cells, grid: OccupancyGrid) -> np.ndarray:
+    try:
+        array = np.asarray(cells, dtype=np.int64).reshape(-1, 2)
+    except (TypeError, ValueError):
+        raise PlannerError(f"{name} must be (row, col) cells, got {cells!r}") from None
+    rows, cols = grid.shape
+    for index, (row, col) in enumerate(array):
+        if not (0 <= row < rows and 0 <= col < cols):
+            raise PlannerError(f"{name[:-1]} {index} {(int(row), int(col))} is outside the {rows}x{cols} grid")
+        if grid.occupied[row, col]:
+            raise PlannerError(f"{name[:-1]} {index} {(int(row), int(col))} is on an obstacle")
+    seen: dict[tuple[int, int], int] = {}
+    for index, cell in enumerate(map(tuple, array.tolist())):
+        if cell in seen:
+            raise PlannerError(f"{name[:-1]}s {seen[cell]} and {index} are the same cell {cell}")
+        seen[cell] = index
+    return array
+
+
+def graph(grid: OccupancyGrid) -> tuple[np.ndarray, np.ndarray]:
+    """(vertex of each cell, -1 if blocked; (V, 4) neighbour vertices, -1 = none) of the free cells."""
+    cached = grid._cache.get("mapf_graph")
+    if cached is not None:
+        return cached
+    free = ~grid.occupied
+    vertex = np.full(free.shape, -1, dtype=np.int32)
+    vertex[free] = np.arange(int(free.sum()), dtype=np.int32)
+    padded = np.pad(vertex, 1, constant_values=-1)
+    rows, cols = np.nonzero(free)
+    rows, cols = rows + 1, cols + 1
+    neighbours = np.stack(
+        [padded[rows - 1, cols], padded[rows + 1, cols], padded[rows, cols - 1], padded[rows, cols + 1]], axis=1
+    ).astype(np.int32)
+    grid._cache["mapf_graph"] = (vertex, np.ascontiguousarray(neighbours))
+    return grid._cache["mapf_graph"]
+
+
+def sum_of_costs(paths: list[np.ndarray], goals: np.ndarray) -> int:
+    """Sum over agents of the last time step at which an agent is not on its goal, plus one."""
+    total = 0
+    for path, goal in zip(paths, goals):
+        away = np.nonzero(np.any(path != goal, axis=1))[0]
+        total += int(away[-1]) + 1 if away.size else 0
+    return total
+
+
+def solve(
+    grid: OccupancyGrid,
+    starts,
+    goals,
+    time_limit: float = 10.0,
+    seed: int = 0,
+    memory: float = DEFAULT_MEMORY,
+) -> MapfResult:
+    """Collision-free paths from `starts` to `goals` ((row, col) cells, one per agent).
+
+    time_limit [s]: the search stops there (or earlier with a proven optimum); 0 stops at the first
+    solution. seed: PIBT's random tie-breaking. memory [bytes]: cap of the search nodes.
+    """
+    if not isinstance(grid, OccupancyGrid):
+        raise PlannerError(f"grid must be a planner.OccupancyGrid, got {type(grid).__name__}")
+    starts = _cells("starts", starts, grid)
+    goals = _cells("goals", goals, grid)
+    if len(starts) != len(goals):
+        raise PlannerError(f"{len(starts)} starts but {len(goals)} goals: one of each per agent")
+    if len(starts) == 0:
+        raise PlannerError("no agents: give at least one start and goal")
+    if not time_limit >= 0:
+        raise PlannerError(f"time_limit must be >= 0 [s], got {time_limit}")
+    began = time.perf_counter()
+    vertex, neighbours = graph(grid)
+    n = len(starts)
+    start_v = np.ascontiguousarray(vertex[starts[:, 0], starts[:, 1]], dtype=np.int32)
+    goal_v = np.ascontiguousarray(vertex[goals[:, 0], goals[:, 1]], dtype=np.int32)
+    handle = _KERNELS.mapf_solve(
+        len(neighbours), neighbours.ctypes.data_as(_INT_P), n, start_v.ctypes.data_as(_INT_P),
+        goal_v.ctypes.data_as(_INT_P), float(time_limit), seed, float(memory),
+    )  # fmt: skip
+    if not handle:
+        raise MemoryError("mapf: cannot allocate the solver's state")
+    try:
+        status = _KERNELS.mapf_status(handle)
+        length = _KERNELS.mapf_length(handle)
+        path = np.zeros((max(length, 1), n), dtype=np.int32)
+        distance = np.zeros(n, dtype=np.int32)
+        _KERNELS.mapf_copy(handle, path.ctypes.data_as(_INT_P), distance.ctypes.data_as(_INT_P),
+                           start_v.ctypes.data_as(_INT_P))  # fmt: skip
+        first = _KERNELS.mapf_first_time(handle)
+        nodes = _KERNELS.mapf_nodes(handle)
+    finally:
+        _KERNELS.mapf_free(handle)
+    if status == OUT_OF_MEMORY and length == 0:
+        raise MemoryError(f"mapf: out of memory with {n} agents")
+    lower = int(distance[distance >= 0].sum())
+    solved = length > 0
+    paths: list[np.ndarray] = []
+    if solved:
+        rows, cols = np.nonzero(~grid.occupied)
+        cells = np.stack([rows, cols], axis=1).astype(np.int64)  # vertex -> (row, col)
+        paths = [cells[path[:length, agent]] for agent in range(n)]
+    return MapfResult(
+        paths=paths,
+        sum_of_costs=sum_of_costs(paths, goals) if solved else None,
+        makespan=length - 1 if solved else None,
+        lower_bound=lower,
+        elapsed=time.perf_counter() - began,
+        solved=solved,
+        optimal=status == OPTIMAL,
+        first_solution=first if solved else None,
+        nodes=nodes,
+    )
