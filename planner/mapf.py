@@ -2,14 +2,16 @@
 
 Agents move synchronously on the free cells, 4-connected: each time step every agent moves to a
 neighbour or waits; two agents never share a cell (vertex conflict) nor swap cells in one step
-(swap conflict). The solver (C, planner/native/mapf.c) is LaCAM (Okumura, AAAI 2023): a depth-first
-search over configurations (one cell per agent) whose successors PIBT (Okumura et al. 2022)
-generates under constraints that a lazily grown tree adds agent by agent, so every successor is
-eventually tried and the search is complete. After the first solution it continues as LaCAM*
-(Okumura, IJCAI 2023): configurations met again link the search nodes, their costs are rewired
-along the links, and nodes that cannot beat the best solution are pruned, until `time_limit` or a
-proof of optimality (of the sum of losses: a step costs one per agent not resting on its goal).
-Goal distances are one breadth-first search per agent.
+(swap conflict). The solver is C (planner/native/mapf.c, mapf_lns.h). The first solution comes from
+LaCAM (Okumura, AAAI 2023): a depth-first search over configurations (one cell per agent) whose
+successors PIBT (Okumura et al. 2022) generates under constraints that a lazily grown tree adds
+agent by agent, so every successor is eventually tried and the search is complete. Then, until
+`time_limit` or a proof of optimality, two improvers share the best solution: LaCAM* (Okumura, IJCAI
+2023; configurations met again link the search nodes, costs are rewired along the links, nodes that
+cannot beat the best sum of costs are pruned; an exhausted search proves the best one optimal) and a
+large neighbourhood search (Li et al., IJCAI 2021: a few agents at a time replanned by space-time A*
+against the others' paths, kept if the sum of costs drops). Goal distances are one breadth-first
+search per agent.
 """
 
 from __future__ import annotations
@@ -38,13 +40,17 @@ _KERNELS = native.bind(
         "mapf_length": (ctypes.c_int, [ctypes.c_void_p]),
         "mapf_first_time": (ctypes.c_double, [ctypes.c_void_p]),
         "mapf_nodes": (ctypes.c_int, [ctypes.c_void_p]),
-        "mapf_copy": (None, [ctypes.c_void_p, _INT_P, _INT_P, _INT_P]),
+        "mapf_bytes": (ctypes.c_double, [ctypes.c_void_p]),
+        "mapf_lns_iterations": (ctypes.c_longlong, [ctypes.c_void_p]),
+        "mapf_lower": (ctypes.c_longlong, [ctypes.c_void_p]),
+        "mapf_copy": (None, [ctypes.c_void_p, _INT_P]),
         "mapf_free": (None, [ctypes.c_void_p]),
     },
 )  # fmt: skip
 
-OPTIMAL, TIME_LIMIT, UNSOLVED, UNSOLVABLE, OUT_OF_MEMORY = 1, 2, 0, -1, -3
-DEFAULT_MEMORY = 1.0e9  # bytes the search nodes may take (12 bytes per agent and node)
+# The kernel's status codes, and what MapfResult.status says for each.
+STATUS = {1: "optimal", 2: "time limit", 0: "time limit", -1: "unsolvable", -3: "memory limit"}
+DEFAULT_MEMORY = 1.0e9  # bytes: distance tables (4 per agent and cell) and search nodes (12 per agent)
 
 
 @dataclass(frozen=True)
@@ -59,8 +65,12 @@ class MapfResult:
     lower_bound: sum of the single-agent shortest distances (time steps).
     elapsed: wall time of the solve [s]; first_solution: wall time to the first solution [s]
         (None if none).
-    solved: a solution was found; optimal: the search proved its sum of losses minimal.
-    nodes: configurations the search created.
+    solved: a solution was found; optimal: its sum of costs is proven minimal.
+    status: why the search stopped: "optimal", "time limit", "memory limit" (the byte budget was
+        spent before a solution) or "unsolvable" (proven: some agent cannot reach its goal, or the
+        complete search ran out of configurations).
+    nodes: configurations LaCAM created; neighbourhoods: large-neighbourhood iterations made;
+    memory: bytes charged to the budget (distance tables and LaCAM's search).
     """
 
     paths: list
@@ -71,7 +81,10 @@ class MapfResult:
     solved: bool
     optimal: bool
     first_solution: float | None
+    status: str
     nodes: int
+    neighbourhoods: int
+    memory: float
 
 
 def _cells(name: str, cells, grid: OccupancyGrid) -> np.ndarray:
@@ -82,7 +95,9 @@ def _cells(name: str, cells, grid: OccupancyGrid) -> np.ndarray:
     rows, cols = grid.shape
     for index, (row, col) in enumerate(array):
         if not (0 <= row < rows and 0 <= col < cols):
-            raise PlannerError(f"{name[:-1]} {index} {(int(row), int(col))} is outside the {rows}x{cols} grid")
+            raise PlannerError(
+                f"{name[:-1]} {index} {(int(row), int(col))} is outside the {rows}x{cols} grid"
+            )
         if grid.occupied[row, col]:
             raise PlannerError(f"{name[:-1]} {index} {(int(row), int(col))} is on an obstacle")
     seen: dict[tuple[int, int], int] = {}
@@ -105,7 +120,8 @@ def graph(grid: OccupancyGrid) -> tuple[np.ndarray, np.ndarray]:
     rows, cols = np.nonzero(free)
     rows, cols = rows + 1, cols + 1
     neighbours = np.stack(
-        [padded[rows - 1, cols], padded[rows + 1, cols], padded[rows, cols - 1], padded[rows, cols + 1]], axis=1
+        [padded[rows - 1, cols], padded[rows + 1, cols], padded[rows, cols - 1], padded[rows, cols + 1]],
+        axis=1,
     ).astype(np.int32)
     grid._cache["mapf_graph"] = (vertex, np.ascontiguousarray(neighbours))
     return grid._cache["mapf_graph"]
@@ -114,7 +130,7 @@ def graph(grid: OccupancyGrid) -> tuple[np.ndarray, np.ndarray]:
 def sum_of_costs(paths: list[np.ndarray], goals: np.ndarray) -> int:
     """Sum over agents of the last time step at which an agent is not on its goal, plus one."""
     total = 0
-    for path, goal in zip(paths, goals):
+    for path, goal in zip(paths, goals, strict=True):
         away = np.nonzero(np.any(path != goal, axis=1))[0]
         total += int(away[-1]) + 1 if away.size else 0
     return total
@@ -130,8 +146,9 @@ def solve(
 ) -> MapfResult:
     """Collision-free paths from `starts` to `goals` ((row, col) cells, one per agent).
 
-    time_limit [s]: the search stops there (or earlier with a proven optimum); 0 stops at the first
-    solution. seed: PIBT's random tie-breaking. memory [bytes]: cap of the search nodes.
+    time_limit [s]: wall time of the whole solve, first solution included; the improvement runs
+    until then unless the optimum is proven earlier. seed: the random choices (PIBT's ties, the
+    neighbourhoods). memory [bytes]: budget of the distance tables and LaCAM's search nodes.
     """
     if not isinstance(grid, OccupancyGrid):
         raise PlannerError(f"grid must be a planner.OccupancyGrid, got {type(grid).__name__}")
@@ -141,8 +158,16 @@ def solve(
         raise PlannerError(f"{len(starts)} starts but {len(goals)} goals: one of each per agent")
     if len(starts) == 0:
         raise PlannerError("no agents: give at least one start and goal")
-    if not time_limit >= 0:
-        raise PlannerError(f"time_limit must be >= 0 [s], got {time_limit}")
+    if (
+        isinstance(time_limit, bool)
+        or not isinstance(time_limit, (int, float))
+        or not 0 <= time_limit < float("inf")
+    ):
+        raise PlannerError(f"time_limit must be a finite number of seconds >= 0, got {time_limit}")
+    if isinstance(memory, bool) or not isinstance(memory, (int, float)) or not memory > 0:
+        raise PlannerError(f"memory must be a number of bytes > 0, got {memory}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise PlannerError(f"seed must be an integer >= 0, got {seed!r}")
     began = time.perf_counter()
     vertex, neighbours = graph(grid)
     n = len(starts)
@@ -158,16 +183,14 @@ def solve(
         status = _KERNELS.mapf_status(handle)
         length = _KERNELS.mapf_length(handle)
         path = np.zeros((max(length, 1), n), dtype=np.int32)
-        distance = np.zeros(n, dtype=np.int32)
-        _KERNELS.mapf_copy(handle, path.ctypes.data_as(_INT_P), distance.ctypes.data_as(_INT_P),
-                           start_v.ctypes.data_as(_INT_P))  # fmt: skip
+        _KERNELS.mapf_copy(handle, path.ctypes.data_as(_INT_P))
+        lower = _KERNELS.mapf_lower(handle)
         first = _KERNELS.mapf_first_time(handle)
         nodes = _KERNELS.mapf_nodes(handle)
+        neighbourhoods = _KERNELS.mapf_lns_iterations(handle)
+        used = _KERNELS.mapf_bytes(handle)
     finally:
         _KERNELS.mapf_free(handle)
-    if status == OUT_OF_MEMORY and length == 0:
-        raise MemoryError(f"mapf: out of memory with {n} agents")
-    lower = int(distance[distance >= 0].sum())
     solved = length > 0
     paths: list[np.ndarray] = []
     if solved:
@@ -178,10 +201,13 @@ def solve(
         paths=paths,
         sum_of_costs=sum_of_costs(paths, goals) if solved else None,
         makespan=length - 1 if solved else None,
-        lower_bound=lower,
+        lower_bound=int(lower),
         elapsed=time.perf_counter() - began,
         solved=solved,
-        optimal=status == OPTIMAL,
+        optimal=status == 1,
         first_solution=first if solved else None,
+        status=STATUS[status],
         nodes=nodes,
+        neighbourhoods=neighbourhoods,
+        memory=used,
     )

@@ -1,33 +1,39 @@
-/* Multi-agent path finding on a 4-connected graph: LaCAM (a search over configurations, each
- * successor made by PIBT under a growing set of constraints) with the LaCAM* improvement phase
- * (edges between known configurations, g rewired along them, pruning by g + h >= best cost).
+/* Multi-agent path finding on a 4-connected graph.
  *
- * The graph is given as free vertices 0..V-1 with up to 4 neighbours each (-1 = none). A
- * configuration is one vertex per agent. Search node cost g is the sum of losses: a transition
- * costs one per agent that is not staying on its goal, so h = sum of goal distances is admissible.
+ * First solution: LaCAM (Okumura, AAAI 2023), a depth-first search over configurations (one vertex
+ * per agent) whose successors PIBT (Okumura et al., AIJ 2022) generates under constraints that a
+ * lazily grown tree adds agent by agent, so every successor is eventually tried: complete.
+ * Then, until the time limit, two improvers share the best solution (its sum of costs bounds both):
+ * - LaCAM* (Okumura, IJCAI 2023): configurations met again link the search nodes, costs g are
+ *   rewired along the links (Dijkstra-like), nodes with g + h >= the best sum of costs are pruned;
+ *   when the search is exhausted the best solution is proven optimal;
+ * - large neighbourhood search (mapf_lns.h), which is what brings the sum of costs near the bound
+ *   on large instances.
+ * Slices of LACAM_SLICE and LNS_SLICE seconds alternate.
  *
- * Memory: each search node keeps its configuration, the agents' PIBT priorities and their order
- * (12 bytes per agent); a byte budget caps the nodes (the search then only revisits known ones).
+ * The graph is given as free vertices 0..V-1 with up to 4 neighbours each (-1 = none). A search
+ * node's g is a sum of losses: a transition costs one per agent not staying on its goal, so
+ * h = sum of goal distances is admissible, and a sum of losses never exceeds the sum of costs (each
+ * agent's time until it reaches its goal for the last time) of the same plan.
+ *
+ * Memory: the distance tables (4 bytes per agent and vertex) and everything the search keeps (per
+ * node its configuration, the agents' PIBT priorities and order: 12 bytes per agent; constraints,
+ * successor lists, the hash table, the open stack) are charged to a byte budget. When it is spent,
+ * no node is added: before a solution the solver stops (out of memory), after one LaCAM* only
+ * revisits known nodes and can no longer prove optimality.
  */
 #define _POSIX_C_SOURCE 199309L
+#include <limits.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
-typedef struct { int *a; int n, cap; } ivec;
+#include "mapf_lns.h"
 
-static int iv_push(ivec *v, int x) {
-    if (v->n == v->cap) {
-        int cap = v->cap ? 2 * v->cap : 4;
-        int *grown = realloc(v->a, (size_t)cap * sizeof(int));
-        if (!grown) return -1;
-        v->a = grown;
-        v->cap = cap;
-    }
-    v->a[v->n++] = x;
-    return 0;
-}
+#define LACAM_SLICE 0.002
+#define LNS_SLICE 0.008
+
+typedef struct { int *a; long long n, cap; } ivec;
 
 typedef struct { int parent, agent, vertex, depth; } Constraint;
 
@@ -35,7 +41,7 @@ typedef struct {
     int parent;           /* search node it is reached from at cost g */
     long long g, h;
     ivec queue;           /* constraints still to try (indices into the pool) */
-    int head;             /* next one of queue */
+    long long head;       /* next one of queue */
     ivec next;            /* known successors (LaCAM*) */
 } Node;
 
@@ -44,34 +50,57 @@ typedef struct {
     const int *adj;       /* V x 4 */
     const int *goal;
     int *dist;            /* N x V, -1 = unreachable */
-    Node *nodes; int n_nodes, cap_nodes, max_nodes;
-    int *cfg; float *pri; int *order;   /* n_nodes x N each */
+    Node *nodes; int n_nodes, cap_nodes;
+    int *cfg; float *pri; int *order;   /* rows of N per node (cfg: one spare row) */
     Constraint *pool; long long n_pool, cap_pool;
     int *table; long long table_size;   /* hash: node id or -1 */
+    ivec open, work;
     int *occ_now, *occ_next, *nxt, *stamp; int gen;
     uint64_t rng;
-    /* result */
-    int goal_node; double first_time; int status;
+    double used, budget;  /* bytes */
+    int truncated;        /* a node or constraint was refused for the budget */
+    long long lower;      /* sum of the agents' goal distances */
+    /* the best solution lives in lns (its paths, its sum of costs) */
+    Lns lns; int solved; long long best;
+    int goal_node; long long goal_g_taken;
+    double first_time; int status;
     int *path; int length;
 } Mapf;
 
-static double now(void) {
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
-}
+static double now(void) { return clock_now(); }
 
 static uint64_t rnd(Mapf *m) {  /* xorshift64 */
     m->rng ^= m->rng << 13; m->rng ^= m->rng >> 7; m->rng ^= m->rng << 17;
     return m->rng;
 }
 
-static void bfs(Mapf *m, int agent, int *queue) {
-    int *d = m->dist + (size_t)agent * m->V;
+/* Grow *items (capacity *cap items of `size` bytes) to hold `need` items, charged to the budget. */
+static int reserve(Mapf *m, void **items, long long *cap, long long need, size_t size) {
+    if (need <= *cap) return 0;
+    long long grown = *cap ? *cap : 4;
+    while (grown < need) grown *= 2;
+    double more = (double)(grown - *cap) * (double)size;
+    if (m->used + more > m->budget) { m->truncated = 1; return -1; }
+    void *moved = realloc(*items, (size_t)grown * size);
+    if (!moved) { m->truncated = 1; return -1; }
+    *items = moved;
+    *cap = grown;
+    m->used += more;
+    return 0;
+}
+
+static int push(Mapf *m, ivec *v, int x) {
+    if (reserve(m, (void **)&v->a, &v->cap, v->n + 1, sizeof(int)) < 0) return -1;
+    v->a[v->n++] = x;
+    return 0;
+}
+
+/* Breadth-first distances d (V, -1 = unreachable) to vertex `goal`. */
+static void bfs(const Mapf *m, int goal, int *d, int *queue) {
     for (int v = 0; v < m->V; v++) d[v] = -1;
     int head = 0, tail = 0;
-    d[m->goal[agent]] = 0;
-    queue[tail++] = m->goal[agent];
+    d[goal] = 0;
+    queue[tail++] = goal;
     while (head < tail) {
         int v = queue[head++];
         for (int k = 0; k < 4; k++) {
@@ -101,8 +130,9 @@ static int find(Mapf *m, const int *q, long long *slot) {
 
 static int grow_table(Mapf *m) {
     long long size = m->table_size * 2;
+    if (m->used + (double)(size - m->table_size) * sizeof(int) > m->budget) { m->truncated = 1; return -1; }
     int *table = malloc((size_t)size * sizeof(int));
-    if (!table) return -1;
+    if (!table) { m->truncated = 1; return -1; }
     for (long long s = 0; s < size; s++) table[s] = -1;
     for (int id = 0; id < m->n_nodes; id++) {
         long long s = (long long)(hash(config(m, id), m->N) & (uint64_t)(size - 1));
@@ -111,6 +141,7 @@ static int grow_table(Mapf *m) {
     }
     free(m->table);
     m->table = table;
+    m->used += (double)(size - m->table_size) * sizeof(int);
     m->table_size = size;
     return 0;
 }
@@ -128,13 +159,7 @@ static long long heuristic(Mapf *m, const int *q) {
 }
 
 static int push_constraint(Mapf *m, int parent, int agent, int vertex, int depth) {
-    if (m->n_pool == m->cap_pool) {
-        long long cap = m->cap_pool ? 2 * m->cap_pool : 1024;
-        Constraint *grown = realloc(m->pool, (size_t)cap * sizeof(Constraint));
-        if (!grown) return -1;
-        m->pool = grown;
-        m->cap_pool = cap;
-    }
+    if (reserve(m, (void **)&m->pool, &m->cap_pool, m->n_pool + 1, sizeof(Constraint)) < 0) return -1;
     Constraint c = {parent, agent, vertex, depth};
     m->pool[m->n_pool] = c;
     return (int)m->n_pool++;
@@ -145,6 +170,27 @@ static const float *sort_pri;
 static int cmp_pri(const void *a, const void *b) {
     float pa = sort_pri[*(const int *)a], pb = sort_pri[*(const int *)b];
     return (pa < pb) - (pa > pb);
+}
+
+/* Room for one more node (and the spare configuration row after it); -1 if over the budget. */
+static int grow_nodes(Mapf *m) {
+    if (m->n_nodes + 1 < m->cap_nodes) return 0;
+    int cap = m->cap_nodes ? 2 * m->cap_nodes : 16;
+    size_t N = (size_t)m->N;
+    double more = (double)(cap - m->cap_nodes) * (double)(sizeof(Node) + 3 * N * sizeof(int));
+    if (m->used + more > m->budget) { m->truncated = 1; return -1; }
+    Node *nodes = realloc(m->nodes, (size_t)cap * sizeof(Node));
+    if (nodes) m->nodes = nodes;
+    int *cfg = realloc(m->cfg, (size_t)cap * N * sizeof(int));
+    if (cfg) m->cfg = cfg;
+    float *pri = realloc(m->pri, (size_t)cap * N * sizeof(float));
+    if (pri) m->pri = pri;
+    int *order = realloc(m->order, (size_t)cap * N * sizeof(int));
+    if (order) m->order = order;
+    if (!nodes || !cfg || !pri || !order) { m->truncated = 1; return -1; }
+    m->cap_nodes = cap;
+    m->used += more;
+    return 0;
 }
 
 /* A new search node for configuration q (already copied at slot n_nodes). */
@@ -167,7 +213,8 @@ static int new_node(Mapf *m, int parent, long long g) {
     node->parent = parent;
     node->g = g;
     node->h = heuristic(m, q);
-    if (iv_push(&node->queue, push_constraint(m, -1, -1, -1, 0)) < 0) return -1;
+    int root = push_constraint(m, -1, -1, -1, 0);
+    if (root < 0 || push(m, &node->queue, root) < 0) { free(node->queue.a); return -1; }
     m->n_nodes++;
     return id;
 }
@@ -237,40 +284,24 @@ static int generate(Mapf *m, int s, int c, int *out) {
     return ok;
 }
 
-static int grow_nodes(Mapf *m) {
-    if (m->n_nodes < m->cap_nodes) return 0;
-    int cap = m->cap_nodes * 2;
-    if (cap > m->max_nodes) cap = m->max_nodes;
-    if (cap <= m->n_nodes) return -1;
-    size_t N = (size_t)m->N;
-    Node *nodes = realloc(m->nodes, (size_t)cap * sizeof(Node));
-    if (nodes) m->nodes = nodes;
-    int *cfg = realloc(m->cfg, (size_t)(cap + 1) * N * sizeof(int));
-    if (cfg) m->cfg = cfg;
-    float *pri = realloc(m->pri, (size_t)cap * N * sizeof(float));
-    if (pri) m->pri = pri;
-    int *order = realloc(m->order, (size_t)cap * N * sizeof(int));
-    if (order) m->order = order;
-    if (!nodes || !cfg || !pri || !order) return -1;
-    m->cap_nodes = cap;
-    return 0;
-}
+static long long bound(const Mapf *m) { return m->solved ? m->best : LLONG_MAX; }
 
-/* Lower g along known edges from node `from` (Dijkstra-like relaxation on a worklist). */
-static void rewire(Mapf *m, ivec *work, int from) {
+/* Lower g along known edges from node `from` (Dijkstra-like relaxation on a worklist); a node whose
+ * g dropped below the bound goes back on the open stack, since its successors may now improve. */
+static void rewire(Mapf *m, int from) {
+    ivec *work = &m->work;
     work->n = 0;
-    iv_push(work, from);
+    if (push(m, work, from) < 0) return;
     while (work->n > 0) {
         int u = work->a[--work->n];
-        Node *nu = &m->nodes[u];
-        for (int e = 0; e < nu->next.n; e++) {
-            int w = nu->next.a[e];
-            long long g = nu->g + cost(m, config(m, u), config(m, w));
+        for (long long e = 0; e < m->nodes[u].next.n; e++) {
+            int w = m->nodes[u].next.a[e];
+            long long g = m->nodes[u].g + cost(m, config(m, u), config(m, w));
             if (g < m->nodes[w].g) {
                 m->nodes[w].g = g;
                 m->nodes[w].parent = u;
-                iv_push(work, w);
-                nu = &m->nodes[u];
+                if (push(m, work, w) < 0) return;
+                if (g + m->nodes[w].h < bound(m) && m->nodes[w].head < m->nodes[w].queue.n) push(m, &m->open, w);
             }
         }
     }
@@ -281,31 +312,18 @@ static int is_goal(Mapf *m, const int *q) {
     return 1;
 }
 
-/* Status: 1 solved and proven optimal (sum of losses), 2 solved (time limit), 0 time limit with no
- * solution, -1 unsolvable (search exhausted or an agent cannot reach its goal), -3 out of memory. */
-static void search(Mapf *m, const int *start, double time_limit, double t0) {
-    int N = m->N;
-    ivec open = {0}, work = {0};
-    long long lower = 0;
-    m->status = -3;
-    if (grow_nodes(m) < 0) goto done;
-    memcpy(config(m, 0), start, (size_t)N * sizeof(int));
-    if (new_node(m, -1, 0) < 0) goto done;
+enum { LACAM_DEADLINE, LACAM_EXHAUSTED, LACAM_FOUND, LACAM_BUDGET };
+
+/* Run the LaCAM(*) loop until `deadline`, an exhausted open stack, or (with stop_at_goal) the goal
+ * configuration's first node; LACAM_BUDGET if the budget refused a node before any solution. */
+static int lacam(Mapf *m, double deadline, int stop_at_goal) {
+    int N = m->N, cand[5];
     long long slot;
-    find(m, start, &slot);
-    m->table[slot] = 0;
-    lower = m->nodes[0].h;
-    if (is_goal(m, start)) { m->goal_node = 0; m->first_time = now() - t0; }
-    if (iv_push(&open, 0) < 0) goto done;
-    int cand[5];
-    long long iterations = 0;
-    while (open.n > 0) {
-        if ((++iterations & 63) == 0 && now() - t0 > time_limit) break;
-        if (m->goal_node >= 0 && m->nodes[m->goal_node].g <= lower) break;  /* optimal */
-        int s = open.a[open.n - 1];
+    for (long long iterations = 0; m->open.n > 0; iterations++) {
+        if ((iterations & 63) == 63 && now() > deadline) return LACAM_DEADLINE;
+        int s = m->open.a[m->open.n - 1];
         Node *ns = &m->nodes[s];
-        if (m->goal_node >= 0 && ns->g + ns->h >= m->nodes[m->goal_node].g) { open.n--; continue; }
-        if (ns->head >= ns->queue.n) { open.n--; continue; }
+        if (ns->g + ns->h >= bound(m) || ns->head >= ns->queue.n) { m->open.n--; continue; }
         int c = ns->queue.a[ns->head++];
         Constraint con = m->pool[c];
         if (con.depth < N) {
@@ -315,45 +333,113 @@ static void search(Mapf *m, const int *start, double time_limit, double t0) {
             for (int k = n - 1; k > 0; k--) { int r = (int)(rnd(m) % (uint64_t)(k + 1)), t = cand[k]; cand[k] = cand[r]; cand[r] = t; }
             for (int k = 0; k < n; k++) {
                 int id = push_constraint(m, c, i, cand[k], con.depth + 1);
-                if (id < 0 || iv_push(&m->nodes[s].queue, id) < 0) goto done;
+                if (id < 0 || push(m, &m->nodes[s].queue, id) < 0) break;  /* truncated */
             }
         }
-        /* the candidate configuration goes into the slot after the last node */
+        /* the candidate configuration goes into the spare row after the last node */
         int *q = config(m, m->n_nodes);
         if (!generate(m, s, c, q)) continue;
         int t = find(m, q, &slot);
         long long step = cost(m, config(m, s), q);
         if (t >= 0) {
-            iv_push(&m->nodes[s].next, t);
+            push(m, &m->nodes[s].next, t);
             if (m->nodes[s].g + step < m->nodes[t].g) {
                 m->nodes[t].g = m->nodes[s].g + step;
                 m->nodes[t].parent = s;
-                rewire(m, &work, t);
+                rewire(m, t);
             }
-            if (iv_push(&open, t) < 0) goto done;  /* revisit it (LaCAM*) */
+            push(m, &m->open, t);  /* revisit it (LaCAM*) */
             continue;
         }
-        if (m->n_nodes + 1 >= m->max_nodes) continue;  /* budget spent: only known nodes */
-        if (grow_nodes(m) < 0) continue;
-        q = config(m, m->n_nodes);  /* may have moved */
-        if (2 * (long long)(m->n_nodes + 1) > m->table_size) {
-            if (grow_table(m) < 0) goto done;
-            find(m, q, &slot);
+        if ((2 * (long long)(m->n_nodes + 1) > m->table_size && grow_table(m) < 0) || grow_nodes(m) < 0) {
+            if (!m->solved && m->goal_node < 0) return LACAM_BUDGET;
+            continue;  /* budget spent: only known nodes from here on */
         }
+        q = config(m, m->n_nodes);  /* the rows may have moved (realloc kept the spare row) */
+        find(m, q, &slot);          /* the table may have grown */
         int id = new_node(m, s, m->nodes[s].g + step);
-        if (id < 0) goto done;
+        if (id < 0) { if (!m->solved && m->goal_node < 0) return LACAM_BUDGET; continue; }
         m->table[slot] = id;
-        iv_push(&m->nodes[s].next, id);
-        if (iv_push(&open, id) < 0) goto done;
-        if (m->goal_node < 0 && is_goal(m, q)) { m->goal_node = id; m->first_time = now() - t0; }
+        push(m, &m->nodes[s].next, id);
+        push(m, &m->open, id);
+        if (m->goal_node < 0 && is_goal(m, q)) {
+            m->goal_node = id;
+            if (stop_at_goal) return LACAM_FOUND;
+        }
     }
-    if (m->goal_node >= 0)
-        m->status = (open.n == 0 || m->nodes[m->goal_node].g <= lower) ? 1 : 2;
-    else
-        m->status = open.n == 0 ? -1 : 0;
-done:
-    free(open.a);
-    free(work.a);
+    return LACAM_EXHAUSTED;
+}
+
+/* If LaCAM*'s goal node got a cheaper path than last taken: its sum of costs, and it becomes the
+ * best solution if lower. -1 out of memory. */
+static int take_lacam_solution(Mapf *m) {
+    if (m->goal_node < 0 || m->nodes[m->goal_node].g >= m->goal_g_taken) return 0;
+    m->goal_g_taken = m->nodes[m->goal_node].g;
+    int length = 0;
+    for (int k = m->goal_node; k >= 0; k = m->nodes[k].parent) length++;
+    int *rows = malloc((size_t)length * m->N * sizeof(int));
+    if (!rows) return -1;
+    int row = length - 1;
+    for (int k = m->goal_node; k >= 0; k = m->nodes[k].parent, row--)
+        memcpy(rows + (size_t)row * m->N, config(m, k), (size_t)m->N * sizeof(int));
+    long long soc = 0;
+    for (int i = 0; i < m->N; i++) {
+        int last = 0;
+        for (int t = 0; t < length; t++) if (rows[(size_t)t * m->N + i] != m->goal[i]) last = t + 1;
+        soc += last;
+    }
+    int status = 0;
+    if (!m->solved || soc < m->best) {
+        status = lns_load(&m->lns, rows, length);
+        if (status == 0) { m->solved = 1; m->best = m->lns.soc; }
+    }
+    free(rows);
+    return status;
+}
+
+/* Status: 1 solved and proven optimal, 2 solved (stopped by the time limit), 0 time limit with no
+ * solution, -1 unsolvable (search exhausted or an agent cannot reach its goal), -3 out of memory. */
+static void search(Mapf *m, const int *start, double deadline, double t0) {
+    m->status = -3;
+    if (grow_nodes(m) < 0) return;
+    memcpy(config(m, 0), start, (size_t)m->N * sizeof(int));
+    if (new_node(m, -1, 0) < 0) return;
+    long long slot;
+    find(m, start, &slot);
+    m->table[slot] = 0;
+    if (push(m, &m->open, 0) < 0) return;
+    int outcome = is_goal(m, start) ? (m->goal_node = 0, LACAM_FOUND) : lacam(m, deadline, 1);
+    if (m->goal_node < 0) {
+        m->status = outcome == LACAM_BUDGET ? -3 : outcome == LACAM_EXHAUSTED && !m->truncated ? -1 : 0;
+        return;
+    }
+    m->first_time = now() - t0;
+    if (take_lacam_solution(m) < 0) return;
+    int lacam_open = outcome != LACAM_EXHAUSTED, lns_alive = 1, optimal = 0;
+    while (now() < deadline) {
+        if (m->best <= m->lower) { optimal = 1; break; }
+        if (lacam_open) {
+            double until = now() + LACAM_SLICE;
+            outcome = lacam(m, until < deadline ? until : deadline, 0);
+            if (take_lacam_solution(m) < 0) lns_alive = 0;
+            if (outcome == LACAM_EXHAUSTED) {
+                lacam_open = 0;
+                if (!m->truncated) { optimal = 1; break; }
+            }
+        }
+        if (lns_alive) {
+            double until = now() + LNS_SLICE;
+            if (until > deadline) until = deadline;
+            while (now() < until) {
+                int done = lns_iterate(&m->lns, until);
+                if (done == -1) { lns_alive = 0; break; }
+            }
+            m->best = m->lns.soc;
+        }
+        if (!lacam_open && !lns_alive) break;
+    }
+    if (m->best <= m->lower) optimal = 1;
+    m->status = optimal ? 1 : 2;
 }
 
 /* Solve: adj (V x 4), starts/goals (N vertices). Returns a handle to read the result from. */
@@ -364,62 +450,63 @@ void *mapf_solve(int V, const int *adj, int N, const int *start, const int *goal
     if (!m) return NULL;
     m->V = V; m->N = N; m->adj = adj; m->goal = goal;
     m->rng = seed * 2654435761ULL + 88172645463325252ULL;
-    m->goal_node = -1; m->first_time = -1.0; m->status = -3;
-    m->dist = malloc((size_t)N * V * sizeof(int));
+    m->goal_node = -1; m->goal_g_taken = LLONG_MAX; m->first_time = -1.0; m->status = -3;
+    m->budget = memory_bytes;
+    /* tables over the budget: one row, for the lower bound and the reachability verdict alone */
+    m->table_size = 1 << 10;
+    double tables = (double)N * V * sizeof(int) + (double)m->table_size * sizeof(int);
+    int fits = tables <= m->budget;
+    m->used = fits ? tables : (double)V * sizeof(int);
+    m->dist = malloc((size_t)(fits ? N : 1) * V * sizeof(int));
     int *queue = malloc((size_t)V * sizeof(int));
     m->occ_now = malloc((size_t)V * sizeof(int));
     m->occ_next = malloc((size_t)V * sizeof(int));
     m->stamp = calloc((size_t)V, sizeof(int));
     m->nxt = malloc((size_t)N * sizeof(int));
-    m->table_size = 1 << 12;
     m->table = malloc((size_t)m->table_size * sizeof(int));
-    double per_node = 12.0 * N + sizeof(Node) + 64.0;
-    m->max_nodes = memory_bytes / per_node > 2e9 ? 2000000000 : (int)(memory_bytes / per_node);
-    m->cap_nodes = 0;
-    if (!m->dist || !queue || !m->occ_now || !m->occ_next || !m->stamp || !m->nxt || !m->table) {
-        free(queue);
-        return m;
-    }
-    m->cap_nodes = 1;
-    if (m->max_nodes < 2) m->max_nodes = 2;
-    m->nodes = malloc(sizeof(Node));
-    m->cfg = malloc(2 * (size_t)N * sizeof(int));
-    m->pri = malloc((size_t)N * sizeof(float));
-    m->order = malloc((size_t)N * sizeof(int));
+    int ready = m->dist && queue && m->occ_now && m->occ_next && m->stamp && m->nxt && m->table
+                && lns_init(&m->lns, V, N, adj, goal, NULL, seed) == 0;
+    if (!ready) { free(queue); return m; }
     for (long long s = 0; s < m->table_size; s++) m->table[s] = -1;
     for (int v = 0; v < V; v++) { m->occ_now[v] = -1; m->occ_next[v] = -1; }
     int reachable = 1;
     for (int i = 0; i < N; i++) {
-        bfs(m, i, queue);
-        if (m->dist[(size_t)i * V + start[i]] < 0) reachable = 0;
+        int *d = m->dist + (fits ? (size_t)i * V : 0);
+        bfs(m, goal[i], d, queue);
+        if (d[start[i]] < 0) reachable = 0;
+        else m->lower += d[start[i]];
     }
     free(queue);
-    if (!m->nodes || !m->cfg || !m->pri || !m->order) return m;
+    m->lns.dist = m->dist;
     if (!reachable) { m->status = -1; return m; }
-    search(m, start, time_limit, t0);
-    if (m->goal_node >= 0) {
-        int length = 0;
-        for (int k = m->goal_node; k >= 0; k = m->nodes[k].parent) length++;
-        m->path = malloc((size_t)length * N * sizeof(int));
+    if (!fits) { m->truncated = 1; m->status = -3; return m; }
+    search(m, start, t0 + time_limit, t0);
+    if (m->solved) {
+        int makespan = 0;
+        for (int i = 0; i < N; i++) if (m->lns.cost[i] > makespan) makespan = m->lns.cost[i];
+        m->path = malloc((size_t)(makespan + 1) * N * sizeof(int));
         if (!m->path) { m->status = -3; return m; }
-        m->length = length;
-        int row = length - 1;
-        for (int k = m->goal_node; k >= 0; k = m->nodes[k].parent, row--)
-            memcpy(m->path + (size_t)row * N, config(m, k), (size_t)N * sizeof(int));
+        m->length = makespan + 1;
+        for (int t = 0; t <= makespan; t++)
+            for (int i = 0; i < N; i++) m->path[(size_t)t * N + i] = lns_at(&m->lns, i, t);
     }
     return m;
 }
+
 
 int mapf_status(const void *handle) { return handle ? ((const Mapf *)handle)->status : -3; }
 int mapf_length(const void *handle) { return handle ? ((const Mapf *)handle)->length : 0; }
 double mapf_first_time(const void *handle) { return handle ? ((const Mapf *)handle)->first_time : -1.0; }
 int mapf_nodes(const void *handle) { return handle ? ((const Mapf *)handle)->n_nodes : 0; }
+double mapf_bytes(const void *handle) { return handle ? ((const Mapf *)handle)->used : 0.0; }
+long long mapf_lns_iterations(const void *handle) { return handle ? ((const Mapf *)handle)->lns.iterations : 0; }
 
-/* Copy the solution (length x N vertices) and the agents' goal distances from their starts. */
-void mapf_copy(const void *handle, int *path, int *start_distance, const int *start) {
+long long mapf_lower(const void *handle) { return handle ? ((const Mapf *)handle)->lower : 0; }
+
+/* Copy the solution: length x N vertices. */
+void mapf_copy(const void *handle, int *path) {
     const Mapf *m = handle;
     if (m->path) memcpy(path, m->path, (size_t)m->length * m->N * sizeof(int));
-    for (int i = 0; i < m->N; i++) start_distance[i] = m->dist ? m->dist[(size_t)i * m->V + start[i]] : -1;
 }
 
 void mapf_free(void *handle) {
@@ -427,6 +514,8 @@ void mapf_free(void *handle) {
     if (!m) return;
     for (int k = 0; k < m->n_nodes; k++) { free(m->nodes[k].queue.a); free(m->nodes[k].next.a); }
     free(m->nodes); free(m->cfg); free(m->pri); free(m->order); free(m->pool); free(m->table);
+    free(m->open.a); free(m->work.a);
     free(m->dist); free(m->occ_now); free(m->occ_next); free(m->stamp); free(m->nxt); free(m->path);
+    lns_free(&m->lns);
     free(m);
 }

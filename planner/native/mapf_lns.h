@@ -1,0 +1,485 @@
+/* Large neighbourhood search for MAPF (Li et al., IJCAI 2021: anytime MAPF via LNS): keep a
+ * solution; repeatedly take a few agents out (a neighbourhood), replan them one after the other in
+ * random order with space-time A* against everyone else's paths, and keep the new paths if their
+ * sum of costs is lower. Neighbourhoods come from three rules, chosen by adaptive weights: the
+ * agents met by a random walk that could shorten the most delayed agent's path, the agents passing
+ * near a random intersection, and random agents.
+ *
+ * Agent i's path is p[0..c_i], c_i its cost (the time it reaches its goal for the last time); it
+ * rests on its goal from c_i on. Occupancy: the (time, agent) visits of the steps t < c_j of the
+ * paths, per vertex and in a hash table keyed by (time, vertex), and per vertex the time from which
+ * an agent rests there.
+ */
+#include <limits.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#define LNS_HOOD 8               /* agents per neighbourhood (Li et al.'s default) */
+#define LNS_REACTION 0.01        /* adaptive weights: w <- r * improvement + (1 - r) * w */
+#define LNS_RULES 3
+
+typedef struct { int t, agent; } Visit;
+typedef struct { Visit *a; int n, cap; } Visits;
+typedef struct { int v, t, parent; } StNode;
+
+typedef struct {
+    int V, N;
+    const int *adj, *goal, *dist;   /* adj V x 4; dist N x V */
+    int **path, *cost;              /* per agent: p[0..cost] */
+    Visits *visits;                 /* per vertex */
+    long long *occ_key; int *occ_agent, occ_size, occ_count;  /* (t, v) -> agent, -1 = empty slot */
+    int *rest_from;                 /* per vertex: time its goal's agent rests from, INT_MAX if none */
+    int *goal_agent;                /* per vertex: the agent whose goal it is, -1 if none */
+    long long soc, iterations;
+    uint64_t rng;
+    double weight[LNS_RULES];
+    int *hood, n_hood; char *in_hood, *tabu; int n_tabu;
+    int **saved_path, *saved_cost;
+    int *intersections, n_intersections;
+    int *bfs_queue; int *bfs_stamp, bfs_gen;
+    /* space-time A*: nodes, binary heap of node ids, hash set of the (t, v) generated */
+    StNode *st; int st_n, st_cap;
+    int *heap, heap_n, heap_cap;
+    long long *keys; int *stamp, table_size, generation;
+    int expansion_cap, settle;      /* settle: the searched agent may rest on its goal from then on */
+} Lns;
+
+static double clock_now(void) {
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+static uint64_t lns_rnd(Lns *l) {
+    l->rng ^= l->rng << 13; l->rng ^= l->rng >> 7; l->rng ^= l->rng << 17;
+    return l->rng;
+}
+
+static int lns_at(const Lns *l, int agent, int t) {
+    return t < l->cost[agent] ? l->path[agent][t] : l->goal[agent];
+}
+
+static long long st_key(const Lns *l, int v, int t) { return (long long)t * l->V + v; }
+
+static uint64_t slot_of(long long key, int size) {
+    uint64_t h = (uint64_t)key * 0x9E3779B97F4A7C15ULL;
+    return (h ^ (h >> 31)) & (uint64_t)(size - 1);
+}
+
+static int occ_find(const Lns *l, long long key) {
+    uint64_t mask = (uint64_t)l->occ_size - 1;
+    for (uint64_t s = slot_of(key, l->occ_size);; s = (s + 1) & mask) {
+        if (l->occ_agent[s] < 0) return -1;
+        if (l->occ_key[s] == key) return (int)s;
+    }
+}
+
+static int occ_put(Lns *l, long long key, int agent) {
+    if (2 * (l->occ_count + 1) > l->occ_size) {
+        int size = 2 * l->occ_size;
+        long long *keys = malloc((size_t)size * sizeof(long long));
+        int *agents = malloc((size_t)size * sizeof(int));
+        if (!keys || !agents) { free(keys); free(agents); return -1; }
+        for (int s = 0; s < size; s++) agents[s] = -1;
+        for (int s = 0; s < l->occ_size; s++) {
+            if (l->occ_agent[s] < 0) continue;
+            uint64_t t = slot_of(l->occ_key[s], size);
+            while (agents[t] >= 0) t = (t + 1) & (uint64_t)(size - 1);
+            keys[t] = l->occ_key[s]; agents[t] = l->occ_agent[s];
+        }
+        free(l->occ_key); free(l->occ_agent);
+        l->occ_key = keys; l->occ_agent = agents; l->occ_size = size;
+    }
+    uint64_t s = slot_of(key, l->occ_size);
+    while (l->occ_agent[s] >= 0) s = (s + 1) & (uint64_t)(l->occ_size - 1);
+    l->occ_key[s] = key;
+    l->occ_agent[s] = agent;
+    l->occ_count++;
+    return 0;
+}
+
+/* Linear probing's deletion: later entries of the probe run shift back into the hole. */
+static void occ_remove(Lns *l, long long key) {
+    int hole = occ_find(l, key);
+    if (hole < 0) return;
+    uint64_t mask = (uint64_t)l->occ_size - 1, i = (uint64_t)hole;
+    for (uint64_t j = (i + 1) & mask; l->occ_agent[j] >= 0; j = (j + 1) & mask) {
+        uint64_t home = slot_of(l->occ_key[j], l->occ_size);
+        if (((j - home) & mask) >= ((j - i) & mask)) {  /* home not in (i, j]: it may fill i */
+            l->occ_key[i] = l->occ_key[j];
+            l->occ_agent[i] = l->occ_agent[j];
+            i = j;
+        }
+    }
+    l->occ_agent[i] = -1;
+    l->occ_count--;
+}
+
+static int visits_add(Visits *list, int t, int agent) {
+    if (list->n == list->cap) {
+        int cap = list->cap ? 2 * list->cap : 4;
+        Visit *grown = realloc(list->a, (size_t)cap * sizeof(Visit));
+        if (!grown) return -1;
+        list->a = grown;
+        list->cap = cap;
+    }
+    list->a[list->n].t = t;
+    list->a[list->n].agent = agent;
+    list->n++;
+    return 0;
+}
+
+static void lns_unvisit(Lns *l, int agent, int steps) {
+    for (int t = 0; t < steps; t++) {
+        occ_remove(l, st_key(l, l->path[agent][t], t));
+        Visits *list = &l->visits[l->path[agent][t]];
+        for (int k = 0; k < list->n; k++)
+            if (list->a[k].agent == agent && list->a[k].t == t) { list->a[k] = list->a[--list->n]; break; }
+    }
+}
+
+/* Enter agent's path into the tables; -1 (tables unchanged) if out of memory. */
+static int lns_occupy(Lns *l, int agent) {
+    for (int t = 0; t < l->cost[agent]; t++)
+        if (visits_add(&l->visits[l->path[agent][t]], t, agent) < 0
+            || occ_put(l, st_key(l, l->path[agent][t], t), agent) < 0) { lns_unvisit(l, agent, t + 1); return -1; }
+    l->rest_from[l->goal[agent]] = l->cost[agent];
+    l->soc += l->cost[agent];
+    return 0;
+}
+
+static void lns_vacate(Lns *l, int agent) {
+    lns_unvisit(l, agent, l->cost[agent]);
+    l->rest_from[l->goal[agent]] = INT_MAX;
+    l->soc -= l->cost[agent];
+}
+
+/* The agent at vertex v at time t, -1 if none (agent i itself is never in the tables then). */
+static int lns_occupant(const Lns *l, int v, int t) {
+    int s = occ_find(l, st_key(l, v, t));
+    return s < 0 ? -1 : l->occ_agent[s];
+}
+
+static int lns_last_visit(const Lns *l, int v) {
+    int last = -1;
+    const Visits *list = &l->visits[v];
+    for (int k = 0; k < list->n; k++) if (list->a[k].t > last) last = list->a[k].t;
+    return last;
+}
+
+/* Replace agent's path by a copy of p[0..cost]. */
+static int lns_set_path(Lns *l, int agent, const int *p, int cost) {
+    int *copy = malloc((size_t)(cost + 1) * sizeof(int));
+    if (!copy) return -1;
+    memcpy(copy, p, (size_t)(cost + 1) * sizeof(int));
+    free(l->path[agent]);
+    l->path[agent] = copy;
+    l->cost[agent] = cost;
+    return 0;
+}
+
+/* Load a solution given as `length` configurations (rows of N vertices). */
+static int lns_load(Lns *l, const int *rows, int length) {
+    for (int i = 0; i < l->N; i++) if (l->path[i]) lns_vacate(l, i);
+    int *column = malloc((size_t)length * sizeof(int));
+    if (!column) return -1;
+    for (int i = 0; i < l->N; i++) {
+        int cost = 0;
+        for (int t = 0; t < length; t++) {
+            column[t] = rows[(size_t)t * l->N + i];
+            if (column[t] != l->goal[i]) cost = t + 1;
+        }
+        if (lns_set_path(l, i, column, cost) < 0 || lns_occupy(l, i) < 0) { free(column); return -1; }
+    }
+    free(column);
+    return 0;
+}
+
+static int lns_init(Lns *l, int V, int N, const int *adj, const int *goal, const int *dist, uint64_t seed) {
+    memset(l, 0, sizeof(*l));
+    l->V = V; l->N = N; l->adj = adj; l->goal = goal; l->dist = dist;
+    l->rng = seed * 0x9E3779B97F4A7C15ULL + 1442695040888963407ULL;
+    for (int r = 0; r < LNS_RULES; r++) l->weight[r] = 1.0;
+    l->path = calloc((size_t)N, sizeof(int *));
+    l->saved_path = calloc((size_t)N, sizeof(int *));
+    l->cost = calloc((size_t)N, sizeof(int));
+    l->saved_cost = calloc((size_t)N, sizeof(int));
+    l->hood = malloc((size_t)N * sizeof(int));
+    l->in_hood = calloc((size_t)N, 1);
+    l->tabu = calloc((size_t)N, 1);
+    l->visits = calloc((size_t)V, sizeof(Visits));
+    l->rest_from = malloc((size_t)V * sizeof(int));
+    l->goal_agent = malloc((size_t)V * sizeof(int));
+    l->intersections = malloc((size_t)V * sizeof(int));
+    l->bfs_queue = malloc((size_t)V * sizeof(int));
+    l->bfs_stamp = calloc((size_t)V, sizeof(int));
+    l->table_size = 1 << 14;
+    l->keys = malloc((size_t)l->table_size * sizeof(long long));
+    l->stamp = calloc((size_t)l->table_size, sizeof(int));
+    l->occ_size = 1 << 12;
+    l->occ_key = malloc((size_t)l->occ_size * sizeof(long long));
+    l->occ_agent = malloc((size_t)l->occ_size * sizeof(int));
+    l->expansion_cap = 20 * V + 100000;
+    if (!l->path || !l->saved_path || !l->cost || !l->saved_cost || !l->hood || !l->in_hood || !l->tabu
+        || !l->visits || !l->rest_from || !l->intersections || !l->bfs_queue || !l->bfs_stamp || !l->keys
+        || !l->stamp || !l->goal_agent || !l->occ_key || !l->occ_agent) return -1;
+    for (int k = 0; k < l->occ_size; k++) l->occ_agent[k] = -1;
+    for (int v = 0; v < V; v++) {
+        l->rest_from[v] = INT_MAX;
+        l->goal_agent[v] = -1;
+        int degree = 0;
+        for (int k = 0; k < 4; k++) degree += adj[4 * v + k] >= 0;
+        if (degree >= 3) l->intersections[l->n_intersections++] = v;
+    }
+    for (int i = 0; i < N; i++) l->goal_agent[goal[i]] = i;
+    return 0;
+}
+
+static void lns_free(Lns *l) {
+    for (int i = 0; l->path && i < l->N; i++) { free(l->path[i]); if (l->saved_path) free(l->saved_path[i]); }
+    for (int v = 0; l->visits && v < l->V; v++) free(l->visits[v].a);
+    free(l->path); free(l->saved_path); free(l->cost); free(l->saved_cost); free(l->hood); free(l->in_hood);
+    free(l->tabu); free(l->visits); free(l->rest_from); free(l->goal_agent); free(l->intersections); free(l->bfs_queue);
+    free(l->bfs_stamp); free(l->occ_key); free(l->occ_agent); free(l->st); free(l->heap); free(l->keys); free(l->stamp);
+}
+
+/* -- space-time A* ------------------------------------------------------------------------------- */
+
+
+/* A slot is in use if its stamp is the current generation: a new search clears the table in O(1). */
+static int st_seen(const Lns *l, long long key) {
+    for (uint64_t s = slot_of(key, l->table_size);; s = (s + 1) & (uint64_t)(l->table_size - 1)) {
+        if (l->stamp[s] != l->generation) return 0;
+        if (l->keys[s] == key) return 1;
+    }
+}
+
+static int st_insert(Lns *l, long long key) {
+    if (2 * (l->st_n + 1) > l->table_size) {
+        int size = 2 * l->table_size;
+        long long *keys = malloc((size_t)size * sizeof(long long));
+        int *stamp = calloc((size_t)size, sizeof(int));
+        if (!keys || !stamp) { free(keys); free(stamp); return -1; }
+        for (int k = 0; k < l->st_n; k++) {
+            long long old = st_key(l, l->st[k].v, l->st[k].t);
+            uint64_t s = slot_of(old, size);
+            while (stamp[s] == 1) s = (s + 1) & (uint64_t)(size - 1);
+            keys[s] = old; stamp[s] = 1;
+        }
+        free(l->keys); free(l->stamp);
+        l->keys = keys; l->stamp = stamp; l->table_size = size; l->generation = 1;
+    }
+    uint64_t s = slot_of(key, l->table_size);
+    while (l->stamp[s] == l->generation) s = (s + 1) & (uint64_t)(l->table_size - 1);
+    l->keys[s] = key;
+    l->stamp[s] = l->generation;
+    return 0;
+}
+
+/* Heap order: f = max(t + goal distance, settle) ascending (consistent: the agent cannot rest on
+ * its goal before settle), then later t first (deeper nodes: fewer ties re-expanded). */
+static int st_before(const Lns *l, int agent, int a, int b) {
+    const StNode *x = &l->st[a], *y = &l->st[b];
+    const int *d = l->dist + (size_t)agent * l->V;
+    int fx = x->t + d[x->v], fy = y->t + d[y->v];
+    if (fx < l->settle) fx = l->settle;
+    if (fy < l->settle) fy = l->settle;
+    return fx < fy || (fx == fy && (x->t > y->t || (x->t == y->t && d[x->v] < d[y->v])));
+}
+
+static int st_push(Lns *l, int agent, int v, int t, int parent) {
+    if (l->st_n == l->st_cap) {
+        int cap = l->st_cap ? 2 * l->st_cap : 1024;
+        StNode *grown = realloc(l->st, (size_t)cap * sizeof(StNode));
+        if (!grown) return -1;
+        l->st = grown; l->st_cap = cap;
+    }
+    if (l->heap_n == l->heap_cap) {
+        int cap = l->heap_cap ? 2 * l->heap_cap : 1024;
+        int *grown = realloc(l->heap, (size_t)cap * sizeof(int));
+        if (!grown) return -1;
+        l->heap = grown; l->heap_cap = cap;
+    }
+    int id = l->st_n;
+    if (st_insert(l, st_key(l, v, t)) < 0) return -1;
+    l->st[id].v = v; l->st[id].t = t; l->st[id].parent = parent;
+    l->st_n++;
+    int k = l->heap_n++;
+    while (k > 0 && st_before(l, agent, id, l->heap[(k - 1) / 2])) { l->heap[k] = l->heap[(k - 1) / 2]; k = (k - 1) / 2; }
+    l->heap[k] = id;
+    return 0;
+}
+
+static int st_pop(Lns *l, int agent) {
+    int top = l->heap[0], last = l->heap[--l->heap_n], k = 0;
+    for (;;) {
+        int child = 2 * k + 1;
+        if (child >= l->heap_n) break;
+        if (child + 1 < l->heap_n && st_before(l, agent, l->heap[child + 1], l->heap[child])) child++;
+        if (!st_before(l, agent, l->heap[child], last)) break;
+        l->heap[k] = l->heap[child];
+        k = child;
+    }
+    if (l->heap_n > 0) l->heap[k] = last;
+    return top;
+}
+
+/* Shortest path of `agent` from `start` against the paths in the tables, into path[agent] (a new
+ * array). 0 found, 1 none within the expansion cap or the horizon, 2 deadline, -1 out of memory. */
+static int st_astar(Lns *l, int agent, int start, double deadline) {
+    l->st_n = 0; l->heap_n = 0;
+    l->generation++;
+    int goal = l->goal[agent], settle = lns_last_visit(l, goal) + 1, horizon = 0;
+    l->settle = settle;
+    for (int j = 0; j < l->N; j++) if (l->cost[j] > horizon) horizon = l->cost[j];
+    horizon += l->V;
+    if (st_push(l, agent, start, 0, -1) < 0) return -1;
+    for (int expanded = 0; l->heap_n > 0 && expanded < l->expansion_cap; expanded++) {
+        if ((expanded & 4095) == 4095 && clock_now() > deadline) return 2;
+        int id = st_pop(l, agent);
+        StNode node = l->st[id];
+        if (node.v == goal && node.t >= settle) {
+            int *out = malloc((size_t)(node.t + 1) * sizeof(int));
+            if (!out) return -1;
+            for (int k = id; k >= 0; k = l->st[k].parent) out[l->st[k].t] = l->st[k].v;
+            l->path[agent] = out;
+            l->cost[agent] = node.t;
+            return 0;
+        }
+        if (node.t >= horizon) continue;
+        int t = node.t + 1;
+        for (int k = 0; k <= 4; k++) {
+            int u = k < 4 ? l->adj[4 * node.v + k] : node.v;
+            if (u < 0 || l->rest_from[u] <= t || l->dist[(size_t)agent * l->V + u] < 0) continue;
+            if (lns_occupant(l, u, t) >= 0) continue;
+            int other = lns_occupant(l, u, node.t);            /* swap: other goes u -> v */
+            if (other >= 0 && u != node.v && lns_at(l, other, t) == node.v) continue;
+            long long key = st_key(l, u, t);
+            if (st_seen(l, key)) continue;
+            if (st_push(l, agent, u, t, id) < 0) return -1;
+        }
+    }
+    return 1;
+}
+
+/* -- neighbourhoods ------------------------------------------------------------------------------- */
+
+static void hood_add(Lns *l, int agent) {
+    if (agent < 0 || l->in_hood[agent] || l->n_hood >= LNS_HOOD) return;
+    l->in_hood[agent] = 1;
+    l->hood[l->n_hood++] = agent;
+}
+
+static int resting_at(const Lns *l, int v, int t) {
+    return l->rest_from[v] <= t ? l->goal_agent[v] : -1;
+}
+
+/* The agents met by random walks in space-time from the most delayed agent's path that could still
+ * reach its goal earlier than it now does. */
+static void hood_random_walk(Lns *l) {
+    int chosen = -1, worst = -1;
+    if (l->n_tabu >= l->N) { memset(l->tabu, 0, (size_t)l->N); l->n_tabu = 0; }
+    for (int i = 0; i < l->N; i++) {
+        int delay = l->cost[i] - l->dist[(size_t)i * l->V + l->path[i][0]];
+        if (!l->tabu[i] && delay > worst) { worst = delay; chosen = i; }
+    }
+    l->tabu[chosen] = 1;
+    l->n_tabu++;
+    hood_add(l, chosen);
+    if (l->cost[chosen] == 0) return;
+    const int *d = l->dist + (size_t)chosen * l->V;
+    for (int walk = 0; walk < 16 && l->n_hood < LNS_HOOD; walk++) {
+        int t = (int)(lns_rnd(l) % (uint64_t)l->cost[chosen]), v = l->path[chosen][t];
+        for (int step = 0; step < l->cost[chosen] && l->n_hood < LNS_HOOD; step++) {
+            int options[5], n = 0;
+            for (int k = 0; k <= 4; k++) {
+                int u = k < 4 ? l->adj[4 * v + k] : v;
+                if (u >= 0 && t + 1 + d[u] < l->cost[chosen]) options[n++] = u;
+            }
+            if (n == 0) break;
+            v = options[lns_rnd(l) % (uint64_t)n];
+            t++;
+            hood_add(l, lns_occupant(l, v, t));
+            hood_add(l, resting_at(l, v, t));
+        }
+    }
+}
+
+/* The agents whose paths pass the cells nearest (breadth first) to a random intersection. */
+static void hood_intersection(Lns *l) {
+    if (l->n_intersections == 0) return;
+    int head = 0, tail = 0, seed = l->intersections[lns_rnd(l) % (uint64_t)l->n_intersections];
+    l->bfs_gen++;
+    l->bfs_queue[tail++] = seed;
+    l->bfs_stamp[seed] = l->bfs_gen;
+    while (head < tail && l->n_hood < LNS_HOOD && head < 4 * LNS_HOOD * LNS_HOOD) {
+        int v = l->bfs_queue[head++];
+        const Visits *list = &l->visits[v];
+        for (int k = 0; k < list->n; k++) hood_add(l, list->a[k].agent);
+        hood_add(l, resting_at(l, v, INT_MAX - 1));
+        for (int k = 0; k < 4; k++) {
+            int u = l->adj[4 * v + k];
+            if (u >= 0 && l->bfs_stamp[u] != l->bfs_gen) { l->bfs_stamp[u] = l->bfs_gen; l->bfs_queue[tail++] = u; }
+        }
+    }
+}
+
+static int pick_rule(Lns *l) {
+    double total = 0.0;
+    for (int r = 0; r < LNS_RULES; r++) total += l->weight[r];
+    double x = (double)(lns_rnd(l) >> 11) * (1.0 / 9007199254740992.0) * total;
+    for (int r = 0; r < LNS_RULES - 1; r++) { if (x < l->weight[r]) return r; x -= l->weight[r]; }
+    return LNS_RULES - 1;
+}
+
+/* One LNS iteration: 1 improved, 0 not, 2 deadline, -1 out of memory (the solution is kept). */
+static int lns_iterate(Lns *l, double deadline) {
+    int rule = pick_rule(l);
+    l->n_hood = 0;
+    if (rule == 0) hood_random_walk(l);
+    else if (rule == 1) hood_intersection(l);
+    while (l->n_hood < LNS_HOOD && l->n_hood < l->N) hood_add(l, (int)(lns_rnd(l) % (uint64_t)l->N));
+    for (int k = l->n_hood - 1; k > 0; k--) {   /* random planning order */
+        int r = (int)(lns_rnd(l) % (uint64_t)(k + 1)), t = l->hood[k];
+        l->hood[k] = l->hood[r]; l->hood[r] = t;
+    }
+    long long before = l->soc, rest = 0;
+    for (int k = 0; k < l->n_hood; k++) {
+        int i = l->hood[k];
+        lns_vacate(l, i);
+        l->saved_path[i] = l->path[i];
+        l->saved_cost[i] = l->cost[i];
+        rest += l->dist[(size_t)i * l->V + l->path[i][0]];
+    }
+    int planned = 0, status = 0;   /* the first `planned` members hold new, entered paths */
+    for (; planned < l->n_hood; planned++) {
+        int i = l->hood[planned];
+        rest -= l->dist[(size_t)i * l->V + l->path[i][0]];
+        status = st_astar(l, i, l->saved_path[i][0], deadline);
+        if (status != 0) break;
+        if (lns_occupy(l, i) < 0) { status = -1; break; }
+        if (l->soc + rest >= before) { status = 1; planned++; break; }  /* cannot beat the old paths */
+    }
+    int improved = status == 0 && l->soc < before;
+    l->iterations++;
+    for (int k = 0; k < l->n_hood; k++) {
+        int i = l->hood[k];
+        if (improved) {
+            free(l->saved_path[i]);
+        } else {
+            /* the old paths go back; the visit lists held them before, so no list grows here */
+            if (k < planned) lns_vacate(l, i);
+            if (l->path[i] != l->saved_path[i]) free(l->path[i]);
+            l->path[i] = l->saved_path[i];
+            l->cost[i] = l->saved_cost[i];
+            lns_occupy(l, i);
+        }
+        l->saved_path[i] = NULL;
+        l->in_hood[i] = 0;
+    }
+    double gain = improved ? (double)(before - l->soc) : 0.0;
+    l->weight[rule] = LNS_REACTION * gain + (1.0 - LNS_REACTION) * l->weight[rule];
+    return status == -1 || status == 2 ? status : improved;
+}
