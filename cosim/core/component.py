@@ -45,7 +45,8 @@ class NativeStep:
     Addresses are plain integers (C pointers). `fmi_version` selects the calling convention of the
     FMI get/set/doStep functions. `groups` lists every get/set call of a step: (direction "set" or
     "get", kind "real"/"integer"/"boolean", function, value references, reference count, value
-    count, FMI value array, direct (the array is the component's buffer), buffer slots, scales).
+    count, FMI value array, direct (the array is the component's buffer), buffer slots, scales); the
+    kinds beyond those three are `cosim.core.kernel.KINDS`.
     `fail(call, status, t, kind)` raises the component's `CosimError` for a call (0 set, 1 doStep,
     2 get, 3 asked to terminate, 4 an output not finite: `status` is its slot) that the kernel
     stopped at. After each get the kernel checks that the outputs at `finite_outputs` are finite
@@ -65,18 +66,27 @@ class NativeStep:
 
 @dataclass(frozen=True, init=False)
 class Port:
-    """A scalar port: name, FMI-like type (`real`, `integer`, `boolean`), unit, start value."""
+    """A scalar port: name, FMI-like type (`real`, `integer`, `boolean`), unit, start value, and
+    for an FMU's port the FMI type that moves it (`fmi_type`: "Float32", "Int64", ...; see
+    `cosim.fmi.types`; "" for other components' ports)."""
 
     name: str
     type: str = "real"
     unit: str = ""
     description: str = ""
     start: float = 0.0
+    fmi_type: str = ""
     array_name: str | None = field(default=None, init=False, compare=False)
     array_index: tuple[int, ...] | None = field(default=None, init=False, compare=False)
 
     def __init__(
-        self, name: str, type: str = "real", unit: str = "", description: str = "", start: float = 0.0
+        self,
+        name: str,
+        type: str = "real",
+        unit: str = "",
+        description: str = "",
+        start: float = 0.0,
+        fmi_type: str = "",
     ) -> None:
         # Written out (not generated) because a run makes ~10,000 ports: the generated __init__ of a
         # frozen dataclass sets each field through object.__setattr__ and parsed every name anew.
@@ -89,6 +99,7 @@ class Port:
             unit=unit,
             description=description,
             start=start,
+            fmi_type=fmi_type,
             array_name=array_name,
             array_index=array_index,
         )

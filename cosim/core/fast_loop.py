@@ -109,7 +109,7 @@ class KernelTables:
                     ) = call
                     groups.append(
                         (
-                            {"real": K.KIND_REAL, "integer": K.KIND_INTEGER, "boolean": K.KIND_BOOLEAN}[kind],
+                            K.KINDS.index(kind),
                             function, refs, ref_count, value_count, values, int(direct),
                             len(slots), len(call_slots),
                         )

@@ -44,6 +44,21 @@ G_SLOT_FIRST, G_SLOT_COUNT = 7, 8
 GROUP_COLUMNS = 9
 KIND_REAL, KIND_INTEGER, KIND_BOOLEAN = 0, 1, 2
 RESULT_SIZE = 7  # int64 elements of the result: code, step, position, component, call, status, kind
+# Every group kind by its code (kernel.c's KIND_*): real double, integer int32, boolean, then FMI 3.0's
+# other numeric types (an int64 or uint64 beyond 2^53 is read as NaN, for the output check to stop at).
+KINDS = (
+    "real",
+    "integer",
+    "boolean",
+    "float32",
+    "int8",
+    "uint8",
+    "int16",
+    "uint16",
+    "uint32",
+    "int64",
+    "uint64",
+)
 # Failure calls (as `NativeStep.fail`): 0 set, 1 doStep, 2 get, 3 asked to terminate, 4 not finite.
 
 

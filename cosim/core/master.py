@@ -70,7 +70,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from cosim.core import fast_loop
-from cosim.core.component import Component, State, closest_names
+from cosim.core.component import Component, Port, State, closest_names
+from cosim.core.port_types import connection_problem
 from cosim.errors import CosimError
 
 if TYPE_CHECKING:
@@ -139,6 +140,11 @@ class Connection:
         return self.target.split(".", 1)[0]
 
 
+def _typed(port: Port) -> str:
+    """A port's type as a connection message names it."""
+    return port.fmi_type or port.type
+
+
 # A connection into a component, resolved (`System.links`): connection, producer, output index, input index.
 Link = tuple[Connection, str, int, int]
 
@@ -192,8 +198,14 @@ class System:
 
     def connect(self, source: str, target: str, scale: float = 1.0, offset: float = 0.0) -> Connection:
         """Connect output `source` ("comp.port") to input `target`: input = output * scale + offset."""
-        self.resolve(source, "output")
-        self.resolve(target, "input")
+        producer, output = self.resolve(source, "output")
+        consumer, input_ = self.resolve(target, "input")
+        problem = connection_problem(producer.outputs[output], consumer.inputs[input_])
+        if problem is not None:
+            raise CosimError(
+                f"connection {source} ({_typed(producer.outputs[output])}) -> {target} "
+                f"({_typed(consumer.inputs[input_])}) cannot convert: {problem}"
+            )
         if target in self._targets:
             raise CosimError(f"input '{target}' is already connected")
         if not (math.isfinite(scale) and math.isfinite(offset)):
@@ -707,7 +719,7 @@ class Master:
             if code == kernel.FAILED:
                 try:
                     native = tables.native[failed]
-                    kind_name = ("real", "integer", "boolean")[kind]
+                    kind_name = kernel.KINDS[kind]
                     native.fail(
                         call, status, None if call in (0, 2) else (start_ns + k * h_ns) / NS_PER_S, kind_name
                     )

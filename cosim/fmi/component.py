@@ -65,20 +65,16 @@ from cosim.core.component import Component, NativeStep, Port, State, check_uniqu
 from cosim.errors import CosimError
 from cosim.fmi.archive import check_unpacked_size
 from cosim.fmi.builtin import documented_nan_variables
+from cosim.fmi.types import C_TYPES, KINDS, TRANSFER_TYPES, WIDE, check_integer, exact_as_float, transfer_type
 
 _STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
-_TYPES = {
-    "Real": "real",
-    "Float64": "real",
-    "Integer": "integer",
-    "Enumeration": "integer",
-    "Int32": "integer",
+# Transfer types as the compiled kernel's group kinds (`cosim.core.kernel.KINDS`).
+_KERNEL_TYPES = {2: {"Real": "real", "Integer": "integer", "Boolean": "boolean"}}
+_KERNEL_TYPES[3] = {"Float64": "real", "Int32": "integer", "Boolean": "boolean"}
+_KERNEL_TYPES[3] |= {name: name.lower() for name in TRANSFER_TYPES[3] if name not in _KERNEL_TYPES[3]}
+_FMI_TYPE_NAMES = {
+    version: {kind: name for name, kind in names.items()} for version, names in _KERNEL_TYPES.items()
 }
-_TYPES["Boolean"] = "boolean"
-_FMI_TYPE_NAMES = {2: {"real": "Real", "integer": "Integer", "boolean": "Boolean"}}
-_FMI_TYPE_NAMES[3] = {"real": "Float64", "integer": "Int32", "boolean": "Boolean"}
-_C_TYPES = {2: {"real": ctypes.c_double, "integer": ctypes.c_int, "boolean": ctypes.c_int}}
-_C_TYPES[3] = {"real": ctypes.c_double, "integer": ctypes.c_int32, "boolean": ctypes.c_bool}
 
 
 def _file_identity(path: Path) -> tuple[int, int]:
@@ -300,9 +296,10 @@ def _make_layout(
     ports: dict[str, list[Port]] = {"input": [], "output": [], "parameter": []}
     for variable in description.modelVariables:
         causality = variable.causality if variable.causality != "structuralParameter" else "parameter"
-        kind = _TYPES.get(variable.type)
+        kind = KINDS.get(variable.type)
         if causality not in ports or kind is None:
             continue
+        fmi_type = transfer_type(version, variable.type)
         unit = getattr(variable, "unit", None) or getattr(
             getattr(variable, "declaredType", None), "unit", None
         )
@@ -316,7 +313,7 @@ def _make_layout(
                     f"'{by_variable[variable.name][0][0]}' names array variable '{variable.name}'; "
                     "only scalar variables can be mapped"
                 )
-            made = _array_ports(path, name, variable, kind, unit or "", shape, mapping)
+            made = _array_ports(path, name, variable, fmi_type, unit or "", shape, mapping)
             ports[causality] += made
             for element, port in enumerate(made):
                 reaches[port.name] = (variable, 1.0)
@@ -324,10 +321,10 @@ def _make_layout(
             continue
         if variable.name not in by_variable and variable.name in mapping:
             continue  # a mapped port already took this name
-        start = _start_value(variable.start, kind)
+        start = _start_value(variable.start, fmi_type, f"FMU '{path}' variable '{variable.name}' start")
         for port_name, scale in by_variable.get(variable.name, [(variable.name, 1.0)]):
             ports[causality].append(
-                Port(port_name, kind, unit or "", variable.description or "", start * scale)
+                Port(port_name, kind, unit or "", variable.description or "", start * scale, fmi_type)
             )
             reaches[port_name] = (variable, scale)
     for causality, declared in ports.items():  # as `Component` checks them: here, so describing finds it
@@ -360,8 +357,10 @@ def _make_layout(
     )
 
 
-def _array_ports(path: Path, name: str, variable, kind: str, unit: str, shape, mapping) -> list[Port]:
-    """One port per element of FMI 3.0 array `variable`, named `name[i]` / `name[i,j]`."""
+def _array_ports(path: Path, name: str, variable, fmi_type: str, unit: str, shape, mapping) -> list[Port]:
+    """One port per element of FMI 3.0 array `variable` (transfer type `fmi_type`), named `name[i]` /
+    `name[i,j]`."""
+    kind = KINDS[fmi_type]
     starts = str(variable.start).split() if variable.start not in (None, "") else []
     ports = []
     for element, index in enumerate(np.ndindex(*shape)):
@@ -372,7 +371,8 @@ def _array_ports(path: Path, name: str, variable, kind: str, unit: str, shape, m
                 f"is also an element of array variable '{variable.name}'"
             )
         text = starts[element if len(starts) > 1 else 0] if starts else None
-        ports.append(Port(port_name, kind, unit, variable.description or "", _start_value(text, kind)))
+        start = _start_value(text, fmi_type, f"FMU '{path}' variable '{port_name}' start")
+        ports.append(Port(port_name, kind, unit, variable.description or "", start, fmi_type))
     return ports
 
 
@@ -458,7 +458,7 @@ class FmuComponent(Component):
     def _groups(
         self, ports: list[Port], only: set[int] | None = None
     ) -> list[tuple[str, list[int], object, object, list[float]]]:
-        """Per FMI type: (kind, buffer slots, value references, FMI value array, scales). An FMI 3.0
+        """Per FMI transfer type: (type, buffer slots, value references, FMI value array, scales). An FMI 3.0
         array's element ports are consecutive (in element order), so its reference is listed once,
         at its first element, and its values fill that stretch of the value array."""
         if only is not None:  # an array is transferred whole: a slot of it brings all of them
@@ -469,8 +469,8 @@ class FmuComponent(Component):
                 if p.name in self._elements and self._variables[p.name][0].name in arrays
             }
         groups = []
-        for kind in ("real", "integer", "boolean"):
-            slots = [i for i, p in enumerate(ports) if p.type == kind and (only is None or i in only)]
+        for kind in TRANSFER_TYPES[self.fmi_version]:
+            slots = [i for i, p in enumerate(ports) if p.fmi_type == kind and (only is None or i in only)]
             if slots:
                 references = [
                     self._variables[ports[i].name][0].valueReference
@@ -478,7 +478,7 @@ class FmuComponent(Component):
                     if self._elements.get(ports[i].name, 0) == 0
                 ]
                 scales = [self._variables[ports[i].name][1] for i in slots]
-                values = (_C_TYPES[self.fmi_version][kind] * len(slots))()
+                values = (C_TYPES[self.fmi_version][kind] * len(slots))()
                 groups.append((kind, slots, (ctypes.c_uint32 * len(references))(*references), values, scales))
         return groups
 
@@ -501,8 +501,9 @@ class FmuComponent(Component):
             ("Get", self._output_groups, pull),
         ):
             for g, (kind, slots, references, values, scales) in enumerate(groups):
-                function = f"fmi{self.fmi_version}{direction}{_FMI_TYPE_NAMES[self.fmi_version][kind]}"
-                direct = kind == "real" and all(scale == 1.0 for scale in scales) and len(groups) == 1
+                function = f"fmi{self.fmi_version}{direction}{kind}"
+                direct = KINDS[kind] == "real" and C_TYPES[self.fmi_version][kind] is ctypes.c_double
+                direct = direct and all(scale == 1.0 for scale in scales) and len(groups) == 1
                 buffer = self.input_cbuffer if direction == "Set" else self.output_cbuffer
                 if direct and slots == list(range(len(slots))):
                     values = buffer  # the FMI call reads/writes the component's buffer itself
@@ -513,7 +514,11 @@ class FmuComponent(Component):
                 names[f"vn{direction}{g}"] = np.ctypeslib.as_array(values)
                 names[f"s{direction}{g}"] = np.array(slots, dtype=np.intp)
                 names[f"k{direction}{g}"] = np.array(scales)
-                copies = [] if values is buffer else _copy_lines(direction, g, kind, slots, scales)
+                copies = [] if values is buffer else _copy_lines(direction, g, KINDS[kind], slots, scales)
+                if direction == "Get" and kind in WIDE:  # before the copy rounds them
+                    below = "" if kind == "UInt64" else f" or vnGet{g}.min() < -exact{kind}"
+                    test = f"vnGet{g}.max() > exact{kind}{below}"
+                    copies.insert(0, f"    if {test}: inexact(vnGet{g}, sGet{g}, '{kind}')")
                 count = len(references)  # FMI 3.0: then the number of values (array elements)
                 call = [
                     f"    status = f{direction}{g}(handle, r{direction}{g}, {count}, v{direction}{g}"
@@ -525,6 +530,7 @@ class FmuComponent(Component):
         push.append("    return None")
         pull += _finite_check_lines(*self._checked_outputs())
         names.update(nonfinite=self._nonfinite_output, zeros=np.zeros(len(self.outputs)), inf=math.inf)
+        names.update(exactInt64=np.int64(2**53), exactUInt64=np.uint64(2**53), inexact=self._inexact_output)
         pull.append("    return obn")
         if self.fmi_version == 2:
             step = ["def do_step(t, h):", "    clock[0] = t", "    status = raw(handle, t, h, 1)"]
@@ -634,15 +640,17 @@ class FmuComponent(Component):
         c_void_p, c_size_t, c_double, c_int = ctypes.c_void_p, ctypes.c_size_t, ctypes.c_double, ctypes.c_int
         self._handle = self._slave.component
         self._setters, self._getters = {}, {}
-        for kind, type_name in _FMI_TYPE_NAMES[self.fmi_version].items():
-            values = ctypes.POINTER(_C_TYPES[self.fmi_version][kind])
+        # Only the types the FMU's ports use (an FMI 2.0 Enumeration moves as Integer).
+        used = {p.fmi_type for p in (*self.inputs, *self.outputs, *self.parameters)}
+        for type_name in (name for name in TRANSFER_TYPES[self.fmi_version] if name in used):
+            values = ctypes.POINTER(C_TYPES[self.fmi_version][type_name])
             vrs = ctypes.POINTER(ctypes.c_uint32)
             if self.fmi_version == 2:
                 prototype = ctypes.CFUNCTYPE(c_int, c_void_p, vrs, c_size_t, values)
             else:
                 prototype = ctypes.CFUNCTYPE(c_int, c_void_p, vrs, c_size_t, values, c_size_t)
-            self._setters[kind] = prototype((f"fmi{self.fmi_version}Set{type_name}", dll))
-            self._getters[kind] = prototype((f"fmi{self.fmi_version}Get{type_name}", dll))
+            self._setters[type_name] = prototype((f"fmi{self.fmi_version}Set{type_name}", dll))
+            self._getters[type_name] = prototype((f"fmi{self.fmi_version}Get{type_name}", dll))
         if self.fmi_version == 2:
             prototype = ctypes.CFUNCTYPE(c_int, c_void_p, c_double, c_double, c_int)
             self._raw_do_step = prototype(("fmi2DoStep", dll))
@@ -673,7 +681,7 @@ class FmuComponent(Component):
         values = dict(self.default_parameters)
         values.update(parameters)
         names = [p.name for p in self.parameters]
-        kinds = {p.name: p.type for p in self.parameters}
+        kinds = {p.name: p.fmi_type for p in self.parameters}
         arrays: dict[str, dict[int, float]] = {}  # FMI 3.0 array parameter -> given elements
         for key, value in values.items():
             if key not in kinds:
@@ -685,7 +693,8 @@ class FmuComponent(Component):
                 arrays.setdefault(key.split("[")[0], {})[self._elements[key]] = value
                 continue
             variable, scale = self._variables[key]
-            self._set_scalar(kinds[key], variable.valueReference, value * scale, key)
+            value = value if scale == 1.0 else value * scale  # (a Python int stays exact for an Int64)
+            self._set_scalar(kinds[key], variable.valueReference, value, key)
         for array, elements in arrays.items():
             self._set_array_parameter(array, elements)
         self.t0 = float(t0)
@@ -694,29 +703,35 @@ class FmuComponent(Component):
         self.state = State.SET_UP
 
     def _set_scalar(self, kind: str, reference: int, value: float, name: str) -> None:
-        if kind != "real" and float(value) != int(value):
-            raise CosimError(f"FMU '{self.name}': parameter '{name}' must be an integer, got {value}")
-        values = (_C_TYPES[self.fmi_version][kind] * 1)(value if kind == "real" else int(value))
+        """Set one variable of transfer type `kind` (integers checked against the type's range)."""
+        value = self._fmi_value(kind, value, name)
+        values = (C_TYPES[self.fmi_version][kind] * 1)(value)
         status = self._setters[kind](
             self._handle, (ctypes.c_uint32 * 1)(reference), 1, values, *self._count(1)
         )
         if status > 1:
-            self._fail(status, f"fmi{self.fmi_version}Set{_FMI_TYPE_NAMES[self.fmi_version][kind]} ({name})")
+            self._fail(status, f"fmi{self.fmi_version}Set{kind} ({name})")
+
+    def _fmi_value(self, kind: str, value: float, name: str):
+        """A parameter value as its FMI type takes it."""
+        if KINDS[kind] == "integer":
+            return check_integer(value, kind, f"FMU '{self.name}': parameter '{name}'")
+        if KINDS[kind] == "boolean":
+            return value != 0
+        return float(value)
 
     def _set_array_parameter(self, array: str, elements: Mapping[int, float]) -> None:
         """Set FMI 3.0 array parameter `array` whole: the given elements, the others at their start."""
         ports = [p for p in self.parameters if p.name in self._elements and p.name.split("[")[0] == array]
         variable = self._variables[ports[0].name][0]
-        kind = ports[0].type
+        kind = ports[0].fmi_type
         numbers = [elements.get(self._elements[p.name], p.start) for p in ports]
-        if kind != "real" and any(float(v) != int(v) for v in numbers):
-            raise CosimError(f"FMU '{self.name}': parameter '{array}' must have integer elements")
-        values = (_C_TYPES[3][kind] * len(numbers))(*(v if kind == "real" else int(v) for v in numbers))
+        values = (C_TYPES[3][kind] * len(numbers))(*(self._fmi_value(kind, v, array) for v in numbers))
         status = self._setters[kind](
             self._handle, (ctypes.c_uint32 * 1)(variable.valueReference), 1, values, len(numbers)
         )
         if status > 1:
-            self._fail(status, f"fmi3Set{_FMI_TYPE_NAMES[3][kind]} ({array})")
+            self._fail(status, f"fmi3Set{kind} ({array})")
 
     def _count(self, n: int) -> tuple[int, ...]:
         return () if self.fmi_version == 2 else (n,)
@@ -750,24 +765,28 @@ class FmuComponent(Component):
             return ctypes.cast(function, ctypes.c_void_p).value
 
         version = self.fmi_version
+        kernel_kinds = _KERNEL_TYPES[version]
         calls = []
         for direction, groups, buffer in (
             ("set", self._input_groups, self.input_cbuffer),
             ("get", self._output_groups, self.output_cbuffer),
         ):
             functions = self._setters if direction == "set" else self._getters
-            for kind, slots, refs, values, scales in groups:
+            for fmi_type, slots, refs, values, scales in groups:
+                kind = kernel_kinds[fmi_type]
                 # As `_compile_fast_path`: a lone unscaled real group over all ports is the buffer.
                 direct = kind == "real" and all(scale == 1.0 for scale in scales) and len(groups) == 1
                 direct = direct and slots == list(range(len(slots)))
                 calls.append(
                     (
-                        direction, kind, address(functions[kind]), ctypes.addressof(refs), len(refs),
+                        direction, kind, address(functions[fmi_type]), ctypes.addressof(refs), len(refs),
                         len(slots), ctypes.addressof(buffer if direct else values), direct,
                         tuple(slots), tuple(float(scale) for scale in scales),
                     )
                 )  # fmt: skip
         finite_outputs, nan_outputs = self._checked_outputs()
+        # The kernel reads an Int64/UInt64 beyond 2^53 as NaN, so the check stops at it.
+        finite_outputs += [i for i, port in enumerate(self.outputs) if port.fmi_type in WIDE]
         return NativeStep(
             fmi_version=version,
             handle=self._handle if isinstance(self._handle, int) else self._handle.value,
@@ -785,6 +804,8 @@ class FmuComponent(Component):
             self._asked_to_terminate(t)
         if call == 4:
             self._step_time[0] = t
+            if self.outputs[status].fmi_type in WIDE:  # read again, to name the value
+                self._compiled["get_outputs"]()
             self._nonfinite_output()
         type_name = _FMI_TYPE_NAMES[self.fmi_version][kind]
         function = ("Set" + type_name, "DoStep", "Get" + type_name)[call]
@@ -805,6 +826,11 @@ class FmuComponent(Component):
                 f"{shown} after {when} (FMU outputs must be finite; list outputs whose NaN has a "
                 "meaning in the component's nan_outputs)"
             )
+
+    def _inexact_output(self, values: np.ndarray, slots: np.ndarray, fmi_type: str) -> None:
+        """Raise the `CosimError` naming the first 64-bit integer output a float64 cannot hold."""
+        for value, slot in zip(values.tolist(), slots.tolist(), strict=False):
+            exact_as_float(value, fmi_type, f"FMU '{self.name}' output '{self.outputs[slot].name}'")
 
     def _asked_to_terminate(self, t: float) -> None:
         raise CosimError(
@@ -927,13 +953,20 @@ def _array_shape(variable, description) -> tuple[int, ...] | None:
     return tuple(shape)
 
 
-def _start_value(start: object, kind: str) -> float:
-    """A variable's start attribute as a float (NaN when absent)."""
+def _start_value(start: object, fmi_type: str, what: str) -> float:
+    """A variable's start attribute (of transfer type `fmi_type`) as a float (NaN when absent); a
+    64-bit integer start a float64 cannot hold is a `CosimError` naming `what`."""
+    kind = KINDS[fmi_type]
     if start is None or start == "":
         return float("nan") if kind == "real" else 0.0
     text = str(start).strip().split()[0]
     if kind == "boolean":
         return 1.0 if text.lower() in ("true", "1") else 0.0
+    if fmi_type in WIDE:
+        try:
+            return exact_as_float(int(text), fmi_type, what)
+        except ValueError:
+            pass
     try:
         return float(text)
     except ValueError:

@@ -99,7 +99,7 @@ def test_fmi3_component_has_the_fmi2_ports_and_moves_each_array_with_one_call():
     for kind in ("inputs", "outputs", "parameters"):
         assert [p.name for p in getattr(fmi2, kind)] == [p.name for p in getattr(fmi3, kind)], kind
     (kind, slots, references, _, _), *others = fmi3._input_groups  # one call: the Float64 inputs
-    assert not others and kind == "real" and len(slots) == 1441
+    assert not others and kind == "Float64" and len(slots) == 1441
     assert len(references) == 3  # ranges, angles, target_dir: each array is one value reference
     assert len(fmi2._input_groups[0][2]) == 1441  # FMI 2.0: one reference per scalar
     rng = np.random.default_rng(5)

@@ -31,7 +31,16 @@ enum {
     G_KIND, G_FUNCTION, G_REFERENCES, G_REFERENCE_COUNT, G_VALUE_COUNT, G_VALUES, G_DIRECT,
     G_SLOT_FIRST, G_SLOT_COUNT, GROUP_COLUMNS
 };
-enum { KIND_REAL = 0, KIND_INTEGER = 1, KIND_BOOLEAN = 2 };
+/* FMI value types of a group: REAL double, INTEGER int32, BOOLEAN int32 (FMI 2.0) or bool (FMI 3.0),
+ * then FMI 3.0's other numeric types. An INT64/UINT64 value beyond 2^53, which a double may not hold,
+ * is read as NaN: the output check (which covers those outputs) stops there and Python names it. */
+enum {
+    KIND_REAL = 0, KIND_INTEGER = 1, KIND_BOOLEAN = 2, KIND_FLOAT32, KIND_INT8, KIND_UINT8, KIND_INT16,
+    KIND_UINT16, KIND_UINT32, KIND_INT64, KIND_UINT64
+};
+
+/* Every integer of magnitude up to this is a double. */
+#define EXACT_INTEGER ((int64_t)1 << 53)
 
 /* Most components whose table the kernel copies onto its stack. */
 #define MAX_COPIED 64
@@ -120,14 +129,25 @@ HOT int64_t set_inputs(const Tables *t, int64_t i, int64_t *kind_out) {
                 if (t->slot_scales[s] != 1.0) {
                     value = value * t->slot_scales[s];
                 }
-                if (kind == KIND_REAL) {
-                    ((double *)pointer(values))[position] = value;
-                } else if (kind == KIND_INTEGER) {
-                    ((int32_t *)pointer(values))[position] = (int32_t)(int64_t)rint(value);
-                } else if (version == 2) {
-                    ((int32_t *)pointer(values))[position] = value != 0.0 ? 1 : 0;
-                } else {
-                    ((uint8_t *)pointer(values))[position] = value != 0.0 ? 1 : 0;
+                void *array = pointer(values);
+                switch (kind) {
+                case KIND_REAL: ((double *)array)[position] = value; break;
+                case KIND_INTEGER: ((int32_t *)array)[position] = (int32_t)(int64_t)rint(value); break;
+                case KIND_BOOLEAN:
+                    if (version == 2) {
+                        ((int32_t *)array)[position] = value != 0.0 ? 1 : 0;
+                    } else {
+                        ((uint8_t *)array)[position] = value != 0.0 ? 1 : 0;
+                    }
+                    break;
+                case KIND_FLOAT32: ((float *)array)[position] = (float)value; break;
+                case KIND_INT8: ((int8_t *)array)[position] = (int8_t)(int64_t)rint(value); break;
+                case KIND_UINT8: ((uint8_t *)array)[position] = (uint8_t)(int64_t)rint(value); break;
+                case KIND_INT16: ((int16_t *)array)[position] = (int16_t)(int64_t)rint(value); break;
+                case KIND_UINT16: ((uint16_t *)array)[position] = (uint16_t)(int64_t)rint(value); break;
+                case KIND_UINT32: ((uint32_t *)array)[position] = (uint32_t)(int64_t)rint(value); break;
+                case KIND_INT64: ((int64_t *)array)[position] = (int64_t)rint(value); break;
+                default: ((uint64_t *)array)[position] = (uint64_t)rint(value); break;
                 }
             }
         }
@@ -160,12 +180,30 @@ HOT int64_t get_outputs(const Tables *t, int64_t i, int64_t *kind_out) {
             for (int64_t position = 0; position < count; position++) {
                 int64_t s = first_slot + position;
                 double value;
-                if (kind == KIND_REAL) {
-                    value = ((const double *)pointer(values))[position];
-                } else if (kind == KIND_INTEGER || version == 2) {
-                    value = (double)((const int32_t *)pointer(values))[position];
-                } else {
-                    value = (double)((const uint8_t *)pointer(values))[position];
+                const void *array = pointer(values);
+                switch (kind) {
+                case KIND_REAL: value = ((const double *)array)[position]; break;
+                case KIND_INTEGER: value = (double)((const int32_t *)array)[position]; break;
+                case KIND_BOOLEAN:
+                    value = version == 2 ? (double)((const int32_t *)array)[position]
+                                         : (double)((const uint8_t *)array)[position];
+                    break;
+                case KIND_FLOAT32: value = (double)((const float *)array)[position]; break;
+                case KIND_INT8: value = (double)((const int8_t *)array)[position]; break;
+                case KIND_UINT8: value = (double)((const uint8_t *)array)[position]; break;
+                case KIND_INT16: value = (double)((const int16_t *)array)[position]; break;
+                case KIND_UINT16: value = (double)((const uint16_t *)array)[position]; break;
+                case KIND_UINT32: value = (double)((const uint32_t *)array)[position]; break;
+                case KIND_INT64: {
+                    int64_t number = ((const int64_t *)array)[position];
+                    value = number > EXACT_INTEGER || number < -EXACT_INTEGER ? NAN : (double)number;
+                    break;
+                }
+                default: {
+                    uint64_t number = ((const uint64_t *)array)[position];
+                    value = number > (uint64_t)EXACT_INTEGER ? NAN : (double)number;
+                    break;
+                }
                 }
                 if (t->slot_scales[s] != 1.0) {
                     value = value * t->slot_scales[s];

@@ -1,0 +1,187 @@
+"""Every numeric FMI variable type in parameters, inputs, outputs and connections, checked against
+fmpy's own simulation of the same every-type feedthrough FMU (`fixtures.types_fixture`)."""
+
+from __future__ import annotations
+
+import fmpy
+import pytest
+from fixtures.build_fixtures import build_fixture_fmu
+from fixtures.types_fixture import INPUT_STARTS, TYPES
+
+from cosim.core.master import Master, System
+from cosim.errors import CosimError
+from cosim.fmi.component import FmuComponent
+
+NUMERIC = {version: [t for t in TYPES[version] if t not in ("String", "Binary")] for version in (2, 3)}
+
+
+@pytest.fixture(scope="module")
+def fmus(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("types")
+    return {version: build_fixture_fmu(f"types_fmi{version}", folder) for version in (2, 3)}
+
+
+# Parameter values of each type that the FMU adds to the input (within each type's range).
+PARAMETERS = {
+    "Real": -0.75, "Float32": 0.25, "Float64": -0.75, "Int8": 7, "UInt8": 55, "Int16": 16, "UInt16": 5535,
+    "Int32": 2, "Integer": 2, "UInt32": 294967295, "Int64": 2**45, "UInt64": 2**52, "Boolean": True,
+    "Enumeration": 2,
+}  # fmt: skip
+
+
+def _fmpy_outputs(path, version: int, start_values: dict) -> dict[str, float]:
+    """The outputs at t = 1 s of fmpy's simulation of the FMU (an independent FMI importer)."""
+    result = fmpy.simulate_fmu(str(path), stop_time=1.0, output_interval=0.5, start_values=start_values)
+    return {f"{t}_output": float(result[f"{t}_output"][-1]) for t in NUMERIC[version]}
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_every_numeric_type_matches_fmpy(fmus, version):
+    """Parameters and held inputs of every numeric type reach the FMU, and its outputs come back, as
+    fmpy gives them; the unset inputs keep their start values."""
+    held = {"Int8_input": -100, "UInt16_input": 1} if version == 3 else {"Integer_input": 41}
+    parameters = {f"{t}_parameter": PARAMETERS[t] for t in NUMERIC[version]}
+    expected = _fmpy_outputs(fmus[version], version, {**parameters, **held})
+    component = FmuComponent(fmus[version], "types", parameters=parameters)
+    component.input_buffer[[component.input_index[name] for name in held]] = list(held.values())
+    system = System(0.5)
+    system.add(component)
+    with Master(system) as master:
+        master.initialize()
+        master.run(2)
+    inputs = dict(zip([p.name for p in component.inputs], component.input_buffer.tolist(), strict=True))
+    outputs = dict(zip([p.name for p in component.outputs], component.output_buffer.tolist(), strict=True))
+    assert outputs == expected
+    for t in NUMERIC[version]:
+        name = f"{t}_input"
+        assert inputs[name] == held.get(name, float(INPUT_STARTS[t])), name
+    if version == 3:  # FMI 3.0 Enumerations move as Int64: green (2) + blue (2) - 1 = blue + 1 = 3
+        assert outputs["Enumeration_output"] == 3.0
+
+
+def _chain(fmus, version: int, compiled: bool) -> tuple[list[float], list[float]]:
+    """Outputs of two every-type FMUs, the first's outputs feeding the second's inputs of each
+    numeric type, after 4 steps (the first's inputs held at values off their starts)."""
+    system = System(0.25)
+    first = system.add(
+        FmuComponent(
+            fmus[version], "first", parameters={f"{t}_parameter": PARAMETERS[t] for t in NUMERIC[version]}
+        )
+    )
+    second = system.add(FmuComponent(fmus[version], "second"))
+    for t in NUMERIC[version]:
+        system.connect(f"first.{t}_output", f"second.{t}_input")
+    with Master(system) as master:
+        master.initialize()
+        master.run(4, compiled=compiled)
+    return first.output_buffer.tolist(), second.output_buffer.tolist()
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_connections_of_every_numeric_type_give_the_same_values_in_the_kernel_and_in_python(fmus, version):
+    """Connected through the compiled kernel or the Python loop: the same values, and those the FMU
+    computes (the second adds its neutral parameters to what the first gives)."""
+    compiled, python = _chain(fmus, version, True), _chain(fmus, version, False)
+    assert compiled == python
+    first, second = python
+    names = [f"{t}_output" for t in NUMERIC[version]]
+    expected = _fmpy_outputs(
+        fmus[version], version, {f"{t}_parameter": PARAMETERS[t] for t in NUMERIC[version]}
+    )
+    assert dict(zip(names, first, strict=True)) == expected
+    assert second == first
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_64_bit_output_beyond_2_53_stops_the_run_by_name(fmus, compiled):
+    """2^53 + 1 as an Int64 output cannot be a float64 signal: the step that makes it stops the
+    run naming it, in the compiled kernel (which steps every numeric type) and in Python alike."""
+    system = System(0.5)
+    first = system.add(FmuComponent(fmus[3], "first", parameters={"Int64_parameter": 2**53}))
+    system.add(FmuComponent(fmus[3], "second", parameters={"Int64_parameter": 2**40}))
+    system.connect("first.Int64_output", "second.Int64_input")  # 2^53 - 2^40 + 2^40: exact
+    with Master(system) as master:
+        master.initialize()
+        if compiled:
+            assert all(native is not None for native in master.kernel_tables().native)
+        master.run(2, compiled=compiled)
+        first.set_inputs([first.input_index["Int64_input"]], [-(2**40) + 1])
+        with pytest.raises(
+            CosimError, match="'second' output 'Int64_output' = 9007199254740993 [(]Int64[)] is beyond 2\\^53"
+        ):
+            master.run(2, compiled=compiled)
+
+
+def test_a_64_bit_parameter_is_exact_as_an_int_and_refused_as_a_float_beyond_2_53(fmus):
+    component = FmuComponent(fmus[3], "wide", parameters={"Int64_parameter": 2**53 + 1 + 2**40})
+    system = System(0.5)
+    system.add(component)
+    with pytest.raises(
+        CosimError, match="output 'Int64_output' = 9007199254740993 [(]Int64[)] is beyond 2\\^53"
+    ):
+        with Master(system) as master:
+            master.initialize()
+    component = FmuComponent(fmus[3], "wide", parameters={"Int64_parameter": float(2**60)})
+    component.instantiate()
+    try:
+        with pytest.raises(
+            CosimError, match="parameter 'Int64_parameter': 1152921504606846976 is beyond 2\\^53"
+        ):
+            component.setup(0.0, {})
+    finally:
+        component.free()
+
+
+@pytest.mark.parametrize(
+    ("source", "target", "problem"),
+    [
+        ("Float64_output", "Int32_input", "a float cannot feed an integer"),
+        ("Float32_output", "Enumeration_input", "a float cannot feed an integer"),
+        ("Int32_output", "Boolean_input", "only a Boolean feeds a Boolean"),
+        ("Float64_output", "Boolean_input", "only a Boolean feeds a Boolean"),
+        ("Int64_output", "Int32_input", "Int32 [-2147483648, 2147483647] does not hold every Int64"),
+        ("Int8_output", "UInt8_input", "UInt8 [0, 255] does not hold every Int8"),
+        ("UInt64_output", "Int64_input", "does not hold every UInt64"),
+    ],
+)
+def test_a_connection_that_cannot_convert_names_both_ends(fmus, source, target, problem):
+    system = System(0.25)
+    system.add(FmuComponent(fmus[3], "a"))
+    system.add(FmuComponent(fmus[3], "b"))
+    with pytest.raises(CosimError, match="connection a[.]" + source + r" [(].*[)] -> b[.]" + target) as error:
+        system.connect(f"a.{source}", f"b.{target}")
+    assert problem in str(error.value)
+
+
+@pytest.mark.parametrize(
+    ("source", "target"),
+    [
+        ("Int8_output", "Int16_input"),
+        ("UInt8_output", "Int16_input"),
+        ("UInt32_output", "Int64_input"),
+        ("Int32_output", "Float32_input"),
+        ("UInt64_output", "Float64_input"),
+        ("Float64_output", "Float32_input"),
+        ("Enumeration_output", "Int64_input"),
+        ("Int32_output", "Enumeration_input"),
+        ("Boolean_output", "Float64_input"),
+        ("Boolean_output", "UInt8_input"),
+    ],
+)
+def test_connections_that_convert_are_accepted(fmus, source, target):
+    system = System(0.25)
+    system.add(FmuComponent(fmus[3], "a"))
+    system.add(FmuComponent(fmus[3], "b"))
+    system.connect(f"a.{source}", f"b.{target}")
+
+
+def test_an_integer_parameter_outside_its_type_is_refused(fmus):
+    component = FmuComponent(fmus[3], "narrow", parameters={"UInt8_parameter": 256})
+    component.instantiate()
+    try:
+        with pytest.raises(
+            CosimError, match=r"'UInt8_parameter': 256 is outside the range of the FMU's UInt8 \[0, 255\]"
+        ):
+            component.setup(0.0, {})
+    finally:
+        component.free()
