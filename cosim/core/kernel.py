@@ -59,6 +59,8 @@ KINDS = (
     "int64",
     "uint64",
 )
+(KIND_FLOAT32, KIND_INT8, KIND_UINT8, KIND_INT16) = range(3, 7)
+(KIND_UINT16, KIND_UINT32, KIND_INT64, KIND_UINT64) = range(7, 11)
 # Failure calls (as `NativeStep.fail`): 0 set, 1 doStep, 2 get, 3 asked to terminate, 4 not finite.
 
 
