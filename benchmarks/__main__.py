@@ -26,6 +26,7 @@ BENCHMARKS = {
     "live": ["bench_live.py"],
     "mcap_writers": ["bench_mcap_writers.py"],
     "png": ["bench_png.py"],
+    "fmu_simulate": ["bench_fmu_simulate.py"],
 }
 
 
