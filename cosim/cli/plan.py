@@ -3,6 +3,7 @@
     cosim plan MAP --start X,Y --goal X,Y [options] [--png OUT]
     cosim plan MAP --query NAME [options]          (named start/goal from MAP's <stem>.queries.toml)
     cosim plan compare MAP --start X,Y --goal X,Y [--expansion-distance M] [--png OUT]
+    cosim plan mapf MAP --scen FILE --agents N [--time-limit S] [--seed K] [--png OUT]   (see plan_mapf)
 
 Metrics: path length [m], path nodes, searched nodes (expanded cells), elapsed time [s]. The search is a
 C kernel built on first use and loaded once per process, so every configuration runs once untimed and
@@ -21,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cosim.cli import plan_mapf
 from cosim.errors import CosimError
 from planner.options import CONFIGURATIONS, PLANNERS, USER_HEURISTICS
 
@@ -29,6 +31,7 @@ DEFAULT_COMPARE_EXPANSION = 0.8  # m: the thesis's differential-drive robot (rad
 
 USAGE = (
     "cosim plan [compare] MAP (--start X,Y --goal X,Y | --query NAME) [options] [--png OUT]\n"
+    "       cosim plan mapf MAP --scen FILE --agents N [--time-limit S] [--seed K] [--png OUT]\n"
     "       X,Y in metres; X,Y,THETA (THETA in rad) for --planner hybrid; negative values as --start=-5,6"
 )
 
@@ -44,13 +47,13 @@ class Configuration:
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "plan",
-        help="plan a path on a map; 'plan compare' prints the thesis's Tables 3.1-3.4 columns",
+        help="plan a path on a map; 'plan compare': the thesis's Tables 3.1-3.4; 'plan mapf': many agents",
         description=__doc__,
         usage=USAGE,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument(
-        "words", nargs="+", metavar="[compare] MAP", help="map file (.yaml, .map, .png, .pgm, .npy)"
+        "words", nargs="+", metavar="[compare|mapf] MAP", help="map file (.yaml, .map, .png, .pgm, .npy)"
     )
     parser.add_argument("--start", metavar="X,Y[,THETA]", help="start [m] (and heading [rad] for hybrid)")
     parser.add_argument("--goal", metavar="X,Y[,THETA]", help="goal [m] (and heading [rad] for hybrid)")
@@ -79,6 +82,7 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--png", type=Path, metavar="OUT", help="draw map, inflation, explored cells, path(s)"
     )
+    plan_mapf.add_arguments(parser)
     parser.set_defaults(handler=_handler)
 
 
@@ -86,8 +90,13 @@ def _handler(args: argparse.Namespace) -> int:
     words = args.words
     if len(words) == 2 and words[0] == "compare":
         return _compare(args, Path(words[1]))
+    if len(words) == 2 and words[0] == "mapf":
+        return plan_mapf.run(args, Path(words[1]))
     if len(words) != 1:
-        raise CosimError(f"expected 'cosim plan MAP' or 'cosim plan compare MAP', got {' '.join(words)!r}")
+        raise CosimError(
+            "expected 'cosim plan MAP', 'cosim plan compare MAP' or 'cosim plan mapf MAP', "
+            f"got {' '.join(words)!r}"
+        )
     return _plan_one(args, Path(words[0]))
 
 
