@@ -394,7 +394,7 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     tables = master.kernel_tables(record=True) if _use_kernel() else None
     if tables is not None:
         tables.warm_up()
-    bar = _progress_bar(scenario.stop_time) if progress else None
+    bar = progress_bar(scenario.stop_time) if progress else None
     wall_start = time.perf_counter()
     last_update = [wall_start, 0.0]
     state = {"reason": None}
@@ -442,7 +442,7 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     def show_progress(sim_time: float) -> None:
         now = time.perf_counter()
         if now - last_update[0] >= PROGRESS_INTERVAL:
-            _update_bar(bar, sim_time, now - wall_start, last_update)
+            update_bar(bar, sim_time, now - wall_start, last_update)
             last_update[0] = now
 
     def stop(reason: str | None, poll_signal: bool, sim_time: float) -> bool:
@@ -507,7 +507,7 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     reason = "fmu_failed" if failure else state["reason"] or "stop_time"
     outcome = monitor.finish(end_ns / NS_PER_S, reason)
     if bar is not None:
-        _update_bar(bar, master.time, wall_time, last_update)
+        update_bar(bar, master.time, wall_time, last_update)
         # The run is over whatever its reason (goal reached early, collision, interrupt): the bar
         # ends full, at the time the run ended, instead of vanishing part-way.
         bar.total = bar.n
@@ -1055,7 +1055,9 @@ class _BlockRecording:
         return self.buffers[i][0]
 
 
-def _progress_bar(stop_time: float):
+def progress_bar(stop_time: float):
+    """The run's progress bar on stderr (tqdm, erased at the end), counting simulated seconds up to
+    `stop_time` [s]; `update_bar` moves it."""
     from tqdm import tqdm
 
     return tqdm(
@@ -1068,7 +1070,9 @@ def _progress_bar(stop_time: float):
     )
 
 
-def _update_bar(bar, sim_time: float, wall: float, last_update: list) -> None:
+def update_bar(bar, sim_time: float, wall: float, last_update: list) -> None:
+    """Move `bar` to `sim_time` [s] simulated in `wall` [s] of wall time; `last_update[1]` holds
+    the simulated time it showed last."""
     bar.update(round(sim_time - last_update[1], 3))
     last_update[1] = sim_time
     if wall > 0:

@@ -46,7 +46,6 @@ from cosim.scenario.load import DEFAULT_LOG_PATTERN
 INTERFACES = ("cs", "me")  # co-simulation, Model Exchange
 SOLVERS = ("cvode", "rk4", "euler")  # Model Exchange integrators
 CHUNK_STEPS = 20_000  # steps between checks for an interrupt
-PROGRESS_INTERVAL = 0.1  # [s] of wall time between progress-bar updates
 _INTEGER_TYPES = {"Integer", "Enumeration", *(f"{s}Int{n}" for s in ("", "U") for n in (8, 16, 32, 64))}
 
 
@@ -293,6 +292,7 @@ def _output_ports(described: ComponentDescription):
 
 
 def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: bool, force: bool):
+    from cosim.navigation.run import PROGRESS_INTERVAL, progress_bar, update_bar
     from cosim.record.recorder import Recorder
 
     (component,) = master.order
@@ -309,9 +309,9 @@ def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: b
         raise
     h_ns = master.system.macro_step_ns
     total = simulation.steps
-    bar = _progress_bar(simulation.stop_time - simulation.start_time) if progress else None
+    bar = progress_bar(simulation.stop_time - simulation.start_time) if progress else None
     wall_start = time.perf_counter()
-    shown = [wall_start]
+    shown = [wall_start, 0.0]  # wall time and simulated time [s] of the bar's last update
     failure = None
     with recorder:
         _write_header(simulation, component, recorder)
@@ -335,7 +335,7 @@ def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: b
             now = time.perf_counter()
             if bar is not None and now - shown[0] >= PROGRESS_INTERVAL:
                 shown[0] = now
-                _update_bar(bar, (first + count) * h_ns / NS_PER_S, now - wall_start)
+                update_bar(bar, (first + count) * h_ns / NS_PER_S, now - wall_start, shown)
 
         compiled = total >= COMPILED_MIN_STEPS
         try:
@@ -413,26 +413,6 @@ _FORMATS = {
     "integer": lambda column: list(map(str, column.astype(np.int64).tolist())),
     "boolean": lambda column: ["True" if value else "False" for value in column.tolist()],
 }
-
-
-def _progress_bar(duration: float):
-    from tqdm import tqdm
-
-    return tqdm(
-        total=round(duration, 3),
-        unit="s",
-        desc="simulated",
-        leave=False,
-        dynamic_ncols=True,
-        bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} s [{elapsed}{postfix}]",
-    )
-
-
-def _update_bar(bar, sim_time: float, wall: float) -> None:
-    bar.n = round(sim_time, 3)
-    if wall > 0:
-        bar.set_postfix_str(f"{sim_time / wall:.0f}x real time", refresh=False)
-    bar.refresh()
 
 
 def summary(result: SimulationResult) -> str:
