@@ -12,9 +12,10 @@ scale * FMU output, FMU parameter = scale * given value. FMU variables not named
 their own names (unless a mapped port already uses the name). Several ports may name one variable:
 an output then fills each of them, and an input receives the value of the port set last (its
 position in the FMU's input order); this lets an FMU with fewer ports than a role (a
-fault-injection FMU, say) fill it. Supported variable types: FMI 2.0
-Real, Integer, Enumeration, Boolean; FMI 3.0 Float64, Int32, Boolean, scalars and arrays (other
-FMI 3.0 types, and arrays sized by a tunable structural parameter, are not exposed).
+fault-injection FMU, say) fill it. Supported variable types: FMI 2.0 Real, Integer, Enumeration,
+Boolean; FMI 3.0 Float32, Float64, Int8..UInt64, Enumeration (moved as Int64), Boolean, scalars and
+arrays (`cosim.fmi.types`). An array sized by a tunable structural parameter has the size of the
+parameter's start value (the parameter keeps it).
 
 An FMI 3.0 array variable of fixed size appears as one port per element, named as FMI 2.0's
 structured scalars (`ranges[3]`, `waypoints[12,1]`; row-major), so a system connects the FMI 2.0
@@ -306,7 +307,7 @@ def _make_layout(
         if getattr(variable, "dimensions", None):
             shape = _array_shape(variable, description)
             if shape is None:
-                continue  # sized by a tunable structural parameter: the ports would change size
+                continue  # a dimension without a size (inspect.py reports such a description)
             if variable.name in by_variable:
                 raise CosimError(
                     f"FMU '{path}' (component '{name}'): port map entry "
@@ -693,6 +694,9 @@ class FmuComponent(Component):
                 arrays.setdefault(key.split("[")[0], {})[self._elements[key]] = value
                 continue
             variable, scale = self._variables[key]
+            if variable.causality == "structuralParameter" and variable.variability == "tunable":
+                self._check_structural(key, variable, kinds[key], value)
+                continue
             value = value if scale == 1.0 else value * scale  # (a Python int stays exact for an Int64)
             self._set_scalar(kinds[key], variable.valueReference, value, key)
         for array, elements in arrays.items():
@@ -701,6 +705,17 @@ class FmuComponent(Component):
         if self.fmi_version == 2:
             self._call_lifecycle("setupExperiment", None, self.t0)
         self.state = State.SET_UP
+
+    def _check_structural(self, key: str, variable, fmi_type: str, value: float) -> None:
+        """A tunable structural parameter sizes arrays, whose ports were made at its start value: it
+        keeps that value (changing it takes FMI 3.0's configuration mode and ports of another size)."""
+        start = _start_value(variable.start, fmi_type, key)
+        if float(value) != start:
+            raise CosimError(
+                f"FMU '{self.name}' (model {self.model_description.modelName}): structural parameter "
+                f"'{key}' sizes array variables, whose ports navcosim makes at its start value "
+                f"{start:g}; it cannot be set to {value:g}"
+            )
 
     def _set_scalar(self, kind: str, reference: int, value: float, name: str) -> None:
         """Set one variable of transfer type `kind` (integers checked against the type's range)."""
@@ -938,15 +953,16 @@ def _copy_lines(direction: str, group: int, kind: str, slots: list[int], scales:
 
 
 def _array_shape(variable, description) -> tuple[int, ...] | None:
-    """The fixed shape of an FMI 3.0 array variable; None when a dimension is a tunable structural
-    parameter (its size could change in configuration mode)."""
+    """The shape of an FMI 3.0 array variable: each dimension's start, or the start of the
+    structural parameter that sizes it (a tunable one too: the ports keep the size the FMU starts
+    with, which `FmuComponent.setup` holds it to); None when a dimension's size is unknown."""
     by_reference = {v.valueReference: v for v in description.modelVariables}
     shape = []
     for dimension in variable.dimensions:
         size = dimension.start
         if size is None:
             parameter = by_reference.get(dimension.valueReference)
-            if parameter is None or parameter.variability not in ("constant", "fixed"):
+            if parameter is None or parameter.start in (None, ""):
                 return None
             size = parameter.start
         shape.append(int(size))
