@@ -75,9 +75,7 @@ def _chain(fmus, version: int, compiled: bool) -> tuple[list[float], list[float]
         master.initialize()
         master.run(4, compiled=compiled)
     names = [f"{t}_output" for t in NUMERIC[version]]
-    return tuple(
-        [component.output_buffer[component.output_index[name]] for name in names] for component in (first, second)
-    )
+    return tuple([c.output_buffer[c.output_index[name]] for name in names] for c in (first, second))
 
 
 @pytest.mark.parametrize("version", [2, 3])
