@@ -184,15 +184,15 @@ def _read_description(path: Path, max_unpacked_size: int | None = None):
     version = int(str(description.fmiVersion).split(".")[0])
     if version not in (2, 3):
         raise CosimError(f"FMU '{path}' is FMI {description.fmiVersion}; navcosim supports FMI 2.0 and 3.0")
-    if description.coSimulation is None:
-        raise CosimError(
-            f"FMU '{path}' (model {description.modelName}) supports model exchange only; "
-            "navcosim needs a co-simulation FMU"
-        )
+    # The binary of the interface a component uses by default: co-simulation when the FMU has it
+    # (`cosim.fmi.model_exchange` checks the Model Exchange binary of an FMU run as one).
+    interface = description.coSimulation or description.modelExchange
+    if interface is None:
+        raise CosimError(f"FMU '{path}' (model {description.modelName}) declares no FMI interface")
     platform = fmpy.platform if version == 2 else fmpy.platform_tuple
-    binary = f"binaries/{platform}/{description.coSimulation.modelIdentifier}{fmpy.sharedLibraryExtension}"
+    binary = f"binaries/{platform}/{interface.modelIdentifier}{fmpy.sharedLibraryExtension}"
     if binary not in names:
-        identifier = description.coSimulation.modelIdentifier
+        identifier = interface.modelIdentifier
         from cosim.fmi.diagnose import missing_binary
 
         raise CosimError(missing_binary(path, names, platform, identifier, fmpy.sharedLibraryExtension))
@@ -407,6 +407,7 @@ class FmuComponent(Component):
         self.path = Path(path)
         layout = fmu_layout(self.path, name, port_map or {}, max_unpacked_size)
         self.model_description, self.fmi_version = layout.model_description, layout.fmi_version
+        self._check_interface()
         self.default_parameters = dict(parameters or {})
         self._variables = layout.variables  # port name -> (fmpy variable, scale); shared, read-only
         self._elements = layout.elements  # element port of an FMI 3.0 array -> row-major index
@@ -421,6 +422,20 @@ class FmuComponent(Component):
         self._unzip_dir: str | None = None
         self._fatal = False
         self.log_messages: deque[str] = deque(maxlen=20)
+
+    # fmpy's class of an instance, by FMI version (`cosim.fmi.model_exchange` has its own).
+    _FMPY_CLASSES = {2: FMU2Slave, 3: FMU3Slave}
+
+    def _interface(self):
+        """The description's element of the interface this component runs (co-simulation)."""
+        return self.model_description.coSimulation
+
+    def _check_interface(self) -> None:
+        if self._interface() is None:
+            raise CosimError(
+                f"FMU '{self.path}' (model {self.model_description.modelName}) supports model exchange "
+                'only: run it with interface = "me" (and a solver)'
+            )
 
     def _plan_transfers(self) -> None:
         """Per FMI type: buffer slots, value references, FMI value array, scales."""
@@ -585,12 +600,12 @@ class FmuComponent(Component):
         try:
             # What the instance can use: its binaries and resources (not sources/ or documentation/).
             fmpy.extract(str(self.path), unzipdir=self._unzip_dir, include=_needed_at_run_time)
-            slave_class = FMU2Slave if self.fmi_version == 2 else FMU3Slave
+            slave_class = self._FMPY_CLASSES[self.fmi_version]
             guid = description.guid if self.fmi_version == 2 else description.instantiationToken
             self._slave = slave_class(
                 guid=guid,
                 unzipDirectory=self._unzip_dir,
-                modelIdentifier=description.coSimulation.modelIdentifier,
+                modelIdentifier=self._interface().modelIdentifier,
                 instanceName=self.name,
             )
             if self.fmi_version == 2:
@@ -638,7 +653,7 @@ class FmuComponent(Component):
     def _bind_raw_functions(self) -> None:
         """Own prototypes of the per-step C functions (fmpy's wrappers allocate on every call)."""
         dll = self._slave.dll
-        c_void_p, c_size_t, c_double, c_int = ctypes.c_void_p, ctypes.c_size_t, ctypes.c_double, ctypes.c_int
+        c_void_p, c_size_t, c_int = ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int
         self._handle = self._slave.component
         self._setters, self._getters = {}, {}
         # Only the types the FMU's ports use (an FMI 2.0 Enumeration moves as Integer).
@@ -652,6 +667,10 @@ class FmuComponent(Component):
                 prototype = ctypes.CFUNCTYPE(c_int, c_void_p, vrs, c_size_t, values, c_size_t)
             self._setters[type_name] = prototype((f"fmi{self.fmi_version}Set{type_name}", dll))
             self._getters[type_name] = prototype((f"fmi{self.fmi_version}Get{type_name}", dll))
+        self._bind_do_step(dll)
+
+    def _bind_do_step(self, dll) -> None:
+        c_void_p, c_double, c_int = ctypes.c_void_p, ctypes.c_double, ctypes.c_int
         if self.fmi_version == 2:
             prototype = ctypes.CFUNCTYPE(c_int, c_void_p, c_double, c_double, c_int)
             self._raw_do_step = prototype(("fmi2DoStep", dll))
