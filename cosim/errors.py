@@ -9,6 +9,18 @@ class CosimError(NavcosimError):
     """Bad scenario, bad FMU, a failed FMU, a bad log file. One-line message."""
 
 
+class SimulationEnded(CosimError):
+    """An FMU asked to end the simulation (FMI 3.0 terminateSimulation, FMI 2.0 Discard with
+    fmi2Terminated): the run ends cleanly at the last communication point every component reached.
+    A `CosimError`, so a caller that does not expect it stops as at a failure; `component` names
+    the FMU, `time` [s] the start of the step in which it asked."""
+
+    def __init__(self, message: str, component: str, time: float) -> None:
+        super().__init__(message)
+        self.component = component
+        self.time = time
+
+
 QUOTE_LIMIT = 80  # characters of a user's value quoted in an error message
 PATH_LIMIT = 200  # characters of a path quoted in an error message
 WHERE_LIMIT = 120  # characters of the key path an error names, e.g. [components.lag].ports.u

@@ -127,6 +127,8 @@ def _handler(args) -> int:
         )
         if not args.quiet:
             print(format_summary(scenario.name, result.outcome, result.log_path, result.wall_time))
+            if result.ended:
+                print(f"ended: {result.ended}")
         if result.failure is not None:
             print(
                 f"cosim: error: {result.failure}; log (up to the failure): {result.log_path}", file=sys.stderr

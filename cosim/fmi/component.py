@@ -63,7 +63,7 @@ from fmpy.fmi3 import FMU3Slave
 from fmpy.model_description import ModelVariable
 
 from cosim.core.component import Component, NativeStep, Port, State, check_unique_ports, closest_names
-from cosim.errors import CosimError
+from cosim.errors import CosimError, SimulationEnded
 from cosim.fmi.archive import check_unpacked_size
 from cosim.fmi.builtin import documented_nan_variables
 from cosim.fmi.types import C_TYPES, KINDS, TRANSFER_TYPES, WIDE, check_integer, exact_as_float, transfer_type
@@ -553,7 +553,8 @@ class FmuComponent(Component):
         else:
             step = ["def do_step(t, h):", "    clock[0] = t", "    status = raw(handle, t, h, True, *flags)"]
         names["clock"] = self._step_time
-        step.append(f"    if status > 1: fail(status, 'fmi{self.fmi_version}DoStep', t)")
+        step.append("    if status > 1: step_failed(status, t)")
+        names["step_failed"] = self._step_failed
         if self.fmi_version == 3:
             step.append("    if step_flags[1]: asked_to_terminate(t)")
             names.update(flags=self._do_step_flags, step_flags=self._step_flags)
@@ -836,6 +837,8 @@ class FmuComponent(Component):
     def _native_failure(self, call: int, status: int, t: float, kind: str = "real") -> None:
         if call == 3:
             self._asked_to_terminate(t)
+        if call == 1:
+            self._step_failed(status, t)
         if call == 4:
             self._step_time[0] = t
             if self.outputs[status].fmi_type in WIDE:  # read again, to name the value
@@ -866,10 +869,32 @@ class FmuComponent(Component):
         for value, slot in zip(values.tolist(), slots.tolist(), strict=False):
             exact_as_float(value, fmi_type, f"FMU '{self.name}' output '{self.outputs[slot].name}'")
 
+    def _step_failed(self, status: int, t: float) -> None:
+        """A doStep status above Warning: Discard with fmi2Terminated true (FMI 2.0) or with
+        terminateSimulation set (FMI 3.0) is the FMU's request to end the simulation; anything else
+        fails."""
+        if status == 2 and (self._step_flags[1] if self.fmi_version == 3 else self._fmi2_terminated()):
+            self._asked_to_terminate(t)
+        self._fail(status, f"fmi{self.fmi_version}DoStep", t)
+
+    def _fmi2_terminated(self) -> bool:
+        """fmi2GetBooleanStatus(fmi2Terminated): whether the FMU wants the simulation to end."""
+        c_int = ctypes.c_int
+        prototype = ctypes.CFUNCTYPE(c_int, ctypes.c_void_p, c_int, ctypes.POINTER(c_int))
+        try:
+            function = prototype(("fmi2GetBooleanStatus", self._slave.dll))
+        except AttributeError:
+            return False
+        terminated = c_int(0)
+        fmi2_terminated = 3  # fmi2StatusKind
+        return function(self._handle, fmi2_terminated, ctypes.byref(terminated)) == 0 and terminated.value != 0
+
     def _asked_to_terminate(self, t: float) -> None:
-        raise CosimError(
-            f"FMU '{self.name}' (model {self.model_description.modelName}) asked to terminate "
-            f"the simulation at t = {t:.9g} s"
+        raise SimulationEnded(
+            f"FMU '{self.name}' (model {self.model_description.modelName}) asked to end "
+            f"the simulation in its step from t = {t:.9g} s",
+            self.name,
+            t,
         )
 
     def terminate(self) -> None:

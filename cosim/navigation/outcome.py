@@ -26,7 +26,8 @@ MODE_FOLLOW, MODE_AVOID, MODE_RECOVER = 0, 1, 2  # AvoidanceMixer's `mode` outpu
 @dataclass
 class Outcome:
     """The summary of one run. `reason`: goal_reached, collision, stop_time, no_path (the goal
-    cannot be reached any more: a replan found no path), interrupted, fmu_failed."""
+    cannot be reached any more: a replan found no path), interrupted, fmu_failed, fmu_terminated (an
+    FMU asked to end the simulation)."""
 
     reached: bool = False
     reason: str = "running"

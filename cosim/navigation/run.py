@@ -61,7 +61,7 @@ import numpy as np
 from cosim import release_collector
 from cosim.core import interrupt
 from cosim.core.master import NS_PER_S, Master, due_from
-from cosim.errors import PATH_LIMIT, CosimError, shorten
+from cosim.errors import PATH_LIMIT, CosimError, SimulationEnded, shorten
 from cosim.navigation.build import BuiltRun, build_run
 from cosim.navigation.outcome import Outcome, OutcomeMonitor, outcome_metadata
 from cosim.record.logfile import (
@@ -85,6 +85,7 @@ class RunResult:
     wall_time: float  # [s]
     failure: str | None = None  # message of a failed FMU
     trace: object | None = None  # the recorder's `RunTrace`: what the default plot draws
+    ended: str | None = None  # which FMU asked to end the run, and when (reason fmu_terminated)
 
     @property
     def exit_code(self) -> int:
@@ -460,6 +461,7 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
         return stop(finish_step(current.step_index - 1), True, current.time)
 
     failure = None
+    ended = None  # an FMU's request to end the run (FMI terminateSimulation / fmi2Terminated)
     blocks = None
     try:
         if tables is None:
@@ -488,6 +490,9 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
                 before_block=blocks.watch,
                 cut_after_python=cut_after_python,
             )
+    except SimulationEnded as request:  # the run ends cleanly; the outcome rules judge it
+        state["reason"] = "fmu_terminated"
+        ended = str(request)
     except CosimError as error:
         failure = str(error) if " at t = " in str(error) else f"{error} (at t = {master.time:.3f} s)"
     except interrupt.Interrupted:  # a signal while an FMU in a child process did not answer
@@ -518,12 +523,14 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
         metadata["goal"] = f"{monitor.goal[0]},{monitor.goal[1]}"  # the last goal given during the run
     if failure:
         metadata["failure"] = failure
+    if ended:
+        metadata["ended_by"] = ended
     try:
         master.close()
     except CosimError as error:
         failure = failure or f"terminating the system failed: {error}"
     recorder.close(metadata)
-    return RunResult(outcome, log_path, master.step_index, wall_time, failure, recorder.trace)
+    return RunResult(outcome, log_path, master.step_index, wall_time, failure, recorder.trace, ended)
 
 
 def _goal_poll(goals, built: BuiltRun, monitor: OutcomeMonitor, recorder, recording: _Recording):

@@ -25,7 +25,7 @@ import numpy as np
 
 from cosim.core import interrupt
 from cosim.core.master import COMPILED_MIN_STEPS, MODES, Master, due_from, seconds_to_ns
-from cosim.errors import CosimError
+from cosim.errors import CosimError, SimulationEnded
 from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
 from cosim.scenario.load import DEFAULT_LOG_PATTERN
 from cosim.ssp.read import SspSystem, build_system, open_ssp
@@ -40,17 +40,18 @@ class SspRunResult:
     steps: int
     end_time: float  # [s]
     wall_time: float  # [s]
-    reason: str  # stop_time, interrupted, fmu_failed
+    reason: str  # stop_time, fmu_terminated (an FMU asked to end), interrupted, fmu_failed
     failure: str | None = None
     macro_step: float = 0.0  # [s]
     macro_step_source: str = ""  # where the macro step came from
+    ended: str | None = None  # which FMU asked to end the run, and when
 
     @property
     def exit_code(self) -> int:
-        """0 the run completed, 1 interrupted, 2 a failed FMU."""
+        """0 the run completed (or an FMU ended it), 1 interrupted, 2 a failed FMU."""
         if self.failure is not None:
             return 2
-        return 0 if self.reason == "stop_time" else 1
+        return 0 if self.reason in ("stop_time", "fmu_terminated") else 1
 
 
 @dataclass(frozen=True)
@@ -165,6 +166,7 @@ def _record(
     total = round((seconds_to_ns(run.stop_time, "stop time") - master.start_time_ns) / h_ns)
     wall_start = time.perf_counter()
     failure = None
+    ended = None  # an FMU's request to end the run
     with recorder:
         _write_header(ssp, run, master, recorder)
         channels, periods = [], []
@@ -193,11 +195,14 @@ def _record(
         try:
             while master.step_index < total and interrupt.take() is None:
                 master.run_recorded(min(CHUNK_STEPS, total - master.step_index), record, compiled=compiled)
+        except SimulationEnded as request:
+            ended = str(request)
         except CosimError as error:
             failure = f"{ssp.members(str(error))} (at t = {master.time:.3f} s)"
         except interrupt.Interrupted:  # a signal while an FMU in a child process did not answer
             interrupt.take()
         reason = "fmu_failed" if failure else ("stop_time" if master.step_index >= total else "interrupted")
+        reason = "fmu_terminated" if ended else reason
         try:
             master.close()
         except CosimError as error:
@@ -205,6 +210,8 @@ def _record(
         outcome = {"reached": "false", "reason": reason, "time": repr(master.time)}
         if failure:
             outcome["failure"] = failure
+        if ended:
+            outcome["ended_by"] = ended
         recorder.end_steps(master.time_ns)
         recorder.close(outcome)
     wall_time = time.perf_counter() - wall_start
@@ -217,6 +224,7 @@ def _record(
         failure,
         run.macro_step,
         run.macro_step_source,
+        ended,
     )
 
 
@@ -244,10 +252,14 @@ def _write_header(ssp: SspSystem, run: Experiment, master: Master, recorder) -> 
     recorder.add_attachment("SystemStructure.ssd", "application/x-ssp-definition", ssp.ssd_text)
 
 
+def _ended(ended: str | None) -> str:
+    return f" ({ended})" if ended else ""
+
+
 def summary(result: SspRunResult) -> str:
     rate = result.end_time / result.wall_time if result.wall_time > 0 else math.inf
     return (
-        f"{result.reason}: {result.steps} steps of {result.macro_step:.6g} s (macro step from "
+        f"{result.reason}{_ended(result.ended)}: {result.steps} steps of {result.macro_step:.6g} s (macro step from "
         f"{result.macro_step_source}) to t = {result.end_time:.6g} s in {result.wall_time:.2f} s "
         f"({rate:.0f}x real time); log: {result.log_path}"
     )

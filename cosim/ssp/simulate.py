@@ -37,7 +37,7 @@ import numpy as np
 from cosim.core import interrupt
 from cosim.core.component import closest_names
 from cosim.core.master import COMPILED_MIN_STEPS, NS_PER_S, Master, System, seconds_to_ns
-from cosim.errors import CosimError
+from cosim.errors import CosimError, SimulationEnded
 from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
 from cosim.scenario.description import ComponentDescription
 from cosim.scenario.limits import MAX_STEPS
@@ -73,15 +73,16 @@ class SimulationResult:
     steps: int
     end_time: float  # [s]
     wall_time: float  # [s]
-    reason: str  # stop_time, interrupted, fmu_failed
+    reason: str  # stop_time, fmu_terminated (an FMU asked to end), interrupted, fmu_failed
     failure: str | None = None
+    ended: str | None = None  # which FMU asked to end the run, and when
 
     @property
     def exit_code(self) -> int:
-        """0 the run reached its stop time, 1 interrupted, 2 a failed FMU."""
+        """0 the run reached its stop time or the FMU ended it, 1 interrupted, 2 a failed FMU."""
         if self.failure is not None:
             return 2
-        return 0 if self.reason == "stop_time" else 1
+        return 0 if self.reason in ("stop_time", "fmu_terminated") else 1
 
 
 def parse_start_values(texts: list[str] | tuple[str, ...]) -> dict[str, float | bool]:
@@ -313,6 +314,7 @@ def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: b
     wall_start = time.perf_counter()
     shown = [wall_start, 0.0]  # wall time and simulated time [s] of the bar's last update
     failure = None
+    ended = None  # an FMU's request to end the run
     with recorder:
         _write_header(simulation, component, recorder)
         channel = recorder.signal_channel(
@@ -341,6 +343,8 @@ def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: b
         try:
             while master.step_index < total and interrupt.take() is None:
                 master.run_recorded(min(CHUNK_STEPS, total - master.step_index), record, compiled=compiled)
+        except SimulationEnded as request:
+            ended = str(request)
         except CosimError as error:
             failure = f"{error} (at t = {master.time:.6g} s)"
         except interrupt.Interrupted:  # a signal while an FMU in a child process did not answer
@@ -351,6 +355,7 @@ def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: b
             if csv is not None:
                 csv.close()
         reason = "fmu_failed" if failure else ("stop_time" if master.step_index >= total else "interrupted")
+        reason = "fmu_terminated" if ended else reason
         try:
             master.close()
         except CosimError as error:
@@ -358,10 +363,14 @@ def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: b
         outcome = {"reason": reason, "time": repr(master.time)}
         if failure:
             outcome["failure"] = failure
+        if ended:
+            outcome["ended_by"] = ended
         recorder.end_steps(master.time_ns)
         recorder.close(outcome)
     wall_time = time.perf_counter() - wall_start
-    return SimulationResult(log_path, csv_path, master.step_index, master.time, wall_time, reason, failure)
+    return SimulationResult(
+        log_path, csv_path, master.step_index, master.time, wall_time, reason, failure, ended
+    )
 
 
 def _write_header(simulation: Simulation, component, recorder) -> None:
@@ -419,6 +428,6 @@ def summary(result: SimulationResult) -> str:
     rate = result.end_time / result.wall_time if result.wall_time > 0 else math.inf
     csv = f"; csv: {result.csv_path}" if result.csv_path is not None else ""
     return (
-        f"{result.reason}: {result.steps} steps to t = {result.end_time:.6g} s in {result.wall_time:.2f} s "
+        f"{result.reason}{f' ({result.ended})' if result.ended else ''}: {result.steps} steps to t = {result.end_time:.6g} s in {result.wall_time:.2f} s "
         f"({rate:.0f}x real time); log: {result.log_path}{csv}"
     )
