@@ -887,7 +887,8 @@ class FmuComponent(Component):
             return False
         terminated = c_int(0)
         fmi2_terminated = 3  # fmi2StatusKind
-        return function(self._handle, fmi2_terminated, ctypes.byref(terminated)) == 0 and terminated.value != 0
+        status = function(self._handle, fmi2_terminated, ctypes.byref(terminated))
+        return status == 0 and terminated.value != 0
 
     def _asked_to_terminate(self, t: float) -> None:
         raise SimulationEnded(

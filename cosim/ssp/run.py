@@ -259,7 +259,8 @@ def _ended(ended: str | None) -> str:
 def summary(result: SspRunResult) -> str:
     rate = result.end_time / result.wall_time if result.wall_time > 0 else math.inf
     return (
-        f"{result.reason}{_ended(result.ended)}: {result.steps} steps of {result.macro_step:.6g} s (macro step from "
+        f"{result.reason}{_ended(result.ended)}: {result.steps} steps of {result.macro_step:.6g} s "
+        "(macro step from "
         f"{result.macro_step_source}) to t = {result.end_time:.6g} s in {result.wall_time:.2f} s "
         f"({rate:.0f}x real time); log: {result.log_path}"
     )

@@ -427,7 +427,8 @@ _FORMATS = {
 def summary(result: SimulationResult) -> str:
     rate = result.end_time / result.wall_time if result.wall_time > 0 else math.inf
     csv = f"; csv: {result.csv_path}" if result.csv_path is not None else ""
+    ended = f" ({result.ended})" if result.ended else ""
     return (
-        f"{result.reason}{f' ({result.ended})' if result.ended else ''}: {result.steps} steps to t = {result.end_time:.6g} s in {result.wall_time:.2f} s "
-        f"({rate:.0f}x real time); log: {result.log_path}{csv}"
+        f"{result.reason}{ended}: {result.steps} steps to t = {result.end_time:.6g} s in "
+        f"{result.wall_time:.2f} s ({rate:.0f}x real time); log: {result.log_path}{csv}"
     )
