@@ -15,6 +15,7 @@ import logging
 import os
 import secrets
 import signal
+import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -100,13 +101,16 @@ class SweepResult:
 def plan(spec: SweepSpec) -> tuple[Bundle, list[Run], str]:
     """Validate the sweep's keys and values and list its runs; raises `CosimError` (one line).
 
-    Every varied value (of an interval: both ends) passes the scenario's validation with the base
-    overrides, so a wrong key, type or range is caught before anything runs. Returns the bundle,
-    the runs in sweep order and the scenario's name.
+    Each varied key's extreme values pass the scenario's validation with the base overrides: of
+    numbers the smallest and the largest (of an interval: both ends), every other value once (a
+    choice, a flag, a list). So a wrong key, type or range is caught before anything runs, in a
+    time that grows with the keys and not with the points. A value inside the range that the
+    scenario still refuses (a macro step that no rate divides) fails its own run, with the reason
+    in its row. Returns the bundle, the runs in sweep order and the scenario's name.
     """
     base = adapter.load(spec.scenario, spec.overrides, check_world=False)
     for dimension in spec.dimensions:
-        for value in dimension.values if dimension.values is not None else dimension.interval:
+        for value in _checked_values(dimension):
             override = f"{dimension.key}={toml_value(value)}"
             try:
                 adapter.load(spec.scenario, [*spec.overrides, override], check_world=False)
@@ -126,6 +130,17 @@ def plan(spec: SweepSpec) -> tuple[Bundle, list[Run], str]:
         builder.add_run(len(seen) - 1, values, overrides)
     bundle, runs = builder.finish()
     return bundle, runs, base.name
+
+
+def _checked_values(dimension) -> list:
+    """The values of `dimension` that `plan` validates: numbers' extremes, the others once each."""
+    values = dimension.values if dimension.values is not None else dimension.interval
+    numbers = [v for v in values if isinstance(v, int | float) and not isinstance(v, bool)]
+    others: list = []
+    for value in values:
+        if value not in numbers and value not in others:
+            others.append(value)
+    return ([min(numbers), max(numbers)] if numbers else []) + others
 
 
 def _without_set(message: str) -> str:
@@ -217,6 +232,54 @@ def stop_fork_server() -> None:
         pass
 
 
+# Largest first frame a Dask comm handshake may announce [bytes]; a real one is a few dozen bytes.
+HANDSHAKE_LIMIT = 1 << 20
+
+
+def probe_scheduler(address: str, timeout: float) -> None:
+    """Check within `timeout` seconds that a tcp:// `address` answers as a Dask scheduler does.
+
+    A scheduler sends its comm handshake as soon as it accepts a connection: an 8-byte
+    little-endian length, then that many bytes of message. A server that accepts and stays silent
+    would hang `distributed.Client` past its own timeout, which does not cover the handshake; one
+    that answers something else (an HTTP server) makes Dask read the first 8 bytes as a frame
+    length and try to allocate exabytes. Other schemes (tls://, ucx://) are left to Dask.
+    """
+    import socket
+
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    try:
+        scheme, location = parse_address(address)
+        if scheme != "tcp":
+            return
+        host, port = parse_host_port(location)
+    except (TypeError, ValueError) as error:
+        raise CosimError(f"--scheduler {address}: not a scheduler address ({error})") from None
+    deadline = time.monotonic() + timeout
+    try:
+        with socket.create_connection((host, port), timeout=timeout) as connection:
+            head = b""
+            while len(head) < 8:
+                connection.settimeout(max(deadline - time.monotonic(), 1e-3))
+                chunk = connection.recv(8 - len(head))
+                if not chunk:
+                    raise CosimError(f"--scheduler {address}: closed the connection: not a Dask scheduler")
+                head += chunk
+    except TimeoutError:
+        raise CosimError(
+            f"--scheduler {address}: no Dask handshake within {timeout:g} s (is it a Dask scheduler?)"
+        ) from None
+    except OSError as error:
+        raise CosimError(
+            f"--scheduler {address}: cannot reach the Dask scheduler: {error.strerror or error}"
+        ) from None
+    length = int.from_bytes(head, "little")
+    if not 0 < length <= HANDSHAKE_LIMIT:
+        shown = head.decode("latin-1").encode("unicode_escape").decode()
+        raise CosimError(f"--scheduler {address}: not a Dask scheduler (it answered {shown!r})")
+
+
 @contextmanager
 def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterator[tuple[object, int]]:
     """A client on `scheduler`, or on a new LocalCluster of `workers` processes (default: one per
@@ -224,10 +287,15 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
     from distributed import Client, LocalCluster
 
     if scheduler is not None:
+        probe_scheduler(scheduler, CONNECT_TIMEOUT)
         try:
             client = Client(scheduler, timeout=CONNECT_TIMEOUT, set_as_default=False)
         except (OSError, TimeoutError, ValueError) as error:
             raise CosimError(f"--scheduler {scheduler}: cannot reach the Dask scheduler: {error}") from None
+        except Exception as error:  # it answered, but not as a scheduler does (MemoryError, ...)
+            raise CosimError(
+                f"--scheduler {scheduler}: not a Dask scheduler ({type(error).__name__}: {str(error)[:120]})"
+            ) from None
         try:
             try:
                 client.wait_for_workers(1, timeout=WORKER_WAIT)
@@ -376,6 +444,39 @@ def _execute(
             pass
 
 
+def kept_row_problem(row: dict[str, str], run: Run, out_dir: Path) -> str | None:
+    """Why a completed row of an earlier sweep cannot be kept by `--resume` (None: it can).
+
+    Nothing read back is trusted: the row's log must be a regular file inside DIR/runs, a complete
+    MCAP file (its footer read), recorded with this run's overrides, and its outcome metadata
+    must be the row's; no cell may hold a control character (a NUL would go on into the table).
+    """
+    from cosim.logs.index import read_index
+
+    if any(any(ord(c) < 32 for c in str(value)) for value in row.values() if value is not None):
+        return "row with control characters"
+    runs_dir = (out_dir / "runs").resolve()
+    path = (out_dir / (row.get("log") or "")).resolve()
+    if not path.is_relative_to(runs_dir) or path == runs_dir:
+        return "log outside the sweep folder"
+    if not path.is_file():
+        return "log missing"
+    try:
+        index = read_index(path)
+    except CosimError:
+        return "log unreadable"
+    if not index.complete:
+        return "log incomplete"
+    metadata = {record.name: record.metadata for record in index.metadata}
+    recorded = f" {metadata.get('navcosim', {}).get('overrides', '')} "
+    if not all(f" {override} " in recorded for override in run.overrides):
+        return "log of another run"
+    outcome = metadata.get("outcome")
+    if outcome is None or any(row.get(key, "") != value for key, value in outcome.items()):
+        return "row differing from its log"
+    return None
+
+
 def _load_plotting() -> None:
     """Import the plot module (Matplotlib: about a second) while the last runs end."""
     import cosim.sweep.plot  # noqa: F401
@@ -397,18 +498,22 @@ def run_sweep(
     keys = spec.keys
     outcome_keys = adapter.outcome_keys()
     results = ResultsFile(out_dir / RESULTS_FILE, columns(keys, outcome_keys))
-    ids = {run.run_id for run in runs}
     rows: dict[str, dict[str, str]] = {}
+    rerun: dict[str, int] = {}
     if options.resume:
+        by_id = {run.run_id: run for run in runs}
         for row in read_rows(out_dir / RESULTS_FILE):
-            log = row.get("log") or ""
-            if (
-                row.get("run_id") in ids
-                and row.get("status") == COMPLETED
-                and log
-                and (out_dir / log).is_file()
-            ):
-                rows[row["run_id"]] = {key: row.get(key) or "" for key in results.header}
+            run = by_id.get(row.get("run_id") or "")
+            if run is None or row.get("status") != COMPLETED:
+                continue
+            problem = kept_row_problem(row, run, out_dir)
+            if problem is None:
+                rows[run.run_id] = {key: row.get(key) or "" for key in results.header}
+            else:
+                rerun[problem] = rerun.get(problem, 0) + 1
+        if rerun and progress:
+            reasons = ", ".join(f"{count} {why}" for why, count in sorted(rerun.items()))
+            print(f"resume: {len(rows)} runs kept; run again: {reasons}", file=sys.stderr)
     skipped = len(rows)
     pending = [run for run in runs if run.run_id not in rows]
 

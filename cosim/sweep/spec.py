@@ -31,6 +31,9 @@ from cosim.errors import CosimError
 
 METHODS = ("grid", "random", "lhs")
 SIGNIFICANT_DIGITS = 12
+# Most runs of one sweep, checked before any point is made: each run is a task, a results row and a
+# log (about 2 MB for a warehouse scenario), so more would fill the scheduler and the disk first.
+MAX_POINTS = 100_000
 
 
 @dataclass(frozen=True)
@@ -109,6 +112,8 @@ def _parse_value(text: str) -> Any:
         return tomllib.loads(f"value = {text}")["value"]
     except tomllib.TOMLDecodeError:
         return text
+    except RecursionError:
+        raise CosimError(f"the value {text[:40]}... is nested too deeply") from None
 
 
 def _split_top_level(text: str, separator: str) -> list[str]:
@@ -167,6 +172,8 @@ def _range(key: str, spec: str, parts: list[str]) -> Dimension:
     count = _parse_value(parts[2])
     if not isinstance(count, int) or isinstance(count, bool) or count < 1:
         raise CosimError(f"{where}: bad range: COUNT must be an integer >= 1, got '{parts[2].strip()}'")
+    if count > MAX_POINTS:
+        raise CosimError(f"{where}: COUNT {count} is more than a sweep runs ({MAX_POINTS})")
     return Dimension(key, spec, values=_linspace(start, stop, count))
 
 
@@ -302,8 +309,17 @@ def make_spec(
                 raise CosimError(
                     f"{dimension.describe()}: a grid needs a list or START:STOP:COUNT, not an interval"
                 )
+        size = math.prod(len(dimension.values) for dimension in dimensions)
+        if size > MAX_POINTS:
+            shape = " x ".join(str(len(dimension.values)) for dimension in dimensions)
+            raise CosimError(
+                f"the grid has {size} points ({shape}), more than a sweep runs ({MAX_POINTS}); "
+                "vary fewer values, or sample with --method lhs --samples N"
+            )
     elif samples is None or samples < 1:
         raise CosimError(f"--method {method} needs --samples N (N >= 1)")
+    elif samples > MAX_POINTS:
+        raise CosimError(f"--samples {samples}: more than a sweep runs ({MAX_POINTS})")
     if seed is not None and seed < 0:
         raise CosimError(f"--seed {seed}: must be >= 0")
     return SweepSpec(Path(scenario), tuple(dimensions), method, samples, seed or 0, tuple(overrides))
