@@ -1,6 +1,7 @@
 """`cosim ssp export SCENARIO --out X.ssp`: write a scenario's whole system as an SSP 1.0 archive.
 
-The FMUs go in `resources/`, their parameters in `resources/parameters.ssv`, the navigation parts
+The FMUs go in `resources/`, their parameters in `resources/parameters.ssv` and in each component's
+own binding, the units in `<ssd:Units>` (`cosim.ssp.write`), the navigation parts
 (planner, lidar, world, outcome settings) in a navcosim annotation with the scenario TOML and its
 map as resources (`cosim.ssp.export`). `cosim run X.ssp` reproduces the scenario's run.
 """

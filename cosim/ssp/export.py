@@ -2,9 +2,9 @@
 
 The archive holds the scenario's whole system:
 - the FMU components as `resources/<component>.fmu` (the files that the scenario runs), their
-  parameters (as the run sets them, derived ones included) in `resources/parameters.ssv`, the
-  connections between FMUs, the stop time, macro step, master and periods (`cosim.ssp.write`);
-  any SSP 1.0 tool runs this FMU part;
+  parameters (as the run sets them, derived ones included) in `resources/parameters.ssv` and in
+  each component's own binding, the units, the connections between FMUs, the stop time, macro
+  step, master and periods (`cosim.ssp.write`); any SSP 1.0 tool runs this FMU part;
 - the parts that are not FMUs (planner, lidar, world, outcome settings) as resources, the scenario
   TOML `resources/navcosim/scenario.toml` as written and its map files beside it, described by the
   SSD-level annotation `org.navcosim.scenario`:

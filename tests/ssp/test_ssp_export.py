@@ -1,13 +1,16 @@
 """`cosim ssp export`: what it writes is valid SSP 1.0 (the normative schemas, and fmpy's reader),
 and `cosim run` of the archive reproduces the scenario's log exactly (`cosim log diff` at
-tolerance 0); the SSV is what the run uses; an SSD the scenario does not describe is an error;
-without the navcosim annotation the archive runs FMU-only.
+tolerance 0); the SSV is what the run uses; each component carries its own binding with the same
+values under its variables' own names (what libcosim and ecos read), and every unit the SSD names
+is defined with the SI exponents of the FMU's own UnitDefinitions; an SSD the scenario does not
+describe is an error; without the navcosim annotation the archive runs FMU-only.
 """
 
 from __future__ import annotations
 
 import io
 import re
+import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
@@ -74,6 +77,89 @@ def test_a_second_reader_sees_the_fmus_and_their_connections(exported):
     parameters = {p.name: p.value for p in read_ssv(str(archive), "resources/parameters.ssv").parameters}
     assert float(parameters["pure_pursuit.lookahead_distance"]) == lookahead
     assert parameters["vehicle.x0"] == "6.0"  # derived from [start], as the run sets it
+
+
+SSD_NS = {
+    "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
+    "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
+    "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
+}
+
+
+def _values(parameter_set: ET.Element) -> dict[str, tuple[str, str]]:
+    """name -> (value type, value text) of an ssv:ParameterSet."""
+    values = {}
+    for parameter in parameter_set.iterfind("ssv:Parameters/ssv:Parameter", SSD_NS):
+        (value,) = list(parameter)
+        values[parameter.get("name")] = (value.tag.rpartition("}")[2], value.get("value"))
+    return values
+
+
+def test_each_component_has_its_own_binding_with_the_systems_values(exported):
+    """The same numbers as the root's parameters.ssv, named without the component prefix, in a
+    set named as the system (ecos selects parameter sets by name); each set valid SSP 1.0."""
+    _, _, archive = exported
+    with zipfile.ZipFile(archive) as zipped:
+        ssd = ET.fromstring(zipped.read("SystemStructure.ssd"))
+        root_values = _values(ET.fromstring(zipped.read("resources/parameters.ssv")))
+    ssv_schema = xmlschema.XMLSchema(SCHEMAS / "SystemStructureParameterValues.xsd")
+    from_components = {}
+    for component in ssd.iterfind("ssd:System/ssd:Elements/ssd:Component", SSD_NS):
+        bindings = component.findall("ssd:ParameterBindings/ssd:ParameterBinding", SSD_NS)
+        assert len(bindings) == 1 and bindings[0].get("source") is None
+        parameter_set = bindings[0].find("ssd:ParameterValues/ssv:ParameterSet", SSD_NS)
+        ssv_schema.validate(parameter_set)
+        assert parameter_set.get("name") == ssd.get("name")
+        for name, value in _values(parameter_set).items():
+            assert "." not in name
+            from_components[f"{component.get('name')}.{name}"] = value
+    assert from_components == root_values and len(root_values) >= 15
+    assert from_components["vehicle.x0"] == ("Real", "6.0")
+
+
+def test_every_unit_the_ssd_names_is_defined_with_the_fmus_si_exponents(exported):
+    _, _, archive = exported
+    with zipfile.ZipFile(archive) as zipped:
+        ssd = ET.fromstring(zipped.read("SystemStructure.ssd"))
+        fmus = [
+            ET.fromstring(zipfile.ZipFile(io.BytesIO(zipped.read(n))).read("modelDescription.xml"))
+            for n in zipped.namelist()
+            if n.endswith(".fmu")
+        ]
+    referenced = {element.get("unit") for element in ssd.iter() if element.get("unit") is not None}
+    defined = {}
+    for unit in ssd.iterfind("ssd:Units/ssc:Unit", SSD_NS):
+        (base,) = unit.findall("ssc:BaseUnit", SSD_NS)
+        defined[unit.get("name")] = {key: float(value) for key, value in base.attrib.items()}
+    assert referenced == set(defined) and {"m", "rad", "m/s", "rad/s"} <= referenced
+    # The FMUs' own definitions (FMI's BaseUnit attributes, the same names as SSP's).
+    for description in fmus:
+        for unit in description.iterfind("UnitDefinitions/Unit"):
+            base = unit.find("BaseUnit")
+            if unit.get("name") in defined and base is not None:
+                expected = {key: float(value) for key, value in base.attrib.items() if float(value) != 0}
+                expected = {k: v for k, v in expected.items() if not (k == "factor" and v == 1.0)}
+                assert defined[unit.get("name")] == expected, unit.get("name")
+    assert defined["m/s"] == {"m": 1.0, "s": -1.0} and defined["rad"] == {"rad": 1.0}
+
+
+def test_the_component_bindings_alone_give_the_run_its_values(exported, tmp_path):
+    """Without the root binding (as libcosim and ecos see it) the reader finds the same values."""
+    _, _, archive = exported
+    edited = tmp_path / "components_only.ssp"
+    with zipfile.ZipFile(archive) as source, zipfile.ZipFile(edited, "w") as target:
+        for item in source.infolist():
+            data = source.read(item)
+            if item.filename == "SystemStructure.ssd":
+                root = b'<ssd:ParameterBinding source="resources/parameters.ssv" />'
+                assert data.count(root) == 1
+                data = data.replace(root, b"")
+                data = data.replace(b"<ssd:ParameterBindings>\n      \n    </ssd:ParameterBindings>\n", b"")
+            target.writestr(item, data)
+    with open_ssp(archive) as full, open_ssp(edited) as alone:
+        for a, b in zip(full.components, alone.components, strict=True):
+            assert (a.name, a.parameters, a.inputs) == (b.name, b.parameters, b.inputs)
+            assert a.parameters or a.inputs
 
 
 def test_running_the_ssp_reproduces_the_scenario_log_exactly(exported, tmp_path, capsys):
