@@ -10,7 +10,8 @@ The archive holds the scenario's whole system:
   SSD-level annotation `org.navcosim.scenario`:
   `<nc:Scenario name=... scenario="resources/navcosim/scenario.toml">` with one `nc:Python` per
   Python component (planner, lidar), one `nc:Resource` per map file, and `nc:Set` overrides that
-  re-point file names into the archive (and repeat the `--set` overrides of the export).
+  re-point file names into the archive, keep each FMU's isolation as the scenario had it (its
+  project FMUs in-process, on the compiled kernel) and repeat the `--set` overrides of the export.
 
 `cosim run X.ssp` on such an archive rebuilds the navigation system: the scenario from the TOML
 (the non-FMU parts), the FMUs from the SSD's components and their parameters from the SSV. The
@@ -117,10 +118,13 @@ def export_scenario(scenario: Scenario, out: Path) -> Path:
     sets = [f'map.file="{scenario.map_file.name}"']
     for component in components:
         spec = scenario.components[component.name]
+        # A [components.NAME] may carry a role's name: it replaces that role.
+        section = f"components.{component.name}" if spec.added else component.name
         if not spec.is_builtin:
-            # A [components.NAME] may carry a role's name: it replaces that role.
-            section = f"components.{component.name}" if spec.added else component.name
             sets.append(f'{section}.fmu="../{component.name}.fmu"')
+        # Where the scenario ran the FMU: in the archive every FMU is given by path, which alone
+        # would put the project's own FMUs in a child process (off the compiled kernel).
+        sets.append(f'{section}.isolation="{scenario.isolation(spec)}"')
     for name in built.system.components:
         if name not in {component.name for component in components}:
             ET.SubElement(content, tag("nc:Python"), name=name, kind=name)

@@ -196,6 +196,24 @@ def test_the_ssv_is_what_the_run_uses(exported, tmp_path):
         assert Path(scenario.components["vehicle"].fmu).parent == ssp.directory / "resources"
 
 
+def test_the_archive_runs_each_fmu_where_the_scenario_ran_it(exported, tmp_path):
+    """The project FMUs in-process (on the compiled kernel), though the archive gives them by path
+    (which alone would isolate them in child processes); an isolation chosen in the scenario stays."""
+    path, overrides, archive = exported
+    scenario = load_scenario(path, overrides)
+    with open_ssp(archive) as ssp:
+        again = scenario_of(ssp, {})
+        for name, spec in again.components.items():
+            assert not spec.is_builtin and again.isolation(spec) == "none"
+            assert scenario.isolation(scenario.components[name]) == "none"
+    isolated = export_scenario(
+        load_scenario(path, [*overrides, 'vfh.isolation="process"']), tmp_path / "i.ssp"
+    )
+    with open_ssp(isolated) as ssp:
+        again = scenario_of(ssp, {})
+        assert [n for n, spec in again.components.items() if again.isolation(spec) == "process"] == ["vfh"]
+
+
 def test_an_ssd_the_scenario_does_not_describe_is_an_error(exported, tmp_path, capsys):
     _, _, archive = exported
     edited = tmp_path / "rewired.ssp"
