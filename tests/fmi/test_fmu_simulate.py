@@ -180,3 +180,24 @@ def test_start_value_texts():
         "on": True,
         "y0": -0.002,
     }
+
+
+def test_csv_and_log_end_together_where_the_fmu_ends_the_run(tmp_path):
+    """The every-type fixture asks to end in its step from 0.5 s (end_time = 0.55): both stop at 0.5 s,
+    where fmpy's simulate_fmu stops too."""
+    path = fixture_fmu("types_fmi2")
+    start = {"end_time": 0.55}
+    result = simulate(
+        prepare(path, stop_time=2.0, step=0.1, start_values=start), tmp_path / "e.mcap", tmp_path / "e.csv"
+    )
+    assert (result.reason, result.exit_code) == ("fmu_terminated", 0)
+    ours = _read_csv(tmp_path / "e.csv")
+    reference = _fmpy(path, 2.0, 0.1, start)
+    # fmpy repeats its last communication point (a row at termination); the points are the same.
+    np.testing.assert_allclose(ours["time"], np.unique(reference["time"]), rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(ours["Real_output"], reference["Real_output"][: len(ours)])
+    with open_log(tmp_path / "e.mcap") as log:
+        signals = log.signals(log.components[0])
+        np.testing.assert_array_equal(signals.t, ours["time"])
+        for name in ours.dtype.names[1:]:
+            np.testing.assert_array_equal(signals[name], ours[name].astype(float))
