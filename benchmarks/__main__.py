@@ -17,6 +17,7 @@ HERE = Path(__file__).resolve().parent
 BENCHMARKS = {
     "fmus": ["bench_fmus.py"],
     "planner": ["bench_planner.py"],
+    "mapf": ["bench_mapf.py"],
     "hybrid": ["bench_hybrid.py"],
     "orchestrator": ["bench_orchestrator.py", "--parts", "a,b,c"],
     "isolation": ["bench_isolation.py"],
