@@ -90,6 +90,8 @@ def format_system(description: SystemDescription, order: list[str], constant: se
         if component.kind == "fmu":
             fmu = f"{component.model_name} ({component.fmu})"
             version = f"{component.fmi_version}.0"
+            if component.integration.interface == "me":
+                version += f" ME {component.integration.solver}"
         else:
             fmu, version = f"Python {component.kind} (navcosim)", "-"
         rows.append(

@@ -85,7 +85,7 @@ import cosim
 from cosim.core.component import Component, State
 from cosim.core.interrupt import Interrupted, abandonable
 from cosim.errors import CosimError
-from cosim.fmi.component import FmuComponent
+from cosim.fmi.model_exchange import fmu_component
 
 DEFAULT_TIMEOUT = 10.0  # [s] longest FMI call ([simulation] fmu_timeout)
 STARTUP_TIMEOUT = 120.0  # [s] for the child's Python to start and read the model description
@@ -183,11 +183,13 @@ class _Child:
 
 
 class IsolatedFmuComponent(Component):
-    """An FMU (FMI 2.0 or 3.0 co-simulation) stepped in a child process; see the module docstring.
+    """An FMU (FMI 2.0 or 3.0 co-simulation, or Model Exchange) stepped in a child process; see the
+    module docstring.
 
     Args: those of `FmuComponent` (path, name, parameters, port_map, period, feedthrough_override,
-    nan_outputs, max_unpacked_size), and `timeout`: the longest an FMI call may take [s] before the
-    child is killed and the call fails.
+    nan_outputs, max_unpacked_size), `integration` (a Model Exchange FMU's solver settings, as
+    `cosim.fmi.model_exchange.fmu_component` takes them), and `timeout`: the longest an FMI call may
+    take [s] before the child is killed and the call fails.
     """
 
     def __init__(
@@ -201,6 +203,7 @@ class IsolatedFmuComponent(Component):
         nan_outputs: Collection[str] = (),
         max_unpacked_size: int | None = None,
         timeout: float = DEFAULT_TIMEOUT,
+        integration: Mapping[str, object] | None = None,
     ) -> None:
         if not timeout > 0:
             raise CosimError(f"component '{name}': FMU timeout must be > 0 s, got {timeout}")
@@ -213,9 +216,10 @@ class IsolatedFmuComponent(Component):
             "feedthrough_override": {k: list(v) for k, v in (feedthrough_override or {}).items()},
             "nan_outputs": list(nan_outputs),
             "max_unpacked_size": max_unpacked_size,
+            "integration": dict(integration) if integration else None,
         }
         # Reads and checks the description here, so bad input fails before any process starts.
-        self.spec = FmuComponent(**self._arguments)
+        self.spec = fmu_component(**self._arguments)
         super().__init__(name, period=period)
         spec = self.spec
         self._set_ports(spec.inputs, spec.outputs, spec.parameters, spec.feedthrough)

@@ -24,6 +24,7 @@ import time
 from cosim.errors import CosimError
 from cosim.fmi import isolated as protocol
 from cosim.fmi.component import FmuComponent
+from cosim.fmi.model_exchange import fmu_component
 
 _PR_SET_PDEATHSIG = 1
 
@@ -49,7 +50,7 @@ def serve(fd: int, memory: mmap.mmap) -> int:
     """Answer the host's commands on socket `fd`; return the exit status."""
     read, write = os.read, os.write
     try:
-        component = FmuComponent(**json.loads(sys.stdin.buffer.read()))
+        component = fmu_component(**json.loads(sys.stdin.buffer.read()))
     except CosimError as error:
         write(fd, _error(None, str(error)))
         return 0

@@ -49,6 +49,14 @@ DEFAULT_TOLERANCE = 1e-5  # fmpy's relative tolerance when the FMU's DefaultExpe
 _MAX_EVENT_ITERATIONS = 1000  # discrete-state updates at one event before it is an error
 
 
+def fmu_component(integration: Mapping[str, object] | None = None, **arguments) -> FmuComponent:
+    """`FmuComponent(**arguments)`, or with `integration` (solver, tolerance, max_step: None for
+    the defaults) `ModelExchangeComponent(**arguments, **integration)`."""
+    if integration is None:
+        return FmuComponent(**arguments)
+    return ModelExchangeComponent(**arguments, **integration)
+
+
 def integration_problem(solver: str, tolerance: float | None, max_step: float | None) -> str | None:
     """Why these integration settings are invalid (one line), or None."""
     if solver not in SOLVERS:

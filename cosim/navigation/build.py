@@ -54,19 +54,27 @@ def make_fmu(
 ) -> Component:
     """The FMU component of a description (its interface as described: port map, dependencies), in
     this process (`isolation` "none") or in a child process ("process", calls limited to `timeout`
-    seconds); `nan_outputs` may be NaN."""
-    from cosim.fmi.component import FmuComponent
+    seconds); `nan_outputs` may be NaN. A Model Exchange FMU (`component.integration`) is a
+    `cosim.fmi.model_exchange.ModelExchangeComponent`."""
+    from cosim.fmi.model_exchange import fmu_component
 
     port_map = {port: {"name": m.variable, "scale": m.scale} for port, m in component.port_map.items()}
     override = {output: list(depends) for output, depends in component.feedthrough.items()}
     options = {"port_map": port_map, "period": component.period, "feedthrough_override": override}
     options.update(max_unpacked_size=max_unpacked_size, nan_outputs=nan_outputs)
+    given = component.integration
+    if given.interface == "me":
+        options["integration"] = {
+            "solver": given.solver,
+            "tolerance": given.tolerance,
+            "max_step": given.max_step,
+        }
     if isolation == "process":
         from cosim.fmi.isolated import IsolatedFmuComponent
 
         fmu = IsolatedFmuComponent(component.fmu, component.name, timeout=timeout, **options)
     else:
-        fmu = FmuComponent(component.fmu, component.name, **options)
+        fmu = fmu_component(path=component.fmu, name=component.name, **options)
     for name, value in component.held_inputs.items():
         fmu.input_buffer[fmu.input_index[name]] = value
     return fmu

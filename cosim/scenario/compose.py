@@ -38,7 +38,7 @@ from cosim.scenario.description import (
     ConnectionDescription,
     SystemDescription,
 )
-from cosim.scenario.load import ComponentSpec, PortMapping, Scenario, rate_problem
+from cosim.scenario.load import ComponentSpec, Integration, PortMapping, Scenario, rate_problem
 from cosim.scenario.params import pair_key
 from cosim.scenario.schema import did_you_mean
 from cosim.scenario.template import (
@@ -206,8 +206,10 @@ class _Composer:
             variable = port_map[port].variable if port in port_map else port
             if port in feedthrough and variable not in declared:
                 feedthrough[port] = ()
+        integration = self._integration(spec, description, where)
         described = replace(
             component,
+            integration=integration,
             fmu=path,
             fmi_version=fmu.fmi_version,
             model_name=description.modelName or "",
@@ -218,6 +220,27 @@ class _Composer:
             feedthrough=feedthrough,
         )
         self.components[component.name] = self._values(described, spec, variables)
+
+    def _integration(self, spec: ComponentSpec, description, where: str) -> Integration:
+        """The section's interface, resolved against the FMU (co-simulation when it has it, unless
+        interface = "me"), with the Model Exchange solver (cvode unless given); a setting the FMU
+        cannot take is reported."""
+        given = spec.integration
+        interface = given.interface or ("cs" if description.coSimulation is not None else "me")
+        if interface == "me" and description.modelExchange is None:
+            self.problems.add(
+                f"{where}.interface", 'interface = "me": the FMU has no Model Exchange interface'
+            )
+        if interface == "cs":
+            for key in ("solver", "tolerance", "max_step"):
+                if getattr(given, key) is not None:
+                    self.problems.add(
+                        f"{where}.{key}",
+                        f"{key} integrates a Model Exchange FMU, and this one runs as co-simulation: "
+                        'add interface = "me" (or drop the key)',
+                    )
+            return Integration(interface="cs")
+        return replace(given, interface="me", solver=given.solver or "cvode")
 
     def _port_map(self, component: ComponentDescription, variables: dict) -> dict[str, PortMapping]:
         """The valid part of a role's `ports` table; each bad entry is reported."""

@@ -12,7 +12,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cosim.scenario.load import PortMapping
+from cosim.scenario.load import Integration, PortMapping
 
 TEMPLATE = "navigation template"  # `where` of what the template declares
 
@@ -34,6 +34,7 @@ class ComponentDescription:
     inputs, outputs, parameter_names: the interface (port names), filled in by `describe_system`.
     feedthrough: output -> inputs it depends on directly (an FMU output without declared
         dependencies depends on every input; `state_outputs` override that).
+    integration: the FMU's interface ("cs" or "me") and, for Model Exchange, its solver settings.
     state_outputs: outputs taken as states (no direct dependency) when the FMU declares no
         dependencies for them: a kinematic vehicle's pose integrates its inputs.
     """
@@ -55,6 +56,7 @@ class ComponentDescription:
     parameter_names: tuple[str, ...] = ()
     feedthrough: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
     state_outputs: tuple[str, ...] = ()
+    integration: Integration = Integration(interface="cs")  # an FMU's interface (and solver), resolved
 
     @property
     def period(self) -> float:

@@ -22,6 +22,7 @@ import numpy as np
 
 from cosim.errors import PATH_LIMIT, CosimError
 from cosim.fmi.builtin import known_names
+from cosim.fmi.solvers import SOLVERS
 from cosim.scenario.limits import (
     MAX_LIDAR_BEAMS,
     MAX_LINEAR_SPEED,
@@ -49,8 +50,10 @@ def builtin_fmus() -> tuple[str, ...]:
 
 VEHICLE_TYPES = {"DifferentialDrive": "differential", "Bicycle": "bicycle"}
 DEFAULT_FMUS = {"pure_pursuit": "PurePursuit", "vfh": "VectorFieldHistogram", "mixer": "AvoidanceMixer"}
+INTERFACES = ("cs", "me")  # co-simulation, Model Exchange
+INTEGRATION_KEYS = ("interface", "solver", "tolerance", "max_step")
 # Section keys that are not FMU parameters; every other key of a component section is one.
-COMPONENT_KEYS = ("fmu", "ports", "rate", "isolation", "nan_outputs")
+COMPONENT_KEYS = ("fmu", "ports", "rate", "isolation", "nan_outputs", *INTEGRATION_KEYS)
 ISOLATIONS = ("process", "none")  # an FMU in a child process, or in the run's own process
 ROLE_SECTIONS = ("vehicle", "pure_pursuit", "vfh", "mixer")
 SECTIONS = (
@@ -63,6 +66,19 @@ PYTHON_COMPONENTS = ("planner", "lidar")
 # swapped in [vehicle]: the run reads the robot pose from it).
 REPLACEABLE = ("pure_pursuit", "vfh", "mixer")
 DEFAULT_LOG_PATTERN = "logs/{scenario}-{timestamp}.mcap"  # [output].log when the scenario gives none
+
+
+@dataclass(frozen=True)
+class Integration:
+    """How a component section runs its FMU: `interface` "cs" or "me" (None: co-simulation when the
+    FMU has it, else Model Exchange); for Model Exchange the `solver` ("cvode", "rk4", "euler";
+    None: cvode), CVode's relative `tolerance` and the solver's `max_step` [s]
+    (`cosim.fmi.model_exchange` gives their defaults). Checked against the FMU by `describe_system`."""
+
+    interface: str | None = None
+    solver: str | None = None
+    tolerance: float | None = None
+    max_step: float | None = None
 
 
 @dataclass(frozen=True)
@@ -99,6 +115,7 @@ class ComponentSpec:
     added: bool = False
     isolation: str | None = None
     nan_outputs: tuple[str, ...] = ()
+    integration: Integration = Integration()
 
     @property
     def is_builtin(self) -> bool:
@@ -532,6 +549,7 @@ def _component(
     if rate is not None:
         _check_rate(table, "rate", rate, macro_step)
     isolation, nan_outputs = _isolation_keys(table)
+    integration = _integration_keys(table)
     parameters: dict[str, float | int | bool] = {}
     for key, value in table.table.items():
         if key in COMPONENT_KEYS or key in ("type", "radius") and role == "vehicle":
@@ -549,6 +567,17 @@ def _component(
         rate=rate,
         isolation=isolation,
         nan_outputs=nan_outputs,
+        integration=integration,
+    )
+
+
+def _integration_keys(table: TableReader) -> Integration:
+    """A component section's `interface`, `solver`, `tolerance` and `max_step` (`Integration`)."""
+    return Integration(
+        interface=table.string("interface", None, choices=INTERFACES),
+        solver=table.string("solver", None, choices=SOLVERS),
+        tolerance=table.number("tolerance", None, minimum=0.0, exclusive_minimum=True),
+        max_step=table.number("max_step", None, minimum=0.0, exclusive_minimum=True),
     )
 
 
@@ -600,9 +629,10 @@ def _added_components(top: TableReader, base_dir: Path, removed: tuple[str, ...]
         fmu = _fmu_name(table, None, base_dir)
         rate = table.number("rate", None, minimum=0.0, exclusive_minimum=True)
         isolation, nan_outputs = _isolation_keys(table)
+        integration = _integration_keys(table)
         parameters: dict[str, float | int | bool] = {}
         for key, item in table.table.items():
-            if key in ("fmu", "rate", "isolation", "nan_outputs"):
+            if key in ("fmu", "rate", "isolation", "nan_outputs", *INTEGRATION_KEYS):
                 continue
             table.used.add(key)
             if isinstance(item, bool) or is_number(item):
@@ -612,7 +642,9 @@ def _added_components(top: TableReader, base_dir: Path, removed: tuple[str, ...]
                     key, f"an FMU variable's value must be a number or true/false, got {describe(item)}"
                 )
         table.finish()
-        components[name] = ComponentSpec(name, fmu, parameters, {}, rate, True, isolation, nan_outputs)
+        components[name] = ComponentSpec(
+            name, fmu, parameters, {}, rate, True, isolation, nan_outputs, integration
+        )
     return components
 
 

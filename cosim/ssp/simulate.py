@@ -41,7 +41,7 @@ from cosim.errors import CosimError, SimulationEnded
 from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
 from cosim.scenario.description import ComponentDescription
 from cosim.scenario.limits import MAX_STEPS
-from cosim.scenario.load import DEFAULT_LOG_PATTERN
+from cosim.scenario.load import DEFAULT_LOG_PATTERN, Integration
 
 INTERFACES = ("cs", "me")  # co-simulation, Model Exchange
 SOLVERS = ("cvode", "rk4", "euler")  # Model Exchange integrators
@@ -127,10 +127,9 @@ def prepare(
         raise CosimError(f"--interface {interface}: must be one of {', '.join(INTERFACES)}")
     if solver is not None and interface != "me":
         raise CosimError(f"--solver {solver}: a solver integrates a Model Exchange FMU; give --interface me")
-    if interface == "me":
-        has = "" if description.modelExchange is not None else " (and the FMU has no <ModelExchange>)"
-        raise CosimError(f"{path}: Model Exchange (--interface me) is not supported yet{has}")
-    if description.coSimulation is None:
+    if interface == "me" and description.modelExchange is None:
+        raise CosimError(f"{path}: the FMU has no <ModelExchange> interface; --interface me cannot run it")
+    if interface == "cs" and description.coSimulation is None:
         raise CosimError(f"{path}: the FMU has no <CoSimulation> interface; --interface cs cannot run it")
     name = component_name(description.modelName or path.stem)
     layout = fmu_layout(path, name)
@@ -151,8 +150,13 @@ def prepare(
         outputs=tuple(port.name for port in layout.outputs),
         parameter_names=tuple(port.name for port in layout.parameters),
         feedthrough=feedthrough,
+        integration=Integration(interface="me", solver=solver or "cvode")
+        if interface == "me"
+        else Integration("cs"),
     )
-    return Simulation(component, interface, solver, start, stop, h, dict(start_values or {}))
+    return Simulation(
+        component, interface, component.integration.solver, start, stop, h, dict(start_values or {})
+    )
 
 
 def component_name(model_name: str) -> str:

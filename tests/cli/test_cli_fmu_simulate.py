@@ -57,7 +57,7 @@ def test_default_log_goes_under_logs_and_the_summary_names_it(tmp_path):
         (["--start-values", "omga=1"], "has no parameter or input 'omga'; closest: omega"),
         (["--start-values", "v"], "--start-values v: expected NAME=VALUE"),
         (["--stop-time", "1.05", "--step", "0.1"], "is not a whole number of --step 0.1 s steps"),
-        (["--interface", "me"], "Model Exchange (--interface me) is not supported yet"),
+        (["--interface", "me"], "the FMU has no <ModelExchange> interface; --interface me cannot run it"),
         (["--solver", "rk4"], "--solver rk4: a solver integrates a Model Exchange FMU"),
     ],
 )

@@ -150,9 +150,9 @@ def test_failing_fmu_ends_the_run_with_its_failure_and_a_finalised_log(tmp_path)
         ("diffdrive_fmi2", {"stop_time": 1.05, "step": 0.1}, "is not a whole number of --step 0.1 s steps"),
         ("diffdrive_fmi2", {"stop_time": -1.0}, "--stop-time -1 s is not after the start time 0 s"),
         ("diffdrive_fmi2", {"step": 0.0}, "--step must be > 0 s"),
-        ("diffdrive_fmi2", {"interface": "me"}, "Model Exchange (--interface me) is not supported yet"),
+        ("diffdrive_fmi2", {"interface": "me"}, "the FMU has no <ModelExchange> interface; --interface me"),
         ("diffdrive_fmi2", {"solver": "cvode"}, "--solver cvode: a solver integrates a Model Exchange FMU"),
-        ("model_exchange_only", {}, "Model Exchange (--interface me) is not supported yet"),
+        ("model_exchange_only", {"interface": "cs"}, "the FMU has no <CoSimulation> interface"),
         ("corrupt", {}, "not an FMU"),
     ],
 )

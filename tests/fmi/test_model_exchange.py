@@ -157,3 +157,22 @@ def test_bad_settings_are_one_line_errors(options, message):
 def test_a_co_simulation_only_fmu_has_no_model_exchange():
     with pytest.raises(CosimError, match='has no model exchange interface; interface = "me" needs one'):
         ModelExchangeComponent(fixture_fmu("diffdrive_fmi2"), "vehicle")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("version", [2, 3])
+def test_cosim_fmu_simulate_bounces_the_ball_as_fmpy(tmp_path, version, capsys):
+    """`cosim fmu simulate --interface me --solver cvode`; both take the FMU's DefaultExperiment
+    (stop 2 s, step 0.01 s, tolerance 1e-10)."""
+    from cosim.cli import main
+
+    path = fixture_fmu(f"bouncing_ball_me_fmi{version}")
+    csv = tmp_path / "ball.csv"
+    argv = ["fmu", "simulate", str(path), "--interface", "me", "--solver", "cvode"]
+    assert main([*argv, "--out", str(tmp_path / "ball.mcap"), "--csv", str(csv)]) == 0
+    table = np.genfromtxt(csv, delimiter=",", names=True)
+    ours = bounce_times(table["t_bounce"])
+    theirs = bounce_times(fmpy.simulate_fmu(str(path), output=["t_bounce"])["t_bounce"])
+    assert len(ours) == len(theirs) == 4
+    assert np.max(np.abs(np.subtract(ours, theirs))) < 1e-6
+    assert np.max(np.abs(np.subtract(ours, analytic_bounces(1.0, 4)))) < 1e-6
