@@ -34,12 +34,19 @@ def load(path: Path, overrides: tuple[str, ...] | list[str], check_world: bool =
 
 def raw_toml(text: str, source: str, overrides: tuple[str, ...] | list[str]) -> dict[str, Any]:
     """The scenario's TOML as parsed, with the overrides applied as `cosim run --set` applies them."""
-    from cosim.scenario.load import apply_override
-
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise CosimError(f"{source}: TOML syntax error: {error}") from None
+    return with_overrides(raw, source, overrides)
+
+
+def with_overrides(
+    raw: dict[str, Any], source: str, overrides: tuple[str, ...] | list[str]
+) -> dict[str, Any]:
+    """`raw` (parsed scenario TOML, changed in place) with the overrides applied as `--set` applies them."""
+    from cosim.scenario.load import apply_override
+
     for override in overrides:
         apply_override(raw, override, source)
     return raw

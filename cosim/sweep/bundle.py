@@ -13,6 +13,7 @@ A run's id is a hash of the scenario text, the bytes of the files it uses and it
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import os
 from dataclasses import dataclass, field
@@ -92,24 +93,39 @@ def _map_image(yaml_file: Path) -> Path | None:
     return None
 
 
-def referenced_files(raw: dict[str, Any], base_dir: Path) -> list[tuple[str | None, str, Path]]:
-    """(key, name as written, resolved path) of every existing file the parsed scenario names."""
+def _named_files(written: str, base_dir: Path) -> list[tuple[str | None, Path]]:
+    """The existing file a string value names (and a map YAML's image): [] when it names none."""
+    if "\n" in written or len(written) > 4096:
+        return []
+    path = Path(written) if Path(written).is_absolute() else base_dir / written
+    try:
+        if not path.is_file():
+            return []
+    except OSError:
+        return []
+    path = path.resolve()
+    found: list[tuple[str | None, Path]] = [(written, path)]
+    if path.suffix in (".yaml", ".yml"):
+        image = _map_image(path)
+        if image is not None:
+            found.append((None, image))
+    return found
+
+
+def referenced_files(
+    raw: dict[str, Any], base_dir: Path, known: dict[str, list] | None = None
+) -> list[tuple[str | None, str, Path]]:
+    """(key, name as written, resolved path) of every existing file the parsed scenario names.
+    `known` remembers what each string names, for many runs of one sweep (one look per string)."""
     found: list[tuple[str | None, str, Path]] = []
     for key, written in _string_values(raw):
-        if "\n" in written or len(written) > 4096:
-            continue
-        path = Path(written) if Path(written).is_absolute() else base_dir / written
-        try:
-            if not path.is_file():
-                continue
-        except OSError:
-            continue
-        path = path.resolve()
-        found.append((key, written, path))
-        if path.suffix in (".yaml", ".yml"):
-            image = _map_image(path)
-            if image is not None:
-                found.append((None, str(image), image))
+        named = known.get(written) if known is not None else None
+        if named is None:
+            named = _named_files(written, base_dir)
+            if known is not None:
+                known[written] = named
+        for name, path in named:
+            found.append((key, written, path) if name is not None else (None, str(path), path))
     return found
 
 
@@ -129,6 +145,8 @@ class BundleBuilder:
         self._data: dict[Path, bytes] = {}
         self._add(self.scenario_path, self.text.encode())
         self._runs: list[tuple[int, tuple, tuple[str, ...], list[tuple[str | None, str, Path]]]] = []
+        self._parsed: dict[str, Any] | None = None
+        self._named: dict[str, list] = {}
 
     def _add(self, path: Path, data: bytes | None = None) -> None:
         if path not in self._paths:
@@ -137,8 +155,12 @@ class BundleBuilder:
             self._paths[path] = hashlib.sha256(data).hexdigest()
 
     def add_run(self, index: int, values: tuple, overrides: tuple[str, ...]) -> None:
-        raw = adapter.raw_toml(self.text, self.source, overrides)
-        files = referenced_files(raw, self.scenario_path.parent)
+        # The scenario is parsed once; each run applies its overrides to a copy (a sweep of 100,000
+        # points would otherwise spend minutes parsing the same text).
+        if self._parsed is None:
+            self._parsed = adapter.raw_toml(self.text, self.source, ())
+        raw = adapter.with_overrides(copy.deepcopy(self._parsed), self.source, overrides)
+        files = referenced_files(raw, self.scenario_path.parent, self._named)
         for _, _, path in files:
             self._add(path)
         self._runs.append((index, values, overrides, files))
