@@ -1,4 +1,4 @@
-"""FMI 2.0 and 3.0 co-simulation FMUs as components, through fmpy, with a strict lifecycle.
+"""FMI 1.0, 2.0 and 3.0 co-simulation FMUs as components, through fmpy, with a strict lifecycle.
 
 fmpy loads the binary and runs the lifecycle calls; the per-step calls (set inputs, do step, get
 outputs) go straight to the FMU's C functions with value references resolved once and values in
@@ -58,6 +58,7 @@ from pathlib import Path
 
 import fmpy
 import numpy as np
+from fmpy.fmi1 import FMU1Slave
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 from fmpy.model_description import ModelVariable
@@ -70,7 +71,8 @@ from cosim.fmi.types import C_TYPES, KINDS, TRANSFER_TYPES, WIDE, check_integer,
 
 _STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
 # Transfer types as the compiled kernel's group kinds (`cosim.core.kernel.KINDS`).
-_KERNEL_TYPES = {2: {"Real": "real", "Integer": "integer", "Boolean": "boolean"}}
+_KERNEL_TYPES = {1: {"Real": "real", "Integer": "integer"}}  # FMI 1.0 Booleans are chars: Python moves them
+_KERNEL_TYPES[2] = {"Real": "real", "Integer": "integer", "Boolean": "boolean"}
 _KERNEL_TYPES[3] = {"Float64": "real", "Int32": "integer", "Boolean": "boolean"}
 _KERNEL_TYPES[3] |= {name: name.lower() for name in TRANSFER_TYPES[3] if name not in _KERNEL_TYPES[3]}
 _FMI_TYPE_NAMES = {
@@ -182,14 +184,16 @@ def _read_description(path: Path, max_unpacked_size: int | None = None):
         first_line = problem or " ".join(str(error).split())[:300]
         raise CosimError(f"FMU '{path}': invalid modelDescription.xml: {first_line}") from None
     version = int(str(description.fmiVersion).split(".")[0])
-    if version not in (2, 3):
-        raise CosimError(f"FMU '{path}' is FMI {description.fmiVersion}; navcosim supports FMI 2.0 and 3.0")
+    if version not in (1, 2, 3):
+        raise CosimError(
+            f"FMU '{path}' is FMI {description.fmiVersion}; navcosim supports FMI 1.0, 2.0 and 3.0"
+        )
     # The binary of the interface a component uses by default: co-simulation when the FMU has it
     # (`cosim.fmi.model_exchange` checks the Model Exchange binary of an FMU run as one).
     interface = description.coSimulation or description.modelExchange
     if interface is None:
         raise CosimError(f"FMU '{path}' (model {description.modelName}) declares no FMI interface")
-    platform = fmpy.platform if version == 2 else fmpy.platform_tuple
+    platform = fmpy.platform if version < 3 else fmpy.platform_tuple
     binary = f"binaries/{platform}/{interface.modelIdentifier}{fmpy.sharedLibraryExtension}"
     if binary not in names:
         identifier = interface.modelIdentifier
@@ -378,7 +382,7 @@ def _array_ports(path: Path, name: str, variable, fmi_type: str, unit: str, shap
 
 
 class FmuComponent(Component):
-    """A co-simulation FMU (FMI 2.0 or 3.0) as a component.
+    """A co-simulation FMU (FMI 1.0, 2.0 or 3.0) as a component.
 
     Args:
         path: the .fmu file.
@@ -424,7 +428,7 @@ class FmuComponent(Component):
         self.log_messages: deque[str] = deque(maxlen=20)
 
     # fmpy's class of an instance, by FMI version (`cosim.fmi.model_exchange` has its own).
-    _FMPY_CLASSES = {2: FMU2Slave, 3: FMU3Slave}
+    _FMPY_CLASSES = {1: FMU1Slave, 2: FMU2Slave, 3: FMU3Slave}
 
     def _interface(self):
         """The description's element of the interface this component runs (co-simulation)."""
@@ -506,7 +510,7 @@ class FmuComponent(Component):
         element copies, with no loop, lookup or allocation. `_remove_fast_path` puts the checked
         class methods back when the instance leaves the stepping state.
         """
-        n = "" if self.fmi_version == 2 else ", {n}"
+        n = "" if self.fmi_version < 3 else ", {n}"
         names: dict[str, object] = {"fail": self._fail, "np": np, "ib": self.input_cbuffer}
         names.update(
             ob=self.output_cbuffer, obn=self.output_buffer, ibn=self.input_buffer, handle=self._handle
@@ -548,7 +552,7 @@ class FmuComponent(Component):
         names.update(nonfinite=self._nonfinite_output, zeros=np.zeros(len(self.outputs)), inf=math.inf)
         names.update(exactInt64=np.int64(2**53), exactUInt64=np.uint64(2**53), inexact=self._inexact_output)
         pull.append("    return obn")
-        if self.fmi_version == 2:
+        if self.fmi_version < 3:
             step = ["def do_step(t, h):", "    clock[0] = t", "    status = raw(handle, t, h, 1)"]
         else:
             step = ["def do_step(t, h):", "    clock[0] = t", "    status = raw(handle, t, h, True, *flags)"]
@@ -602,14 +606,16 @@ class FmuComponent(Component):
             # What the instance can use: its binaries and resources (not sources/ or documentation/).
             fmpy.extract(str(self.path), unzipdir=self._unzip_dir, include=_needed_at_run_time)
             slave_class = self._FMPY_CLASSES[self.fmi_version]
-            guid = description.guid if self.fmi_version == 2 else description.instantiationToken
+            guid = description.guid if self.fmi_version < 3 else description.instantiationToken
             self._slave = slave_class(
                 guid=guid,
                 unzipDirectory=self._unzip_dir,
                 modelIdentifier=self._interface().modelIdentifier,
                 instanceName=self.name,
             )
-            if self.fmi_version == 2:
+            if self.fmi_version == 1:
+                self._slave.instantiate()  # (fmpy's FMI 1.0 callbacks)
+            elif self.fmi_version == 2:
                 self._slave.instantiate(callbacks=self._fmi2_callbacks())
             else:
                 self._slave.instantiate(logMessage=self._log)
@@ -662,19 +668,27 @@ class FmuComponent(Component):
         for type_name in (name for name in TRANSFER_TYPES[self.fmi_version] if name in used):
             values = ctypes.POINTER(C_TYPES[self.fmi_version][type_name])
             vrs = ctypes.POINTER(ctypes.c_uint32)
-            if self.fmi_version == 2:
+            if self.fmi_version < 3:
                 prototype = ctypes.CFUNCTYPE(c_int, c_void_p, vrs, c_size_t, values)
             else:
                 prototype = ctypes.CFUNCTYPE(c_int, c_void_p, vrs, c_size_t, values, c_size_t)
-            self._setters[type_name] = prototype((f"fmi{self.fmi_version}Set{type_name}", dll))
-            self._getters[type_name] = prototype((f"fmi{self.fmi_version}Get{type_name}", dll))
+            self._setters[type_name] = prototype((self._function(f"Set{type_name}"), dll))
+            self._getters[type_name] = prototype((self._function(f"Get{type_name}"), dll))
         self._bind_do_step(dll)
+
+    def _function(self, name: str) -> str:
+        """The C symbol of FMI function `name` ("SetReal"): fmi2SetReal, fmi3SetReal; FMI 1.0 prefixes
+        the model identifier: <identifier>_fmiSetReal."""
+        if self.fmi_version == 1:
+            return f"{self._interface().modelIdentifier}_fmi{name}"
+        return f"fmi{self.fmi_version}{name}"
 
     def _bind_do_step(self, dll) -> None:
         c_void_p, c_double, c_int = ctypes.c_void_p, ctypes.c_double, ctypes.c_int
-        if self.fmi_version == 2:
-            prototype = ctypes.CFUNCTYPE(c_int, c_void_p, c_double, c_double, c_int)
-            self._raw_do_step = prototype(("fmi2DoStep", dll))
+        if self.fmi_version < 3:  # FMI 1.0's last argument (newStep) is an fmiBoolean, a char
+            last = c_int if self.fmi_version == 2 else ctypes.c_uint8
+            prototype = ctypes.CFUNCTYPE(c_int, c_void_p, c_double, c_double, last)
+            self._raw_do_step = prototype((self._function("DoStep"), dll))
             self._do_step_flags = ()
         else:
             flag = ctypes.POINTER(ctypes.c_bool)
@@ -769,15 +783,18 @@ class FmuComponent(Component):
             self._fail(status, f"fmi3Set{kind} ({array})")
 
     def _count(self, n: int) -> tuple[int, ...]:
-        return () if self.fmi_version == 2 else (n,)
+        return () if self.fmi_version < 3 else (n,)
 
     def initialize(self) -> None:
         self._require("initialize", State.SET_UP)
-        if self.fmi_version == 2:
+        if self.fmi_version == 1:  # no initialization mode: fmiInitializeSlave(tStart, stopDefined, tStop)
+            self._call_lifecycle("initialize", self.t0, None)
+        elif self.fmi_version == 2:
             self._call_lifecycle("enterInitializationMode")
         else:
             self._call_lifecycle("enterInitializationMode", None, self.t0)
-        self._call_lifecycle("exitInitializationMode")
+        if self.fmi_version > 1:
+            self._call_lifecycle("exitInitializationMode")
         self.state = State.STEPPING
         self._install_fast_path()
 
@@ -801,6 +818,9 @@ class FmuComponent(Component):
 
         version = self.fmi_version
         kernel_kinds = _KERNEL_TYPES[version]
+        if any(group[0] not in kernel_kinds for group in (*self._input_groups, *self._output_groups)):
+            return None
+        version = 2 if version == 1 else version  # FMI 1.0 calls as FMI 2.0 does (the same C arguments)
         calls = []
         for direction, groups, buffer in (
             ("set", self._input_groups, self.input_cbuffer),
@@ -873,7 +893,11 @@ class FmuComponent(Component):
         """A doStep status above Warning: Discard with fmi2Terminated true (FMI 2.0) or with
         terminateSimulation set (FMI 3.0) is the FMU's request to end the simulation; anything else
         fails."""
-        if status == 2 and (self._step_flags[1] if self.fmi_version == 3 else self._fmi2_terminated()):
+        if self.fmi_version == 3:
+            requested = bool(self._step_flags[1])
+        else:
+            requested = self.fmi_version == 2 and self._fmi2_terminated()
+        if status == 2 and requested:
             self._asked_to_terminate(t)
         self._fail(status, f"fmi{self.fmi_version}DoStep", t)
 
@@ -929,7 +953,7 @@ class FmuComponent(Component):
             "fmu": str(self.path),
             "model_name": description.modelName or "",
             "fmi_version": description.fmiVersion or "",
-            "guid": (description.guid if self.fmi_version == 2 else description.instantiationToken) or "",
+            "guid": (description.guid if self.fmi_version < 3 else description.instantiationToken) or "",
             "generation_tool": description.generationTool or "",
             "generation_date": description.generationDateAndTime or "",
         }

@@ -1,14 +1,14 @@
 """FMI variable types as navcosim carries them, and which connections between them convert.
 
-Every numeric FMI type travels in the master's float64 buffers (`cosim.core.component`): FMI 2.0
-Real, Integer, Enumeration and Boolean; FMI 3.0 Float32, Float64, Int8 to UInt64, Enumeration and
+Every numeric FMI type travels in the master's float64 buffers (`cosim.core.component`): FMI 1.0 and
+2.0 Real, Integer, Enumeration and Boolean; FMI 3.0 Float32, Float64, Int8 to UInt64, Enumeration and
 Boolean. A float64 holds every integer of magnitude up to 2^53 exactly, so all of them are exact
 except Int64 and UInt64 values beyond that: such a value is refused (`CosimError`) where it would
 enter a buffer (an output read, a start value) or leave one for the FMU (a parameter given as a
 TOML integer), never rounded silently.
 
 Each variable is transferred with the FMI function of its *transfer type*: its own type, except
-an FMI 2.0 Enumeration (fmi2SetInteger / fmi2GetInteger) and an FMI 3.0 Enumeration (fmi3SetInt64 /
+an FMI 1.0 or 2.0 Enumeration (fmiSetInteger, fmi2SetInteger) and an FMI 3.0 Enumeration (fmi3SetInt64 /
 fmi3GetInt64, as FMI 3.0 defines its enumerations as Int64).
 
 Which connections between these types convert is `cosim.core.port_types`'s rule.
@@ -37,6 +37,7 @@ KINDS = {
 EXACT_INTEGER = 2**53
 # Transfer types per FMI version, in the order their calls are made each step.
 TRANSFER_TYPES = {
+    1: ("Real", "Integer", "Boolean"),
     2: ("Real", "Integer", "Boolean"),
     3: (
         "Float64",
@@ -53,6 +54,7 @@ TRANSFER_TYPES = {
     ),
 }
 C_TYPES = {
+    1: {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_uint8},  # fmiBoolean: a char
     2: {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int},
     3: {
         "Float64": ctypes.c_double,
@@ -75,7 +77,7 @@ WIDE = frozenset({"Int64", "UInt64"})
 def transfer_type(version: int, declared: str) -> str:
     """The FMI type whose Set/Get functions move a variable of type `declared`."""
     if declared == "Enumeration":
-        return "Integer" if version == 2 else "Int64"
+        return "Integer" if version < 3 else "Int64"
     return declared
 
 
