@@ -36,8 +36,12 @@ Semantics, as SSP 1.0 and 2.0 define them:
   FMUs' own DefaultExperiment. `SspSystem.macro_step_source` says which. A component's period
   comes from `<ssc:Annotation type="org.navcosim.component"><nc:Component period="0.05"/>`.
 
+Components: an FMU runs as co-simulation, or as model exchange (integrated between communication
+points by CVode, `cosim.fmi.model_exchange`) when the component says implementation="ModelExchange"
+or says "any" (the default) of an FMU without co-simulation.
+
 Not supported (an error, not a silent change of meaning): referenced SSDs/SSPs as components,
-model-exchange-only FMUs, signal dictionaries, parameter mappings (.ssm), mapping transformations,
+ScheduledExecution, signal dictionaries, parameter mappings (.ssm), mapping transformations,
 connections that carry a calculated parameter, String, Binary and array values, unit conversion.
 """
 
@@ -84,6 +88,8 @@ class SspComponent:
     fmu: the FMU file inside the unpacked archive;
     parameters: FMU parameter -> value; inputs: FMU input -> start value;
     period: [s] between its steps, 0 = every macro step;
+    interface: how it runs, "cs" (co-simulation) or "me" (model exchange, `cosim.fmi.model_exchange`
+    with its default solver, CVode);
     member: the FMU's archive member ("resources/X.fmu"), as messages and logs name it;
     default_step: [s] the FMU's own DefaultExperiment stepSize, None when it gives none.
     """
@@ -97,6 +103,7 @@ class SspComponent:
     variables: dict = field(default_factory=dict, repr=False)  # FMU variable name -> fmpy variable
     member: str = ""
     default_step: float | None = None
+    interface: str = "cs"  # "cs" co-simulation, "me" model exchange (integrated by CVode)
 
 
 @dataclass(frozen=True)
@@ -344,23 +351,20 @@ class _Reader:
             raise CosimError(f"{self.where}: {_where(path)}: signal dictionaries are not supported")
 
     def component(self, element: ET.Element, path: tuple[str, ...]) -> None:
-        from cosim.fmi.component import FmuComponent
-
         where = f"{self.where}: {_where(path)}"
         kind = element.get("type", FMU_TYPE)
         if kind != FMU_TYPE:
             raise CosimError(f"{where}: component type '{kind}' is not supported (only FMUs, {FMU_TYPE})")
         implementation = element.get("implementation", "any")
-        if implementation in ("ModelExchange", "ScheduledExecution"):
-            raise CosimError(
-                f"{where}: implementation '{implementation}' is not supported (co-simulation only)"
-            )
+        if implementation == "ScheduledExecution":
+            raise CosimError(f"{where}: implementation 'ScheduledExecution' is not supported")
         member = element.get("source", "")
         fmu_path = self._resource(member, where)
         member = PurePosixPath(member).as_posix()
         name = component_name(path)
         try:
-            fmu = FmuComponent(fmu_path, name)
+            interface = _interface(fmu_path, implementation)
+            fmu = component_class(interface)(fmu_path, name)
         except CosimError as error:
             raise CosimError(f"{where}: {archive_members(self.directory, str(error))}") from None
         variables = {v.name: v for v in fmu.model_description.modelVariables}
@@ -376,6 +380,7 @@ class _Reader:
             variables=variables,
             member=member,
             default_step=_default_step(fmu.model_description),
+            interface=interface,
         )
         for connector in self._connectors(element, path, False):
             variable = variables.get(connector.get("name"))
@@ -573,6 +578,33 @@ class _Reader:
         return list(self.components.values())
 
 
+def _interface(fmu: Path, implementation: str) -> str:
+    """The interface to run: "me" for implementation="ModelExchange", and for "any" of an FMU
+    without co-simulation; else "cs"."""
+    if implementation == "ModelExchange":
+        return "me"
+    if implementation == "CoSimulation":
+        return "cs"
+    import fmpy
+
+    try:
+        description = fmpy.read_model_description(str(fmu), validate=False)
+    except Exception:
+        return "cs"  # the component reports what is wrong with the FMU
+    return "me" if description.coSimulation is None and description.modelExchange is not None else "cs"
+
+
+def component_class(interface: str):
+    """The component class of an interface: `FmuComponent` ("cs") or `ModelExchangeComponent` ("me")."""
+    if interface == "me":
+        from cosim.fmi.model_exchange import ModelExchangeComponent
+
+        return ModelExchangeComponent
+    from cosim.fmi.component import FmuComponent
+
+    return FmuComponent
+
+
 def _default_step(model_description) -> float | None:
     """[s] the FMU's DefaultExperiment stepSize, None when it gives none (or not a positive number)."""
     experiment = getattr(model_description, "defaultExperiment", None)
@@ -637,14 +669,13 @@ def build_system(ssp: SspSystem, macro_step: float, master: str = "gauss-seidel"
     `Master.initialize` sends before initialising each FMU (connected inputs are then overwritten).
     """
     from cosim.core.master import System
-    from cosim.fmi.component import FmuComponent
 
     system = System(macro_step, master)
     parameters: dict[str, dict[str, float]] = {}
     for spec in ssp.components:
         where = f"{ssp.source}: {_where(tuple(spec.path.split('.')))}"
         try:
-            component = FmuComponent(spec.fmu, spec.name, period=spec.period)
+            component = component_class(spec.interface)(spec.fmu, spec.name, period=spec.period)
             for name, value in spec.inputs.items():
                 component.input_buffer[component.input_index[name]] = value
             system.add(component)

@@ -298,3 +298,63 @@ def _fmi1(tmp_path: Path) -> Path:
     with zipfile.ZipFile(path, "w") as archive:
         archive.writestr("modelDescription.xml", description)
     return path
+
+
+BALL_SSD = f"""<ssd:SystemStructureDescription {NAMESPACES} version="2.0" name="ball">
+  <ssd:System name="ball"><ssd:Elements>
+    <ssd:Component name="ball" source="models/ball.fmu"IMPLEMENTATION/>
+  </ssd:Elements></ssd:System>
+  <ssd:DefaultExperiment stopTime="2"/>
+</ssd:SystemStructureDescription>"""
+
+
+@pytest.mark.parametrize(
+    "kind, implementation",
+    [
+        ("bouncing_ball_me_fmi2", ""),
+        ("bouncing_ball_me_fmi3", ""),
+        ("bouncing_ball_both_fmi2", "ModelExchange"),
+    ],
+)
+def test_model_exchange_components_are_integrated(kind, implementation, tmp_path):
+    """An FMU without co-simulation (implementation "any", the default), or one whose component says
+    "ModelExchange", is integrated by CVode: the ball from rest at 1 m bounces at the analytic
+    times t1 = sqrt(2 h0 / g), t_k+1 = t_k + 2 e^k sqrt(2 g h0) / g (4 bounces in 2 s)."""
+    attribute = f' implementation="{implementation}"' if implementation else ""
+    ssd = BALL_SSD.replace("IMPLEMENTATION", attribute)
+    xmlschema.XMLSchema(SCHEMAS_2 / "SystemStructureDescription.xsd").validate(ssd)
+    archive = pack(tmp_path / "ball.ssp", ssd, {"models/ball.fmu": fixture_fmu(kind)})
+    with open_ssp(archive) as ssp:
+        assert ssp.components[0].interface == "me"
+    result = run_ssp(archive, tmp_path / "ball.mcap", ["simulation.macro_step=0.01"])
+    assert result.exit_code == 0
+    ball = open_log(result.log_path).signals("ball")
+    g, e, h0 = 9.81, 0.7, 1.0
+    bounces = [np.sqrt(2 * h0 / g)]
+    for k in range(1, 4):
+        bounces.append(bounces[-1] + 2 * e**k * np.sqrt(2 * g * h0) / g)
+    assert ball["bounces"][-1] == 4
+    assert abs(ball["t_bounce"][-1] - bounces[-1]) < 1e-3  # CVode at the FMU's default tolerance
+
+
+def test_an_fmu_with_both_interfaces_runs_co_simulation_unless_the_ssd_says_otherwise(tmp_path, capsys):
+    """The fixture's co-simulation binary is absent: choosing it fails, naming the member."""
+    archive = pack(
+        tmp_path / "both.ssp",
+        BALL_SSD.replace("IMPLEMENTATION", ""),
+        {"models/ball.fmu": fixture_fmu("bouncing_ball_both_fmi2")},
+    )
+    with open_ssp(archive) as ssp:
+        assert ssp.components[0].interface == "cs"
+    argv = [
+        "run",
+        str(archive),
+        "--out",
+        str(tmp_path / "x.mcap"),
+        "--quiet",
+        "--set",
+        "simulation.macro_step=0.01",
+    ]
+    assert main(argv) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and "'models/ball.fmu'" in error and "navcosim-ssp-" not in error, error
