@@ -128,6 +128,11 @@ class ModelExchangeComponent(FmuComponent):
         return self.model_description.modelExchange
 
     def _check_interface(self) -> None:
+        if self.fmi_version not in self._FMPY_CLASSES:
+            raise CosimError(
+                f"FMU '{self.path}' (model {self.model_description.modelName}): Model Exchange runs FMI 2.0 "
+                f"and 3.0 FMUs; this one is FMI {self.model_description.fmiVersion}"
+            )
         if self._interface() is None:
             raise CosimError(
                 f"FMU '{self.path}' (model {self.model_description.modelName}) has no model exchange "
