@@ -358,3 +358,37 @@ def test_an_fmu_with_both_interfaces_runs_co_simulation_unless_the_ssd_says_othe
     assert main(argv) == 2
     error = capsys.readouterr().err
     assert error.count("\n") == 1 and "'models/ball.fmu'" in error and "navcosim-ssp-" not in error, error
+
+
+def test_an_fmi1_fmu_in_an_ssp_runs_the_exact_arc(tmp_path):
+    """The FMI 1.0 co-simulation fixture; its connectors by SSP's FMI 1.0 rule (a variable of
+    variability "parameter" is kind parameter), its values from an SSP 1.0 inline binding."""
+    ssd = f"""<ssd:SystemStructureDescription {NAMESPACES} version="1.0" name="arc1">
+      <ssd:System name="arc1"><ssd:Elements>
+        <ssd:Component name="robot" source="models/robot1.fmu">
+          <ssd:Connectors>
+            <ssd:Connector name="v" kind="input"/><ssd:Connector name="y0" kind="parameter"/>
+            <ssd:Connector name="x" kind="output"/>
+          </ssd:Connectors>
+          <ssd:ParameterBindings><ssd:ParameterBinding><ssd:ParameterValues>
+            <ssv:ParameterSet version="1.0" name="p"><ssv:Parameters>
+              <ssv:Parameter name="v"><ssv:Real value="0.5"/></ssv:Parameter>
+              <ssv:Parameter name="omega"><ssv:Real value="0.4"/></ssv:Parameter>
+              <ssv:Parameter name="y0"><ssv:Real value="1.0"/></ssv:Parameter>
+            </ssv:Parameters></ssv:ParameterSet>
+          </ssd:ParameterValues></ssd:ParameterBinding></ssd:ParameterBindings>
+        </ssd:Component>
+      </ssd:Elements></ssd:System>
+      <ssd:DefaultExperiment stopTime="3"/></ssd:SystemStructureDescription>"""
+    xmlschema.XMLSchema(schema.SCHEMA_DIR / "SystemStructureDescription.xsd").validate(ssd)
+    archive = pack(tmp_path / "arc1.ssp", ssd, {"models/robot1.fmu": fixture_fmu("diffdrive_fmi1")})
+    result = run_ssp(archive, tmp_path / "arc1.mcap", ["simulation.macro_step=0.01"])
+    assert result.exit_code == 0 and result.steps == 300
+    log = open_log(result.log_path)
+    assert log.metadata["fmu/robot"]["fmu"] == "models/robot1.fmu"
+    assert log.metadata["fmu/robot"]["fmi_version"] == "1.0"
+    robot = log.signals("robot")
+    theta = 0.4 * robot.t
+    assert np.allclose(robot["theta"], theta, rtol=0, atol=1e-12)
+    assert np.allclose(robot["x"], 0.5 / 0.4 * np.sin(theta), rtol=0, atol=1e-12)
+    assert np.allclose(robot["y"], 1.0 + 0.5 / 0.4 * (1 - np.cos(theta)), rtol=0, atol=1e-12)
