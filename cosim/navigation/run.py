@@ -277,6 +277,8 @@ def _write_header(built: BuiltRun, master: Master, recorder) -> None:
     for name, component in built.system.components.items():
         description = component.describe()
         if description:
+            if name in scenario.fmu_labels:
+                description["fmu"] = scenario.fmu_labels[name]
             recorder.add_metadata(f"fmu/{name}", description)
     recorder.add_attachment("scenario.toml", "application/toml", scenario.text.encode())
     map_file = scenario.map_file

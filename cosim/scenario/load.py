@@ -211,6 +211,9 @@ class Scenario:
     # [system] remove: template components left out (as written; `describe_system` checks the names).
     # A removed role has no entry in `components`.
     removed: tuple[str, ...] = ()
+    # Component -> how the log names its FMU instead of the file's path: the archive member of an
+    # FMU unpacked from an SSP (a path new in every run would make equal runs differ in bytes).
+    fmu_labels: dict[str, str] = field(default_factory=dict)
 
     def isolation(self, spec: ComponentSpec) -> str:
         """Where one FMU runs: "process" (a child process) or "none" (in the run's process). The

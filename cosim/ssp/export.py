@@ -170,6 +170,7 @@ def scenario_of(ssp: SspSystem, simulation: dict[str, object]) -> Scenario:
     )
     check_start_goal(scenario)
     components = dict(scenario.components)
+    labels = {name: ssp.component(name).member for name in scenario.components}
     for name, spec in scenario.components.items():
         component = ssp.component(name)
         parameters = {}
@@ -178,7 +179,7 @@ def scenario_of(ssp: SspSystem, simulation: dict[str, object]) -> Scenario:
             port = ports[0] if ports else variable
             parameters[port] = value / _port_of(scenario, name, port)[1]
         components[name] = replace(spec, fmu=str(component.fmu), parameters=parameters)
-    return replace(scenario, components=components)
+    return replace(scenario, components=components, fmu_labels=labels)
 
 
 def _check_against_ssd(ssp: SspSystem, scenario: Scenario) -> None:

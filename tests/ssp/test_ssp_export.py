@@ -179,6 +179,20 @@ def test_running_the_ssp_reproduces_the_scenario_log_exactly(exported, tmp_path,
     assert a.scenario_text == b.scenario_text and a.outcome == b.outcome
 
 
+def test_two_runs_of_the_archive_write_the_same_bytes(exported, tmp_path):
+    """The log names each FMU by its archive member, not the folder each run unpacked it to."""
+    _, _, archive = exported
+    logs = [tmp_path / "a.mcap", tmp_path / "b.mcap"]
+    for log in logs:
+        assert main(["run", str(archive), "--out", str(log), "--no-plot", "--quiet"]) in (0, 1)
+    assert logs[0].read_bytes() == logs[1].read_bytes()
+    metadata = open_log(logs[0]).metadata
+    assert [metadata[f"fmu/{name}"]["fmu"] for name in ("vehicle", "mixer")] == [
+        "resources/vehicle.fmu",
+        "resources/mixer.fmu",
+    ]
+
+
 def test_the_ssv_is_what_the_run_uses(exported, tmp_path):
     _, _, archive = exported
     edited = tmp_path / "edited.ssp"
