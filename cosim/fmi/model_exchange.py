@@ -1,4 +1,4 @@
-"""Model Exchange FMUs (FMI 2.0 and 3.0) as co-simulation components, integrated by a solver.
+"""Model Exchange FMUs (FMI 1.0, 2.0 and 3.0) as co-simulation components, integrated by a solver.
 
 `ModelExchangeComponent` is an `FmuComponent` (the same ports, port map, parameters, batched
 input/output transfers and checks) whose `do_step(t, h)` integrates the FMU's continuous states
@@ -10,14 +10,15 @@ the values pushed for the step (zero-order hold, as a co-simulation FMU sees the
   time of the solver, and a step event (fmi*CompletedIntegratorStep asking for event mode, after
   each accepted step when the FMU declares it needs the call) stops it where it is. At each event the
   FMU enters event mode and its discrete states are updated until it needs no more
-  (fmi2NewDiscreteStates / fmi3UpdateDiscreteStates), then the solver restarts from the states
-  the FMU gives back;
+  (fmi2NewDiscreteStates / fmi3UpdateDiscreteStates; FMI 1.0, which has no modes: fmiEventUpdate
+  until iterationConverged), then the solver restarts from the states the FMU gives back;
 - an input that changed since the last step restarts the solver (its derivatives jumped); a change of
   a discrete input (Integer, Boolean, or variability discrete) is pushed in event mode, with the
   event iteration after it, as FMI requires.
 
 Initialisation is `FmuComponent`'s, followed by the event iteration FMI prescribes after
-exitInitializationMode and the switch to continuous-time mode. The FMU asking to terminate is a
+exitInitializationMode and the switch to continuous-time mode (FMI 1.0: fmiSetTime(t0), then
+fmiInitialize, which does the initial event iteration itself). The FMU asking to terminate is a
 `CosimError`, as for co-simulation FMUs.
 
 Defaults: `tolerance` (CVode's relative tolerance; absolute = tolerance x the states' nominals) is
@@ -37,6 +38,7 @@ from pathlib import Path
 
 import fmpy
 import numpy as np
+from fmpy.fmi1 import FMU1Model
 from fmpy.fmi2 import FMU2Model
 from fmpy.fmi3 import FMU3Model
 
@@ -76,7 +78,7 @@ class ModelExchangeComponent(FmuComponent):
         max_step: the longest solver step [s] (None: unbounded for CVode, h for rk4 / euler).
     """
 
-    _FMPY_CLASSES = {2: FMU2Model, 3: FMU3Model}
+    _FMPY_CLASSES = {1: FMU1Model, 2: FMU2Model, 3: FMU3Model}
 
     def __init__(
         self,
@@ -107,7 +109,9 @@ class ModelExchangeComponent(FmuComponent):
         self.max_step = max_step
         self.nx = int(description.numberOfContinuousStates)
         self.nz = int(description.numberOfEventIndicators)
-        self._needs_completed_step = bool(description.modelExchange.needsCompletedIntegratorStep)
+        # FMI 1.0 has no attribute for it: fmiCompletedIntegratorStep is called after every step.
+        needs = description.modelExchange.needsCompletedIntegratorStep or self.fmi_version == 1
+        self._needs_completed_step = bool(needs)
         variables = [self._variables[p.name][0] for p in self.inputs]
         self._discrete_inputs = np.array(
             [
@@ -128,11 +132,6 @@ class ModelExchangeComponent(FmuComponent):
         return self.model_description.modelExchange
 
     def _check_interface(self) -> None:
-        if self.fmi_version not in self._FMPY_CLASSES:
-            raise CosimError(
-                f"FMU '{self.path}' (model {self.model_description.modelName}): Model Exchange runs FMI 2.0 "
-                f"and 3.0 FMUs; this one is FMI {self.model_description.fmiVersion}"
-            )
         if self._interface() is None:
             raise CosimError(
                 f"FMU '{self.path}' (model {self.model_description.modelName}) has no model exchange "
@@ -140,7 +139,7 @@ class ModelExchangeComponent(FmuComponent):
             )
 
     def _check_binary(self) -> None:
-        platform = fmpy.platform if self.fmi_version == 2 else fmpy.platform_tuple
+        platform = fmpy.platform if self.fmi_version < 3 else fmpy.platform_tuple
         identifier = self._interface().modelIdentifier
         binary = f"binaries/{platform}/{identifier}{fmpy.sharedLibraryExtension}"
         with zipfile.ZipFile(self.path) as archive:
@@ -154,17 +153,23 @@ class ModelExchangeComponent(FmuComponent):
         """The Model Exchange calls of the integration loop (there is no doStep)."""
         v, d, n, c_int = ctypes.c_void_p, ctypes.c_double, ctypes.c_size_t, ctypes.c_int
         array = ctypes.CFUNCTYPE(c_int, v, v, n)
-        flag = ctypes.c_int if self.fmi_version == 2 else ctypes.c_bool
-        prefix = f"fmi{self.fmi_version}"
-        derivatives = "GetDerivatives" if self.fmi_version == 2 else "GetContinuousStateDerivatives"
-        self._set_time = ctypes.CFUNCTYPE(c_int, v, d)((f"{prefix}SetTime", dll))
-        self._set_states = array((f"{prefix}SetContinuousStates", dll))
-        self._get_states = array((f"{prefix}GetContinuousStates", dll))
-        self._get_nominals = array((f"{prefix}GetNominalsOfContinuousStates", dll))
-        self._get_derivatives = array((f"{prefix}{derivatives}", dll))
-        self._get_indicators = array((f"{prefix}GetEventIndicators", dll))
-        prototype = ctypes.CFUNCTYPE(c_int, v, flag, ctypes.POINTER(flag), ctypes.POINTER(flag))
-        self._completed_step = prototype((f"{prefix}CompletedIntegratorStep", dll))
+        version, function = self.fmi_version, self._function
+        flag = {1: ctypes.c_uint8, 2: ctypes.c_int, 3: ctypes.c_bool}[
+            version
+        ]  # fmiBoolean, fmi2Boolean, bool
+        derivatives = "GetDerivatives" if version < 3 else "GetContinuousStateDerivatives"
+        nominals = "GetNominalContinuousStates" if version == 1 else "GetNominalsOfContinuousStates"
+        self._set_time = ctypes.CFUNCTYPE(c_int, v, d)((function("SetTime"), dll))
+        self._set_states = array((function("SetContinuousStates"), dll))
+        self._get_states = array((function("GetContinuousStates"), dll))
+        self._get_nominals = array((function(nominals), dll))
+        self._get_derivatives = array((function(derivatives), dll))
+        self._get_indicators = array((function("GetEventIndicators"), dll))
+        if version == 1:  # (c, *callEventUpdate)
+            prototype = ctypes.CFUNCTYPE(c_int, v, ctypes.POINTER(flag))
+        else:  # (c, noSetFMUStatePriorToCurrentPoint, *enterEventMode, *terminateSimulation)
+            prototype = ctypes.CFUNCTYPE(c_int, v, flag, ctypes.POINTER(flag), ctypes.POINTER(flag))
+        self._completed_step = prototype((function("CompletedIntegratorStep"), dll))
         self._completed_flags = (flag(), flag())
         self._raw_do_step, self._do_step_flags = None, ()
         self._step_flags = (ctypes.c_bool * 3)()
@@ -184,7 +189,7 @@ class ModelExchangeComponent(FmuComponent):
             if self.state is not State.STEPPING or np.array_equal(self.input_buffer[slots], sent):
                 return push()
             sent[:] = self.input_buffer[slots]
-            self._call("enterEventMode")
+            self._enter_event_mode()
             push()
             self._handle_event(self._time)
             return None
@@ -227,7 +232,10 @@ class ModelExchangeComponent(FmuComponent):
             return False
         self._set_model(t, x)
         enter, terminate = self._completed_flags
-        status = self._completed_step(self._handle, True, ctypes.byref(enter), ctypes.byref(terminate))
+        if self.fmi_version == 1:
+            status = self._completed_step(self._handle, ctypes.byref(enter))
+        else:
+            status = self._completed_step(self._handle, True, ctypes.byref(enter), ctypes.byref(terminate))
         self._checked(status, "CompletedIntegratorStep", t)
         if terminate.value:
             self._asked_to_terminate(t)
@@ -250,9 +258,13 @@ class ModelExchangeComponent(FmuComponent):
 
     def _event_iteration(self, t: float) -> None:
         """Update the discrete states until the FMU needs no more; keep its next event time."""
-        update = "newDiscreteStates" if self.fmi_version == 2 else "updateDiscreteStates"
+        update = ("eventUpdate", "newDiscreteStates", "updateDiscreteStates")[self.fmi_version - 1]
         for _ in range(_MAX_EVENT_ITERATIONS):
-            needed, terminate, _, _, time_defined, next_time = self._call(update)
+            if self.fmi_version == 1:  # (iterationConverged, ..., terminateSimulation, upcomingTimeEvent, t)
+                converged, _, _, terminate, time_defined, next_time = self._call(update)
+                needed = not converged
+            else:
+                needed, terminate, _, _, time_defined, next_time = self._call(update)
             if terminate:
                 self._asked_to_terminate(t)
             if not needed:
@@ -267,16 +279,27 @@ class ModelExchangeComponent(FmuComponent):
         """In event mode: iterate, back to continuous time, restart the solver from the FMU's states."""
         self.events += 1
         self._event_iteration(t)
-        self._call("enterContinuousTimeMode")
+        self._leave_event_mode()
         self._solver.reset(t, self._states())
+
+    def _enter_event_mode(self) -> None:
+        if self.fmi_version > 1:  # FMI 1.0 has no modes: fmiEventUpdate is called directly
+            self._call("enterEventMode")
+
+    def _leave_event_mode(self) -> None:
+        if self.fmi_version > 1:
+            self._call("enterContinuousTimeMode")
 
     # ---- lifecycle ---------------------------------------------------------------------------
 
     def initialize(self) -> None:
-        super().initialize()
-        self._time = self.t0
-        self._event_iteration(self.t0)  # exitInitializationMode leaves a ME FMU in event mode
-        self._call("enterContinuousTimeMode")
+        if self.fmi_version == 1:
+            self._initialize_fmi1()
+        else:
+            super().initialize()
+            self._time = self.t0
+            self._event_iteration(self.t0)  # exitInitializationMode leaves a ME FMU in event mode
+            self._leave_event_mode()
         max_step = self.max_step if self.max_step is not None else math.inf
         callbacks = (self._derivatives, self._indicators, self._completed)
         self._solver = make_solver(
@@ -284,6 +307,20 @@ class ModelExchangeComponent(FmuComponent):
         )
         self._solver.reset(self.t0, self._states())
         self._integrated_inputs[:] = self.input_buffer
+
+    def _initialize_fmi1(self) -> None:
+        """FMI 1.0: the start time, then fmiInitialize, which does the initial event iteration."""
+        self._require("initialize", State.SET_UP)
+        self._time = self.t0
+        self._checked(self._set_time(self._handle, self.t0), "SetTime", self.t0)
+        converged, _, _, terminate, time_defined, next_time = self._call("initialize")
+        if terminate:
+            self._asked_to_terminate(self.t0)
+        self._next_event = float(next_time) if time_defined else None
+        if not converged:
+            self._event_iteration(self.t0)
+        self.state = State.STEPPING
+        self._install_fast_path()
 
     def do_step(self, t: float, h: float) -> None:
         self._require("do_step", State.STEPPING)
@@ -309,7 +346,7 @@ class ModelExchangeComponent(FmuComponent):
             self._time = reached
             self._set_model(reached, solver.x[: self.nx])
             if event:
-                self._call("enterEventMode")
+                self._enter_event_mode()
                 self._handle_event(reached)
         self._time = t_end
 
