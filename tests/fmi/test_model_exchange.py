@@ -176,3 +176,24 @@ def test_cosim_fmu_simulate_bounces_the_ball_as_fmpy(tmp_path, version, capsys):
     assert len(ours) == len(theirs) == 4
     assert np.max(np.abs(np.subtract(ours, theirs))) < 1e-6
     assert np.max(np.abs(np.subtract(ours, analytic_bounces(1.0, 4)))) < 1e-6
+
+
+@pytest.mark.parametrize("version", [1, 2, 3])
+def test_step_events_update_the_discrete_states_after_each_step(version):
+    """A model that asks for an event after every completed integrator step: rk4 with 0.01 s
+    substeps over 1 s makes 100 step events, CVode one per communication point (10); each is
+    one discrete-state update (plus the initial one), and the fall stays exact (rk4 integrates
+    the quadratic h exactly; CVode restarts at first order after each event)."""
+    parameters = {"h0": 100.0, "step_events": 1.0}
+    for solver, max_step, steps, allowed in (("rk4", 0.01, 100, 1e-9), ("cvode", None, 10, 1e-6)):
+        ball = ModelExchangeComponent(
+            fixture_fmu(f"bouncing_ball_me_fmi{version}"),
+            "ball",
+            parameters,
+            solver=solver,
+            max_step=max_step,
+        )
+        series = run(ball, 0.1, 1.0)
+        assert series["event_updates"][-1] == 1 + steps
+        assert ball.events == steps
+        assert series["h"][-1] == pytest.approx(100.0 - G / 2, abs=allowed)
