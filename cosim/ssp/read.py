@@ -24,17 +24,10 @@ Semantics, as SSP 1.0 and 2.0 define them:
   earlier ones of the same element; a binding higher in the hierarchy overrides lower ones. Names
   that match no variable are ignored, as the standard says. Values of every numeric SSP type
   (Real, Integer, Boolean, Enumeration; SSP 2.0's Float32/64, Int8..UInt64) are passed as numbers.
-- Time: `DefaultExperiment` gives startTime and stopTime. SSP has no step size; the macro step is
-  the first of (`--set simulation.macro_step` comes before all, in `cosim.ssp.run`):
-  navcosim's annotation on the DefaultExperiment, `<ssc:Annotation type="org.navcosim.simulation">
-  <nc:Simulation macroStep="0.01" master="gauss-seidel"/>` (which also names the master); the
-  Open Simulation Platform's, `<ssc:Annotation type="com.opensimulationplatform"><osp:Algorithm>
-  <osp:FixedStepAlgorithm baseStepSize="0.01"/>` on the DefaultExperiment (libcosim's); the
-  OpenModelica one on the root system, `<ssc:Annotation type="org.openmodelica"><oms:Annotations>
-  <oms:SimulationInformation><oms:FixedStepMaster stepSize="0.01"/>` (OMSimulator's; matched by
-  local names, as its namespace has changed between versions); else the smallest `stepSize` of the
-  FMUs' own DefaultExperiment. `SspSystem.macro_step_source` says which. A component's period
-  comes from `<ssc:Annotation type="org.navcosim.component"><nc:Component period="0.05"/>`.
+- Time: `DefaultExperiment` gives startTime and stopTime; the macro step comes from navcosim's,
+  the OSP or the OMS annotation, or the FMUs' own step sizes (`cosim.ssp.experiment`), and
+  `SspSystem.macro_step_source` says which. A component's period comes from
+  `<ssc:Annotation type="org.navcosim.component"><nc:Component period="0.05"/>`.
 
 Components: an FMU runs as co-simulation, or as model exchange (integrated between communication
 points by CVode, `cosim.fmi.model_exchange`) when the component says implementation="ModelExchange"
@@ -47,7 +40,6 @@ connections that carry a calculated parameter, String, Binary and array values, 
 
 from __future__ import annotations
 
-import math
 import re
 import shutil
 import tempfile
@@ -61,16 +53,13 @@ from pathlib import Path, PurePosixPath
 from cosim.core.component import closest_names
 from cosim.errors import CosimError
 from cosim.ssp import schema
-from cosim.ssp.schema import tag
+from cosim.ssp.experiment import fmu_default_step, read_experiment
+from cosim.ssp.schema import annotations_of, local_name, number, tag
 
 SSD_NAME = "SystemStructure.ssd"
 FMU_TYPE = "application/x-fmu-sharedlibrary"
 PARAMETER_SET_TYPE = "application/x-ssp-parameter-set"
-SIMULATION_ANNOTATION = "org.navcosim.simulation"
 COMPONENT_ANNOTATION = "org.navcosim.component"
-OSP_ANNOTATION = "com.opensimulationplatform"
-OSP_NS = "http://opensimulationplatform.com/SSP/OSPAnnotations"
-OMS_ANNOTATION = "org.openmodelica"
 _SOURCES = ("output", "calculatedParameter")  # kinds that give a value, seen from outside an element
 _CAUSALITY_KINDS = {"input": "input", "output": "output", "parameter": "parameter"}
 _CAUSALITY_KINDS |= {"structuralParameter": "parameter", "calculatedParameter": "calculatedParameter"}
@@ -191,11 +180,7 @@ def read_ssd(directory: Path, source: str) -> SspSystem:
     system = root.find(tag("ssd:System"))
     reader.system(system, ())
     components = reader.finish()
-    experiment = root.find(tag("ssd:DefaultExperiment"))
-    start_time, stop_time, macro_step, master = _experiment(experiment, where)
-    source_of_step = "navcosim annotation nc:Simulation macroStep"
-    if macro_step is None:
-        macro_step, source_of_step = _foreign_step(experiment, system, components, where)
+    start_time, stop_time, macro_step, master, source_of_step = read_experiment(root, components, where)
     return SspSystem(
         source=source,
         name=root.get("name", ""),
@@ -208,90 +193,9 @@ def read_ssd(directory: Path, source: str) -> SspSystem:
         master=master,
         annotations=annotations_of(root),
         ssd_text=data,
-        macro_step_source=source_of_step if macro_step is not None else "",
+        macro_step_source=source_of_step,
         version=schema.version_of(root),
     )
-
-
-def _foreign_step(experiment: ET.Element | None, system: ET.Element, components, where: str):
-    """(macro step, where it comes from) from the OSP or OMS annotation, else the FMUs' own
-    DefaultExperiment stepSize (the smallest); (None, "") when none gives one."""
-    algorithm = annotations_of(experiment).get(OSP_ANNOTATION)
-    if algorithm is not None:
-        fixed = algorithm.find(f"{{{OSP_NS}}}FixedStepAlgorithm")
-        if fixed is not None and fixed.get("baseStepSize") is not None:
-            step = _positive(fixed, "baseStepSize", f"{where}: annotation {OSP_ANNOTATION}")
-            return step, "OSP annotation osp:FixedStepAlgorithm baseStepSize"
-    oms = annotations_of(system).get(OMS_ANNOTATION)  # oms:Annotations
-    informations = (
-        _children(oms, "SimulationInformation")
-        if oms is not None and _local(oms.tag) == "Annotations"
-        else []
-    )
-    for information in informations:
-        for master in _children(information, "FixedStepMaster"):
-            if master.get("stepSize") is not None:
-                step = _positive(master, "stepSize", f"{where}: annotation {OMS_ANNOTATION}")
-                return step, "OMS annotation oms:FixedStepMaster stepSize"
-    steps = [(c.default_step, c.member) for c in components if c.default_step is not None]
-    if steps:
-        step, member = min(steps)
-        return step, f"smallest FMU DefaultExperiment stepSize, of {member}"
-    return None, ""
-
-
-def _children(element: ET.Element | None, local: str) -> list[ET.Element]:
-    """The children of `element` with this local name, whatever their namespace."""
-    return [child for child in (element if element is not None else ()) if _local(child.tag) == local]
-
-
-def _positive(element: ET.Element, attribute: str, where: str) -> float:
-    value = _number(element, attribute, where)
-    if not (math.isfinite(value) and value > 0):
-        raise CosimError(f"{where}: {_local(element.tag)}.{attribute} must be a number > 0, got {value!r}")
-    return value
-
-
-def annotations_of(element: ET.Element | None) -> dict[str, ET.Element]:
-    """The `ssc:Annotation` children of an element's `Annotations`, by type: their content element."""
-    found: dict[str, ET.Element] = {}
-    if element is None:
-        return found
-    for block in (element.find(tag("ssd:Annotations")), element.find(tag("ssc:Annotations"))):
-        if block is None:
-            continue
-        for annotation in block.findall(tag("ssc:Annotation")):
-            content = list(annotation)
-            found[annotation.get("type", "")] = content[0] if content else ET.Element("empty")
-    return found
-
-
-def _experiment(element: ET.Element | None, where: str):
-    if element is None:
-        return 0.0, None, None, None
-    start = float(element.get("startTime", 0.0))
-    stop = float(element.get("stopTime")) if element.get("stopTime") is not None else None
-    simulation = annotations_of(element).get(SIMULATION_ANNOTATION)
-    macro_step = master = None
-    if simulation is not None:
-        if simulation.tag != tag("nc:Simulation"):
-            raise CosimError(f"{where}: annotation {SIMULATION_ANNOTATION} must hold one nc:Simulation")
-        macro_step = _number(simulation, "macroStep", where) if simulation.get("macroStep") else None
-        master = simulation.get("master")
-    return start, stop, macro_step, master
-
-
-def _number(element: ET.Element, attribute: str, where: str) -> float:
-    text = element.get(attribute)
-    try:
-        return float(text)
-    except (TypeError, ValueError):
-        what = f"{_local(element.tag)}.{attribute}"
-        raise CosimError(f"{where}: {what} must be a number, got {text!r}") from None
-
-
-def _local(qualified: str) -> str:
-    return qualified.rpartition("}")[2]
 
 
 def component_name(path: tuple[str, ...]) -> str:
@@ -343,7 +247,7 @@ class _Reader:
                 self.system(child, path + (name,))
             else:
                 raise CosimError(
-                    f"{self.where}: {_where(path + (name,))}: {_local(child.tag)} is not supported"
+                    f"{self.where}: {_where(path + (name,))}: {local_name(child.tag)} is not supported"
                 )
         for connection in element.iterfind(f"{tag('ssd:Connections')}/{tag('ssd:Connection')}"):
             self._connection(connection, path)
@@ -371,7 +275,7 @@ class _Reader:
         period = 0.0
         annotation = annotations_of(element).get(COMPONENT_ANNOTATION)
         if annotation is not None and annotation.get("period") is not None:
-            period = _number(annotation, "period", where)
+            period = number(annotation, "period", where)
         self.components[path] = SspComponent(
             name,
             _dotted(path),
@@ -379,7 +283,7 @@ class _Reader:
             period=period,
             variables=variables,
             member=member,
-            default_step=_default_step(fmu.model_description),
+            default_step=fmu_default_step(fmu.model_description),
             interface=interface,
         )
         for connector in self._connectors(element, path, False):
@@ -462,7 +366,7 @@ class _Reader:
                 factor = float(child.get("factor", 1.0))
                 offset = float(child.get("offset", 0.0))
             elif child.tag.endswith("MappingTransformation"):
-                raise CosimError(f"{where}: {_local(child.tag)} is not supported")
+                raise CosimError(f"{where}: {local_name(child.tag)} is not supported")
         if sink in self.incoming:
             raise CosimError(f"{where}: {_dotted(sink[0] + (sink[1],))} is already connected")
         self.incoming[sink] = (source, factor, offset, where)
@@ -499,7 +403,7 @@ class _Reader:
                 text = value.get("value")
                 if text is None:  # SSP 2.0: the values as ssv:Value children
                     text = " ".join(item.get("value", "") for item in value.iterfind(tag("ssv:Value")))
-                entry = (-len(path), order, _dotted(name), _local(value.tag), text)
+                entry = (-len(path), order, _dotted(name), local_name(value.tag), text)
                 self.bindings.append(entry + (value.get("unit"), file_where))
 
     def _apply_bindings(self) -> dict[tuple, float]:
@@ -603,16 +507,6 @@ def component_class(interface: str):
     from cosim.fmi.component import FmuComponent
 
     return FmuComponent
-
-
-def _default_step(model_description) -> float | None:
-    """[s] the FMU's DefaultExperiment stepSize, None when it gives none (or not a positive number)."""
-    experiment = getattr(model_description, "defaultExperiment", None)
-    try:
-        step = float(getattr(experiment, "stepSize", None))
-    except (TypeError, ValueError):
-        return None
-    return step if math.isfinite(step) and step > 0 else None
 
 
 def _value(kind: str, text: str | None, variable, where: str) -> float:

@@ -95,3 +95,32 @@ def to_bytes(root: ET.Element) -> bytes:
     """An element as a UTF-8 XML document with a declaration, indented for readers."""
     ET.indent(root, space="  ")
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
+
+
+def annotations_of(element: ET.Element | None) -> dict[str, ET.Element]:
+    """The `ssc:Annotation` children of an element's `Annotations`, by type: their content element."""
+    found: dict[str, ET.Element] = {}
+    if element is None:
+        return found
+    for block in (element.find(tag("ssd:Annotations")), element.find(tag("ssc:Annotations"))):
+        if block is None:
+            continue
+        for annotation in block.findall(tag("ssc:Annotation")):
+            content = list(annotation)
+            found[annotation.get("type", "")] = content[0] if content else ET.Element("empty")
+    return found
+
+
+def number(element: ET.Element, attribute: str, where: str) -> float:
+    """The attribute as a float; `CosimError` naming `where`, the element and the attribute if not."""
+    text = element.get(attribute)
+    try:
+        return float(text)
+    except (TypeError, ValueError):
+        what = f"{local_name(element.tag)}.{attribute}"
+        raise CosimError(f"{where}: {what} must be a number, got {text!r}") from None
+
+
+def local_name(qualified: str) -> str:
+    """'{namespace}Tag' -> 'Tag'."""
+    return qualified.rpartition("}")[2]

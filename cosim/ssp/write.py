@@ -30,13 +30,8 @@ from pathlib import Path
 
 from cosim.errors import CosimError
 from cosim.ssp import schema
-from cosim.ssp.read import (
-    COMPONENT_ANNOTATION,
-    SIMULATION_ANNOTATION,
-    SSD_NAME,
-    SspComponent,
-    SspConnection,
-)
+from cosim.ssp.experiment import SIMULATION_ANNOTATION
+from cosim.ssp.read import COMPONENT_ANNOTATION, SSD_NAME, SspComponent, SspConnection
 from cosim.ssp.schema import tag
 
 PARAMETERS = "resources/parameters.ssv"
