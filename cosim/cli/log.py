@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from cosim.errors import CosimError
+from cosim.record.output import atomic_output, checked_output
 
 
 def register(subparsers) -> None:
@@ -37,6 +38,7 @@ def register(subparsers) -> None:
         "range, distance to goal; for a log without map, goal or trajectory: every signal)",
     )
     plot.add_argument("--png", type=Path, metavar="OUT", help="output image (default: LOG with .png)")
+    plot.add_argument("--force", action="store_true", help="overwrite the image if it exists")
     plot.set_defaults(handler=_plot)
 
     animate = commands.add_parser(
@@ -49,6 +51,7 @@ def register(subparsers) -> None:
         "--speed", type=float, default=10.0, help="simulated seconds per second of video (10)"
     )
     animate.add_argument("--quiet", action="store_true", help="no progress bar")
+    animate.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     animate.set_defaults(handler=_animate)
 
     export = commands.add_parser("export", help="signals as CSV (one file per component) or NPZ")
@@ -56,6 +59,7 @@ def register(subparsers) -> None:
     export.add_argument("--component", nargs="+", metavar="NAME", help="components to export (default: all)")
     export.add_argument("--to", choices=("csv", "npz"), required=True, help="table format")
     export.add_argument("--out", type=Path, metavar="DIR", help="output folder (default: the log's folder)")
+    export.add_argument("--force", action="store_true", help="overwrite tables that exist")
     export.set_defaults(handler=_export)
 
     diff = commands.add_parser(
@@ -82,6 +86,7 @@ def register(subparsers) -> None:
     recover.add_argument(
         "--out", type=Path, metavar="OUT", help="recovered log (default: IN with .recovered.mcap)"
     )
+    recover.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
     recover.set_defaults(handler=_recover)
 
 
@@ -122,21 +127,24 @@ def _plot(args) -> int:
     from cosim.logs.signal_plot import plot_any
 
     skip_matplotlib_docstrings()  # this process draws and exits: no help() text needed
+    png = checked_output(args.png or args.log.with_suffix(".png"), args.force)
     log = _open(args.log)
-    png = args.png or args.log.with_suffix(".png")
     signals = [name for text in args.signals for name in text.split(",") if name] if args.signals else None
-    written = _guard(args.log, lambda: plot_any(log, png, signals))
-    print(f"wrote {written}")
+    with atomic_output(png, args.force) as temporary:
+        _guard(args.log, lambda: plot_any(log, temporary, signals))
+    print(f"wrote {png}")
     return 0
 
 
 def _animate(args) -> int:
     from cosim.logs.animate import animate_log
 
+    checked_output(args.out, args.force)
     log = _open(args.log)
-    video = _guard(args.log, lambda: animate_log(log, args.out, args.fps, args.speed, not args.quiet))
+    with atomic_output(args.out, args.force) as temporary:
+        video = _guard(args.log, lambda: animate_log(log, temporary, args.fps, args.speed, not args.quiet))
     width, height = video.size
-    print(f"wrote {video.path} ({video.frames} frames, {width} x {height} px, {video.seconds:.1f} s)")
+    print(f"wrote {args.out} ({video.frames} frames, {width} x {height} px, {video.seconds:.1f} s)")
     return 0
 
 
@@ -145,7 +153,7 @@ def _export(args) -> int:
 
     log = _open(args.log)
     out_dir = args.out or args.log.parent
-    for path in _guard(args.log, lambda: export_signals(log, out_dir, args.to, args.component)):
+    for path in _guard(args.log, lambda: export_signals(log, out_dir, args.to, args.component, args.force)):
         print(f"wrote {path}")
     return 0
 
@@ -164,7 +172,7 @@ def _diff(args) -> int:
 def _recover(args) -> int:
     from cosim.logs.recover import recover_log
 
-    recovery = _guard(args.log, lambda: recover_log(args.log, args.out))
+    recovery = _guard(args.log, lambda: recover_log(args.log, args.out, args.force))
     for note in recovery.dropped:
         print(f"cosim: warning: {args.log}: {note}", file=sys.stderr)
     state = "complete already" if recovery.was_complete else f"cut: {recovery.problem}"

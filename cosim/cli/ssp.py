@@ -25,6 +25,7 @@ def register(subparsers) -> None:
     )
     export.add_argument("scenario", type=Path, help="scenario file (.toml)")
     export.add_argument("--out", type=Path, required=True, help="the .ssp archive to write")
+    export.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     export.add_argument(
         "--set",
         dest="overrides",
@@ -37,10 +38,13 @@ def register(subparsers) -> None:
 
 
 def _export(args) -> int:
+    from cosim.record.output import atomic_output, checked_output
     from cosim.scenario.load import load_scenario
     from cosim.ssp.export import export_scenario
 
+    checked_output(args.out, args.force)  # before the work, not only after it
     scenario = load_scenario(args.scenario, args.overrides)
-    path = export_scenario(scenario, args.out)
-    print(f"wrote {path} ({path.stat().st_size / 1e3:.0f} kB)")
+    with atomic_output(args.out, args.force) as temporary:
+        export_scenario(scenario, temporary)
+    print(f"wrote {args.out} ({args.out.stat().st_size / 1e3:.0f} kB)")
     return 0

@@ -38,13 +38,17 @@ def register(subparsers) -> None:
         help="override a scenario key, as for cosim run (repeatable)",
     )
     parser.add_argument("--png", type=Path, metavar="FILE", help="also draw the wiring as a block diagram")
+    parser.add_argument("--force", action="store_true", help="overwrite --png if it exists")
     parser.set_defaults(handler=_handler)
 
 
 def _handler(args) -> int:
     from cosim.navigation.build import build_run
+    from cosim.record.output import atomic_output, checked_output
     from cosim.scenario.load import load_scenario
 
+    if args.png is not None:
+        checked_output(args.png, args.force)
     scenario = load_scenario(args.scenario, args.overrides)
     built = build_run(scenario)  # the system that `cosim run` steps, not initialised
     order = [component.name for component in built.system.order()]
@@ -53,7 +57,8 @@ def _handler(args) -> int:
     if args.png is not None:
         from cosim.cli.system_plot import draw_system
 
-        draw_system(built.description, order, args.png, title=scenario.name)
+        with atomic_output(args.png, args.force) as temporary:
+            draw_system(built.description, order, temporary, title=scenario.name)
         print(f"block diagram: {args.png}")
     return 0
 

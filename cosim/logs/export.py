@@ -15,10 +15,14 @@ import numpy as np
 
 from cosim.errors import CosimError
 from cosim.logs.reader import Log
+from cosim.record.output import atomic_output, checked_output
 
 
-def export_signals(log: Log, out_dir: Path, fmt: str, components: list[str] | None = None) -> list[Path]:
-    """Write the signals of `components` (default: all) to `out_dir`; returns the files written."""
+def export_signals(
+    log: Log, out_dir: Path, fmt: str, components: list[str] | None = None, force: bool = False
+) -> list[Path]:
+    """Write the signals of `components` (default: all) to `out_dir`; returns the files written.
+    Existing files are refused unless `force` (all checked before the first is written)."""
     chosen = components or log.components
     if not chosen:
         raise CosimError(f"{log.path}: no navcosim signal channels to export")
@@ -37,10 +41,15 @@ def export_signals(log: Log, out_dir: Path, fmt: str, components: list[str] | No
             arrays[f"{component}.values"] = signals.values
             arrays[f"{component}.names"] = np.array(signals.names, dtype=str)
         path = out_dir / f"{stem}-signals.npz"
-        np.savez(path, **arrays)
+        with atomic_output(path, force) as temporary:
+            np.savez(temporary, **arrays)
         return [path]
     if fmt == "csv":
-        return [_write_csv(log, component, out_dir / f"{stem}-{component}.csv") for component in chosen]
+        paths = [checked_output(out_dir / f"{stem}-{component}.csv", force) for component in chosen]
+        for component, path in zip(chosen, paths, strict=True):
+            with atomic_output(path, force) as temporary:
+                _write_csv(log, component, temporary)
+        return paths
     raise CosimError(f"unknown export format {fmt!r} (csv or npz)")
 
 

@@ -20,6 +20,8 @@ The record layout is declared in `cosim.record.mcap_format` (shared with the wri
 from __future__ import annotations
 
 import io
+import os
+import stat
 import struct
 import zlib
 from dataclasses import dataclass, field
@@ -94,9 +96,17 @@ def read_index(path: Path) -> LogIndex:
     """Walk `path`; raises CosimError when it is not an MCAP file at all."""
     path = Path(path)
     try:
-        handle = open(path, "rb")  # noqa: SIM115 - closed below
+        # O_NONBLOCK: opening a FIFO must not wait for a writer; it is refused just below.
+        descriptor = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
     except OSError as error:
         raise CosimError(f"{path}: cannot open the log ({error.strerror})") from None
+    except ValueError as error:  # an embedded NUL byte
+        raise CosimError(f"{path}: cannot open the log ({error})") from None
+    if not stat.S_ISREG(os.fstat(descriptor).st_mode):
+        os.close(descriptor)
+        raise CosimError(f"{path}: not a regular file (a folder, device or FIFO), not a log")
+    os.set_blocking(descriptor, True)
+    handle = os.fdopen(descriptor, "rb")
     with handle:
         file_size = path.stat().st_size
         magic = handle.read(len(MAGIC))

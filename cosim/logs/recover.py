@@ -30,6 +30,7 @@ from cosim.errors import CosimError
 from cosim.logs import index as log_index
 from cosim.logs.index import LogIndex
 from cosim.record.mcap_format import MESSAGE_FIELDS, OP_CHANNEL, OP_MESSAGE, OP_SCHEMA, RECORD_HEAD
+from cosim.record.output import atomic_output
 from cosim.record.writer import ChunkWriter
 
 
@@ -57,9 +58,10 @@ def default_target(source: Path) -> Path:
     return source.with_suffix(".recovered.mcap")
 
 
-def recover_log(source: str | Path, target: str | Path | None = None) -> Recovery:
+def recover_log(source: str | Path, target: str | Path | None = None, force: bool = False) -> Recovery:
     """Write everything readable in `source` to `target` (default `default_target`) as a complete,
-    indexed MCAP. Raises CosimError (one line) for a file that is not MCAP at all."""
+    indexed MCAP (an existing `target` only with `force`; see cosim.record.output). Raises
+    CosimError (one line) for a file that is not MCAP at all."""
     source = Path(source)
     target = Path(target) if target is not None else default_target(source)
     if not source.is_file():
@@ -68,16 +70,9 @@ def recover_log(source: str | Path, target: str | Path | None = None) -> Recover
         raise CosimError(f"{source}: the recovered log must not overwrite its source (give --out)")
     log = log_index.read_index(source)
     recovery = Recovery(source, target, log.complete, log.problem, dropped=list(log.skipped))
-    try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        with open(source, "rb") as handle, open(target, "wb") as out:
+    with atomic_output(target, force) as temporary:
+        with open(source, "rb") as handle, open(temporary, "wb") as out:
             _write(handle, log, ChunkWriter(out), recovery)
-    except OSError as error:
-        target.unlink(missing_ok=True)
-        raise CosimError(f"{target}: cannot write the recovered log ({error.strerror})") from None
-    except BaseException:
-        target.unlink(missing_ok=True)
-        raise
     return recovery
 
 

@@ -60,6 +60,9 @@ def test_plot_command_with_chosen_signals(runs, tmp_path, capsys):
     args = ["log", "plot", str(runs["a"].path), "--png", str(chosen), "--signals"]
     assert main([*args, "vfh.ranges[1]", "mixer.mode"]) == 0
     assert chosen.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert main([*args, "vfh.ranges[1]"]) == 2  # the picture is kept: drawing again needs --force
+    assert "already exists; give --force" in capsys.readouterr().err
+    args.insert(-1, "--force")
     assert main([*args, "vfh.nope"]) == 2
     assert "no signal 'nope'" in capsys.readouterr().err
     assert main([*args, "novariable"]) == 2
