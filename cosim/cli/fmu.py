@@ -87,7 +87,19 @@ def register(subparsers) -> None:
     simulate.add_argument(
         "--solver",
         choices=("cvode", "rk4", "euler"),
-        help="the Model Exchange integrator (with --interface me)",
+        help="the Model Exchange integrator (with --interface me; default cvode)",
+    )
+    simulate.add_argument(
+        "--tolerance",
+        type=float,
+        metavar="RTOL",
+        help="CVode's relative tolerance (default: DefaultExperiment tolerance, else 1e-5, as fmpy)",
+    )
+    simulate.add_argument(
+        "--max-step",
+        type=float,
+        metavar="S",
+        help="the solver's largest step [s] (default: unbounded for cvode, one --step for rk4 and euler)",
     )
     simulate.add_argument(
         "--out", type=Path, metavar="LOG", help="log file (default: logs/<model>-<timestamp>.mcap)"
@@ -158,6 +170,8 @@ def _simulate(args: argparse.Namespace) -> int:
         start_values=parse_start_values(args.start_values),
         interface=args.interface,
         solver=args.solver,
+        tolerance=args.tolerance,
+        max_step=args.max_step,
     )
     result = simulate(simulation, args.out, args.csv, progress=not args.quiet, force=args.force)
     if not args.quiet:

@@ -112,6 +112,8 @@ def prepare(
     start_values: dict[str, float | bool] | None = None,
     interface: str | None = None,
     solver: str | None = None,
+    tolerance: float | None = None,
+    max_step: float | None = None,
 ) -> Simulation:
     """Read the FMU at `path` and check the options against it; `CosimError` (one line) otherwise.
     None takes the default (module docstring); `interface` None: co-simulation when the FMU has it."""
@@ -125,8 +127,13 @@ def prepare(
     interface = interface or ("cs" if description.coSimulation is not None else "me")
     if interface not in INTERFACES:
         raise CosimError(f"--interface {interface}: must be one of {', '.join(INTERFACES)}")
-    if solver is not None and interface != "me":
-        raise CosimError(f"--solver {solver}: a solver integrates a Model Exchange FMU; give --interface me")
+    for option, value in (("--solver", solver), ("--tolerance", tolerance), ("--max-step", max_step)):
+        if value is not None and interface != "me":
+            raise CosimError(
+                f"{option} {value}: a solver integrates a Model Exchange FMU; give --interface me"
+            )
+        if option != "--solver" and value is not None and not (math.isfinite(value) and value > 0):
+            raise CosimError(f"{option} must be > 0, got {value:g}")
     if interface == "me" and description.modelExchange is None:
         raise CosimError(f"{path}: the FMU has no <ModelExchange> interface; --interface me cannot run it")
     if interface == "cs" and description.coSimulation is None:
@@ -150,7 +157,7 @@ def prepare(
         outputs=tuple(port.name for port in layout.outputs),
         parameter_names=tuple(port.name for port in layout.parameters),
         feedthrough=feedthrough,
-        integration=Integration(interface="me", solver=solver or "cvode")
+        integration=Integration("me", solver or "cvode", tolerance, max_step)
         if interface == "me"
         else Integration("cs"),
     )

@@ -201,3 +201,55 @@ def test_csv_and_log_end_together_where_the_fmu_ends_the_run(tmp_path):
         np.testing.assert_array_equal(signals.t, ours["time"])
         for name in ours.dtype.names[1:]:
             np.testing.assert_array_equal(signals[name], ours[name].astype(float))
+
+
+def _van_der_pol_end(tmp_path, **options):
+    simulation = prepare(fixture_fmu("van_der_pol_me_fmi2"), stop_time=2.0, step=0.5, **options)
+    log = tmp_path / f"vdp-{len(list(tmp_path.glob('*.mcap')))}.mcap"
+    simulate(simulation, log)
+    with open_log(log) as opened:
+        signals = opened.signals(opened.components[0])
+        return np.array([signals["x0"][-1], signals["x1"][-1]])
+
+
+def test_solver_tolerance_and_max_step_reach_the_model_exchange_solver(tmp_path):
+    """Van der Pol (mu = 1, x = (2, 0), u = 0) to t = 2 s in steps of 0.5 s against scipy's
+    solve_ivp at rtol 1e-12: CVode at rtol 1e-10 and RK4 in 1 ms steps agree; RK4 in one 0.5 s step
+    per communication step and CVode at rtol 1e-2 do not."""
+    from scipy.integrate import solve_ivp
+
+    def van_der_pol(t, x):
+        return [x[1], (1 - x[0] ** 2) * x[1] - x[0]]
+
+    exact = solve_ivp(van_der_pol, (0.0, 2.0), [2.0, 0.0], rtol=1e-12, atol=1e-12).y[:, -1]
+    tight = _van_der_pol_end(tmp_path, interface="me", solver="cvode", tolerance=1e-10)
+    fine = _van_der_pol_end(tmp_path, interface="me", solver="rk4", max_step=1e-3)
+    coarse = _van_der_pol_end(tmp_path, interface="me", solver="rk4")
+    loose = _van_der_pol_end(tmp_path, interface="me", solver="cvode", tolerance=1e-2)
+    assert np.max(np.abs(fine - exact)) < 1e-9 and np.max(np.abs(tight - exact)) < 1e-7
+    assert np.max(np.abs(coarse - exact)) > 1e-4 and np.max(np.abs(loose - exact)) > 1e-5
+    simulation = prepare(fixture_fmu("van_der_pol_me_fmi2"), solver="euler", max_step=0.01, tolerance=1e-6)
+    assert (simulation.interface, simulation.solver) == ("me", "euler")  # ME-only: no --interface needed
+    assert simulation.component.integration.max_step == 0.01
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        (
+            {"tolerance": 1e-6},
+            "--tolerance 1e-06: a solver integrates a Model Exchange FMU; give --interface me",
+        ),
+        ({"max_step": 0.01}, "--max-step 0.01: a solver integrates a Model Exchange FMU"),
+    ],
+)
+def test_solver_options_on_a_co_simulation_fmu_are_one_line(options, message):
+    with pytest.raises(CosimError) as error:
+        prepare(fixture_fmu("diffdrive_fmi2"), **options)
+    assert message in str(error.value) and "\n" not in str(error.value)
+
+
+@pytest.mark.parametrize("options", [{"tolerance": 0.0}, {"max_step": -1.0}, {"tolerance": float("nan")}])
+def test_non_positive_solver_options_are_refused(options):
+    with pytest.raises(CosimError, match=r"must be > 0"):
+        prepare(fixture_fmu("van_der_pol_me_fmi2"), interface="me", **options)
