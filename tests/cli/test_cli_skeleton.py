@@ -61,3 +61,23 @@ def test_closed_pipe_ends_quietly():
     assert result.stdout == "line 0\n"
     assert "Traceback" not in result.stderr, result.stderr
     assert result.returncode == 141
+
+
+@pytest.mark.slow
+def test_an_interrupt_while_the_cli_imports_is_one_line():
+    """Ctrl-C before `main` handles signals (during the CLI's imports): one line, exit 1."""
+    import subprocess
+    import sys
+
+    script = (
+        "import sys\n"
+        "class Interrupting:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name == 'cosim.cli':\n"
+        "            raise KeyboardInterrupt\n"
+        "sys.meta_path.insert(0, Interrupting())\n"
+        "from cosim.__main__ import run\n"
+        "run()\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert (done.returncode, done.stderr) == (1, "cosim: interrupted (SIGINT)\n")
