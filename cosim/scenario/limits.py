@@ -16,6 +16,9 @@ MIN_MACRO_STEP = 1e-9  # [s] the time base counts nanoseconds
 MAX_TIME = 1e9  # [s] stop time, macro step and component periods (int64 nanoseconds hold 292 years)
 MAX_OBSTACLES = 1_000  # [[obstacles]]: each one is tested by every lidar beam and collision check
 MAX_LIDAR_BEAMS = 720  # the VectorFieldHistogram FMU's input size
+# [m] longest lidar range: /scan's sensor_msgs/LaserScan holds ranges as float32, and a lidar
+# reaching farther than any map is no sensor (the widest Moving AI maps are a few km).
+MAX_LIDAR_RANGE = 1e6
 MAX_NAME_LENGTH = 100  # [scenario].name: it becomes part of the log's file name
 MAX_LINEAR_SPEED = 100.0  # [m/s] commanded speeds of the robot and speeds of moving obstacles
 MAX_ANGULAR_SPEED = 100.0  # [rad/s] commanded yaw rates

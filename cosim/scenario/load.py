@@ -25,6 +25,7 @@ from cosim.fmi.builtin import known_names
 from cosim.fmi.solvers import SOLVERS
 from cosim.scenario.limits import (
     MAX_LIDAR_BEAMS,
+    MAX_LIDAR_RANGE,
     MAX_LINEAR_SPEED,
     MAX_NAME_LENGTH,
     MAX_OBSTACLES,
@@ -790,6 +791,8 @@ def _lidar(table: TableReader, macro_step: float) -> LidarSettings:
     range_min, range_max = table.interval("range", [0.0, 20.0], minimum=0.0)
     if range_max <= 0:
         raise table.error("range", f"max must be > 0, got {range_max:g}")
+    if range_max > MAX_LIDAR_RANGE:
+        raise table.error("range", f"max must be at most {MAX_LIDAR_RANGE:g} m, got {range_max:g}")
     noise = table.number("noise", 0.0, minimum=0.0)
     seed = table.integer("seed", 0, minimum=0)
     rate = table.number("rate", 10.0, minimum=0.0, exclusive_minimum=True)

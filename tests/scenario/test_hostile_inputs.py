@@ -158,6 +158,12 @@ def test_huge_lidar_count(tmp_path, capsys):
     assert "[lidar].count: at most 720 beams (the VFH input size), got 9223372036854775807" in message
 
 
+def test_lidar_range_beyond_what_a_laser_scan_holds(tmp_path, capsys):
+    # sensor_msgs/LaserScan's range_max is a float32: 1e308 m broke the /scan packing with a traceback.
+    message = reject(tmp_path, capsys, args=("--set", "lidar.range=[0, 1e308]"))
+    assert f"[lidar].range: max must be at most {limits.MAX_LIDAR_RANGE:g} m, got 1e+308" in message
+
+
 def test_lidar_component_beam_limits():
     with pytest.raises(CosimError, match=rf"lidar 'l': count must be an integer in 1..{MAX_BEAMS}, got 9223"):
         Lidar("l", count=2**63 - 1)
