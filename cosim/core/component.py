@@ -306,6 +306,15 @@ class Component(ABC):
         """The C-level step of this component, or None when it needs Python to step (the default)."""
         return None
 
+    def text_port(self, name: str, direction: str) -> str | None:
+        """The type ("String", "Binary") of a text input or output outside the float buffers (an
+        FMU's: `cosim.fmi.text`); None for every other name (the default: a component has none)."""
+        return None
+
+    def feed_text(self, name: str, producer: Component, output: str) -> None:
+        """Take text input `name` from `producer`'s text output `output` before each step."""
+        raise CosimError(f"component '{self.name}' has no text input '{name}'")
+
     def describe(self) -> dict[str, str]:
         """Facts for a log's metadata (FMU GUID, generating tool...); empty for plain components."""
         return {}

@@ -161,6 +161,7 @@ class System:
         self.mode = mode
         self.components: dict[str, Component] = {}
         self.connections: list[Connection] = []
+        self.text_connections: list[Connection] = []  # String/Binary ones (`System._connect_text`)
         self._targets: set[str] = set()  # connected inputs: a set, so connecting N inputs is O(N)
         self._links: tuple[list[Connection], dict[str, list[Link]]] = ([], {})
 
@@ -198,6 +199,9 @@ class System:
 
     def connect(self, source: str, target: str, scale: float = 1.0, offset: float = 0.0) -> Connection:
         """Connect output `source` ("comp.port") to input `target`: input = output * scale + offset."""
+        text = self._connect_text(source, target, scale, offset)
+        if text is not None:
+            return text
         producer, output = self.resolve(source, "output")
         consumer, input_ = self.resolve(target, "input")
         problem = connection_problem(producer.outputs[output], consumer.inputs[input_])
@@ -212,6 +216,33 @@ class System:
             raise CosimError(f"connection {source} -> {target}: scale and offset must be finite")
         connection = Connection(source, target, float(scale), float(offset))
         self.connections.append(connection)
+        self._targets.add(target)
+        return connection
+
+    def _connect_text(self, source: str, target: str, scale: float, offset: float) -> Connection | None:
+        """A connection of String or Binary ports (`Component.text_port`), which the consumer itself
+        reads before each of its steps (`Component.feed_text`); None when neither end is one."""
+        producer = self.components.get(source.partition(".")[0])
+        consumer = self.components.get(target.partition(".")[0])
+        if producer is None or consumer is None:
+            return None
+        source_type = producer.text_port(source.partition(".")[2], "output")
+        target_type = consumer.text_port(target.partition(".")[2], "input")
+        if source_type is None and target_type is None:
+            return None
+        if source_type != target_type:
+            raise CosimError(
+                f"connection {source} ({source_type or 'a number'}) -> {target} "
+                f"({target_type or 'a number'}) cannot convert: a String or Binary connects only to its own "
+                "type"
+            )
+        if scale != 1.0 or offset != 0.0:
+            raise CosimError(f"connection {source} -> {target}: a {source_type} takes no scale or offset")
+        if target in self._targets:
+            raise CosimError(f"input '{target}' is already connected")
+        consumer.feed_text(target.partition(".")[2], producer, source.partition(".")[2])
+        connection = Connection(source, target)
+        self.text_connections.append(connection)
         self._targets.add(target)
         return connection
 

@@ -52,7 +52,7 @@ import weakref
 import zipfile
 from collections import deque
 from collections.abc import Collection, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
 
@@ -67,6 +67,7 @@ from cosim.core.component import Component, NativeStep, Port, State, check_uniqu
 from cosim.errors import CosimError, SimulationEnded
 from cosim.fmi.archive import check_unpacked_size
 from cosim.fmi.builtin import documented_nan_variables
+from cosim.fmi.text import TEXT_TYPES, TextPort, TextTransfer, check_text, text_start
 from cosim.fmi.types import C_TYPES, KINDS, TRANSFER_TYPES, WIDE, check_integer, exact_as_float, transfer_type
 
 _STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
@@ -236,6 +237,7 @@ class FmuLayout:
     elements: Mapping[str, int]  # element port of an FMI 3.0 array -> row-major index
     feedthrough: Mapping[str, tuple[str, ...]]  # output port -> input ports, as <ModelStructure> declares
     documented_nan: tuple[str, ...]  # output ports of the FMU's documented NaN outputs
+    text: Mapping[str, tuple[TextPort, ...]] = field(default_factory=dict)  # causality -> String/Binary
 
 
 # Checked archives (`_read_description`) and layouts, keyed by the file's resolved path and version
@@ -299,8 +301,19 @@ def _make_layout(
     reaches: dict[str, tuple[object, float]] = {}
     elements: dict[str, int] = {}
     ports: dict[str, list[Port]] = {"input": [], "output": [], "parameter": []}
+    text: dict[str, list[TextPort]] = {"input": [], "output": [], "parameter": []}
     for variable in description.modelVariables:
         causality = variable.causality if variable.causality != "structuralParameter" else "parameter"
+        if variable.type in TEXT_TYPES and causality in text and not getattr(variable, "dimensions", None):
+            port = TextPort(
+                variable.name,
+                variable.type,
+                variable.valueReference,
+                text_start(variable),
+                variable.description or "",
+            )
+            text[causality].append(port)
+            continue
         kind = KINDS.get(variable.type)
         if causality not in ports or kind is None:
             continue
@@ -359,6 +372,7 @@ def _make_layout(
         elements,
         feedthrough,
         tuple(port for variable in documented for port in ports_of.get(variable, ())),
+        {causality: tuple(listed) for causality, listed in text.items()},
     )
 
 
@@ -418,6 +432,14 @@ class FmuComponent(Component):
         feedthrough = dict(layout.feedthrough)
         feedthrough.update(feedthrough_override or {})
         self._set_ports(layout.inputs, layout.outputs, layout.parameters, feedthrough)
+        self.text_inputs = layout.text.get("input", ())  # String/Binary variables (`cosim.fmi.text`)
+        self.text_outputs = layout.text.get("output", ())
+        self.text_parameters = layout.text.get("parameter", ())
+        self.text_values: dict[str, str | bytes] = {
+            p.name: p.start for p in (*self.text_inputs, *self.text_outputs)
+        }
+        self._text_feeds: dict[str, tuple[Component, str]] = {}  # text input -> (producer, its output)
+        self._text = None
         self.nan_outputs: frozenset[str] = frozenset()
         self.allow_nan(*nan_outputs, *layout.documented_nan)
         self._step_time: list[float | None] = [None]  # start of the last doStep [s], for messages
@@ -440,6 +462,39 @@ class FmuComponent(Component):
                 f"FMU '{self.path}' (model {self.model_description.modelName}) supports model exchange "
                 'only: run it with interface = "me" (and a solver)'
             )
+
+    def text_port(self, name: str, direction: str) -> str | None:
+        """The FMI type ("String", "Binary") of text input/output `name`; None if it is none."""
+        ports = self.text_inputs if direction == "input" else self.text_outputs
+        return next((p.fmi_type for p in ports if p.name == name), None)
+
+    def set_text(self, name: str, value: str | bytes) -> None:
+        """Hold text input `name` at `value` (sent at setup, or before the next step)."""
+        port = next((p for p in self.text_inputs if p.name == name), None)
+        if port is None:
+            names = [p.name for p in self.text_inputs]
+            raise CosimError(
+                f"FMU '{self.name}' has no String or Binary input '{name}'; those: {names or 'none'}"
+            )
+        self.text_values[name] = check_text(port, value, f"FMU '{self.name}' input '{name}'")
+
+    def feed_text(self, name: str, producer: Component, output: str) -> None:
+        """From now on text input `name` takes `producer`'s text output `output` before each step."""
+        self._text_feeds[name] = (producer, output)
+
+    def _send_text(self) -> None:
+        """Send every text input (the fed ones with their producers' latest values)."""
+        for name, (producer, output) in self._text_feeds.items():
+            self.text_values[name] = producer.text_values[output]
+        status = self._text.set(self.text_inputs, [self.text_values[p.name] for p in self.text_inputs])
+        if status > 1:
+            self._fail(status, "fmiSetString/fmiSetBinary (text inputs)")
+
+    def _read_text(self) -> None:
+        status, values = self._text.get(self.text_outputs)
+        if status > 1:
+            self._fail(status, "fmiGetString/fmiGetBinary (text outputs)")
+        self.text_values.update(zip((p.name for p in self.text_outputs), values, strict=True))
 
     def _plan_transfers(self) -> None:
         """Per FMI type: buffer slots, value references, FMI value array, scales."""
@@ -566,6 +621,8 @@ class FmuComponent(Component):
         names["raw"] = self._raw_do_step
         exec("\n".join(push + pull + step), names)  # noqa: S102 - generated from our own templates
         self._compiled = {method: names[method] for method in ("push_inputs", "get_outputs", "do_step")}
+        if self.text_inputs or self.text_outputs:  # text beside the numbers (`cosim.fmi.text`)
+            self._compiled.update(_with_text(self, self._compiled["do_step"], self._compiled["get_outputs"]))
 
     def _install_fast_path(self) -> None:
         self.__dict__.update(self._compiled)
@@ -674,6 +731,8 @@ class FmuComponent(Component):
                 prototype = ctypes.CFUNCTYPE(c_int, c_void_p, vrs, c_size_t, values, c_size_t)
             self._setters[type_name] = prototype((self._function(f"Set{type_name}"), dll))
             self._getters[type_name] = prototype((self._function(f"Get{type_name}"), dll))
+        if self.text_inputs or self.text_outputs or self.text_parameters:
+            self._text = TextTransfer(dll, self.fmi_version, self._handle, self._function)
         self._bind_do_step(dll)
 
     def _function(self, name: str) -> str:
@@ -715,10 +774,15 @@ class FmuComponent(Component):
         self._require("setup", State.INSTANTIATED)
         values = dict(self.default_parameters)
         values.update(parameters)
-        names = [p.name for p in self.parameters]
+        names = [p.name for p in (*self.parameters, *self.text_parameters)]
         kinds = {p.name: p.fmi_type for p in self.parameters}
         arrays: dict[str, dict[int, float]] = {}  # FMI 3.0 array parameter -> given elements
+        texts = {p.name: p for p in self.text_parameters}
+        given_texts = {}
         for key, value in values.items():
+            if key in texts:
+                given_texts[key] = check_text(texts[key], value, f"FMU '{self.name}' parameter '{key}'")
+                continue
             if key not in kinds:
                 raise CosimError(
                     f"FMU '{self.name}' (model {self.model_description.modelName}) has no parameter "
@@ -735,6 +799,10 @@ class FmuComponent(Component):
             self._set_scalar(kinds[key], variable.valueReference, value, key)
         for array, elements in arrays.items():
             self._set_array_parameter(array, elements)
+        if given_texts and self._text.set([texts[k] for k in given_texts], list(given_texts.values())) > 1:
+            self._fail(3, "fmiSetString/fmiSetBinary (parameters)")
+        if self.text_inputs:
+            self._send_text()
         self.t0 = float(t0)
         if self.fmi_version == 2:
             self._call_lifecycle("setupExperiment", None, self.t0)
@@ -818,6 +886,8 @@ class FmuComponent(Component):
 
         version = self.fmi_version
         kernel_kinds = _KERNEL_TYPES[version]
+        if self._text_feeds or self.text_outputs:
+            return None  # text moves in Python (`cosim.fmi.text`)
         if any(group[0] not in kernel_kinds for group in (*self._input_groups, *self._output_groups)):
             return None
         version = 2 if version == 1 else version  # FMI 1.0 calls as FMI 2.0 does (the same C arguments)
@@ -960,6 +1030,23 @@ class FmuComponent(Component):
 
 
 _LOG_TARGETS: dict[int, weakref.ref] = {}
+
+
+def _with_text(component: FmuComponent, do_step, get_outputs) -> dict:
+    """`do_step` that first sends the text inputs, `get_outputs` that also reads the text outputs."""
+
+    def stepped(t: float, h: float) -> None:
+        if component.text_inputs:
+            component._send_text()
+        do_step(t, h)
+
+    def read():
+        outputs = get_outputs()
+        if component.text_outputs:
+            component._read_text()
+        return outputs
+
+    return {"do_step": stepped, "get_outputs": read}
 
 
 def _needed_at_run_time(member: str) -> bool:

@@ -21,6 +21,13 @@ def fmus(tmp_path_factory):
     return {version: build_fixture_fmu(f"types_fmi{version}", folder) for version in (2, 3)}
 
 
+@pytest.fixture(scope="module")
+def numeric(tmp_path_factory):
+    """The builds without String and Binary, which step in the compiled kernel."""
+    folder = tmp_path_factory.mktemp("numeric")
+    return {version: build_fixture_fmu(f"types_numeric_fmi{version}", folder) for version in (2, 3)}
+
+
 # Parameter values of each type that the FMU adds to the input (within each type's range).
 PARAMETERS = {
     "Real": -0.75, "Float32": 0.25, "Float64": -0.75, "Int8": 7, "UInt8": 55, "Int16": 16, "UInt16": 5535,
@@ -79,9 +86,10 @@ def _chain(fmus, version: int, compiled: bool) -> tuple[list[float], list[float]
 
 
 @pytest.mark.parametrize("version", [2, 3])
-def test_connections_of_every_numeric_type_give_the_same_values_in_the_kernel_and_in_python(fmus, version):
+def test_connections_of_every_numeric_type_give_the_same_values_in_the_kernel_and_in_python(numeric, version):
     """Connected through the compiled kernel or the Python loop: the same values, and those the FMU
     computes (the second adds its neutral parameters to what the first gives)."""
+    fmus = numeric
     compiled, python = _chain(fmus, version, True), _chain(fmus, version, False)
     assert compiled == python
     first, second = python
@@ -94,12 +102,12 @@ def test_connections_of_every_numeric_type_give_the_same_values_in_the_kernel_an
 
 
 @pytest.mark.parametrize("compiled", [True, False])
-def test_a_64_bit_output_beyond_2_53_stops_the_run_by_name(fmus, compiled):
+def test_a_64_bit_output_beyond_2_53_stops_the_run_by_name(numeric, compiled):
     """2^53 + 1 as an Int64 output cannot be a float64 signal: the step that makes it stops the
     run naming it, in the compiled kernel (which steps every numeric type) and in Python alike."""
     system = System(0.5)
-    first = system.add(FmuComponent(fmus[3], "first", parameters={"Int64_parameter": 2**53}))
-    system.add(FmuComponent(fmus[3], "second", parameters={"Int64_parameter": 2**40}))
+    first = system.add(FmuComponent(numeric[3], "first", parameters={"Int64_parameter": 2**53}))
+    system.add(FmuComponent(numeric[3], "second", parameters={"Int64_parameter": 2**40}))
     system.connect("first.Int64_output", "second.Int64_input")  # 2^53 - 2^40 + 2^40: exact
     with Master(system) as master:
         master.initialize()
@@ -212,3 +220,34 @@ def test_an_array_sized_by_a_tunable_structural_parameter_is_logged_whole(fmus):
             resized.setup(0.0, {})
     finally:
         resized.free()
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_string_and_binary_parameters_inputs_outputs_and_connections(fmus, version):
+    """Text moves beside the numbers: parameters at setup, a held input, a connection from one FMU's
+    String output to another's input, read before each step; unconnected text inputs keep their
+    start values; outputs as the fixture defines them (input then parameter: fmpy records no text)."""
+    system = System(0.5)
+    first = system.add(FmuComponent(fmus[version], "first", parameters={"String_parameter": " world"}))
+    second = system.add(FmuComponent(fmus[version], "second", parameters={"String_parameter": "!"}))
+    if version == 3:
+        first.default_parameters["Binary_parameter"] = b"\x0c"
+        second.set_text("Binary_input", "ff")
+    for t in ("String",):
+        system.connect(f"first.{t}_output", f"second.{t}_input")
+    real = "Float64" if version == 3 else "Real"
+    with pytest.raises(
+        CosimError, match=f"first.String_output [(]String[)] -> second.{real}_input [(]a number"
+    ):
+        system.connect("first.String_output", f"second.{real}_input")
+    with Master(system) as master:
+        master.initialize()
+        assert master.kernel_tables() is None  # text moves in Python
+        master.run(2)
+    assert first.text_values["String_input"] == "hello"  # its start value
+    assert first.text_values["String_output"] == "hello world"
+    assert second.text_values["String_input"] == "hello world"
+    assert second.text_values["String_output"] == "hello world!"
+    if version == 3:
+        assert first.text_values["Binary_output"] == b"\x0a\x0b\x0c"
+        assert second.text_values["Binary_output"] == b"\xff"
