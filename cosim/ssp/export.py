@@ -71,15 +71,20 @@ def flat_system(built) -> tuple[list[SspComponent], list[SspConnection]]:
                         "not divide back exactly; the exported SSP would not reproduce the run"
                     )
         components.append(SspComponent(name, name, component.path, *values, component.period, variables))
-    fmus = {component.name for component in components}
-    connections = []
-    for connection in built.system.connections:
+    return components, fmu_connections(scenario, built.system.connections, {c.name for c in components})
+
+
+def fmu_connections(scenario: Scenario, connections, fmus: set[str]) -> list[SspConnection]:
+    """The connections between the FMUs `fmus` (of a built `System` or a `SystemDescription`: both
+    have source, target, scale, offset) between FMU variables, port scales folded in."""
+    found = []
+    for connection in connections:
         if connection.source_component not in fmus or connection.target_component not in fmus:
             continue  # a Python component's connection: the template makes it again
         source, source_scale = _port_of(scenario, *connection.source.split(".", 1))
         target, target_scale = _port_of(scenario, *connection.target.split(".", 1))
         factor = target_scale * connection.scale * source_scale
-        connections.append(
+        found.append(
             SspConnection(
                 f"{connection.source_component}.{source}",
                 f"{connection.target_component}.{target}",
@@ -87,7 +92,7 @@ def flat_system(built) -> tuple[list[SspComponent], list[SspConnection]]:
                 target_scale * connection.offset,
             )
         )
-    return components, connections
+    return found
 
 
 def _map_files(scenario: Scenario) -> list[Path]:
@@ -183,12 +188,14 @@ def scenario_of(ssp: SspSystem, simulation: dict[str, object]) -> Scenario:
 
 
 def _check_against_ssd(ssp: SspSystem, scenario: Scenario) -> None:
-    """The scenario's FMU part must be the SSD's: same components, periods and connections."""
-    from cosim.navigation.build import build_run
+    """The scenario's FMU part must be the SSD's: same components, periods and connections (from
+    its description: building the run here too would plan and load it twice)."""
+    from cosim.scenario.compose import describe_system
 
-    components, connections = flat_system(build_run(scenario))
+    description = describe_system(scenario)
+    ours = [(c.name, c.period) for c in description.components.values() if c.kind == "fmu"]
+    connections = fmu_connections(scenario, description.connections, {name for name, _ in ours})
     where = f"{ssp.source}: SystemStructure.ssd"
-    ours = [(c.name, c.period) for c in components]
     theirs = [(c.name, c.period) for c in ssp.components]
     if sorted(ours) != sorted(theirs):
         raise CosimError(f"{where}: components and periods {theirs} differ from the scenario's {ours}")
