@@ -29,7 +29,8 @@ import re
 import time
 import tomllib
 import zipfile
-from dataclasses import dataclass, field
+from contextlib import ExitStack
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +40,7 @@ from cosim.core.component import closest_names
 from cosim.core.master import COMPILED_MIN_STEPS, NS_PER_S, Master, System, seconds_to_ns
 from cosim.errors import CosimError, SimulationEnded
 from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
+from cosim.record.output import atomic_output, checked_output
 from cosim.scenario.description import ComponentDescription
 from cosim.scenario.limits import MAX_STEPS
 from cosim.scenario.load import DEFAULT_LOG_PATTERN, Integration
@@ -275,9 +277,12 @@ def simulate(
 
     described = simulation.component
     for path in (out_path, csv_path):
-        if path is not None and not force and Path(path).exists():
-            raise CosimError(f"{path}: already exists; give --force to overwrite it")
-    with interrupt.catching_signals():
+        if path is not None:
+            checked_output(path, force)  # checked again, race-free, when written
+    with interrupt.catching_signals(), ExitStack() as outputs:
+        # The CSV goes to a temporary beside it, renamed when the run ends (with the rows up to a
+        # failure, as the log); an error before that leaves no file.
+        csv_temporary = outputs.enter_context(atomic_output(csv_path, force)) if csv_path else None
         # Nothing feeds this FMU: its NaN outputs are its values, recorded as they are.
         real = tuple(port.name for port in _output_ports(described) if port.type == "real")
         try:
@@ -294,7 +299,8 @@ def simulate(
         except CosimError as error:
             raise CosimError(f"{described.fmu}: initialising the FMU failed: {error}") from None
         with interrupt.deferred():
-            return _run(simulation, master, out_path, csv_path, progress, force)
+            result = _run(simulation, master, out_path, csv_temporary, progress, force)
+    return replace(result, csv_path=csv_path)
 
 
 def _output_ports(described: ComponentDescription):
@@ -308,15 +314,18 @@ def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: b
     from cosim.record.recorder import Recorder
 
     (component,) = master.order
+    csv = None
     try:
+        csv = _CsvWriter(csv_path, component) if csv_path is not None else None
         if out_path is not None:
             log_path, stream = Path(out_path), claim_log(Path(out_path), force)
         else:
             pattern = default_log_path(DEFAULT_LOG_PATTERN, component.name)
             log_path, stream = claim_default_log(pattern)
         recorder = Recorder(log_path, stream=stream)
-        csv = _CsvWriter(csv_path, component) if csv_path is not None else None
     except BaseException:
+        if csv is not None:
+            csv.close()
         master.close()
         raise
     h_ns = master.system.macro_step_ns

@@ -253,3 +253,24 @@ def test_solver_options_on_a_co_simulation_fmu_are_one_line(options, message):
 def test_non_positive_solver_options_are_refused(options):
     with pytest.raises(CosimError, match=r"must be > 0"):
         prepare(fixture_fmu("van_der_pol_me_fmi2"), interface="me", **options)
+
+
+def test_outputs_destroy_nothing(tmp_path):
+    """An existing CSV is refused without force, a folder always, before anything is written; a
+    run that fails keeps its CSV up to the failure, as its log."""
+    simulation = prepare(
+        fixture_fmu("failing_fmi2"), stop_time=2.0, step=0.1, start_values={"fail_time": 0.5}
+    )
+    taken = tmp_path / "taken.csv"
+    taken.write_text("mine\n")
+    with pytest.raises(CosimError, match="taken.csv: already exists; give --force"):
+        simulate(simulation, tmp_path / "a.mcap", taken)
+    with pytest.raises(CosimError, match="is a folder"):
+        simulate(simulation, tmp_path / "a.mcap", tmp_path)
+    assert taken.read_text() == "mine\n" and not (tmp_path / "a.mcap").exists()
+    result = simulate(simulation, tmp_path / "a.mcap", taken, force=True)
+    assert result.reason == "fmu_failed" and result.csv_path == taken
+    rows = _read_csv(taken)
+    with open_log(tmp_path / "a.mcap") as log:
+        np.testing.assert_array_equal(log.signals(log.components[0]).t, rows["time"])
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no temporary left
