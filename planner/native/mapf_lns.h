@@ -221,6 +221,8 @@ static int lns_init(Lns *l, int V, int N, const int *adj, const int *goal, const
     l->occ_size = 1 << 12;
     l->occ_key = malloc((size_t)l->occ_size * sizeof(long long));
     l->occ_agent = malloc((size_t)l->occ_size * sizeof(int));
+    /* a replanned agent that needs more expansions than this is given up: the neighbourhood fails,
+     * the old paths stay, and the time goes to other neighbourhoods */
     l->expansion_cap = 20 * V + 100000;
     if (!l->path || !l->saved_path || !l->cost || !l->saved_cost || !l->hood || !l->in_hood || !l->tabu
         || !l->visits || !l->rest_from || !l->intersections || !l->bfs_queue || !l->bfs_stamp || !l->keys
@@ -414,6 +416,7 @@ static void hood_intersection(Lns *l) {
     l->bfs_gen++;
     l->bfs_queue[tail++] = seed;
     l->bfs_stamp[seed] = l->bfs_gen;
+    /* a few hundred cells around it at most: past that the agents found are no longer near it */
     while (head < tail && l->n_hood < LNS_HOOD && head < 4 * LNS_HOOD * LNS_HOOD) {
         int v = l->bfs_queue[head++];
         const Visits *list = &l->visits[v];
