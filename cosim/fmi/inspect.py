@@ -327,8 +327,39 @@ def array_problems(description) -> list[str]:
     return problems
 
 
+def archive_problems(path: Path) -> list[str]:
+    """What `cosim run` refuses in the zip itself: more than the default unpacked-size limit (a
+    zip bomb), and members that would land outside the extraction folder (absolute names or `..`
+    parts: a zip slip)."""
+    from cosim.fmi.archive import DEFAULT_MAX_UNPACKED_SIZE, MIB, unpacked_size
+
+    problems = []
+    try:
+        with zipfile.ZipFile(path) as archive:
+            total = unpacked_size(archive)
+            names = archive.namelist()
+    except (zipfile.BadZipFile, OSError) as error:
+        return [f"not a readable zip archive: {error}"]
+    if total > DEFAULT_MAX_UNPACKED_SIZE:
+        problems.append(
+            f"unpacks to {total / MIB:,.0f} MiB, more than the default limit of "
+            f"{DEFAULT_MAX_UNPACKED_SIZE / MIB:,.0f} MiB ([simulation] fmu_max_size)"
+        )
+    escaping = [
+        name for name in names if name.startswith(("/", "\\")) or ".." in name.replace("\\", "/").split("/")
+    ]
+    if escaping:
+        problems.append(
+            f"member '{escaping[0]}' would be extracted outside the FMU's folder ({len(escaping)} such)"
+        )
+    return problems
+
+
 def validate(path: Path) -> list[str]:
-    """Problems of the FMU at `path`: fmpy's validation, FMI 3.0 array checks, binary and
-    exported-symbol checks."""
+    """Problems of the FMU at `path`: the archive's own (size, member paths), fmpy's validation,
+    FMI 3.0 array checks, binary and exported-symbol checks."""
+    problems = archive_problems(path)
+    if problems:  # nothing is extracted from such an archive, as `cosim run` extracts nothing
+        return problems
     description = read_description(path)
     return fmpy_problems(path) + array_problems(description) + _binary_problems(path, description)
