@@ -86,6 +86,7 @@ from cosim.core.component import Component, State
 from cosim.core.interrupt import Interrupted, abandonable
 from cosim.errors import CosimError
 from cosim.fmi.model_exchange import fmu_component
+from cosim.fmi.types import TRANSFER_TYPES
 
 DEFAULT_TIMEOUT = 10.0  # [s] longest FMI call ([simulation] fmu_timeout)
 STARTUP_TIMEOUT = 120.0  # [s] for the child's Python to start and read the model description
@@ -131,8 +132,6 @@ _last: list = [None]  # weak reference to the isolated component stepped last (l
 # What the child is doing, as it records it in the shared header before each call.
 CALL_IDLE, CALL_SET, CALL_STEP, CALL_GET = 0, 1, 2, 3
 CALL_INSTANTIATE, CALL_SETUP, CALL_INITIALIZE, CALL_TERMINATE, CALL_FREE, CALL_LOAD = 4, 5, 6, 7, 8, 9
-_TYPE_NAMES = {2: {"real": "Real", "integer": "Integer", "boolean": "Boolean"}}
-_TYPE_NAMES[3] = {"real": "Float64", "integer": "Int32", "boolean": "Boolean"}
 
 
 def shared_size(inputs: int, outputs: int) -> int:
@@ -389,12 +388,11 @@ class IsolatedFmuComponent(Component):
     def _call_name(self, call: int, what: str) -> str:
         """The FMI function(s) behind one of the child's recorded calls."""
         v = self.fmi_version
-        names = _TYPE_NAMES[v]
         if call in (CALL_SET, CALL_GET):
             ports = self.inputs if call == CALL_SET else self.outputs
             direction = "Set" if call == CALL_SET else "Get"
-            kinds = [kind for kind in names if any(p.type == kind for p in ports)]
-            return "/".join(f"fmi{v}{direction}{names[kind]}" for kind in kinds)
+            used = {p.fmi_type for p in ports}  # every FMI type its ports move (`cosim.fmi.types`)
+            return "/".join(f"fmi{v}{direction}{name}" for name in TRANSFER_TYPES[v] if name in used)
         return {
             CALL_STEP: f"fmi{v}DoStep",
             CALL_INSTANTIATE: f"fmi{v}Instantiate",
