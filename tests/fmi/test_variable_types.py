@@ -251,3 +251,31 @@ def test_string_and_binary_parameters_inputs_outputs_and_connections(fmus, versi
     if version == 3:
         assert first.text_values["Binary_output"] == b"\x0a\x0b\x0c"
         assert second.text_values["Binary_output"] == b"\xff"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("version", [2, 3])
+def test_every_type_in_the_log_of_fmu_simulate(fmus, version, tmp_path):
+    """`cosim fmu simulate` of the every-type FMU, one parameter of each numeric type given: the
+    log's /signals hold each input at its start value and each output as fmpy computes it."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from cosim.logs.reader import open_log
+
+    given = {"Integer": 2, "Int16": 16, "UInt32": 294967295, "Boolean": True, "Float32": 0.25}
+    start_values = {f"{t}_parameter": v for t, v in given.items() if t in NUMERIC[version]}
+    command = [sys.executable, "-m", "cosim", "fmu", "simulate", str(fmus[version]), "--stop-time", "1"]
+    command += ["--step", "0.5", "--out", str(tmp_path / "run.mcap"), "--quiet", "--start-values"]
+    command += [f"{k}={str(v).lower()}" for k, v in start_values.items()]
+    root = Path(__file__).resolve().parents[2]
+    completed = subprocess.run(command, capture_output=True, text=True, cwd=root, timeout=300)
+    assert completed.returncode == 0, completed.stderr
+    expected = _fmpy_outputs(fmus[version], version, start_values)
+    with open_log(tmp_path / "run.mcap") as log:
+        (component,) = log.components
+        signals = log.signals(component)
+        for t in NUMERIC[version]:
+            assert signals[f"{t}_input"].tolist() == [float(INPUT_STARTS[t])] * 3, t
+            assert signals[f"{t}_output"][-1] == expected[f"{t}_output"], t
