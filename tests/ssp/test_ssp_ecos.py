@@ -3,7 +3,8 @@
 ecos reads the FMU part of the archive: the components, their own parameter bindings (selected by
 the parameter set's name, the system's) and the connections; the Python parts (planner, lidar)
 are navcosim's only. What it must show: the vehicle starts at the scenario's start pose, not at
-the FMU's default (0, 0). The whole trajectory is compared with ours, sample by sample:
+the FMU's default (0, 0), and every Real value the run sets is what ecos has after its
+initialisation. The whole trajectory is compared with ours, sample by sample:
 - the shipped scenario: with no planner in ecos, Pure Pursuit has no path and the vehicle holds
   its start pose; compared with our run of the same archive's FMU part (the navcosim annotation
   taken out, so `cosim run` runs only the FMUs, as ecos does);
@@ -29,6 +30,7 @@ import pytest
 from cosim.cli import main
 from cosim.logs import open_log
 from cosim.scenario.load import load_scenario
+from cosim.ssp.read import open_ssp
 
 REPO = Path(__file__).resolve().parents[2]
 STEP = 0.01  # [s] the scenarios' macro step
@@ -39,9 +41,11 @@ import numpy as np
 from ecospy import EcosLib, EcosSimulation
 EcosLib.set_log_level("warn")
 archive, parameter_set, step, steps, out = sys.argv[1:]
-names = json.loads(sys.stdin.read())
+names, parameters = json.loads(sys.stdin.read())
 sim = EcosSimulation(step_size=float(step), ssp_path=archive)
 sim.init(0.0, parameter_set)
+with open(out + ".json", "w") as file:
+    json.dump({name: sim.get_real(name) for name in parameters}, file)
 rows = [[sim.get_real(f"vehicle::{name}") for name in names]]
 for _ in range(int(steps)):
     sim.step(1)
@@ -51,17 +55,22 @@ np.save(out, np.array(rows))
 """
 
 
-def ecos_run(archive: Path, parameter_set: str, stop_time: float, tmp_path: Path) -> np.ndarray:
-    """The vehicle's NAMES after initialisation and after each step in ecos: one row per step."""
+def ecos_run(archive: Path, parameter_set: str, stop_time: float, tmp_path: Path, parameters=()):
+    """The vehicle's NAMES after initialisation and after each step in ecos (one row per step),
+    and the Real `parameters` ("component::name") as ecos has them after initialisation."""
     out = tmp_path / "ecos.npy"
     argv = [sys.executable, "-c", ECOS, str(archive), parameter_set, str(STEP), str(round(stop_time / STEP))]
     done = subprocess.run(
-        argv + [str(out)], input=json.dumps(NAMES), capture_output=True, text=True, timeout=600
+        argv + [str(out)],
+        input=json.dumps([NAMES, list(parameters)]),
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     if done.returncode != 0 and "libtbb" in done.stderr and not os.environ.get("CI"):
         pytest.skip("ecospy needs Debian's libtbb12 (apt-get install -y libtbb12; .ci/run installs it)")
     assert done.returncode == 0, done.stderr[-2000:]
-    return np.load(out)
+    return np.load(out), json.loads(Path(f"{out}.json").read_text())
 
 
 def export(scenario: Path, archive: Path, overrides=()) -> Path:
@@ -95,8 +104,18 @@ def test_exported_scenario_starts_at_its_start_pose_in_ecos(tmp_path, capsys):
     scenario = load_scenario(path)
     stop = 5.0
     archive = export(path, tmp_path / "scenario.ssp")
-    theirs = ecos_run(archive, scenario.name, stop, tmp_path)
+    with open_ssp(archive) as ssp:  # every Real value the run sets, FMU by FMU
+        given = {
+            f"{c.name}::{name}": value
+            for c in ssp.components
+            for name, value in c.parameters.items()
+            if c.variables[name].type == "Real"
+        }
+    theirs, seen = ecos_run(archive, scenario.name, stop, tmp_path, given)
     assert tuple(theirs[0, :3]) == scenario.start == (6.0, 6.0, 0.0)  # the FMU's own default is 0, 0, 0
+    # Each component's own binding reached ecos: Pure Pursuit's lookahead is the scenario's 10 m
+    # (its FMU's default is 1 m), and so on for every value.
+    assert seen == given and len(given) >= 10 and seen["pure_pursuit::lookahead_distance"] == 10.0
     log = tmp_path / "fmus.mcap"
     argv = ["run", str(fmu_part(archive, tmp_path / "fmus.ssp")), "--out", str(log), "--quiet"]
     assert main(argv + ["--set", f"simulation.stop_time={stop}"]) == 0
@@ -134,7 +153,7 @@ stop_time = {stop}
     )
     log = tmp_path / "arc.mcap"
     assert main(["run", str(path), "--out", str(log), "--no-plot", "--quiet"]) in (0, 1)  # goal not reached
-    theirs = ecos_run(export(path, tmp_path / "arc.ssp"), "arc", stop, tmp_path)
+    theirs, _ = ecos_run(export(path, tmp_path / "arc.ssp"), "arc", stop, tmp_path)
     mine = ours(log)
     assert mine.shape == theirs.shape == (round(stop / STEP) + 1, len(NAMES))
     assert tuple(theirs[0, :3]) == (x0, y0, 0.0)
