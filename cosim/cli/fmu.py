@@ -76,7 +76,8 @@ def register(subparsers) -> None:
         nargs="+",
         default=[],
         metavar="NAME=VALUE",
-        help="parameters and inputs, by FMU variable name, e.g. x0=1.5 v=0.2 (a number or true/false); "
+        help="parameters and inputs, by FMU variable name, e.g. x0=1.5 v=0.2 (a number or true/false; "
+        "text for a String, hex for a Binary); "
         "an input keeps its value for the whole run, the others their start values",
     )
     simulate.add_argument(

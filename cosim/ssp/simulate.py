@@ -61,7 +61,8 @@ class Simulation:
     start_time: float
     stop_time: float
     step: float
-    start_values: dict[str, float] = field(default_factory=dict)  # as given, by variable name
+    start_values: dict[str, object] = field(default_factory=dict)  # as given, by variable name
+    held_text: dict[str, str | bytes] = field(default_factory=dict)  # String / Binary inputs' values
 
     @property
     def steps(self) -> int:
@@ -87,22 +88,37 @@ class SimulationResult:
         return 0 if self.reason in ("stop_time", "fmu_terminated") else 1
 
 
-def parse_start_values(texts: list[str] | tuple[str, ...]) -> dict[str, float | bool]:
-    """`name=value` texts (a number or true/false) as name -> value; `CosimError` on a bad one."""
-    values: dict[str, float | bool] = {}
+def parse_start_values(texts: list[str] | tuple[str, ...]) -> dict[str, str]:
+    """`name=value` texts as name -> value text (read by `prepare` as the variable's type takes it);
+    `CosimError` on one without a name or `=`."""
+    values: dict[str, str] = {}
     for text in texts:
         name, separator, literal = text.partition("=")
         name = name.strip()
         if not separator or not name:
             raise CosimError(f"--start-values {text}: expected NAME=VALUE, e.g. x0=1.5")
-        try:
-            value = tomllib.loads(f"value = {literal.strip()}")["value"]
-        except tomllib.TOMLDecodeError:
-            value = None
-        if not isinstance(value, bool) and (not isinstance(value, int | float) or not math.isfinite(value)):
-            raise CosimError(f"--start-values {text}: the value must be a finite number or true/false")
-        values[name] = value
+        values[name] = literal.strip()
     return values
+
+
+def _number(name: str, literal: str) -> int | float | bool:
+    """A numeric variable's value text: a TOML number or true/false (an integer stays exact)."""
+    try:
+        value = tomllib.loads(f"value = {literal}")["value"]
+    except tomllib.TOMLDecodeError:
+        value = None
+    if not isinstance(value, bool) and (not isinstance(value, int | float) or not math.isfinite(value)):
+        raise CosimError(f"--start-values {name}={literal}: the value must be a finite number or true/false")
+    return value
+
+
+def _text(literal: str) -> str:
+    """A String (or Binary, as hex) variable's value text: as written, or a TOML string unquoted."""
+    try:
+        value = tomllib.loads(f"value = {literal}")["value"]
+    except tomllib.TOMLDecodeError:
+        return literal
+    return value if isinstance(value, str) else literal
 
 
 def prepare(
@@ -111,14 +127,15 @@ def prepare(
     stop_time: float | None = None,
     step: float | None = None,
     start_time: float | None = None,
-    start_values: dict[str, float | bool] | None = None,
+    start_values: dict[str, object] | None = None,
     interface: str | None = None,
     solver: str | None = None,
     tolerance: float | None = None,
     max_step: float | None = None,
 ) -> Simulation:
     """Read the FMU at `path` and check the options against it; `CosimError` (one line) otherwise.
-    None takes the default (module docstring); `interface` None: co-simulation when the FMU has it."""
+    None takes the default (module docstring); `interface` None: co-simulation when the FMU has it.
+    `start_values`: variable name -> value, or its text (`parse_start_values`)."""
     from cosim.fmi.component import fmu_layout
     from cosim.fmi.inspect import read_description
 
@@ -143,7 +160,7 @@ def prepare(
     name = component_name(description.modelName or path.stem)
     layout = fmu_layout(path, name)
     start, stop, h = _experiment(description, start_time, stop_time, step)
-    parameters, held = _split_start_values(path, description, layout, start_values or {})
+    parameters, held, held_text = _split_start_values(path, description, layout, start_values or {})
     inputs = tuple(port.name for port in layout.inputs)
     feedthrough = {port.name: layout.feedthrough.get(port.name, inputs) for port in layout.outputs}
     component = ComponentDescription(
@@ -163,9 +180,8 @@ def prepare(
         if interface == "me"
         else Integration("cs"),
     )
-    return Simulation(
-        component, interface, component.integration.solver, start, stop, h, dict(start_values or {})
-    )
+    given = dict(start_values or {})
+    return Simulation(component, interface, component.integration.solver, start, stop, h, given, held_text)
 
 
 def component_name(model_name: str) -> str:
@@ -210,26 +226,36 @@ def _experiment(description, start_time, stop_time, step) -> tuple[float, float,
     return start, stop, h
 
 
-def _split_start_values(path: Path, description, layout, values: dict) -> tuple[dict, dict]:
-    """The start values as parameters and held inputs, each checked against its variable's type and
-    declared min/max; `CosimError` naming the first bad one (with the closest names for a typo)."""
-    parameters = {port.name for port in layout.parameters}
-    inputs = {port.name for port in layout.inputs}
+def _split_start_values(path: Path, description, layout, values: dict) -> tuple[dict, dict, dict]:
+    """The start values as parameters, held numeric inputs and held text (String, Binary) inputs,
+    each checked against its variable's type and declared min/max; `CosimError` naming the first
+    bad one (with the closest names for a typo). A value given as text is read as its variable's
+    type takes it (`parse_start_values`)."""
+    parameters = {port.name for port in (*layout.parameters, *layout.text.get("parameter", ()))}
+    texts = {port.name for causality in ("parameter", "input") for port in layout.text.get(causality, ())}
     variables = {variable.name: variable for variable in description.modelVariables}
     settable = [port.name for port in (*layout.parameters, *layout.inputs)]
-    split: tuple[dict, dict] = ({}, {})
+    settable += [port.name for causality in ("parameter", "input") for port in layout.text.get(causality, ())]
+    split: tuple[dict, dict, dict] = ({}, {}, {})
     for name, value in values.items():
-        given = f"--start-values {name}={_literal(value)}"
-        if name not in parameters and name not in inputs:
+        if name not in settable:
             raise CosimError(
-                f"{given}: the FMU ({description.modelName}) has no parameter or input '{name}'; "
+                f"--start-values {name}={_literal(value)}: the FMU ({description.modelName}) has no "
+                f"parameter or input '{name}'; "
                 f"closest: {closest_names(name, settable) if settable else 'none (it has neither)'}"
             )
+        if name in texts:
+            value = _text(value) if isinstance(value, str) else value
+            split[0 if name in parameters else 2][name] = value  # the FMU checks the type at setup
+            continue
+        value = _number(name, value) if isinstance(value, str) else value
         variable = variables.get(name)
         problem = _value_problem(variable, value) if variable is not None else None
         if problem:
-            raise CosimError(f"{given}: {problem}")
-        split[0 if name in parameters else 1][name] = float(value)
+            raise CosimError(f"--start-values {name}={_literal(value)}: {problem}")
+        # An integer stays a Python int: an Int64 beyond 2^53 reaches the FMU exactly.
+        value = value if isinstance(value, int) and not isinstance(value, bool) else float(value)
+        split[0 if name in parameters else 1][name] = value
     return split
 
 
@@ -258,8 +284,10 @@ def _bound(text) -> float | None:
     return bound if math.isfinite(bound) else None
 
 
-def _literal(value: float | bool) -> str:
-    return str(value).lower() if isinstance(value, bool) else f"{value:g}"
+def _literal(value) -> str:
+    if isinstance(value, bool):
+        return str(value).lower()
+    return f"{value:g}" if isinstance(value, float) else str(value)
 
 
 def simulate(
@@ -287,6 +315,8 @@ def simulate(
         real = tuple(port.name for port in _output_ports(described) if port.type == "real")
         try:
             component = make_fmu(described, nan_outputs=real)
+            for name, value in simulation.held_text.items():
+                component.set_text(name, value)
         except CosimError as error:
             raise CosimError(f"{described.fmu}: {error}") from None
         system = System(simulation.step)

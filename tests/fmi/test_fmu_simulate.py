@@ -167,19 +167,51 @@ def test_start_value_outside_the_declared_range():
         prepare(builtin_fmu("DifferentialDrive", 2), start_values={"wheel_radius": -1.0})
 
 
-@pytest.mark.parametrize("text", ["x0", "=1", "x0=abc", "x0=nan", "x0=[1, 2]"])
-def test_bad_start_value_text(text):
-    with pytest.raises(CosimError, match=r"^--start-values "):
+@pytest.mark.parametrize("text", ["x0", "=1", " = 2"])
+def test_start_value_without_name_or_equals(text):
+    with pytest.raises(CosimError, match=r"^--start-values .*: expected NAME=VALUE"):
         parse_start_values([text])
 
 
-def test_start_value_texts():
-    assert parse_start_values(["x0=1.5", "n=3", "on=true", "y0 = -2e-3"]) == {
-        "x0": 1.5,
-        "n": 3,
-        "on": True,
-        "y0": -0.002,
-    }
+@pytest.mark.parametrize("text", ["x0=abc", "x0=nan", "x0=[1, 2]", "x0="])
+def test_a_numeric_variable_takes_only_a_number(text):
+    with pytest.raises(
+        CosimError, match=r"^--start-values x0=.*: the value must be a finite number or true/false$"
+    ):
+        prepare(fixture_fmu("diffdrive_fmi2"), start_values=parse_start_values([text]))
+
+
+def test_start_value_texts_are_read_as_the_variable_takes_them():
+    assert parse_start_values(["x0=1.5", "s = a b", "e="]) == {"x0": "1.5", "s": "a b", "e": ""}
+    texts = parse_start_values(["x0=1.5", "theta0=-2e-3", "v=3"])
+    simulation = prepare(fixture_fmu("diffdrive_fmi2"), start_values=texts)
+    assert simulation.component.parameters == {"x0": 1.5, "theta0": -0.002}
+    assert simulation.component.held_inputs == {"v": 3}
+
+
+def test_string_start_values_reach_the_fmu(tmp_path, monkeypatch):
+    """The every-type fixture's String_output is String_input followed by String_parameter."""
+    import cosim.navigation.build
+
+    made = []
+    make_fmu = cosim.navigation.build.make_fmu
+    monkeypatch.setattr(
+        cosim.navigation.build, "make_fmu", lambda *a, **k: made.append(make_fmu(*a, **k)) or made[-1]
+    )
+    texts = parse_start_values(['String_input="ab "', "String_parameter=cd"])
+    simulation = prepare(fixture_fmu("types_fmi2"), stop_time=0.2, step=0.1, start_values=texts)
+    assert simulation.held_text == {"String_input": "ab "}
+    assert simulate(simulation, tmp_path / "s.mcap").reason == "stop_time"
+    assert made[0].text_values["String_output"] == "ab cd"
+
+
+def test_an_integer_start_value_stays_exact(tmp_path):
+    """2^53 + 1 is no float: it reaches the FMU's setter as given, whose Integer range refuses it."""
+    texts = parse_start_values(["Integer_parameter=9007199254740993"])
+    simulation = prepare(fixture_fmu("types_fmi2"), stop_time=0.2, step=0.1, start_values=texts)
+    assert simulation.component.parameters["Integer_parameter"] == 2**53 + 1
+    with pytest.raises(CosimError, match="Integer_parameter.*9007199254740993"):
+        simulate(simulation, tmp_path / "i.mcap")
 
 
 def test_csv_and_log_end_together_where_the_fmu_ends_the_run(tmp_path):
