@@ -2,7 +2,9 @@
  *
  * First solution: LaCAM (Okumura, AAAI 2023), a depth-first search over configurations (one vertex
  * per agent) whose successors PIBT (Okumura et al., AIJ 2022) generates under constraints that a
- * lazily grown tree adds agent by agent, so every successor is eventually tried: complete.
+ * lazily grown tree adds agent by agent, so every successor is eventually tried: complete. It shares
+ * the time with prioritized planning (mapf_lns.h), which finds a first solution where PIBT's greedy
+ * steps need a deep search (agents resting on goals in the dead ends of a maze).
  * Then, until the time limit, two improvers share the best solution (its sum of costs bounds both):
  * - LaCAM* (Okumura, IJCAI 2023): configurations met again link the search nodes, costs g are
  *   rewired along the links (Dijkstra-like), nodes with g + h >= the best sum of costs are pruned;
@@ -24,6 +26,7 @@
  */
 #define _POSIX_C_SOURCE 199309L
 #include <limits.h>
+#include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -32,6 +35,7 @@
 
 #define LACAM_SLICE 0.002
 #define LNS_SLICE 0.008
+#define FIRST_SLICE 0.05  /* s: LaCAM's turn while it looks for a first solution */
 
 typedef struct { int *a; long long n, cap; } ivec;
 
@@ -408,13 +412,34 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
     find(m, start, &slot);
     m->table[slot] = 0;
     if (push(m, &m->open, 0) < 0) return;
-    int outcome = is_goal(m, start) ? (m->goal_node = 0, LACAM_FOUND) : lacam(m, deadline, 1);
-    if (m->goal_node < 0) {
+    /* LaCAM in slices and whole attempts of prioritized planning, each kept to half the time */
+    int outcome = LACAM_FOUND, planned = 0;
+    double lacam_time = 0.0, planning_time = 0.0;
+    if (is_goal(m, start)) m->goal_node = 0;
+    while (m->goal_node < 0 && !planned && now() < deadline) {
+        double began = now();
+        if (lacam_time <= planning_time) {
+            outcome = lacam(m, began + FIRST_SLICE < deadline ? began + FIRST_SLICE : deadline, 1);
+            lacam_time += now() - began;
+            if (outcome != LACAM_DEADLINE) break;
+        } else {
+            int done = lns_prioritized(&m->lns, deadline);
+            planning_time += now() - began;
+            planned = done == 1;
+            if (done == -1) planning_time = INFINITY;  /* out of memory: LaCAM alone from here */
+        }
+    }
+    if (m->goal_node < 0 && !planned) {
         m->status = outcome == LACAM_BUDGET ? -3 : outcome == LACAM_EXHAUSTED && !m->truncated ? -1 : 0;
         return;
     }
     m->first_time = now() - t0;
-    if (take_lacam_solution(m) < 0) return;
+    if (planned) {
+        m->solved = 1;
+        m->best = m->lns.soc;
+    } else if (take_lacam_solution(m) < 0) {
+        return;
+    }
     int lacam_open = outcome != LACAM_EXHAUSTED, lns_alive = 1, optimal = 0;
     while (now() < deadline) {
         if (m->best <= m->lower) { optimal = 1; break; }
@@ -465,7 +490,7 @@ void *mapf_solve(int V, const int *adj, int N, const int *start, const int *goal
     m->nxt = malloc((size_t)N * sizeof(int));
     m->table = malloc((size_t)m->table_size * sizeof(int));
     int ready = m->dist && queue && m->occ_now && m->occ_next && m->stamp && m->nxt && m->table
-                && lns_init(&m->lns, V, N, adj, goal, NULL, seed) == 0;
+                && lns_init(&m->lns, V, N, adj, start, goal, NULL, seed) == 0;
     if (!ready) { free(queue); return m; }
     for (long long s = 0; s < m->table_size; s++) m->table[s] = -1;
     for (int v = 0; v < V; v++) { m->occ_now[v] = -1; m->occ_next[v] = -1; }

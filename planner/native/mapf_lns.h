@@ -26,7 +26,7 @@ typedef struct { int v, t, parent; } StNode;
 
 typedef struct {
     int V, N;
-    const int *adj, *goal, *dist;   /* adj V x 4; dist N x V */
+    const int *adj, *start, *goal, *dist;   /* adj V x 4; dist N x V */
     int **path, *cost;              /* per agent: p[0..cost] */
     Visits *visits;                 /* per vertex */
     long long *occ_key; int *occ_agent, occ_size, occ_count;  /* (t, v) -> agent, -1 = empty slot */
@@ -36,6 +36,7 @@ typedef struct {
     uint64_t rng;
     double weight[LNS_RULES];
     int *hood, n_hood; char *in_hood, *tabu; int n_tabu;
+    int *order;                     /* prioritized planning's agent order */
     int **saved_path, *saved_cost;
     int *intersections, n_intersections;
     int *bfs_queue; int *bfs_stamp, bfs_gen;
@@ -197,9 +198,10 @@ static int lns_load(Lns *l, const int *rows, int length) {
     return 0;
 }
 
-static int lns_init(Lns *l, int V, int N, const int *adj, const int *goal, const int *dist, uint64_t seed) {
+static int lns_init(Lns *l, int V, int N, const int *adj, const int *start, const int *goal, const int *dist,
+                    uint64_t seed) {
     memset(l, 0, sizeof(*l));
-    l->V = V; l->N = N; l->adj = adj; l->goal = goal; l->dist = dist;
+    l->V = V; l->N = N; l->adj = adj; l->start = start; l->goal = goal; l->dist = dist;
     l->rng = seed * 0x9E3779B97F4A7C15ULL + 1442695040888963407ULL;
     for (int r = 0; r < LNS_RULES; r++) l->weight[r] = 1.0;
     l->path = calloc((size_t)N, sizeof(int *));
@@ -207,6 +209,7 @@ static int lns_init(Lns *l, int V, int N, const int *adj, const int *goal, const
     l->cost = calloc((size_t)N, sizeof(int));
     l->saved_cost = calloc((size_t)N, sizeof(int));
     l->hood = malloc((size_t)N * sizeof(int));
+    l->order = malloc((size_t)N * sizeof(int));
     l->in_hood = calloc((size_t)N, 1);
     l->tabu = calloc((size_t)N, 1);
     l->visits = calloc((size_t)V, sizeof(Visits));
@@ -224,7 +227,7 @@ static int lns_init(Lns *l, int V, int N, const int *adj, const int *goal, const
     /* a replanned agent that needs more expansions than this is given up: the neighbourhood fails,
      * the old paths stay, and the time goes to other neighbourhoods */
     l->expansion_cap = 20 * V + 100000;
-    if (!l->path || !l->saved_path || !l->cost || !l->saved_cost || !l->hood || !l->in_hood || !l->tabu
+    if (!l->path || !l->saved_path || !l->cost || !l->saved_cost || !l->hood || !l->order || !l->in_hood || !l->tabu
         || !l->visits || !l->rest_from || !l->intersections || !l->bfs_queue || !l->bfs_stamp || !l->keys
         || !l->stamp || !l->goal_agent || !l->occ_key || !l->occ_agent) return -1;
     for (int k = 0; k < l->occ_size; k++) l->occ_agent[k] = -1;
@@ -235,14 +238,18 @@ static int lns_init(Lns *l, int V, int N, const int *adj, const int *goal, const
         for (int k = 0; k < 4; k++) degree += adj[4 * v + k] >= 0;
         if (degree >= 3) l->intersections[l->n_intersections++] = v;
     }
-    for (int i = 0; i < N; i++) l->goal_agent[goal[i]] = i;
+    for (int i = 0; i < N; i++) { l->goal_agent[goal[i]] = i; l->order[i] = i; }
+    for (int k = N - 1; k > 0; k--) {
+        int r = (int)(lns_rnd(l) % (uint64_t)(k + 1)), t = l->order[k];
+        l->order[k] = l->order[r]; l->order[r] = t;
+    }
     return 0;
 }
 
 static void lns_free(Lns *l) {
     for (int i = 0; l->path && i < l->N; i++) { free(l->path[i]); if (l->saved_path) free(l->saved_path[i]); }
     for (int v = 0; l->visits && v < l->V; v++) free(l->visits[v].a);
-    free(l->path); free(l->saved_path); free(l->cost); free(l->saved_cost); free(l->hood); free(l->in_hood);
+    free(l->path); free(l->saved_path); free(l->cost); free(l->saved_cost); free(l->hood); free(l->order); free(l->in_hood);
     free(l->tabu); free(l->visits); free(l->rest_from); free(l->goal_agent); free(l->intersections); free(l->bfs_queue);
     free(l->bfs_stamp); free(l->occ_key); free(l->occ_agent); free(l->st); free(l->heap); free(l->keys); free(l->stamp);
 }
@@ -485,4 +492,26 @@ static int lns_iterate(Lns *l, double deadline) {
     double gain = improved ? (double)(before - l->soc) : 0.0;
     l->weight[rule] = LNS_REACTION * gain + (1.0 - LNS_REACTION) * l->weight[rule];
     return status == -1 || status == 2 ? status : improved;
+}
+
+/* One attempt of prioritized planning in l->order: 1 every agent has a path (the solution is in the
+ * tables), 0 an agent found none (it goes first next time), 2 deadline, -1 out of memory. */
+static int lns_prioritized(Lns *l, double deadline) {
+    for (int i = 0; i < l->N; i++) {
+        if (l->path[i]) lns_vacate(l, i);
+        free(l->path[i]);
+        l->path[i] = NULL;
+        l->cost[i] = 0;
+    }
+    for (int k = 0; k < l->N; k++) {
+        int i = l->order[k], status = st_astar(l, i, l->start[i], deadline);
+        if (status == 1) {
+            memmove(l->order + 1, l->order, (size_t)k * sizeof(int));
+            l->order[0] = i;
+            return 0;
+        }
+        if (status != 0) return status;
+        if (lns_occupy(l, i) < 0) return -1;
+    }
+    return 1;
 }
