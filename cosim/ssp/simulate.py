@@ -3,9 +3,12 @@
 The FMU becomes a component as a scenario's `[components.NAME]` does: a `ComponentDescription`
 (its interface read from modelDescription.xml, the start values split into parameters and held
 inputs) made into a component by `cosim.navigation.build.make_fmu`. It is the one component of a
-`System` without connections, run by the master as an SSP's FMUs are (`cosim.ssp.run`): every
-step through the compiled kernel, which keeps each step's inputs and outputs in blocks for the log.
+`System` without connections, run by the master as an SSP's FMUs are (`cosim.ssp.run`): a
+co-simulation FMU steps through the compiled kernel, which keeps each step's inputs and outputs in
+blocks for the log (a Model Exchange FMU, `cosim.fmi.model_exchange`, steps in the Python loop).
 An input keeps its value for the whole run: the one given in `start_values`, else its start value.
+The run ends at the stop time, or where the FMU asks to end it (`SimulationEnded`: reason
+"fmu_terminated", exit code 0), or at a failure (the log finalised up to it).
 
 Defaults are fmpy's: the start time is the DefaultExperiment's startTime, else 0; the stop time its
 stopTime, else 1 s after the start; the step its stepSize, else the power of ten nearest to a
@@ -46,7 +49,6 @@ from cosim.scenario.limits import MAX_STEPS
 from cosim.scenario.load import DEFAULT_LOG_PATTERN, Integration
 
 INTERFACES = ("cs", "me")  # co-simulation, Model Exchange
-SOLVERS = ("cvode", "rk4", "euler")  # Model Exchange integrators
 CHUNK_STEPS = 20_000  # steps between checks for an interrupt
 _INTEGER_TYPES = {"Integer", "Enumeration", *(f"{s}Int{n}" for s in ("", "U") for n in (8, 16, 32, 64))}
 
