@@ -45,11 +45,11 @@ def register(subparsers) -> None:
         help="run one FMU alone (as fmpy simulate): log every input and output, optionally a CSV",
         description="Run one FMU alone from its start to its stop time, as fmpy simulate and fmusim "
         "do: every input and output goes to the MCAP log (/signals/<model>); --csv writes time and "
-        "every output. Exit 0 when the run reaches its stop time, 1 interrupted, 2 bad input or a "
-        "failed FMU.",
+        "every output. Exit 0 when the run reaches its stop time or the FMU ends it, 1 interrupted, "
+        "2 bad input or a failed FMU.",
     )
     simulate.add_argument(
-        "fmu", metavar="FILE|NAME", help="an .fmu file (FMI 2.0 or 3.0) or a project FMU name"
+        "fmu", metavar="FILE|NAME", help="an .fmu file (FMI 1.0, 2.0 or 3.0) or a project FMU name"
     )
     _fmi_option(simulate)
     simulate.add_argument(
