@@ -338,8 +338,8 @@ def archive_problems(path: Path) -> list[str]:
         with zipfile.ZipFile(path) as archive:
             total = unpacked_size(archive)
             names = archive.namelist()
-    except (zipfile.BadZipFile, OSError) as error:
-        return [f"not a readable zip archive: {error}"]
+    except (zipfile.BadZipFile, OSError):
+        return []  # not an archive at all: read_description says so, as for `cosim run` (exit 2)
     if total > DEFAULT_MAX_UNPACKED_SIZE:
         problems.append(
             f"unpacks to {total / MIB:,.0f} MiB, more than the default limit of "
