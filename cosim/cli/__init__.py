@@ -21,10 +21,32 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         prog="cosim",
         description="Scenario co-simulation of mobile robots: plan, run, inspect logs.",
     )
+    parser.add_argument("--version", action=_Version, help="print the installed navcosim's version and exit")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS if command is None else (command,):
         importlib.import_module(f"cosim.cli.{name}").register(subparsers)
     return parser
+
+
+class _Version(argparse.Action):
+    """`cosim --version`: the installed package's version (read only when asked, not at start-up),
+    with the Python and fmpy versions a bug report needs."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, help=None):
+        super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from importlib.metadata import PackageNotFoundError, version
+
+        def installed(name: str) -> str:
+            try:
+                return version(name)
+            except PackageNotFoundError:
+                return "not installed"
+
+        python = ".".join(str(part) for part in sys.version_info[:3])
+        print(f"navcosim {installed('navcosim')} (Python {python}, fmpy {installed('fmpy')})")
+        parser.exit()
 
 
 def main(argv: list[str] | None = None) -> int:
