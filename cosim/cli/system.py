@@ -28,7 +28,7 @@ def register(subparsers) -> None:
         "[components.*] and [[connections]]): each component's FMU, FMI version and rate, each "
         "connection with scale and offset, and the step order.",
     )
-    parser.add_argument("scenario", type=Path, help="scenario file (.toml)")
+    parser.add_argument("scenario", type=Path, help="scenario file (.toml) or SSP archive (.ssp)")
     parser.add_argument(
         "--set",
         dest="overrides",
@@ -43,17 +43,35 @@ def register(subparsers) -> None:
 
 
 def _handler(args) -> int:
-    from cosim.navigation.build import build_run
-    from cosim.record.output import atomic_output, checked_output
+    from cosim.errors import file_kind
+    from cosim.record.output import checked_output
     from cosim.scenario.load import load_scenario
 
     if args.png is not None:
         checked_output(args.png, args.force)
+    if args.scenario.suffix.lower() == ".ssp" or file_kind(args.scenario) == "ssp":
+        from cosim.cli.system_ssp import show_ssp
+
+        return show_ssp(args)
     scenario = load_scenario(args.scenario, args.overrides)
+    return show_scenario(args, scenario, f"{scenario.name} ({scenario.source})")
+
+
+def show_scenario(args, scenario, title: str, unpacked: Path | None = None) -> int:
+    """Print (and with --png draw) the system `scenario` runs; files under `unpacked` (an SSP's
+    temporary folder) are named by their archive member."""
+    from cosim.navigation.build import build_run
+    from cosim.record.output import atomic_output
+
     built = build_run(scenario)  # the system that `cosim run` steps, not initialised
     order = [component.name for component in built.system.order()]
     constant = {name for name, component in built.system.components.items() if component.constant_outputs}
-    print(format_system(built.description, order, constant, f"{scenario.name} ({scenario.source})"))
+    description = built.description
+    if unpacked is not None:
+        description = replace(
+            description, components={name: _member(c, unpacked) for name, c in description.components.items()}
+        )
+    print(format_system(description, order, constant, title))
     if args.png is not None:
         from cosim.cli.system_plot import draw_system
 
@@ -61,6 +79,13 @@ def _handler(args) -> int:
             draw_system(built.description, order, temporary, title=scenario.name)
         print(f"block diagram: {args.png}")
     return 0
+
+
+def _member(component, unpacked: Path):
+    """`component` with its FMU named by its path inside the archive unpacked at `unpacked`."""
+    if component.fmu is None or not component.fmu.is_relative_to(unpacked):
+        return component
+    return replace(component, fmu=component.fmu.relative_to(unpacked))
 
 
 def _number(value: float) -> str:

@@ -33,7 +33,7 @@ import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.records import Attachment, Channel, Header, Metadata, Schema
 
-from cosim.errors import CosimError
+from cosim.errors import CosimError, wrong_file_message
 from cosim.record.mcap_format import (
     CHUNK_FIELDS,
     MAGIC,
@@ -113,7 +113,9 @@ def read_index(path: Path) -> LogIndex:
         if file_size == 0:
             raise CosimError(f"{path}: empty file, not an MCAP log (the run wrote nothing)")
         if magic != MAGIC:
-            raise CosimError(f"{path}: not an MCAP file (bad magic bytes)")
+            raise CosimError(
+                wrong_file_message(path, "an MCAP log") or f"{path}: not an MCAP file (bad magic bytes)"
+            )
         log = LogIndex(path)
         try:
             _walk(handle, file_size, log)

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim.errors import PATH_LIMIT, CosimError
+from cosim.errors import PATH_LIMIT, CosimError, wrong_file_message
 from cosim.fmi.builtin import known_names
 from cosim.fmi.solvers import SOLVERS
 from cosim.scenario.limits import (
@@ -235,7 +235,11 @@ def load_scenario(path: str | Path, overrides: list[str] | tuple[str, ...] = (),
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise CosimError(f"{source}: no such scenario file") from None
-    except (OSError, UnicodeDecodeError) as error:
+    except UnicodeDecodeError as error:
+        raise CosimError(
+            wrong_file_message(path, "a scenario") or f"{source}: cannot read: {error}"
+        ) from None
+    except OSError as error:
         raise CosimError(f"{source}: cannot read: {error}") from None
     scenario = parse_scenario(text, source, path.resolve().parent, overrides, path=path)
     if check_world:
