@@ -194,28 +194,41 @@ def _platform_binaries(fmi_version: str) -> tuple[str, str]:
     return f"{system}{bits}", suffix
 
 
-def required_functions(fmi_version: str) -> list[str]:
-    """Every function name of the FMI API (fmpy ships the standard headers), which an FMU must export."""
+def required_functions(fmi_version: str, interfaces: tuple[str, ...] = ("cs", "me")) -> list[str]:
+    """The FMI API functions an FMU's binary must export for `interfaces` ("cs", "me"), read from
+    the standard headers fmpy ships. FMI 3.0 requires every function of the API, of interface types
+    the FMU does not support too (they may just return fmi3Error); FMI 2.0 requires the common
+    functions and those of each interface the FMU declares, so a co-simulation-only FMU need not
+    export fmi2GetDerivatives. FMI 1.0 is not checked (its names carry the model identifier)."""
     major = fmi_version[0]
     header = FMPY_HEADERS / f"fmi{major}Functions.h"
     if major not in "23" or not header.is_file():
         return []
-    return sorted(
-        set(re.findall(rf"FMI{major}_Export\s+fmi{major}\w+TYPE\s+(fmi{major}\w+)\s*;", header.read_text()))
-    )
+    text = header.read_text()
+    if major == "2":
+        # The header's export block: "Common Functions", then the Model Exchange functions, then
+        # the Co-Simulation ones (the banners also stand above the type definitions: take the last).
+        common = text.rindex("Common Functions")
+        exchange = text.rindex("Functions for FMI2 for Model Exchange")
+        cosimulation = text.rindex("Functions for FMI2 for Co-Simulation")
+        parts = [text[common:exchange]]
+        parts += [text[exchange:cosimulation]] if "me" in interfaces else []
+        parts += [text[cosimulation:]] if "cs" in interfaces else []
+        text = "".join(parts)
+    return sorted(set(re.findall(rf"FMI{major}_Export\s+fmi{major}\w+TYPE\s+(fmi{major}\w+)\s*;", text)))
 
 
 def _binary_problems(path: Path, description) -> list[str]:
     folder, suffix = _platform_binaries(description.fmiVersion)
-    identifiers = {
-        kind.modelIdentifier
-        for kind in (
-            description.coSimulation,
-            description.modelExchange,
-            getattr(description, "scheduledExecution", None),
-        )
-        if kind is not None
-    }
+    interfaces: dict[str, set[str]] = {}  # model identifier -> the interfaces its binary serves
+    for interface, kind in (
+        ("cs", description.coSimulation),
+        ("me", description.modelExchange),
+        ("se", getattr(description, "scheduledExecution", None)),
+    ):
+        if kind is not None:
+            interfaces.setdefault(kind.modelIdentifier, set()).add(interface)
+    identifiers = interfaces
     problems = []
     with zipfile.ZipFile(path) as archive, tempfile.TemporaryDirectory() as temp:
         names = set(archive.namelist())
@@ -234,7 +247,9 @@ def _binary_problems(path: Path, description) -> list[str]:
             finally:
                 os.chdir(cwd)
             missing = [
-                name for name in required_functions(description.fmiVersion) if not hasattr(library, name)
+                name
+                for name in required_functions(description.fmiVersion, tuple(interfaces[identifier]))
+                if not hasattr(library, name)
             ]
             if missing:
                 problems.append(

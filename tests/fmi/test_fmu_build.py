@@ -287,3 +287,28 @@ def test_stamp_environment_names_the_headers_the_build_uses(version):
     build = fmus._build_module(REPO / "fmus")
     headers = build.fmi_header_dir(REPO / "fmus" / "common", version)
     assert fmus._environment_line(REPO / "fmus" / "Bicycle", version).startswith(f"env {headers} CC=")
+
+
+def test_a_co_simulation_only_fmi2_fmu_need_not_export_model_exchange_functions(tmp_path, capsys):
+    """PythonFMU's FMUs are FMI 2.0 co-simulation only and export none of the Model Exchange
+    functions; FMI 2.0 asks for the common and the co-simulation functions only, and fmpy's
+    validation does not ask for them either. FMI 3.0 asks for every function whatever the interfaces."""
+    import ctypes
+    import platform
+
+    from fixtures.pythonfmu_fixtures import pythonfmu_fmu
+
+    fmu = pythonfmu_fmu("first_order_lag")
+    description = read_model_description(str(fmu))
+    assert description.modelExchange is None and description.coSimulation is not None
+    identifier = description.coSimulation.modelIdentifier
+    with zipfile.ZipFile(fmu) as archive:
+        library = Path(archive.extract(f"binaries/linux64/{identifier}.so", tmp_path))
+    binary = ctypes.CDLL(str(library))
+    assert platform.system() == "Linux"
+    assert not hasattr(binary, "fmi2GetDerivatives") and hasattr(binary, "fmi2DoStep")
+    # fmpy's verdict (it notes this model's empty InitialUnknowns) is ours, and nothing more.
+    assert validate(fmu) == validate_fmu(str(fmu))
+    cs, me = set(required_functions("2.0", ("cs",))), set(required_functions("2.0", ("me",)))
+    assert "fmi2DoStep" in cs - me and "fmi2GetDerivatives" in me - cs and "fmi2Instantiate" in cs & me
+    assert required_functions("3.0", ("cs",)) == required_functions("3.0")
