@@ -18,6 +18,20 @@ MIB = 1 << 20
 DEFAULT_MAX_UNPACKED_SIZE = 1 << 30  # [bytes] 1 GiB; scenarios raise it with [simulation] fmu_max_size
 
 
+def mib(size: int) -> str:
+    """`size` [bytes] in MiB as a limit message says it: whole MiB from 10 MiB up, else with as many
+    decimals as it takes to be non-zero (a 0.4 MiB limit is not "0 MiB"), exact bytes below 1 KiB."""
+    if size < 1024:
+        return f"{size} bytes"
+    value = size / MIB
+    if value >= 10:
+        return f"{value:,.0f} MiB"
+    decimals = 1
+    while round(value, decimals) == 0 or (decimals < 6 and abs(round(value, decimals) - value) > value / 20):
+        decimals += 1
+    return f"{value:.{decimals}f} MiB"
+
+
 def unpacked_size(archive: zipfile.ZipFile) -> int:
     """The total uncompressed size [bytes] the archive's entries declare."""
     return sum(info.file_size for info in archive.infolist())
@@ -31,7 +45,7 @@ def check_unpacked_size(path: Path, archive: zipfile.ZipFile, limit: int | None 
     if total > limit:
         largest = max(archive.infolist(), key=lambda info: info.file_size)
         raise CosimError(
-            f"FMU '{path}' would unpack to {total / MIB:,.0f} MiB ('{largest.filename}' alone "
-            f"{largest.file_size / MIB:,.0f} MiB), more than the limit of {limit / MIB:,.0f} MiB; "
+            f"FMU '{path}' would unpack to {mib(total)} ('{largest.filename}' alone "
+            f"{mib(largest.file_size)}), more than the limit of {mib(limit)}; "
             "not extracted (raise the limit with [simulation] fmu_max_size, in MiB, if you trust it)"
         )

@@ -346,7 +346,7 @@ def archive_problems(path: Path) -> list[str]:
     """What `cosim run` refuses in the zip itself: more than the default unpacked-size limit (a
     zip bomb), and members that would land outside the extraction folder (absolute names or `..`
     parts: a zip slip)."""
-    from cosim.fmi.archive import DEFAULT_MAX_UNPACKED_SIZE, MIB, unpacked_size
+    from cosim.fmi.archive import DEFAULT_MAX_UNPACKED_SIZE, mib, unpacked_size
 
     problems = []
     try:
@@ -357,8 +357,8 @@ def archive_problems(path: Path) -> list[str]:
         return []  # not an archive at all: read_description says so, as for `cosim run` (exit 2)
     if total > DEFAULT_MAX_UNPACKED_SIZE:
         problems.append(
-            f"unpacks to {total / MIB:,.0f} MiB, more than the default limit of "
-            f"{DEFAULT_MAX_UNPACKED_SIZE / MIB:,.0f} MiB ([simulation] fmu_max_size)"
+            f"unpacks to {mib(total)}, more than the default limit of "
+            f"{mib(DEFAULT_MAX_UNPACKED_SIZE)} ([simulation] fmu_max_size)"
         )
     escaping = [
         name for name in names if name.startswith(("/", "\\")) or ".." in name.replace("\\", "/").split("/")

@@ -299,3 +299,28 @@ def test_fmu_max_size_applies_to_every_fmu_of_the_run(tmp_path):
     between = f"simulation.fmu_max_size={(vehicle_size + pure_pursuit_size) / 2 / MIB!r}"
     with pytest.raises(CosimError, match=r"\[pure_pursuit\]\.fmu: FMU '.*PurePursuit.fmu' would unpack to"):
         build_run(load(tmp_path, scenario_text(vehicle=vehicle), between))
+
+
+@pytest.mark.parametrize(
+    ("size", "said"),
+    [
+        (0.4 * MIB, "0.4 MiB"),
+        (0.25 * MIB, "0.25 MiB"),
+        (1.5 * MIB, "1.5 MiB"),
+        (2 * GIB, "2,048 MiB"),
+        (700, "700 bytes"),
+    ],
+)
+def test_limit_messages_never_round_a_size_to_zero(size, said):
+    """A limit under 1 MiB ([simulation] fmu_max_size = 0.4) was said as "0 MiB"."""
+    from cosim.fmi.archive import mib
+
+    assert mib(int(size)) == said
+
+
+def test_a_limit_below_one_mib_is_said_as_given(tmp_path):
+    size = fixture_fmu("diffdrive_fmi2").stat().st_size
+    vehicle = FIXTURE_VEHICLE.format(path=fixture_fmu("diffdrive_fmi2"), extra="")
+    with pytest.raises(CosimError, match=r"more than the limit of 0\.001 MiB;") as error:
+        build_run(load(tmp_path, scenario_text(vehicle=vehicle), "simulation.fmu_max_size=0.001"))
+    assert " 0 MiB" not in str(error.value) and size > 0.001 * MIB
