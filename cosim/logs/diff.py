@@ -74,7 +74,9 @@ def diff_logs(log_a: Log, log_b: Log, tolerance: float) -> DiffReport:
     for component in log_b.components:
         if component not in log_a.components:
             report.only_in_b += [f"{component}.{name}" for name in log_b.signals(component).names]
-    report.outcome_differences = _outcome_differences(log_a.outcome, log_b.outcome, tolerance)
+    report.outcome_differences = _outcome_differences(
+        log_a.metadata.get("outcome"), log_b.metadata.get("outcome"), tolerance
+    )
     report.deviations.sort(key=lambda item: (-_sort_key(item.max_deviation), item.component, item.name))
     return report
 

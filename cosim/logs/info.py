@@ -17,7 +17,7 @@ def format_info(log: Log) -> str:
     for key, label in (("start", "start"), ("goal", "goal"), ("navcosim_version", "navcosim")):
         if key in run:
             lines.append(f"{label:<9} {run[key]}")
-    outcome = log.outcome
+    outcome = log.metadata.get("outcome")  # as written
     if outcome is None:
         lines.append("outcome   (none recorded: the run did not end normally)")
     else:

@@ -131,8 +131,11 @@ class TraceSource:
         return self.metadata.get("navcosim", {}).get("scenario_name")
 
     @property
-    def outcome(self) -> dict[str, str] | None:
-        return self.metadata.get("outcome")
+    def outcome(self) -> dict[str, bool | int | float | str] | None:
+        from cosim.logs.reader import typed_value
+
+        written = self.metadata.get("outcome")
+        return None if written is None else {key: typed_value(text) for key, text in written.items()}
 
     def signals(self, component: str) -> Signals:
         from cosim.logs.reader import Signals
@@ -206,7 +209,7 @@ def _title(source) -> str:
     outcome = source.outcome
     if outcome is None:
         result = "no outcome recorded" + ("" if source.is_complete else " (log cut short)")
-    elif outcome.get("reached") == "true":
+    elif outcome.get("reached") is True:
         time = outcome.get("time")
         result = f"goal reached at t = {float(time):.1f} s" if time else "goal reached"
     else:
@@ -271,7 +274,7 @@ def _collect_map(data: PlotData, source) -> None:
         data.trajectory = np.column_stack((trajectory.x, trajectory.y))
         bounds.append(data.trajectory)
         outcome = source.outcome or {}
-        if outcome.get("reached") != "true":
+        if outcome.get("reached") is not True:
             reason = outcome.get("reason", "log ends" if source.outcome is None else "end")
             data.end = (float(trajectory.x[-1]), float(trajectory.y[-1]), reason)
         if data.modes is not None:

@@ -196,9 +196,12 @@ class Log:
         return self.metadata.get("navcosim", {}).get("scenario_name")
 
     @property
-    def outcome(self) -> dict[str, str] | None:
-        """The run's outcome metadata (reached, reason, time, ...), None when the run did not end."""
-        return self.metadata.get("outcome")
+    def outcome(self) -> dict[str, bool | int | float | str] | None:
+        """The run's outcome (reached, reason, time, ...) with typed values: `reached` a bool, times
+        and distances floats, counts ints, reasons and messages strings; None when the run did not
+        end. MCAP metadata holds only strings: `metadata["outcome"]` keeps them as written."""
+        written = self.metadata.get("outcome")
+        return None if written is None else {key: typed_value(text) for key, text in written.items()}
 
     @property
     def fmus(self) -> dict[str, dict[str, str]]:
@@ -458,3 +461,19 @@ def _signal_fields(definition: str) -> list[str]:
     """The float64 field names of a generated signals struct (the schema's first section)."""
     main = definition.split(rosmsg.SEPARATOR)[0]
     return re.findall(r"^float64\s+(\w+)\s*$", main, flags=re.MULTILINE)
+
+
+_INTEGER = re.compile(r"[+-]?[0-9]+")
+_FLOAT = re.compile(r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?|[+-]?(nan|inf)")
+
+
+def typed_value(text: str) -> bool | int | float | str:
+    """A metadata value as what it is: "true"/"false" a bool, "12" an int, "41.250000", "nan" or
+    "1e-3" a float, anything else (a reason, a message, "6.0,8.0") the string itself."""
+    if text in ("true", "false"):
+        return text == "true"
+    if _INTEGER.fullmatch(text):
+        return int(text)
+    if _FLOAT.fullmatch(text):
+        return float(text)
+    return text

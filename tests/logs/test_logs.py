@@ -95,7 +95,14 @@ def test_metadata_scenario_and_outcome(log):
     assert log.metadata["navcosim"] == METADATA["navcosim"]
     assert log.scenario_name == "synthetic_quarter_circle"
     assert log.scenario_text == SCENARIO_TEXT
-    assert log.outcome == OUTCOME
+    assert log.metadata["outcome"] == OUTCOME  # as written
+    assert log.outcome == {
+        "reached": True,
+        "reason": "goal",
+        "time": 5.95,
+        "distance": 2.98,
+        "min_clearance": 0.7,
+    }
     assert log.fmus["vehicle"]["guid"] == METADATA["fmu/vehicle"]["guid"]
 
 
@@ -205,3 +212,33 @@ def test_bad_files(tmp_path, content, message):
             open_log(target)
     with pytest.raises(CosimError, match="no such log file"):
         open_log(tmp_path / "missing.mcap")
+
+
+@pytest.mark.parametrize(
+    ("text", "value"),
+    [
+        ("true", True),
+        ("false", False),
+        ("12", 12),
+        ("-3", -3),
+        ("41.250000", 41.25),
+        ("1e-3", 1e-3),
+        ("inf", float("inf")),
+        ("goal_reached", "goal_reached"),
+        ("6.0,8.0", "6.0,8.0"),
+        ("", ""),
+        ("True", "True"),  # only the recorder's own spelling is a bool
+    ],
+)
+def test_outcome_values_are_typed(text, value):
+    from cosim.logs.reader import typed_value
+
+    assert typed_value(text) == value and type(typed_value(text)) is type(value)
+
+
+def test_a_nan_outcome_value_is_a_float_nan():
+    import math
+
+    from cosim.logs.reader import typed_value
+
+    assert math.isnan(typed_value("nan"))

@@ -76,7 +76,7 @@ def test_each_row_matches_its_log(local_sweep):
         assert row["log"] == f"runs/{row['run_id']}.mcap"
         with open_log(out / row["log"]) as log:
             assert log.is_complete
-            assert {key: row[key] for key in OUTCOME} == log.outcome
+            assert {key: row[key] for key in OUTCOME} == log.metadata["outcome"]
             overrides = log.metadata["navcosim"]["overrides"].split()
         assert overrides == [
             "simulation.stop_time=4",
@@ -205,7 +205,7 @@ def test_a_sweep_on_a_dask_scheduler_gives_the_same_table(local_sweep, dask_sche
     assert all(row["worker"].startswith("tcp://127.0.0.1:") for row in remote)
     for row in remote:
         with open_log(tmp_path / "remote" / row["log"]) as log:
-            assert {key: row[key] for key in OUTCOME} == log.outcome
+            assert {key: row[key] for key in OUTCOME} == log.metadata["outcome"]
 
 
 @pytest.mark.slow
@@ -251,7 +251,7 @@ def test_failed_runs_are_rows_interrupt_keeps_rows_and_resume_finishes(dask_sche
         else:
             assert row["status"] == "completed" and row["reason"] == "stop_time"
             with open_log(out / row["log"]) as log:
-                assert log.outcome == {key: row[key] for key in OUTCOME}
+                assert log.metadata["outcome"] == {key: row[key] for key in OUTCOME}
     for run_id, row in before.items():
         if row["status"] == "completed":  # skipped by resume: the very same row
             assert next(r for r in rows if r["run_id"] == run_id) == row
