@@ -252,6 +252,58 @@ def _header(map_path: Path, grid, start, goal) -> str:
     )
 
 
+def effective_options(grid, options: dict) -> str:
+    """Every option the search ran with, as `planner.plan` resolves them (defaults, then the preset,
+    then the given ones), the given ones marked with *."""
+    if options.get("planner") == "hybrid":
+        from planner.hybrid import resolve_hybrid_options
+
+        hybrid = {name: value for name, value in options.items() if name != "planner"}
+        resolved = {"planner": "hybrid", **resolve_hybrid_options(grid, hybrid)}
+    else:
+        from planner.options import resolve
+
+        resolved = resolve(options)
+        resolved.pop("bidirectional")  # said by planner
+    given = set(options)
+
+    def shown(value) -> str:
+        if isinstance(value, float):
+            return f"{value:g}"
+        return "none" if value is None else str(value)
+
+    return ", ".join(
+        f"{name} {shown(value)}{'*' if name in given else ''}" for name, value in resolved.items()
+    )
+
+
+# The `cosim plan` options that give a comparison column's planner options.
+_FLAGS = {
+    "planner": "--planner",
+    "configuration": "--configuration",
+    "heuristic": "--heuristic",
+    "expansion_distance": "--expansion-distance",
+    "min_turning_radius": "--min-turning-radius",
+}
+
+
+def reproducing_command(map_path: Path, start, goal, options: dict) -> str:
+    """The `cosim plan` command that plans one comparison column alone, with the same result."""
+    import shlex
+
+    hybrid = options.get("planner") == "hybrid"
+    points = [point if len(point) == 3 or not hybrid else (*point, 0.0) for point in (start, goal)]
+    if not hybrid:
+        points = [point[:2] for point in points]
+    words = ["cosim", "plan", str(map_path)]
+    for option, point in zip(("--start", "--goal"), points, strict=True):
+        words.append(f"{option}={','.join(f'{value:g}' for value in point)}")
+    for name, value in options.items():
+        if not (name == "planner" and value == "astar"):
+            words += [_FLAGS[name], f"{value:g}" if isinstance(value, float) else str(value)]
+    return shlex.join(words)
+
+
 def _timing_note(repeat: int) -> str:
     return (
         f"elapsed time: search only, median of {repeat} runs after one untimed run that loads "
@@ -265,9 +317,8 @@ def _plan_one(args: argparse.Namespace, map_path: Path) -> int:
     start, goal = _endpoints(args, map_path, with_heading=hybrid)
     options = _single_options(args)
     result, elapsed = timed_plan(grid, start, goal, options, args.repeat)
-    described = ", ".join(f"{name} {value}" for name, value in options.items())
     print(_header(map_path, grid, start, goal))
-    print(f"options: {described}")
+    print(f"options (* given, the rest the planner's defaults): {effective_options(grid, options)}")
     print(format_table(list(METRICS), {"value": _metric_cells(result, elapsed)}))
     print(_timing_note(args.repeat))
     if args.png is not None:
@@ -334,6 +385,9 @@ def _compare(args: argparse.Namespace, map_path: Path) -> int:
         f"points + OPEN-list replacement, no corner cutting; inflated: expansion distance {expansion:g} m; "
         "new h: eq 3.6"
     )
+    print("each column alone (the same search as its column):")
+    for configuration in configurations:
+        print(f"  {configuration.label}: {reproducing_command(map_path, start, goal, configuration.options)}")
     for note in notes:
         print(f"note: {note}")
     if args.png is not None:

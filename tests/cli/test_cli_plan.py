@@ -210,3 +210,45 @@ def test_bad_input_exits_2_with_one_line(case, bad_maps, capsys):
     assert captured.err.startswith("cosim: error: ")
     assert captured.err.count("\n") == 1, captured.err
     assert "Traceback" not in captured.err
+
+
+def test_plan_prints_every_option_it_ran_with(capsys):
+    """The defaults are said, not only the given options: resolved as `planner.options.resolve`
+    resolves them, the given ones marked."""
+    from planner.options import PRESETS
+
+    assert main(["plan", str(WAREHOUSE), "--query", "thesis_table_3_1", "--repeat", "1"]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("options"))
+    assert "planner astar*" in line and "connectivity 8," in line and "heuristic octile," in line
+    assert "expansion_distance 0," in line and "untrusted_points False," in line
+    arguments = ["--configuration", "modified", "--heuristic", "euclidean"]
+    assert main(["plan", str(WAREHOUSE), "--query", "thesis_table_3_1", "--repeat", "1", *arguments]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("options"))
+    assert "configuration modified*" in line and "heuristic euclidean*" in line
+    assert f"untrusted_points {PRESETS['modified']['untrusted_points']}," in line  # from the preset
+
+
+def test_each_compare_column_is_reproduced_by_the_plan_command_it_prints(capsys):
+    """`plan compare` names, per column, the `cosim plan` command with the same options; run as
+    printed, each gives the column's path length, path nodes and searched nodes."""
+    import shlex
+
+    assert (
+        main(["plan", "compare", str(WAREHOUSE), "--start", "6,6", "--goal", "84,53", "--repeat", "1"]) == 0
+    )
+    output = capsys.readouterr().out
+    header = next(line for line in output.splitlines() if line.strip().startswith("basic"))
+    labels = re.split(r"\s{2,}", header.strip())
+    commands = dict(
+        line.strip().split(": ", 1)
+        for line in output.split("each column alone")[1].splitlines()[1:]
+        if line.startswith("  ")
+    )
+    assert list(commands) == labels
+    for column, label in enumerate(labels):
+        words = shlex.split(commands[label])
+        assert words[:2] == ["cosim", "plan"]
+        assert main([*words[1:], "--repeat", "1"]) == 0
+        alone = capsys.readouterr().out
+        for name in ("path length [m]", "path nodes", "searched nodes"):
+            assert metric(alone, name) == metric(output, name, column), (label, name)
