@@ -22,6 +22,8 @@ from cosim.scenario.description import TEMPLATE, SystemDescription  # noqa: E402
 
 BOX_WIDTH, BOX_HEIGHT = 2.2, 1.0  # [diagram units]
 COLUMN, ROW = 3.4, 2.2  # spacing of the boxes
+INCH_PER_UNIT = 0.9  # figure inches per diagram unit
+LABEL_MARGIN = 0.15  # [diagram units] between a label and the boxes beside it
 MAX_LABEL_LINES = 4
 _FMU_COLOUR, _PYTHON_COLOUR, _ADDED_COLOUR = "#dbe9f6", "#e5f5e0", "#fde0c5"
 
@@ -55,22 +57,55 @@ def _label(links) -> str:
     return "\n".join(lines)
 
 
+def _label_width(text: str) -> float:
+    """The width [diagram units] of a label at 8 pt: ~0.6 em a character, 0.9 inch a unit."""
+    return max((len(line) for line in text.splitlines()), default=0) * 8 * 0.6 / 72 / INCH_PER_UNIT
+
+
+def _column_x(column: dict[str, int], rows: dict[str, int], pairs: dict) -> list[float]:
+    """The x of each column's centre: COLUMN apart, wider where a label of an arrow between two
+    neighbouring boxes (same row, next column) would not fit between them."""
+    gaps = [COLUMN - BOX_WIDTH] * max(column.values(), default=0)
+    for (source, target), links in pairs.items():
+        if column[target] == column[source] + 1 and rows[source] == rows[target]:
+            needed = _label_width(_label(links)) + 2 * LABEL_MARGIN
+            gaps[column[source]] = max(gaps[column[source]], needed)
+    xs = [0.0]
+    for gap in gaps:
+        xs.append(xs[-1] + BOX_WIDTH + gap)
+    return xs
+
+
 def draw_system(description: SystemDescription, order: list[str], png: Path, title: str = "") -> None:
     """Write the block diagram of `description` (stepped in `order`) to `png`."""
+    figure = system_figure(description, order, title)
+    png = Path(png)
+    png.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(png)
+    plt.close(figure)
+
+
+def system_figure(description: SystemDescription, order: list[str], title: str = ""):
+    """The block diagram as a matplotlib figure (its boxes, then the arrows' labels, are the axes'
+    patches and texts with gid "box" and "label")."""
+    import textwrap
+
     column = _columns(description, order)
-    rows: dict[int, int] = {}
-    centre: dict[str, tuple[float, float]] = {}
-    for name in order:
-        row = rows.get(column[name], 0)
-        rows[column[name]] = row + 1
-        centre[name] = (column[name] * COLUMN, -row * ROW)
-    width = (max(column.values()) + 1) * COLUMN
-    height = max(rows.values()) * ROW + 2.0
-    figure, axes = plt.subplots(figsize=(max(8.0, width * 0.9), max(4.5, height * 1.1)), dpi=100)
-    position = {name: i for i, name in enumerate(order)}
     pairs: dict[tuple[str, str], list] = {}
     for link in fold(description.connections):
         pairs.setdefault((link.source.split(".")[0], link.target.split(".")[0]), []).append(link)
+    rows: dict[int, int] = {}
+    row_of: dict[str, int] = {}
+    for name in order:
+        row_of[name] = rows.get(column[name], 0)
+        rows[column[name]] = row_of[name] + 1
+    xs = _column_x(column, row_of, pairs)
+    centre = {name: (xs[column[name]], -row_of[name] * ROW) for name in order}
+    width = xs[-1] + COLUMN
+    height = max(rows.values()) * ROW + 2.0
+    figure_width = max(8.0, width * INCH_PER_UNIT)
+    figure, axes = plt.subplots(figsize=(figure_width, max(4.5, height * 1.1)), dpi=100)
+    position = {name: i for i, name in enumerate(order)}
     for (source, target), links in pairs.items():
         forward = position[source] < position[target]
         (x0, y0), (x1, y1) = centre[source], centre[target]
@@ -114,6 +149,7 @@ def draw_system(description: SystemDescription, order: list[str], png: Path, tit
             color=colour,
             bbox={"boxstyle": "round,pad=0.15", "facecolor": "white", "edgecolor": "none", "alpha": 0.85},
             zorder=3,
+            gid="label",
         )
     for name in order:
         component = description.components[name]
@@ -130,6 +166,7 @@ def draw_system(description: SystemDescription, order: list[str], png: Path, tit
             edgecolor="#333333",
             linewidth=1.2,
             zorder=2,
+            gid="box",
         )
         axes.add_patch(box)
         rate = "every step" if component.rate is None else f"{component.rate:g} Hz"
@@ -161,14 +198,13 @@ def draw_system(description: SystemDescription, order: list[str], png: Path, tit
         changes.append(f"replaced by the scenario's FMU: {', '.join(description.replacing)}")
     if description.dropped:
         changes.append(f"{len(description.dropped)} template connections dropped")
-    axes.set_title(
+    # Wrapped to the figure's width (~0.6 em a character at 9 pt) so that no part is cut off.
+    characters = max(40, int(figure_width * 72 / (9 * 0.6) * 0.95))
+    lines = [
         f"{heading}{len(description.components)} components, {len(description.connections)} connections; "
-        "numbers = step order, dashed = feedback into an earlier-stepped component, orange = the scenario's"
-        + (f"\n{'; '.join(changes)}" if changes else ""),
-        fontsize=9,
-    )
+        "numbers = step order, dashed = feedback into an earlier-stepped component, orange = the scenario's",
+        *(["; ".join(changes)] if changes else []),
+    ]
+    axes.set_title("\n".join(textwrap.fill(line, characters) for line in lines), fontsize=9)
     figure.tight_layout()
-    png = Path(png)
-    png.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(png)
-    plt.close(figure)
+    return figure
