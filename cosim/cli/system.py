@@ -17,6 +17,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from cosim.cli.wiring import fold
+from cosim.cli.wiring import number_text as _number
+from cosim.cli.wiring import table_lines as _table
 from cosim.scenario.description import SystemDescription
 
 
@@ -52,7 +54,7 @@ def _handler(args) -> int:
     if args.scenario.suffix.lower() == ".ssp" or file_kind(args.scenario) == "ssp":
         from cosim.cli.system_ssp import show_ssp
 
-        return show_ssp(args)
+        return show_ssp(args, show_scenario)
     scenario = load_scenario(args.scenario, args.overrides)
     return show_scenario(args, scenario, f"{scenario.name} ({scenario.source})")
 
@@ -88,23 +90,11 @@ def _member(component, unpacked: Path):
     return replace(component, fmu=component.fmu.relative_to(unpacked))
 
 
-def _number(value: float) -> str:
-    return f"{value:g}"
-
-
 def _rate(rate: float | None, macro_step: float) -> str:
     if rate is None:
         return f"{1 / macro_step:g} Hz (every step)"
     steps = round(1.0 / (rate * macro_step))
     return f"{rate:g} Hz (every {steps} steps)" if steps > 1 else f"{rate:g} Hz (every step)"
-
-
-def _table(rows: list[tuple[str, ...]], indent: str = "  ") -> list[str]:
-    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
-    return [
-        indent + "  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True)).rstrip()
-        for row in rows
-    ]
 
 
 def format_system(description: SystemDescription, order: list[str], constant: set[str], title: str) -> str:

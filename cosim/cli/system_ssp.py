@@ -12,7 +12,8 @@ from __future__ import annotations
 from cosim.errors import CosimError
 
 
-def show_ssp(args) -> int:
+def show_ssp(args, show_scenario) -> int:
+    """Print the SSP's system; an exported scenario's through `show_scenario` (cosim.cli.system's)."""
     from cosim.ssp import export
     from cosim.ssp.read import build_system, open_ssp
     from cosim.ssp.run import experiment, parse_overrides
@@ -20,8 +21,6 @@ def show_ssp(args) -> int:
     values = parse_overrides(args.overrides)
     with open_ssp(args.scenario) as ssp:
         if export.SCENARIO_ANNOTATION in ssp.annotations:
-            from cosim.cli.system import show_scenario
-
             scenario = export.scenario_of(ssp, values)
             title = f"{scenario.name} (exported scenario in {ssp.source})"
             return show_scenario(args, scenario, title, unpacked=ssp.directory)
@@ -37,7 +36,8 @@ def show_ssp(args) -> int:
 
 
 def format_ssp_system(ssp, run, system, order: list[str]) -> str:
-    from cosim.cli.system import _number, _table
+    from cosim.cli.wiring import number_text as _number
+    from cosim.cli.wiring import table_lines as _table
 
     lines = [
         f"system of {ssp.name} ({ssp.source}, SSP {ssp.version})",

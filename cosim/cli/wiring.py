@@ -89,3 +89,15 @@ def fold(connections: tuple[ConnectionDescription, ...] | list[ConnectionDescrip
             )
         )
     return folded
+
+
+def number_text(value: float) -> str:
+    return f"{value:g}"
+
+
+def table_lines(rows: list[tuple[str, ...]], indent: str = "  ") -> list[str]:
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    return [
+        indent + "  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True)).rstrip()
+        for row in rows
+    ]
