@@ -396,7 +396,7 @@ class IsolatedFmuComponent(Component):
         return {
             CALL_STEP: f"fmi{v}DoStep",
             CALL_INSTANTIATE: f"fmi{v}Instantiate",
-            CALL_SETUP: f"fmi{v}Set* of the parameters" + (" / fmi2SetupExperiment" if v == 2 else ""),
+            CALL_SETUP: ("fmi2SetupExperiment / " if v == 2 else "") + f"fmi{v}Set* of the parameters",
             CALL_INITIALIZE: f"fmi{v}EnterInitializationMode / fmi{v}ExitInitializationMode",
             CALL_TERMINATE: f"fmi{v}Terminate",
             CALL_FREE: f"fmi{v}FreeInstance",
@@ -411,10 +411,11 @@ class IsolatedFmuComponent(Component):
         self._exchange(INSTANTIATE, "instantiate")
         self.state = State.INSTANTIATED
 
-    def setup(self, t0: float, parameters: Mapping[str, float]) -> None:
+    def setup(self, t0: float, parameters: Mapping[str, float], stop_time: float | None = None) -> None:
         self._require("setup", State.INSTANTIATED)
         self._time = float(t0)
-        arguments = {"t0": float(t0), "parameters": dict(parameters), "push": self._push_pending}
+        arguments = {"t0": float(t0), "parameters": dict(parameters), "stop_time": stop_time}
+        arguments["push"] = self._push_pending
         self._push_pending = False
         self._exchange(SETUP + json.dumps(arguments).encode(), "setup")
         self.t0 = float(t0)

@@ -143,8 +143,10 @@ def serve(fd: int, memory: mmap.mmap) -> int:
                     call.value = protocol.CALL_SET
                     component.push_inputs()
                 call.value = protocol.CALL_SETUP
-                component.setup(arguments["t0"], arguments["parameters"])
+                component.setup(arguments["t0"], arguments["parameters"], arguments["stop_time"])
             elif command == protocol.INITIALIZE:
+                call.value = protocol.CALL_INITIALIZE
+                component.enter_initialization()  # the inputs below are initial values
                 if argument == b"1":
                     call.value = protocol.CALL_SET
                     component.push_inputs()

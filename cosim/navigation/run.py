@@ -330,7 +330,7 @@ def _build_and_run(
     from cosim.record.recorder import Recorder
 
     built = build_run(scenario)
-    master = Master(built.system, parameters=built.parameters)
+    master = Master(built.system, parameters=built.parameters, stop_time=scenario.stop_time)
     try:
         master.initialize()
     except CosimError as error:
@@ -390,7 +390,7 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     recording.write_constant(master.start_time_ns)
     recording.write_pose(0)
     h_ns = system.macro_step_ns
-    total_steps = round(scenario.stop_time * NS_PER_S / h_ns)
+    total_steps = master.steps_to_stop  # the last one ends at the stop time
     # Build (or load) the C kernels that would first run inside the loop, so the real-time factor
     # measures the simulation, not a first run's compilation.
     monitor.world.distance(*scenario.start[:2])

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from cosim.core import interrupt
-from cosim.core.master import COMPILED_MIN_STEPS, MODES, Master, due_from, seconds_to_ns
+from cosim.core.master import COMPILED_MIN_STEPS, MODES, Master, due_from
 from cosim.errors import CosimError, SimulationEnded
 from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
 from cosim.scenario.load import DEFAULT_LOG_PATTERN
@@ -135,7 +135,7 @@ def run_ssp(
 
 def _run_fmus(ssp: SspSystem, run: Experiment, out_path: Path | None, force: bool) -> SspRunResult:
     system, parameters = build_system(ssp, run.macro_step, run.master)
-    master = Master(system, start_time=run.start_time, parameters=parameters)
+    master = Master(system, start_time=run.start_time, parameters=parameters, stop_time=run.stop_time)
     try:
         master.initialize()
     except CosimError as error:
@@ -163,7 +163,7 @@ def _record(
         master.close()
         raise
     h_ns = system.macro_step_ns
-    total = round((seconds_to_ns(run.stop_time, "stop time") - master.start_time_ns) / h_ns)
+    total = master.steps_to_stop  # the last one shorter where the stop is no whole number of steps
     wall_start = time.perf_counter()
     failure = None
     ended = None  # an FMU's request to end the run
