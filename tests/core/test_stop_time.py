@@ -1,0 +1,94 @@
+"""The stop time: every FMU is told it, and the last step ends exactly there, also where the stop
+time is no whole number of macro steps (or of a component's period) after the start: in the
+Python loop, in the compiled kernel and in `cosim fmu simulate` (against fmpy's simulate_fmu,
+which cuts its last step the same way for an FMU that can take variable steps). The `gain_fmi2`
+fixture keeps the stop time it was told (`stop_time`) and the end t + h of its last step
+(`end_time`)."""
+
+from __future__ import annotations
+
+import fmpy
+import numpy as np
+import pytest
+from fixtures.conftest_helpers import fixture_fmu
+
+from cosim.core.master import Master, System
+from cosim.errors import CosimError
+from cosim.fmi.component import FmuComponent
+from cosim.ssp.simulate import prepare, simulate
+
+
+def _master(macro_step: float, stop_time: float, period: float = 0.0, start_time: float = 0.0):
+    system = System(macro_step)
+    gain = system.add(FmuComponent(fixture_fmu("gain_fmi2"), "gain", period=period))
+    return Master(system, start_time=start_time, stop_time=stop_time), gain
+
+
+def _end(gain) -> tuple[float, float]:
+    return tuple(gain.output_buffer[[gain.output_index["stop_time"], gain.output_index["end_time"]]])
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+@pytest.mark.parametrize(
+    ("macro_step", "stop_time", "period", "start_time", "steps"),
+    [
+        (0.3, 1.0, 0.0, 0.0, 4),  # 0.3, 0.6, 0.9, then 0.1
+        (0.25, 1.0, 0.0, 0.0, 4),  # a whole number of steps: none cut
+        (0.3, 1.0, 0.6, 0.0, 4),  # period 0.6: [0, 0.6], then [0.6, 1.0]
+        (0.1, 1.05, 0.0, 0.5, 6),  # from 0.5: five steps of 0.1, then 0.05
+    ],
+)
+def test_the_last_step_ends_at_the_stop_time(compiled, macro_step, stop_time, period, start_time, steps):
+    master, gain = _master(macro_step, stop_time, period, start_time)
+    with master:
+        master.initialize()
+        assert master.steps_to_stop == steps
+        master.run(steps, compiled=compiled)
+        assert master.time == stop_time and master.time_ns == round(stop_time * 1e9)
+        assert _end(gain) == (stop_time, stop_time)
+
+
+def test_kernel_and_python_loop_record_the_same_cut_steps():
+    histories = {}
+    for compiled in (False, True):
+        master, _ = _master(0.3, 1.0, period=0.6)
+        rows = []
+        with master:
+            master.initialize()
+            master.run_recorded(
+                4, lambda first, count, h, rows=rows: rows.append(h[0].copy()), compiled=compiled
+            )
+        histories[compiled] = np.concatenate(rows)
+    np.testing.assert_array_equal(histories[False], histories[True])
+    np.testing.assert_array_equal(histories[True][:, -1], [0.6, 1.0])  # end_time after each step
+
+
+def test_no_step_passes_the_stop_time():
+    master, _ = _master(0.3, 1.0)
+    with master:
+        master.initialize()
+        master.run(3)
+        with pytest.raises(CosimError, match=r"pass the stop time 1 s \(1 steps remain\)"):
+            master.run(2)
+        master.step()
+        with pytest.raises(CosimError, match="pass the stop time"):
+            master.step()
+
+
+def test_a_stop_time_before_the_start_is_refused():
+    with pytest.raises(CosimError, match="is not after the start time"):
+        _master(0.1, 1.0, start_time=1.0)
+
+
+def test_fmu_simulate_cuts_the_last_step_as_fmpy_does(tmp_path):
+    path = fixture_fmu("diffdrive_fmi2")
+    start = {"x0": 1.0, "theta0": 0.3, "v": 0.8, "omega": -0.4}
+    result = simulate(
+        prepare(path, stop_time=1.05, step=0.1, start_values=start), tmp_path / "r.mcap", tmp_path / "r.csv"
+    )
+    assert (result.reason, result.steps, result.end_time) == ("stop_time", 11, 1.05)
+    ours = np.genfromtxt(tmp_path / "r.csv", delimiter=",", names=True)
+    reference = fmpy.simulate_fmu(str(path), stop_time=1.05, output_interval=0.1, start_values=start)
+    assert ours["time"][-1] == reference["time"][-1] == 1.05
+    for name in ("time", "x", "y", "theta"):
+        np.testing.assert_allclose(ours[name], reference[name], rtol=0, atol=1e-12)
