@@ -36,12 +36,30 @@ An output `P.o` is *direct* when it depends directly on at least one of P's inpu
   step. The order only fixes the sequence of calls. A loop of direct outputs is allowed (the
   one-step delay breaks it).
 
-Initialisation runs in an order where a producer comes before a consumer whose input feeds one of
-the consumer's *connected* outputs directly (`System.initialization_order`): a vehicle whose pose
-outputs are states initialises before the controllers that read the pose, even though the
-controllers' commands feed its (unconnected) velocity outputs. Each component gathers its
-inputs from the producers already initialised (other inputs keep their start values),
-initialises, and has its outputs read. Jacobi mode uses the same initialisation.
+Initialisation follows libcosim and ecos (FMI allows other orders; some FMUs rely on this one):
+every component is instantiated, then set up (FMI 2.0: fmi2SetupExperiment with the start and stop
+times, then the parameters, so an FMU that resets its variables in setupExperiment keeps the
+values), then enters initialisation (FMI 3.0's enterInitializationMode takes the times; FMI 1.0
+has no such mode: fmiInitializeSlave takes them when the component initialises). The connected
+values are then exchanged in an order where a producer comes before a consumer whose input feeds
+one of the consumer's *connected* outputs directly (`System.initialization_order`): a vehicle whose
+pose outputs are states initialises before the controllers that read the pose, even though the
+controllers' commands feed its (unconnected) velocity outputs. Each component gathers its inputs
+from the producers already initialised (other inputs keep their start values), initialises, and
+has its outputs read. A component that initialised before a producer of an input that any output
+of its depends on directly (`System.initialized_early`: the vehicle's measured velocity on its
+commands) then gathers all its connected inputs once more and has its outputs read again, so at
+the start time every output reflects its connected inputs (within an algebraic loop, after that
+one pass in a fixed order). Jacobi mode uses the same initialisation.
+
+Stop time
+---------
+A master given a stop time tells every component (`Component.setup`), never steps past it, and
+cuts the steps that would end after it: a component due at step k steps by
+min(P * h, stop - t_k) (`Master.step_seconds`), so a stop time that is no whole number of macro
+steps (or of a component's period) after the start ends with a shorter step, exactly at the stop
+time (`Master.steps_to_stop` steps; `time` is then the stop time). The compiled kernel takes those
+last steps one at a time, with the cut step sizes written into its tables.
 
 Loops
 -----

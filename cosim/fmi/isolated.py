@@ -112,6 +112,7 @@ MAX_PACKET = 1 << 16
 # Host -> child commands (first byte of a datagram; JSON arguments follow where needed).
 STEP, STEP_PUSHED = b"s", b"S"  # doStep (after sending the inputs), then get the outputs
 INSTANTIATE, SETUP, INITIALIZE, RESTRICT, TERMINATE, FREE = b"I", b"U", b"N", b"R", b"T", b"F"
+EXCHANGE = b"X"  # send the inputs and get the outputs, no step (initialisation's second pass)
 # Child -> host: OK alone, or ERROR + the component's state (one byte) + the message (UTF-8).
 OK, ERROR = b"\x00", b"\x01"
 # Either way: "look at the shared header" (a wake-up for a sleeping peer; may be stale: ignored).
@@ -549,6 +550,9 @@ class IsolatedFmuComponent(Component):
     def get_outputs(self) -> np.ndarray:
         if self.state is not State.STEPPING:
             self._require("get_outputs", State.STEPPING)
+        if self._push_pending:  # inputs pushed after the last step: their outputs, without a step
+            self._push_pending = False
+            self._exchange(EXCHANGE, "get_outputs")
         return self.output_buffer  # the child has written them at the end of its step
 
     def terminate(self) -> None:

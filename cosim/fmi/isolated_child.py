@@ -154,6 +154,11 @@ def serve(fd: int, memory: mmap.mmap) -> int:
                 component.initialize()
                 call.value = protocol.CALL_GET
                 component.get_outputs()
+            elif command == protocol.EXCHANGE:
+                call.value = protocol.CALL_SET
+                component.push_inputs()
+                call.value = protocol.CALL_GET
+                component.get_outputs()
             elif command == protocol.RESTRICT:
                 component.restrict_push(json.loads(argument))
             elif command == protocol.TERMINATE:

@@ -1,10 +1,12 @@
 """`cosim run SYSTEM.ssp`: run an SSP 1.0 or 2.0 archive and log every component's variables.
 
 An SSP that navcosim exported runs as the scenario it came from (`cosim.ssp.export`).
-In any other, the FMU components and connections of the SSD are stepped by the master from the start to the
-stop time, with every scalar input and output of each component on `/signals/<component>` at each
-of its steps, each value stamped at the time it holds (inputs applied at t, outputs at t, a last
-record with the final outputs at the end; the convention of `cosim.navigation.run`).
+In any other, the FMU components and connections of the SSD are stepped by the master from the
+start to the stop time (which the FMUs are told; a stop time that is no whole number of macro
+steps after the start ends with a shorter step), with every scalar input and output of each
+component on `/signals/<component>` at each of its steps, each value stamped at the time it holds
+(inputs applied at t, outputs at t, a last record with the final outputs at the end; the
+convention of `cosim.navigation.run`).
 
 Overrides: `--set simulation.stop_time=S`, `simulation.macro_step=S`, `simulation.start_time=S`,
 `simulation.master=gauss-seidel|jacobi` take precedence over the file (for the macro step, over

@@ -12,7 +12,10 @@ The run ends at the stop time, or where the FMU asks to end it (`SimulationEnded
 
 Defaults are fmpy's: the start time is the DefaultExperiment's startTime, else 0; the stop time its
 stopTime, else 1 s after the start; the step its stepSize, else the power of ten nearest to a
-thousandth of the run (10 ** (round(log10(stop - start)) - 3) s, fmpy's rule).
+thousandth of the run (10 ** (round(log10(stop - start)) - 3) s, fmpy's rule). A stop time that
+is no whole number of steps after the start ends with a shorter step, as fmpy does, for an FMU that
+can take variable steps (canHandleVariableCommunicationStepSize; a Model Exchange FMU always can);
+the FMU is told the stop time.
 
 The log (`/signals/<name>`, every input and output, stamped as `cosim.record.recorder` says: the
 record at t holds the outputs at t, the first the outputs after initialisation) names the FMU's

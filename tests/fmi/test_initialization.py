@@ -144,3 +144,9 @@ def test_a_feedback_through_a_state_output_is_exchanged():
         assert [c.name for c in system.initialization_order()] == ["b", "a"]
         assert a.input_buffer[0] == 3.0 and a.output_buffer[0] == 7.0
         assert b.input_buffer[0] == 7.0 and b.output_buffer[0] == 2.5
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("connect_out", [False, True])
+def test_isolated_fmus_exchange_at_the_start_as_in_process(connect_out):
+    assert _chain(2, connect_out, IsolatedFmuComponent) == _chain(2, connect_out)
