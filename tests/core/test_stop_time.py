@@ -7,6 +7,8 @@ fixture keeps the stop time it was told (`stop_time`) and the end t + h of its l
 
 from __future__ import annotations
 
+import zipfile
+
 import fmpy
 import numpy as np
 import pytest
@@ -15,6 +17,8 @@ from fixtures.conftest_helpers import fixture_fmu
 from cosim.core.master import Master, System
 from cosim.errors import CosimError
 from cosim.fmi.component import FmuComponent
+from cosim.logs.reader import open_log
+from cosim.ssp.run import run_ssp
 from cosim.ssp.simulate import prepare, simulate
 
 
@@ -92,3 +96,35 @@ def test_fmu_simulate_cuts_the_last_step_as_fmpy_does(tmp_path):
     assert ours["time"][-1] == reference["time"][-1] == 1.05
     for name in ("time", "x", "y", "theta"):
         np.testing.assert_allclose(ours[name], reference[name], rtol=0, atol=1e-12)
+
+
+def test_an_ssp_run_ends_at_its_stop_time_with_its_parameters(tmp_path):
+    """An SSP of the FMI 2.0 gain fixture (which resets gain and offset in fmi2SetupExperiment),
+    its parameters from an .ssv, stop time 1 s at a 0.3 s macro step."""
+    ssd = """<ssd:SystemStructureDescription
+      xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" version="1.0" name="g">
+      <ssd:System name="g"><ssd:ParameterBindings>
+        <ssd:ParameterBinding source="resources/g.ssv"/></ssd:ParameterBindings>
+        <ssd:Elements><ssd:Component name="gain" source="resources/gain.fmu"/></ssd:Elements>
+      </ssd:System><ssd:DefaultExperiment stopTime="1.0"/></ssd:SystemStructureDescription>"""
+    values = {"gain.gain": 3.0, "gain.offset": 0.5, "gain.u": 2.0}
+    parameters = "".join(
+        f'<ssv:Parameter name="{name}"><ssv:Real value="{value}"/></ssv:Parameter>'
+        for name, value in values.items()
+    )
+    ssv = (
+        '<ssv:ParameterSet xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues"'
+        f' version="1.0" name="g"><ssv:Parameters>{parameters}</ssv:Parameters></ssv:ParameterSet>'
+    )
+    path = tmp_path / "g.ssp"
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("SystemStructure.ssd", ssd)
+        archive.writestr("resources/g.ssv", ssv)
+        archive.write(fixture_fmu("gain_fmi2"), "resources/gain.fmu")
+    result = run_ssp(path, tmp_path / "g.mcap", ["simulation.macro_step=0.3"])
+    assert (result.reason, result.steps, result.end_time) == ("stop_time", 4, 1.0)
+    with open_log(tmp_path / "g.mcap") as log:
+        gain = log.signals("gain")
+        assert set(gain["y"].tolist()) == {3.0 * 2.0 + 0.5}
+        assert set(gain["stop_time"].tolist()) == {1.0}
+        assert gain.t[-1] == 1.0 and gain["end_time"][-1] == 1.0

@@ -9,6 +9,10 @@ analytic value of a chain of gains."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
+from pathlib import Path
+
 import fmpy
 import pytest
 from fixtures.conftest_helpers import fixture_fmu
@@ -19,6 +23,7 @@ from fmpy.fmi3 import FMU3Slave
 from cosim.core.master import Master, System
 from cosim.fmi.component import FmuComponent
 from cosim.fmi.isolated import IsolatedFmuComponent
+from cosim.logs.reader import open_log
 
 PARAMETERS = {"gain": 3.0, "offset": 0.5}
 U = 2.0
@@ -150,3 +155,30 @@ def test_a_feedback_through_a_state_output_is_exchanged():
 @pytest.mark.parametrize("connect_out", [False, True])
 def test_isolated_fmus_exchange_at_the_start_as_in_process(connect_out):
     assert _chain(2, connect_out, IsolatedFmuComponent) == _chain(2, connect_out)
+
+
+@pytest.mark.slow
+def test_a_scenario_component_keeps_its_parameters_and_sees_its_input_at_the_start(tmp_path):
+    """[components.gain] (the FMI 2.0 fixture that resets gain and offset in fmi2SetupExperiment)
+    fed the mixer's v: y = 3 v + 0.5 from t = 0 on; it is told the stop time, which is no whole
+    number of macro steps (0.01 s) and where the run ends."""
+    root = Path(__file__).resolve().parents[2]
+    text = (root / "scenarios" / "warehouse_diff_drive_no_obstacle.toml").read_text()
+    text = text.replace('"maps/warehouse.yaml"', f'"{root / "scenarios" / "maps" / "warehouse.yaml"}"')
+    text += (
+        f'\n[components.gain]\nfmu = "{fixture_fmu("gain_fmi2")}"\ngain = 3.0\noffset = 0.5\n'
+        '\n[[connections]]\nfrom = "mixer.v"\nto = "gain.u"\n'
+    )
+    scenario = tmp_path / "gain.toml"
+    scenario.write_text(text)
+    command = [sys.executable, "-m", "cosim", "run", str(scenario), "--out", str(tmp_path / "run.mcap")]
+    command += ["--no-plot", "--quiet", "--set", "simulation.stop_time=2.005"]
+    completed = subprocess.run(command, capture_output=True, text=True, cwd=root, timeout=600)
+    assert completed.returncode in (0, 1), completed.stderr
+    with open_log(tmp_path / "run.mcap") as log:
+        gain, mixer = log.signals("gain"), log.signals("mixer")
+        assert gain.t[0] == 0.0 and mixer.t[0] == 0.0
+        assert gain["u"][0] == mixer["v"][0] != 0.0
+        assert gain["y"][0] == 3.0 * mixer["v"][0] + 0.5
+        assert set(gain["stop_time"].tolist()) == {2.005}
+        assert gain.t[-1] == 2.005 and gain["end_time"][-1] == 2.005
