@@ -114,6 +114,7 @@ class _Recording:
 
     def __init__(self, built: BuiltRun, master: Master, recorder) -> None:
         self.recorder = recorder
+        self.stop_ns = master.stop_time_ns  # a last step cut short ends there, and so does its pose
         system = built.system
         self.entries = []
         self.entry_ports = []  # per entry: (component, scalar input slots, output slots)
@@ -245,7 +246,7 @@ class _Recording:
             _, v_buffer, index_v, omega_buffer, index_omega = command
             recorder.write_cmd_vel(t_ns, v_buffer.item(index_v), omega_buffer.item(index_omega))
         if (k + 1) % self.pose_steps == 0:
-            self.write_pose(t_ns + h_ns)
+            self.write_pose(min(t_ns + h_ns, self.stop_ns))
 
 
 def _run_view(buffer: np.ndarray, slots: list[int]) -> np.ndarray | None:
@@ -419,7 +420,8 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
         recording.after_step(k, t_ns, h_ns)
         if mode_steps and k % mode_steps == 0:
             monitor.check_mode(mode_buffer.item(mode_index), mode_period)
-        reason = monitor.check_position((t_ns + h_ns) / NS_PER_S, x_item(index_x), y_item(index_y))
+        end_ns = min(t_ns + h_ns, master.stop_time_ns)  # (a last step cut short ends at the stop time)
+        reason = monitor.check_position(end_ns / NS_PER_S, x_item(index_x), y_item(index_y))
         return finish_checks(k, reason)
 
     def finish_checks(k: int, reason: str | None, before_write=None) -> str | None:
@@ -955,7 +957,8 @@ class _BlockRecording:
         (i, column_x), (j, column_y) = self.pose_columns[:2]
         xs = self._values(i, column_x, first, end, before[i])
         ys = self._values(j, column_y, first, end, before[j])
-        times = [(start_ns + (k + 1) * h_ns) / NS_PER_S for k in range(first, end)]
+        stop_ns = self.recording.stop_ns
+        times = [min(start_ns + (k + 1) * h_ns, stop_ns) / NS_PER_S for k in range(first, end)]
         index, reason = self.monitor.check_positions(times, xs, ys)
         if reason is not None and (index != end - first - 1 or not clean):
             raise RuntimeError(
@@ -1043,7 +1046,8 @@ class _BlockRecording:
             else:
                 for column, (i, where_) in enumerate(self.command_columns, start=3):
                     values[:, column] = self.buffers[i][self._latest(i, steps), where_]
-            poses = (steps * slots + self.pose_slot, start_ns + (steps + 1) * h_ns, values)
+            ends = np.minimum(start_ns + (steps + 1) * h_ns, self.recording.stop_ns)
+            poses = (steps * slots + self.pose_slot, ends, values)
         other = None
         if others:
             other = (

@@ -8,12 +8,14 @@ fixture keeps the stop time it was told (`stop_time`) and the end t + h of its l
 from __future__ import annotations
 
 import zipfile
+from pathlib import Path
 
 import fmpy
 import numpy as np
 import pytest
 from fixtures.conftest_helpers import fixture_fmu
 
+from cosim.cli import main
 from cosim.core.master import Master, System
 from cosim.errors import CosimError
 from cosim.fmi.component import FmuComponent
@@ -128,3 +130,18 @@ def test_an_ssp_run_ends_at_its_stop_time_with_its_parameters(tmp_path):
         assert set(gain["y"].tolist()) == {3.0 * 2.0 + 0.5}
         assert set(gain["stop_time"].tolist()) == {1.0}
         assert gain.t[-1] == 1.0 and gain["end_time"][-1] == 1.0
+
+
+@pytest.mark.parametrize("loop", ["kernel", "python"])
+def test_a_scenario_ends_at_a_stop_time_between_macro_steps(loop, tmp_path, monkeypatch):
+    """2.015 s at a 0.01 s macro step: the last step (0.005 s) ends at the stop time, and so does
+    every record of the log, the pose of that step included (on the pose grid of 2 steps)."""
+    monkeypatch.setenv("NAVCOSIM_LOOP", loop)
+    root = Path(__file__).resolve().parents[2]
+    scenario = root / "scenarios" / "warehouse_diff_drive_no_obstacle.toml"
+    argv = ["run", str(scenario), "--out", str(tmp_path / "run.mcap"), "--no-plot", "--quiet"]
+    monkeypatch.chdir(root)
+    assert main([*argv, "--set", "simulation.stop_time=2.015"]) == 1  # the goal is farther
+    with open_log(tmp_path / "run.mcap") as log:
+        assert log.end_time == 2.015 and log.outcome["time"] == 2.015
+        assert log.signals("vehicle").t[-1] == 2.015
