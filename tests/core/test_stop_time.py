@@ -145,3 +145,11 @@ def test_a_scenario_ends_at_a_stop_time_between_macro_steps(loop, tmp_path, monk
     with open_log(tmp_path / "run.mcap") as log:
         assert log.end_time == 2.015 and log.outcome["time"] == 2.015
         assert log.signals("vehicle").t[-1] == 2.015
+
+
+def test_fmu_simulate_refuses_a_cut_step_an_fmu_cannot_take():
+    path = fixture_fmu("gain_fixed_step_fmi2")
+    with pytest.raises(CosimError, match="cannot take a shorter last step") as error:
+        prepare(path, stop_time=1.05, step=0.1)
+    assert "\n" not in str(error.value)
+    assert prepare(path, stop_time=1.0, step=0.1).steps == 10
