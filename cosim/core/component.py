@@ -270,12 +270,19 @@ class Component(ABC):
         """Create the model instance (load an FMU's binary)."""
 
     @abstractmethod
-    def setup(self, t0: float, parameters: Mapping[str, float]) -> None:
-        """Apply parameter values (by name) and the start time t0 [s]."""
+    def setup(self, t0: float, parameters: Mapping[str, float], stop_time: float | None = None) -> None:
+        """Set up the experiment (start time t0 [s]; the stop time [s], None when open), then apply
+        parameter values (by name)."""
+
+    def enter_initialization(self) -> None:
+        """Enter initialisation (an FMU's initialization mode): inputs pushed from now on until
+        `initialize` are the initial values. A component without such a mode does nothing."""
+        return None
 
     @abstractmethod
     def initialize(self) -> None:
-        """Enter and leave initialisation: outputs become valid for t0 from the staged inputs."""
+        """End initialisation (entering it first if need be): outputs become valid for t0 from the
+        pushed inputs."""
 
     @abstractmethod
     def push_inputs(self) -> None:
@@ -337,7 +344,7 @@ class PythonComponent(Component):
         self._require("instantiate", State.CREATED)
         self.state = State.INSTANTIATED
 
-    def setup(self, t0: float, parameters: Mapping[str, float]) -> None:
+    def setup(self, t0: float, parameters: Mapping[str, float], stop_time: float | None = None) -> None:
         self._require("setup", State.INSTANTIATED)
         known = {p.name for p in self.parameters}
         for key in parameters:

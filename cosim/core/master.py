@@ -36,12 +36,30 @@ An output `P.o` is *direct* when it depends directly on at least one of P's inpu
   step. The order only fixes the sequence of calls. A loop of direct outputs is allowed (the
   one-step delay breaks it).
 
-Initialisation runs in an order where a producer comes before a consumer whose input feeds one of
-the consumer's *connected* outputs directly (`System.initialization_order`): a vehicle whose pose
-outputs are states initialises before the controllers that read the pose, even though the
-controllers' commands feed its (unconnected) velocity outputs. Each component gathers its
-inputs from the producers already initialised (other inputs keep their start values),
-initialises, and has its outputs read. Jacobi mode uses the same initialisation.
+Initialisation follows libcosim and ecos (FMI allows other orders; some FMUs rely on this one):
+every component is instantiated, then set up (FMI 2.0: fmi2SetupExperiment with the start and stop
+times, then the parameters, so an FMU that resets its variables in setupExperiment keeps the
+values), then enters initialisation (FMI 3.0's enterInitializationMode takes the times; FMI 1.0
+has no such mode: fmiInitializeSlave takes them when the component initialises). The connected
+values are then exchanged in an order where a producer comes before a consumer whose input feeds
+one of the consumer's *connected* outputs directly (`System.initialization_order`): a vehicle whose
+pose outputs are states initialises before the controllers that read the pose, even though the
+controllers' commands feed its (unconnected) velocity outputs. Each component gathers its inputs
+from the producers already initialised (other inputs keep their start values), initialises, and
+has its outputs read. A component that initialised before a producer of an input that any output
+of its depends on directly (`System.initialized_early`: the vehicle's measured velocity on its
+commands) then gathers all its connected inputs once more and has its outputs read again, so at
+the start time every output reflects its connected inputs (within an algebraic loop, after that
+one pass in a fixed order). Jacobi mode uses the same initialisation.
+
+Stop time
+---------
+A master given a stop time tells every component (`Component.setup`), never steps past it, and
+cuts the steps that would end after it: a component due at step k steps by
+min(P * h, stop - t_k) (`Master.step_seconds`), so a stop time that is no whole number of macro
+steps (or of a component's period) after the start ends with a shorter step, exactly at the stop
+time (`Master.steps_to_stop` steps; `time` is then the stop time). The compiled kernel takes those
+last steps one at a time, with the cut step sizes written into its tables.
 
 Loops
 -----
@@ -346,6 +364,23 @@ class System:
                     edges.add((producer, name))
         return [self.components[name] for name in self._topological(edges)]
 
+    def initialized_early(self, order: list[Component]) -> list[Component]:
+        """The components of initialisation `order` that initialised before a producer feeding an
+        input some output of theirs depends on directly (connected or not: a vehicle's measured
+        speed on its commanded one), in that order. The master hands them their connected inputs
+        once more after every component is initialised and reads their outputs again, so every
+        output at the start time reflects its connected inputs (within an algebraic loop, after
+        one pass in this fixed order)."""
+        position = {component.name: number for number, component in enumerate(order)}
+        early = set()
+        for name, links in self.links().items():
+            component = self.components[name]
+            direct = {i for depends in component.feedthrough.values() for i in depends}
+            for _, producer, _, index in links:
+                if position[producer] >= position[name] and component.inputs[index].name in direct:
+                    early.add(name)
+        return [component for component in order if component.name in early]
+
 
 def find_algebraic_loop(
     connections: Iterable[tuple[str, str]], feedthrough: Mapping[str, Mapping[str, Iterable[str]]]
@@ -473,9 +508,15 @@ class Master:
         system: System,
         start_time: float = 0.0,
         parameters: Mapping[str, Mapping[str, float]] | None = None,
+        stop_time: float | None = None,
     ) -> None:
         self.system = system
         self.start_time_ns = seconds_to_ns(start_time, "start time")
+        # The components are told the stop time, and no step of theirs ends after it (`steps_to_stop`).
+        self.stop_time = None if stop_time is None else float(stop_time)
+        self.stop_time_ns = None if stop_time is None else seconds_to_ns(stop_time, "stop time")
+        if self.stop_time_ns is not None and self.stop_time_ns <= self.start_time_ns:
+            raise CosimError(f"stop time {stop_time} s is not after the start time {start_time} s")
         self.parameters = {name: dict(values) for name, values in (parameters or {}).items()}
         for name in self.parameters:
             system.component(name)
@@ -490,18 +531,57 @@ class Master:
             for component in self.order
         ]
         self._steppers: list[tuple] = []
+        self._tail_from = self._first_short_step()
 
     # ---- time --------------------------------------------------------------------------------
 
     @property
     def time_ns(self) -> int:
-        """Start of the next step (the current simulation time) in integer nanoseconds."""
-        return self.start_time_ns + self.step_index * self.system.macro_step_ns
+        """Start of the next step (the current simulation time) in integer nanoseconds; the stop
+        time after a last step cut short to end there."""
+        time_ns = self.start_time_ns + self.step_index * self.system.macro_step_ns
+        return time_ns if self.stop_time_ns is None else min(time_ns, self.stop_time_ns)
 
     @property
     def time(self) -> float:
         """Current simulation time [s], exact up to one float rounding of `time_ns`."""
         return self.time_ns / NS_PER_S
+
+    @property
+    def steps_to_stop(self) -> int | None:
+        """Macro steps from the start to the stop time (None without one); where the stop time is no
+        whole number of macro steps after the start the last is shorter, ending at the stop time."""
+        if self.stop_time_ns is None:
+            return None
+        return -(-(self.stop_time_ns - self.start_time_ns) // self.system.macro_step_ns)
+
+    def _first_short_step(self) -> int | None:
+        """The first step at which a component's step would end after the stop time, so is cut to
+        end at it (None: none would). Component of period P due at k passes the stop when
+        (k + P) h > stop - start, that is k >= floor((stop - start) / h) - P + 1."""
+        if self.stop_time_ns is None:
+            return None
+        whole = (self.stop_time_ns - self.start_time_ns) // self.system.macro_step_ns
+        firsts = [due_from(max(0, whole - period + 1), period) for _, period, _ in self._plan]
+        return min(firsts, default=None)
+
+    def _check_steps(self, steps: int) -> None:
+        if steps < 0:
+            raise CosimError(f"number of steps must be >= 0, got {steps}")
+        last = self.steps_to_stop
+        if last is not None and self.step_index + steps > last:
+            raise CosimError(
+                f"{steps} steps from t = {self.time:g} s pass the stop time {self.stop_time:g} s "
+                f"({last - self.step_index} steps remain)"
+            )
+
+    def step_seconds(self, k: int, period: int) -> float:
+        """The step [s] of a component of `period` macro steps due at step k: a whole period, or up
+        to the stop time when that comes first."""
+        h_ns = period * self.system.macro_step_ns
+        if self.stop_time_ns is not None:
+            h_ns = min(h_ns, self.stop_time_ns - self.start_time_ns - k * self.system.macro_step_ns)
+        return h_ns / NS_PER_S
 
     # ---- lifecycle ---------------------------------------------------------------------------
 
@@ -514,9 +594,12 @@ class Master:
             for component in self.order:
                 component.instantiate()
             for component in self.order:
-                component.setup(t0, self.parameters.get(component.name, {}))
+                component.setup(t0, self.parameters.get(component.name, {}), self.stop_time)
+            for component in self.order:
+                component.enter_initialization()
             ready: set[str] = set()
-            for component in self.system.initialization_order():
+            order = self.system.initialization_order()
+            for component in order:
                 gather = _gather(self.system, component, producers=ready)
                 if gather is not None:
                     gather()
@@ -524,6 +607,11 @@ class Master:
                 component.initialize()
                 component.get_outputs()
                 ready.add(component.name)
+            for component in self.system.initialized_early(order):
+                gather = _gather(self.system, component)
+                gather()
+                component.push_inputs()
+                component.get_outputs()
         except BaseException:
             try:
                 self.close()
@@ -565,8 +653,9 @@ class Master:
             raise CosimError("the master is not running (call initialize() first; not after close())")
 
     def step(self) -> None:
-        """Advance one macro step, from `time` to `time + macro_step`."""
+        """Advance one macro step, from `time` to `time + macro_step` (or to the stop time)."""
         self._check_running()
+        self._check_steps(1)
         self._advance(1)
 
     def run(
@@ -584,8 +673,7 @@ class Master:
         possible, False never.
         """
         self._check_running()
-        if steps < 0:
-            raise CosimError(f"number of steps must be >= 0, got {steps}")
+        self._check_steps(steps)
         if callback is None:
             wanted = steps >= COMPILED_MIN_STEPS if compiled is None else compiled
             tables = self._kernel(record=False, block=KERNEL_BLOCK) if wanted else None
@@ -614,8 +702,7 @@ class Master:
         loop copies them.
         """
         self._check_running()
-        if steps < 0:
-            raise CosimError(f"number of steps must be >= 0, got {steps}")
+        self._check_steps(steps)
         if block < 1:
             raise CosimError(f"block must be >= 1 step, got {block}")
         wanted = steps >= COMPILED_MIN_STEPS if compiled is None else compiled
@@ -696,8 +783,7 @@ class Master:
         the stretch with step k.
         """
         self._check_running()
-        if steps < 0:
-            raise CosimError(f"number of steps must be >= 0, got {steps}")
+        self._check_steps(steps)
         most = tables.record_block or block  # recorded: the rows the tables hold
         if not 1 <= block <= most:
             raise CosimError(f"block must be 1 to {max(1, most)} steps, got {block}")
@@ -718,6 +804,13 @@ class Master:
             if before_block is not None:
                 before_block()
             count = 1 if finish_step else min(block, end - k)
+            tail = self._tail_from is not None and k >= self._tail_from
+            if tail:  # steps cut at the stop time go one at a time, with their step sizes
+                count = 1
+                for i in stepping:
+                    tables.step_sizes[i] = self.step_seconds(k, periods[i])
+            elif self._tail_from is not None:
+                count = min(count, self._tail_from - k)
             code, k, position, failed, call, status, kind = tables.run(
                 k, count, position, start_ns, h_ns, jacobi
             )
@@ -766,7 +859,7 @@ class Master:
                         if gather is not None:
                             gather()
                             component.push_inputs()
-                        component.do_step((start_ns + k * h_ns) / NS_PER_S, period * h_ns / NS_PER_S)
+                        component.do_step((start_ns + k * h_ns) / NS_PER_S, self.step_seconds(k, period))
                         component.get_outputs()
                     except CosimError as error:
                         self.failure = error
@@ -812,18 +905,20 @@ class Master:
         h_ns = self.system.macro_step_ns
         start_ns = self.start_time_ns
         jacobi = self.system.mode == "jacobi"
+        tail_from = self._tail_from
         first = k = self.step_index
         try:
             for k in range(first, first + steps):
                 t = (start_ns + k * h_ns) / NS_PER_S
+                tail = tail_from is not None and k >= tail_from  # steps cut at the stop time
                 if jacobi:
                     due = [entry for entry in steppers if k % entry[0] == 0]
                     for _, _, gather, push, _, _ in due:
                         if gather is not None:
                             gather()
                             push()
-                    for _, h, _, _, do_step, get_outputs in due:
-                        do_step(t, h)
+                    for period, h, _, _, do_step, get_outputs in due:
+                        do_step(t, self.step_seconds(k, period) if tail else h)
                         get_outputs()
                 else:
                     for period, h, gather, push, do_step, get_outputs in steppers:
@@ -831,7 +926,7 @@ class Master:
                             if gather is not None:
                                 gather()
                                 push()
-                            do_step(t, h)
+                            do_step(t, self.step_seconds(k, period) if tail else h)
                             get_outputs()
                 if callback is not None:
                     self.step_index = k + 1

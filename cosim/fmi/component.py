@@ -770,8 +770,15 @@ class FmuComponent(Component):
             status = getattr(error, "status", 3)
             self._fail(int(status), function)
 
-    def setup(self, t0: float, parameters: Mapping[str, float]) -> None:
+    def setup(self, t0: float, parameters: Mapping[str, float], stop_time: float | None = None) -> None:
         self._require("setup", State.INSTANTIATED)
+        self.t0 = float(t0)
+        self.stop_time = None if stop_time is None else float(stop_time)
+        # The experiment before the values, as libcosim and ecos order them: an FMU may reset its
+        # variables to their start values in fmi2SetupExperiment (20-sim's do), and the values set
+        # after it must stay. FMI 1.0 and 3.0 take the times when initialisation starts.
+        if self.fmi_version == 2:
+            self._call_lifecycle("setupExperiment", None, self.t0, self.stop_time)
         values = dict(self.default_parameters)
         values.update(parameters)
         names = [p.name for p in (*self.parameters, *self.text_parameters)]
@@ -803,9 +810,7 @@ class FmuComponent(Component):
             self._fail(3, "fmiSetString/fmiSetBinary (parameters)")
         if self.text_inputs:
             self._send_text()
-        self.t0 = float(t0)
-        if self.fmi_version == 2:
-            self._call_lifecycle("setupExperiment", None, self.t0)
+        self._initializing = False
         self.state = State.SET_UP
 
     def _check_structural(self, key: str, variable, fmi_type: str, value: float) -> None:
@@ -853,15 +858,24 @@ class FmuComponent(Component):
     def _count(self, n: int) -> tuple[int, ...]:
         return () if self.fmi_version < 3 else (n,)
 
+    def enter_initialization(self) -> None:
+        """Enter initialization mode (FMI 3.0 with the start and stop times); FMI 1.0 has none: its
+        inputs pushed before `initialize` are the initial values."""
+        self._require("enter_initialization", State.SET_UP)
+        if self._initializing:
+            return
+        if self.fmi_version == 2:
+            self._call_lifecycle("enterInitializationMode")
+        elif self.fmi_version == 3:
+            self._call_lifecycle("enterInitializationMode", None, self.t0, self.stop_time)
+        self._initializing = True
+
     def initialize(self) -> None:
         self._require("initialize", State.SET_UP)
+        self.enter_initialization()
         if self.fmi_version == 1:  # no initialization mode: fmiInitializeSlave(tStart, stopDefined, tStop)
-            self._call_lifecycle("initialize", self.t0, None)
-        elif self.fmi_version == 2:
-            self._call_lifecycle("enterInitializationMode")
+            self._call_lifecycle("initialize", self.t0, self.stop_time)
         else:
-            self._call_lifecycle("enterInitializationMode", None, self.t0)
-        if self.fmi_version > 1:
             self._call_lifecycle("exitInitializationMode")
         self.state = State.STEPPING
         self._install_fast_path()

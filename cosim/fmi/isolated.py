@@ -112,6 +112,7 @@ MAX_PACKET = 1 << 16
 # Host -> child commands (first byte of a datagram; JSON arguments follow where needed).
 STEP, STEP_PUSHED = b"s", b"S"  # doStep (after sending the inputs), then get the outputs
 INSTANTIATE, SETUP, INITIALIZE, RESTRICT, TERMINATE, FREE = b"I", b"U", b"N", b"R", b"T", b"F"
+EXCHANGE = b"X"  # send the inputs and get the outputs, no step (initialisation's second pass)
 # Child -> host: OK alone, or ERROR + the component's state (one byte) + the message (UTF-8).
 OK, ERROR = b"\x00", b"\x01"
 # Either way: "look at the shared header" (a wake-up for a sleeping peer; may be stale: ignored).
@@ -396,7 +397,7 @@ class IsolatedFmuComponent(Component):
         return {
             CALL_STEP: f"fmi{v}DoStep",
             CALL_INSTANTIATE: f"fmi{v}Instantiate",
-            CALL_SETUP: f"fmi{v}Set* of the parameters" + (" / fmi2SetupExperiment" if v == 2 else ""),
+            CALL_SETUP: ("fmi2SetupExperiment / " if v == 2 else "") + f"fmi{v}Set* of the parameters",
             CALL_INITIALIZE: f"fmi{v}EnterInitializationMode / fmi{v}ExitInitializationMode",
             CALL_TERMINATE: f"fmi{v}Terminate",
             CALL_FREE: f"fmi{v}FreeInstance",
@@ -411,10 +412,11 @@ class IsolatedFmuComponent(Component):
         self._exchange(INSTANTIATE, "instantiate")
         self.state = State.INSTANTIATED
 
-    def setup(self, t0: float, parameters: Mapping[str, float]) -> None:
+    def setup(self, t0: float, parameters: Mapping[str, float], stop_time: float | None = None) -> None:
         self._require("setup", State.INSTANTIATED)
         self._time = float(t0)
-        arguments = {"t0": float(t0), "parameters": dict(parameters), "push": self._push_pending}
+        arguments = {"t0": float(t0), "parameters": dict(parameters), "stop_time": stop_time}
+        arguments["push"] = self._push_pending
         self._push_pending = False
         self._exchange(SETUP + json.dumps(arguments).encode(), "setup")
         self.t0 = float(t0)
@@ -548,6 +550,9 @@ class IsolatedFmuComponent(Component):
     def get_outputs(self) -> np.ndarray:
         if self.state is not State.STEPPING:
             self._require("get_outputs", State.STEPPING)
+        if self._push_pending:  # inputs pushed after the last step: their outputs, without a step
+            self._push_pending = False
+            self._exchange(EXCHANGE, "get_outputs")
         return self.output_buffer  # the child has written them at the end of its step
 
     def terminate(self) -> None:

@@ -143,13 +143,20 @@ def serve(fd: int, memory: mmap.mmap) -> int:
                     call.value = protocol.CALL_SET
                     component.push_inputs()
                 call.value = protocol.CALL_SETUP
-                component.setup(arguments["t0"], arguments["parameters"])
+                component.setup(arguments["t0"], arguments["parameters"], arguments["stop_time"])
             elif command == protocol.INITIALIZE:
+                call.value = protocol.CALL_INITIALIZE
+                component.enter_initialization()  # the inputs below are initial values
                 if argument == b"1":
                     call.value = protocol.CALL_SET
                     component.push_inputs()
                 call.value = protocol.CALL_INITIALIZE
                 component.initialize()
+                call.value = protocol.CALL_GET
+                component.get_outputs()
+            elif command == protocol.EXCHANGE:
+                call.value = protocol.CALL_SET
+                component.push_inputs()
                 call.value = protocol.CALL_GET
                 component.get_outputs()
             elif command == protocol.RESTRICT:

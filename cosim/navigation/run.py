@@ -114,6 +114,7 @@ class _Recording:
 
     def __init__(self, built: BuiltRun, master: Master, recorder) -> None:
         self.recorder = recorder
+        self.stop_ns = master.stop_time_ns  # a last step cut short ends there, and so does its pose
         system = built.system
         self.entries = []
         self.entry_ports = []  # per entry: (component, scalar input slots, output slots)
@@ -245,7 +246,7 @@ class _Recording:
             _, v_buffer, index_v, omega_buffer, index_omega = command
             recorder.write_cmd_vel(t_ns, v_buffer.item(index_v), omega_buffer.item(index_omega))
         if (k + 1) % self.pose_steps == 0:
-            self.write_pose(t_ns + h_ns)
+            self.write_pose(min(t_ns + h_ns, self.stop_ns))
 
 
 def _run_view(buffer: np.ndarray, slots: list[int]) -> np.ndarray | None:
@@ -330,7 +331,7 @@ def _build_and_run(
     from cosim.record.recorder import Recorder
 
     built = build_run(scenario)
-    master = Master(built.system, parameters=built.parameters)
+    master = Master(built.system, parameters=built.parameters, stop_time=scenario.stop_time)
     try:
         master.initialize()
     except CosimError as error:
@@ -390,7 +391,7 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     recording.write_constant(master.start_time_ns)
     recording.write_pose(0)
     h_ns = system.macro_step_ns
-    total_steps = round(scenario.stop_time * NS_PER_S / h_ns)
+    total_steps = master.steps_to_stop  # the last one ends at the stop time
     # Build (or load) the C kernels that would first run inside the loop, so the real-time factor
     # measures the simulation, not a first run's compilation.
     monitor.world.distance(*scenario.start[:2])
@@ -419,7 +420,8 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
         recording.after_step(k, t_ns, h_ns)
         if mode_steps and k % mode_steps == 0:
             monitor.check_mode(mode_buffer.item(mode_index), mode_period)
-        reason = monitor.check_position((t_ns + h_ns) / NS_PER_S, x_item(index_x), y_item(index_y))
+        end_ns = min(t_ns + h_ns, master.stop_time_ns)  # (a last step cut short ends at the stop time)
+        reason = monitor.check_position(end_ns / NS_PER_S, x_item(index_x), y_item(index_y))
         return finish_checks(k, reason)
 
     def finish_checks(k: int, reason: str | None, before_write=None) -> str | None:
@@ -955,7 +957,8 @@ class _BlockRecording:
         (i, column_x), (j, column_y) = self.pose_columns[:2]
         xs = self._values(i, column_x, first, end, before[i])
         ys = self._values(j, column_y, first, end, before[j])
-        times = [(start_ns + (k + 1) * h_ns) / NS_PER_S for k in range(first, end)]
+        stop_ns = self.recording.stop_ns
+        times = [min(start_ns + (k + 1) * h_ns, stop_ns) / NS_PER_S for k in range(first, end)]
         index, reason = self.monitor.check_positions(times, xs, ys)
         if reason is not None and (index != end - first - 1 or not clean):
             raise RuntimeError(
@@ -1043,7 +1046,8 @@ class _BlockRecording:
             else:
                 for column, (i, where_) in enumerate(self.command_columns, start=3):
                     values[:, column] = self.buffers[i][self._latest(i, steps), where_]
-            poses = (steps * slots + self.pose_slot, start_ns + (steps + 1) * h_ns, values)
+            ends = np.minimum(start_ns + (steps + 1) * h_ns, self.recording.stop_ns)
+            poses = (steps * slots + self.pose_slot, ends, values)
         other = None
         if others:
             other = (

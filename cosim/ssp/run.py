@@ -1,10 +1,12 @@
 """`cosim run SYSTEM.ssp`: run an SSP 1.0 or 2.0 archive and log every component's variables.
 
 An SSP that navcosim exported runs as the scenario it came from (`cosim.ssp.export`).
-In any other, the FMU components and connections of the SSD are stepped by the master from the start to the
-stop time, with every scalar input and output of each component on `/signals/<component>` at each
-of its steps, each value stamped at the time it holds (inputs applied at t, outputs at t, a last
-record with the final outputs at the end; the convention of `cosim.navigation.run`).
+In any other, the FMU components and connections of the SSD are stepped by the master from the
+start to the stop time (which the FMUs are told; a stop time that is no whole number of macro
+steps after the start ends with a shorter step), with every scalar input and output of each
+component on `/signals/<component>` at each of its steps, each value stamped at the time it holds
+(inputs applied at t, outputs at t, a last record with the final outputs at the end; the
+convention of `cosim.navigation.run`).
 
 Overrides: `--set simulation.stop_time=S`, `simulation.macro_step=S`, `simulation.start_time=S`,
 `simulation.master=gauss-seidel|jacobi` take precedence over the file (for the macro step, over
@@ -24,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from cosim.core import interrupt
-from cosim.core.master import COMPILED_MIN_STEPS, MODES, Master, due_from, seconds_to_ns
+from cosim.core.master import COMPILED_MIN_STEPS, MODES, Master, due_from
 from cosim.errors import CosimError, SimulationEnded
 from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
 from cosim.scenario.load import DEFAULT_LOG_PATTERN
@@ -135,7 +137,7 @@ def run_ssp(
 
 def _run_fmus(ssp: SspSystem, run: Experiment, out_path: Path | None, force: bool) -> SspRunResult:
     system, parameters = build_system(ssp, run.macro_step, run.master)
-    master = Master(system, start_time=run.start_time, parameters=parameters)
+    master = Master(system, start_time=run.start_time, parameters=parameters, stop_time=run.stop_time)
     try:
         master.initialize()
     except CosimError as error:
@@ -163,7 +165,7 @@ def _record(
         master.close()
         raise
     h_ns = system.macro_step_ns
-    total = round((seconds_to_ns(run.stop_time, "stop time") - master.start_time_ns) / h_ns)
+    total = master.steps_to_stop  # the last one shorter where the stop is no whole number of steps
     wall_start = time.perf_counter()
     failure = None
     ended = None  # an FMU's request to end the run

@@ -12,7 +12,10 @@ The run ends at the stop time, or where the FMU asks to end it (`SimulationEnded
 
 Defaults are fmpy's: the start time is the DefaultExperiment's startTime, else 0; the stop time its
 stopTime, else 1 s after the start; the step its stepSize, else the power of ten nearest to a
-thousandth of the run (10 ** (round(log10(stop - start)) - 3) s, fmpy's rule).
+thousandth of the run (10 ** (round(log10(stop - start)) - 3) s, fmpy's rule). A stop time that
+is no whole number of steps after the start ends with a shorter step, as fmpy does, for an FMU that
+can take variable steps (canHandleVariableCommunicationStepSize; a Model Exchange FMU always can);
+the FMU is told the stop time.
 
 The log (`/signals/<name>`, every input and output, stamped as `cosim.record.recorder` says: the
 record at t holds the outputs at t, the first the outputs after initialisation) names the FMU's
@@ -68,7 +71,9 @@ class Simulation:
 
     @property
     def steps(self) -> int:
-        return round((self.stop_time - self.start_time) / self.step)
+        """Steps to the stop time, the last shorter where the stop is no whole number of steps."""
+        span_ns = seconds_to_ns(self.stop_time, "stop time") - seconds_to_ns(self.start_time, "start time")
+        return -(-span_ns // seconds_to_ns(self.step, "step"))
 
 
 @dataclass
@@ -161,7 +166,8 @@ def prepare(
         raise CosimError(f"{path}: the FMU has no <CoSimulation> interface; --interface cs cannot run it")
     name = component_name(description.modelName or path.stem)
     layout = fmu_layout(path, name)
-    start, stop, h = _experiment(description, start_time, stop_time, step)
+    variable_step = interface == "me" or description.coSimulation.canHandleVariableCommunicationStepSize
+    start, stop, h = _experiment(description, start_time, stop_time, step, variable_step)
     parameters, held, held_text = _split_start_values(path, description, layout, start_values or {})
     inputs = tuple(port.name for port in layout.inputs)
     feedthrough = {port.name: layout.feedthrough.get(port.name, inputs) for port in layout.outputs}
@@ -192,8 +198,10 @@ def component_name(model_name: str) -> str:
     return name if name and not name[0].isdigit() else f"fmu_{name}"
 
 
-def _experiment(description, start_time, stop_time, step) -> tuple[float, float, float]:
-    """Start, stop and step [s]: the options, else the DefaultExperiment, else fmpy's defaults."""
+def _experiment(description, start_time, stop_time, step, variable_step: bool) -> tuple[float, float, float]:
+    """Start, stop and step [s]: the options, else the DefaultExperiment, else fmpy's defaults. A
+    stop time that is no whole number of steps after the start takes a shorter last step, which an
+    FMU without canHandleVariableCommunicationStepSize cannot take."""
     experiment = description.defaultExperiment
 
     def default(option, attribute: str):
@@ -218,11 +226,13 @@ def _experiment(description, start_time, stop_time, step) -> tuple[float, float,
     h_ns = seconds_to_ns(h, "--step")
     span_ns = seconds_to_ns(stop, "--stop-time") - seconds_to_ns(start, "--start-time")
     steps, rest = divmod(span_ns, h_ns)
-    if rest:
+    if rest and not variable_step:
         raise CosimError(
             f"--stop-time {stop:g} s is not a whole number of --step {h:g} s steps after the start "
-            f"time {start:g} s ({span_ns / h_ns:.6g} steps)"
+            f"time {start:g} s ({span_ns / h_ns:.6g} steps), and the FMU cannot take a shorter last "
+            "step (no canHandleVariableCommunicationStepSize)"
         )
+    steps += rest > 0
     if steps > MAX_STEPS:
         raise CosimError(f"{steps} steps of {h:g} s: more than {MAX_STEPS}; give a larger --step")
     return start, stop, h
@@ -324,7 +334,10 @@ def simulate(
         system = System(simulation.step)
         system.add(component)
         master = Master(
-            system, start_time=simulation.start_time, parameters={described.name: described.parameters}
+            system,
+            start_time=simulation.start_time,
+            parameters={described.name: described.parameters},
+            stop_time=simulation.stop_time,
         )
         try:
             master.initialize()
@@ -385,7 +398,8 @@ def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: b
             times = master.start_time_ns + (first + np.arange(len(rows))) * h_ns
             recorder.hold_signal_rows([(channel, times, rows)])
             if csv is not None:
-                csv.write(times + h_ns, rows[:, len(component.inputs) :])  # outputs at each step's end
+                # Outputs at each step's end (the last ends at the stop time).
+                csv.write(np.minimum(times + h_ns, master.time_ns), rows[:, len(component.inputs) :])
             now = time.perf_counter()
             if bar is not None and now - shown[0] >= PROGRESS_INTERVAL:
                 shown[0] = now
