@@ -654,14 +654,27 @@ class FmuComponent(Component):
             text = message.decode(errors="replace") if isinstance(message, bytes) else str(message)
             self.log_messages.append(" ".join(text.split()))
 
+    def unpack(self) -> None:
+        """Extract the archive into the instance's own folder (`instantiate()` does it if not done):
+        what the instance can use, its binaries and resources (not sources/ or documentation/)."""
+        self._require("unpack", State.CREATED)
+        if self._unzip_dir is not None:
+            return
+        self._unzip_dir = tempfile.mkdtemp(prefix=f"navcosim-{self.name}-")
+        try:
+            fmpy.extract(str(self.path), unzipdir=self._unzip_dir, include=_needed_at_run_time)
+        except Exception as error:
+            self._discard_files()
+            detail = " ".join(str(error).split())[:300]
+            what = f"FMU '{self.path}' (component '{self.name}')"
+            raise CosimError(f"{what} cannot be unpacked: {detail}") from None
+
     def instantiate(self) -> None:
         self._require("instantiate", State.CREATED)
-        self._unzip_dir = tempfile.mkdtemp(prefix=f"navcosim-{self.name}-")
+        self.unpack()
         description = self.model_description
         work_dir = os.getcwd()
         try:
-            # What the instance can use: its binaries and resources (not sources/ or documentation/).
-            fmpy.extract(str(self.path), unzipdir=self._unzip_dir, include=_needed_at_run_time)
             slave_class = self._FMPY_CLASSES[self.fmi_version]
             guid = description.guid if self.fmi_version < 3 else description.instantiationToken
             self._slave = slave_class(
