@@ -438,6 +438,7 @@ class IsolatedFmuComponent(Component):
         self.state = State.FAILED
         if isinstance(reply, BlockingIOError):
             child.kill()
+            shutil.rmtree(child.folder, ignore_errors=True)
             if call == CALL_NAMES_UNPACK:
                 limit, setting = f"{timeout or UNPACK_TIMEOUT:g} s", "its own limit, not fmu_timeout"
             else:
@@ -447,6 +448,7 @@ class IsolatedFmuComponent(Component):
                 f"({setting}); its process was killed"
             )
         returncode = child.reap()
+        shutil.rmtree(child.folder, ignore_errors=True)  # what it unpacked: it is gone
         if returncode < 0:
             number = -returncode
             try:
