@@ -65,6 +65,7 @@ from fmpy.model_description import ModelVariable
 
 from cosim.core.component import Component, NativeStep, Port, State, check_unique_ports, closest_names
 from cosim.errors import CosimError, SimulationEnded
+from cosim.fmi import exit_guard
 from cosim.fmi.archive import check_unpacked_size
 from cosim.fmi.builtin import documented_nan_variables
 from cosim.fmi.text import TEXT_TYPES, TextPort, TextTransfer, check_text, text_start
@@ -672,6 +673,7 @@ class FmuComponent(Component):
     def instantiate(self) -> None:
         self._require("instantiate", State.CREATED)
         self.unpack()
+        exit_guard.watch(self)  # an exit() inside the FMU from now on ends the run as failed
         description = self.model_description
         work_dir = os.getcwd()
         try:
@@ -690,6 +692,7 @@ class FmuComponent(Component):
             else:
                 self._slave.instantiate(logMessage=self._log)
         except Exception as error:
+            exit_guard.release(self)
             self._discard_files()
             detail = (
                 f": {self.log_messages[-1]}" if self.log_messages else f": {' '.join(str(error).split())}"
@@ -1023,6 +1026,7 @@ class FmuComponent(Component):
                     pass
         self.state = State.FREED
         _LOG_TARGETS.pop(id(self), None)
+        exit_guard.release(self)
         self._discard_files()
 
     def _discard_files(self) -> None:

@@ -24,6 +24,7 @@ import sys
 import time
 
 from cosim.errors import CosimError
+from cosim.fmi import exit_guard
 from cosim.fmi import isolated as protocol
 from cosim.fmi.component import FmuComponent
 from cosim.fmi.model_exchange import fmu_component
@@ -214,6 +215,7 @@ def serve(fd: int, memory: mmap.mmap) -> int:
 
 def main(argv: list[str]) -> int:
     fd, memory_fd, parent, limit = (int(value) for value in argv)
+    exit_guard.enabled = False  # an exit() in the FMU ends this process with its status: the host says so
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the host decides how a run ends
     _die_with(parent)
     memory = mmap.mmap(memory_fd, 0)
