@@ -95,6 +95,7 @@ import cosim
 from cosim.core.component import Component, State
 from cosim.core.interrupt import Interrupted, abandonable
 from cosim.errors import CosimError
+from cosim.fmi.archive import mib
 from cosim.fmi.model_exchange import fmu_component
 from cosim.fmi.types import TRANSFER_TYPES
 
@@ -150,10 +151,11 @@ CALL_INSTANTIATE, CALL_SETUP, CALL_INITIALIZE, CALL_TERMINATE, CALL_FREE, CALL_L
 CALL_UNPACK = 10
 
 
-def memory_text(size: float) -> str:
-    """A byte count as the setting reads: '2 GiB', '300 MiB', '1.5 GiB'."""
-    mib = size / (1 << 20)
-    return f"{mib / 1024:.3g} GiB" if mib >= 1024 else f"{mib:.3g} MiB"
+def memory_text(size: int) -> str:
+    """An amount of memory [bytes] for a message: '2 GiB', '1.93 GiB', '300 MiB'."""
+    if size >= 1 << 30:
+        return f"{size >> 30} GiB" if size % (1 << 30) == 0 else f"{size / (1 << 30):.2f} GiB"
+    return mib(size)
 
 
 CALL_NAMES_UNPACK = "unpacking the FMU archive"
