@@ -119,6 +119,7 @@ W_HOST_ASLEEP = 9  # host: 1 while it may block in read for the reply (wake it w
 W_CHILD_ASLEEP = 10  # child: 1 while it may block in read for a request (wake it with HINT)
 W_CHILD_SPIN = 11  # host: how long the child polls W_REQUEST after a step [ns]
 W_PREPARE = 12  # host: "your request comes next": poll for it this long [ns], giving the core away
+W_PEAK = 14  # child: its peak resident memory [KiB] when it sent an error under a memory limit
 W_UNTOUCHED = 15  # child: data not resident when it set its memory limit [KiB]
 HEADER_WORDS = BUFFERS_OFFSET // 4
 MAX_PACKET = 1 << 16
@@ -432,7 +433,9 @@ class IsolatedFmuComponent(Component):
             message = reply[2:].decode(errors="replace")
             if reply[:1] == OUT_OF_MEMORY:  # the call the child was in, then the message
                 call, message = self._call_name(reply[2], what), reply[3:].decode(errors="replace")
-            peak = _resident_peak(child.process.pid) if self.max_memory is not None else None
+            peak = None
+            if self.max_memory is not None:  # the child's own figure: it may have ended since
+                peak = max(self._header[W_PEAK] * 1024, _resident_peak(child.process.pid) or 0) or None
             if reply[:1] == OUT_OF_MEMORY or self._near_memory_limit(peak):
                 who = f"{model}, process {child.process.pid})"
                 raise CosimError(self._over_memory(who, call, when, peak, message))

@@ -40,7 +40,33 @@ def _die_with(parent: int) -> None:
         os._exit(1)
 
 
+_limited: list = [None]  # the shared header while a memory limit is set (`_record_peak`)
+
+
+def _status(*keys: str) -> dict[str, int]:
+    """Fields of /proc/self/status [KiB]."""
+    values = {}
+    with open("/proc/self/status") as status:
+        for line in status:
+            key, _, rest = line.partition(":")
+            if key in keys:
+                values[key] = int(rest.split()[0])
+    return values
+
+
+def _record_peak() -> None:
+    """Before an error reply under a memory limit: the peak resident memory, for the host's verdict
+    (the child may be gone before the host can look)."""
+    header = _limited[0]
+    if header is not None:
+        try:
+            header[protocol.W_PEAK] = _status("VmHWM").get("VmHWM", 0)
+        except (OSError, MemoryError, ValueError):
+            pass
+
+
 def _error(component: FmuComponent | None, message: str) -> bytes:
+    _record_peak()
     state = component.state if component is not None else 0
     return protocol.ERROR + bytes([int(state)]) + message.encode(errors="replace")[: protocol.MAX_PACKET - 2]
 
@@ -51,6 +77,7 @@ def _bug(component: FmuComponent, error: Exception) -> bytes:
 
 def _out_of_memory(component: FmuComponent | None, call: int) -> bytes:
     """The reply to a MemoryError (the memory limit): the host words the message."""
+    _record_peak()
     state = component.state if component is not None else 0
     return protocol.OUT_OF_MEMORY + bytes([int(state), call]) + b"MemoryError (an allocation failed)"
 
@@ -62,14 +89,10 @@ def _limit_memory(limit: int, header) -> None:
         return
     import resource
 
-    values = {}
-    with open("/proc/self/status") as status:
-        for line in status:
-            key, _, rest = line.partition(":")
-            if key in ("VmData", "RssAnon"):
-                values[key] = int(rest.split()[0])
+    values = _status("VmData", "RssAnon")
     header[protocol.W_UNTOUCHED] = max(0, values.get("VmData", 0) - values.get("RssAnon", 0))
     resource.setrlimit(resource.RLIMIT_DATA, (limit, limit))
+    _limited[0] = header
 
 
 def serve(fd: int, memory: mmap.mmap) -> int:

@@ -105,6 +105,19 @@ def test_an_fmu_that_fails_far_below_the_limit_is_a_plain_crash():
     assert "fmu_max_memory" not in str(error.value) and "crashed with signal 11" in str(error.value)
 
 
+def test_a_limit_below_what_the_child_needs_to_load_the_fmu_is_named():
+    """60 MiB: less data than the child's Python already has mapped (about 100 MiB), so loading
+    the description's parser fails; the failure says which limit it was."""
+    vehicle = IsolatedFmuComponent(fixture_fmu("diffdrive_fmi2"), "vehicle", max_memory=60 * MIB)
+    with pytest.raises(CosimError) as error:
+        vehicle.instantiate()
+    vehicle.free()
+    assert re.match(
+        r"FMU 'vehicle' \(model fixture_diffdrive_fmi2, process \d+\) exceeded fmu_max_memory \(60 MiB\) in ",
+        str(error.value),
+    ), str(error.value)
+
+
 def test_a_bad_memory_limit_is_refused():
     with pytest.raises(CosimError, match=r"component 'vehicle': FMU memory limit must be > 0 bytes, got 0"):
         IsolatedFmuComponent(fixture_fmu("diffdrive_fmi2"), "vehicle", max_memory=0)
