@@ -62,7 +62,9 @@ simulation time; the component is then FAILED and the child gone):
   raises MemoryError). A MemoryError in the child, or a failure or death of the child whose peak
   resident memory (the kernel's ru_maxrss / VmHWM) came within the child's untouched data (what
   counts against RLIMIT_DATA but is not resident, measured when the limit was set) plus
-  MEMORY_MARGIN of the limit, reads "exceeded fmu_max_memory (2 GiB)" with that peak.
+  MEMORY_MARGIN of the limit, reads "exceeded fmu_max_memory (2 GiB)" with that peak. (Linux
+  keeps ru_maxrss across execve, so a dead child's ru_maxrss is its own peak only above the host's
+  resident size when it was started, which the child records: a host that large hides it.)
 Unpacking the archive is a call of its own (UNPACK_TIMEOUT, not `timeout`): a large FMU is not
 reported as an fmi2Instantiate that did not return. Every child unpacks into a folder the host
 made (its TMPDIR), which the host removes once the child has ended, however it ended.
@@ -119,6 +121,7 @@ W_HOST_ASLEEP = 9  # host: 1 while it may block in read for the reply (wake it w
 W_CHILD_ASLEEP = 10  # child: 1 while it may block in read for a request (wake it with HINT)
 W_CHILD_SPIN = 11  # host: how long the child polls W_REQUEST after a step [ns]
 W_PREPARE = 12  # host: "your request comes next": poll for it this long [ns], giving the core away
+W_INHERITED = 13  # child: its ru_maxrss when it set its memory limit [KiB] (the host's, from exec)
 W_PEAK = 14  # child: its peak resident memory [KiB] when it sent an error under a memory limit
 W_UNTOUCHED = 15  # child: data not resident when it set its memory limit [KiB]
 HEADER_WORDS = BUFFERS_OFFSET // 4
@@ -466,8 +469,11 @@ class IsolatedFmuComponent(Component):
         last_line = next((line for line in reversed(child.stderr_text().splitlines()) if line.strip()), "")
         detail = f"; its stderr: {' '.join(last_line.split())[:300]}" if last_line else ""
         who = f"{model}, process {child.process.pid})"
-        if self._near_memory_limit(child.peak):
-            raise CosimError(self._over_memory(who, call, when, child.peak, what_happened) + detail)
+        # ru_maxrss is the child's own peak only above what exec handed down (the host's size).
+        inherited = self._header[W_INHERITED] * 1024
+        peak = child.peak if child.peak is not None and child.peak > inherited else None
+        if self._near_memory_limit(peak):
+            raise CosimError(self._over_memory(who, call, when, peak, what_happened) + detail)
         raise CosimError(f"{who} {what_happened} in {call}{when}{detail}")
 
     def _near_memory_limit(self, peak: int | None) -> bool:

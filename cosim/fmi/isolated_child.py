@@ -91,6 +91,8 @@ def _limit_memory(limit: int, header) -> None:
 
     values = _status("VmData", "RssAnon")
     header[protocol.W_UNTOUCHED] = max(0, values.get("VmData", 0) - values.get("RssAnon", 0))
+    # Linux keeps ru_maxrss across execve: the host's resident size when it started this process.
+    header[protocol.W_INHERITED] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     resource.setrlimit(resource.RLIMIT_DATA, (limit, limit))
     _limited[0] = header
 
