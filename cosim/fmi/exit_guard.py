@@ -39,13 +39,10 @@ _key = ctypes.c_char()  # its address is the handler's key (__cxa_atexit's dso_h
 _HANDLER = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_int)
 
 
-class _DlInfo(ctypes.Structure):
-    _fields_ = [
-        ("dli_fname", ctypes.c_char_p),
-        ("dli_fbase", ctypes.c_void_p),
-        ("dli_sname", ctypes.c_char_p),
-        ("dli_saddr", ctypes.c_void_p),
-    ]
+# glibc's Dl_info, four pointers: dli_fname (the shared object's path), dli_fbase, dli_sname (the
+# nearest symbol's name), dli_saddr.
+_DL_INFO = ctypes.c_void_p * 4
+_FNAME, _SNAME = 0, 2
 
 
 def _libc():
@@ -54,7 +51,7 @@ def _libc():
     libc.__cxa_finalize.argtypes = (ctypes.c_void_p,)
     libc.__cxa_finalize.restype = None
     libc.backtrace.argtypes = (ctypes.POINTER(ctypes.c_void_p), ctypes.c_int)
-    libc.dladdr.argtypes = (ctypes.c_void_p, ctypes.POINTER(_DlInfo))
+    libc.dladdr.argtypes = (ctypes.c_void_p, ctypes.POINTER(_DL_INFO))
     return libc
 
 
@@ -102,20 +99,21 @@ def _culprit() -> tuple[object | None, str]:
     frames = (ctypes.c_void_p * 256)()
     count = _LIBC.backtrace(frames, len(frames))
     found, function = None, ""
-    info = _DlInfo()
+    info = _DL_INFO()
     for address in frames[:count]:
         # address - 1: inside the call instruction (after a call of exit(), which does not return,
         # the return address may already be the next function's first byte).
-        if not address or not _LIBC.dladdr(address - 1, ctypes.byref(info)) or not info.dli_fname:
+        if not address or not _LIBC.dladdr(address - 1, ctypes.byref(info)) or not info[_FNAME]:
             continue
-        library = os.path.realpath(os.fsdecode(info.dli_fname))
+        library = os.path.realpath(os.fsdecode(ctypes.string_at(info[_FNAME])))
         owner = next((c for folder, c in folders.items() if library.startswith(folder)), None)
         if owner is None:
             if found is not None:
                 break  # past the FMU's outermost frame
             continue
         found = owner
-        function = info.dli_sname.decode(errors="replace") if info.dli_sname else function
+        if info[_SNAME]:
+            function = ctypes.string_at(info[_SNAME]).decode(errors="replace")
     return found, function
 
 
@@ -157,7 +155,11 @@ def _exited(_argument, status: int) -> None:
         os._exit(FAILED)
 
 
-_LIBC = _libc()
-_handler = _HANDLER(_exited)  # kept alive for the life of the process
-atexit.register(_disarm)
-os.register_at_fork(after_in_child=_disarm)
+try:
+    _LIBC = _libc()
+except (AttributeError, OSError):  # not glibc-like: exit() is not watched
+    enabled = False
+else:
+    _handler = _HANDLER(_exited)  # kept alive for the life of the process
+    atexit.register(_disarm)
+    os.register_at_fork(after_in_child=_disarm)

@@ -162,9 +162,6 @@ def memory_text(size: int) -> str:
     return mib(size)
 
 
-CALL_NAMES_UNPACK = "unpacking the FMU archive"
-
-
 def _resident_peak(pid: int) -> int | None:
     """The peak resident memory [bytes] of a running process (VmHWM), or None."""
     try:
@@ -374,6 +371,7 @@ class IsolatedFmuComponent(Component):
         self._finalizer = weakref.finalize(self, self._child.close)
         self._fd = host_end.fileno()
         _set_receive_timeout(host_end, SLICE)
+        self._call.value = CALL_LOAD  # the child's first job; it records its calls from then on
         try:
             process.stdin.write(json.dumps(self._arguments).encode())
             process.stdin.close()
@@ -383,6 +381,7 @@ class IsolatedFmuComponent(Component):
             reply = self._receive(STARTUP_TIMEOUT)
         if reply != OK:
             self._failed(reply, "load", STARTUP_TIMEOUT)
+        self._call.value = CALL_IDLE
 
     def _receive_abandonable(self, timeout: float) -> bytes | OSError:
         """`_receive` that SIGINT/SIGTERM end (`Interrupted`; the child is killed)."""
@@ -447,7 +446,7 @@ class IsolatedFmuComponent(Component):
         if isinstance(reply, BlockingIOError):
             child.kill()
             shutil.rmtree(child.folder, ignore_errors=True)
-            if call == CALL_NAMES_UNPACK:
+            if what == "unpack":
                 limit, setting = f"{timeout or UNPACK_TIMEOUT:g} s", "its own limit, not fmu_timeout"
             else:
                 limit, setting = f"{timeout or self.timeout:g} s", "fmu_timeout"
@@ -504,7 +503,7 @@ class IsolatedFmuComponent(Component):
             CALL_TERMINATE: f"fmi{v}Terminate",
             CALL_FREE: f"fmi{v}FreeInstance",
             CALL_LOAD: "reading the model description",
-            CALL_UNPACK: CALL_NAMES_UNPACK,
+            CALL_UNPACK: "unpacking the FMU archive",
         }.get(call, f"{what} (between FMI calls)")
 
     # ---- lifecycle ---------------------------------------------------------------------------
