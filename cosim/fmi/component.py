@@ -65,6 +65,7 @@ from fmpy.model_description import ModelVariable
 
 from cosim.core.component import Component, NativeStep, Port, State, check_unique_ports, closest_names
 from cosim.errors import CosimError, SimulationEnded
+from cosim.fmi import exit_guard
 from cosim.fmi.archive import check_unpacked_size
 from cosim.fmi.builtin import documented_nan_variables
 from cosim.fmi.text import TEXT_TYPES, TextPort, TextTransfer, check_text, text_start
@@ -654,14 +655,28 @@ class FmuComponent(Component):
             text = message.decode(errors="replace") if isinstance(message, bytes) else str(message)
             self.log_messages.append(" ".join(text.split()))
 
+    def unpack(self) -> None:
+        """Extract the archive into the instance's own folder (`instantiate()` does it if not done):
+        what the instance can use, its binaries and resources (not sources/ or documentation/)."""
+        self._require("unpack", State.CREATED)
+        if self._unzip_dir is not None:
+            return
+        self._unzip_dir = tempfile.mkdtemp(prefix=f"navcosim-{self.name}-")
+        try:
+            fmpy.extract(str(self.path), unzipdir=self._unzip_dir, include=_needed_at_run_time)
+        except Exception as error:
+            self._discard_files()
+            detail = " ".join(str(error).split())[:300]
+            what = f"FMU '{self.path}' (component '{self.name}')"
+            raise CosimError(f"{what} cannot be unpacked: {detail}") from None
+
     def instantiate(self) -> None:
         self._require("instantiate", State.CREATED)
-        self._unzip_dir = tempfile.mkdtemp(prefix=f"navcosim-{self.name}-")
+        self.unpack()
+        exit_guard.watch(self)  # an exit() inside the FMU from now on ends the run as failed
         description = self.model_description
         work_dir = os.getcwd()
         try:
-            # What the instance can use: its binaries and resources (not sources/ or documentation/).
-            fmpy.extract(str(self.path), unzipdir=self._unzip_dir, include=_needed_at_run_time)
             slave_class = self._FMPY_CLASSES[self.fmi_version]
             guid = description.guid if self.fmi_version < 3 else description.instantiationToken
             self._slave = slave_class(
@@ -677,6 +692,7 @@ class FmuComponent(Component):
             else:
                 self._slave.instantiate(logMessage=self._log)
         except Exception as error:
+            exit_guard.release(self)
             self._discard_files()
             detail = (
                 f": {self.log_messages[-1]}" if self.log_messages else f": {' '.join(str(error).split())}"
@@ -1024,6 +1040,7 @@ class FmuComponent(Component):
                     pass
         self.state = State.FREED
         _LOG_TARGETS.pop(id(self), None)
+        exit_guard.release(self)
         self._discard_files()
 
     def _discard_files(self) -> None:

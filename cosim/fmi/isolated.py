@@ -56,7 +56,18 @@ simulation time; the component is then FAILED and the child gone):
 - a call did not return within `timeout` seconds: the child is killed with SIGKILL (only a
   process can stop a hung C call; threads and signals the FMU may ignore cannot);
 - an FMU error status, a non-finite output, etc. inside the child: the child's `CosimError`
-  message, verbatim.
+  message, verbatim;
+- the child went over `max_memory` ([simulation] fmu_max_memory): the child sets it as its
+  RLIMIT_DATA before it loads the FMU, so an allocation beyond it fails (malloc returns NULL, Python
+  raises MemoryError). A MemoryError in the child, or a failure or death of the child whose peak
+  resident memory (the kernel's ru_maxrss / VmHWM) came within the child's untouched data (what
+  counts against RLIMIT_DATA but is not resident, measured when the limit was set) plus
+  MEMORY_MARGIN of the limit, reads "exceeded fmu_max_memory (2 GiB)" with that peak. (Linux
+  keeps ru_maxrss across execve, so a dead child's ru_maxrss is its own peak only above the host's
+  resident size when it was started, which the child records: a host that large hides it.)
+Unpacking the archive is a call of its own (UNPACK_TIMEOUT, not `timeout`): a large FMU is not
+reported as an fmi2Instantiate that did not return. Every child unpacks into a folder the host
+made (its TMPDIR), which the host removes once the child has ended, however it ended.
 The child dies with the host (PR_SET_PDEATHSIG), ignores the terminal's Ctrl-C (the host handles
 it and ends the run cleanly), and its stderr is kept in a file whose last line is added to a
 crash message (and copied to the host's stderr on a clean end).
@@ -68,6 +79,7 @@ import ctypes
 import json
 import mmap
 import os
+import shutil
 import signal
 import socket
 import struct
@@ -85,10 +97,13 @@ import cosim
 from cosim.core.component import Component, State
 from cosim.core.interrupt import Interrupted, abandonable
 from cosim.errors import CosimError
+from cosim.fmi.archive import mib
 from cosim.fmi.model_exchange import fmu_component
 from cosim.fmi.types import TRANSFER_TYPES
 
 DEFAULT_TIMEOUT = 10.0  # [s] longest FMI call ([simulation] fmu_timeout)
+UNPACK_TIMEOUT = 600.0  # [s] for the child to unpack the archive (its size is limited before)
+MEMORY_MARGIN = 64 << 20  # [bytes] see "Failures" in the module docstring
 STARTUP_TIMEOUT = 120.0  # [s] for the child's Python to start and read the model description
 FREE_TIMEOUT = 5.0  # [s] for a child to free its instance and exit before it is killed
 
@@ -106,6 +121,9 @@ W_HOST_ASLEEP = 9  # host: 1 while it may block in read for the reply (wake it w
 W_CHILD_ASLEEP = 10  # child: 1 while it may block in read for a request (wake it with HINT)
 W_CHILD_SPIN = 11  # host: how long the child polls W_REQUEST after a step [ns]
 W_PREPARE = 12  # host: "your request comes next": poll for it this long [ns], giving the core away
+W_INHERITED = 13  # child: its ru_maxrss when it set its memory limit [KiB] (the host's, from exec)
+W_PEAK = 14  # child: its peak resident memory [KiB] when it sent an error under a memory limit
+W_UNTOUCHED = 15  # child: data not resident when it set its memory limit [KiB]
 HEADER_WORDS = BUFFERS_OFFSET // 4
 MAX_PACKET = 1 << 16
 
@@ -113,8 +131,10 @@ MAX_PACKET = 1 << 16
 STEP, STEP_PUSHED = b"s", b"S"  # doStep (after sending the inputs), then get the outputs
 INSTANTIATE, SETUP, INITIALIZE, RESTRICT, TERMINATE, FREE = b"I", b"U", b"N", b"R", b"T", b"F"
 EXCHANGE = b"X"  # send the inputs and get the outputs, no step (initialisation's second pass)
-# Child -> host: OK alone, or ERROR + the component's state (one byte) + the message (UTF-8).
-OK, ERROR = b"\x00", b"\x01"
+UNPACK = b"P"  # unpack the archive (before INSTANTIATE; timed apart, UNPACK_TIMEOUT)
+# Child -> host: OK alone, or ERROR + the component's state (one byte) + the message (UTF-8);
+# OUT_OF_MEMORY (a MemoryError in the child: its memory limit) + state + the CALL_* it was in + message.
+OK, ERROR, OUT_OF_MEMORY = b"\x00", b"\x01", b"\x02"
 # Either way: "look at the shared header" (a wake-up for a sleeping peer; may be stale: ignored).
 HINT = b"w"
 
@@ -133,6 +153,26 @@ _last: list = [None]  # weak reference to the isolated component stepped last (l
 # What the child is doing, as it records it in the shared header before each call.
 CALL_IDLE, CALL_SET, CALL_STEP, CALL_GET = 0, 1, 2, 3
 CALL_INSTANTIATE, CALL_SETUP, CALL_INITIALIZE, CALL_TERMINATE, CALL_FREE, CALL_LOAD = 4, 5, 6, 7, 8, 9
+CALL_UNPACK = 10
+
+
+def memory_text(size: int) -> str:
+    """An amount of memory [bytes] for a message: '2 GiB', '1.93 GiB', '300 MiB'."""
+    if size >= 1 << 30:
+        return f"{size >> 30} GiB" if size % (1 << 30) == 0 else f"{size / (1 << 30):.2f} GiB"
+    return mib(size)
+
+
+def _resident_peak(pid: int) -> int | None:
+    """The peak resident memory [bytes] of a running process (VmHWM), or None."""
+    try:
+        with open(f"/proc/{pid}/status") as status:
+            for line in status:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
 
 
 def shared_size(inputs: int, outputs: int) -> int:
@@ -161,15 +201,31 @@ def _set_receive_timeout(sock: socket.socket, seconds: float) -> None:
 class _Child:
     """The child process and its ends of the exchange; `close()` is also the GC finaliser."""
 
-    def __init__(self, process: subprocess.Popen, sock: socket.socket, stderr) -> None:
+    def __init__(self, process: subprocess.Popen, sock: socket.socket, stderr, folder: str) -> None:
         self.process = process
         self.sock = sock
         self.stderr = stderr
+        self.folder = folder  # its TMPDIR: the extracted FMU (removed once the child has ended)
+        self.peak: int | None = None  # its peak resident memory [bytes], once reaped
+
+    def reap(self) -> int:
+        """Wait for the child to end; return its exit status as `Popen.returncode` gives it, and keep
+        its peak resident memory (`peak`)."""
+        process = self.process
+        if process.returncode is None:
+            try:
+                _, status, usage = os.wait4(process.pid, 0)
+            except ChildProcessError:  # reaped elsewhere (Popen.poll)
+                process.wait()
+            else:
+                process.returncode = os.waitstatus_to_exitcode(status)
+                self.peak = usage.ru_maxrss * 1024
+        return process.returncode
 
     def kill(self) -> None:
-        if self.process.poll() is None:
+        if self.process.returncode is None and self.process.poll() is None:
             self.process.kill()
-        self.process.wait()
+        self.reap()
 
     def stderr_text(self) -> str:
         self.stderr.seek(0)
@@ -180,6 +236,7 @@ class _Child:
         self.kill()
         self.sock.close()
         self.stderr.close()
+        shutil.rmtree(self.folder, ignore_errors=True)
 
 
 class IsolatedFmuComponent(Component):
@@ -188,8 +245,9 @@ class IsolatedFmuComponent(Component):
 
     Args: those of `FmuComponent` (path, name, parameters, port_map, period, feedthrough_override,
     nan_outputs, max_unpacked_size), `integration` (a Model Exchange FMU's solver settings, as
-    `cosim.fmi.model_exchange.fmu_component` takes them), and `timeout`: the longest an FMI call may
-    take [s] before the child is killed and the call fails.
+    `cosim.fmi.model_exchange.fmu_component` takes them), `timeout`: the longest an FMI call may
+    take [s] before the child is killed and the call fails, and `max_memory`: the child's memory
+    limit [bytes] (RLIMIT_DATA; None: none).
     """
 
     def __init__(
@@ -204,9 +262,12 @@ class IsolatedFmuComponent(Component):
         max_unpacked_size: int | None = None,
         timeout: float = DEFAULT_TIMEOUT,
         integration: Mapping[str, object] | None = None,
+        max_memory: int | None = None,
     ) -> None:
         if not timeout > 0:
             raise CosimError(f"component '{name}': FMU timeout must be > 0 s, got {timeout}")
+        if max_memory is not None and not max_memory > 0:
+            raise CosimError(f"component '{name}': FMU memory limit must be > 0 bytes, got {max_memory}")
         self._arguments = {
             "path": str(path),  # the child starts in this working directory
             "name": name,
@@ -228,6 +289,7 @@ class IsolatedFmuComponent(Component):
         self.fmi_version = spec.fmi_version
         self.nan_outputs = spec.nan_outputs
         self.timeout = float(timeout)
+        self.max_memory = None if max_memory is None else int(max_memory)
         self._memory_fd = os.memfd_create(f"navcosim-{name}", os.MFD_CLOEXEC)
         os.ftruncate(self._memory_fd, shared_size(len(self.inputs), len(self.outputs)))
         self._memory = mmap.mmap(self._memory_fd, 0)
@@ -282,8 +344,12 @@ class IsolatedFmuComponent(Component):
             filter(None, [package_root, os.environ.get("PYTHONPATH")])
         )
         stderr = tempfile.TemporaryFile(prefix=f"navcosim-{self.name}-stderr-")
+        # The child's temporary files (the unpacked FMU) go here; the host removes it after the child.
+        folder = tempfile.mkdtemp(prefix=f"navcosim-{self.name}-process-")
+        environment["TMPDIR"] = folder
         command = [sys.executable, "-m", "cosim.fmi.isolated_child"]
         command += [str(child_end.fileno()), str(self._memory_fd), str(os.getpid())]
+        command += [str(self.max_memory or 0)]
         try:
             process = subprocess.Popen(
                 command,
@@ -296,15 +362,17 @@ class IsolatedFmuComponent(Component):
         except OSError as error:
             host_end.close()
             stderr.close()
+            shutil.rmtree(folder, ignore_errors=True)
             raise CosimError(f"FMU '{self.name}': cannot start its process: {error}") from None
         finally:
             child_end.close()
             self._memory_fd_closer()  # the child has its own descriptor; the mapping stays
-        self._child = _Child(process, host_end, stderr)
+        self._child = _Child(process, host_end, stderr, folder)
         _live.add(id(self._child))
         self._finalizer = weakref.finalize(self, self._child.close)
         self._fd = host_end.fileno()
         _set_receive_timeout(host_end, SLICE)
+        self._call.value = CALL_LOAD  # the child's first job; it records its calls from then on
         try:
             process.stdin.write(json.dumps(self._arguments).encode())
             process.stdin.close()
@@ -314,6 +382,7 @@ class IsolatedFmuComponent(Component):
             reply = self._receive(STARTUP_TIMEOUT)
         if reply != OK:
             self._failed(reply, "load", STARTUP_TIMEOUT)
+        self._call.value = CALL_IDLE
 
     def _receive_abandonable(self, timeout: float) -> bytes | OSError:
         """`_receive` that SIGINT/SIGTERM end (`Interrupted`; the child is killed)."""
@@ -341,8 +410,9 @@ class IsolatedFmuComponent(Component):
             if packet != HINT:
                 return packet
 
-    def _exchange(self, packet: bytes, what: str) -> bytes:
-        """Send one command and return the child's answer (after OK); raise on any failure."""
+    def _exchange(self, packet: bytes, what: str, timeout: float | None = None) -> bytes:
+        """Send one command and return the child's answer (after OK); raise on any failure. The
+        command may take `timeout` seconds (None: `self.timeout`, an FMI call's limit)."""
         if len(packet) > MAX_PACKET:
             raise CosimError(f"FMU '{self.name}': {what} needs {len(packet)} bytes, more than {MAX_PACKET}")
         try:
@@ -350,9 +420,9 @@ class IsolatedFmuComponent(Component):
         except OSError as error:
             reply = error
         else:
-            reply = self._receive_abandonable(self.timeout)
+            reply = self._receive_abandonable(self.timeout if timeout is None else timeout)
         if not isinstance(reply, bytes) or reply[:1] != OK:
-            self._failed(reply, what)
+            self._failed(reply, what, timeout)
         return reply[1:]
 
     def _failed(self, reply: bytes | OSError, what: str, timeout: float | None = None) -> None:
@@ -360,19 +430,33 @@ class IsolatedFmuComponent(Component):
         call = self._call_name(self._call.value, what)
         when = f" at t = {self._time:.9g} s" if self._time is not None else ""
         model = f"FMU '{self.name}' (model {self.model_description.modelName}"
-        if isinstance(reply, bytes) and reply[:1] == ERROR:
-            self.state = State(reply[1])
-            raise CosimError(reply[2:].decode(errors="replace"))
         child = self._child
+        if isinstance(reply, bytes) and reply[:1] in (ERROR, OUT_OF_MEMORY):
+            self.state = State(reply[1])
+            message = reply[2:].decode(errors="replace")
+            if reply[:1] == OUT_OF_MEMORY:  # the call the child was in, then the message
+                call, message = self._call_name(reply[2], what), reply[3:].decode(errors="replace")
+            peak = None
+            if self.max_memory is not None:  # the child's own figure: it may have ended since
+                peak = max(self._header[W_PEAK] * 1024, _resident_peak(child.process.pid) or 0) or None
+            if reply[:1] == OUT_OF_MEMORY or self._near_memory_limit(peak):
+                who = f"{model}, process {child.process.pid})"
+                raise CosimError(self._over_memory(who, call, when, peak, message))
+            raise CosimError(message)
         self.state = State.FAILED
         if isinstance(reply, BlockingIOError):
             child.kill()
-            limit = f"{timeout or self.timeout:g} s"
+            shutil.rmtree(child.folder, ignore_errors=True)
+            if what == "unpack":
+                limit, setting = f"{timeout or UNPACK_TIMEOUT:g} s", "its own limit, not fmu_timeout"
+            else:
+                limit, setting = f"{timeout or self.timeout:g} s", "fmu_timeout"
             raise CosimError(
                 f"{model}, process {child.process.pid}) did not return from {call}{when} within {limit} "
-                f"(fmu_timeout); its process was killed"
+                f"({setting}); its process was killed"
             )
-        returncode = child.process.wait()
+        returncode = child.reap()
+        shutil.rmtree(child.folder, ignore_errors=True)  # what it unpacked: it is gone
         if returncode < 0:
             number = -returncode
             try:
@@ -384,7 +468,25 @@ class IsolatedFmuComponent(Component):
             what_happened = f"ended its process with exit status {returncode} (exit() inside the FMU)"
         last_line = next((line for line in reversed(child.stderr_text().splitlines()) if line.strip()), "")
         detail = f"; its stderr: {' '.join(last_line.split())[:300]}" if last_line else ""
-        raise CosimError(f"{model}, process {child.process.pid}) {what_happened} in {call}{when}{detail}")
+        who = f"{model}, process {child.process.pid})"
+        # ru_maxrss is the child's own peak only above what exec handed down (the host's size).
+        inherited = self._header[W_INHERITED] * 1024
+        peak = child.peak if child.peak is not None and child.peak > inherited else None
+        if self._near_memory_limit(peak):
+            raise CosimError(self._over_memory(who, call, when, peak, what_happened) + detail)
+        raise CosimError(f"{who} {what_happened} in {call}{when}{detail}")
+
+    def _near_memory_limit(self, peak: int | None) -> bool:
+        """Whether a failure with this peak resident memory [bytes] is the memory limit's doing."""
+        if self.max_memory is None or peak is None:
+            return False
+        untouched = self._header[W_UNTOUCHED] * 1024
+        return peak + untouched + MEMORY_MARGIN >= self.max_memory
+
+    def _over_memory(self, who: str, call: str, when: str, peak: int | None, what: str) -> str:
+        limit = memory_text(self.max_memory)
+        reached = f"its peak resident memory {memory_text(peak)}; " if peak else ""
+        return f"{who} exceeded fmu_max_memory ({limit}) in {call}{when}: {reached}{what}"
 
     def _call_name(self, call: int, what: str) -> str:
         """The FMI function(s) behind one of the child's recorded calls."""
@@ -402,6 +504,7 @@ class IsolatedFmuComponent(Component):
             CALL_TERMINATE: f"fmi{v}Terminate",
             CALL_FREE: f"fmi{v}FreeInstance",
             CALL_LOAD: "reading the model description",
+            CALL_UNPACK: "unpacking the FMU archive",
         }.get(call, f"{what} (between FMI calls)")
 
     # ---- lifecycle ---------------------------------------------------------------------------
@@ -409,6 +512,7 @@ class IsolatedFmuComponent(Component):
     def instantiate(self) -> None:
         self._require("instantiate", State.CREATED)
         self._start()
+        self._exchange(UNPACK, "unpack", UNPACK_TIMEOUT)
         self._exchange(INSTANTIATE, "instantiate")
         self.state = State.INSTANTIATED
 

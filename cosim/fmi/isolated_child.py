@@ -1,7 +1,9 @@
-"""The child process of an `IsolatedFmuComponent`: `python -m cosim.fmi.isolated_child SOCKET MEMORY PARENT`.
+"""The child process of an `IsolatedFmuComponent`:
+`python -m cosim.fmi.isolated_child SOCKET MEMORY PARENT LIMIT`.
 
 SOCKET is its end of the host's SOCK_SEQPACKET pair, MEMORY the descriptor of the shared block,
-PARENT the host's process id. Standard input holds `FmuComponent`'s arguments (JSON, up to its
+PARENT the host's process id, LIMIT its memory limit [bytes] (0: none), set as RLIMIT_DATA before
+the FMU is read or loaded. Standard input holds `FmuComponent`'s arguments (JSON, up to its
 end); the child builds the component over the shared buffers, answers OK, and serves one command
 per datagram
 (protocol in `cosim.fmi.isolated`) until FREE or until the host goes away. Before each FMI call it
@@ -22,6 +24,7 @@ import sys
 import time
 
 from cosim.errors import CosimError
+from cosim.fmi import exit_guard
 from cosim.fmi import isolated as protocol
 from cosim.fmi.component import FmuComponent
 from cosim.fmi.model_exchange import fmu_component
@@ -37,13 +40,61 @@ def _die_with(parent: int) -> None:
         os._exit(1)
 
 
+_limited: list = [None]  # the shared header while a memory limit is set (`_record_peak`)
+
+
+def _status(*keys: str) -> dict[str, int]:
+    """Fields of /proc/self/status [KiB]."""
+    values = {}
+    with open("/proc/self/status") as status:
+        for line in status:
+            key, _, rest = line.partition(":")
+            if key in keys:
+                values[key] = int(rest.split()[0])
+    return values
+
+
+def _record_peak() -> None:
+    """Before an error reply under a memory limit: the peak resident memory, for the host's verdict
+    (the child may be gone before the host can look)."""
+    header = _limited[0]
+    if header is not None:
+        try:
+            header[protocol.W_PEAK] = _status("VmHWM").get("VmHWM", 0)
+        except (OSError, MemoryError, ValueError):
+            pass
+
+
 def _error(component: FmuComponent | None, message: str) -> bytes:
+    _record_peak()
     state = component.state if component is not None else 0
     return protocol.ERROR + bytes([int(state)]) + message.encode(errors="replace")[: protocol.MAX_PACKET - 2]
 
 
 def _bug(component: FmuComponent, error: Exception) -> bytes:
     return _error(component, f"FMU '{component.name}' in its process: {type(error).__name__}: {error}")
+
+
+def _out_of_memory(component: FmuComponent | None, call: int) -> bytes:
+    """The reply to a MemoryError (the memory limit): the host words the message."""
+    _record_peak()
+    state = component.state if component is not None else 0
+    return protocol.OUT_OF_MEMORY + bytes([int(state), call]) + b"MemoryError (an allocation failed)"
+
+
+def _limit_memory(limit: int, header) -> None:
+    """Cap the data this process may allocate (RLIMIT_DATA, hard and soft: the FMU cannot raise it)
+    and record the data that counts against it but is not resident (for the host's verdict)."""
+    if not limit:
+        return
+    import resource
+
+    values = _status("VmData", "RssAnon")
+    header[protocol.W_UNTOUCHED] = max(0, values.get("VmData", 0) - values.get("RssAnon", 0))
+    # Linux keeps ru_maxrss across execve: the host's resident size when it started this process.
+    header[protocol.W_INHERITED] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    resource.setrlimit(resource.RLIMIT_DATA, (limit, limit))
+    _limited[0] = header
 
 
 def serve(fd: int, memory: mmap.mmap) -> int:
@@ -53,6 +104,9 @@ def serve(fd: int, memory: mmap.mmap) -> int:
         component = fmu_component(**json.loads(sys.stdin.buffer.read()))
     except CosimError as error:
         write(fd, _error(None, str(error)))
+        return 0
+    except MemoryError:
+        write(fd, _out_of_memory(None, protocol.CALL_LOAD))
         return 0
     protocol.bind_buffers(component, memory)
     write(fd, protocol.OK)
@@ -119,6 +173,9 @@ def serve(fd: int, memory: mmap.mmap) -> int:
             except CosimError as error:
                 write(fd, _error(component, str(error)))
                 header[W_STATUS] = 1
+            except MemoryError:
+                write(fd, _out_of_memory(component, call.value))
+                header[W_STATUS] = 1
             except Exception as error:  # a bug here, not the FMU's: still one line for the host
                 write(fd, _bug(component, error))
                 header[W_STATUS] = 1
@@ -134,7 +191,10 @@ def serve(fd: int, memory: mmap.mmap) -> int:
             if not packet:
                 return 0  # the host has gone
             command, argument = packet[:1], packet[1:]
-            if command == protocol.INSTANTIATE:
+            if command == protocol.UNPACK:
+                call.value = protocol.CALL_UNPACK
+                component.unpack()
+            elif command == protocol.INSTANTIATE:
                 call.value = protocol.CALL_INSTANTIATE
                 component.instantiate()
             elif command == protocol.SETUP:
@@ -177,17 +237,22 @@ def serve(fd: int, memory: mmap.mmap) -> int:
         except CosimError as error:
             call.value = protocol.CALL_IDLE
             write(fd, _error(component, str(error)))
+        except MemoryError:
+            failed_in, call.value = call.value, protocol.CALL_IDLE
+            write(fd, _out_of_memory(component, failed_in))
         except Exception as error:  # a bug here, not the FMU's: still one line for the host
             call.value = protocol.CALL_IDLE
             write(fd, _bug(component, error))
 
 
 def main(argv: list[str]) -> int:
-    fd, memory_fd, parent = (int(value) for value in argv)
+    fd, memory_fd, parent, limit = (int(value) for value in argv)
+    exit_guard.enabled = False  # an exit() in the FMU ends this process with its status: the host says so
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the host decides how a run ends
     _die_with(parent)
     memory = mmap.mmap(memory_fd, 0)
     os.close(memory_fd)
+    _limit_memory(limit, memoryview(memory)[: protocol.BUFFERS_OFFSET].cast("i"))
     seconds = protocol.SLICE  # a blocked read wakes this often to re-read the header
     with socket.socket(fileno=os.dup(fd)) as sock:  # the option is the socket's, shared by fd
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, struct.pack("ll", 0, int(seconds * 1e6)))

@@ -51,11 +51,12 @@ def make_fmu(
     timeout: float = Scenario.fmu_timeout,
     max_unpacked_size: int | None = None,
     nan_outputs: tuple[str, ...] = (),
+    max_memory: int | None = round(Scenario.fmu_max_memory * (1 << 20)),
 ) -> Component:
     """The FMU component of a description (its interface as described: port map, dependencies), in
     this process (`isolation` "none") or in a child process ("process", calls limited to `timeout`
-    seconds); `nan_outputs` may be NaN. A Model Exchange FMU (`component.integration`) is a
-    `cosim.fmi.model_exchange.ModelExchangeComponent`."""
+    seconds, its memory to `max_memory` bytes); `nan_outputs` may be NaN. A Model Exchange FMU
+    (`component.integration`) is a `cosim.fmi.model_exchange.ModelExchangeComponent`."""
     from cosim.fmi.model_exchange import fmu_component
 
     port_map = {port: {"name": m.variable, "scale": m.scale} for port, m in component.port_map.items()}
@@ -72,7 +73,9 @@ def make_fmu(
     if isolation == "process":
         from cosim.fmi.isolated import IsolatedFmuComponent
 
-        fmu = IsolatedFmuComponent(component.fmu, component.name, timeout=timeout, **options)
+        fmu = IsolatedFmuComponent(
+            component.fmu, component.name, timeout=timeout, max_memory=max_memory, **options
+        )
     else:
         fmu = fmu_component(path=component.fmu, name=component.name, **options)
     for name, value in component.held_inputs.items():
@@ -100,6 +103,7 @@ def _fmu(scenario: Scenario, component: ComponentDescription) -> Component:
             scenario.fmu_timeout,
             round(scenario.fmu_max_size * MIB),
             allowed,
+            round(scenario.fmu_max_memory * MIB),
         )
     except CosimError as error:
         raise CosimError(f"{scenario.source}: {component.where}.fmu: {error}") from None

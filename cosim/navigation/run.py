@@ -62,6 +62,7 @@ from cosim import release_collector
 from cosim.core import interrupt
 from cosim.core.master import NS_PER_S, Master, due_from
 from cosim.errors import PATH_LIMIT, CosimError, SimulationEnded, shorten
+from cosim.fmi import exit_guard
 from cosim.navigation.build import BuiltRun, build_run
 from cosim.navigation.outcome import Outcome, OutcomeMonitor, outcome_metadata
 from cosim.record.logfile import (
@@ -467,6 +468,52 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
     failure = None
     ended = None  # an FMU's request to end the run (FMI terminateSimulation / fmi2Terminated)
     blocks = None
+
+    def finish(failure: str | None, ended: str | None, free: bool = True) -> RunResult:
+        """The end of the run: the last pose, the outcome, the log finalised (`free`: and the
+        system closed)."""
+        wall_time = time.perf_counter() - wall_start
+        end_ns = master.time_ns
+        # The pose at end_ns is the vehicle's after the last completed step (after a failure too; the
+        # after_step of that step wrote it already when end_ns is on the pose grid). A pose that turned
+        # NaN in the failed step is not logged.
+        if master.step_index % recording.pose_steps != 0 and all(map(math.isfinite, recording.pose())):
+            recording.write_pose(end_ns)
+        recorder.end_steps(end_ns)
+        reason = "fmu_failed" if failure else state["reason"] or "stop_time"
+        outcome = monitor.finish(end_ns / NS_PER_S, reason)
+        if bar is not None:
+            update_bar(bar, master.time, wall_time, last_update)
+            # The run is over whatever its reason (goal reached early, collision, interrupt): the bar
+            # ends full, at the time the run ended, instead of vanishing part-way.
+            bar.total = bar.n
+            bar.refresh()
+            bar.close()
+        metadata = outcome_metadata(outcome)
+        if tuple(monitor.goal) != tuple(scenario.goal[:2]):
+            metadata["goal"] = f"{monitor.goal[0]},{monitor.goal[1]}"  # the last goal given during the run
+        if failure:
+            metadata["failure"] = failure
+        if ended:
+            metadata["ended_by"] = ended
+        try:
+            if free:
+                master.close()
+        except CosimError as error:
+            failure = failure or f"terminating the system failed: {error}"
+        recorder.close(metadata)
+        return RunResult(outcome, log_path, master.step_index, wall_time, failure, recorder.trace, ended)
+
+    def fmu_exited(message: str) -> str:
+        """An FMU in this process called exit() (`cosim.fmi.exit_guard`): finalise the log as for a
+        failed FMU (the FMUs are not freed: the process ends inside one of them)."""
+        if blocks is not None and blocks.fast is not None:
+            blocks.fast.flush()
+        failure = f"{message} (after t = {master.time:.3f} s)"
+        finish(failure, None, free=False)
+        return f"{failure}; log (up to the failure): {log_path}"
+
+    exit_guard.add_hook(fmu_exited)
     try:
         if tables is None:
             master.run(total_steps, after_step)
@@ -503,38 +550,10 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
         take_signal()
         state["reason"] = "interrupted"
     finally:
+        exit_guard.remove_hook(fmu_exited)
         if blocks is not None and blocks.fast is not None:
             blocks.fast.flush()  # the steps recorded but not yet handed to the log
-    wall_time = time.perf_counter() - wall_start
-    end_ns = master.time_ns
-    # The pose at end_ns is the vehicle's after the last completed step (after a failure too; the
-    # after_step of that step wrote it already when end_ns is on the pose grid). A pose that turned
-    # NaN in the failed step is not logged.
-    if master.step_index % recording.pose_steps != 0 and all(map(math.isfinite, recording.pose())):
-        recording.write_pose(end_ns)
-    recorder.end_steps(end_ns)
-    reason = "fmu_failed" if failure else state["reason"] or "stop_time"
-    outcome = monitor.finish(end_ns / NS_PER_S, reason)
-    if bar is not None:
-        update_bar(bar, master.time, wall_time, last_update)
-        # The run is over whatever its reason (goal reached early, collision, interrupt): the bar
-        # ends full, at the time the run ended, instead of vanishing part-way.
-        bar.total = bar.n
-        bar.refresh()
-        bar.close()
-    metadata = outcome_metadata(outcome)
-    if tuple(monitor.goal) != tuple(scenario.goal[:2]):
-        metadata["goal"] = f"{monitor.goal[0]},{monitor.goal[1]}"  # the last goal given during the run
-    if failure:
-        metadata["failure"] = failure
-    if ended:
-        metadata["ended_by"] = ended
-    try:
-        master.close()
-    except CosimError as error:
-        failure = failure or f"terminating the system failed: {error}"
-    recorder.close(metadata)
-    return RunResult(outcome, log_path, master.step_index, wall_time, failure, recorder.trace, ended)
+    return finish(failure, ended)
 
 
 def _goal_poll(goals, built: BuiltRun, monitor: OutcomeMonitor, recorder, recording: _Recording):

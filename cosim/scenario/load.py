@@ -209,6 +209,7 @@ class Scenario:
     fmu_isolation: str = "auto"  # "auto" | "process" | "none": see `isolation`
     fmu_timeout: float = 10.0  # [s] longest FMI call of an FMU in a child process
     fmu_max_size: float = 1024.0  # [MiB] largest total uncompressed size of an FMU archive
+    fmu_max_memory: float = 2048.0  # [MiB] memory limit of an FMU's child process (RLIMIT_DATA)
     # [system] remove: template components left out (as written; `describe_system` checks the names).
     # A removed role has no entry in `components`.
     removed: tuple[str, ...] = ()
@@ -363,6 +364,9 @@ def _build(
     fmu_max_size = simulation.number(
         "fmu_max_size", Scenario.fmu_max_size, minimum=0.0, exclusive_minimum=True
     )
+    fmu_max_memory = simulation.number(
+        "fmu_max_memory", Scenario.fmu_max_memory, minimum=0.0, exclusive_minimum=True
+    )
     check_run_length(simulation, macro_step, stop_time)
     simulation.finish()
 
@@ -449,6 +453,7 @@ def _build(
         fmi_version=fmi_version,
         fmu_isolation=fmu_isolation,
         fmu_timeout=fmu_timeout,
+        fmu_max_memory=fmu_max_memory,
         fmu_max_size=fmu_max_size,
         removed=removed,
     )
