@@ -401,7 +401,12 @@ class Mutator:
             files += [("resources/extra.bin", bytes(range(256)) * 4), ("readme", b""), ("x.ssd", b"<a/>")]
         elif edit == "dotdot":
             files.append(
-                (self.choice(["../evil.txt", "resources/../../evil.txt", "../" * 50 + "tmp/e"]), b"e")
+                (
+                    self.choice(
+                        ["../evil.txt", "resources/../../evil.txt", "../" * 50 + "tmp/navcosim-mutant-e"]
+                    ),
+                    b"e",
+                )
             )
         elif edit == "absolute":
             files.append((self.choice(["/tmp/navcosim-mutant-evil.txt", "//server/x", "C:/x.txt"]), b"e"))
@@ -597,6 +602,9 @@ def test_ssp_mutants(bases, tmp_path_factory):
     outcomes = run_mutants(mutants, work / "children")
     counts, failures = report("SSP mutants", outcomes)
     assert not failures, f"{len(failures)} mutants broke the contract:\n" + "\n".join(failures[:10])
+    # No member with ../ or an absolute name was written outside the folder it was unpacked to.
+    escaped = [*work.rglob("evil.txt"), *Path("/tmp").glob("navcosim-mutant-e*")]
+    assert not escaped, escaped
     assert counts["mutants"] >= 300
     # The mutator reaches past validation too: some mutants run.
     assert counts["exit 0"] + counts["exit 1"] > 0 and counts["exit 2"] > 0
