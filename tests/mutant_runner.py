@@ -34,8 +34,8 @@ CRASH = "crash"
 class Mutant:
     argv: list[str]
     what: str  # how the mutant was made, for the failure message
-    # A problem this mutant is expected to show (the start of `Outcome.problem()`'s text) and why:
-    # a bug left to another open issue. Any other problem still fails.
+    # A problem this mutant is expected to show (text found in `Outcome.problem()`'s) and why: a
+    # bug left to another open issue. Any other problem still fails.
     known: tuple[str, str] | None = None
 
 
@@ -170,7 +170,7 @@ def report(name: str, outcomes: list[Outcome]) -> tuple[collections.Counter, lis
         if problem is None:
             continue
         known = outcome.mutant.known
-        if known is not None and problem.startswith(known[0]):
+        if known is not None and known[0] in problem:
             counts["known"] += 1
             print(f"\nknown ({known[1]}): {outcome.mutant.what[:300]}: {problem.splitlines()[0][:300]}")
             continue
