@@ -3,6 +3,7 @@
 Exit codes: 0 every run completed (ran to an outcome: goal reached, collision or stop time), 1 some
 runs failed (each is a row with its error), 2 bad input, an unreachable scheduler or an unwritable
 output folder (one line on stderr), 130 interrupted (finished rows and logs are kept).
+`--dry-run` checks the sweep as a run would and lists its runs without running them (0 or 2).
 """
 
 from __future__ import annotations
@@ -58,6 +59,11 @@ def register(subparsers) -> None:
     parser.add_argument("--resume", action="store_true", help="skip runs already completed in DIR")
     parser.add_argument("--no-plot", action="store_true", help="do not draw DIR/sweep.png")
     parser.add_argument("--quiet", action="store_true", help="no progress bar and no summary table")
+    parser.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="check the sweep and list its runs (run id, varied values) without running them or writing DIR",
+    )
     parser.set_defaults(handler=_handler)
 
 
@@ -91,8 +97,26 @@ def _handler(args) -> int:
         args.scheduler,
         args.resume,
     )
+    if args.dry_run:
+        return _dry_run(spec, options)
     _freeze_at_exit()
     result = run_sweep(spec, options, progress=not args.quiet, plot=not args.no_plot)
     if not args.quiet:
         print(result.summary())
     return result.exit_code
+
+
+def _dry_run(spec, options) -> int:
+    """What `cosim sweep` would run, checked as it checks it, one line a run; nothing is written."""
+    from cosim.sweep.engine import check_options, plan
+    from cosim.sweep.spec import display_value
+
+    check_options(options)
+    _, runs, name = plan(spec)
+    print(f"{name}: {len(runs)} runs ({spec.method}) of {spec.scenario}")
+    for run in runs:
+        values = " ".join(
+            f"{key}={display_value(value)}" for key, value in zip(spec.keys, run.values, strict=True)
+        )
+        print(f"{run.run_id}  {values}")
+    return 0

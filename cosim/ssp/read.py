@@ -581,8 +581,10 @@ def build_system(ssp: SspSystem, macro_step: float, master: str = "gauss-seidel"
         try:
             system.connect(connection.source, connection.target, connection.factor, connection.offset)
         except CosimError as error:
-            what = f"connection {connection.source} -> {connection.target}"
-            raise CosimError(f"{ssp.source}: {what}: {error}") from None
+            message = str(error)  # the master's own messages may already name the connection
+            if not message.startswith("connection "):
+                message = f"connection {connection.source} -> {connection.target}: {message}"
+            raise CosimError(f"{ssp.source}: {message}") from None
     try:
         system.order()  # raises on an algebraic loop
     except CosimError as error:

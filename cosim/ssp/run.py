@@ -91,6 +91,8 @@ def experiment(ssp: SspSystem, overrides: dict[str, object]) -> Experiment:
     """Start, stop, macro step and master from the overrides, else the file; errors say which is missing."""
     where = f"{ssp.source}: SystemStructure.ssd"
     start = float(overrides.get("start_time", ssp.start_time))
+    if not (math.isfinite(start) and start >= 0):  # the log's clock counts nanoseconds from 0
+        raise CosimError(f"{where}: start time must be a finite number of seconds >= 0, got {start:g}")
     stop = overrides.get("stop_time", ssp.stop_time)
     if stop is None:
         raise CosimError(

@@ -64,7 +64,7 @@ def build(scenario, vary, method, samples, seed, overrides, out, workers, schedu
     path = Path(scenario)
     fields: dict[str, Any] = {"scenario": path, "dimensions": [], "overrides": []}
     options = SweepOptions()
-    if path.suffix == ".toml" and path.is_file() and is_sweep_file(path):
+    if path.suffix == ".toml" and is_sweep_file(path):  # (a name too long for the OS is not one)
         fields, options = read_sweep_file(path)
     given = {dimension.key: dimension for dimension in vary_dimensions(vary)}
     dimensions = [given.pop(d.key, d) for d in fields["dimensions"]] + list(given.values())

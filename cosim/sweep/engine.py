@@ -482,16 +482,21 @@ def _load_plotting() -> None:
     import cosim.sweep.plot  # noqa: F401
 
 
+def check_options(options: SweepOptions) -> None:
+    """`CosimError` (one line) on options that exclude each other or are out of range."""
+    if options.workers is not None and options.scheduler is not None:
+        raise CosimError("--workers and --scheduler exclude each other (a scheduler has its own workers)")
+    if options.workers is not None and options.workers < 1:
+        raise CosimError(f"--workers {options.workers}: must be >= 1")
+
+
 def run_sweep(
     spec: SweepSpec, options: SweepOptions, progress: bool = True, plot: bool = True
 ) -> SweepResult:
     """Run the sweep; the rows of finished runs are in DIR even when this is interrupted."""
     from concurrent.futures import ThreadPoolExecutor
 
-    if options.workers is not None and options.scheduler is not None:
-        raise CosimError("--workers and --scheduler exclude each other (a scheduler has its own workers)")
-    if options.workers is not None and options.workers < 1:
-        raise CosimError(f"--workers {options.workers}: must be >= 1")
+    check_options(options)
     bundle, runs, name = plan(spec)
     out_dir = Path(options.out) if options.out is not None else default_out_dir(name)
     created = _prepare_out_dir(out_dir, options.resume)

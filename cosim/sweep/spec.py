@@ -205,10 +205,11 @@ def dimension_from_toml(key: str, value: Any, where: str) -> Dimension:
 
 
 def is_sweep_file(path: Path) -> bool:
-    """A TOML file with a top-level [sweep] table (a scenario has none)."""
+    """A TOML file with a top-level [sweep] table (a scenario has none). Not one when it cannot be
+    read or parsed (nested too deeply included): the scenario loader then says why."""
     try:
         return isinstance(tomllib.loads(path.read_text(encoding="utf-8")).get("sweep"), dict)
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, RecursionError):
         return False
 
 
