@@ -17,6 +17,9 @@ def format_info(log: Log) -> str:
     for key, label in (("start", "start"), ("goal", "goal"), ("navcosim_version", "navcosim")):
         if key in run:
             lines.append(f"{label:<9} {run[key]}")
+    if run.get("overrides"):
+        # The attached scenario.toml is the file as given; the run applied these on top of it.
+        lines.append(f"--set     {run['overrides']} (applied over the attached scenario.toml)")
     outcome = log.metadata.get("outcome")  # as written
     if outcome is None:
         lines.append("outcome   (none recorded: the run did not end normally)")

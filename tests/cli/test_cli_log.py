@@ -171,3 +171,25 @@ def test_foreign_mcap_partial_output_or_one_line(foreign, tmp_path, capsys):
     assert (tmp_path / "f.png").exists()
     assert main(["log", "export", str(foreign), "--to", "csv", "--out", str(tmp_path)]) == 2
     assert "no navcosim signal channels" in capsys.readouterr().err
+
+
+def test_info_shows_the_overrides_the_run_applied(tmp_path, capsys):
+    """A real run with two --set overrides: log info names them (the attached scenario.toml is the
+    file as given, so without them the log would not say what ran)."""
+    from pathlib import Path
+
+    scenario = Path(__file__).resolve().parents[2] / "scenarios" / "warehouse_diff_drive_no_obstacle.toml"
+    log = tmp_path / "over.mcap"
+    sets = ["--set", "simulation.stop_time=0.3", "--set", "vfh.safety_distance=0.6"]
+    assert main(["run", str(scenario), "--out", str(log), "--no-plot", *sets]) == 1
+    capsys.readouterr()
+    assert main(["log", "info", str(log)]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("--set"))
+    assert "simulation.stop_time=0.3" in line and "vfh.safety_distance=0.6" in line
+    assert (
+        main(["run", str(scenario), "--out", str(tmp_path / "plain.mcap"), "--no-plot", sets[0], sets[1]])
+        == 1
+    )
+    capsys.readouterr()
+    assert main(["log", "info", str(tmp_path / "plain.mcap")]) == 0
+    assert "vfh.safety_distance" not in capsys.readouterr().out
