@@ -498,8 +498,21 @@ def rate_problem(rate: float, macro_step: float) -> str | None:
         return f"must be >= {1 / MAX_TIME:g} Hz (a period of at most {MAX_TIME:g} s), got {rate:g}"
     steps = 1.0 / (rate * macro_step)
     if steps < 1.0 - 1e-9 or abs(steps - round(steps)) > 1e-6 * steps:
-        return f"{rate:g} Hz is not a whole number of macro steps of {macro_step:g} s (period {1 / rate:g} s)"
+        return (
+            f"{rate:g} Hz is not a whole number of macro steps of {macro_step:g} s (period {1 / rate:g} s); "
+            f"rates that fit: {', '.join(f'{r:g}' for r in fitting_rates(rate, macro_step))} Hz"
+        )
     return None
+
+
+def fitting_rates(rate: float, macro_step: float, count: int = 3) -> list[float]:
+    """The `count` rates [Hz] nearest to `rate` whose period is a whole number of macro steps
+    (1 / (n * macro_step), n >= 1), highest first."""
+    steps = max(1, round(1.0 / (rate * macro_step)))
+    near = sorted(
+        range(max(1, steps - count), steps + count + 1), key=lambda n: (abs(1 / (n * macro_step) - rate), n)
+    )
+    return sorted((1.0 / (n * macro_step) for n in near[:count]), reverse=True)
 
 
 def _check_rate(table: TableReader, key: str, rate: float, macro_step: float) -> None:
