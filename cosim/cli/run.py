@@ -99,7 +99,7 @@ def _handler(args) -> int:
         from cosim import hold_collector
 
         hold_collector()  # until the run's loop starts (`cosim.release_collector`)
-    from cosim.navigation.outcome import format_summary
+    from cosim.navigation.outcome import avoider_name, format_summary
     from cosim.navigation.run import run_scenario
     from cosim.scenario.load import load_scenario
 
@@ -126,7 +126,11 @@ def _handler(args) -> int:
             scenario, args.out, progress=not args.quiet, sink=sink, force=args.force, goals=goals
         )
         if not args.quiet:
-            print(format_summary(scenario.name, result.outcome, result.log_path, result.wall_time))
+            print(
+                format_summary(
+                    scenario.name, result.outcome, result.log_path, result.wall_time, avoider_name(scenario)
+                )
+            )
             if result.ended:
                 print(f"ended: {result.ended}")
         if result.failure is not None:
@@ -158,11 +162,15 @@ def _run_ssp(args) -> int:
         if not args.quiet:
             print(summary(result))
     else:  # an SSP navcosim exported: the scenario's run
-        from cosim.navigation.outcome import format_summary
+        from cosim.navigation.outcome import avoider_name, format_summary
 
         scenario, result = result
         if not args.quiet:
-            print(format_summary(scenario.name, result.outcome, result.log_path, result.wall_time))
+            print(
+                format_summary(
+                    scenario.name, result.outcome, result.log_path, result.wall_time, avoider_name(scenario)
+                )
+            )
         if result.failure is None and scenario.plot and not args.no_plot:
             _plot(result.log_path, args.quiet)
     if result.failure is not None:

@@ -153,15 +153,34 @@ def outcome_metadata(outcome: Outcome) -> dict[str, str]:
     } | ({"no_path": outcome.no_path} if outcome.no_path else {})
 
 
-def format_summary(name: str, outcome: Outcome, log_path=None, wall_time: float | None = None) -> str:
-    """A two-column table of the outcome, for the terminal."""
+# The project's avoidance FMUs by the short name a summary gives them.
+_AVOIDERS = {"VectorFieldHistogram": "VFH", "ArtificialPotentialField": "APF"}
+
+
+def avoider_name(scenario) -> str:
+    """What avoided obstacles in `scenario`'s run, as the summary names it: "VFH", "APF", the stem
+    of a user's FMU in the vfh role, or "avoidance" when the role was removed."""
+    from pathlib import PurePath
+
+    spec = scenario.components.get("vfh")
+    if spec is None or "vfh" in scenario.removed:
+        return "avoidance"
+    fmu = str(spec.fmu)
+    return _AVOIDERS.get(fmu, PurePath(fmu).stem or fmu)
+
+
+def format_summary(
+    name: str, outcome: Outcome, log_path=None, wall_time: float | None = None, avoider: str = "VFH"
+) -> str:
+    """A two-column table of the outcome, for the terminal; `avoider` names what the mode counts
+    count (`avoider_name`): "APF interventions" where the potential field replaced VFH."""
     rows = [
         ("scenario", name),
         ("goal reached", "yes" if outcome.reached else f"no ({outcome.reason.replace('_', ' ')})"),
         ("simulated time", f"{outcome.time:.2f} s"),
         ("distance driven", f"{outcome.distance:.2f} m"),
         ("minimum clearance", f"{outcome.min_clearance:.3f} m"),
-        ("VFH interventions", str(outcome.vfh_interventions)),
+        (f"{avoider} interventions", str(outcome.vfh_interventions)),
         ("time in recovery", f"{outcome.recovery_time:.2f} s"),
         ("replans", str(outcome.replans)),
     ]
