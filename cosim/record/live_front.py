@@ -47,6 +47,7 @@ MESSAGE_RATE = 200.0  # [1/s] a client's messages
 MESSAGE_BURST = 1000
 MAX_SUBSCRIPTIONS = 1024  # per client (a run has tens of channels)
 SUBPROTOCOLS = ("foxglove.sdk.v1", "foxglove.websocket.v1")  # the SDK's first, then the classic
+GOING_AWAY = (1001).to_bytes(2, "big") + b"navcosim: closed"
 CLOSE_GRACE = 0.2  # [s] for the close frames to go out before the connections are cut
 PING_TAG = b"navcosim"  # the front's pings; their pongs are not passed on
 _CLOSE, _PING, _PONG = 0x8, 0x9, 0xA
@@ -165,6 +166,7 @@ class _Client:
         self.pinged = now
         self.tokens, self.refilled = float(MESSAGE_BURST), now
         self.at_boundary = True  # between two of the server's frames
+        self.upstream_closing = False
 
     def allow(self, now: float) -> bool:
         """Token bucket: MESSAGE_RATE per second, MESSAGE_BURST at most."""
@@ -177,16 +179,22 @@ class _Client:
 
     def going_away(self) -> None:
         """Close frames (1001) to both ends, where a frame may begin; `close` follows."""
-        reason = (1001).to_bytes(2, "big") + b"the run ended"
-        if self.upstream is not None:  # the front writes whole frames upstream: always a boundary
-            self.upstream[1].write(frame(_CLOSE, reason, True))
-            if self.at_boundary:
-                self.writer.write(frame(_CLOSE, reason, False))
+        self._close_upstream()
+        if self.upstream is not None and self.at_boundary:
+            self.writer.write(frame(_CLOSE, GOING_AWAY, False))
+
+    def _close_upstream(self) -> None:
+        # The front writes whole frames to the server: a close frame may always go next.
+        if self.upstream is not None and not self.upstream_closing:
+            self.upstream_closing = True
+            self.upstream[1].write(frame(_CLOSE, GOING_AWAY, True))
 
     def close(self) -> None:
-        for writer in (self.writer, self.upstream[1] if self.upstream else None):
-            if writer is not None:
-                writer.transport.abort()
+        """Cut the client; the server gets a close frame first (it always reads)."""
+        self.writer.transport.abort()
+        if self.upstream is not None:
+            self._close_upstream()
+            self.upstream[1].close()
 
 
 class Front:
@@ -200,6 +208,7 @@ class Front:
         self.token = token
         self.warnings = Warnings()
         self.clients: set[_Client] = set()
+        self.closing = False
         self.loop = asyncio.new_event_loop()
         try:
             self.server = self.loop.run_until_complete(
@@ -218,14 +227,29 @@ class Front:
             return
 
         async def shut() -> None:
-            self.server.close()
+            self.closing = True  # a connection accepted from now on is cut at once
+            # Stop accepting but close the listening socket only at the end: a connection accepted
+            # after Server.close() would be left open by asyncio (3.11: its transport is refused).
+            for listening in self.server.sockets:
+                self.loop.remove_reader(listening.fileno())
             clients = list(self.clients)
             for client in clients:
                 client.going_away()
             if clients:
                 await asyncio.sleep(CLOSE_GRACE)
-            for client in clients:
-                client.close()
+            # Until every connection's task has ended (one accepted just before close() may only
+            # now get its task), cut what is open.
+            deadline = time.monotonic() + 2.0
+            while time.monotonic() < deadline:
+                for client in list(self.clients):
+                    client.close()
+                others = [task for task in asyncio.all_tasks() if task is not asyncio.current_task()]
+                if not others:
+                    break
+                await asyncio.wait(others, timeout=0.05)
+            for _ in range(2):  # the sockets close in the callbacks the aborts scheduled
+                await asyncio.sleep(0)
+            self.server.close()  # connections still queued in the kernel are reset
 
         try:
             asyncio.run_coroutine_threadsafe(shut(), self.loop).result(timeout=5)
@@ -241,6 +265,9 @@ class Front:
     async def _serve(self, reader, writer) -> None:
         peer = writer.get_extra_info("peername") or ("?", 0)
         client = _Client(f"{peer[0]}:{peer[1]}", reader, writer)
+        if self.closing:
+            writer.transport.abort()
+            return
         if len(self.clients) >= MAX_CLIENTS:
             self.warnings.refusal("too many clients", f"{client.name} refused: {MAX_CLIENTS} clients already")
             await self._answer(writer, 503, "Service Unavailable")
@@ -279,6 +306,8 @@ class Front:
             )
             return False
         except (asyncio.LimitOverrunError, asyncio.IncompleteReadError, ValueError):
+            if self.closing:
+                return False
             self.warnings.refusal("bad request", f"{client.name} refused: not an HTTP request")
             await self._answer(writer, 400, "Bad Request")
             return False
