@@ -501,6 +501,8 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
                 master.close()
         except CosimError as error:
             failure = failure or f"terminating the system failed: {error}"
+        for name, record in getattr(goals, "acknowledged", tuple)():  # the live view's last commands
+            recorder.add_metadata(name, record)
         recorder.close(metadata)
         return RunResult(outcome, log_path, master.step_index, wall_time, failure, recorder.trace, ended)
 
