@@ -126,6 +126,11 @@ def offered_subprotocols(headers: list[tuple[str, str]]) -> list[str]:
     ]
 
 
+async def _discard(client) -> None:
+    while await client.reader.read(1 << 16):
+        client.heard = time.monotonic()
+
+
 class Warnings:
     """One stderr line per (client, limit); refused connections: the first of each reason, and
     how many more at the end."""
@@ -167,6 +172,7 @@ class _Client:
         self.tokens, self.refilled = float(MESSAGE_BURST), now
         self.at_boundary = True  # between two of the server's frames
         self.upstream_closing = False
+        self.closing = False  # the front sent its close frame: no more idle checks
 
     def allow(self, now: float) -> bool:
         """Token bucket: MESSAGE_RATE per second, MESSAGE_BURST at most."""
@@ -390,6 +396,13 @@ class Front:
                 self._warn(client, "size", f"a message over {MAX_MESSAGE} bytes: closed (1009)")
                 client.writer.write(frame(_CLOSE, (1009).to_bytes(2, "big") + b"message too big", False))
                 await client.writer.drain()
+                client.closing = True
+                # Read on for a moment: cut with the rest of the message unread, the connection
+                # would be reset and the client could lose the close frame.
+                try:
+                    await asyncio.wait_for(_discard(client), CLOSE_GRACE * 5)
+                except TimeoutError:
+                    pass
                 return
             key = await reader.readexactly(4)
             payload = unmask(await reader.readexactly(length), key)
@@ -479,7 +492,7 @@ class Front:
                 remaining, partial = frame_boundary(partial + chunk, remaining)
                 client.at_boundary = remaining == 0 and not partial
             now = time.monotonic()
-            if now - client.heard > IDLE_TIMEOUT:
+            if now - client.heard > IDLE_TIMEOUT and not client.closing:
                 self._warn(client, "idle", f"nothing heard for {IDLE_TIMEOUT:g} s (not even a pong): closed")
                 return
             if client.at_boundary and now - client.pinged >= PING_INTERVAL:
