@@ -51,9 +51,24 @@ def register(subparsers) -> None:
         action="store_true",
         help="stream every channel to a Foxglove WebSocket server while the run goes (open "
         "ws://127.0.0.1:PORT in Foxglove); paced at --realtime 1 unless told otherwise. A "
-        "geometry_msgs/PoseStamped a client publishes on /goal_pose sets a new goal (replanned)",
+        "geometry_msgs/PoseStamped a client publishes on /goal_pose sets a new goal (replanned); "
+        "services /navcosim/pause, resume, step, speed and goal control the run",
     )
-    parser.add_argument("--port", type=int, default=8765, help="the live view's port (8765)")
+    parser.add_argument("--port", type=int, default=8765, help="the live view's port (8765; 0: any free one)")
+    parser.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="the live view's address (127.0.0.1; another one lets other hosts watch and control the run)",
+    )
+    parser.add_argument(
+        "--live-token",
+        nargs="?",
+        const="",
+        metavar="TOKEN",
+        help="with --live: clients must give ?token=TOKEN in the URL (or Authorization: Bearer). "
+        "Without TOKEN: $NAVCOSIM_LIVE_TOKEN, else a random one (printed in the URL); a TOKEN on "
+        "the command line is visible to other users (ps)",
+    )
     parser.add_argument(
         "--realtime",
         type=float,
@@ -69,15 +84,21 @@ def register(subparsers) -> None:
     parser.set_defaults(handler=_handler)
 
 
-def _live_sink(args):
-    """The sink of --live / --realtime (None: neither), after checking their values."""
+def _live_sink(args, step: float = 0.01):
+    """The sink of --live / --realtime (None: neither), after checking their values. `step` [s]:
+    the run's macro step (the live view's single step)."""
     if args.realtime is not None and not args.realtime > 0:
         raise CosimError(f"--realtime must be > 0, got {args.realtime}")
     if args.linger is not None and not args.linger >= 0:
         raise CosimError(f"--linger must be >= 0, got {args.linger}")
     if not args.live:
-        if args.linger is not None or args.port != 8765:
-            raise CosimError("--port and --linger need --live")
+        if (
+            args.linger is not None
+            or args.port != 8765
+            or args.host != "127.0.0.1"
+            or args.live_token is not None
+        ):
+            raise CosimError("--port, --host, --live-token and --linger need --live")
         if args.realtime is None:
             return None
         from cosim.record.live import Pacer
@@ -85,11 +106,47 @@ def _live_sink(args):
         return Pacer(args.realtime)
     if not 0 <= args.port <= 65535:
         raise CosimError(f"--port must be 0..65535, got {args.port}")
+    token = _live_token(args.live_token)
+    loopback = _is_loopback(args.host)
     from cosim.record.live import FoxgloveLive
 
-    live = FoxgloveLive(args.port, 1.0 if args.realtime is None else args.realtime)
+    live = FoxgloveLive(
+        args.port, 1.0 if args.realtime is None else args.realtime, args.host, token=token, step=step
+    )
+    if not loopback:
+        guard = "only clients with the token" if token else "anyone who reaches it; give --live-token"
+        print(
+            f"cosim: warning: --host {args.host} is not a loopback address: {guard} can watch and "
+            "control the run (unencrypted ws://)",
+            file=sys.stderr,
+            flush=True,
+        )
     print(f"live view: {live.url} (Foxglove: Open connection, WebSocket)", file=sys.stderr, flush=True)
     return live
+
+
+def _live_token(given: str | None) -> str | None:
+    """--live-token's token: None (no token), the one given, $NAVCOSIM_LIVE_TOKEN, or a new one."""
+    if given is None:
+        return None
+    import secrets
+
+    token = given or os.environ.get("NAVCOSIM_LIVE_TOKEN", "") or secrets.token_urlsafe(18)
+    if not all(c.isalnum() or c in "-._~" for c in token):
+        raise CosimError("--live-token: use letters, digits and - . _ ~ only (it goes into a URL)")
+    return token
+
+
+def _is_loopback(host: str) -> bool:
+    """Whether every address `host` names is a loopback one (one line, exit 2, if none)."""
+    import ipaddress
+    import socket
+
+    try:
+        addresses = {info[4][0] for info in socket.getaddrinfo(host, None, proto=socket.IPPROTO_TCP)}
+    except (OSError, UnicodeError) as error:
+        raise CosimError(f"--host {host!r}: not an address of this machine ({error})") from None
+    return all(ipaddress.ip_address(address.split("%")[0]).is_loopback for address in addresses)
 
 
 def _handler(args) -> int:
@@ -115,13 +172,13 @@ def _handler(args) -> int:
         # or sockets. It prepares the plot while the run goes.
         plotter = PlotProcess.start()
     try:
-        sink = _live_sink(args)
+        sink = _live_sink(args, scenario.macro_step)
     except BaseException:
         if plotter is not None:
             plotter.cancel()
         raise
     try:
-        goals = sink if args.live else None  # a client's /goal_pose sets a new goal
+        goals = sink if args.live else None  # a client's /goal_pose, the control services
         result = run_scenario(
             scenario, args.out, progress=not args.quiet, sink=sink, force=args.force, goals=goals
         )

@@ -116,3 +116,9 @@ def take() -> str | None:
     """The name of a signal received while deferring ("SIGINT"/"SIGTERM"), once; None if none."""
     name, _state.pending = _state.pending, None
     return name
+
+
+def pending() -> bool:
+    """Whether a signal was received while deferring and is not taken yet (a wait in the run's
+    thread that is not `abandonable`, e.g. the live view's pause, ends on it)."""
+    return _state.pending is not None

@@ -501,6 +501,8 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
                 master.close()
         except CosimError as error:
             failure = failure or f"terminating the system failed: {error}"
+        for name, record in getattr(goals, "acknowledged", tuple)():  # the live view's last commands
+            recorder.add_metadata(name, record)
         recorder.close(metadata)
         return RunResult(outcome, log_path, master.step_index, wall_time, failure, recorder.trace, ended)
 
@@ -562,11 +564,19 @@ def _goal_poll(goals, built: BuiltRun, monitor: OutcomeMonitor, recorder, record
     true obstacles, as the live view shows them) or the planner finds no path to it, makes it the
     goal: the planner replans from the current pose (its new plan goes on /plan as any replan's),
     the outcome monitor judges the new goal (reaching it ends the run), and /goal gets it. A goal
-    refused is `goals.report(text)`-ed; the old goal stays and the run goes on."""
+    refused is `goals.report(text)`-ed; the old goal stays and the run goes on. What
+    `goals.acknowledged()` returns, if it has it ((name, record) pairs: the live view's commands),
+    goes into the log as metadata."""
     planner = built.planner
     radius = built.scenario.vehicle_radius
+    acknowledged = getattr(goals, "acknowledged", None)  # the live view's commands, for the log
 
     def poll(t_ns: int, h_ns: int) -> None:
+        take_goal(t_ns, h_ns)
+        for name, record in acknowledged() if acknowledged is not None else ():
+            recorder.add_metadata(name, record)
+
+    def take_goal(t_ns: int, h_ns: int) -> None:
         goal = goals.take()
         if goal is None:
             return

@@ -12,6 +12,9 @@ the same schemas (ros2msg) and the same CDR bytes as the file. Two sinks:
   may publish (capability `clientPublish`, encoding `cdr`) a `geometry_msgs/msg/PoseStamped` on
   `/goal_pose` (Foxglove's "Publish pose" tool), decoded here with rosbags and handed to the run
   thread through a queue; the run takes the newest one between steps (`cosim.navigation.run`).
+  Services (`/navcosim/pause`, `resume`, `step`, `speed`, `goal`) pause, step and pace the run
+  (`LiveControl`); what they did goes into the log as metadata `live_control/N`. Clients reach
+  the server through `cosim.record.live_front` (timeouts, limits, token, both subprotocols).
 
 Messages reach the sink in blocks (the recorder packs a block of steps at a time); pacing per
 message keeps the stream's wall-clock timing right regardless.
@@ -19,6 +22,8 @@ message keeps the stream's wall-clock timing right regardless.
 
 from __future__ import annotations
 
+import json
+import logging
 import math
 import queue
 import struct
@@ -29,6 +34,7 @@ from typing import Protocol
 
 import numpy as np
 
+from cosim.core import interrupt
 from cosim.errors import CosimError
 from cosim.record.mcap_format import MESSAGE_HEAD, RECORD_HEAD
 from cosim.scenario.topics import LATCHED_TOPICS  # a client joining late gets their last message
@@ -142,48 +148,181 @@ class Pacer:
             # of catching up in a burst faster than R x real time.
             self._origin = (now, t_ns)
 
+    def restart(self) -> None:
+        """The schedule starts again from the next message (after a pause, a new factor)."""
+        self._origin = None
+
+
+CONTROL = "/navcosim/"  # the services' prefix: pause, resume, step, speed, goal
+MAX_REALTIME = 1e4
+
+
+class LiveControl:
+    """Pause, resume, single steps and the real-time factor of a paced stream, and so of the run:
+    the recorder hands its messages to the sink in the run's thread, so holding a message there
+    holds the run (`gate`). Commands come from other threads (the server's)."""
+
+    def __init__(self, realtime: float, step_ns: int) -> None:
+        self.pacer = Pacer(realtime)
+        self.step_ns = max(1, int(step_ns))
+        self._condition = threading.Condition()
+        self._paused = False
+        self._step_until: int | None = None  # while paused: messages up to this time pass
+        self._shown = 0  # [ns] the time of the last message that went out
+        self._held: int | None = None  # [ns] the time of the message held by the pause
+        self._log: list[dict[str, str]] = []  # acknowledgements the run has not written yet
+
+    def gate(self, t_ns: int) -> None:
+        """Before each message goes out (run thread): wait while paused, then keep the pace. A
+        signal (SIGINT/SIGTERM) ends the wait, so the run can stop."""
+        with self._condition:
+            waited = False
+            while self._paused and not interrupt.pending():
+                if self._step_until is not None and t_ns <= self._step_until:
+                    break
+                self._held = t_ns
+                waited = True
+                self._condition.wait(0.1)
+            self._held = None
+            if waited:
+                self.pacer.restart()
+            self._shown = max(self._shown, t_ns)
+        self.pacer.wait(t_ns)
+
+    def command(self, name: str, arguments: dict, client: str) -> tuple[bool, str]:
+        """Carry out pause, resume, step ({"steps": N}, default 1) or speed ({"factor": R});
+        (done, what became of it), acknowledged on stderr and in the run's log."""
+        with self._condition:
+            t = self._shown / 1e9
+            if name == "pause":
+                done, text = (
+                    not self._paused,
+                    f"paused at t = {t:.3f} s" if not self._paused else "already paused",
+                )
+                self._paused, self._step_until = True, None
+            elif name == "resume":
+                done = self._paused
+                text = f"resumed at t = {t:.3f} s" if done else "not paused"
+                self._paused, self._step_until = False, None
+            elif name == "step":
+                steps = arguments.get("steps", 1)
+                if not isinstance(steps, int) or isinstance(steps, bool) or not 1 <= steps <= 10**6:
+                    done, text = False, f"step: steps must be a whole number 1..1000000, got {steps!r}"
+                else:
+                    base = self._step_until if self._step_until is not None else self._shown
+                    until = base + steps * self.step_ns
+                    if self._held is not None:
+                        until = max(until, self._held)
+                    self._paused, self._step_until = True, until
+                    done, text = True, f"step from t = {t:.3f} s to t = {until / 1e9:.3f} s, then paused"
+            elif name == "speed":
+                factor = arguments.get("factor")
+                if isinstance(factor, bool) or not isinstance(factor, (int, float)):
+                    done, text = False, f"speed: factor must be a number, got {factor!r}"
+                elif not (0 < factor <= MAX_REALTIME):
+                    done, text = False, f"speed: factor must be in (0, {MAX_REALTIME:g}], got {factor!r}"
+                else:
+                    self.pacer.realtime = float(factor)
+                    self.pacer.restart()
+                    done, text = True, f"real-time factor {float(factor):g} from t = {t:.3f} s"
+            else:
+                done, text = False, f"unknown command {name!r}"
+            self._condition.notify_all()
+        self.acknowledge(name, text, client, done)
+        return done, text
+
+    def acknowledge(self, command: str, text: str, client: str, done: bool) -> None:
+        """One line on stderr and a record for the log (`acknowledged`)."""
+        print(
+            f"cosim: {'' if done else 'warning: '}live view: {text} ({client})", file=sys.stderr, flush=True
+        )
+        self.record({"command": command, "client": client, "result": text, "done": str(done).lower()})
+
+    def record(self, record: dict[str, str]) -> None:
+        """An acknowledgement for the log, at the time last shown ("t" [s])."""
+        with self._condition:
+            self._log.append({**record, "t": f"{self._shown / 1e9:.9f}"})
+
+    def acknowledged(self) -> list[dict[str, str]]:
+        """The acknowledgements since the last call (run thread: it writes them to the log)."""
+        with self._condition:
+            taken, self._log = self._log, []
+        return taken
+
 
 class FoxgloveLive:
-    """A Foxglove WebSocket server streaming every recorded channel (ros2msg schemas, CDR)."""
+    """A Foxglove WebSocket server streaming every recorded channel (ros2msg schemas, CDR).
 
-    def __init__(self, port: int = 8765, realtime: float | None = 1.0, host: str = "127.0.0.1") -> None:
+    The foxglove-sdk server listens on an ephemeral port of 127.0.0.1 behind the front
+    (`cosim.record.live_front`), which serves `host`:`port`: handshake and idle timeouts, both
+    subprotocols, the token, per-client limits. Services `/navcosim/pause`, `resume`, `step`,
+    `speed` and `goal` (JSON) control the run (`LiveControl`); each is acknowledged on stderr, in
+    the service's answer, to every client as a status, and in the log (metadata `live_control/N`,
+    written by the run between steps, `cosim.navigation.run`)."""
+
+    def __init__(
+        self,
+        port: int = 8765,
+        realtime: float = 1.0,
+        host: str = "127.0.0.1",
+        token: str | None = None,
+        step: float = 0.01,
+    ) -> None:
         import foxglove
+        from cosim.record.live_front import Front
 
         self._foxglove = foxglove
-        self._pacer = Pacer(realtime) if realtime is not None else None
+        _quiet_sdk_log()
+        self.control = LiveControl(realtime, round(step * 1e9))
         self._context = foxglove.Context()
         self._channels: dict[int, object] = {}
+        self._known: set[int] = set()  # the SDK's channel ids (the front lets clients subscribe to these)
         self._latched: dict[str, tuple[int, bytes]] = {}  # topic -> last (t_ns, payload)
         self._lock = threading.Lock()
         self._goals: queue.SimpleQueue[tuple[float, float]] = queue.SimpleQueue()
         self._client_channels: dict[tuple[int, int], object] = {}  # (client id, channel id) -> ClientChannel
+        self._acks = 0
+        capability = foxglove.Capability
         try:
             self.server = foxglove.start_server(
                 name="navcosim",
-                host=host,
-                port=port,
+                host="127.0.0.1",
+                port=0,
                 context=self._context,
-                capabilities=[foxglove.Capability.Time, foxglove.Capability.ClientPublish],
-                supported_encodings=["cdr"],
+                capabilities=[capability.Time, capability.ClientPublish, capability.Services],
+                supported_encodings=["cdr", "json"],
                 server_listener=_listener(self),
+                services=_services(self),
             )
-        except Exception as error:  # the SDK raises a plain RuntimeError for a taken port
-            text = str(error).splitlines()[0] if str(error) else type(error).__name__
-            raise CosimError(f"--live: cannot serve on {host}:{port} ({text})") from None
-        self.port = self.server.port
-        self.url = f"ws://{host}:{self.port}"
+        except Exception as error:  # the SDK raises a plain RuntimeError
+            raise CosimError(f"--live: cannot start the server ({_first_line(error)})") from None
+        try:
+            self.front = Front(host, port, self.server.port, self.known, token)
+        except OSError as error:
+            self._stop_server()
+            raise CosimError(f"--live: cannot serve on {host}:{port} ({error.strerror or error})") from None
+        self.port = self.front.port
+        shown = f"[{host}]" if ":" in host else host
+        self.url = f"ws://{shown}:{self.port}" + (f"/?token={token}" if token else "")
         self._last_time = -1
 
     def channel(self, channel_id, topic, encoding, schema, metadata) -> None:
         foxglove = self._foxglove
         described = foxglove.Schema(name=schema[0], encoding=schema[1], data=schema[2]) if schema else None
-        self._channels[channel_id] = foxglove.Channel(
-            topic, schema=described, message_encoding=encoding, context=self._context, metadata=metadata
-        )
+        with self._lock:  # the advertise may reach a client (and its subscribe the front) at once
+            channel = foxglove.Channel(
+                topic, schema=described, message_encoding=encoding, context=self._context, metadata=metadata
+            )
+            self._known.add(channel.id())
+        self._channels[channel_id] = channel
+
+    def known(self, sdk_channel_id: int) -> bool:
+        """Whether the SDK server has this channel (the front's thread asks)."""
+        with self._lock:
+            return sdk_channel_id in self._known
 
     def message(self, channel_id: int, t_ns: int, payload: bytes) -> None:
-        if self._pacer is not None:
-            self._pacer.wait(t_ns)
+        self.control.gate(t_ns)
         channel = self._channels[channel_id]
         topic = channel.topic()
         if topic in LATCHED_TOPICS:
@@ -212,13 +351,44 @@ class FoxgloveLive:
         except ValueError as error:
             self.report(f"{GOAL_TOPIC} ignored: {error}")
             return
-        if math.isfinite(x) and math.isfinite(y):
-            self._goals.put((x, y))
+        self.give_goal(x, y)
+
+    def give_goal(self, x: float, y: float) -> str | None:
+        """Queue a goal for the run; why not (one line), or None."""
+        if not (math.isfinite(x) and math.isfinite(y)):
+            why = f"position ({x}, {y}) is not finite"
+            self.report(f"{GOAL_TOPIC} ignored: {why}")
+            return why
+        self._goals.put((x, y))
+        return None
+
+    def call(self, name: str, client_id: int, payload: bytes) -> bytes:
+        """A service call (server thread): its JSON answer {"ok", "message"}."""
+        client = f"client {client_id}"
+        try:
+            arguments = json.loads(payload) if payload.strip() else {}
+        except (ValueError, UnicodeDecodeError):
+            arguments = None
+        if not isinstance(arguments, dict):
+            done, text = False, f"{name}: the request is not a JSON object"
+            self.control.acknowledge(name, text, client, done)
+        elif name == "goal":
+            x, y = arguments.get("x"), arguments.get("y")
+            if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (x, y)):
+                done, text = False, f"goal: x and y must be numbers [m], got {x!r}, {y!r}"
+                self.control.acknowledge(name, text, client, done)
+            else:
+                why = self.give_goal(float(x), float(y))
+                done = why is None
+                text = f"goal ({x:g}, {y:g}) m " + ("queued: the run answers as a status" if done else why)
         else:
-            self.report(f"{GOAL_TOPIC} ignored: position ({x}, {y}) is not finite")
+            done, text = self.control.command(name, arguments, client)
+        if done and name != "goal":
+            self._status(text, warning=False)
+        return json.dumps({"ok": done, "message": text}).encode()
 
     def take(self) -> tuple[float, float] | None:
-        """The newest goal published since the last call (older ones are superseded), or None."""
+        """The newest goal given since the last call (older ones are superseded), or None."""
         goal = None
         while True:
             try:
@@ -227,13 +397,26 @@ class FoxgloveLive:
                 return goal
 
     def report(self, text: str, warning: bool = True) -> None:
-        """A line on stderr and a status message to the clients (Foxglove shows it)."""
-        level = self._foxglove.websocket.StatusLevel
+        """What became of a goal: a line on stderr, a status message to the clients (Foxglove
+        shows it) and an acknowledgement in the log."""
         print(f"cosim: {'warning: ' if warning else ''}{text}", file=sys.stderr, flush=True)
+        self._status(text, warning)
+        self.control.record({"command": "goal", "result": text, "done": str(not warning).lower()})
+
+    def _status(self, text: str, warning: bool) -> None:
+        level = self._foxglove.websocket.StatusLevel
         self.server.publish_status(text, level.Warning if warning else level.Info)
 
+    def acknowledged(self) -> list[tuple[str, dict[str, str]]]:
+        """(metadata name, record) of each control command since the last call, for the log."""
+        records = []
+        for record in self.control.acknowledged():
+            self._acks += 1
+            records.append((f"live_control/{self._acks}", record))
+        return records
+
     def linger(self, seconds: float | None) -> None:
-        """Keep serving after the run: `seconds`, or until Ctrl-C when None."""
+        """Keep serving after the run: `seconds`, or until Ctrl-C (SIGINT, SIGTERM) when None."""
         try:
             if seconds is None:
                 while True:
@@ -244,7 +427,94 @@ class FoxgloveLive:
             pass
 
     def stop(self) -> None:
-        self.server.stop()
+        """End every client's connection, then the server (a second call: no-op)."""
+        self.front.close()
+        self._stop_server()
+
+    def _stop_server(self) -> None:
+        # The front held every connection the SDK had, so it stops at once; one a local process
+        # opened to the SDK's own port directly could hold it: the wait is bounded.
+        stopper = threading.Thread(target=self.server.stop, name="navcosim-live-stop", daemon=True)
+        stopper.start()
+        stopper.join(STOP_TIMEOUT)
+        if stopper.is_alive():
+            print(
+                f"cosim: warning: live view: the server did not stop within {STOP_TIMEOUT:g} s; left behind",
+                file=sys.stderr,
+                flush=True,
+            )
+
+
+STOP_TIMEOUT = 2.0  # [s]
+
+
+def _first_line(error: BaseException) -> str:
+    return str(error).splitlines()[0] if str(error) else type(error).__name__
+
+
+class _SdkLog(logging.Handler):
+    """foxglove-sdk's own log lines (Python logger "foxglove"): the first few on stderr."""
+
+    SHOWN = 5
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.count = 0
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.count += 1
+        if self.count <= self.SHOWN:
+            more = " (further foxglove-sdk lines are not shown)" if self.count == self.SHOWN else ""
+            print(f"cosim: live view: foxglove-sdk: {record.getMessage()}{more}", file=sys.stderr, flush=True)
+
+
+def _quiet_sdk_log() -> None:
+    logger = logging.getLogger("foxglove")
+    if not any(isinstance(handler, _SdkLog) for handler in logger.handlers):
+        logger.addHandler(_SdkLog())
+        logger.setLevel(logging.WARNING)
+        logger.propagate = False
+
+
+def _services(live: FoxgloveLive) -> list:
+    """The control services: a JSON request (an object; its schema below), a JSON answer."""
+    foxglove = live._foxglove
+    answer = {"type": "object", "properties": {"ok": {"type": "boolean"}, "message": {"type": "string"}}}
+    requests = {
+        "pause": {},
+        "resume": {},
+        "step": {"steps": {"type": "integer", "minimum": 1, "description": "macro steps (default 1)"}},
+        "speed": {"factor": {"type": "number", "exclusiveMinimum": 0, "description": "real-time factor"}},
+        "goal": {"x": {"type": "number"}, "y": {"type": "number"}},
+    }
+
+    def schema(name: str, body: dict):
+        data = json.dumps(body).encode()
+        return foxglove.MessageSchema(
+            encoding="json", schema=foxglove.Schema(name=name, encoding="jsonschema", data=data)
+        )
+
+    services = []
+    for name, properties in requests.items():
+        request = {"type": "object", "properties": properties}
+        if name in ("speed", "goal"):
+            request["required"] = list(properties)
+
+        def handler(call, name=name) -> bytes:
+            return live.call(name, call.client_id, call.payload)
+
+        services.append(
+            foxglove.Service(
+                CONTROL + name,
+                schema=foxglove.ServiceSchema(
+                    f"navcosim/{name}",
+                    request=schema(f"navcosim/{name}Request", request),
+                    response=schema(f"navcosim/{name}Response", answer),
+                ),
+                handler=handler,
+            )
+        )
+    return services
 
 
 def _listener(live: FoxgloveLive):

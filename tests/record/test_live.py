@@ -33,7 +33,7 @@ BICYCLE = ROOT / "scenarios" / "warehouse_bicycle_no_obstacle.toml"
 NEW_GOAL = (42.0, 30.0)
 IN_A_RACK = (20.0, 14.0)  # the rack row y = 12..16 m, x = 10..38 m
 OFF_THE_MAP = (-5.0, 3.0)
-SUBPROTOCOL = "foxglove.sdk.v1"  # what foxglove-sdk 0.30's server accepts (it answers 400 otherwise)
+SUBPROTOCOL = "foxglove.sdk.v1"  # foxglove-sdk's own; the classic one: tests/record/test_live_front.py
 TOPICS = ("/odom", "/scan")
 
 
