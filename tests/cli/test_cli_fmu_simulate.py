@@ -56,7 +56,6 @@ def test_default_log_goes_under_logs_and_the_summary_names_it(tmp_path):
     [
         (["--start-values", "omga=1"], "has no parameter or input 'omga'; closest: omega"),
         (["--start-values", "v"], "--start-values v: expected NAME=VALUE"),
-        (["--stop-time", "1.05", "--step", "0.1"], "is not a whole number of --step 0.1 s steps"),
         (["--interface", "me"], "the FMU has no <ModelExchange> interface; --interface me cannot run it"),
         (["--solver", "rk4"], "--solver rk4: a solver integrates a Model Exchange FMU"),
     ],
@@ -74,3 +73,16 @@ def test_missing_file_is_one_line_and_exit_2(tmp_path):
     completed = _cosim(tmp_path / "nothing.fmu", cwd=tmp_path)
     assert completed.returncode == 2 and completed.stderr.count("\n") == 1
     assert "nothing.fmu: no such file and not a project FMU" in completed.stderr
+
+
+@pytest.mark.slow
+def test_a_cut_last_step_is_refused_only_for_an_fmu_that_cannot_take_it(tmp_path):
+    arguments = ["--stop-time", "1.05", "--step", "0.1", "--out", "run.mcap"]
+    refused = _cosim(fixture_fmu("gain_fixed_step_fmi2"), *arguments, cwd=tmp_path)
+    assert refused.returncode == 2 and refused.stderr.count("\n") == 1
+    assert "is not a whole number of --step 0.1 s steps" in refused.stderr
+    assert "cannot take a shorter last step" in refused.stderr
+    completed = _cosim(fixture_fmu("diffdrive_fmi2"), *arguments, cwd=tmp_path)
+    assert completed.returncode == 0, completed.stderr
+    with open_log(tmp_path / "run.mcap") as log:
+        assert log.end_time == pytest.approx(1.05, abs=1e-12)

@@ -436,6 +436,7 @@ def test_readme_removal_example_runs_as_written(tmp_path):
     replace = {
         **remove_section("pure_pursuit"),
         **remove_section("vfh"),
+        **remove_section("goal"),  # the block's own [goal] takes its place
         r"^smoothing = \"none\".*$": 'smoothing = "none"\nreplan = false',
     }
     path = write_scenario(tmp_path, "readme_direct", "warehouse_diff_drive_no_obstacle.toml", extra, replace)
