@@ -282,6 +282,7 @@ def _write_header(built: BuiltRun, master: Master, recorder) -> None:
             if name in scenario.fmu_labels:
                 description["fmu"] = scenario.fmu_labels[name]
             recorder.add_metadata(f"fmu/{name}", description)
+    recorder.add_unconnected_inputs(built.system)
     recorder.add_attachment("scenario.toml", "application/toml", scenario.text.encode())
     map_file = scenario.map_file
     recorder.add_attachment(map_file.name, "application/octet-stream", map_file.read_bytes())

@@ -51,6 +51,8 @@ import numpy as np
 from cosim.errors import CosimError
 from cosim.record import rosmsg
 from cosim.record.batch import RAW_STREAM, MessageBlock
+from cosim.record.inputs import METADATA_NAME as UNCONNECTED_INPUTS
+from cosim.record.inputs import unconnected_metadata
 from cosim.record.logfile import navcosim_version
 from cosim.record.writer import ChunkWriter
 from cosim.scenario.topics import TOPIC_TYPES
@@ -303,6 +305,13 @@ class Recorder:
         self._writer.add_metadata(name, record)
         if self.trace is not None:
             self.trace.metadata[name] = record
+
+    def add_unconnected_inputs(self, system) -> None:
+        """The metadata record `unconnected_inputs` of `system` (`cosim.record.inputs`), when it has
+        an input that no connection feeds."""
+        kept = unconnected_metadata(system)
+        if kept:
+            self.add_metadata(UNCONNECTED_INPUTS, kept)
 
     def add_attachment(self, name: str, media_type: str, data: bytes, t_ns: int = 0) -> None:
         """An attached file (the scenario, the map) stored as-is; its create and log time are the

@@ -46,3 +46,31 @@ def check_parameters(table: TableReader, parameters: dict[str, object]) -> dict[
 def pair_key(name: str) -> str | None:
     """The pair key (e.g. `distance_limits`) a split parameter can come from, or None."""
     return next((key for key, names in PAIRS.items() if name in names), None)
+
+
+def has_start(variable) -> bool:
+    """Whether an FMU variable (fmpy's) declares a start value. FMI 2.0 and 3.0 require one on every
+    input and parameter (FMI 3.0 Clocks excepted) and define no default for one that lacks it, so an
+    unconnected input without a start value has no value to keep: an error, not the type's zero."""
+    return getattr(variable, "start", None) not in (None, "")
+
+
+def unstarted_inputs(layout) -> tuple[str, ...]:
+    """The input ports (numbers and text) of an FMU's layout (`cosim.fmi.component.fmu_layout`)
+    whose variable has no start value."""
+    variables = {variable.name: variable for variable in layout.model_description.modelVariables}
+    return tuple(
+        port.name
+        for port in (*layout.inputs, *layout.text.get("input", ()))
+        if not has_start(
+            layout.variables[port.name][0] if port.name in layout.variables else variables[port.name]
+        )
+    )
+
+
+def unstarted_problem(port: str, remedy: str) -> str:
+    """The one line for an input that nothing feeds and that has no start value."""
+    return (
+        f"input '{port}' is not connected and the FMU gives it no start value (FMI requires one on "
+        f"every input): {remedy}"
+    )

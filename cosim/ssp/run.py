@@ -253,6 +253,7 @@ def _write_header(ssp: SspSystem, run: Experiment, master: Master, recorder) -> 
             # The archive member, not the folder this run unpacked it to (new in every run).
             description["fmu"] = members.get(component.name, description["fmu"])
             recorder.add_metadata(f"fmu/{component.name}", description)
+    recorder.add_unconnected_inputs(master.system)
     recorder.add_attachment("SystemStructure.ssd", "application/x-ssp-definition", ssp.ssd_text)
 
 
