@@ -53,6 +53,7 @@ from cosim.scenario.template import (
 )
 
 _LISTED = 12  # names listed in one message before "(and N more)"
+SHOWN_PROBLEMS = 20  # problem lines of one error before "... and N more problems"
 
 
 class Problems:
@@ -67,8 +68,14 @@ class Problems:
         self.lines.append(f"{self.source}: {shorten(where, WHERE_LIMIT)}: {shorten_words(problem)}")
 
     def check(self) -> None:
-        if self.lines:
-            raise CosimError("\n".join(self.lines))
+        """Raise the problems, the first `SHOWN_PROBLEMS` of them and how many more (10,000 bad
+        connections are 20,000 problems: the first ones say what is wrong)."""
+        if not self.lines:
+            return
+        lines = self.lines[:SHOWN_PROBLEMS]
+        if len(self.lines) > SHOWN_PROBLEMS:
+            lines.append(f"{self.source}: ... and {len(self.lines) - SHOWN_PROBLEMS} more problems")
+        raise CosimError("\n".join(lines))
 
 
 def describe_system(scenario: Scenario) -> SystemDescription:

@@ -24,12 +24,14 @@ from cosim.errors import PATH_LIMIT, CosimError, wrong_file_message
 from cosim.fmi.builtin import known_names
 from cosim.fmi.solvers import SOLVERS
 from cosim.scenario.limits import (
+    MAX_COMPONENTS,
     MAX_LIDAR_BEAMS,
     MAX_LIDAR_RANGE,
     MAX_LINEAR_SPEED,
     MAX_NAME_LENGTH,
     MAX_OBSTACLES,
     MAX_TIME,
+    check_component_count,
     check_run_length,
     check_speeds,
     check_time_base,
@@ -368,6 +370,7 @@ def _build(
         "fmu_max_memory", Scenario.fmu_max_memory, minimum=0.0, exclusive_minimum=True
     )
     check_run_length(simulation, macro_step, stop_time)
+    max_components = simulation.integer("max_components", MAX_COMPONENTS, minimum=1)
     simulation.finish()
 
     vehicle_table = TableReader(source, "[vehicle]", top.raw("vehicle"))
@@ -397,6 +400,10 @@ def _build(
         table = vfh_table if role == "vfh" else TableReader(source, f"[{role}]", top.raw(role, {}))
         fmu = _fmu_name(table, DEFAULT_FMUS[role], base_dir)
         components[role] = _component(table, role, fmu, controller_rate, macro_step)
+    if isinstance(tables, dict):  # counted before each table is read: a limit, not a slow refusal
+        check_component_count(
+            top, "components", len(components) + len(set(tables) - set(components)), max_components
+        )
     components.update(_added_components(top, base_dir, removed))
     connections = tuple(
         _connection(source, index, item) for index, item in enumerate(_list(top, "connections"))
