@@ -457,6 +457,33 @@ class Recorder:
             self.trace.add_channel(channel, component, names)
         return channel
 
+    def text_channel(self, component: str, names: list[str], fmi_types: list[str], inputs: int) -> int:
+        """Register `/text_signals/<component>`: one field per String (`string`) or Binary
+        (`uint8[]`) variable, the first `inputs` of them inputs; returns its handle for
+        `write_text`."""
+        topic = f"/text_signals/{component}"
+        if topic in self._channels:
+            raise CosimError(f"{self.path}: text channel {topic} registered twice")
+        fields = rosmsg.field_names(list(names))
+        schema = self._schema(
+            rosmsg.text_type_name(component), rosmsg.text_definition(fields, list(fmi_types))
+        )
+        metadata = {
+            rosmsg.TEXT_COMPONENT_KEY: component,
+            rosmsg.TEXT_NAMES_KEY: json.dumps(list(names)),
+            rosmsg.TEXT_TYPES_KEY: json.dumps(list(fmi_types)),
+            rosmsg.TEXT_INPUTS_KEY: str(inputs),
+        }
+        channel = self._writer.register_channel(topic, "cdr", schema, metadata)
+        self._block.registered()
+        self._channels[topic] = channel
+        self._sequences[channel] = 0
+        return channel
+
+    def write_text(self, channel: int, t_ns: int, values: list[str | bytes]) -> None:
+        """One record of a text channel at `t_ns` [ns], the values in the channel's order."""
+        self._write(channel, t_ns, rosmsg.text_payload(t_ns, values))
+
     def write_signals(self, channel: int, t_ns: int, values: np.ndarray) -> None:
         """One record of a component's signals at `t_ns` [ns]: float64 values in the channel's
         order, stamped as given (not for a step channel)."""

@@ -47,6 +47,7 @@ from cosim.core.master import COMPILED_MIN_STEPS, NS_PER_S, Master, System, seco
 from cosim.errors import CosimError, SimulationEnded
 from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
 from cosim.record.output import atomic_output, checked_output
+from cosim.record.text_signals import TextRecording
 from cosim.scenario.description import ComponentDescription
 from cosim.scenario.limits import MAX_STEPS
 from cosim.scenario.load import DEFAULT_LOG_PATTERN, Integration
@@ -388,6 +389,7 @@ def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: b
     ended = None  # an FMU's request to end the run
     with recorder:
         _write_header(simulation, component, master.system, recorder)
+        text = TextRecording(recorder, master.system)
         channel = recorder.signal_channel(
             component.name,
             component.signal_names(),
@@ -437,6 +439,7 @@ def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: b
             outcome["failure"] = failure
         if ended:
             outcome["ended_by"] = ended
+        text.finish(master.time_ns)
         recorder.end_steps(master.time_ns)
         recorder.close(outcome)
     wall_time = time.perf_counter() - wall_start
