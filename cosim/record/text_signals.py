@@ -6,8 +6,8 @@ inputs or outputs (an FMU's, `cosim.fmi.text`) also gets `/text_signals/<compone
 Binary variable, inputs first (channel metadata `navcosim.text_names`, `navcosim.text_types`,
 `navcosim.text_inputs`). Its records are stamped as the numeric ones: the record at t holds the
 inputs applied at t and the outputs at t, the first one the values after initialisation, a last one
-at the end time; a record is written only when a value differs from the previous record (text
-changes seldom), so each value holds from its record's time to the next record.
+at the end time; in between, a record is written only when a value differs from the previous one
+(text changes seldom), so each value holds from its record's time to the next record.
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ class TextRecording:
         """The last records, at the end time (the final outputs, the inputs last applied)."""
         for track in self._tracks:
             track.component.text_listener = None
-            track.write(end_ns, track.outputs())
+            track.write(end_ns, track.outputs(), always=True)
 
 
 class _Track:
@@ -50,9 +50,9 @@ class _Track:
     def outputs(self) -> list:
         return [self.component.text_values[p.name] for p in self.output_ports]
 
-    def write(self, t_ns: int, outputs: list) -> None:
+    def write(self, t_ns: int, outputs: list, always: bool = False) -> None:
         values = [self.component.text_values[p.name] for p in self.inputs] + outputs
-        if values != self.last:
+        if always or values != self.last:
             self.recorder.write_text(self.channel, t_ns, values)
             self.last = values
 

@@ -27,7 +27,7 @@ where a name is close to a known one:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from cosim.core.component import closest_names
@@ -115,6 +115,7 @@ class _Composer:
         self.missing: dict[str, list[str]] = {}  # role component -> ports the template needs, absent
         self.own: dict[str, dict[str, list[str]]] = {}  # component -> causality -> FMU variable names
         self.unstarted: dict[str, tuple[str, ...]] = {}  # component -> input ports without a start value
+        self.text_ports: dict[str, dict[str, tuple[str, str]]] = {}  # component -> `_FmuInterface.text`
         # The template components left out ([system] remove); every other name there is a problem.
         self.removed = [n for n in dict.fromkeys(scenario.removed) if n in ORDER and n != POSE_COMPONENT]
         self.replacing = {name for name, spec in scenario.components.items() if spec.added and name in ORDER}
@@ -210,6 +211,7 @@ class _Composer:
             fmu = _fmu_interface(path, component.name, mapped, max_size)
         if fmu.unstarted:
             self.unstarted[component.name] = fmu.unstarted
+        self.text_ports[component.name] = fmu.text
         # A state output: the template says it is one and the FMU declares no dependencies for it.
         declared = {u.variable.name for u in description.outputs if u.dependencies is not None}
         feedthrough = dict(fmu.feedthrough)
@@ -293,7 +295,8 @@ class _Composer:
         """Split the section's values into parameters and held inputs; check names, types, ranges."""
         where = component.where
         known = set(component.parameter_names)
-        settable = known | set(component.inputs)  # an input given a value is held at it
+        text = self.text_ports.get(component.name, {})
+        settable = known | set(component.inputs) | set(text)  # an input given a value is held at it
         values = dict(component.parameters) if not spec.added else dict(spec.parameters)
         parameters, held = {}, {}
         for name, value in values.items():
@@ -309,6 +312,13 @@ class _Composer:
                 continue
             mapping = component.port_map.get(name)
             variable = variables[mapping.variable if mapping else name]
+            if name in text or isinstance(value, str):
+                problem = _text_problem(text.get(name, ("", ""))[1], variable, value)
+                if problem:
+                    self.problems.add(f"{where}.{name}", problem)
+                else:
+                    (parameters if text[name][0] == "parameter" else held)[name] = value
+                continue
             received = float(value) * (mapping.scale if mapping else 1.0)
             problem = _value_problem(variable, received, spec.parameters.get(name, value))
             if problem:
@@ -548,6 +558,8 @@ class _FmuInterface:
     parameters: tuple[str, ...]
     feedthrough: dict[str, tuple[str, ...]]  # output port -> input ports it depends on directly
     unstarted: tuple[str, ...] = ()  # input ports (numbers and text) whose variable has no start value
+    text: dict[str, tuple[str, str]] = field(default_factory=dict)  # String/Binary parameter or input
+    # port -> (causality, FMI type)
 
 
 # The interfaces of the last few FMU components described, keyed by everything `FmuComponent` reads
@@ -587,6 +599,11 @@ def _fmu_interface(path: Path, name: str, port_map: dict, max_size: int) -> _Fmu
         tuple(p.name for p in layout.parameters),
         feedthrough,
         unstarted_inputs(layout),
+        {
+            port.name: (causality, port.fmi_type)
+            for causality in ("parameter", "input")
+            for port in layout.text.get(causality, ())
+        },
     )
     if key is not None:
         if len(_INTERFACES) >= _INTERFACES_KEPT:
@@ -626,6 +643,24 @@ def _value_problem(variable, value: float, given) -> str | None:
         return f"must be >= {low:g}, {got}"
     if high is not None and value > high:
         return f"must be <= {high:g}, {got}"
+    return None
+
+
+def _text_problem(fmi_type: str, variable, value) -> str | None:
+    """Whether `value` suits a String (a TOML string) or Binary (a string of hex digits) variable;
+    a string given to any other variable is a problem too."""
+    if not fmi_type:
+        return f"must be a number (the FMU's {variable.type}), got a string"
+    if not isinstance(value, str):
+        wanted = "text" if fmi_type == "String" else 'hex digits, two a byte (e.g. "0a0b")'
+        return f"the FMU's {fmi_type} takes a string of {wanted}, got {str(value).lower()}"
+    if fmi_type == "Binary":
+        try:
+            bytes.fromhex(value)
+        except ValueError:
+            return (
+                f'the FMU\'s Binary takes a string of hex digits, two a byte (e.g. "0a0b"), got {value!r:.40}'
+            )
     return None
 
 

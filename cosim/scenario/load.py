@@ -650,16 +650,17 @@ def _added_components(top: TableReader, base_dir: Path, removed: tuple[str, ...]
         rate = table.number("rate", None, minimum=0.0, exclusive_minimum=True)
         isolation, nan_outputs = _isolation_keys(table)
         integration = _integration_keys(table)
-        parameters: dict[str, float | int | bool] = {}
+        parameters: dict[str, float | int | bool | str] = {}
         for key, item in table.table.items():
             if key in ("fmu", "rate", "isolation", "nan_outputs", *INTEGRATION_KEYS):
                 continue
             table.used.add(key)
-            if isinstance(item, bool) or is_number(item):
-                parameters[key] = item
+            if isinstance(item, bool | str) or is_number(item):
+                parameters[key] = item  # a string sets a String (or, as hex, a Binary) variable
             else:
                 raise table.error(
-                    key, f"an FMU variable's value must be a number or true/false, got {describe(item)}"
+                    key,
+                    f"an FMU variable's value must be a number, true/false or a string, got {describe(item)}",
                 )
         table.finish()
         components[name] = ComponentSpec(
