@@ -36,9 +36,9 @@ def show_ssp(args, show_scenario) -> int:
 
 
 def format_ssp_system(ssp, run, system, order: list[str]) -> str:
-    from cosim.cli.system import unconnected_lines
     from cosim.cli.wiring import number_text as _number
     from cosim.cli.wiring import table_lines as _table
+    from cosim.cli.wiring import unconnected_lines
 
     lines = [
         f"system of {ssp.name} ({ssp.source}, SSP {ssp.version})",
