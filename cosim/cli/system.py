@@ -6,8 +6,9 @@ version and rate, each connection with its scale and offset and who declared it 
 between elements of two arrays are folded into one line, e.g. `lidar.ranges[1..360] ->
 vfh.ranges[1..360]`), the template connections the scenario replaced, the template components it
 removed (`[system] remove`) or replaced (`[components.NAME]` of a template name) with the template
-connections dropped with them, the order in which the master steps the components, and what the
-run reads besides the recording (robot pose, command, avoidance mode, scan). `--png FILE` draws
+connections dropped with them, the order in which the master steps the components, what the run
+reads besides the recording (robot pose, command, avoidance mode, scan), and the inputs that no
+connection feeds with the values they keep (start values, as FMI defines, or held ones). `--png FILE` draws
 the wiring as a block diagram.
 """
 
@@ -16,7 +17,7 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
-from cosim.cli.wiring import fold
+from cosim.cli.wiring import fold, unconnected_lines
 from cosim.cli.wiring import number_text as _number
 from cosim.cli.wiring import table_lines as _table
 from cosim.scenario.description import SystemDescription
@@ -73,7 +74,8 @@ def show_scenario(args, scenario, title: str, unpacked: Path | None = None) -> i
         description = replace(
             description, components={name: _member(c, unpacked) for name, c in description.components.items()}
         )
-    print(format_system(description, order, constant, title))
+    text = format_system(description, order, constant, title)
+    print("\n".join([text, *unconnected_lines(built.system, description)]))
     if args.png is not None:
         from cosim.cli.system_plot import draw_system
 

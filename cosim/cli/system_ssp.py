@@ -38,6 +38,7 @@ def show_ssp(args, show_scenario) -> int:
 def format_ssp_system(ssp, run, system, order: list[str]) -> str:
     from cosim.cli.wiring import number_text as _number
     from cosim.cli.wiring import table_lines as _table
+    from cosim.cli.wiring import unconnected_lines
 
     lines = [
         f"system of {ssp.name} ({ssp.source}, SSP {ssp.version})",
@@ -61,4 +62,4 @@ def format_ssp_system(ssp, run, system, order: list[str]) -> str:
         lines += _table(rows)
     lines += ["", f"step order ({run.master})"]
     lines += [f"  {position}. {name}" for position, name in enumerate(order, start=1)]
-    return "\n".join(lines)
+    return "\n".join(lines + unconnected_lines(system))

@@ -101,3 +101,62 @@ def table_lines(rows: list[tuple[str, ...]], indent: str = "  ") -> list[str]:
         indent + "  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True)).rstrip()
         for row in rows
     ]
+
+
+def unconnected_lines(system, description=None) -> list[str]:
+    """The inputs that no connection feeds, each with the value it keeps for the run (its start
+    value, or the one the scenario holds it at), folded to 12 a component; none: no lines."""
+    from cosim.record.inputs import unconnected_inputs, value_text
+
+    kept = unconnected_inputs(system)
+    if not kept:
+        return []
+    count = sum(len(values) for values in kept.values())
+    lines = ["", f"unconnected inputs ({count}; each keeps its value for the run)"]
+    rows = [("input", "value", "from")]
+    for name, values in kept.items():
+        held = (
+            description.components[name].held_inputs if description and name in description.components else {}
+        )
+        runs = _runs(
+            [
+                (port, value_text(value), "held by the scenario" if port in held else "start")
+                for port, value in values.items()
+            ]
+        )
+        for position, (port, value, source) in enumerate(runs):
+            if position == _LISTED:
+                rows.append((f"{name}: ... and {len(runs) - _LISTED} more", "", ""))
+                break
+            rows.append((f"{name}.{port}", value, source))
+    return lines + table_lines(rows)
+
+
+def _runs(rows: list[tuple[str, str, str]]) -> list[tuple[str, str, str]]:
+    """Consecutive elements of one array with the same value and source as one row, `a[3..9]`."""
+    folded: list[list] = []
+    for port, value, source in rows:
+        array, _, index = port[:-1].partition("[") if port.endswith("]") else (port, "", "")
+        last = folded[-1] if folded else None
+        if (
+            last is not None
+            and index.isdigit()
+            and last[0] == array
+            and last[2] + 1 == int(index)
+            and last[3:] == [value, source]
+        ):
+            last[2] = int(index)
+            continue
+        number = int(index) if index.isdigit() else None
+        folded.append([array if number is not None else port, number, number, value, source])
+    return [
+        (
+            name if first is None else f"{name}[{first}]" if first == last else f"{name}[{first}..{last}]",
+            value,
+            source,
+        )
+        for name, first, last, value, source in folded
+    ]
+
+
+_LISTED = 12

@@ -440,6 +440,7 @@ class FmuComponent(Component):
             p.name: p.start for p in (*self.text_inputs, *self.text_outputs)
         }
         self._text_feeds: dict[str, tuple[Component, str]] = {}  # text input -> (producer, its output)
+        self.text_listener = None  # called with t [s] after each step's text values are read
         self._text = None
         self.nan_outputs: frozenset[str] = frozenset()
         self.allow_nan(*nan_outputs, *layout.documented_nan)
@@ -1066,15 +1067,21 @@ _LOG_TARGETS: dict[int, weakref.ref] = {}
 def _with_text(component: FmuComponent, do_step, get_outputs) -> dict:
     """`do_step` that first sends the text inputs, `get_outputs` that also reads the text outputs."""
 
+    started = [None]  # start [s] of the step whose outputs `read` gets next
+
     def stepped(t: float, h: float) -> None:
         if component.text_inputs:
             component._send_text()
         do_step(t, h)
+        started[0] = t
 
     def read():
         outputs = get_outputs()
         if component.text_outputs:
             component._read_text()
+        if started[0] is not None and component.text_listener is not None:
+            component.text_listener(started[0])  # a recording (`cosim.record.text_signals`)
+        started[0] = None
         return outputs
 
     return {"do_step": stepped, "get_outputs": read}

@@ -74,6 +74,28 @@ class Signals:
 
 
 @dataclass(frozen=True)
+class TextSignals:
+    """One component's String and Binary signals (`/text_signals/<component>`): `rows[i]` holds
+    every variable (`names`, FMI types `types`: str for a String, bytes for a Binary) from time
+    `t[i]` [s] until the next record (a record is written when a value changes)."""
+
+    component: str
+    t: np.ndarray  # [s]
+    names: list[str]
+    types: list[str]
+    rows: list[list[str | bytes]]
+
+    def __getitem__(self, name: str) -> list[str | bytes]:
+        if name not in self.names:
+            raise CosimError(
+                f"component {self.component!r} has no text signal {name!r} "
+                f"(text signals: {', '.join(self.names)})"
+            )
+        index = self.names.index(name)
+        return [row[index] for row in self.rows]
+
+
+@dataclass(frozen=True)
 class Trajectory:
     t: np.ndarray  # [s]
     x: np.ndarray  # [m]
@@ -237,6 +259,39 @@ class Log:
         metadata = self._index.channels[self._signal_channels[component]].metadata
         units = json.loads(metadata[SIGNAL_UNITS_KEY]) if SIGNAL_UNITS_KEY in metadata else []
         return [str(unit) for unit in units] if len(units) == len(names) else [""] * len(names)
+
+    @cached_property
+    def _text_channels(self) -> dict[str, object]:
+        return {
+            channel.metadata[rosmsg.TEXT_COMPONENT_KEY]: channel
+            for _, channel in sorted(self._index.channels.items())
+            if rosmsg.TEXT_COMPONENT_KEY in channel.metadata and rosmsg.TEXT_NAMES_KEY in channel.metadata
+        }
+
+    @property
+    def text_components(self) -> list[str]:
+        """Components with String or Binary signals (`/text_signals/<component>`)."""
+        return list(self._text_channels)
+
+    def text_signals(self, component: str) -> TextSignals:
+        """Every record of `/text_signals/<component>`, decoded."""
+        channel = self._text_channels.get(component)
+        if channel is None:
+            known = ", ".join(self._text_channels) or "none"
+            raise CosimError(f"{self.path}: no text signals of component {component!r} (components: {known})")
+        names = [str(name) for name in json.loads(channel.metadata[rosmsg.TEXT_NAMES_KEY])]
+        types = [str(kind) for kind in json.loads(channel.metadata[rosmsg.TEXT_TYPES_KEY])]
+        fields = rosmsg.field_names(names)
+        times, rows = [], []
+        for item in self.messages(channel.topic):
+            times.append(item.t_ns)
+            rows.append(
+                [
+                    getattr(item.message, field) if kind == "String" else bytes(getattr(item.message, field))
+                    for field, kind in zip(fields, types, strict=True)
+                ]
+            )
+        return TextSignals(component, np.array(times, dtype=np.int64) / 1e9, names, types, rows)
 
     # --- signals -------------------------------------------------------------------------
 

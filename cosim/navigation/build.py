@@ -79,7 +79,15 @@ def make_fmu(
     else:
         fmu = fmu_component(path=component.fmu, name=component.name, **options)
     for name, value in component.held_inputs.items():
-        fmu.input_buffer[fmu.input_index[name]] = value
+        if isinstance(value, str):  # a String's, or a Binary's in hex (`cosim.fmi.text`)
+            if not hasattr(fmu, "set_text"):
+                raise CosimError(
+                    f"{component.where}.{name}: String and Binary values move only with the FMU in the "
+                    'run\'s process: add isolation = "none" to the section'
+                )
+            fmu.set_text(name, value)
+        else:
+            fmu.input_buffer[fmu.input_index[name]] = value
     return fmu
 
 

@@ -72,6 +72,7 @@ from cosim.record.logfile import (
     is_regular_file,
     navcosim_version,
 )
+from cosim.record.text_signals import TextRecording
 from cosim.scenario.load import Scenario
 from cosim.world.shapes import moves
 
@@ -282,6 +283,7 @@ def _write_header(built: BuiltRun, master: Master, recorder) -> None:
             if name in scenario.fmu_labels:
                 description["fmu"] = scenario.fmu_labels[name]
             recorder.add_metadata(f"fmu/{name}", description)
+    recorder.add_unconnected_inputs(built.system)
     recorder.add_attachment("scenario.toml", "application/toml", scenario.text.encode())
     map_file = scenario.map_file
     recorder.add_attachment(map_file.name, "application/octet-stream", map_file.read_bytes())
@@ -389,6 +391,7 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
         built.world, scenario.goal, scenario.goal_tolerance, scenario.vehicle_radius, scenario.start
     )
     _write_header(built, master, recorder)
+    text = TextRecording(recorder, system)
     recording.write_constant(master.start_time_ns)
     recording.write_pose(0)
     h_ns = system.macro_step_ns
@@ -479,6 +482,7 @@ def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bo
         # NaN in the failed step is not logged.
         if master.step_index % recording.pose_steps != 0 and all(map(math.isfinite, recording.pose())):
             recording.write_pose(end_ns)
+        text.finish(end_ns)
         recorder.end_steps(end_ns)
         reason = "fmu_failed" if failure else state["reason"] or "stop_time"
         outcome = monitor.finish(end_ns / NS_PER_S, reason)

@@ -51,6 +51,8 @@ import numpy as np
 from cosim.errors import CosimError
 from cosim.record import rosmsg
 from cosim.record.batch import RAW_STREAM, MessageBlock
+from cosim.record.inputs import METADATA_NAME as UNCONNECTED_INPUTS
+from cosim.record.inputs import unconnected_metadata
 from cosim.record.logfile import navcosim_version
 from cosim.record.writer import ChunkWriter
 from cosim.scenario.topics import TOPIC_TYPES
@@ -304,6 +306,13 @@ class Recorder:
         if self.trace is not None:
             self.trace.metadata[name] = record
 
+    def add_unconnected_inputs(self, system) -> None:
+        """The metadata record `unconnected_inputs` of `system` (`cosim.record.inputs`), when it has
+        an input that no connection feeds."""
+        kept = unconnected_metadata(system)
+        if kept:
+            self.add_metadata(UNCONNECTED_INPUTS, kept)
+
     def add_attachment(self, name: str, media_type: str, data: bytes, t_ns: int = 0) -> None:
         """An attached file (the scenario, the map) stored as-is; its create and log time are the
         simulation time `t_ns` [ns] it was attached at (not the wall clock: same run, same bytes)."""
@@ -447,6 +456,33 @@ class Recorder:
         if self.trace is not None:
             self.trace.add_channel(channel, component, names)
         return channel
+
+    def text_channel(self, component: str, names: list[str], fmi_types: list[str], inputs: int) -> int:
+        """Register `/text_signals/<component>`: one field per String (`string`) or Binary
+        (`uint8[]`) variable, the first `inputs` of them inputs; returns its handle for
+        `write_text`."""
+        topic = f"/text_signals/{component}"
+        if topic in self._channels:
+            raise CosimError(f"{self.path}: text channel {topic} registered twice")
+        fields = rosmsg.field_names(list(names))
+        schema = self._schema(
+            rosmsg.text_type_name(component), rosmsg.text_definition(fields, list(fmi_types))
+        )
+        metadata = {
+            rosmsg.TEXT_COMPONENT_KEY: component,
+            rosmsg.TEXT_NAMES_KEY: json.dumps(list(names)),
+            rosmsg.TEXT_TYPES_KEY: json.dumps(list(fmi_types)),
+            rosmsg.TEXT_INPUTS_KEY: str(inputs),
+        }
+        channel = self._writer.register_channel(topic, "cdr", schema, metadata)
+        self._block.registered()
+        self._channels[topic] = channel
+        self._sequences[channel] = 0
+        return channel
+
+    def write_text(self, channel: int, t_ns: int, values: list[str | bytes]) -> None:
+        """One record of a text channel at `t_ns` [ns], the values in the channel's order."""
+        self._write(channel, t_ns, rosmsg.text_payload(t_ns, values))
 
     def write_signals(self, channel: int, t_ns: int, values: np.ndarray) -> None:
         """One record of a component's signals at `t_ns` [ns]: float64 values in the channel's

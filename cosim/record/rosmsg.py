@@ -32,6 +32,11 @@ SIGNAL_NAMES_KEY = "navcosim.signal_names"  # JSON list of the original variable
 SIGNAL_UNITS_KEY = "navcosim.signal_units"  # JSON list of their units ("" for none), same order
 SIGNAL_INPUTS_KEY = "navcosim.signal_inputs"  # how many of the first names are inputs (step channels)
 COMPONENT_KEY = "navcosim.component"
+# Channel metadata of a `/text_signals/<component>` channel (String and Binary variables).
+TEXT_COMPONENT_KEY = "navcosim.text_component"
+TEXT_NAMES_KEY = "navcosim.text_names"  # JSON list of the original variable names
+TEXT_TYPES_KEY = "navcosim.text_types"  # JSON list of their FMI types, "String" or "Binary"
+TEXT_INPUTS_KEY = "navcosim.text_inputs"  # how many of the first names are inputs
 
 _TIME_DEFINITION = "int32 sec\nuint32 nanosec\n"
 _stamp = struct.Struct("<iI")
@@ -289,6 +294,32 @@ def signals_definition(fields: list[str]) -> str:
     """ros2msg schema text of a signals struct, with the Time dependency appended as ROS 2 does."""
     body = "builtin_interfaces/Time stamp\n" + "".join(f"float64 {field}\n" for field in fields)
     return f"{body}{SEPARATOR}\nMSG: builtin_interfaces/Time\n{_TIME_DEFINITION}"
+
+
+def text_type_name(component: str) -> str:
+    """`pure_pursuit` -> `navcosim_msgs/msg/PurePursuitText`."""
+    return signals_type_name(component).removesuffix("Signals") + "Text"
+
+
+def text_definition(fields: list[str], fmi_types: list[str]) -> str:
+    """ros2msg schema text of a text struct: a String is a `string`, a Binary a `uint8[]`."""
+    body = "builtin_interfaces/Time stamp\n" + "".join(
+        f"{'string' if fmi_type == 'String' else 'uint8[]'} {field}\n"
+        for field, fmi_type in zip(fields, fmi_types, strict=True)
+    )
+    return f"{body}{SEPARATOR}\nMSG: builtin_interfaces/Time\n{_TIME_DEFINITION}"
+
+
+def text_payload(t_ns: int, values: list[str | bytes]) -> bytes:
+    """CDR bytes of a text struct: a string is its UTF-8 bytes and a NUL after a uint32 length that
+    counts the NUL, a uint8[] its bytes after a uint32 count; each uint32 4-aligned (from the end
+    of the encapsulation header)."""
+    body = bytearray(_stamp.pack(*split_time(t_ns)))
+    for value in values:
+        data = value.encode() + b"\0" if isinstance(value, str) else bytes(value)
+        body += b"\0" * (-len(body) % 4)
+        body += struct.pack("<I", len(data)) + data
+    return CDR_HEADER + bytes(body)
 
 
 def message_definition(typename: str) -> str:

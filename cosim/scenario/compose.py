@@ -15,10 +15,11 @@ where a name is close to a known one:
   wired to an output (or from an input), two connections into one input;
 - a `[system] remove` name that is no template component (or is the vehicle, whose pose the run
   needs);
-- an input of an added (or replacing) component that is neither connected nor held at a value, and
-  an input of a template component whose template connection was dropped (its source removed, or
-  replaced by an FMU without that output) that is neither connected nor held; an input both
-  connected and held;
+- an input of a template component whose template connection was dropped (its source removed, or
+  replaced by an FMU without that output) that is neither connected nor held (a lost feed); an
+  input neither connected nor held whose FMU gives it no start value (FMI 2.0 and 3.0 require one
+  on every input); an input both connected and held (an added component's other unconnected
+  inputs keep their start values, as FMI defines and as other importers run them);
 - a rate that is not a whole number of macro steps;
 - an algebraic loop (Gauss-Seidel only), naming its components.
 """
@@ -26,7 +27,7 @@ where a name is close to a known one:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from cosim.core.component import closest_names
@@ -39,7 +40,7 @@ from cosim.scenario.description import (
     SystemDescription,
 )
 from cosim.scenario.load import ComponentSpec, Integration, PortMapping, Scenario, rate_problem
-from cosim.scenario.params import pair_key
+from cosim.scenario.params import pair_key, unstarted_inputs, unstarted_problem
 from cosim.scenario.schema import did_you_mean
 from cosim.scenario.template import (
     ORDER,
@@ -52,6 +53,7 @@ from cosim.scenario.template import (
 )
 
 _LISTED = 12  # names listed in one message before "(and N more)"
+SHOWN_PROBLEMS = 20  # problem lines of one error before "... and N more problems"
 
 
 class Problems:
@@ -66,8 +68,14 @@ class Problems:
         self.lines.append(f"{self.source}: {shorten(where, WHERE_LIMIT)}: {shorten_words(problem)}")
 
     def check(self) -> None:
-        if self.lines:
-            raise CosimError("\n".join(self.lines))
+        """Raise the problems, the first `SHOWN_PROBLEMS` of them and how many more (10,000 bad
+        connections are 20,000 problems: the first ones say what is wrong)."""
+        if not self.lines:
+            return
+        lines = self.lines[:SHOWN_PROBLEMS]
+        if len(self.lines) > SHOWN_PROBLEMS:
+            lines.append(f"{self.source}: ... and {len(self.lines) - SHOWN_PROBLEMS} more problems")
+        raise CosimError("\n".join(lines))
 
 
 def describe_system(scenario: Scenario) -> SystemDescription:
@@ -106,6 +114,8 @@ class _Composer:
         self.broken: set[str] = set()  # components whose FMU did not load: reported once
         self.missing: dict[str, list[str]] = {}  # role component -> ports the template needs, absent
         self.own: dict[str, dict[str, list[str]]] = {}  # component -> causality -> FMU variable names
+        self.unstarted: dict[str, tuple[str, ...]] = {}  # component -> input ports without a start value
+        self.text_ports: dict[str, dict[str, tuple[str, str]]] = {}  # component -> `_FmuInterface.text`
         # The template components left out ([system] remove); every other name there is a problem.
         self.removed = [n for n in dict.fromkeys(scenario.removed) if n in ORDER and n != POSE_COMPONENT]
         self.replacing = {name for name, spec in scenario.components.items() if spec.added and name in ORDER}
@@ -199,6 +209,9 @@ class _Composer:
         if port_map:
             mapped = {port: {"name": m.variable, "scale": m.scale} for port, m in port_map.items()}
             fmu = _fmu_interface(path, component.name, mapped, max_size)
+        if fmu.unstarted:
+            self.unstarted[component.name] = fmu.unstarted
+        self.text_ports[component.name] = fmu.text
         # A state output: the template says it is one and the FMU declares no dependencies for it.
         declared = {u.variable.name for u in description.outputs if u.dependencies is not None}
         feedthrough = dict(fmu.feedthrough)
@@ -282,7 +295,8 @@ class _Composer:
         """Split the section's values into parameters and held inputs; check names, types, ranges."""
         where = component.where
         known = set(component.parameter_names)
-        settable = known | set(component.inputs)  # an input given a value is held at it
+        text = self.text_ports.get(component.name, {})
+        settable = known | set(component.inputs) | set(text)  # an input given a value is held at it
         values = dict(component.parameters) if not spec.added else dict(spec.parameters)
         parameters, held = {}, {}
         for name, value in values.items():
@@ -298,6 +312,13 @@ class _Composer:
                 continue
             mapping = component.port_map.get(name)
             variable = variables[mapping.variable if mapping else name]
+            if name in text or isinstance(value, str):
+                problem = _text_problem(text.get(name, ("", ""))[1], variable, value)
+                if problem:
+                    self.problems.add(f"{where}.{name}", problem)
+                else:
+                    (parameters if text[name][0] == "parameter" else held)[name] = value
+                continue
             received = float(value) * (mapping.scale if mapping else 1.0)
             problem = _value_problem(variable, received, spec.parameters.get(name, value))
             if problem:
@@ -446,12 +467,12 @@ class _Composer:
         attempted: set[str],
         dropped: list[tuple[ConnectionDescription, str]],
     ) -> None:
-        """Every input of an added component is connected or held at a value (the template feeds
-        its own, unless a connection it made was dropped); one that a failed connection meant to
-        feed is reported with that connection. A held input must not be connected too."""
+        """An input that is not connected keeps its start value (or the value it is held at); one
+        without a start value must be connected or held, and so must a template input whose
+        template connection was dropped (a lost feed, not a choice). One that a failed connection
+        meant to feed is reported with that connection. A held input must not be connected too."""
         feeding = {connection.target: connection for connection in connections}
         fed = set(feeding) | attempted
-        outputs = [f"{c.name}.{port}" for c in self.components.values() for port in c.outputs]
         for component in self.components.values():
             for port in component.held_inputs:
                 connection = feeding.get(f"{component.name}.{port}")
@@ -461,20 +482,18 @@ class _Composer:
                         f"input '{port}' is held at a value and also connected (from '{connection.source}', "
                         f"{connection.where}); drop one of them",
                     )
-        for spec in self.scenario.components.values():
-            component = self.components.get(spec.name)
-            if not spec.added or component is None:
+        for name, ports in self.unstarted.items():
+            component = self.components.get(name)
+            if component is None:
                 continue
-            for port in component.inputs:
-                if f"{component.name}.{port}" in fed or port in component.held_inputs:
+            for port in ports:
+                if f"{name}.{port}" in fed or port in component.held_inputs:
                     continue
-                # The same name on another component is the likeliest source.
-                same = [o for o in outputs if o.endswith(f".{port}") and o.split(".")[0] != component.name]
-                suggestion = f" (did you mean from = '{same[0]}'?)" if same else did_you_mean(port, outputs)
                 self.problems.add(
                     component.where,
-                    f"input '{port}' is not connected: add [[connections]] from = \"<component>.<output>\", "
-                    f'to = "{component.name}.{port}", or hold it with {port} = <value>{suggestion}',
+                    unstarted_problem(
+                        port, f'add [[connections]] to = "{name}.{port}", or hold it with {port} = <value>'
+                    ),
                 )
         # Template inputs whose template connection was dropped: one line per component and reason.
         unfed: dict[tuple[str, str], list[str]] = {}
@@ -538,6 +557,9 @@ class _FmuInterface:
     outputs: tuple[str, ...]
     parameters: tuple[str, ...]
     feedthrough: dict[str, tuple[str, ...]]  # output port -> input ports it depends on directly
+    unstarted: tuple[str, ...] = ()  # input ports (numbers and text) whose variable has no start value
+    text: dict[str, tuple[str, str]] = field(default_factory=dict)  # String/Binary parameter or input
+    # port -> (causality, FMI type)
 
 
 # The interfaces of the last few FMU components described, keyed by everything `FmuComponent` reads
@@ -576,6 +598,12 @@ def _fmu_interface(path: Path, name: str, port_map: dict, max_size: int) -> _Fmu
         tuple(p.name for p in layout.outputs),
         tuple(p.name for p in layout.parameters),
         feedthrough,
+        unstarted_inputs(layout),
+        {
+            port.name: (causality, port.fmi_type)
+            for causality in ("parameter", "input")
+            for port in layout.text.get(causality, ())
+        },
     )
     if key is not None:
         if len(_INTERFACES) >= _INTERFACES_KEPT:
@@ -615,6 +643,24 @@ def _value_problem(variable, value: float, given) -> str | None:
         return f"must be >= {low:g}, {got}"
     if high is not None and value > high:
         return f"must be <= {high:g}, {got}"
+    return None
+
+
+def _text_problem(fmi_type: str, variable, value) -> str | None:
+    """Whether `value` suits a String (a TOML string) or Binary (a string of hex digits) variable;
+    a string given to any other variable is a problem too."""
+    if not fmi_type:
+        return f"must be a number (the FMU's {variable.type}), got a string"
+    if not isinstance(value, str):
+        wanted = "text" if fmi_type == "String" else 'hex digits, two a byte (e.g. "0a0b")'
+        return f"the FMU's {fmi_type} takes a string of {wanted}, got {str(value).lower()}"
+    if fmi_type == "Binary":
+        try:
+            bytes.fromhex(value)
+        except ValueError:
+            return (
+                f'the FMU\'s Binary takes a string of hex digits, two a byte (e.g. "0a0b"), got {value!r:.40}'
+            )
     return None
 
 

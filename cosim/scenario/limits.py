@@ -2,7 +2,9 @@
 names the key and the limit.
 
 They keep every accepted scenario runnable in bounded time and memory: a run is at most
-`[simulation].max_steps` macro steps (default `MAX_STEPS`, raised with `--max-steps`); times fit
+`[simulation].max_steps` macro steps (default `MAX_STEPS`, raised with `--max-steps`), of at most
+`[simulation].max_components` FMU components (the template's and `[components.*]`; default `MAX_COMPONENTS`,
+raised with `--set simulation.max_components=N`); times fit
 the integer nanosecond time base; obstacles, lidar beams and speeds have ceilings far above any
 scenario of the thesis. The map's own limit (cells) is `planner.mapio.MAX_MAP_CELLS`.
 """
@@ -12,6 +14,10 @@ from __future__ import annotations
 from cosim.scenario.schema import TableReader, describe, is_number
 
 MAX_STEPS = 100_000_000  # macro steps per run, default of [simulation].max_steps
+# FMU components of one system (the template's and [components.*]). Each is an FMU instance that
+# describing the system loads and every macro step calls: 2,000 of them take minutes to set up
+# before the first step, far beyond any robot's system.
+MAX_COMPONENTS = 1_000
 MIN_MACRO_STEP = 1e-9  # [s] the time base counts nanoseconds
 MAX_TIME = 1e9  # [s] stop time, macro step and component periods (int64 nanoseconds hold 292 years)
 MAX_OBSTACLES = 1_000  # [[obstacles]]: each one is tested by every lidar beam and collision check
@@ -64,3 +70,13 @@ def check_speeds(table: TableReader, role: str, parameters: dict[str, object]) -
         value = parameters.get(key)
         if is_number(value) and not abs(value) <= ceiling:
             raise table.error(key, f"must be at most {ceiling:g} {unit} in magnitude, got {describe(value)}")
+
+
+def check_component_count(table: TableReader, key: str, count: int, max_components: int) -> None:
+    """A system of `count` components stays within `[simulation].max_components`."""
+    if count > max_components:
+        raise table.error(
+            key,
+            f"{count} components, above max_components = {max_components} (raise "
+            "[simulation].max_components, or --set simulation.max_components=N)",
+        )

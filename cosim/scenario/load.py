@@ -24,12 +24,14 @@ from cosim.errors import PATH_LIMIT, CosimError, wrong_file_message
 from cosim.fmi.builtin import known_names
 from cosim.fmi.solvers import SOLVERS
 from cosim.scenario.limits import (
+    MAX_COMPONENTS,
     MAX_LIDAR_BEAMS,
     MAX_LIDAR_RANGE,
     MAX_LINEAR_SPEED,
     MAX_NAME_LENGTH,
     MAX_OBSTACLES,
     MAX_TIME,
+    check_component_count,
     check_run_length,
     check_speeds,
     check_time_base,
@@ -368,6 +370,7 @@ def _build(
         "fmu_max_memory", Scenario.fmu_max_memory, minimum=0.0, exclusive_minimum=True
     )
     check_run_length(simulation, macro_step, stop_time)
+    max_components = simulation.integer("max_components", MAX_COMPONENTS, minimum=1)
     simulation.finish()
 
     vehicle_table = TableReader(source, "[vehicle]", top.raw("vehicle"))
@@ -397,6 +400,10 @@ def _build(
         table = vfh_table if role == "vfh" else TableReader(source, f"[{role}]", top.raw(role, {}))
         fmu = _fmu_name(table, DEFAULT_FMUS[role], base_dir)
         components[role] = _component(table, role, fmu, controller_rate, macro_step)
+    if isinstance(tables, dict):  # counted before each table is read: a limit, not a slow refusal
+        check_component_count(
+            top, "components", len(components) + len(set(tables) - set(components)), max_components
+        )
     components.update(_added_components(top, base_dir, removed))
     connections = tuple(
         _connection(source, index, item) for index, item in enumerate(_list(top, "connections"))
@@ -656,16 +663,17 @@ def _added_components(top: TableReader, base_dir: Path, removed: tuple[str, ...]
         rate = table.number("rate", None, minimum=0.0, exclusive_minimum=True)
         isolation, nan_outputs = _isolation_keys(table)
         integration = _integration_keys(table)
-        parameters: dict[str, float | int | bool] = {}
+        parameters: dict[str, float | int | bool | str] = {}
         for key, item in table.table.items():
             if key in ("fmu", "rate", "isolation", "nan_outputs", *INTEGRATION_KEYS):
                 continue
             table.used.add(key)
-            if isinstance(item, bool) or is_number(item):
-                parameters[key] = item
+            if isinstance(item, bool | str) or is_number(item):
+                parameters[key] = item  # a string sets a String (or, as hex, a Binary) variable
             else:
                 raise table.error(
-                    key, f"an FMU variable's value must be a number or true/false, got {describe(item)}"
+                    key,
+                    f"an FMU variable's value must be a number, true/false or a string, got {describe(item)}",
                 )
         table.finish()
         components[name] = ComponentSpec(

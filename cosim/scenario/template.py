@@ -95,7 +95,9 @@ def _fmu_component(
 ) -> ComponentDescription:
     """A role FMU; `defaults` are set when the FMU has them, `required` (value, key it comes from)
     must exist in the FMU. The section's own values win over both."""
-    parameters = {name: float(value) for name, value in spec.parameters.items()}
+    parameters = {  # a string is a String or Binary variable's (checked with the FMU's interface)
+        name: value if isinstance(value, str) else float(value) for name, value in spec.parameters.items()
+    }
     required = {name: item for name, item in (required or {}).items() if name not in parameters}
     parameters.update({name: float(value) for name, (value, _) in required.items()})
     return ComponentDescription(

@@ -556,6 +556,20 @@ def _where(path: tuple[str, ...]) -> str:
     return f"element '{_dotted(path)}'" if path else "the root system"
 
 
+def _check_starts(ssp: SspSystem, system) -> None:
+    """An input that no connection feeds keeps its start value: one without (neither in the FMU nor
+    bound by the SSP) is a `CosimError` naming it."""
+    from cosim.fmi.component import fmu_layout
+    from cosim.scenario.params import unstarted_inputs, unstarted_problem
+
+    fed = {connection.target for connection in (*system.connections, *system.text_connections)}
+    for spec in ssp.components:
+        for port in unstarted_inputs(fmu_layout(spec.fmu, spec.name)):
+            if f"{spec.name}.{port}" not in fed and port not in spec.inputs:
+                where = f"{ssp.source}: {_where(tuple(spec.path.split('.')))}"
+                raise CosimError(f"{where}: {unstarted_problem(port, 'connect it or bind its start value')}")
+
+
 def build_system(ssp: SspSystem, macro_step: float, master: str = "gauss-seidel"):
     """A `System` of the SSP's FMU components and connections, and the parameters for `Master`.
 
@@ -585,6 +599,7 @@ def build_system(ssp: SspSystem, macro_step: float, master: str = "gauss-seidel"
             if not message.startswith("connection "):
                 message = f"connection {connection.source} -> {connection.target}: {message}"
             raise CosimError(f"{ssp.source}: {message}") from None
+    _check_starts(ssp, system)
     try:
         system.order()  # raises on an algebraic loop
     except CosimError as error:

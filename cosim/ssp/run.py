@@ -29,6 +29,7 @@ from cosim.core import interrupt
 from cosim.core.master import COMPILED_MIN_STEPS, MODES, Master, due_from
 from cosim.errors import CosimError, SimulationEnded
 from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
+from cosim.record.text_signals import TextRecording
 from cosim.scenario.load import DEFAULT_LOG_PATTERN
 from cosim.ssp.read import SspSystem, build_system, open_ssp
 
@@ -173,6 +174,7 @@ def _record(
     ended = None  # an FMU's request to end the run
     with recorder:
         _write_header(ssp, run, master, recorder)
+        text = TextRecording(recorder, system)
         channels, periods = [], []
         for component in master.order:
             periods.append(system.period_steps(component))
@@ -216,6 +218,7 @@ def _record(
             outcome["failure"] = failure
         if ended:
             outcome["ended_by"] = ended
+        text.finish(master.time_ns)
         recorder.end_steps(master.time_ns)
         recorder.close(outcome)
     wall_time = time.perf_counter() - wall_start
@@ -253,6 +256,7 @@ def _write_header(ssp: SspSystem, run: Experiment, master: Master, recorder) -> 
             # The archive member, not the folder this run unpacked it to (new in every run).
             description["fmu"] = members.get(component.name, description["fmu"])
             recorder.add_metadata(f"fmu/{component.name}", description)
+    recorder.add_unconnected_inputs(master.system)
     recorder.add_attachment("SystemStructure.ssd", "application/x-ssp-definition", ssp.ssd_text)
 
 

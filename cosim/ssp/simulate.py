@@ -47,9 +47,11 @@ from cosim.core.master import COMPILED_MIN_STEPS, NS_PER_S, Master, System, seco
 from cosim.errors import CosimError, SimulationEnded
 from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
 from cosim.record.output import atomic_output, checked_output
+from cosim.record.text_signals import TextRecording
 from cosim.scenario.description import ComponentDescription
 from cosim.scenario.limits import MAX_STEPS
 from cosim.scenario.load import DEFAULT_LOG_PATTERN, Integration
+from cosim.scenario.params import unstarted_inputs, unstarted_problem
 
 INTERFACES = ("cs", "me")  # co-simulation, Model Exchange
 CHUNK_STEPS = 20_000  # steps between checks for an interrupt
@@ -169,6 +171,11 @@ def prepare(
     variable_step = interface == "me" or description.coSimulation.canHandleVariableCommunicationStepSize
     start, stop, h = _experiment(description, start_time, stop_time, step, variable_step)
     parameters, held, held_text = _split_start_values(path, description, layout, start_values or {})
+    for port in unstarted_inputs(layout):
+        if port not in held and port not in held_text:
+            raise CosimError(
+                f"{path}: " + unstarted_problem(port, f"give it a value with --start-values {port}=<value>")
+            )
     inputs = tuple(port.name for port in layout.inputs)
     feedthrough = {port.name: layout.feedthrough.get(port.name, inputs) for port in layout.outputs}
     component = ComponentDescription(
@@ -381,7 +388,8 @@ def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: b
     failure = None
     ended = None  # an FMU's request to end the run
     with recorder:
-        _write_header(simulation, component, recorder)
+        _write_header(simulation, component, master.system, recorder)
+        text = TextRecording(recorder, master.system)
         channel = recorder.signal_channel(
             component.name,
             component.signal_names(),
@@ -431,6 +439,7 @@ def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: b
             outcome["failure"] = failure
         if ended:
             outcome["ended_by"] = ended
+        text.finish(master.time_ns)
         recorder.end_steps(master.time_ns)
         recorder.close(outcome)
     wall_time = time.perf_counter() - wall_start
@@ -439,7 +448,7 @@ def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: b
     )
 
 
-def _write_header(simulation: Simulation, component, recorder) -> None:
+def _write_header(simulation: Simulation, component, system: System, recorder) -> None:
     described = simulation.component
     recorder.add_metadata(
         "navcosim",
@@ -455,6 +464,7 @@ def _write_header(simulation: Simulation, component, recorder) -> None:
         },
     )
     recorder.add_metadata(f"fmu/{component.name}", component.describe())
+    recorder.add_unconnected_inputs(system)
     with zipfile.ZipFile(described.fmu) as archive:
         text = archive.read("modelDescription.xml")
     recorder.add_attachment("modelDescription.xml", "application/xml", text)

@@ -279,3 +279,29 @@ def test_every_type_in_the_log_of_fmu_simulate(fmus, version, tmp_path):
         for t in NUMERIC[version]:
             assert signals[f"{t}_input"].tolist() == [float(INPUT_STARTS[t])] * 3, t
             assert signals[f"{t}_output"][-1] == expected[f"{t}_output"], t
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_unconnected_inputs_keep_their_start_values_in_the_kernel_and_in_python(numeric, version):
+    """One input wired, the others unconnected: the compiled kernel (which sends every input before
+    each step) and the Python loop (which sends them at initialisation and with a gathered one) give
+    the outputs fmpy gives from the start values and the one input."""
+    wired = "Int32" if version == 3 else "Integer"
+    runs = []
+    for compiled in (True, False):
+        system = System(0.25)
+        system.add(FmuComponent(numeric[version], "first", parameters={f"{wired}_parameter": 5}))
+        second = system.add(FmuComponent(numeric[version], "second"))
+        system.connect(f"first.{wired}_output", f"second.{wired}_input")
+        with Master(system) as master:
+            master.initialize()
+            master.run(4, compiled=compiled)
+        outputs = [second.output_buffer[second.output_index[f"{t}_output"]] for t in NUMERIC[version]]
+        runs.append((second.input_buffer.tolist(), outputs))
+    assert runs[0] == runs[1]
+    names = [f"{t}_output" for t in NUMERIC[version]]
+    given = {f"{wired}_input": INPUT_STARTS[wired] + 5}
+    expected = fmpy.simulate_fmu(
+        str(numeric[version]), stop_time=1.0, output_interval=0.25, start_values=given
+    )
+    assert dict(zip(names, runs[0][1], strict=True)) == {n: float(expected[n][-1]) for n in names}
