@@ -31,6 +31,9 @@ SCHEMAS = {
     "ssv": "SystemStructureParameterValues.xsd",
     "ssm": "SystemStructureParameterMapping.xsd",
 }
+# Deepest element nesting of a file (20 nested systems take about 50): the schema check recurses
+# through the document, a file nested thousands deep would exhaust Python's stack.
+MAX_DEPTH = 100
 for _prefix, _uri in NS.items():
     ET.register_namespace(_prefix, _uri)
 
@@ -83,8 +86,23 @@ def parse(data: bytes, kind: str, where: str) -> ET.Element:
     except ET.ParseError as error:
         line, column = error.position
         raise CosimError(f"{where}: bad XML at line {line}, column {column}: {_reason(error)}") from None
+    depth = _depth(root)
+    if depth > MAX_DEPTH:
+        raise CosimError(
+            f"{where}: elements nest {depth} deep, more than the limit of {MAX_DEPTH} "
+            "(systems inside systems: at most 20)"
+        )
     validate(root, kind, where)
     return root
+
+
+def _depth(root: ET.Element) -> int:
+    """How deep the elements of `root` nest (root alone: 1), without recursion."""
+    deepest, level = 0, [root]
+    while level:
+        deepest += 1
+        level = [child for element in level for child in element]
+    return deepest
 
 
 def _reason(error: ET.ParseError) -> str:
