@@ -297,7 +297,7 @@ def _steps(ssp: SspSystem, run: Experiment, master: Master, system, recorder, lo
         except SimulationEnded as request:
             ended = str(request)
         except CosimError as error:
-            failure = f"{ssp.members(str(error))} (at t = {master.time:.3f} s)"
+            failure = f"{ssp.source}: {ssp.members(str(error))} (at t = {master.time:.3f} s)"
         except interrupt.Interrupted:  # a signal while an FMU in a child process did not answer
             interrupt.take()
         reason = "fmu_failed" if failure else ("stop_time" if master.step_index >= total else "interrupted")
@@ -305,7 +305,7 @@ def _steps(ssp: SspSystem, run: Experiment, master: Master, system, recorder, lo
         try:
             master.close()
         except CosimError as error:
-            failure = failure or f"terminating the system failed: {ssp.members(str(error))}"
+            failure = failure or f"{ssp.source}: terminating the system failed: {ssp.members(str(error))}"
         outcome = {"reached": "false", "reason": reason, "time": repr(master.time)}
         if failure:
             outcome["failure"] = failure
