@@ -24,6 +24,11 @@ Semantics, as SSP 1.0 and 2.0 define them:
   earlier ones of the same element; a binding higher in the hierarchy overrides lower ones. Names
   that match no variable are ignored, as the standard says. Values of every numeric SSP type
   (Real, Integer, Boolean, Enumeration; SSP 2.0's Float32/64, Int8..UInt64) are passed as numbers.
+- Units: a connection between connectors whose type elements name different units (`<ssc:Real
+  unit="mm"/>`) converts the value between them as SSP says, before its LinearTransformation,
+  by the `ssd:Units` definitions (SI value = factor * value + offset); units of different SI base
+  exponents, or a unit `ssd:Units` does not define, are an error naming both ends, unless the
+  connection says suppressUnitConversion="true". A connector that names no unit is not checked.
 - Time: `DefaultExperiment` gives startTime and stopTime; the macro step comes from navcosim's,
   the OSP or the OMS annotation, or the FMUs' own step sizes (`cosim.ssp.experiment`), and
   `SspSystem.macro_step_source` says which. A component's period comes from
@@ -35,7 +40,13 @@ or says "any" (the default) of an FMU without co-simulation.
 
 Not supported (an error, not a silent change of meaning): referenced SSDs/SSPs as components,
 ScheduledExecution, signal dictionaries, parameter mappings (.ssm), mapping transformations,
-connections that carry a calculated parameter, String, Binary and array values, unit conversion.
+connections that carry a calculated parameter, String, Binary and array values, unit conversion
+of parameter values.
+
+An archive is untrusted input: `open_ssp` extracts nothing from one with too many entries or too
+large (`cosim.fmi.archive.unpack_problem`) or with a member outside it; an SSD may nest
+`MAX_SYSTEM_DEPTH` systems and names of `MAX_NAME_LENGTH` characters, every source must be a path
+inside the archive; each limit is a one-line error.
 """
 
 from __future__ import annotations
