@@ -173,30 +173,37 @@ def open_ssp(path: str | Path, max_unpacked_size: int | None = None) -> Iterator
         raise CosimError(f"{source}: no such SSP file")
     if not zipfile.is_zipfile(path):
         raise CosimError(f"{source}: not a zip archive (an SSP is a zip with {SSD_NAME} at its root)")
-    directory = Path(tempfile.mkdtemp(prefix="navcosim-ssp-"))
     try:
-        try:
-            with zipfile.ZipFile(path) as archive:
-                names = archive.namelist()
-                if SSD_NAME not in names:
-                    raise CosimError(f"{source}: the archive has no {SSD_NAME} at its root")
-                problem = unpack_problem(archive, max_unpacked_size)
-                if problem is not None:
-                    hint = "; raise the limit with --set simulation.fmu_max_size=MIB if you trust it"
-                    hint = hint if problem.startswith("would") else ""
-                    raise CosimError(f"{source}: the SSP archive {problem}; not extracted{hint}")
-                for name in names:
-                    target = (directory / name).resolve()
-                    if name.startswith("/") or not target.is_relative_to(directory.resolve()):
-                        raise CosimError(
-                            f"{source}: archive member '{shorten(name)}' points outside the archive"
-                        )
+        with zipfile.ZipFile(path) as archive:
+            _check_members(archive, source, max_unpacked_size)
+            directory = Path(tempfile.mkdtemp(prefix="navcosim-ssp-"))
+            try:
                 archive.extractall(directory)
-        except (zipfile.BadZipFile, OSError) as error:
-            raise CosimError(f"{source}: cannot unpack: {error}") from None
+            except BaseException:
+                shutil.rmtree(directory, ignore_errors=True)
+                raise
+    except (zipfile.BadZipFile, OSError) as error:
+        raise CosimError(f"{source}: cannot unpack: {error}") from None
+    try:
         yield read_ssd(directory, source)
     finally:
         shutil.rmtree(directory, ignore_errors=True)
+
+
+def _check_members(archive: zipfile.ZipFile, source: str, max_unpacked_size: int | None) -> None:
+    """What `open_ssp` checks before it extracts anything (`CosimError` naming `source`)."""
+    names = archive.namelist()
+    if SSD_NAME not in names:
+        raise CosimError(f"{source}: the archive has no {SSD_NAME} at its root")
+    problem = unpack_problem(archive, max_unpacked_size)
+    if problem is not None:
+        hint = "; raise the limit with --set simulation.fmu_max_size=MIB if you trust it"
+        hint = hint if problem.startswith("would") else ""
+        raise CosimError(f"{source}: the SSP archive {problem}; not extracted{hint}")
+    for name in names:
+        member = PurePosixPath(name.replace("\\", "/"))
+        if member.is_absolute() or ".." in member.parts:
+            raise CosimError(f"{source}: archive member '{shorten(name)}' points outside the archive")
 
 
 def read_ssd(directory: Path, source: str) -> SspSystem:

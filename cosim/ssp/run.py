@@ -151,7 +151,8 @@ def experiment(ssp: SspSystem, overrides: dict[str, object]) -> Experiment:
     for what, value in (("start time", start), ("stop time", stop), ("macro step", step)):
         if not (math.isfinite(float(value)) and abs(float(value)) <= MAX_TIME):
             raise CosimError(
-                f"{where}: {what} must be a finite number of at most {MAX_TIME:g} s, got {value}"
+                f"{where}: {what} must be a finite number, at most {MAX_TIME:g} s in magnitude, "
+                f"got {float(value):g}"
             )
     if float(step) <= 0:
         raise CosimError(f"{where}: macro step must be > 0 s, got {step}")

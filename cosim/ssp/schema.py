@@ -14,7 +14,7 @@ import xml.etree.ElementTree as ET
 from functools import cache
 from pathlib import Path
 
-from cosim.errors import CosimError
+from cosim.errors import CosimError, shorten_words
 
 SCHEMA_DIR = Path(__file__).resolve().parent / "schemas"
 SCHEMA_DIRS = {"1.0": SCHEMA_DIR, "2.0": SCHEMA_DIR / "ssp-2.0"}  # SSP version -> its schemas
@@ -69,7 +69,8 @@ def validate(element: ET.Element, kind: str, where: str) -> None:
         elem = getattr(error, "elem", None)
         if elem is not None and elem.get("name") is not None:
             path += f" (name '{elem.get('name')}')"
-        raise CosimError(f"{where}: not valid SSP {version} ({SCHEMAS[kind]}) at {path}: {reason}")
+        message = f"{where}: not valid SSP {version} ({SCHEMAS[kind]}) at {path}: {reason}"
+        raise CosimError(shorten_words(message, 2000))
 
 
 def _short(path: str) -> str:
