@@ -190,10 +190,16 @@ def scenario_of(ssp: SspSystem, simulation: dict[str, object]) -> Scenario:
         raise CosimError(f"{ssp.source}: {uri}: cannot read the scenario ({error})") from None
     scenario = parse_scenario(text, f"{ssp.source}: {uri}", toml.parent, overrides)
     files = [scenario.map_file]
-    try:
-        files = _map_files(scenario)
-    except (CosimError, OSError, UnicodeDecodeError):
-        pass  # the map's own reader says what is wrong with it, once the files are known to be inside
+    if _inside(ssp, scenario.map_file) is not None:
+        try:
+            files = _map_files(scenario)  # and a ROS map's image, which must sit beside it
+        except CosimError:
+            raise CosimError(
+                f"{ssp.source}: {uri}: the image of the map '{scenario.map_file.name}' is not beside it in "
+                "the archive; an archive's scenario may name only files inside it"
+            ) from None
+        except (OSError, UnicodeDecodeError):
+            pass  # the map's own reader says what is wrong with it
     for path in files:
         if _inside(ssp, path) is None:
             raise CosimError(

@@ -430,3 +430,134 @@ def test_an_fmu_failure_in_process_names_the_archive_too(tmp_path, capsys):
     assert "returned fmi2Error from fmi2DoStep" in result.failure
     with pytest.raises(CosimError, match=r"^\S+error.ssp: --set simulation.fmu_timeout=0: "):
         run_ssp(archive, tmp_path / "error2.mcap", ["simulation.fmu_timeout=0"])
+
+
+# ---- an exported SSP: the scenario inside it ----------------------------------------------------
+
+REPO = Path(__file__).resolve().parents[2]
+SHIPPED = REPO / "scenarios" / "warehouse_diff_drive_one_obstacle.toml"
+SCENARIO = "resources/navcosim/scenario.toml"
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory) -> Path:
+    archive = tmp_path_factory.mktemp("exported") / "exported.ssp"
+    assert main(["ssp", "export", str(SHIPPED), "--out", str(archive)]) == 0
+    return archive
+
+
+def rewrite(archive: Path, out: Path, **edits) -> Path:
+    """A copy of `archive` with members replaced: name (with '/' as '__') -> function of the text
+    (bytes for a .fmu)."""
+    replaced = {name.replace("__", "/"): edit for name, edit in edits.items()}
+    with zipfile.ZipFile(archive) as source, zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as target:
+        for info in source.infolist():
+            data = source.read(info)
+            if info.filename in replaced:
+                edit = replaced[info.filename]
+                data = edit(data) if info.filename.endswith(".fmu") else edit(data.decode()).encode()
+            target.writestr(info.filename, data)
+    return out
+
+
+@pytest.mark.parametrize("name", ["../../etc/hostname", "/etc/passwd", "resources/../../../etc/passwd"])
+def test_the_scenario_of_an_exported_ssp_must_be_inside_it(name, exported, tmp_path, capsys):
+    def edit(text: str) -> str:
+        return text.replace(f'scenario="{SCENARIO}"', f'scenario="{name}"')
+
+    archive = rewrite(exported, tmp_path / "outside.ssp", **{"SystemStructure.ssd": edit})
+    line = refuses(capsys, archive)
+    assert line == (
+        "SystemStructure.ssd: annotation org.navcosim.scenario: needs an nc:Scenario whose scenario "
+        f"attribute names a file in the archive (got '{name}')"
+    )
+
+
+def test_the_map_of_an_exported_ssp_must_be_inside_it(exported, tmp_path, capsys):
+    outside = (SHIPPED.parent / "maps" / "warehouse.yaml").resolve()
+
+    def ssd_edit(text: str) -> str:
+        return re.sub(r'\s*<nc:Set value="map.file=[^"]*" />', "", text)
+
+    def toml_edit(text: str) -> str:
+        return text.replace('file = "maps/warehouse.yaml"', f'file = "{outside}"')
+
+    archive = rewrite(
+        exported, tmp_path / "map.ssp", **{"SystemStructure.ssd": ssd_edit, SCENARIO: toml_edit}
+    )
+    line = refuses(capsys, archive)
+    assert line == (
+        f"{SCENARIO}: the map file '{outside}' is not in the archive; an archive's scenario may name "
+        "only files inside it"
+    )
+
+
+def test_the_image_of_an_exported_ssps_map_must_be_inside_it(exported, tmp_path, capsys):
+    def yaml_edit(text: str) -> str:
+        return re.sub(r"(?m)^image:.*$", "image: ../../../../etc/hostname", text)
+
+    archive = rewrite(exported, tmp_path / "image.ssp", **{"resources/navcosim/warehouse.yaml": yaml_edit})
+    line = refuses(capsys, archive)
+    assert line.startswith(
+        f"{SCENARIO}: the image of the map 'warehouse.yaml' is not beside it in the archive"
+    )
+
+
+@pytest.mark.slow
+def test_the_output_log_of_an_exported_ssp_is_not_followed(exported, tmp_path, monkeypatch):
+    elsewhere = tmp_path / "elsewhere" / "chosen.mcap"
+
+    def toml_edit(text: str) -> str:
+        return text + f'\n[output]\nlog = "{elsewhere}"\n'
+
+    archive = rewrite(exported, tmp_path / "log.ssp", **{SCENARIO: toml_edit})
+    monkeypatch.chdir(tmp_path)
+    scenario, result = run_ssp(archive, None, ["simulation.stop_time=0.5"])
+    assert not elsewhere.exists() and not elsewhere.parent.exists()
+    assert result.log_path.resolve().parent == (tmp_path / "logs").resolve()
+    assert open_log(result.log_path).metadata["navcosim"]["scenario_name"] == scenario.name
+
+
+def test_an_exported_ssp_runs_only_the_projects_own_fmus_in_process(exported, tmp_path):
+    from cosim.ssp.export import scenario_of
+
+    def repack(data: bytes) -> bytes:
+        import io
+
+        buffer = io.BytesIO()
+        with zipfile.ZipFile(io.BytesIO(data)) as source, zipfile.ZipFile(buffer, "w") as target:
+            for info in source.infolist():
+                target.writestr(info, source.read(info))
+            target.comment = b"not the project's bytes"
+        return buffer.getvalue()
+
+    archive = rewrite(exported, tmp_path / "foreign.ssp", **{"resources/vehicle.fmu": repack})
+    with zipfile.ZipFile(archive) as zipped:
+        assert "vehicle.isolation=&quot;none&quot;" in zipped.read("SystemStructure.ssd").decode()
+    with open_ssp(archive) as ssp:
+        scenario = scenario_of(ssp, {})
+        where = {name: scenario.isolation(spec) for name, spec in scenario.components.items()}
+        assert where == {"vehicle": "process", "pure_pursuit": "none", "vfh": "none", "mixer": "none"}
+        scenario = scenario_of(ssp, {"fmu_isolation": "none"})  # the user's word
+        assert {scenario.isolation(spec) for spec in scenario.components.values()} == {"none"}
+        scenario = scenario_of(ssp, {"fmu_isolation": "auto"})
+        where = {name: scenario.isolation(spec) for name, spec in scenario.components.items()}
+        assert where == {"vehicle": "process", "pure_pursuit": "none", "vfh": "none", "mixer": "none"}
+
+
+def test_an_exported_ssp_cannot_raise_the_limits_of_its_run(exported, tmp_path, capsys):
+    from cosim.ssp.export import scenario_of
+
+    def toml_edit(text: str) -> str:
+        raised = "fmu_timeout = 1e6\nfmu_max_size = 1e6\nmax_steps = 1_000_000_000_000"
+        text = text.replace("[simulation]", f"[simulation]\n{raised}", 1)
+        return re.sub(r"(?m)^stop_time = .*$", "stop_time = 1e7", text)
+
+    archive = rewrite(exported, tmp_path / "limits.ssp", **{SCENARIO: toml_edit})
+    line = refuses(capsys, archive)
+    assert "stop_time" in line and "above max_steps = 1e+08" in line, line
+    with open_ssp(archive) as ssp:
+        scenario = scenario_of(ssp, {"stop_time": 10})
+        assert (scenario.fmu_timeout, scenario.fmu_max_size) == (10.0, 1024.0)
+        scenario = scenario_of(ssp, {"stop_time": 10, "fmu_timeout": 60, "fmu_max_size": 2048})
+        assert (scenario.fmu_timeout, scenario.fmu_max_size) == (60, 2048)
