@@ -185,7 +185,7 @@ def open_ssp(path: str | Path, max_unpacked_size: int | None = None) -> Iterator
     except (zipfile.BadZipFile, OSError) as error:
         raise CosimError(f"{source}: cannot unpack: {error}") from None
     try:
-        yield read_ssd(directory, source)
+        yield read_ssd(directory, source, max_unpacked_size)
     finally:
         shutil.rmtree(directory, ignore_errors=True)
 
@@ -206,14 +206,16 @@ def _check_members(archive: zipfile.ZipFile, source: str, max_unpacked_size: int
             raise CosimError(f"{source}: archive member '{shorten(name)}' points outside the archive")
 
 
-def read_ssd(directory: Path, source: str) -> SspSystem:
-    """Read `directory/SystemStructure.ssd` (an unpacked SSP); errors name `source`."""
+def read_ssd(directory: Path, source: str, max_unpacked_size: int | None = None) -> SspSystem:
+    """Read `directory/SystemStructure.ssd` (an unpacked SSP); errors name `source`; each FMU may
+    unpack to `max_unpacked_size` bytes (default 1 GiB)."""
     ssd_path = directory / SSD_NAME
     data = ssd_path.read_bytes()
     where = f"{source}: {SSD_NAME}"
     root = schema.parse(data, "ssd", where)
     reader = _Reader(directory, source, where)
     reader.units = _unit_definitions(root)
+    reader.max_unpacked_size = max_unpacked_size
     system = root.find(tag("ssd:System"))
     reader.system(system, ())
     components = reader.finish()
@@ -266,6 +268,7 @@ class _Reader:
         self.bindings: list[tuple[int, int, str, str, str, str | None, str]] = []
         self.connections: list[SspConnection] = []
         self.units: dict[str, tuple] = {}  # ssd:Units: name -> (SI exponents, factor, offset)
+        self.max_unpacked_size: int | None = None  # [bytes] of each FMU (None: the default)
 
     # ---- hierarchy ---------------------------------------------------------------------------
 
@@ -318,7 +321,7 @@ class _Reader:
             )
         try:
             interface = _interface(fmu_path, implementation)
-            fmu = component_class(interface)(fmu_path, name)
+            fmu = component_class(interface)(fmu_path, name, max_unpacked_size=self.max_unpacked_size)
         except CosimError as error:
             raise CosimError(f"{where}: {archive_members(self.directory, str(error))}") from None
         variables = {v.name: v for v in fmu.model_description.modelVariables}

@@ -561,3 +561,31 @@ def test_an_exported_ssp_cannot_raise_the_limits_of_its_run(exported, tmp_path, 
         assert (scenario.fmu_timeout, scenario.fmu_max_size) == (10.0, 1024.0)
         scenario = scenario_of(ssp, {"stop_time": 10, "fmu_timeout": 60, "fmu_max_size": 2048})
         assert (scenario.fmu_timeout, scenario.fmu_max_size) == (60, 2048)
+
+
+def test_an_fmu_inside_an_ssp_is_held_to_the_same_limits(tmp_path, capsys):
+    own = cosim.builtin_fmu("DifferentialDrive")
+    padded, crowded = tmp_path / "padded.fmu", tmp_path / "crowded.fmu"
+    for path, extra in ((padded, {"resources/padding.bin": bytes(2 * MIB)}), (crowded, None)):
+        extra = extra or {f"resources/{i}": b"" for i in range(MAX_ENTRIES)}
+        with zipfile.ZipFile(own) as source, zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as target:
+            for info in source.infolist():
+                target.writestr(info, source.read(info))
+            for name, data in extra.items():
+                target.writestr(name, data)
+    archive = pack(tmp_path / "padded.ssp", ssd(robot()), {"models/robot.fmu": padded})
+    assert archive.stat().st_size < MIB  # the archive itself is within 1.5 MiB
+    line = refuses(capsys, archive, "--set", "simulation.fmu_max_size=1.5")
+    assert line.startswith("SystemStructure.ssd: element 'robot': FMU 'models/robot.fmu' would unpack to "), (
+        line
+    )
+    assert "more than the limit of 1.5 MiB" in line
+    assert run_ssp(archive, tmp_path / "padded.mcap", ["simulation.fmu_max_size=3"]).failure is None
+    archive = pack(tmp_path / "crowded.ssp", ssd(robot()), {"models/robot.fmu": crowded})
+    line = refuses(capsys, archive)
+    with zipfile.ZipFile(crowded) as zipped:
+        entries = len(zipped.infolist())
+    assert line == (
+        f"SystemStructure.ssd: element 'robot': FMU 'models/robot.fmu' has {entries:,} entries, more than "
+        f"the limit of {MAX_ENTRIES:,}; not extracted"
+    )
