@@ -279,7 +279,7 @@ def test_times_and_the_number_of_steps_are_limited(stop, step, expected, tmp_pat
 def test_max_steps_is_a_set_key_and_an_option(tmp_path, capsys):
     archive = pack(tmp_path / "steps.ssp", ssd(robot()))  # 1 s of 0.1 s: 10 steps
     assert "is 10 steps, above max_steps = 9" in refuses(capsys, archive, "--set", "simulation.max_steps=9")
-    assert run_ssp(archive, tmp_path / "steps.mcap", ["simulation.max_steps=10"]).steps == 10
+    assert run_ssp(archive, tmp_path / "ten.mcap", ["simulation.max_steps=10"]).steps == 10
     assert "is 10 steps, above max_steps = 9" in refuses(capsys, archive, "--max-steps", "9")
 
 
