@@ -37,7 +37,7 @@ from pathlib import Path
 from cosim.errors import CosimError, shorten
 from cosim.fmi.archive import MIB
 from cosim.scenario.load import DEFAULT_LOG_PATTERN, Scenario, parse_scenario
-from cosim.ssp.read import SspComponent, SspConnection, SspSystem
+from cosim.ssp.read import DEFAULT_TIMEOUT, SspComponent, SspConnection, SspSystem, max_unpacked_size
 from cosim.ssp.schema import tag
 
 SCENARIO_ANNOTATION = "org.navcosim.scenario"
@@ -164,7 +164,6 @@ def export_scenario(scenario: Scenario, out: Path) -> Path:
 def scenario_of(ssp: SspSystem, simulation: dict[str, object]) -> Scenario:
     """The scenario an exported SSP describes, with the FMUs and parameters of its SSD and SSV."""
     from cosim.scenario.limits import MAX_STEPS
-    from cosim.ssp.run import DEFAULT_TIMEOUT, max_unpacked_size
     from cosim.world.distance import check_start_goal
 
     content = ssp.annotations[SCENARIO_ANNOTATION]

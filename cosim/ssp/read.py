@@ -63,7 +63,7 @@ from pathlib import Path, PurePosixPath
 
 from cosim.core.component import closest_names
 from cosim.errors import CosimError, shorten
-from cosim.fmi.archive import unpack_problem
+from cosim.fmi.archive import DEFAULT_MAX_UNPACKED_SIZE, MIB, unpack_problem
 from cosim.ssp import schema
 from cosim.ssp.experiment import fmu_default_step, read_experiment
 from cosim.ssp.schema import annotations_of, local_name, number, tag
@@ -82,6 +82,7 @@ _INTEGERS = ("Integer", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "
 MAX_SYSTEM_DEPTH = 20  # systems inside systems below the root system
 MAX_NAME_LENGTH = 200  # characters of an element's or connector's name, and of a component's
 _BASE_UNIT = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")  # ssc:BaseUnit's SI exponents
+DEFAULT_TIMEOUT = 10.0  # [s] longest FMI call of an FMU in a child process, as a scenario's default
 
 
 @dataclass
@@ -158,6 +159,14 @@ def archive_members(directory: Path, text: str) -> str:
     for folder in {str(directory), str(directory.resolve())}:
         text = text.replace(folder.rstrip("/") + "/", "")
     return text
+
+
+def max_unpacked_size(overrides: dict[str, object]) -> int:
+    """[bytes] what the archive (and each FMU in it) may unpack to: `simulation.fmu_max_size` MiB
+    of a run's overrides (`cosim.ssp.run.parse_overrides`), else the default 1 GiB."""
+    if "fmu_max_size" in overrides:
+        return round(float(overrides["fmu_max_size"]) * MIB)
+    return DEFAULT_MAX_UNPACKED_SIZE
 
 
 @contextmanager
@@ -703,7 +712,7 @@ def build_system(
     macro_step: float,
     master: str = "gauss-seidel",
     isolation: str = "auto",
-    timeout: float = 10.0,
+    timeout: float = DEFAULT_TIMEOUT,
     max_unpacked_size: int | None = None,
 ):
     """A `System` of the SSP's FMU components and connections, and the parameters for `Master`.

@@ -38,17 +38,15 @@ import numpy as np
 from cosim.core import interrupt
 from cosim.core.master import COMPILED_MIN_STEPS, MODES, Master, due_from
 from cosim.errors import PATH_LIMIT, CosimError, SimulationEnded, shorten
-from cosim.fmi.archive import DEFAULT_MAX_UNPACKED_SIZE, MIB
 from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
 from cosim.scenario.limits import MAX_STEPS, MAX_TIME, MIN_MACRO_STEP
 from cosim.scenario.load import DEFAULT_LOG_PATTERN
-from cosim.ssp.read import SspSystem, build_system, open_ssp
+from cosim.ssp.read import DEFAULT_TIMEOUT, SspSystem, build_system, max_unpacked_size, open_ssp
 
 SIMULATION_KEYS = ("stop_time", "macro_step", "start_time", "master")
 # The [simulation] keys of a scenario's FMUs and run length, which an SSP run takes too.
 GUARD_KEYS = ("fmu_isolation", "fmu_timeout", "fmu_max_size", "max_steps")
 ISOLATIONS = ("auto", "process", "none")
-DEFAULT_TIMEOUT = 10.0  # [s] as a scenario's [simulation] fmu_timeout
 CHUNK_STEPS = 20_000  # steps between checks for an interrupt
 
 
@@ -116,13 +114,6 @@ def parse_overrides(overrides: list[str] | tuple[str, ...]) -> dict[str, object]
             raise CosimError(f"--set {override}: {name} must be a number of seconds")
         values[name] = value
     return values
-
-
-def max_unpacked_size(overrides: dict[str, object]) -> int:
-    """[bytes] what the archive (and each FMU in it) may unpack to: `simulation.fmu_max_size` MiB."""
-    if "fmu_max_size" in overrides:
-        return round(float(overrides["fmu_max_size"]) * MIB)
-    return DEFAULT_MAX_UNPACKED_SIZE
 
 
 def experiment(ssp: SspSystem, overrides: dict[str, object]) -> Experiment:
