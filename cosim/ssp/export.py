@@ -273,4 +273,7 @@ def run_exported(
 
     scenario = scenario_of(ssp, simulation)
     _check_against_ssd(ssp, scenario)
-    return scenario, run_scenario(scenario, out_path, progress=progress, force=force)
+    result = run_scenario(scenario, out_path, progress=progress, force=force)
+    if result.failure is not None and not result.failure.startswith(f"{ssp.source}:"):
+        result.failure = f"{ssp.source}: {result.failure}"  # as every SSP error line (the log keeps its own)
+    return scenario, result

@@ -47,6 +47,7 @@ SIMULATION_KEYS = ("stop_time", "macro_step", "start_time", "master")
 # The [simulation] keys of a scenario's FMUs and run length, which an SSP run takes too.
 GUARD_KEYS = ("fmu_isolation", "fmu_timeout", "fmu_max_size", "max_steps")
 ISOLATIONS = ("auto", "process", "none")
+MESSAGE_LIMIT = 2000  # characters of an error line
 CHUNK_STEPS = 20_000  # steps between checks for an interrupt
 
 
@@ -188,9 +189,11 @@ def run_ssp(
 
 
 def named(source: str, error: CosimError) -> CosimError:
-    """`error` as a line that starts with the archive's name `source` (every SSP error does)."""
+    """`error` as one line of at most `MESSAGE_LIMIT` characters that starts with the archive's name
+    `source` (every SSP error does, whatever in the archive it quotes)."""
     message = str(error)
-    return error if message.startswith(f"{source}:") else CosimError(f"{source}: {message}")
+    line = message if message.startswith(f"{source}:") else f"{source}: {message}"
+    return error if line == shorten(line, MESSAGE_LIMIT) else CosimError(shorten(line, MESSAGE_LIMIT))
 
 
 def _run_fmus(

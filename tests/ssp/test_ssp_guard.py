@@ -590,3 +590,61 @@ def test_an_fmu_inside_an_ssp_is_held_to_the_same_limits(tmp_path, capsys):
         f"SystemStructure.ssd: element 'robot': FMU 'models/robot.fmu' has {entries:,} entries, more than "
         f"the limit of {MAX_ENTRIES:,}; not extracted"
     )
+
+
+def fault_scenario(tmp_path: Path, fault: str) -> Path:
+    """The shipped one-obstacle scenario, 4 s long, with the fault FMU (a path) as its vehicle, its
+    fault due at 2 s."""
+    text = SHIPPED.read_text()
+    text = text.replace(
+        'file = "maps/warehouse.yaml"', f'file = "{SHIPPED.parent / "maps" / "warehouse.yaml"}"'
+    )
+    start = text.index("[vehicle]")
+    end = text.index("\n[", start + 1)
+    section = f"""[vehicle]
+fmu = "{fixture_fmu("fault_fmi2")}"
+type = "differential"
+radius = 0.5
+fault = {FAULTS.index(fault)}
+fault_time = 2.0
+"""
+    text = re.sub(r"(?m)^stop_time = .*$", "stop_time = 4.0", text[:start] + section + text[end:])
+    path = tmp_path / f"{fault}.toml"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.slow
+def test_an_exported_ssp_that_says_in_process_runs_a_foreign_fmu_in_a_child_process(tmp_path):
+    """A segfault of the vehicle, which the archive (edited) says to run in-process: exit code 2 and
+    one line naming the archive and the signal, not a dead process (exit code 139)."""
+    import subprocess
+    import sys
+
+    exported = tmp_path / "fault.ssp"
+    assert main(["ssp", "export", str(fault_scenario(tmp_path, "segfault")), "--out", str(exported)]) == 0
+
+    def in_process(text: str) -> str:
+        assert "vehicle.isolation=&quot;process&quot;" in text  # as the scenario ran it
+        return text.replace("vehicle.isolation=&quot;process&quot;", "vehicle.isolation=&quot;none&quot;")
+
+    archive = rewrite(exported, tmp_path / "in_process.ssp", **{"SystemStructure.ssd": in_process})
+    log_path = tmp_path / "in_process.mcap"
+    argv = [
+        sys.executable,
+        "-m",
+        "cosim",
+        "run",
+        str(archive),
+        "--out",
+        str(log_path),
+        "--quiet",
+        "--no-plot",
+    ]
+    done = subprocess.run(argv, capture_output=True, text=True, cwd=tmp_path, check=False)
+    lines = done.stderr.splitlines()
+    assert done.returncode == 2 and len(lines) == 1, (done.returncode, done.stderr[-2000:])
+    assert lines[0].startswith(f"cosim: error: {archive}: ")
+    assert "crashed with signal 11 (SIGSEGV, Segmentation fault) in fmi2DoStep at t = 2" in lines[0]
+    outcome = open_log(log_path).metadata["outcome"]
+    assert outcome["reason"] == "fmu_failed" and "SIGSEGV" in outcome["failure"]
