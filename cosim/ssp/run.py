@@ -193,7 +193,8 @@ def named(source: str, error: CosimError) -> CosimError:
     `source` (every SSP error does, whatever in the archive it quotes)."""
     message = str(error)
     line = message if message.startswith(f"{source}:") else f"{source}: {message}"
-    return error if line == shorten(line, MESSAGE_LIMIT) else CosimError(shorten(line, MESSAGE_LIMIT))
+    line = shorten(line, MESSAGE_LIMIT)
+    return error if line == message else CosimError(line)
 
 
 def _run_fmus(
