@@ -214,7 +214,10 @@ def _run_ssp(args) -> int:
         raise CosimError(f"{args.scenario}: --live and --realtime run scenario files (.toml), not SSP")
     from cosim.ssp.run import SspRunResult, run_ssp, summary
 
-    result = run_ssp(args.scenario, args.out, args.overrides, progress=not args.quiet, force=args.force)
+    overrides = list(args.overrides)
+    if args.max_steps is not None:  # as for a scenario
+        overrides.append(f"simulation.max_steps={args.max_steps}")
+    result = run_ssp(args.scenario, args.out, overrides, progress=not args.quiet, force=args.force)
     if isinstance(result, SspRunResult):
         if not args.quiet:
             print(summary(result))

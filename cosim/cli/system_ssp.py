@@ -14,12 +14,22 @@ from cosim.errors import CosimError
 
 def show_ssp(args, show_scenario) -> int:
     """Print the SSP's system; an exported scenario's through `show_scenario` (cosim.cli.system's)."""
+    from cosim.errors import PATH_LIMIT, shorten
+    from cosim.ssp.run import named
+
+    try:
+        return _show_ssp(args, show_scenario)
+    except CosimError as error:  # every SSP error line starts with the archive's name
+        raise named(shorten(args.scenario, PATH_LIMIT), error) from None
+
+
+def _show_ssp(args, show_scenario) -> int:
     from cosim.ssp import export
     from cosim.ssp.read import build_system, open_ssp
-    from cosim.ssp.run import experiment, parse_overrides
+    from cosim.ssp.run import experiment, max_unpacked_size, parse_overrides
 
     values = parse_overrides(args.overrides)
-    with open_ssp(args.scenario) as ssp:
+    with open_ssp(args.scenario, max_unpacked_size(values)) as ssp:
         if export.SCENARIO_ANNOTATION in ssp.annotations:
             scenario = export.scenario_of(ssp, values)
             title = f"{scenario.name} (exported scenario in {ssp.source})"

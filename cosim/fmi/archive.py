@@ -16,6 +16,9 @@ from cosim.errors import CosimError
 
 MIB = 1 << 20
 DEFAULT_MAX_UNPACKED_SIZE = 1 << 30  # [bytes] 1 GiB; scenarios raise it with [simulation] fmu_max_size
+# Entries of one archive: each is a file (an inode) and a system call when extracted; an FMU or an
+# SSP holds tens to hundreds, a zip of 10^6 empty entries is a few tens of MB.
+MAX_ENTRIES = 10_000
 
 
 def mib(size: int) -> str:
@@ -37,15 +40,30 @@ def unpacked_size(archive: zipfile.ZipFile) -> int:
     return sum(info.file_size for info in archive.infolist())
 
 
-def check_unpacked_size(path: Path, archive: zipfile.ZipFile, limit: int | None = None) -> None:
-    """Raise `CosimError` when the entries of `archive` (the file at `path`) unpack to more than
-    `limit` bytes (default `DEFAULT_MAX_UNPACKED_SIZE`)."""
+def unpack_problem(archive: zipfile.ZipFile, limit: int | None = None) -> str | None:
+    """Why `archive` must not be extracted (more than `MAX_ENTRIES` entries, or more than `limit`
+    bytes, default `DEFAULT_MAX_UNPACKED_SIZE`, declared in all), or None."""
     limit = DEFAULT_MAX_UNPACKED_SIZE if limit is None else limit
+    entries = archive.infolist()
+    if len(entries) > MAX_ENTRIES:
+        return f"has {len(entries):,} entries, more than the limit of {MAX_ENTRIES:,}"
     total = unpacked_size(archive)
     if total > limit:
-        largest = max(archive.infolist(), key=lambda info: info.file_size)
-        raise CosimError(
-            f"FMU '{path}' would unpack to {mib(total)} ('{largest.filename}' alone "
-            f"{mib(largest.file_size)}), more than the limit of {mib(limit)}; "
-            "not extracted (raise the limit with [simulation] fmu_max_size, in MiB, if you trust it)"
+        largest = max(entries, key=lambda info: info.file_size)
+        return (
+            f"would unpack to {mib(total)} ('{largest.filename[:200]}' alone "
+            f"{mib(largest.file_size)}), more than the limit of {mib(limit)}"
         )
+    return None
+
+
+def check_unpacked_size(path: Path, archive: zipfile.ZipFile, limit: int | None = None) -> None:
+    """Raise `CosimError` when `archive` (the file at `path`) has too many entries or its entries
+    unpack to more than `limit` bytes (default `DEFAULT_MAX_UNPACKED_SIZE`): `unpack_problem`."""
+    problem = unpack_problem(archive, limit)
+    if problem is not None:
+        hint = SIZE_HINT if problem.startswith("would") else "not extracted"
+        raise CosimError(f"FMU '{path}' {problem}; {hint}")
+
+
+SIZE_HINT = "not extracted (raise the limit with [simulation] fmu_max_size, in MiB, if you trust it)"

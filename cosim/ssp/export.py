@@ -18,6 +18,14 @@ The archive holds the scenario's whole system:
 system it builds is checked against the SSD (same components, periods and connections), so an SSD
 edited into something the scenario does not describe is an error rather than silently ignored.
 The run is the scenario's run: `cosim log diff` of both logs at tolerance 0 finds no difference.
+
+The archive is untrusted input: every file the scenario names (the TOML, its map and the map's
+image, the FMUs) must lie inside the archive; the log goes where the command line says (or the
+default `logs/` name), never where the archive's `[output] log` says; an FMU that the archive says
+to run in-process runs in a child process unless it is the project's own build
+(`cosim.ssp.read.is_project_fmu`) or the command line says `simulation.fmu_isolation`; and the
+archive cannot raise the limits of the run above the command line's or the defaults
+(`simulation.fmu_timeout`, `fmu_max_size`, `max_steps`).
 """
 
 from __future__ import annotations
@@ -26,9 +34,10 @@ import xml.etree.ElementTree as ET
 from dataclasses import replace
 from pathlib import Path
 
-from cosim.errors import CosimError
-from cosim.scenario.load import Scenario, parse_scenario
-from cosim.ssp.read import SspComponent, SspConnection, SspSystem
+from cosim.errors import CosimError, shorten
+from cosim.fmi.archive import MIB
+from cosim.scenario.load import DEFAULT_LOG_PATTERN, Scenario, parse_scenario
+from cosim.ssp.read import DEFAULT_TIMEOUT, SspComponent, SspConnection, SspSystem, max_unpacked_size
 from cosim.ssp.schema import tag
 
 SCENARIO_ANNOTATION = "org.navcosim.scenario"
@@ -154,25 +163,53 @@ def export_scenario(scenario: Scenario, out: Path) -> Path:
 
 def scenario_of(ssp: SspSystem, simulation: dict[str, object]) -> Scenario:
     """The scenario an exported SSP describes, with the FMUs and parameters of its SSD and SSV."""
+    from cosim.scenario.limits import MAX_STEPS
     from cosim.world.distance import check_start_goal
 
     content = ssp.annotations[SCENARIO_ANNOTATION]
     where = f"{ssp.source}: SystemStructure.ssd: annotation {SCENARIO_ANNOTATION}"
     uri = content.get("scenario")
-    toml = ssp.directory / uri if uri else None
+    toml = _inside(ssp, uri) if uri else None
     if content.tag != tag("nc:Scenario") or toml is None or not toml.is_file():
         raise CosimError(
             f"{where}: needs an nc:Scenario whose scenario attribute names a file in the archive"
+            + (f" (got '{shorten(uri)}')" if uri else "")
         )
     if float(simulation.get("start_time", 0.0)) != 0.0:
         raise CosimError(
             f"{ssp.source}: a navcosim scenario starts at t = 0; simulation.start_time is not allowed"
         )
     overrides = [element.get("value", "") for element in content.iterfind(tag("nc:Set"))]
+    if "max_steps" not in simulation:  # the archive's own max_steps cannot raise the default
+        overrides.append(f"simulation.max_steps={MAX_STEPS}")
     overrides += [f"simulation.{key}={value}" for key, value in simulation.items()]
-    scenario = parse_scenario(
-        toml.read_text(encoding="utf-8"), f"{ssp.source}: {uri}", toml.parent, overrides
-    )
+    try:
+        text = toml.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as error:
+        raise CosimError(f"{ssp.source}: {uri}: cannot read the scenario ({error})") from None
+    scenario = parse_scenario(text, f"{ssp.source}: {uri}", toml.parent, overrides)
+    files = [scenario.map_file]
+    if _inside(ssp, scenario.map_file) is not None:
+        try:
+            files = _map_files(scenario)  # and a ROS map's image, which must sit beside it
+        except CosimError:
+            raise CosimError(
+                f"{ssp.source}: {uri}: the image of the map '{scenario.map_file.name}' is not beside it in "
+                "the archive; an archive's scenario may name only files inside it"
+            ) from None
+        except (OSError, UnicodeDecodeError):
+            pass  # the map's own reader says what is wrong with it
+    for path in files:
+        if _inside(ssp, path) is None:
+            raise CosimError(
+                f"{ssp.source}: {uri}: the map file '{shorten(path)}' is not in the archive; an "
+                "archive's scenario may name only files inside it"
+            )
+    limits = {"log_pattern": DEFAULT_LOG_PATTERN}  # the archive's [output] log is not followed
+    if "fmu_timeout" not in simulation:
+        limits["fmu_timeout"] = min(scenario.fmu_timeout, DEFAULT_TIMEOUT)
+    limits["fmu_max_size"] = min(scenario.fmu_max_size, max_unpacked_size(simulation) / MIB)
+    scenario = replace(scenario, **limits)
     check_start_goal(scenario)
     components = dict(scenario.components)
     labels = {name: ssp.component(name).member for name in scenario.components}
@@ -183,8 +220,24 @@ def scenario_of(ssp: SspSystem, simulation: dict[str, object]) -> Scenario:
             ports = [port for port in spec.ports if spec.ports[port].variable == variable]
             port = ports[0] if ports else variable
             parameters[port] = value / _port_of(scenario, name, port)[1]
-        components[name] = replace(spec, fmu=str(component.fmu), parameters=parameters)
+        isolation = spec.isolation
+        if "fmu_isolation" in simulation:  # the command line decides for every FMU
+            isolation = "none" if simulation["fmu_isolation"] == "auto" and component.project else None
+        elif scenario.isolation(spec) == "none" and not component.project:
+            isolation = "process"  # the archive says in-process, but this is not the project's FMU
+        components[name] = replace(spec, fmu=str(component.fmu), parameters=parameters, isolation=isolation)
     return replace(scenario, components=components, fmu_labels=labels)
+
+
+def _inside(ssp: SspSystem, name: str | Path) -> Path | None:
+    """The file `name` (relative to the unpacked archive, or absolute) when it lies inside the
+    archive, symbolic links resolved; None when it does not."""
+    text = str(name)
+    if "\0" in text:
+        return None
+    root = ssp.directory.resolve()
+    path = (root / text).resolve()
+    return path if path.is_relative_to(root) else None
 
 
 def _check_against_ssd(ssp: SspSystem, scenario: Scenario) -> None:
@@ -220,4 +273,7 @@ def run_exported(
 
     scenario = scenario_of(ssp, simulation)
     _check_against_ssd(ssp, scenario)
-    return scenario, run_scenario(scenario, out_path, progress=progress, force=force)
+    result = run_scenario(scenario, out_path, progress=progress, force=force)
+    if result.failure is not None and not result.failure.startswith(f"{ssp.source}:"):
+        result.failure = f"{ssp.source}: {result.failure}"  # as every SSP error line (the log keeps its own)
+    return scenario, result

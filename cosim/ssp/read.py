@@ -24,6 +24,11 @@ Semantics, as SSP 1.0 and 2.0 define them:
   earlier ones of the same element; a binding higher in the hierarchy overrides lower ones. Names
   that match no variable are ignored, as the standard says. Values of every numeric SSP type
   (Real, Integer, Boolean, Enumeration; SSP 2.0's Float32/64, Int8..UInt64) are passed as numbers.
+- Units: a connection between connectors whose type elements name different units (`<ssc:Real
+  unit="mm"/>`) converts the value between them as SSP says, before its LinearTransformation,
+  by the `ssd:Units` definitions (SI value = factor * value + offset); units of different SI base
+  exponents, or a unit `ssd:Units` does not define, are an error naming both ends, unless the
+  connection says suppressUnitConversion="true". A connector that names no unit is not checked.
 - Time: `DefaultExperiment` gives startTime and stopTime; the macro step comes from navcosim's,
   the OSP or the OMS annotation, or the FMUs' own step sizes (`cosim.ssp.experiment`), and
   `SspSystem.macro_step_source` says which. A component's period comes from
@@ -35,7 +40,13 @@ or says "any" (the default) of an FMU without co-simulation.
 
 Not supported (an error, not a silent change of meaning): referenced SSDs/SSPs as components,
 ScheduledExecution, signal dictionaries, parameter mappings (.ssm), mapping transformations,
-connections that carry a calculated parameter, String, Binary and array values, unit conversion.
+connections that carry a calculated parameter, String, Binary and array values, unit conversion
+of parameter values.
+
+An archive is untrusted input: `open_ssp` extracts nothing from one with too many entries or too
+large (`cosim.fmi.archive.unpack_problem`) or with a member outside it; an SSD may nest
+`MAX_SYSTEM_DEPTH` systems and names of `MAX_NAME_LENGTH` characters, every source must be a path
+inside the archive; each limit is a one-line error.
 """
 
 from __future__ import annotations
@@ -51,7 +62,8 @@ from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
 from cosim.core.component import closest_names
-from cosim.errors import CosimError
+from cosim.errors import CosimError, shorten
+from cosim.fmi.archive import DEFAULT_MAX_UNPACKED_SIZE, MIB, unpack_problem
 from cosim.ssp import schema
 from cosim.ssp.experiment import fmu_default_step, read_experiment
 from cosim.ssp.schema import annotations_of, local_name, number, tag
@@ -66,6 +78,11 @@ _CAUSALITY_KINDS |= {"structuralParameter": "parameter", "calculatedParameter": 
 _CAUSALITY_KINDS |= {"local": "local"}  # SSP 2.0's connector kind for an FMU's local variable
 _REALS = ("Real", "Float64", "Float32")
 _INTEGERS = ("Integer", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64")
+# An archive is untrusted input: bounds on what its SSD may nest and name.
+MAX_SYSTEM_DEPTH = 20  # systems inside systems below the root system
+MAX_NAME_LENGTH = 200  # characters of an element's or connector's name, and of a component's
+_BASE_UNIT = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")  # ssc:BaseUnit's SI exponents
+DEFAULT_TIMEOUT = 10.0  # [s] longest FMI call of an FMU in a child process, as a scenario's default
 
 
 @dataclass
@@ -80,7 +97,8 @@ class SspComponent:
     interface: how it runs, "cs" (co-simulation) or "me" (model exchange, `cosim.fmi.model_exchange`
     with its default solver, CVode);
     member: the FMU's archive member ("resources/X.fmu"), as messages and logs name it;
-    default_step: [s] the FMU's own DefaultExperiment stepSize, None when it gives none.
+    default_step: [s] the FMU's own DefaultExperiment stepSize, None when it gives none;
+    project: True when the file is byte for byte the project's own build of that FMU.
     """
 
     name: str
@@ -93,6 +111,7 @@ class SspComponent:
     member: str = ""
     default_step: float | None = None
     interface: str = "cs"  # "cs" co-simulation, "me" model exchange (integrated by CVode)
+    project: bool = False  # its bytes are the project's own build of its model (`is_project_fmu`)
 
 
 @dataclass(frozen=True)
@@ -142,41 +161,70 @@ def archive_members(directory: Path, text: str) -> str:
     return text
 
 
+def max_unpacked_size(overrides: dict[str, object]) -> int:
+    """[bytes] what the archive (and each FMU in it) may unpack to: `simulation.fmu_max_size` MiB
+    of a run's overrides (`cosim.ssp.run.parse_overrides`), else the default 1 GiB."""
+    if "fmu_max_size" in overrides:
+        return round(float(overrides["fmu_max_size"]) * MIB)
+    return DEFAULT_MAX_UNPACKED_SIZE
+
+
 @contextmanager
-def open_ssp(path: str | Path) -> Iterator[SspSystem]:
-    """Unpack the archive `path` into a temporary folder, read it, and delete the folder on exit."""
+def open_ssp(path: str | Path, max_unpacked_size: int | None = None) -> Iterator[SspSystem]:
+    """Unpack the archive `path` into a temporary folder, read it, and delete the folder on exit.
+
+    Nothing is extracted from an archive with more entries than `cosim.fmi.archive.MAX_ENTRIES`
+    or whose entries declare more than `max_unpacked_size` bytes in all (default 1 GiB, as an FMU),
+    nor from one with a member that points outside it."""
     path = Path(path)
-    source = str(path)
+    source = shorten(path, 200)
     if not path.is_file():
         raise CosimError(f"{source}: no such SSP file")
     if not zipfile.is_zipfile(path):
         raise CosimError(f"{source}: not a zip archive (an SSP is a zip with {SSD_NAME} at its root)")
-    directory = Path(tempfile.mkdtemp(prefix="navcosim-ssp-"))
     try:
-        try:
-            with zipfile.ZipFile(path) as archive:
-                names = archive.namelist()
-                if SSD_NAME not in names:
-                    raise CosimError(f"{source}: the archive has no {SSD_NAME} at its root")
-                for name in names:
-                    target = (directory / name).resolve()
-                    if not target.is_relative_to(directory.resolve()):
-                        raise CosimError(f"{source}: archive member '{name}' points outside the archive")
+        with zipfile.ZipFile(path) as archive:
+            _check_members(archive, source, max_unpacked_size)
+            directory = Path(tempfile.mkdtemp(prefix="navcosim-ssp-"))
+            try:
                 archive.extractall(directory)
-        except (zipfile.BadZipFile, OSError) as error:
-            raise CosimError(f"{source}: cannot unpack: {error}") from None
-        yield read_ssd(directory, source)
+            except BaseException:
+                shutil.rmtree(directory, ignore_errors=True)
+                raise
+    except (zipfile.BadZipFile, OSError) as error:
+        raise CosimError(f"{source}: cannot unpack: {error}") from None
+    try:
+        yield read_ssd(directory, source, max_unpacked_size)
     finally:
         shutil.rmtree(directory, ignore_errors=True)
 
 
-def read_ssd(directory: Path, source: str) -> SspSystem:
-    """Read `directory/SystemStructure.ssd` (an unpacked SSP); errors name `source`."""
+def _check_members(archive: zipfile.ZipFile, source: str, max_unpacked_size: int | None) -> None:
+    """What `open_ssp` checks before it extracts anything (`CosimError` naming `source`)."""
+    names = archive.namelist()
+    if SSD_NAME not in names:
+        raise CosimError(f"{source}: the archive has no {SSD_NAME} at its root")
+    problem = unpack_problem(archive, max_unpacked_size)
+    if problem is not None:
+        hint = "; raise the limit with --set simulation.fmu_max_size=MIB if you trust it"
+        hint = hint if problem.startswith("would") else ""
+        raise CosimError(f"{source}: the SSP archive {problem}; not extracted{hint}")
+    for name in names:
+        member = PurePosixPath(name.replace("\\", "/"))
+        if member.is_absolute() or ".." in member.parts:
+            raise CosimError(f"{source}: archive member '{shorten(name)}' points outside the archive")
+
+
+def read_ssd(directory: Path, source: str, max_unpacked_size: int | None = None) -> SspSystem:
+    """Read `directory/SystemStructure.ssd` (an unpacked SSP); errors name `source`; each FMU may
+    unpack to `max_unpacked_size` bytes (default 1 GiB)."""
     ssd_path = directory / SSD_NAME
     data = ssd_path.read_bytes()
     where = f"{source}: {SSD_NAME}"
     root = schema.parse(data, "ssd", where)
     reader = _Reader(directory, source, where)
+    reader.units = _unit_definitions(root)
+    reader.max_unpacked_size = max_unpacked_size
     system = root.find(tag("ssd:System"))
     reader.system(system, ())
     components = reader.finish()
@@ -212,6 +260,7 @@ class _Node:
     name: str
     kind: str
     is_system: bool
+    unit: str | None = None  # the unit its type element (ssc:Real) names
 
 
 class _Reader:
@@ -227,10 +276,17 @@ class _Reader:
         self.incoming: dict[tuple, tuple[tuple, float, float, str]] = {}  # sink -> (source, f, o, what)
         self.bindings: list[tuple[int, int, str, str, str, str | None, str]] = []
         self.connections: list[SspConnection] = []
+        self.units: dict[str, tuple] = {}  # ssd:Units: name -> (SI exponents, factor, offset)
+        self.max_unpacked_size: int | None = None  # [bytes] of each FMU (None: the default)
 
     # ---- hierarchy ---------------------------------------------------------------------------
 
     def system(self, element: ET.Element, path: tuple[str, ...]) -> None:
+        if len(path) > MAX_SYSTEM_DEPTH:
+            raise CosimError(
+                f"{self.where}: {_where(path)}: systems nest more than {MAX_SYSTEM_DEPTH} deep "
+                f"(the limit of navcosim)"
+            )
         self.systems.add(path)
         self._connectors(element, path, True)
         self._bindings(element, path)
@@ -238,6 +294,7 @@ class _Reader:
         names: set[str] = set()
         for child in list(elements) if elements is not None else []:
             name = child.get("name", "")
+            self._check_name(name, f"{_where(path)}: element")
             if name in names:
                 raise CosimError(f"{self.where}: system '{_dotted(path)}' has two elements named '{name}'")
             names.add(name)
@@ -266,9 +323,14 @@ class _Reader:
         fmu_path = self._resource(member, where)
         member = PurePosixPath(member).as_posix()
         name = component_name(path)
+        if len(name) > MAX_NAME_LENGTH:
+            raise CosimError(
+                f"{where}: its component name '{shorten(name, 60)}' ({len(name)} characters, the element "
+                f"path joined by '_') is longer than {MAX_NAME_LENGTH} characters"
+            )
         try:
             interface = _interface(fmu_path, implementation)
-            fmu = component_class(interface)(fmu_path, name)
+            fmu = component_class(interface)(fmu_path, name, max_unpacked_size=self.max_unpacked_size)
         except CosimError as error:
             raise CosimError(f"{where}: {archive_members(self.directory, str(error))}") from None
         variables = {v.name: v for v in fmu.model_description.modelVariables}
@@ -285,6 +347,7 @@ class _Reader:
             member=member,
             default_step=fmu_default_step(fmu.model_description),
             interface=interface,
+            project=is_project_fmu(fmu_path, fmu.model_description, fmu.fmi_version),
         )
         for connector in self._connectors(element, path, False):
             variable = variables.get(connector.get("name"))
@@ -308,14 +371,24 @@ class _Reader:
         connectors = element.findall(f"{tag('ssd:Connectors')}/{tag('ssd:Connector')}")
         for connector in connectors:
             name, kind = connector.get("name", ""), connector.get("kind", "")
+            self._check_name(name, f"{_where(path)}: connector")
             if (path, name) in self.nodes:
                 raise CosimError(f"{self.where}: {_where(path)}: connector '{name}' declared twice")
             if kind == "inout":
                 raise CosimError(
                     f"{self.where}: {_where(path)}: connector '{name}': kind 'inout' is not supported"
                 )
-            self.nodes[(path, name)] = _Node(path, name, kind, is_system)
+            types = [child for child in connector if child.get("unit")]
+            unit = types[0].get("unit") if types else None
+            self.nodes[(path, name)] = _Node(path, name, kind, is_system, unit)
         return connectors
+
+    def _check_name(self, name: str, what: str) -> None:
+        if len(name) > MAX_NAME_LENGTH:
+            raise CosimError(
+                f"{self.where}: {what} name '{shorten(name, 60)}' is {len(name):,} characters long, "
+                f"more than {MAX_NAME_LENGTH}"
+            )
 
     def _resource(self, uri: str, where: str) -> Path:
         relative = PurePosixPath(uri)
@@ -367,9 +440,39 @@ class _Reader:
                 offset = float(child.get("offset", 0.0))
             elif child.tag.endswith("MappingTransformation"):
                 raise CosimError(f"{where}: {local_name(child.tag)} is not supported")
+        suppress = (element.get("suppressUnitConversion") or "false").strip() in ("true", "1")
+        conversion = None if suppress else self._conversion(source, sink, where)
+        if conversion is not None:
+            # SSP: the source value is converted to the target's unit first, then transformed.
+            factor, offset = factor * conversion[0], factor * conversion[1] + offset
         if sink in self.incoming:
             raise CosimError(f"{where}: {_dotted(sink[0] + (sink[1],))} is already connected")
         self.incoming[sink] = (source, factor, offset, where)
+
+    def _conversion(self, source: tuple, sink: tuple, where: str) -> tuple[float, float] | None:
+        """(factor, offset) that convert a value in the unit of connector `source` to the unit of
+        `sink` (SSP's automatic unit conversion), None when they agree or one of them has no unit;
+        `CosimError` naming both ends when the units do not convert into each other."""
+        units = self.nodes[source].unit, self.nodes[sink].unit
+        if None in units or units[0] == units[1]:
+            return None
+        pairs = zip(units, (source, sink), strict=True)
+        ends = [f"'{unit}' at {_dotted(key[0] + (key[1],))}" for unit, key in pairs]
+        definitions = [self.units.get(unit) for unit in units]
+        for unit, definition in zip(units, definitions, strict=True):
+            if definition is None:
+                raise CosimError(
+                    f"{where}: units differ ({ends[0]}, {ends[1]}) and '{unit}' is not defined in "
+                    'ssd:Units, so they cannot be converted (or say suppressUnitConversion="true")'
+                )
+        (exponents, f_source, o_source), (target_exponents, f_target, o_target) = definitions
+        if exponents != target_exponents:
+            raise CosimError(
+                f"{where}: units do not agree: {ends[0]} and {ends[1]} have different SI base units "
+                '(or say suppressUnitConversion="true" on the connection)'
+            )
+        # SI value = factor * value + offset, for either unit.
+        return f_source / f_target, (o_source - o_target) / f_target
 
     # ---- parameter bindings ------------------------------------------------------------------
 
@@ -498,6 +601,25 @@ def _interface(fmu: Path, implementation: str) -> str:
     return "me" if description.coSimulation is None and description.modelExchange is not None else "cs"
 
 
+def is_project_fmu(path: Path, description, fmi_version: int) -> bool:
+    """True when the FMU file `path` is byte for byte the project's own build of its model (one of
+    `cosim.fmi.builtin`'s FMUs, as `cosim ssp export` packs them): code that navcosim ships, which
+    "auto" isolation runs in-process as a scenario runs its project FMUs."""
+    from cosim.fmi.builtin import GENERATION_TOOL, builtin_fmu, known_names
+
+    name = getattr(description, "modelName", "")
+    tool = getattr(description, "generationTool", "") or ""
+    if not tool.startswith(GENERATION_TOOL) or fmi_version not in (2, 3) or name not in known_names():
+        return False
+    try:
+        own = builtin_fmu(name, fmi_version)
+        if own.stat().st_size != path.stat().st_size:
+            return False
+        return own.read_bytes() == path.read_bytes()
+    except (CosimError, OSError):
+        return False
+
+
 def component_class(interface: str):
     """The component class of an interface: `FmuComponent` ("cs") or `ModelExchangeComponent` ("me")."""
     if interface == "me":
@@ -548,6 +670,35 @@ def _check_unit(unit: str | None, variable, where: str) -> None:
         )
 
 
+def _unit_definitions(root: ET.Element) -> dict[str, tuple]:
+    """The SSD's `ssd:Units`: name -> (SI exponents kg..rad, factor, offset) of its ssc:BaseUnit."""
+    definitions: dict[str, tuple] = {}
+    units = root.find(tag("ssd:Units"))
+    for unit in units.iterfind(tag("ssc:Unit")) if units is not None else ():
+        base = unit.find(tag("ssc:BaseUnit"))
+        base = base if base is not None else ET.Element("none")
+        exponents = tuple(int(base.get(name, 0)) for name in _BASE_UNIT)
+        definitions[unit.get("name", "")] = (
+            exponents,
+            float(base.get("factor", 1.0)),
+            float(base.get("offset", 0.0)),
+        )
+    return definitions
+
+
+def _component(spec: SspComponent, isolation: str, timeout: float, max_unpacked_size: int | None):
+    """The component of one FMU, in a child process (`isolation` "process") or in this one."""
+    options = {"period": spec.period, "max_unpacked_size": max_unpacked_size}
+    if isolation == "process":
+        from cosim.fmi.isolated import IsolatedFmuComponent
+
+        integration = (
+            {"solver": "cvode", "tolerance": None, "max_step": None} if spec.interface == "me" else None
+        )
+        return IsolatedFmuComponent(spec.fmu, spec.name, timeout=timeout, integration=integration, **options)
+    return component_class(spec.interface)(spec.fmu, spec.name, **options)
+
+
 def _dotted(path: tuple[str, ...]) -> str:
     return ".".join(path)
 
@@ -570,9 +721,20 @@ def _check_starts(ssp: SspSystem, system) -> None:
                 raise CosimError(f"{where}: {unstarted_problem(port, 'connect it or bind its start value')}")
 
 
-def build_system(ssp: SspSystem, macro_step: float, master: str = "gauss-seidel"):
+def build_system(
+    ssp: SspSystem,
+    macro_step: float,
+    master: str = "gauss-seidel",
+    isolation: str = "auto",
+    timeout: float = DEFAULT_TIMEOUT,
+    max_unpacked_size: int | None = None,
+):
     """A `System` of the SSP's FMU components and connections, and the parameters for `Master`.
 
+    Each FMU runs where `isolation` says, as a scenario's `[simulation] fmu_isolation`: "process"
+    in a child process (`cosim.fmi.isolated`, each FMI call limited to `timeout` seconds), "none"
+    in this process, "auto" in-process for the project's own FMUs (`SspComponent.project`) and in
+    a child process for any other. Each FMU may unpack to `max_unpacked_size` bytes (default 1 GiB).
     Input start values from parameter bindings are staged in the components' input buffers, which
     `Master.initialize` sends before initialising each FMU (connected inputs are then overwritten).
     """
@@ -582,8 +744,9 @@ def build_system(ssp: SspSystem, macro_step: float, master: str = "gauss-seidel"
     parameters: dict[str, dict[str, float]] = {}
     for spec in ssp.components:
         where = f"{ssp.source}: {_where(tuple(spec.path.split('.')))}"
+        where_run = isolation if isolation != "auto" else ("none" if spec.project else "process")
         try:
-            component = component_class(spec.interface)(spec.fmu, spec.name, period=spec.period)
+            component = _component(spec, where_run, timeout, max_unpacked_size)
             for name, value in spec.inputs.items():
                 component.input_buffer[component.input_index[name]] = value
             system.add(component)

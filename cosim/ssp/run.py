@@ -13,6 +13,16 @@ Overrides: `--set simulation.stop_time=S`, `simulation.macro_step=S`, `simulatio
 the annotations and the FMUs' step sizes: `cosim.ssp.read`); the summary and the log's metadata
 say where the macro step came from. The log names each FMU by its archive member, so two runs of
 one archive write the same bytes.
+
+An archive is untrusted input, held to a scenario's limits: it is not extracted when it has more
+than `cosim.fmi.archive.MAX_ENTRIES` entries or would unpack to more than `simulation.fmu_max_size`
+MiB (default 1024, as an FMU); a run is at most `simulation.max_steps` macro steps (default
+`cosim.scenario.limits.MAX_STEPS`) and its times at most `MAX_TIME`. Its FMUs run where a
+scenario's FMUs given by path run (`simulation.fmu_isolation`, default "auto"): in a child process
+whose FMI calls may take `simulation.fmu_timeout` seconds, so a crash, an exit() or a hang of an
+FMU ends the run with exit code 2 and a finalised log; an FMU whose bytes are the project's own
+build of it runs in-process ("auto"), as a scenario's project FMUs do. Every error line starts
+with the archive's name.
 """
 
 from __future__ import annotations
@@ -27,13 +37,18 @@ import numpy as np
 
 from cosim.core import interrupt
 from cosim.core.master import COMPILED_MIN_STEPS, MODES, Master, due_from
-from cosim.errors import CosimError, SimulationEnded
+from cosim.errors import PATH_LIMIT, CosimError, SimulationEnded, shorten
 from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
 from cosim.record.text_signals import TextRecording
+from cosim.scenario.limits import MAX_STEPS, MAX_TIME, MIN_MACRO_STEP
 from cosim.scenario.load import DEFAULT_LOG_PATTERN
-from cosim.ssp.read import SspSystem, build_system, open_ssp
+from cosim.ssp.read import DEFAULT_TIMEOUT, SspSystem, build_system, max_unpacked_size, open_ssp
 
 SIMULATION_KEYS = ("stop_time", "macro_step", "start_time", "master")
+# The [simulation] keys of a scenario's FMUs and run length, which an SSP run takes too.
+GUARD_KEYS = ("fmu_isolation", "fmu_timeout", "fmu_max_size", "max_steps")
+ISOLATIONS = ("auto", "process", "none")
+MESSAGE_LIMIT = 2000  # characters of an error line
 CHUNK_STEPS = 20_000  # steps between checks for an interrupt
 
 
@@ -64,6 +79,8 @@ class Experiment:
     macro_step: float
     master: str
     macro_step_source: str = ""
+    isolation: str = "auto"  # where the FMUs run: `cosim.ssp.read.build_system`
+    timeout: float = DEFAULT_TIMEOUT  # [s] longest FMI call of an FMU in a child process
 
 
 def parse_overrides(overrides: list[str] | tuple[str, ...]) -> dict[str, object]:
@@ -72,17 +89,30 @@ def parse_overrides(overrides: list[str] | tuple[str, ...]) -> dict[str, object]
     for override in overrides:
         key, separator, text = override.partition("=")
         section, _, name = key.strip().partition(".")
-        if not separator or section != "simulation" or name not in SIMULATION_KEYS:
-            known = ", ".join(f"simulation.{k}" for k in SIMULATION_KEYS)
+        override = shorten(override)
+        if not separator or section != "simulation" or name not in SIMULATION_KEYS + GUARD_KEYS:
+            known = ", ".join(f"simulation.{k}" for k in SIMULATION_KEYS + GUARD_KEYS)
             raise CosimError(f"--set {override}: an SSP run takes only {known}")
         try:
             value = tomllib.loads(f"value = {text.strip()}")["value"]
         except tomllib.TOMLDecodeError:
             value = text.strip()
+        number = not isinstance(value, bool) and isinstance(value, int | float) and math.isfinite(value)
         if name == "master":
             if value not in MODES:
                 raise CosimError(f"--set {override}: master must be one of {', '.join(MODES)}")
-        elif isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        elif name == "fmu_isolation":
+            if value not in ISOLATIONS:
+                raise CosimError(f"--set {override}: fmu_isolation must be one of {', '.join(ISOLATIONS)}")
+        elif name == "max_steps":
+            if not (number and value == int(value) and value >= 1):
+                raise CosimError(f"--set {override}: max_steps must be a whole number >= 1")
+            value = int(value)
+        elif name in ("fmu_timeout", "fmu_max_size"):
+            if not (number and value > 0):
+                unit = "seconds" if name == "fmu_timeout" else "MiB"
+                raise CosimError(f"--set {override}: {name} must be a number of {unit} > 0")
+        elif not number:
             raise CosimError(f"--set {override}: {name} must be a number of seconds")
         values[name] = value
     return values
@@ -111,11 +141,28 @@ def experiment(ssp: SspSystem, overrides: dict[str, object]) -> Experiment:
     master = str(overrides.get("master", ssp.master or "gauss-seidel"))
     if master not in MODES:
         raise CosimError(f"{where}: nc:Simulation master '{master}' is not one of {', '.join(MODES)}")
+    for what, value in (("start time", start), ("stop time", stop), ("macro step", step)):
+        if not (math.isfinite(float(value)) and abs(float(value)) <= MAX_TIME):
+            raise CosimError(
+                f"{where}: {what} must be a finite number, at most {MAX_TIME:g} s in magnitude, "
+                f"got {float(value):g}"
+            )
     if float(step) <= 0:
         raise CosimError(f"{where}: macro step must be > 0 s, got {step}")
+    if float(step) < MIN_MACRO_STEP:
+        raise CosimError(f"{where}: macro step must be at least 1 ns (the time base), got {step} s")
     if float(stop) <= start:
         raise CosimError(f"{where}: stop time {stop} s is not after the start time {start} s")
-    return Experiment(start, float(stop), float(step), master, source)
+    max_steps = int(overrides.get("max_steps", MAX_STEPS))
+    steps = (float(stop) - start) / float(step)
+    if steps > max_steps + 0.5:
+        raise CosimError(
+            f"{where}: {float(stop) - start:g} s at macro step {float(step):g} s is {steps:.3g} steps, "
+            f"above max_steps = {max_steps:.3g} (give --set simulation.max_steps=N to allow it)"
+        )
+    isolation = str(overrides.get("fmu_isolation", "auto"))
+    timeout = float(overrides.get("fmu_timeout", DEFAULT_TIMEOUT))
+    return Experiment(start, float(stop), float(step), master, source, isolation, timeout)
 
 
 def run_ssp(
@@ -128,26 +175,58 @@ def run_ssp(
     `CosimError` on bad input, before any log exists. The log is claimed and signals are handled as
     for a scenario (`cosim.navigation.run.run_scenario`).
     """
-    values = parse_overrides(overrides)
-    with open_ssp(path) as ssp:
-        from cosim.ssp import export
+    source = shorten(path, PATH_LIMIT)
+    try:
+        values = parse_overrides(overrides)
+        with open_ssp(path, max_unpacked_size(values)) as ssp:
+            from cosim.ssp import export
 
-        if export.SCENARIO_ANNOTATION in ssp.annotations:
-            return export.run_exported(ssp, values, out_path, progress, force)
-        with interrupt.catching_signals():
-            return _run_fmus(ssp, experiment(ssp, values), out_path, force)
+            if export.SCENARIO_ANNOTATION in ssp.annotations:
+                return export.run_exported(ssp, values, out_path, progress, force)
+            with interrupt.catching_signals():
+                return _run_fmus(ssp, experiment(ssp, values), out_path, force, max_unpacked_size(values))
+    except CosimError as error:
+        raise named(source, error) from None
 
 
-def _run_fmus(ssp: SspSystem, run: Experiment, out_path: Path | None, force: bool) -> SspRunResult:
-    system, parameters = build_system(ssp, run.macro_step, run.master)
+def named(source: str, error: CosimError) -> CosimError:
+    """`error` as one line of at most `MESSAGE_LIMIT` characters that starts with the archive's name
+    `source` (every SSP error does, whatever in the archive it quotes)."""
+    message = str(error)
+    line = message if message.startswith(f"{source}:") else f"{source}: {message}"
+    line = shorten(line, MESSAGE_LIMIT)
+    return error if line == message else CosimError(line)
+
+
+def _run_fmus(
+    ssp: SspSystem, run: Experiment, out_path: Path | None, force: bool, max_size: int | None = None
+) -> SspRunResult:
+    system, parameters = build_system(ssp, run.macro_step, run.master, run.isolation, run.timeout, max_size)
     master = Master(system, start_time=run.start_time, parameters=parameters, stop_time=run.stop_time)
     try:
         master.initialize()
     except CosimError as error:
+        _close_quietly(master)
         message = ssp.members(str(error))
         raise CosimError(f"{ssp.source}: initialising the system failed: {message}") from None
+    except BaseException:
+        _close_quietly(master)
+        raise
     with interrupt.deferred():
         return _record(ssp, run, master, system, out_path, force)
+
+
+def _close_quietly(master: Master, recorder=None, outcome=None) -> None:
+    """Close the master (the FMUs, their child processes) and the recorder, whatever fails."""
+    try:
+        master.close()
+    except Exception:  # noqa: BLE001 (already failing: the first error is the one to report)
+        pass
+    if recorder is not None:
+        try:
+            recorder.close(outcome)
+        except Exception:  # noqa: BLE001
+            pass
 
 
 def _record(
@@ -167,6 +246,18 @@ def _record(
     except BaseException:
         master.close()
         raise
+    try:
+        return _steps(ssp, run, master, system, recorder, log_path)
+    except OSError as error:
+        # The log could not be written (no space, I/O error): what reached the file stays.
+        _close_quietly(master, recorder)
+        where = shorten(error.filename or log_path, PATH_LIMIT)
+        raise CosimError(
+            f"{ssp.source}: {where}: writing the log failed ({error.strerror or error})"
+        ) from None
+
+
+def _steps(ssp: SspSystem, run: Experiment, master: Master, system, recorder, log_path: Path) -> SspRunResult:
     h_ns = system.macro_step_ns
     total = master.steps_to_stop  # the last one shorter where the stop is no whole number of steps
     wall_start = time.perf_counter()
@@ -204,7 +295,7 @@ def _record(
         except SimulationEnded as request:
             ended = str(request)
         except CosimError as error:
-            failure = f"{ssp.members(str(error))} (at t = {master.time:.3f} s)"
+            failure = f"{ssp.source}: {ssp.members(str(error))} (at t = {master.time:.3f} s)"
         except interrupt.Interrupted:  # a signal while an FMU in a child process did not answer
             interrupt.take()
         reason = "fmu_failed" if failure else ("stop_time" if master.step_index >= total else "interrupted")
@@ -212,7 +303,7 @@ def _record(
         try:
             master.close()
         except CosimError as error:
-            failure = failure or f"terminating the system failed: {ssp.members(str(error))}"
+            failure = failure or f"{ssp.source}: terminating the system failed: {ssp.members(str(error))}"
         outcome = {"reached": "false", "reason": reason, "time": repr(master.time)}
         if failure:
             outcome["failure"] = failure

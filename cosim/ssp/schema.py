@@ -14,7 +14,7 @@ import xml.etree.ElementTree as ET
 from functools import cache
 from pathlib import Path
 
-from cosim.errors import CosimError
+from cosim.errors import CosimError, shorten_words
 
 SCHEMA_DIR = Path(__file__).resolve().parent / "schemas"
 SCHEMA_DIRS = {"1.0": SCHEMA_DIR, "2.0": SCHEMA_DIR / "ssp-2.0"}  # SSP version -> its schemas
@@ -31,6 +31,9 @@ SCHEMAS = {
     "ssv": "SystemStructureParameterValues.xsd",
     "ssm": "SystemStructureParameterMapping.xsd",
 }
+# Deepest element nesting of a file (20 nested systems take about 50): the schema check recurses
+# through the document, a file nested thousands deep would exhaust Python's stack.
+MAX_DEPTH = 100
 for _prefix, _uri in NS.items():
     ET.register_namespace(_prefix, _uri)
 
@@ -66,7 +69,8 @@ def validate(element: ET.Element, kind: str, where: str) -> None:
         elem = getattr(error, "elem", None)
         if elem is not None and elem.get("name") is not None:
             path += f" (name '{elem.get('name')}')"
-        raise CosimError(f"{where}: not valid SSP {version} ({SCHEMAS[kind]}) at {path}: {reason}")
+        message = f"{where}: not valid SSP {version} ({SCHEMAS[kind]}) at {path}: {reason}"
+        raise CosimError(shorten_words(message, 2000))
 
 
 def _short(path: str) -> str:
@@ -83,8 +87,23 @@ def parse(data: bytes, kind: str, where: str) -> ET.Element:
     except ET.ParseError as error:
         line, column = error.position
         raise CosimError(f"{where}: bad XML at line {line}, column {column}: {_reason(error)}") from None
+    depth = _depth(root)
+    if depth > MAX_DEPTH:
+        raise CosimError(
+            f"{where}: elements nest {depth} deep, more than the limit of {MAX_DEPTH} "
+            "(systems inside systems: at most 20)"
+        )
     validate(root, kind, where)
     return root
+
+
+def _depth(root: ET.Element) -> int:
+    """How deep the elements of `root` nest (root alone: 1), without recursion."""
+    deepest, level = 0, [root]
+    while level:
+        deepest += 1
+        level = [child for element in level for child in element]
+    return deepest
 
 
 def _reason(error: ET.ParseError) -> str:

@@ -17,7 +17,9 @@ so the SSP rule that a binding higher in the hierarchy wins changes nothing.
 
 Every unit that a connector names is defined in `<ssd:Units>` with its SI exponents
 (`ssc:BaseUnit` kg m s A K mol cd rad, factor, offset), as the FMU's own UnitDefinitions give
-them; a unit the FMU does not define is left off its connector rather than guessed. The SSD and
+them; a unit the FMU does not define is left off its connector rather than guessed. A connection
+between connectors of different units says suppressUnitConversion="true": navcosim passes values
+as they are (its factor and offset), where SSP would convert between the units first. The SSD and
 every parameter set are checked against the normative schemas before the archive is written.
 """
 
@@ -121,6 +123,7 @@ def system_structure(
     root.set("generationTool", "navcosim")
     system = ET.SubElement(root, tag("ssd:System"), name=name)
     units: dict[str, tuple] = {}
+    connector_units: dict[str, str] = {}  # "component.variable" -> the unit its connector names
     bindings = ET.SubElement(system, tag("ssd:ParameterBindings"))
     ET.SubElement(bindings, tag("ssd:ParameterBinding"), source=PARAMETERS)
     used: dict[str, list[str]] = {c.name: [] for c in components}
@@ -152,6 +155,8 @@ def system_structure(
                             "another FMU of the system; SSP has one definition per name"
                         )
                 attributes = {"unit": unit} if definition is not None else {}
+                if definition is not None:
+                    connector_units[f"{component.name}.{variable_name}"] = unit
                 ET.SubElement(connector, tag(f"ssc:{kind}"), **attributes)
         if component.parameters or component.inputs:
             # The component's own binding, bare names: libcosim and ecos read only these.
@@ -176,6 +181,11 @@ def system_structure(
                 endElement=end_element,
                 endConnector=end_connector,
             )
+            ends = connector_units.get(connection.source), connector_units.get(connection.target)
+            if None not in ends and ends[0] != ends[1]:
+                # navcosim connects values as they are (target = factor * source + offset); SSP
+                # would convert between the units first.
+                wire.set("suppressUnitConversion", "true")
             if connection.factor != 1.0 or connection.offset != 0.0:
                 ET.SubElement(
                     wire,
