@@ -81,6 +81,7 @@ it, further steps are refused, and `close()` terminates the healthy components a
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -97,6 +98,7 @@ if TYPE_CHECKING:
 
 NS_PER_S = 1_000_000_000
 MODES = ("gauss-seidel", "jacobi")
+LOOP_HANDLING = ("delay", "error")  # `[simulation] algebraic_loops` (`System.loops`)
 # Below this many values from one producer, per-value ctypes copies beat one NumPy fancy-index copy.
 _SCALAR_COPY_LIMIT = 4
 # `run`/`run_recorded` with `compiled=None` step through the kernel from this many steps on: fewer
@@ -170,13 +172,18 @@ Link = tuple[Connection, str, int, int]
 class System:
     """Components, connections, the macro step [s] and the master algorithm (`mode`)."""
 
-    def __init__(self, macro_step: float | Fraction, mode: str = "gauss-seidel") -> None:
+    def __init__(
+        self, macro_step: float | Fraction, mode: str = "gauss-seidel", loops: str = "delay"
+    ) -> None:
         self.macro_step_ns = seconds_to_ns(macro_step, "macro step")
         if self.macro_step_ns <= 0:
             raise CosimError(f"macro step must be > 0 s, got {macro_step}")
         if mode not in MODES:
             raise CosimError(f"master mode '{mode}' is not one of {', '.join(MODES)}")
         self.mode = mode
+        if loops not in LOOP_HANDLING:
+            raise CosimError(f"algebraic loop handling '{loops}' is not one of {', '.join(LOOP_HANDLING)}")
+        self.loops = loops
         self.components: dict[str, Component] = {}
         self.connections: list[Connection] = []
         self.text_connections: list[Connection] = []  # String/Binary ones (`System._connect_text`)
@@ -313,29 +320,92 @@ class System:
                     indegree[consumer] -= 1
         return order
 
+    def algebraic_loop(self) -> list[str] | None:
+        """A cycle of direct dependencies between ports ("comp.port", first = last), or None."""
+        feedthrough = {name: c.feedthrough for name, c in self.components.items()}
+        return find_algebraic_loop([(c.source, c.target) for c in self.connections], feedthrough)
+
     def check_algebraic_loops(self) -> None:
         """Raise `CosimError` naming a cycle of direct dependencies between ports, if any."""
-        feedthrough = {name: c.feedthrough for name, c in self.components.items()}
-        loop = find_algebraic_loop([(c.source, c.target) for c in self.connections], feedthrough)
+        loop = self.algebraic_loop()
         if loop is not None:
             raise CosimError(
                 "algebraic loop (direct feedthrough only): "
                 + " -> ".join(loop)
-                + "; an FMU output without declared dependencies depends on every input"
+                + "; an FMU output without declared dependencies depends on every input; "
+                "`--set simulation.algebraic_loops=delay` (or simulation.master=jacobi) runs it "
+                "with the loop's inputs from the previous communication point"
             )
 
-    def order(self) -> list[Component]:
-        """Step order (see the module docstring); checks algebraic loops in Gauss-Seidel mode."""
-        if self.mode == "gauss-seidel":
-            self.check_algebraic_loops()
+    def _direct_edges(self) -> set[tuple[str, str]]:
         components = self.components
-        edges = {
+        return {
             (producer, consumer)
             for consumer, links in self.links().items()
             for _, producer, output, _ in links
             if producer != consumer
             and components[producer].feedthrough[components[producer].outputs[output].name]
         }
+
+    def loop_components(self) -> list[str]:
+        """The components on a cycle of direct connections (Gauss-Seidel with `loops="delay"`
+        steps them Jacobi-style: their connections among themselves carry the outputs from
+        before the step), in the order they were added; empty when the system has no algebraic
+        loop or runs in Jacobi mode."""
+        if self.mode != "gauss-seidel" or self.algebraic_loop() is None:
+            return []
+        edges = self._direct_edges()
+        after: dict[str, set[str]] = {}
+        for producer, consumer in edges:
+            after.setdefault(producer, set()).add(consumer)
+
+        def reach(start: str) -> set[str]:
+            seen: set[str] = set()
+            todo = [start]
+            while todo:
+                for nxt in after.get(todo.pop(), ()):
+                    if nxt not in seen:
+                        seen.add(nxt)
+                        todo.append(nxt)
+            return seen
+
+        return [name for name in self.components if name in reach(name)]
+
+    def delayed_links(self) -> set[tuple[str, str]]:
+        """(producer, consumer) pairs whose connections are delayed by one step (`loop_components`)."""
+        members = set(self.loop_components())
+        if not members:
+            return set()
+        reach = {name: set() for name in members}
+        for producer, consumer in self._direct_edges():
+            if producer in members and consumer in members:
+                reach[producer].add(consumer)
+        # Producer and consumer on one cycle: delay every link between loop members whose
+        # producer can be reached back from the consumer (same strongly connected component).
+        closure = {name: set(targets) for name, targets in reach.items()}
+        changed = True
+        while changed:
+            changed = False
+            for name in members:
+                extra = set().union(*(closure[n] for n in closure[name])) - closure[name]
+                if extra:
+                    closure[name] |= extra
+                    changed = True
+        return {
+            (producer, consumer)
+            for consumer, links in self.links().items()
+            if consumer in members
+            for _, producer, _, _ in links
+            if producer in members and producer != consumer and producer in closure[consumer]
+        }
+
+    def order(self) -> list[Component]:
+        """Step order (see the module docstring); checks algebraic loops in Gauss-Seidel mode
+        when `loops == "error"`."""
+        if self.mode == "gauss-seidel" and self.loops == "error":
+            self.check_algebraic_loops()
+        delayed = self.delayed_links()
+        edges = self._direct_edges() - delayed
         return [self.components[name] for name in self._topological(edges)]
 
     def initialization_order(self) -> list[Component]:
@@ -447,13 +517,17 @@ def _search_algebraic_loop(
 
 
 def _gather(
-    system: System, consumer: Component, producers: set[str] | None = None
+    system: System,
+    consumer: Component,
+    producers: set[str] | None = None,
+    delayed: Mapping[str, np.ndarray] | None = None,
 ) -> Callable[[], None] | None:
     """A function copying the consumer's connected inputs from its producers' output buffers.
 
     Generated as straight-line code (one statement per value, or one NumPy copy for many values
     from one producer), because it runs for every component on every step. None when the
-    consumer has no connected input (from `producers`, when given).
+    consumer has no connected input (from `producers`, when given). `delayed` maps producers
+    whose values come from a copy of their outputs taken before the step (`System.delayed_links`).
     """
     groups: dict[str, list[tuple[int, int, float, float]]] = {}
     for connection, producer, source_index, target_index in system.links().get(consumer.name, ()):
@@ -467,8 +541,11 @@ def _gather(
     lines = ["def gather():"]
     for number, (producer_name, links) in enumerate(groups.items()):
         producer = system.components[producer_name]
-        names[f"source{number}"] = producer.output_cbuffer
-        names[f"source_array{number}"] = producer.output_buffer
+        if delayed is not None and producer_name in delayed:
+            names[f"source{number}"] = names[f"source_array{number}"] = delayed[producer_name]
+        else:
+            names[f"source{number}"] = producer.output_cbuffer
+            names[f"source_array{number}"] = producer.output_buffer
         if len(links) <= _SCALAR_COPY_LIMIT:
             for source_index, target_index, scale, offset in links:
                 value = fast_loop.transfer_expression(f"source{number}[{source_index}]", scale, offset)
@@ -526,8 +603,29 @@ class Master:
         self._initialized = False
         self._closed = False
         self._kernels: dict[tuple[bool, int], fast_loop.KernelTables | None] = {}
+        delayed = system.delayed_links()
+        # Loop members' outputs as they were before the step (copied at its start, `_advance`).
+        self._previous = {
+            producer: np.array(system.components[producer].output_buffer) for producer, _ in delayed
+        }
+        if delayed:
+            loop = " -> ".join(system.algebraic_loop() or [])
+            members = ", ".join(system.loop_components())
+            print(
+                f"note: algebraic loop {loop}: {members} step with their inputs from the previous "
+                'communication point (simulation.algebraic_loops = "delay")',
+                file=sys.stderr,
+            )
         self._plan = [
-            (component, system.period_steps(component), _gather(system, component))
+            (
+                component,
+                system.period_steps(component),
+                _gather(
+                    system,
+                    component,
+                    delayed={p: self._previous[p] for p, c in delayed if c == component.name} or None,
+                ),
+            )
             for component in self.order
         ]
         self._steppers: list[tuple] = []
@@ -754,6 +852,8 @@ class Master:
             return None
         if self.system.mode == "jacobi" and any(native is None for native in stepped):
             return None
+        if self._previous:
+            return None  # a delayed loop steps in Python (`_advance`)
         return tables
 
     def run_blocks(
@@ -906,11 +1006,15 @@ class Master:
         start_ns = self.start_time_ns
         jacobi = self.system.mode == "jacobi"
         tail_from = self._tail_from
+        components = self.system.components
+        previous = [(copy, components[name].output_buffer) for name, copy in self._previous.items()]
         first = k = self.step_index
         try:
             for k in range(first, first + steps):
                 t = (start_ns + k * h_ns) / NS_PER_S
                 tail = tail_from is not None and k >= tail_from  # steps cut at the stop time
+                for copy, outputs in previous:
+                    copy[:] = outputs
                 if jacobi:
                     due = [entry for entry in steppers if k % entry[0] == 0]
                     for _, _, gather, push, _, _ in due:

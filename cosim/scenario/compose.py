@@ -130,8 +130,9 @@ class _Composer:
         for name, ports in self.missing.items():
             self._missing_ports(self.components[name], list(dict.fromkeys(ports)))
         self._check_unconnected(connections, attempted, dropped)
+        loop: list[str] | None = None
         if scenario.master == "gauss-seidel":
-            self._check_loops(connections)
+            loop = self._check_loops(connections, scenario.algebraic_loops)
         self.problems.check()
         return SystemDescription(
             components=self.components,
@@ -143,6 +144,8 @@ class _Composer:
             removed=tuple(self.removed),
             replacing=tuple(name for name in ORDER if name in self.replacing),
             dropped=tuple(dropped),
+            algebraic_loops=scenario.algebraic_loops,
+            loop=tuple(loop or ()),
         )
 
     def _check_removed(self) -> None:
@@ -511,11 +514,12 @@ class _Composer:
                 f"{'were' if several else 'was'} dropped (from {source}: {reason}); {remedy}",
             )
 
-    def _check_loops(self, connections: list[ConnectionDescription]) -> None:
+    def _check_loops(self, connections: list[ConnectionDescription], handling: str) -> list[str] | None:
+        """The algebraic loop (ports), if any; a problem when `handling` is "error"."""
         feedthrough = {name: component.feedthrough for name, component in self.components.items()}
         loop = _algebraic_loop([(c.source, c.target) for c in connections], feedthrough)
-        if loop is None:
-            return
+        if loop is None or handling != "error":
+            return loop
         names = list(dict.fromkeys(reference.split(".", 1)[0] for reference in loop))
         links = set(zip(loop, loop[1:], strict=False))
         declared = [c.where for c in connections if (c.source, c.target) in links and c.where != TEMPLATE]
@@ -524,8 +528,10 @@ class _Composer:
             f"algebraic loop through components {', '.join(names)}: {' -> '.join(loop)} (each output "
             "depends directly on the input before it; an FMU output without declared dependencies "
             "depends on every input): break it with a component whose output is a state, or use "
-            '[simulation] master = "jacobi"',
+            '[simulation] algebraic_loops = "delay" (or master = "jacobi") to step the loop with its '
+            "inputs from the previous communication point",
         )
+        return loop
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,104 @@
+"""Algebraic loops under the Gauss-Seidel master (`System.loops`): "delay" steps the loop's
+components with their inputs from the previous communication point (Jacobi inside the loop,
+Gauss-Seidel elsewhere), "error" refuses the loop naming the keys that run it.
+
+Truth: two affine feedthrough FMUs (the `types_numeric_fmi2` fixture, Real_output = Real_input +
+Real_parameter) wired into each other through scaled connections; the one-step-delayed recurrence
+is computed here, and it converges to the coupled fixed point known analytically."""
+
+import numpy as np
+import pytest
+from fixtures.conftest_helpers import fixture_fmu
+
+from cosim.core.component import Port, PythonComponent
+from cosim.core.master import Master, System
+from cosim.errors import CosimError
+from cosim.fmi.component import FmuComponent
+
+A_GAIN, C_GAIN, B_BIAS, D_BIAS = 0.5, -0.8, 1.0, 2.0  # y1 = a*y2 + b, y2 = c*y1 + d
+
+
+def _loop(loops="delay", downstream=False):
+    system = System(0.01, loops=loops)
+    kind = fixture_fmu("types_numeric_fmi2")
+    system.add(FmuComponent(kind, "one", {"Real_parameter": B_BIAS}))
+    system.add(FmuComponent(kind, "two", {"Real_parameter": D_BIAS}))
+    # one.Real_input = a * two.Real_output, two.Real_input = c * one.Real_output
+    system.connect("two.Real_output", "one.Real_input", scale=A_GAIN)
+    system.connect("one.Real_output", "two.Real_input", scale=C_GAIN)
+    if downstream:
+        system.add(FmuComponent(kind, "three", {"Real_parameter": 0.0}))
+        system.connect("one.Real_output", "three.Real_input")
+    return system
+
+
+def _outputs(master, name):
+    component = master.system.components[name]
+    return component.output_buffer[component.output_index["Real_output"]]
+
+
+def test_delay_follows_the_one_step_delayed_recurrence_and_reaches_the_fixed_point():
+    with Master(_loop(downstream=True)) as master:
+        master.initialize()
+        y1, y2 = _outputs(master, "one"), _outputs(master, "two")
+        for _ in range(60):
+            master.step()
+            # Both loop members saw the other's output from before the step.
+            y1, y2 = A_GAIN * y2 + B_BIAS, C_GAIN * y1 + D_BIAS
+            assert _outputs(master, "one") == pytest.approx(y1, abs=1e-12)
+            assert _outputs(master, "two") == pytest.approx(y2, abs=1e-12)
+            # Outside the loop, Gauss-Seidel: `three` sees `one`'s output of this step.
+            assert _outputs(master, "three") == pytest.approx(y1, abs=1e-12)
+    fixed = (A_GAIN * D_BIAS + B_BIAS) / (1 - A_GAIN * C_GAIN)
+    assert y1 == pytest.approx(fixed, abs=1e-6)
+    assert y2 == pytest.approx(C_GAIN * fixed + D_BIAS, abs=1e-6)
+
+
+def test_delay_equals_the_jacobi_master_on_the_loop():
+    runs = []
+    for mode in ("gauss-seidel", "jacobi"):
+        system = _loop()
+        system.mode = mode
+        with Master(system) as master:
+            master.initialize()
+            rows = []
+            for _ in range(20):
+                master.step()
+                rows.append((_outputs(master, "one"), _outputs(master, "two")))
+        runs.append(np.array(rows))
+    assert np.array_equal(runs[0], runs[1])
+
+
+def test_error_refuses_the_loop_and_names_the_keys_that_run_it():
+    with pytest.raises(
+        CosimError, match=r"algebraic loop .*one\.Real_output.*simulation\.algebraic_loops=delay"
+    ):
+        Master(_loop("error"))
+
+
+def test_unknown_handling_is_refused():
+    with pytest.raises(CosimError, match="not one of delay, error"):
+        System(0.01, loops="solve")
+
+
+class Echo(PythonComponent):
+    def __init__(self, name):
+        super().__init__(name, [Port("seen", start=0.0)], [Port("out", start=0.0)])
+
+    def step(self, t, h):
+        self.output_buffer[0] = self.input_buffer[0] + 1.0
+
+
+def test_delay_note_is_said_once_on_stderr(capsys):
+    system = System(0.01)
+    system.add(Echo("a"))
+    system.add(Echo("b"))
+    system.connect("a.out", "b.seen")
+    system.connect("b.out", "a.seen")
+    with Master(system) as master:
+        master.initialize()
+        master.run(3)
+        # a_k+1 = b_k + 1, b_k+1 = a_k + 1 from 0, 0: both 3 after 3 steps.
+        assert master.system.components["a"].output_buffer[0] == 3.0
+        assert master.system.components["b"].output_buffer[0] == 3.0
+    assert capsys.readouterr().err.count("algebraic loop a.out -> b.seen -> b.out -> a.seen -> a.out") == 1
