@@ -5,7 +5,8 @@ the scenario's components and connections) and checks it as a whole; this module
 component by its kind (an FMU, or the planner and lidar Python components), sets held inputs,
 wires the connections, and plans the path. Everything that can fail because of the input happens
 here, before a log exists: the known map loads, every FMU loads, the plan is found, and the
-connection graph has no algebraic loop.
+connection graph has no algebraic loop (unless `[simulation] algebraic_loops = "delay"`, the
+default, runs it).
 """
 
 from __future__ import annotations

@@ -20,7 +20,8 @@ where a name is close to a known one:
   replaced by an FMU without that output) that is neither connected nor held; an input both
   connected and held;
 - a rate that is not a whole number of macro steps;
-- an algebraic loop (Gauss-Seidel only), naming its components.
+- an algebraic loop (Gauss-Seidel with `[simulation] algebraic_loops = "error"` only), naming its
+  components; with "delay" (the default) the loop is kept in the description (`loop`).
 """
 
 from __future__ import annotations

@@ -586,7 +586,7 @@ def build_system(ssp: SspSystem, macro_step: float, master: str = "gauss-seidel"
                 message = f"connection {connection.source} -> {connection.target}: {message}"
             raise CosimError(f"{ssp.source}: {message}") from None
     try:
-        system.order()  # raises on an algebraic loop
+        system.order()  # an algebraic loop runs delayed (`System.loops`, the default "delay")
     except CosimError as error:
         raise CosimError(f"{ssp.source}: {error}") from None
     return system, parameters
