@@ -347,56 +347,35 @@ class System:
             and components[producer].feedthrough[components[producer].outputs[output].name]
         }
 
-    def loop_components(self) -> list[str]:
-        """The components on a cycle of direct connections (Gauss-Seidel with `loops="delay"`
-        steps them Jacobi-style: their connections among themselves carry the outputs from
-        before the step), in the order they were added; empty when the system has no algebraic
-        loop or runs in Jacobi mode."""
+    def _loop_ports(self) -> dict[str, int]:
+        """Port -> number of its strongly connected component in the graph of ports (connections
+        and direct dependencies), for the ports on a cycle; empty without an algebraic loop."""
         if self.mode != "gauss-seidel" or self.algebraic_loop() is None:
-            return []
-        edges = self._direct_edges()
-        after: dict[str, set[str]] = {}
-        for producer, consumer in edges:
-            after.setdefault(producer, set()).add(consumer)
+            return {}
+        graph: dict[str, list[str]] = {}
+        for c in self.connections:
+            graph.setdefault(c.source, []).append(c.target)
+        for name, component in self.components.items():
+            for output, depends in component.feedthrough.items():
+                for input_ in depends:
+                    graph.setdefault(f"{name}.{input_}", []).append(f"{name}.{output}")
+        return _cyclic_components(graph)
 
-        def reach(start: str) -> set[str]:
-            seen: set[str] = set()
-            todo = [start]
-            while todo:
-                for nxt in after.get(todo.pop(), ()):
-                    if nxt not in seen:
-                        seen.add(nxt)
-                        todo.append(nxt)
-            return seen
-
-        return [name for name in self.components if name in reach(name)]
+    def loop_components(self) -> list[str]:
+        """The components with a port on an algebraic loop (Gauss-Seidel with `loops="delay"`
+        steps them Jacobi-style: the connections of the loop carry the outputs from before the
+        step), in the order they were added; empty without a loop or in Jacobi mode."""
+        ports = self._loop_ports()
+        members = {port.split(".", 1)[0] for port in ports}
+        return [name for name in self.components if name in members]
 
     def delayed_links(self) -> set[tuple[str, str]]:
-        """(producer, consumer) pairs whose connections are delayed by one step (`loop_components`)."""
-        members = set(self.loop_components())
-        if not members:
-            return set()
-        reach = {name: set() for name in members}
-        for producer, consumer in self._direct_edges():
-            if producer in members and consumer in members:
-                reach[producer].add(consumer)
-        # Producer and consumer on one cycle: delay every link between loop members whose
-        # producer can be reached back from the consumer (same strongly connected component).
-        closure = {name: set(targets) for name, targets in reach.items()}
-        changed = True
-        while changed:
-            changed = False
-            for name in members:
-                extra = set().union(*(closure[n] for n in closure[name])) - closure[name]
-                if extra:
-                    closure[name] |= extra
-                    changed = True
+        """(producer, consumer) pairs with a connection on an algebraic loop: delayed by one step."""
+        ports = self._loop_ports()
         return {
-            (producer, consumer)
-            for consumer, links in self.links().items()
-            if consumer in members
-            for _, producer, _, _ in links
-            if producer in members and producer != consumer and producer in closure[consumer]
+            (c.source_component, c.target_component)
+            for c in self.connections
+            if c.source in ports and ports[c.source] == ports.get(c.target)
         }
 
     def order(self) -> list[Component]:
@@ -514,6 +493,53 @@ def _search_algebraic_loop(
                 path.append(node)
                 iterators.append(iter(graph.get(node, [])))
     return None
+
+
+def _cyclic_components(graph: Mapping[str, list[str]]) -> dict[str, int]:
+    """Node -> number of its strongly connected component, for nodes on a cycle (Tarjan's
+    algorithm, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: dict[str, int] = {}
+    counter = 0
+    for root in list(graph):
+        if root in index:
+            continue
+        work = [(root, iter(graph.get(root, ())))]
+        index[root] = low[root] = counter
+        counter += 1
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, successors = work[-1]
+            nxt = next(successors, None)
+            if nxt is not None:
+                if nxt not in index:
+                    index[nxt] = low[nxt] = counter
+                    counter += 1
+                    stack.append(nxt)
+                    on_stack.add(nxt)
+                    work.append((nxt, iter(graph.get(nxt, ()))))
+                elif nxt in on_stack:
+                    low[node] = min(low[node], index[nxt])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                members = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    members.append(member)
+                    if member == node:
+                        break
+                if len(members) > 1 or node in graph.get(node, ()):
+                    for member in members:
+                        found[member] = index[node]
+    return found
 
 
 def _gather(

@@ -102,3 +102,67 @@ def test_delay_note_is_said_once_on_stderr(capsys):
         assert master.system.components["a"].output_buffer[0] == 3.0
         assert master.system.components["b"].output_buffer[0] == 3.0
     assert capsys.readouterr().err.count("algebraic loop a.out -> b.seen -> b.out -> a.seen -> a.out") == 1
+
+
+LOOP_SCENARIO = """
+[components.one]
+fmu = "{fmu}"
+Real_parameter = 1.0
+Integer_input = 0
+Boolean_input = false
+Enumeration_input = 1
+
+[components.two]
+fmu = "{fmu}"
+Real_parameter = 2.0
+Integer_input = 0
+Boolean_input = false
+Enumeration_input = 1
+
+[[connections]]
+from = "two.Real_output"
+to = "one.Real_input"
+scale = 0.5
+
+[[connections]]
+from = "one.Real_output"
+to = "two.Real_input"
+scale = -0.8
+"""
+
+
+@pytest.fixture
+def loop_scenario(tmp_path):
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scenario"))
+    from test_compose import write_scenario
+
+    extra = LOOP_SCENARIO.format(fmu=fixture_fmu("types_numeric_fmi2"))
+    return write_scenario(tmp_path, "looped", "warehouse_diff_drive_one_obstacle.toml", extra)
+
+
+def test_cosim_system_shows_the_loop_and_its_handling(loop_scenario, capsys):
+    from cosim.cli import main
+
+    assert main(["system", str(loop_scenario)]) == 0
+    out = capsys.readouterr().out
+    assert "algebraic loop: " in out and "one.Real_output -> two.Real_input" in out
+    assert 'simulation.algebraic_loops = "delay"' in out
+    assert main(["system", str(loop_scenario), "--set", "simulation.algebraic_loops=error"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1
+    assert "algebraic loop through components" in err and 'algebraic_loops = "delay"' in err
+
+
+@pytest.mark.slow
+def test_a_scenario_with_a_loop_runs(loop_scenario, tmp_path, capsys):
+    from cosim.cli import main
+
+    log = tmp_path / "looped.mcap"
+    args = ["run", str(loop_scenario), "--out", str(log), "--quiet", "--no-plot"]
+    args += ["--set", "simulation.stop_time=0.5"]
+    assert main(args) == 1  # ran to the stop time (the goal is far)
+    assert log.exists()
+    assert capsys.readouterr().err.count("note: algebraic loop") == 1
