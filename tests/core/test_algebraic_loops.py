@@ -166,3 +166,55 @@ def test_a_scenario_with_a_loop_runs(loop_scenario, tmp_path, capsys):
     assert main(args) == 1  # ran to the stop time (the goal is far)
     assert log.exists()
     assert capsys.readouterr().err.count("note: algebraic loop") == 1
+
+
+SSP1 = "http://ssp-standard.org/SSP1"
+LOOP_SSD = f"""<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription xmlns:ssd="{SSP1}/SystemStructureDescription"
+    xmlns:ssc="{SSP1}/SystemStructureCommon" version="1.0" name="looped">
+  <ssd:System name="root">
+    <ssd:Elements>
+      <ssd:Component name="one" source="resources/affine.fmu"><ssd:Connectors>
+        <ssd:Connector name="Real_input" kind="input"><ssc:Real/></ssd:Connector>
+        <ssd:Connector name="Real_output" kind="output"><ssc:Real/></ssd:Connector>
+      </ssd:Connectors></ssd:Component>
+      <ssd:Component name="two" source="resources/affine.fmu"><ssd:Connectors>
+        <ssd:Connector name="Real_input" kind="input"><ssc:Real/></ssd:Connector>
+        <ssd:Connector name="Real_output" kind="output"><ssc:Real/></ssd:Connector>
+      </ssd:Connectors></ssd:Component>
+    </ssd:Elements>
+    <ssd:Connections>
+      <ssd:Connection startElement="two" startConnector="Real_output"
+          endElement="one" endConnector="Real_input">
+        <ssc:LinearTransformation factor="{A_GAIN}" offset="{B_BIAS}"/></ssd:Connection>
+      <ssd:Connection startElement="one" startConnector="Real_output"
+          endElement="two" endConnector="Real_input">
+        <ssc:LinearTransformation factor="{C_GAIN}" offset="{D_BIAS}"/></ssd:Connection>
+    </ssd:Connections>
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="0" stopTime="0.3"/>
+</ssd:SystemStructureDescription>
+"""
+
+
+@pytest.mark.slow
+def test_an_ssp_with_a_loop_runs_the_delayed_recurrence(tmp_path):
+    import zipfile
+
+    from cosim.logs import open_log
+    from cosim.ssp.run import run_ssp
+
+    archive = tmp_path / "looped.ssp"
+    with zipfile.ZipFile(archive, "w") as zipped:
+        zipped.writestr("SystemStructure.ssd", LOOP_SSD)
+        zipped.write(fixture_fmu("types_numeric_fmi2"), "resources/affine.fmu")
+    result = run_ssp(archive, tmp_path / "looped.mcap", ["simulation.macro_step=0.01"])
+    assert result.exit_code == 0
+    log = open_log(result.log_path)
+    one, two = log.signals("one")["Real_output"], log.signals("two")["Real_output"]
+    # Parameters 0: Real_output = Real_input; the connections carry a*y2 + b and c*y1 + d from
+    # the previous communication point.
+    for k in range(1, len(one)):
+        assert one[k] == pytest.approx(A_GAIN * two[k - 1] + B_BIAS, abs=1e-12)
+        assert two[k] == pytest.approx(C_GAIN * one[k - 1] + D_BIAS, abs=1e-12)
+    assert len(one) >= 30
