@@ -198,7 +198,7 @@ LOOP_SSD = f"""<?xml version="1.0" encoding="UTF-8"?>
 
 
 @pytest.mark.slow
-def test_an_ssp_with_a_loop_runs_the_delayed_recurrence(tmp_path):
+def test_an_ssp_with_a_loop_runs_the_delayed_recurrence(tmp_path, capsys):
     import zipfile
 
     from cosim.logs import open_log
@@ -218,3 +218,8 @@ def test_an_ssp_with_a_loop_runs_the_delayed_recurrence(tmp_path):
         assert one[k] == pytest.approx(A_GAIN * two[k - 1] + B_BIAS, abs=1e-12)
         assert two[k] == pytest.approx(C_GAIN * one[k - 1] + D_BIAS, abs=1e-12)
     assert len(one) >= 30
+    from cosim.cli import main
+
+    assert main(["system", str(archive), "--set", "simulation.macro_step=0.01"]) == 0
+    out = capsys.readouterr().out
+    assert "algebraic loop: " in out and "one, two step with their inputs from the previous" in out
