@@ -30,7 +30,13 @@ An output `P.o` is *direct* when it depends directly on at least one of P's inpu
   P was due at k); from a producer later in the order, C sees P's outputs as they were before
   step k (P's step at k has not run yet). Then C steps and its outputs are read.
   A cycle of direct connections through direct outputs (P.o direct on P.i, P.i fed by a direct
-  output ... back to P.o) is an algebraic loop: `System.order()` raises `CosimError` naming it.
+  output ... back to P.o) is an algebraic loop. With `System(..., loops="delay")` (the default,
+  `[simulation] algebraic_loops`) the connections on it (`System.delayed_links`: both ends among
+  the strongly connected ports) carry the producer's outputs as they were before step k, as in
+  Jacobi mode, so the loop's components step with their inputs from the previous communication
+  point; every other connection keeps the Gauss-Seidel rule. Such a system steps in the Python
+  loop (the compiled kernel is not used), and `Master` says so once on stderr. With
+  `loops="error"` `System.order()` raises `CosimError` naming the loop and the keys that run it.
 * **Jacobi**. Every due component gathers its inputs first, all from the outputs as they were
   before step k (after each producer's most recent step before k); then all due components
   step. The order only fixes the sequence of calls. A loop of direct outputs is allowed (the
