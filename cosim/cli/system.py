@@ -148,6 +148,13 @@ def format_system(description: SystemDescription, order: list[str], constant: se
             count = f" ({link.count} connections)" if link.count > 1 else ""
             rows.append((link.source, link.target, link.where + count))
         lines += _table(rows)
+    if description.loop:
+        lines += [
+            "",
+            f"algebraic loop: {' -> '.join(description.loop)}",
+            f'  handled by delay (simulation.algebraic_loops = "{description.algebraic_loops}"): '
+            "the loop's components step with their inputs from the previous communication point",
+        ]
     lines += ["", f"step order ({description.master})"]
     for position, name in enumerate(order, start=1):
         note = "  (outputs fixed after initialisation: not stepped)" if name in constant else ""

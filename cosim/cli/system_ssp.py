@@ -70,6 +70,13 @@ def format_ssp_system(ssp, run, system, order: list[str]) -> str:
         for link in ssp.connections:
             rows.append((link.source, link.target, _number(link.factor), _number(link.offset)))
         lines += _table(rows)
+    if system.loop_components():
+        lines += ["", f"algebraic loop: {' -> '.join(system.algebraic_loop())}"]
+        lines.append(
+            f'  handled by delay (simulation.algebraic_loops = "{system.loops}"): '
+            f"{', '.join(system.loop_components())} step with their inputs from the previous "
+            "communication point"
+        )
     lines += ["", f"step order ({run.master})"]
     lines += [f"  {position}. {name}" for position, name in enumerate(order, start=1)]
     return "\n".join(lines + unconnected_lines(system))

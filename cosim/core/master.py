@@ -30,7 +30,13 @@ An output `P.o` is *direct* when it depends directly on at least one of P's inpu
   P was due at k); from a producer later in the order, C sees P's outputs as they were before
   step k (P's step at k has not run yet). Then C steps and its outputs are read.
   A cycle of direct connections through direct outputs (P.o direct on P.i, P.i fed by a direct
-  output ... back to P.o) is an algebraic loop: `System.order()` raises `CosimError` naming it.
+  output ... back to P.o) is an algebraic loop. With `System(..., loops="delay")` (the default,
+  `[simulation] algebraic_loops`) the connections on it (`System.delayed_links`: both ends among
+  the strongly connected ports) carry the producer's outputs as they were before step k, as in
+  Jacobi mode, so the loop's components step with their inputs from the previous communication
+  point; every other connection keeps the Gauss-Seidel rule. Such a system steps in the Python
+  loop (the compiled kernel is not used), and `Master` says so once on stderr. With
+  `loops="error"` `System.order()` raises `CosimError` naming the loop and the keys that run it.
 * **Jacobi**. Every due component gathers its inputs first, all from the outputs as they were
   before step k (after each producer's most recent step before k); then all due components
   step. The order only fixes the sequence of calls. A loop of direct outputs is allowed (the
@@ -81,6 +87,7 @@ it, further steps are refused, and `close()` terminates the healthy components a
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -97,6 +104,7 @@ if TYPE_CHECKING:
 
 NS_PER_S = 1_000_000_000
 MODES = ("gauss-seidel", "jacobi")
+LOOP_HANDLING = ("delay", "error")  # `[simulation] algebraic_loops` (`System.loops`)
 # Below this many values from one producer, per-value ctypes copies beat one NumPy fancy-index copy.
 _SCALAR_COPY_LIMIT = 4
 # `run`/`run_recorded` with `compiled=None` step through the kernel from this many steps on: fewer
@@ -170,13 +178,18 @@ Link = tuple[Connection, str, int, int]
 class System:
     """Components, connections, the macro step [s] and the master algorithm (`mode`)."""
 
-    def __init__(self, macro_step: float | Fraction, mode: str = "gauss-seidel") -> None:
+    def __init__(
+        self, macro_step: float | Fraction, mode: str = "gauss-seidel", loops: str = "delay"
+    ) -> None:
         self.macro_step_ns = seconds_to_ns(macro_step, "macro step")
         if self.macro_step_ns <= 0:
             raise CosimError(f"macro step must be > 0 s, got {macro_step}")
         if mode not in MODES:
             raise CosimError(f"master mode '{mode}' is not one of {', '.join(MODES)}")
         self.mode = mode
+        if loops not in LOOP_HANDLING:
+            raise CosimError(f"algebraic loop handling '{loops}' is not one of {', '.join(LOOP_HANDLING)}")
+        self.loops = loops
         self.components: dict[str, Component] = {}
         self.connections: list[Connection] = []
         self.text_connections: list[Connection] = []  # String/Binary ones (`System._connect_text`)
@@ -313,29 +326,71 @@ class System:
                     indegree[consumer] -= 1
         return order
 
+    def algebraic_loop(self) -> list[str] | None:
+        """A cycle of direct dependencies between ports ("comp.port", first = last), or None."""
+        feedthrough = {name: c.feedthrough for name, c in self.components.items()}
+        return find_algebraic_loop([(c.source, c.target) for c in self.connections], feedthrough)
+
     def check_algebraic_loops(self) -> None:
         """Raise `CosimError` naming a cycle of direct dependencies between ports, if any."""
-        feedthrough = {name: c.feedthrough for name, c in self.components.items()}
-        loop = find_algebraic_loop([(c.source, c.target) for c in self.connections], feedthrough)
+        loop = self.algebraic_loop()
         if loop is not None:
             raise CosimError(
                 "algebraic loop (direct feedthrough only): "
                 + " -> ".join(loop)
-                + "; an FMU output without declared dependencies depends on every input"
+                + "; an FMU output without declared dependencies depends on every input; "
+                "`--set simulation.algebraic_loops=delay` (or simulation.master=jacobi) runs it "
+                "with the loop's inputs from the previous communication point"
             )
 
-    def order(self) -> list[Component]:
-        """Step order (see the module docstring); checks algebraic loops in Gauss-Seidel mode."""
-        if self.mode == "gauss-seidel":
-            self.check_algebraic_loops()
+    def _direct_edges(self) -> set[tuple[str, str]]:
         components = self.components
-        edges = {
+        return {
             (producer, consumer)
             for consumer, links in self.links().items()
             for _, producer, output, _ in links
             if producer != consumer
             and components[producer].feedthrough[components[producer].outputs[output].name]
         }
+
+    def _loop_ports(self) -> dict[str, int]:
+        """Port -> number of its strongly connected component in the graph of ports (connections
+        and direct dependencies), for the ports on a cycle; empty without an algebraic loop."""
+        if self.mode != "gauss-seidel" or self.algebraic_loop() is None:
+            return {}
+        graph: dict[str, list[str]] = {}
+        for c in self.connections:
+            graph.setdefault(c.source, []).append(c.target)
+        for name, component in self.components.items():
+            for output, depends in component.feedthrough.items():
+                for input_ in depends:
+                    graph.setdefault(f"{name}.{input_}", []).append(f"{name}.{output}")
+        return _cyclic_components(graph)
+
+    def loop_components(self) -> list[str]:
+        """The components with a port on an algebraic loop (Gauss-Seidel with `loops="delay"`
+        steps them Jacobi-style: the connections of the loop carry the outputs from before the
+        step), in the order they were added; empty without a loop or in Jacobi mode."""
+        ports = self._loop_ports()
+        members = {port.split(".", 1)[0] for port in ports}
+        return [name for name in self.components if name in members]
+
+    def delayed_links(self) -> set[tuple[str, str]]:
+        """(producer, consumer) pairs with a connection on an algebraic loop: delayed by one step."""
+        ports = self._loop_ports()
+        return {
+            (c.source_component, c.target_component)
+            for c in self.connections
+            if c.source in ports and ports[c.source] == ports.get(c.target)
+        }
+
+    def order(self) -> list[Component]:
+        """Step order (see the module docstring); checks algebraic loops in Gauss-Seidel mode
+        when `loops == "error"`."""
+        if self.mode == "gauss-seidel" and self.loops == "error":
+            self.check_algebraic_loops()
+        delayed = self.delayed_links()
+        edges = self._direct_edges() - delayed
         return [self.components[name] for name in self._topological(edges)]
 
     def initialization_order(self) -> list[Component]:
@@ -446,14 +501,65 @@ def _search_algebraic_loop(
     return None
 
 
+def _cyclic_components(graph: Mapping[str, list[str]]) -> dict[str, int]:
+    """Node -> number of its strongly connected component, for nodes on a cycle (Tarjan's
+    algorithm, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: dict[str, int] = {}
+    counter = 0
+    for root in list(graph):
+        if root in index:
+            continue
+        work = [(root, iter(graph.get(root, ())))]
+        index[root] = low[root] = counter
+        counter += 1
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, successors = work[-1]
+            nxt = next(successors, None)
+            if nxt is not None:
+                if nxt not in index:
+                    index[nxt] = low[nxt] = counter
+                    counter += 1
+                    stack.append(nxt)
+                    on_stack.add(nxt)
+                    work.append((nxt, iter(graph.get(nxt, ()))))
+                elif nxt in on_stack:
+                    low[node] = min(low[node], index[nxt])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                members = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    members.append(member)
+                    if member == node:
+                        break
+                if len(members) > 1 or node in graph.get(node, ()):
+                    for member in members:
+                        found[member] = index[node]
+    return found
+
+
 def _gather(
-    system: System, consumer: Component, producers: set[str] | None = None
+    system: System,
+    consumer: Component,
+    producers: set[str] | None = None,
+    delayed: Mapping[str, np.ndarray] | None = None,
 ) -> Callable[[], None] | None:
     """A function copying the consumer's connected inputs from its producers' output buffers.
 
     Generated as straight-line code (one statement per value, or one NumPy copy for many values
     from one producer), because it runs for every component on every step. None when the
-    consumer has no connected input (from `producers`, when given).
+    consumer has no connected input (from `producers`, when given). `delayed` maps producers
+    whose values come from a copy of their outputs taken before the step (`System.delayed_links`).
     """
     groups: dict[str, list[tuple[int, int, float, float]]] = {}
     for connection, producer, source_index, target_index in system.links().get(consumer.name, ()):
@@ -467,8 +573,11 @@ def _gather(
     lines = ["def gather():"]
     for number, (producer_name, links) in enumerate(groups.items()):
         producer = system.components[producer_name]
-        names[f"source{number}"] = producer.output_cbuffer
-        names[f"source_array{number}"] = producer.output_buffer
+        if delayed is not None and producer_name in delayed:
+            names[f"source{number}"] = names[f"source_array{number}"] = delayed[producer_name]
+        else:
+            names[f"source{number}"] = producer.output_cbuffer
+            names[f"source_array{number}"] = producer.output_buffer
         if len(links) <= _SCALAR_COPY_LIMIT:
             for source_index, target_index, scale, offset in links:
                 value = fast_loop.transfer_expression(f"source{number}[{source_index}]", scale, offset)
@@ -526,8 +635,29 @@ class Master:
         self._initialized = False
         self._closed = False
         self._kernels: dict[tuple[bool, int], fast_loop.KernelTables | None] = {}
+        delayed = system.delayed_links()
+        # Loop members' outputs as they were before the step (copied at its start, `_advance`).
+        self._previous = {
+            producer: np.array(system.components[producer].output_buffer) for producer, _ in delayed
+        }
+        if delayed:
+            loop = " -> ".join(system.algebraic_loop() or [])
+            members = ", ".join(system.loop_components())
+            print(
+                f"note: algebraic loop {loop}: {members} step with their inputs from the previous "
+                'communication point (simulation.algebraic_loops = "delay")',
+                file=sys.stderr,
+            )
         self._plan = [
-            (component, system.period_steps(component), _gather(system, component))
+            (
+                component,
+                system.period_steps(component),
+                _gather(
+                    system,
+                    component,
+                    delayed={p: self._previous[p] for p, c in delayed if c == component.name} or None,
+                ),
+            )
             for component in self.order
         ]
         self._steppers: list[tuple] = []
@@ -754,6 +884,8 @@ class Master:
             return None
         if self.system.mode == "jacobi" and any(native is None for native in stepped):
             return None
+        if self._previous:
+            return None  # a delayed loop steps in Python (`_advance`)
         return tables
 
     def run_blocks(
@@ -906,11 +1038,15 @@ class Master:
         start_ns = self.start_time_ns
         jacobi = self.system.mode == "jacobi"
         tail_from = self._tail_from
+        components = self.system.components
+        previous = [(copy, components[name].output_buffer) for name, copy in self._previous.items()]
         first = k = self.step_index
         try:
             for k in range(first, first + steps):
                 t = (start_ns + k * h_ns) / NS_PER_S
                 tail = tail_from is not None and k >= tail_from  # steps cut at the stop time
+                for copy, outputs in previous:
+                    copy[:] = outputs
                 if jacobi:
                     due = [entry for entry in steppers if k % entry[0] == 0]
                     for _, _, gather, push, _, _ in due:

@@ -5,7 +5,8 @@ the scenario's components and connections) and checks it as a whole; this module
 component by its kind (an FMU, or the planner and lidar Python components), sets held inputs,
 wires the connections, and plans the path. Everything that can fail because of the input happens
 here, before a log exists: the known map loads, every FMU loads, the plan is found, and the
-connection graph has no algebraic loop.
+connection graph has no algebraic loop (unless `[simulation] algebraic_loops = "delay"`, the
+default, runs it).
 """
 
 from __future__ import annotations
@@ -154,7 +155,7 @@ def build_run(scenario: Scenario) -> BuiltRun:
     expansion = scenario.planner.expansion_distance
     inflated = grid.inflate(expansion) if expansion > 0 else grid
     world = WorldDistance(grid, scenario.obstacles)
-    system = System(description.macro_step, description.master)
+    system = System(description.macro_step, description.master, description.algebraic_loops)
     plans = []
     for component in description.components.values():
         if component.kind == "fmu":

@@ -21,7 +21,8 @@ where a name is close to a known one:
   on every input); an input both connected and held (an added component's other unconnected
   inputs keep their start values, as FMI defines and as other importers run them);
 - a rate that is not a whole number of macro steps;
-- an algebraic loop (Gauss-Seidel only), naming its components.
+- an algebraic loop (Gauss-Seidel with `[simulation] algebraic_loops = "error"` only), naming its
+  components; with "delay" (the default) the loop is kept in the description (`loop`).
 """
 
 from __future__ import annotations
@@ -140,8 +141,9 @@ class _Composer:
         for name, ports in self.missing.items():
             self._missing_ports(self.components[name], list(dict.fromkeys(ports)))
         self._check_unconnected(connections, attempted, dropped)
+        loop: list[str] | None = None
         if scenario.master == "gauss-seidel":
-            self._check_loops(connections)
+            loop = self._check_loops(connections, scenario.algebraic_loops)
         self.problems.check()
         return SystemDescription(
             components=self.components,
@@ -153,6 +155,8 @@ class _Composer:
             removed=tuple(self.removed),
             replacing=tuple(name for name in ORDER if name in self.replacing),
             dropped=tuple(dropped),
+            algebraic_loops=scenario.algebraic_loops,
+            loop=tuple(loop or ()),
         )
 
     def _check_removed(self) -> None:
@@ -530,11 +534,12 @@ class _Composer:
                 f"{'were' if several else 'was'} dropped (from {source}: {reason}); {remedy}",
             )
 
-    def _check_loops(self, connections: list[ConnectionDescription]) -> None:
+    def _check_loops(self, connections: list[ConnectionDescription], handling: str) -> list[str] | None:
+        """The algebraic loop (ports), if any; a problem when `handling` is "error"."""
         feedthrough = {name: component.feedthrough for name, component in self.components.items()}
         loop = _algebraic_loop([(c.source, c.target) for c in connections], feedthrough)
-        if loop is None:
-            return
+        if loop is None or handling != "error":
+            return loop
         names = list(dict.fromkeys(reference.split(".", 1)[0] for reference in loop))
         links = set(zip(loop, loop[1:], strict=False))
         declared = [c.where for c in connections if (c.source, c.target) in links and c.where != TEMPLATE]
@@ -543,8 +548,10 @@ class _Composer:
             f"algebraic loop through components {', '.join(names)}: {' -> '.join(loop)} (each output "
             "depends directly on the input before it; an FMU output without declared dependencies "
             "depends on every input): break it with a component whose output is a state, or use "
-            '[simulation] master = "jacobi"',
+            '[simulation] algebraic_loops = "delay" (or master = "jacobi") to step the loop with its '
+            "inputs from the previous communication point",
         )
+        return loop
 
 
 @dataclass(frozen=True)

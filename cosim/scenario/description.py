@@ -135,3 +135,5 @@ class SystemDescription:
     removed: tuple[str, ...] = ()
     replacing: tuple[str, ...] = ()
     dropped: tuple[tuple[ConnectionDescription, str], ...] = ()
+    algebraic_loops: str = "delay"  # `[simulation] algebraic_loops`
+    loop: tuple[str, ...] = ()  # an algebraic loop run by `algebraic_loops = "delay"` (ports)

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from cosim.core.master import LOOP_HANDLING
 from cosim.errors import PATH_LIMIT, CosimError, wrong_file_message
 from cosim.fmi.builtin import known_names
 from cosim.fmi.solvers import SOLVERS
@@ -207,6 +208,7 @@ class Scenario:
     overrides: tuple[str, ...] = field(default=())
     topics: dict[str, str] = field(default_factory=dict)  # [output.topics]: "/odom" -> name in the log
     connections: tuple[ConnectionSpec, ...] = field(default=())
+    algebraic_loops: str = "delay"  # "delay" | "error": see `cosim.core.master.System.loops`
     fmi_version: int = 2  # which build of the project FMUs the roles use (2 or 3)
     fmu_isolation: str = "auto"  # "auto" | "process" | "none": see `isolation`
     fmu_timeout: float = 10.0  # [s] longest FMI call of an FMU in a child process
@@ -351,6 +353,7 @@ def _build(
     stop_time = simulation.number("stop_time", 300.0, minimum=0.0, exclusive_minimum=True, maximum=MAX_TIME)
     master = simulation.string("master", "gauss-seidel", choices=("gauss-seidel", "jacobi"))
     controller_rate = simulation.number("controller_rate", 20.0, minimum=0.0, exclusive_minimum=True)
+    algebraic_loops = simulation.string("algebraic_loops", Scenario.algebraic_loops, choices=LOOP_HANDLING)
     fmi_version = simulation.integer("fmi_version", Scenario.fmi_version)
     if fmi_version not in (2, 3):
         raise simulation.error(
@@ -458,6 +461,7 @@ def _build(
         overrides=overrides,
         connections=connections,
         fmi_version=fmi_version,
+        algebraic_loops=algebraic_loops,
         fmu_isolation=fmu_isolation,
         fmu_timeout=fmu_timeout,
         fmu_max_memory=fmu_max_memory,

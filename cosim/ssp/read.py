@@ -764,7 +764,7 @@ def build_system(
             raise CosimError(f"{ssp.source}: {message}") from None
     _check_starts(ssp, system)
     try:
-        system.order()  # raises on an algebraic loop
+        system.order()  # an algebraic loop runs delayed (`System.loops`, the default "delay")
     except CosimError as error:
         raise CosimError(f"{ssp.source}: {error}") from None
     return system, parameters

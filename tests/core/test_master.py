@@ -140,7 +140,7 @@ def test_start_time_offsets_the_time_base():
 
 def test_algebraic_loop_is_named_and_jacobi_accepts_it():
     for mode in ("gauss-seidel", "jacobi"):
-        system = System(0.01, mode)
+        system = System(0.01, mode, loops="error")
         system.add(Echo("a"))
         system.add(Echo("b"))
         system.connect("a.out", "b.seen")

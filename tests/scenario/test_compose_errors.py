@@ -98,7 +98,7 @@ def broken(tmp_path) -> Path:
 
 
 def test_every_problem_is_reported_at_once(broken):
-    scenario = load_scenario(broken)
+    scenario = load_scenario(broken, ["simulation.algebraic_loops=error"])
     with pytest.raises(CosimError) as raised:
         describe_system(scenario)
     lines = str(raised.value).splitlines()
@@ -115,7 +115,18 @@ def test_every_problem_is_reported_at_once(broken):
 
 def test_cli_prints_every_problem_on_its_own_line(broken, tmp_path, capsys):
     log = tmp_path / "run.mcap"
-    code = main(["run", str(broken), "--out", str(log), "--quiet", "--no-plot"])
+    code = main(
+        [
+            "run",
+            str(broken),
+            "--out",
+            str(log),
+            "--quiet",
+            "--no-plot",
+            "--set",
+            "simulation.algebraic_loops=error",
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2
     lines = err.strip().splitlines()
@@ -124,9 +135,11 @@ def test_cli_prints_every_problem_on_its_own_line(broken, tmp_path, capsys):
     assert "Traceback" not in err and not log.exists()
 
 
-def test_jacobi_allows_the_loop(broken):
-    """The one-step delay of Jacobi breaks an algebraic loop: not a problem there."""
-    scenario = load_scenario(broken, ["simulation.master=jacobi"])
+@pytest.mark.parametrize("settings", [["simulation.master=jacobi"], []])
+def test_jacobi_and_the_default_delay_allow_the_loop(broken, settings):
+    """The one-step delay of Jacobi (or of the default `algebraic_loops = "delay"`) breaks an
+    algebraic loop: not a problem there."""
+    scenario = load_scenario(broken, settings)
     with pytest.raises(CosimError) as raised:
         describe_system(scenario)
     assert "algebraic loop" not in str(raised.value)
