@@ -124,6 +124,7 @@ class SweepResult:
                 files,
                 self.spec.replicates,
                 self.warnings,
+                self.spec.table_keys,
             )
         )
 

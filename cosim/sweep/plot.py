@@ -20,6 +20,7 @@ A key whose values are not all numbers is drawn as categories in sweep order.
 from __future__ import annotations
 
 import math
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -90,17 +91,18 @@ class _Data:
 
 
 def _varying(points: list[Point], metrics: Sequence[str]) -> tuple[list[str], dict[str, float]]:
-    """The metrics that differ between points, and the constant ones with their value (metrics no
-    goal-reached run has are in neither)."""
+    """The metrics to draw, and the constant ones with their value: the same in every goal-reached
+    run (a metric that no goal-reached run has is in neither)."""
     varying, constant = [], {}
     for metric in metrics:
-        means = [point.metrics[metric].mean for point in points if metric in point.metrics]
-        if not means:
+        stats = [point.metrics[metric] for point in points if metric in point.metrics]
+        if not stats:
             continue
-        if max(means) - min(means) > 1e-12 * max(1.0, abs(max(means))):
-            varying.append(metric)
+        low, high = min(s.low for s in stats), max(s.high for s in stats)
+        if high - low <= 1e-12 * max(1.0, abs(high)):
+            constant[metric] = stats[0].mean
         else:
-            constant[metric] = means[0]
+            varying.append(metric)
     return varying, constant
 
 
@@ -136,9 +138,11 @@ def plot_sweep(
         notes[0] += " (mean; bars ± 1 std, ticks min and max)" if len(keys) == 1 else " (mean)"
     if constant:
         shown = ", ".join(f"{metric} = {value:.4g}" for metric, value in constant.items())
-        notes.append(f"the same at every point, not drawn: {shown}")
+        notes.append(f"the same in every goal-reached run, not drawn: {shown}")
     heading = [title] if title else []
-    figure.suptitle("\n".join([*heading, f"{runs}: {outcomes}", "; ".join(notes)]), fontsize=10)
+    width = int(figure.get_figwidth() * 13)  # characters of 10 pt text across the figure
+    lines = [*heading, f"{runs}: {outcomes}", *textwrap.wrap("; ".join(notes), width)]
+    figure.suptitle("\n".join(lines), fontsize=10)
     _legend(figure.axes[0], points)
     figure.savefig(png_path, dpi=DPI)
     return png_path
@@ -195,8 +199,15 @@ def _bottom_marks(axis, x: np.ndarray, points: list[Point], replicates: int) -> 
             )
             text = _mark_text(count, point, replicates)
             if text:
-                axis.text(
-                    position, height, f" {text}", color=colour, fontsize=6, va="center", transform=transform
+                axis.annotate(
+                    text,
+                    (position, height),
+                    xycoords=transform,
+                    xytext=(5, 0),
+                    textcoords="offset points",
+                    color=colour,
+                    fontsize=6,
+                    va="center",
                 )
 
 

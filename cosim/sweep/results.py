@@ -226,6 +226,7 @@ class SummaryInput:
     files: list[tuple[str, Path]]  # ("results", path), ("plot", path), ...
     replicates: int = 1
     warnings: list[str] = field(default_factory=list)
+    listed_keys: Sequence[str] = ()  # the values that name a listed run (default `keys`)
 
 
 LISTED = 5  # runs listed per outcome that is not the goal, and failed runs listed
@@ -287,7 +288,7 @@ def format_summary(summary: SummaryInput) -> str:
                 for key, unit in (("time", " s"), ("distance", " m"), ("min_clearance", " m"))
                 if _float(row.get(key)) is not None
             )
-            values = _point_name({key: row.get(key, "") for key in summary.keys})
+            values = _point_name({key: row.get(key, "") for key in summary.listed_keys or summary.keys})
             text.append(f"  {row['run_id']}  {values}  ({where})")
         if len(ended) > LISTED:
             text.append(f"  ... and {len(ended) - LISTED} more (see {RESULTS_FILE})")
@@ -311,11 +312,14 @@ def _point_table(summary: SummaryInput, metrics: list[str]) -> list[str]:
     shown = [metric for metric in ("time", "min_clearance") if metric in metrics]
     names = [_point_name(point.values) for point in points[:POINTS_LISTED]]
     name_width = max([len("point"), *map(len, names)]) + 2
-    header = f"{'point':<{name_width}}{'runs':>5}{'goal':>6}{'other':>7}"
+    outcomes = [_outcome_line(point.outcomes | {FAILED: 0}) for point in points[:POINTS_LISTED]]
+    outcome_width = max([len("outcomes"), *map(len, outcomes)]) + 2
+    header = f"{'point':<{name_width}}{'runs':>5}  {'outcomes':<{outcome_width}}"
     header += "".join(f"  {metric + ' mean ± std [min, max]':<34}" for metric in shown)
     text = ["", f"per point, over {summary.replicates} replicates (goal-reached runs only):", header]
-    for name, point in zip(names, points, strict=False):
-        line = f"{name:<{name_width}}{point.runs:>5}{point.count(GOAL):>6}{point.runs - point.count(GOAL):>7}"
+    for name, outcome, point in zip(names, outcomes, points, strict=False):
+        failed = f", failed {point.count(FAILED)}" if point.count(FAILED) else ""
+        line = f"{name:<{name_width}}{point.runs:>5}  {outcome + failed:<{outcome_width}}"
         for metric in shown:
             stats = point.metrics.get(metric)
             cell = "-"
