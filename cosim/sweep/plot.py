@@ -118,6 +118,22 @@ def plot_sweep(
     """Draw `png_path` from the rows of every run (failed ones too); None when there is no row.
 
     Uses matplotlib's object API (no pyplot state), so it may draw in a thread of its own."""
+    figure = sweep_figure(rows, keys, outcome_keys, grid, title, replicates)
+    if figure is None:
+        return None
+    figure.savefig(png_path, dpi=DPI)
+    return png_path
+
+
+def sweep_figure(
+    rows: list[dict[str, str]],
+    keys: Sequence[str],
+    outcome_keys: Sequence[str],
+    grid: bool,
+    title: str = "",
+    replicates: int = 1,
+) -> Figure | None:
+    """The figure `plot_sweep` saves (None when there is no row)."""
     if not rows:
         return None
     points = group_points(rows, keys, outcome_keys)
@@ -144,8 +160,7 @@ def plot_sweep(
     lines = [*heading, f"{runs}: {outcomes}", *textwrap.wrap("; ".join(notes), width)]
     figure.suptitle("\n".join(lines), fontsize=10)
     _legend(figure.axes[0], points)
-    figure.savefig(png_path, dpi=DPI)
-    return png_path
+    return figure
 
 
 def _legend(axis, points: list[Point]) -> None:
@@ -299,8 +314,9 @@ def _maps(data: _Data, keys: Sequence[str], panels: list[str], grid: bool, repli
             centred = grid and not np.isfinite(value)  # an empty cell: the mark in its middle
             for level, (mark, count) in enumerate(_marks(point)):
                 marker, colour, _ = MARKS[mark]
-                at_x = position_x - 0.3 if centred else position_x
-                at_y = (position_y - 0.3 if centred else position_y) - (0.25 * level if grid else 0.0)
+                # In a cell: up to three marks a column at its left (empty) or right edge, inside it.
+                at_x = position_x - (0.6 if centred else 0.0)
+                at_y = position_y - (0.25 * level if grid else 0.0)
                 axis.plot([at_x], [at_y], marker, color=colour, markersize=9 if grid else 6)
                 text = _mark_text(count, point, replicates)
                 if centred and not text:
