@@ -573,7 +573,7 @@ def _record_problem(row: dict[str, str], run: Run, out_dir: Path) -> str | None:
         record = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError, RecursionError):
         return "outcome record unreadable"
-    if not isinstance(record, dict) or record.get("run_id") != run.run_id:
+    if not isinstance(record, dict) or not record.get("run_id") == run.run_id == row.get("run_id"):
         return "outcome record of another run"
     if record.get("overrides") != list(run.overrides):
         return "outcome record of another run"
@@ -730,5 +730,6 @@ def kept_text(rows: list[dict[str, str]], total: int, out_dir: Path, keep_logs: 
     )
     return (
         f"interrupted: kept {len(rows)} of {total} rows in {out_dir / RESULTS_FILE} ({completed} completed, "
-        f"{len(rows) - completed} failed, which --resume runs again; {logs} in {out_dir / 'runs'})"
+        f"{len(rows) - completed} failed; {logs} in {out_dir / 'runs'}); --resume keeps the {completed} "
+        f"completed and runs the other {total - completed}"
     )

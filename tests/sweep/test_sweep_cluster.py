@@ -238,6 +238,14 @@ def test_failed_runs_are_rows_interrupt_keeps_rows_and_resume_finishes(dask_sche
     assert "Traceback" not in stderr
     before = {row["run_id"]: row for row in _rows(out)}
     assert len(before) >= 2
+    if "cosim: interrupted" in stderr:  # not when the sweep had already finished
+        completed = sum(row["status"] == "completed" for row in before.values())
+        assert f"cosim sweep: interrupted: kept {len(before)} of 4 rows in {out / 'results.csv'}" in stderr
+        assert f"({completed} completed, {len(before) - completed} failed" in stderr
+        resume = next(
+            line for line in stderr.splitlines() if line.startswith("cosim sweep: to run the rest: ")
+        )
+        assert resume.endswith(f"--out {out} --resume") and "--scheduler" in resume
     for row in before.values():
         assert (out / row["log"]).is_file() if row["log"] else row["status"] == "failed"
     result = subprocess.run([*command, "--resume"], cwd=REPO, capture_output=True, text=True, timeout=600)
