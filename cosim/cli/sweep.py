@@ -2,7 +2,8 @@
 
 Exit codes: 0 every run completed (ran to an outcome: goal reached, collision or stop time), 1 some
 runs failed (each is a row with its error), 2 bad input, an unreachable scheduler or an unwritable
-output folder (one line on stderr), 130 interrupted (finished rows and logs are kept).
+output folder (one line on stderr); interrupted, 1 as every `cosim` command (finished rows and
+logs are kept, and the command says how many and how to `--resume`).
 """
 
 from __future__ import annotations

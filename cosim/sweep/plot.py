@@ -25,7 +25,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-from matplotlib import patheffects
+from matplotlib import colormaps, patheffects
 from matplotlib.figure import Figure
 
 from cosim.sweep.results import FAILED, GOAL, Point, count_outcomes, group_points, metric_keys
@@ -293,7 +293,8 @@ def _maps(data: _Data, keys: Sequence[str], panels: list[str], grid: bool, repli
     xs, ys = np.unique(x), np.unique(y)
     for axis, panel in zip(axes, panels, strict=True):
         values = data.values(panel)
-        colours = "RdYlGn" if panel == OUTCOME_PANEL else "viridis"
+        # A cell without a value (no run of the point reached the goal) is grey, not white.
+        colours = colormaps["RdYlGn" if panel == OUTCOME_PANEL else "viridis"].with_extremes(bad="0.88")
         limits = {"vmin": 0.0, "vmax": 1.0} if panel == OUTCOME_PANEL else {}
         if grid:
             columns, lines = np.searchsorted(xs, x), np.searchsorted(ys, y)
@@ -316,7 +317,7 @@ def _maps(data: _Data, keys: Sequence[str], panels: list[str], grid: bool, repli
                 marker, colour, _ = MARKS[mark]
                 # In a cell: up to three marks a column at its left (empty) or right edge, inside it.
                 at_x = position_x - (0.6 if centred else 0.0)
-                at_y = position_y - (0.25 * level if grid else 0.0)
+                at_y = position_y - ((0.3 if centred else 0.0) + 0.2 * level if grid else 0.0)
                 axis.plot([at_x], [at_y], marker, color=colour, markersize=9 if grid else 6)
                 text = _mark_text(count, point, replicates)
                 if centred and not text:

@@ -1,14 +1,19 @@
-"""The results table of a sweep: `results.csv`, written a row at a time, and its summary.
+"""The results of a sweep: `results.csv`, written a row at a time, `aggregate.csv` and the summary.
 
-Columns: `run_id`, one per varied key (the value as the override gave it), `status` (`completed`
-or `failed`), the log's outcome metadata (`reached`, `reason`, `time` [s], `distance` [m],
-`min_clearance` [m], `vfh_interventions`, `recovery_time` [s], and any key the run loop adds, such
-as replans), `wall_time` [s] on the worker, `worker` (its address), `log` (relative to the sweep
-folder) and `error` (why a failed run did not complete; empty otherwise).
+Columns of results.csv: `run_id`, one per varied key (the value as the override gave it), with
+`--replicates` also `replicate` and each seed key (`lidar.seed`), `status` (`completed` or
+`failed`), the log's outcome metadata (`reached`, `reason`, `time` [s], `distance` [m],
+`min_clearance` [m], `vfh_interventions`, `recovery_time` [s], `replans`, and any key the run loop
+adds), `wall_time` [s] on the worker, `worker` (its address), `log` (relative to the sweep folder;
+empty when --keep-logs did not keep it) and `error` (why a failed run did not complete).
 
 A run is *completed* when it ran to an outcome of its own: the goal was reached, the vehicle
 collided, or the stop time came. Not reaching the goal is a result, not a failure. A run *failed*
 when it could not be loaded or built, an FMU failed, it was interrupted, or its worker died.
+
+The summary and aggregate.csv count the runs by outcome (`outcome_of`: the reason of a completed
+run, else `failed`) and take each metric over the goal-reached runs only, so that a collision's
+time never mixes into the time to the goal; the runs that ended otherwise are listed.
 """
 
 from __future__ import annotations
