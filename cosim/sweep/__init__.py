@@ -55,7 +55,9 @@ def sweep(
         keep_logs: "all" (default), "failed" (the logs of runs that did not reach the goal) or
             "none" (a small outcome record per run instead of its log).
 
-    Raises `cosim.CosimError` (one line) on bad input; a failed run is a row with its error.
+    Raises `cosim.CosimError` (one line) on bad input; a failed run is a row with its error. A
+    varied key that changes nothing (a seed without noise) is a `UserWarning` (printed instead when
+    `progress`).
     """
     from cosim.sweep.engine import run_sweep
 
@@ -73,7 +75,13 @@ def sweep(
         replicates,
         keep_logs,
     )
-    return run_sweep(spec, options, progress=progress, plot=plot).table()
+    result = run_sweep(spec, options, progress=progress, plot=plot)
+    if not progress:  # with progress they were printed already
+        import warnings
+
+        for warning in result.warnings:
+            warnings.warn(warning, UserWarning, stacklevel=2)
+    return result.table()
 
 
 def build(
