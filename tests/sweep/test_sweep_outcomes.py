@@ -94,7 +94,9 @@ def test_replicates_get_their_own_seeds_and_only_the_missed_goals_keep_a_log(swe
             assert row["log"] == f"runs/{row['run_id']}.mcap"
             expected.add(f"{row['run_id']}.mcap")
             with open_log(out / row["log"]) as log:
-                assert {key: row[key] for key in OUTCOME} == {key: log.outcome[key] for key in OUTCOME}
+                assert {key: row[key] for key in OUTCOME} == {
+                    key: log.metadata["outcome"][key] for key in OUTCOME
+                }
                 assert f"lidar.seed={row['lidar.seed']}" in log.metadata["navcosim"]["overrides"].split()
     assert {path.name for path in (out / "runs").iterdir()} == expected
 

@@ -157,7 +157,7 @@ def recorded(tmp_path_factory):
         log = out / f"{run.run_id}.mcap"
         result = run_scenario(load_scenario(SCENARIO, list(run.overrides)), log, progress=False)
         with open_log(log) as opened:
-            assert opened.outcome == outcome_metadata(result.outcome)
+            assert opened.metadata["outcome"] == outcome_metadata(result.outcome)
         log.unlink()  # as --keep-logs none does: the worker's log goes once the row is recorded
         task = TaskResult(run.run_id, outcome_metadata(result.outcome), None, 0.5, "tcp://w", None, ".mcap")
         rows.append(_row(run, spec.table_keys, task, out))
