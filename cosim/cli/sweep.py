@@ -2,14 +2,16 @@
 
 Exit codes: 0 every run completed (ran to an outcome: goal reached, collision or stop time), 1 some
 runs failed (each is a row with its error), 2 bad input, an unreachable scheduler or an unwritable
-output folder (one line on stderr), 130 interrupted (finished rows and logs are kept).
-`--dry-run` checks the sweep as a run would and lists its runs without running them (0 or 2).
+output folder (one line on stderr); interrupted, 1 as every `cosim` command (finished rows and
+logs are kept, and the command says how many and how to `--resume`). `--dry-run` checks the sweep
+as a run would and lists its runs without running them (0 or 2).
 """
 
 from __future__ import annotations
 
 import atexit
 import gc
+import sys
 from pathlib import Path
 
 _exit_registered = False
@@ -57,6 +59,19 @@ def register(subparsers) -> None:
         "--out", type=Path, metavar="DIR", help="sweep folder (default: logs/sweep-<scenario>-<timestamp>)"
     )
     parser.add_argument("--resume", action="store_true", help="skip runs already completed in DIR")
+    parser.add_argument(
+        "--replicates",
+        type=int,
+        metavar="N",
+        help="run each point N times, each with its own lidar.seed derived from the point; "
+        "DIR/aggregate.csv holds each point's counts by outcome and mean, std, min, max",
+    )
+    parser.add_argument(
+        "--keep-logs",
+        choices=("all", "failed", "none"),
+        help="logs kept in DIR/runs: all (default), failed (runs that did not reach the goal) or "
+        "none (a small outcome record per run instead, so --resume still checks each row)",
+    )
     parser.add_argument("--no-plot", action="store_true", help="do not draw DIR/sweep.png")
     parser.add_argument("--quiet", action="store_true", help="no progress bar and no summary table")
     parser.add_argument(
@@ -81,6 +96,23 @@ def _freeze_at_exit() -> None:
         _exit_registered = True
 
 
+def resume_command(args, out_dir: Path) -> str:
+    """The command line that finishes an interrupted sweep: its options, `--resume --out DIR`."""
+    import shlex
+
+    words = ["cosim", "sweep", str(args.scenario)]
+    for vary in args.vary:
+        words += ["--vary", vary]
+    for override in args.overrides:
+        words += ["--set", override]
+    for option in ("method", "samples", "seed", "workers", "scheduler", "replicates", "keep_logs"):
+        value = getattr(args, option)
+        if value is not None:
+            words += [f"--{option.replace('_', '-')}", str(value)]
+    words += ["--no-plot"] * args.no_plot + ["--quiet"] * args.quiet
+    return shlex.join([*words, "--out", str(out_dir), "--resume"])
+
+
 def _handler(args) -> int:
     from cosim.sweep import build
     from cosim.sweep.engine import run_sweep
@@ -96,11 +128,22 @@ def _handler(args) -> int:
         args.workers,
         args.scheduler,
         args.resume,
+        args.replicates,
+        args.keep_logs,
     )
     if args.dry_run:
         return _dry_run(spec, options)
     _freeze_at_exit()
-    result = run_sweep(spec, options, progress=not args.quiet, plot=not args.no_plot)
+    try:
+        result = run_sweep(spec, options, progress=not args.quiet, plot=not args.no_plot)
+    except KeyboardInterrupt as interrupt:
+        kept = getattr(interrupt, "sweep_kept", None)
+        if kept is not None:
+            print(f"cosim sweep: {kept}", file=sys.stderr)
+            print(
+                f"cosim sweep: to run the rest: {resume_command(args, interrupt.sweep_out)}", file=sys.stderr
+            )
+        raise
     if not args.quiet:
         print(result.summary())
     return result.exit_code

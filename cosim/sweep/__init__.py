@@ -31,6 +31,8 @@ def sweep(
     workers: int | None = None,
     scheduler: str | None = None,
     resume: bool = False,
+    replicates: int | None = None,
+    keep_logs: str | None = None,
     progress: bool = True,
     plot: bool = True,
 ):
@@ -47,19 +49,64 @@ def sweep(
         out: the sweep folder (default `logs/sweep-<scenario>-<timestamp>`).
         workers: processes of the local cluster (default: one per core); or `scheduler`, the
             address of a running Dask scheduler ("tcp://host:8786").
-        resume: skip runs whose completed row and log are already in `out`.
+        resume: skip runs whose completed row and log (or outcome record) are already in `out`.
+        replicates: runs per point, each with its own `lidar.seed` derived from the point; the
+            per-point mean, spread and counts go to `out/aggregate.csv`.
+        keep_logs: "all" (default), "failed" (the logs of runs that did not reach the goal) or
+            "none" (a small outcome record per run instead of its log).
 
-    Raises `cosim.CosimError` (one line) on bad input; a failed run is a row with its error.
+    Raises `cosim.CosimError` (one line) on bad input; a failed run is a row with its error. A
+    varied key that changes nothing (a seed without noise) is a `UserWarning` (printed instead when
+    `progress`).
     """
     from cosim.sweep.engine import run_sweep
 
-    spec, options = build(scenario, vary, method, samples, seed, overrides, out, workers, scheduler, resume)
-    return run_sweep(spec, options, progress=progress, plot=plot).table()
+    spec, options = build(
+        scenario,
+        vary,
+        method,
+        samples,
+        seed,
+        overrides,
+        out,
+        workers,
+        scheduler,
+        resume,
+        replicates,
+        keep_logs,
+    )
+    result = run_sweep(spec, options, progress=progress, plot=plot)
+    if not progress:  # with progress they were printed already
+        import warnings
+
+        for warning in result.warnings:
+            warnings.warn(warning, UserWarning, stacklevel=2)
+    return result.table()
 
 
-def build(scenario, vary, method, samples, seed, overrides, out, workers, scheduler, resume):
+def build(
+    scenario,
+    vary,
+    method,
+    samples,
+    seed,
+    overrides,
+    out,
+    workers,
+    scheduler,
+    resume,
+    replicates=None,
+    keep_logs=None,
+):
     """A `SweepSpec` and `SweepOptions` from arguments, merged over a sweep file when given one."""
-    from cosim.sweep.spec import SweepOptions, is_sweep_file, make_spec, read_sweep_file, vary_dimensions
+    from cosim.sweep.spec import (
+        SweepOptions,
+        checked_keep_logs,
+        is_sweep_file,
+        make_spec,
+        read_sweep_file,
+        vary_dimensions,
+    )
 
     path = Path(scenario)
     fields: dict[str, Any] = {"scenario": path, "dimensions": [], "overrides": []}
@@ -75,12 +122,15 @@ def build(scenario, vary, method, samples, seed, overrides, out, workers, schedu
         samples if samples is not None else fields.get("samples"),
         seed if seed is not None else fields.get("seed"),
         [*fields["overrides"], *overrides],
+        replicates if replicates is not None else fields.get("replicates"),
     )
     if out is not None:
         options.out = Path(out)
     if workers is not None or scheduler is not None:
         options.workers, options.scheduler = workers, scheduler
     options.resume = resume
+    if keep_logs is not None:
+        options.keep_logs = checked_keep_logs(keep_logs)
     return spec, options
 
 

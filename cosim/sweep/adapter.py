@@ -60,6 +60,11 @@ def check_builds(scenario) -> None:
     build_run(scenario)
 
 
+def noise_levels(scenario) -> dict[str, float]:
+    """The noise each seed key of `cosim.sweep.spec.NOISE_OF_SEED` seeds, in `scenario` (std [m])."""
+    return {"lidar.noise": float(scenario.lidar.noise)}
+
+
 def outcome_keys() -> tuple[str, ...]:
     """The keys of a log's `outcome` metadata, in the order the log writes them."""
     from cosim.navigation.outcome import Outcome, outcome_metadata

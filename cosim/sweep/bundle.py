@@ -64,8 +64,9 @@ class Run:
     index: int
     run_id: str
     values: tuple[Any, ...]
-    overrides: tuple[str, ...]  # the base overrides, then one per varied key
+    overrides: tuple[str, ...]  # the base overrides, then one per varied key (and seed key)
     references: tuple[FileReference, ...]
+    point: int = 0  # index of the point in sweep order (its replicates share it)
 
 
 def _string_values(node: Any, path: tuple[str, ...] = ()):
@@ -144,7 +145,7 @@ class BundleBuilder:
         self._paths: dict[Path, str] = {}  # resolved path -> SHA-256 hex
         self._data: dict[Path, bytes] = {}
         self._add(self.scenario_path, self.text.encode())
-        self._runs: list[tuple[int, tuple, tuple[str, ...], list[tuple[str | None, str, Path]]]] = []
+        self._runs: list[tuple[int, tuple, tuple[str, ...], list[tuple[str | None, str, Path]], int]] = []
         self._parsed: dict[str, Any] | None = None
         self._named: dict[str, list] = {}
 
@@ -154,7 +155,9 @@ class BundleBuilder:
             self._data[path] = data
             self._paths[path] = hashlib.sha256(data).hexdigest()
 
-    def add_run(self, index: int, values: tuple, overrides: tuple[str, ...]) -> None:
+    def add_run(
+        self, index: int, values: tuple, overrides: tuple[str, ...], point: int | None = None
+    ) -> None:
         # The scenario is parsed once; each run applies its overrides to a copy (a sweep of 100,000
         # points would otherwise spend minutes parsing the same text).
         if self._parsed is None:
@@ -163,7 +166,7 @@ class BundleBuilder:
         files = referenced_files(raw, self.scenario_path.parent, self._named)
         for _, _, path in files:
             self._add(path)
-        self._runs.append((index, values, overrides, files))
+        self._runs.append((index, values, overrides, files, index if point is None else point))
 
     def finish(self) -> tuple[Bundle, list[Run]]:
         root = Path(os.path.commonpath([self.scenario_path.parent, *self._paths]))
@@ -173,7 +176,7 @@ class BundleBuilder:
             bundle.files[name] = self._data[path]
             bundle.digests[name] = self._paths[path]
         runs = []
-        for index, values, overrides, files in self._runs:
+        for index, values, overrides, files, point in self._runs:
             digest = hashlib.sha256()
             digest.update(b"navcosim sweep run\0" + self.text.encode() + b"\0")
             # Names as written, not bundle paths: the bundle root depends on the other runs.
@@ -181,5 +184,6 @@ class BundleBuilder:
                 digest.update(f"{key or ''} {written} {self._paths[path]}\0".encode())
             digest.update("\0".join(overrides).encode())
             references = tuple(FileReference(key, written, relative[path]) for key, written, path in files)
-            runs.append(Run(index, digest.hexdigest()[:RUN_ID_LENGTH], values, overrides, references))
+            run_id = digest.hexdigest()[:RUN_ID_LENGTH]
+            runs.append(Run(index, run_id, values, overrides, references, point))
         return bundle, runs

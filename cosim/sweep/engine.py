@@ -19,7 +19,7 @@ import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
 
@@ -27,16 +27,28 @@ import cosim.sweep.adapter as adapter
 from cosim.errors import CosimError
 from cosim.sweep.bundle import Bundle, BundleBuilder, Run
 from cosim.sweep.results import (
+    AGGREGATE_FILE,
     COMPLETED,
     FAILED,
     RESULTS_FILE,
     ResultsFile,
+    SummaryInput,
     columns,
     format_summary,
+    group_points,
     read_rows,
     read_table,
+    write_aggregate,
 )
-from cosim.sweep.spec import SweepOptions, SweepSpec, display_value, sample_points, toml_value
+from cosim.sweep.spec import (
+    SEED_LIMIT,
+    SweepOptions,
+    SweepSpec,
+    display_value,
+    replicate_seeds,
+    sample_points,
+    toml_value,
+)
 
 CONNECT_TIMEOUT = 5.0  # [s] to reach a scheduler
 WORKER_WAIT = 30.0  # [s] for a reached scheduler to have at least one worker
@@ -65,6 +77,7 @@ class SweepResult:
     workers: int | None
     plot_path: Path | None
     skipped: int  # runs found in DIR by resume
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def failed(self) -> int:
@@ -79,22 +92,40 @@ class SweepResult:
     def results_path(self) -> Path:
         return self.out_dir / RESULTS_FILE
 
+    @property
+    def aggregate_path(self) -> Path | None:
+        """`aggregate.csv`, one row per point, written when the sweep has replicates."""
+        return self.out_dir / AGGREGATE_FILE if self.spec.replicates > 1 else None
+
     def table(self):
         """The results as a pandas DataFrame (read back from results.csv)."""
         return read_table(self.results_path)
 
     def summary(self) -> str:
-        title = f"{self.scenario_name} ({self.spec.method}, {len(self.rows)} runs"
+        runs = f"{len(self.rows)} runs"
+        if self.spec.replicates > 1:
+            runs = f"{self.spec.replicates} replicates a point, {runs}"
+        title = f"{self.scenario_name} ({self.spec.method}, {runs}"
         title += f", {self.skipped} from an earlier sweep)" if self.skipped else ")"
+        files = [("results", self.results_path)]
+        if self.aggregate_path is not None:
+            files.append(("aggregate", self.aggregate_path))
+        if self.plot_path is not None:
+            files.append(("plot", self.plot_path))
         return format_summary(
-            title,
-            self.rows,
-            self.outcome_keys,
-            self.wall_time,
-            len(self.rows) - self.skipped,
-            self.workers,
-            self.results_path,
-            self.plot_path,
+            SummaryInput(
+                title,
+                self.rows,
+                self.spec.keys,
+                self.outcome_keys,
+                self.wall_time,
+                len(self.rows) - self.skipped,
+                self.workers,
+                files,
+                self.spec.replicates,
+                self.warnings,
+                self.spec.table_keys,
+            )
         )
 
 
@@ -116,18 +147,34 @@ def plan(spec: SweepSpec) -> tuple[Bundle, list[Run], str]:
                 adapter.load(spec.scenario, [*spec.overrides, override], check_world=False)
             except CosimError as error:
                 raise CosimError(f"{dimension.describe()}: {_without_set(str(error))}") from None
+    for key in spec.seed_keys:  # each replicate sets it to a value in [0, SEED_LIMIT)
+        for value in (0, SEED_LIMIT - 1):
+            try:
+                adapter.load(spec.scenario, [*spec.overrides, f"{key}={value}"], check_world=False)
+            except CosimError as error:
+                raise CosimError(f"--replicates {spec.replicates}: {_without_set(str(error))}") from None
     builder = BundleBuilder(spec.scenario)
     seen: set[tuple[str, ...]] = set()
+    by_key = lambda text: text.partition("=")[0]  # noqa: E731
+    count = 0
     for values in sample_points(spec):
-        varied = sorted(
-            (f"{d.key}={toml_value(v)}" for d, v in zip(spec.dimensions, values, strict=True)),
-            key=lambda text: text.partition("=")[0],
+        varied = tuple(
+            sorted(
+                (f"{d.key}={toml_value(v)}" for d, v in zip(spec.dimensions, values, strict=True)), key=by_key
+            )
         )
-        overrides = (*spec.overrides, *varied)
-        if overrides in seen:  # a random draw from a list may repeat a point: it would be the same run
+        if varied in seen:  # a random draw from a list may repeat a point: it would be the same run
             continue
-        seen.add(overrides)
-        builder.add_run(len(seen) - 1, values, overrides)
+        seen.add(varied)
+        if spec.replicates == 1:
+            builder.add_run(count, values, (*spec.overrides, *varied), len(seen) - 1)
+            count += 1
+            continue
+        for replicate, seed in enumerate(replicate_seeds(varied, spec.replicates)):
+            seeded = sorted([*varied, *(f"{key}={seed}" for key in spec.seed_keys)], key=by_key)
+            point_values = (*values, replicate, *(seed for _ in spec.seed_keys))
+            builder.add_run(count, point_values, (*spec.overrides, *seeded), len(seen) - 1)
+            count += 1
     bundle, runs = builder.finish()
     return bundle, runs, base.name
 
@@ -349,8 +396,26 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
         cluster.close()
 
 
+RECORD_SUFFIX = ".outcome.json"
+
+
+def record_name(run_id: str) -> str:
+    """Where a completed run whose log was not kept leaves its outcome record, relative to DIR."""
+    return f"runs/{run_id}{RECORD_SUFFIX}"
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
+    temporary = path.with_name(f".{path.name}.partial")
+    temporary.write_bytes(data)
+    os.replace(temporary, path)  # either whole or absent
+
+
 def _row(run: Run, keys: tuple[str, ...], result, out_dir: Path) -> dict[str, str]:
-    """The results row of a run, writing its log into DIR/runs/."""
+    """The results row of a run, writing into DIR/runs/ its log, or, for a completed run whose log
+    the worker did not send (--keep-logs), its outcome record: the overrides and the outcome the log
+    held, so that --resume can check the row against it."""
+    import json
+
     row = {"run_id": run.run_id}
     row.update({key: display_value(value) for key, value in zip(keys, run.values, strict=True)})
     row["status"] = COMPLETED if result.error is None and result.outcome is not None else FAILED
@@ -360,10 +425,11 @@ def _row(run: Run, keys: tuple[str, ...], result, out_dir: Path) -> dict[str, st
     row["log"] = ""
     if result.log is not None:
         name = f"runs/{run.run_id}{result.log_suffix}"
-        temporary = out_dir / "runs" / f".{run.run_id}.partial"
-        temporary.write_bytes(result.log)
-        os.replace(temporary, out_dir / name)  # a log is either whole or absent
+        _write_atomic(out_dir / name, result.log)
         row["log"] = name
+    elif row["status"] == COMPLETED:
+        record = {"run_id": run.run_id, "overrides": list(run.overrides), "outcome": result.outcome}
+        _write_atomic(out_dir / record_name(run.run_id), json.dumps(record, indent=1).encode())
     row["error"] = result.error or ""
     return row
 
@@ -382,10 +448,12 @@ def _execute(
     checked,
     workers: int,
     tail,
+    keep_logs: str,
 ):
     """Check `first` on a worker, then run `pending`, writing each row as it comes. `checked()` is
     called once the check passed, before any row is kept; a failed check raises `CosimError`.
-    `tail()` (if not None) is called once when fewer runs are left than there are workers."""
+    `tail()` (if not None) is called once when fewer runs are left than there are workers. The
+    workers send the logs that `keep_logs` keeps."""
     from distributed import as_completed
     from tqdm import tqdm
 
@@ -400,7 +468,9 @@ def _execute(
         check_task, plugin.name, first, key=f"navcosim-check-{token}", pure=False, priority=1
     )
     futures = {
-        client.submit(run_task, plugin.name, run, key=f"navcosim-{run.run_id}-{token}", pure=False): run
+        client.submit(
+            run_task, plugin.name, run, keep_logs, key=f"navcosim-{run.run_id}-{token}", pure=False
+        ): run
         for run in pending
     }
     bar = None
@@ -449,12 +519,17 @@ def kept_row_problem(row: dict[str, str], run: Run, out_dir: Path) -> str | None
 
     Nothing read back is trusted: the row's log must be a regular file inside DIR/runs, a complete
     MCAP file (its footer read), recorded with this run's overrides, and its outcome metadata
-    must be the row's; no cell may hold a control character (a NUL would go on into the table).
+    must be the row's; no cell may hold a control character (a NUL would go on into the table). A
+    row without a log (--keep-logs failed or none) is checked in the same way against its outcome
+    record (`record_name`): a JSON file inside DIR/runs naming this run, with exactly this run's
+    overrides and the row's outcome; a row with neither runs again.
     """
     from cosim.logs.index import read_index
 
     if any(any(ord(c) < 32 for c in str(value)) for value in row.values() if value is not None):
         return "row with control characters"
+    if not row.get("log"):
+        return _record_problem(row, run, out_dir)
     runs_dir = (out_dir / "runs").resolve()
     path = (out_dir / (row.get("log") or "")).resolve()
     if not path.is_relative_to(runs_dir) or path == runs_dir:
@@ -471,10 +546,38 @@ def kept_row_problem(row: dict[str, str], run: Run, out_dir: Path) -> str | None
     recorded = f" {metadata.get('navcosim', {}).get('overrides', '')} "
     if not all(f" {override} " in recorded for override in run.overrides):
         return "log of another run"
-    outcome = metadata.get("outcome")
-    if outcome is None or any(row.get(key, "") != value for key, value in outcome.items()):
-        return "row differing from its log"
+    return _outcome_problem(row, metadata.get("outcome"), "log")
+
+
+def _outcome_problem(row: dict[str, str], outcome, source: str) -> str | None:
+    if not isinstance(outcome, dict) or not outcome:
+        return f"row differing from its {source}"
+    if any(not isinstance(value, str) or row.get(key, "") != value for key, value in outcome.items()):
+        return f"row differing from its {source}"
     return None
+
+
+RECORD_LIMIT = 1 << 20  # [bytes] an outcome record is a few hundred bytes
+
+
+def _record_problem(row: dict[str, str], run: Run, out_dir: Path) -> str | None:
+    """Why a completed row without a log cannot be kept, checked against its outcome record."""
+    import json
+
+    path = out_dir / record_name(run.run_id)
+    if path.is_symlink() or not path.is_file():
+        return "no log and no outcome record"
+    try:
+        if path.stat().st_size > RECORD_LIMIT:
+            return "outcome record unreadable"
+        record = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+        return "outcome record unreadable"
+    if not isinstance(record, dict) or not record.get("run_id") == run.run_id == row.get("run_id"):
+        return "outcome record of another run"
+    if record.get("overrides") != list(run.overrides):
+        return "outcome record of another run"
+    return _outcome_problem(row, record.get("outcome"), "outcome record")
 
 
 def _load_plotting() -> None:
@@ -493,14 +596,20 @@ def check_options(options: SweepOptions) -> None:
 def run_sweep(
     spec: SweepSpec, options: SweepOptions, progress: bool = True, plot: bool = True
 ) -> SweepResult:
-    """Run the sweep; the rows of finished runs are in DIR even when this is interrupted."""
+    """Run the sweep; the rows of finished runs are in DIR even when this is interrupted (the
+    interrupt then carries a note saying which rows are kept and how to resume)."""
     from concurrent.futures import ThreadPoolExecutor
+
+    from cosim.sweep.effect import outcome_warnings, seed_warnings
 
     check_options(options)
     bundle, runs, name = plan(spec)
+    warnings = seed_warnings(
+        spec, adapter.noise_levels(adapter.load(spec.scenario, spec.overrides, check_world=False))
+    )
     out_dir = Path(options.out) if options.out is not None else default_out_dir(name)
     created = _prepare_out_dir(out_dir, options.resume)
-    keys = spec.keys
+    keys = spec.table_keys
     outcome_keys = adapter.outcome_keys()
     results = ResultsFile(out_dir / RESULTS_FILE, columns(keys, outcome_keys))
     rows: dict[str, dict[str, str]] = {}
@@ -525,10 +634,24 @@ def run_sweep(
     def ordered() -> list[dict[str, str]]:
         return [rows[run.run_id] for run in runs if run.run_id in rows]
 
+    def finish_tables() -> None:
+        results.rewrite(ordered())
+        if spec.replicates > 1:
+            points = group_points(ordered(), spec.keys, outcome_keys)
+            write_aggregate(out_dir / AGGREGATE_FILE, points, spec.keys, outcome_keys)
+
     def draw() -> Path | None:
         from cosim.sweep.plot import plot_sweep
 
-        return plot_sweep(ordered(), keys, outcome_keys, out_dir / PLOT_FILE, spec.method == "grid")
+        return plot_sweep(
+            ordered(),
+            spec.keys,
+            outcome_keys,
+            out_dir / PLOT_FILE,
+            grid=spec.method == "grid",
+            title=f"{name}: {spec.method} sweep",
+            replicates=spec.replicates,
+        )
 
     started = time.perf_counter()
     workers, plot_path, plotting = None, None, None
@@ -542,6 +665,9 @@ def run_sweep(
             nonlocal writing
             results.rewrite(ordered())
             writing = True
+            if progress:  # now, not only in the summary: the runs may take hours
+                for warning in warnings:
+                    print(f"warning: {warning}", file=sys.stderr)
 
         # On an error or an interrupt the fork server is left to stop with this process (as it
         # would, being told by its closed pipe): it may still be warming up, and waiting is slower.
@@ -563,8 +689,9 @@ def run_sweep(
                         checked,
                         workers,
                         (lambda: pool.submit(_load_plotting)) if plot else None,
+                        options.keep_logs,
                     )
-                    results.rewrite(ordered())
+                    finish_tables()
                     if plot:  # drawn while the cluster closes
                         plotting = pool.submit(draw)
                 if options.scheduler is None:  # stops while the plot is drawn
@@ -576,11 +703,38 @@ def run_sweep(
             if not writing:  # refused before anything ran: leave nothing behind
                 _remove_empty(created)
             raise
+        except KeyboardInterrupt as interrupt:
+            if writing:
+                finish_tables()
+                interrupt.sweep_kept = kept_text(ordered(), len(runs), out_dir, options.keep_logs)
+                interrupt.sweep_out = out_dir
+                interrupt.add_note(
+                    f"{interrupt.sweep_kept}; run the rest with resume=True, out={str(out_dir)!r}"
+                )
+            raise
         finally:
             if writing:
                 results.rewrite(ordered())
     else:
-        results.rewrite(ordered())
+        finish_tables()
         plot_path = draw() if plot else None
     wall_time = time.perf_counter() - started
-    return SweepResult(spec, name, out_dir, ordered(), outcome_keys, wall_time, workers, plot_path, skipped)
+    seeds = [key for key in spec.keys if any(key in warning for warning in warnings)]
+    group_keys = (*spec.keys, "replicate") if spec.replicates > 1 else spec.keys
+    warnings += outcome_warnings(ordered(), spec.keys, group_keys, outcome_keys, skip=seeds)
+    return SweepResult(
+        spec, name, out_dir, ordered(), outcome_keys, wall_time, workers, plot_path, skipped, warnings
+    )
+
+
+def kept_text(rows: list[dict[str, str]], total: int, out_dir: Path, keep_logs: str) -> str:
+    """What an interrupted sweep kept, in one line."""
+    completed = sum(row.get("status") == COMPLETED for row in rows)
+    logs = {"all": "their logs", "failed": "logs of the runs without the goal"}.get(
+        keep_logs, "outcome records"
+    )
+    return (
+        f"interrupted: kept {len(rows)} of {total} rows in {out_dir / RESULTS_FILE} ({completed} completed, "
+        f"{len(rows) - completed} failed; {logs} in {out_dir / 'runs'}); --resume keeps the {completed} "
+        f"completed and runs the other {total - completed}"
+    )

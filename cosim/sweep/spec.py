@@ -13,10 +13,15 @@ independently and uniformly (numpy's default generator seeded with `seed`); `lhs
 hypercube of `samples` points (`scipy.stats.qmc.LatinHypercube`, seeded with `seed`): along every
 key, each of `samples` equal strata of [0, 1) holds exactly one point, mapped onto the interval or
 onto the list of values. The same specification gives the same points.
+
+Replicates (`--replicates N`): each point runs N times, each time with another value of every seed
+key of the scenario (`SEED_KEYS`), derived from the point alone (`replicate_seeds`): the same point
+gets the same N seeds in any sweep, and the seeds of one point are distinct.
 """
 
 from __future__ import annotations
 
+import hashlib
 import itertools
 import math
 import tomllib
@@ -34,6 +39,13 @@ SIGNIFICANT_DIGITS = 12
 # Most runs of one sweep, checked before any point is made: each run is a task, a results row and a
 # log (about 2 MB for a warehouse scenario), so more would fill the scheduler and the disk first.
 MAX_POINTS = 100_000
+# The scenario keys that seed a random source. The lidar's range noise is the only random source of
+# a run (the rest is deterministic), and `lidar.seed` seeds it alone; it matters only when
+# `lidar.noise` > 0.
+SEED_KEYS = ("lidar.seed",)
+NOISE_OF_SEED = {"lidar.seed": "lidar.noise"}  # the key whose value 0 makes the seed irrelevant
+SEED_LIMIT = 1 << 31  # replicate seeds are drawn from [0, 2^31)
+KEEP_LOGS = ("all", "failed", "none")
 
 
 @dataclass(frozen=True)
@@ -60,10 +72,23 @@ class SweepSpec:
     samples: int | None = None
     seed: int = 0
     overrides: tuple[str, ...] = ()
+    replicates: int = 1  # runs per point, each with its own seeds (`replicate_seeds`)
 
     @property
     def keys(self) -> tuple[str, ...]:
+        """The varied keys."""
         return tuple(dimension.key for dimension in self.dimensions)
+
+    @property
+    def seed_keys(self) -> tuple[str, ...]:
+        """The keys each replicate sets (none without replicates)."""
+        return SEED_KEYS if self.replicates > 1 else ()
+
+    @property
+    def table_keys(self) -> tuple[str, ...]:
+        """The columns of a run's values in results.csv: the varied keys, then with replicates
+        `replicate` (0 to N-1) and each seed key."""
+        return (*self.keys, "replicate", *self.seed_keys) if self.replicates > 1 else self.keys
 
 
 @dataclass
@@ -74,6 +99,7 @@ class SweepOptions:
     workers: int | None = None
     scheduler: str | None = None
     resume: bool = False
+    keep_logs: str = "all"  # all | failed (runs that did not reach the goal) | none
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -232,6 +258,7 @@ def read_sweep_file(path: Path) -> tuple[dict[str, Any], SweepOptions]:
         )
     table = raw.get("sweep", {})
     known = {"scenario", "method", "samples", "seed", "set", "out", "workers", "scheduler"}
+    known |= {"replicates", "keep_logs"}
     for key in table:
         if key not in known:
             from cosim.scenario.schema import did_you_mean
@@ -253,6 +280,7 @@ def read_sweep_file(path: Path) -> tuple[dict[str, Any], SweepOptions]:
         "samples": _typed(table, "samples", int, source),
         "seed": _typed(table, "seed", int, source),
         "overrides": list(overrides),
+        "replicates": _typed(table, "replicates", int, source),
     }
     out = _typed(table, "out", str, source)
     options = SweepOptions(
@@ -260,7 +288,16 @@ def read_sweep_file(path: Path) -> tuple[dict[str, Any], SweepOptions]:
         workers=_typed(table, "workers", int, source),
         scheduler=_typed(table, "scheduler", str, source),
     )
+    keep_logs = _typed(table, "keep_logs", str, source)
+    if keep_logs is not None:
+        options.keep_logs = checked_keep_logs(keep_logs, f"{source}: [sweep] keep_logs")
     return fields, options
+
+
+def checked_keep_logs(value: str, where: str = "--keep-logs") -> str:
+    if value not in KEEP_LOGS:
+        raise CosimError(f"{where} {value}: expected all, failed or none")
+    return value
 
 
 def _flat(table: dict, prefix: str = "") -> list[tuple[str, Any]]:
@@ -289,8 +326,12 @@ def make_spec(
     samples: int | None = None,
     seed: int | None = None,
     overrides: Sequence[str] = (),
+    replicates: int | None = None,
 ) -> SweepSpec:
     """Check the combination of options; the keys are checked later, against the scenario."""
+    replicates = 1 if replicates is None else replicates
+    if replicates < 1:
+        raise CosimError(f"--replicates {replicates}: must be >= 1")
     if method not in METHODS:
         from cosim.scenario.schema import did_you_mean
 
@@ -302,6 +343,11 @@ def make_spec(
         if dimension.key in seen:
             raise CosimError(f"{dimension.describe()}: {dimension.key} is varied twice")
         seen.add(dimension.key)
+        if replicates > 1 and dimension.key in SEED_KEYS:
+            raise CosimError(
+                f"{dimension.describe()}: --replicates {replicates} sets {dimension.key} in every run; "
+                "vary it or replicate, not both"
+            )
     if method == "grid":
         if samples is not None:
             raise CosimError("--samples applies to --method random and lhs; a grid runs every combination")
@@ -311,19 +357,37 @@ def make_spec(
                     f"{dimension.describe()}: a grid needs a list or START:STOP:COUNT, not an interval"
                 )
         size = math.prod(len(dimension.values) for dimension in dimensions)
-        if size > MAX_POINTS:
+        if size * replicates > MAX_POINTS:
             shape = " x ".join(str(len(dimension.values)) for dimension in dimensions)
+            times = f" x {replicates} replicates" if replicates > 1 else ""
             raise CosimError(
-                f"the grid has {size} points ({shape}), more than a sweep runs ({MAX_POINTS}); "
-                "vary fewer values, or sample with --method lhs --samples N"
+                f"the grid has {size * replicates} points ({shape}{times}), more than a sweep runs "
+                f"({MAX_POINTS}); vary fewer values, or sample with --method lhs --samples N"
             )
     elif samples is None or samples < 1:
         raise CosimError(f"--method {method} needs --samples N (N >= 1)")
-    elif samples > MAX_POINTS:
-        raise CosimError(f"--samples {samples}: more than a sweep runs ({MAX_POINTS})")
+    elif samples * replicates > MAX_POINTS:
+        times = f" x --replicates {replicates}" if replicates > 1 else ""
+        raise CosimError(f"--samples {samples}{times}: more than a sweep runs ({MAX_POINTS})")
     if seed is not None and seed < 0:
         raise CosimError(f"--seed {seed}: must be >= 0")
-    return SweepSpec(Path(scenario), tuple(dimensions), method, samples, seed or 0, tuple(overrides))
+    return SweepSpec(
+        Path(scenario), tuple(dimensions), method, samples, seed or 0, tuple(overrides), replicates
+    )
+
+
+def replicate_seeds(point: Sequence[str], count: int) -> list[int]:
+    """`count` distinct seeds in [0, 2^31) for the replicates of the point whose varied overrides
+    are `point`: from SHA-256 of the point and a counter, so they depend on the point alone."""
+    seeds: list[int] = []
+    counter = 0
+    while len(seeds) < count:
+        text = "navcosim replicate\0" + "\0".join(point) + f"\0{counter}"
+        seed = int.from_bytes(hashlib.sha256(text.encode()).digest()[:8], "little") % SEED_LIMIT
+        counter += 1
+        if seed not in seeds:
+            seeds.append(seed)
+    return seeds
 
 
 def vary_dimensions(vary: Mapping[str, Any] | Sequence[str] | None) -> list[Dimension]:

@@ -92,8 +92,19 @@ def check_task(plugin_name: str, run: Run) -> str | None:
     return None
 
 
-def run_task(plugin_name: str, run: Run) -> TaskResult:
-    """Run one scenario of the sweep on this worker; a run that fails is a result, not an exception."""
+def keeps_log(keep_logs: str, outcome: dict[str, str] | None, error: str | None) -> bool:
+    """Whether the sweep keeps a run's log: `all`, `failed` (every run that did not reach the goal,
+    failed runs included) or `none`."""
+    if keep_logs == "all":
+        return True
+    reached = error is None and outcome is not None and outcome.get("reason") == "goal_reached"
+    return keep_logs == "failed" and not reached
+
+
+def run_task(plugin_name: str, run: Run, keep_logs: str = "all") -> TaskResult:
+    """Run one scenario of the sweep on this worker; a run that fails is a result, not an exception.
+    The log is written here in any case (the run needs a file) and sent back only when the sweep
+    keeps it (`keeps_log`); this worker's copy is removed either way."""
     worker = get_worker()
     plugin: BundlePlugin = worker.plugins[plugin_name]
     files = plugin.folder / "files"
@@ -110,12 +121,14 @@ def run_task(plugin_name: str, run: Run) -> TaskResult:
         error = f"{type(failure).__name__}: {' '.join(str(failure).split())}"
     wall_time = time.perf_counter() - started
     log, suffix = None, ".mcap"
+    keep = keeps_log(keep_logs, outcome, error)
     for candidate, candidate_suffix in (
         (log_path, ".mcap"),
         (log_path.with_suffix(".failed.mcap"), ".failed.mcap"),
     ):
         if candidate.is_file():
-            log, suffix = candidate.read_bytes(), candidate_suffix
+            if keep:
+                log, suffix = candidate.read_bytes(), candidate_suffix
             candidate.unlink()
             break
     if error is not None:

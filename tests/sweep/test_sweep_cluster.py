@@ -13,6 +13,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import warnings
 from pathlib import Path
 
 import pytest
@@ -118,17 +119,27 @@ def test_every_log_equals_a_run_without_dask(local_sweep, tmp_path):
 @pytest.mark.slow
 def test_the_python_api_returns_the_table(local_sweep):
     out, _ = local_sweep
-    # Every run is in DIR already: resume answers from DIR without starting a cluster.
-    table = cosim.sweep(
-        SCENARIO,
-        {"pure_pursuit.desired_linear_velocity": [1.0, 1.5], "lidar.noise": "0.0:0.2:2"},
-        overrides=["simulation.stop_time=4"],
-        out=out,
-        resume=True,
-        progress=False,
-        plot=False,
-    )
     rows = _rows(out)
+    # In 4 s no obstacle comes near enough for the noise to matter, or it does: the API warns
+    # exactly when the two noise levels gave the same outcomes at each speed.
+    outcome = [tuple(row[key] for key in OUTCOME) for row in rows]  # noise fastest
+    same = outcome[0] == outcome[1] and outcome[2] == outcome[3]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        # Every run is in DIR already: resume answers from DIR without starting a cluster.
+        table = cosim.sweep(
+            SCENARIO,
+            {"pure_pursuit.desired_linear_velocity": [1.0, 1.5], "lidar.noise": "0.0:0.2:2"},
+            overrides=["simulation.stop_time=4"],
+            out=out,
+            resume=True,
+            progress=False,
+            plot=False,
+        )
+    said = [
+        str(w.message) for w in caught if "--vary lidar.noise: its 2 values gave the same" in str(w.message)
+    ]
+    assert len(said) == same
     assert list(table["run_id"]) == [row["run_id"] for row in rows]
     assert list(table["distance"]) == [float(row["distance"]) for row in rows]
     assert table["reached"].dtype == bool
@@ -238,6 +249,14 @@ def test_failed_runs_are_rows_interrupt_keeps_rows_and_resume_finishes(dask_sche
     assert "Traceback" not in stderr
     before = {row["run_id"]: row for row in _rows(out)}
     assert len(before) >= 2
+    if "cosim: interrupted" in stderr:  # not when the sweep had already finished
+        completed = sum(row["status"] == "completed" for row in before.values())
+        assert f"cosim sweep: interrupted: kept {len(before)} of 4 rows in {out / 'results.csv'}" in stderr
+        assert f"({completed} completed, {len(before) - completed} failed" in stderr
+        resume = next(
+            line for line in stderr.splitlines() if line.startswith("cosim sweep: to run the rest: ")
+        )
+        assert resume.endswith(f"--out {out} --resume") and "--scheduler" in resume
     for row in before.values():
         assert (out / row["log"]).is_file() if row["log"] else row["status"] == "failed"
     result = subprocess.run([*command, "--resume"], cwd=REPO, capture_output=True, text=True, timeout=600)
