@@ -159,7 +159,7 @@ def _dry_run(spec, options) -> int:
     print(f"{name}: {len(runs)} runs ({spec.method}) of {spec.scenario}")
     for run in runs:
         values = " ".join(
-            f"{key}={display_value(value)}" for key, value in zip(spec.keys, run.values, strict=True)
+            f"{key}={display_value(value)}" for key, value in zip(spec.table_keys, run.values, strict=True)
         )
         print(f"{run.run_id}  {values}")
     return 0

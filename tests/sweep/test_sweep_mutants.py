@@ -374,5 +374,19 @@ def test_dry_run_lists_every_point_and_writes_nothing(tmp_path, capsys):
     assert "[lidar].nois: unknown key (did you mean 'noise'?)" in capsys.readouterr().err
 
 
+def test_dry_run_lists_each_replicate_with_the_seed_the_sweep_gives_it(tmp_path, capsys):
+    from cosim.sweep.spec import replicate_seeds
+
+    argv = ["sweep", str(SCENARIO), "--vary", "lidar.noise=0.02,0.05", "--replicates", "3",
+            "--out", str(tmp_path / "sweep"), "--dry-run"]  # fmt: skip
+    assert main(argv) == 0  # the replicate and seed columns once broke the listing (zip strict)
+    lines = capsys.readouterr().out.splitlines()[1:]
+    assert len(lines) == 6
+    for noise, group in zip(("0.02", "0.05"), (lines[:3], lines[3:]), strict=True):
+        seeds = [int(line.rsplit("lidar.seed=", 1)[1]) for line in group]
+        assert seeds == replicate_seeds((f"lidar.noise={noise}",), 3) and len(set(seeds)) == 3
+        assert [line.split()[2] for line in group] == ["replicate=0", "replicate=1", "replicate=2"]
+
+
 if __name__ == "__main__":
     sys.exit(pytest.main([__file__, "-q", "-s"]))
