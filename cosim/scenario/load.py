@@ -388,10 +388,21 @@ def _build(
     removed = _removed(top)
     tables = top.raw("components", {})
     replaced = set(tables) & set(REPLACEABLE) if isinstance(tables, dict) else set()
-    for role in (*ROLE_SECTIONS, *PYTHON_COMPONENTS):
-        if role != "vehicle" and (role in removed or role in replaced) and top.has(role):
-            how = "removed by [system].remove" if role in removed else f"replaced by [components.{role}]"
-            raise top.error(role, f"'{role}' is {how}: this section would set nothing; delete it")
+    idle = [
+        role
+        for role in (*ROLE_SECTIONS, *PYTHON_COMPONENTS)
+        if role != "vehicle" and (role in removed or role in replaced) and top.has(role)
+    ]
+    if idle:  # every such section at once: deleting one to be told of the next is a loop of runs
+        how = {
+            role: "removed by [system].remove" if role in removed else f"replaced by [components.{role}]"
+            for role in idle
+        }
+        if len(idle) == 1:
+            role = idle[0]
+            raise top.error(role, f"'{role}' is {how[role]}: this section would set nothing; delete it")
+        sections = ", ".join(f"[{role}] ({how[role]})" for role in idle)
+        raise CosimError(f"{source}: {sections}: these sections would set nothing; delete them")
     vfh_table = TableReader(source, "[vfh]", top.raw("vfh", {}))
     vfh_radius = vfh_table.table.get("robot_radius")
     default_radius = float(vfh_radius) if is_number(vfh_radius) and vfh_radius > 0 else 0.5

@@ -281,6 +281,12 @@ def test_replacement_problems_at_once(tmp_path):
             "[vfh]",
             "'vfh' is removed by [system].remove: this section would set nothing; delete it",
         ),
+        (  # every idle section in one line, not one per run
+            '[system]\nremove = ["vfh", "pure_pursuit"]\n',
+            (),
+            "[pure_pursuit] (removed by [system].remove), [vfh] (removed by [system].remove)",
+            "these sections would set nothing; delete them",
+        ),
         ('[system]\nremove = ["mixer"]\nkeep = 1\n', (), "[system].keep", "unknown key"),
         (
             '[components.pure_pursuit]\nfmu = "PurePursuit"\n',
