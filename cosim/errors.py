@@ -1,6 +1,7 @@
 """Errors a user can cause in the orchestrator; see `planner.errors.NavcosimError`."""
 
 import re
+import sys
 
 from planner.errors import NavcosimError
 
@@ -96,3 +97,15 @@ def wrong_file_message(path, wanted: str) -> str | None:
         return None
     what, hint = _WHAT[kind]
     return f"{path}: this is {what}, not {wanted}; {hint.format(path=path)}"
+
+
+def say(line: str) -> None:
+    """Print `line` on stderr without writing it into a progress bar that is showing: through
+    `tqdm.write` (which clears the bars on stderr, prints, and draws them again) once tqdm is
+    loaded, a plain print otherwise."""
+    tqdm_module = sys.modules.get("tqdm")
+    if tqdm_module is None:
+        print(line, file=sys.stderr, flush=True)
+        return
+    tqdm_module.tqdm.write(line, file=sys.stderr)
+    sys.stderr.flush()

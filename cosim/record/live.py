@@ -35,7 +35,7 @@ from typing import Protocol
 import numpy as np
 
 from cosim.core import interrupt
-from cosim.errors import CosimError
+from cosim.errors import CosimError, say
 from cosim.record.mcap_format import MESSAGE_HEAD, RECORD_HEAD
 from cosim.scenario.topics import LATCHED_TOPICS  # a client joining late gets their last message
 
@@ -233,9 +233,7 @@ class LiveControl:
 
     def acknowledge(self, command: str, text: str, client: str, done: bool) -> None:
         """One line on stderr and a record for the log (`acknowledged`)."""
-        print(
-            f"cosim: {'' if done else 'warning: '}live view: {text} ({client})", file=sys.stderr, flush=True
-        )
+        say(f"cosim: {'' if done else 'warning: '}live view: {text} ({client})")
         self.record({"command": command, "client": client, "result": text, "done": str(done).lower()})
 
     def record(self, record: dict[str, str]) -> None:
@@ -399,7 +397,7 @@ class FoxgloveLive:
     def report(self, text: str, warning: bool = True) -> None:
         """What became of a goal: a line on stderr, a status message to the clients (Foxglove
         shows it) and an acknowledgement in the log."""
-        print(f"cosim: {'warning: ' if warning else ''}{text}", file=sys.stderr, flush=True)
+        say(f"cosim: {'warning: ' if warning else ''}{text}")
         self._status(text, warning)
         self.control.record({"command": "goal", "result": text, "done": str(not warning).lower()})
 
@@ -465,7 +463,7 @@ class _SdkLog(logging.Handler):
         self.count += 1
         if self.count <= self.SHOWN:
             more = " (further foxglove-sdk lines are not shown)" if self.count == self.SHOWN else ""
-            print(f"cosim: live view: foxglove-sdk: {record.getMessage()}{more}", file=sys.stderr, flush=True)
+            say(f"cosim: live view: foxglove-sdk: {record.getMessage()}{more}")
 
 
 def _quiet_sdk_log() -> None:

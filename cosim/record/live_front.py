@@ -32,10 +32,11 @@ import asyncio
 import hmac
 import json
 import os
-import sys
 import threading
 import time
 from urllib.parse import parse_qs, urlsplit
+
+from cosim.errors import say
 
 HANDSHAKE_TIMEOUT = 5.0  # [s] from the TCP connection to the end of the client's request head
 PING_INTERVAL = 10.0  # [s]
@@ -141,22 +142,18 @@ class Warnings:
     def once(self, seen: set, kind: str, text: str) -> None:
         if kind not in seen:
             seen.add(kind)
-            print(f"cosim: warning: live view: {text}", file=sys.stderr, flush=True)
+            say(f"cosim: warning: live view: {text}")
 
     def refusal(self, reason: str, text: str) -> None:
         count = self.refused.get(reason, 0)
         self.refused[reason] = count + 1
         if count == 0:
-            print(f"cosim: warning: live view: {text}", file=sys.stderr, flush=True)
+            say(f"cosim: warning: live view: {text}")
 
     def summary(self) -> None:
         for reason, count in self.refused.items():
             if count > 1:
-                print(
-                    f"cosim: warning: live view: {count - 1} more connection(s) refused ({reason})",
-                    file=sys.stderr,
-                    flush=True,
-                )
+                say(f"cosim: warning: live view: {count - 1} more connection(s) refused ({reason})")
 
 
 class _Client:
