@@ -120,7 +120,12 @@ def decode_goal_pose(encoding: str, schema_name: str, data: bytes) -> tuple[floa
 
 
 class Pacer:
-    """Holds messages back so simulated time runs `realtime` times as fast as the wall clock."""
+    """Holds messages back so simulated time runs `realtime` times as fast as the wall clock.
+
+    Nothing watches a paced run's messages as they come, so its log keeps the chunk windows of an
+    unpaced run (`watched` False): `--realtime` alone writes the same bytes as no pacing."""
+
+    watched = False
 
     def __init__(self, realtime: float) -> None:
         if not realtime > 0:

@@ -241,7 +241,7 @@ class Recorder:
     ) -> None:
         """`sink` (`cosim.record.live.Sink`): also gets every schema, channel and message written.
         `chunk_duration` [s]: the chunk window, by default `CHUNK_DURATION` (`LIVE_CHUNK_DURATION`
-        with a sink).
+        with a sink that is watched: one without a `watched` attribute False).
         `topics`: a topic's name in the log, by its name here ("/odom" -> "/ground-truth-pose").
         `stream`: the file already opened for `path` (`cosim.record.logfile.claim_log`); it is
         closed by `close()`. Without it `path` is opened (and truncated) here.
@@ -256,7 +256,10 @@ class Recorder:
             raise CosimError(f"{self.path}: cannot write the log ({error.strerror})") from None
         self._file = stream
         if chunk_duration is None:
-            chunk_duration = CHUNK_DURATION if sink is None else LIVE_CHUNK_DURATION
+            # A live view gets the messages a window at a time: shorter windows. A sink that no
+            # one watches (`Pacer`: --realtime alone) keeps the file's bytes as without it.
+            watched = sink is not None and getattr(sink, "watched", True)
+            chunk_duration = LIVE_CHUNK_DURATION if watched else CHUNK_DURATION
         if not chunk_duration > 0:
             self._file.close()
             raise CosimError(f"{self.path}: chunk_duration must be > 0 s, got {chunk_duration}")
