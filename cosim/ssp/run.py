@@ -186,6 +186,8 @@ def run_ssp(
             with interrupt.catching_signals():
                 return _run_fmus(ssp, experiment(ssp, values), out_path, force, max_unpacked_size(values))
     except CosimError as error:
+        if out_path is not None and str(error).startswith(f"{out_path}:"):
+            raise CosimError(shorten(str(error), MESSAGE_LIMIT)) from None  # the command line's log
         raise named(source, error) from None
 
 
