@@ -155,6 +155,9 @@ def _export(args) -> int:
     out_dir = args.out or args.log.parent
     for path in _guard(args.log, lambda: export_signals(log, out_dir, args.to, args.component, args.force)):
         print(f"wrote {path}")
+    text = [name for name in log.text_components if not args.component or name in args.component]
+    if args.to == "npz" and text:
+        print(f"text signals of {', '.join(text)} left out of the .npz (--to csv writes them)")
     return 0
 
 

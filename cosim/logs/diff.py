@@ -9,6 +9,10 @@ Angles: a signal whose unit is "rad" in either log (units come from the FMUs' mo
 stored in the channel metadata) is compared modulo 2 pi, so a heading wrapped to (-pi, pi] and
 one that is not agree; B is unwrapped before it is interpolated. A difference of at most pi is
 taken as it is, so equal values stay exactly equal.
+
+Text signals (String and Binary, `/text_signals/<component>`) hold each value until the next
+record; they are equal when the held values agree at every record time of either log (no
+tolerance applies); the report names the first time a text signal differs.
 """
 
 from __future__ import annotations
@@ -42,6 +46,7 @@ class DiffReport:
     only_in_a: list[str] = field(default_factory=list)  # "component.name"
     only_in_b: list[str] = field(default_factory=list)
     outcome_differences: list[tuple[str, str, str]] = field(default_factory=list)  # key, A, B
+    text_differences: list[tuple[str, float]] = field(default_factory=list)  # "component.name", t [s]
 
     @property
     def exceeding(self) -> list[SignalDeviation]:
@@ -50,7 +55,7 @@ class DiffReport:
     @property
     def differs(self) -> bool:
         """True when a signal or the outcome differs by more than the tolerance."""
-        return bool(self.exceeding or self.outcome_differences)
+        return bool(self.exceeding or self.outcome_differences or self.text_differences)
 
 
 def diff_logs(log_a: Log, log_b: Log, tolerance: float) -> DiffReport:
@@ -74,11 +79,40 @@ def diff_logs(log_a: Log, log_b: Log, tolerance: float) -> DiffReport:
     for component in log_b.components:
         if component not in log_a.components:
             report.only_in_b += [f"{component}.{name}" for name in log_b.signals(component).names]
+    _compare_text(log_a, log_b, report)
     report.outcome_differences = _outcome_differences(
         log_a.metadata.get("outcome"), log_b.metadata.get("outcome"), tolerance
     )
     report.deviations.sort(key=lambda item: (-_sort_key(item.max_deviation), item.component, item.name))
     return report
+
+
+def _compare_text(log_a: Log, log_b: Log, report: DiffReport) -> None:
+    for component in log_a.text_components:
+        a = log_a.text_signals(component)
+        if component not in log_b.text_components:
+            report.only_in_a += [f"{component}.{name}" for name in a.names]
+            continue
+        b = log_b.text_signals(component)
+        report.only_in_a += [f"{component}.{name}" for name in a.names if name not in b.names]
+        report.only_in_b += [f"{component}.{name}" for name in b.names if name not in a.names]
+        times = sorted(set(a.t.tolist()) | set(b.t.tolist()))
+        for name in (name for name in a.names if name in b.names):
+            values_a, values_b = a[name], b[name]
+            for t in times:
+                held_a = _held(a.t, values_a, t)
+                if held_a != _held(b.t, values_b, t):
+                    report.text_differences.append((f"{component}.{name}", t))
+                    break
+    for component in log_b.text_components:
+        if component not in log_a.text_components:
+            report.only_in_b += [f"{component}.{name}" for name in log_b.text_signals(component).names]
+
+
+def _held(t: np.ndarray, values: list, at: float):
+    """The value recorded last at or before `at` (None before the first record)."""
+    index = int(np.searchsorted(t, at, side="right")) - 1
+    return values[index] if index >= 0 else None
 
 
 def _sort_key(value: float) -> float:
@@ -183,13 +217,17 @@ def format_report(report: DiffReport, log_a: Log, log_b: Log, limit: int = 40) -
     for label, names in (("only in A", report.only_in_a), ("only in B", report.only_in_b)):
         if names:
             lines.append(f"{label}: {', '.join(names[:20])}{' ...' if len(names) > 20 else ''}")
+    for name, t in report.text_differences:
+        lines.append(f"text {name}: differs from t = {t:.3f} s")
     for key, value_a, value_b in report.outcome_differences:
         lines.append(f"outcome {key}: A {value_a}  B {value_b}")
     if not report.outcome_differences:
         lines.append("outcome: equal")
     components = sorted({item.component for item in exceeding})
     verdict = (
-        f"DIFFERENT ({', '.join(components) or 'outcome'})" if report.differs else "EQUAL within tolerance"
+        f"DIFFERENT ({', '.join(components) or ('text' if report.text_differences else 'outcome')})"
+        if report.differs
+        else "EQUAL within tolerance"
     )
     lines.append(f"result: {verdict}")
     return "\n".join(lines)

@@ -45,6 +45,12 @@ def format_info(log: Log) -> str:
         )
     else:
         lines.append("signals   none (no /signals/<component> channels: not a navcosim run log)")
+    if log.text_components:
+        # String and Binary variables: /text_signals/<component>, a record when a value changes
+        lines.append(
+            "text      "
+            + ", ".join(f"{name} ({len(log.text_signals(name).names)})" for name in log.text_components)
+        )
     if log.attachments:
         lines.append("attached  " + ", ".join(log.attachments))
     return "\n".join(lines)
