@@ -171,6 +171,7 @@ def test_a_message_over_the_size_limit_closes_that_client_with_one_line(server, 
 def test_a_token_is_required_when_set(monkeypatch):
     live = FoxgloveLive(0, 1e4, token="s3cret-token")
     try:
+
         async def enter(url: str) -> str:
             async with websockets.connect(url, subprotocols=[CLASSIC]) as client:
                 return json.loads(await client.recv())["op"]
