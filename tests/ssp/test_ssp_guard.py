@@ -12,16 +12,15 @@ with the conversion written out as a LinearTransformation.
 from __future__ import annotations
 
 import re
-import struct
 import tempfile
 import zipfile
-import zlib
 from pathlib import Path
 
 import numpy as np
 import pytest
 from fixtures.build_fixtures import FAULTS
 from fixtures.conftest_helpers import fixture_fmu
+from zip_bomb import write_zip_bomb
 
 import cosim
 from cosim.cli import main
@@ -112,37 +111,9 @@ def no_extraction(monkeypatch) -> list[str]:
 # ---- the archive ---------------------------------------------------------------------------------
 
 
-def write_bomb(path: Path, entry_size: int) -> None:
-    """A valid zip of one deflated entry of `entry_size` zero bytes, `resources/padding.bin`, written
-    without compressing them: after a full flush deflate codes each MiB of zeros identically."""
-    compressor = zlib.compressobj(9, zlib.DEFLATED, -15)
-    block = compressor.compress(bytes(MIB)) + compressor.flush(zlib.Z_FULL_FLUSH)
-    tail = compressor.flush(zlib.Z_FINISH)
-    blocks = entry_size // MIB
-    crc = 0
-    for _ in range(blocks):
-        crc = zlib.crc32(bytes(MIB), crc)
-    compressed = len(block) * blocks + len(tail)
-    name = b"resources/padding.bin"
-    local = struct.pack("<IHHHHHIIIHH", 0x04034B50, 20, 0, 8, 0, 0, crc, compressed, entry_size, len(name), 0)
-    with path.open("wb") as out:
-        out.write(local + name)
-        for _ in range(blocks):
-            out.write(block)
-        out.write(tail)
-        directory_at = out.tell()
-        central = struct.pack(
-            "<IHHHHHHIIIHHHHHII", 0x02014B50, 20, 20, 0, 8, 0, 0, crc, compressed, entry_size,
-            len(name), 0, 0, 0, 0, 0, 0,
-        )  # fmt: skip
-        out.write(central + name)
-        size = out.tell() - directory_at
-        out.write(struct.pack("<IHHHHIIH", 0x06054B50, 0, 0, 1, 1, size, directory_at, 0))
-
-
 def test_a_2_gib_entry_beside_the_ssd_is_refused_before_extraction(tmp_path, capsys, monkeypatch):
     archive = tmp_path / "bomb.ssp"
-    write_bomb(archive, 2 * GIB)
+    write_zip_bomb(archive, 2 * GIB)
     with zipfile.ZipFile(archive, "a") as zipped:
         zipped.writestr("SystemStructure.ssd", ssd(robot()))
         zipped.write(cosim.builtin_fmu("DifferentialDrive"), "models/robot.fmu")
