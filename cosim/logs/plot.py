@@ -1,8 +1,13 @@
 """Draw a run: the trajectory over the map, and time series of its signals.
 
-Left: map (occupied cells), inflated zone, unknown obstacles, planned path, driven trajectory,
-start and goal, and where VFH took over (the mixer's mode: 1 avoid, 2 recover). Right: one panel
-per signal over time, with the avoid/recover intervals shaded.
+Left: map (occupied cells), inflated zone, unknown obstacles, every plan the run had (the first
+and each replan: the one in force at the end dashed, older ones fainter the older they are; a
+Hybrid A* plan's reverse segments in their own colour), the driven trajectory, the start, each goal
+the run was given (an earlier one hollow, the one in force at the end filled) and where VFH took
+over (the mixer's mode: 1 avoid, 2 recover). Right: one panel per signal over time, with the
+avoid/recover intervals shaded; the distance to the goal is to the goal in force at each time.
+Several runs (`cosim log plot A.mcap B.mcap`) overlay: the first run's map, each run's trajectory,
+last plan, goal and signals in its own colour, named by its file's stem.
 
 Two sources give the same picture: a log (`plot_run`, `plot_log`: `cosim log plot`), or the
 `cosim.record.recorder.RunTrace` a run kept in memory while writing that log (`plot_trace`: the PNG
@@ -35,6 +40,13 @@ MODE_COLORS = {MODE_AVOID: "#ff9f1c", MODE_RECOVER: "#d62828"}
 MODE_NAMES = {MODE_AVOID: "VFH avoiding (mode 1)", MODE_RECOVER: "recovering (mode 2)"}
 ZONE_RGBA = (0.55, 0.7, 0.95, 0.55)  # the inflated zone over free cells
 DPI = 110
+PLAN_COLOR = "#1d4ed8"
+REVERSE_COLOR = "#d946ef"  # a plan's reverse segments (Hybrid A*)
+GOAL_COLOR = "#e76f51"
+OLDEST_PLAN_ALPHA, PREVIOUS_PLAN_ALPHA = 0.2, 0.6  # earlier plans fade linearly between these
+LABELLED_REPLANS = 6  # up to this many replans get their time written beside them
+# one colour per run of an overlay (matplotlib's tab10 without its blue, the plans' colour here)
+RUN_COLORS = ("#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf", "#7f7f7f")
 GRID_ALPHA = 0.3  # the panels' grid lines
 
 # Where the default series come from, in order of preference (each must be in the trace's
@@ -69,16 +81,24 @@ class PlotData:
     has_zone: bool = False
     obstacles: list[np.ndarray] = field(default_factory=list)  # polygons, N x 2 [m]
     tracks: list[np.ndarray] = field(default_factory=list)  # moving obstacles' centres, N x 2 [m]
-    plan: np.ndarray | None = None  # N x 2 [m]
+    plans: list[tuple[float, np.ndarray]] = field(default_factory=list)  # (t [s], N x 2 [m]) oldest first
+    reverse: list[np.ndarray] = field(default_factory=list)  # per plan, per segment: the car reverses
     trajectory: np.ndarray | None = None  # N x 2 [m]
     end: tuple[float, float, str] | None = None  # where a run that missed its goal ended, and why
     mode_points: dict[int, np.ndarray] = field(default_factory=dict)  # mode -> trajectory points in it
     start: tuple[float, float, float] | None = None
-    goal: tuple[float, float] | None = None
+    goal: tuple[float, float] | None = None  # in force at the end (the outcome's)
+    goals: list[tuple[float, float, float]] = field(default_factory=list)  # (t [s], x, y [m]) given
     tolerance: float | None = None
     limits: tuple[float, float, float, float] | None = None  # x0, x1, y0, y1 of the map view
     series: list[Series] = field(default_factory=list)
     modes: tuple[np.ndarray, np.ndarray] | None = None  # (t [s], mode) of the mixer
+    label: str = ""  # the run's name in an overlay (its log's stem)
+
+    @property
+    def plan(self) -> np.ndarray | None:
+        """The plan in force at the end, N x 2 [m], or None."""
+        return self.plans[-1][1] if self.plans else None
 
 
 def plot_run(log_path: str | Path, png_path: str | Path) -> Path:
@@ -89,11 +109,19 @@ def plot_run(log_path: str | Path, png_path: str | Path) -> Path:
         return plot_log(log, Path(png_path))
 
 
-def plot_log(log: Log, png_path: Path, signals: list[str] | None = None) -> Path:
+def plot_log(log: Log, png_path: Path, signals: list[str] | None = None, dpi: float = DPI, size=None) -> Path:
     """Draw `log` to `png_path`. `signals` are "component.variable" names; None = the defaults
     (speed, angular velocity or steering angle, VFH steering direction, minimum range, distance
-    to the goal). Returns the PNG path."""
-    return draw(collect(log, signals), png_path)
+    to the goal). `dpi` and `size` as `draw`'s. Returns the PNG path."""
+    return draw(collect(log, signals), png_path, dpi, size)
+
+
+def plot_logs(
+    logs: list, png_path: Path, signals: list[str] | None = None, dpi: float = DPI, size=None
+) -> Path:
+    """Overlay the runs of `logs` in one picture (each in its own colour, named by its file's stem);
+    otherwise as `plot_log`."""
+    return draw([collect(log, signals) for log in logs], png_path, dpi, size)
 
 
 def plot_trace(trace, png_path: str | Path) -> Path:
@@ -104,7 +132,7 @@ def plot_trace(trace, png_path: str | Path) -> Path:
 def collect(source, signals: list[str] | None = None) -> PlotData:
     """The arrays the plot of `source` (a `Log`, or a `TraceSource`) shows."""
     series = _chosen_series(source, signals) if signals else _default_series(source)
-    data = PlotData(_title(source), series=series, modes=_modes(source))
+    data = PlotData(_title(source), series=series, modes=_modes(source), label=source.path.stem)
     _collect_map(data, source)
     return data
 
@@ -156,8 +184,18 @@ class TraceSource:
         occupied, resolution, origin = self.trace.grids[topic]
         return OccupancyGrid(occupied, resolution, origin)
 
-    def plan(self) -> np.ndarray | None:
-        return self.trace.plan
+    def plans(self) -> list[tuple[float, np.ndarray]]:
+        from cosim.logs.reader import path_poses
+
+        return [(t_ns / 1e9, path_poses(message)) for t_ns, message in self.trace.plans]
+
+    def goals(self) -> list[tuple[float, float, float]]:
+        from cosim.logs.reader import metadata_goal
+
+        if self.trace.goals:
+            return [(t_ns / 1e9, m.pose.position.x, m.pose.position.y) for t_ns, m in self.trace.goals]
+        goal = metadata_goal(self.metadata)  # (a log without /goal: its start time; never drawn)
+        return [] if goal is None else [(0.0, *goal)]
 
     def obstacles(self) -> list:
         from cosim.logs.reader import _marker_shapes
@@ -186,9 +224,9 @@ class TraceSource:
         return Trajectory(rows[:, 0] / 1e9, rows[:, 1], rows[:, 2], theta)
 
     def goal(self) -> tuple[float, float] | None:
-        from cosim.logs.reader import metadata_goal
+        from cosim.logs.reader import final_goal
 
-        return metadata_goal(self.metadata) or self.trace.goal
+        return final_goal(self.metadata, self.goals)
 
     def start(self) -> tuple[float, float, float] | None:
         from cosim.logs.reader import start_pose
@@ -266,9 +304,10 @@ def _collect_map(data: PlotData, source) -> None:
         bounds.append(np.array([[x0, y0], [x1, y1]]))
     data.obstacles = [np.asarray(obstacle.polygon(), dtype=float) for obstacle in source.obstacles()]
     data.tracks = [track[:, 1:3] for track in source.obstacle_tracks() if len(track) > 1]
-    plan = source.plan()
-    if plan is not None and len(plan):
-        data.plan = plan
+    for t, poses in source.plans():
+        if len(poses):
+            data.plans.append((t, poses[:, :2]))
+            data.reverse.append(reverse_segments(poses))
     trajectory = source.trajectory()
     if trajectory is not None and len(trajectory.t):
         data.trajectory = np.column_stack((trajectory.x, trajectory.y))
@@ -285,18 +324,40 @@ def _collect_map(data: PlotData, source) -> None:
                 where = mode_here == mode
                 if np.any(where):
                     data.mode_points[mode] = data.trajectory[where]
-    data.start, data.goal = source.start(), source.goal()
+    data.start, data.goal, data.goals = source.start(), source.goal(), source.goals()
     tolerance = source.metadata.get("navcosim", {}).get("goal_tolerance")
     data.tolerance = float(tolerance) if tolerance else None
-    for point in (data.start, data.goal):
+    for point in (data.start, data.goal, *(goal[1:] for goal in data.goals)):
         if point is not None:
             bounds.append(np.array([point[:2]]))
-    if data.plan is not None:
-        bounds.append(data.plan)
+    bounds += [points for _, points in data.plans]
     if bounds:
         low, high = np.min(np.vstack(bounds), axis=0), np.max(np.vstack(bounds), axis=0)
         margin = 0.03 * max(float(np.max(high - low)), 1.0)
         data.limits = (low[0] - margin, high[0] + margin, low[1] - margin, high[1] + margin)
+
+
+def reverse_segments(poses: np.ndarray) -> np.ndarray:
+    """Per segment of a path of N poses (x, y [m], heading [rad]), whether it is driven in reverse:
+    it leads backwards from the heading at its first pose. A run logs a grid planner's pose facing
+    the next one (never reverse), a Hybrid A* pose with the car's heading, which is the tangent of
+    the curve forwards and its opposite in reverse (a sampled arc's chord is within half its
+    angle, well under 90 degrees, of the tangent); at a cusp the heading is the same before and
+    after while the direction of travel turns round."""
+    if len(poses) < 2:
+        return np.zeros(0, dtype=bool)
+    step = np.diff(poses[:, :2], axis=0)
+    along = step[:, 0] * np.cos(poses[:-1, 2]) + step[:, 1] * np.sin(poses[:-1, 2])
+    return along < 0.0
+
+
+def goal_distance(goals, t: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Distance [m] from (x, y) at times t [s] to the goal in force at each time: the last of `goals`
+    ((t, x, y) each, in time order) given at or before it (the first before any was given)."""
+    goal_t = np.array([goal[0] for goal in goals])
+    points = np.array([goal[1:] for goal in goals], dtype=float).reshape(-1, 2)
+    at = np.clip(np.searchsorted(goal_t, t, side="right") - 1, 0, len(goals) - 1)
+    return np.hypot(x - points[at, 0], y - points[at, 1])
 
 
 def _modes(source) -> tuple[np.ndarray, np.ndarray] | None:
@@ -337,10 +398,11 @@ def _default_series(source) -> list[Series]:
     ranges = source.min_ranges() if isinstance(source, TraceSource) else _min_range(source)
     if ranges is not None:
         series.append(Series("minimum lidar range (/scan)", "m", *ranges, "range"))
-    trajectory, goal = source.trajectory(), source.goal()
-    if trajectory is not None and goal is not None:
-        distance = np.hypot(trajectory.x - goal[0], trajectory.y - goal[1])
-        series.append(Series("distance to the goal", "m", trajectory.t, distance, "goal"))
+    trajectory, goals = source.trajectory(), source.goals()
+    if trajectory is not None and goals:
+        distance = goal_distance(goals, trajectory.t, trajectory.x, trajectory.y)
+        label = "distance to the goal" + (" in force" if len(goals) > 1 else "")
+        series.append(Series(label, "m", trajectory.t, distance, "goal"))
     return series
 
 
@@ -351,7 +413,7 @@ def _chosen_series(log: Log, names: list[str]) -> list[Series]:
         if not name:
             raise CosimError(f"--signals {text!r}: expected COMPONENT.VARIABLE, e.g. vehicle.v_actual")
         signals = log.signals(component)
-        series.append(Series(text, "", signals.t, signals[name], text))
+        series.append(Series(text, signals.unit(name), signals.t, signals[name], text))
     return series
 
 
@@ -420,47 +482,84 @@ def prepare_drawing() -> None:
         get_font(findfont(FontProperties()))
 
 
-def draw(data: PlotData, png_path: str | Path) -> Path:
-    """Render `data` to a PNG (Agg, no pyplot, no display); returns its path."""
+def draw(data: PlotData | list[PlotData], png_path: str | Path, dpi: float = DPI, size=None) -> Path:
+    """Render `data` (one run, or a list of runs to overlay) to a PNG (Agg, no pyplot, no display);
+    `dpi` [pixels per inch]; `size` (width, height) [px], by default 15 in wide and as high as the
+    panels need. Returns its path."""
     with collector_paused():
-        return _render(data, Path(png_path))
+        figure = build_figure(data, dpi, size)
+        png_path = Path(png_path)
+        png_path.parent.mkdir(parents=True, exist_ok=True)
+        write_png(png_path, np.asarray(figure.canvas.buffer_rgba())[:, :, :3], dpi)  # the figure is opaque
+        return png_path
 
 
-def _render(data: PlotData, png_path: Path) -> Path:
+def figure_size(rows: int, size=None, dpi: float = DPI) -> tuple[float, float]:
+    """The figure's (width, height) [in]: `size` [px] at `dpi`, else 15 in by 1.9 in per panel row
+    (at least 7.5 in)."""
+    if size is not None:
+        return size[0] / dpi, size[1] / dpi
+    return 15.0, max(7.5, 1.9 * rows)
+
+
+def build_figure(data: PlotData | list[PlotData], dpi: float = DPI, size=None):
+    """The drawn figure of `data` (its canvas drawn): `draw` writes its pixels; the map is
+    `figure.axes[0]`, then the panels top to bottom."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    panels: dict[str, list[Series]] = {}
-    for item in data.series:
-        panels.setdefault(item.panel, []).append(item)
+    runs = data if isinstance(data, list) else [data]
+    if not runs:
+        raise CosimError("no run to plot")
+    panels: dict[str, list[tuple[int, Series]]] = {}
+    for index, run in enumerate(runs):
+        for item in run.series:
+            panels.setdefault(item.panel, []).append((index, item))
     rows = max(len(panels), 1)
-    height = max(7.5, 1.9 * rows)
-    figure = Figure(figsize=(15, height), dpi=DPI)
+    width, height = figure_size(rows, size, dpi)
+    figure = Figure(figsize=(width, height), dpi=dpi)
     canvas = FigureCanvasAgg(figure)
+    title = runs[0].title if len(runs) == 1 else _overlay_title(runs)
+    title_lines = title.count("\n") + 1
     # Fixed margins [inches] instead of a layout engine: room for the title above, the map's
     # legend below it, and the panels' tick labels.
     grid = figure.add_gridspec(
         rows,
         2,
         width_ratios=(1.15, 1.0),
-        left=0.055,
-        right=0.985,
-        top=1.0 - 0.75 / height,
+        left=0.825 / width,
+        right=1.0 - 0.225 / width,
+        top=1.0 - (0.75 + 0.22 * max(title_lines - 2, 0)) / height,
         bottom=0.55 / height,
         wspace=0.14,
         hspace=0.12,
     )
-    _draw_map(figure.add_subplot(grid[:, 0]), data)
-    panel_axes = _draw_series(figure, grid, panels, data.modes)
-    figure.suptitle(data.title, fontsize=13)
+    map_axes = figure.add_subplot(grid[:, 0])
+    if len(runs) == 1:
+        _draw_map(map_axes, runs[0])
+    else:
+        _draw_overlay_map(map_axes, runs)
+    panel_axes = _draw_series(figure, grid, panels, runs)
+    figure.suptitle(title, fontsize=13)
     for axes in figure.axes:
         _ticks_in_view(axes)
     for axes in panel_axes[:-1]:  # the bottom panel labels the time axis they share
         _unlabelled_x_ticks(axes)
     canvas.draw()
-    png_path.parent.mkdir(parents=True, exist_ok=True)
-    write_png(png_path, np.asarray(canvas.buffer_rgba())[:, :, :3], DPI)  # the figure is opaque
-    return png_path
+    return figure
+
+
+def _overlay_title(runs: list[PlotData]) -> str:
+    lines = [f"{len(runs)} runs overlaid"]
+    for run in runs:
+        result, _, _ = run.title.partition("\n")
+        lines.append(f"{run.label}: {result.partition(': ')[2] or result}")
+    return "\n".join(lines)
+
+
+def run_colour(index: int) -> str:
+    """The colour of the `index`-th run of an overlay."""
+    return RUN_COLORS[index % len(RUN_COLORS)]
 
 
 def write_png(path: Path, pixels: np.ndarray, dpi: float) -> None:
@@ -559,7 +658,7 @@ def _unlabelled_x_ticks(axes) -> None:
 def _draw_map(axes, data: PlotData) -> None:
     from matplotlib.collections import LineCollection, PolyCollection
     from matplotlib.lines import Line2D
-    from matplotlib.patches import Circle, Patch
+    from matplotlib.patches import Patch
 
     handles: list = []
     if data.image is not None:
@@ -579,17 +678,7 @@ def _draw_map(axes, data: PlotData) -> None:
                 [], [], ls=":", color="#c1121f", lw=1.4, label="moving obstacles: tracks (last pose drawn)"
             )
         )
-    if data.plan is not None:
-        (line,) = axes.plot(
-            data.plan[:, 0],
-            data.plan[:, 1],
-            "--",
-            color="#1d4ed8",
-            lw=1.6,
-            label="planned path (A*)",
-            zorder=4,
-        )
-        handles.append(line)
+    handles += _draw_plans(axes, data)
     if data.trajectory is not None:
         (line,) = axes.plot(
             data.trajectory[:, 0], data.trajectory[:, 1], "-", color="#111111", lw=1.4,
@@ -619,13 +708,7 @@ def _draw_map(axes, data: PlotData) -> None:
         handles.append(
             Line2D([], [], marker="o", color="#2a9d8f", ls="none", ms=9, label="start (and heading)")
         )
-    if data.goal is not None:
-        axes.plot(*data.goal, marker="*", color="#e76f51", ms=16, ls="none", zorder=7)
-        if data.tolerance:
-            axes.add_patch(Circle(data.goal, data.tolerance, fill=False, ls=":", color="#e76f51", zorder=6))
-        handles.append(
-            Line2D([], [], marker="*", color="#e76f51", ls="none", ms=13, label="goal (tolerance circle)")
-        )
+    handles += _draw_goals(axes, data, GOAL_COLOR)
     if data.limits is not None:
         axes.set_xlim(*data.limits[:2])
         axes.set_ylim(*data.limits[2:])
@@ -647,21 +730,184 @@ def _draw_map(axes, data: PlotData) -> None:
         axes.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, fontsize=8)
 
 
-def _draw_series(figure, grid, panels: dict[str, list[Series]], modes) -> list:
-    """One panel (axes) per entry of `panels`, top to bottom, sharing the time axis; returns them."""
+def _draw_plans(axes, data: PlotData) -> list:
+    """Every plan of the run, oldest first: the one in force at the end dashed, each earlier one
+    solid and fainter the older it is, a replan's first point (where the robot was) ringed and,
+    for a few, labelled with its time; reverse segments (`data.reverse`) in `REVERSE_COLOR`.
+    Returns the legend handles."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.colors import to_rgba
+    from matplotlib.lines import Line2D
+
+    if not data.plans:
+        return []
+    handles = []
+    count = len(data.plans)
+    earlier = count - 1
+    forward_lines, forward_colours, reverse_lines, reverse_colours = [], [], [], []
+    for index, ((t, points), reverse) in enumerate(zip(data.plans, data.reverse, strict=True)):
+        alpha = 1.0 if index == earlier else _plan_alpha(index, earlier)
+        for run, backwards in _direction_runs(points, reverse):
+            if index == earlier and not backwards:
+                axes.plot(run[:, 0], run[:, 1], "--", color=PLAN_COLOR, lw=1.6, zorder=4)
+                continue
+            (reverse_lines if backwards else forward_lines).append(run)
+            colours = reverse_colours if backwards else forward_colours
+            colours.append(to_rgba(REVERSE_COLOR if backwards else PLAN_COLOR, alpha))
+        if 0 < index:
+            x, y = points[0]
+            axes.plot(x, y, marker="o", mfc="none", mec=to_rgba(PLAN_COLOR, alpha), ms=7, ls="none", zorder=4)
+            if count - 1 <= LABELLED_REPLANS:
+                axes.annotate(
+                    f"replan t = {t:.1f} s", (x, y), xytext=(5, 5), textcoords="offset points", fontsize=7,
+                    color=to_rgba(PLAN_COLOR, max(alpha, PREVIOUS_PLAN_ALPHA)), zorder=9,
+                )  # fmt: skip
+    if forward_lines:
+        axes.add_collection(LineCollection(forward_lines, colors=forward_colours, lw=1.3, zorder=4))
+    if reverse_lines:
+        axes.add_collection(LineCollection(reverse_lines, colors=reverse_colours, lw=2.4, zorder=4))
+    planner = "plan" if count == 1 else f"plan in force at the end (of {count})"
+    handles.append(Line2D([], [], ls="--", color=PLAN_COLOR, lw=1.6, label=planner))
+    if count > 1:
+        handles.append(
+            Line2D([], [], color=PLAN_COLOR, alpha=PREVIOUS_PLAN_ALPHA, lw=1.3,
+                   label="earlier plans (fainter: older), o: replanned here"),
+        )  # fmt: skip
+    if any(reverse.any() for reverse in data.reverse):
+        handles.append(Line2D([], [], color=REVERSE_COLOR, lw=2.4, label="plan: reverse segments"))
+    return handles
+
+
+def _plan_alpha(index: int, earlier: int) -> float:
+    """Opacity of the `index`-th of `earlier` plans replaced during the run (0 the oldest)."""
+    if earlier <= 1:
+        return PREVIOUS_PLAN_ALPHA
+    return OLDEST_PLAN_ALPHA + (PREVIOUS_PLAN_ALPHA - OLDEST_PLAN_ALPHA) * index / (earlier - 1)
+
+
+def _direction_runs(points: np.ndarray, reverse: np.ndarray) -> list[tuple[np.ndarray, bool]]:
+    """`points` cut into polylines of consecutive segments driven the same way: (points, reverse)."""
+    if len(points) < 2:
+        return [(points, False)]
+    cuts = np.flatnonzero(np.diff(reverse.astype(np.int8))) + 1  # first segment of each new run
+    starts = np.concatenate(([0], cuts))
+    ends = np.concatenate((cuts, [len(reverse)]))
+    return [(points[a : b + 1], bool(reverse[a])) for a, b in zip(starts, ends, strict=True)]
+
+
+def _draw_goals(axes, data: PlotData, colour: str, label: str = "goal") -> list:
+    """The goal in force at the end (a filled star and its tolerance circle) and each goal given
+    before it (a hollow star, with the time it was replaced); returns the legend handles."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Circle
+
+    handles = []
+    earlier = [
+        (x, y, data.goals[index + 1][0])
+        for index, (_, x, y) in enumerate(data.goals[:-1])
+        if (x, y) != tuple(data.goal or ())
+    ]
+    for x, y, until in earlier:
+        axes.plot(x, y, marker="*", mfc="white", mec=colour, mew=1.5, ms=15, ls="none", zorder=7)
+        axes.annotate(
+            f"goal until t = {until:.1f} s", (x, y), xytext=(7, -11), textcoords="offset points",
+            fontsize=7, color=colour, zorder=9,
+        )  # fmt: skip
+    if earlier:
+        handles.append(
+            Line2D([], [], marker="*", mfc="white", mec=colour, mew=1.5, ls="none", ms=12,
+                   label=f"earlier {label}" + ("s" if len(earlier) > 1 else "")),
+        )  # fmt: skip
+    if data.goal is not None:
+        axes.plot(*data.goal, marker="*", color=colour, ms=16, ls="none", zorder=7)
+        if data.tolerance:
+            axes.add_patch(Circle(data.goal, data.tolerance, fill=False, ls=":", color=colour, zorder=6))
+        text = (
+            f"{label} (tolerance circle)"
+            if not earlier
+            else f"{label} in force at the end (tolerance circle)"
+        )
+        handles.append(Line2D([], [], marker="*", color=colour, ls="none", ms=13, label=text))
+    return handles
+
+
+def _draw_overlay_map(axes, runs: list[PlotData]) -> None:
+    """Several runs over the first one's map: each run's trajectory, plan in force at the end,
+    goals and end in its colour; the legend names the runs."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    first = runs[0]
+    handles: list = []
+    if first.image is not None:
+        axes.imshow(first.image, extent=first.extent, origin="upper", interpolation="nearest", zorder=0)
+        handles.append(Patch(color="0.15", label=f"map: occupied ({first.label})"))
+    limits = []
+    for index, run in enumerate(runs):
+        colour = run_colour(index)
+        if run.plan is not None:
+            axes.plot(run.plan[:, 0], run.plan[:, 1], "--", color=colour, lw=1.2, alpha=0.7, zorder=4)
+        if run.trajectory is not None:
+            axes.plot(run.trajectory[:, 0], run.trajectory[:, 1], "-", color=colour, lw=1.5, zorder=5)
+            if run.end is not None:
+                axes.plot(*run.end[:2], marker="X", color=colour, ms=10, ls="none", zorder=8)
+        if run.start is not None:
+            axes.plot(*run.start[:2], marker="o", color=colour, ms=8, ls="none", zorder=7)
+        _draw_goals(axes, run, colour)
+        handles.append(Line2D([], [], color=colour, lw=2, label=run.label))
+        if run.limits is not None:
+            limits.append(run.limits)
+    handles += [
+        Line2D([], [], ls="--", color="0.3", label="plan in force at the end"),
+        Line2D([], [], marker="o", color="0.3", ls="none", label="start"),
+        Line2D([], [], marker="*", color="0.3", ls="none", ms=11, label="goal"),
+        Line2D([], [], marker="X", color="0.3", ls="none", label="end (goal not reached)"),
+    ]
+    if limits:
+        low, high = np.min(limits, axis=0), np.max(limits, axis=0)
+        axes.set_xlim(low[0], high[1])
+        axes.set_ylim(low[2], high[3])
+    axes.set_aspect("equal", adjustable="box")
+    axes.set_xlabel("x [m]")
+    axes.set_ylabel("y [m]")
+    axes.set_title("trajectories over the map", y=1.0)
+    axes.grid(alpha=0.25)
+    axes.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, fontsize=8)
+
+
+LINE_STYLES = ("-", "--", ":", "-.")  # the series of one run that share a panel, in an overlay
+
+
+def _draw_series(figure, grid, panels: dict[str, list[tuple[int, Series]]], runs: list[PlotData]) -> list:
+    """One panel (axes) per entry of `panels` ((run index, series) each), top to bottom, sharing the
+    time axis; returns them. One run: each series in the next default colour, the mixer's modes
+    shaded; an overlay: each run in its colour, a panel's series told apart by line style."""
+    overlay = len(runs) > 1
     first_axes = None
     drawn = []
     for row, items in enumerate(panels.values()):
         axes = figure.add_subplot(grid[row, 1], sharex=first_axes)
         first_axes = first_axes or axes
         drawn.append(axes)
-        lines = [axes.plot(item.t, item.values, lw=1.2)[0] for item in items]
-        shaded = _shade_modes(axes, modes)
-        unit = items[0].unit
+        if overlay:
+            labels = list(dict.fromkeys(item.label for _, item in items))
+            for index, item in items:
+                style = LINE_STYLES[labels.index(item.label) % len(LINE_STYLES)]
+                axes.plot(item.t, item.values, style, color=run_colour(index), lw=1.2)
+            entries = [(f"{label} ({LINE_STYLES[k % len(LINE_STYLES)]})" if len(labels) > 1 else label,
+                        "black", None) for k, label in enumerate(labels)]  # fmt: skip
+            if row == 0:
+                entries += [(run.label, run_colour(index), None) for index, run in enumerate(runs)]
+        else:
+            lines = [axes.plot(item.t, item.values, lw=1.2)[0] for _, item in items]
+            shaded = _shade_modes(axes, runs[0].modes)
+            entries = [
+                (item.label, line.get_color(), None) for (_, item), line in zip(items, lines, strict=True)
+            ]
+            if row == 0:  # explain the shading once
+                entries += [(MODE_NAMES[mode], "black", MODE_COLORS[mode]) for mode in shaded]
+        unit = items[0][1].unit
         axes.set_ylabel(f"[{unit}]" if unit else "value")
-        entries = [(item.label, line.get_color(), None) for item, line in zip(items, lines, strict=True)]
-        if row == 0:  # explain the shading once
-            entries += [(MODE_NAMES[mode], "black", MODE_COLORS[mode]) for mode in shaded]
         _label_panel(axes, entries)
         axes.grid(alpha=GRID_ALPHA)
         if row == len(panels) - 1:  # the others draw their ticks unlabelled: `_unlabelled_x_ticks`
