@@ -242,16 +242,20 @@ class TraceSource:
 # --- what is drawn ----------------------------------------------------------------------------
 
 
+def outcome_text(outcome: dict | None, complete: bool) -> str:
+    """How a run ended, in words: "goal reached at t = 74.2 s", "goal NOT reached (collision)"."""
+    if outcome is None:
+        return "no outcome recorded" + ("" if complete else " (log cut short)")
+    if outcome.get("reached") is True:
+        time = outcome.get("time")
+        return f"goal reached at t = {float(time):.1f} s" if time else "goal reached"
+    return f"goal NOT reached ({outcome.get('reason', 'unknown reason')})"
+
+
 def _title(source) -> str:
     name = source.scenario_name or source.path.stem
     outcome = source.outcome
-    if outcome is None:
-        result = "no outcome recorded" + ("" if source.is_complete else " (log cut short)")
-    elif outcome.get("reached") is True:
-        time = outcome.get("time")
-        result = f"goal reached at t = {float(time):.1f} s" if time else "goal reached"
-    else:
-        result = f"goal NOT reached ({outcome.get('reason', 'unknown reason')})"
+    result = outcome_text(outcome, source.is_complete)
     distance = outcome.get("distance") if outcome else None
     tail = f", driven {float(distance):.1f} m" if distance else ""
     return f"{name}: {result}{tail}\n{source.path.name}"
