@@ -258,7 +258,7 @@ class _Scene:
             self.reverse_lines,
             self.goal_marker,
         ]
-        self.artists += [self.trail, self.body, self.heading, self.clock]
+        self.artists += [self.trail, self.body, self.heading, self.clock, self.banner]
         handles += [
             Line2D([], [], ls="--", color=PLAN_COLOR, label="plan (latest)"),
             Line2D([], [], color="#111111", label="driven"),

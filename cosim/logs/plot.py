@@ -417,7 +417,8 @@ def _chosen_series(log: Log, names: list[str]) -> list[Series]:
         if not name:
             raise CosimError(f"--signals {text!r}: expected COMPONENT.VARIABLE, e.g. vehicle.v_actual")
         signals = log.signals(component)
-        series.append(Series(text, signals.unit(name), signals.t, signals[name], text))
+        values = signals[name]  # (an unknown name: the error that lists the known ones)
+        series.append(Series(text, signals.unit(name), signals.t, values, text))
     return series
 
 
