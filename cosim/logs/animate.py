@@ -130,7 +130,18 @@ def _write_gif(frames: Iterator[np.ndarray], out: Path, fps: float) -> None:
     # One palette for every frame (from the first frame plus swatches of the colours that appear
     # only later), so the unchanged map quantises identically and GIF stores only what moved.
     swatches = np.array(
-        [_rgb(colour) for colour in (*MODE_COLORS.values(), FOLLOW_COLOR, "#16a34a", "#c1121f", "#111111")],
+        [
+            _rgb(colour)
+            for colour in (
+                *MODE_COLORS.values(),
+                FOLLOW_COLOR,
+                "#16a34a",
+                "#c1121f",
+                "#111111",
+                REVERSE_COLOR,
+                GOAL_COLOR,
+            )
+        ],
         dtype=np.uint8,
     )
     sample = first[..., :3].copy()
@@ -245,7 +256,7 @@ class _Scene:
         )  # fmt: skip
         axes.add_collection(self.beams)
         self.banner = axes.text(
-            0.5, 0.5, "", transform=axes.transAxes, ha="center", va="center", fontsize=13, zorder=11,
+            0.5, 0.98, "", transform=axes.transAxes, ha="center", va="top", fontsize=12, zorder=11,
             bbox={"boxstyle": "round", "fc": "white", "ec": "0.3", "alpha": 0.9}, **moving,
         )  # fmt: skip
         axes.add_collection(self.obstacle_patches)

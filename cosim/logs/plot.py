@@ -774,10 +774,17 @@ def _draw_plans(axes, data: PlotData) -> list:
     planner = "plan" if count == 1 else f"plan in force at the end (of {count})"
     handles.append(Line2D([], [], ls="--", color=PLAN_COLOR, lw=1.6, label=planner))
     if count > 1:
-        handles.append(
-            Line2D([], [], color=PLAN_COLOR, alpha=PREVIOUS_PLAN_ALPHA, lw=1.3,
-                   label="earlier plans (fainter: older), o: replanned here"),
-        )  # fmt: skip
+        handles += [
+            Line2D(
+                [],
+                [],
+                color=PLAN_COLOR,
+                alpha=PREVIOUS_PLAN_ALPHA,
+                lw=1.3,
+                label="earlier plans (older: fainter)",
+            ),
+            Line2D([], [], marker="o", mfc="none", mec=PLAN_COLOR, ls="none", ms=7, label="replanned here"),
+        ]
     if any(reverse.any() for reverse in data.reverse):
         handles.append(Line2D([], [], color=REVERSE_COLOR, lw=2.4, label="plan: reverse segments"))
     return handles
@@ -827,11 +834,7 @@ def _draw_goals(axes, data: PlotData, colour: str, label: str = "goal") -> list:
         axes.plot(*data.goal, marker="*", color=colour, ms=16, ls="none", zorder=7)
         if data.tolerance:
             axes.add_patch(Circle(data.goal, data.tolerance, fill=False, ls=":", color=colour, zorder=6))
-        text = (
-            f"{label} (tolerance circle)"
-            if not earlier
-            else f"{label} in force at the end (tolerance circle)"
-        )
+        text = f"{label} (tolerance circle)" if not earlier else f"{label} at the end (tolerance circle)"
         handles.append(Line2D([], [], marker="*", color=colour, ls="none", ms=13, label=text))
     return handles
 

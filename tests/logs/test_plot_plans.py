@@ -178,7 +178,7 @@ def test_the_old_goal_is_hollow_and_the_new_one_filled(run):
     new = _pixel_window(figure, figure.axes[0], NEW_GOAL, half=1)
     assert np.all(new == _rgb(plot.GOAL_COLOR)), "the new goal's star is filled"
     labels = [text.get_text() for text in figure.axes[0].get_legend().get_texts()]
-    assert "earlier goal" in labels and "goal in force at the end (tolerance circle)" in labels
+    assert "earlier goal" in labels and "goal at the end (tolerance circle)" in labels
     notes = [child.get_text() for child in figure.axes[0].texts]
     assert any(note.startswith("goal until t = 34.9 s") for note in notes)
 
