@@ -750,7 +750,8 @@ def _draw_plans(axes, data: PlotData) -> list:
     count = len(data.plans)
     earlier = count - 1
     forward_lines, forward_colours, reverse_lines, reverse_colours = [], [], [], []
-    for index, ((t, points), reverse) in enumerate(zip(data.plans, data.reverse, strict=True)):
+    rings, ring_colours = [], []  # where each replan starts (the robot's position then)
+    for index, ((_, points), reverse) in enumerate(zip(data.plans, data.reverse, strict=True)):
         alpha = 1.0 if index == earlier else _plan_alpha(index, earlier)
         for run, backwards in _direction_runs(points, reverse):
             if index == earlier and not backwards:
@@ -760,13 +761,13 @@ def _draw_plans(axes, data: PlotData) -> list:
             colours = reverse_colours if backwards else forward_colours
             colours.append(to_rgba(REVERSE_COLOR if backwards else PLAN_COLOR, alpha))
         if 0 < index:
-            x, y = points[0]
-            axes.plot(x, y, marker="o", mfc="none", mec=to_rgba(PLAN_COLOR, alpha), ms=7, ls="none", zorder=4)
-            if count - 1 <= LABELLED_REPLANS:
-                axes.annotate(
-                    f"replan t = {t:.1f} s", (x, y), xytext=(5, 5), textcoords="offset points", fontsize=7,
-                    color=to_rgba(PLAN_COLOR, max(alpha, PREVIOUS_PLAN_ALPHA)), zorder=9,
-                )  # fmt: skip
+            rings.append(points[0])
+            ring_colours.append(to_rgba(PLAN_COLOR, alpha))
+    if rings:
+        rings = np.array(rings)
+        axes.scatter(rings[:, 0], rings[:, 1], s=49, facecolors="none", edgecolors=ring_colours, zorder=4)
+    if count - 1 <= LABELLED_REPLANS:
+        _label_replans(axes, data)
     if forward_lines:
         axes.add_collection(LineCollection(forward_lines, colors=forward_colours, lw=1.3, zorder=4))
     if reverse_lines:
@@ -788,6 +789,27 @@ def _draw_plans(axes, data: PlotData) -> list:
     if any(reverse.any() for reverse in data.reverse):
         handles.append(Line2D([], [], color=REVERSE_COLOR, lw=2.4, label="plan: reverse segments"))
     return handles
+
+
+def _label_replans(axes, data: PlotData) -> None:
+    """Write each replan's time beside its ring, the newest first; a label that would overlap a
+    newer one's is left out."""
+    from matplotlib.colors import to_rgba
+
+    labelled: list[tuple[float, float]] = []
+    span = data.limits[1] - data.limits[0] if data.limits else 1.0  # [m] of the view's width
+    earlier = len(data.plans) - 1
+    for index in range(earlier, 0, -1):
+        t, points = data.plans[index]
+        x, y = points[0]
+        if any(abs(x - a) < 0.12 * span and abs(y - b) < 0.03 * span for a, b in labelled):
+            continue
+        labelled.append((x, y))
+        alpha = 1.0 if index == earlier else _plan_alpha(index, earlier)
+        axes.annotate(
+            f"replan t = {t:.1f} s", (x, y), xytext=(5, 5), textcoords="offset points", fontsize=7,
+            color=to_rgba(PLAN_COLOR, max(alpha, PREVIOUS_PLAN_ALPHA)), zorder=9,
+        )  # fmt: skip
 
 
 def _plan_alpha(index: int, earlier: int) -> float:
