@@ -42,6 +42,7 @@ from cosim.logs.plot import (
     PLAN_COLOR,
     REVERSE_COLOR,
     _modes,
+    avoider_name,
     draw_grid,
     outcome_text,
     reverse_segments,
@@ -49,7 +50,7 @@ from cosim.logs.plot import (
 from cosim.logs.reader import Log
 
 FOLLOW_COLOR = "#2563eb"
-MODE_LABELS = {0: "follow", MODE_AVOID: "avoid (VFH)", MODE_RECOVER: "recover"}
+MODE_LABELS = {0: "follow", MODE_AVOID: "avoid ({avoider})", MODE_RECOVER: "recover"}
 DEFAULT_RADIUS = 0.5  # [m] footprint when the log's scenario gives none
 WIDTH, HEIGHT = 720, 480  # [px] of a frame by default; even, as H.264's yuv420p needs
 DPI = 80
@@ -209,6 +210,8 @@ class _Scene:
         self.goals = log.goals()
         self.goal_t = np.array([t for t, _, _ in self.goals])
         self.outcome = outcome_text(log.outcome, log.is_complete)
+        avoider = avoider_name(log.metadata)
+        self.mode_labels = {mode: label.format(avoider=avoider) for mode, label in MODE_LABELS.items()}
         self.obstacles = [(t, [shape.polygon() for shape in shapes]) for t, shapes in log.obstacle_frames()]
         self.obstacle_t = np.array([t for t, _ in self.obstacles])
         self.scans = _scans(log, trajectory)
@@ -277,7 +280,7 @@ class _Scene:
             patches.Patch(color="#c1121f", alpha=0.8, label="obstacles (lidar only)"),
         ]
         handles += [
-            patches.Patch(color=colour, label=f"vehicle: {MODE_LABELS[mode]}")
+            patches.Patch(color=colour, label=f"vehicle: {self.mode_labels[mode]}")
             for mode, colour in ((0, FOLLOW_COLOR), *MODE_COLORS.items())
         ]
         self.figure.legend(handles=handles, loc="lower center", ncol=5, fontsize=7, frameon=False)
@@ -308,7 +311,7 @@ class _Scene:
         self.obstacle_patches.set_verts(self.obstacles[obstacles][1] if obstacles >= 0 else [])
         scan = _latest(self.scan_t, t)
         self.beams.set_segments(self.scans[scan][1] if scan >= 0 else [])
-        self.clock.set_text(f"t = {t:.{decimals}f} s   {MODE_LABELS.get(mode, f'mode {mode}')}")
+        self.clock.set_text(f"t = {t:.{decimals}f} s   {self.mode_labels.get(mode, f'mode {mode}')}")
         self.banner.set_text(self.outcome if final else "")
         self.banner.set_visible(final)
         self.canvas.restore_region(self.background)

@@ -37,7 +37,9 @@ if TYPE_CHECKING:
 
 MODE_AVOID, MODE_RECOVER = 1, 2
 MODE_COLORS = {MODE_AVOID: "#ff9f1c", MODE_RECOVER: "#d62828"}
-MODE_NAMES = {MODE_AVOID: "VFH avoiding (mode 1)", MODE_RECOVER: "recovering (mode 2)"}
+MODE_NAMES = {MODE_AVOID: "{avoider} avoiding (mode 1)", MODE_RECOVER: "recovering (mode 2)"}
+# The avoider (the `vfh` role's FMU) by its model name: VFH by default, or the one that replaced it.
+AVOIDERS = {"VectorFieldHistogram": "VFH", "ArtificialPotentialField": "APF"}
 ZONE_RGBA = (0.55, 0.7, 0.95, 0.55)  # the inflated zone over free cells
 DPI = 110
 PLAN_COLOR = "#1d4ed8"
@@ -56,7 +58,7 @@ STEERING = [("vehicle", "steering_angle_actual"), ("mixer", "steering_angle")]
 TURNING = [("vehicle", "omega_actual"), ("mixer", "omega"), ("vehicle", "yaw_rate")]
 DIRECTIONS = [
     ("pure_pursuit", "target_dir", "target direction (pure pursuit)"),
-    ("vfh", "steering_dir", "VFH steering direction"),
+    ("vfh", "steering_dir", "{avoider} steering direction"),
 ]
 
 
@@ -94,6 +96,7 @@ class PlotData:
     series: list[Series] = field(default_factory=list)
     modes: tuple[np.ndarray, np.ndarray] | None = None  # (t [s], mode) of the mixer
     label: str = ""  # the run's name in an overlay (its log's stem)
+    avoider: str = "VFH"  # the avoider that ran (`avoider_name`)
 
     @property
     def plan(self) -> np.ndarray | None:
@@ -132,7 +135,13 @@ def plot_trace(trace, png_path: str | Path) -> Path:
 def collect(source, signals: list[str] | None = None) -> PlotData:
     """The arrays the plot of `source` (a `Log`, or a `TraceSource`) shows."""
     series = _chosen_series(source, signals) if signals else _default_series(source)
-    data = PlotData(_title(source), series=series, modes=_modes(source), label=source.path.stem)
+    data = PlotData(
+        _title(source),
+        series=series,
+        modes=_modes(source),
+        label=source.path.stem,
+        avoider=avoider_name(source.metadata),
+    )
     _collect_map(data, source)
     return data
 
@@ -364,6 +373,16 @@ def goal_distance(goals, t: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndar
     return np.hypot(x - points[at, 0], y - points[at, 1])
 
 
+def avoider_name(metadata: dict) -> str:
+    """The avoider a run used, from its `fmu/vfh` metadata: "VFH", "APF", or the FMU's model name."""
+    model = metadata.get("fmu/vfh", {}).get("model_name", "")
+    return AVOIDERS.get(model, model or "VFH")
+
+
+def mode_name(mode: int, avoider: str) -> str:
+    return MODE_NAMES[mode].format(avoider=avoider)
+
+
 def _modes(source) -> tuple[np.ndarray, np.ndarray] | None:
     if "mixer" not in source.components:
         return None
@@ -395,10 +414,13 @@ def _default_series(source) -> list[Series]:
         component, name, signals = turning
         unit = "rad" if "steering" in name else "rad/s"
         series.append(Series(f"{component}.{name}", unit, signals.t, signals[name], "turning"))
+    avoider = avoider_name(source.metadata)
     for component, name, label in DIRECTIONS:
         found = _first(source, [(component, name)])
         if found:
-            series.append(Series(label, "rad", found[2].t, found[2][name], "direction"))
+            series.append(
+                Series(label.format(avoider=avoider), "rad", found[2].t, found[2][name], "direction")
+            )
     ranges = source.min_ranges() if isinstance(source, TraceSource) else _min_range(source)
     if ranges is not None:
         series.append(Series("minimum lidar range (/scan)", "m", *ranges, "range"))
@@ -699,7 +721,9 @@ def _draw_map(axes, data: PlotData) -> None:
         for mode, points in data.mode_points.items():
             colour = MODE_COLORS[mode]
             axes.scatter(points[:, 0], points[:, 1], s=9, color=colour, zorder=6, linewidths=0)
-            handles.append(Line2D([], [], marker="o", color=colour, ls="none", ms=6, label=MODE_NAMES[mode]))
+            handles.append(
+                Line2D([], [], marker="o", color=colour, ls="none", ms=6, label=mode_name(mode, data.avoider))
+            )
     if data.start is not None:
         x, y, theta = data.start
         axes.plot(x, y, marker="o", color="#2a9d8f", ms=10, ls="none", zorder=7)
@@ -935,7 +959,7 @@ def _draw_series(figure, grid, panels: dict[str, list[tuple[int, Series]]], runs
                 (item.label, line.get_color(), None) for (_, item), line in zip(items, lines, strict=True)
             ]
             if row == 0:  # explain the shading once
-                entries += [(MODE_NAMES[mode], "black", MODE_COLORS[mode]) for mode in shaded]
+                entries += [(mode_name(mode, runs[0].avoider), "black", MODE_COLORS[mode]) for mode in shaded]
         unit = items[0][1].unit
         axes.set_ylabel(f"[{unit}]" if unit else "value")
         _label_panel(axes, entries)

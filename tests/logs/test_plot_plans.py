@@ -251,3 +251,23 @@ def test_the_reverse_rule_on_poses_made_here():
     grid_path = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.0, 0.0]])  # a U-turn on a grid
     headings = np.append(np.arctan2(*np.diff(grid_path, axis=0).T[::-1]), 0.0)
     assert not plot.reverse_segments(np.column_stack((grid_path, headings))).any()
+
+
+def test_the_plot_names_the_avoider_that_ran(tmp_path):
+    """The potential field in the avoider's role: the legend, the shading and the direction panel
+    say APF (the FMU's model name in the log's metadata, read with the mcap package), never VFH."""
+    scenario = load_scenario(REPO / "scenarios" / "warehouse_apf.toml", ["simulation.stop_time=25"])
+    log_path = tmp_path / "apf.mcap"
+    run_scenario(scenario, log_path)
+    assert _metadata(log_path, "fmu/vfh")["model_name"] == "ArtificialPotentialField"
+    with open_log(log_path) as log:
+        data = plot.collect(log)
+        scene = _Scene(log)
+    assert plot.MODE_AVOID in data.mode_points, "the field took over in these 25 s"
+    figure = plot.build_figure(data)
+    legend = [text.get_text() for text in figure.axes[0].get_legend().get_texts()]
+    panels = [text.get_text() for axes in figure.axes[1:] for text in axes.texts]
+    assert "APF avoiding (mode 1)" in legend and "APF avoiding (mode 1)" in panels
+    assert "APF steering direction" in panels
+    assert not any("VFH" in text for text in legend + panels)
+    assert scene.mode_labels[plot.MODE_AVOID] == "avoid (APF)"
