@@ -944,10 +944,17 @@ def _draw_series(figure, grid, panels: dict[str, list[tuple[int, Series]]], runs
         first_axes = first_axes or axes
         drawn.append(axes)
         if overlay:
-            labels = list(dict.fromkeys(item.label for _, item in items))
+            # the k-th series of each run in this panel gets the k-th style, named as the first run names it
+            labels: list[str] = []
+            position = dict.fromkeys(range(len(runs)), 0)
             for index, item in items:
-                style = LINE_STYLES[labels.index(item.label) % len(LINE_STYLES)]
-                axes.plot(item.t, item.values, style, color=run_colour(index), lw=1.2)
+                k = position[index]
+                position[index] += 1
+                if k == len(labels):
+                    labels.append(item.label)
+                axes.plot(
+                    item.t, item.values, LINE_STYLES[k % len(LINE_STYLES)], color=run_colour(index), lw=1.2
+                )
             entries = [(f"{label} ({LINE_STYLES[k % len(LINE_STYLES)]})" if len(labels) > 1 else label,
                         "black", None) for k, label in enumerate(labels)]  # fmt: skip
             if row == 0:
