@@ -35,18 +35,14 @@ from matplotlib.lines import Line2D
 
 from cosim.errors import CosimError
 from cosim.logs.plot import (
-    GOAL_COLOR,
-    MODE_AVOID,
-    MODE_COLORS,
-    MODE_RECOVER,
-    PLAN_COLOR,
-    REVERSE_COLOR,
     _modes,
     avoider_name,
     draw_grid,
     outcome_text,
     reverse_segments,
 )
+from cosim.logs.plot_data import MODE_AVOID, MODE_COLORS, MODE_RECOVER
+from cosim.logs.plot_map import GOAL_COLOR, PLAN_COLOR, REVERSE_COLOR
 from cosim.logs.reader import Log
 
 FOLLOW_COLOR = "#2563eb"

@@ -12,7 +12,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from cosim.logs.diff import DiffReport, signal_difference
-from cosim.logs.plot import DPI, GRID_ALPHA, collector_paused, run_colour, write_png
+from cosim.logs.plot import DPI, GRID_ALPHA, collector_paused, write_png
+from cosim.logs.plot_map import run_colour
 
 if TYPE_CHECKING:
     from cosim.logs.reader import Log

@@ -20,7 +20,8 @@ import numpy as np
 
 from cosim.core.component import closest_names
 from cosim.errors import CosimError
-from cosim.logs.plot import DPI, GRID_ALPHA, collector_paused, plot_logs, run_colour, write_png
+from cosim.logs.plot import DPI, GRID_ALPHA, collector_paused, plot_logs, write_png
+from cosim.logs.plot_map import run_colour
 
 if TYPE_CHECKING:
     from cosim.logs.reader import Log

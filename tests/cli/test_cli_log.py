@@ -208,7 +208,7 @@ def _colour_pixels(pixels, colour: str) -> int:
 
 
 def test_plot_overlays_runs_each_in_its_colour_named_by_its_stem(runs, tmp_path, capsys):
-    from cosim.logs import plot
+    from cosim.logs import plot, plot_map
     from cosim.logs.reader import open_log
 
     out = tmp_path / "both.png"
@@ -216,7 +216,7 @@ def test_plot_overlays_runs_each_in_its_colour_named_by_its_stem(runs, tmp_path,
     assert main(["log", "plot", str(a), str(b), "--png", str(out)]) == 0
     _, _, pixels = _png(out)
     for index in (0, 1):  # each trajectory in its run's colour (opaque lines)
-        assert _colour_pixels(pixels, plot.run_colour(index)) >= 50
+        assert _colour_pixels(pixels, plot_map.run_colour(index)) >= 50
     with open_log(a) as log_a, open_log(b) as log_b:
         figure = plot.build_figure([plot.collect(log_a), plot.collect(log_b)])
     labels = [text.get_text() for text in figure.axes[0].get_legend().get_texts()]
@@ -224,7 +224,7 @@ def test_plot_overlays_runs_each_in_its_colour_named_by_its_stem(runs, tmp_path,
     # every panel has one line per run, in the runs' colours
     for axes in figure.axes[1:]:
         colours = {line.get_color() for line in axes.get_lines()}
-        assert {plot.run_colour(0), plot.run_colour(1)} <= colours
+        assert {plot_map.run_colour(0), plot_map.run_colour(1)} <= colours
     title = figure.get_suptitle().splitlines()
     assert title[0] == "2 runs overlaid" and title[1].startswith("a: goal reached")
     assert title[2] == "failed: goal NOT reached (collision)"

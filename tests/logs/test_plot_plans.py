@@ -15,7 +15,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from cosim.logs import plot
+from cosim.logs import plot, plot_data, plot_map
 from cosim.logs.animate import _Scene, frame_times
 from cosim.logs.reader import open_log
 from cosim.navigation.run import run_scenario
@@ -148,7 +148,7 @@ def test_older_plans_are_drawn_fainter(run):
         data = plot.collect(log)
     figure = plot.build_figure(data)
     bare = plot.build_figure(
-        plot.PlotData(data.title, image=data.image, extent=data.extent, has_zone=data.has_zone,
+        plot_data.PlotData(data.title, image=data.image, extent=data.extent, has_zone=data.has_zone,
                       limits=data.limits, series=data.series)
     )  # fmt: skip
     (oldest, _), (middle, _), (newest, _) = [(points, t) for t, points in data.plans]
@@ -157,15 +157,15 @@ def test_older_plans_are_drawn_fainter(run):
     ]
     # the first of three plans at the oldest opacity, the second (the previous one) at the previous one's
     for points, others, alpha in (
-        (oldest, [middle, newest, data.trajectory, *data.obstacles, *dense], plot.OLDEST_PLAN_ALPHA),
-        (middle, [oldest, newest, data.trajectory, *data.obstacles, *dense], plot.PREVIOUS_PLAN_ALPHA),
+        (oldest, [middle, newest, data.trajectory, *data.obstacles, *dense], plot_map.OLDEST_PLAN_ALPHA),
+        (middle, [oldest, newest, data.trajectory, *data.obstacles, *dense], plot_map.PREVIOUS_PLAN_ALPHA),
     ):
         at = _lonely_point(points, others)
         background = _pixel_window(bare, bare.axes[0], at)[3, 3]
         drawn = _strongest(_pixel_window(figure, figure.axes[0], at), background)
-        expected = alpha * _rgb(plot.PLAN_COLOR) + (1.0 - alpha) * background
+        expected = alpha * _rgb(plot_map.PLAN_COLOR) + (1.0 - alpha) * background
         assert np.abs(drawn - expected).max() <= 6, (at, drawn, expected)
-    assert plot.OLDEST_PLAN_ALPHA < plot.PREVIOUS_PLAN_ALPHA < 1.0
+    assert plot_map.OLDEST_PLAN_ALPHA < plot_map.PREVIOUS_PLAN_ALPHA < 1.0
 
 
 def test_the_old_goal_is_hollow_and_the_new_one_filled(run):
@@ -174,9 +174,9 @@ def test_the_old_goal_is_hollow_and_the_new_one_filled(run):
     old = _pixel_window(figure, figure.axes[0], (84.0, 53.0), half=1)
     assert np.all(old == 255), "the old goal's star is hollow (white inside)"
     ring = _pixel_window(figure, figure.axes[0], (84.0, 53.0), half=8)
-    assert np.any(np.all(ring == _rgb(plot.GOAL_COLOR), axis=2)), "its outline in the goal's colour"
+    assert np.any(np.all(ring == _rgb(plot_map.GOAL_COLOR), axis=2)), "its outline in the goal's colour"
     new = _pixel_window(figure, figure.axes[0], NEW_GOAL, half=1)
-    assert np.all(new == _rgb(plot.GOAL_COLOR)), "the new goal's star is filled"
+    assert np.all(new == _rgb(plot_map.GOAL_COLOR)), "the new goal's star is filled"
     labels = [text.get_text() for text in figure.axes[0].get_legend().get_texts()]
     assert "earlier goal" in labels and "goal at the end (tolerance circle)" in labels
     notes = [child.get_text() for child in figure.axes[0].texts]
@@ -227,11 +227,11 @@ def test_reverse_segments_of_a_hybrid_plan_are_the_planners(goal, cusps, tmp_pat
     assert reverse.any() and not reverse.all()
     # drawn in the reverse colour (the plan in force: opaque), on the longest reverse stretch
     figure = plot.build_figure(data)
-    runs = plot._direction_runs(data.plans[0][1], reverse)
+    runs = plot_map._direction_runs(data.plans[0][1], reverse)
     points = max((points for points, backwards in runs if backwards), key=len)
     at = (points[len(points) // 2 - 1] + points[len(points) // 2]) / 2.0
     drawn = _strongest(_pixel_window(figure, figure.axes[0], at), np.array([255, 255, 255]))
-    assert np.abs(drawn - _rgb(plot.REVERSE_COLOR)).max() <= 6
+    assert np.abs(drawn - _rgb(plot_map.REVERSE_COLOR)).max() <= 6
     labels = [text.get_text() for text in figure.axes[0].get_legend().get_texts()]
     assert "plan: reverse segments" in labels
 
@@ -263,11 +263,11 @@ def test_the_plot_names_the_avoider_that_ran(tmp_path):
     with open_log(log_path) as log:
         data = plot.collect(log)
         scene = _Scene(log)
-    assert plot.MODE_AVOID in data.mode_points, "the field took over in these 25 s"
+    assert plot_data.MODE_AVOID in data.mode_points, "the field took over in these 25 s"
     figure = plot.build_figure(data)
     legend = [text.get_text() for text in figure.axes[0].get_legend().get_texts()]
     panels = [text.get_text() for axes in figure.axes[1:] for text in axes.texts]
     assert "APF avoiding (mode 1)" in legend and "APF avoiding (mode 1)" in panels
     assert "APF steering direction" in panels
     assert not any("VFH" in text for text in legend + panels)
-    assert scene.mode_labels[plot.MODE_AVOID] == "avoid (APF)"
+    assert scene.mode_labels[plot_data.MODE_AVOID] == "avoid (APF)"
