@@ -26,9 +26,9 @@ def register(subparsers) -> None:
     plot = commands.add_parser(
         "plot",
         help="a robot run: trajectory over the map and signals over time; any other log: its "
-        "signals over time (PNG)",
+        "signals over time (PNG); several robot runs: overlaid, each in its own colour",
     )
-    plot.add_argument("log", type=Path, help="run log (.mcap)")
+    plot.add_argument("log", type=Path, nargs="+", help="run log (.mcap); several overlay in one picture")
     plot.add_argument(
         "--signals",
         nargs="+",
@@ -37,7 +37,13 @@ def register(subparsers) -> None:
         "default for a robot run: speed, turn rate or steering angle, VFH steering direction, minimum "
         "range, distance to goal; for a log without map, goal or trajectory: every signal)",
     )
-    plot.add_argument("--png", type=Path, metavar="OUT", help="output image (default: LOG with .png)")
+    plot.add_argument(
+        "--png",
+        type=Path,
+        metavar="OUT",
+        help="output image (default: LOG with .png; needed for several logs)",
+    )
+    _image_options(plot, "the plot's own size")
     plot.add_argument("--force", action="store_true", help="overwrite the image if it exists")
     plot.set_defaults(handler=_plot)
 
@@ -50,6 +56,7 @@ def register(subparsers) -> None:
     animate.add_argument(
         "--speed", type=float, default=10.0, help="simulated seconds per second of video (10)"
     )
+    _image_options(animate, "720x480", default_dpi="80")
     animate.add_argument("--quiet", action="store_true", help="no progress bar")
     animate.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     animate.set_defaults(handler=_animate)
@@ -74,6 +81,14 @@ def register(subparsers) -> None:
     diff.add_argument(
         "--tolerance", type=float, default=1e-9, metavar="X", help="largest allowed |A-B| (1e-9)"
     )
+    diff.add_argument(
+        "--png",
+        type=Path,
+        metavar="OUT",
+        help="also plot the signals that differ: A and B over time, and A - B",
+    )
+    _image_options(diff, "the plot's own size")
+    diff.add_argument("--force", action="store_true", help="overwrite --png if it exists")
     diff.set_defaults(handler=_diff)
 
     recover = commands.add_parser(
@@ -88,6 +103,34 @@ def register(subparsers) -> None:
     )
     recover.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
     recover.set_defaults(handler=_recover)
+
+
+def _image_options(parser, default_size: str, default_dpi: str = "110") -> None:
+    parser.add_argument(
+        "--dpi", type=float, metavar="N", help=f"pixels per inch: the size of text and lines ({default_dpi})"
+    )
+    parser.add_argument(
+        "--size", type=_size, metavar="WxH", help=f"image size in pixels, e.g. 1600x900 ({default_size})"
+    )
+
+
+def _size(text: str) -> tuple[int, int]:
+    width, x, height = text.lower().partition("x")
+    if x and width.strip().isdigit() and height.strip().isdigit():
+        size = int(width), int(height)
+        if 16 <= min(size) and max(size) <= 20_000:
+            return size
+    raise argparse.ArgumentTypeError(
+        f"expected WIDTHxHEIGHT in pixels (16 to 20000 each), e.g. 1600x900, got {text!r}"
+    )
+
+
+def _dpi(args, default: float) -> float:
+    if args.dpi is None:
+        return default
+    if not (10 <= args.dpi <= 1000):
+        raise CosimError(f"--dpi must be between 10 and 1000, got {args.dpi:g}")
+    return args.dpi
 
 
 def _open(path: Path):
@@ -123,26 +166,32 @@ def _info(args) -> int:
 
 
 def _plot(args) -> int:
-    from cosim.logs.plot import skip_matplotlib_docstrings
+    from cosim.logs.plot import DPI, skip_matplotlib_docstrings
     from cosim.logs.signal_plot import plot_any
 
     skip_matplotlib_docstrings()  # this process draws and exits: no help() text needed
-    png = checked_output(args.png or args.log.with_suffix(".png"), args.force)
-    log = _open(args.log)
+    if len(args.log) > 1 and args.png is None:
+        raise CosimError("several logs are overlaid in one picture: name it with --png OUT.png")
+    dpi = _dpi(args, DPI)
+    png = checked_output(args.png or args.log[0].with_suffix(".png"), args.force)
+    logs = [_open(path) for path in args.log]
     signals = [name for text in args.signals for name in text.split(",") if name] if args.signals else None
     with atomic_output(png, args.force) as temporary:
-        _guard(args.log, lambda: plot_any(log, temporary, signals))
+        _guard(args.log[0], lambda: plot_any(logs, temporary, signals, dpi, args.size))
     print(f"wrote {png}")
     return 0
 
 
 def _animate(args) -> int:
-    from cosim.logs.animate import animate_log
+    from cosim.logs.animate import DPI, HEIGHT, WIDTH, animate_log
 
     checked_output(args.out, args.force)
+    dpi, size = _dpi(args, DPI), args.size or (WIDTH, HEIGHT)
     log = _open(args.log)
     with atomic_output(args.out, args.force) as temporary:
-        video = _guard(args.log, lambda: animate_log(log, temporary, args.fps, args.speed, not args.quiet))
+        video = _guard(
+            args.log, lambda: animate_log(log, temporary, args.fps, args.speed, not args.quiet, dpi, size)
+        )
     width, height = video.size
     print(f"wrote {args.out} ({video.frames} frames, {width} x {height} px, {video.seconds:.1f} s)")
     return 0
@@ -166,9 +215,21 @@ def _diff(args) -> int:
 
     if not args.tolerance >= 0:
         raise CosimError(f"--tolerance must be >= 0, got {args.tolerance}")
+    if args.png is not None:
+        from cosim.logs.plot import DPI, skip_matplotlib_docstrings
+
+        skip_matplotlib_docstrings()
+        dpi = _dpi(args, DPI)
+        checked_output(args.png, args.force)
     log_a, log_b = _open(args.log_a), _open(args.log_b)
     report = _guard(args.log_a, lambda: diff_logs(log_a, log_b, args.tolerance))
     print(format_report(report, log_a, log_b))
+    if args.png is not None:
+        from cosim.logs.diff_plot import plot_diff
+
+        with atomic_output(args.png, args.force) as temporary:
+            _guard(args.log_a, lambda: plot_diff(report, log_a, log_b, temporary, dpi, args.size))
+        print(f"wrote {args.png}")
     return 1 if report.differs else 0
 
 

@@ -123,22 +123,32 @@ def _max_deviation(
     t_a: np.ndarray, a: np.ndarray, t_b: np.ndarray, b: np.ndarray, same_times: bool, angle: bool = False
 ) -> tuple[float, float]:
     """Largest |a - b| (modulo 2 pi for an angle) and the time [s] where it occurs; times are int64 ns."""
+    t_a, difference = signal_difference(t_a, a, t_b, b, same_times, angle)
+    if len(difference) == 0:
+        return math.nan, math.nan
+    deviation = np.abs(difference)
+    deviation = np.where(np.isnan(deviation), np.inf, deviation)
+    worst = int(np.argmax(deviation))
+    return float(deviation[worst]), float(t_a[worst]) / 1e9
+
+
+def signal_difference(
+    t_a: np.ndarray, a: np.ndarray, t_b: np.ndarray, b: np.ndarray, same_times: bool, angle: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """A - B at the compared times (int64 ns; module docstring): equal values (NaN in both, the
+    same infinity) give 0, NaN in one gives NaN; an angle's difference beyond pi is taken round
+    the circle, into [-pi, pi)."""
     if not same_times:
         inside = (t_a >= t_b[0]) & (t_a <= t_b[-1]) if len(t_b) else np.zeros(len(t_a), dtype=bool)
         t_a, a = t_a[inside], a[inside]
         b = _interpolate(t_b, _unwrap(b) if angle else b, t_a)
-    if len(a) == 0:
-        return math.nan, math.nan
     equal = (a == b) | (np.isnan(a) & np.isnan(b))  # inf == inf and NaN/NaN count as equal
     with np.errstate(invalid="ignore"):
-        difference = np.abs(a - b)
-        if angle:  # the distance on the circle; within pi the plain difference (exact when equal)
-            wrapped = np.abs(np.remainder(a - b + math.pi, 2.0 * math.pi) - math.pi)
-            difference = np.where(difference > math.pi, wrapped, difference)
-        deviation = np.where(equal, 0.0, difference)
-    deviation = np.where(np.isnan(deviation), np.inf, deviation)
-    worst = int(np.argmax(deviation))
-    return float(deviation[worst]), float(t_a[worst]) / 1e9
+        difference = a - b
+        if angle:  # the difference on the circle; within pi the plain difference (exact when equal)
+            wrapped = np.remainder(difference + math.pi, 2.0 * math.pi) - math.pi
+            difference = np.where(np.abs(difference) > math.pi, wrapped, difference)
+    return t_a, np.where(equal, 0.0, difference)
 
 
 def _unwrap(values: np.ndarray) -> np.ndarray:

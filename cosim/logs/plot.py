@@ -1,8 +1,12 @@
 """Draw a run: the trajectory over the map, and time series of its signals.
 
-Left: map (occupied cells), inflated zone, unknown obstacles, planned path, driven trajectory,
-start and goal, and where VFH took over (the mixer's mode: 1 avoid, 2 recover). Right: one panel
-per signal over time, with the avoid/recover intervals shaded.
+Left: the map panel (`cosim.logs.plot_map`): map, inflated zone, unknown obstacles, every plan the
+run had (older ones fainter, reverse segments marked), the driven trajectory with where the
+avoider took over (the mixer's mode: 1 avoid, 2 recover), the start and each goal given. Right:
+one panel per signal over time, with the avoid/recover intervals shaded; the distance to the goal
+is to the goal in force at each time. Several runs (`cosim log plot A.mcap B.mcap`) overlay: the
+first run's map, each run's trajectory, last plan, goal and signals in its own colour, named by
+its file's stem.
 
 Two sources give the same picture: a log (`plot_run`, `plot_log`: `cosim log plot`), or the
 `cosim.record.recorder.RunTrace` a run kept in memory while writing that log (`plot_trace`: the PNG
@@ -19,21 +23,20 @@ matplotlib is imported when a plot is drawn, not with this module.
 from __future__ import annotations
 
 from contextlib import contextmanager
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from cosim.errors import CosimError
+from cosim.logs.plot_data import MODE_COLORS, ZONE_RGBA, PlotData, Series, mode_name
+from cosim.logs.plot_map import draw_map, draw_overlay_map, run_colour
 
 if TYPE_CHECKING:
     from cosim.logs.reader import Log, Signals, Trajectory
 
-MODE_AVOID, MODE_RECOVER = 1, 2
-MODE_COLORS = {MODE_AVOID: "#ff9f1c", MODE_RECOVER: "#d62828"}
-MODE_NAMES = {MODE_AVOID: "VFH avoiding (mode 1)", MODE_RECOVER: "recovering (mode 2)"}
-ZONE_RGBA = (0.55, 0.7, 0.95, 0.55)  # the inflated zone over free cells
+# The avoider (the `vfh` role's FMU) by its model name: VFH by default, or the one that replaced it.
+AVOIDERS = {"VectorFieldHistogram": "VFH", "ArtificialPotentialField": "APF"}
 DPI = 110
 GRID_ALPHA = 0.3  # the panels' grid lines
 
@@ -44,41 +47,8 @@ STEERING = [("vehicle", "steering_angle_actual"), ("mixer", "steering_angle")]
 TURNING = [("vehicle", "omega_actual"), ("mixer", "omega"), ("vehicle", "yaw_rate")]
 DIRECTIONS = [
     ("pure_pursuit", "target_dir", "target direction (pure pursuit)"),
-    ("vfh", "steering_dir", "VFH steering direction"),
+    ("vfh", "steering_dir", "{avoider} steering direction"),
 ]
-
-
-@dataclass
-class Series:
-    label: str  # legend text
-    unit: str  # y axis unit
-    t: np.ndarray  # [s]
-    values: np.ndarray
-    panel: str  # series with the same panel share an axis
-
-
-@dataclass
-class PlotData:
-    """Everything the figure shows, as arrays: what `draw` turns into pixels."""
-
-    title: str
-    image: np.ndarray | None = (
-        None  # RGBA bytes of the map: occupied cells, free cells, inflated zone; row 0 at the top
-    )
-    extent: tuple[float, float, float, float] | None = None  # the image's (x0, x1, y0, y1) [m]
-    has_zone: bool = False
-    obstacles: list[np.ndarray] = field(default_factory=list)  # polygons, N x 2 [m]
-    tracks: list[np.ndarray] = field(default_factory=list)  # moving obstacles' centres, N x 2 [m]
-    plan: np.ndarray | None = None  # N x 2 [m]
-    trajectory: np.ndarray | None = None  # N x 2 [m]
-    end: tuple[float, float, str] | None = None  # where a run that missed its goal ended, and why
-    mode_points: dict[int, np.ndarray] = field(default_factory=dict)  # mode -> trajectory points in it
-    start: tuple[float, float, float] | None = None
-    goal: tuple[float, float] | None = None
-    tolerance: float | None = None
-    limits: tuple[float, float, float, float] | None = None  # x0, x1, y0, y1 of the map view
-    series: list[Series] = field(default_factory=list)
-    modes: tuple[np.ndarray, np.ndarray] | None = None  # (t [s], mode) of the mixer
 
 
 def plot_run(log_path: str | Path, png_path: str | Path) -> Path:
@@ -89,11 +59,19 @@ def plot_run(log_path: str | Path, png_path: str | Path) -> Path:
         return plot_log(log, Path(png_path))
 
 
-def plot_log(log: Log, png_path: Path, signals: list[str] | None = None) -> Path:
+def plot_log(log: Log, png_path: Path, signals: list[str] | None = None, dpi: float = DPI, size=None) -> Path:
     """Draw `log` to `png_path`. `signals` are "component.variable" names; None = the defaults
     (speed, angular velocity or steering angle, VFH steering direction, minimum range, distance
-    to the goal). Returns the PNG path."""
-    return draw(collect(log, signals), png_path)
+    to the goal). `dpi` and `size` as `draw`'s. Returns the PNG path."""
+    return draw(collect(log, signals), png_path, dpi, size)
+
+
+def plot_logs(
+    logs: list, png_path: Path, signals: list[str] | None = None, dpi: float = DPI, size=None
+) -> Path:
+    """Overlay the runs of `logs` in one picture (each in its own colour, named by its file's stem);
+    otherwise as `plot_log`."""
+    return draw([collect(log, signals) for log in logs], png_path, dpi, size)
 
 
 def plot_trace(trace, png_path: str | Path) -> Path:
@@ -104,7 +82,13 @@ def plot_trace(trace, png_path: str | Path) -> Path:
 def collect(source, signals: list[str] | None = None) -> PlotData:
     """The arrays the plot of `source` (a `Log`, or a `TraceSource`) shows."""
     series = _chosen_series(source, signals) if signals else _default_series(source)
-    data = PlotData(_title(source), series=series, modes=_modes(source))
+    data = PlotData(
+        _title(source),
+        series=series,
+        modes=_modes(source),
+        label=source.path.stem,
+        avoider=avoider_name(source.metadata),
+    )
     _collect_map(data, source)
     return data
 
@@ -156,8 +140,18 @@ class TraceSource:
         occupied, resolution, origin = self.trace.grids[topic]
         return OccupancyGrid(occupied, resolution, origin)
 
-    def plan(self) -> np.ndarray | None:
-        return self.trace.plan
+    def plans(self) -> list[tuple[float, np.ndarray]]:
+        from cosim.logs.reader import path_poses
+
+        return [(t_ns / 1e9, path_poses(message)) for t_ns, message in self.trace.plans]
+
+    def goals(self) -> list[tuple[float, float, float]]:
+        from cosim.logs.reader import metadata_goal
+
+        if self.trace.goals:
+            return [(t_ns / 1e9, m.pose.position.x, m.pose.position.y) for t_ns, m in self.trace.goals]
+        goal = metadata_goal(self.metadata)  # (a log without /goal: its start time; never drawn)
+        return [] if goal is None else [(0.0, *goal)]
 
     def obstacles(self) -> list:
         from cosim.logs.reader import _marker_shapes
@@ -186,9 +180,9 @@ class TraceSource:
         return Trajectory(rows[:, 0] / 1e9, rows[:, 1], rows[:, 2], theta)
 
     def goal(self) -> tuple[float, float] | None:
-        from cosim.logs.reader import metadata_goal
+        from cosim.logs.reader import final_goal
 
-        return metadata_goal(self.metadata) or self.trace.goal
+        return final_goal(self.metadata, self.goals)
 
     def start(self) -> tuple[float, float, float] | None:
         from cosim.logs.reader import start_pose
@@ -204,16 +198,20 @@ class TraceSource:
 # --- what is drawn ----------------------------------------------------------------------------
 
 
+def outcome_text(outcome: dict | None, complete: bool) -> str:
+    """How a run ended, in words: "goal reached at t = 74.2 s", "goal NOT reached (collision)"."""
+    if outcome is None:
+        return "no outcome recorded" + ("" if complete else " (log cut short)")
+    if outcome.get("reached") is True:
+        time = outcome.get("time")
+        return f"goal reached at t = {float(time):.1f} s" if time else "goal reached"
+    return f"goal NOT reached ({outcome.get('reason', 'unknown reason')})"
+
+
 def _title(source) -> str:
     name = source.scenario_name or source.path.stem
     outcome = source.outcome
-    if outcome is None:
-        result = "no outcome recorded" + ("" if source.is_complete else " (log cut short)")
-    elif outcome.get("reached") is True:
-        time = outcome.get("time")
-        result = f"goal reached at t = {float(time):.1f} s" if time else "goal reached"
-    else:
-        result = f"goal NOT reached ({outcome.get('reason', 'unknown reason')})"
+    result = outcome_text(outcome, source.is_complete)
     distance = outcome.get("distance") if outcome else None
     tail = f", driven {float(distance):.1f} m" if distance else ""
     return f"{name}: {result}{tail}\n{source.path.name}"
@@ -266,9 +264,10 @@ def _collect_map(data: PlotData, source) -> None:
         bounds.append(np.array([[x0, y0], [x1, y1]]))
     data.obstacles = [np.asarray(obstacle.polygon(), dtype=float) for obstacle in source.obstacles()]
     data.tracks = [track[:, 1:3] for track in source.obstacle_tracks() if len(track) > 1]
-    plan = source.plan()
-    if plan is not None and len(plan):
-        data.plan = plan
+    for t, poses in source.plans():
+        if len(poses):
+            data.plans.append((t, poses[:, :2]))
+            data.reverse.append(reverse_segments(poses))
     trajectory = source.trajectory()
     if trajectory is not None and len(trajectory.t):
         data.trajectory = np.column_stack((trajectory.x, trajectory.y))
@@ -285,18 +284,46 @@ def _collect_map(data: PlotData, source) -> None:
                 where = mode_here == mode
                 if np.any(where):
                     data.mode_points[mode] = data.trajectory[where]
-    data.start, data.goal = source.start(), source.goal()
+    data.start, data.goal, data.goals = source.start(), source.goal(), source.goals()
     tolerance = source.metadata.get("navcosim", {}).get("goal_tolerance")
     data.tolerance = float(tolerance) if tolerance else None
-    for point in (data.start, data.goal):
+    for point in (data.start, data.goal, *(goal[1:] for goal in data.goals)):
         if point is not None:
             bounds.append(np.array([point[:2]]))
-    if data.plan is not None:
-        bounds.append(data.plan)
+    bounds += [points for _, points in data.plans]
     if bounds:
         low, high = np.min(np.vstack(bounds), axis=0), np.max(np.vstack(bounds), axis=0)
         margin = 0.03 * max(float(np.max(high - low)), 1.0)
         data.limits = (low[0] - margin, high[0] + margin, low[1] - margin, high[1] + margin)
+
+
+def reverse_segments(poses: np.ndarray) -> np.ndarray:
+    """Per segment of a path of N poses (x, y [m], heading [rad]), whether it is driven in reverse:
+    it leads backwards from the heading at its first pose. A run logs a grid planner's pose facing
+    the next one (never reverse), a Hybrid A* pose with the car's heading, which is the tangent of
+    the curve forwards and its opposite in reverse (a sampled arc's chord is within half its
+    angle, well under 90 degrees, of the tangent); at a cusp the heading is the same before and
+    after while the direction of travel turns round."""
+    if len(poses) < 2:
+        return np.zeros(0, dtype=bool)
+    step = np.diff(poses[:, :2], axis=0)
+    along = step[:, 0] * np.cos(poses[:-1, 2]) + step[:, 1] * np.sin(poses[:-1, 2])
+    return along < 0.0
+
+
+def goal_distance(goals, t: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Distance [m] from (x, y) at times t [s] to the goal in force at each time: the last of `goals`
+    ((t, x, y) each, in time order) given at or before it (the first before any was given)."""
+    goal_t = np.array([goal[0] for goal in goals])
+    points = np.array([goal[1:] for goal in goals], dtype=float).reshape(-1, 2)
+    at = np.clip(np.searchsorted(goal_t, t, side="right") - 1, 0, len(goals) - 1)
+    return np.hypot(x - points[at, 0], y - points[at, 1])
+
+
+def avoider_name(metadata: dict) -> str:
+    """The avoider a run used, from its `fmu/vfh` metadata: "VFH", "APF", or the FMU's model name."""
+    model = metadata.get("fmu/vfh", {}).get("model_name", "")
+    return AVOIDERS.get(model, model or "VFH")
 
 
 def _modes(source) -> tuple[np.ndarray, np.ndarray] | None:
@@ -330,17 +357,21 @@ def _default_series(source) -> list[Series]:
         component, name, signals = turning
         unit = "rad" if "steering" in name else "rad/s"
         series.append(Series(f"{component}.{name}", unit, signals.t, signals[name], "turning"))
+    avoider = avoider_name(source.metadata)
     for component, name, label in DIRECTIONS:
         found = _first(source, [(component, name)])
         if found:
-            series.append(Series(label, "rad", found[2].t, found[2][name], "direction"))
+            series.append(
+                Series(label.format(avoider=avoider), "rad", found[2].t, found[2][name], "direction")
+            )
     ranges = source.min_ranges() if isinstance(source, TraceSource) else _min_range(source)
     if ranges is not None:
         series.append(Series("minimum lidar range (/scan)", "m", *ranges, "range"))
-    trajectory, goal = source.trajectory(), source.goal()
-    if trajectory is not None and goal is not None:
-        distance = np.hypot(trajectory.x - goal[0], trajectory.y - goal[1])
-        series.append(Series("distance to the goal", "m", trajectory.t, distance, "goal"))
+    trajectory, goals = source.trajectory(), source.goals()
+    if trajectory is not None and goals:
+        distance = goal_distance(goals, trajectory.t, trajectory.x, trajectory.y)
+        label = "distance to the goal" + (" in force" if len(goals) > 1 else "")
+        series.append(Series(label, "m", trajectory.t, distance, "goal"))
     return series
 
 
@@ -351,7 +382,8 @@ def _chosen_series(log: Log, names: list[str]) -> list[Series]:
         if not name:
             raise CosimError(f"--signals {text!r}: expected COMPONENT.VARIABLE, e.g. vehicle.v_actual")
         signals = log.signals(component)
-        series.append(Series(text, "", signals.t, signals[name], text))
+        values = signals[name]  # (an unknown name: the error that lists the known ones)
+        series.append(Series(text, signals.unit(name), signals.t, values, text))
     return series
 
 
@@ -420,47 +452,79 @@ def prepare_drawing() -> None:
         get_font(findfont(FontProperties()))
 
 
-def draw(data: PlotData, png_path: str | Path) -> Path:
-    """Render `data` to a PNG (Agg, no pyplot, no display); returns its path."""
+def draw(data: PlotData | list[PlotData], png_path: str | Path, dpi: float = DPI, size=None) -> Path:
+    """Render `data` (one run, or a list of runs to overlay) to a PNG (Agg, no pyplot, no display);
+    `dpi` [pixels per inch]; `size` (width, height) [px], by default 15 in wide and as high as the
+    panels need. Returns its path."""
     with collector_paused():
-        return _render(data, Path(png_path))
+        figure = build_figure(data, dpi, size)
+        png_path = Path(png_path)
+        png_path.parent.mkdir(parents=True, exist_ok=True)
+        write_png(png_path, np.asarray(figure.canvas.buffer_rgba())[:, :, :3], dpi)  # the figure is opaque
+        return png_path
 
 
-def _render(data: PlotData, png_path: Path) -> Path:
+def figure_size(rows: int, size=None, dpi: float = DPI) -> tuple[float, float]:
+    """The figure's (width, height) [in]: `size` [px] at `dpi`, else 15 in by 1.9 in per panel row
+    (at least 7.5 in)."""
+    if size is not None:
+        return size[0] / dpi, size[1] / dpi
+    return 15.0, max(7.5, 1.9 * rows)
+
+
+def build_figure(data: PlotData | list[PlotData], dpi: float = DPI, size=None):
+    """The drawn figure of `data` (its canvas drawn): `draw` writes its pixels; the map is
+    `figure.axes[0]`, then the panels top to bottom."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    panels: dict[str, list[Series]] = {}
-    for item in data.series:
-        panels.setdefault(item.panel, []).append(item)
+    runs = data if isinstance(data, list) else [data]
+    if not runs:
+        raise CosimError("no run to plot")
+    panels: dict[str, list[tuple[int, Series]]] = {}
+    for index, run in enumerate(runs):
+        for item in run.series:
+            panels.setdefault(item.panel, []).append((index, item))
     rows = max(len(panels), 1)
-    height = max(7.5, 1.9 * rows)
-    figure = Figure(figsize=(15, height), dpi=DPI)
+    width, height = figure_size(rows, size, dpi)
+    figure = Figure(figsize=(width, height), dpi=dpi)
     canvas = FigureCanvasAgg(figure)
+    title = runs[0].title if len(runs) == 1 else _overlay_title(runs)
+    title_lines = title.count("\n") + 1
     # Fixed margins [inches] instead of a layout engine: room for the title above, the map's
     # legend below it, and the panels' tick labels.
     grid = figure.add_gridspec(
         rows,
         2,
         width_ratios=(1.15, 1.0),
-        left=0.055,
-        right=0.985,
-        top=1.0 - 0.75 / height,
+        left=0.825 / width,
+        right=1.0 - 0.225 / width,
+        top=1.0 - (0.75 + 0.22 * max(title_lines - 2, 0)) / height,
         bottom=0.55 / height,
         wspace=0.14,
         hspace=0.12,
     )
-    _draw_map(figure.add_subplot(grid[:, 0]), data)
-    panel_axes = _draw_series(figure, grid, panels, data.modes)
-    figure.suptitle(data.title, fontsize=13)
+    map_axes = figure.add_subplot(grid[:, 0])
+    if len(runs) == 1:
+        draw_map(map_axes, runs[0])
+    else:
+        draw_overlay_map(map_axes, runs)
+    panel_axes = _draw_series(figure, grid, panels, runs)
+    figure.suptitle(title, fontsize=13)
     for axes in figure.axes:
         _ticks_in_view(axes)
     for axes in panel_axes[:-1]:  # the bottom panel labels the time axis they share
         _unlabelled_x_ticks(axes)
     canvas.draw()
-    png_path.parent.mkdir(parents=True, exist_ok=True)
-    write_png(png_path, np.asarray(canvas.buffer_rgba())[:, :, :3], DPI)  # the figure is opaque
-    return png_path
+    return figure
+
+
+def _overlay_title(runs: list[PlotData]) -> str:
+    lines = [f"{len(runs)} runs overlaid"]
+    for run in runs:
+        result, _, _ = run.title.partition("\n")
+        lines.append(f"{run.label}: {result.partition(': ')[2] or result}")
+    return "\n".join(lines)
 
 
 def write_png(path: Path, pixels: np.ndarray, dpi: float) -> None:
@@ -556,112 +620,46 @@ def _unlabelled_x_ticks(axes) -> None:
     )
 
 
-def _draw_map(axes, data: PlotData) -> None:
-    from matplotlib.collections import LineCollection, PolyCollection
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Circle, Patch
-
-    handles: list = []
-    if data.image is not None:
-        axes.imshow(data.image, extent=data.extent, origin="upper", interpolation="nearest", zorder=0)
-        if data.has_zone:
-            handles.append(Patch(color=ZONE_RGBA[:3], label="inflated zone (planner)"))
-        handles.append(Patch(color="0.15", label="map: occupied"))
-    if data.obstacles:
-        axes.add_collection(
-            PolyCollection(data.obstacles, closed=True, color="#c1121f", alpha=0.75, zorder=3)
-        )
-        handles.append(Patch(color="#c1121f", alpha=0.75, label="unknown obstacles (lidar only)"))
-    if data.tracks:
-        axes.add_collection(LineCollection(data.tracks, colors="#c1121f", linestyles=":", lw=1.4, zorder=3))
-        handles.append(
-            Line2D(
-                [], [], ls=":", color="#c1121f", lw=1.4, label="moving obstacles: tracks (last pose drawn)"
-            )
-        )
-    if data.plan is not None:
-        (line,) = axes.plot(
-            data.plan[:, 0],
-            data.plan[:, 1],
-            "--",
-            color="#1d4ed8",
-            lw=1.6,
-            label="planned path (A*)",
-            zorder=4,
-        )
-        handles.append(line)
-    if data.trajectory is not None:
-        (line,) = axes.plot(
-            data.trajectory[:, 0], data.trajectory[:, 1], "-", color="#111111", lw=1.4,
-            label="driven trajectory", zorder=5,
-        )  # fmt: skip
-        handles.append(line)
-        if data.end is not None:
-            x, y, reason = data.end
-            axes.plot(x, y, marker="X", color="#7b2cbf", ms=11, ls="none", zorder=8)
-            handles.append(
-                Line2D([], [], marker="X", color="#7b2cbf", ls="none", ms=9, label=f"end: {reason}")
-            )
-        for mode, points in data.mode_points.items():
-            colour = MODE_COLORS[mode]
-            axes.scatter(points[:, 0], points[:, 1], s=9, color=colour, zorder=6, linewidths=0)
-            handles.append(Line2D([], [], marker="o", color=colour, ls="none", ms=6, label=MODE_NAMES[mode]))
-    if data.start is not None:
-        x, y, theta = data.start
-        axes.plot(x, y, marker="o", color="#2a9d8f", ms=10, ls="none", zorder=7)
-        axes.annotate(
-            "",
-            xy=(x + np.cos(theta), y + np.sin(theta)),
-            xytext=(x, y),
-            arrowprops={"arrowstyle": "->", "color": "#2a9d8f", "lw": 2},
-            zorder=7,
-        )
-        handles.append(
-            Line2D([], [], marker="o", color="#2a9d8f", ls="none", ms=9, label="start (and heading)")
-        )
-    if data.goal is not None:
-        axes.plot(*data.goal, marker="*", color="#e76f51", ms=16, ls="none", zorder=7)
-        if data.tolerance:
-            axes.add_patch(Circle(data.goal, data.tolerance, fill=False, ls=":", color="#e76f51", zorder=6))
-        handles.append(
-            Line2D([], [], marker="*", color="#e76f51", ls="none", ms=13, label="goal (tolerance circle)")
-        )
-    if data.limits is not None:
-        axes.set_xlim(*data.limits[:2])
-        axes.set_ylim(*data.limits[2:])
-    if data.image is None and data.trajectory is None:
-        axes.text(
-            0.5,
-            0.5,
-            "no map and no trajectory in this log",
-            ha="center",
-            va="center",
-            transform=axes.transAxes,
-        )
-    axes.set_aspect("equal", adjustable="box")
-    axes.set_xlabel("x [m]")
-    axes.set_ylabel("y [m]")
-    axes.set_title("trajectory over the map", y=1.0)  # y given: no search for what might be above
-    axes.grid(alpha=0.25)
-    if handles:  # below the map, so it never hides part of it
-        axes.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, fontsize=8)
+LINE_STYLES = ("-", "--", ":", "-.")  # the series of one run that share a panel, in an overlay
 
 
-def _draw_series(figure, grid, panels: dict[str, list[Series]], modes) -> list:
-    """One panel (axes) per entry of `panels`, top to bottom, sharing the time axis; returns them."""
+def _draw_series(figure, grid, panels: dict[str, list[tuple[int, Series]]], runs: list[PlotData]) -> list:
+    """One panel (axes) per entry of `panels` ((run index, series) each), top to bottom, sharing the
+    time axis; returns them. One run: each series in the next default colour, the mixer's modes
+    shaded; an overlay: each run in its colour, a panel's series told apart by line style."""
+    overlay = len(runs) > 1
     first_axes = None
     drawn = []
     for row, items in enumerate(panels.values()):
         axes = figure.add_subplot(grid[row, 1], sharex=first_axes)
         first_axes = first_axes or axes
         drawn.append(axes)
-        lines = [axes.plot(item.t, item.values, lw=1.2)[0] for item in items]
-        shaded = _shade_modes(axes, modes)
-        unit = items[0].unit
+        if overlay:
+            # the k-th series of each run in this panel gets the k-th style, named as the first run names it
+            labels: list[str] = []
+            position = dict.fromkeys(range(len(runs)), 0)
+            for index, item in items:
+                k = position[index]
+                position[index] += 1
+                if k == len(labels):
+                    labels.append(item.label)
+                axes.plot(
+                    item.t, item.values, LINE_STYLES[k % len(LINE_STYLES)], color=run_colour(index), lw=1.2
+                )
+            entries = [(f"{label} ({LINE_STYLES[k % len(LINE_STYLES)]})" if len(labels) > 1 else label,
+                        "black", None) for k, label in enumerate(labels)]  # fmt: skip
+            if row == 0:
+                entries += [(run.label, run_colour(index), None) for index, run in enumerate(runs)]
+        else:
+            lines = [axes.plot(item.t, item.values, lw=1.2)[0] for _, item in items]
+            shaded = _shade_modes(axes, runs[0].modes)
+            entries = [
+                (item.label, line.get_color(), None) for (_, item), line in zip(items, lines, strict=True)
+            ]
+            if row == 0:  # explain the shading once
+                entries += [(mode_name(mode, runs[0].avoider), "black", MODE_COLORS[mode]) for mode in shaded]
+        unit = items[0][1].unit
         axes.set_ylabel(f"[{unit}]" if unit else "value")
-        entries = [(item.label, line.get_color(), None) for item, line in zip(items, lines, strict=True)]
-        if row == 0:  # explain the shading once
-            entries += [(MODE_NAMES[mode], "black", MODE_COLORS[mode]) for mode in shaded]
         _label_panel(axes, entries)
         axes.grid(alpha=GRID_ALPHA)
         if row == len(panels) - 1:  # the others draw their ticks unlabelled: `_unlabelled_x_ticks`

@@ -398,10 +398,11 @@ class Log:
         return None if message is None else _path_points(message)
 
     def plans(self) -> list[tuple[float, np.ndarray]]:
-        """Every published plan (the first and each replan) as (log time [s], N x 2 [m]), in order."""
+        """Every published plan (the first and each replan) as (log time [s], N x 3 poses: x, y [m],
+        heading [rad]), in order."""
         if not self.has_topic("/plan"):
             return []
-        return [(item.t, _path_points(item.message)) for item in self.messages("/plan")]
+        return [(item.t, path_poses(item.message)) for item in self.messages("/plan")]
 
     def trajectory(self) -> Trajectory | None:
         """The driven trajectory: the vehicle's x, y, theta signals, else the /pose messages."""
@@ -451,13 +452,20 @@ class Log:
                 tracks.setdefault(marker.id, []).append((item.t, x, y))
         return [np.array(tracks[key], dtype=float) for key in sorted(tracks)]
 
-    def goal(self) -> tuple[float, float] | None:
-        """Goal (x, y) [m] from the run's metadata, else the last /goal message."""
+    def goals(self) -> list[tuple[float, float, float]]:
+        """Every goal the run was given as (log time [s], x, y [m]): the /goal messages (the first
+        goal and each change), else the goal of the run's metadata from the log's start."""
+        if self.has_topic("/goal"):
+            return [
+                (item.t, item.message.pose.position.x, item.message.pose.position.y)
+                for item in self.messages("/goal")
+            ]
         goal = metadata_goal(self.metadata)
-        if goal is not None:
-            return goal
-        message = self.last_message("/goal")
-        return (message.pose.position.x, message.pose.position.y) if message else None
+        return [] if goal is None else [(self.start_time, *goal)]
+
+    def goal(self) -> tuple[float, float] | None:
+        """The goal (x, y) [m] in force at the end (`final_goal`)."""
+        return final_goal(self.metadata, self.goals)
 
     def start(self) -> tuple[float, float, float] | None:
         """Start pose (x, y [m], theta [rad]) from the run's metadata, else the first trajectory point."""
@@ -468,6 +476,27 @@ def metadata_goal(metadata: dict) -> tuple[float, float] | None:
     """Goal (x, y) [m] in a run's `navcosim` metadata, or None."""
     goal = _floats(metadata.get("navcosim", {}).get("goal"))
     return (goal[0], goal[1]) if goal is not None and len(goal) >= 2 else None
+
+
+def final_goal(metadata: dict, goals) -> tuple[float, float] | None:
+    """The goal (x, y) [m] in force at the end of a run: the outcome's (a run whose goal changed
+    records its last one there), else the last of `goals()` ((t, x, y) each; called only then: a
+    log reads them from the file), else the run's `navcosim` metadata."""
+    goal = _floats(metadata.get("outcome", {}).get("goal"))
+    if goal is not None and len(goal) >= 2:
+        return goal[0], goal[1]
+    given = goals()
+    return (given[-1][1], given[-1][2]) if given else metadata_goal(metadata)
+
+
+def path_poses(message) -> np.ndarray:
+    """A nav_msgs/Path's poses as N x 3: x, y [m] and heading [rad] (the yaw of each orientation).
+    A run writes a grid planner's path with each pose facing the next one and a Hybrid A* path with
+    the vehicle's heading, which points backwards along the path where the car reverses."""
+    return np.array(
+        [(p.pose.position.x, p.pose.position.y, rosmsg.yaw_of(p.pose.orientation)) for p in message.poses],
+        dtype=float,
+    ).reshape(-1, 3)
 
 
 def start_pose(metadata: dict, trajectory) -> tuple[float, float, float] | None:

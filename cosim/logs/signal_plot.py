@@ -5,7 +5,8 @@ goal or trajectory): its signals over time, one panel each, titled by the system
 robot picture (`cosim.logs.plot.plot_log`, unchanged), any other this one. Every variable of every
 `/signals/<component>` is drawn (`component.variable`, with its unit), or the ones chosen; panels
 go in up to three columns and share the time axis; past `MAX_PANELS` signals the title says how
-many are left out.
+many are left out. Several logs overlay: the first log's signals (or the ones chosen), each log's
+line in its own colour, named by the log's file stem.
 """
 
 from __future__ import annotations
@@ -19,7 +20,8 @@ import numpy as np
 
 from cosim.core.component import closest_names
 from cosim.errors import CosimError
-from cosim.logs.plot import DPI, GRID_ALPHA, collector_paused, plot_log, write_png
+from cosim.logs.plot import DPI, GRID_ALPHA, collector_paused, plot_logs, write_png
+from cosim.logs.plot_map import run_colour
 
 if TYPE_CHECKING:
     from cosim.logs.reader import Log
@@ -35,14 +37,20 @@ class SignalPanel:
     unit: str
     t: np.ndarray  # [s]
     values: np.ndarray
+    run: int = 0  # which log of an overlay
 
 
-def plot_any(log: Log, png_path: str | Path, signals: list[str] | None = None) -> Path:
-    """Draw `log` to `png_path` as a robot's run or as signals over time (module docstring);
-    `signals` ("component.variable") None: the picture's defaults. Returns the PNG path."""
-    if is_robot_log(log):
-        return plot_log(log, Path(png_path), signals)
-    return plot_signals(log, png_path, signals)
+def plot_any(
+    logs: Log | list[Log], png_path: str | Path, signals: list[str] | None = None, dpi: float = DPI, size=None
+) -> Path:
+    """Draw `logs` (one, or several to overlay) to `png_path` as robots' runs when each is one,
+    else as signals over time (module docstring); `signals` ("component.variable") None: the
+    picture's defaults; `dpi` [pixels per inch], `size` (width, height) [px] or None: the
+    picture's own. Returns the PNG path."""
+    logs = logs if isinstance(logs, list) else [logs]
+    if all(is_robot_log(log) for log in logs):
+        return plot_logs(logs, Path(png_path), signals, dpi, size)
+    return plot_signals(logs, png_path, signals, dpi, size)
 
 
 def is_robot_log(log: Log) -> bool:
@@ -81,11 +89,25 @@ def _reference(log: Log, text: str) -> tuple[str, str]:
     return component, name
 
 
-def plot_signals(log: Log, png_path: str | Path, signals: list[str] | None = None) -> Path:
-    """Draw the signals of `log` (all, or `signals`) to `png_path`; returns the PNG path."""
-    panels = signal_panels(log, signals)
+def plot_signals(
+    logs: Log | list[Log], png_path: str | Path, signals: list[str] | None = None, dpi: float = DPI, size=None
+) -> Path:
+    """Draw the signals of `logs` (all of the first log's, or `signals`; several logs overlaid)
+    to `png_path`; returns the PNG path."""
+    logs = logs if isinstance(logs, list) else [logs]
+    panels = signal_panels(logs[0], signals)
+    names = [(panel.label, *panel.label.split(".", 1)) for panel in panels[:MAX_PANELS]]
+    drawn = list(panels[:MAX_PANELS])
+    for run, log in enumerate(logs[1:], start=1):
+        for label, component, name in names:
+            if component in log.components and name in log.signal_names(component):
+                recorded = log.signals(component)
+                drawn.append(SignalPanel(label, recorded.unit(name), recorded.t, recorded[name], run))
+    title = signal_title(logs[0], len(panels))
+    if len(logs) > 1:
+        title = f"{len(logs)} logs overlaid: " + ", ".join(log.path.stem for log in logs) + "\n" + title
     with collector_paused():
-        return _render(panels[:MAX_PANELS], signal_title(log, len(panels)), Path(png_path))
+        return _render(drawn, title, Path(png_path), dpi, size, [log.path.stem for log in logs])
 
 
 def signal_title(log: Log, signals: int) -> str:
@@ -103,31 +125,54 @@ def signal_title(log: Log, signals: int) -> str:
     return f"{title}\n{log.path.name}, {ended}"
 
 
-def _render(panels: list[SignalPanel], title: str, png_path: Path) -> Path:
+def _render(
+    drawn: list[SignalPanel],
+    title: str,
+    png_path: Path,
+    dpi: float = DPI,
+    size=None,
+    runs: list[str] | None = None,
+) -> Path:
+    """One panel per label of `drawn` (in order), each run's line in its colour when `runs` names
+    more than one."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
+    panels: dict[str, list[SignalPanel]] = {}
+    for item in drawn:
+        panels.setdefault(item.label, []).append(item)
+    overlay = runs is not None and len(runs) > 1
     columns = 1 if len(panels) <= 6 else 2 if len(panels) <= 16 else 3
     rows = max(1, math.ceil(len(panels) / columns))
-    height = 1.3 + PANEL_HEIGHT * rows
-    figure = Figure(figsize=(COLUMN_WIDTH * columns + 1.0, height), dpi=DPI)
+    title_lines = title.count("\n") + 1
+    width, height = COLUMN_WIDTH * columns + 1.0, 1.3 + 0.22 * (title_lines - 2) + PANEL_HEIGHT * rows
+    if size is not None:
+        width, height = size[0] / dpi, size[1] / dpi
+    figure = Figure(figsize=(width, height), dpi=dpi)
     canvas = FigureCanvasAgg(figure)
     grid = figure.add_gridspec(
-        rows, columns, left=0.9 / (COLUMN_WIDTH * columns + 1.0), right=0.985, top=1.0 - 0.8 / height,
+        rows, columns, left=0.9 / width, right=0.985, top=1.0 - (0.8 + 0.22 * (title_lines - 2)) / height,
         bottom=0.5 / height, wspace=0.22, hspace=0.35,
     )  # fmt: skip
     shared = None
-    for index, panel in enumerate(panels):
+    for index, (label, items) in enumerate(panels.items()):
         row, column = divmod(index, columns)
         axes = figure.add_subplot(grid[row, column], sharex=shared)
         shared = shared or axes
-        axes.plot(panel.t, panel.values, lw=1.2)
-        axes.set_title(panel.label, fontsize=9, loc="left", y=1.0)
-        axes.set_ylabel(f"[{panel.unit}]" if panel.unit else "value", fontsize=8)
+        for item in items:
+            axes.plot(item.t, item.values, lw=1.2, **({"color": run_colour(item.run)} if overlay else {}))
+        axes.set_title(label, fontsize=9, loc="left", y=1.0)
+        unit = items[0].unit
+        axes.set_ylabel(f"[{unit}]" if unit else "value", fontsize=8)
         axes.tick_params(labelsize=8)
         axes.grid(alpha=GRID_ALPHA)
         if index + columns >= len(panels):  # the lowest panel of its column
             axes.set_xlabel("time [s]", fontsize=8)
+        if overlay and index == 0:
+            from matplotlib.lines import Line2D
+
+            handles = [Line2D([], [], color=run_colour(k), label=name) for k, name in enumerate(runs)]
+            axes.legend(handles=handles, loc="upper right", fontsize=7)
     if not panels:
         axes = figure.add_subplot(grid[0, 0])
         axes.text(
@@ -137,5 +182,5 @@ def _render(panels: list[SignalPanel], title: str, png_path: Path) -> Path:
     figure.suptitle(title, fontsize=12)
     canvas.draw()
     png_path.parent.mkdir(parents=True, exist_ok=True)
-    write_png(png_path, np.asarray(canvas.buffer_rgba())[:, :, :3], DPI)
+    write_png(png_path, np.asarray(canvas.buffer_rgba())[:, :, :3], dpi)
     return png_path

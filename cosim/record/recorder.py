@@ -100,10 +100,11 @@ TRACE_LIMIT = 20_000_000  # values kept at most; a longer run's plot reads its l
 
 class RunTrace:
     """What the default plot of a run draws, kept as the run writes its log: the last grid of each
-    map topic, the last plan and goal, the obstacle frames (marker centres), per scan the shortest
-    valid range, the /pose rows and the `TRACE_SIGNALS` columns of each signal channel, appended a
-    block at a time. Every value is the one the log holds, computed as `cosim.logs.reader` decodes
-    it, so a plot drawn from the trace is the plot of the log (`cosim.logs.plot.plot_trace`).
+    map topic, every /plan and /goal message (the first and each change), the obstacle frames
+    (marker centres), per scan the shortest valid range, the /pose rows and the `TRACE_SIGNALS`
+    columns of each signal channel, appended a block at a time. Every value is the one the log
+    holds, computed as `cosim.logs.reader` decodes it (the plans and goals are the messages
+    written), so a plot drawn from the trace is the plot of the log (`cosim.logs.plot.plot_trace`).
 
     `complete` is False until the log was closed; `dropped` is True when the run wrote more than
     `TRACE_LIMIT` values (the trace then stops growing and the plot reads the log)."""
@@ -114,8 +115,8 @@ class RunTrace:
         self.grids: dict[
             str, tuple[np.ndarray, float, tuple[float, float]]
         ] = {}  # topic -> (occupied, res, origin)
-        self.plan: np.ndarray | None = None  # N x 2 [m]
-        self.goal: tuple[float, float] | None = None
+        self.plans: list[tuple[int, object]] = []  # (t_ns, nav_msgs/Path) of each /plan message
+        self.goals: list[tuple[int, object]] = []  # (t_ns, geometry_msgs/PoseStamped) of each /goal
         self.obstacle_markers: list[
             tuple[int, int, float, float]
         ] = []  # (t_ns, id, x, y) of each frame's markers
@@ -612,7 +613,7 @@ class Recorder:
         message = rosmsg.pose_stamped(t_ns, x, y, 0.0 if theta is None else theta)
         self._write_message("/goal", t_ns, message)
         if self.trace is not None:
-            self.trace.goal = (message.pose.position.x, message.pose.position.y)
+            self.trace.goals.append((int(t_ns), message))
 
     def write_path(self, t_ns: int, path: np.ndarray) -> None:
         """The planned path, N x 2 (x, y) or N x 3 (x, y, theta) [m, m, rad], on /plan. Without
@@ -635,7 +636,7 @@ class Recorder:
         message = rosmsg.make("nav_msgs/msg/Path", header=rosmsg.header(t_ns, MAP_FRAME), poses=poses)
         self._write_message("/plan", t_ns, message)
         if self.trace is not None:
-            self.trace.plan = np.array([(p.pose.position.x, p.pose.position.y) for p in poses]).reshape(-1, 2)
+            self.trace.plans.append((int(t_ns), message))
 
     def write_grid(self, t_ns: int, grid, topic: str = "/map") -> None:
         """An occupancy grid (`planner.OccupancyGrid`: `.occupied` [row, col] with row 0 at the top,

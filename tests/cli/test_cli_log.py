@@ -193,3 +193,138 @@ def test_info_shows_the_overrides_the_run_applied(tmp_path, capsys):
     capsys.readouterr()
     assert main(["log", "info", str(tmp_path / "plain.mcap")]) == 0
     assert "vfh.safety_distance" not in capsys.readouterr().out
+
+
+def _png(path):
+    from PIL import Image
+
+    with Image.open(path) as image:
+        return image.size, image.info.get("dpi"), np.asarray(image.convert("RGB"))
+
+
+def _colour_pixels(pixels, colour: str) -> int:
+    rgb = np.array([int(colour[i : i + 2], 16) for i in (1, 3, 5)])
+    return int(np.all(pixels == rgb, axis=2).sum())
+
+
+def test_plot_overlays_runs_each_in_its_colour_named_by_its_stem(runs, tmp_path, capsys):
+    from cosim.logs import plot, plot_map
+    from cosim.logs.reader import open_log
+
+    out = tmp_path / "both.png"
+    a, b = runs["a"].path, runs["failed"].path
+    assert main(["log", "plot", str(a), str(b), "--png", str(out)]) == 0
+    _, _, pixels = _png(out)
+    for index in (0, 1):  # each trajectory in its run's colour (opaque lines)
+        assert _colour_pixels(pixels, plot_map.run_colour(index)) >= 50
+    with open_log(a) as log_a, open_log(b) as log_b:
+        figure = plot.build_figure([plot.collect(log_a), plot.collect(log_b)])
+    labels = [text.get_text() for text in figure.axes[0].get_legend().get_texts()]
+    assert "a" in labels and "failed" in labels
+    # every panel has one line per run, in the runs' colours
+    for axes in figure.axes[1:]:
+        colours = {line.get_color() for line in axes.get_lines()}
+        assert {plot_map.run_colour(0), plot_map.run_colour(1)} <= colours
+    title = figure.get_suptitle().splitlines()
+    assert title[0] == "2 runs overlaid" and title[1].startswith("a: goal reached")
+    assert title[2] == "failed: goal NOT reached (collision)"
+    assert main(["log", "plot", str(a), str(b)]) == 2  # several logs need a --png to name the picture
+    assert "--png" in capsys.readouterr().err
+
+
+def test_diff_png_plots_the_signals_that_differ(runs, tmp_path, capsys):
+    from cosim.logs.diff import diff_logs
+    from cosim.logs.diff_plot import diff_figure
+    from cosim.logs.reader import open_log
+
+    out = tmp_path / "diff.png"
+    a, b = runs["a"], runs["vfh_changed"]
+    assert main(["log", "diff", str(a.path), str(b.path), "--png", str(out)]) == 1
+    assert f"wrote {out}" in capsys.readouterr().out and out.exists()
+    with open_log(a.path) as log_a, open_log(b.path) as log_b:
+        figure = diff_figure(diff_logs(log_a, log_b, 1e-9), log_a, log_b)
+    titles = [axes.get_title(loc="left") for axes in figure.axes]
+    # the signals that differ, from the written arrays (inf + 1e-3 is inf: equal)
+    before, after = a.signals["vfh"], b.signals["vfh"]
+    changed = [
+        name
+        for column, name in enumerate(COMPONENTS["vfh"])
+        if not np.array_equal(before[:, column], after[:, column], equal_nan=True)
+    ]
+    assert len(figure.axes) == 2 * len(changed)
+    assert sorted(title.split(":")[0] for title in titles[::2]) == sorted(f"vfh.{name}" for name in changed)
+    for left, right in zip(figure.axes[::2], figure.axes[1::2], strict=True):
+        name = left.get_title(loc="left").split(":")[0].removeprefix("vfh.")
+        column = COMPONENTS["vfh"].index(name)
+        expected = before[:, column] - after[:, column]
+        expected[np.isnan(before[:, column]) & np.isnan(after[:, column])] = 0.0  # NaN in both: equal
+        (line,) = right.get_lines()[:1]
+        np.testing.assert_allclose(line.get_ydata(), expected, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(line.get_xdata(), a.t_ns / 1e9)
+        assert len(left.get_lines()) >= 2  # A and B
+    # two equal runs: a picture that says so
+    assert main(["log", "diff", str(a.path), str(runs["same"].path), "--png", str(out), "--force"]) == 0
+
+
+def test_dpi_and_size_set_the_pictures_pixels(runs, tmp_path, capsys):
+    png = tmp_path / "sized.png"
+    assert (
+        main(["log", "plot", str(runs["a"].path), "--png", str(png), "--size", "800x500", "--dpi", "60"]) == 0
+    )
+    size, dpi, _ = _png(png)
+    assert size == (800, 500) and np.allclose(dpi, (60, 60), atol=0.01)
+    assert main(["log", "plot", str(runs["a"].path), "--png", str(png), "--force", "--dpi", "55"]) == 0
+    size, dpi, _ = _png(png)
+    assert size == (15 * 55, round(9.5 * 55)) and np.allclose(dpi, (55, 55), atol=0.01)  # 15 x 9.5 in
+    diff = tmp_path / "diff.png"
+    args = ["log", "diff", str(runs["a"].path), str(runs["vfh_changed"].path), "--png", str(diff)]
+    assert main([*args, "--size", "640x480"]) == 1
+    assert _png(diff)[0] == (640, 480)
+    gif = tmp_path / "small.gif"
+    assert (
+        main(["log", "animate", str(runs["a"].path), "--out", str(gif), "--size", "320x240", "--quiet"]) == 0
+    )
+    from PIL import Image
+
+    with Image.open(gif) as image:
+        assert image.size == (320, 240)
+    capsys.readouterr()
+    odd = ["log", "animate", str(runs["a"].path), "--out", str(tmp_path / "odd.mp4"), "--size", "321x240"]
+    assert main(odd) == 2 and "even" in capsys.readouterr().err
+    assert main(["log", "plot", str(runs["a"].path), "--png", str(png), "--force", "--dpi", "0"]) == 2
+    with pytest.raises(SystemExit) as stopped:
+        main(["log", "plot", str(runs["a"].path), "--size", "800"])
+    assert stopped.value.code == 2 and "WIDTHxHEIGHT" in capsys.readouterr().err
+
+
+def test_signals_plot_keeps_the_logs_units(tmp_path, capsys):
+    """Chosen signals of a real run: each panel's axis says the unit the log's channel metadata
+    holds (read with the mcap package)."""
+    import json
+    from pathlib import Path
+
+    from mcap.reader import make_reader
+
+    from cosim.logs import plot
+    from cosim.logs.reader import open_log
+    from cosim.record.rosmsg import COMPONENT_KEY, SIGNAL_NAMES_KEY, SIGNAL_UNITS_KEY
+
+    scenario = Path(__file__).resolve().parents[2] / "scenarios" / "warehouse_diff_drive_no_obstacle.toml"
+    log = tmp_path / "units.mcap"
+    assert (
+        main(["run", str(scenario), "--out", str(log), "--no-plot", "--set", "simulation.stop_time=0.5"]) == 1
+    )
+    chosen = ["vehicle.v_actual", "vehicle.theta", "pure_pursuit.lookahead_x"]
+    units = {}
+    with open(log, "rb") as handle:
+        for channel in make_reader(handle).get_summary().channels.values():
+            if SIGNAL_UNITS_KEY in channel.metadata:
+                names = json.loads(channel.metadata[SIGNAL_NAMES_KEY])
+                for name, unit in zip(names, json.loads(channel.metadata[SIGNAL_UNITS_KEY]), strict=True):
+                    units[f"{channel.metadata[COMPONENT_KEY]}.{name}"] = unit
+    assert [units[name] for name in chosen] == ["m/s", "rad", "m"]
+    png = tmp_path / "chosen.png"
+    assert main(["log", "plot", str(log), "--png", str(png), "--signals", *chosen]) == 0
+    with open_log(log) as read:
+        figure = plot.build_figure(plot.collect(read, chosen))
+    assert [axes.get_ylabel() for axes in figure.axes[1:]] == [f"[{units[name]}]" for name in chosen]

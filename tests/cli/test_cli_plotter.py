@@ -113,10 +113,10 @@ def test_a_child_that_fails_is_drawn_for_here(cosim_run, tmp_path: Path, monkeyp
     parent = os.getpid()
     draw = plot.draw
 
-    def draw_here_only(data, png_path):
+    def draw_here_only(data, png_path, *options):  # options: dpi, size
         if os.getpid() != parent:
             raise RuntimeError("a bug in the child")
-        return draw(data, png_path)
+        return draw(data, png_path, *options)
 
     monkeypatch.setattr(plot, "draw", draw_here_only)
     process = PlotProcess.start()

@@ -40,7 +40,9 @@ def test_gif_has_one_frame_per_speed_over_fps_seconds(short_run, tmp_path, capsy
     assert main(["log", "animate", str(short_run), "--out", str(out), "--fps", "10", "--speed", "2"]) == 0
     assert f"wrote {out}" in capsys.readouterr().out
     start, end = _log_span(short_run)
-    expected = math.floor((end - start) * fps / speed + 1e-9) + 1
+    expected = math.floor((end - start) * fps / speed + 1e-9) + 1  # every speed/fps s from the start
+    if not math.isclose((end - start) * fps / speed % 1.0, 0.0, abs_tol=1e-6):
+        expected += 1  # and the run's end time, between two
     with Image.open(out) as gif:
         assert gif.n_frames == expected
         assert gif.info["duration"] == pytest.approx(1000 / fps, abs=10)  # GIF stores 10 ms units

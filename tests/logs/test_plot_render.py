@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from cosim.logs import plot
+from cosim.logs import plot, plot_data
 
 
-def _data(panels: int = 5) -> plot.PlotData:
+def _data(panels: int = 5) -> plot_data.PlotData:
     """A small run's picture: a walled map with an inflated zone, an obstacle, a plan, a driven
     trajectory partly under VFH, start and goal, and `panels` panels of signals (one with two)."""
     occupied = np.zeros((40, 60), dtype=bool)
@@ -27,22 +27,23 @@ def _data(panels: int = 5) -> plot.PlotData:
     t = np.linspace(0.0, 30.0, 3001)
     x, y = 5.0 + 0.8 * t, 10.0 + 6.0 * np.sin(t / 9.0)
     trajectory = np.column_stack((x, y))
-    mode = np.where((t > 8.0) & (t < 12.5), plot.MODE_AVOID, 0)
+    mode = np.where((t > 8.0) & (t < 12.5), plot_data.MODE_AVOID, 0)
     values = [0.8 + 0.1 * np.sin(t), 0.3 * np.cos(t / 3.0), np.sin(t / 4.0), 2.0 + np.cos(t / 2.0), 30.0 - t]
     series = [
-        plot.Series(f"signal {index}", "m", t, value, f"panel {index}")
+        plot_data.Series(f"signal {index}", "m", t, value, f"panel {index}")
         for index, value in enumerate(values[:panels])
     ]
-    series.insert(1, plot.Series("second signal of panel 0", "m", t, 0.5 * values[0], "panel 0"))
-    data = plot.PlotData(
+    series.insert(1, plot_data.Series("second signal of panel 0", "m", t, 0.5 * values[0], "panel 0"))
+    data = plot_data.PlotData(
         "synthetic: goal reached at t = 30.0 s\nsynthetic.mcap",
         image=plot.map_image(grid, inflated),
         extent=(0.0, 30.0, 0.0, 20.0),
         has_zone=True,
         obstacles=[np.array([[20.0, 4.0], [21.0, 4.0], [21.0, 5.0], [20.0, 5.0]])],
-        plan=np.array([[5.0, 10.0], [12.0, 14.0], [20.0, 15.0], [29.0, 12.0]]),
+        plans=[(0.0, np.array([[5.0, 10.0], [12.0, 14.0], [20.0, 15.0], [29.0, 12.0]]))],
+        reverse=[np.zeros(3, dtype=bool)],
         trajectory=trajectory,
-        mode_points={plot.MODE_AVOID: trajectory[mode == plot.MODE_AVOID]},
+        mode_points={plot_data.MODE_AVOID: trajectory[mode == plot_data.MODE_AVOID]},
         start=(5.0, 10.0, 0.5),
         goal=(29.0, 12.0),
         tolerance=0.6,
@@ -82,13 +83,20 @@ def test_the_png_shows_every_part_in_its_colour(tmp_path):
         assert image.size == (15 * plot.DPI, round(9.5 * plot.DPI))
         assert np.allclose(image.info["dpi"], (plot.DPI, plot.DPI), atol=0.01)
     pixels = _pixels(path)
-    for colour in ("#1d4ed8", "#2a9d8f", "#e76f51", plot.MODE_COLORS[plot.MODE_AVOID], "#1f77b4", "#ff7f0e"):
+    for colour in (
+        "#1d4ed8",
+        "#2a9d8f",
+        "#e76f51",
+        plot_data.MODE_COLORS[plot_data.MODE_AVOID],
+        "#1f77b4",
+        "#ff7f0e",
+    ):
         assert _has(pixels, colour), f"no {colour} pixels"  # plan, start, goal, VFH points, signals
     assert _has(pixels, "#262626", 100)  # occupied cells, 0.15 grey
-    zone = 255 * (plot.ZONE_RGBA[3] * np.array(plot.ZONE_RGBA[:3]) + 1.0 - plot.ZONE_RGBA[3])
+    zone = 255 * (plot_data.ZONE_RGBA[3] * np.array(plot_data.ZONE_RGBA[:3]) + 1.0 - plot_data.ZONE_RGBA[3])
     assert int(np.all(np.abs(pixels - zone) <= 1, axis=2).sum()) >= 100  # the inflated zone
     # the shading's entry: its box in the shading's colour at alpha 0.3 over white, opaque
-    face = np.array([int(plot.MODE_COLORS[plot.MODE_AVOID][i : i + 2], 16) for i in (1, 3, 5)])
+    face = np.array([int(plot_data.MODE_COLORS[plot_data.MODE_AVOID][i : i + 2], 16) for i in (1, 3, 5)])
     assert int(np.all(np.abs(pixels - (0.3 * face + 0.7 * 255)) <= 1, axis=2).sum()) >= 100
 
 

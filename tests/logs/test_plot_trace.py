@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from cosim.errors import CosimError
-from cosim.logs import plot
+from cosim.logs import plot, plot_data
 from cosim.logs.reader import open_log
 from cosim.navigation.run import run_scenario
 from cosim.record import recorder
@@ -71,7 +71,7 @@ def test_trace_gives_the_arrays_the_log_gives(run):
     assert len(from_log.series) >= 5 and from_log.obstacles
     name = run.log_path.stem
     if name == "one_obstacle":
-        assert plot.MODE_AVOID in from_log.mode_points
+        assert plot_data.MODE_AVOID in from_log.mode_points
     if name == "moving_short":
         assert from_log.tracks and from_log.end is not None and from_log.end[2] == "stop_time"
     if name == "bicycle_short":
