@@ -313,6 +313,22 @@ class Component(ABC):
         """The C-level step of this component, or None when it needs Python to step (the default)."""
         return None
 
+    # ---- state (what `[simulation] algebraic_loops = "iterate"` rolls a step back with) ---------
+
+    def state_support(self) -> str | None:
+        """None when the component can keep its state and go back to it (`save_state`,
+        `restore_state`); otherwise why not, a phrase for a message. The default: it cannot."""
+        return "it cannot save and restore its state"
+
+    def save_state(self) -> None:
+        """Keep the component's current state (while stepping); a second call replaces the first."""
+        raise CosimError(f"component '{self.name}': {self.state_support()}")
+
+    def restore_state(self) -> None:
+        """Go back to the state `save_state` kept (the output buffer keeps its values until the next
+        `get_outputs`)."""
+        raise CosimError(f"component '{self.name}': {self.state_support()}")
+
     def text_port(self, name: str, direction: str) -> str | None:
         """The type ("String", "Binary") of a text input or output outside the float buffers (an
         FMU's: `cosim.fmi.text`); None for every other name (the default: a component has none)."""

@@ -449,6 +449,7 @@ class FmuComponent(Component):
         self._slave = None
         self._unzip_dir: str | None = None
         self._fatal = False
+        self._fmu_state: ctypes.c_void_p | None = None  # kept by `save_state`, freed with the instance
         self.log_messages: deque[str] = deque(maxlen=20)
 
     # fmpy's class of an instance, by FMI version (`cosim.fmi.model_exchange` has its own).
@@ -955,6 +956,55 @@ class FmuComponent(Component):
             nan_outputs=tuple(nan_outputs),
         )
 
+    def state_support(self) -> str | None:
+        """None when the FMU can get and set its state (canGetAndSetFMUstate, FMI 2.0 and 3.0), else
+        why not."""
+        model = f"model {self.model_description.modelName}"
+        if self.fmi_version == 1:
+            return f"{model} is FMI 1.0, which has no FMU state"
+        if self._interface() is not self.model_description.coSimulation:
+            # The solver's own state (CVode's history) would have to go back with the FMU's.
+            return f"{model} runs as Model Exchange, whose solver state is not saved"
+        if not self._interface().canGetAndSetFMUstate:
+            return f"{model} does not declare canGetAndSetFMUstate"
+        return None
+
+    def save_state(self) -> None:
+        """fmi2GetFMUstate / fmi3GetFMUState into the one state this component keeps (allocated by
+        the FMU at the first call, overwritten in place after that, as FMI allows)."""
+        self._require("save_state", State.STEPPING)
+        if self._fmu_state is None:
+            self._fmu_state = ctypes.c_void_p()
+        function = "fmi2GetFMUstate" if self.fmi_version == 2 else "fmi3GetFMUState"
+        self._call_state(function, ctypes.byref(self._fmu_state))
+
+    def restore_state(self) -> None:
+        """fmi2SetFMUstate / fmi3SetFMUState with the state `save_state` kept."""
+        self._require("restore_state", State.STEPPING)
+        if self._fmu_state is None:
+            raise CosimError(f"FMU '{self.name}': restore_state() before save_state()")
+        function = "fmi2SetFMUstate" if self.fmi_version == 2 else "fmi3SetFMUState"
+        self._call_state(function, self._fmu_state)
+
+    def _call_state(self, function: str, state) -> None:
+        if self.state_support() is not None:
+            raise CosimError(f"FMU '{self.name}': {self.state_support()}")
+        try:
+            getattr(self._slave, function)(self._slave.component, state)
+        except Exception as error:  # fmpy's FMICallException carries the status
+            self._fail(int(getattr(error, "status", 3)), function, self._step_time[0])
+
+    def _free_state(self) -> None:
+        """Free the kept FMU state (before the instance: FMI frees states with it only by accident)."""
+        state, self._fmu_state = self._fmu_state, None
+        if state is None or not state.value or self._fatal:
+            return
+        function = "fmi2FreeFMUstate" if self.fmi_version == 2 else "fmi3FreeFMUState"
+        try:
+            getattr(self._slave, function)(self._slave.component, ctypes.byref(state))
+        except Exception:  # a broken FMU must not prevent freeing the instance
+            pass
+
     def _native_failure(self, call: int, status: int, t: float, kind: str = "real") -> None:
         if call == 3:
             self._asked_to_terminate(t)
@@ -1033,6 +1083,7 @@ class FmuComponent(Component):
         """Free the instance and unload the binary; after fmi*Fatal only forget them."""
         self._remove_fast_path()
         if self._slave is not None and self.state is not State.FREED:
+            self._free_state()
             slave, self._slave = self._slave, None
             if not self._fatal:
                 try:

@@ -132,6 +132,7 @@ STEP, STEP_PUSHED = b"s", b"S"  # doStep (after sending the inputs), then get th
 INSTANTIATE, SETUP, INITIALIZE, RESTRICT, TERMINATE, FREE = b"I", b"U", b"N", b"R", b"T", b"F"
 EXCHANGE = b"X"  # send the inputs and get the outputs, no step (initialisation's second pass)
 UNPACK = b"P"  # unpack the archive (before INSTANTIATE; timed apart, UNPACK_TIMEOUT)
+SAVE_STATE, RESTORE_STATE = b"G", b"V"  # FmuComponent.save_state / restore_state (FMU state)
 # Child -> host: OK alone, or ERROR + the component's state (one byte) + the message (UTF-8);
 # OUT_OF_MEMORY (a MemoryError in the child: its memory limit) + state + the CALL_* it was in + message.
 OK, ERROR, OUT_OF_MEMORY = b"\x00", b"\x01", b"\x02"
@@ -154,6 +155,7 @@ _last: list = [None]  # weak reference to the isolated component stepped last (l
 CALL_IDLE, CALL_SET, CALL_STEP, CALL_GET = 0, 1, 2, 3
 CALL_INSTANTIATE, CALL_SETUP, CALL_INITIALIZE, CALL_TERMINATE, CALL_FREE, CALL_LOAD = 4, 5, 6, 7, 8, 9
 CALL_UNPACK = 10
+CALL_STATE = 11
 
 
 def memory_text(size: int) -> str:
@@ -505,6 +507,7 @@ class IsolatedFmuComponent(Component):
             CALL_FREE: f"fmi{v}FreeInstance",
             CALL_LOAD: "reading the model description",
             CALL_UNPACK: "unpacking the FMU archive",
+            CALL_STATE: f"fmi{v}GetFMUstate / fmi{v}SetFMUstate",
         }.get(call, f"{what} (between FMI calls)")
 
     # ---- lifecycle ---------------------------------------------------------------------------
@@ -535,6 +538,19 @@ class IsolatedFmuComponent(Component):
     def restrict_push(self, slots) -> None:
         """As `FmuComponent.restrict_push`, in the child."""
         self._exchange(RESTRICT + json.dumps([int(slot) for slot in slots]).encode(), "restrict_push")
+
+    def state_support(self) -> str | None:
+        return self.spec.state_support()
+
+    def save_state(self) -> None:
+        """As `FmuComponent.save_state`, in the child (the state stays there)."""
+        self._require("save_state", State.STEPPING)
+        self._exchange(SAVE_STATE, "save_state")
+
+    def restore_state(self) -> None:
+        """As `FmuComponent.restore_state`, in the child."""
+        self._require("restore_state", State.STEPPING)
+        self._exchange(RESTORE_STATE, "restore_state")
 
     def push_inputs(self) -> None:
         if self.state not in (State.INSTANTIATED, State.SET_UP, State.STEPPING):

@@ -219,6 +219,12 @@ def serve(fd: int, memory: mmap.mmap) -> int:
                 component.push_inputs()
                 call.value = protocol.CALL_GET
                 component.get_outputs()
+            elif command == protocol.SAVE_STATE:
+                call.value = protocol.CALL_STATE
+                component.save_state()
+            elif command == protocol.RESTORE_STATE:
+                call.value = protocol.CALL_STATE
+                component.restore_state()
             elif command == protocol.RESTRICT:
                 component.restrict_push(json.loads(argument))
             elif command == protocol.TERMINATE:
