@@ -338,6 +338,11 @@ class Component(ABC):
         """Take text input `name` from `producer`'s text output `output` before each step."""
         raise CosimError(f"component '{self.name}' has no text input '{name}'")
 
+    def push_text(self) -> None:
+        """Send the text inputs now, the fed ones with their producers' current values (the master
+        calls it at initialisation; while stepping they go before each step). Default: none."""
+        return None
+
     def describe(self) -> dict[str, str]:
         """Facts for a log's metadata (FMU GUID, generating tool...); empty for plain components."""
         return {}

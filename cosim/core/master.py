@@ -500,6 +500,10 @@ class System:
             for _, producer, _, index in links:
                 if producer != name and inputs[index].name in feeding[name]:
                     edges.add((producer, name))
+        # A text output's dependencies are not known (`Component.feedthrough` holds numbers): the
+        # producer of a text connection initialises first, so its value reaches the consumer at t0.
+        edges |= {(c.source_component, c.target_component) for c in self.text_connections}
+        edges = {(producer, consumer) for producer, consumer in edges if producer != consumer}
         return [self.components[name] for name in self._topological(edges)]
 
     def initialized_early(self, order: list[Component]) -> list[Component]:
@@ -510,7 +514,11 @@ class System:
         output at the start time reflects its connected inputs (within an algebraic loop, after
         one pass in this fixed order)."""
         position = {component.name: number for number, component in enumerate(order)}
-        early = set()
+        early = {
+            c.target_component
+            for c in self.text_connections
+            if position[c.source_component] >= position[c.target_component]
+        }
         for name, links in self.links().items():
             component = self.components[name]
             direct = {i for depends in component.feedthrough.values() for i in depends}
@@ -918,13 +926,16 @@ class Master:
                 if gather is not None:
                     gather()
                 component.push_inputs()
+                component.push_text()
                 component.initialize()
                 component.get_outputs()
                 ready.add(component.name)
             for component in self.system.initialized_early(order):
                 gather = _gather(self.system, component)
-                gather()
+                if gather is not None:
+                    gather()
                 component.push_inputs()
+                component.push_text()
                 component.get_outputs()
             if self._loop_groups:
                 self._signals.output_buffer[0] = self._initial_loop_passes(order)

@@ -485,6 +485,10 @@ class FmuComponent(Component):
         """From now on text input `name` takes `producer`'s text output `output` before each step."""
         self._text_feeds[name] = (producer, output)
 
+    def push_text(self) -> None:
+        if self.text_inputs:
+            self._send_text()
+
     def _send_text(self) -> None:
         """Send every text input (the fed ones with their producers' latest values)."""
         for name, (producer, output) in self._text_feeds.items():
