@@ -13,8 +13,7 @@ where a name is close to a known one:
 - a parameter the FMU lacks, or one outside the FMU's declared min/max or of the wrong type;
 - a connection end that is no `component.variable`, an unknown component or variable, an output
   wired to an output (or from an input), two connections into one input; a String or Binary
-  variable connected to anything but its own type (naming both ends), with a scale or offset, or
-  of an FMU in a child process (text moves only with the FMU in the run's process);
+  variable connected to anything but its own type (naming both ends), or with a scale or offset;
 - a `[system] remove` name that is no template component (or is the vehicle, whose pose the run
   needs);
 - an input of a template component whose template connection was dropped (its source removed, or
@@ -429,14 +428,6 @@ class _Composer:
             )
         if spec.scale != 1.0 or spec.offset != 0.0:
             return f"connection {source} -> {target}: a {source_type} takes no scale or offset"
-        for reference in (source, target):
-            name = reference.partition(".")[0]
-            added = self.scenario.components.get(name)
-            if added is not None and self.scenario.isolation(added) == "process":
-                return (
-                    f"connection {source} -> {target}: String and Binary values move only with the FMU "
-                    f'in the run\'s process: add isolation = "none" to [components.{name}]'
-                )
         return None
 
     def _missing_ports(self, component: ComponentDescription, ports: list[str]) -> None:

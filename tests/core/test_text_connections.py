@@ -1,5 +1,6 @@
 """String -> String and Binary -> Binary connections: in a `System` and in a scenario's
-`[[connections]]`, from the start time on; a text end wired to a number is refused naming both ends.
+`[[connections]]`, from the start time on, with the FMUs in this process or in child processes
+(`cosim.fmi.isolated`); a text end wired to a number is refused naming both ends.
 
 Truth: the every-type fixture (`types_fmi2/3`): a String or Binary output is its input followed by
 its parameter, at initialisation too, so a consumer fed by a producer shows both parameters
@@ -16,26 +17,26 @@ from fixtures.conftest_helpers import fixture_fmu
 from cosim.cli import main
 from cosim.core.master import Master, System
 from cosim.fmi.component import FmuComponent
+from cosim.fmi.isolated import IsolatedFmuComponent
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scenario"))
 from test_compose import write_scenario  # noqa: E402
 
 
-@pytest.mark.parametrize("consumer_first", [False, True])
+@pytest.mark.parametrize(("consumer_first", "isolated"), [(False, ()), (True, ()), (False, ("one", "two"))])
 @pytest.mark.parametrize(("version", "kind", "suffix", "expected"), [
     (2, "String", "-two", "hello-one-two"),
     (3, "Binary", b"\x02", b"\x0a\x0b\x01\x02"),
 ])  # fmt: skip
-def test_a_text_connection_holds_from_the_start_time(consumer_first, version, kind, suffix, expected):
+def test_a_text_connection_holds_from_the_start_time(
+    consumer_first, isolated, version, kind, suffix, expected
+):
     system = System(0.1)
     fmu = fixture_fmu(f"types_fmi{version}")
-    first = b"\x01" if kind == "Binary" else "-one"
-    made = {
-        "one": lambda: FmuComponent(fmu, "one", {f"{kind}_parameter": first}),
-        "two": lambda: FmuComponent(fmu, "two", {f"{kind}_parameter": suffix}),
-    }
+    parameters = {"one": b"\x01" if kind == "Binary" else "-one", "two": suffix}
     for name in ("two", "one") if consumer_first else ("one", "two"):
-        system.add(made[name]())
+        made = IsolatedFmuComponent if name in isolated else FmuComponent
+        system.add(made(fmu, name, {f"{kind}_parameter": parameters[name]}))
     system.connect(f"one.{kind}_output", f"two.{kind}_input")
     two = system.components["two"]
     with Master(system, stop_time=0.3) as master:
@@ -52,6 +53,7 @@ TEXT_SCENARIO = """
 fmu = "{fmu}"
 isolation = "{isolation}"
 String_parameter = "-one"
+String_input = "hi"
 
 [components.two]
 fmu = "{fmu}"
@@ -84,18 +86,12 @@ def test_a_scenario_connection_of_text_and_a_number_is_refused_naming_both_ends(
     assert "[[connections]][0]" in err and f"connection {shown} cannot convert" in err
 
 
-def test_a_scenario_text_connection_of_an_fmu_in_a_child_process_is_refused(tmp_path, capsys):
-    assert main(["system", str(_scenario(tmp_path, isolation="process"))]) == 2
-    err = capsys.readouterr().err
-    assert len(err.strip().splitlines()) == 1
-    assert "move only with the FMU in the run's process" in err and 'isolation = "none"' in err
-
-
 @pytest.mark.slow
-def test_a_scenario_text_connection_runs_and_is_logged_from_the_start(tmp_path, capsys):
+@pytest.mark.parametrize("isolation", ["none", "process"])
+def test_a_scenario_text_connection_runs_and_is_logged_from_the_start(tmp_path, capsys, isolation):
     from cosim.logs import open_log
 
-    scenario = _scenario(tmp_path)
+    scenario = _scenario(tmp_path, isolation=isolation)
     assert main(["system", str(scenario)]) == 0
     assert "one.String_output" in capsys.readouterr().out
     log_path = tmp_path / "text.mcap"
@@ -104,5 +100,6 @@ def test_a_scenario_text_connection_runs_and_is_logged_from_the_start(tmp_path, 
     with open_log(log_path) as log:
         two = log.text_signals("two")
         assert two.t[0] == 0.0
-        assert set(two["String_input"]) == {"hello-one"}
-        assert set(two["String_output"]) == {"hello-one-two"}  # at t = 0 too
+        assert set(log.text_signals("one")["String_output"]) == {"hi-one"}  # its input held at "hi"
+        assert set(two["String_input"]) == {"hi-one"}
+        assert set(two["String_output"]) == {"hi-one-two"}  # at t = 0 too
