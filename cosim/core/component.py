@@ -313,6 +313,11 @@ class Component(ABC):
         """The C-level step of this component, or None when it needs Python to step (the default)."""
         return None
 
+    def can_vary_step(self) -> bool:
+        """Whether the component takes steps shorter than its period (a last step cut at the stop
+        time); an FMU says so with canHandleVariableCommunicationStepSize. Default: it can."""
+        return True
+
     # ---- state (what `[simulation] algebraic_loops = "iterate"` rolls a step back with) ---------
 
     def state_support(self) -> str | None:

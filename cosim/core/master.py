@@ -70,7 +70,12 @@ A master given a stop time tells every component (`Component.setup`), never step
 cuts the steps that would end after it: a component due at step k steps by
 min(P * h, stop - t_k) (`Master.step_seconds`), so a stop time that is no whole number of macro
 steps (or of a component's period) after the start ends with a shorter step, exactly at the stop
-time (`Master.steps_to_stop` steps; `time` is then the stop time). The compiled kernel takes those
+time (`Master.steps_to_stop` steps; `time` is then the stop time). An FMU without
+canHandleVariableCommunicationStepSize (`Component.can_vary_step`) cannot take that shorter step:
+`Master` refuses such a stop time in one line, naming the component and the nearest stop times it
+can end at (`cosim fmu simulate` refuses it too). Stepping past the stop time would break the
+stop time the FMU was told, and ending at the last whole step before it (fmpy's choice) would end
+the run silently early. The compiled kernel takes those
 last steps one at a time, with the cut step sizes written into its tables.
 
 Loops
@@ -784,6 +789,7 @@ class Master:
             for component in self.order
         ]
         self._steppers: list[tuple] = []
+        self._check_cut_steps()
         self._tail_from = self._first_short_step()
 
     def _check_loop_states(self) -> None:
@@ -876,6 +882,26 @@ class Master:
         if self.stop_time_ns is None:
             return None
         return -(-(self.stop_time_ns - self.start_time_ns) // self.system.macro_step_ns)
+
+    def _check_cut_steps(self) -> None:
+        """`CosimError` when the stop time cuts the last step of a component that cannot take a
+        shorter step (module docstring, "Stop time")."""
+        if self.stop_time_ns is None:
+            return
+        span_ns = self.stop_time_ns - self.start_time_ns
+        for component, period, _ in self._plan:
+            step_ns = period * self.system.macro_step_ns
+            if span_ns % step_ns == 0 or component.constant_outputs or component.can_vary_step():
+                continue
+            whole = span_ns // step_ns
+            before, after = ((self.start_time_ns + n * step_ns) / NS_PER_S for n in (whole, whole + 1))
+            raise CosimError(
+                f"stop time {self.stop_time:g} s is not a whole number of steps of component "
+                f"'{component.name}' ({step_ns / NS_PER_S:g} s) after the start time "
+                f"{self.start_time_ns / NS_PER_S:g} s, and it cannot take the shorter last step that "
+                "would end there (no canHandleVariableCommunicationStepSize); give a stop time of "
+                f"{before:g} or {after:g} s"
+            )
 
     def _first_short_step(self) -> int | None:
         """The first step at which a component's step would end after the stop time, so is cut to

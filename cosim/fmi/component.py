@@ -82,6 +82,21 @@ _FMI_TYPE_NAMES = {
 }
 
 
+@cache
+def _fmi1_variable_step(path: str, mtime_ns: int, size: int) -> bool:
+    """canHandleVariableCommunicationStepSize of an FMI 1.0 co-simulation FMU (its Capabilities
+    element under Implementation/CoSimulation_StandAlone or CoSimulation_Tool)."""
+    from xml.etree import ElementTree
+
+    with zipfile.ZipFile(path) as archive:
+        root = ElementTree.fromstring(archive.read("modelDescription.xml"))
+    capabilities = root.find("Implementation/*/Capabilities")
+    return capabilities is not None and capabilities.get("canHandleVariableCommunicationStepSize") in {
+        "true",
+        "1",
+    }
+
+
 def _file_identity(path: Path) -> tuple[int, int]:
     status = path.stat()
     return status.st_mtime_ns, status.st_size
@@ -959,6 +974,16 @@ class FmuComponent(Component):
             finite_outputs=tuple(finite_outputs),
             nan_outputs=tuple(nan_outputs),
         )
+
+    def can_vary_step(self) -> bool:
+        """canHandleVariableCommunicationStepSize of the co-simulation interface (a Model Exchange
+        FMU's solver takes any step; fmpy does not read FMI 1.0's Capabilities: read here)."""
+        interface = self._interface()
+        if interface is not self.model_description.coSimulation:
+            return True
+        if self.fmi_version == 1:
+            return _fmi1_variable_step(str(self.path.resolve()), *_file_identity(self.path))
+        return bool(interface.canHandleVariableCommunicationStepSize)
 
     def state_support(self) -> str | None:
         """None when the FMU can get and set its state (canGetAndSetFMUstate, FMI 2.0 and 3.0), else

@@ -563,6 +563,9 @@ class IsolatedFmuComponent(Component):
     def state_support(self) -> str | None:
         return self.spec.state_support()
 
+    def can_vary_step(self) -> bool:
+        return self.spec.can_vary_step()
+
     def save_state(self) -> None:
         """As `FmuComponent.save_state`, in the child (the state stays there)."""
         self._require("save_state", State.STEPPING)
