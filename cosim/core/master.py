@@ -770,8 +770,7 @@ class Master:
                 f"note: algebraic loop {loop}: {members} iterate to a fixed point within each macro "
                 f'step (simulation.algebraic_loops = "iterate", loop_tolerance = '
                 f"{system.loop_tolerance:g}, loop_max_iterations = {system.loop_max_iterations}); "
-                "the system steps in the Python "
-                "master loop, not the compiled kernel",
+                "the system steps in the Python master loop, not the compiled kernel",
                 file=sys.stderr,
             )
         self._step_now = [0] if self._loop_groups else None  # the step `_advance` is in, for the loops
