@@ -127,22 +127,32 @@ class LoopSolver:
         if links:  # a member not due holds its outputs: the loop is open at it
             for component, _, _ in due:
                 component.save_state()
+        # A text recording hears of the accepted step only (`cosim.record.text_signals`).
+        listening = [(c, c.text_listener) for c, _, _ in due if getattr(c, "text_listener", None)]
+        for component, _ in listening:
+            component.text_listener = None
         iteration = 1
-        while True:
-            for component, period, gather in due:
-                if gather is not None:
-                    gather()
-                    component.push_inputs()
-                component.do_step(t, self.step_seconds(k, period))
-                component.get_outputs()
-            worst = self.worst(links) if links else None
-            if worst is None:
-                break
-            if iteration >= self.max_iterations:
-                raise self.not_converged(worst, f"in the macro step from t = {t:.9g} s")
-            for component, _, _ in due:
-                component.restore_state()
-            iteration += 1
+        try:
+            while True:
+                for component, period, gather in due:
+                    if gather is not None:
+                        gather()
+                        component.push_inputs()
+                    component.do_step(t, self.step_seconds(k, period))
+                    component.get_outputs()
+                worst = self.worst(links) if links else None
+                if worst is None:
+                    break
+                if iteration >= self.max_iterations:
+                    raise self.not_converged(worst, f"in the macro step from t = {t:.9g} s")
+                for component, _, _ in due:
+                    component.restore_state()
+                iteration += 1
+        finally:
+            for component, listener in listening:
+                component.text_listener = listener
+        for _, listener in listening:
+            listener(t)
         self.iterations = iteration
 
     def not_converged(self, worst: tuple[float, LoopLink], when: str) -> CosimError:
