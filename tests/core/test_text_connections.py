@@ -23,7 +23,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scenario"))
 from test_compose import write_scenario  # noqa: E402
 
 
-@pytest.mark.parametrize(("consumer_first", "isolated"), [(False, ()), (True, ()), (False, ("one", "two"))])
+@pytest.mark.parametrize(("consumer_first", "isolated"), [
+    (False, ()),
+    (True, ()),
+    pytest.param(False, ("one", "two"), marks=pytest.mark.slow),  # child processes
+])  # fmt: skip
 @pytest.mark.parametrize(("version", "kind", "suffix", "expected"), [
     (2, "String", "-two", "hello-one-two"),
     (3, "Binary", b"\x02", b"\x0a\x0b\x01\x02"),
