@@ -152,8 +152,13 @@ def format_system(description: SystemDescription, order: list[str], constant: se
         lines += [
             "",
             f"algebraic loop: {' -> '.join(description.loop)}",
-            f'  handled by delay (simulation.algebraic_loops = "{description.algebraic_loops}"): '
-            "the loop's components step with their inputs from the previous communication point",
+            f"  handled by {'iteration' if description.algebraic_loops == 'iterate' else 'delay'} "
+            f'(simulation.algebraic_loops = "{description.algebraic_loops}"): the loop\'s components '
+            + (
+                "iterate to a fixed point within each macro step, rolled back with their FMU state"
+                if description.algebraic_loops == "iterate"
+                else "step with their inputs from the previous communication point"
+            ),
         ]
     lines += ["", f"step order ({description.master})"]
     for position, name in enumerate(order, start=1):

@@ -40,6 +40,7 @@ def _show_ssp(args, show_scenario) -> int:
             )
         run = experiment(ssp, values)
         system, _ = build_system(ssp, run.macro_step, run.master)
+        system.handle_loops(run.loops, run.loop_tolerance, run.loop_max_iterations)
         order = [component.name for component in system.order()]
         print(format_ssp_system(ssp, run, system, order))
     return 0
@@ -73,9 +74,13 @@ def format_ssp_system(ssp, run, system, order: list[str]) -> str:
     if system.loop_components():
         lines += ["", f"algebraic loop: {' -> '.join(system.algebraic_loop())}"]
         lines.append(
-            f'  handled by delay (simulation.algebraic_loops = "{system.loops}"): '
-            f"{', '.join(system.loop_components())} step with their inputs from the previous "
-            "communication point"
+            f"  handled by {'iteration' if system.loops == 'iterate' else 'delay'} "
+            f'(simulation.algebraic_loops = "{system.loops}"): {", ".join(system.loop_components())} '
+            + (
+                "iterate to a fixed point within each macro step, rolled back with their FMU state"
+                if system.loops == "iterate"
+                else "step with their inputs from the previous communication point"
+            )
         )
     lines += ["", f"step order ({run.master})"]
     lines += [f"  {position}. {name}" for position, name in enumerate(order, start=1)]

@@ -313,6 +313,27 @@ class Component(ABC):
         """The C-level step of this component, or None when it needs Python to step (the default)."""
         return None
 
+    def can_vary_step(self) -> bool:
+        """Whether the component takes steps shorter than its period (a last step cut at the stop
+        time); an FMU says so with canHandleVariableCommunicationStepSize. Default: it can."""
+        return True
+
+    # ---- state (what `[simulation] algebraic_loops = "iterate"` rolls a step back with) ---------
+
+    def state_support(self) -> str | None:
+        """None when the component can keep its state and go back to it (`save_state`,
+        `restore_state`); otherwise why not, a phrase for a message. The default: it cannot."""
+        return "it cannot save and restore its state"
+
+    def save_state(self) -> None:
+        """Keep the component's current state (while stepping); a second call replaces the first."""
+        raise CosimError(f"component '{self.name}': {self.state_support()}")
+
+    def restore_state(self) -> None:
+        """Go back to the state `save_state` kept (the output buffer keeps its values until the next
+        `get_outputs`)."""
+        raise CosimError(f"component '{self.name}': {self.state_support()}")
+
     def text_port(self, name: str, direction: str) -> str | None:
         """The type ("String", "Binary") of a text input or output outside the float buffers (an
         FMU's: `cosim.fmi.text`); None for every other name (the default: a component has none)."""
@@ -321,6 +342,11 @@ class Component(ABC):
     def feed_text(self, name: str, producer: Component, output: str) -> None:
         """Take text input `name` from `producer`'s text output `output` before each step."""
         raise CosimError(f"component '{self.name}' has no text input '{name}'")
+
+    def push_text(self) -> None:
+        """Send the text inputs now, the fed ones with their producers' current values (the master
+        calls it at initialisation; while stepping they go before each step). Default: none."""
+        return None
 
     def describe(self) -> dict[str, str]:
         """Facts for a log's metadata (FMU GUID, generating tool...); empty for plain components."""

@@ -36,7 +36,11 @@ An output `P.o` is *direct* when it depends directly on at least one of P's inpu
   Jacobi mode, so the loop's components step with their inputs from the previous communication
   point; every other connection keeps the Gauss-Seidel rule. Such a system steps in the Python
   loop (the compiled kernel is not used), and `Master` says so once on stderr. With
-  `loops="error"` `System.order()` raises `CosimError` naming the loop and the keys that run it.
+  `loops="iterate"` each loop (`System.loop_groups`) steps as one block at its place in the order
+  (the graph of components with each loop contracted to one node, sorted as above) and iterates
+  to a fixed point within the macro step, rolling its members back with their FMU state
+  (`cosim.core.loops`; also the Python loop, also said once). With `loops="error"`
+  `System.order()` raises `CosimError` naming the loop and the keys that run it.
 * **Jacobi**. Every due component gathers its inputs first, all from the outputs as they were
   before step k (after each producer's most recent step before k); then all due components
   step. The order only fixes the sequence of calls. A loop of direct outputs is allowed (the
@@ -56,7 +60,9 @@ has its outputs read. A component that initialised before a producer of an input
 of its depends on directly (`System.initialized_early`: the vehicle's measured velocity on its
 commands) then gathers all its connected inputs once more and has its outputs read again, so at
 the start time every output reflects its connected inputs (within an algebraic loop, after that
-one pass in a fixed order). Jacobi mode uses the same initialisation.
+one pass in a fixed order; with `loops="iterate"` the loop's members exchange their connected
+values again until they agree to `loop_tolerance`, and the components they feed take them once
+more). Jacobi mode uses the same initialisation.
 
 Stop time
 ---------
@@ -64,7 +70,12 @@ A master given a stop time tells every component (`Component.setup`), never step
 cuts the steps that would end after it: a component due at step k steps by
 min(P * h, stop - t_k) (`Master.step_seconds`), so a stop time that is no whole number of macro
 steps (or of a component's period) after the start ends with a shorter step, exactly at the stop
-time (`Master.steps_to_stop` steps; `time` is then the stop time). The compiled kernel takes those
+time (`Master.steps_to_stop` steps; `time` is then the stop time). An FMU without
+canHandleVariableCommunicationStepSize (`Component.can_vary_step`) cannot take that shorter step:
+`Master` refuses such a stop time in one line, naming the component and the nearest stop times it
+can end at (`cosim fmu simulate` refuses it too). Stepping past the stop time would break the
+stop time the FMU was told, and ending at the last whole step before it (fmpy's choice) would end
+the run silently early. The compiled kernel takes those
 last steps one at a time, with the cut step sizes written into its tables.
 
 Loops
@@ -96,6 +107,14 @@ import numpy as np
 
 from cosim.core import fast_loop
 from cosim.core.component import Component, Port, State, closest_names
+from cosim.core.loops import (
+    DEFAULT_MAX_ITERATIONS,
+    DEFAULT_TOLERANCE,
+    MASTER_SIGNALS,
+    LoopLink,
+    LoopSolver,
+    MasterSignals,
+)
 from cosim.core.port_types import connection_problem
 from cosim.errors import CosimError
 
@@ -104,7 +123,7 @@ if TYPE_CHECKING:
 
 NS_PER_S = 1_000_000_000
 MODES = ("gauss-seidel", "jacobi")
-LOOP_HANDLING = ("delay", "error")  # `[simulation] algebraic_loops` (`System.loops`)
+LOOP_HANDLING = ("delay", "iterate", "error")  # `[simulation] algebraic_loops` (`System.loops`)
 # Below this many values from one producer, per-value ctypes copies beat one NumPy fancy-index copy.
 _SCALAR_COPY_LIMIT = 4
 # `run`/`run_recorded` with `compiled=None` step through the kernel from this many steps on: fewer
@@ -176,10 +195,17 @@ Link = tuple[Connection, str, int, int]
 
 
 class System:
-    """Components, connections, the macro step [s] and the master algorithm (`mode`)."""
+    """Components, connections, the macro step [s] and the master algorithm (`mode`); how an
+    algebraic loop runs (`loops`, and for "iterate" `loop_tolerance`, relative, and
+    `loop_max_iterations`: `cosim.core.loops`)."""
 
     def __init__(
-        self, macro_step: float | Fraction, mode: str = "gauss-seidel", loops: str = "delay"
+        self,
+        macro_step: float | Fraction,
+        mode: str = "gauss-seidel",
+        loops: str = "delay",
+        loop_tolerance: float = DEFAULT_TOLERANCE,
+        loop_max_iterations: int = DEFAULT_MAX_ITERATIONS,
     ) -> None:
         self.macro_step_ns = seconds_to_ns(macro_step, "macro step")
         if self.macro_step_ns <= 0:
@@ -187,14 +213,32 @@ class System:
         if mode not in MODES:
             raise CosimError(f"master mode '{mode}' is not one of {', '.join(MODES)}")
         self.mode = mode
-        if loops not in LOOP_HANDLING:
-            raise CosimError(f"algebraic loop handling '{loops}' is not one of {', '.join(LOOP_HANDLING)}")
-        self.loops = loops
+        self.handle_loops(loops, loop_tolerance, loop_max_iterations)
         self.components: dict[str, Component] = {}
         self.connections: list[Connection] = []
         self.text_connections: list[Connection] = []  # String/Binary ones (`System._connect_text`)
         self._targets: set[str] = set()  # connected inputs: a set, so connecting N inputs is O(N)
         self._links: tuple[list[Connection], dict[str, list[Link]]] = ([], {})
+
+    def handle_loops(
+        self,
+        loops: str,
+        tolerance: float = DEFAULT_TOLERANCE,
+        max_iterations: int = DEFAULT_MAX_ITERATIONS,
+    ) -> None:
+        """How algebraic loops run: `loops` ("delay", "iterate", "error"), and for "iterate" the
+        relative `tolerance` and the most iterations per macro step (`cosim.core.loops`)."""
+        if loops not in LOOP_HANDLING:
+            raise CosimError(f"algebraic loop handling '{loops}' is not one of {', '.join(LOOP_HANDLING)}")
+        if isinstance(tolerance, bool) or not (
+            isinstance(tolerance, int | float) and math.isfinite(tolerance) and tolerance > 0
+        ):
+            raise CosimError(f"loop_tolerance must be a number > 0, got {tolerance!r}")
+        if isinstance(max_iterations, bool) or not (isinstance(max_iterations, int) and max_iterations >= 1):
+            raise CosimError(f"loop_max_iterations must be a whole number >= 1, got {max_iterations!r}")
+        self.loops = loops
+        self.loop_tolerance = float(tolerance)
+        self.loop_max_iterations = max_iterations
 
     @property
     def macro_step(self) -> float:
@@ -309,9 +353,10 @@ class System:
 
     # ---- ordering ----------------------------------------------------------------------------
 
-    def _topological(self, edges: set[tuple[str, str]]) -> list[str]:
-        """Kahn's algorithm; ready components are taken in the order they were added."""
-        names = list(self.components)
+    def _topological(self, edges: set[tuple[str, str]], names: list[str] | None = None) -> list[str]:
+        """Kahn's algorithm over `names` (default: every component); ready ones are taken in the
+        order of `names` (the order they were added)."""
+        names = list(self.components) if names is None else names
         indegree = dict.fromkeys(names, 0)
         for _, consumer in edges:
             indegree[consumer] += 1
@@ -375,23 +420,66 @@ class System:
         members = {port.split(".", 1)[0] for port in ports}
         return [name for name in self.components if name in members]
 
-    def delayed_links(self) -> set[tuple[str, str]]:
-        """(producer, consumer) pairs with a connection on an algebraic loop: delayed by one step."""
+    def loop_connections(self) -> list[Connection]:
+        """The connections on an algebraic loop (both ends in one strongly connected set of ports)."""
         ports = self._loop_ports()
-        return {
-            (c.source_component, c.target_component)
-            for c in self.connections
-            if c.source in ports and ports[c.source] == ports.get(c.target)
-        }
+        return [c for c in self.connections if c.source in ports and ports[c.source] == ports.get(c.target)]
+
+    def delayed_links(self) -> set[tuple[str, str]]:
+        """(producer, consumer) pairs with a connection on an algebraic loop: delayed by one step
+        (none when `loops == "iterate"`: the loops iterate instead)."""
+        if self.loops == "iterate":
+            return set()
+        return {(c.source_component, c.target_component) for c in self.loop_connections()}
+
+    def loop_groups(self) -> list[tuple[list[str], list[Connection]]]:
+        """The algebraic loops as (member components in the order they were added, connections of
+        the loop): strongly connected sets of ports, joined where they share a component."""
+        ports = self._loop_ports()
+        group: dict[int, int] = {number: number for number in set(ports.values())}
+
+        def root(number: int) -> int:
+            while group[number] != number:
+                number = group[number]
+            return number
+
+        first_set: dict[str, int] = {}
+        for port, number in ports.items():
+            name = port.split(".", 1)[0]
+            if name in first_set:
+                group[root(number)] = root(first_set[name])
+            else:
+                first_set[name] = number
+        members: dict[int, list[str]] = {}
+        for name in self.components:
+            if name in first_set:
+                members.setdefault(root(first_set[name]), []).append(name)
+        links: dict[int, list[Connection]] = {}
+        for c in self.loop_connections():
+            links.setdefault(root(ports[c.source]), []).append(c)
+        return [(names, links.get(number, [])) for number, names in members.items()]
 
     def order(self) -> list[Component]:
         """Step order (see the module docstring); checks algebraic loops in Gauss-Seidel mode
         when `loops == "error"`."""
         if self.mode == "gauss-seidel" and self.loops == "error":
             self.check_algebraic_loops()
-        delayed = self.delayed_links()
-        edges = self._direct_edges() - delayed
-        return [self.components[name] for name in self._topological(edges)]
+        loop_links = {(c.source_component, c.target_component) for c in self.loop_connections()}
+        edges = self._direct_edges() - loop_links
+        order = self._topological(edges)
+        groups = self.loop_groups() if self.loops == "iterate" else []
+        if groups:  # each loop one node of the graph, its members in the order above
+            leader = {name: names[0] for names, _ in groups for name in names}
+            nodes = [name for name in self.components if leader.get(name, name) == name]
+            contracted = {(leader.get(p, p), leader.get(c, c)) for p, c in edges}
+            position = {name: number for number, name in enumerate(order)}
+            members = {names[0]: sorted(names, key=position.__getitem__) for names, _ in groups}
+            order = [
+                name
+                for node in self._topological({(p, c) for p, c in contracted if p != c}, nodes)
+                for name in members.get(node, [node])
+            ]
+        return [self.components[name] for name in order]
 
     def initialization_order(self) -> list[Component]:
         """Producers before the consumers that need their values at initialisation.
@@ -417,6 +505,10 @@ class System:
             for _, producer, _, index in links:
                 if producer != name and inputs[index].name in feeding[name]:
                     edges.add((producer, name))
+        # A text output's dependencies are not known (`Component.feedthrough` holds numbers): the
+        # producer of a text connection initialises first, so its value reaches the consumer at t0.
+        edges |= {(c.source_component, c.target_component) for c in self.text_connections}
+        edges = {(producer, consumer) for producer, consumer in edges if producer != consumer}
         return [self.components[name] for name in self._topological(edges)]
 
     def initialized_early(self, order: list[Component]) -> list[Component]:
@@ -427,7 +519,11 @@ class System:
         output at the start time reflects its connected inputs (within an algebraic loop, after
         one pass in this fixed order)."""
         position = {component.name: number for number, component in enumerate(order)}
-        early = set()
+        early = {
+            c.target_component
+            for c in self.text_connections
+            if position[c.source_component] >= position[c.target_component]
+        }
         for name, links in self.links().items():
             component = self.components[name]
             direct = {i for depends in component.feedthrough.values() for i in depends}
@@ -548,6 +644,10 @@ def _cyclic_components(graph: Mapping[str, list[str]]) -> dict[str, int]:
     return found
 
 
+def _no_outputs() -> None:
+    """`get_outputs` of a loop's entry in the Python loop: its members have read theirs."""
+
+
 def _gather(
     system: System,
     consumer: Component,
@@ -629,7 +729,22 @@ class Master:
         self.parameters = {name: dict(values) for name, values in (parameters or {}).items()}
         for name in self.parameters:
             system.component(name)
+        # Algebraic loops iterated within the macro step (`cosim.core.loops`): their members must
+        # roll back, and the iteration counts go on /signals/master.
+        self._loop_groups = system.loop_groups() if system.loops == "iterate" else []
+        self._signals: MasterSignals | None = None
+        if self._loop_groups:
+            self._check_loop_states()
+            known = system.components.get(MASTER_SIGNALS)
+            if known is not None and not isinstance(known, MasterSignals):
+                raise CosimError(
+                    f"a component is named '{MASTER_SIGNALS}', the name of the master's own signals "
+                    '(loop_iterations) under simulation.algebraic_loops = "iterate"; rename it'
+                )
+            self._signals = known or system.add(MasterSignals([]))
         self.order = system.order()
+        if self._signals is not None:  # stepped last: it takes the iteration counts of the step
+            self.order = [c for c in self.order if c is not self._signals] + [self._signals]
         self.step_index = 0
         self.failure: CosimError | None = None
         self._initialized = False
@@ -648,6 +763,18 @@ class Master:
                 'communication point (simulation.algebraic_loops = "delay")',
                 file=sys.stderr,
             )
+        if self._loop_groups:
+            loop = " -> ".join(system.algebraic_loop() or [])
+            members = ", ".join(system.loop_components())
+            print(
+                f"note: algebraic loop {loop}: {members} iterate to a fixed point within each macro "
+                f'step (simulation.algebraic_loops = "iterate", loop_tolerance = '
+                f"{system.loop_tolerance:g}, loop_max_iterations = {system.loop_max_iterations}); "
+                "the system steps in the Python master loop, not the compiled kernel",
+                file=sys.stderr,
+            )
+        self._step_now = [0] if self._loop_groups else None  # the step `_advance` is in, for the loops
+        self._solvers: list[LoopSolver] = []
         self._plan = [
             (
                 component,
@@ -661,7 +788,77 @@ class Master:
             for component in self.order
         ]
         self._steppers: list[tuple] = []
+        self._check_cut_steps()
         self._tail_from = self._first_short_step()
+
+    def _check_loop_states(self) -> None:
+        """Every member of an iterated loop must save and restore its state: one-line error otherwise."""
+        for names, _ in self._loop_groups:
+            for name in names:
+                problem = self.system.components[name].state_support()
+                if problem is not None:
+                    loop = " -> ".join(self.system.algebraic_loop() or names)
+                    raise CosimError(
+                        f'simulation.algebraic_loops = "iterate" rolls back the components of algebraic '
+                        f"loop {loop}, but component '{name}' cannot: {problem}; use "
+                        'simulation.algebraic_loops = "delay" (inputs from the previous communication point)'
+                    )
+
+    def _loop_solvers(self) -> list[LoopSolver]:
+        """One `LoopSolver` per iterated loop, with the plan's gathers (after initialisation)."""
+        plan = {entry[0].name: entry for entry in self._plan}
+        solvers = []
+        for names, connections in self._loop_groups:
+            members = [plan[component.name] for component in self.order if component.name in names]
+            links = []
+            for c in connections:
+                producer, output = self.system.resolve(c.source, "output")
+                consumer, input_ = self.system.resolve(c.target, "input")
+                name = f"{c.source} -> {c.target}"
+                links.append(LoopLink(name, producer, output, consumer, input_, c.scale, c.offset))
+            label = ", ".join(link.name for link in links)
+            solvers.append(
+                LoopSolver(
+                    f"({label})",
+                    members,
+                    links,
+                    self.system.loop_tolerance,
+                    self.system.loop_max_iterations,
+                    self.step_seconds,
+                )
+            )
+        return solvers
+
+    def _initial_loop_passes(self, order: list[Component]) -> int:
+        """Exchange the loops' connected values until they agree (initialisation, `loops="iterate"`);
+        then the components outside the loops take their connected inputs once more (those fed by
+        a loop see its settled values). Returns the passes over the loops, the first one included
+        (the pass every mode makes: `System.initialized_early`)."""
+        solvers = self._loop_solvers()
+        members = {name for names, _ in self._loop_groups for name in names}
+        looped = [(c, _gather(self.system, c)) for c in order if c.name in members]
+        passes = 1
+        while True:
+            unsettled = [(solver, worst) for solver in solvers if (worst := solver.worst(solver.links))]
+            if not unsettled:
+                break
+            if passes >= self.system.loop_max_iterations:
+                solver, worst = unsettled[0]
+                raise solver.not_converged(worst, "at initialisation")
+            for component, gather in looped:
+                if gather is not None:
+                    gather()
+                    component.push_inputs()
+                component.get_outputs()
+            passes += 1
+        if passes > 1:
+            for component in order:
+                gather = None if component.name in members else _gather(self.system, component)
+                if gather is not None:
+                    gather()
+                    component.push_inputs()
+                    component.get_outputs()
+        return passes
 
     # ---- time --------------------------------------------------------------------------------
 
@@ -684,6 +881,26 @@ class Master:
         if self.stop_time_ns is None:
             return None
         return -(-(self.stop_time_ns - self.start_time_ns) // self.system.macro_step_ns)
+
+    def _check_cut_steps(self) -> None:
+        """`CosimError` when the stop time cuts the last step of a component that cannot take a
+        shorter step (module docstring, "Stop time")."""
+        if self.stop_time_ns is None:
+            return
+        span_ns = self.stop_time_ns - self.start_time_ns
+        for component, period, _ in self._plan:
+            step_ns = period * self.system.macro_step_ns
+            if span_ns % step_ns == 0 or component.constant_outputs or component.can_vary_step():
+                continue
+            whole = span_ns // step_ns
+            before, after = ((self.start_time_ns + n * step_ns) / NS_PER_S for n in (whole, whole + 1))
+            raise CosimError(
+                f"stop time {self.stop_time:g} s is not a whole number of steps of component "
+                f"'{component.name}' ({step_ns / NS_PER_S:g} s) after the start time "
+                f"{self.start_time_ns / NS_PER_S:g} s, and it cannot take the shorter last step that "
+                "would end there (no canHandleVariableCommunicationStepSize); give a stop time of "
+                f"{before:g} or {after:g} s"
+            )
 
     def _first_short_step(self) -> int | None:
         """The first step at which a component's step would end after the stop time, so is cut to
@@ -734,14 +951,19 @@ class Master:
                 if gather is not None:
                     gather()
                 component.push_inputs()
+                component.push_text()
                 component.initialize()
                 component.get_outputs()
                 ready.add(component.name)
             for component in self.system.initialized_early(order):
                 gather = _gather(self.system, component)
-                gather()
+                if gather is not None:
+                    gather()
                 component.push_inputs()
+                component.push_text()
                 component.get_outputs()
+            if self._loop_groups:
+                self._signals.output_buffer[0] = self._initial_loop_passes(order)
         except BaseException:
             try:
                 self.close()
@@ -752,11 +974,32 @@ class Master:
         self._skip_constant_producers()
         # Bound once, after initialisation installed the components' fast paths.
         h_ns = self.system.macro_step_ns
-        self._steppers = [
-            (period, period * h_ns / NS_PER_S, gather, c.push_inputs, c.do_step, c.get_outputs)
-            for c, period, gather in self._plan
-            if not c.constant_outputs
-        ]
+        self._solvers = self._loop_solvers() if self._loop_groups else []
+        if self._signals is not None:
+            self._signals.solvers = self._solvers
+        solver_of = {component.name: solver for solver in self._solvers for component, _, _ in solver.members}
+        placed: set[int] = set()
+        self._steppers = []
+        for c, period, gather in self._plan:
+            solver = solver_of.get(c.name)
+            if solver is None:
+                if not c.constant_outputs:
+                    self._steppers.append(
+                        (period, period * h_ns / NS_PER_S, gather, c.push_inputs, c.do_step, c.get_outputs)
+                    )
+            elif id(solver) not in placed:  # a loop steps as one entry, at its first member's place
+                placed.add(id(solver))
+                self._steppers.append((1, h_ns / NS_PER_S, None, None, self._loop_step(solver), _no_outputs))
+
+    def _loop_step(self, solver: LoopSolver) -> Callable[[float, float], None]:
+        """The `do_step` of a loop's entry in the Python loop: the loop's macro step (`_advance` keeps
+        the step number in `_step_now`)."""
+        now = self._step_now
+
+        def do_step(t: float, h: float) -> None:
+            solver.step(now[0], t)
+
+        return do_step
 
     def _skip_constant_producers(self) -> None:
         """Components with constant outputs were copied from at initialisation: from now on their
@@ -884,8 +1127,8 @@ class Master:
             return None
         if self.system.mode == "jacobi" and any(native is None for native in stepped):
             return None
-        if self._previous:
-            return None  # a delayed loop steps in Python (`_advance`)
+        if self._previous or self._loop_groups:
+            return None  # a delayed or iterated loop steps in Python (`_advance`)
         return tables
 
     def run_blocks(
@@ -1040,6 +1283,7 @@ class Master:
         tail_from = self._tail_from
         components = self.system.components
         previous = [(copy, components[name].output_buffer) for name, copy in self._previous.items()]
+        now = self._step_now
         first = k = self.step_index
         try:
             for k in range(first, first + steps):
@@ -1047,6 +1291,8 @@ class Master:
                 tail = tail_from is not None and k >= tail_from  # steps cut at the stop time
                 for copy, outputs in previous:
                     copy[:] = outputs
+                if now is not None:
+                    now[0] = k
                 if jacobi:
                     due = [entry for entry in steppers if k % entry[0] == 0]
                     for _, _, gather, push, _, _ in due:

@@ -82,6 +82,21 @@ _FMI_TYPE_NAMES = {
 }
 
 
+@cache
+def _fmi1_variable_step(path: str, mtime_ns: int, size: int) -> bool:
+    """canHandleVariableCommunicationStepSize of an FMI 1.0 co-simulation FMU (its Capabilities
+    element under Implementation/CoSimulation_StandAlone or CoSimulation_Tool)."""
+    from xml.etree import ElementTree
+
+    with zipfile.ZipFile(path) as archive:
+        root = ElementTree.fromstring(archive.read("modelDescription.xml"))
+    capabilities = root.find("Implementation/*/Capabilities")
+    return capabilities is not None and capabilities.get("canHandleVariableCommunicationStepSize") in {
+        "true",
+        "1",
+    }
+
+
 def _file_identity(path: Path) -> tuple[int, int]:
     status = path.stat()
     return status.st_mtime_ns, status.st_size
@@ -449,6 +464,7 @@ class FmuComponent(Component):
         self._slave = None
         self._unzip_dir: str | None = None
         self._fatal = False
+        self._fmu_state: ctypes.c_void_p | None = None  # kept by `save_state`, freed with the instance
         self.log_messages: deque[str] = deque(maxlen=20)
 
     # fmpy's class of an instance, by FMI version (`cosim.fmi.model_exchange` has its own).
@@ -483,6 +499,10 @@ class FmuComponent(Component):
     def feed_text(self, name: str, producer: Component, output: str) -> None:
         """From now on text input `name` takes `producer`'s text output `output` before each step."""
         self._text_feeds[name] = (producer, output)
+
+    def push_text(self) -> None:
+        if self.text_inputs:
+            self._send_text()
 
     def _send_text(self) -> None:
         """Send every text input (the fed ones with their producers' latest values)."""
@@ -955,6 +975,65 @@ class FmuComponent(Component):
             nan_outputs=tuple(nan_outputs),
         )
 
+    def can_vary_step(self) -> bool:
+        """canHandleVariableCommunicationStepSize of the co-simulation interface (a Model Exchange
+        FMU's solver takes any step; fmpy does not read FMI 1.0's Capabilities: read here)."""
+        interface = self._interface()
+        if interface is not self.model_description.coSimulation:
+            return True
+        if self.fmi_version == 1:
+            return _fmi1_variable_step(str(self.path.resolve()), *_file_identity(self.path))
+        return bool(interface.canHandleVariableCommunicationStepSize)
+
+    def state_support(self) -> str | None:
+        """None when the FMU can get and set its state (canGetAndSetFMUstate, FMI 2.0 and 3.0), else
+        why not."""
+        model = f"model {self.model_description.modelName}"
+        if self.fmi_version == 1:
+            return f"{model} is FMI 1.0, which has no FMU state"
+        if self._interface() is not self.model_description.coSimulation:
+            # The solver's own state (CVode's history) would have to go back with the FMU's.
+            return f"{model} runs as Model Exchange, whose solver state is not saved"
+        if not self._interface().canGetAndSetFMUstate:
+            return f"{model} does not declare canGetAndSetFMUstate"
+        return None
+
+    def save_state(self) -> None:
+        """fmi2GetFMUstate / fmi3GetFMUState into the one state this component keeps (allocated by
+        the FMU at the first call, overwritten in place after that, as FMI allows)."""
+        self._require("save_state", State.STEPPING)
+        if self._fmu_state is None:
+            self._fmu_state = ctypes.c_void_p()
+        function = "fmi2GetFMUstate" if self.fmi_version == 2 else "fmi3GetFMUState"
+        self._call_state(function, ctypes.byref(self._fmu_state))
+
+    def restore_state(self) -> None:
+        """fmi2SetFMUstate / fmi3SetFMUState with the state `save_state` kept."""
+        self._require("restore_state", State.STEPPING)
+        if self._fmu_state is None:
+            raise CosimError(f"FMU '{self.name}': restore_state() before save_state()")
+        function = "fmi2SetFMUstate" if self.fmi_version == 2 else "fmi3SetFMUState"
+        self._call_state(function, self._fmu_state)
+
+    def _call_state(self, function: str, state) -> None:
+        if self.state_support() is not None:
+            raise CosimError(f"FMU '{self.name}': {self.state_support()}")
+        try:
+            getattr(self._slave, function)(self._slave.component, state)
+        except Exception as error:  # fmpy's FMICallException carries the status
+            self._fail(int(getattr(error, "status", 3)), function, self._step_time[0])
+
+    def _free_state(self) -> None:
+        """Free the kept FMU state (before the instance: FMI frees states with it only by accident)."""
+        state, self._fmu_state = self._fmu_state, None
+        if state is None or not state.value or self._fatal:
+            return
+        function = "fmi2FreeFMUstate" if self.fmi_version == 2 else "fmi3FreeFMUState"
+        try:
+            getattr(self._slave, function)(self._slave.component, ctypes.byref(state))
+        except Exception:  # a broken FMU must not prevent freeing the instance
+            pass
+
     def _native_failure(self, call: int, status: int, t: float, kind: str = "real") -> None:
         if call == 3:
             self._asked_to_terminate(t)
@@ -1033,6 +1112,7 @@ class FmuComponent(Component):
         """Free the instance and unload the binary; after fmi*Fatal only forget them."""
         self._remove_fast_path()
         if self._slave is not None and self.state is not State.FREED:
+            self._free_state()
             slave, self._slave = self._slave, None
             if not self._fatal:
                 try:

@@ -14,7 +14,10 @@ child is in and the step handshake, then the component's input buffer, then its 
 The host's `input_buffer`/`output_buffer` and the child's FmuComponent buffers ARE these views, so
 the master writes inputs straight into the child's buffer and reads outputs from it: no copies.
 Commands other than a step (instantiate, setup, ..., free: rare) are one datagram each way on a
-Unix SOCK_SEQPACKET socket pair.
+Unix SOCK_SEQPACKET socket pair. String and Binary values (`cosim.fmi.text`) do not fit the float
+buffers: a component with text inputs sends them in a TEXT datagram before each step (and at
+initialisation), and one with text outputs asks for them with another after each step; the child's
+answer holds its text outputs (JSON, a Binary as hex), at most MAX_PACKET bytes in all.
 
 A step is a spin-then-block handshake through the header: the host writes t, h, "push the inputs
 first" and then a new request sequence number; the child sets the inputs, calls doStep, gets the
@@ -132,6 +135,8 @@ STEP, STEP_PUSHED = b"s", b"S"  # doStep (after sending the inputs), then get th
 INSTANTIATE, SETUP, INITIALIZE, RESTRICT, TERMINATE, FREE = b"I", b"U", b"N", b"R", b"T", b"F"
 EXCHANGE = b"X"  # send the inputs and get the outputs, no step (initialisation's second pass)
 UNPACK = b"P"  # unpack the archive (before INSTANTIATE; timed apart, UNPACK_TIMEOUT)
+SAVE_STATE, RESTORE_STATE = b"G", b"V"  # FmuComponent.save_state / restore_state (FMU state)
+TEXT = b"E"  # JSON {"set": {input: value}, "send": bool}: stage (and send) text inputs; answer: outputs
 # Child -> host: OK alone, or ERROR + the component's state (one byte) + the message (UTF-8);
 # OUT_OF_MEMORY (a MemoryError in the child: its memory limit) + state + the CALL_* it was in + message.
 OK, ERROR, OUT_OF_MEMORY = b"\x00", b"\x01", b"\x02"
@@ -154,6 +159,7 @@ _last: list = [None]  # weak reference to the isolated component stepped last (l
 CALL_IDLE, CALL_SET, CALL_STEP, CALL_GET = 0, 1, 2, 3
 CALL_INSTANTIATE, CALL_SETUP, CALL_INITIALIZE, CALL_TERMINATE, CALL_FREE, CALL_LOAD = 4, 5, 6, 7, 8, 9
 CALL_UNPACK = 10
+CALL_STATE = 11
 
 
 def memory_text(size: int) -> str:
@@ -189,6 +195,16 @@ def bind_buffers(component: Component, memory: mmap.mmap) -> None:
     component.output_cbuffer = (ctypes.c_double * max(1, outputs)).from_buffer(memory, output_offset)
     component.input_buffer = np.ctypeslib.as_array(component.input_cbuffer)[:inputs]
     component.output_buffer = np.ctypeslib.as_array(component.output_cbuffer)[:outputs]
+
+
+def json_text(value: str | bytes) -> str:
+    """A String as itself, a Binary as hex text (as `cosim.fmi.text.check_text` takes it back)."""
+    return value.hex() if isinstance(value, bytes) else value
+
+
+def _json_values(values: Mapping[str, object]) -> dict[str, object]:
+    """Parameter values for JSON: a Binary's bytes as hex text (`json_text`), the rest as they are."""
+    return {name: json_text(value) if isinstance(value, bytes) else value for name, value in values.items()}
 
 
 def _set_receive_timeout(sock: socket.socket, seconds: float) -> None:
@@ -271,7 +287,7 @@ class IsolatedFmuComponent(Component):
         self._arguments = {
             "path": str(path),  # the child starts in this working directory
             "name": name,
-            "parameters": dict(parameters or {}),
+            "parameters": _json_values(parameters or {}),
             "port_map": dict(port_map or {}),
             "period": period,
             "feedthrough_override": {k: list(v) for k, v in (feedthrough_override or {}).items()},
@@ -312,6 +328,13 @@ class IsolatedFmuComponent(Component):
         self._fd = -1
         self._push_pending = False
         self._time: float | None = None  # simulation time of the current call [s], for messages
+        # String and Binary ports, as `FmuComponent`'s; their values cross in TEXT datagrams.
+        self.text_inputs, self.text_outputs = spec.text_inputs, spec.text_outputs
+        self.text_parameters = spec.text_parameters
+        self.text_values = spec.text_values  # the spec's own dict: `set_text` checks and stages there
+        self._text_feeds: dict[str, tuple[Component, str]] = {}
+        self.text_listener = None  # as `FmuComponent.text_listener`
+        self._text_step: float | None = None  # start [s] of the step whose text outputs are next read
 
     def variable_name(self, port: str) -> str:
         """The FMU variable behind a port."""
@@ -505,6 +528,7 @@ class IsolatedFmuComponent(Component):
             CALL_FREE: f"fmi{v}FreeInstance",
             CALL_LOAD: "reading the model description",
             CALL_UNPACK: "unpacking the FMU archive",
+            CALL_STATE: f"fmi{v}GetFMUstate / fmi{v}SetFMUstate",
         }.get(call, f"{what} (between FMI calls)")
 
     # ---- lifecycle ---------------------------------------------------------------------------
@@ -519,7 +543,7 @@ class IsolatedFmuComponent(Component):
     def setup(self, t0: float, parameters: Mapping[str, float], stop_time: float | None = None) -> None:
         self._require("setup", State.INSTANTIATED)
         self._time = float(t0)
-        arguments = {"t0": float(t0), "parameters": dict(parameters), "stop_time": stop_time}
+        arguments = {"t0": float(t0), "parameters": _json_values(parameters), "stop_time": stop_time}
         arguments["push"] = self._push_pending
         self._push_pending = False
         self._exchange(SETUP + json.dumps(arguments).encode(), "setup")
@@ -536,6 +560,52 @@ class IsolatedFmuComponent(Component):
         """As `FmuComponent.restrict_push`, in the child."""
         self._exchange(RESTRICT + json.dumps([int(slot) for slot in slots]).encode(), "restrict_push")
 
+    def state_support(self) -> str | None:
+        return self.spec.state_support()
+
+    def can_vary_step(self) -> bool:
+        return self.spec.can_vary_step()
+
+    def save_state(self) -> None:
+        """As `FmuComponent.save_state`, in the child (the state stays there)."""
+        self._require("save_state", State.STEPPING)
+        self._exchange(SAVE_STATE, "save_state")
+
+    def restore_state(self) -> None:
+        """As `FmuComponent.restore_state`, in the child."""
+        self._require("restore_state", State.STEPPING)
+        self._exchange(RESTORE_STATE, "restore_state")
+
+    # ---- text (`cosim.fmi.text`) ----------------------------------------------------------------
+
+    def text_port(self, name: str, direction: str) -> str | None:
+        return self.spec.text_port(name, direction)
+
+    def set_text(self, name: str, value: str | bytes) -> None:
+        """As `FmuComponent.set_text`; the value reaches the child with the next text inputs."""
+        self.spec.set_text(name, value)
+
+    def feed_text(self, name: str, producer: Component, output: str) -> None:
+        self._text_feeds[name] = (producer, output)
+
+    def push_text(self) -> None:
+        if self.text_inputs:
+            self._exchange_text(send=True)
+
+    def _exchange_text(self, send: bool = False, inputs: bool = True) -> None:
+        """One TEXT exchange: the text inputs (the fed ones from their producers) staged in the child,
+        sent to the FMU now when `send` (else by the child's next step); its text outputs read back."""
+        staged = {}
+        if inputs:
+            for name, (producer, output) in self._text_feeds.items():
+                self.text_values[name] = producer.text_values[output]
+            staged = {p.name: json_text(self.text_values[p.name]) for p in self.text_inputs}
+        reply = self._exchange(TEXT + json.dumps({"set": staged, "send": send}).encode(), "text")
+        outputs = json.loads(reply) if reply else {}
+        for port in self.text_outputs:
+            value = outputs[port.name]
+            self.text_values[port.name] = bytes.fromhex(value) if port.fmi_type == "Binary" else value
+
     def push_inputs(self) -> None:
         if self.state not in (State.INSTANTIATED, State.SET_UP, State.STEPPING):
             self._require("push_inputs", State.INSTANTIATED, State.SET_UP, State.STEPPING)
@@ -544,6 +614,9 @@ class IsolatedFmuComponent(Component):
     def do_step(self, t: float, h: float) -> None:
         if self.state is not State.STEPPING:
             self._require("do_step", State.STEPPING)
+        if self.text_inputs:
+            self._exchange_text()
+        self._text_step = t
         times = self._times
         times[0] = t
         times[1] = h
@@ -657,6 +730,11 @@ class IsolatedFmuComponent(Component):
         if self._push_pending:  # inputs pushed after the last step: their outputs, without a step
             self._push_pending = False
             self._exchange(EXCHANGE, "get_outputs")
+        if self.text_outputs:
+            self._exchange_text(inputs=False)
+        started, self._text_step = self._text_step, None
+        if started is not None and self.text_listener is not None:
+            self.text_listener(started)  # a recording (`cosim.record.text_signals`)
         return self.output_buffer  # the child has written them at the end of its step
 
     def terminate(self) -> None:

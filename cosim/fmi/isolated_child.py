@@ -191,6 +191,7 @@ def serve(fd: int, memory: mmap.mmap) -> int:
             if not packet:
                 return 0  # the host has gone
             command, argument = packet[:1], packet[1:]
+            answer = protocol.OK
             if command == protocol.UNPACK:
                 call.value = protocol.CALL_UNPACK
                 component.unpack()
@@ -219,6 +220,23 @@ def serve(fd: int, memory: mmap.mmap) -> int:
                 component.push_inputs()
                 call.value = protocol.CALL_GET
                 component.get_outputs()
+            elif command == protocol.SAVE_STATE:
+                call.value = protocol.CALL_STATE
+                component.save_state()
+            elif command == protocol.RESTORE_STATE:
+                call.value = protocol.CALL_STATE
+                component.restore_state()
+            elif command == protocol.TEXT:
+                request = json.loads(argument)
+                for name, value in request["set"].items():
+                    component.set_text(name, value)  # a Binary's as hex
+                if request["send"]:
+                    call.value = protocol.CALL_SET
+                    component.push_text()
+                outputs = {
+                    p.name: protocol.json_text(component.text_values[p.name]) for p in component.text_outputs
+                }
+                answer = protocol.OK + json.dumps(outputs).encode()
             elif command == protocol.RESTRICT:
                 component.restrict_push(json.loads(argument))
             elif command == protocol.TERMINATE:
@@ -233,7 +251,7 @@ def serve(fd: int, memory: mmap.mmap) -> int:
             else:
                 raise CosimError(f"isolated FMU '{component.name}': unknown command {command!r}")
             call.value = protocol.CALL_IDLE
-            write(fd, protocol.OK)
+            write(fd, answer)
         except CosimError as error:
             call.value = protocol.CALL_IDLE
             write(fd, _error(component, str(error)))

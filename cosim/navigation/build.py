@@ -155,7 +155,13 @@ def build_run(scenario: Scenario) -> BuiltRun:
     expansion = scenario.planner.expansion_distance
     inflated = grid.inflate(expansion) if expansion > 0 else grid
     world = WorldDistance(grid, scenario.obstacles)
-    system = System(description.macro_step, description.master, description.algebraic_loops)
+    system = System(
+        description.macro_step,
+        description.master,
+        description.algebraic_loops,
+        scenario.loop_tolerance,
+        scenario.loop_max_iterations,
+    )
     plans = []
     for component in description.components.values():
         if component.kind == "fmu":

@@ -12,7 +12,8 @@ where a name is close to a known one:
   the FMU's own variable names);
 - a parameter the FMU lacks, or one outside the FMU's declared min/max or of the wrong type;
 - a connection end that is no `component.variable`, an unknown component or variable, an output
-  wired to an output (or from an input), two connections into one input;
+  wired to an output (or from an input), two connections into one input; a String or Binary
+  variable connected to anything but its own type (naming both ends), or with a scale or offset;
 - a `[system] remove` name that is no template component (or is the vehicle, whose pose the run
   needs);
 - an input of a template component whose template connection was dropped (its source removed, or
@@ -117,6 +118,7 @@ class _Composer:
         self.own: dict[str, dict[str, list[str]]] = {}  # component -> causality -> FMU variable names
         self.unstarted: dict[str, tuple[str, ...]] = {}  # component -> input ports without a start value
         self.text_ports: dict[str, dict[str, tuple[str, str]]] = {}  # component -> `_FmuInterface.text`
+        self.text_outputs: dict[str, dict[str, str]] = {}  # component -> `_FmuInterface.text_outputs`
         # The template components left out ([system] remove); every other name there is a problem.
         self.removed = [n for n in dict.fromkeys(scenario.removed) if n in ORDER and n != POSE_COMPONENT]
         self.replacing = {name for name, spec in scenario.components.items() if spec.added and name in ORDER}
@@ -216,6 +218,7 @@ class _Composer:
         if fmu.unstarted:
             self.unstarted[component.name] = fmu.unstarted
         self.text_ports[component.name] = fmu.text
+        self.text_outputs[component.name] = fmu.text_outputs
         # A state output: the template says it is one and the FMU declares no dependencies for it.
         declared = {u.variable.name for u in description.outputs if u.dependencies is not None}
         feedthrough = dict(fmu.feedthrough)
@@ -359,6 +362,10 @@ class _Composer:
                     "an input takes one connection",
                 )
                 continue
+            problem = self._text_connection_problem(source, target, spec)
+            if problem is not None:
+                self.problems.add(spec.where, problem)
+                continue
             fed[target] = ConnectionDescription(source, target, spec.scale, spec.offset, spec.where)
             added.append(fed[target])
         # Sets: the template connects thousands of ports (waypoints, beams).
@@ -399,6 +406,29 @@ class _Composer:
             if reference.partition(".")[0] not in self.replacing:
                 present(reference, "outputs")
         return kept + added, replaced, attempted, dropped
+
+    def _text_type(self, reference: str, direction: str) -> str | None:
+        """The FMI type ("String", "Binary") of a text input or output "component.port", else None."""
+        name, _, port = reference.partition(".")
+        if direction == "output":
+            return self.text_outputs.get(name, {}).get(port)
+        causality, fmi_type = self.text_ports.get(name, {}).get(port, ("", None))
+        return fmi_type if causality == "input" else None
+
+    def _text_connection_problem(self, source: str, target: str, spec) -> str | None:
+        """Why a connection with a String or Binary end cannot be made (None: it can, or it has none)."""
+        source_type, target_type = self._text_type(source, "output"), self._text_type(target, "input")
+        if source_type is None and target_type is None:
+            return None
+        if source_type != target_type:
+            return (
+                f"connection {source} ({source_type or 'a number'}) -> {target} "
+                f"({target_type or 'a number'}) cannot convert: a String or Binary connects only to its "
+                "own type"
+            )
+        if spec.scale != 1.0 or spec.offset != 0.0:
+            return f"connection {source} -> {target}: a {source_type} takes no scale or offset"
+        return None
 
     def _missing_ports(self, component: ComponentDescription, ports: list[str]) -> None:
         """One line for every port the template needs that a role FMU lacks, with its own variables."""
@@ -446,7 +476,7 @@ class _Composer:
         wanted, other = component.outputs, component.inputs
         if direction == "input":
             wanted, other = other, wanted
-        if port in wanted:
+        if port in wanted or self._text_type(reference, direction) is not None:
             return reference
         if port in other:
             kind = "input" if direction == "output" else "output"
@@ -567,6 +597,7 @@ class _FmuInterface:
     unstarted: tuple[str, ...] = ()  # input ports (numbers and text) whose variable has no start value
     text: dict[str, tuple[str, str]] = field(default_factory=dict)  # String/Binary parameter or input
     # port -> (causality, FMI type)
+    text_outputs: dict[str, str] = field(default_factory=dict)  # String/Binary output port -> FMI type
 
 
 # The interfaces of the last few FMU components described, keyed by everything `FmuComponent` reads
@@ -611,6 +642,7 @@ def _fmu_interface(path: Path, name: str, port_map: dict, max_size: int) -> _Fmu
             for causality in ("parameter", "input")
             for port in layout.text.get(causality, ())
         },
+        {port.name: port.fmi_type for port in layout.text.get("output", ())},
     )
     if key is not None:
         if len(_INTERFACES) >= _INTERFACES_KEPT:

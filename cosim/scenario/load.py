@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from cosim.core.loops import DEFAULT_MAX_ITERATIONS, DEFAULT_TOLERANCE
 from cosim.core.master import LOOP_HANDLING
 from cosim.errors import PATH_LIMIT, CosimError, wrong_file_message
 from cosim.fmi.builtin import known_names
@@ -208,7 +209,9 @@ class Scenario:
     overrides: tuple[str, ...] = field(default=())
     topics: dict[str, str] = field(default_factory=dict)  # [output.topics]: "/odom" -> name in the log
     connections: tuple[ConnectionSpec, ...] = field(default=())
-    algebraic_loops: str = "delay"  # "delay" | "error": see `cosim.core.master.System.loops`
+    algebraic_loops: str = "delay"  # "delay" | "iterate" | "error": see `cosim.core.master.System.loops`
+    loop_tolerance: float = DEFAULT_TOLERANCE  # relative, of "iterate": see `cosim.core.loops`
+    loop_max_iterations: int = DEFAULT_MAX_ITERATIONS  # of "iterate" per macro step
     fmi_version: int = 2  # which build of the project FMUs the roles use (2 or 3)
     fmu_isolation: str = "auto"  # "auto" | "process" | "none": see `isolation`
     fmu_timeout: float = 10.0  # [s] longest FMI call of an FMU in a child process
@@ -354,6 +357,10 @@ def _build(
     master = simulation.string("master", "gauss-seidel", choices=("gauss-seidel", "jacobi"))
     controller_rate = simulation.number("controller_rate", 20.0, minimum=0.0, exclusive_minimum=True)
     algebraic_loops = simulation.string("algebraic_loops", Scenario.algebraic_loops, choices=LOOP_HANDLING)
+    loop_tolerance = simulation.number(
+        "loop_tolerance", Scenario.loop_tolerance, minimum=0.0, exclusive_minimum=True, maximum=1.0
+    )
+    loop_max_iterations = simulation.integer("loop_max_iterations", Scenario.loop_max_iterations, minimum=1)
     fmi_version = simulation.integer("fmi_version", Scenario.fmi_version)
     if fmi_version not in (2, 3):
         raise simulation.error(
@@ -473,6 +480,8 @@ def _build(
         connections=connections,
         fmi_version=fmi_version,
         algebraic_loops=algebraic_loops,
+        loop_tolerance=loop_tolerance,
+        loop_max_iterations=loop_max_iterations,
         fmu_isolation=fmu_isolation,
         fmu_timeout=fmu_timeout,
         fmu_max_memory=fmu_max_memory,

@@ -11,7 +11,9 @@ convention of `cosim.navigation.run`).
 Overrides: `--set simulation.stop_time=S`, `simulation.macro_step=S`, `simulation.start_time=S`,
 `simulation.master=gauss-seidel|jacobi` take precedence over the file (for the macro step, over
 the annotations and the FMUs' step sizes: `cosim.ssp.read`); the summary and the log's metadata
-say where the macro step came from. The log names each FMU by its archive member, so two runs of
+say where the macro step came from. `simulation.algebraic_loops=delay|iterate|error`,
+`loop_tolerance` and `loop_max_iterations` say how an algebraic loop runs, as in a scenario
+(`cosim.core.loops`). The log names each FMU by its archive member, so two runs of
 one archive write the same bytes.
 
 An archive is untrusted input, held to a scenario's limits: it is not extracted when it has more
@@ -36,7 +38,8 @@ from pathlib import Path
 import numpy as np
 
 from cosim.core import interrupt
-from cosim.core.master import COMPILED_MIN_STEPS, MODES, Master, due_from
+from cosim.core.loops import DEFAULT_MAX_ITERATIONS, DEFAULT_TOLERANCE
+from cosim.core.master import COMPILED_MIN_STEPS, LOOP_HANDLING, MODES, Master, due_from
 from cosim.errors import PATH_LIMIT, CosimError, SimulationEnded, shorten
 from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
 from cosim.record.text_signals import TextRecording
@@ -45,6 +48,7 @@ from cosim.scenario.load import DEFAULT_LOG_PATTERN
 from cosim.ssp.read import DEFAULT_TIMEOUT, SspSystem, build_system, max_unpacked_size, open_ssp
 
 SIMULATION_KEYS = ("stop_time", "macro_step", "start_time", "master")
+LOOP_KEYS = ("algebraic_loops", "loop_tolerance", "loop_max_iterations")  # `System.handle_loops`
 # The [simulation] keys of a scenario's FMUs and run length, which an SSP run takes too.
 GUARD_KEYS = ("fmu_isolation", "fmu_timeout", "fmu_max_size", "max_steps")
 ISOLATIONS = ("auto", "process", "none")
@@ -81,6 +85,9 @@ class Experiment:
     macro_step_source: str = ""
     isolation: str = "auto"  # where the FMUs run: `cosim.ssp.read.build_system`
     timeout: float = DEFAULT_TIMEOUT  # [s] longest FMI call of an FMU in a child process
+    loops: str = "delay"  # how an algebraic loop runs (`System.handle_loops`)
+    loop_tolerance: float = DEFAULT_TOLERANCE
+    loop_max_iterations: int = DEFAULT_MAX_ITERATIONS
 
 
 def parse_overrides(overrides: list[str] | tuple[str, ...]) -> dict[str, object]:
@@ -90,8 +97,8 @@ def parse_overrides(overrides: list[str] | tuple[str, ...]) -> dict[str, object]
         key, separator, text = override.partition("=")
         section, _, name = key.strip().partition(".")
         override = shorten(override)
-        if not separator or section != "simulation" or name not in SIMULATION_KEYS + GUARD_KEYS:
-            known = ", ".join(f"simulation.{k}" for k in SIMULATION_KEYS + GUARD_KEYS)
+        if not separator or section != "simulation" or name not in SIMULATION_KEYS + GUARD_KEYS + LOOP_KEYS:
+            known = ", ".join(f"simulation.{k}" for k in SIMULATION_KEYS + GUARD_KEYS + LOOP_KEYS)
             raise CosimError(f"--set {override}: an SSP run takes only {known}")
         try:
             value = tomllib.loads(f"value = {text.strip()}")["value"]
@@ -101,6 +108,19 @@ def parse_overrides(overrides: list[str] | tuple[str, ...]) -> dict[str, object]
         if name == "master":
             if value not in MODES:
                 raise CosimError(f"--set {override}: master must be one of {', '.join(MODES)}")
+        elif name == "algebraic_loops":
+            if value not in LOOP_HANDLING:
+                raise CosimError(
+                    f"--set {override}: algebraic_loops must be one of {', '.join(LOOP_HANDLING)}"
+                )
+        elif name == "loop_tolerance":
+            if not (number and value > 0):
+                raise CosimError(f"--set {override}: loop_tolerance must be a number > 0")
+            value = float(value)
+        elif name == "loop_max_iterations":
+            if not (number and value == int(value) and value >= 1):
+                raise CosimError(f"--set {override}: loop_max_iterations must be a whole number >= 1")
+            value = int(value)
         elif name == "fmu_isolation":
             if value not in ISOLATIONS:
                 raise CosimError(f"--set {override}: fmu_isolation must be one of {', '.join(ISOLATIONS)}")
@@ -162,7 +182,12 @@ def experiment(ssp: SspSystem, overrides: dict[str, object]) -> Experiment:
         )
     isolation = str(overrides.get("fmu_isolation", "auto"))
     timeout = float(overrides.get("fmu_timeout", DEFAULT_TIMEOUT))
-    return Experiment(start, float(stop), float(step), master, source, isolation, timeout)
+    loops = (
+        str(overrides.get("algebraic_loops", "delay")),
+        float(overrides.get("loop_tolerance", DEFAULT_TOLERANCE)),
+        int(overrides.get("loop_max_iterations", DEFAULT_MAX_ITERATIONS)),
+    )
+    return Experiment(start, float(stop), float(step), master, source, isolation, timeout, *loops)
 
 
 def run_ssp(
@@ -204,6 +229,7 @@ def _run_fmus(
     ssp: SspSystem, run: Experiment, out_path: Path | None, force: bool, max_size: int | None = None
 ) -> SspRunResult:
     system, parameters = build_system(ssp, run.macro_step, run.master, run.isolation, run.timeout, max_size)
+    system.handle_loops(run.loops, run.loop_tolerance, run.loop_max_iterations)
     master = Master(system, start_time=run.start_time, parameters=parameters, stop_time=run.stop_time)
     try:
         master.initialize()

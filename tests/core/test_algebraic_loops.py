@@ -77,7 +77,7 @@ def test_error_refuses_the_loop_and_names_the_keys_that_run_it():
 
 
 def test_unknown_handling_is_refused():
-    with pytest.raises(CosimError, match="not one of delay, error"):
+    with pytest.raises(CosimError, match="not one of delay, iterate, error"):
         System(0.01, loops="solve")
 
 

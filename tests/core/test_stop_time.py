@@ -153,3 +153,34 @@ def test_fmu_simulate_refuses_a_cut_step_an_fmu_cannot_take():
         prepare(path, stop_time=1.05, step=0.1)
     assert "\n" not in str(error.value)
     assert prepare(path, stop_time=1.0, step=0.1).steps == 10
+
+
+@pytest.mark.parametrize(("macro_step", "period"), [(0.1, 0.0), (0.05, 0.1)])
+def test_a_stop_time_that_cuts_the_step_of_an_fmu_that_cannot_vary_it_is_refused(macro_step, period):
+    """gain_fixed_step_fmi2 lacks canHandleVariableCommunicationStepSize: a stop time 1.05 s after
+    the start would give it a last step of 0.05 s, which it cannot take (its own step, or its
+    period of two macro steps); 1.0 s and, for the macro step alone, 1.1 s end on its steps."""
+    system = System(macro_step)
+    system.add(FmuComponent(fixture_fmu("gain_fixed_step_fmi2"), "gain", period=period))
+    with pytest.raises(CosimError) as error:
+        Master(system, stop_time=1.05)
+    message = str(error.value)
+    assert "\n" not in message
+    assert "component 'gain' (0.1 s)" in message and "canHandleVariableCommunicationStepSize" in message
+    assert "give a stop time of 1 or 1.1 s" in message
+    with Master(system, stop_time=1.1) as master:
+        master.initialize()
+        master.run(master.steps_to_stop)
+        assert master.time == 1.1
+
+
+def test_an_fmi1_fmu_that_declares_variable_steps_takes_the_cut_step():
+    """gain_fmi1 declares canHandleVariableCommunicationStepSize in its FMI 1.0 Capabilities (which
+    fmpy does not read): its last step is cut to end at the stop time."""
+    system = System(0.1)
+    gain = system.add(FmuComponent(fixture_fmu("gain_fmi1"), "gain"))
+    assert gain.can_vary_step()
+    with Master(system, stop_time=1.05) as master:
+        master.initialize()
+        master.run(master.steps_to_stop)
+        assert gain.output_buffer[gain.output_index["end_time"]] == pytest.approx(1.05, abs=1e-12)

@@ -1,0 +1,165 @@
+"""Fixed-point iteration of algebraic loops within a macro step (`[simulation] algebraic_loops =
+"iterate"`).
+
+A loop is a set of components whose ports form a cycle of direct dependencies (`System.loop_groups`:
+the strongly connected sets of ports, joined where they share a component). The Gauss-Seidel
+master steps a loop as one block at its place in the step order (after the producers that feed
+it, before the consumers it feeds):
+
+1. each member due at step k saves its state (`Component.save_state`: fmi2GetFMUstate /
+   fmi3GetFMUState, which the FMU must declare with canGetAndSetFMUstate);
+2. iteration n: the members step in order, each gathering its inputs as the Gauss-Seidel master
+   does (from a member earlier in the loop, this iteration's outputs; from a later one, the
+   previous iteration's, the outputs before the step in the first);
+3. the loop's coupling values are compared: for every connection of the loop (both ends members
+   due at k), the value the consumer stepped with, u, against what the producer's output now
+   delivers, u' = output * scale + offset. The step is accepted when every one satisfies
+   |u' - u| <= loop_tolerance * (1 + |u'|): a relative tolerance for values far from zero, an
+   absolute one near it. Otherwise every member goes back to its saved state and steps again
+   with u' (iteration n + 1), until `loop_max_iterations`; a loop that has not converged then
+   is an error naming the loop, the time and the largest change.
+
+The number of iterations of each macro step (the most any loop needed; 1 when the first step was
+already consistent, 0 in a step where no loop member was due) is the output `loop_iterations` of a
+component named `master` that the master adds to the system (`MasterSignals`), so the log has it
+on `/signals/master` like any component's signals. Its record at t holds the iterations of the
+macro step that ended at t; the one at the start time, the exchange passes initialisation needed
+(the loop's connected values are exchanged until they agree to the same tolerance).
+
+A system with such a loop steps in the Python master loop: the compiled kernel
+(`cosim.core.native/kernel.c`) steps each component once per macro step and cannot roll back.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from cosim.core.component import Component, Port, PythonComponent
+from cosim.errors import CosimError
+
+DEFAULT_TOLERANCE = 1e-8  # `[simulation] loop_tolerance`
+DEFAULT_MAX_ITERATIONS = 50  # `[simulation] loop_max_iterations`
+MASTER_SIGNALS = "master"  # the name of the component holding `loop_iterations`
+
+
+class MasterSignals(PythonComponent):
+    """The master's own signals as a component's outputs (`/signals/master`): `loop_iterations`,
+    the fixed-point iterations of the macro step that ended at a record's time. The master sets
+    it; stepping it (last in every step) takes the most over the loops."""
+
+    def __init__(self, solvers: Sequence[LoopSolver]) -> None:
+        super().__init__(MASTER_SIGNALS, outputs=[Port("loop_iterations", "integer")])
+        self.solvers = list(solvers)
+
+    def step(self, t: float, h: float) -> None:
+        self.output_buffer[0] = max(solver.iterations for solver in self.solvers)
+
+
+@dataclass(frozen=True)
+class LoopLink:
+    """A connection of a loop: producer output slot -> consumer input slot, as `gather` copies it."""
+
+    name: str  # "producer.port -> consumer.port"
+    producer: Component
+    output: int
+    consumer: Component
+    input: int
+    scale: float
+    offset: float
+
+    def change(self) -> float:
+        """|u' - u| of this connection, relative as the module docstring says (NaN both: 0)."""
+        new = self.producer.output_buffer[self.output]
+        if self.scale != 1.0:
+            new = new * self.scale
+        if self.offset != 0.0:
+            new = new + self.offset
+        used = self.consumer.input_buffer[self.input]
+        if new != new and used != used:  # both NaN: the same value
+            return 0.0
+        change = abs(new - used) / (1.0 + abs(new))
+        return math.inf if change != change else float(change)
+
+
+class LoopSolver:
+    """Steps one algebraic loop (`members`: (component, period in macro steps, gather) in step
+    order) by fixed-point iteration; see the module docstring. `step_seconds(k, period)` is the
+    master's step size of a component due at step k."""
+
+    def __init__(
+        self,
+        label: str,
+        members: Sequence[tuple[Component, int, Callable[[], None] | None]],
+        links: Sequence[LoopLink],
+        tolerance: float,
+        max_iterations: int,
+        step_seconds: Callable[[int, int], float],
+    ) -> None:
+        self.label = label
+        self.members = list(members)
+        self.links = list(links)
+        self.tolerance = tolerance
+        self.max_iterations = max_iterations
+        self.step_seconds = step_seconds
+        self.iterations = 0  # of the last macro step
+
+    def worst(self, links: Sequence[LoopLink]) -> tuple[float, LoopLink] | None:
+        """The largest relative change above the tolerance and its connection; None: converged."""
+        worst = None
+        for link in links:
+            change = link.change()
+            if change > self.tolerance and (worst is None or change > worst[0]):
+                worst = (change, link)
+        return worst
+
+    def step(self, k: int, t: float) -> None:
+        """Macro step k, from t [s]: the members due at k iterate until their loop agrees."""
+        due = [member for member in self.members if member[1] == 1 or k % member[1] == 0]
+        if not due:
+            self.iterations = 0
+            return
+        stepping = {id(component) for component, _, _ in due}
+        links = [
+            link for link in self.links if id(link.producer) in stepping and id(link.consumer) in stepping
+        ]
+        if links:  # a member not due holds its outputs: the loop is open at it
+            for component, _, _ in due:
+                component.save_state()
+        # A text recording hears of the accepted step only (`cosim.record.text_signals`).
+        listening = [(c, c.text_listener) for c, _, _ in due if getattr(c, "text_listener", None)]
+        for component, _ in listening:
+            component.text_listener = None
+        iteration = 1
+        try:
+            while True:
+                for component, period, gather in due:
+                    if gather is not None:
+                        gather()
+                        component.push_inputs()
+                    component.do_step(t, self.step_seconds(k, period))
+                    component.get_outputs()
+                worst = self.worst(links) if links else None
+                if worst is None:
+                    break
+                if iteration >= self.max_iterations:
+                    raise self.not_converged(worst, f"in the macro step from t = {t:.9g} s")
+                for component, _, _ in due:
+                    component.restore_state()
+                iteration += 1
+        finally:
+            for component, listener in listening:
+                component.text_listener = listener
+        for _, listener in listening:
+            listener(t)
+        self.iterations = iteration
+
+    def not_converged(self, worst: tuple[float, LoopLink], when: str) -> CosimError:
+        change, link = worst
+        return CosimError(
+            f"algebraic loop {self.label} did not converge {when} in {self.max_iterations} iterations: "
+            f"{link.name} still changed by {change:.3g} (relative, simulation.loop_tolerance = "
+            f"{self.tolerance:g}); raise simulation.loop_max_iterations or loop_tolerance, or use "
+            'simulation.algebraic_loops = "delay"'
+        )
