@@ -786,3 +786,41 @@ def test_scenarios_readme_outcomes(workspace):
         }[avoider]
         assert_outcome(parse_outcome(without), outcome(name, "false"), f"{avoider} {name} replan = false")
         assert_outcome(parse_outcome(with_replan), outcome(name, "true"), f"{avoider} {name} replan = true")
+
+
+# ---------------------------------------------------------------------------------------------
+# README "Command line": each synopsis names a command that exists, with options it has
+
+
+def subcommand_parsers(parser) -> dict:
+    import argparse
+
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return action.choices
+    return {}
+
+
+def test_command_line_table():
+    """Every row of the README's command table: its (sub-)commands exist and every option it shows
+    is one of theirs (`cosim X --help` lists it)."""
+    from cosim.cli import build_parser
+
+    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    section = readme[readme.index("## Command line") :]
+    rows = table_rows(section, "| command | what it does |")
+    assert len(rows) >= 15
+    checked = 0
+    for row in rows:
+        for synopsis in re.findall(r"`(cosim [^`]+)`", row[0]):
+            words = synopsis.replace("\\|", "|").split()[1:]
+            parsers = [build_parser()]
+            while words and all(name in subcommand_parsers(parsers[0]) for name in words[0].split("|")):
+                parsers = [subcommand_parsers(p)[name] for p in parsers for name in words.pop(0).split("|")]
+            assert parsers[0].prog != "cosim", f"no command in {synopsis!r}"
+            for option in re.findall(r"(?<![\w-])(--[a-z][a-z-]*)", synopsis):
+                for parser in parsers:
+                    known = {s for action in parser._actions for s in action.option_strings}
+                    assert option in known, f"{parser.prog} has no {option} ({synopsis!r})"
+                    checked += 1
+    assert checked >= 25  # the table shows about 30 options: the parsing found them
