@@ -824,3 +824,20 @@ def test_command_line_table():
                     assert option in known, f"{parser.prog} has no {option} ({synopsis!r})"
                     checked += 1
     assert checked >= 25  # the table shows about 30 options: the parsing found them
+
+
+@pytest.mark.slow
+def test_set_array_of_tables(workspace):
+    """README: "`--set obstacles.0.center=[X,Y]` moves the first `[[obstacles]]`", in the Quick
+    start's scenario: the log's /obstacles marker stands at (X, Y)."""
+    from cosim.logs import open_log
+
+    readme = " ".join((REPO / "README.md").read_text(encoding="utf-8").split())
+    override, x, y = quoted(
+        readme, r"`--set (obstacles\.0\.center=\[([\d.]+),([\d.]+)\])` moves the first `\[\[obstacles\]\]`"
+    )
+    check(bash(f"cosim run {QUICK} --set {override} --out logs/moved.mcap --no-plot", workspace))
+    scenario = tomllib.loads((REPO / QUICK).read_text(encoding="utf-8"))
+    assert scenario["obstacles"][0]["center"] != [float(x), float(y)]  # it does move
+    marker = next(iter(open_log(workspace / "logs" / "moved.mcap").messages("/obstacles"))).message.markers[0]
+    assert (marker.pose.position.x, marker.pose.position.y) == (float(x), float(y))
