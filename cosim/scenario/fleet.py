@@ -28,8 +28,10 @@ from __future__ import annotations
 
 import copy
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from cosim.scenario.limits import MAX_NAME_LENGTH
 from cosim.scenario.schema import TableReader, describe
@@ -112,13 +114,10 @@ def find_robot(robots: list, part: str):
     return None
 
 
-def build_fleet(
-    raw: dict, source: str, base_dir: Path, text: str, path: Path | None, overrides: tuple
-) -> Fleet:
-    """The fleet of parsed TOML `raw` (overrides applied): each robot built and checked as a
-    single-robot scenario (see the module docstring)."""
-    from cosim.scenario.load import _build
-
+def build_fleet(raw: dict, source: str, build: Callable[..., Any], *args) -> Fleet:
+    """The fleet of parsed TOML `raw` (overrides applied): each robot made by
+    `build(robot_raw, robot_source, *args)` (the loader's single-robot build: base_dir, text, path,
+    overrides), so checked as a single-robot scenario (see the module docstring)."""
     top = TableReader(source, "", raw)
     if "robots" not in raw:
         raise top.error("fleet", "needs at least one [[robots]] table")
@@ -164,11 +163,20 @@ def build_fleet(
         reader.finish(extra_allowed=None)
         label = f"{source}: {where} ({name})"
         robot_raw["scenario"] = dict(scenario_table)
-        scenario = _build(robot_raw, label, base_dir, text, path, overrides)
+        scenario = build(robot_raw, label, *args)
         robots.append(Robot(name, index, scenario, mission, repeat))
     _check_common(source, robots)
     first = robots[0].scenario
-    return Fleet(source, path, text, first.name, first.description, tuple(robots), settings, overrides)
+    return Fleet(
+        source,
+        first.path,
+        first.text,
+        first.name,
+        first.description,
+        tuple(robots),
+        settings,
+        first.overrides,
+    )
 
 
 def _settings(table: TableReader) -> FleetSettings:

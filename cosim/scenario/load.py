@@ -280,7 +280,7 @@ def parse_scenario(
     for override in overrides:
         apply_override(raw, override, source)
     if is_fleet(raw):  # [[robots]]: a Fleet of single-robot scenarios (cosim.scenario.fleet)
-        return build_fleet(raw, source, base_dir, text, path, tuple(overrides))
+        return build_fleet(raw, source, _build, base_dir, text, path, tuple(overrides))
     return _build(raw, source, base_dir, text, path, tuple(overrides))
 
 
