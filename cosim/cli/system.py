@@ -57,6 +57,10 @@ def _handler(args) -> int:
 
         return show_ssp(args, show_scenario)
     scenario = load_scenario(args.scenario, args.overrides)
+    if hasattr(scenario, "robots"):  # a fleet ([[robots]])
+        from cosim.cli.system_fleet import show_fleet
+
+        return show_fleet(args, scenario)
     return show_scenario(args, scenario, f"{scenario.name} ({scenario.source})")
 
 
