@@ -1,0 +1,352 @@
+"""Run a fleet: every robot's system stepped together, robots seeing and touching each other.
+
+`run_fleet(fleet)` builds each robot as the single-robot run builds it (`build_run` with the
+robot's description from `cosim.scenario.fleet_compose.describe_fleet`: its lidar has the inputs
+`robots_x[j]`, `robots_y[j]`), initialises every robot's `Master`, then steps them in lockstep,
+one macro step at a time:
+
+1. before the step from t to t + h, every robot's lidar gets the other robots' positions at t
+   (each vehicle's x, y then): the scan at t sees every robot where it stands at t, whatever the
+   robots' order (the links `robotK.vehicle.x -> robotJ.lidar.robots_x[i]` of the description,
+   applied between the robots' masters);
+2. every robot's master steps (its components in its own order, Gauss-Seidel within the robot);
+3. the footprints are checked pairwise over the step (`cosim.world.fleet.FleetContacts`: exact
+   first contact of circles moving linearly within the step), and each robot against the walls
+   and unknown obstacles (`OutcomeMonitor`, exactly as for one robot);
+4. mission progress: a robot within its goal's tolerance has reached it; after its `dwell` the
+   planner is given the next goal (`PlannerComponent.set_goal`, a replan from the current pose);
+   after the last goal (times `repeat`) the robot has completed and stays where it is (still an
+   obstacle for the others).
+
+The run ends when every robot has completed, at the stop time, or at the first collision when
+`[fleet] on_collision = "stop"` (robot-robot contact, or a robot hitting a wall or obstacle). With
+"continue" every robot-robot contact is reported once when it begins and the run goes on; a
+robot that hit a wall stops being judged (it has failed).
+
+Deadlock: a robot that has not completed and has come no closer than 0.5 m to its current goal
+than its best for `[fleet] deadlock_after` seconds (dwelling at a goal excluded) is deadlocked from
+the start of that period; it stays deadlocked unless it makes progress again (then the period
+counts anew). The fleet outcome counts robots deadlocked at the end.
+
+This module steps the masters in Python (`Master.step`) and writes no log yet: the fleet's log
+(topics under each robot's namespace, `/robot1/odom`, TF frames `robot1/odom` ->
+`robot1/base_link` under one `map`) comes with the run path that steps one system through the
+recorder (`cosim.record`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cosim.core.master import NS_PER_S, Master
+from cosim.errors import CosimError
+from cosim.navigation.build import build_run
+from cosim.navigation.outcome import MODE_RECOVER, OutcomeMonitor
+from cosim.scenario.fleet import Fleet
+from cosim.scenario.fleet_compose import POSE_OF, SEEN_BY, describe_fleet
+from cosim.world.fleet import Contact, FleetContacts
+
+PROGRESS = 0.5  # [m] closer to the current goal than the best so far: progress (deadlock rule)
+STOPPED_SPEED = 0.01  # [m/s] below this a robot counts as stopped
+
+
+@dataclass
+class RobotOutcome:
+    """One robot's run. status: running, completed, collision (with a wall or obstacle; robot
+    contacts are in the fleet's `collisions`), no_path, stop_time."""
+
+    name: str
+    status: str = "running"
+    goals_reached: int = 0
+    goals: int = 0  # goals of the mission, times repeat
+    completion_time: float | None = None  # [s] when the last goal was reached
+    distance: float = 0.0  # [m]
+    min_clearance_walls: float = math.inf  # [m] footprint to the true map and obstacles
+    min_clearance_robots: float = math.inf  # [m] footprint to footprint
+    stopped_time: float = 0.0  # [s] slower than STOPPED_SPEED while not completed or dwelling
+    recovery_time: float = 0.0  # [s] in the mixer's recover mode
+    deadlocked_at: float | None = None  # [s] start of the no-progress period that made it deadlocked
+
+
+@dataclass
+class FleetOutcome:
+    robots: list[RobotOutcome]
+    collisions: list[Contact] = field(default_factory=list)
+    time: float = 0.0  # [s] simulated when the run ended
+    reason: str = (
+        "running"  # completed, collision, stop_time, all_ended (none still running, not all completed)
+    )
+    wall_time: float = 0.0  # [s]
+
+    @property
+    def completed(self) -> bool:
+        return all(robot.status == "completed" for robot in self.robots)
+
+    @property
+    def makespan(self) -> float | None:
+        """[s] until the last robot completed (None unless all did)."""
+        return max(robot.completion_time for robot in self.robots) if self.completed else None
+
+    @property
+    def deadlocks(self) -> list[RobotOutcome]:
+        return [
+            robot for robot in self.robots if robot.deadlocked_at is not None and robot.status != "completed"
+        ]
+
+    @property
+    def throughput(self) -> float:
+        """Goals reached per hour of simulated time."""
+        return (
+            sum(robot.goals_reached for robot in self.robots) * 3600.0 / self.time if self.time > 0 else 0.0
+        )
+
+    @property
+    def exit_code(self) -> int:
+        """0 only when every robot completed its goal or mission."""
+        return 0 if self.completed else 1
+
+
+class Progress:
+    """The deadlock rule for one robot (module docstring): `update(t, remaining)` with its distance
+    [m] to its current goal after the step that ended at t [s] returns the time since which it is
+    deadlocked, or None; `restart(t, remaining)` when it gets a new goal (or dwells)."""
+
+    def __init__(self, deadlock_after: float, t: float, remaining: float) -> None:
+        self.deadlock_after = deadlock_after
+        self.restart(t, remaining)
+
+    def restart(self, t: float, remaining: float) -> None:
+        self.best, self.best_time, self.deadlocked_at = remaining, t, None
+
+    def update(self, t: float, remaining: float) -> float | None:
+        if remaining < self.best - PROGRESS:
+            self.best, self.best_time, self.deadlocked_at = remaining, t, None
+        elif self.deadlocked_at is None and t - self.best_time >= self.deadlock_after - 1e-9:
+            self.deadlocked_at = self.best_time
+        return self.deadlocked_at
+
+
+class _Robot:
+    """One robot of the run: its built system and master, where to read its pose and mode, where
+    its lidar takes the other robots' positions, its mission and its outcome."""
+
+    def __init__(self, robot, built, seen: tuple[str, ...], deadlock_after: float) -> None:
+        self.robot = robot
+        self.built = built
+        self.master = Master(built.system, parameters=built.parameters, stop_time=robot.scenario.stop_time)
+        system = built.system
+        vehicle, self.slot_x = system.resolve(f"{POSE_OF}.x", "output")
+        _, self.slot_y = system.resolve(f"{POSE_OF}.y", "output")
+        self.vehicle_outputs = vehicle.output_buffer
+        mode = built.description.observed.mode if built.description.observed else None
+        self.mode = system.resolve(mode, "output") if mode else None
+        self.seen = seen
+        self.lidar = system.components.get(SEEN_BY) if seen else None
+        self.lidar_slots = np.arange(3, 3 + 2 * len(seen)) if seen else None
+        self.goals = [goal for _ in range(robot.repeat) for goal in robot.mission]
+        self.goal_index = 0
+        self.dwell_until: float | None = None
+        scenario = robot.scenario
+        self.monitor = OutcomeMonitor(
+            built.world, scenario.goal, scenario.goal_tolerance, scenario.vehicle_radius, scenario.start
+        )
+        self.outcome = RobotOutcome(robot.name, goals=len(self.goals))
+        remaining = math.hypot(scenario.goal[0] - scenario.start[0], scenario.goal[1] - scenario.start[1])
+        self.progress = Progress(deadlock_after, 0.0, remaining)
+
+    @property
+    def position(self) -> tuple[float, float]:
+        return float(self.vehicle_outputs[self.slot_x]), float(self.vehicle_outputs[self.slot_y])
+
+    @property
+    def judged(self) -> bool:
+        return self.outcome.status == "running"
+
+
+def run_fleet(fleet: Fleet, trace: list | None = None) -> FleetOutcome:
+    """Run `fleet` (module docstring); `CosimError` on bad input (before anything runs). `trace`,
+    when given, gets (t [s], positions (N x 2) [m]) at the start and after every step."""
+    described = describe_fleet(fleet)
+    robots: list[_Robot] = []
+    try:
+        for robot in fleet.robots:
+            built = build_run(robot.scenario, described.robots[robot.name])
+            robots.append(_Robot(robot, built, described.seen[robot.name], fleet.settings.deadlock_after))
+        for each in robots:
+            try:
+                each.master.initialize()
+            except CosimError as error:
+                raise CosimError(
+                    f"{each.robot.scenario.source}: initialising the system failed: {error}"
+                ) from None
+        return _run(fleet, robots, trace)
+    finally:
+        for each in robots:
+            try:
+                each.master.close()
+            except CosimError:
+                pass
+
+
+def _run(fleet: Fleet, robots: list[_Robot], trace: list | None) -> FleetOutcome:
+    settings = fleet.settings
+    index = {each.robot.name: k for k, each in enumerate(robots)}
+    contacts = FleetContacts([each.robot.name for each in robots], [each.robot.radius for each in robots])
+    outcome = FleetOutcome([each.outcome for each in robots])
+    h_ns = robots[0].built.system.macro_step_ns
+    steps = robots[0].master.steps_to_stop
+    positions = np.array([each.position for each in robots])
+    contacts.start(positions)
+    if trace is not None:
+        trace.append((0.0, positions))
+    seen_rows = [np.array([index[name] for name in each.seen], dtype=np.intp) for each in robots]
+    wall_start = time.perf_counter()
+    reason = "stop_time"
+    for k in range(steps):
+        t_ns = k * h_ns
+        t = t_ns / NS_PER_S
+        for each, rows in zip(robots, seen_rows, strict=True):
+            if each.lidar is not None:
+                others = positions[rows]
+                each.lidar.input_buffer[each.lidar_slots] = np.concatenate((others[:, 0], others[:, 1]))
+        for each in robots:
+            each.master.step()
+        t_next = robots[0].master.time
+        h = t_next - t
+        after = np.array([each.position for each in robots])
+        began = contacts.step(t, h, positions, after)
+        outcome.collisions += began
+        for k_robot, each in enumerate(robots):
+            _judge(each, t_next, h, positions[k_robot], after[k_robot])
+        positions = after
+        outcome.time = t_next
+        if trace is not None:
+            trace.append((t_next, after))
+        if began and settings.on_collision == "stop":
+            reason = "collision"
+            break
+        if any(each.outcome.status == "collision" for each in robots) and settings.on_collision == "stop":
+            reason = "collision"
+            break
+        if all(not each.judged for each in robots):
+            reason = "completed" if outcome.completed else "all_ended"
+            break
+    for k_robot, each in enumerate(robots):
+        each.outcome.min_clearance_walls = each.monitor.outcome.min_clearance
+        each.outcome.min_clearance_robots = float(contacts.min_clearance[k_robot])
+        if each.outcome.status == "running":
+            each.outcome.status = "stop_time" if reason == "stop_time" else "stopped"
+    outcome.reason = reason
+    outcome.wall_time = time.perf_counter() - wall_start
+    return outcome
+
+
+def _judge(each: _Robot, t: float, h: float, before, after) -> None:
+    """One robot after the step that ended at t: distance, clearance, mode, mission, deadlock."""
+    result = each.outcome
+    if not each.judged:
+        return
+    moved = math.hypot(after[0] - before[0], after[1] - before[1])
+    result.distance += moved
+    if each.mode is not None:
+        component, slot = each.mode
+        if component.output_buffer[slot] == MODE_RECOVER:
+            result.recovery_time += h
+    monitor = each.monitor
+    _, why = monitor.check_positions((t,), (float(after[0]),), (float(after[1]),))
+    if why == "collision":
+        result.status = "collision"
+        return
+    dwelling = each.dwell_until is not None
+    if moved < STOPPED_SPEED * h and not dwelling:
+        result.stopped_time += h
+    if dwelling:
+        if t + 1e-9 < each.dwell_until:
+            return
+        each.dwell_until = None
+        _next_goal(each, t)
+        return
+    if why == "goal_reached":
+        monitor.outcome.reason, monitor.outcome.reached = "running", False
+        result.goals_reached += 1
+        goal = each.goals[each.goal_index]
+        each.goal_index += 1
+        if each.goal_index == len(each.goals):
+            result.status = "completed"
+            result.completion_time = t
+            result.deadlocked_at = None
+            return
+        result.deadlocked_at = None
+        if goal.dwell > 0:
+            each.dwell_until = t + goal.dwell
+            return
+        _next_goal(each, t)
+        return
+    goal = each.goals[each.goal_index]
+    result.deadlocked_at = each.progress.update(t, math.hypot(goal.x - after[0], goal.y - after[1]))
+
+
+def _next_goal(each: _Robot, t: float) -> None:
+    """Give the planner the robot's next goal (a replan from where it stands)."""
+    goal = each.goals[each.goal_index]
+    x, y = each.position
+    planner = each.built.planner
+    vehicle = each.built.system.components[POSE_OF]
+    theta = float(vehicle.output_buffer[vehicle.output_index["theta"]])
+    why = planner.set_goal(goal.x, goal.y, t, (x, y, theta)) if planner is not None else "no planner"
+    if why is not None:
+        each.outcome.status = "no_path"
+        return
+    each.monitor.goal = (goal.x, goal.y)
+    each.monitor.tolerance = goal.tolerance
+    each.progress.restart(t, math.hypot(goal.x - x, goal.y - y))
+
+
+def format_fleet(fleet: Fleet, outcome: FleetOutcome) -> str:
+    """The summary table: a row per robot and the fleet's line."""
+    rows = [
+        ("robot", "status", "goals", "time [s]", "distance [m]", "clearance walls [m]",
+         "clearance robots [m]", "stopped [s]", "recovery [s]", "deadlocked")
+    ]  # fmt: skip
+    for robot in outcome.robots:
+        rows.append(
+            (
+                robot.name, robot.status, f"{robot.goals_reached}/{robot.goals}",
+                "-" if robot.completion_time is None else f"{robot.completion_time:.2f}",
+                f"{robot.distance:.2f}", f"{robot.min_clearance_walls:.3f}",
+                f"{robot.min_clearance_robots:.3f}",
+                f"{robot.stopped_time:.2f}", f"{robot.recovery_time:.2f}",
+                "-" if robot.deadlocked_at is None else f"since {robot.deadlocked_at:.2f} s",
+            )
+        )  # fmt: skip
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    lines = [
+        "  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True)).rstrip() for row in rows
+    ]
+    makespan = outcome.makespan
+    lines.append(
+        f"fleet: {outcome.reason} at t = {outcome.time:.2f} s; makespan "
+        f"{'-' if makespan is None else f'{makespan:.2f} s'}; throughput {outcome.throughput:.1f} goals/h; "
+        f"collisions {len(outcome.collisions)}; deadlocks {len(outcome.deadlocks)}; "
+        f"wall {outcome.wall_time:.2f} s"
+    )
+    lines += [f"  collision: {contact.describe()}" for contact in outcome.collisions]
+    return "\n".join(lines)
+
+
+def run_fleet_command(args, fleet: Fleet) -> int:
+    """`cosim run FLEET.toml`: run, print the fleet summary; exit 0 only when every robot completed."""
+    import sys
+
+    if getattr(args, "live", False):
+        raise CosimError(f"{fleet.source}: --live shows one robot; a fleet's live view is not there yet")
+    if args.out is not None:
+        print(f"cosim: note: a fleet run writes no log yet; {args.out} not written", file=sys.stderr)
+    outcome = run_fleet(fleet)
+    if not args.quiet:
+        print(format_fleet(fleet, outcome))
+    return outcome.exit_code

@@ -1,0 +1,117 @@
+"""A fleet run: the head-on robots' collision report against geometry computed here; the fleet
+outcome; the deadlock rule."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.cli import main
+from cosim.navigation.fleet import PROGRESS, Progress, run_fleet
+from cosim.scenario.load import load_scenario
+
+SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
+
+
+def _bisect_contact(a0, a1, b0, b1, reach, t0, h):
+    """The time in [t0, t0 + h] at which the linearly interpolated centres are `reach` apart,
+    by bisection on the distance (a second method to the quadratic's root)."""
+    low, high = 0.0, 1.0
+    for _ in range(200):
+        mid = 0.5 * (low + high)
+        a, b = a0 + mid * (a1 - a0), b0 + mid * (b1 - b0)
+        if math.hypot(*(b - a)) > reach:
+            low = mid
+        else:
+            high = mid
+    return t0 + high * h, a0 + high * (a1 - a0), b0 + high * (b1 - b0)
+
+
+def test_head_on_robots_collide_and_the_report_matches_the_geometry():
+    fleet = load_scenario(SCENARIOS / "fleet_head_on.toml")
+    trace: list = []
+    outcome = run_fleet(fleet, trace)
+    (contact,) = outcome.collisions  # on_collision = "stop": the run ends at the first contact
+    assert outcome.reason == "collision" and outcome.exit_code == 1
+    assert (contact.first, contact.second) == ("robot1", "robot2")
+    radii = [robot.scenario.vehicle_radius for robot in fleet.robots]
+    assert (contact.first_radius, contact.second_radius) == tuple(radii)
+    reach = sum(radii)
+    times = np.array([t for t, _ in trace])
+    positions = np.array([p for _, p in trace])  # steps x robots x 2
+    gaps = np.hypot(*(positions[:, 1] - positions[:, 0]).T)
+    # The step in which the footprints first touch: the first step whose end is within reach, or
+    # (grazing) one whose segment comes within reach; none before it does.
+    k = int(np.flatnonzero(gaps <= reach)[0])
+    samples = np.linspace(0.0, 1.0, 101)
+    for step in range(k - 1, k):  # the step before could have touched within it and separated
+        a0, a1, b0, b1 = (
+            positions[step, 0],
+            positions[step + 1, 0],
+            positions[step, 1],
+            positions[step + 1, 1],
+        )
+        within = np.hypot(*((b0 - a0) + samples[:, None] * ((b1 - b0) - (a1 - a0))).T)
+        if within.min() <= reach:
+            k = step + 1
+    assert gaps[:k].min() > reach
+    time, at_a, at_b = _bisect_contact(
+        positions[k - 1, 0],
+        positions[k, 0],
+        positions[k - 1, 1],
+        positions[k, 1],
+        reach,
+        times[k - 1],
+        times[k] - times[k - 1],
+    )
+    assert contact.time == pytest.approx(time, abs=1e-9)
+    assert contact.first_center == pytest.approx(tuple(at_a), abs=1e-9)
+    assert contact.second_center == pytest.approx(tuple(at_b), abs=1e-9)
+    assert math.dist(contact.first_center, contact.second_center) == pytest.approx(reach, abs=1e-9)
+    # They met between their starts, both having swerved off the aisle's centre line (y = 19):
+    # each saw the other (a wall-free straight aisle gives no reason to swerve).
+    assert 12.0 < contact.first_center[0] < contact.second_center[0] < 35.0
+    assert abs(contact.first_center[1] - 19.0) > 0.05 and abs(contact.second_center[1] - 19.0) > 0.05
+    assert outcome.time == pytest.approx(times[k])
+    for robot in outcome.robots:
+        assert robot.min_clearance_robots <= 0.0 and robot.status != "completed"
+
+
+def test_robots_completing_make_the_fleet_complete():
+    # Two robots in different aisles, far apart: both reach their goals.
+    fleet = load_scenario(
+        SCENARIOS / "fleet_head_on.toml",
+        [
+            "robots.robot2.start={x=12.0,y=30.0,theta=0.0}",
+            "robots.robot2.goal={x=30.0,y=30.0}",
+            "robots.robot1.goal={x=30.0,y=19.0}",
+        ],
+    )
+    outcome = run_fleet(fleet)
+    assert outcome.reason == "completed" and outcome.exit_code == 0 and not outcome.collisions
+    assert outcome.makespan == max(robot.completion_time for robot in outcome.robots)
+    for robot in outcome.robots:
+        assert robot.goals_reached == 1 and robot.status == "completed"
+        assert 17.0 < robot.distance < 20.0  # about the 18 m straight line, less the 1 m tolerance
+        assert 2.0 < robot.min_clearance_robots < 11.0 - 1.0 + 1e-9  # the aisles' centres are 11 m apart
+    assert outcome.throughput == pytest.approx(2 * 3600.0 / outcome.time)
+
+
+def test_deadlock_rule():
+    progress = Progress(deadlock_after=5.0, t=0.0, remaining=10.0)
+    assert progress.update(1.0, 9.6) is None  # 0.4 m closer: not progress
+    assert progress.update(4.99, 9.0) is None  # progress at 4.99 s
+    assert progress.update(9.98, 8.6) is None
+    assert progress.update(9.99, 8.6) == 4.99  # 5 s without coming PROGRESS closer than 9.0
+    assert progress.update(12.0, 9.0 - PROGRESS - 0.01) is None  # progress again: no longer
+    progress.restart(20.0, 3.0)
+    assert progress.update(24.0, 3.0) is None and progress.update(25.0, 3.0) == 20.0
+
+
+def test_cosim_run_prints_the_fleet_and_exits_1_without_completion(capsys):
+    assert main(["run", str(SCENARIOS / "fleet_head_on.toml"), "--no-plot"]) == 1
+    text = capsys.readouterr().out
+    assert "robot1 and robot2 collide at t = " in text and "fleet: collision" in text
