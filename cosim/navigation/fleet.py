@@ -28,10 +28,10 @@ than its best for `[fleet] deadlock_after` seconds (dwelling at a goal excluded)
 the start of that period; it stays deadlocked unless it makes progress again (then the period
 counts anew). The fleet outcome counts robots deadlocked at the end.
 
-This module steps the masters in Python (`Master.step`) and writes no log yet: the fleet's log
-(topics under each robot's namespace, `/robot1/odom`, TF frames `robot1/odom` ->
-`robot1/base_link` under one `map`) comes with the run path that steps one system through the
-recorder (`cosim.record`).
+This module steps the masters in Python (`Master.step`); its log (`cosim.navigation.fleet_log`)
+holds the robots' poses under their namespaces (`/robot1/odom`, TF `map -> robot1/odom ->
+robot1/base_link`), goals and the fleet outcome. Signals, scans and plans per robot come when a
+fleet is one system recorded through the run path's recorder (`cosim.record`).
 """
 
 from __future__ import annotations
@@ -39,12 +39,14 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from cosim.core.master import NS_PER_S, Master
 from cosim.errors import CosimError
 from cosim.navigation.build import build_run
+from cosim.navigation.fleet_log import FleetLog, outcome_record
 from cosim.navigation.outcome import MODE_RECOVER, OutcomeMonitor
 from cosim.scenario.fleet import Fleet
 from cosim.scenario.fleet_compose import POSE_OF, SEEN_BY, describe_fleet
@@ -142,8 +144,13 @@ class _Robot:
         vehicle, self.slot_x = system.resolve(f"{POSE_OF}.x", "output")
         _, self.slot_y = system.resolve(f"{POSE_OF}.y", "output")
         self.vehicle_outputs = vehicle.output_buffer
-        mode = built.description.observed.mode if built.description.observed else None
+        observed = built.description.observed
+        mode = observed.mode if observed else None
         self.mode = system.resolve(mode, "output") if mode else None
+        self.theta = system.resolve(f"{POSE_OF}.theta", "output")[1]
+        self.commands = (
+            [system.resolve(r, "output") for r in observed.command] if observed and observed.command else None
+        )
         self.seen = seen
         self.lidar = system.components.get(SEEN_BY) if seen else None
         self.lidar_slots = np.arange(3, 3 + 2 * len(seen)) if seen else None
@@ -157,19 +164,32 @@ class _Robot:
         self.outcome = RobotOutcome(robot.name, goals=len(self.goals))
         remaining = math.hypot(scenario.goal[0] - scenario.start[0], scenario.goal[1] - scenario.start[1])
         self.progress = Progress(deadlock_after, 0.0, remaining)
+        self.logged_goal = scenario.goal
 
     @property
     def position(self) -> tuple[float, float]:
         return float(self.vehicle_outputs[self.slot_x]), float(self.vehicle_outputs[self.slot_y])
 
     @property
+    def pose(self) -> tuple[float, float, float]:
+        return (*self.position, float(self.vehicle_outputs[self.theta]))
+
+    @property
+    def command(self) -> tuple[float, float]:
+        if self.commands is None:
+            return math.nan, math.nan
+        (a, i), (b, j) = self.commands
+        return float(a.output_buffer[i]), float(b.output_buffer[j])
+
+    @property
     def judged(self) -> bool:
         return self.outcome.status == "running"
 
 
-def run_fleet(fleet: Fleet, trace: list | None = None) -> FleetOutcome:
+def run_fleet(fleet: Fleet, trace: list | None = None, log_path: Path | None = None) -> FleetOutcome:
     """Run `fleet` (module docstring); `CosimError` on bad input (before anything runs). `trace`,
-    when given, gets (t [s], positions (N x 2) [m]) at the start and after every step."""
+    when given, gets (t [s], positions (N x 2) [m]) at the start and after every step; `log_path`
+    gets the fleet's log (`cosim.navigation.fleet_log`)."""
     described = describe_fleet(fleet)
     robots: list[_Robot] = []
     try:
@@ -183,7 +203,11 @@ def run_fleet(fleet: Fleet, trace: list | None = None) -> FleetOutcome:
                 raise CosimError(
                     f"{each.robot.scenario.source}: initialising the system failed: {error}"
                 ) from None
-        return _run(fleet, robots, trace)
+        log = FleetLog(log_path, [each.robot.name for each in robots], fleet.text) if log_path else None
+        outcome = _run(fleet, robots, trace, log)
+        if log is not None:
+            log.close(outcome_record(outcome))
+        return outcome
     finally:
         for each in robots:
             try:
@@ -192,7 +216,7 @@ def run_fleet(fleet: Fleet, trace: list | None = None) -> FleetOutcome:
                 pass
 
 
-def _run(fleet: Fleet, robots: list[_Robot], trace: list | None) -> FleetOutcome:
+def _run(fleet: Fleet, robots: list[_Robot], trace: list | None, log: FleetLog | None) -> FleetOutcome:
     settings = fleet.settings
     index = {each.robot.name: k for k, each in enumerate(robots)}
     contacts = FleetContacts([each.robot.name for each in robots], [each.robot.radius for each in robots])
@@ -203,6 +227,11 @@ def _run(fleet: Fleet, robots: list[_Robot], trace: list | None) -> FleetOutcome
     contacts.start(positions)
     if trace is not None:
         trace.append((0.0, positions))
+    pose_steps = max(1, round(1.0 / (fleet.first.pose_rate * fleet.first.macro_step)))
+    if log is not None:
+        log.write_poses(0, [each.pose for each in robots], [each.command for each in robots])
+        for each in robots:
+            log.write_goal(0, each.robot.name, *each.monitor.goal)
     seen_rows = [np.array([index[name] for name in each.seen], dtype=np.intp) for each in robots]
     wall_start = time.perf_counter()
     reason = "stop_time"
@@ -226,6 +255,14 @@ def _run(fleet: Fleet, robots: list[_Robot], trace: list | None) -> FleetOutcome
         outcome.time = t_next
         if trace is not None:
             trace.append((t_next, after))
+        if log is not None:
+            t_next_ns = robots[0].master.time_ns
+            if (k + 1) % pose_steps == 0:
+                log.write_poses(t_next_ns, [each.pose for each in robots], [each.command for each in robots])
+            for each in robots:
+                if each.monitor.goal != each.logged_goal:
+                    log.write_goal(t_next_ns, each.robot.name, *each.monitor.goal)
+                    each.logged_goal = each.monitor.goal
         if began and settings.on_collision == "stop":
             reason = "collision"
             break
@@ -235,6 +272,10 @@ def _run(fleet: Fleet, robots: list[_Robot], trace: list | None) -> FleetOutcome
         if all(not each.judged for each in robots):
             reason = "completed" if outcome.completed else "all_ended"
             break
+    if log is not None and (k + 1) % pose_steps != 0:
+        log.write_poses(
+            robots[0].master.time_ns, [each.pose for each in robots], [each.command for each in robots]
+        )
     for k_robot, each in enumerate(robots):
         each.outcome.min_clearance_walls = each.monitor.outcome.min_clearance
         each.outcome.min_clearance_robots = float(contacts.min_clearance[k_robot])
@@ -293,10 +334,8 @@ def _judge(each: _Robot, t: float, h: float, before, after) -> None:
 def _next_goal(each: _Robot, t: float) -> None:
     """Give the planner the robot's next goal (a replan from where it stands)."""
     goal = each.goals[each.goal_index]
-    x, y = each.position
+    x, y, theta = each.pose
     planner = each.built.planner
-    vehicle = each.built.system.components[POSE_OF]
-    theta = float(vehicle.output_buffer[vehicle.output_index["theta"]])
     why = planner.set_goal(goal.x, goal.y, t, (x, y, theta)) if planner is not None else "no planner"
     if why is not None:
         each.outcome.status = "no_path"
@@ -344,9 +383,14 @@ def run_fleet_command(args, fleet: Fleet) -> int:
 
     if getattr(args, "live", False):
         raise CosimError(f"{fleet.source}: --live shows one robot; a fleet's live view is not there yet")
-    if args.out is not None:
-        print(f"cosim: note: a fleet run writes no log yet; {args.out} not written", file=sys.stderr)
-    outcome = run_fleet(fleet)
+    from cosim.record.logfile import default_log_path
+
+    path = args.out if args.out is not None else default_log_path(fleet.first.log_pattern, fleet.name)
+    if Path(path).exists() and not args.force:
+        raise CosimError(f"{path}: already exists; give --force to overwrite it")
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    outcome = run_fleet(fleet, log_path=Path(path))
     if not args.quiet:
         print(format_fleet(fleet, outcome))
+        print(f"log: {path}", file=sys.stdout)
     return outcome.exit_code

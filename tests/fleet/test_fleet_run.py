@@ -115,3 +115,43 @@ def test_cosim_run_prints_the_fleet_and_exits_1_without_completion(capsys):
     assert main(["run", str(SCENARIOS / "fleet_head_on.toml"), "--no-plot"]) == 1
     text = capsys.readouterr().out
     assert "robot1 and robot2 collide at t = " in text and "fleet: collision" in text
+
+
+def test_the_log_holds_one_tf_tree_under_map_and_namespaced_odometry(tmp_path):
+    from mcap.reader import make_reader
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)  # rosbags' own message definitions
+    fleet = load_scenario(SCENARIOS / "fleet_head_on.toml")
+    trace: list = []
+    log = tmp_path / "fleet.mcap"
+    outcome = run_fleet(fleet, trace, log_path=log)
+    positions = {round(t * 1e9): p for t, p in trace}
+    parents: dict[str, str] = {}
+    odometry = {"robot1": 0, "robot2": 0}
+    with open(log, "rb") as stream:
+        reader = make_reader(stream)
+        for schema, channel, message in reader.iter_messages():
+            data = store.deserialize_cdr(message.data, schema.name)
+            if channel.topic == "/tf":
+                for transform in data.transforms:
+                    parents[transform.child_frame_id] = transform.header.frame_id
+            elif channel.topic.endswith("/odom"):
+                name = channel.topic.split("/")[1]
+                assert data.header.frame_id == f"{name}/odom" and data.child_frame_id == f"{name}/base_link"
+                expected = positions[message.log_time][int(name[-1]) - 1]
+                assert (data.pose.pose.position.x, data.pose.pose.position.y) == pytest.approx(
+                    tuple(expected)
+                )
+                odometry[name] += 1
+        (metadata,) = [m for m in reader.iter_metadata() if m.name == "fleet_outcome"]
+    assert parents == {
+        "robot1/odom": "map", "robot1/base_link": "robot1/odom",
+        "robot2/odom": "map", "robot2/base_link": "robot2/odom",
+    }  # fmt: skip
+    # 50 Hz from t = 0 to the end of the run (a last pose at the end).
+    assert odometry["robot1"] == odometry["robot2"] == math.floor(outcome.time * 50 + 1e-9) + 1
+    import json
+
+    (collision,) = json.loads(metadata.metadata["collisions"])
+    assert collision["robots"] == ["robot1", "robot2"] and collision["time"] == outcome.collisions[0].time
