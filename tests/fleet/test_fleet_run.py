@@ -155,3 +155,32 @@ def test_the_log_holds_one_tf_tree_under_map_and_namespaced_odometry(tmp_path):
 
     (collision,) = json.loads(metadata.metadata["collisions"])
     assert collision["robots"] == ["robot1", "robot2"] and collision["time"] == outcome.collisions[0].time
+
+
+def test_a_mission_visits_its_goals_in_order_and_dwells():
+    from cosim.scenario.load import parse_scenario
+
+    text = (SCENARIOS / "fleet_head_on.toml").read_text()
+    text = text.replace(
+        "goal = { x = 35.0, y = 19.0, tolerance = 1.0 }",
+        "mission = [{ x = 25.0, y = 19.0, dwell = 3.0 }, { x = 40.0, y = 19.0 }]",
+    )
+    text = text.replace(
+        "start = { x = 35.0, y = 19.0, theta = 3.141592653589793 }", "start = { x = 12.0, y = 30.0 }"
+    )
+    text = text.replace("goal = { x = 12.0, y = 19.0, tolerance = 1.0 }", "goal = { x = 30.0, y = 30.0 }")
+    fleet = parse_scenario(text, "mission.toml", SCENARIOS)
+    trace: list = []
+    outcome = run_fleet(fleet, trace)
+    robot1 = outcome.robots[0]
+    assert outcome.reason == "completed" and (robot1.goals_reached, robot1.goals) == (2, 2)
+    times = np.array([t for t, _ in trace])
+    path = np.array([p[0] for _, p in trace])
+    # Reached when first within the 1 m tolerance of (25, 19); then it stays put for 3 s.
+    first = int(np.flatnonzero(np.hypot(path[:, 0] - 25.0, path[:, 1] - 19.0) <= 1.0)[0])
+    dwell = (times >= times[first]) & (times <= times[first] + 3.0 - 1e-9)
+    stopping = (times >= times[first] + 1.0) & dwell  # after a second to brake (1.5 m/s)
+    assert np.ptp(path[stopping, 0]) < 0.05 and np.ptp(path[stopping, 1]) < 0.05
+    second = int(np.flatnonzero(np.hypot(path[:, 0] - 40.0, path[:, 1] - 19.0) <= 1.0)[0])
+    assert robot1.completion_time == pytest.approx(times[second])
+    assert times[second] > times[first] + 3.0 + (40.0 - 25.0 - 2.0) / 1.5  # dwell, then >= 13 m at 1.5 m/s
