@@ -72,6 +72,7 @@ class RobotOutcome:
     stopped_time: float = 0.0  # [s] slower than STOPPED_SPEED while not completed or dwelling
     recovery_time: float = 0.0  # [s] in the mixer's recover mode
     deadlocked_at: float | None = None  # [s] start of the no-progress period that made it deadlocked
+    collision: tuple[float, float, float] | None = None  # (t [s], x, y [m]) of hitting a wall or obstacle
 
 
 @dataclass
@@ -301,6 +302,7 @@ def _judge(each: _Robot, t: float, h: float, before, after) -> None:
     _, why = monitor.check_positions((t,), (float(after[0]),), (float(after[1]),))
     if why == "collision":
         result.status = "collision"
+        result.collision = (t, float(after[0]), float(after[1]))
         return
     dwelling = each.dwell_until is not None
     if moved < STOPPED_SPEED * h and not dwelling:
@@ -374,6 +376,12 @@ def format_fleet(fleet: Fleet, outcome: FleetOutcome) -> str:
         f"wall {outcome.wall_time:.2f} s"
     )
     lines += [f"  collision: {contact.describe()}" for contact in outcome.collisions]
+    lines += [
+        f"  collision: {robot.name} hits a wall or obstacle at t = {robot.collision[0]:.3f} s at "
+        f"({robot.collision[1]:.3f}, {robot.collision[2]:.3f})"
+        for robot in outcome.robots
+        if robot.collision is not None
+    ]
     return "\n".join(lines)
 
 

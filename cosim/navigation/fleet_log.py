@@ -125,6 +125,7 @@ def outcome_record(outcome) -> dict:
             "stopped_time": robot.stopped_time,
             "recovery_time": robot.recovery_time,
             "deadlocked_at": robot.deadlocked_at,
+            "collision": list(robot.collision) if robot.collision else None,
         }
         for robot in outcome.robots
     }
