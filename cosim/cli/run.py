@@ -163,7 +163,7 @@ def _handler(args) -> int:
     overrides = list(args.overrides)
     if args.max_steps is not None:
         overrides.append(f"simulation.max_steps={args.max_steps}")
-    scenario = load_scenario(args.scenario, overrides)
+    scenario = load_scenario(args.scenario, overrides, fleet=True)
     if hasattr(scenario, "robots"):  # a fleet ([[robots]]): cosim.navigation.fleet
         from cosim.navigation.fleet import run_fleet_command
 

@@ -236,8 +236,15 @@ class Scenario:
         return "none" if spec.is_builtin else "process"
 
 
-def load_scenario(path: str | Path, overrides: list[str] | tuple[str, ...] = (), check_world: bool = True):
-    """Read, override and validate a scenario file; raise `CosimError` (one line) on any problem."""
+def load_scenario(
+    path: str | Path,
+    overrides: list[str] | tuple[str, ...] = (),
+    check_world: bool = True,
+    fleet: bool = False,
+):
+    """Read, override and validate a scenario file; raise `CosimError` (one line) on any problem.
+    A fleet (`[[robots]]`) is a `cosim.scenario.fleet.Fleet`, accepted only with `fleet=True`
+    (what takes one robot says so instead of failing on it)."""
     path = Path(path)
     source = str(path)
     try:
@@ -251,6 +258,11 @@ def load_scenario(path: str | Path, overrides: list[str] | tuple[str, ...] = (),
     except OSError as error:
         raise CosimError(f"{source}: cannot read: {error}") from None
     scenario = parse_scenario(text, source, path.resolve().parent, overrides, path=path)
+    if isinstance(scenario, Fleet) and not fleet:
+        raise CosimError(
+            f"{source}: a fleet ([[robots]]) runs with cosim run and shows with cosim system; "
+            "this takes one robot"
+        )
     if check_world:
         from cosim.world.distance import check_start_goal
 

@@ -31,7 +31,7 @@ def _bisect_contact(a0, a1, b0, b1, reach, t0, h):
 
 
 def test_head_on_robots_collide_and_the_report_matches_the_geometry():
-    fleet = load_scenario(SCENARIOS / "fleet_head_on.toml")
+    fleet = load_scenario(SCENARIOS / "fleet_head_on.toml", fleet=True)
     trace: list = []
     outcome = run_fleet(fleet, trace)
     (contact,) = outcome.collisions  # on_collision = "stop": the run ends at the first contact
@@ -84,7 +84,8 @@ def test_robots_completing_make_the_fleet_complete():
     # Two robots in different aisles, far apart: both reach their goals.
     fleet = load_scenario(
         SCENARIOS / "fleet_head_on.toml",
-        [
+        fleet=True,
+        overrides=[
             "robots.robot2.start={x=12.0,y=30.0,theta=0.0}",
             "robots.robot2.goal={x=30.0,y=30.0}",
             "robots.robot1.goal={x=30.0,y=19.0}",
@@ -122,7 +123,7 @@ def test_the_log_holds_one_tf_tree_under_map_and_namespaced_odometry(tmp_path):
     from rosbags.typesys import Stores, get_typestore
 
     store = get_typestore(Stores.ROS2_HUMBLE)  # rosbags' own message definitions
-    fleet = load_scenario(SCENARIOS / "fleet_head_on.toml")
+    fleet = load_scenario(SCENARIOS / "fleet_head_on.toml", fleet=True)
     trace: list = []
     log = tmp_path / "fleet.mcap"
     outcome = run_fleet(fleet, trace, log_path=log)

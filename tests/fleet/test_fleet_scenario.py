@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from cosim.cli import main
 from cosim.errors import CosimError
 from cosim.scenario.fleet import Fleet
 from cosim.scenario.load import load_scenario, parse_scenario
@@ -137,13 +138,13 @@ def test_overlapping_starts_and_goals_in_walls_are_refused(tmp_path):
     path = tmp_path / "f.toml"
     path.write_text(text.replace('"maps/warehouse.yaml"', f'"{SCENARIOS / "maps" / "warehouse.yaml"}"'))
     with pytest.raises(CosimError, match=r"\[\[robots\]\]\[1\]\.start: 'b' starts within 1 m of 'a'"):
-        load_scenario(path)
+        load_scenario(path, fleet=True)
     # The mission's second goal, (20, 13), lies in a rack.
     path.write_text(
         path.read_text().replace("x = 12.6", "x = 35.0").replace("x = 20.0, y = 6.0", "x = 20.0, y = 13.0")
     )
     with pytest.raises(CosimError, match=r"\[\[robots\]\]\[1\] \(b\): \[goal\]: \(20, 13\) is inside"):
-        load_scenario(path)
+        load_scenario(path, fleet=True)
 
 
 def test_a_scenario_without_robots_is_one_robot():
@@ -153,7 +154,16 @@ def test_a_scenario_without_robots_is_one_robot():
     assert scenario.start == tuple(raw["start"].values())
 
 
+def test_what_takes_one_robot_refuses_a_fleet_in_one_line(tmp_path):
+    with pytest.raises(
+        CosimError, match=r"fleet_head_on\.toml: a fleet \(\[\[robots\]\]\) runs with cosim run"
+    ):
+        load_scenario(HEAD_ON)
+    assert main(["ssp", "export", str(HEAD_ON), "--out", str(tmp_path / "fleet.ssp")]) == 2
+    assert not (tmp_path / "fleet.ssp").exists()
+
+
 def test_shipped_fleet_scenarios_load():
     for path in sorted(SCENARIOS.glob("fleet_*.toml")):
-        fleet = load_scenario(path)
+        fleet = load_scenario(path, fleet=True)
         assert isinstance(fleet, Fleet) and len(fleet.robots) >= 2

@@ -13,7 +13,9 @@ SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 
 
 def test_every_robot_is_the_template_and_sees_the_others():
-    fleet = load_scenario(SCENARIOS / "fleet_intersection.toml", ["robots.robot3.vfh.safety_distance=0.45"])
+    fleet = load_scenario(
+        SCENARIOS / "fleet_intersection.toml", ["robots.robot3.vfh.safety_distance=0.45"], fleet=True
+    )
     described = describe_fleet(fleet)
     single = describe_system(fleet.robots[0].scenario)
     flat = described.flat()
