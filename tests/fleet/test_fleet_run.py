@@ -185,3 +185,37 @@ def test_a_mission_visits_its_goals_in_order_and_dwells():
     second = int(np.flatnonzero(np.hypot(path[:, 0] - 40.0, path[:, 1] - 19.0) <= 1.0)[0])
     assert robot1.completion_time == pytest.approx(times[second])
     assert times[second] > times[first] + 3.0 + (40.0 - 25.0 - 2.0) / 1.5  # dwell, then >= 13 m at 1.5 m/s
+
+
+def _contact_events(trace, names, reach):
+    """Every contact's beginning, found from the positions alone: a step in which a pair, apart
+    at its start (or after having separated), comes within `reach`; its time by bisection."""
+    times = [t for t, _ in trace]
+    positions = [p for _, p in trace]
+    samples = np.linspace(0.0, 1.0, 201)
+    events = []
+    for i in range(len(names)):
+        for j in range(i + 1, len(names)):
+            touching = math.dist(positions[0][i], positions[0][j]) <= reach
+            for k in range(len(trace) - 1):
+                a0, a1, b0, b1 = positions[k][i], positions[k + 1][i], positions[k][j], positions[k + 1][j]
+                gaps = np.hypot(*((b0 - a0) + samples[:, None] * ((b1 - b0) - (a1 - a0))).T)
+                if not touching and gaps.min() <= reach:
+                    time, _, _ = _bisect_contact(a0, a1, b0, b1, reach, times[k], times[k + 1] - times[k])
+                    events.append((names[i], names[j], time))
+                touching = gaps[-1] <= reach
+    return sorted(events, key=lambda event: event[2])
+
+
+def test_every_contact_at_the_intersection_is_reported_once_at_its_time():
+    fleet = load_scenario(SCENARIOS / "fleet_intersection.toml", ["simulation.stop_time=12"], fleet=True)
+    assert fleet.settings.on_collision == "continue"
+    trace: list = []
+    outcome = run_fleet(fleet, trace)
+    names = [robot.name for robot in fleet.robots]
+    expected = _contact_events(trace, names, 1.0)
+    assert len(expected) >= 2  # robots planning alone do meet there
+    reported = [(c.first, c.second, c.time) for c in outcome.collisions]
+    assert [event[:2] for event in reported] == [event[:2] for event in expected]
+    for (_, _, got), (_, _, time) in zip(reported, expected, strict=True):
+        assert got == pytest.approx(time, abs=1e-9)
