@@ -64,6 +64,7 @@ class Robot:
     scenario: object  # cosim.scenario.load.Scenario
     mission: tuple[Goal, ...]
     repeat: int = 1
+    sections: tuple[str, ...] = ()  # the template sections the robot gives for itself
 
     @property
     def radius(self) -> float:
@@ -164,7 +165,8 @@ def build_fleet(raw: dict, source: str, build: Callable[..., Any], *args) -> Fle
         label = f"{source}: {where} ({name})"
         robot_raw["scenario"] = dict(scenario_table)
         scenario = build(robot_raw, label, *args)
-        robots.append(Robot(name, index, scenario, mission, repeat))
+        own = tuple(section for section in ROBOT_SECTIONS if section in table)
+        robots.append(Robot(name, index, scenario, mission, repeat, own))
     _check_common(source, robots)
     first = robots[0].scenario
     return Fleet(

@@ -61,7 +61,7 @@ def describe_fleet(fleet: Fleet) -> FleetDescription:
     links: list[ConnectionDescription] = []
     radius = {robot.name: robot.radius for robot in fleet.robots}
     for robot in fleet.robots:
-        description = describe_system(robot.scenario)
+        description = _own_sections(robot, describe_system(robot.scenario))
         lidar = description.components.get(SEEN_BY)
         if lidar is None or lidar.kind != "lidar" or len(fleet.robots) == 1:
             robots[robot.name] = description  # no template lidar: this robot sees no one
@@ -88,6 +88,19 @@ def describe_fleet(fleet: Fleet) -> FleetDescription:
                     )
                 )
     return FleetDescription(robots, tuple(links), seen)
+
+
+def _own_sections(robot, description: SystemDescription) -> SystemDescription:
+    """Components that the robot's own sections set say so in `where`: "[vfh] + [[robots]][1].vfh"
+    (a `[components.NAME]` of the robot's: "+ [[robots]][1].components")."""
+    label = f"[[robots]][{robot.index}]"
+    components = {}
+    for name, component in description.components.items():
+        section = "components" if component.where.startswith("[components.") else name
+        if section in robot.sections:
+            component = replace(component, where=f"{component.where} + {label}.{section}")
+        components[name] = component
+    return replace(description, components=components)
 
 
 def qualified(robot: str, description: SystemDescription) -> SystemDescription:

@@ -23,6 +23,9 @@ def test_every_robot_is_the_template_and_sees_the_others():
     assert list(flat.components) == names
     assert flat.components["robot3.vfh"].parameters["safety_distance"] == 0.45
     assert flat.components["robot1.vfh"].parameters["safety_distance"] == 0.3
+    # A section the robot gives for itself is named where the component is declared.
+    assert flat.components["robot3.vfh"].where == "[vfh] + [[robots]][2].vfh"
+    assert flat.components["robot1.vfh"].where == "[vfh]"
     # Each robot's lidar sees the three others, in fleet order, fed by their vehicles' x and y.
     assert described.seen["robot2"] == ("robot1", "robot3", "robot4")
     feeds = {c.target: c.source for c in described.links}
