@@ -166,6 +166,80 @@ class _Robot:
         remaining = math.hypot(scenario.goal[0] - scenario.start[0], scenario.goal[1] - scenario.start[1])
         self.progress = Progress(deadlock_after, 0.0, remaining)
         self.logged_goal = scenario.goal
+        self.pending_goal = False
+        # Where the block's rows hold the pose, the command (the vehicle's inputs) and the mode.
+        names = [component.name for component in self.master.order]
+        self.vehicle_row = names.index(POSE_OF)
+        self.vehicle_period = system.period_steps(vehicle)
+        inputs = len(vehicle.inputs)
+        self.pose_columns = [inputs + vehicle.output_index[axis] for axis in ("x", "y", "theta")]
+        command = [vehicle.input_index.get(port) for port in ("v", "omega")]
+        self.command_columns = command if None not in command else None
+        self.mode_row = None
+        if self.mode is not None:
+            component, slot = self.mode
+            self.mode_row = (
+                names.index(component.name),
+                len(component.inputs) + slot,
+                system.period_steps(component),
+            )
+        self.tables = None  # the compiled kernel's tables (`Master.kernel_tables`), made at the first block
+        self._tried_kernel = False
+        self.poses = np.empty((0, 3))
+        self.commands_now = np.empty((0, 2))
+        self.modes = np.empty(0)
+        self._last = (np.array(self.pose, dtype=float), np.array(self.command, dtype=float), math.nan)
+
+    def _step_recorded(self, count: int) -> list[np.ndarray]:
+        """Step `count` steps; every component's rows (inputs, then outputs, after each of its steps)."""
+        kept: list[list[np.ndarray]] = []
+        if self.tables is None and not self._tried_kernel:
+            self._tried_kernel = True
+            self.tables = self.master.kernel_tables(record=True, block=count)
+        if self.tables is not None and count <= self.tables.record_block:
+            # FMUs in the compiled kernel; the lidar and planner (Python) step in the block's first
+            # step and hold their outputs to its end (the block is cut only at their periods).
+            self.master.run_blocks(
+                count,
+                self.tables,
+                lambda _first, _end, rows, _clean: kept.append(
+                    [None if r is None else r.copy() for r in rows]
+                ),
+                block=count,
+                cut_after_python=lambda _k: False,
+            )
+        else:
+            self.master.run_recorded(count, lambda _first, _count, rows: kept.append(rows), block=count)
+        if len(kept) == 1:
+            return kept[0]
+        return [
+            np.concatenate([part[i] for part in kept if part[i] is not None])
+            if any(part[i] is not None for part in kept)
+            else np.empty((0, 0))
+            for i in range(len(kept[0]))
+        ]
+
+    def advance(self, count: int) -> None:
+        """Step `count` macro steps (the compiled kernel where the system allows it) and keep, for
+        each step, the pose at its end, the command applied in it and the avoidance mode."""
+        first = self.master.step_index
+        histories = self._step_recorded(count)
+        last_pose, last_command, last_mode = self._last
+        vehicle = histories[self.vehicle_row]
+        self.poses = _held(vehicle[:, self.pose_columns], first, count, self.vehicle_period, last_pose)
+        if self.command_columns is not None:
+            self.commands_now = _held(
+                vehicle[:, self.command_columns], first, count, self.vehicle_period, last_command
+            )
+        else:
+            self.commands_now = np.full((count, 2), math.nan)
+        if self.mode_row is not None:
+            row, column, period = self.mode_row
+            modes = _held(histories[row][:, [column]], first, count, period, np.array([last_mode]))
+            self.modes = modes[:, 0]
+        else:
+            self.modes = np.full(count, math.nan)
+        self._last = (self.poses[-1], self.commands_now[-1], self.modes[-1])
 
     @property
     def position(self) -> tuple[float, float]:
@@ -217,6 +291,19 @@ def run_fleet(fleet: Fleet, trace: list | None = None, log_path: Path | None = N
                 pass
 
 
+def _block_steps(robots: list[_Robot]) -> int:
+    """Steps per block: the greatest common divisor of the periods (in steps) of every robot's
+    Python components (lidar, planner), so each of their steps, the only ones that read the other
+    robots, falls on a block's first step; 1 when a robot has a lidar stepped every step."""
+    periods = [
+        each.built.system.period_steps(component)
+        for each in robots
+        for component in each.master.order
+        if component.name in (SEEN_BY, "planner") and not component.constant_outputs
+    ]
+    return math.gcd(*periods) if periods else 1
+
+
 def _run(fleet: Fleet, robots: list[_Robot], trace: list | None, log: FleetLog | None) -> FleetOutcome:
     settings = fleet.settings
     index = {each.robot.name: k for k, each in enumerate(robots)}
@@ -224,6 +311,7 @@ def _run(fleet: Fleet, robots: list[_Robot], trace: list | None, log: FleetLog |
     outcome = FleetOutcome([each.outcome for each in robots])
     h_ns = robots[0].built.system.macro_step_ns
     steps = robots[0].master.steps_to_stop
+    stop_ns = robots[0].master.stop_time_ns
     positions = np.array([each.position for each in robots])
     contacts.start(positions)
     if trace is not None:
@@ -234,49 +322,61 @@ def _run(fleet: Fleet, robots: list[_Robot], trace: list | None, log: FleetLog |
         for each in robots:
             log.write_goal(0, each.robot.name, *each.monitor.goal)
     seen_rows = [np.array([index[name] for name in each.seen], dtype=np.intp) for each in robots]
+    block = _block_steps(robots)
     wall_start = time.perf_counter()
-    reason = "stop_time"
-    for k in range(steps):
-        t_ns = k * h_ns
-        t = t_ns / NS_PER_S
+    reason = None
+    k = 0
+    last_pose_step = 0
+    while k < steps and reason is None:
+        count = min(block, steps - k)
+        # The other robots where they stand at the block's start, for the scans of its first step.
         for each, rows in zip(robots, seen_rows, strict=True):
             if each.lidar is not None:
                 others = positions[rows]
                 each.lidar.input_buffer[each.lidar_slots] = np.concatenate((others[:, 0], others[:, 1]))
         for each in robots:
-            each.master.step()
-        t_next = robots[0].master.time
-        h = t_next - t
-        after = np.array([each.position for each in robots])
-        began = contacts.step(t, h, positions, after)
-        outcome.collisions += began
-        for k_robot, each in enumerate(robots):
-            _judge(each, t_next, h, positions[k_robot], after[k_robot])
-        positions = after
-        outcome.time = t_next
-        if trace is not None:
-            trace.append((t_next, after))
-        if log is not None:
-            t_next_ns = robots[0].master.time_ns
-            if (k + 1) % pose_steps == 0:
-                log.write_poses(t_next_ns, [each.pose for each in robots], [each.command for each in robots])
-            for each in robots:
-                if each.monitor.goal != each.logged_goal:
-                    log.write_goal(t_next_ns, each.robot.name, *each.monitor.goal)
-                    each.logged_goal = each.monitor.goal
-        if began and settings.on_collision == "stop":
-            reason = "collision"
-            break
-        if any(each.outcome.status == "collision" for each in robots) and settings.on_collision == "stop":
-            reason = "collision"
-            break
-        if all(not each.judged for each in robots):
-            reason = "completed" if outcome.completed else "all_ended"
-            break
-    if log is not None and (k + 1) % pose_steps != 0:
+            each.advance(count)
+        for i in range(count):
+            t = (k + i) * h_ns / NS_PER_S
+            end_ns = min((k + i + 1) * h_ns, stop_ns) if stop_ns is not None else (k + i + 1) * h_ns
+            t_next = end_ns / NS_PER_S
+            after = np.array([each.poses[i, :2] for each in robots])
+            began = contacts.step(t, t_next - t, positions, after)
+            outcome.collisions += began
+            for k_robot, each in enumerate(robots):
+                _judge(each, t_next, t_next - t, positions[k_robot], after[k_robot], i)
+            positions = after
+            outcome.time = t_next
+            if trace is not None:
+                trace.append((t_next, after))
+            if log is not None and (k + i + 1) % pose_steps == 0:
+                log.write_poses(
+                    end_ns, [each.poses[i] for each in robots], [each.commands_now[i] for each in robots]
+                )
+                last_pose_step = k + i + 1
+            if (began or any(each.outcome.status == "collision" for each in robots)) and (
+                settings.on_collision == "stop"
+            ):
+                reason = "collision"
+            elif all(not each.judged for each in robots):
+                reason = "completed" if outcome.completed else "all_ended"
+            if reason is not None:
+                break
+        k += i + 1
+        for each in robots:  # a new mission goal: given at the end of the block
+            if each.pending_goal and each.judged:
+                _next_goal(each, outcome.time)
+            each.pending_goal = False
+            if log is not None and each.monitor.goal != each.logged_goal:
+                log.write_goal(round(outcome.time * NS_PER_S), each.robot.name, *each.monitor.goal)
+                each.logged_goal = each.monitor.goal
+    if log is not None and last_pose_step != k:  # the pose at the end (step i of the last block)
         log.write_poses(
-            robots[0].master.time_ns, [each.pose for each in robots], [each.command for each in robots]
+            round(outcome.time * NS_PER_S),
+            [each.poses[i] for each in robots],
+            [each.commands_now[i] for each in robots],
         )
+    reason = reason or "stop_time"
     for k_robot, each in enumerate(robots):
         each.outcome.min_clearance_walls = each.monitor.outcome.min_clearance
         each.outcome.min_clearance_robots = float(contacts.min_clearance[k_robot])
@@ -287,22 +387,36 @@ def _run(fleet: Fleet, robots: list[_Robot], trace: list | None, log: FleetLog |
     return outcome
 
 
-def _judge(each: _Robot, t: float, h: float, before, after) -> None:
+def _held(rows: np.ndarray, first: int, count: int, period: int, last: np.ndarray) -> np.ndarray:
+    """Per step k = first .. first + count - 1, the row of the component's latest step <= k (its
+    rows are those of the steps k % period == 0; before its first step in the block, `last`)."""
+    if period == 1:
+        return rows
+    out = np.empty((count, rows.shape[1]))
+    value, j = last, 0
+    for i, k in enumerate(range(first, first + count)):
+        if k % period == 0:
+            value, j = rows[j], j + 1
+        out[i] = value
+    return out
+
+
+def _judge(each: _Robot, t: float, h: float, before, after, step: int = 0) -> None:
     """One robot after the step that ended at t: distance, clearance, mode, mission, deadlock."""
     result = each.outcome
     if not each.judged:
         return
     moved = math.hypot(after[0] - before[0], after[1] - before[1])
     result.distance += moved
-    if each.mode is not None:
-        component, slot = each.mode
-        if component.output_buffer[slot] == MODE_RECOVER:
-            result.recovery_time += h
+    if each.modes[step] == MODE_RECOVER:
+        result.recovery_time += h
     monitor = each.monitor
     _, why = monitor.check_positions((t,), (float(after[0]),), (float(after[1]),))
     if why == "collision":
         result.status = "collision"
         result.collision = (t, float(after[0]), float(after[1]))
+        return
+    if each.pending_goal:  # at a goal, the next one given at the block's end
         return
     dwelling = each.dwell_until is not None
     if moved < STOPPED_SPEED * h and not dwelling:
@@ -311,7 +425,7 @@ def _judge(each: _Robot, t: float, h: float, before, after) -> None:
         if t + 1e-9 < each.dwell_until:
             return
         each.dwell_until = None
-        _next_goal(each, t)
+        each.pending_goal = True
         return
     if why == "goal_reached":
         monitor.outcome.reason, monitor.outcome.reached = "running", False
@@ -327,7 +441,7 @@ def _judge(each: _Robot, t: float, h: float, before, after) -> None:
         if goal.dwell > 0:
             each.dwell_until = t + goal.dwell
             return
-        _next_goal(each, t)
+        each.pending_goal = True
         return
     goal = each.goals[each.goal_index]
     result.deadlocked_at = each.progress.update(t, math.hypot(goal.x - after[0], goal.y - after[1]))
@@ -336,7 +450,7 @@ def _judge(each: _Robot, t: float, h: float, before, after) -> None:
 def _next_goal(each: _Robot, t: float) -> None:
     """Give the planner the robot's next goal (a replan from where it stands)."""
     goal = each.goals[each.goal_index]
-    x, y, theta = each.pose
+    x, y, theta = (float(value) for value in each.poses[-1])
     planner = each.built.planner
     why = planner.set_goal(goal.x, goal.y, t, (x, y, theta)) if planner is not None else "no planner"
     if why is not None:
