@@ -2,21 +2,25 @@
 
 `run_fleet(fleet)` builds each robot as the single-robot run builds it (`build_run` with the
 robot's description from `cosim.scenario.fleet_compose.describe_fleet`: its lidar has the inputs
-`robots_x[j]`, `robots_y[j]`), initialises every robot's `Master`, then steps them in lockstep,
-one macro step at a time:
+`robots_x[j]`, `robots_y[j]`), initialises every robot's `Master`, then advances them together a
+block of steps at a time. A block is the greatest common divisor of every robot's lidar and planner
+periods (10 steps for the template's 10 Hz lidar at 100 Hz), so a lidar scans only in a block's
+first step:
 
-1. before the step from t to t + h, every robot's lidar gets the other robots' positions at t
-   (each vehicle's x, y then): the scan at t sees every robot where it stands at t, whatever the
+1. before a block from t, every robot's lidar gets the other robots' positions at t (each
+   vehicle's x, y then): the scan at t sees every robot where it stands at t, whatever the
    robots' order (the links `robotK.vehicle.x -> robotJ.lidar.robots_x[i]` of the description,
    applied between the robots' masters);
-2. every robot's master steps (its components in its own order, Gauss-Seidel within the robot);
-3. the footprints are checked pairwise over the step (`cosim.world.fleet.FleetContacts`: exact
-   first contact of circles moving linearly within the step), and each robot against the walls
-   and unknown obstacles (`OutcomeMonitor`, exactly as for one robot);
+2. every robot's master steps the block (its FMUs in the compiled kernel, `Master.run_blocks`;
+   its lidar and planner in Python in the first step), keeping each step's rows of its components;
+3. then, step by step through the block, the footprints are checked pairwise
+   (`cosim.world.fleet.FleetContacts`: exact first contact of circles moving linearly within
+   the step), and each robot against the walls and unknown obstacles (`OutcomeMonitor`, exactly
+   as for one robot);
 4. mission progress: a robot within its goal's tolerance has reached it; after its `dwell` the
-   planner is given the next goal (`PlannerComponent.set_goal`, a replan from the current pose);
-   after the last goal (times `repeat`) the robot has completed and stays where it is (still an
-   obstacle for the others).
+   planner is given the next goal (`PlannerComponent.set_goal`, a replan from the current pose)
+   at the end of that block (at most one block, 0.1 s, later); after the last goal (times
+   `repeat`) the robot has completed and stays where it is (still an obstacle for the others).
 
 The run ends when every robot has completed, at the stop time, or at the first collision when
 `[fleet] on_collision = "stop"` (robot-robot contact, or a robot hitting a wall or obstacle). With
@@ -28,7 +32,8 @@ than its best for `[fleet] deadlock_after` seconds (dwelling at a goal excluded)
 the start of that period; it stays deadlocked unless it makes progress again (then the period
 counts anew). The fleet outcome counts robots deadlocked at the end.
 
-This module steps the masters in Python (`Master.step`); its log (`cosim.navigation.fleet_log`)
+A run that ends inside a block ends at that step: the robots' systems have advanced to the block's
+end, but nothing after the step is judged or logged. The log (`cosim.navigation.fleet_log`)
 holds the robots' poses under their namespaces (`/robot1/odom`, TF `map -> robot1/odom ->
 robot1/base_link`), goals and the fleet outcome. Signals, scans and plans per robot come when a
 fleet is one system recorded through the run path's recorder (`cosim.record`).
