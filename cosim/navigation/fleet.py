@@ -172,6 +172,11 @@ class _Robot:
         self.progress = Progress(deadlock_after, 0.0, remaining)
         self.logged_goal = scenario.goal
         self.pending_goal = False
+        self.logged_plan = 0
+        self.scan_lidar = system.components.get(SEEN_BY)
+        if self.scan_lidar is not None and not hasattr(self.scan_lidar, "beam_angles"):
+            self.scan_lidar = None  # not the template's lidar
+        self.lidar_steps = system.period_steps(self.scan_lidar) if self.scan_lidar is not None else 1
         # Where the block's rows hold the pose, the command (the vehicle's inputs) and the mode.
         names = [component.name for component in self.master.order]
         self.vehicle_row = names.index(POSE_OF)
@@ -296,6 +301,24 @@ def run_fleet(fleet: Fleet, trace: list | None = None, log_path: Path | None = N
                 pass
 
 
+def _log_block(log: FleetLog, robots: list[_Robot], t_ns: int) -> None:
+    """The scans taken at the block's start t_ns (a lidar scans only in a block's first step) and
+    the plans made in it (stamped t_ns: the planner steps with the lidar)."""
+    system_period = robots[0].built.system.macro_step_ns
+    for each in robots:
+        lidar = each.scan_lidar
+        if lidar is not None and (t_ns // system_period) % each.lidar_steps == 0:
+            count = len(lidar.beam_angles)
+            log.write_scan(
+                t_ns, each.robot.name, lidar.beam_angles, lidar.output_buffer[:count],
+                lidar.range_min, lidar.range_max, each.lidar_steps * system_period / NS_PER_S,
+            )  # fmt: skip
+        planner = each.built.planner
+        if planner is not None and planner.plan_version != each.logged_plan:
+            log.write_plan(t_ns, each.robot.name, planner.waypoints)
+            each.logged_plan = planner.plan_version
+
+
 def _block_steps(robots: list[_Robot]) -> int:
     """Steps per block: the greatest common divisor of the periods (in steps) of every robot's
     Python components (lidar, planner), so each of their steps, the only ones that read the other
@@ -323,9 +346,13 @@ def _run(fleet: Fleet, robots: list[_Robot], trace: list | None, log: FleetLog |
         trace.append((0.0, positions))
     pose_steps = max(1, round(1.0 / (fleet.first.pose_rate * fleet.first.macro_step)))
     if log is not None:
+        log.write_map(robots[0].built.grid)
         log.write_poses(0, [each.pose for each in robots], [each.command for each in robots])
         for each in robots:
             log.write_goal(0, each.robot.name, *each.monitor.goal)
+            if each.built.planner is not None:
+                log.write_plan(0, each.robot.name, each.built.planner.waypoints)
+                each.logged_plan = each.built.planner.plan_version
     seen_rows = [np.array([index[name] for name in each.seen], dtype=np.intp) for each in robots]
     block = _block_steps(robots)
     wall_start = time.perf_counter()
@@ -341,6 +368,8 @@ def _run(fleet: Fleet, robots: list[_Robot], trace: list | None, log: FleetLog |
                 each.lidar.input_buffer[each.lidar_slots] = np.concatenate((others[:, 0], others[:, 1]))
         for each in robots:
             each.advance(count)
+        if log is not None:
+            _log_block(log, robots, k * h_ns)
         for i in range(count):
             t = (k + i) * h_ns / NS_PER_S
             end_ns = min((k + i + 1) * h_ns, stop_ns) if stop_ns is not None else (k + i + 1) * h_ns

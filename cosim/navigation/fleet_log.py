@@ -7,10 +7,15 @@ One MCAP file (ROS 2 messages, cdr, profile "ros2"), written by `mcap.writer.Wri
 - `/robotN/odom` (nav_msgs/Odometry, frame `robotN/odom`, child `robotN/base_link`) at the same
   times, twist = the robot's command (`Observed.command`) or NaN;
 - `/robotN/goal` (geometry_msgs/PoseStamped in `map`) at t = 0 and when the robot takes its next goal;
+- `/robotN/plan` (nav_msgs/Path in `map`) at t = 0 and after each block in which it replanned;
+- `/robotN/scan` (sensor_msgs/LaserScan in `robotN/base_link`) at each lidar step, as the
+  single-robot log's /scan (REP-117: no return is +inf; beams on a uniform angle grid);
+- `/map` (nav_msgs/OccupancyGrid) once at t = 0: the known map;
 - metadata `fleet_outcome` (per robot and fleet figures, collisions) and attachment `scenario.toml`.
 
-The single-robot log (`cosim.record.recorder`) has more topics (signals, scan, plan, map); a
-fleet's will have them under the namespaces once a fleet is recorded through the same recorder.
+The single-robot log (`cosim.record.recorder`) also has `/signals/<component>`, `/cmd_vel` and
+`/obstacles`; a fleet's will have them under the namespaces once a fleet is recorded through the
+same recorder.
 """
 
 from __future__ import annotations
@@ -19,13 +24,18 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 from mcap.writer import CompressionType, Writer
 
 from cosim.record import rosmsg
+from cosim.record.recorder import scan_layout
 
 ODOM = "nav_msgs/msg/Odometry"
 TF = "tf2_msgs/msg/TFMessage"
 POSE = "geometry_msgs/msg/PoseStamped"
+PATH = "nav_msgs/msg/Path"
+SCAN = "sensor_msgs/msg/LaserScan"
+GRID = "nav_msgs/msg/OccupancyGrid"
 
 
 def odom_frame(robot: str) -> str:
@@ -86,6 +96,53 @@ class FleetLog:
     def write_goal(self, t_ns: int, name: str, x: float, y: float) -> None:
         self._write(f"/{name}/goal", POSE, t_ns, rosmsg.pose_stamped(t_ns, x, y, 0.0))
 
+    def write_map(self, grid) -> None:
+        """The known map (`planner.OccupancyGrid`) as nav_msgs/OccupancyGrid at t = 0: rows bottom
+        to top, occupied 100, free 0."""
+        occupied = np.asarray(grid.occupied, dtype=bool)
+        info = rosmsg.make(
+            "nav_msgs/msg/MapMetaData",
+            map_load_time=rosmsg.time_msg(0),
+            resolution=float(grid.resolution),
+            width=int(occupied.shape[1]),
+            height=int(occupied.shape[0]),
+            origin=rosmsg.pose(float(grid.origin[0]), float(grid.origin[1]), 0.0),
+        )
+        data = np.ascontiguousarray(np.flipud(occupied.astype(np.int8) * 100)).reshape(-1)
+        message = rosmsg.make(GRID, header=rosmsg.header(0, rosmsg.MAP_FRAME), info=info, data=data)
+        self._write("/map", GRID, 0, message)
+
+    def write_plan(self, t_ns: int, name: str, waypoints) -> None:
+        points = np.asarray(waypoints, dtype=float).reshape(-1, 2)
+        headings = np.arctan2(*np.diff(points, axis=0)[:, ::-1].T) if len(points) > 1 else np.zeros(0)
+        headings = np.append(headings, headings[-1] if len(headings) else 0.0)
+        poses = [rosmsg.pose_stamped(t_ns, x, y, yaw) for (x, y), yaw in zip(points, headings, strict=True)]
+        message = rosmsg.make(PATH, header=rosmsg.header(t_ns, rosmsg.MAP_FRAME), poses=poses)
+        self._write(f"/{name}/plan", PATH, t_ns, message)
+
+    def write_scan(
+        self, t_ns: int, name: str, angles, ranges, range_min: float, range_max: float, period: float
+    ):
+        """One sweep: beam angles [rad] and ranges [m] (NaN: no return, written +inf)."""
+        angle_min, increment, bins, _ = scan_layout(np.asarray(angles, dtype=float))
+        binned = np.full(int(bins[-1]) + 1 if len(bins) else 0, np.nan, dtype=np.float32)
+        values = np.asarray(ranges, dtype=np.float32)
+        binned[bins] = np.where(np.isnan(values), np.float32(np.inf), values)
+        message = rosmsg.make(
+            SCAN,
+            header=rosmsg.header(t_ns, base_frame(name)),
+            angle_min=angle_min,
+            angle_max=angle_min + increment * (len(binned) - 1),
+            angle_increment=increment,
+            time_increment=0.0,
+            scan_time=period,
+            range_min=range_min,
+            range_max=range_max,
+            ranges=binned,
+            intensities=np.zeros(0, dtype=np.float32),
+        )
+        self._write(f"/{name}/scan", SCAN, t_ns, message)
+
     def close(self, outcome: dict) -> None:
         self._writer.add_metadata("fleet_outcome", {key: json.dumps(value) for key, value in outcome.items()})
         self._writer.finish()
@@ -106,8 +163,6 @@ def _transform(t_ns: int, parent: str, child: str, x: float, y: float, theta: fl
 
 
 def _zeros():
-    import numpy as np
-
     return np.zeros(36)
 
 

@@ -130,13 +130,21 @@ def test_the_log_holds_one_tf_tree_under_map_and_namespaced_odometry(tmp_path):
     positions = {round(t * 1e9): p for t, p in trace}
     parents: dict[str, str] = {}
     odometry = {"robot1": 0, "robot2": 0}
+    scans = []
+    headings: dict[int, float] = {}
     with open(log, "rb") as stream:
         reader = make_reader(stream)
         for schema, channel, message in reader.iter_messages():
             data = store.deserialize_cdr(message.data, schema.name)
+            if channel.topic == "/robot1/scan":
+                assert data.header.frame_id == "robot1/base_link"
+                scans.append((message.log_time, data))
             if channel.topic == "/tf":
                 for transform in data.transforms:
                     parents[transform.child_frame_id] = transform.header.frame_id
+                    if transform.child_frame_id == "robot1/base_link":
+                        q = transform.transform.rotation
+                        headings[message.log_time] = 2 * math.atan2(q.z, q.w)
             elif channel.topic.endswith("/odom"):
                 name = channel.topic.split("/")[1]
                 assert data.header.frame_id == f"{name}/odom" and data.child_frame_id == f"{name}/base_link"
@@ -152,6 +160,27 @@ def test_the_log_holds_one_tf_tree_under_map_and_namespaced_odometry(tmp_path):
     }  # fmt: skip
     # 50 Hz from t = 0 to the end of the run (a last pose at the end).
     assert odometry["robot1"] == odometry["robot2"] == math.floor(outcome.time * 50 + 1e-9) + 1
+    # Robot 1's scans see robot 2's footprint where the trace puts it at the scan's time: along
+    # each beam that meets the circle (centre at distance d, bearing off the beam a, radius r) the
+    # range is d cos a - sqrt(r^2 - d^2 sin^2 a); nothing stands between them in the aisle.
+    seen = 0
+    for stamp, scan in scans:
+        (x1, y1), (x2, y2) = positions[stamp]
+        d = math.hypot(x2 - x1, y2 - y1)
+        if d > 19.0:
+            continue
+        heading = math.atan2(y2 - y1, x2 - x1)
+        ranges = np.asarray(scan.ranges, dtype=float)
+        angles = scan.angle_min + scan.angle_increment * np.arange(len(ranges))
+        for angle, measured in zip(angles, ranges, strict=True):
+            # The beam's angle in the map frame needs robot 1's heading at the scan: from /tf.
+            world = angle + headings[stamp]
+            a = math.remainder(heading - world, math.tau)
+            if abs(d * math.sin(a)) < 0.4 and abs(a) < math.pi / 2:  # off the edge: float32 angles
+                expected = d * math.cos(a) - math.sqrt(0.25 - (d * math.sin(a)) ** 2)
+                assert measured == pytest.approx(expected, abs=1e-4)
+                seen += 1
+    assert seen > 20
     import json
 
     (collision,) = json.loads(metadata.metadata["collisions"])
