@@ -248,3 +248,23 @@ def test_every_contact_at_the_intersection_is_reported_once_at_its_time():
     assert [event[:2] for event in reported] == [event[:2] for event in expected]
     for (_, _, got), (_, _, time) in zip(reported, expected, strict=True):
         assert got == pytest.approx(time, abs=1e-9)
+
+
+def test_a_fleet_of_one_is_the_single_robot_run(tmp_path):
+    # The one_obstacle scenario as a fleet of one robot: the same system, stepped in blocks by
+    # the fleet run instead of the robot run, must reach the goal at the same step, having
+    # driven the same distance with the same least clearance.
+    from cosim.navigation.run import run_scenario
+    from cosim.scenario.load import parse_scenario
+
+    path = SCENARIOS / "warehouse_diff_drive_one_obstacle.toml"
+    single = run_scenario(load_scenario(path), tmp_path / "single.mcap").outcome
+    text = path.read_text()
+    robot = '[[robots]]\nname = "solo"\nstart = { x = 6.0, y = 6.0 }\ngoal = { x = 84.0, y = 53.0 }\n'
+    text = text[: text.index("\n[start]")] + "\n" + robot + text[text.index("\n[planner]") :]
+    outcome = run_fleet(parse_scenario(text, "solo.toml", SCENARIOS))
+    (solo,) = outcome.robots
+    assert single.reached and solo.status == "completed"
+    assert solo.completion_time == single.time
+    assert solo.distance == pytest.approx(single.distance, rel=1e-12)
+    assert solo.min_clearance_walls == single.min_clearance
