@@ -39,7 +39,8 @@ from cosim.scenario.schema import TableReader, describe
 MAX_ROBOTS = 1000
 # Sections a robot may give for itself, over the scenario-wide ones.
 ROBOT_SECTIONS = ("vehicle", "pure_pursuit", "vfh", "mixer", "lidar", "planner", "components", "connections")
-COORDINATIONS = ("none",)  # "prioritized", "mapf": the coordination issue
+COORDINATIONS = ("none",)
+PLANNED_COORDINATIONS = ("prioritized", "mapf")  # multi-agent path finding: to come
 ON_COLLISION = ("stop", "continue")
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 
@@ -183,6 +184,9 @@ def build_fleet(raw: dict, source: str, build: Callable[..., Any], *args) -> Fle
 
 def _settings(table: TableReader) -> FleetSettings:
     default = FleetSettings
+    planned = table.table.get("coordination")
+    if planned in PLANNED_COORDINATIONS:
+        raise table.error("coordination", f"'{planned}' is not there yet; robots plan alone with 'none'")
     settings = FleetSettings(
         coordination=table.string("coordination", default.coordination, choices=COORDINATIONS),
         on_collision=table.string("on_collision", default.on_collision, choices=ON_COLLISION),

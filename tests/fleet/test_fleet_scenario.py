@@ -119,6 +119,11 @@ def test_set_addresses_a_robot_by_name():
         ),
         (TWO, "[fleet]\ndeadlock_after = 0", r"^f\.toml: \[fleet\]\.deadlock_after: must be > 0"),
         (
+            TWO,
+            '[fleet]\ncoordination = "mapf"',
+            r"^f\.toml: \[fleet\]\.coordination: 'mapf' is not there yet",
+        ),
+        (
             TWO + "\n[start]\nx = 1\ny = 1\n",
             "",
             r"^f\.toml: \[start\]: a fleet gives each robot its own start",
