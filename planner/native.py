@@ -35,8 +35,11 @@ import subprocess
 import sys
 import tempfile
 import threading
-from concurrent.futures import Executor, Future
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # not imported at run time: concurrent.futures imports logging (~8 ms)
+    from concurrent.futures import Executor, Future
 
 # An undeclared function is an error everywhere (GCC >= 14 already makes it one; older compilers
 # would only warn, and a kernel calling a function as int-returning computes garbage).
@@ -186,6 +189,19 @@ def _build_into_cache(source: Path) -> Path:
         except OSError:
             continue  # not writable: the next one
     raise NativeBuildError(f"no writable folder to build {source.name} into: {dirs[-1]}")
+
+
+def missing(sources) -> list[Path]:
+    """The resolved `sources` whose library is neither loaded, nor being built, nor in a cache."""
+    found = []
+    for source in sources:
+        source = Path(source).resolve()
+        with _lock:
+            if source in _loaded or source in _pending:
+                continue
+        if _find(source) is None:
+            found.append(source)
+    return found
 
 
 def start_builds(sources, executor: Executor) -> list[Path]:

@@ -20,14 +20,17 @@ import importlib.util
 import os
 import threading
 from collections.abc import Callable, Iterable
-from concurrent.futures import Future, ThreadPoolExecutor
 from functools import cache
 from pathlib import Path
 from types import ModuleType
+from typing import TYPE_CHECKING
 
 import planner
 from cosim.errors import CosimError, shorten
 from planner import native
+
+if TYPE_CHECKING:  # imported when a build is started: concurrent.futures imports logging (~8 ms)
+    from concurrent.futures import Future, ThreadPoolExecutor
 
 GENERATION_TOOL = "navcosim"  # how the project FMUs' generationTool starts
 
@@ -213,15 +216,21 @@ def builtin_fmu(name: str, fmi_version: int = 2) -> Path:
         raise CosimError(f"unknown project FMU {shorten(name)!r}; known: {', '.join(names) or '(none)'}")
     if _has_sources(SOURCE_ROOT):
         cache_dir = default_cache_dir()
+        key = (name, fmi_version, cache_dir)
         with _lock:
-            pending = _pending.pop((name, fmi_version, cache_dir), None)
+            pending = _pending.pop(key, None)
+            checked = key in _fresh
+            _fresh.discard(key)  # once: a later call checks again (the sources may change meanwhile)
         if pending is not None:
             return pending.result()  # started by `prepare`; its CosimError if the build failed
+        if checked:
+            return version_dir(cache_dir, fmi_version) / f"{name}.fmu"
         return build_if_stale(name, SOURCE_ROOT, cache_dir, fmi_version)
     return version_dir(SHIPPED_DIR, fmi_version) / f"{name}.fmu"
 
 
 _pending: dict[tuple[str, int, Path], Future] = {}  # FMU builds `prepare` started, until used
+_fresh: set[tuple[str, int, Path]] = set()  # FMUs `prepare` found up to date, until used
 _lock = threading.Lock()
 _builders: ThreadPoolExecutor | None = None
 
@@ -232,6 +241,8 @@ def _executor() -> ThreadPoolExecutor:
     half-done (each writes a temporary file and renames it: a reader never sees half of one)."""
     global _builders
     if _builders is None:
+        from concurrent.futures import ThreadPoolExecutor
+
         _builders = ThreadPoolExecutor(max_workers=os.cpu_count() or 1, thread_name_prefix="navcosim-build")
     return _builders
 
@@ -260,18 +271,23 @@ def prepare(
                 continue
             try:
                 if _is_fresh(name, SOURCE_ROOT, folder, fmi_version):
+                    with _lock:
+                        _fresh.add(key)
                     continue
             except OSError:
                 pass  # `build_if_stale` reports it
             stale.append(name)
+    uncompiled = native.missing(kernels)
+    if not (stale or uncompiled):
+        return  # a warm start: a few `stat` calls and hashes of the kernel sources
     pool = _executor()
-    started = native.start_builds(kernels[:1], pool)  # the longest first
+    started = native.start_builds(uncompiled[:1], pool)  # the longest first
     with _lock:
         for name in stale:
             _pending[(name, fmi_version, cache_dir)] = pool.submit(
                 build_if_stale, name, SOURCE_ROOT, cache_dir, fmi_version
             )
-    started += native.start_builds(kernels[1:], pool)
+    started += native.start_builds(uncompiled[1:], pool)
     if announce is not None and stale:
         announce(f"building FMUs {', '.join(stale)} (first use or changed sources) ...")
     if announce is not None and started:

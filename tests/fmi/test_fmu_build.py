@@ -325,7 +325,7 @@ def test_prepare_builds_stale_fmus_and_builtin_fmu_waits_for_them(tmp_path, monk
     assert path == tmp_path / "cache" / "Bicycle.fmu" and validate(path) == []
     assert fmus._pending == {}
     fmus.prepare(["Bicycle"], 2, kernels=(), announce=lines.append)  # up to date: nothing to say
-    assert len(lines) == 1
+    assert len(lines) == 1 and fmus.builtin_fmu("Bicycle") == path and fmus._fresh == set()
 
 
 @pytest.mark.slow
