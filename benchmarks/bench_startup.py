@@ -86,7 +86,7 @@ def _timed(command: list[str], cwd: Path, env: dict[str, str]) -> tuple[float, f
 def _environment(checkout: Path) -> dict[str, str]:
     env = {**os.environ, "PYTHONPATH": str(checkout)}
     for name in (
-        "NUMBA_CACHE_DIR", "NAVCOSIM_FMU_CACHE", "NAVCOSIM_NATIVE_CACHE", "PYTHONDONTWRITEBYTECODE",
+        "NAVCOSIM_FMU_CACHE", "NAVCOSIM_NATIVE_CACHE", "PYTHONDONTWRITEBYTECODE",
         "PYTHONPYCACHEPREFIX",
     ):  # fmt: skip
         env.pop(name, None)
@@ -94,15 +94,15 @@ def _environment(checkout: Path) -> dict[str, str]:
 
 
 SKIP = shutil.ignore_patterns(
-    ".git", "__pycache__", "*.nbi", "*.nbc", "build", "_native", "logs", "*.egg-info", ".pytest_cache",
+    ".git", "__pycache__", "build", "_native", "logs", "*.egg-info", ".pytest_cache",
     ".ruff_cache",
 )  # fmt: skip
 
 
 def _fresh_copy(checkout: Path, into: Path, with_fmus: bool) -> Path:
-    """The checkout's files (times kept) in `into`, without bytecode, numba cache files, logs or
-    builds; with `with_fmus`, the checkout's FMU build cache too (its stamps name the sources relative
-    to the source tree, so the copied FMUs are up to date)."""
+    """The checkout's files (times kept) in `into`, without bytecode, logs or builds; with
+    `with_fmus`, the checkout's FMU build cache too (its stamps name the sources relative to the
+    source tree, so the copied FMUs are up to date)."""
     copy = into / "checkout"
     shutil.copytree(checkout, copy, ignore=SKIP)
     fmus = checkout / "build" / "fmus"
@@ -112,13 +112,13 @@ def _fresh_copy(checkout: Path, into: Path, with_fmus: bool) -> Path:
 
 
 def _cold(checkout: Path, command, repeat: int, with_fmus: bool) -> tuple[float, float, float]:
-    """Fastest of `repeat` first runs, each in its own fresh copy with an empty numba cache."""
+    """Fastest of `repeat` first runs, each in its own fresh copy."""
     runs = []
     for _ in range(repeat):
         with tempfile.TemporaryDirectory() as scratch:
             scratch = Path(scratch)
             copy = _fresh_copy(checkout, scratch, with_fmus)
-            env = _environment(copy) | {"NUMBA_CACHE_DIR": str(scratch / "numba")}
+            env = _environment(copy)
             runs.append(_timed(command(scratch), copy, env))
     return _best(runs)
 
