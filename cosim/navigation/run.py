@@ -310,11 +310,14 @@ def run_scenario(
     sink=None,
     force: bool = False,
     goals=None,
+    trace: bool | None = None,
 ) -> RunResult:
     """Run `scenario`, logging to `out_path` (default: `[output].log`). Raises `CosimError` on bad input.
     `sink` (`cosim.record.live.Sink`, e.g. the live view) also gets everything the log gets.
     `goals` (`cosim.record.live.GoalSource`, e.g. the live view's /goal_pose) gives new goals during
-    the run (`_goal_poll`).
+    the run (`_goal_poll`). `trace`: keep what the default plot draws in memory (`RunResult.trace`;
+    default: when the scenario's [output].plot asks for a plot); without it the run's memory does
+    not grow with simulated time.
 
     An existing `out_path` is refused unless `force`; a default name that is taken gets a numbered
     suffix (`cosim.record.logfile`). SIGINT/SIGTERM before the log exists raise
@@ -325,11 +328,19 @@ def run_scenario(
         # Checked again, race-free, when the log is created; here to fail before the build.
         raise CosimError(f"{shorten(out_path, PATH_LIMIT)}: already exists; give --force to overwrite it")
     with interrupt.catching_signals():
-        return _build_and_run(scenario, out_path, force, progress, flush_interval, sink, goals)
+        keep = scenario.plot if trace is None else trace
+        return _build_and_run(scenario, out_path, force, progress, flush_interval, sink, goals, keep)
 
 
 def _build_and_run(
-    scenario: Scenario, out_path, force: bool, progress: bool, flush_interval: float, sink=None, goals=None
+    scenario: Scenario,
+    out_path,
+    force: bool,
+    progress: bool,
+    flush_interval: float,
+    sink=None,
+    goals=None,
+    trace: bool = True,
 ) -> RunResult:
     from cosim.record.recorder import Recorder
 
@@ -350,7 +361,12 @@ def _build_and_run(
             else:
                 log_path, stream = claim_default_log(default_log_path(scenario.log_pattern, scenario.name))
             recorder = Recorder(
-                log_path, flush_interval=flush_interval, sink=sink, topics=scenario.topics, stream=stream
+                log_path,
+                flush_interval=flush_interval,
+                sink=sink,
+                topics=scenario.topics,
+                stream=stream,
+                trace=trace,
             )
         except BaseException:
             _close_quietly(master)

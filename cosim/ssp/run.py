@@ -244,7 +244,7 @@ def _record(
             log_path, stream = claim_default_log(
                 default_log_path(DEFAULT_LOG_PATTERN, Path(ssp.source).stem or "ssp")
             )
-        recorder = Recorder(log_path, stream=stream)
+        recorder = Recorder(log_path, stream=stream, trace=False)  # a plot reads the log
     except BaseException:
         master.close()
         raise

@@ -374,7 +374,7 @@ def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: b
         else:
             pattern = default_log_path(DEFAULT_LOG_PATTERN, component.name)
             log_path, stream = claim_default_log(pattern)
-        recorder = Recorder(log_path, stream=stream)
+        recorder = Recorder(log_path, stream=stream, trace=False)  # a plot reads the log
     except BaseException:
         if csv is not None:
             csv.close()
