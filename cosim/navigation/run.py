@@ -59,24 +59,24 @@ from pathlib import Path
 from cosim import release_collector
 from cosim.core import interrupt
 from cosim.core.master import NS_PER_S, Master
-from cosim.errors import PATH_LIMIT, CosimError, SimulationEnded, shorten
+from cosim.errors import PATH_LIMIT, CosimError, shorten
 from cosim.fmi import exit_guard
 from cosim.navigation.build import BuiltRun, build_run
 from cosim.navigation.outcome import Outcome, OutcomeMonitor, outcome_metadata
 from cosim.record.blocks import BlockRecording
-from cosim.record.logfile import (
-    claim_default_log,
-    claim_log,
-    default_log_path,
-    is_regular_file,
-    navcosim_version,
-)
+from cosim.record.logfile import is_regular_file, navcosim_version
 from cosim.record.replay import BlockReplay
 from cosim.record.steps import Reading, StepRecording
+from cosim.record.system_run import (
+    PROGRESS_INTERVAL,
+    SystemRun,
+    close_quietly,
+    open_recorder,
+    run_guarded,
+    update_bar,
+)
 from cosim.record.text_signals import TextRecording
 from cosim.scenario.load import Scenario
-
-PROGRESS_INTERVAL = 0.1  # [s] wall time between progress-bar updates
 
 
 @dataclass
@@ -185,105 +185,85 @@ def _build_and_run(
     goals=None,
     trace: bool = True,
 ) -> RunResult:
-    from cosim.record.recorder import Recorder
-
     built = build_run(scenario)
     master = Master(built.system, parameters=built.parameters, stop_time=scenario.stop_time)
     try:
         master.initialize()
     except CosimError as error:
-        _close_quietly(master)
+        close_quietly(master)
         raise CosimError(f"{scenario.source}: initialising the system failed: {error}") from None
     except BaseException:
-        _close_quietly(master)
+        close_quietly(master)
         raise
     with interrupt.deferred():
         try:
-            if out_path is not None:
-                log_path, stream = Path(out_path), claim_log(Path(out_path), force)
-            else:
-                log_path, stream = claim_default_log(default_log_path(scenario.log_pattern, scenario.name))
-            recorder = Recorder(
-                log_path,
+            recorder = open_recorder(
+                out_path,
+                force,
+                scenario.name,
+                scenario.log_pattern,
                 flush_interval=flush_interval,
                 sink=sink,
                 topics=scenario.topics,
-                stream=stream,
                 trace=trace,
             )
+            log_path = recorder.path
         except BaseException:
-            _close_quietly(master)
+            close_quietly(master)
             raise
         try:
-            return _run(built, master, recorder, log_path, progress, goals)
+            return _RobotRun(built, master, recorder, progress, goals).run()
         except OSError as error:
             # The log could not be written (no space, I/O error): what reached the file stays.
-            _close_quietly(master, recorder)
+            close_quietly(master, recorder)
             where = shorten(error.filename or log_path, PATH_LIMIT)
             raise CosimError(f"{where}: writing the log failed ({error.strerror or error})") from None
         except BaseException:
             # Neither a normal end, an interrupt nor an FMU failure: keep the log, but marked.
-            _close_quietly(master, recorder, {"reached": "false", "reason": "error"})
+            close_quietly(master, recorder, {"reached": "false", "reason": "error"})
             if is_regular_file(log_path):
                 log_path.replace(log_path.with_suffix(".failed.mcap"))
             raise
 
 
-def _close_quietly(master: Master, recorder=None, outcome: dict[str, str] | None = None) -> None:
-    """Close what a run opened, on its way out with an error that matters more than theirs."""
-    try:
-        master.close()
-    except CosimError:
-        pass
-    if recorder is not None:
-        try:
-            recorder.close(outcome)
-        except (OSError, CosimError):
-            pass
+class _RobotRun(SystemRun):
+    """One robot run, from the header to the finalised log: the base run (`SystemRun`: the
+    recorder, the text signals, the clock and progress bar, how a run's loop ends) plus the robot's
+    loop: the master steps (the compiled kernel's blocks, or the Python loop), the recording writes
+    each step (`StepRecording`, `BlockRecording`), the outcome monitor judges it, the planner's new
+    plans and the goals given during the run are taken between steps, and `finish` ends the run
+    whatever ended it."""
 
-
-class _RobotRun:
-    """One run's loop, from the header to the finalised log: the master steps (the compiled
-    kernel's blocks, or the Python loop), the recording writes each step (`StepRecording`,
-    `BlockRecording`), the outcome monitor judges it, the planner's new plans and the goals given
-    during the run are taken between steps, and `finish` ends the run whatever ended it."""
-
-    def __init__(self, built: BuiltRun, master: Master, recorder, log_path: Path, progress: bool, goals=None):
+    def __init__(self, built: BuiltRun, master: Master, recorder, progress: bool, goals=None):
         scenario = built.scenario
         system = built.system
-        self.built, self.master, self.recorder, self.log_path, self.goals = (
-            built,
-            master,
-            recorder,
-            log_path,
-            goals,
-        )
         observed = built.description.observed
-        self.recording = StepRecording(system, master, recorder, observed, scenario)
-        self.monitor = OutcomeMonitor(
+        recording = StepRecording(system, master, recorder, observed, scenario)
+        monitor = OutcomeMonitor(
             built.world, scenario.goal, scenario.goal_tolerance, scenario.vehicle_radius, scenario.start
         )
         _write_header(built, master, recorder)
-        self.text = TextRecording(recorder, system)
-        self.recording.write_constant(master.start_time_ns)
-        self.recording.write_pose(0)
-        self.start_ns = master.start_time_ns
-        self.h_ns = system.macro_step_ns
+        text = TextRecording(recorder, system)
+        recording.write_constant(master.start_time_ns)
+        recording.write_pose(0)
         # Build (or load) the C kernels that would first run inside the loop, so the real-time factor
         # measures the simulation, not a first run's compilation.
-        self.monitor.world.distance(*scenario.start[:2])
+        monitor.world.distance(*scenario.start[:2])
         self.tables = master.kernel_tables(record=True) if _use_kernel() else None
         if self.tables is not None:
             self.tables.warm_up()
-        self.bar = progress_bar(scenario.stop_time) if progress else None
-        self.wall_start = time.perf_counter()
-        self.last_update = [self.wall_start, 0.0]  # wall time and simulated time [s] the bar last showed
+        super().__init__(master, recorder, progress=scenario.stop_time if progress else None)
+        self.text = text
+        self.built, self.goals = built, goals
+        self.recording, self.monitor = recording, monitor
+        self.start_ns = master.start_time_ns
+        self.h_ns = system.macro_step_ns
         self.reason: str | None = None  # why the loop stopped
         planner = built.planner
         self.planner = planner if planner is not None and not planner.constant_outputs else None
         self.plan_version = self.planner.plan_version if self.planner is not None else 0
         # New goals during the run (the live view's /goal_pose), polled at the planner's rate.
-        self.goal_poll = _goal_poll(goals, built, self.monitor, recorder, self.recording) if goals else None
+        self.goal_poll = _goal_poll(goals, built, monitor, recorder, recording) if goals is not None else None
         self.goal_steps = system.period_steps(planner) if self.goal_poll is not None and planner else 1
         self.replay: BlockReplay | None = None
 
@@ -295,9 +275,7 @@ class _RobotRun:
         mode = recording.mode
         if mode is not None and k % mode.period == 0:
             monitor.check_mode(mode.mode.value(), mode.period_s)
-        end_ns = min(
-            t_ns + self.h_ns, self.master.stop_time_ns
-        )  # (a last step cut short ends at the stop time)
+        end_ns = min(t_ns + self.h_ns, self.master.stop_time_ns)  # a last step cut short ends at the stop
         x, y, _ = recording.pose
         reason = monitor.check_position(end_ns / NS_PER_S, x.value(), y.value())
         return self.finish_checks(k, reason)
@@ -354,49 +332,47 @@ class _RobotRun:
             planner is not None and (planner.plan_version != self.plan_version or planner.no_path is not None)
         )
 
-    def run(self) -> RunResult:
+    def loop(self) -> None:
+        """Step to the stop time, or until the run ends: the kernel's blocks, or the Python loop."""
         master = self.master
         total_steps = master.steps_to_stop  # the last one ends at the stop time
-        failure = None
-        ended = None  # an FMU's request to end the run (FMI terminateSimulation / fmi2Terminated)
+        if self.tables is None:
+            master.run(total_steps, self.after_step)
+            return
+        built = self.built
+        watch = _SafeCircle(built, master, self.tables, self.monitor)
+        polled = self.goal_steps if self.goal_poll is not None else 0
+        observed = built.description.observed
+        fast = BlockRecording(
+            built.system, master, self.recording, observed, self.monitor, self.finish_checks, polled
+        )
+        self.replay = BlockReplay(master, self.finish_step, fast)
+        master.run_blocks(
+            total_steps,
+            self.tables,
+            self.on_block,
+            block=watch.block,
+            before_block=watch.watch,
+            cut_after_python=self.cut_after_python,
+        )
+
+    def run(self) -> RunResult:
+        master = self.master
+
+        def describe(error: CosimError) -> str:
+            return str(error) if " at t = " in str(error) else f"{error} (at t = {master.time:.3f} s)"
+
         exit_guard.add_hook(self.fmu_exited)
         try:
-            if self.tables is None:
-                master.run(total_steps, self.after_step)
-            else:
-                built = self.built
-                watch = _SafeCircle(built, master, self.tables, self.monitor)
-                polled = self.goal_steps if self.goal_poll is not None else 0
-                fast = BlockRecording(
-                    built.system,
-                    master,
-                    self.recording,
-                    built.description.observed,
-                    self.monitor,
-                    self.finish_checks,
-                    polled,
-                )
-                self.replay = BlockReplay(master, self.finish_step, fast)
-                master.run_blocks(
-                    total_steps,
-                    self.tables,
-                    self.on_block,
-                    block=watch.block,
-                    before_block=watch.watch,
-                    cut_after_python=self.cut_after_python,
-                )
-        except SimulationEnded as request:  # the run ends cleanly; the outcome rules judge it
-            self.reason = "fmu_terminated"
-            ended = str(request)
-        except CosimError as error:
-            failure = str(error) if " at t = " in str(error) else f"{error} (at t = {master.time:.3f} s)"
-        except interrupt.Interrupted:  # a signal while an FMU in a child process did not answer
-            interrupt.take()
-            self.reason = "interrupted"
+            end = run_guarded(self.loop, describe)
         finally:
             exit_guard.remove_hook(self.fmu_exited)
             self.flush()  # the steps recorded but not yet handed to the log
-        return self.finish(failure, ended)
+        if end.ended is not None:
+            self.reason = "fmu_terminated"  # the run ends cleanly; the outcome rules judge it
+        elif end.interrupted:
+            self.reason = "interrupted"
+        return self.finish(end.failure, end.ended)
 
     def flush(self) -> None:
         """Hand the steps the block recording holds to the log."""
@@ -414,7 +390,7 @@ class _RobotRun:
             self.bar,
         )
         scenario = self.built.scenario
-        wall_time = time.perf_counter() - self.wall_start
+        wall_time = self.wall_time
         end_ns = master.time_ns
         # The pose at end_ns is the vehicle's after the last completed step (after a failure too; the
         # after_step of that step wrote it already when end_ns is on the pose grid). A pose that turned
@@ -423,8 +399,7 @@ class _RobotRun:
             map(math.isfinite, recording.current_pose())
         ):
             recording.write_pose(end_ns)
-        self.text.finish(end_ns)
-        recorder.end_steps(end_ns)
+        self.end_steps()
         reason = "fmu_failed" if failure else self.reason or "stop_time"
         outcome = monitor.finish(end_ns / NS_PER_S, reason)
         if bar is not None:
@@ -441,15 +416,12 @@ class _RobotRun:
             metadata["failure"] = failure
         if ended:
             metadata["ended_by"] = ended
-        try:
-            if free:
-                master.close()
-        except CosimError as error:
-            failure = failure or f"terminating the system failed: {error}"
+        if free:
+            failure = self.close_master(failure, lambda error: f"terminating the system failed: {error}")
         for name, record in getattr(self.goals, "acknowledged", tuple)():  # the live view's last commands
             recorder.add_metadata(name, record)
         recorder.close(metadata)
-        return RunResult(outcome, self.log_path, master.step_index, wall_time, failure, recorder.trace, ended)
+        return RunResult(outcome, recorder.path, master.step_index, wall_time, failure, recorder.trace, ended)
 
     def fmu_exited(self, message: str) -> str:
         """An FMU in this process called exit() (`cosim.fmi.exit_guard`): finalise the log as for a
@@ -457,11 +429,7 @@ class _RobotRun:
         self.flush()
         failure = f"{message} (after t = {self.master.time:.3f} s)"
         self.finish(failure, None, free=False)
-        return f"{failure}; log (up to the failure): {self.log_path}"
-
-
-def _run(built: BuiltRun, master: Master, recorder, log_path: Path, progress: bool, goals=None) -> RunResult:
-    return _RobotRun(built, master, recorder, log_path, progress, goals).run()
+        return f"{failure}; log (up to the failure): {self.recorder.path}"
 
 
 def _goal_poll(goals, built: BuiltRun, monitor: OutcomeMonitor, recorder, recording: StepRecording):
@@ -586,27 +554,3 @@ class _SafeCircle:
         drift = self.speed * (self.block + 1) * self.h
         free = distance - self.radius - drift - 1e-6 * (1.0 + distance)
         numbers[3:] = (x, y, free * free if free > 0.0 else -1.0)
-
-
-def progress_bar(stop_time: float):
-    """The run's progress bar on stderr (tqdm, erased at the end), counting simulated seconds up to
-    `stop_time` [s]; `update_bar` moves it."""
-    from tqdm import tqdm
-
-    return tqdm(
-        total=round(stop_time, 3),
-        unit="s",
-        desc="simulated",
-        leave=False,
-        dynamic_ncols=True,
-        bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} s [{elapsed}{postfix}]",
-    )
-
-
-def update_bar(bar, sim_time: float, wall: float, last_update: list) -> None:
-    """Move `bar` to `sim_time` [s] simulated in `wall` [s] of wall time; `last_update[1]` holds
-    the simulated time it showed last."""
-    bar.update(round(sim_time - last_update[1], 3))
-    last_update[1] = sim_time
-    if wall > 0:
-        bar.set_postfix_str(f"{sim_time / wall:.0f}x real time", refresh=False)
