@@ -64,7 +64,7 @@ from cosim.fmi import exit_guard
 from cosim.navigation.build import BuiltRun, build_run
 from cosim.navigation.outcome import Outcome, OutcomeMonitor, outcome_metadata
 from cosim.record.blocks import BlockRecording
-from cosim.record.logfile import is_regular_file, navcosim_version
+from cosim.record.logfile import is_regular_file
 from cosim.record.replay import BlockReplay
 from cosim.record.steps import Reading, StepRecording
 from cosim.record.system_run import (
@@ -75,7 +75,6 @@ from cosim.record.system_run import (
     run_guarded,
     update_bar,
 )
-from cosim.record.text_signals import TextRecording
 from cosim.scenario.load import Scenario
 
 
@@ -101,41 +100,33 @@ class RunResult:
         return self.outcome.time / self.wall_time if self.wall_time > 0 else math.inf
 
 
-def _write_header(built: BuiltRun, master: Master, recorder) -> None:
+def _write_header(built: BuiltRun, steps: SystemRun) -> None:
     """Metadata, attachments and the once-only topics at t = 0."""
-    scenario = built.scenario
+    scenario, recorder = built.scenario, steps.recorder
     x, y, theta = scenario.start
-    recorder.add_metadata(
-        "navcosim",
-        {
-            "scenario_name": scenario.name,
-            "navcosim_version": navcosim_version(),
-            "start": f"{x},{y},{theta}",
-            "goal": f"{scenario.goal[0]},{scenario.goal[1]}",
-            "goal_tolerance": str(scenario.goal_tolerance),
-            "macro_step": str(scenario.macro_step),
-            "stop_time": str(scenario.stop_time),
-            "overrides": " ".join(scenario.overrides),
-            "master": scenario.master,
-            "topics": ",".join(f"{topic}={name}" for topic, name in scenario.topics.items()),
-        },
-    )
-    for name, component in built.system.components.items():
-        description = component.describe()
-        if description:
-            if name in scenario.fmu_labels:
-                description["fmu"] = scenario.fmu_labels[name]
-            recorder.add_metadata(f"fmu/{name}", description)
-    recorder.add_unconnected_inputs(built.system)
-    recorder.add_attachment("scenario.toml", "application/toml", scenario.text.encode())
+    details = {
+        "start": f"{x},{y},{theta}",
+        "goal": f"{scenario.goal[0]},{scenario.goal[1]}",
+        "goal_tolerance": str(scenario.goal_tolerance),
+        "macro_step": str(scenario.macro_step),
+        "stop_time": str(scenario.stop_time),
+        "overrides": " ".join(scenario.overrides),
+        "master": scenario.master,
+        "topics": ",".join(f"{topic}={name}" for topic, name in scenario.topics.items()),
+    }
     map_file = scenario.map_file
-    recorder.add_attachment(map_file.name, "application/octet-stream", map_file.read_bytes())
+    attachments = [
+        ("scenario.toml", "application/toml", scenario.text.encode()),
+        (map_file.name, "application/octet-stream", map_file.read_bytes()),
+    ]
     if map_file.suffix in (".yaml", ".yml"):
         for line in map_file.read_text().splitlines():
             key, _, value = line.partition(":")
             image = map_file.parent / value.strip().strip("'\"")
             if key.strip() == "image" and image.is_file():
-                recorder.add_attachment(image.name, "image/x-portable-graymap", image.read_bytes())
+                attachments.append((image.name, "image/x-portable-graymap", image.read_bytes()))
+    components = built.system.components.values()
+    steps.write_header(scenario.name, details, components, scenario.fmu_labels, attachments)
     recorder.write_grid(0, built.grid, "/map")
     recorder.write_grid(0, built.inflated, "/map_inflated")
     if built.plan is not None:
@@ -235,27 +226,25 @@ class _RobotRun(SystemRun):
     whatever ended it."""
 
     def __init__(self, built: BuiltRun, master: Master, recorder, progress: bool, goals=None):
+        super().__init__(master, recorder)
         scenario = built.scenario
         system = built.system
-        observed = built.description.observed
-        recording = StepRecording(system, master, recorder, observed, scenario)
-        monitor = OutcomeMonitor(
+        self.built, self.goals = built, goals
+        self.recording = StepRecording(system, master, recorder, built.description.observed, scenario)
+        self.monitor = OutcomeMonitor(
             built.world, scenario.goal, scenario.goal_tolerance, scenario.vehicle_radius, scenario.start
         )
-        _write_header(built, master, recorder)
-        text = TextRecording(recorder, system)
-        recording.write_constant(master.start_time_ns)
-        recording.write_pose(0)
+        _write_header(built, self)
+        self.begin()
+        self.recording.write_constant(master.start_time_ns)
+        self.recording.write_pose(0)
         # Build (or load) the C kernels that would first run inside the loop, so the real-time factor
         # measures the simulation, not a first run's compilation.
-        monitor.world.distance(*scenario.start[:2])
+        self.monitor.world.distance(*scenario.start[:2])
         self.tables = master.kernel_tables(record=True) if _use_kernel() else None
         if self.tables is not None:
             self.tables.warm_up()
-        super().__init__(master, recorder, progress=scenario.stop_time if progress else None)
-        self.text = text
-        self.built, self.goals = built, goals
-        self.recording, self.monitor = recording, monitor
+        self.start_clock(scenario.stop_time if progress else None)
         self.start_ns = master.start_time_ns
         self.h_ns = system.macro_step_ns
         self.reason: str | None = None  # why the loop stopped
@@ -263,7 +252,9 @@ class _RobotRun(SystemRun):
         self.planner = planner if planner is not None and not planner.constant_outputs else None
         self.plan_version = self.planner.plan_version if self.planner is not None else 0
         # New goals during the run (the live view's /goal_pose), polled at the planner's rate.
-        self.goal_poll = _goal_poll(goals, built, monitor, recorder, recording) if goals is not None else None
+        self.goal_poll = None
+        if goals is not None:
+            self.goal_poll = _goal_poll(goals, built, self.monitor, recorder, self.recording)
         self.goal_steps = system.period_steps(planner) if self.goal_poll is not None and planner else 1
         self.replay: BlockReplay | None = None
 

@@ -28,7 +28,7 @@ import numpy as np
 from cosim.core import interrupt
 from cosim.core.master import COMPILED_MIN_STEPS, NS_PER_S, Master, due_from
 from cosim.errors import CosimError, SimulationEnded
-from cosim.record.logfile import claim_default_log, claim_log, default_log_path
+from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
 from cosim.record.text_signals import TextRecording
 from cosim.scenario.load import DEFAULT_LOG_PATTERN
 
@@ -125,15 +125,46 @@ class SystemRun:
         self.recorder = recorder
         self.system = master.system
         self.on_rows = on_rows
+        self.text: TextRecording | None = None
+        self.start_clock(progress)
+
+    def start_clock(self, progress: float | None) -> None:
+        """The run's wall clock starts now (again), with a progress bar up to `progress` [s]."""
         self.bar = progress_bar(progress) if progress is not None else None
         self.wall_start = time.perf_counter()
         self.last_update = [self.wall_start, 0.0]  # wall time and simulated time [s] the bar last showed
-        self.text: TextRecording | None = None
 
     @property
     def wall_time(self) -> float:
         """[s] since the run started."""
         return time.perf_counter() - self.wall_start
+
+    def write_header(
+        self,
+        name: str,
+        details: dict[str, str],
+        components,
+        fmu_labels: dict[str, str] | None = None,
+        attachments=(),
+    ) -> None:
+        """The metadata every log starts with: `navcosim` (the run's `name`, this version, then
+        `details`), `fmu/<component>` for each of `components` that describes itself (its `fmu`
+        as `fmu_labels` names it, when it does), the unconnected inputs, then `attachments`
+        ((name, media type, bytes) each)."""
+        recorder = self.recorder
+        recorder.add_metadata(
+            "navcosim", {"scenario_name": name, "navcosim_version": navcosim_version(), **details}
+        )
+        labels = fmu_labels or {}
+        for component in components:
+            description = component.describe()
+            if description:
+                if component.name in labels:
+                    description["fmu"] = labels[component.name]
+                recorder.add_metadata(f"fmu/{component.name}", description)
+        recorder.add_unconnected_inputs(self.system)
+        for attachment, media_type, data in attachments:
+            recorder.add_attachment(attachment, media_type, data)
 
     def begin(self) -> None:
         """The channels of the text signals (after the header's metadata, as the log lists them)."""

@@ -35,7 +35,6 @@ from pathlib import Path
 from cosim.core import interrupt
 from cosim.core.master import MODES, Master
 from cosim.errors import PATH_LIMIT, CosimError, shorten
-from cosim.record.logfile import navcosim_version
 from cosim.record.system_run import SystemRun, close_quietly, open_recorder
 from cosim.scenario.limits import MAX_STEPS, MAX_TIME, MIN_MACRO_STEP
 from cosim.ssp.read import DEFAULT_TIMEOUT, SspSystem, build_system, max_unpacked_size, open_ssp
@@ -237,7 +236,7 @@ def _record(
 def _steps(ssp: SspSystem, run: Experiment, master: Master, recorder) -> SspRunResult:
     steps = SystemRun(master, recorder)
     with recorder:
-        _write_header(ssp, run, master, recorder)
+        _write_header(ssp, run, steps)
         steps.begin()
         steps.signal_channels()
         reason, end = steps.record_steps(
@@ -268,29 +267,19 @@ def _steps(ssp: SspSystem, run: Experiment, master: Master, recorder) -> SspRunR
     )
 
 
-def _write_header(ssp: SspSystem, run: Experiment, master: Master, recorder) -> None:
-    recorder.add_metadata(
-        "navcosim",
-        {
-            "scenario_name": ssp.name,
-            "navcosim_version": navcosim_version(),
-            "ssp": Path(ssp.source).name,
-            "macro_step": repr(run.macro_step),
-            "macro_step_source": run.macro_step_source,
-            "start_time": repr(run.start_time),
-            "stop_time": repr(run.stop_time),
-            "master": run.master,
-        },
-    )
+def _write_header(ssp: SspSystem, run: Experiment, steps: SystemRun) -> None:
+    details = {
+        "ssp": Path(ssp.source).name,
+        "macro_step": repr(run.macro_step),
+        "macro_step_source": run.macro_step_source,
+        "start_time": repr(run.start_time),
+        "stop_time": repr(run.stop_time),
+        "master": run.master,
+    }
+    # Each FMU as its archive member, not the folder this run unpacked it to (new in every run).
     members = {spec.name: spec.member for spec in ssp.components}
-    for component in master.order:
-        description = component.describe()
-        if description:
-            # The archive member, not the folder this run unpacked it to (new in every run).
-            description["fmu"] = members.get(component.name, description["fmu"])
-            recorder.add_metadata(f"fmu/{component.name}", description)
-    recorder.add_unconnected_inputs(master.system)
-    recorder.add_attachment("SystemStructure.ssd", "application/x-ssp-definition", ssp.ssd_text)
+    ssd = ("SystemStructure.ssd", "application/x-ssp-definition", ssp.ssd_text)
+    steps.write_header(ssp.name, details, steps.master.order, members, [ssd])
 
 
 def _ended(ended: str | None) -> str:

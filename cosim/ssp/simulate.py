@@ -44,7 +44,6 @@ from cosim.core import interrupt
 from cosim.core.component import closest_names
 from cosim.core.master import NS_PER_S, Master, System, seconds_to_ns
 from cosim.errors import CosimError
-from cosim.record.logfile import navcosim_version
 from cosim.record.output import atomic_output, checked_output
 from cosim.record.system_run import SystemRun, open_recorder
 from cosim.scenario.description import ComponentDescription
@@ -385,7 +384,7 @@ def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: b
         on_rows=write_csv if csv is not None else None,
     )
     with recorder:
-        _write_header(simulation, component, master.system, recorder)
+        _write_header(simulation, steps)
         steps.begin()
         steps.signal_channels()
         if csv is not None:
@@ -410,26 +409,22 @@ def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: b
     )
 
 
-def _write_header(simulation: Simulation, component, system: System, recorder) -> None:
+def _write_header(simulation: Simulation, steps: SystemRun) -> None:
     described = simulation.component
-    recorder.add_metadata(
-        "navcosim",
-        {
-            "scenario_name": described.model_name or described.name,
-            "navcosim_version": navcosim_version(),
-            "fmu": Path(described.fmu).name,
-            "interface": simulation.interface,
-            "start_time": repr(simulation.start_time),
-            "stop_time": repr(simulation.stop_time),
-            "macro_step": repr(simulation.step),
-            "start_values": " ".join(f"{k}={_literal(v)}" for k, v in simulation.start_values.items()),
-        },
-    )
-    recorder.add_metadata(f"fmu/{component.name}", component.describe())
-    recorder.add_unconnected_inputs(system)
+    details = {
+        "fmu": Path(described.fmu).name,
+        "interface": simulation.interface,
+        "start_time": repr(simulation.start_time),
+        "stop_time": repr(simulation.stop_time),
+        "macro_step": repr(simulation.step),
+        "start_values": " ".join(f"{k}={_literal(v)}" for k, v in simulation.start_values.items()),
+    }
     with zipfile.ZipFile(described.fmu) as archive:
         text = archive.read("modelDescription.xml")
-    recorder.add_attachment("modelDescription.xml", "application/xml", text)
+    description = ("modelDescription.xml", "application/xml", text)
+    steps.write_header(
+        described.model_name or described.name, details, steps.master.order, None, [description]
+    )
 
 
 class _CsvWriter:
