@@ -1,45 +1,35 @@
 """Run a scenario: build, plan, step the master, record every signal to MCAP, decide the outcome.
 
-`run_scenario(scenario, out_path)` builds the system (`cosim.navigation.build`), initialises every
-component, and only then creates the log, so bad input never leaves a log behind. The loop stops
-when the goal is reached, on a collision, at the stop time, on SIGINT/SIGTERM, or when an FMU fails.
+The data flows scenario -> system -> run loop -> recording -> log. `run_scenario(scenario, out_path)`
+builds the system (`cosim.navigation.build`), initialises every component, and only then creates
+the log (`cosim.record.system_run.open_recorder`), so bad input never leaves a log behind. The run
+(`_RobotRun`) is the base run of any system (`cosim.record.system_run.SystemRun`: header, text
+signals, clock, how a loop ends) plus the robot's loop, topics and outcome. The loop stops when the
+goal is reached, on a collision, at the stop time, on SIGINT/SIGTERM, or when an FMU fails.
 
-Log contents and rates (t = simulated time, integer nanoseconds):
-- `/signals/<component>`: every scalar input and output of the component, each time it steps
-  (its rate), each value stamped at the time it holds: the record at t has the inputs applied at
-  t and the outputs at t (the first record the initial outputs), and a last record at the end
-  has the final outputs (`cosim.record.recorder`). Array ports (waypoints, ranges, angles) are
-  on `/plan` and `/scan` instead; with [output].signal_arrays array outputs are recorded too (a
-  component whose outputs never change, the planner, once at t = 0).
-- `/odom`, `/tf`, `/pose`: the robot pose (the description's `Observed.pose`, the vehicle's x, y,
-  theta) at t = 0 and every 1/pose_rate s ([output].pose_rate, default 50 Hz), and at the end of
-  the run; twist = the commanded v and omega (`Observed.command`, the mixer's).
-- `/scan`: every lidar step; `/cmd_vel`: every mixer step (v, omega of the mixer).
-- `/obstacles`: at t = 0, and at every lidar step at which a moving obstacle has moved (the poses
-  that scan saw).
-- `/plan`: at t = 0 and at each replan (stamped with the start of the planner step that made it).
-- `/map`, `/map_inflated`, `/goal`: once at t = 0.
-- metadata `navcosim`, `fmu/<role>`, `outcome`; attachments `scenario.toml` and the map file(s).
+What goes into the log, and when, is the recording's (`cosim.record`): the per-step topics in
+`cosim.record.steps` (signals, /odom /tf /pose, /scan, /cmd_vel, /obstacles); here only the
+header: metadata `navcosim`, `fmu/<role>`, `outcome`; attachments `scenario.toml` and the map
+file(s); `/map`, `/map_inflated`, `/goal`, `/obstacles` and the first `/plan` at t = 0; then `/plan`
+at each replan (stamped with the start of the planner step that made it) and `/goal` for each goal
+given during the run.
 
-The loop: the FMUs step in the compiled kernel (`Master.run_blocks`, `cosim.core.kernel`), which keeps
-their buffers after each step and hands the Python components (lidar, planner) back where they are
-due. After each block of steps (cut before every Python component's step, at the end of a step in
-which one stepped when that step has something to write (a new plan, no path, a goal poll; else the
-block goes on), and after any step whose position may end the run: not finite, near the goal, or
-outside a circle that the true obstacles cannot reach) `_BlockRecording` takes the block's rows:
-the positions of all its steps go through `OutcomeMonitor.check_positions` (the arithmetic of the
-per-step check, step by step), and the rows are collected over blocks and turned into their
-messages with NumPy every few chunk windows (`Recorder.hold_steps`: the bytes of writing them one at
-a time). A block the rows cannot describe (a topic's first message, a Python component due after
-the block's first step) is replayed step by step: `_KernelBlocks.replay_steps` sets the buffers to
-each step's values in turn and calls `finish_step` (recording, mode, outcome, planner) for it, as
-the Python loop's per-step callback does. Either way the log and the outcome are the same bytes and
-numbers, and the run ends at the same step. Hooks: `finish_step(k)` runs once per step (Python
-loop, blocks replayed step by step), `finish_checks` (goal poll, new plan) after a step's position
-check in both, `on_block` once per block (kernel; interrupts are noticed there, at most one block
-late), `_KernelBlocks.watch` before each kernel call (it re-reads the monitor's goal). A system the
-kernel cannot step (Jacobi mode with Python components) and NAVCOSIM_LOOP=python use the master's
-Python loop with the per-step callback.
+The loop: the FMUs step in the compiled kernel (`Master.run_blocks`, `cosim.core.kernel`), which
+keeps their buffers after each step and hands the Python components (lidar, planner) back where
+they are due. A block of steps ends before every Python component's step, at the end of a step in
+which one stepped when that step has something to do (a new plan, no path, a goal poll; else the
+block goes on: `cut_after_python`), and after any step whose position may end the run (not
+finite, near the goal, or outside the circle that the true obstacles cannot reach: `_SafeCircle`).
+Each block goes to the recording (`cosim.record.replay`): recorded and checked from its rows
+(`cosim.record.blocks`: the positions of all its steps through `OutcomeMonitor.check_positions`,
+the rows turned into messages with NumPy every few chunk windows), or, when the rows cannot describe
+it, replayed step by step through `finish_step`, as the Python loop's per-step callback does. Either
+way the log and the outcome are the same bytes and numbers, and the run ends at the same step.
+Hooks: `finish_step(k)` once per step (Python loop, blocks replayed step by step), `finish_checks`
+(goal poll, new plan) after a step's position check in both, `on_block` once per block (kernel;
+interrupts are noticed there, at most one block late), `_SafeCircle.watch` before each kernel call
+(it re-reads the monitor's goal). A system the kernel cannot step (Jacobi mode with Python
+components) and NAVCOSIM_LOOP=python use the master's Python loop with the per-step callback.
 
 End of a run: a normal end, an interrupt (outcome reason "interrupted") and an FMU failure
 (reason "fmu_failed": an error status, a crash, exit() or hang of an FMU in a child process, a NaN
@@ -230,10 +220,22 @@ class _RobotRun(SystemRun):
         scenario = built.scenario
         system = built.system
         self.built, self.goals = built, goals
-        self.recording = StepRecording(system, master, recorder, built.description.observed, scenario)
+        # The robot's side first: the outcome, the replanning planner, the goals given during the run.
         self.monitor = OutcomeMonitor(
             built.world, scenario.goal, scenario.goal_tolerance, scenario.vehicle_radius, scenario.start
         )
+        planner = built.planner
+        self.planner = planner if planner is not None and not planner.constant_outputs else None
+        self.plan_version = self.planner.plan_version if self.planner is not None else 0
+        # New goals during the run (the live view's /goal_pose), polled at the planner's rate.
+        self.goal_poll = None
+        if goals is not None:
+            self.goal_poll = _goal_poll(
+                goals, built, self.monitor, recorder, lambda: self.recording.current_pose()
+            )
+        self.goal_steps = system.period_steps(planner) if self.goal_poll is not None and planner else 1
+        # Then the recording: the signal channels, the header, the first records.
+        self.recording = StepRecording(system, master, recorder, built.description.observed, scenario)
         _write_header(built, self)
         self.begin()
         self.recording.write_constant(master.start_time_ns)
@@ -248,14 +250,6 @@ class _RobotRun(SystemRun):
         self.start_ns = master.start_time_ns
         self.h_ns = system.macro_step_ns
         self.reason: str | None = None  # why the loop stopped
-        planner = built.planner
-        self.planner = planner if planner is not None and not planner.constant_outputs else None
-        self.plan_version = self.planner.plan_version if self.planner is not None else 0
-        # New goals during the run (the live view's /goal_pose), polled at the planner's rate.
-        self.goal_poll = None
-        if goals is not None:
-            self.goal_poll = _goal_poll(goals, built, self.monitor, recorder, self.recording)
-        self.goal_steps = system.period_steps(planner) if self.goal_poll is not None and planner else 1
         self.replay: BlockReplay | None = None
 
     def finish_step(self, k: int) -> str | None:
@@ -423,7 +417,7 @@ class _RobotRun(SystemRun):
         return f"{failure}; log (up to the failure): {self.recorder.path}"
 
 
-def _goal_poll(goals, built: BuiltRun, monitor: OutcomeMonitor, recorder, recording: StepRecording):
+def _goal_poll(goals, built: BuiltRun, monitor: OutcomeMonitor, recorder, pose):
     """`poll(t_ns, h_ns)`, called after a planner step that started at t_ns: takes the newest goal
     `goals` holds (`take()` -> (x, y) [m] or None) and, unless the robot would not fit there (the
     true obstacles, as the live view shows them) or the planner finds no path to it, makes it the
@@ -431,7 +425,7 @@ def _goal_poll(goals, built: BuiltRun, monitor: OutcomeMonitor, recorder, record
     the outcome monitor judges the new goal (reaching it ends the run), and /goal gets it. A goal
     refused is `goals.report(text)`-ed; the old goal stays and the run goes on. What
     `goals.acknowledged()` returns, if it has it ((name, record) pairs: the live view's commands),
-    goes into the log as metadata."""
+    goes into the log as metadata. `pose()`: the robot's pose (x, y [m], theta [rad]) now."""
     planner = built.planner
     radius = built.scenario.vehicle_radius
     acknowledged = getattr(goals, "acknowledged", None)  # the live view's commands, for the log
@@ -455,7 +449,7 @@ def _goal_poll(goals, built: BuiltRun, monitor: OutcomeMonitor, recorder, record
         elif _world_at(built.world, t).distance(x, y) < radius:
             why = f"in an obstacle or off the map (the vehicle's {radius:g} m radius does not fit)"
         else:
-            why = planner.set_goal(x, y, t, recording.current_pose())
+            why = planner.set_goal(x, y, t, pose())
         if why is not None:
             old = monitor.goal
             goals.report(

@@ -6,7 +6,7 @@ start to the stop time (which the FMUs are told; a stop time that is no whole nu
 steps after the start ends with a shorter step), with every scalar input and output of each
 component on `/signals/<component>` at each of its steps, each value stamped at the time it holds
 (inputs applied at t, outputs at t, a last record with the final outputs at the end; the
-convention of `cosim.navigation.run`).
+convention of every run: `cosim.record.system_run`).
 
 Overrides: `--set simulation.stop_time=S`, `simulation.macro_step=S`, `simulation.start_time=S`,
 `simulation.master=gauss-seidel|jacobi` take precedence over the file (for the macro step, over
@@ -167,7 +167,7 @@ def run_ssp(
     Returns an `SspRunResult`; for an SSP that navcosim exported from a scenario (it carries the
     `org.navcosim.scenario` annotation) the scenario's run: (scenario, `RunResult`). Raises
     `CosimError` on bad input, before any log exists. The log is claimed and signals are handled as
-    for a scenario (`cosim.navigation.run.run_scenario`).
+    for a scenario (`cosim.record.system_run`).
     """
     source = shorten(path, PATH_LIMIT)
     try:

@@ -316,7 +316,7 @@ def simulate(
     """Run `simulation`, logging to `out_path` (default logs/<model>-<timestamp>.mcap) and, given
     `csv_path`, writing the outputs as CSV. `CosimError` on bad input, before any file exists;
     an FMU that fails while stepping ends the run with its `failure` (the log finalised up to it).
-    Signals are handled as for a scenario run (`cosim.navigation.run.run_scenario`)."""
+    Signals are handled as for any run (`cosim.record.system_run`)."""
     from cosim.navigation.build import make_fmu
 
     described = simulation.component
