@@ -121,10 +121,9 @@ class ScanPorts(NamedTuple):
         return self.ranges if self.gather is None else self.buffer[self.gather]
 
 
-def reading(system, reference: str) -> Reading:
-    """Where an observed "component.port" output is read."""
-    component, index = system.resolve(reference, "output")
-    return Reading(component.output_buffer, index)
+def reading(component, slot: int) -> Reading:
+    """Where output `slot` of `component` is read."""
+    return Reading(component.output_buffer, slot)
 
 
 def run_view(buffer: np.ndarray, slots: list[int]) -> np.ndarray | None:
@@ -144,6 +143,12 @@ class StepRecording:
     def __init__(self, system, master, recorder, observed, scenario) -> None:
         self.recorder = recorder
         self.stop_ns = master.stop_time_ns  # a last step cut short ends there, and so does its pose
+        # What the recording asks of the system, asked once: each component's period [steps], where
+        # each observed output is read, the lidar.
+        periods = {name: system.period_steps(component) for name, component in system.components.items()}
+        found = {reference: system.resolve(reference, "output") for _, reference in observed.references()}
+        lidar = system.component(observed.scan.component) if observed.scan is not None else None
+        h = system.macro_step  # [s]
         self.entries: list[SignalEntry] = []
         self.constant: list[ConstantEntry] = []
         arrays = scenario.signal_arrays
@@ -161,7 +166,7 @@ class StepRecording:
                 channel = recorder.signal_channel(component.name, names, units=units)
                 self.constant.append(ConstantEntry(channel, component, inputs, outputs))
                 continue
-            period = system.period_steps(component)
+            period = periods[component.name]
             channel = recorder.signal_channel(
                 component.name,
                 names,
@@ -188,25 +193,25 @@ class StepRecording:
             self.entries.append(
                 SignalEntry(period, channel, first, second, gather, component, inputs, outputs)
             )
-        self.pose = tuple(reading(system, reference) for reference in observed.pose)  # x, y, theta
+        self.pose = tuple(reading(*found[reference]) for reference in observed.pose)  # x, y, theta
         self.command = None
         if observed.command is not None:
-            v, omega = (reading(system, reference) for reference in observed.command)
-            component = system.component(observed.command[0].split(".")[0])
-            self.command = CommandPorts(system.period_steps(component), v, omega)
+            v, omega = (reading(*found[reference]) for reference in observed.command)
+            commanding = found[observed.command[0]][0]
+            self.command = CommandPorts(periods[commanding.name], v, omega)
         self.mode = None
         if observed.mode is not None:
-            steps = system.period_steps(system.component(observed.mode.split(".")[0]))
-            self.mode = ModePort(steps, steps * system.macro_step, reading(system, observed.mode))
+            component, _ = found[observed.mode]
+            steps = periods[component.name]
+            self.mode = ModePort(steps, steps * h, reading(*found[observed.mode]))
         self.scan = None
-        if observed.scan is not None:
+        if lidar is not None:
             source = observed.scan
-            lidar = system.component(source.component)
             ranges_index = [i for i, p in enumerate(lidar.outputs) if p.array_name == "ranges"]
             ranges = run_view(lidar.output_buffer, ranges_index)
             angles = np.array(source.angles, dtype=float)
             angles.flags.writeable = False
-            period = system.period_steps(lidar)
+            period = periods[lidar.name]
             self.scan = ScanPorts(
                 period,
                 lidar.output_buffer,
@@ -215,7 +220,7 @@ class StepRecording:
                 angles,
                 source.range_min,
                 source.range_max,
-                period * system.macro_step,
+                period * h,
             )
         self.pose_steps = max(1, round(1.0 / (scenario.pose_rate * scenario.macro_step)))
         self.obstacles = scenario.obstacles
