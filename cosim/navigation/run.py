@@ -19,7 +19,7 @@ keeps their buffers after each step and hands the Python components (lidar, plan
 they are due. A block of steps ends before every Python component's step, at the end of a step in
 which one stepped when that step has something to do (a new plan, no path, a goal poll; else the
 block goes on: `cut_after_python`), and after any step whose position may end the run (not
-finite, near the goal, or outside the circle that the true obstacles cannot reach: `_SafeCircle`).
+finite, near the goal, or outside the circle that the true obstacles cannot reach: `SafeCircle`).
 Each block goes to the recording (`cosim.record.replay`): recorded and checked from its rows
 (`cosim.record.blocks`: the positions of all its steps through `OutcomeMonitor.check_positions`,
 the rows turned into messages with NumPy every few chunk windows), or, when the rows cannot describe
@@ -27,7 +27,7 @@ it, replayed step by step through `finish_step`, as the Python loop's per-step c
 way the log and the outcome are the same bytes and numbers, and the run ends at the same step.
 Hooks: `finish_step(k)` once per step (Python loop, blocks replayed step by step), `finish_checks`
 (goal poll, new plan) after a step's position check in both, `on_block` once per block (kernel;
-interrupts are noticed there, at most one block late), `_SafeCircle.watch` before each kernel call
+interrupts are noticed there, at most one block late), `SafeCircle.watch` before each kernel call
 (it re-reads the monitor's goal). A system the kernel cannot step (Jacobi mode with Python
 components) and NAVCOSIM_LOOP=python use the master's Python loop with the per-step callback.
 
@@ -40,7 +40,6 @@ it `<name>.failed.mcap`.
 
 from __future__ import annotations
 
-import ctypes
 import math
 import time
 from dataclasses import dataclass
@@ -52,11 +51,11 @@ from cosim.core.master import NS_PER_S, Master
 from cosim.errors import PATH_LIMIT, CosimError, shorten
 from cosim.fmi import exit_guard
 from cosim.navigation.build import BuiltRun, build_run
-from cosim.navigation.outcome import Outcome, OutcomeMonitor, outcome_metadata
+from cosim.navigation.outcome import Outcome, OutcomeMonitor, SafeCircle, outcome_metadata
 from cosim.record.blocks import BlockRecording
 from cosim.record.logfile import is_regular_file
 from cosim.record.replay import BlockReplay
-from cosim.record.steps import Reading, StepRecording
+from cosim.record.steps import StepRecording
 from cosim.record.system_run import (
     PROGRESS_INTERVAL,
     SystemRun,
@@ -325,9 +324,10 @@ class _RobotRun(SystemRun):
             master.run(total_steps, self.after_step)
             return
         built = self.built
-        watch = _SafeCircle(built, master, self.tables, self.monitor)
-        polled = self.goal_steps if self.goal_poll is not None else 0
         observed = built.description.observed
+        radius = built.scenario.vehicle_radius
+        watch = SafeCircle(built.system, master, self.tables, self.monitor, observed.pose[:2], radius)
+        polled = self.goal_steps if self.goal_poll is not None else 0
         fast = BlockRecording(
             built.system, master, self.recording, observed, self.monitor, self.finish_checks, polled
         )
@@ -477,65 +477,3 @@ def _use_kernel() -> bool:
     import os
 
     return os.environ.get("NAVCOSIM_LOOP", "kernel") != "python"
-
-
-class _SafeCircle:
-    """The run loop's watch on `Master.run_blocks`: where the kernel must return to the run loop.
-
-    The kernel returns after any step whose position may end the run: not finite, within the
-    goal tolerance (plus a margin), or outside a circle around the last checked position that
-    the true obstacles cannot reach within the block (the world's distance there, minus the
-    vehicle's radius, minus what moving obstacles can cover in a block, minus a margin). So the
-    exact checks of `OutcomeMonitor.check_position`, made for every step from the rows the kernel
-    kept (`cosim.record.replay`), can only end the run at the last step of a block, where the
-    kernel stopped.
-    """
-
-    def __init__(self, built: BuiltRun, master: Master, tables, monitor: OutcomeMonitor) -> None:
-        system = built.system
-        self.master = master
-        self.monitor = monitor
-        self.tables = tables
-        observed = built.description.observed
-        (vehicle_x, x), (vehicle_y, y) = (system.resolve(r, "output") for r in observed.pose[:2])
-        self.x, self.y = Reading(vehicle_x.output_buffer, x), Reading(vehicle_y.output_buffer, y)
-        tables.watch_addresses[:] = (
-            1,
-            ctypes.addressof(vehicle_x.output_cbuffer) + 8 * x,
-            ctypes.addressof(vehicle_y.output_cbuffer) + 8 * y,
-        )
-        self.radius = built.scenario.vehicle_radius
-        self.world = monitor.world
-        self.speed = getattr(self.world, "max_speed", 0.0)
-        self.moving = bool(getattr(self.world, "moving", False))
-        # Moving obstacles: short blocks, so the reach of the obstacles in one block stays small.
-        self.block = 50 if self.speed > 0.0 else 1000
-        self.h = system.macro_step
-        self.anchor: tuple[float, float] | None = None
-
-    def watch(self) -> None:
-        """Before a kernel call: the circle around the current position known free of collisions."""
-        x, y = self.x.value(), self.y.value()
-        numbers = self.tables.watch_numbers
-        # The goal as the monitor has it now (a hook may move it between blocks).
-        goal, tolerance = self.monitor.goal, self.monitor.tolerance
-        reach = tolerance + 1e-6 * (1.0 + tolerance)
-        numbers[:3] = (goal[0], goal[1], reach * reach)
-        if not self.moving and self.anchor is not None:
-            # A static world: the circle stays valid; a new one only when half of it is used up.
-            anchor_x, anchor_y = self.anchor
-            dx, dy = x - anchor_x, y - anchor_y
-            if 4.0 * (dx * dx + dy * dy) < numbers[5]:
-                return
-        self.anchor = (x, y)
-        if not (math.isfinite(x) and math.isfinite(y)):
-            numbers[3:] = (0.0, 0.0, -1.0)  # every step is checked
-            return
-        if self.moving:
-            self.world.at(self.master.time)
-        distance = self.world.lower_bound(x, y)
-        if distance - self.radius < 1.0:
-            distance = self.world.distance(x, y)
-        drift = self.speed * (self.block + 1) * self.h
-        free = distance - self.radius - drift - 1e-6 * (1.0 + distance)
-        numbers[3:] = (x, y, free * free if free > 0.0 else -1.0)
