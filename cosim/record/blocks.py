@@ -104,8 +104,8 @@ class BlockRecording:
         self.monitor = monitor
         self.finish_checks = finish_checks
         self.polled = polled
-        self.components = [component for component, _, _ in master._plan]
-        self.periods = [period for _, period, _ in master._plan]
+        self.components = list(master.order)  # as the kernel's rows (`histories`) are ordered
+        self.periods = [system.period_steps(component) for component in self.components]
         self.index = {component.name: i for i, component in enumerate(self.components)}
         self.start_ns = master.start_time_ns
         self.h_ns = system.macro_step_ns

@@ -39,7 +39,8 @@ class BlockReplay:
         self.finish_step = finish_step
         self.fast = fast
         self.parts: list[HeldPart] = []
-        for component, period, _ in master._plan:
+        for component in master.order:  # as the kernel's rows (`histories`) are ordered
+            period = master.system.period_steps(component)
             slots = [i for i, port in enumerate(component.inputs) if not port.is_array_element]
             if not slots:
                 where = slice(0, 0)
