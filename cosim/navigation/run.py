@@ -41,7 +41,6 @@ it `<name>.failed.mcap`.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -57,7 +56,6 @@ from cosim.record.logfile import is_regular_file
 from cosim.record.replay import BlockReplay
 from cosim.record.steps import StepRecording
 from cosim.record.system_run import (
-    PROGRESS_INTERVAL,
     SystemRun,
     close_quietly,
     open_recorder,
@@ -289,11 +287,7 @@ class _RobotRun(SystemRun):
         """After a step (Python loop) or a block (kernel): whether the run ends, and why."""
         if reason is None and poll_signal and interrupt.take() is not None:
             reason = "interrupted"
-        if self.bar is not None:
-            now = time.perf_counter()
-            if now - self.last_update[0] >= PROGRESS_INTERVAL:
-                update_bar(self.bar, sim_time, now - self.wall_start, self.last_update)
-                self.last_update[0] = now
+        self.show_progress(sim_time)
         if reason is not None:
             self.reason = reason
             return True

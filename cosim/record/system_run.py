@@ -199,13 +199,15 @@ class SystemRun:
         self.recorder.hold_signal_rows(blocks)
         if self.on_rows is not None:
             self.on_rows(first, count, blocks)
+        self.show_progress((first + count) * h_ns / NS_PER_S)
+
+    def show_progress(self, sim_time: float) -> None:
+        """Move the progress bar to `sim_time` [s] simulated (at most every `PROGRESS_INTERVAL`)."""
         if self.bar is not None:
             now = time.perf_counter()
             if now - self.last_update[0] >= PROGRESS_INTERVAL:
                 self.last_update[0] = now
-                update_bar(
-                    self.bar, (first + count) * h_ns / NS_PER_S, now - self.wall_start, self.last_update
-                )
+                update_bar(self.bar, sim_time, now - self.wall_start, self.last_update)
 
     def record_steps(self, total: int, describe: Callable[[CosimError], str]) -> tuple[str, RunEnd]:
         """Step to `total` steps, recording every signal; (reason, how it ended): reason
