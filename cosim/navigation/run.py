@@ -61,6 +61,7 @@ from cosim.record.system_run import (
     open_recorder,
     run_guarded,
     update_bar,
+    writing_failed,
 )
 from cosim.scenario.load import Scenario
 
@@ -194,8 +195,7 @@ def _build_and_run(
         except OSError as error:
             # The log could not be written (no space, I/O error): what reached the file stays.
             close_quietly(master, recorder)
-            where = shorten(error.filename or log_path, PATH_LIMIT)
-            raise CosimError(f"{where}: writing the log failed ({error.strerror or error})") from None
+            raise CosimError(writing_failed(error, log_path)) from None
         except BaseException:
             # Neither a normal end, an interrupt nor an FMU failure: keep the log, but marked.
             close_quietly(master, recorder, {"reached": "false", "reason": "error"})

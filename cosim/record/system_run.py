@@ -27,7 +27,7 @@ import numpy as np
 
 from cosim.core import interrupt
 from cosim.core.master import COMPILED_MIN_STEPS, NS_PER_S, Master, due_from
-from cosim.errors import CosimError, SimulationEnded
+from cosim.errors import PATH_LIMIT, CosimError, SimulationEnded, shorten
 from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
 from cosim.record.text_signals import TextRecording
 from cosim.scenario.load import DEFAULT_LOG_PATTERN
@@ -63,6 +63,13 @@ def close_quietly(master: Master, recorder=None, outcome: dict[str, str] | None 
             recorder.close(outcome)
         except Exception:  # noqa: BLE001
             pass
+
+
+def writing_failed(error: OSError, log_path: Path) -> str:
+    """The one line saying the log could not be written (no space, an I/O error); what reached
+    the file stays."""
+    where = shorten(error.filename or log_path, PATH_LIMIT)
+    return f"{where}: writing the log failed ({error.strerror or error})"
 
 
 class RunEnd(NamedTuple):
@@ -238,6 +245,22 @@ class SystemRun:
             self.master.close()
         except CosimError as error:
             return failure or describe(error)
+        return failure
+
+    def finish(
+        self, reason: str, end: RunEnd, describe: Callable[[CosimError], str], first: dict | None = None
+    ) -> str | None:
+        """The end of the run: the system freed (`describe(error)` when that fails), the last
+        records, the log closed with the outcome metadata (`first`, then reason, time, failure,
+        ended_by); returns the run's failure."""
+        failure = self.close_master(end.failure, describe)
+        outcome = {**(first or {}), "reason": reason, "time": repr(self.master.time)}
+        if failure:
+            outcome["failure"] = failure
+        if end.ended:
+            outcome["ended_by"] = end.ended
+        self.end_steps()
+        self.recorder.close(outcome)
         return failure
 
     def end_steps(self) -> None:

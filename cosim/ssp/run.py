@@ -35,7 +35,7 @@ from pathlib import Path
 from cosim.core import interrupt
 from cosim.core.master import MODES, Master
 from cosim.errors import PATH_LIMIT, CosimError, shorten
-from cosim.record.system_run import SystemRun, close_quietly, open_recorder
+from cosim.record.system_run import SystemRun, close_quietly, open_recorder, writing_failed
 from cosim.scenario.limits import MAX_STEPS, MAX_TIME, MIN_MACRO_STEP
 from cosim.ssp.read import DEFAULT_TIMEOUT, SspSystem, build_system, max_unpacked_size, open_ssp
 
@@ -209,11 +209,11 @@ def _run_fmus(
         close_quietly(master)
         raise
     with interrupt.deferred():
-        return _record(ssp, run, master, system, out_path, force)
+        return _record(ssp, run, master, out_path, force)
 
 
 def _record(
-    ssp: SspSystem, run: Experiment, master: Master, system, out_path: Path | None, force: bool
+    ssp: SspSystem, run: Experiment, master: Master, out_path: Path | None, force: bool
 ) -> SspRunResult:
     """Step and log, with signals deferred: an interrupt ends the run with a finalised log."""
     try:
@@ -222,38 +222,25 @@ def _record(
     except BaseException:
         master.close()
         raise
-    try:
-        return _steps(ssp, run, master, recorder)
-    except OSError as error:
-        # The log could not be written (no space, I/O error): what reached the file stays.
-        close_quietly(master, recorder)
-        where = shorten(error.filename or recorder.path, PATH_LIMIT)
-        raise CosimError(
-            f"{ssp.source}: {where}: writing the log failed ({error.strerror or error})"
-        ) from None
-
-
-def _steps(ssp: SspSystem, run: Experiment, master: Master, recorder) -> SspRunResult:
     steps = SystemRun(master, recorder)
-    with recorder:
-        _write_header(ssp, run, steps)
-        steps.begin()
-        steps.signal_channels()
-        reason, end = steps.record_steps(
-            master.steps_to_stop,  # the last one shorter where the stop is no whole number of steps
-            lambda error: f"{ssp.source}: {ssp.members(str(error))} (at t = {master.time:.3f} s)",
-        )
-        failure = steps.close_master(
-            end.failure,
-            lambda error: f"{ssp.source}: terminating the system failed: {ssp.members(str(error))}",
-        )
-        outcome = {"reached": "false", "reason": reason, "time": repr(master.time)}
-        if failure:
-            outcome["failure"] = failure
-        if end.ended:
-            outcome["ended_by"] = end.ended
-        steps.end_steps()
-        recorder.close(outcome)
+    try:
+        with recorder:
+            _write_header(ssp, run, steps)
+            steps.begin()
+            steps.signal_channels()
+            reason, end = steps.record_steps(
+                master.steps_to_stop,  # the last one shorter where the stop is no whole number of steps
+                lambda error: f"{ssp.source}: {ssp.members(str(error))} (at t = {master.time:.3f} s)",
+            )
+            failure = steps.finish(
+                reason,
+                end,
+                lambda error: f"{ssp.source}: terminating the system failed: {ssp.members(str(error))}",
+                {"reached": "false"},
+            )
+    except OSError as error:
+        close_quietly(master, recorder)
+        raise CosimError(f"{ssp.source}: {writing_failed(error, recorder.path)}") from None
     return SspRunResult(
         recorder.path,
         master.step_index,

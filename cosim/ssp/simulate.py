@@ -396,14 +396,7 @@ def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: b
         finally:
             if csv is not None:
                 csv.close()
-        failure = steps.close_master(end.failure, lambda error: f"terminating the FMU failed: {error}")
-        outcome = {"reason": reason, "time": repr(master.time)}
-        if failure:
-            outcome["failure"] = failure
-        if end.ended:
-            outcome["ended_by"] = end.ended
-        steps.end_steps()
-        recorder.close(outcome)
+        failure = steps.finish(reason, end, lambda error: f"terminating the FMU failed: {error}")
     return SimulationResult(
         recorder.path, csv_path, master.step_index, master.time, steps.wall_time, reason, failure, end.ended
     )
