@@ -191,7 +191,13 @@ def _handler(args) -> int:
     try:
         goals = sink if args.live else None  # a client's /goal_pose, the control services
         result = run_scenario(
-            scenario, args.out, progress=not args.quiet, sink=sink, force=args.force, goals=goals
+            scenario,
+            args.out,
+            progress=not args.quiet,
+            sink=sink,
+            force=args.force,
+            goals=goals,
+            trace=scenario.plot and not args.no_plot,  # the plot's in-memory copy, only for a plot
         )
         if not args.quiet:
             print(
