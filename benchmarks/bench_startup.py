@@ -2,28 +2,31 @@
 
 Every figure is the fastest of `--repeat` fresh processes (wall time, and the max RSS of that run;
 CPU time, user + system, the least of them), measured in this run beside the import floor
-`python3 -c "import numpy, scipy.ndimage, fmpy, mcap"` (the libraries any run must load). The floor
-and the warm runs are measured in rounds (floor, run, run with plot, the same for a `--baseline`
-checkout, floor, ...), so a load that comes and goes hits them alike. Wall time is the issue's
-measure; CPU time depends far less on other processes, so its ratios are the ones to read on a busy
-machine:
+`python3 -c "import numpy, scipy.ndimage, fmpy, mcap"` (the libraries a run loaded when the issue
+was written). The floor and the warm runs are measured in rounds (floor, run, run with plot, the
+same for a `--baseline` checkout, floor, ...), so a load that comes and goes hits them alike. Wall
+time is the issue's measure; CPU time depends far less on other processes, so its ratios are the
+ones to read on a busy machine:
 
-- `run --no-plot, warm`: `cosim run SCENARIO --no-plot` with warm caches (numba's, the FMU builds,
+- `run --no-plot, warm`: `cosim run SCENARIO --no-plot` with warm caches (the FMU and kernel builds,
   Python's bytecode: `PYTHONDONTWRITEBYTECODE` is dropped for every process measured, as a user's
   shell does not set it);
 - `plot added`: the same run drawing its default PNG, minus the run without it. On Linux the PNG
   is drawn by a child forked before the run (`cosim.cli.plotter`), which imports matplotlib while
   the run goes: with a free core that is off the wall time, not off the CPU time (the child's
   CPU is in the figure: `wait4` counts the children a process has reaped);
-- `first run, cold caches`: a fresh copy of the checkout (no `__pycache__`, `build/` or logs, so no
-  bytecode, no in-tree numba index files and no built C kernels: `planner.native` compiles them into
-  the copy's `build/native/`) with an empty `NUMBA_CACHE_DIR` and the FMUs already
-  built (the user's FMU build cache copied in): the first run of a fresh install. The user's own
-  caches are never touched;
-- `first run, cold caches + FMUs`: the same without built FMUs (a fresh source checkout builds them);
-- `hybrid first call, cold`: `planner.plan(..., planner="hybrid")` in such a copy, in seconds.
+- `first run, nothing built`: a fresh copy of the checkout (no `__pycache__`, `build/` or logs, so
+  no bytecode, no built FMUs and no built C kernels): the first run of a fresh source checkout,
+  which builds its 4 FMUs and 5 kernels (side by side since issue 23). The user's own caches are
+  never touched;
+- `first run, FMUs built`: the same with the checkout's FMU build cache copied in (kernels only);
+- `hybrid first call, cold`: `planner.plan(..., planner="hybrid")` in such a copy, in seconds;
+- `sweep of 8 / 8 runs`: `cosim sweep SCENARIO --vary lidar.seed=0:3:4 --vary lidar.noise=0.02,0.05`
+  (a local cluster, one worker per core, drawing its sweep.png) against the same 8 points as 8
+  sequential `cosim run --no-plot` processes, wall time; the ratio is to those 8 runs, not to the
+  floor.
 
-The issue's figures (issue 15, "now", measured before the work) are printed beside the ratios.
+The issue's figures (issue 23, measured before the work) are printed beside the ratios.
 `--baseline DIR` runs the same commands in another checkout (e.g. `git worktree add /tmp/old <commit>`)
 and prints its figures beside these, from the same run.
 """
@@ -46,21 +49,24 @@ HYBRID = (
     "grid = planner.OccupancyGrid.from_file('scenarios/maps/warehouse.yaml')\n"
     "planner.plan(grid, (6.0, 6.0, 0.0), (84.0, 53.0, 0.0), planner='hybrid', expansion_distance=2.25)\n"
 )
-# Issue 15's "now" column (before): ratio to the floor, or seconds for Hybrid A*.
+# Issue 23's figures, measured before the work: ratio to the floor (the sweep: to 8 sequential runs).
 ISSUE_BEFORE = {
-    "run --no-plot, warm": "5.0x",
-    "plot added": "3.9x",
-    "first run, cold caches": "27x",
-    "first run, cold caches + FMUs": "",
-    "hybrid first call, cold": "16-19 s",
+    "run --no-plot, warm": "1.9x",
+    "plot added": "",
+    "first run, nothing built": "",
+    "first run, FMUs built": "",
+    "hybrid first call, cold": "",
+    "sweep of 8 / 8 runs": "0.64x",
 }
 GOALS = {
-    "run --no-plot, warm": "<= 2.5x",
-    "plot added": "<= 1.5x",
-    "first run, cold caches": "<= 10x",
-    "first run, cold caches + FMUs": "",
-    "hybrid first call, cold": "<= 5 s",
+    "run --no-plot, warm": "<= 1.2x",
+    "plot added": "<= 0.3x",
+    "first run, nothing built": "<= 5x",
+    "first run, FMUs built": "",
+    "hybrid first call, cold": "",
+    "sweep of 8 / 8 runs": "<= 0.4x",
 }
+SWEEP_POINTS = [(seed, noise) for seed in range(4) for noise in ("0.02", "0.05")]
 
 
 def _timed(command: list[str], cwd: Path, env: dict[str, str]) -> tuple[float, float, float]:
@@ -80,7 +86,7 @@ def _timed(command: list[str], cwd: Path, env: dict[str, str]) -> tuple[float, f
 def _environment(checkout: Path) -> dict[str, str]:
     env = {**os.environ, "PYTHONPATH": str(checkout)}
     for name in (
-        "NUMBA_CACHE_DIR", "NAVCOSIM_FMU_CACHE", "NAVCOSIM_NATIVE_CACHE", "PYTHONDONTWRITEBYTECODE",
+        "NAVCOSIM_FMU_CACHE", "NAVCOSIM_NATIVE_CACHE", "PYTHONDONTWRITEBYTECODE",
         "PYTHONPYCACHEPREFIX",
     ):  # fmt: skip
         env.pop(name, None)
@@ -88,15 +94,15 @@ def _environment(checkout: Path) -> dict[str, str]:
 
 
 SKIP = shutil.ignore_patterns(
-    ".git", "__pycache__", "*.nbi", "*.nbc", "build", "_native", "logs", "*.egg-info", ".pytest_cache",
+    ".git", "__pycache__", "build", "_native", "logs", "*.egg-info", ".pytest_cache",
     ".ruff_cache",
 )  # fmt: skip
 
 
 def _fresh_copy(checkout: Path, into: Path, with_fmus: bool) -> Path:
-    """The checkout's files (times kept) in `into`, without bytecode, numba cache files, logs or
-    builds; with `with_fmus`, the checkout's FMU build cache too (its stamps name the sources relative
-    to the source tree, so the copied FMUs are up to date)."""
+    """The checkout's files (times kept) in `into`, without bytecode, logs or builds; with
+    `with_fmus`, the checkout's FMU build cache too (its stamps name the sources relative to the
+    source tree, so the copied FMUs are up to date)."""
     copy = into / "checkout"
     shutil.copytree(checkout, copy, ignore=SKIP)
     fmus = checkout / "build" / "fmus"
@@ -106,13 +112,13 @@ def _fresh_copy(checkout: Path, into: Path, with_fmus: bool) -> Path:
 
 
 def _cold(checkout: Path, command, repeat: int, with_fmus: bool) -> tuple[float, float, float]:
-    """Fastest of `repeat` first runs, each in its own fresh copy with an empty numba cache."""
+    """Fastest of `repeat` first runs, each in its own fresh copy."""
     runs = []
     for _ in range(repeat):
         with tempfile.TemporaryDirectory() as scratch:
             scratch = Path(scratch)
             copy = _fresh_copy(checkout, scratch, with_fmus)
-            env = _environment(copy) | {"NUMBA_CACHE_DIR": str(scratch / "numba")}
+            env = _environment(copy)
             runs.append(_timed(command(scratch), copy, env))
     return _best(runs)
 
@@ -157,8 +163,8 @@ def measure(
         added = tuple(with_plot - without for with_plot, without in zip(plot_best, warm_best, strict=True))
         results[name] = {"run --no-plot, warm": warm_best, "plot added": added}
     cold = {
-        "first run, cold caches": (_cosim_run(scenario, "--no-plot"), cold_repeat, True),
-        "first run, cold caches + FMUs": (_cosim_run(scenario, "--no-plot"), 1, False),
+        "first run, nothing built": (_cosim_run(scenario, "--no-plot"), cold_repeat, False),
+        "first run, FMUs built": (_cosim_run(scenario, "--no-plot"), 1, True),
         "hybrid first call, cold": (lambda _: [sys.executable, "-c", HYBRID], 1, True),
     }
     for what, (command, times, with_fmus) in cold.items():
@@ -169,6 +175,49 @@ def measure(
     return _best(floor), results
 
 
+def _sequential(scenario: str, scratch: Path, checkout: Path, env: dict[str, str]) -> float:
+    """Wall seconds of the sweep's 8 points as 8 `cosim run --no-plot` processes, one after the other."""
+    started = time.perf_counter()
+    for seed, noise in SWEEP_POINTS:
+        points = ["--set", f"lidar.seed={seed}", "--set", f"lidar.noise={noise}", "--no-plot", "--force"]
+        _timed(_cosim_run(scenario, *points)(scratch), checkout, env)
+    return time.perf_counter() - started
+
+
+def _sweep(scenario: str, scratch: Path, checkout: Path, env: dict[str, str]) -> float:
+    """Wall seconds of `cosim sweep` over the same 8 points on a local cluster (into a new folder)."""
+    out = Path(tempfile.mkdtemp(dir=scratch))
+    vary = ["--vary", "lidar.seed=0:3:4", "--vary", "lidar.noise=0.02,0.05"]
+    command = [
+        sys.executable,
+        "-m",
+        "cosim",
+        "sweep",
+        scenario,
+        *vary,
+        "--out",
+        str(out / "sweep"),
+        "--quiet",
+    ]
+    wall = _timed(command, checkout, env)[0]
+    shutil.rmtree(out)
+    return wall
+
+
+def measure_sweep(checkouts: dict[str, Path], scenario: str, repeat: int) -> dict[str, tuple[float, float]]:
+    """Per checkout the fastest wall seconds of 8 sequential runs and of the 8-run local sweep, in
+    rounds (sequential, sweep, for each checkout in turn)."""
+    envs = {name: _environment(path) for name, path in checkouts.items()}
+    walls: dict[str, tuple[list[float], list[float]]] = {name: ([], []) for name in checkouts}
+    with tempfile.TemporaryDirectory() as scratch:
+        scratch = Path(scratch)
+        for _ in range(repeat):
+            for name, path in checkouts.items():
+                walls[name][0].append(_sequential(scenario, scratch, path, envs[name]))
+                walls[name][1].append(_sweep(scenario, scratch, path, envs[name]))
+    return {name: (min(sequential), min(sweep)) for name, (sequential, sweep) in walls.items()}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", default="scenarios/warehouse_diff_drive_one_obstacle.toml")
@@ -176,13 +225,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--cold-repeat", type=int, default=2, help="cold first runs (fastest); 0 leaves out every cold figure"
     )
+    parser.add_argument(
+        "--sweep-repeat", type=int, default=2, help="rounds of the sweep figure (fastest); 0 leaves it out"
+    )
     parser.add_argument("--baseline", type=Path, help="another checkout to measure beside this one")
     args = parser.parse_args(argv)
     checkouts = {"now": REPO} | ({"baseline": args.baseline.resolve()} if args.baseline else {})
     load = os.getloadavg()
     floor, results = measure(checkouts, args.scenario, args.repeat, args.cold_repeat)
     floor_wall, floor_rss, floor_cpu = floor
-    print(f"scenario {args.scenario}; load average at start {load[0]:.2f}, at end {os.getloadavg()[0]:.2f}")
+    after = os.getloadavg()[0]
+    print(f"scenario {args.scenario}; load average at start {load[0]:.2f}, after the runs {after:.2f}")
     print(f"import floor: {floor_wall:.3f} s wall, {floor_cpu:.3f} s CPU, {floor_rss:.0f} MiB")
     header = f"{'what':<30}" + "".join(
         f"{name + ' wall':>14}{'/ floor':>8}{'CPU':>8}{'/ floor':>8}{'MiB':>6}" for name in results
@@ -196,6 +249,14 @@ def main(argv: list[str] | None = None) -> int:
             wall, rss, cpu = figures[what]
             row += f"{wall:>13.3f}s{wall / floor_wall:>7.2f}x{cpu:>7.3f}s{cpu / floor_cpu:>7.2f}x{rss:>6.0f}"
         print(row + f"{ISSUE_BEFORE[what]:>14}{GOALS[what]:>9}")
+    if args.sweep_repeat > 0:
+        what = "sweep of 8 / 8 runs"
+        sweeps = measure_sweep(checkouts, args.scenario, args.sweep_repeat)
+        row = f"{what:<30}"
+        for sequential, sweep in sweeps.values():
+            row += f"{sweep:>13.3f}s{sweep / sequential:>7.2f}x{'8 runs':>8}{sequential:>7.2f}s{'':>6}"
+        print(row + f"{ISSUE_BEFORE[what]:>14}{GOALS[what]:>9}")
+    print(f"load average at the end {os.getloadavg()[0]:.2f}")
     return 0
 
 

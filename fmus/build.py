@@ -278,9 +278,13 @@ def _build_description(identifier: str, sources: list[str]) -> str:
     )
 
 
-def build_fmu(model_dir: Path, out_dir: Path, header_dir: Path | None = None, fmi_version: int = 2) -> Path:
+def build_fmu(
+    model_dir: Path, out_dir: Path, header_dir: Path | None = None, fmi_version: int = 2, run_compiler=None
+) -> Path:
     """Compile and pack the FMI `fmi_version` FMU of `model_dir` into `out_dir/<Name>.fmu`; returns
-    its path.
+    its path. `run_compiler(command)` runs the compiler as `subprocess.run(command,
+    capture_output=True, text=True)` does (the default); `cosim.fmi.builtin` passes one that is safe
+    in a thread of a process that forks.
 
     The archive is written to a temporary file in `out_dir` and renamed into place, so a reader
     (or a second build running at the same time) never sees a half-written `.fmu`.
@@ -318,7 +322,10 @@ def build_fmu(model_dir: Path, out_dir: Path, header_dir: Path | None = None, fm
         includes = [f"-I{include_dir}" for include_dir in (generated, model_dir, common_dir, headers_from)]
         command = [compiler, *COMPILE_FLAGS, *includes]
         command += [str(s) for s in sources] + ["-o", str(binary), *LINK_FLAGS]
-        result = subprocess.run(command, capture_output=True, text=True)
+        if run_compiler is None:
+            result = subprocess.run(command, capture_output=True, text=True)
+        else:
+            result = run_compiler(command)
         if result.returncode != 0:
             errors = [line for line in result.stderr.splitlines() if " error: " in line]
             first = errors[0] if errors else result.stderr.strip()

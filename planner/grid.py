@@ -123,8 +123,7 @@ class OccupancyGrid:
     # -- derived grids and files ------------------------------------------------------------------
     def inflate(self, radius_m: float) -> OccupancyGrid:
         """A new grid: obstacles plus every cell within `radius_m` [m] of one (planner.inflation)."""
-        # Imported here: planner.inflation pulls in scipy, which a grid that is never inflated
-        # does not need.
+        # Imported here: only a grid that is inflated needs planner.inflation (and its C kernel).
         from planner.inflation import inflation_mask
 
         return OccupancyGrid(self.occupied | inflation_mask(self, radius_m), self.resolution, self.origin)

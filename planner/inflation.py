@@ -1,8 +1,9 @@
 """Expansion distance (the thesis's third improvement): inflation and a nav2-style cost gradient.
 
 Rule: a free cell is *inflated* when the Euclidean distance between its centre and the centre of
-the nearest occupied cell is <= the radius [m]. Distances come from scipy's exact Euclidean
-distance transform, so the rule is exact (no chamfer approximation) at every resolution.
+the nearest occupied cell is <= the radius [m]. Distances come from an exact Euclidean distance
+transform (`distance_to_nearest`, C: planner/native/distance.c), so the rule is exact (no chamfer
+approximation) at every resolution.
 Consequence: a path through cell centres of the inflated grid keeps more than `radius` from every
 obstacle *centre*, i.e. more than `radius - resolution / 2` from an obstacle cell's edge.
 
@@ -12,13 +13,64 @@ method is built on `inflation_mask`, so the grid module sits above this one.
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import math
+from pathlib import Path
 from typing import Protocol
 
 import numpy as np
-from scipy.ndimage import distance_transform_edt
 
+from planner import native
 from planner.errors import PlannerError
+
+KERNEL_SOURCE = Path(__file__).parent / "native" / "distance.c"
+
+
+@functools.cache
+def _kernels() -> ctypes.CDLL:
+    """The distance transform and dilation kernels, loaded (built) on first use."""
+    pointer, count, real = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double
+    return native.bind(
+        native.load(KERNEL_SOURCE),
+        {
+            "navcosim_distance_transform": (count, (pointer, count, count, real, real, pointer)),
+            "navcosim_dilate_square": (None, (pointer, count, count, pointer)),
+        },
+    )
+
+
+def _cells(mask: np.ndarray) -> np.ndarray:
+    """`mask` as a C-ordered 2-D array of bytes 0/1 (no copy for a C-ordered bool array)."""
+    mask = np.asarray(mask)
+    if mask.ndim != 2:
+        raise ValueError(f"expected a 2-D grid, got shape {mask.shape}")
+    return np.ascontiguousarray(mask, dtype=bool).view(np.uint8)
+
+
+def distance_to_nearest(mask: np.ndarray, sampling: tuple[float, float] = (1.0, 1.0)) -> np.ndarray:
+    """Exact Euclidean distance from every cell of a 2-D grid to the nearest True cell of `mask`
+    (0 on them; inf everywhere when there is none), rows `sampling[0]` and columns `sampling[1]`
+    apart: `scipy.ndimage.distance_transform_edt(~mask, sampling=sampling)`, equal bit for bit with
+    unit sampling (exact integer squared distances) and to rounding otherwise."""
+    cells = _cells(mask)
+    rows, cols = cells.shape
+    distance = np.empty((rows, cols))
+    if cells.size and _kernels().navcosim_distance_transform(
+        cells.ctypes.data, rows, cols, float(sampling[0]), float(sampling[1]), distance.ctypes.data
+    ):
+        raise MemoryError("no memory for the distance transform's scratch lines")
+    return distance
+
+
+def dilate_square(mask: np.ndarray) -> np.ndarray:
+    """`mask` dilated by a full 3 x 3 square (a cell is True when it or one of its 8 neighbours is;
+    nothing beyond the border): `scipy.ndimage.binary_dilation(mask, structure=np.ones((3, 3)))`."""
+    cells = _cells(mask)
+    dilated = np.empty(cells.shape, dtype=bool)
+    if cells.size:
+        _kernels().navcosim_dilate_square(cells.ctypes.data, *cells.shape, dilated.ctypes.data)
+    return dilated
 
 
 class Grid(Protocol):
@@ -45,7 +97,7 @@ def obstacle_distance(grid: Grid) -> np.ndarray:
     if not grid.occupied.any():
         distance = np.full(grid.shape, np.inf)
     else:
-        distance = distance_transform_edt(~grid.occupied) * grid.resolution
+        distance = distance_to_nearest(grid.occupied) * grid.resolution
     distance.flags.writeable = False
     grid._cache["obstacle_distance"] = distance
     return distance

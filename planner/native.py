@@ -13,7 +13,9 @@ building it when needed:
 - a wheel ships them prebuilt (`setup.py` builds every kernel into `<package>/_native/`);
 - otherwise they go to `$NAVCOSIM_NATIVE_CACHE`, else `<repo>/build/native/` in a source checkout,
   else `~/.cache/navcosim/native/`: written to a temporary file, then renamed, so processes building
-  the same library at once each get a whole one.
+  the same library at once each get a whole one;
+- `start_builds` compiles several missing ones side by side on an executor (a first run's kernels),
+  and `load` then waits for the one it needs.
 
 Floating point: `-O2 -ffp-contract=off` and no fast-math, so every `+ - * / sqrt` is the IEEE
 operation the source says, in its order (no fused multiply-add): results do not depend on the
@@ -32,7 +34,12 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # not imported at run time: concurrent.futures imports logging (~8 ms)
+    from concurrent.futures import Executor, Future
 
 # An undeclared function is an error everywhere (GCC >= 14 already makes it one; older compilers
 # would only warn, and a kernel calling a function as int-returning computes garbage).
@@ -45,6 +52,16 @@ SHIPPED = "_native"  # <package>/_native/: a wheel's prebuilt libraries
 SUFFIX = ".dylib" if sys.platform == "darwin" else ".so"
 _INCLUDE = re.compile(rb'^\s*#\s*include\s+"([^"]+)"', re.MULTILINE)
 _loaded: dict[Path, ctypes.CDLL] = {}
+_pending: dict[Path, Future] = {}  # builds started by `start_builds`, until `load` takes them
+_lock = threading.Lock()
+# Compilers are started under this lock, and a fork (from another thread) waits for it: a process
+# forked while `subprocess` holds a compiler's pipes open in this one would keep their write ends,
+# and the build would wait for that process to end (`cosim run` forks its plotter, which lives as
+# long as the run). `subprocess` itself forks without the hooks, so starting under it is safe.
+_spawning = threading.RLock()
+os.register_at_fork(
+    before=_spawning.acquire, after_in_parent=_spawning.release, after_in_child=_spawning.release
+)
 
 
 class NativeBuildError(Exception):
@@ -82,6 +99,15 @@ def _sources(source: Path) -> list[Path]:
             if header.is_file():
                 todo.append(header)
     return seen
+
+
+def run_compiler(command: list[str]) -> subprocess.CompletedProcess:
+    """`subprocess.run(command, capture_output=True, text=True)`, safe to call from a thread of a
+    process that forks (see `_spawning`). OSError if the command cannot be started."""
+    with _spawning:
+        process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    stdout, stderr = process.communicate()
+    return subprocess.CompletedProcess(command, process.returncode, stdout, stderr)
 
 
 def library_name(source: Path) -> str:
@@ -133,7 +159,7 @@ def build(source: Path, out_dir: Path, cc: str | None = None) -> Path:
     try:
         command = [cc, *FLAGS, "-o", temporary, str(source), *LINK]
         try:
-            done = subprocess.run(command, capture_output=True, text=True)
+            done = run_compiler(command)
         except OSError as error:
             raise NativeBuildError(f"cannot run the C compiler {cc}: {error.strerror or error}") from None
         if done.returncode != 0:
@@ -148,24 +174,65 @@ def build(source: Path, out_dir: Path, cc: str | None = None) -> Path:
     return target
 
 
+def _find(source: Path) -> Path | None:
+    """The built library of `source` in the first cache folder that holds it, or None."""
+    name = library_name(source)
+    return next((d / name for d in _cache_dirs(source) if (d / name).is_file()), None)
+
+
+def _build_into_cache(source: Path) -> Path:
+    """Build `source` into the first writable cache folder; the library's path."""
+    dirs = _cache_dirs(source)
+    for directory in dirs[1:] or dirs:
+        try:
+            return build(source, directory)
+        except OSError:
+            continue  # not writable: the next one
+    raise NativeBuildError(f"no writable folder to build {source.name} into: {dirs[-1]}")
+
+
+def missing(sources) -> list[Path]:
+    """The resolved `sources` whose library is neither loaded, nor being built, nor in a cache."""
+    found = []
+    for source in sources:
+        source = Path(source).resolve()
+        with _lock:
+            if source in _loaded or source in _pending:
+                continue
+        if _find(source) is None:
+            found.append(source)
+    return found
+
+
+def start_builds(sources, executor: Executor) -> list[Path]:
+    """Start building, on `executor`, each of `sources` that no cache holds yet, so that a later
+    `load` waits for it instead of compiling it then: a process that needs several kernels compiles
+    them side by side (and beside other work) instead of one after the other. Returns the sources
+    whose build was started (none when all are built: a warm start costs one `stat` per source)."""
+    started = []
+    for source in sources:
+        source = Path(source).resolve()
+        with _lock:
+            if source in _loaded or source in _pending or _find(source) is not None:
+                continue
+            _pending[source] = executor.submit(_build_into_cache, source)
+        started.append(source)
+    return started
+
+
 def load(source: str | Path) -> ctypes.CDLL:
-    """The loaded library of `source` (a `.c` file), built first if no cache holds it. Once per process."""
+    """The loaded library of `source` (a `.c` file), built first if no cache holds it (or waited
+    for, when `start_builds` started its build). Once per process."""
     source = Path(source).resolve()
     library = _loaded.get(source)
     if library is not None:
         return library
-    dirs = _cache_dirs(source)
-    name = library_name(source)
-    path = next((d / name for d in dirs if (d / name).is_file()), None)
-    if path is None:
-        for directory in dirs[1:] or dirs:
-            try:
-                path = build(source, directory)
-                break
-            except OSError:
-                continue  # not writable: the next one
-        else:
-            raise NativeBuildError(f"no writable folder to build {source.name} into: {dirs[-1]}")
+    with _lock:
+        pending = _pending.pop(source, None)
+    if pending is not None:
+        path = pending.result()  # its NativeBuildError, if the build failed (a later load tries again)
+    else:
+        path = _find(source) or _build_into_cache(source)
     library = ctypes.CDLL(str(path))
     _loaded[source] = library
     return library

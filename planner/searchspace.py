@@ -8,11 +8,10 @@ size in this module (the C kernels hold the GIL, so sharing them is safe).
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import binary_dilation
 
 from planner.astar import HEAP_SLACK, WorkState
 from planner.grid import OccupancyGrid
-from planner.inflation import cost_gradient, inflation_mask
+from planner.inflation import cost_gradient, dilate_square, inflation_mask
 
 _STAMP_LIMIT = 2**31 - 8
 _PATH_ROWS = 1024  # first size of a workspace's path buffers; grown when a path is longer
@@ -48,7 +47,7 @@ class SearchMap:
         obstacle = grid.occupied | self.inflated
         # Untrusted points (first improvement): free cells whose 3x3 neighbourhood holds an obstacle
         # of the map the search sees (inflated cells count as obstacles).
-        untrusted = binary_dilation(obstacle, structure=np.ones((3, 3), dtype=bool)) & ~obstacle
+        untrusted = dilate_square(obstacle) & ~obstacle
         padded = np.ones((rows + 2, cols + 2), dtype=np.uint8)
         inner = padded[1:-1, 1:-1]
         inner[:] = 0

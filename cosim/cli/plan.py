@@ -20,8 +20,6 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from cosim.cli import plan_mapf
 from cosim.errors import CosimError
 from planner.options import CONFIGURATIONS, PLANNERS, USER_HEURISTICS
@@ -209,10 +207,8 @@ def plan_panel(title: str, grid, result, options: dict):
     Uses the options the planner resolved (result.info["options"]) when it reports them, so presets
     such as configuration="modified" show what they switched on.
     """
-    from scipy.ndimage import binary_dilation
-
     from cosim.cli.plan_plot import PlanPanel
-    from planner.inflation import inflation_mask
+    from planner.inflation import dilate_square, inflation_mask
 
     settings = result.info.get("options", options) if isinstance(result.info, dict) else options
     expansion = settings.get("expansion_distance") or 0.0
@@ -221,7 +217,7 @@ def plan_panel(title: str, grid, result, options: dict):
     if settings.get("untrusted_points"):
         # The planner's rule: a free cell with an obstacle or inflated cell among its 8 neighbours.
         closed = grid.occupied if inflated is None else grid.occupied | inflated
-        untrusted = binary_dilation(closed, structure=np.ones((3, 3), dtype=bool)) & ~closed
+        untrusted = dilate_square(closed) & ~closed
     return PlanPanel(title, result, inflated, untrusted)
 
 

@@ -149,6 +149,10 @@ def _is_loopback(host: str) -> bool:
     return all(ipaddress.ip_address(address.split("%")[0]).is_loopback for address in addresses)
 
 
+def _announce(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
 def _handler(args) -> int:
     if args.scenario.suffix.lower() == ".ssp":
         return _run_ssp(args)
@@ -156,8 +160,10 @@ def _handler(args) -> int:
         from cosim import hold_collector
 
         hold_collector()  # until the run's loop starts (`cosim.release_collector`)
-    from cosim.navigation.outcome import avoider_name, format_summary
-    from cosim.navigation.run import run_scenario
+    from cosim.fmi.builtin import prepare
+
+    announce = None if args.quiet else _announce
+    prepare((), announce=announce)  # the kernels, compiled while the modules that load them import
     from cosim.scenario.load import load_scenario
 
     overrides = list(args.overrides)
@@ -175,6 +181,11 @@ def _handler(args) -> int:
         # Forked before the live view's server starts, so the child holds none of its threads
         # or sockets. It prepares the plot while the run goes.
         plotter = PlotProcess.start()
+    fmus = [spec.fmu for spec in scenario.components.values() if spec.is_builtin]
+    prepare(fmus, scenario.fmi_version, kernels=(), announce=announce)
+    from cosim.navigation.outcome import avoider_name, format_summary
+    from cosim.navigation.run import run_scenario
+
     try:
         sink = _live_sink(args, scenario.macro_step)
     except BaseException:
@@ -184,7 +195,13 @@ def _handler(args) -> int:
     try:
         goals = sink if args.live else None  # a client's /goal_pose, the control services
         result = run_scenario(
-            scenario, args.out, progress=not args.quiet, sink=sink, force=args.force, goals=goals
+            scenario,
+            args.out,
+            progress=not args.quiet,
+            sink=sink,
+            force=args.force,
+            goals=goals,
+            trace=scenario.plot and not args.no_plot,  # the plot's in-memory copy, only for a plot
         )
         if not args.quiet:
             print(

@@ -115,7 +115,6 @@ def resume_command(args, out_dir: Path) -> str:
 
 def _handler(args) -> int:
     from cosim.sweep import build
-    from cosim.sweep.engine import run_sweep
 
     spec, options = build(
         args.scenario,
@@ -133,7 +132,13 @@ def _handler(args) -> int:
     )
     if args.dry_run:
         return _dry_run(spec, options)
+    if options.scheduler is None:
+        from cosim.sweep.warm import start_fork_server
+
+        start_fork_server(spec.scenario, spec.overrides)  # warms up while the engine is imported
     _freeze_at_exit()
+    from cosim.sweep.engine import run_sweep
+
     try:
         result = run_sweep(spec, options, progress=not args.quiet, plot=not args.no_plot)
     except KeyboardInterrupt as interrupt:

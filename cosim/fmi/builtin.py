@@ -7,6 +7,10 @@ or `$NAVCOSIM_FMU_CACHE`; FMI 3.0 in its `fmi3/`) and rebuilds one when the hash
 changes (checked by the files' times and sizes first: `build_if_stale`), so an edit to the C code
 is picked up on the next call
 whatever installed the package (pip never rebuilds an editable install; uv only with cache-keys).
+
+A first run compiles the FMUs it uses and the C kernels it loads (`planner.native`): `prepare`
+starts all of those builds at once on a pool of compiler processes, one per core, and says so;
+`builtin_fmu` and `planner.native.load` then wait for the one they need.
 """
 
 from __future__ import annotations
@@ -14,17 +18,35 @@ from __future__ import annotations
 import fcntl
 import importlib.util
 import os
+import threading
+from collections.abc import Callable, Iterable
 from functools import cache
 from pathlib import Path
 from types import ModuleType
+from typing import TYPE_CHECKING
 
+import planner
 from cosim.errors import CosimError, shorten
+from planner import native
+
+if TYPE_CHECKING:  # imported when a build is started: concurrent.futures imports logging (~8 ms)
+    from concurrent.futures import Future, ThreadPoolExecutor
 
 GENERATION_TOOL = "navcosim"  # how the project FMUs' generationTool starts
 
 PACKAGE_DIR = Path(__file__).resolve().parent.parent  # the `cosim` package
 SHIPPED_DIR = PACKAGE_DIR / "_fmus"
 SOURCE_ROOT = PACKAGE_DIR.parent / "fmus"
+# The compiled kernels every scenario run loads: the grid search and the distance transform of the
+# planner, the master's stepping kernel, the world's distances and lidar, the costmap
+# (tests/fmi/test_fmu_build.py holds this list to what a run loads).
+RUN_KERNELS = (
+    Path(planner.__file__).parent / "native" / "astar.c",
+    PACKAGE_DIR / "core" / "native" / "kernel.c",
+    Path(planner.__file__).parent / "native" / "distance.c",
+    PACKAGE_DIR / "world" / "native" / "world.c",
+    PACKAGE_DIR / "navigation" / "native" / "costmap.c",
+)  # the longest to compile first
 
 
 def documented_nan_variables(description) -> tuple[str, ...]:
@@ -130,6 +152,16 @@ def _stamp_is_fresh(stamp: Path, target: Path, lines: list[str], environment: st
     return newest < stamp_ns - RACY_SECONDS * 1e9
 
 
+def _is_fresh(name: str, source_root: Path, folder: Path, fmi_version: int) -> bool:
+    """Whether the FMU in `folder` (the cache's folder of `fmi_version`) is that of the sources, by
+    its stamp's times and sizes (`_stamp_is_fresh`); False when that cannot tell."""
+    model_dir = source_root / name
+    files = _build_module(source_root).source_files(model_dir, fmi_version)
+    lines = _stat_lines(files, source_root)
+    environment = _environment_line(model_dir, fmi_version)
+    return _stamp_is_fresh(folder / f"{name}.stamp", folder / f"{name}.fmu", lines, environment)
+
+
 def build_if_stale(name: str, source_root: Path, cache_dir: Path, fmi_version: int = 2) -> Path:
     """Build FMU `name` (FMI `fmi_version`) from `source_root` into `cache_dir` (FMI 3.0: its `fmi3/`
     subfolder) unless its stamp matches the sources.
@@ -148,8 +180,7 @@ def build_if_stale(name: str, source_root: Path, cache_dir: Path, fmi_version: i
     target, stamp = cache_dir / f"{name}.fmu", cache_dir / f"{name}.stamp"
     try:
         environment = _environment_line(model_dir, fmi_version)
-        lines = _stat_lines(build.source_files(model_dir, fmi_version), source_root)
-        if _stamp_is_fresh(stamp, target, lines, environment):
+        if _is_fresh(name, source_root, cache_dir, fmi_version):
             return target
         cache_dir.mkdir(parents=True, exist_ok=True)
         with open(cache_dir / f"{name}.lock", "w") as lock:
@@ -157,7 +188,8 @@ def build_if_stale(name: str, source_root: Path, cache_dir: Path, fmi_version: i
             digest = build.source_hash(model_dir, fmi_version)
             recorded = stamp.read_text().splitlines()[:1] if stamp.is_file() else []
             if not (target.is_file() and recorded == [digest]):
-                build.build_fmu(model_dir, cache_dir, fmi_version=fmi_version)
+                compile_safely = native.run_compiler
+                build.build_fmu(model_dir, cache_dir, fmi_version=fmi_version, run_compiler=compile_safely)
             # Times read after the hash: a file edited in between hashes differently next time.
             lines = _stat_lines(build.source_files(model_dir, fmi_version), source_root)
             temporary_stamp = cache_dir / f".{name}.stamp.{os.getpid()}"
@@ -183,8 +215,83 @@ def builtin_fmu(name: str, fmi_version: int = 2) -> Path:
     if name not in names:
         raise CosimError(f"unknown project FMU {shorten(name)!r}; known: {', '.join(names) or '(none)'}")
     if _has_sources(SOURCE_ROOT):
-        return build_if_stale(name, SOURCE_ROOT, default_cache_dir(), fmi_version)
+        cache_dir = default_cache_dir()
+        key = (name, fmi_version, cache_dir)
+        with _lock:
+            pending = _pending.pop(key, None)
+            checked = key in _fresh
+            _fresh.discard(key)  # once: a later call checks again (the sources may change meanwhile)
+        if pending is not None:
+            return pending.result()  # started by `prepare`; its CosimError if the build failed
+        if checked:
+            return version_dir(cache_dir, fmi_version) / f"{name}.fmu"
+        return build_if_stale(name, SOURCE_ROOT, cache_dir, fmi_version)
     return version_dir(SHIPPED_DIR, fmi_version) / f"{name}.fmu"
+
+
+_pending: dict[tuple[str, int, Path], Future] = {}  # FMU builds `prepare` started, until used
+_fresh: set[tuple[str, int, Path]] = set()  # FMUs `prepare` found up to date, until used
+_lock = threading.Lock()
+_builders: ThreadPoolExecutor | None = None
+
+
+def _executor() -> ThreadPoolExecutor:
+    """The pool that runs the builds `prepare` starts: one compiler process per core at a time. Its
+    threads end when the builds do; the interpreter waits for them at exit, so no build is left
+    half-done (each writes a temporary file and renames it: a reader never sees half of one)."""
+    global _builders
+    if _builders is None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _builders = ThreadPoolExecutor(max_workers=os.cpu_count() or 1, thread_name_prefix="navcosim-build")
+    return _builders
+
+
+def prepare(
+    fmu_names: Iterable[str],
+    fmi_version: int = 2,
+    kernels: Iterable[Path] = RUN_KERNELS,
+    announce: Callable[[str], None] | None = None,
+) -> None:
+    """Start building, side by side, each project FMU of `fmu_names` (FMI `fmi_version`) whose build
+    is not up to date and each kernel of `kernels` not compiled yet; returns at once. A first run
+    then waits for the longest build, not for their sum. `announce` gets one line per kind of build
+    started ("building FMUs ...", "compiling kernels ..."); nothing when all are built.
+    Errors come later, from the `builtin_fmu` or kernel load that waits for the failed build."""
+    fmi_version = _check_version(fmi_version)
+    kernels = [Path(path) for path in kernels if Path(path).is_file()]
+    stale: list[str] = []
+    cache_dir = default_cache_dir()
+    if _has_sources(SOURCE_ROOT):
+        folder = version_dir(cache_dir, fmi_version)
+        known = set(known_names())
+        for name in dict.fromkeys(fmu_names):
+            key = (name, fmi_version, cache_dir)
+            if name not in known or key in _pending:
+                continue
+            try:
+                if _is_fresh(name, SOURCE_ROOT, folder, fmi_version):
+                    with _lock:
+                        _fresh.add(key)
+                    continue
+            except OSError:
+                pass  # `build_if_stale` reports it
+            stale.append(name)
+    uncompiled = native.missing(kernels)
+    if not (stale or uncompiled):
+        return  # a warm start: a few `stat` calls and hashes of the kernel sources
+    pool = _executor()
+    started = native.start_builds(uncompiled[:1], pool)  # the longest first
+    with _lock:
+        for name in stale:
+            _pending[(name, fmi_version, cache_dir)] = pool.submit(
+                build_if_stale, name, SOURCE_ROOT, cache_dir, fmi_version
+            )
+    started += native.start_builds(uncompiled[1:], pool)
+    if announce is not None and stale:
+        announce(f"building FMUs {', '.join(stale)} (first use or changed sources) ...")
+    if announce is not None and started:
+        announce(f"compiling kernels {', '.join(p.stem for p in started)} (first use or changed sources) ...")
 
 
 def build_all(fmi_versions: tuple[int, ...] = FMI_VERSIONS) -> list[Path]:

@@ -451,6 +451,8 @@ class IsolatedFmuComponent(Component):
     def _failed(self, reply: bytes | OSError, what: str, timeout: float | None = None) -> None:
         """Raise the `CosimError` for a failed exchange; a dead or hung child is ended first."""
         call = self._call_name(self._call.value, what)
+        if what == "unpack" and call.endswith("(between FMI calls)"):
+            call = self._call_name(CALL_UNPACK, what)  # a child too slow to say it began is unpacking all the same
         when = f" at t = {self._time:.9g} s" if self._time is not None else ""
         model = f"FMU '{self.name}' (model {self.model_description.modelName}"
         child = self._child

@@ -3,6 +3,8 @@
 `OutcomeMonitor` is fed the vehicle's position after every vehicle step and the mixer's mode after
 every mixer step; it decides when the run ends (goal reached or collision) and keeps the numbers
 of the summary. `format_summary` prints them as a table; `outcome_metadata` stores them in the log.
+`SafeCircle` tells the compiled loop where a position may end the run, so that it hands the steps
+back before the monitor's exact checks could end it.
 
 Definitions:
 - goal reached: the vehicle's reference point is within the goal tolerance of the goal.
@@ -17,8 +19,11 @@ Definitions:
 
 from __future__ import annotations
 
+import ctypes
 import math
 from dataclasses import dataclass
+
+from cosim.record.steps import Reading
 
 MODE_FOLLOW, MODE_AVOID, MODE_RECOVER = 0, 1, 2  # AvoidanceMixer's `mode` output
 
@@ -137,6 +142,67 @@ class OutcomeMonitor:
             self.outcome.reason = reason
             self.outcome.time = t
         return self.outcome
+
+
+class SafeCircle:
+    """The run loop's watch on `Master.run_blocks`: where the kernel must return to the run loop.
+
+    The kernel returns after any step whose position may end the run: not finite, within the
+    goal tolerance (plus a margin), or outside a circle around the last checked position that
+    the true obstacles cannot reach within the block (the world's distance there, minus the
+    vehicle's radius, minus what moving obstacles can cover in a block, minus a margin). So the
+    exact checks of `OutcomeMonitor.check_position`, made for every step from the rows the kernel
+    kept (`cosim.record.replay`), can only end the run at the last step of a block, where the
+    kernel stopped (`cosim.navigation.run`).
+    """
+
+    def __init__(self, system, master, tables, monitor: OutcomeMonitor, pose: tuple[str, str], radius: float):
+        """`pose`: the observed x and y ("component.port"); `radius` [m] the vehicle's."""
+        self.master = master
+        self.monitor = monitor
+        self.tables = tables
+        (vehicle_x, x), (vehicle_y, y) = (system.resolve(reference, "output") for reference in pose)
+        self.x, self.y = Reading(vehicle_x.output_buffer, x), Reading(vehicle_y.output_buffer, y)
+        tables.watch_addresses[:] = (
+            1,
+            ctypes.addressof(vehicle_x.output_cbuffer) + 8 * x,
+            ctypes.addressof(vehicle_y.output_cbuffer) + 8 * y,
+        )
+        self.radius = radius
+        self.world = monitor.world
+        self.speed = getattr(self.world, "max_speed", 0.0)
+        self.moving = bool(getattr(self.world, "moving", False))
+        # Moving obstacles: short blocks, so the reach of the obstacles in one block stays small.
+        self.block = 50 if self.speed > 0.0 else 1000
+        self.h = system.macro_step
+        self.anchor: tuple[float, float] | None = None
+
+    def watch(self) -> None:
+        """Before a kernel call: the circle around the current position known free of collisions."""
+        x, y = self.x.value(), self.y.value()
+        numbers = self.tables.watch_numbers
+        # The goal as the monitor has it now (a hook may move it between blocks).
+        goal, tolerance = self.monitor.goal, self.monitor.tolerance
+        reach = tolerance + 1e-6 * (1.0 + tolerance)
+        numbers[:3] = (goal[0], goal[1], reach * reach)
+        if not self.moving and self.anchor is not None:
+            # A static world: the circle stays valid; a new one only when half of it is used up.
+            anchor_x, anchor_y = self.anchor
+            dx, dy = x - anchor_x, y - anchor_y
+            if 4.0 * (dx * dx + dy * dy) < numbers[5]:
+                return
+        self.anchor = (x, y)
+        if not (math.isfinite(x) and math.isfinite(y)):
+            numbers[3:] = (0.0, 0.0, -1.0)  # every step is checked
+            return
+        if self.moving:
+            self.world.at(self.master.time)
+        distance = self.world.lower_bound(x, y)
+        if distance - self.radius < 1.0:
+            distance = self.world.distance(x, y)
+        drift = self.speed * (self.block + 1) * self.h
+        free = distance - self.radius - drift - 1e-6 * (1.0 + distance)
+        numbers[3:] = (x, y, free * free if free > 0.0 else -1.0)
 
 
 def outcome_metadata(outcome: Outcome) -> dict[str, str]:

@@ -6,7 +6,7 @@ start to the stop time (which the FMUs are told; a stop time that is no whole nu
 steps after the start ends with a shorter step), with every scalar input and output of each
 component on `/signals/<component>` at each of its steps, each value stamped at the time it holds
 (inputs applied at t, outputs at t, a last record with the final outputs at the end; the
-convention of `cosim.navigation.run`).
+convention of every run: `cosim.record.system_run`).
 
 Overrides: `--set simulation.stop_time=S`, `simulation.macro_step=S`, `simulation.start_time=S`,
 `simulation.master=gauss-seidel|jacobi` take precedence over the file (for the macro step, over
@@ -30,21 +30,16 @@ with the archive's name.
 from __future__ import annotations
 
 import math
-import time
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from cosim.core import interrupt
 from cosim.core.loops import DEFAULT_MAX_ITERATIONS, DEFAULT_TOLERANCE
-from cosim.core.master import COMPILED_MIN_STEPS, LOOP_HANDLING, MODES, Master, due_from
-from cosim.errors import PATH_LIMIT, CosimError, SimulationEnded, shorten
-from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
-from cosim.record.text_signals import TextRecording
+from cosim.core.master import LOOP_HANDLING, MODES, Master
+from cosim.errors import PATH_LIMIT, CosimError, shorten
+from cosim.record.system_run import SystemRun, close_quietly, open_recorder, writing_failed
 from cosim.scenario.limits import MAX_STEPS, MAX_TIME, MIN_MACRO_STEP
-from cosim.scenario.load import DEFAULT_LOG_PATTERN
 from cosim.ssp.read import DEFAULT_TIMEOUT, SspSystem, build_system, max_unpacked_size, open_ssp
 
 SIMULATION_KEYS = ("stop_time", "macro_step", "start_time", "master")
@@ -53,7 +48,6 @@ LOOP_KEYS = ("algebraic_loops", "loop_tolerance", "loop_max_iterations")  # `Sys
 GUARD_KEYS = ("fmu_isolation", "fmu_timeout", "fmu_max_size", "max_steps")
 ISOLATIONS = ("auto", "process", "none")
 MESSAGE_LIMIT = 2000  # characters of an error line
-CHUNK_STEPS = 20_000  # steps between checks for an interrupt
 
 
 @dataclass
@@ -198,7 +192,7 @@ def run_ssp(
     Returns an `SspRunResult`; for an SSP that navcosim exported from a scenario (it carries the
     `org.navcosim.scenario` annotation) the scenario's run: (scenario, `RunResult`). Raises
     `CosimError` on bad input, before any log exists. The log is claimed and signals are handled as
-    for a scenario (`cosim.navigation.run.run_scenario`).
+    for a scenario (`cosim.record.system_run`).
     """
     source = shorten(path, PATH_LIMIT)
     try:
@@ -234,149 +228,71 @@ def _run_fmus(
     try:
         master.initialize()
     except CosimError as error:
-        _close_quietly(master)
+        close_quietly(master)
         message = ssp.members(str(error))
         raise CosimError(f"{ssp.source}: initialising the system failed: {message}") from None
     except BaseException:
-        _close_quietly(master)
+        close_quietly(master)
         raise
     with interrupt.deferred():
-        return _record(ssp, run, master, system, out_path, force)
-
-
-def _close_quietly(master: Master, recorder=None, outcome=None) -> None:
-    """Close the master (the FMUs, their child processes) and the recorder, whatever fails."""
-    try:
-        master.close()
-    except Exception:  # noqa: BLE001 (already failing: the first error is the one to report)
-        pass
-    if recorder is not None:
-        try:
-            recorder.close(outcome)
-        except Exception:  # noqa: BLE001
-            pass
+        return _record(ssp, run, master, out_path, force)
 
 
 def _record(
-    ssp: SspSystem, run: Experiment, master: Master, system, out_path: Path | None, force: bool
+    ssp: SspSystem, run: Experiment, master: Master, out_path: Path | None, force: bool
 ) -> SspRunResult:
     """Step and log, with signals deferred: an interrupt ends the run with a finalised log."""
-    from cosim.record.recorder import Recorder
-
     try:
-        if out_path is not None:
-            log_path, stream = Path(out_path), claim_log(Path(out_path), force)
-        else:
-            log_path, stream = claim_default_log(
-                default_log_path(DEFAULT_LOG_PATTERN, Path(ssp.source).stem or "ssp")
-            )
-        recorder = Recorder(log_path, stream=stream)
+        # No in-memory trace: the plot of an SSP run reads the log.
+        recorder = open_recorder(out_path, force, Path(ssp.source).stem or "ssp", trace=False)
     except BaseException:
         master.close()
         raise
+    steps = SystemRun(master, recorder)
     try:
-        return _steps(ssp, run, master, system, recorder, log_path)
-    except OSError as error:
-        # The log could not be written (no space, I/O error): what reached the file stays.
-        _close_quietly(master, recorder)
-        where = shorten(error.filename or log_path, PATH_LIMIT)
-        raise CosimError(
-            f"{ssp.source}: {where}: writing the log failed ({error.strerror or error})"
-        ) from None
-
-
-def _steps(ssp: SspSystem, run: Experiment, master: Master, system, recorder, log_path: Path) -> SspRunResult:
-    h_ns = system.macro_step_ns
-    total = master.steps_to_stop  # the last one shorter where the stop is no whole number of steps
-    wall_start = time.perf_counter()
-    failure = None
-    ended = None  # an FMU's request to end the run
-    with recorder:
-        _write_header(ssp, run, master, recorder)
-        text = TextRecording(recorder, system)
-        channels, periods = [], []
-        for component in master.order:
-            periods.append(system.period_steps(component))
-            channels.append(
-                recorder.signal_channel(
-                    component.name,
-                    component.signal_names(),
-                    units=[port.unit for port in (*component.inputs, *component.outputs)],
-                    inputs=len(component.inputs),
-                    initial=component.signal_values(),
-                    period_ns=periods[-1] * h_ns,
-                )
+        with recorder:
+            _write_header(ssp, run, steps)
+            steps.begin()
+            steps.signal_channels()
+            reason, end = steps.record_steps(
+                master.steps_to_stop,  # the last one shorter where the stop is no whole number of steps
+                lambda error: f"{ssp.source}: {ssp.members(str(error))} (at t = {master.time:.3f} s)",
             )
-
-        def record(first: int, count: int, histories: list[np.ndarray]) -> None:
-            blocks = []
-            for channel, period, rows in zip(channels, periods, histories, strict=True):
-                first_k = due_from(first, period)  # row j is step first_k + j * period
-                times = master.start_time_ns + (first_k + period * np.arange(len(rows))) * h_ns
-                blocks.append((channel, times, rows))
-            recorder.hold_signal_rows(blocks)
-
-        compiled = total >= COMPILED_MIN_STEPS
-        try:
-            while master.step_index < total and interrupt.take() is None:
-                master.run_recorded(min(CHUNK_STEPS, total - master.step_index), record, compiled=compiled)
-        except SimulationEnded as request:
-            ended = str(request)
-        except CosimError as error:
-            failure = f"{ssp.source}: {ssp.members(str(error))} (at t = {master.time:.3f} s)"
-        except interrupt.Interrupted:  # a signal while an FMU in a child process did not answer
-            interrupt.take()
-        reason = "fmu_failed" if failure else ("stop_time" if master.step_index >= total else "interrupted")
-        reason = "fmu_terminated" if ended else reason
-        try:
-            master.close()
-        except CosimError as error:
-            failure = failure or f"{ssp.source}: terminating the system failed: {ssp.members(str(error))}"
-        outcome = {"reached": "false", "reason": reason, "time": repr(master.time)}
-        if failure:
-            outcome["failure"] = failure
-        if ended:
-            outcome["ended_by"] = ended
-        text.finish(master.time_ns)
-        recorder.end_steps(master.time_ns)
-        recorder.close(outcome)
-    wall_time = time.perf_counter() - wall_start
+            failure = steps.finish(
+                reason,
+                end,
+                lambda error: f"{ssp.source}: terminating the system failed: {ssp.members(str(error))}",
+                {"reached": "false"},
+            )
+    except OSError as error:
+        close_quietly(master, recorder)
+        raise CosimError(f"{ssp.source}: {writing_failed(error, recorder.path)}") from None
     return SspRunResult(
-        log_path,
+        recorder.path,
         master.step_index,
         master.time,
-        wall_time,
+        steps.wall_time,
         reason,
         failure,
         run.macro_step,
         run.macro_step_source,
-        ended,
+        end.ended,
     )
 
 
-def _write_header(ssp: SspSystem, run: Experiment, master: Master, recorder) -> None:
-    recorder.add_metadata(
-        "navcosim",
-        {
-            "scenario_name": ssp.name,
-            "navcosim_version": navcosim_version(),
-            "ssp": Path(ssp.source).name,
-            "macro_step": repr(run.macro_step),
-            "macro_step_source": run.macro_step_source,
-            "start_time": repr(run.start_time),
-            "stop_time": repr(run.stop_time),
-            "master": run.master,
-        },
-    )
+def _write_header(ssp: SspSystem, run: Experiment, steps: SystemRun) -> None:
+    details = {
+        "ssp": Path(ssp.source).name,
+        "macro_step": repr(run.macro_step),
+        "macro_step_source": run.macro_step_source,
+        "start_time": repr(run.start_time),
+        "stop_time": repr(run.stop_time),
+        "master": run.master,
+    }
+    # Each FMU as its archive member, not the folder this run unpacked it to (new in every run).
     members = {spec.name: spec.member for spec in ssp.components}
-    for component in master.order:
-        description = component.describe()
-        if description:
-            # The archive member, not the folder this run unpacked it to (new in every run).
-            description["fmu"] = members.get(component.name, description["fmu"])
-            recorder.add_metadata(f"fmu/{component.name}", description)
-    recorder.add_unconnected_inputs(master.system)
-    recorder.add_attachment("SystemStructure.ssd", "application/x-ssp-definition", ssp.ssd_text)
+    ssd = ("SystemStructure.ssd", "application/x-ssp-definition", ssp.ssd_text)
+    steps.write_header(ssp.name, details, steps.master.order, members, [ssd])
 
 
 def _ended(ended: str | None) -> str:

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import math
 import re
-import time
 import tomllib
 import zipfile
 from contextlib import ExitStack
@@ -43,18 +42,16 @@ import numpy as np
 
 from cosim.core import interrupt
 from cosim.core.component import closest_names
-from cosim.core.master import COMPILED_MIN_STEPS, NS_PER_S, Master, System, seconds_to_ns
-from cosim.errors import CosimError, SimulationEnded
-from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
+from cosim.core.master import NS_PER_S, Master, System, seconds_to_ns
+from cosim.errors import CosimError
 from cosim.record.output import atomic_output, checked_output
-from cosim.record.text_signals import TextRecording
+from cosim.record.system_run import SystemRun, open_recorder
 from cosim.scenario.description import ComponentDescription
 from cosim.scenario.limits import MAX_STEPS
-from cosim.scenario.load import DEFAULT_LOG_PATTERN, Integration
+from cosim.scenario.load import Integration
 from cosim.scenario.params import unstarted_inputs, unstarted_problem
 
 INTERFACES = ("cs", "me")  # co-simulation, Model Exchange
-CHUNK_STEPS = 20_000  # steps between checks for an interrupt
 _INTEGER_TYPES = {"Integer", "Enumeration", *(f"{s}Int{n}" for s in ("", "U") for n in (8, 16, 32, 64))}
 
 
@@ -319,7 +316,7 @@ def simulate(
     """Run `simulation`, logging to `out_path` (default logs/<model>-<timestamp>.mcap) and, given
     `csv_path`, writing the outputs as CSV. `CosimError` on bad input, before any file exists;
     an FMU that fails while stepping ends the run with its `failure` (the log finalised up to it).
-    Signals are handled as for a scenario run (`cosim.navigation.run.run_scenario`)."""
+    Signals are handled as for any run (`cosim.record.system_run`)."""
     from cosim.navigation.build import make_fmu
 
     described = simulation.component
@@ -362,112 +359,65 @@ def _output_ports(described: ComponentDescription):
 
 
 def _run(simulation: Simulation, master: Master, out_path, csv_path, progress: bool, force: bool):
-    from cosim.navigation.run import PROGRESS_INTERVAL, progress_bar, update_bar
-    from cosim.record.recorder import Recorder
-
     (component,) = master.order
     csv = None
     try:
         csv = _CsvWriter(csv_path, component) if csv_path is not None else None
-        if out_path is not None:
-            log_path, stream = Path(out_path), claim_log(Path(out_path), force)
-        else:
-            pattern = default_log_path(DEFAULT_LOG_PATTERN, component.name)
-            log_path, stream = claim_default_log(pattern)
-        recorder = Recorder(log_path, stream=stream)
+        # No in-memory trace: the plot of an FMU's run reads the log.
+        recorder = open_recorder(out_path, force, component.name, trace=False)
     except BaseException:
         if csv is not None:
             csv.close()
         master.close()
         raise
     h_ns = master.system.macro_step_ns
-    total = simulation.steps
-    bar = progress_bar(simulation.stop_time - simulation.start_time) if progress else None
-    wall_start = time.perf_counter()
-    shown = [wall_start, 0.0]  # wall time and simulated time [s] of the bar's last update
-    failure = None
-    ended = None  # an FMU's request to end the run
+
+    def write_csv(first: int, count: int, blocks) -> None:
+        ((_, times, rows),) = blocks
+        # Outputs at each step's end (the last ends at the stop time).
+        csv.write(np.minimum(times + h_ns, master.time_ns), rows[:, len(component.inputs) :])
+
+    steps = SystemRun(
+        master,
+        recorder,
+        progress=simulation.stop_time - simulation.start_time if progress else None,
+        on_rows=write_csv if csv is not None else None,
+    )
     with recorder:
-        _write_header(simulation, component, master.system, recorder)
-        text = TextRecording(recorder, master.system)
-        channel = recorder.signal_channel(
-            component.name,
-            component.signal_names(),
-            units=[port.unit for port in (*component.inputs, *component.outputs)],
-            inputs=len(component.inputs),
-            initial=component.signal_values(),
-            period_ns=h_ns,
-        )
+        _write_header(simulation, steps)
+        steps.begin()
+        steps.signal_channels()
         if csv is not None:
             csv.write(np.array([master.start_time_ns]), component.output_buffer[None, :])
-
-        def record(first: int, count: int, histories: list[np.ndarray]) -> None:
-            (rows,) = histories
-            times = master.start_time_ns + (first + np.arange(len(rows))) * h_ns
-            recorder.hold_signal_rows([(channel, times, rows)])
-            if csv is not None:
-                # Outputs at each step's end (the last ends at the stop time).
-                csv.write(np.minimum(times + h_ns, master.time_ns), rows[:, len(component.inputs) :])
-            now = time.perf_counter()
-            if bar is not None and now - shown[0] >= PROGRESS_INTERVAL:
-                shown[0] = now
-                update_bar(bar, (first + count) * h_ns / NS_PER_S, now - wall_start, shown)
-
-        compiled = total >= COMPILED_MIN_STEPS
         try:
-            while master.step_index < total and interrupt.take() is None:
-                master.run_recorded(min(CHUNK_STEPS, total - master.step_index), record, compiled=compiled)
-        except SimulationEnded as request:
-            ended = str(request)
-        except CosimError as error:
-            failure = f"{error} (at t = {master.time:.6g} s)"
-        except interrupt.Interrupted:  # a signal while an FMU in a child process did not answer
-            interrupt.take()
+            reason, end = steps.record_steps(
+                simulation.steps, lambda error: f"{error} (at t = {master.time:.6g} s)"
+            )
         finally:
-            if bar is not None:
-                bar.close()
             if csv is not None:
                 csv.close()
-        reason = "fmu_failed" if failure else ("stop_time" if master.step_index >= total else "interrupted")
-        reason = "fmu_terminated" if ended else reason
-        try:
-            master.close()
-        except CosimError as error:
-            failure = failure or f"terminating the FMU failed: {error}"
-        outcome = {"reason": reason, "time": repr(master.time)}
-        if failure:
-            outcome["failure"] = failure
-        if ended:
-            outcome["ended_by"] = ended
-        text.finish(master.time_ns)
-        recorder.end_steps(master.time_ns)
-        recorder.close(outcome)
-    wall_time = time.perf_counter() - wall_start
+        failure = steps.finish(reason, end, lambda error: f"terminating the FMU failed: {error}")
     return SimulationResult(
-        log_path, csv_path, master.step_index, master.time, wall_time, reason, failure, ended
+        recorder.path, csv_path, master.step_index, master.time, steps.wall_time, reason, failure, end.ended
     )
 
 
-def _write_header(simulation: Simulation, component, system: System, recorder) -> None:
+def _write_header(simulation: Simulation, steps: SystemRun) -> None:
     described = simulation.component
-    recorder.add_metadata(
-        "navcosim",
-        {
-            "scenario_name": described.model_name or described.name,
-            "navcosim_version": navcosim_version(),
-            "fmu": Path(described.fmu).name,
-            "interface": simulation.interface,
-            "start_time": repr(simulation.start_time),
-            "stop_time": repr(simulation.stop_time),
-            "macro_step": repr(simulation.step),
-            "start_values": " ".join(f"{k}={_literal(v)}" for k, v in simulation.start_values.items()),
-        },
-    )
-    recorder.add_metadata(f"fmu/{component.name}", component.describe())
-    recorder.add_unconnected_inputs(system)
+    details = {
+        "fmu": Path(described.fmu).name,
+        "interface": simulation.interface,
+        "start_time": repr(simulation.start_time),
+        "stop_time": repr(simulation.stop_time),
+        "macro_step": repr(simulation.step),
+        "start_values": " ".join(f"{k}={_literal(v)}" for k, v in simulation.start_values.items()),
+    }
     with zipfile.ZipFile(described.fmu) as archive:
         text = archive.read("modelDescription.xml")
-    recorder.add_attachment("modelDescription.xml", "application/xml", text)
+    description = ("modelDescription.xml", "application/xml", text)
+    steps.write_header(
+        described.model_name or described.name, details, steps.master.order, None, [description]
+    )
 
 
 class _CsvWriter:

@@ -49,19 +49,11 @@ from cosim.sweep.spec import (
     sample_points,
     toml_value,
 )
+from cosim.sweep.warm import WORKER_PRELOAD, start_fork_server, stop_fork_server
 
 CONNECT_TIMEOUT = 5.0  # [s] to reach a scheduler
 WORKER_WAIT = 30.0  # [s] for a reached scheduler to have at least one worker
 PLOT_FILE = "sweep.png"
-# Imported once by the local cluster's fork server, so its workers start with them loaded; the last
-# one also makes a short run of the sweep's scenario there (`cosim.sweep.warm`).
-WORKER_PRELOAD = [
-    "distributed",
-    "cosim.scenario.load",
-    "cosim.navigation.run",
-    "cosim.sweep.worker",
-    "cosim.sweep.warm",
-]
 
 
 @dataclass
@@ -225,58 +217,6 @@ def _remove_empty(folders: list[Path]) -> None:
             folder.rmdir()
         except OSError:
             return
-
-
-def start_fork_server(scenario: Path, overrides: tuple[str, ...]) -> None:
-    """Start the local cluster's fork server now, warming it up on `scenario` with `overrides`.
-
-    The server imports `WORKER_PRELOAD` and makes a short run (`cosim.sweep.warm`) while this
-    process goes on importing Dask and planning; the workers forked from it later start warm. It
-    inherits an ignored SIGINT (the only disposition that survives exec), and so do the workers it
-    forks: Ctrl-C in a terminal reaches the whole process group, and the interrupt must end the
-    sweep here, which then closes them, instead of each one printing its own traceback. Does
-    nothing when the server already runs (an earlier sweep of this process started it).
-    """
-    import json
-    import multiprocessing
-    from multiprocessing import forkserver
-
-    from cosim.sweep.warm import WARM_ENV
-
-    context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload(WORKER_PRELOAD)
-    request = json.dumps({"scenario": str(Path(scenario).resolve()), "overrides": list(overrides)})
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    saved = os.environ.get(WARM_ENV)
-    os.environ[WARM_ENV] = request
-    try:
-        forkserver.ensure_running()
-    finally:
-        signal.signal(signal.SIGINT, previous)
-        if saved is None:
-            os.environ.pop(WARM_ENV, None)
-        else:
-            os.environ[WARM_ENV] = saved
-
-
-def stop_fork_server() -> None:
-    """Stop the local cluster's fork server (started by `start_fork_server`) and wait for it.
-
-    Left running, it would only stop when this process exits, and then take its time (it holds the
-    whole run stage: its C kernels, the FMUs) with this process's stdout and stderr still open, so
-    whoever reads them waits for it too (about 0.4 s on an idle 2-core machine). Stopped here, it
-    goes while the sweep draws its plot. A later sweep of this process starts a new one (warmed up
-    on its own scenario). Uses `ForkServer._stop` (CPython's, since 3.8; nothing when not running).
-    """
-    from multiprocessing import forkserver
-
-    stop = getattr(getattr(forkserver, "_forkserver", None), "_stop", None)
-    if stop is None:
-        return
-    try:
-        stop()
-    except OSError:  # already gone
-        pass
 
 
 # Largest first frame a Dask comm handshake may announce [bytes]; a real one is a few dozen bytes.
@@ -603,6 +543,9 @@ def run_sweep(
     from cosim.sweep.effect import outcome_warnings, seed_warnings
 
     check_options(options)
+    if options.scheduler is None:
+        # The local cluster's fork server warms up while the sweep is planned and Dask imported.
+        start_fork_server(spec.scenario, spec.overrides)
     bundle, runs, name = plan(spec)
     warnings = seed_warnings(
         spec, adapter.noise_levels(adapter.load(spec.scenario, spec.overrides, check_world=False))
@@ -656,9 +599,6 @@ def run_sweep(
     started = time.perf_counter()
     workers, plot_path, plotting = None, None, None
     if pending:
-        if options.scheduler is None:
-            # Warms up while this process imports Dask and starts the cluster.
-            start_fork_server(spec.scenario, runs[0].overrides)
         writing = False
 
         def checked() -> None:
@@ -716,6 +656,8 @@ def run_sweep(
             if writing:
                 results.rewrite(ordered())
     else:
+        if options.scheduler is None:
+            stop_fork_server()  # every run was kept (--resume): no cluster
         finish_tables()
         plot_path = draw() if plot else None
     wall_time = time.perf_counter() - started

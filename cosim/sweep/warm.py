@@ -2,8 +2,10 @@
 
 A `LocalCluster` of the sweep starts its worker processes by forking them from one server process
 (multiprocessing's "forkserver"), which imports the modules it is told to preload before it forks
-anything. This module is one of them: when the sweep set `WARM_ENV` (the scenario path and the
-overrides of its first run, as JSON) in the server's environment, importing it makes a short run of
+anything. This module starts that server (`start_fork_server`, first thing in a sweep, so that it
+warms up while the sweep is planned and Dask imported) and is one of the modules it preloads: when
+the sweep set `WARM_ENV` (the scenario path and the sweep's fixed overrides, as JSON) in the
+server's environment, importing it makes a short run of
 that scenario (`WARM_STOP_TIME` simulated seconds) into a scratch folder, which imports the whole
 run stage, loads every C kernel the run uses (building any that is missing) and loads the FMUs'
 descriptions. Each forked worker inherits all of that, so the work is done once per sweep,
@@ -17,7 +19,17 @@ from __future__ import annotations
 
 import json
 import os
+from pathlib import Path
 
+# Imported once by the local cluster's fork server, so its workers start with them loaded; the last
+# one (this module) also makes a short run of the sweep's scenario there.
+WORKER_PRELOAD = [
+    "distributed",
+    "cosim.scenario.load",
+    "cosim.navigation.run",
+    "cosim.sweep.worker",
+    "cosim.sweep.warm",
+]
 WARM_ENV = "NAVCOSIM_SWEEP_WARM"
 WARM_STOP_TIME = 0.5  # [s] of simulated time: a few lidar, controller and pose steps
 
@@ -27,7 +39,6 @@ def warm_up(scenario: str, overrides: list[str]) -> None:
     import contextlib
     import shutil
     import tempfile
-    from pathlib import Path
 
     import cosim.sweep.adapter as adapter
 
@@ -42,6 +53,56 @@ def warm_up(scenario: str, overrides: list[str]) -> None:
             adapter.run(loaded, Path(folder) / "warm.mcap")
     finally:
         shutil.rmtree(folder, ignore_errors=True)
+
+
+def start_fork_server(scenario: Path, overrides: tuple[str, ...]) -> None:
+    """Start the local cluster's fork server now, warming it up on `scenario` with `overrides`.
+
+    The server imports `WORKER_PRELOAD` and makes a short run (`cosim.sweep.warm`) while this
+    process goes on importing Dask and planning; the workers forked from it later start warm. It
+    inherits an ignored SIGINT (the only disposition that survives exec), and so do the workers it
+    forks: Ctrl-C in a terminal reaches the whole process group, and the interrupt must end the
+    sweep here, which then closes them, instead of each one printing its own traceback. Does
+    nothing when the server already runs (an earlier sweep of this process started it).
+    """
+    import multiprocessing
+    import signal
+    from multiprocessing import forkserver
+
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload(WORKER_PRELOAD)
+    request = json.dumps({"scenario": str(Path(scenario).resolve()), "overrides": list(overrides)})
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    saved = os.environ.get(WARM_ENV)
+    os.environ[WARM_ENV] = request
+    try:
+        forkserver.ensure_running()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if saved is None:
+            os.environ.pop(WARM_ENV, None)
+        else:
+            os.environ[WARM_ENV] = saved
+
+
+def stop_fork_server() -> None:
+    """Stop the local cluster's fork server (started by `start_fork_server`) and wait for it.
+
+    Left running, it would only stop when this process exits, and then take its time (it holds the
+    whole run stage: its C kernels, the FMUs) with this process's stdout and stderr still open, so
+    whoever reads them waits for it too (about 0.4 s on an idle 2-core machine). Stopped here, it
+    goes while the sweep draws its plot. A later sweep of this process starts a new one (warmed up
+    on its own scenario). Uses `ForkServer._stop` (CPython's, since 3.8; nothing when not running).
+    """
+    from multiprocessing import forkserver
+
+    stop = getattr(getattr(forkserver, "_forkserver", None), "_stop", None)
+    if stop is None:
+        return
+    try:
+        stop()
+    except OSError:  # already gone
+        pass
 
 
 def _from_environment() -> None:

@@ -14,7 +14,6 @@ import math
 import struct
 
 import numpy as np
-from scipy.ndimage import distance_transform_edt
 
 from cosim.errors import CosimError
 from cosim.world import kernels
@@ -23,6 +22,7 @@ from cosim.world.obstacles import ObstacleArrays
 from cosim.world.shapes import Circle, Obstacle
 from planner.errors import PlannerError
 from planner.grid import OccupancyGrid
+from planner.inflation import distance_to_nearest
 
 
 def load_known_map(scenario) -> OccupancyGrid:
@@ -65,7 +65,7 @@ class WorldDistance(kernels.Bound):
         self.occupied = grid.occupied
         # Distance [m] from each cell centre to the nearest occupied cell centre (0 on occupied cells).
         if grid.occupied.any():
-            self.centre_field = distance_transform_edt(~grid.occupied) * grid.resolution
+            self.centre_field = distance_to_nearest(grid.occupied) * grid.resolution
         else:
             self.centre_field = np.full(grid.shape, np.inf)
         self.x_min, self.y_min = grid.origin

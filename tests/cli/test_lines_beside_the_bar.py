@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 
 from cosim.errors import say
-from cosim.navigation.run import progress_bar, update_bar
+from cosim.record.system_run import progress_bar, update_bar
 
 
 def test_a_line_said_while_the_bar_shows_starts_after_the_bar_is_cleared(capsys):

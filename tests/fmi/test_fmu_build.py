@@ -6,6 +6,7 @@ import importlib.util
 import os
 import shutil
 import subprocess
+import sys
 import zipfile
 from pathlib import Path
 
@@ -18,6 +19,7 @@ from cosim.cli import main
 from cosim.errors import CosimError
 from cosim.fmi import builtin as fmus
 from cosim.fmi.inspect import FMPY_HEADERS, fmpy_problems, required_functions, validate
+from planner import native
 
 REPO = Path(__file__).resolve().parents[2]
 NAMES = fmus.known_names()
@@ -312,3 +314,46 @@ def test_a_co_simulation_only_fmi2_fmu_need_not_export_model_exchange_functions(
     cs, me = set(required_functions("2.0", ("cs",))), set(required_functions("2.0", ("me",)))
     assert "fmi2DoStep" in cs - me and "fmi2GetDerivatives" in me - cs and "fmi2Instantiate" in cs & me
     assert required_functions("3.0", ("cs",)) == required_functions("3.0")
+
+
+def test_prepare_builds_stale_fmus_and_builtin_fmu_waits_for_them(tmp_path, monkeypatch):
+    monkeypatch.setenv("NAVCOSIM_FMU_CACHE", str(tmp_path / "cache"))
+    lines: list[str] = []
+    fmus.prepare(["Bicycle", "Bicycle", "NoSuchFmu"], 2, kernels=(), announce=lines.append)
+    assert lines == ["building FMUs Bicycle (first use or changed sources) ..."]
+    path = fmus.builtin_fmu("Bicycle")
+    assert path == tmp_path / "cache" / "Bicycle.fmu" and validate(path) == []
+    assert fmus._pending == {}
+    fmus.prepare(["Bicycle"], 2, kernels=(), announce=lines.append)  # up to date: nothing to say
+    assert len(lines) == 1 and fmus.builtin_fmu("Bicycle") == path and fmus._fresh == set()
+
+
+@pytest.mark.slow
+def test_first_run_says_what_it_builds_and_builds_what_the_run_loads(tmp_path):
+    """A run with empty FMU and kernel caches prints one line per build step on stderr and compiles
+    exactly the kernels the run loads (`RUN_KERNELS`); the next run prints neither line."""
+    environment = dict(
+        os.environ, NAVCOSIM_FMU_CACHE=str(tmp_path / "fmus"), NAVCOSIM_NATIVE_CACHE=str(tmp_path / "native")
+    )
+    code = (
+        "import sys\n"
+        "from cosim.cli import main\n"
+        "from planner import native\n"
+        "code = main(sys.argv[1:])\n"
+        "print('loaded', ' '.join(sorted(str(path) for path in native._loaded)))\n"
+    )
+    scenario = str(REPO / "scenarios" / "warehouse_diff_drive_one_obstacle.toml")
+    command = [sys.executable, "-c", code, "run", scenario, "--no-plot", "--out", str(tmp_path / "run.mcap")]
+    first = subprocess.run(command, capture_output=True, text=True, env=environment, cwd=REPO, timeout=600)
+    assert first.returncode == 0, first.stderr
+    steps = [line for line in first.stderr.splitlines() if "(first use or changed sources)" in line]
+    assert len(steps) == 2
+    assert steps[0].startswith("compiling kernels astar, kernel, distance, world, costmap ")
+    fmu_names = "DifferentialDrive, PurePursuit, VectorFieldHistogram, AvoidanceMixer"
+    assert steps[1].startswith(f"building FMUs {fmu_names} ")
+    loaded = first.stdout.splitlines()[-1].split()[1:]
+    assert sorted(loaded) == sorted(str(path.resolve()) for path in fmus.RUN_KERNELS)
+    built = sorted(path.name for path in (tmp_path / "native").iterdir())
+    assert built == sorted(native.library_name(path.resolve()) for path in fmus.RUN_KERNELS)
+    again = subprocess.run(command, capture_output=True, text=True, env=environment, cwd=REPO, timeout=600)
+    assert again.returncode == 0 and "first use" not in again.stderr

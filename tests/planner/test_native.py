@@ -109,3 +109,40 @@ def test_bind_types_the_functions_and_can_hold_the_gil(tmp_path, monkeypatch):
     assert typed is library and typed.hyp(3, 4) == 5.0  # ints converted: the argtypes are set
     held = native.bind(library, {"hyp": (ctypes.c_double, [ctypes.c_double, ctypes.c_double])}, hold_gil=True)
     assert isinstance(held, ctypes.PyDLL) and held._handle == library._handle and held.hyp(6, 8) == 10.0
+
+
+def _second_package(tmp_path, body: str):
+    """Another kernel in the package of `_package` (call that first)."""
+    source = tmp_path / "pkg" / "native" / "other.c"
+    source.write_text(body)
+    return source
+
+
+def test_started_builds_are_waited_for_by_load(tmp_path, monkeypatch):
+    """`start_builds` compiles the missing kernels side by side; `load` takes each from its build,
+    the compile errors included; a second call finds them built and starts nothing."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    monkeypatch.setattr(native, "_loaded", {})
+    monkeypatch.setattr(native, "_pending", {})
+    monkeypatch.setenv("NAVCOSIM_NATIVE_CACHE", str(tmp_path / "cache"))
+    good = _package(tmp_path, HYPOT)
+    broken = _second_package(tmp_path, "double g(void) { return undefined_name; }\n")
+    with ThreadPoolExecutor(2) as pool:
+        assert native.start_builds([good, broken], pool) == [good.resolve(), broken.resolve()]
+        assert native.start_builds([good, broken], pool) == []  # under way: not started twice
+        library = native.bind(native.load(good), {"hyp": (ctypes.c_double, [ctypes.c_double] * 2)})
+        assert library.hyp(3.0, 4.0) == 5.0
+        with pytest.raises(native.NativeBuildError, match="compiling other.c failed: .*undefined_name"):
+            native.load(broken)
+    assert native._pending == {}
+    assert [p.name for p in (tmp_path / "cache").iterdir()] == [native.library_name(good)]
+    with ThreadPoolExecutor(2) as pool:
+        assert native.start_builds([good], pool) == []  # built (and loaded)
+        monkeypatch.setattr(native, "_loaded", {})
+        assert native.start_builds([good], pool) == []  # built: found in the cache
+
+
+def test_run_compiler_is_subprocess_run():
+    done = native.run_compiler(["sh", "-c", "echo out; echo err >&2; exit 3"])
+    assert (done.returncode, done.stdout, done.stderr) == (3, "out\n", "err\n")

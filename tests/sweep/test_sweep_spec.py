@@ -212,3 +212,25 @@ def test_an_earlier_sweep_needs_resume(capsys, tmp_path):
         capsys, ["sweep", str(SCENARIO), "--vary", "lidar.seed=0,1", "--out", str(tmp_path)]
     )
     assert "holds an earlier sweep (results.csv); add --resume" in line
+
+
+def test_local_cluster_starts_before_the_sweep_is_planned(tmp_path, monkeypatch):
+    """The fork server of the local cluster (Dask's start-up: its imports and a warm-up run) starts
+    first, so it warms up while the sweep is validated; a sweep on a scheduler starts none."""
+    calls = []
+    monkeypatch.setattr(engine, "start_fork_server", lambda scenario, overrides: calls.append("fork server"))
+    planned = engine.plan
+    monkeypatch.setattr(engine, "plan", lambda spec: calls.append("plan") or planned(spec))
+    spec, options = build(
+        SCENARIO, ["lidar.noise=-1,0.05"], None, None, None, (), tmp_path / "out", None, None, False
+    )
+    with pytest.raises(CosimError, match="lidar.noise"):
+        engine.run_sweep(spec, options, progress=False, plot=False)
+    assert calls == ["fork server", "plan"]
+    calls.clear()
+    spec, options = build(
+        SCENARIO, ["lidar.noise=-1,0.05"], None, None, None, (), tmp_path / "out", None, "tcp://x:1", False
+    )
+    with pytest.raises(CosimError, match="lidar.noise"):
+        engine.run_sweep(spec, options, progress=False, plot=False)
+    assert calls == ["plan"]

@@ -1,0 +1,353 @@
+"""The kernel path's recording and checks, a block of steps at a time (`cosim.record.replay`).
+
+Within a block only the kernel's components step (a component stepped by Python steps at most in
+the block's first step, and its live buffers hold that step's values to the block's end), so what
+the per-step recording (`cosim.record.steps.StepRecording.after_step`) and the outcome checks do
+step by step can be done over the block's rows: the positions are checked in one call of the
+monitor's `check_positions` (the same arithmetic, step by step, in Python floats), and the rows
+are copied into buffers that collect the steps of several blocks. `flush()` turns those steps
+into their messages with NumPy (signal records, /odom /tf /pose at the pose rate, /cmd_vel and the
+mixer's mode at the mixer's rate; scans and moved obstacles were made at their steps) and hands
+them to `Recorder.hold_steps`, which writes the bytes of the per-step path. Steps are flushed
+every `WINDOWS` chunk windows of simulated time or the recorder's `flush_interval` of wall time,
+whichever comes first (every window with a live view), before anything else is written (a new
+plan, a goal), when the buffers are full, and at the end of the run. A block the rows cannot
+describe (a component stepped by Python due after its first step, a topic's first message) is
+flushed and replayed step by step (`cosim.record.replay`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import NamedTuple
+
+import numpy as np
+
+from cosim.core.master import NS_PER_S, due_from
+from cosim.record.rosmsg import twist_cdr
+from cosim.record.steps import SignalEntry, StepRecording
+
+POSE_MESSAGES = 3  # a pose is written on /odom, /tf and /pose, in that order
+
+
+class StepOrder(NamedTuple):
+    """Where each message of a step sorts: key = step * `per_step` + slot, the order in which the
+    per-step path writes them: the signal records (slot = their entry's index), then /scan,
+    /obstacles, /cmd_vel, and the pose's messages."""
+
+    signals: int  # signal entries
+
+    @property
+    def scan(self) -> int:
+        return self.signals
+
+    @property
+    def obstacles(self) -> int:
+        return self.signals + 1
+
+    @property
+    def cmd_vel(self) -> int:
+        return self.signals + 2
+
+    @property
+    def pose(self) -> int:
+        return self.signals + 3  # POSE_MESSAGES keys from here
+
+    @property
+    def per_step(self) -> int:
+        return self.signals + 3 + POSE_MESSAGES
+
+
+class Column(NamedTuple):
+    """One value in the collected rows: component `index` (in the kernel's plan), `column` of its row."""
+
+    index: int
+    column: int
+
+
+class BlockEntry(NamedTuple):
+    """A signal entry as a block records it."""
+
+    slot: int  # its index among the step's records (`StepOrder`)
+    index: int  # its component in the kernel's plan
+    columns: np.ndarray | slice | None  # its record in the component's row; None: stepped by Python
+    entry: SignalEntry
+
+
+class OtherMessage(NamedTuple):
+    """A message made at its step (a scan, moved obstacles, a twist), waiting for the flush."""
+
+    key: int
+    t_ns: int
+    topic: str
+    payload: bytes
+
+
+class BlockRecording:
+    """Records and checks blocks of kernel steps from their rows (module docstring).
+
+    `recording` is the run's `StepRecording`; `monitor` checks positions (`check_positions(times,
+    xs, ys)` -> (index, reason)) and counts modes (`check_mode(mode, period)`);
+    `finish_checks(k, reason, before_write)` is the run's end of step k after its position check;
+    `polled` the period [steps] of the goal poll (0 without)."""
+
+    STEPS = 2048  # steps collected at most between two flushes
+    WINDOWS = 2  # chunk windows collected at most between two flushes (1 with a live view): 4 s
+
+    def __init__(
+        self, system, master, recording: StepRecording, observed, monitor, finish_checks, polled: int
+    ) -> None:
+        self.system = system
+        self.recording = recording
+        self.recorder = recording.recorder
+        self.monitor = monitor
+        self.finish_checks = finish_checks
+        self.polled = polled
+        self.components = list(master.order)  # as the kernel's rows (`histories`) are ordered
+        self.periods = [system.period_steps(component) for component in self.components]
+        self.index = {component.name: i for i, component in enumerate(self.components)}
+        self.start_ns = master.start_time_ns
+        self.h_ns = system.macro_step_ns
+        self.window_ns = self.recorder.window_ns
+        self.observed = observed
+        self.ready = False
+        self.usable = True
+        self.first = self.end = None  # steps collected, not yet flushed: [first, end)
+        self.handed = time.monotonic()  # [s] wall clock of the last flush
+        self.buffers: dict[int, np.ndarray] = {}
+
+    def _column(self, reference: str) -> Column:
+        """Where an observed "component.port" output sits in the collected rows."""
+        component, slot = self.system.resolve(reference, "output")
+        return Column(self.index[component.name], len(component.inputs) + slot)
+
+    def _setup(self, histories) -> None:
+        """On the first block: which components have rows, the buffers, the message layout."""
+        self.ready = True
+        recorded = [history is not None for history in histories]
+        recording, observed = self.recording, self.observed
+        self.python = [  # stepped by Python: (plan index, period)
+            (i, self.periods[i])
+            for i, component in enumerate(self.components)
+            if not recorded[i] and not component.constant_outputs
+        ]
+        needed = [*observed.pose, *(observed.command or ()), *([observed.mode] if observed.mode else [])]
+        if not all(recorded[self._column(reference).index] for reference in needed):
+            self.usable = False
+            return
+        if recording.scan is not None and recorded[self.index[observed.scan.component]]:
+            self.usable = False  # ranges inside the rows: replayed step by step
+            return
+        self.pose_columns = [self._column(reference) for reference in observed.pose]
+        self.command_columns = [self._column(r) for r in observed.command] if observed.command else None
+        self.mode_column = self._column(observed.mode) if observed.mode else None
+        # Rows collected: per recorded component, row 0 the last row before the collected steps.
+        self.buffers = {}
+        for i, component in enumerate(self.components):
+            if recorded[i]:
+                n_in = len(component.inputs)
+                rows = np.empty((self.STEPS // self.periods[i] + 3, n_in + len(component.outputs)))
+                rows[0, :n_in] = component.input_buffer
+                rows[0, n_in:] = component.output_buffer
+                self.buffers[i] = rows
+        self.counts = dict.fromkeys(self.buffers, 0)
+        self.entries: list[BlockEntry] = []
+        for slot, entry in enumerate(recording.entries):
+            component = entry.component
+            i = self.index[component.name]
+            columns = None
+            if recorded[i]:
+                n_in = len(component.inputs)
+                columns = np.array(list(entry.inputs) + [n_in + s for s in entry.outputs], dtype=np.intp)
+                if np.array_equal(columns, np.arange(n_in + len(component.outputs))):
+                    columns = slice(None)
+            self.entries.append(BlockEntry(slot, i, columns, entry))
+        self.order = StepOrder(len(self.entries))
+        self.flush_at = 0  # [ns] flush once a step starting at or after it is collected
+        # Records of components stepped by Python, taken from their live buffers: slot -> [(k, row)].
+        self.live = {block.slot: [] for block in self.entries if block.columns is None}
+        self.others: list[OtherMessage] = []
+
+    def accepts(self, first: int, end: int, histories) -> bool:
+        """Whether the block [first, end) can be recorded from its rows (else: step by step)."""
+        if not self.ready:
+            self._setup(histories)
+        if not self.usable:
+            return False
+        # A component stepped by Python steps at most in the block's first step (`run_blocks`
+        # ends a block before it is due, and after its step unless `cut_after_python` lets the
+        # block go on); its buffers hold that step's values to the end of the block.
+        for _, period in self.python:
+            if due_from(first + 1, period) < end:
+                return False
+        if self.polled and due_from(first, self.polled) < end - 1:
+            return False
+        recording, recorder = self.recording, self.recorder
+        if recording.scan is not None:
+            period = recording.scan.period
+            if due_from(first + 1, period) < end:
+                return False  # a scan after the first step: its ranges are not held
+            if not recorder.has_channel("/scan") and first % period == 0:
+                return False
+        if recording.command is not None and not recorder.has_channel("/cmd_vel"):
+            if due_from(first, recording.command.period) < end:
+                return False
+        return True
+
+    def block(self, first: int, end: int, histories, clean: bool) -> str | None:
+        """Record and check the steps [first, end) from their rows; why the run ends, or None."""
+        if self.first is not None and end - self.first > self.STEPS:
+            self.flush()
+        if self.first is None:
+            self.first = first
+            if self.window_ns:
+                windows = self.WINDOWS if self.recorder.batching else 1
+                self.flush_at = (
+                    (self.start_ns + first * self.h_ns) // self.window_ns + windows
+                ) * self.window_ns
+        start_ns, h_ns, per_step = self.start_ns, self.h_ns, self.order.per_step
+        before = dict(self.counts)
+        for i, rows in self.buffers.items():
+            history = histories[i]
+            n = len(history)
+            if n:
+                at = self.counts[i] + 1
+                rows[at : at + n] = history
+                self.counts[i] += n
+        self.end = end
+        last = end - 1
+        t_last = start_ns + last * h_ns
+        # Records of components stepped by Python: due at most at the first step, from live buffers.
+        for block in self.entries:
+            if block.columns is None and first % block.entry.period == 0:
+                self.live[block.slot].append((first, block.entry.record()))
+        recording, recorder = self.recording, self.recorder
+        scan = recording.scan
+        if scan is not None and first % scan.period == 0:
+            t_first = start_ns + first * h_ns
+            payload = recorder.scan_payload(
+                t_first, scan.angles, scan.current(), scan.range_min, scan.range_max, scan.scan_time
+            )
+            self.others.append(OtherMessage(first * per_step + self.order.scan, t_first, "/scan", payload))
+        if recording.moving:
+            steps = recording.obstacle_steps
+            for k in range(due_from(first, steps), end, steps):
+                t_ns = start_ns + k * h_ns
+                obstacles = recording.moved_obstacles(t_ns)
+                if obstacles is not None:
+                    payload = recorder.obstacles_payload(t_ns, obstacles)
+                    key = k * per_step + self.order.obstacles
+                    self.others.append(OtherMessage(key, t_ns, "/obstacles", payload))
+        # The positions after each step, as the monitor checks them.
+        x_column, y_column = self.pose_columns[:2]
+        xs = self._values(x_column, first, end, before[x_column.index])
+        ys = self._values(y_column, first, end, before[y_column.index])
+        stop_ns = recording.stop_ns
+        times = [min(start_ns + (k + 1) * h_ns, stop_ns) / NS_PER_S for k in range(first, end)]
+        index, reason = self.monitor.check_positions(times, xs, ys)
+        if reason is not None and (index != end - first - 1 or not clean):
+            raise RuntimeError(
+                f"the compiled loop ran past step {first + index}, where the run ends ({reason})"
+            )
+        reason = self.finish_checks(last, reason, self.flush)
+        if reason is not None or (self.window_ns and t_last >= self.flush_at):
+            self.flush()
+        elif time.monotonic() - self.handed >= self.recorder.flush_interval:
+            self.flush()  # a killed run loses no more wall time of steps than the recorder's flushes
+        return reason
+
+    def _values(self, where: Column, first: int, end: int, before: int) -> list[float]:
+        """The value at `where` after each step in [first, end) (held between its component's steps)."""
+        rows = self.buffers[where.index]
+        period = self.periods[where.index]
+        if period == 1:
+            return rows[before + 1 : before + 1 + end - first, where.column].tolist()
+        due = due_from(first, period)
+        at = before + 1 + (np.arange(first, end) - due) // period
+        return rows[at, where.column].tolist()
+
+    def _latest(self, where: Column, steps: np.ndarray) -> np.ndarray:
+        """The value at `where` (in the collected rows) after each of `steps`."""
+        period = self.periods[where.index]
+        due = due_from(self.first, period)
+        return self.buffers[where.index][(steps - due) // period + 1, where.column]
+
+    def flush(self) -> None:
+        """Hand the collected steps to the recorder (and the modes to the monitor)."""
+        if self.first is None:
+            return
+        first, end = self.first, self.end
+        start_ns, h_ns, order = self.start_ns, self.h_ns, self.order
+        per_step = order.per_step
+        recording = self.recording
+        signals = []
+        for slot, i, columns, entry in self.entries:
+            if columns is None:
+                taken = self.live[slot]
+                if not taken:
+                    continue
+                steps = np.array([k for k, _ in taken], dtype=np.int64)
+                rows = np.array([row for _, row in taken])
+                taken.clear()
+            else:
+                period = self.periods[i]
+                n = self.counts[i]
+                due = due_from(first, period)
+                steps = due + period * np.arange(n, dtype=np.int64)
+                rows = self.buffers[i][1 : n + 1]
+                rows = rows[:, columns] if not isinstance(columns, slice) else rows
+            signals.append((entry.channel, steps * per_step + slot, start_ns + steps * h_ns, rows))
+        others = self.others
+        if recording.command is not None:
+            period = recording.command.period
+            steps = np.arange(due_from(first, period), end, period, dtype=np.int64)
+            if len(steps):
+                v_column, omega_column = self.command_columns
+                v = self._latest(v_column, steps).tolist()
+                omega = self._latest(omega_column, steps).tolist()
+                for k, t_ns, a, b in zip(
+                    (steps * per_step + order.cmd_vel).tolist(),
+                    (start_ns + steps * h_ns).tolist(),
+                    v,
+                    omega,
+                    strict=True,
+                ):
+                    others.append(OtherMessage(k, t_ns, "/cmd_vel", twist_cdr(a, b)))
+        if self.mode_column is not None:
+            mode = recording.mode
+            steps = np.arange(due_from(first, mode.period), end, mode.period, dtype=np.int64)
+            for value in self._latest(self.mode_column, steps).tolist():
+                self.monitor.check_mode(value, mode.period_s)
+        poses = None
+        every = recording.pose_steps
+        steps = np.arange(due_from(first + 1, every) - 1, end, every, dtype=np.int64)
+        if len(steps):
+            values = np.empty((len(steps), 5))  # x, y, theta, v, omega
+            for column, where in enumerate(self.pose_columns):
+                values[:, column] = self._latest(where, steps)
+            if self.command_columns is None:
+                values[:, 3:] = math.nan
+            else:
+                for column, where in enumerate(self.command_columns, start=3):
+                    values[:, column] = self._latest(where, steps)
+            ends = np.minimum(start_ns + (steps + 1) * h_ns, recording.stop_ns)
+            poses = (steps * per_step + order.pose, ends, values)
+        other = None
+        if others:
+            other = (
+                np.array([message.key for message in others], dtype=np.int64),
+                np.array([message.t_ns for message in others], dtype=np.int64),
+                [(message.topic, message.payload) for message in others],
+            )
+        self.others = []
+        for i, rows in self.buffers.items():
+            rows[0] = rows[self.counts[i]]
+            self.counts[i] = 0
+        self.first = self.end = None
+        self.handed = time.monotonic()
+        self.recorder.hold_steps(signals, poses, other)
+
+    def held(self, i: int) -> np.ndarray:
+        """Component i's row after the last step handed over (flushed)."""
+        return self.buffers[i][0]
