@@ -60,7 +60,7 @@ def _handler(args) -> int:
     if hasattr(scenario, "robots"):  # a fleet ([[robots]])
         from cosim.cli.system_fleet import show_fleet
 
-        return show_fleet(args, scenario)
+        return show_fleet(args, scenario, format_system)
     return show_scenario(args, scenario, f"{scenario.name} ({scenario.source})")
 
 

@@ -13,8 +13,9 @@ from cosim.cli.wiring import table_lines
 from cosim.errors import CosimError
 
 
-def show_fleet(args, fleet) -> int:
-    from cosim.cli.system import format_system
+def show_fleet(args, fleet, format_system) -> int:
+    """Print the fleet's system with `format_system` (`cosim.cli.system`'s, handed in: that module
+    imports this one)."""
     from cosim.navigation.build import build_run
     from cosim.scenario.fleet_compose import describe_fleet
 
