@@ -91,7 +91,7 @@ class PortMapping:
     """Where a role port lives in the FMU: its variable name and a scale.
 
     The scale multiplies along the data flow: FMU input = scale * port value, port output = scale *
-    FMU output, FMU parameter = scale * given value (`cosim.fmi.component`).
+    FMU output, FMU parameter = scale * given value (`cosim.fmi.layout`).
     """
 
     variable: str

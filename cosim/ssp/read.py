@@ -710,7 +710,7 @@ def _where(path: tuple[str, ...]) -> str:
 def _check_starts(ssp: SspSystem, system) -> None:
     """An input that no connection feeds keeps its start value: one without (neither in the FMU nor
     bound by the SSP) is a `CosimError` naming it."""
-    from cosim.fmi.component import fmu_layout
+    from cosim.fmi.layout import fmu_layout
     from cosim.scenario.params import unstarted_inputs, unstarted_problem
 
     fed = {connection.target for connection in (*system.connections, *system.text_connections)}

@@ -145,8 +145,8 @@ def prepare(
     """Read the FMU at `path` and check the options against it; `CosimError` (one line) otherwise.
     None takes the default (module docstring); `interface` None: co-simulation when the FMU has it.
     `start_values`: variable name -> value, or its text (`parse_start_values`)."""
-    from cosim.fmi.component import fmu_layout
     from cosim.fmi.inspect import read_description
+    from cosim.fmi.layout import fmu_layout
 
     path = Path(path)
     if not path.is_file():
@@ -356,7 +356,7 @@ def simulate(
 
 
 def _output_ports(described: ComponentDescription):
-    from cosim.fmi.component import fmu_layout
+    from cosim.fmi.layout import fmu_layout
 
     return fmu_layout(described.fmu, described.name).outputs
 
