@@ -22,7 +22,7 @@ from cosim.core.component import NativeStep
 def transfer_expression(value: str, scale: float, offset: float) -> str:
     """Source text of what a connection delivers: `value * scale + offset`, without the no-op terms.
 
-    The master's Python loop (`cosim.core.master`) and the compiled loop both use it, so they do the
+    The master's Python loop (`cosim.core.gather`) and the compiled loop both use it, so they do the
     same floating-point operations and give bit-identical inputs.
     """
     expression = value if scale == 1.0 else f"{value} * {scale!r}"

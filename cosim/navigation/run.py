@@ -60,7 +60,8 @@ import numpy as np
 
 from cosim import release_collector
 from cosim.core import interrupt
-from cosim.core.master import NS_PER_S, Master, due_from
+from cosim.core.master import Master
+from cosim.core.timebase import NS_PER_S, due_from
 from cosim.errors import PATH_LIMIT, CosimError, SimulationEnded, shorten
 from cosim.fmi import exit_guard
 from cosim.navigation.build import BuiltRun, build_run

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from cosim.core.component import closest_names
-from cosim.core.master import find_algebraic_loop
+from cosim.core.loops import find_algebraic_loop
 from cosim.errors import WHERE_LIMIT, CosimError, shorten, shorten_words
 from cosim.scenario.description import (
     TEMPLATE,

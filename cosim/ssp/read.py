@@ -738,7 +738,7 @@ def build_system(
     Input start values from parameter bindings are staged in the components' input buffers, which
     `Master.initialize` sends before initialising each FMU (connected inputs are then overwritten).
     """
-    from cosim.core.master import System
+    from cosim.core.system import System
 
     system = System(macro_step, master)
     parameters: dict[str, dict[str, float]] = {}

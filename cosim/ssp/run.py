@@ -39,7 +39,9 @@ import numpy as np
 
 from cosim.core import interrupt
 from cosim.core.loops import DEFAULT_MAX_ITERATIONS, DEFAULT_TOLERANCE
-from cosim.core.master import COMPILED_MIN_STEPS, LOOP_HANDLING, MODES, Master, due_from
+from cosim.core.master import COMPILED_MIN_STEPS, Master
+from cosim.core.system import LOOP_HANDLING, MODES
+from cosim.core.timebase import due_from
 from cosim.errors import PATH_LIMIT, CosimError, SimulationEnded, shorten
 from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
 from cosim.record.text_signals import TextRecording

@@ -43,7 +43,9 @@ import numpy as np
 
 from cosim.core import interrupt
 from cosim.core.component import closest_names
-from cosim.core.master import COMPILED_MIN_STEPS, NS_PER_S, Master, System, seconds_to_ns
+from cosim.core.master import COMPILED_MIN_STEPS, Master
+from cosim.core.system import System
+from cosim.core.timebase import NS_PER_S, seconds_to_ns
 from cosim.errors import CosimError, SimulationEnded
 from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
 from cosim.record.output import atomic_output, checked_output
