@@ -42,6 +42,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 from cosim.core.component import Component, Port, PythonComponent
+from cosim.core.fast_loop import PlanEntry
 from cosim.errors import CosimError
 
 DEFAULT_TOLERANCE = 1e-8  # `[simulation] loop_tolerance`
@@ -89,14 +90,14 @@ class LoopLink:
 
 
 class LoopSolver:
-    """Steps one algebraic loop (`members`: (component, period in macro steps, gather) in step
+    """Steps one algebraic loop (`members`: the master's plan entries of its components, in step
     order) by fixed-point iteration; see the module docstring. `step_seconds(k, period)` is the
     master's step size of a component due at step k."""
 
     def __init__(
         self,
         label: str,
-        members: Sequence[tuple[Component, int, Callable[[], None] | None]],
+        members: Sequence[PlanEntry],
         links: Sequence[LoopLink],
         tolerance: float,
         max_iterations: int,
@@ -121,19 +122,20 @@ class LoopSolver:
 
     def step(self, k: int, t: float) -> None:
         """Macro step k, from t [s]: the members due at k iterate until their loop agrees."""
-        due = [member for member in self.members if member[1] == 1 or k % member[1] == 0]
+        due = [member for member in self.members if member.period == 1 or k % member.period == 0]
         if not due:
             self.iterations = 0
             return
-        stepping = {id(component) for component, _, _ in due}
+        stepping = {id(member.component) for member in due}
         links = [
             link for link in self.links if id(link.producer) in stepping and id(link.consumer) in stepping
         ]
         if links:  # a member not due holds its outputs: the loop is open at it
-            for component, _, _ in due:
-                component.save_state()
+            for member in due:
+                member.component.save_state()
         # A text recording hears of the accepted step only (`cosim.record.text_signals`).
-        listening = [(c, c.text_listener) for c, _, _ in due if getattr(c, "text_listener", None)]
+        members = [member.component for member in due]
+        listening = [(c, c.text_listener) for c in members if getattr(c, "text_listener", None)]
         for component, _ in listening:
             component.text_listener = None
         iteration = 1
@@ -150,7 +152,7 @@ class LoopSolver:
                     break
                 if iteration >= self.max_iterations:
                     raise self.not_converged(worst, f"in the macro step from t = {t:.9g} s")
-                for component, _, _ in due:
+                for component in members:
                     component.restore_state()
                 iteration += 1
         finally:

@@ -62,6 +62,7 @@ import numpy as np
 
 from cosim.core import fast_loop
 from cosim.core.component import Component, State
+from cosim.core.fast_loop import PlanEntry
 from cosim.core.gather import make_gather
 from cosim.core.loops import MASTER_SIGNALS, LoopLink, LoopSolver, MasterSignals
 from cosim.core.system import System
@@ -152,7 +153,7 @@ class Master:
         self._step_now = [0] if self._loop_groups else None  # the step `_advance` is in, for the loops
         self._solvers: list[LoopSolver] = []
         self._plan = [
-            (
+            PlanEntry(
                 component,
                 system.period_steps(component),
                 make_gather(
@@ -163,6 +164,8 @@ class Master:
             )
             for component in self.order
         ]
+        # The Python loop's entries (`_advance`): (period, step [s], gather, push_inputs, do_step,
+        # get_outputs), plain tuples because the loop unpacks them on every step.
         self._steppers: list[tuple] = []
         self._check_cut_steps()
         self._tail_from = self._first_short_step()
@@ -182,7 +185,7 @@ class Master:
 
     def _loop_solvers(self) -> list[LoopSolver]:
         """One `LoopSolver` per iterated loop, with the plan's gathers (after initialisation)."""
-        plan = {entry[0].name: entry for entry in self._plan}
+        plan = {entry.component.name: entry for entry in self._plan}
         solvers = []
         for group in self._loop_groups:
             members = [plan[component.name] for component in self.order if component.name in group.members]
@@ -285,7 +288,7 @@ class Master:
         if self.stop_time_ns is None:
             return None
         whole = (self.stop_time_ns - self.start_time_ns) // self.system.macro_step_ns
-        firsts = [due_from(max(0, whole - period + 1), period) for _, period, _ in self._plan]
+        firsts = [due_from(max(0, whole - entry.period + 1), entry.period) for entry in self._plan]
         return min(firsts, default=None)
 
     def _check_steps(self, steps: int) -> None:
@@ -353,7 +356,7 @@ class Master:
         self._solvers = self._loop_solvers() if self._loop_groups else []
         if self._signals is not None:
             self._signals.solvers = self._solvers
-        solver_of = {component.name: solver for solver in self._solvers for component, _, _ in solver.members}
+        solver_of = {member.component.name: solver for solver in self._solvers for member in solver.members}
         placed: set[int] = set()
         self._steppers = []
         for c, period, gather in self._plan:
@@ -392,7 +395,7 @@ class Master:
                 static = {link.input for link in fed if link.producer in constant}
                 if hasattr(component, "restrict_push"):
                     component.restrict_push([i for i in range(len(component.inputs)) if i not in static])
-            plan.append((component, period, gather))
+            plan.append(PlanEntry(component, period, gather))
         self._plan = plan
 
     def _check_running(self) -> None:
@@ -494,7 +497,7 @@ class Master:
         """The tables of `run_blocks` (`cosim.core.kernel`), or None when the kernel cannot run this
         system: no component steps by C calls, or Jacobi mode with a component that needs Python."""
         self._check_running()
-        skip = {c.name for c, _, _ in self._plan if c.constant_outputs}
+        skip = {entry.component.name for entry in self._plan if entry.component.constant_outputs}
         tables = fast_loop.KernelTables(self._plan, self.system, skip, record, block)
         stepped = [
             native for native, (c, _, _) in zip(tables.native, self._plan, strict=True) if c.name not in skip
@@ -542,7 +545,7 @@ class Master:
 
         h_ns, start_ns = self.system.macro_step_ns, self.start_time_ns
         jacobi = self.system.mode == "jacobi"
-        periods = [period for _, period, _ in self._plan]
+        periods = [entry.period for entry in self._plan]
         stepping = [i for i in range(len(periods)) if tables.components[i, kernel.C_KIND] != kernel.KIND_IDLE]
         end = self.step_index + steps
         first = k = self.step_index
@@ -601,7 +604,7 @@ class Master:
                 except CosimError as error:
                     self.failure = error
                     raise
-                raise CosimError(f"component '{self._plan[failed][0].name}' failed at step {k}")
+                raise CosimError(f"component '{self._plan[failed].component.name}' failed at step {k}")
             if code == kernel.HAND_BACK:
                 # This component, and the next ones due in this step while they need Python too.
                 while True:
