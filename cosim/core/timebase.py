@@ -6,7 +6,6 @@ integer divided once by 1e9, so time never accumulates rounding: 2,000,000 steps
 exactly 2000.0 s. A component's `period` is an integer multiple P of h (0 = every step); it is
 stepped at the steps k with k % P == 0, by `do_step(t_k, P * h)`. Between its steps its outputs
 hold their last values (sample and hold).
-
 """
 
 from __future__ import annotations
