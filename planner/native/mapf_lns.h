@@ -36,7 +36,8 @@ typedef struct {
     uint64_t rng;
     double weight[LNS_RULES];
     int *hood, n_hood; char *in_hood, *tabu; int n_tabu;
-    int *order;                     /* prioritized planning's agent order */
+    int *order;                     /* prioritized planning: the queue of agents still to plan (ring) */
+    int queue_head, queue_n, queue_ready;
     int **saved_path, *saved_cost;
     int *intersections, n_intersections;
     int *bfs_queue; int *bfs_stamp, bfs_gen;
@@ -494,24 +495,84 @@ static int lns_iterate(Lns *l, double deadline) {
     return status == -1 || status == 2 ? status : improved;
 }
 
-/* One attempt of prioritized planning in l->order: 1 every agent has a path (the solution is in the
- * tables), 0 an agent found none (it goes first next time), 2 deadline, -1 out of memory. */
-static int lns_prioritized(Lns *l, double deadline) {
-    for (int i = 0; i < l->N; i++) {
-        if (l->path[i]) lns_vacate(l, i);
-        free(l->path[i]);
-        l->path[i] = NULL;
-        l->cost[i] = 0;
-    }
-    for (int k = 0; k < l->N; k++) {
-        int i = l->order[k], status = st_astar(l, i, l->start[i], deadline);
-        if (status == 1) {
-            memmove(l->order + 1, l->order, (size_t)k * sizeof(int));
-            l->order[0] = i;
-            return 0;
+/* Prioritized planning with eviction: the agents are planned one after the other from a queue
+ * (random order at first), each by space-time A* against the ones planned. An agent that finds no
+ * path takes out the planned agents in its way and is planned again at once; they go to the back of
+ * the queue. In its way: the agents on its start's cells in the first steps (it was walled in), the
+ * ones resting on a shortest path of it, and the ones passing its goal after it could arrive. */
+
+static void queue_push(Lns *l, int agent) { l->order[(l->queue_head + l->queue_n++) % l->N] = agent; }
+
+static void evict(Lns *l, int agent) {
+    if (agent < 0 || l->in_hood[agent] || !l->path[agent]) return;
+    l->in_hood[agent] = 1;  /* marks the agents evicted for one failure */
+    l->hood[l->n_hood++] = agent;
+    lns_vacate(l, agent);
+    free(l->path[agent]);
+    l->path[agent] = NULL;
+    l->cost[agent] = 0;
+}
+
+static void evict_blockers(Lns *l, int agent) {
+    const int *d = l->dist + (size_t)agent * l->V;
+    int start = l->start[agent], goal = l->goal[agent], v = start;
+    l->n_hood = 0;
+    for (int t = 0; t <= 2; t++) {
+        evict(l, lns_occupant(l, start, t));
+        evict(l, resting_at(l, start, t));
+        for (int k = 0; k < 4; k++) {
+            int u = l->adj[4 * start + k];
+            if (u >= 0) { evict(l, lns_occupant(l, u, t)); evict(l, resting_at(l, u, t)); }
         }
-        if (status != 0) return status;
-        if (lns_occupy(l, i) < 0) return -1;
+    }
+    while (v != goal) {  /* a shortest path, ties broken at random */
+        int options[4], n = 0;
+        for (int k = 0; k < 4; k++) {
+            int u = l->adj[4 * v + k];
+            if (u >= 0 && d[u] == d[v] - 1) options[n++] = u;
+        }
+        v = options[lns_rnd(l) % (uint64_t)n];
+        evict(l, resting_at(l, v, INT_MAX - 1));
+    }
+    const Visits *list = &l->visits[goal];
+    for (int k = 0; k < list->n; k++) if (list->a[k].t >= d[start]) evict(l, list->a[k].agent);
+    for (int k = l->n_hood - 1; k > 0; k--) {
+        int r = (int)(lns_rnd(l) % (uint64_t)(k + 1)), t = l->hood[k];
+        l->hood[k] = l->hood[r]; l->hood[r] = t;
+    }
+    for (int k = 0; k < l->n_hood; k++) { l->in_hood[l->hood[k]] = 0; queue_push(l, l->hood[k]); }
+    l->n_hood = 0;
+}
+
+/* Plan from the queue until it is empty (1: every agent has a path, the solution is in the tables),
+ * `pause` (2; a later call resumes), or out of memory (-1). A search under way runs until
+ * `deadline`. */
+static int lns_prioritized(Lns *l, double pause, double deadline) {
+    if (!l->queue_ready) {  /* the first call: every agent, in the random order of lns_init */
+        l->queue_n = l->N;
+        l->queue_ready = 1;
+    }
+    while (l->queue_n > 0) {
+        if (clock_now() > pause) return 2;
+        /* a first try on a short leash: a search that long is mostly walled in */
+        int i = l->order[l->queue_head], cap = l->expansion_cap;
+        l->expansion_cap = cap / 8;
+        int status = st_astar(l, i, l->start[i], deadline);
+        l->expansion_cap = cap;
+        if (status == 1) {
+            evict_blockers(l, i);
+            status = st_astar(l, i, l->start[i], deadline);
+            if (status == 1) {  /* still none: it waits at the back of the queue */
+                l->queue_head = (l->queue_head + 1) % l->N;
+                l->queue_n--;
+                queue_push(l, i);
+                continue;
+            }
+        }
+        if (status == 2) return 2;
+        if (status != 0 || lns_occupy(l, i) < 0) return -1;
+        l->queue_head = (l->queue_head + 1) % l->N;
+        l->queue_n--;
     }
     return 1;
 }
