@@ -503,6 +503,12 @@ static int lns_iterate(Lns *l, double deadline) {
 
 static void queue_push(Lns *l, int agent) { l->order[(l->queue_head + l->queue_n++) % l->N] = agent; }
 
+static void queue_push_front(Lns *l, int agent) {
+    l->queue_head = (l->queue_head + l->N - 1) % l->N;
+    l->order[l->queue_head] = agent;
+    l->queue_n++;
+}
+
 static void evict(Lns *l, int agent) {
     if (agent < 0 || l->in_hood[agent] || !l->path[agent]) return;
     l->in_hood[agent] = 1;  /* marks the agents evicted for one failure */
@@ -540,7 +546,10 @@ static void evict_blockers(Lns *l, int agent) {
         int r = (int)(lns_rnd(l) % (uint64_t)(k + 1)), t = l->hood[k];
         l->hood[k] = l->hood[r]; l->hood[r] = t;
     }
-    for (int k = 0; k < l->n_hood; k++) { l->in_hood[l->hood[k]] = 0; queue_push(l, l->hood[k]); }
+    for (int k = 0; k < l->n_hood; k++) {
+        l->in_hood[l->hood[k]] = 0;
+        queue_push(l, l->hood[k]);
+    }
     l->n_hood = 0;
 }
 
@@ -554,25 +563,20 @@ static int lns_prioritized(Lns *l, double pause, double deadline) {
     }
     while (l->queue_n > 0) {
         if (clock_now() > pause) return 2;
-        /* a first try on a short leash: a search that long is mostly walled in */
         int i = l->order[l->queue_head], cap = l->expansion_cap;
+        l->queue_head = (l->queue_head + 1) % l->N;
+        l->queue_n--;
+        /* a first try on a short leash: a search that long is mostly walled in */
         l->expansion_cap = cap / 8;
         int status = st_astar(l, i, l->start[i], deadline);
         l->expansion_cap = cap;
         if (status == 1) {
             evict_blockers(l, i);
             status = st_astar(l, i, l->start[i], deadline);
-            if (status == 1) {  /* still none: it waits at the back of the queue */
-                l->queue_head = (l->queue_head + 1) % l->N;
-                l->queue_n--;
-                queue_push(l, i);
-                continue;
-            }
         }
-        if (status == 2) return 2;
+        if (status == 1) { queue_push(l, i); continue; }  /* still none: to the back of the queue */
+        if (status == 2) { queue_push_front(l, i); return 2; }
         if (status != 0 || lns_occupy(l, i) < 0) return -1;
-        l->queue_head = (l->queue_head + 1) % l->N;
-        l->queue_n--;
     }
     return 1;
 }
