@@ -22,7 +22,7 @@
 
 typedef struct { int t, agent; } Visit;
 typedef struct { Visit *a; int n, cap; } Visits;
-typedef struct { int v, t, parent; } StNode;
+typedef struct { int v, t, parent, f, h; } StNode;  /* h: goal distance; f: see st_before */
 
 typedef struct {
     int V, N;
@@ -290,13 +290,9 @@ static int st_insert(Lns *l, long long key) {
 
 /* Heap order: f = max(t + goal distance, settle) ascending (consistent: the agent cannot rest on
  * its goal before settle), then later t first (deeper nodes: fewer ties re-expanded). */
-static int st_before(const Lns *l, int agent, int a, int b) {
+static int st_before(const Lns *l, int a, int b) {
     const StNode *x = &l->st[a], *y = &l->st[b];
-    const int *d = l->dist + (size_t)agent * l->V;
-    int fx = x->t + d[x->v], fy = y->t + d[y->v];
-    if (fx < l->settle) fx = l->settle;
-    if (fy < l->settle) fy = l->settle;
-    return fx < fy || (fx == fy && (x->t > y->t || (x->t == y->t && d[x->v] < d[y->v])));
+    return x->f < y->f || (x->f == y->f && (x->t > y->t || (x->t == y->t && x->h < y->h)));
 }
 
 static int st_push(Lns *l, int agent, int v, int t, int parent) {
@@ -314,21 +310,23 @@ static int st_push(Lns *l, int agent, int v, int t, int parent) {
     }
     int id = l->st_n;
     if (st_insert(l, st_key(l, v, t)) < 0) return -1;
-    l->st[id].v = v; l->st[id].t = t; l->st[id].parent = parent;
+    int h = l->dist[(size_t)agent * l->V + v];
+    l->st[id].v = v; l->st[id].t = t; l->st[id].parent = parent; l->st[id].h = h;
+    l->st[id].f = t + h < l->settle ? l->settle : t + h;
     l->st_n++;
     int k = l->heap_n++;
-    while (k > 0 && st_before(l, agent, id, l->heap[(k - 1) / 2])) { l->heap[k] = l->heap[(k - 1) / 2]; k = (k - 1) / 2; }
+    while (k > 0 && st_before(l, id, l->heap[(k - 1) / 2])) { l->heap[k] = l->heap[(k - 1) / 2]; k = (k - 1) / 2; }
     l->heap[k] = id;
     return 0;
 }
 
-static int st_pop(Lns *l, int agent) {
+static int st_pop(Lns *l) {
     int top = l->heap[0], last = l->heap[--l->heap_n], k = 0;
     for (;;) {
         int child = 2 * k + 1;
         if (child >= l->heap_n) break;
-        if (child + 1 < l->heap_n && st_before(l, agent, l->heap[child + 1], l->heap[child])) child++;
-        if (!st_before(l, agent, l->heap[child], last)) break;
+        if (child + 1 < l->heap_n && st_before(l, l->heap[child + 1], l->heap[child])) child++;
+        if (!st_before(l, l->heap[child], last)) break;
         l->heap[k] = l->heap[child];
         k = child;
     }
@@ -348,7 +346,7 @@ static int st_astar(Lns *l, int agent, int start, double deadline) {
     if (st_push(l, agent, start, 0, -1) < 0) return -1;
     for (int expanded = 0; l->heap_n > 0 && expanded < l->expansion_cap; expanded++) {
         if ((expanded & 4095) == 4095 && clock_now() > deadline) return 2;
-        int id = st_pop(l, agent);
+        int id = st_pop(l);
         StNode node = l->st[id];
         if (node.v == goal && node.t >= settle) {
             int *out = malloc((size_t)(node.t + 1) * sizeof(int));
@@ -363,11 +361,11 @@ static int st_astar(Lns *l, int agent, int start, double deadline) {
         for (int k = 0; k <= 4; k++) {
             int u = k < 4 ? l->adj[4 * node.v + k] : node.v;
             if (u < 0 || l->rest_from[u] <= t || l->dist[(size_t)agent * l->V + u] < 0) continue;
-            if (lns_occupant(l, u, t) >= 0) continue;
-            int other = lns_occupant(l, u, node.t);            /* swap: other goes u -> v */
-            if (other >= 0 && u != node.v && lns_at(l, other, t) == node.v) continue;
             long long key = st_key(l, u, t);
-            if (st_seen(l, key)) continue;
+            if (st_seen(l, key)) continue;  /* first: this search's table is small and warm */
+            if (lns_occupant(l, u, t) >= 0) continue;
+            int other = u == node.v ? -1 : lns_occupant(l, u, node.t);  /* swap: other goes u -> v */
+            if (other >= 0 && lns_at(l, other, t) == node.v) continue;
             if (st_push(l, agent, u, t, id) < 0) return -1;
         }
     }
