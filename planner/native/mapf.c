@@ -183,8 +183,11 @@ static int grow_nodes(Mapf *m) {
     if (m->n_nodes + 1 < m->cap_nodes) return 0;
     int cap = m->cap_nodes ? 2 * m->cap_nodes : 16;
     size_t N = (size_t)m->N;
-    double more = (double)(cap - m->cap_nodes) * (double)(sizeof(Node) + 3 * N * sizeof(int));
-    if (m->used + more > m->budget) { m->truncated = 1; return -1; }
+    double per_node = (double)(sizeof(Node) + 3 * N * sizeof(int));
+    double room = (m->budget - m->used) / per_node;  /* nodes the budget still pays for */
+    if (cap - m->cap_nodes > room) cap = m->cap_nodes + (int)room;  /* the last growth: what is left */
+    if (cap <= m->n_nodes + 1) { m->truncated = 1; return -1; }
+    double more = (double)(cap - m->cap_nodes) * per_node;
     Node *nodes = realloc(m->nodes, (size_t)cap * sizeof(Node));
     if (nodes) m->nodes = nodes;
     int *cfg = realloc(m->cfg, (size_t)cap * N * sizeof(int));
@@ -485,21 +488,24 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
     find(m, start, &slot);
     m->table[slot] = 0;
     if (push(m, &m->open, 0) < 0) return;
-    /* LaCAM and prioritized planning in slices, each kept to half the time */
+    /* LaCAM and prioritized planning in slices, each kept to half the time while both can go on */
     int outcome = LACAM_FOUND, planned = 0;
     double lacam_time = 0.0, planning_time = 0.0;
     if (is_goal(m, start)) m->goal_node = 0;
     while (m->goal_node < 0 && !planned && now() < deadline) {
         double began = now();
-        if (lacam_time <= planning_time) {
+        if (lacam_time < INFINITY && lacam_time <= planning_time) {
             outcome = lacam(m, began + FIRST_SLICE < deadline ? began + FIRST_SLICE : deadline, 1);
             lacam_time += now() - began;
-            if (outcome != LACAM_DEADLINE) break;
-        } else {
+            if (outcome == LACAM_FOUND || (outcome == LACAM_EXHAUSTED && !m->truncated)) break;
+            if (outcome != LACAM_DEADLINE) lacam_time = INFINITY;  /* budget spent: planning alone */
+        } else if (planning_time < INFINITY) {
             int done = lns_prioritized(&m->lns, began + FIRST_SLICE, deadline);
             planning_time += now() - began;
             planned = done == 1;
             if (done == -1) planning_time = INFINITY;  /* out of memory: LaCAM alone from here */
+        } else {
+            break;  /* neither can go on */
         }
     }
     if (m->goal_node < 0 && !planned) {

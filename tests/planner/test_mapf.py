@@ -135,6 +135,18 @@ def test_memory_budget_is_honoured():
             assert result.status == "memory limit"
 
 
+def test_planning_goes_on_when_the_search_budget_is_spent():
+    """A budget that pays for the distance tables and a handful of LaCAM's nodes, fewer than the
+    crossing's makespan: LaCAM stops for memory, and prioritized planning (no nodes charged) solves."""
+    grid = grid_of(["." * 30] * 30)
+    starts = [(row, 0) for row in range(30)]
+    goals = [(29 - row, 29) for row in range(30)]
+    tables = 30 * 900 * 4 + 1024 * 4  # distance tables and LaCAM's first hash table, bytes
+    result = solve(grid, starts, goals, time_limit=10.0, memory=tables + 8_000)
+    check(grid.occupied.tolist(), starts, goals, result)
+    assert result.nodes < result.makespan and result.memory <= tables + 8_000
+
+
 def test_time_limit_ends_the_improvement():
     """An instance whose optimum is not proven quickly: the solve uses its time limit and says so."""
     rng = np.random.default_rng(3)
