@@ -23,8 +23,9 @@
  * Memory: the distance tables (4 bytes per agent and vertex) and everything the search keeps (per
  * node its configuration, the agents' PIBT priorities and order: 12 bytes per agent; constraints,
  * successor lists, the hash table, the open stack) are charged to a byte budget. When it is spent,
- * no node is added: before a solution the solver stops (out of memory), after one LaCAM* only
- * revisits known nodes and can no longer prove optimality.
+ * no node is added: before a solution prioritized planning goes on alone (its paths are not
+ * charged; without its solution the solver reports the budget), after one LaCAM* only revisits known
+ * nodes and can no longer prove optimality.
  */
 #define _POSIX_C_SOURCE 199309L
 #include <limits.h>
