@@ -33,7 +33,8 @@ sys.path.insert(0, str(REPO))
 
 from fixtures.build_fixtures import build_fixture_fmu  # noqa: E402
 
-from cosim.core.master import Master, System  # noqa: E402
+from cosim.core.master import Master  # noqa: E402
+from cosim.core.system import System  # noqa: E402
 from cosim.fmi.builtin import builtin_fmu  # noqa: E402
 from cosim.fmi.component import FmuComponent  # noqa: E402
 from cosim.fmi.isolated import CHILD_SPIN, HOST_SPIN, IsolatedFmuComponent  # noqa: E402

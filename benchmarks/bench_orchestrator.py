@@ -36,7 +36,8 @@ sys.path.insert(0, str(REPO))  # `benchmarks.bench_scenarios` when run as a scri
 
 from fixtures.build_fixtures import build_fixture_fmu  # noqa: E402
 
-from cosim.core.master import Master, System  # noqa: E402
+from cosim.core.master import Master  # noqa: E402
+from cosim.core.system import System  # noqa: E402
 from cosim.fmi.builtin import builtin_fmu  # noqa: E402
 from cosim.fmi.component import FmuComponent  # noqa: E402
 

@@ -1,2 +1,3 @@
 """Stage 1, the co-simulation core: the `Component` interface, `System` (components, connections,
-rates), the `Master` that steps it on an integer time base, and the compiled kernel (C)."""
+rates, step order), algebraic loops (`loops`: found and iterated), the `Master` that steps a system
+on an integer time base (`timebase`), and the compiled kernel (C)."""

@@ -13,16 +13,26 @@ every loop gives bit-identical results.
 from __future__ import annotations
 
 import ctypes
+from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 
-from cosim.core.component import NativeStep
+from cosim.core.component import Component, NativeStep
+
+
+class PlanEntry(NamedTuple):
+    """A component as the master steps it (the master's plan, in step order)."""
+
+    component: Component
+    period: int  # [macro steps]
+    gather: Callable[[], None] | None  # copies its connected inputs (`cosim.core.gather`); None: none
 
 
 def transfer_expression(value: str, scale: float, offset: float) -> str:
     """Source text of what a connection delivers: `value * scale + offset`, without the no-op terms.
 
-    The master's Python loop (`cosim.core.master`) and the compiled loop both use it, so they do the
+    The master's Python loop (`cosim.core.gather`) and the compiled loop both use it, so they do the
     same floating-point operations and give bit-identical inputs.
     """
     expression = value if scale == 1.0 else f"{value} * {scale!r}"
@@ -32,12 +42,12 @@ def transfer_expression(value: str, scale: float, offset: float) -> str:
 class KernelTables:
     """The tables `cosim.core.kernel.step_kernel` reads for one master plan (see there).
 
-    `plan` is the master's [(component, period, gather)] in step order; `skip` names components
+    `plan` is the master's `PlanEntry`s in step order; `skip` names components
     that are never stepped (constant outputs), whose connections are not copied again either.
     A component whose `native_step()` is None is handed back to Python where it is due.
     """
 
-    def __init__(self, plan, system, skip: set[str], record: bool, block: int) -> None:
+    def __init__(self, plan: list[PlanEntry], system, skip: set[str], record: bool, block: int) -> None:
         from cosim.core import kernel as K
 
         n = len(plan)
@@ -146,7 +156,7 @@ class KernelTables:
         self.watch_addresses = np.zeros(3, dtype=np.int64)
         self.watch_numbers = np.zeros(6)
         # What the tables point into stays alive with them.
-        self._keep = [component for component, _, _ in plan]
+        self._keep = [entry.component for entry in plan]
         self._kernel = None
 
     def histories(self) -> list[np.ndarray | None]:

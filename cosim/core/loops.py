@@ -1,5 +1,10 @@
-"""Fixed-point iteration of algebraic loops within a macro step (`[simulation] algebraic_loops =
-"iterate"`).
+"""Algebraic loops: finding them in a graph of ports (`find_algebraic_loop`, `cyclic_components`),
+and their fixed-point iteration within a macro step (`[simulation] algebraic_loops = "iterate"`).
+
+The graph's nodes are ports ("component.port"); its edges are the connections (output -> input)
+and each component's direct dependencies (input -> the outputs that depend on it directly,
+`Component.feedthrough`). A cycle in it is an algebraic loop. Both searches work on names alone,
+so a system description is checked before any component exists.
 
 A loop is a set of components whose ports form a cycle of direct dependencies (`System.loop_groups`:
 the strongly connected sets of ports, joined where they share a component). The Gauss-Seidel
@@ -33,10 +38,11 @@ A system with such a loop steps in the Python master loop: the compiled kernel
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 from cosim.core.component import Component, Port, PythonComponent
+from cosim.core.fast_loop import PlanEntry
 from cosim.errors import CosimError
 
 DEFAULT_TOLERANCE = 1e-8  # `[simulation] loop_tolerance`
@@ -84,14 +90,14 @@ class LoopLink:
 
 
 class LoopSolver:
-    """Steps one algebraic loop (`members`: (component, period in macro steps, gather) in step
+    """Steps one algebraic loop (`members`: the master's plan entries of its components, in step
     order) by fixed-point iteration; see the module docstring. `step_seconds(k, period)` is the
     master's step size of a component due at step k."""
 
     def __init__(
         self,
         label: str,
-        members: Sequence[tuple[Component, int, Callable[[], None] | None]],
+        members: Sequence[PlanEntry],
         links: Sequence[LoopLink],
         tolerance: float,
         max_iterations: int,
@@ -116,19 +122,20 @@ class LoopSolver:
 
     def step(self, k: int, t: float) -> None:
         """Macro step k, from t [s]: the members due at k iterate until their loop agrees."""
-        due = [member for member in self.members if member[1] == 1 or k % member[1] == 0]
+        due = [member for member in self.members if member.period == 1 or k % member.period == 0]
         if not due:
             self.iterations = 0
             return
-        stepping = {id(component) for component, _, _ in due}
+        stepping = {id(member.component) for member in due}
         links = [
             link for link in self.links if id(link.producer) in stepping and id(link.consumer) in stepping
         ]
         if links:  # a member not due holds its outputs: the loop is open at it
-            for component, _, _ in due:
-                component.save_state()
+            for member in due:
+                member.component.save_state()
         # A text recording hears of the accepted step only (`cosim.record.text_signals`).
-        listening = [(c, c.text_listener) for c, _, _ in due if getattr(c, "text_listener", None)]
+        members = [member.component for member in due]
+        listening = [(c, c.text_listener) for c in members if getattr(c, "text_listener", None)]
         for component, _ in listening:
             component.text_listener = None
         iteration = 1
@@ -145,7 +152,7 @@ class LoopSolver:
                     break
                 if iteration >= self.max_iterations:
                     raise self.not_converged(worst, f"in the macro step from t = {t:.9g} s")
-                for component, _, _ in due:
+                for component in members:
                     component.restore_state()
                 iteration += 1
         finally:
@@ -163,3 +170,114 @@ class LoopSolver:
             f"{self.tolerance:g}); raise simulation.loop_max_iterations or loop_tolerance, or use "
             'simulation.algebraic_loops = "delay"'
         )
+
+
+def find_algebraic_loop(
+    connections: Iterable[tuple[str, str]], feedthrough: Mapping[str, Mapping[str, Iterable[str]]]
+) -> list[str] | None:
+    """A cycle of direct dependencies, as the ports along it ("comp.port", first = last), or None.
+
+    `connections` are (source output, target input) pairs; `feedthrough[component][output]` names
+    the inputs that output depends on directly. Works on names alone, so a system description can
+    be checked before any component exists (`cosim.scenario.compose.describe_system`). The answer
+    for the last few graphs is remembered: a scenario's description is checked, then the system
+    built from it (the same graph), and a sweep's worker builds the same system for every run.
+    """
+    pairs = tuple((source, target) for source, target in connections)
+    dependencies = tuple(
+        (component, tuple((output, tuple(depends)) for output, depends in outputs.items()))
+        for component, outputs in feedthrough.items()
+    )
+    key = (pairs, dependencies)
+    if key not in _LOOPS:
+        if len(_LOOPS) >= _LOOPS_KEPT:
+            _LOOPS.pop(next(iter(_LOOPS)))
+        loop = _search_algebraic_loop(pairs, dependencies)
+        _LOOPS[key] = None if loop is None else tuple(loop)
+    loop = _LOOPS[key]
+    return None if loop is None else list(loop)
+
+
+# `find_algebraic_loop` of the last few graphs, keyed by the graph itself (the connection pairs and
+# every component's feedthrough, in order: the order decides which loop is named).
+_LOOPS: dict[tuple, tuple[str, ...] | None] = {}
+_LOOPS_KEPT = 8
+
+
+def _search_algebraic_loop(
+    pairs: tuple[tuple[str, str], ...], dependencies: tuple[tuple[str, tuple], ...]
+) -> list[str] | None:
+    """A depth-first search of the graph of ports for a cycle (`find_algebraic_loop`)."""
+    graph: dict[str, list[str]] = {}
+    for source, target in pairs:
+        graph.setdefault(source, []).append(target)
+    for component, outputs in dependencies:
+        for output, depends in outputs:
+            for name in depends:
+                graph.setdefault(f"{component}.{name}", []).append(f"{component}.{output}")
+    colour: dict[str, int] = {}  # 1 = on the current path, 2 = finished
+    for start in list(graph):
+        if colour.get(start):
+            continue
+        path = [start]
+        iterators = [iter(graph.get(start, []))]
+        colour[start] = 1
+        while iterators:
+            node = next(iterators[-1], None)
+            if node is None:
+                colour[path.pop()] = 2
+                iterators.pop()
+            elif colour.get(node) == 1:
+                return path[path.index(node) :] + [node]
+            elif not colour.get(node):
+                colour[node] = 1
+                path.append(node)
+                iterators.append(iter(graph.get(node, [])))
+    return None
+
+
+def cyclic_components(graph: Mapping[str, list[str]]) -> dict[str, int]:
+    """Node -> number of its strongly connected component, for nodes on a cycle (Tarjan's
+    algorithm, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: dict[str, int] = {}
+    counter = 0
+    for root in list(graph):
+        if root in index:
+            continue
+        work = [(root, iter(graph.get(root, ())))]
+        index[root] = low[root] = counter
+        counter += 1
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, successors = work[-1]
+            nxt = next(successors, None)
+            if nxt is not None:
+                if nxt not in index:
+                    index[nxt] = low[nxt] = counter
+                    counter += 1
+                    stack.append(nxt)
+                    on_stack.add(nxt)
+                    work.append((nxt, iter(graph.get(nxt, ()))))
+                elif nxt in on_stack:
+                    low[node] = min(low[node], index[nxt])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                members = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    members.append(member)
+                    if member == node:
+                        break
+                if len(members) > 1 or node in graph.get(node, ()):
+                    for member in members:
+                        found[member] = index[node]
+    return found

@@ -1,27 +1,9 @@
 """FMI 1.0, 2.0 and 3.0 co-simulation FMUs as components, through fmpy, with a strict lifecycle.
 
-fmpy loads the binary and runs the lifecycle calls; the per-step calls (set inputs, do step, get
-outputs) go straight to the FMU's C functions with value references resolved once and values in
-preallocated ctypes arrays: one batched call per FMI type, about 4x faster than fmpy's methods,
-which convert lists and check types on every call.
-
-Port mapping lets any FMU fill a role: `port_map = {"v": "u_speed", "omega": {"name": "yawRate",
-"scale": -1}}` exposes FMU variable `u_speed` as port `v` and `yawRate` as port `omega`. The scale
-multiplies in the direction of the data flow: FMU input = scale * port value, port output =
-scale * FMU output, FMU parameter = scale * given value. FMU variables not named in the map keep
-their own names (unless a mapped port already uses the name). Several ports may name one variable:
-an output then fills each of them, and an input receives the value of the port set last (its
-position in the FMU's input order); this lets an FMU with fewer ports than a role (a
-fault-injection FMU, say) fill it. Supported variable types: FMI 2.0 Real, Integer, Enumeration,
-Boolean; FMI 3.0 Float32, Float64, Int8..UInt64, Enumeration (moved as Int64), Boolean, scalars and
-arrays (`cosim.fmi.types`). An array sized by a tunable structural parameter has the size of the
-parameter's start value (the parameter keeps it).
-
-An FMI 3.0 array variable of fixed size appears as one port per element, named as FMI 2.0's
-structured scalars (`ranges[3]`, `waypoints[12,1]`; row-major), so a system connects the FMI 2.0
-and the FMI 3.0 build of a model alike. The transfer is native: one fmi3Get/fmi3Set call moves all
-variables of a type, each array as one value reference with all its elements (a 720-beam scan is
-one reference, not 720). An array is always sent whole; the port map renames scalars only.
+An `FmuComponent` is made from the FMU's checked description (`cosim.fmi.description`) and its
+ports (`cosim.fmi.layout`, with the port map); fmpy loads the binary and runs the lifecycle calls
+(instantiate, setup with the parameters, initialise, terminate, free), and the per-step calls are
+generated code over the FMU's C functions (`cosim.fmi.codegen`).
 
 Every real output must be finite: after each step (and after initialisation) `get_outputs` raises
 `CosimError` naming the output when one is NaN or infinite, since a NaN fed on would pass as a value
@@ -30,9 +12,6 @@ the FMU gives NaN a meaning; they must still not be infinite. The project FMUs' 
 outputs (VFH's `steering_dir` when no direction is free, PurePursuit's `goal_distance` without
 waypoints: `cosim.fmi.builtin.documented_nan_variables`) are allowed by default. Integer and
 Boolean outputs are always finite.
-
-The archive's total uncompressed size is checked before anything is extracted
-(`cosim.fmi.archive`; default limit 1 GiB, `max_unpacked_size` raises it).
 
 fmpy behaviour owned here: each instance is extracted into its own directory (static state inside
 a shared library is not shared between instances), all but sources/ and documentation/; the working
@@ -49,10 +28,8 @@ import os
 import shutil
 import tempfile
 import weakref
-import zipfile
 from collections import deque
 from collections.abc import Collection, Mapping
-from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
 
@@ -61,354 +38,17 @@ import numpy as np
 from fmpy.fmi1 import FMU1Slave
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
-from fmpy.model_description import ModelVariable
 
-from cosim.core.component import Component, NativeStep, Port, State, check_unique_ports, closest_names
+from cosim.core.component import Component, NativeStep, Port, State, closest_names
 from cosim.errors import CosimError, SimulationEnded
 from cosim.fmi import exit_guard
-from cosim.fmi.archive import check_unpacked_size
-from cosim.fmi.builtin import documented_nan_variables
-from cosim.fmi.text import TEXT_TYPES, TextPort, TextTransfer, check_text, text_start
-from cosim.fmi.types import C_TYPES, KINDS, TRANSFER_TYPES, WIDE, check_integer, exact_as_float, transfer_type
+from cosim.fmi.codegen import FMI_TYPE_NAMES, TransferGroup, native_step, step_functions, transfer_groups
+from cosim.fmi.description import file_identity, fmi1_variable_step
+from cosim.fmi.layout import fmu_layout, start_value
+from cosim.fmi.text import TextTransfer, check_text
+from cosim.fmi.types import C_TYPES, KINDS, TRANSFER_TYPES, WIDE, check_integer, exact_as_float
 
 _STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
-# Transfer types as the compiled kernel's group kinds (`cosim.core.kernel.KINDS`).
-_KERNEL_TYPES = {1: {"Real": "real", "Integer": "integer"}}  # FMI 1.0 Booleans are chars: Python moves them
-_KERNEL_TYPES[2] = {"Real": "real", "Integer": "integer", "Boolean": "boolean"}
-_KERNEL_TYPES[3] = {"Float64": "real", "Int32": "integer", "Boolean": "boolean"}
-_KERNEL_TYPES[3] |= {name: name.lower() for name in TRANSFER_TYPES[3] if name not in _KERNEL_TYPES[3]}
-_FMI_TYPE_NAMES = {
-    version: {kind: name for name, kind in names.items()} for version, names in _KERNEL_TYPES.items()
-}
-
-
-@cache
-def _fmi1_variable_step(path: str, mtime_ns: int, size: int) -> bool:
-    """canHandleVariableCommunicationStepSize of an FMI 1.0 co-simulation FMU (its Capabilities
-    element under Implementation/CoSimulation_StandAlone or CoSimulation_Tool)."""
-    from xml.etree import ElementTree
-
-    with zipfile.ZipFile(path) as archive:
-        root = ElementTree.fromstring(archive.read("modelDescription.xml"))
-    capabilities = root.find("Implementation/*/Capabilities")
-    return capabilities is not None and capabilities.get("canHandleVariableCommunicationStepSize") in {
-        "true",
-        "1",
-    }
-
-
-def _file_identity(path: Path) -> tuple[int, int]:
-    status = path.stat()
-    return status.st_mtime_ns, status.st_size
-
-
-@cache
-def _parsed_description(path: str, mtime_ns: int, size: int):
-    """fmpy's parse of an FMU's modelDescription.xml, once per file version: describing a system and
-    then building it reads every FMU twice, and a 2000-variable description takes ~25 ms to parse.
-    A project FMU's parse is also kept on disk beside it (`_kept_description`). Callers treat the
-    result as read-only."""
-    kept = _kept_description(Path(path))
-    if kept is not None:
-        description = _read_kept(kept, path)
-        if description is not None:
-            return description
-    description = fmpy.read_model_description(path)
-    if kept is not None:
-        _keep(kept, path, description)
-    return description
-
-
-_KEPT_FORMAT = b"navcosim fmpy description 2"
-
-
-def _kept_description(path: Path) -> Path | None:
-    """Where the parse of `path` is kept: beside a project FMU in the FMU build cache
-    (`cosim.fmi.builtin`, a folder navcosim writes and whose binaries it runs anyway), else nowhere
-    (a user's FMU is parsed each time: nothing is written next to it). Unpickling fmpy's objects
-    takes a fifth of parsing the XML again (`_KeptVariable`; and no lxml import, no schema
-    validation: the file was validated when it was parsed)."""
-    from cosim.fmi.builtin import default_cache_dir
-
-    try:
-        cache = default_cache_dir().resolve()
-    except OSError:
-        return None
-    if path.parent != cache and path.parent != cache / "fmi3":
-        return None
-    return path.with_name(f".{path.stem}.description.pickle")
-
-
-def _kept_key(path: str) -> bytes:
-    """What the kept parse must have been made from: this file (time, size, inode) and fmpy version."""
-    status = os.stat(path)
-    version = getattr(fmpy, "__version__", "")
-    return b" ".join(
-        [_KEPT_FORMAT, version.encode(), *(str(n).encode() for n in (status.st_mtime_ns, status.st_size))]
-        + [str(status.st_ino).encode()]
-    )
-
-
-def _read_kept(kept: Path, path: str):
-    """The kept parse of `path`, or None (none, another file version, another fmpy, unreadable)."""
-    import pickle
-
-    try:
-        with open(kept, "rb") as stream:
-            if stream.readline().rstrip(b"\n") != _kept_key(path):
-                return None
-            return pickle.load(stream)
-    except Exception:  # noqa: BLE001 - whatever is wrong with the kept copy, the FMU is parsed again
-        return None
-
-
-def _keep(kept: Path, path: str, description) -> None:
-    """Keep the parse beside the FMU (written aside and renamed: readers never see half of it); a
-    failure only means the next run parses again."""
-    import io
-    import pickle
-
-    partial = kept.with_name(f"{kept.name}.{os.getpid()}")
-    try:
-        payload = io.BytesIO()
-        _kept_pickler(payload, protocol=pickle.HIGHEST_PROTOCOL).dump(description)
-        partial.write_bytes(_kept_key(path) + b"\n" + payload.getvalue())
-        os.replace(partial, kept)
-    except Exception:  # noqa: BLE001 - not kept; nothing else changes
-        partial.unlink(missing_ok=True)
-
-
-def _read_description(path: Path, max_unpacked_size: int | None = None):
-    """Check the archive and return fmpy's model description; one-line `CosimError` otherwise."""
-    if not path.is_file():
-        raise CosimError(f"FMU '{path}' not found")
-    if not zipfile.is_zipfile(path):
-        raise CosimError(f"FMU '{path}' is not a zip archive (corrupt file or not an FMU)")
-    try:
-        with zipfile.ZipFile(path) as archive:
-            names = archive.namelist()
-            check_unpacked_size(path, archive, max_unpacked_size)
-    except (zipfile.BadZipFile, OSError) as error:
-        raise CosimError(f"FMU '{path}' cannot be read: {error}") from None
-    if "modelDescription.xml" not in names:
-        raise CosimError(f"FMU '{path}' has no modelDescription.xml")
-    try:
-        description = _parsed_description(str(path.resolve()), *_file_identity(path))
-    except Exception as error:  # fmpy raises plain Exceptions with multi-line text
-        from cosim.fmi.diagnose import dangling_reference  # (and its XML parser) only for a broken FMU
-
-        problem = dangling_reference(path) if isinstance(error, IndexError | KeyError) else None
-        first_line = problem or " ".join(str(error).split())[:300]
-        raise CosimError(f"FMU '{path}': invalid modelDescription.xml: {first_line}") from None
-    version = int(str(description.fmiVersion).split(".")[0])
-    if version not in (1, 2, 3):
-        raise CosimError(
-            f"FMU '{path}' is FMI {description.fmiVersion}; navcosim supports FMI 1.0, 2.0 and 3.0"
-        )
-    # The binary of the interface a component uses by default: co-simulation when the FMU has it
-    # (`cosim.fmi.model_exchange` checks the Model Exchange binary of an FMU run as one).
-    interface = description.coSimulation or description.modelExchange
-    if interface is None:
-        raise CosimError(f"FMU '{path}' (model {description.modelName}) declares no FMI interface")
-    platform = fmpy.platform if version < 3 else fmpy.platform_tuple
-    binary = f"binaries/{platform}/{interface.modelIdentifier}{fmpy.sharedLibraryExtension}"
-    if binary not in names:
-        identifier = interface.modelIdentifier
-        from cosim.fmi.diagnose import missing_binary
-
-        raise CosimError(missing_binary(path, names, platform, identifier, fmpy.sharedLibraryExtension))
-    return description, version
-
-
-def _parse_port_map(port_map: Mapping[str, object], path: Path) -> dict[str, tuple[str, float]]:
-    """port name -> (FMU variable name, scale)."""
-    parsed: dict[str, tuple[str, float]] = {}
-    for port, target in port_map.items():
-        if isinstance(target, str):
-            parsed[port] = (target, 1.0)
-        elif isinstance(target, Mapping) and isinstance(target.get("name"), str):
-            unknown = set(target) - {"name", "scale"}
-            scale = target.get("scale", 1.0)
-            if unknown or isinstance(scale, bool) or not isinstance(scale, int | float):
-                raise CosimError(f"FMU '{path}': port map entry '{port}' must be a name or {{name, scale}}")
-            parsed[port] = (target["name"], float(scale))
-        else:
-            raise CosimError(f"FMU '{path}': port map entry '{port}' must be a name or {{name, scale}}")
-    return parsed
-
-
-@dataclass(frozen=True)
-class FmuLayout:
-    """What `FmuComponent` makes of one FMU file version through a port map: its ports, what each
-    one reaches in the FMU, and the declared dependencies (`fmu_layout`). Shared by every component
-    made from the same file, name, port map and size limit in this process (describing a system and
-    then building it made each FMU's thousands of ports twice); read-only."""
-
-    model_description: object  # fmpy's
-    fmi_version: int
-    inputs: tuple[Port, ...]
-    outputs: tuple[Port, ...]
-    parameters: tuple[Port, ...]
-    variables: Mapping[str, tuple[object, float]]  # port name -> (fmpy variable, scale)
-    elements: Mapping[str, int]  # element port of an FMI 3.0 array -> row-major index
-    feedthrough: Mapping[str, tuple[str, ...]]  # output port -> input ports, as <ModelStructure> declares
-    documented_nan: tuple[str, ...]  # output ports of the FMU's documented NaN outputs
-    text: Mapping[str, tuple[TextPort, ...]] = field(default_factory=dict)  # causality -> String/Binary
-
-
-# Checked archives (`_read_description`) and layouts, keyed by the file's resolved path and version
-# (modification time and size) and the unpacked-size limit; a layout also by the component's name
-# (its error messages) and the parsed port map. A sweep's worker makes the same few FMUs once per
-# run; a changed file is another key. Failures are never remembered.
-_DESCRIPTIONS: dict[tuple, tuple[object, int]] = {}
-_LAYOUTS: dict[tuple, FmuLayout] = {}
-_KEPT = 32
-
-
-def _remember(cache: dict, key: tuple, value):
-    if len(cache) >= _KEPT:
-        cache.pop(next(iter(cache)))
-    cache[key] = value
-    return value
-
-
-def fmu_layout(
-    path: str | Path,
-    name: str,
-    port_map: Mapping[str, object] | None = None,
-    max_unpacked_size: int | None = None,
-) -> FmuLayout:
-    """The ports `FmuComponent(path, name, port_map=..., max_unpacked_size=...)` has, without making
-    the component (a system description needs no more); the same `CosimError` otherwise (the
-    archive's problems before the port map's). Made once per file version in a process."""
-    path = Path(path)
-    port_map = port_map or {}
-    try:
-        identity: tuple | None = (str(path.resolve()), *_file_identity(path), max_unpacked_size)
-    except (OSError, RuntimeError):
-        identity = None  # `_read_description` says what is wrong
-    if identity is not None and identity in _DESCRIPTIONS:
-        description, version = _DESCRIPTIONS[identity]
-    else:
-        description, version = _read_description(path, max_unpacked_size)
-        if identity is not None:
-            _remember(_DESCRIPTIONS, identity, (description, version))
-    mapping = _parse_port_map(port_map, path)
-    key = None if identity is None else (identity, name, tuple(mapping.items()))
-    if key is not None and key in _LAYOUTS:
-        return _LAYOUTS[key]
-    layout = _make_layout(path, name, description, version, mapping)
-    return layout if key is None else _remember(_LAYOUTS, key, layout)
-
-
-def _make_layout(
-    path: Path, name: str, description, version: int, mapping: dict[str, tuple[str, float]]
-) -> FmuLayout:
-    variables = {v.name: v for v in description.modelVariables}
-    for port, (variable, _) in mapping.items():
-        if variable not in variables:
-            raise CosimError(
-                f"FMU '{path}' (component '{name}') has no variable '{variable}' "
-                f"(mapped to port '{port}'); variables: {closest_names(variable, variables)}"
-            )
-    by_variable: dict[str, list[tuple[str, float]]] = {}
-    for port, (variable, scale) in mapping.items():
-        by_variable.setdefault(variable, []).append((port, scale))
-    reaches: dict[str, tuple[object, float]] = {}
-    elements: dict[str, int] = {}
-    ports: dict[str, list[Port]] = {"input": [], "output": [], "parameter": []}
-    text: dict[str, list[TextPort]] = {"input": [], "output": [], "parameter": []}
-    for variable in description.modelVariables:
-        causality = variable.causality if variable.causality != "structuralParameter" else "parameter"
-        if variable.type in TEXT_TYPES and causality in text and not getattr(variable, "dimensions", None):
-            port = TextPort(
-                variable.name,
-                variable.type,
-                variable.valueReference,
-                text_start(variable),
-                variable.description or "",
-            )
-            text[causality].append(port)
-            continue
-        kind = KINDS.get(variable.type)
-        if causality not in ports or kind is None:
-            continue
-        fmi_type = transfer_type(version, variable.type)
-        unit = getattr(variable, "unit", None) or getattr(
-            getattr(variable, "declaredType", None), "unit", None
-        )
-        if getattr(variable, "dimensions", None):
-            shape = _array_shape(variable, description)
-            if shape is None:
-                continue  # a dimension without a size (inspect.py reports such a description)
-            if variable.name in by_variable:
-                raise CosimError(
-                    f"FMU '{path}' (component '{name}'): port map entry "
-                    f"'{by_variable[variable.name][0][0]}' names array variable '{variable.name}'; "
-                    "only scalar variables can be mapped"
-                )
-            made = _array_ports(path, name, variable, fmi_type, unit or "", shape, mapping)
-            ports[causality] += made
-            for element, port in enumerate(made):
-                reaches[port.name] = (variable, 1.0)
-                elements[port.name] = element
-            continue
-        if variable.name not in by_variable and variable.name in mapping:
-            continue  # a mapped port already took this name
-        start = _start_value(variable.start, fmi_type, f"FMU '{path}' variable '{variable.name}' start")
-        for port_name, scale in by_variable.get(variable.name, [(variable.name, 1.0)]):
-            ports[causality].append(
-                Port(port_name, kind, unit or "", variable.description or "", start * scale, fmi_type)
-            )
-            reaches[port_name] = (variable, scale)
-    for causality, declared in ports.items():  # as `Component` checks them: here, so describing finds it
-        check_unique_ports(name, causality, declared)
-    ports_of: dict[str, list[str]] = {}
-    for port, (variable, _) in reaches.items():
-        ports_of.setdefault(variable.name, []).append(port)
-    feedthrough = {}
-    for unknown in description.outputs:
-        if unknown.dependencies is not None and unknown.variable.name in ports_of:
-            depends = tuple(
-                port
-                for d in unknown.dependencies
-                if d.causality == "input" and d.name in ports_of
-                for port in ports_of[d.name]
-            )
-            for port in ports_of[unknown.variable.name]:
-                feedthrough[port] = depends
-    documented = documented_nan_variables(description)
-    return FmuLayout(
-        description,
-        version,
-        tuple(ports["input"]),
-        tuple(ports["output"]),
-        tuple(ports["parameter"]),
-        reaches,
-        elements,
-        feedthrough,
-        tuple(port for variable in documented for port in ports_of.get(variable, ())),
-        {causality: tuple(listed) for causality, listed in text.items()},
-    )
-
-
-def _array_ports(path: Path, name: str, variable, fmi_type: str, unit: str, shape, mapping) -> list[Port]:
-    """One port per element of FMI 3.0 array `variable` (transfer type `fmi_type`), named `name[i]` /
-    `name[i,j]`."""
-    kind = KINDS[fmi_type]
-    starts = str(variable.start).split() if variable.start not in (None, "") else []
-    ports = []
-    for element, index in enumerate(np.ndindex(*shape)):
-        port_name = f"{variable.name}[{','.join(str(i + 1) for i in index)}]"
-        if port_name in mapping:
-            raise CosimError(
-                f"FMU '{path}' (component '{name}'): mapped port '{port_name}' "
-                f"is also an element of array variable '{variable.name}'"
-            )
-        text = starts[element if len(starts) > 1 else 0] if starts else None
-        start = _start_value(text, fmi_type, f"FMU '{path}' variable '{port_name}' start")
-        ports.append(Port(port_name, kind, unit, variable.description or "", start, fmi_type))
-    return ports
 
 
 class FmuComponent(Component):
@@ -536,13 +176,17 @@ class FmuComponent(Component):
 
     def variable_name(self, port: str) -> str:
         """The FMU variable behind a port (the port's own name unless the port map renames it)."""
-        return self._variables[port][0].name
+        return self._variables[port].variable.name
 
     def _checked_outputs(self) -> tuple[list[int], list[int]]:
         """Slots of the real outputs that must be finite, and of those that may only be NaN."""
         real = [i for i, port in enumerate(self.outputs) if port.type == "real"]
         finite = [i for i in real if self.outputs[i].name not in self.nan_outputs]
         return finite, [i for i in real if self.outputs[i].name in self.nan_outputs]
+
+    def _groups(self, ports: list[Port], only: set[int] | None = None) -> list[TransferGroup]:
+        """Per FMI transfer type, the ports (at slots `only`, when given) one call moves."""
+        return transfer_groups(ports, self._variables, self._elements, self.fmi_version, only)
 
     def restrict_push(self, slots) -> None:
         """From now on `push_inputs` sends only the inputs at `slots` (port order): the others keep
@@ -552,99 +196,11 @@ class FmuComponent(Component):
         if self.state is State.STEPPING:
             self._install_fast_path()
 
-    def _groups(
-        self, ports: list[Port], only: set[int] | None = None
-    ) -> list[tuple[str, list[int], object, object, list[float]]]:
-        """Per FMI transfer type: (type, buffer slots, value references, FMI value array, scales). An FMI 3.0
-        array's element ports are consecutive (in element order), so its reference is listed once,
-        at its first element, and its values fill that stretch of the value array."""
-        if only is not None:  # an array is transferred whole: a slot of it brings all of them
-            arrays = {self._variables[ports[i].name][0].name for i in only if ports[i].name in self._elements}
-            only = set(only) | {
-                i
-                for i, p in enumerate(ports)
-                if p.name in self._elements and self._variables[p.name][0].name in arrays
-            }
-        groups = []
-        for kind in TRANSFER_TYPES[self.fmi_version]:
-            slots = [i for i, p in enumerate(ports) if p.fmi_type == kind and (only is None or i in only)]
-            if slots:
-                references = [
-                    self._variables[ports[i].name][0].valueReference
-                    for i in slots
-                    if self._elements.get(ports[i].name, 0) == 0
-                ]
-                scales = [self._variables[ports[i].name][1] for i in slots]
-                values = (C_TYPES[self.fmi_version][kind] * len(slots))()
-                groups.append((kind, slots, (ctypes.c_uint32 * len(references))(*references), values, scales))
-        return groups
-
     def _compile_fast_path(self) -> None:
-        """Generate specialised `push_inputs`, `do_step`, `get_outputs` for this FMU.
-
-        The functions are generated as straight-line Python with every buffer, value reference
-        and C function bound as a constant: a step then costs the C calls plus a few
-        element copies, with no loop, lookup or allocation. `_remove_fast_path` puts the checked
-        class methods back when the instance leaves the stepping state.
-        """
-        n = "" if self.fmi_version < 3 else ", {n}"
-        names: dict[str, object] = {"fail": self._fail, "np": np, "ib": self.input_cbuffer}
-        names.update(
-            ob=self.output_cbuffer, obn=self.output_buffer, ibn=self.input_buffer, handle=self._handle
-        )
-        push, pull = ["def push_inputs():"], ["def get_outputs():"]
-        for direction, groups, lines in (
-            ("Set", self._input_groups, push),
-            ("Get", self._output_groups, pull),
-        ):
-            for g, (kind, slots, references, values, scales) in enumerate(groups):
-                function = f"fmi{self.fmi_version}{direction}{kind}"
-                direct = KINDS[kind] == "real" and C_TYPES[self.fmi_version][kind] is ctypes.c_double
-                direct = direct and all(scale == 1.0 for scale in scales) and len(groups) == 1
-                buffer = self.input_cbuffer if direction == "Set" else self.output_cbuffer
-                if direct and slots == list(range(len(slots))):
-                    values = buffer  # the FMI call reads/writes the component's buffer itself
-                names.update(
-                    {f"f{direction}{g}": self._setters[kind] if direction == "Set" else self._getters[kind]}
-                )
-                names.update({f"r{direction}{g}": references, f"v{direction}{g}": values})
-                names[f"vn{direction}{g}"] = np.ctypeslib.as_array(values)
-                names[f"s{direction}{g}"] = np.array(slots, dtype=np.intp)
-                names[f"k{direction}{g}"] = np.array(scales)
-                copies = [] if values is buffer else _copy_lines(direction, g, KINDS[kind], slots, scales)
-                if direction == "Get" and kind in WIDE:  # before the copy rounds them
-                    below = "" if kind == "UInt64" else f" or vnGet{g}.min() < -exact{kind}"
-                    test = f"vnGet{g}.max() > exact{kind}{below}"
-                    copies.insert(0, f"    if {test}: inexact(vnGet{g}, sGet{g}, '{kind}')")
-                count = len(references)  # FMI 3.0: then the number of values (array elements)
-                call = [
-                    f"    status = f{direction}{g}(handle, r{direction}{g}, {count}, v{direction}{g}"
-                    + n.format(n=len(slots))
-                    + ")",
-                    f"    if status > 1: fail(status, '{function}')",
-                ]
-                lines += copies + call if direction == "Set" else call + copies
-        push.append("    return None")
-        pull += _finite_check_lines(*self._checked_outputs())
-        names.update(nonfinite=self._nonfinite_output, zeros=np.zeros(len(self.outputs)), inf=math.inf)
-        names.update(exactInt64=np.int64(2**53), exactUInt64=np.uint64(2**53), inexact=self._inexact_output)
-        pull.append("    return obn")
-        if self.fmi_version < 3:
-            step = ["def do_step(t, h):", "    clock[0] = t", "    status = raw(handle, t, h, 1)"]
-        else:
-            step = ["def do_step(t, h):", "    clock[0] = t", "    status = raw(handle, t, h, True, *flags)"]
-        names["clock"] = self._step_time
-        step.append("    if status > 1: step_failed(status, t)")
-        names["step_failed"] = self._step_failed
-        if self.fmi_version == 3:
-            step.append("    if step_flags[1]: asked_to_terminate(t)")
-            names.update(flags=self._do_step_flags, step_flags=self._step_flags)
-            names["asked_to_terminate"] = self._asked_to_terminate
-        names["raw"] = self._raw_do_step
-        exec("\n".join(push + pull + step), names)  # noqa: S102 - generated from our own templates
-        self._compiled = {method: names[method] for method in ("push_inputs", "get_outputs", "do_step")}
-        if self.text_inputs or self.text_outputs:  # text beside the numbers (`cosim.fmi.text`)
-            self._compiled.update(_with_text(self, self._compiled["do_step"], self._compiled["get_outputs"]))
+        """Generate specialised `push_inputs`, `do_step`, `get_outputs` for this FMU
+        (`cosim.fmi.codegen`); `_remove_fast_path` puts the checked class methods back when the
+        instance leaves the stepping state."""
+        self._compiled = step_functions(self)
 
     def _install_fast_path(self) -> None:
         self.__dict__.update(self._compiled)
@@ -853,7 +409,7 @@ class FmuComponent(Component):
     def _check_structural(self, key: str, variable, fmi_type: str, value: float) -> None:
         """A tunable structural parameter sizes arrays, whose ports were made at its start value: it
         keeps that value (changing it takes FMI 3.0's configuration mode and ports of another size)."""
-        start = _start_value(variable.start, fmi_type, key)
+        start = start_value(variable.start, fmi_type, key)
         if float(value) != start:
             raise CosimError(
                 f"FMU '{self.name}' (model {self.model_description.modelName}): structural parameter "
@@ -882,7 +438,7 @@ class FmuComponent(Component):
     def _set_array_parameter(self, array: str, elements: Mapping[int, float]) -> None:
         """Set FMI 3.0 array parameter `array` whole: the given elements, the others at their start."""
         ports = [p for p in self.parameters if p.name in self._elements and p.name.split("[")[0] == array]
-        variable = self._variables[ports[0].name][0]
+        variable = self._variables[ports[0].name].variable
         kind = ports[0].fmi_type
         numbers = [elements.get(self._elements[p.name], p.start) for p in ports]
         values = (C_TYPES[3][kind] * len(numbers))(*(self._fmi_value(kind, v, array) for v in numbers))
@@ -930,50 +486,8 @@ class FmuComponent(Component):
         return self._compiled["get_outputs"]()
 
     def native_step(self) -> NativeStep | None:
-        """C-level stepping for the compiled kernel: every get/set call as a group (`NativeStep.groups`)."""
-
-        def address(function) -> int:
-            return ctypes.cast(function, ctypes.c_void_p).value
-
-        version = self.fmi_version
-        kernel_kinds = _KERNEL_TYPES[version]
-        if self._text_feeds or self.text_outputs:
-            return None  # text moves in Python (`cosim.fmi.text`)
-        if any(group[0] not in kernel_kinds for group in (*self._input_groups, *self._output_groups)):
-            return None
-        version = 2 if version == 1 else version  # FMI 1.0 calls as FMI 2.0 does (the same C arguments)
-        calls = []
-        for direction, groups, buffer in (
-            ("set", self._input_groups, self.input_cbuffer),
-            ("get", self._output_groups, self.output_cbuffer),
-        ):
-            functions = self._setters if direction == "set" else self._getters
-            for fmi_type, slots, refs, values, scales in groups:
-                kind = kernel_kinds[fmi_type]
-                # As `_compile_fast_path`: a lone unscaled real group over all ports is the buffer.
-                direct = kind == "real" and all(scale == 1.0 for scale in scales) and len(groups) == 1
-                direct = direct and slots == list(range(len(slots)))
-                calls.append(
-                    (
-                        direction, kind, address(functions[fmi_type]), ctypes.addressof(refs), len(refs),
-                        len(slots), ctypes.addressof(buffer if direct else values), direct,
-                        tuple(slots), tuple(float(scale) for scale in scales),
-                    )
-                )  # fmt: skip
-        finite_outputs, nan_outputs = self._checked_outputs()
-        # The kernel reads an Int64/UInt64 beyond 2^53 as NaN, so the check stops at it.
-        finite_outputs += [i for i, port in enumerate(self.outputs) if port.fmi_type in WIDE]
-        return NativeStep(
-            fmi_version=version,
-            handle=self._handle if isinstance(self._handle, int) else self._handle.value,
-            do_step=address(self._raw_do_step),
-            step_flags=np.ctypeslib.as_array(self._step_flags) if version == 3 else np.zeros(3, bool),
-            last_successful_time=ctypes.addressof(self._last_successful_time) if version == 3 else 0,
-            fail=self._native_failure,
-            groups=tuple(calls),
-            finite_outputs=tuple(finite_outputs),
-            nan_outputs=tuple(nan_outputs),
-        )
+        """C-level stepping for the compiled kernel (`cosim.fmi.codegen.native_step`)."""
+        return native_step(self)
 
     def can_vary_step(self) -> bool:
         """canHandleVariableCommunicationStepSize of the co-simulation interface (a Model Exchange
@@ -982,7 +496,7 @@ class FmuComponent(Component):
         if interface is not self.model_description.coSimulation:
             return True
         if self.fmi_version == 1:
-            return _fmi1_variable_step(str(self.path.resolve()), *_file_identity(self.path))
+            return fmi1_variable_step(str(self.path.resolve()), *file_identity(self.path))
         return bool(interface.canHandleVariableCommunicationStepSize)
 
     def state_support(self) -> str | None:
@@ -1044,7 +558,7 @@ class FmuComponent(Component):
             if self.outputs[status].fmi_type in WIDE:  # read again, to name the value
                 self._compiled["get_outputs"]()
             self._nonfinite_output()
-        type_name = _FMI_TYPE_NAMES[self.fmi_version][kind]
+        type_name = FMI_TYPE_NAMES[self.fmi_version][kind]
         function = ("Set" + type_name, "DoStep", "Get" + type_name)[call]
         self._fail(status, f"fmi{self.fmi_version}{function}", t)
 
@@ -1144,29 +658,6 @@ class FmuComponent(Component):
 _LOG_TARGETS: dict[int, weakref.ref] = {}
 
 
-def _with_text(component: FmuComponent, do_step, get_outputs) -> dict:
-    """`do_step` that first sends the text inputs, `get_outputs` that also reads the text outputs."""
-
-    started = [None]  # start [s] of the step whose outputs `read` gets next
-
-    def stepped(t: float, h: float) -> None:
-        if component.text_inputs:
-            component._send_text()
-        do_step(t, h)
-        started[0] = t
-
-    def read():
-        outputs = get_outputs()
-        if component.text_outputs:
-            component._read_text()
-        if started[0] is not None and component.text_listener is not None:
-            component.text_listener(started[0])  # a recording (`cosim.record.text_signals`)
-        started[0] = None
-        return outputs
-
-    return {"do_step": stepped, "get_outputs": read}
-
-
 def _needed_at_run_time(member: str) -> bool:
     """Whether an instance's directory gets this archive member: all but the FMU's C sources and its
     documentation, which the FMI standard gives the model no use of at run time (its own files are
@@ -1186,131 +677,3 @@ def _fmi2_logger():
             component._log(status, category, message)
 
     return fmi2CallbackLoggerTYPE(dispatch)
-
-
-def _finite_check_lines(finite: list[int], nan_allowed: list[int]) -> list[str]:
-    """Source lines calling `nonfinite()` when an output at a `finite` slot is NaN or infinite, or
-    one at a `nan_allowed` slot is infinite. x - x is 0.0 for every finite x and NaN otherwise, so
-    one comparison covers a whole sum of such differences."""
-    lines = []
-    if len(finite) > 10:  # one NumPy dot product beats many element reads
-        if finite == list(range(len(finite))) and not nan_allowed:
-            lines.append("    if obn.dot(zeros) != 0.0: nonfinite()")
-        else:
-            lines.append(f"    if obn[{finite!r}].dot(zeros[:{len(finite)}]) != 0.0: nonfinite()")
-    elif finite:
-        terms = " + ".join(f"((a{slot} := ob[{slot}]) - a{slot})" for slot in finite)
-        lines.append(f"    if {terms} != 0.0: nonfinite()")
-    lines += [f"    if abs(ob[{slot}]) == inf: nonfinite()" for slot in nan_allowed]
-    return lines
-
-
-def _copy_lines(direction: str, group: int, kind: str, slots: list[int], scales: list[float]) -> list[str]:
-    """Source lines copying one type group between a component buffer and its FMI value array."""
-    values, array = f"v{direction}{group}", f"vn{direction}{group}"
-    if len(slots) > 8:  # one NumPy copy beats many element copies
-        scaled = "" if all(scale == 1.0 for scale in scales) else f" * k{direction}{group}"
-        if direction == "Get":
-            return [f"    obn[s{direction}{group}] = {array}{scaled}"]
-        staged = f"ibn[s{direction}{group}]{scaled}"
-        convert = {"real": staged, "integer": f"np.rint({staged})", "boolean": f"{staged} != 0.0"}[kind]
-        return [f"    {array}[:] = {convert}"]
-    lines = []
-    for position, (slot, scale) in enumerate(zip(slots, scales, strict=True)):
-        factor = "" if scale == 1.0 else f" * {scale!r}"
-        if direction == "Get":
-            lines.append(f"    ob[{slot}] = {values}[{position}]{factor}")
-        else:
-            convert = {"real": "{}", "integer": "int(round({}))", "boolean": "{} != 0.0"}[kind]
-            lines.append(f"    {values}[{position}] = " + convert.format(f"ib[{slot}]{factor}"))
-    return lines
-
-
-def _array_shape(variable, description) -> tuple[int, ...] | None:
-    """The shape of an FMI 3.0 array variable: each dimension's start, or the start of the
-    structural parameter that sizes it (a tunable one too: the ports keep the size the FMU starts
-    with, which `FmuComponent.setup` holds it to); None when a dimension's size is unknown."""
-    by_reference = {v.valueReference: v for v in description.modelVariables}
-    shape = []
-    for dimension in variable.dimensions:
-        size = dimension.start
-        if size is None:
-            parameter = by_reference.get(dimension.valueReference)
-            if parameter is None or parameter.start in (None, ""):
-                return None
-            size = parameter.start
-        shape.append(int(size))
-    return tuple(shape)
-
-
-def _start_value(start: object, fmi_type: str, what: str) -> float:
-    """A variable's start attribute (of transfer type `fmi_type`) as a float (NaN when absent); a
-    64-bit integer start a float64 cannot hold is a `CosimError` naming `what`."""
-    kind = KINDS[fmi_type]
-    if start is None or start == "":
-        return float("nan") if kind == "real" else 0.0
-    text = str(start).strip().split()[0]
-    if kind == "boolean":
-        return 1.0 if text.lower() in ("true", "1") else 0.0
-    if fmi_type in WIDE:
-        try:
-            return exact_as_float(int(text), fmi_type, what)
-        except ValueError:
-            pass
-    try:
-        return float(text)
-    except ValueError:
-        return float("nan")
-
-
-def _variable_defaults() -> dict[str, object]:
-    """fmpy's `ModelVariable` fields and their defaults."""
-    import attr
-
-    return {
-        a.name: a.default.factory() if isinstance(a.default, attr.Factory) else a.default
-        for a in attr.fields(ModelVariable)
-    }
-
-
-class _KeptVariable(ModelVariable):
-    """fmpy's `ModelVariable` as a kept description has it: only the fields that differ from the
-    defaults are in the instance (a `__dict__`; the defaults are class attributes, which shadow
-    fmpy's slots), so unpickling one is a dict update instead of fmpy's forty-odd slot assignments
-    (a 2000-variable description: ~3 ms instead of ~13 ms). Read-only like every parsed description
-    here: the list defaults are shared."""
-
-    def __getstate__(self) -> dict:
-        return dict(self.__dict__)
-
-    def __setstate__(self, state: dict) -> None:
-        self.__dict__.update(state)
-
-
-for _name, _default in _variable_defaults().items():
-    setattr(_KeptVariable, _name, _default)
-
-
-def _new_kept_variable() -> _KeptVariable:
-    """An empty `_KeptVariable` (unpickling: its state follows)."""
-    return object.__new__(_KeptVariable)
-
-
-def _kept_pickler(stream, protocol: int):
-    """A pickler that writes a description's `ModelVariable`s as `_KeptVariable`s."""
-    import pickle
-
-    defaults = _variable_defaults()
-
-    class Pickler(pickle.Pickler):
-        def reducer_override(self, obj):
-            if type(obj) is not ModelVariable:
-                return NotImplemented
-            state = {}
-            for name, default in defaults.items():
-                value = getattr(obj, name)
-                if value is not default and (type(value) is not type(default) or value != default):
-                    state[name] = value
-            return _new_kept_variable, (), state
-
-    return Pickler(stream, protocol=protocol)

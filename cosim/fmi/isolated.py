@@ -452,7 +452,7 @@ class IsolatedFmuComponent(Component):
         """Raise the `CosimError` for a failed exchange; a dead or hung child is ended first."""
         call = self._call_name(self._call.value, what)
         if what == "unpack" and call.endswith("(between FMI calls)"):
-            call = self._call_name(CALL_UNPACK, what)  # a child too slow to say it began is unpacking all the same
+            call = self._call_name(CALL_UNPACK, what)  # a child too slow to record the call is unpacking
         when = f" at t = {self._time:.9g} s" if self._time is not None else ""
         model = f"FMU '{self.name}' (model {self.model_description.modelName}"
         child = self._child

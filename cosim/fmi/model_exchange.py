@@ -112,7 +112,7 @@ class ModelExchangeComponent(FmuComponent):
         # FMI 1.0 has no attribute for it: fmiCompletedIntegratorStep is called after every step.
         needs = description.modelExchange.needsCompletedIntegratorStep or self.fmi_version == 1
         self._needs_completed_step = bool(needs)
-        variables = [self._variables[p.name][0] for p in self.inputs]
+        variables = [self._variables[p.name].variable for p in self.inputs]
         self._discrete_inputs = np.array(
             [
                 i

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cosim.core.component import Component
-from cosim.core.master import System
+from cosim.core.system import System
 from cosim.errors import CosimError
 from cosim.navigation.planner import PlannerComponent, Replanning
 from cosim.scenario.compose import describe_system

@@ -46,7 +46,8 @@ from pathlib import Path
 
 from cosim import release_collector
 from cosim.core import interrupt
-from cosim.core.master import NS_PER_S, Master
+from cosim.core.master import Master
+from cosim.core.timebase import NS_PER_S
 from cosim.errors import PATH_LIMIT, CosimError, shorten
 from cosim.fmi import exit_guard
 from cosim.navigation.build import BuiltRun, build_run

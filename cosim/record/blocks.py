@@ -24,7 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from cosim.core.master import NS_PER_S, due_from
+from cosim.core.timebase import NS_PER_S, due_from
 from cosim.record.rosmsg import twist_cdr
 from cosim.record.steps import SignalEntry, StepRecording
 

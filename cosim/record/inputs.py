@@ -16,7 +16,7 @@ METADATA_NAME = "unconnected_inputs"
 
 def unconnected_inputs(system) -> dict[str, dict[str, object]]:
     """Component name -> {input port -> the value it keeps} of every input (numeric and text) that
-    no connection of `system` (a `cosim.core.master.System`) feeds, in the components' order."""
+    no connection of `system` (a `cosim.core.system.System`) feeds, in the components' order."""
     fed = {connection.target for connection in (*system.connections, *system.text_connections)}
     kept: dict[str, dict[str, object]] = {}
     for name, component in system.components.items():

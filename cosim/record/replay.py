@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from cosim.core.master import due_from
+from cosim.core.timebase import due_from
 from cosim.record.blocks import BlockRecording
 
 

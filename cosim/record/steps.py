@@ -28,7 +28,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from cosim.core.master import NS_PER_S
+from cosim.core.timebase import NS_PER_S
 from cosim.world.shapes import moves
 
 

@@ -26,7 +26,8 @@ from typing import NamedTuple
 import numpy as np
 
 from cosim.core import interrupt
-from cosim.core.master import COMPILED_MIN_STEPS, NS_PER_S, Master, due_from
+from cosim.core.master import COMPILED_MIN_STEPS, Master
+from cosim.core.timebase import NS_PER_S, due_from
 from cosim.errors import PATH_LIMIT, CosimError, SimulationEnded, shorten
 from cosim.record.logfile import claim_default_log, claim_log, default_log_path, navcosim_version
 from cosim.record.text_signals import TextRecording

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from cosim.core.component import closest_names
-from cosim.core.master import find_algebraic_loop
+from cosim.core.loops import find_algebraic_loop
 from cosim.errors import WHERE_LIMIT, CosimError, shorten, shorten_words
 from cosim.scenario.description import (
     TEMPLATE,
@@ -588,7 +588,7 @@ class _Composer:
 class _FmuInterface:
     """What describing a system reads of an FMU component: its ports through a port map."""
 
-    model_description: object  # fmpy's, shared and read-only (`cosim.fmi.component`)
+    model_description: object  # fmpy's, shared and read-only (`cosim.fmi.description`)
     fmi_version: int
     inputs: tuple[str, ...]
     outputs: tuple[str, ...]
@@ -611,7 +611,7 @@ _INTERFACES_KEPT = 32
 def _fmu_interface(path: Path, name: str, port_map: dict, max_size: int) -> _FmuInterface:
     """The interface of `FmuComponent(path, name, port_map=port_map, max_unpacked_size=max_size)`;
     `CosimError` as it raises (never remembered)."""
-    from cosim.fmi.component import fmu_layout
+    from cosim.fmi.layout import fmu_layout
 
     try:
         status = Path(path).stat()

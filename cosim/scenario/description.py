@@ -2,7 +2,7 @@
 
 `cosim.scenario.compose.describe_system(scenario)` makes a `SystemDescription` from a scenario
 (the navigation template plus the scenario's own components and connections), checked as a whole;
-`cosim.navigation.build` turns it into a running `cosim.core.master.System`; `cosim system` prints
+`cosim.navigation.build` turns it into a running `cosim.core.system.System`; `cosim system` prints
 and draws it. Nothing here is specific to a robot: the template's roles are just names.
 """
 

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from cosim.core.loops import DEFAULT_MAX_ITERATIONS, DEFAULT_TOLERANCE
-from cosim.core.master import LOOP_HANDLING
+from cosim.core.system import LOOP_HANDLING
 from cosim.errors import PATH_LIMIT, CosimError, wrong_file_message
 from cosim.fmi.builtin import known_names
 from cosim.fmi.solvers import SOLVERS
@@ -92,7 +92,7 @@ class PortMapping:
     """Where a role port lives in the FMU: its variable name and a scale.
 
     The scale multiplies along the data flow: FMU input = scale * port value, port output = scale *
-    FMU output, FMU parameter = scale * given value (`cosim.fmi.component`).
+    FMU output, FMU parameter = scale * given value (`cosim.fmi.layout`).
     """
 
     variable: str
@@ -210,7 +210,7 @@ class Scenario:
     overrides: tuple[str, ...] = field(default=())
     topics: dict[str, str] = field(default_factory=dict)  # [output.topics]: "/odom" -> name in the log
     connections: tuple[ConnectionSpec, ...] = field(default=())
-    algebraic_loops: str = "delay"  # "delay" | "iterate" | "error": see `cosim.core.master.System.loops`
+    algebraic_loops: str = "delay"  # "delay" | "iterate" | "error": see `cosim.core.system.System.loops`
     loop_tolerance: float = DEFAULT_TOLERANCE  # relative, of "iterate": see `cosim.core.loops`
     loop_max_iterations: int = DEFAULT_MAX_ITERATIONS  # of "iterate" per macro step
     fmi_version: int = 2  # which build of the project FMUs the roles use (2 or 3)

@@ -64,7 +64,7 @@ def has_start(variable) -> bool:
 
 
 def unstarted_inputs(layout) -> tuple[str, ...]:
-    """The input ports (numbers and text) of an FMU's layout (`cosim.fmi.component.fmu_layout`)
+    """The input ports (numbers and text) of an FMU's layout (`cosim.fmi.layout.fmu_layout`)
     whose variable has no start value."""
     variables = {variable.name: variable for variable in layout.model_description.modelVariables}
     return tuple(

@@ -710,7 +710,7 @@ def _where(path: tuple[str, ...]) -> str:
 def _check_starts(ssp: SspSystem, system) -> None:
     """An input that no connection feeds keeps its start value: one without (neither in the FMU nor
     bound by the SSP) is a `CosimError` naming it."""
-    from cosim.fmi.component import fmu_layout
+    from cosim.fmi.layout import fmu_layout
     from cosim.scenario.params import unstarted_inputs, unstarted_problem
 
     fed = {connection.target for connection in (*system.connections, *system.text_connections)}
@@ -738,7 +738,7 @@ def build_system(
     Input start values from parameter bindings are staged in the components' input buffers, which
     `Master.initialize` sends before initialising each FMU (connected inputs are then overwritten).
     """
-    from cosim.core.master import System
+    from cosim.core.system import System
 
     system = System(macro_step, master)
     parameters: dict[str, dict[str, float]] = {}

@@ -36,7 +36,8 @@ from pathlib import Path
 
 from cosim.core import interrupt
 from cosim.core.loops import DEFAULT_MAX_ITERATIONS, DEFAULT_TOLERANCE
-from cosim.core.master import LOOP_HANDLING, MODES, Master
+from cosim.core.master import Master
+from cosim.core.system import LOOP_HANDLING, MODES
 from cosim.errors import PATH_LIMIT, CosimError, shorten
 from cosim.record.system_run import SystemRun, close_quietly, open_recorder, writing_failed
 from cosim.scenario.limits import MAX_STEPS, MAX_TIME, MIN_MACRO_STEP

@@ -42,7 +42,9 @@ import numpy as np
 
 from cosim.core import interrupt
 from cosim.core.component import closest_names
-from cosim.core.master import NS_PER_S, Master, System, seconds_to_ns
+from cosim.core.master import Master
+from cosim.core.system import System
+from cosim.core.timebase import NS_PER_S, seconds_to_ns
 from cosim.errors import CosimError
 from cosim.record.output import atomic_output, checked_output
 from cosim.record.system_run import SystemRun, open_recorder
@@ -142,8 +144,8 @@ def prepare(
     """Read the FMU at `path` and check the options against it; `CosimError` (one line) otherwise.
     None takes the default (module docstring); `interface` None: co-simulation when the FMU has it.
     `start_values`: variable name -> value, or its text (`parse_start_values`)."""
-    from cosim.fmi.component import fmu_layout
     from cosim.fmi.inspect import read_description
+    from cosim.fmi.layout import fmu_layout
 
     path = Path(path)
     if not path.is_file():
@@ -353,7 +355,7 @@ def simulate(
 
 
 def _output_ports(described: ComponentDescription):
-    from cosim.fmi.component import fmu_layout
+    from cosim.fmi.layout import fmu_layout
 
     return fmu_layout(described.fmu, described.name).outputs
 

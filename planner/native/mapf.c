@@ -2,9 +2,11 @@
  *
  * First solution: LaCAM (Okumura, AAAI 2023), a depth-first search over configurations (one vertex
  * per agent) whose successors PIBT (Okumura et al., AIJ 2022) generates under constraints that a
- * lazily grown tree adds agent by agent, so every successor is eventually tried: complete. It shares
- * the time with prioritized planning (mapf_lns.h), which finds a first solution where PIBT's greedy
- * steps need a deep search (agents resting on goals in the dead ends of a maze).
+ * lazily grown tree adds agent by agent, so every successor is eventually tried: complete. PIBT
+ * swaps two agents that meet head-on at the mouth of a dead end (below). LaCAM shares the time with
+ * prioritized planning with eviction (mapf_lns.h), which finds a first solution where PIBT's greedy
+ * steps need a deep search (agents resting on goals in the dead ends of a maze, agents that must
+ * pass each other in the one-cell aisles of a warehouse).
  * Then, until the time limit, two improvers share the best solution (its sum of costs bounds both):
  * - LaCAM* (Okumura, IJCAI 2023): configurations met again link the search nodes, costs g are
  *   rewired along the links (Dijkstra-like), nodes with g + h >= the best sum of costs are pruned;
@@ -21,8 +23,9 @@
  * Memory: the distance tables (4 bytes per agent and vertex) and everything the search keeps (per
  * node its configuration, the agents' PIBT priorities and order: 12 bytes per agent; constraints,
  * successor lists, the hash table, the open stack) are charged to a byte budget. When it is spent,
- * no node is added: before a solution the solver stops (out of memory), after one LaCAM* only
- * revisits known nodes and can no longer prove optimality.
+ * no node is added: before a solution prioritized planning goes on alone (its paths are not
+ * charged; without its solution the solver reports the budget), after one LaCAM* only revisits known
+ * nodes and can no longer prove optimality.
  */
 #define _POSIX_C_SOURCE 199309L
 #include <limits.h>
@@ -181,8 +184,11 @@ static int grow_nodes(Mapf *m) {
     if (m->n_nodes + 1 < m->cap_nodes) return 0;
     int cap = m->cap_nodes ? 2 * m->cap_nodes : 16;
     size_t N = (size_t)m->N;
-    double more = (double)(cap - m->cap_nodes) * (double)(sizeof(Node) + 3 * N * sizeof(int));
-    if (m->used + more > m->budget) { m->truncated = 1; return -1; }
+    double per_node = (double)(sizeof(Node) + 3 * N * sizeof(int));
+    double room = (m->budget - m->used) / per_node;  /* nodes the budget still pays for */
+    if (cap - m->cap_nodes > room) cap = m->cap_nodes + (int)room;  /* the last growth: what is left */
+    if (cap <= m->n_nodes + 1) { m->truncated = 1; return -1; }
+    double more = (double)(cap - m->cap_nodes) * per_node;
     Node *nodes = realloc(m->nodes, (size_t)cap * sizeof(Node));
     if (nodes) m->nodes = nodes;
     int *cfg = realloc(m->cfg, (size_t)cap * N * sizeof(int));
@@ -223,10 +229,73 @@ static int new_node(Mapf *m, int parent, long long g) {
     return id;
 }
 
-/* PIBT step of agent i (current config q, priority order decides who calls first). */
-static int pibt(Mapf *m, const int *q, const int *dist_base, int i, int j) {
+/* -- PIBT with swaps ------------------------------------------------------------------------------
+ * Plain PIBT cannot pass two agents heading in opposite directions through a corridor: the one with
+ * priority pushes the other back one step at a time, for ever. The swap (Okumura 2024, "Engineering
+ * LaCAM*") detects this and lets the agents pass at the corridor's nearest branching: the agent with
+ * priority walks backwards and pulls the other one after it, until it can step aside.
+ * A corridor here is a chain of vertices with one way on; dead-end cells on which an agent rests at
+ * its goal do not count as a way on (that agent need not move). */
+
+/* The way on from v (coming from `back`): the one other usable neighbour, -1 if none, -2 if two or
+ * more (a branching, where two agents can pass each other). */
+static int way_on(const Mapf *m, int v, int back) {
+    int on = -1, ways = 0;
+    for (int k = 0; k < 4; k++) {
+        int u = m->adj[4 * v + k];
+        if (u < 0 || u == back) continue;
+        int degree = 0;
+        for (int e = 0; e < 4; e++) degree += m->adj[4 * u + e] >= 0;
+        int a = m->occ_now[u];
+        if (degree == 1 && a >= 0 && m->goal[a] == u) continue;
+        on = u;
+        ways++;
+    }
+    return ways >= 2 ? -2 : on;
+}
+
+/* Would `pusher` (at vp) pushing `puller` (at vq) ahead of it drive it into a dead end it wants to
+ * come back out of? The push is followed along the corridor (one way on); a branching lets the puller
+ * step aside, and PIBT resolves pushes through corridors open at both ends. */
+static int swap_needed(const Mapf *m, int puller, int vp, int vq) {
+    const int *dq = m->dist + (size_t)puller * m->V;
+    if (dq[vp] >= dq[vq]) return 0;  /* the puller does not want to go where the pusher is */
+    for (int steps = 0; steps < m->V; steps++) {
+        int on = way_on(m, vq, vp);
+        if (on == -2) return 0;
+        if (on == -1) return 1;
+        vp = vq;
+        vq = on;
+    }
+    return 0;
+}
+
+/* Is there a branching behind vq (walking away from vp) where the two agents can pass? */
+static int swap_possible(const Mapf *m, int vp, int vq) {
+    int origin = vp;
+    for (int steps = 0; vq != origin && steps < m->V; steps++) {
+        int on = way_on(m, vq, vp);
+        if (on == -2) return 1;
+        if (on == -1) return 0;
+        vp = vq;
+        vq = on;
+    }
+    return 0;
+}
+
+/* The agent that agent i should swap with (-1 if none): the one on its best next vertex, if pushing
+ * it on would drive it into a dead end that it wants to leave past i. */
+static int swap_partner(const Mapf *m, const int *q, int i, int best) {
+    int here = q[i], k = m->occ_now[best];
+    if (k >= 0 && k != i && m->nxt[k] < 0 && swap_needed(m, k, here, best) && swap_possible(m, best, here))
+        return k;
+    return -1;
+}
+
+/* PIBT step of agent i (current config q; j the agent that pushed i, -1 if none). */
+static int pibt(Mapf *m, const int *q, int i, int j) {
     int cand[5], n = 0, here = q[i];
-    const int *d = dist_base + (size_t)i * m->V;
+    const int *d = m->dist + (size_t)i * m->V;
     for (int k = 0; k < 4; k++) if (m->adj[4 * here + k] >= 0) cand[n++] = m->adj[4 * here + k];
     cand[n++] = here;
     /* shuffle, then stable insertion sort by (distance, occupied now): random ties */
@@ -236,6 +305,9 @@ static int pibt(Mapf *m, const int *q, const int *dist_base, int i, int j) {
         while (b >= 0 && 2 * d[cand[b]] + (m->occ_now[cand[b]] >= 0) > key) { cand[b + 1] = cand[b]; b--; }
         cand[b + 1] = v;
     }
+    int partner = swap_partner(m, q, i, cand[0]);
+    if (partner >= 0)  /* walk backwards: the farthest vertex first */
+        for (int a = 0, b = n - 1; a < b; a++, b--) { int t = cand[a]; cand[a] = cand[b]; cand[b] = t; }
     for (int a = 0; a < n; a++) {
         int u = cand[a];
         if (m->occ_next[u] >= 0) continue;
@@ -244,7 +316,12 @@ static int pibt(Mapf *m, const int *q, const int *dist_base, int i, int j) {
         if (k >= 0 && k != i && m->nxt[k] == here) continue;  /* swap with a decided agent */
         m->nxt[i] = u;
         m->occ_next[u] = i;
-        if (k >= 0 && k != i && m->nxt[k] < 0 && !pibt(m, q, dist_base, k, i)) continue;
+        if (k >= 0 && k != i && m->nxt[k] < 0 && !pibt(m, q, k, i)) continue;
+        /* the partner follows into the vertex i leaves */
+        if (a == 0 && partner >= 0 && m->nxt[partner] < 0 && m->occ_next[here] < 0) {
+            m->nxt[partner] = here;
+            m->occ_next[here] = partner;
+        }
         return 1;
     }
     m->nxt[i] = here;
@@ -267,7 +344,7 @@ static int generate(Mapf *m, int s, int c, int *out) {
     }
     for (int r = 0; ok && r < N; r++) {
         int i = order[r];
-        if (m->nxt[i] < 0) pibt(m, q, m->dist, i, -1);
+        if (m->nxt[i] < 0) pibt(m, q, i, -1);
     }
     /* full check: a fallback "stay" may land on a vertex a constraint took */
     if (ok) {
@@ -412,21 +489,24 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
     find(m, start, &slot);
     m->table[slot] = 0;
     if (push(m, &m->open, 0) < 0) return;
-    /* LaCAM in slices and whole attempts of prioritized planning, each kept to half the time */
+    /* LaCAM and prioritized planning in slices, each kept to half the time while both can go on */
     int outcome = LACAM_FOUND, planned = 0;
     double lacam_time = 0.0, planning_time = 0.0;
     if (is_goal(m, start)) m->goal_node = 0;
     while (m->goal_node < 0 && !planned && now() < deadline) {
         double began = now();
-        if (lacam_time <= planning_time) {
+        if (lacam_time < INFINITY && lacam_time <= planning_time) {
             outcome = lacam(m, began + FIRST_SLICE < deadline ? began + FIRST_SLICE : deadline, 1);
             lacam_time += now() - began;
-            if (outcome != LACAM_DEADLINE) break;
-        } else {
-            int done = lns_prioritized(&m->lns, deadline);
+            if (outcome == LACAM_FOUND || (outcome == LACAM_EXHAUSTED && !m->truncated)) break;
+            if (outcome != LACAM_DEADLINE) lacam_time = INFINITY;  /* budget spent: planning alone */
+        } else if (planning_time < INFINITY) {
+            int done = lns_prioritized(&m->lns, began + FIRST_SLICE, deadline);
             planning_time += now() - began;
             planned = done == 1;
             if (done == -1) planning_time = INFINITY;  /* out of memory: LaCAM alone from here */
+        } else {
+            break;  /* neither can go on */
         }
     }
     if (m->goal_node < 0 && !planned) {

@@ -22,7 +22,7 @@
 
 typedef struct { int t, agent; } Visit;
 typedef struct { Visit *a; int n, cap; } Visits;
-typedef struct { int v, t, parent; } StNode;
+typedef struct { int v, t, parent, f, h; } StNode;  /* h: goal distance; f: see st_before */
 
 typedef struct {
     int V, N;
@@ -36,7 +36,8 @@ typedef struct {
     uint64_t rng;
     double weight[LNS_RULES];
     int *hood, n_hood; char *in_hood, *tabu; int n_tabu;
-    int *order;                     /* prioritized planning's agent order */
+    int *order;                     /* prioritized planning: the queue of agents still to plan (ring) */
+    int queue_head, queue_n, queue_ready;
     int **saved_path, *saved_cost;
     int *intersections, n_intersections;
     int *bfs_queue; int *bfs_stamp, bfs_gen;
@@ -289,13 +290,9 @@ static int st_insert(Lns *l, long long key) {
 
 /* Heap order: f = max(t + goal distance, settle) ascending (consistent: the agent cannot rest on
  * its goal before settle), then later t first (deeper nodes: fewer ties re-expanded). */
-static int st_before(const Lns *l, int agent, int a, int b) {
+static int st_before(const Lns *l, int a, int b) {
     const StNode *x = &l->st[a], *y = &l->st[b];
-    const int *d = l->dist + (size_t)agent * l->V;
-    int fx = x->t + d[x->v], fy = y->t + d[y->v];
-    if (fx < l->settle) fx = l->settle;
-    if (fy < l->settle) fy = l->settle;
-    return fx < fy || (fx == fy && (x->t > y->t || (x->t == y->t && d[x->v] < d[y->v])));
+    return x->f < y->f || (x->f == y->f && (x->t > y->t || (x->t == y->t && x->h < y->h)));
 }
 
 static int st_push(Lns *l, int agent, int v, int t, int parent) {
@@ -313,21 +310,23 @@ static int st_push(Lns *l, int agent, int v, int t, int parent) {
     }
     int id = l->st_n;
     if (st_insert(l, st_key(l, v, t)) < 0) return -1;
-    l->st[id].v = v; l->st[id].t = t; l->st[id].parent = parent;
+    int h = l->dist[(size_t)agent * l->V + v];
+    l->st[id].v = v; l->st[id].t = t; l->st[id].parent = parent; l->st[id].h = h;
+    l->st[id].f = t + h < l->settle ? l->settle : t + h;
     l->st_n++;
     int k = l->heap_n++;
-    while (k > 0 && st_before(l, agent, id, l->heap[(k - 1) / 2])) { l->heap[k] = l->heap[(k - 1) / 2]; k = (k - 1) / 2; }
+    while (k > 0 && st_before(l, id, l->heap[(k - 1) / 2])) { l->heap[k] = l->heap[(k - 1) / 2]; k = (k - 1) / 2; }
     l->heap[k] = id;
     return 0;
 }
 
-static int st_pop(Lns *l, int agent) {
+static int st_pop(Lns *l) {
     int top = l->heap[0], last = l->heap[--l->heap_n], k = 0;
     for (;;) {
         int child = 2 * k + 1;
         if (child >= l->heap_n) break;
-        if (child + 1 < l->heap_n && st_before(l, agent, l->heap[child + 1], l->heap[child])) child++;
-        if (!st_before(l, agent, l->heap[child], last)) break;
+        if (child + 1 < l->heap_n && st_before(l, l->heap[child + 1], l->heap[child])) child++;
+        if (!st_before(l, l->heap[child], last)) break;
         l->heap[k] = l->heap[child];
         k = child;
     }
@@ -347,7 +346,7 @@ static int st_astar(Lns *l, int agent, int start, double deadline) {
     if (st_push(l, agent, start, 0, -1) < 0) return -1;
     for (int expanded = 0; l->heap_n > 0 && expanded < l->expansion_cap; expanded++) {
         if ((expanded & 4095) == 4095 && clock_now() > deadline) return 2;
-        int id = st_pop(l, agent);
+        int id = st_pop(l);
         StNode node = l->st[id];
         if (node.v == goal && node.t >= settle) {
             int *out = malloc((size_t)(node.t + 1) * sizeof(int));
@@ -362,11 +361,11 @@ static int st_astar(Lns *l, int agent, int start, double deadline) {
         for (int k = 0; k <= 4; k++) {
             int u = k < 4 ? l->adj[4 * node.v + k] : node.v;
             if (u < 0 || l->rest_from[u] <= t || l->dist[(size_t)agent * l->V + u] < 0) continue;
-            if (lns_occupant(l, u, t) >= 0) continue;
-            int other = lns_occupant(l, u, node.t);            /* swap: other goes u -> v */
-            if (other >= 0 && u != node.v && lns_at(l, other, t) == node.v) continue;
             long long key = st_key(l, u, t);
-            if (st_seen(l, key)) continue;
+            if (st_seen(l, key)) continue;  /* first: this search's table is small and warm */
+            if (lns_occupant(l, u, t) >= 0) continue;
+            int other = u == node.v ? -1 : lns_occupant(l, u, node.t);  /* swap: other goes u -> v */
+            if (other >= 0 && lns_at(l, other, t) == node.v) continue;
             if (st_push(l, agent, u, t, id) < 0) return -1;
         }
     }
@@ -494,24 +493,88 @@ static int lns_iterate(Lns *l, double deadline) {
     return status == -1 || status == 2 ? status : improved;
 }
 
-/* One attempt of prioritized planning in l->order: 1 every agent has a path (the solution is in the
- * tables), 0 an agent found none (it goes first next time), 2 deadline, -1 out of memory. */
-static int lns_prioritized(Lns *l, double deadline) {
-    for (int i = 0; i < l->N; i++) {
-        if (l->path[i]) lns_vacate(l, i);
-        free(l->path[i]);
-        l->path[i] = NULL;
-        l->cost[i] = 0;
-    }
-    for (int k = 0; k < l->N; k++) {
-        int i = l->order[k], status = st_astar(l, i, l->start[i], deadline);
-        if (status == 1) {
-            memmove(l->order + 1, l->order, (size_t)k * sizeof(int));
-            l->order[0] = i;
-            return 0;
+/* Prioritized planning with eviction: the agents are planned one after the other from a queue
+ * (random order at first), each by space-time A* against the ones planned. An agent that finds no
+ * path takes out the planned agents in its way and is planned again at once; they go to the back of
+ * the queue. In its way: the agents on its start's cells in the first steps (it was walled in), the
+ * ones resting on a shortest path of it, and the ones passing its goal after it could arrive. */
+
+static void queue_push(Lns *l, int agent) { l->order[(l->queue_head + l->queue_n++) % l->N] = agent; }
+
+static void queue_push_front(Lns *l, int agent) {
+    l->queue_head = (l->queue_head + l->N - 1) % l->N;
+    l->order[l->queue_head] = agent;
+    l->queue_n++;
+}
+
+static void evict(Lns *l, int agent) {
+    if (agent < 0 || l->in_hood[agent] || !l->path[agent]) return;
+    l->in_hood[agent] = 1;  /* marks the agents evicted for one failure */
+    l->hood[l->n_hood++] = agent;
+    lns_vacate(l, agent);
+    free(l->path[agent]);
+    l->path[agent] = NULL;
+    l->cost[agent] = 0;
+}
+
+static void evict_blockers(Lns *l, int agent) {
+    const int *d = l->dist + (size_t)agent * l->V;
+    int start = l->start[agent], goal = l->goal[agent], v = start;
+    l->n_hood = 0;
+    for (int t = 0; t <= 2; t++) {
+        evict(l, lns_occupant(l, start, t));
+        evict(l, resting_at(l, start, t));
+        for (int k = 0; k < 4; k++) {
+            int u = l->adj[4 * start + k];
+            if (u >= 0) { evict(l, lns_occupant(l, u, t)); evict(l, resting_at(l, u, t)); }
         }
-        if (status != 0) return status;
-        if (lns_occupy(l, i) < 0) return -1;
+    }
+    while (v != goal) {  /* a shortest path, ties broken at random */
+        int options[4], n = 0;
+        for (int k = 0; k < 4; k++) {
+            int u = l->adj[4 * v + k];
+            if (u >= 0 && d[u] == d[v] - 1) options[n++] = u;
+        }
+        v = options[lns_rnd(l) % (uint64_t)n];
+        evict(l, resting_at(l, v, INT_MAX - 1));
+    }
+    const Visits *list = &l->visits[goal];
+    for (int k = 0; k < list->n; k++) if (list->a[k].t >= d[start]) evict(l, list->a[k].agent);
+    for (int k = l->n_hood - 1; k > 0; k--) {
+        int r = (int)(lns_rnd(l) % (uint64_t)(k + 1)), t = l->hood[k];
+        l->hood[k] = l->hood[r]; l->hood[r] = t;
+    }
+    for (int k = 0; k < l->n_hood; k++) {
+        l->in_hood[l->hood[k]] = 0;
+        queue_push(l, l->hood[k]);
+    }
+    l->n_hood = 0;
+}
+
+/* Plan from the queue until it is empty (1: every agent has a path, the solution is in the tables),
+ * `pause` (2; a later call resumes), or out of memory (-1). A search under way runs until
+ * `deadline`. */
+static int lns_prioritized(Lns *l, double pause, double deadline) {
+    if (!l->queue_ready) {  /* the first call: every agent, in the random order of lns_init */
+        l->queue_n = l->N;
+        l->queue_ready = 1;
+    }
+    while (l->queue_n > 0) {
+        if (clock_now() > pause) return 2;
+        int i = l->order[l->queue_head], cap = l->expansion_cap;
+        l->queue_head = (l->queue_head + 1) % l->N;
+        l->queue_n--;
+        /* a first try on a short leash: a search that long is mostly walled in */
+        l->expansion_cap = cap / 8;
+        int status = st_astar(l, i, l->start[i], deadline);
+        l->expansion_cap = cap;
+        if (status == 1) {
+            evict_blockers(l, i);
+            status = st_astar(l, i, l->start[i], deadline);
+        }
+        if (status == 1) { queue_push(l, i); continue; }  /* still none: to the back of the queue */
+        if (status == 2) { queue_push_front(l, i); return 2; }
+        if (status != 0 || lns_occupy(l, i) < 0) return -1;
     }
     return 1;
 }

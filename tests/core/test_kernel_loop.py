@@ -213,7 +213,8 @@ def test_stepping_through_the_kernel_never_imports_numba():
 
     script = f"""
 import sys
-from cosim.core.master import Master, System
+from cosim.core.master import Master
+from cosim.core.system import System
 from cosim.fmi.component import FmuComponent
 system = System(0.01)
 system.add(FmuComponent({str(fixture_fmu("diffdrive_plain_fmi2"))!r}, "vehicle"))

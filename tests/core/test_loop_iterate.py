@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 from fixtures.conftest_helpers import fixture_fmu
 
-from cosim.core.master import Master, System
+from cosim.core.master import Master
+from cosim.core.system import System
 from cosim.errors import CosimError
 from cosim.fmi.component import FmuComponent
 

@@ -15,7 +15,8 @@ import pytest
 from fixtures.conftest_helpers import fixture_fmu
 
 from cosim.cli import main
-from cosim.core.master import Master, System
+from cosim.core.master import Master
+from cosim.core.system import System
 from cosim.fmi.component import FmuComponent
 from cosim.fmi.isolated import IsolatedFmuComponent
 

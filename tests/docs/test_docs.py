@@ -126,7 +126,7 @@ BLOCKS: dict[tuple[str, str], str] = {
     ),
     (
         "README.md",
-        "cosim/core/ Component interface, System (components, connect",
+        "cosim/core/ Component interface (component.py); the integer",
     ): ("a listing of cosim's stages (tests/test_layout.py checks them)"),
     (
         "docs/logs.md",

@@ -100,10 +100,10 @@ def test_fmi3_component_has_the_fmi2_ports_and_moves_each_array_with_one_call():
     fmi2, fmi3 = _component("VectorFieldHistogram", 2), _component("VectorFieldHistogram", 3)
     for kind in ("inputs", "outputs", "parameters"):
         assert [p.name for p in getattr(fmi2, kind)] == [p.name for p in getattr(fmi3, kind)], kind
-    (kind, slots, references, _, _), *others = fmi3._input_groups  # one call: the Float64 inputs
-    assert not others and kind == "Float64" and len(slots) == 1441
-    assert len(references) == 3  # ranges, angles, target_dir: each array is one value reference
-    assert len(fmi2._input_groups[0][2]) == 1441  # FMI 2.0: one reference per scalar
+    group, *others = fmi3._input_groups  # one call: the Float64 inputs
+    assert not others and group.fmi_type == "Float64" and len(group.slots) == 1441
+    assert len(group.references) == 3  # ranges, angles, target_dir: each array is one value reference
+    assert len(fmi2._input_groups[0].references) == 1441  # FMI 2.0: one reference per scalar
     rng = np.random.default_rng(5)
     angles = np.linspace(-math.pi, math.pi, 720, endpoint=False)
     for k in range(30):
@@ -126,8 +126,8 @@ def test_fmi3_component_sends_an_array_whole_when_restricted():
     pursuit = _component("PurePursuit", 3)
     names = [p.name for p in pursuit.inputs]
     pursuit.restrict_push([names.index("waypoints[3,2]")])
-    kind, slots, references, _, _ = pursuit._input_groups[0]
-    assert len(references) == 1 and len(slots) == 2000
+    group = pursuit._input_groups[0]
+    assert len(group.references) == 1 and len(group.slots) == 2000
     pursuit.input_buffer[[names.index(f"waypoints[{k},1]") for k in (1, 2)]] = [0.0, 4.0]
     pursuit.input_buffer[[names.index(f"waypoints[{k},2]") for k in (1, 2)]] = [0.0, 0.0]
     pursuit.push_inputs()

@@ -1,5 +1,5 @@
 """A project FMU's parsed modelDescription.xml is kept beside it in the FMU build cache
-(`cosim.fmi.component._parsed_description`): read back, it is the parse; any other file version,
+(`cosim.fmi.description._parsed_description`): read back, it is the parse; any other file version,
 or a kept copy that cannot be read, means a fresh parse; nothing is written beside a user's FMU."""
 
 from __future__ import annotations
@@ -12,16 +12,16 @@ import fmpy
 import pytest
 from fmpy.model_description import ModelVariable
 
-from cosim.fmi import component
+from cosim.fmi import description
 from cosim.fmi.builtin import builtin_fmu
 
 FIELDS = ("name", "valueReference", "type", "causality", "variability", "start", "unit", "description")
 
 
-def _summary(description) -> tuple:
-    variables = [tuple(getattr(v, f) for f in FIELDS) for v in description.modelVariables]
-    outputs = [(u.variable.name, [d.name for d in u.dependencies or []]) for u in description.outputs]
-    return description.guid, description.coSimulation.modelIdentifier, variables, outputs
+def _summary(parsed) -> tuple:
+    variables = [tuple(getattr(v, f) for f in FIELDS) for v in parsed.modelVariables]
+    outputs = [(u.variable.name, [d.name for d in u.dependencies or []]) for u in parsed.outputs]
+    return parsed.guid, parsed.coSimulation.modelIdentifier, variables, outputs
 
 
 @pytest.fixture
@@ -35,7 +35,7 @@ def cache(tmp_path: Path, monkeypatch) -> Path:
 
 
 def _parse(path: Path):
-    return component._parsed_description.__wrapped__(str(path.resolve()), *component._file_identity(path))
+    return description._parsed_description.__wrapped__(str(path.resolve()), *description.file_identity(path))
 
 
 def test_the_kept_parse_is_the_parse(cache: Path):
@@ -47,7 +47,7 @@ def test_the_kept_parse_is_the_parse(cache: Path):
     assert again is not first
     assert _summary(again) == _summary(first) == _summary(fmpy.read_model_description(str(fmu)))
     # Every field of every variable, each a fmpy ModelVariable (kept in the compact form).
-    fields = list(component._variable_defaults())
+    fields = list(description._variable_defaults())
     for kept_variable, variable in zip(again.modelVariables, first.modelVariables, strict=True):
         assert isinstance(kept_variable, ModelVariable)
         for name in fields:
@@ -67,7 +67,7 @@ def test_another_file_version_is_parsed_again(cache: Path, monkeypatch):
     os.utime(fmu, ns=(fmu.stat().st_atime_ns, fmu.stat().st_mtime_ns + 1))  # "rebuilt"
     assert _parse(fmu) == "parsed" and len(calls) == 1
     key, _, payload = kept.read_bytes().partition(b"\n")
-    assert key == component._kept_key(str(fmu.resolve()))
+    assert key == description._kept_key(str(fmu.resolve()))
     kept.write_bytes(key + b"\n" + payload[: len(payload) // 2])  # cut short
     assert _parse(fmu) == "parsed" and len(calls) == 2
 

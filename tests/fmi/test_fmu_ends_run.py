@@ -10,7 +10,8 @@ import fmpy
 import pytest
 from fixtures.conftest_helpers import fixture_fmu
 
-from cosim.core.master import Master, System
+from cosim.core.master import Master
+from cosim.core.system import System
 from cosim.errors import CosimError, SimulationEnded
 from cosim.fmi.component import FmuComponent
 from cosim.logs.reader import open_log

@@ -20,7 +20,8 @@ from fmpy.fmi1 import FMU1Slave
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 
-from cosim.core.master import Master, System
+from cosim.core.master import Master
+from cosim.core.system import System
 from cosim.fmi.component import FmuComponent
 from cosim.fmi.isolated import IsolatedFmuComponent
 from cosim.logs.reader import open_log

@@ -23,7 +23,8 @@ from fixtures.build_fixtures import FAULTS
 from fixtures.conftest_helpers import fixture_fmu
 
 from cosim.core.component import State
-from cosim.core.master import Master, System
+from cosim.core.master import Master
+from cosim.core.system import System
 from cosim.errors import CosimError
 from cosim.fmi.builtin import builtin_fmu
 from cosim.fmi.component import FmuComponent

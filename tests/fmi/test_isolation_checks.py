@@ -17,7 +17,8 @@ from fixtures.build_fixtures import FAULTS
 from fixtures.conftest_helpers import fixture_fmu
 from zip_bomb import write_zip_bomb
 
-from cosim.core.master import Master, System
+from cosim.core.master import Master
+from cosim.core.system import System
 from cosim.errors import CosimError
 from cosim.fmi.archive import DEFAULT_MAX_UNPACKED_SIZE, MIB
 from cosim.fmi.builtin import builtin_fmu, documented_nan_variables, known_names

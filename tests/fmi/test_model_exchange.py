@@ -11,7 +11,8 @@ import pytest
 from fixtures.conftest_helpers import fixture_fmu
 from scipy.integrate import solve_ivp
 
-from cosim.core.master import Master, System
+from cosim.core.master import Master
+from cosim.core.system import System
 from cosim.errors import CosimError
 from cosim.fmi.model_exchange import ModelExchangeComponent
 

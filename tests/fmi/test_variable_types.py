@@ -8,7 +8,8 @@ import pytest
 from fixtures.build_fixtures import build_fixture_fmu
 from fixtures.types_fixture import INPUT_STARTS, TYPES
 
-from cosim.core.master import Master, System
+from cosim.core.master import Master
+from cosim.core.system import System
 from cosim.errors import CosimError
 from cosim.fmi.component import FmuComponent
 

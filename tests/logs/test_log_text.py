@@ -21,7 +21,8 @@ def every_type(tmp_path_factory):
 
 
 def _log(fmu, path, second: str, binary: bytes = b"\x00\xff"):
-    from cosim.core.master import Master, System
+    from cosim.core.master import Master
+    from cosim.core.system import System
     from cosim.fmi.component import FmuComponent
     from cosim.record.recorder import Recorder
     from cosim.record.text_signals import TextRecording

@@ -68,6 +68,18 @@ def test_an_agent_passing_another_ones_goal():
     )
 
 
+def test_agents_reorder_in_a_dead_end():
+    """Three agents in a one-cell dead end in the wrong order for their goals: greedy steps (PIBT)
+    deadlock here; all three must come out to the open cells so that the deepest goal's agent goes in
+    first. The solution is valid and costs the exact optimum of the joint-state search."""
+    rows = ["...######", "........."]
+    starts, goals = [(1, 6), (1, 7), (1, 8)], [(1, 7), (1, 3), (1, 5)]
+    result = solve_checked(rows, starts, goals, time_limit=5.0)
+    optimum = optimal_sum_of_costs(grid_of(rows).occupied.tolist(), starts, goals)
+    assert optimum is not None and optimum > result.lower_bound
+    assert result.sum_of_costs == optimum
+
+
 def test_random_instances_on_an_obstacle_grid():
     """Many agents on a 24 x 24 grid with 15 % obstacles: valid paths, and the improvement phase."""
     rng = np.random.default_rng(7)
@@ -121,6 +133,18 @@ def test_memory_budget_is_honoured():
             check(grid.occupied.tolist(), starts, goals, result)
         else:
             assert result.status == "memory limit"
+
+
+def test_planning_goes_on_when_the_search_budget_is_spent():
+    """A budget that pays for the distance tables and a handful of LaCAM's nodes, fewer than the
+    crossing's makespan: LaCAM stops for memory, and prioritized planning (no nodes charged) solves."""
+    grid = grid_of(["." * 30] * 30)
+    starts = [(row, 0) for row in range(30)]
+    goals = [(29 - row, 29) for row in range(30)]
+    tables = 30 * 900 * 4 + 1024 * 4  # distance tables and LaCAM's first hash table, bytes
+    result = solve(grid, starts, goals, time_limit=10.0, memory=tables + 8_000)
+    check(grid.occupied.tolist(), starts, goals, result)
+    assert result.nodes < result.makespan and result.memory <= tables + 8_000
 
 
 def test_time_limit_ends_the_improvement():

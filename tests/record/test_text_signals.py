@@ -91,7 +91,8 @@ def test_a_value_of_the_wrong_kind_is_one_line_naming_the_key(every_type, tmp_pa
 def test_a_text_record_is_written_when_a_value_changes_stamped_as_the_numbers(every_type, tmp_path):
     """An input set between steps: the record at the next step's start t holds it with the outputs
     at t (those before the step), the record one step later the outputs computed from it."""
-    from cosim.core.master import Master, System
+    from cosim.core.master import Master
+    from cosim.core.system import System
     from cosim.fmi.component import FmuComponent
     from cosim.record.recorder import Recorder
     from cosim.record.text_signals import TextRecording

@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from cosim.core.master import Master, System
+from cosim.core.master import Master
+from cosim.core.system import System
 from cosim.errors import CosimError
 from cosim.world.lidar import Lidar
 from cosim.world.shapes import Circle, Polygon, Rectangle

@@ -1,0 +1,83 @@
+"""The copy of a consumer's connected inputs from its producers' outputs, generated per consumer
+(`make_gather`): the Python master loop runs it for every due component on every step.
+
+A generated gather is straight-line code, one statement per value (the connection's arithmetic as
+`cosim.core.fast_loop.transfer_expression` writes it, which the compiled kernel copies), or one NumPy
+copy per kind of link for many values from one producer. For two values from a vehicle it reads:
+
+    def gather():
+        target[0] = source0[0]
+        target[1] = source0[2] * -1.0
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from cosim.core import fast_loop
+from cosim.core.component import Component
+
+if TYPE_CHECKING:
+    from cosim.core.system import Link, System
+
+# Below this many values from one producer, per-value ctypes copies beat one NumPy fancy-index copy.
+_SCALAR_COPY_LIMIT = 4
+
+
+def make_gather(
+    system: System,
+    consumer: Component,
+    producers: set[str] | None = None,
+    delayed: Mapping[str, np.ndarray] | None = None,
+) -> Callable[[], None] | None:
+    """A function copying the consumer's connected inputs from its producers' output buffers.
+
+    Generated as straight-line code (one statement per value, or one NumPy copy for many values
+    from one producer), because it runs for every component on every step. None when the
+    consumer has no connected input (from `producers`, when given). `delayed` maps producers
+    whose values come from a copy of their outputs taken before the step (`System.delayed_links`).
+    """
+    groups: dict[str, list[Link]] = {}
+    for link in system.links().get(consumer.name, ()):
+        if producers is None or link.producer in producers:
+            groups.setdefault(link.producer, []).append(link)
+    if not groups:
+        return None
+    names: dict[str, object] = {"target": consumer.input_cbuffer, "target_array": consumer.input_buffer}
+    lines = ["def gather():"]
+    for number, (producer_name, links) in enumerate(groups.items()):
+        producer = system.components[producer_name]
+        if delayed is not None and producer_name in delayed:
+            names[f"source{number}"] = names[f"source_array{number}"] = delayed[producer_name]
+        else:
+            names[f"source{number}"] = producer.output_cbuffer
+            names[f"source_array{number}"] = producer.output_buffer
+        if len(links) <= _SCALAR_COPY_LIMIT:
+            for link in links:
+                scale, offset = link.connection.scale, link.connection.offset
+                value = fast_loop.transfer_expression(f"source{number}[{link.output}]", scale, offset)
+                lines.append(f"    target[{link.input}] = {value}")
+            continue
+        # One NumPy copy per kind of link, each with exactly the arithmetic of the scalar path (a
+        # plain copy stays a copy: adding 0.0 would turn -0.0 into 0.0).
+        kinds: dict[str, list[Link]] = {"copy": [], "scaled": [], "affine": []}
+        for link in links:
+            c = link.connection
+            kinds["copy" if c.is_plain else "scaled" if c.offset == 0.0 else "affine"].append(link)
+        for kind, chosen in kinds.items():
+            if not chosen:
+                continue
+            key = f"{number}_{kind}"
+            names[f"sources{key}"] = np.array([link.output for link in chosen], dtype=np.intp)
+            names[f"targets{key}"] = np.array([link.input for link in chosen], dtype=np.intp)
+            names[f"scales{key}"] = np.array([link.connection.scale for link in chosen])
+            names[f"offsets{key}"] = np.array([link.connection.offset for link in chosen])
+            value = f"source_array{number}[sources{key}]"
+            if kind != "copy":
+                value += f" * scales{key}" + (f" + offsets{key}" if kind == "affine" else "")
+            lines.append(f"    target_array[targets{key}] = {value}")
+    exec("\n".join(lines), names)  # noqa: S102 - generated from our own templates
+    return names["gather"]

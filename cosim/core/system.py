@@ -1,0 +1,443 @@
+"""A co-simulation system: components, the connections between their ports, the macro step and
+the order in which a master steps and initialises them.
+
+Connections
+-----------
+`System.connect("pure_pursuit.v", "mixer.v_in", scale, offset)` copies `source output * scale +
+offset` into the target input before the target steps (a unit conversion, a sign flip, a bias).
+An input takes at most one connection; unconnected inputs keep their start values (or what the user
+set with `Component.set_inputs`, which sends them).
+
+Ordering (which values a component sees at step k)
+--------------------------------------------------
+An output `P.o` is *direct* when it depends directly on at least one of P's inputs (its entry in
+`P.feedthrough` is non-empty); otherwise it is a *state* output, fixed by P's past alone.
+
+* **Gauss-Seidel** (default). The components are stepped one after the other in an order that is
+  a topological order of the *direct* connections (P before C for every connection P.o -> C.i
+  with P.o direct); components that this leaves unordered keep the order in which they were
+  added to the system. Connections from state outputs put no constraint on the order; they break
+  feedback cycles. At step k a due component C first gathers its inputs: from a producer P
+  earlier in the order, C sees P's outputs after P's most recent step (that is P's step at k if
+  P was due at k); from a producer later in the order, C sees P's outputs as they were before
+  step k (P's step at k has not run yet). Then C steps and its outputs are read.
+  A cycle of direct connections through direct outputs (P.o direct on P.i, P.i fed by a direct
+  output ... back to P.o) is an algebraic loop. With `System(..., loops="delay")` (the default,
+  `[simulation] algebraic_loops`) the connections on it (`System.delayed_links`: both ends among
+  the strongly connected ports) carry the producer's outputs as they were before step k, as in
+  Jacobi mode, so the loop's components step with their inputs from the previous communication
+  point; every other connection keeps the Gauss-Seidel rule. Such a system steps in the Python
+  loop (the compiled kernel is not used), and `Master` says so once on stderr. With
+  `loops="iterate"` each loop (`System.loop_groups`) steps as one block at its place in the order
+  (the graph of components with each loop contracted to one node, sorted as above) and iterates
+  to a fixed point within the macro step, rolling its members back with their FMU state
+  (`cosim.core.loops`; also the Python loop, also said once). With `loops="error"`
+  `System.order()` raises `CosimError` naming the loop and the keys that run it.
+* **Jacobi**. Every due component gathers its inputs first, all from the outputs as they were
+  before step k (after each producer's most recent step before k); then all due components
+  step. The order only fixes the sequence of calls. A loop of direct outputs is allowed (the
+  one-step delay breaks it).
+
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, NamedTuple
+
+from cosim.core.component import Component, Port, closest_names
+from cosim.core.loops import DEFAULT_MAX_ITERATIONS, DEFAULT_TOLERANCE, cyclic_components, find_algebraic_loop
+from cosim.core.port_types import connection_problem
+from cosim.core.timebase import NS_PER_S, seconds_to_ns
+from cosim.errors import CosimError
+
+if TYPE_CHECKING:
+    from fractions import Fraction
+
+MODES = ("gauss-seidel", "jacobi")
+LOOP_HANDLING = ("delay", "iterate", "error")  # `[simulation] algebraic_loops` (`System.loops`)
+
+
+@dataclass(frozen=True)
+class Connection:
+    """`source` output -> `target` input; the input receives `output * scale + offset`."""
+
+    source: str  # "component.port"
+    target: str
+    scale: float = 1.0
+    offset: float = 0.0  # [unit of the target input]
+
+    @property
+    def is_plain(self) -> bool:
+        """True when the value is copied unchanged (scale 1, offset 0)."""
+        return self.scale == 1.0 and self.offset == 0.0
+
+    @property
+    def source_component(self) -> str:
+        return self.source.split(".", 1)[0]
+
+    @property
+    def target_component(self) -> str:
+        return self.target.split(".", 1)[0]
+
+
+def _typed(port: Port) -> str:
+    """A port's type as a connection message names it."""
+    return port.fmi_type or port.type
+
+
+class Link(NamedTuple):
+    """A connection into a component, its ends resolved (`System.links`)."""
+
+    connection: Connection
+    producer: str  # the producing component's name
+    output: int  # index of the producer's output
+    input: int  # index of the consumer's input
+
+
+class LoopGroup(NamedTuple):
+    """An algebraic loop (`System.loop_groups`): its member components, in the order they were added,
+    and the connections on the loop."""
+
+    members: list[str]
+    connections: list[Connection]
+
+
+class System:
+    """Components, connections, the macro step [s] and the master algorithm (`mode`); how an
+    algebraic loop runs (`loops`, and for "iterate" `loop_tolerance`, relative, and
+    `loop_max_iterations`: `cosim.core.loops`)."""
+
+    def __init__(
+        self,
+        macro_step: float | Fraction,
+        mode: str = "gauss-seidel",
+        loops: str = "delay",
+        loop_tolerance: float = DEFAULT_TOLERANCE,
+        loop_max_iterations: int = DEFAULT_MAX_ITERATIONS,
+    ) -> None:
+        self.macro_step_ns = seconds_to_ns(macro_step, "macro step")
+        if self.macro_step_ns <= 0:
+            raise CosimError(f"macro step must be > 0 s, got {macro_step}")
+        if mode not in MODES:
+            raise CosimError(f"master mode '{mode}' is not one of {', '.join(MODES)}")
+        self.mode = mode
+        self.handle_loops(loops, loop_tolerance, loop_max_iterations)
+        self.components: dict[str, Component] = {}
+        self.connections: list[Connection] = []
+        self.text_connections: list[Connection] = []  # String/Binary ones (`System._connect_text`)
+        self._targets: set[str] = set()  # connected inputs: a set, so connecting N inputs is O(N)
+        self._links: tuple[list[Connection], dict[str, list[Link]]] = ([], {})
+
+    def handle_loops(
+        self,
+        loops: str,
+        tolerance: float = DEFAULT_TOLERANCE,
+        max_iterations: int = DEFAULT_MAX_ITERATIONS,
+    ) -> None:
+        """How algebraic loops run: `loops` ("delay", "iterate", "error"), and for "iterate" the
+        relative `tolerance` and the most iterations per macro step (`cosim.core.loops`)."""
+        if loops not in LOOP_HANDLING:
+            raise CosimError(f"algebraic loop handling '{loops}' is not one of {', '.join(LOOP_HANDLING)}")
+        if isinstance(tolerance, bool) or not (
+            isinstance(tolerance, int | float) and math.isfinite(tolerance) and tolerance > 0
+        ):
+            raise CosimError(f"loop_tolerance must be a number > 0, got {tolerance!r}")
+        if isinstance(max_iterations, bool) or not (isinstance(max_iterations, int) and max_iterations >= 1):
+            raise CosimError(f"loop_max_iterations must be a whole number >= 1, got {max_iterations!r}")
+        self.loops = loops
+        self.loop_tolerance = float(tolerance)
+        self.loop_max_iterations = max_iterations
+
+    @property
+    def macro_step(self) -> float:
+        return self.macro_step_ns / NS_PER_S
+
+    def add(self, component: Component) -> Component:
+        if component.name in self.components:
+            raise CosimError(f"component '{component.name}' added twice")
+        self.components[component.name] = component
+        return component
+
+    def component(self, name: str) -> Component:
+        if name not in self.components:
+            raise CosimError(
+                f"no component '{name}'; components: {closest_names(name, self.components) or 'none'}"
+            )
+        return self.components[name]
+
+    def resolve(self, reference: str, direction: str) -> tuple[Component, int]:
+        """'component.port' -> (component, index of the port in its inputs or outputs)."""
+        name, dot, port = reference.partition(".")
+        if not dot or not port:
+            raise CosimError(f"connection end '{reference}' must be 'component.port'")
+        component = self.component(name)
+        ports = component.outputs if direction == "output" else component.inputs
+        index = component.output_index if direction == "output" else component.input_index
+        if port not in index:
+            raise CosimError(
+                f"component '{name}' has no {direction} '{port}'; {direction}s: "
+                f"{closest_names(port, [p.name for p in ports]) or 'none'}"
+            )
+        return component, index[port]
+
+    def connect(self, source: str, target: str, scale: float = 1.0, offset: float = 0.0) -> Connection:
+        """Connect output `source` ("comp.port") to input `target`: input = output * scale + offset."""
+        text = self._connect_text(source, target, scale, offset)
+        if text is not None:
+            return text
+        producer, output = self.resolve(source, "output")
+        consumer, input_ = self.resolve(target, "input")
+        problem = connection_problem(producer.outputs[output], consumer.inputs[input_])
+        if problem is not None:
+            raise CosimError(
+                f"connection {source} ({_typed(producer.outputs[output])}) -> {target} "
+                f"({_typed(consumer.inputs[input_])}) cannot convert: {problem}"
+            )
+        if target in self._targets:
+            raise CosimError(f"input '{target}' is already connected")
+        if not (math.isfinite(scale) and math.isfinite(offset)):
+            raise CosimError(f"connection {source} -> {target}: scale and offset must be finite")
+        connection = Connection(source, target, float(scale), float(offset))
+        self.connections.append(connection)
+        self._targets.add(target)
+        return connection
+
+    def _connect_text(self, source: str, target: str, scale: float, offset: float) -> Connection | None:
+        """A connection of String or Binary ports (`Component.text_port`), which the consumer itself
+        reads before each of its steps (`Component.feed_text`); None when neither end is one."""
+        producer = self.components.get(source.partition(".")[0])
+        consumer = self.components.get(target.partition(".")[0])
+        if producer is None or consumer is None:
+            return None
+        source_type = producer.text_port(source.partition(".")[2], "output")
+        target_type = consumer.text_port(target.partition(".")[2], "input")
+        if source_type is None and target_type is None:
+            return None
+        if source_type != target_type:
+            raise CosimError(
+                f"connection {source} ({source_type or 'a number'}) -> {target} "
+                f"({target_type or 'a number'}) cannot convert: a String or Binary connects only to its own "
+                "type"
+            )
+        if scale != 1.0 or offset != 0.0:
+            raise CosimError(f"connection {source} -> {target}: a {source_type} takes no scale or offset")
+        if target in self._targets:
+            raise CosimError(f"input '{target}' is already connected")
+        consumer.feed_text(target.partition(".")[2], producer, source.partition(".")[2])
+        connection = Connection(source, target)
+        self.text_connections.append(connection)
+        self._targets.add(target)
+        return connection
+
+    def links(self) -> dict[str, list[Link]]:
+        """The connections into each component (by name, in connection order), their ends resolved:
+        (connection, producer name, output index, input index). Resolved once for the connections
+        as they are (`connect` checked both ends, and a component's ports never change); the master
+        reads them a dozen times while ordering and initialising a system of thousands."""
+        resolved_for, incoming = self._links
+        if resolved_for != self.connections:  # a list compare: the same objects, element by element
+            incoming = {}
+            for c in self.connections:
+                source_name, _, output = c.source.partition(".")
+                target_name, _, input_ = c.target.partition(".")
+                source_index = self.components[source_name].output_index[output]
+                target_index = self.components[target_name].input_index[input_]
+                incoming.setdefault(target_name, []).append(Link(c, source_name, source_index, target_index))
+            self._links = (list(self.connections), incoming)
+        return incoming
+
+    def period_steps(self, component: Component) -> int:
+        """The component's period as a whole number of macro steps (>= 1)."""
+        if component.period == 0:
+            return 1
+        period_ns = seconds_to_ns(component.period, f"period of '{component.name}'")
+        steps, remainder = divmod(period_ns, self.macro_step_ns)
+        if remainder or steps == 0:
+            raise CosimError(
+                f"period {component.period} s of '{component.name}' is not a multiple of the "
+                f"macro step {self.macro_step} s"
+            )
+        return steps
+
+    # ---- ordering ----------------------------------------------------------------------------
+
+    def _topological(self, edges: set[tuple[str, str]], names: list[str] | None = None) -> list[str]:
+        """Kahn's algorithm over `names` (default: every component); ready ones are taken in the
+        order of `names` (the order they were added)."""
+        names = list(self.components) if names is None else names
+        indegree = dict.fromkeys(names, 0)
+        for _, consumer in edges:
+            indegree[consumer] += 1
+        order: list[str] = []
+        remaining = list(names)
+        while remaining:
+            ready = next((n for n in remaining if indegree[n] == 0), remaining[0])
+            remaining.remove(ready)
+            order.append(ready)
+            for producer, consumer in edges:
+                if producer == ready and consumer in remaining:
+                    indegree[consumer] -= 1
+        return order
+
+    def algebraic_loop(self) -> list[str] | None:
+        """A cycle of direct dependencies between ports ("comp.port", first = last), or None."""
+        feedthrough = {name: c.feedthrough for name, c in self.components.items()}
+        return find_algebraic_loop([(c.source, c.target) for c in self.connections], feedthrough)
+
+    def check_algebraic_loops(self) -> None:
+        """Raise `CosimError` naming a cycle of direct dependencies between ports, if any."""
+        loop = self.algebraic_loop()
+        if loop is not None:
+            raise CosimError(
+                "algebraic loop (direct feedthrough only): "
+                + " -> ".join(loop)
+                + "; an FMU output without declared dependencies depends on every input; "
+                "`--set simulation.algebraic_loops=delay` (or simulation.master=jacobi) runs it "
+                "with the loop's inputs from the previous communication point"
+            )
+
+    def _direct_edges(self) -> set[tuple[str, str]]:
+        components = self.components
+        return {
+            (producer, consumer)
+            for consumer, links in self.links().items()
+            for link in links
+            if (producer := link.producer) != consumer
+            and components[producer].feedthrough[components[producer].outputs[link.output].name]
+        }
+
+    def _loop_ports(self) -> dict[str, int]:
+        """Port -> number of its strongly connected component in the graph of ports (connections
+        and direct dependencies), for the ports on a cycle; empty without an algebraic loop."""
+        if self.mode != "gauss-seidel" or self.algebraic_loop() is None:
+            return {}
+        graph: dict[str, list[str]] = {}
+        for c in self.connections:
+            graph.setdefault(c.source, []).append(c.target)
+        for name, component in self.components.items():
+            for output, depends in component.feedthrough.items():
+                for input_ in depends:
+                    graph.setdefault(f"{name}.{input_}", []).append(f"{name}.{output}")
+        return cyclic_components(graph)
+
+    def loop_components(self) -> list[str]:
+        """The components with a port on an algebraic loop (Gauss-Seidel with `loops="delay"`
+        steps them Jacobi-style: the connections of the loop carry the outputs from before the
+        step), in the order they were added; empty without a loop or in Jacobi mode."""
+        ports = self._loop_ports()
+        members = {port.split(".", 1)[0] for port in ports}
+        return [name for name in self.components if name in members]
+
+    def loop_connections(self) -> list[Connection]:
+        """The connections on an algebraic loop (both ends in one strongly connected set of ports)."""
+        ports = self._loop_ports()
+        return [c for c in self.connections if c.source in ports and ports[c.source] == ports.get(c.target)]
+
+    def delayed_links(self) -> set[tuple[str, str]]:
+        """(producer, consumer) pairs with a connection on an algebraic loop: delayed by one step
+        (none when `loops == "iterate"`: the loops iterate instead)."""
+        if self.loops == "iterate":
+            return set()
+        return {(c.source_component, c.target_component) for c in self.loop_connections()}
+
+    def loop_groups(self) -> list[LoopGroup]:
+        """The algebraic loops as (member components in the order they were added, connections of
+        the loop): strongly connected sets of ports, joined where they share a component."""
+        ports = self._loop_ports()
+        group: dict[int, int] = {number: number for number in set(ports.values())}
+
+        def root(number: int) -> int:
+            while group[number] != number:
+                number = group[number]
+            return number
+
+        first_set: dict[str, int] = {}
+        for port, number in ports.items():
+            name = port.split(".", 1)[0]
+            if name in first_set:
+                group[root(number)] = root(first_set[name])
+            else:
+                first_set[name] = number
+        members: dict[int, list[str]] = {}
+        for name in self.components:
+            if name in first_set:
+                members.setdefault(root(first_set[name]), []).append(name)
+        links: dict[int, list[Connection]] = {}
+        for c in self.loop_connections():
+            links.setdefault(root(ports[c.source]), []).append(c)
+        return [LoopGroup(names, links.get(number, [])) for number, names in members.items()]
+
+    def order(self) -> list[Component]:
+        """Step order (see the module docstring); checks algebraic loops in Gauss-Seidel mode
+        when `loops == "error"`."""
+        if self.mode == "gauss-seidel" and self.loops == "error":
+            self.check_algebraic_loops()
+        loop_links = {(c.source_component, c.target_component) for c in self.loop_connections()}
+        edges = self._direct_edges() - loop_links
+        order = self._topological(edges)
+        groups = self.loop_groups() if self.loops == "iterate" else []
+        if groups:  # each loop one node of the graph, its members in the order above
+            leader = {name: group.members[0] for group in groups for name in group.members}
+            nodes = [name for name in self.components if leader.get(name, name) == name]
+            contracted = {(leader.get(p, p), leader.get(c, c)) for p, c in edges}
+            position = {name: number for number, name in enumerate(order)}
+            members = {group.members[0]: sorted(group.members, key=position.__getitem__) for group in groups}
+            order = [
+                name
+                for node in self._topological({(p, c) for p, c in contracted if p != c}, nodes)
+                for name in members.get(node, [node])
+            ]
+        return [self.components[name] for name in order]
+
+    def initialization_order(self) -> list[Component]:
+        """Producers before the consumers that need their values at initialisation.
+
+        A consumer C needs producer P first when a connection P.o -> C.i feeds input i into an
+        output of C that is itself connected (C's initial value of that output depends on i
+        directly). A state output (no direct dependencies, e.g. a vehicle's pose) is valid as soon
+        as its component is initialised, so a feedback loop through it orders its producer first
+        (the vehicle before the controllers, whose commands only reach its unconnected outputs).
+        """
+        consumed = {c.source for c in self.connections}
+        # Per consumer, the inputs some connected output depends on directly (one pass over the
+        # feedthrough; a planner's 2000 waypoints feed every output of a path follower).
+        feeding: dict[str, set[str]] = {}
+        for name, component in self.components.items():
+            feeding[name] = set()
+            for output, depends in component.feedthrough.items():
+                if f"{name}.{output}" in consumed:
+                    feeding[name].update(depends)
+        edges = set()
+        for name, links in self.links().items():
+            inputs = self.components[name].inputs
+            for link in links:
+                if link.producer != name and inputs[link.input].name in feeding[name]:
+                    edges.add((link.producer, name))
+        # A text output's dependencies are not known (`Component.feedthrough` holds numbers): the
+        # producer of a text connection initialises first, so its value reaches the consumer at t0.
+        edges |= {(c.source_component, c.target_component) for c in self.text_connections}
+        edges = {(producer, consumer) for producer, consumer in edges if producer != consumer}
+        return [self.components[name] for name in self._topological(edges)]
+
+    def initialized_early(self, order: list[Component]) -> list[Component]:
+        """The components of initialisation `order` that initialised before a producer feeding an
+        input some output of theirs depends on directly (connected or not: a vehicle's measured
+        speed on its commanded one), in that order. The master hands them their connected inputs
+        once more after every component is initialised and reads their outputs again, so every
+        output at the start time reflects its connected inputs (within an algebraic loop, after
+        one pass in this fixed order)."""
+        position = {component.name: number for number, component in enumerate(order)}
+        early = {
+            c.target_component
+            for c in self.text_connections
+            if position[c.source_component] >= position[c.target_component]
+        }
+        for name, links in self.links().items():
+            component = self.components[name]
+            direct = {i for depends in component.feedthrough.values() for i in depends}
+            for link in links:
+                if position[link.producer] >= position[name] and component.inputs[link.input].name in direct:
+                    early.add(name)
+        return [component for component in order if component.name in early]
