@@ -2,17 +2,18 @@
 
 `run_fleet(fleet)` builds each robot as the single-robot run builds it (`build_run` with the
 robot's description from `cosim.scenario.fleet_compose.describe_fleet`: its lidar has the inputs
-`robots_x[j]`, `robots_y[j]`), initialises every robot's `Master`, then advances them together a
-block of steps at a time. A block is the greatest common divisor of every robot's lidar and planner
-periods (10 steps for the template's 10 Hz lidar at 100 Hz), so a lidar scans only in a block's
-first step:
+`robots_x[j]`, `robots_y[j]`), puts every robot's components into ONE `System` (`fleet_system`:
+components `robot1:vehicle`, ..., the robots' own connections, and the links
+`robot2:vehicle.x -> robot1:lidar.robots_x[1]` by which the robots see each other) and steps it
+with one `Master`, a block of steps at a time. A block is the greatest common divisor of every
+robot's lidar and planner periods (10 steps for the template's 10 Hz lidar at 100 Hz), so Python
+components step only in a block's first step:
 
-1. before a block from t, every robot's lidar gets the other robots' positions at t (each
-   vehicle's x, y then): the scan at t sees every robot where it stands at t, whatever the
-   robots' order (the links `robotK.vehicle.x -> robotJ.lidar.robots_x[i]` of the description,
-   applied between the robots' masters);
-2. every robot's master steps the block (its FMUs in the compiled kernel, `Master.run_blocks`;
-   its lidar and planner in Python in the first step), keeping each step's rows of its components;
+1. the lidars read the vehicles' poses, which are states (no direct dependency on the vehicles'
+   inputs), so the master steps every lidar before any vehicle: each scan at t sees every robot
+   where it stands at t, whatever the robots' order;
+2. the master steps the block (FMUs in the compiled kernel, `Master.run_blocks`; lidars and
+   planners in Python in its first step), keeping each step's rows of every component;
 3. then, step by step through the block, the footprints are checked pairwise
    (`cosim.world.fleet.FleetContacts`: exact first contact of circles moving linearly within
    the step), and each robot against the walls and unknown obstacles (`OutcomeMonitor`, exactly
@@ -49,6 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from cosim.core.master import NS_PER_S, Master
+from cosim.core.system import System
 from cosim.errors import CosimError
 from cosim.navigation.build import build_run
 from cosim.navigation.fleet_log import FleetLog, outcome_record
@@ -139,14 +141,13 @@ class Progress:
 
 
 class _Robot:
-    """One robot of the run: its built system and master, where to read its pose and mode, where
-    its lidar takes the other robots' positions, its mission and its outcome."""
+    """One robot of the run: its built components (in the fleet's system), where the fleet's block
+    rows hold its pose, command and mode, its mission and its outcome."""
 
-    def __init__(self, robot, built, seen: tuple[str, ...], deadlock_after: float) -> None:
+    def __init__(self, robot, built, deadlock_after: float) -> None:
         self.robot = robot
         self.built = built
-        self.master = Master(built.system, parameters=built.parameters, stop_time=robot.scenario.stop_time)
-        system = built.system
+        system = built.system  # the robot's own system: its components, ports and periods
         vehicle, self.slot_x = system.resolve(f"{POSE_OF}.x", "output")
         _, self.slot_y = system.resolve(f"{POSE_OF}.y", "output")
         self.vehicle_outputs = vehicle.output_buffer
@@ -157,9 +158,6 @@ class _Robot:
         self.commands = (
             [system.resolve(r, "output") for r in observed.command] if observed and observed.command else None
         )
-        self.seen = seen
-        self.lidar = system.components.get(SEEN_BY) if seen else None
-        self.lidar_slots = np.arange(3, 3 + 2 * len(seen)) if seen else None
         self.goals = [goal for _ in range(robot.repeat) for goal in robot.mission]
         self.goal_index = 0
         self.dwell_until: float | None = None
@@ -177,9 +175,8 @@ class _Robot:
         if self.scan_lidar is not None and not hasattr(self.scan_lidar, "beam_angles"):
             self.scan_lidar = None  # not the template's lidar
         self.lidar_steps = system.period_steps(self.scan_lidar) if self.scan_lidar is not None else 1
-        # Where the block's rows hold the pose, the command (the vehicle's inputs) and the mode.
-        names = [component.name for component in self.master.order]
-        self.vehicle_row = names.index(POSE_OF)
+        self.vehicle = vehicle
+        self.vehicle_row = -1  # where the fleet's block rows hold the vehicle's, set by `place`
         self.vehicle_period = system.period_steps(vehicle)
         inputs = len(vehicle.inputs)
         self.pose_columns = [inputs + vehicle.output_index[axis] for axis in ("x", "y", "theta")]
@@ -188,52 +185,22 @@ class _Robot:
         self.mode_row = None
         if self.mode is not None:
             component, slot = self.mode
-            self.mode_row = (
-                names.index(component.name),
-                len(component.inputs) + slot,
-                system.period_steps(component),
-            )
-        self.tables = None  # the compiled kernel's tables (`Master.kernel_tables`), made at the first block
-        self._tried_kernel = False
+            self.mode_row = [component, len(component.inputs) + slot, system.period_steps(component)]
         self.poses = np.empty((0, 3))
         self.commands_now = np.empty((0, 2))
         self.modes = np.empty(0)
         self._last = (np.array(self.pose, dtype=float), np.array(self.command, dtype=float), math.nan)
 
-    def _step_recorded(self, count: int) -> list[np.ndarray]:
-        """Step `count` steps; every component's rows (inputs, then outputs, after each of its steps)."""
-        kept: list[list[np.ndarray]] = []
-        if self.tables is None and not self._tried_kernel:
-            self._tried_kernel = True
-            self.tables = self.master.kernel_tables(record=True, block=count)
-        if self.tables is not None and count <= self.tables.record_block:
-            # FMUs in the compiled kernel; the lidar and planner (Python) step in the block's first
-            # step and hold their outputs to its end (the block is cut only at their periods).
-            self.master.run_blocks(
-                count,
-                self.tables,
-                lambda _first, _end, rows, _clean: kept.append(
-                    [None if r is None else r.copy() for r in rows]
-                ),
-                block=count,
-                cut_after_python=lambda _k: False,
-            )
-        else:
-            self.master.run_recorded(count, lambda _first, _count, rows: kept.append(rows), block=count)
-        if len(kept) == 1:
-            return kept[0]
-        return [
-            np.concatenate([part[i] for part in kept if part[i] is not None])
-            if any(part[i] is not None for part in kept)
-            else np.empty((0, 0))
-            for i in range(len(kept[0]))
-        ]
+    def place(self, order: list) -> None:
+        """Where the fleet system's block rows (components in `order`) hold this robot's."""
+        self.vehicle_row = next(i for i, component in enumerate(order) if component is self.vehicle)
+        if self.mode_row is not None:
+            component = self.mode_row[0]
+            self.mode_row[0] = next(i for i, c in enumerate(order) if c is component)
 
-    def advance(self, count: int) -> None:
-        """Step `count` macro steps (the compiled kernel where the system allows it) and keep, for
-        each step, the pose at its end, the command applied in it and the avoidance mode."""
-        first = self.master.step_index
-        histories = self._step_recorded(count)
+    def take(self, histories: list[np.ndarray], first: int, count: int) -> None:
+        """Keep, from the rows of the block of `count` steps from step `first`, for each step the
+        pose at its end, the command applied in it and the avoidance mode."""
         last_pose, last_command, last_mode = self._last
         vehicle = histories[self.vehicle_row]
         self.poses = _held(vehicle[:, self.pose_columns], first, count, self.vehicle_period, last_pose)
@@ -276,29 +243,88 @@ def run_fleet(fleet: Fleet, trace: list | None = None, log_path: Path | None = N
     when given, gets (t [s], positions (N x 2) [m]) at the start and after every step; `log_path`
     gets the fleet's log (`cosim.navigation.fleet_log`)."""
     described = describe_fleet(fleet)
-    robots: list[_Robot] = []
+    robots = [
+        _Robot(robot, build_run(robot.scenario, described.robots[robot.name]), fleet.settings.deadlock_after)
+        for robot in fleet.robots
+    ]
+    system, parameters = fleet_system(fleet, described, [each.built for each in robots])
+    master = Master(system, parameters=parameters, stop_time=fleet.first.stop_time)
     try:
-        for robot in fleet.robots:
-            built = build_run(robot.scenario, described.robots[robot.name])
-            robots.append(_Robot(robot, built, described.seen[robot.name], fleet.settings.deadlock_after))
+        try:
+            master.initialize()
+        except CosimError as error:
+            raise CosimError(f"{fleet.source}: initialising the system failed: {error}") from None
         for each in robots:
-            try:
-                each.master.initialize()
-            except CosimError as error:
-                raise CosimError(
-                    f"{each.robot.scenario.source}: initialising the system failed: {error}"
-                ) from None
+            each.place(master.order)
         log = FleetLog(log_path, [each.robot.name for each in robots], fleet.text) if log_path else None
-        outcome = _run(fleet, robots, trace, log)
+        outcome = _run(fleet, master, robots, trace, log)
         if log is not None:
             log.close(outcome_record(outcome))
         return outcome
     finally:
-        for each in robots:
-            try:
-                each.master.close()
-            except CosimError:
-                pass
+        try:
+            master.close()
+        except CosimError:
+            pass
+
+
+def core_name(robot: str, component: str) -> str:
+    """A robot's component in the fleet's `System`: `robot1:vehicle`. The core reads a reference
+    `component.port` up to its first dot, so the description's `robot1.vehicle` is spelt with a
+    colon there (a slash would make FMU temporary folders nested paths)."""
+    return f"{robot}:{component}"
+
+
+def fleet_system(fleet: Fleet, described, builts: list) -> tuple[System, dict]:
+    """One `System` of every robot's components (`core_name`), connections and the links between
+    robots, and the FMU parameters by component; the components are those `build_run` made."""
+    first = fleet.first
+    system = System(first.macro_step, first.master, first.algebraic_loops, first.loop_tolerance,
+                    first.loop_max_iterations)  # fmt: skip
+    parameters: dict[str, dict[str, float]] = {}
+    for robot, built in zip(fleet.robots, builts, strict=True):
+        for name, component in built.system.components.items():
+            component.name = core_name(robot.name, name)
+            system.add(component)
+        for c in built.system.connections:
+            system.connect(f"{robot.name}:{c.source}", f"{robot.name}:{c.target}", c.scale, c.offset)
+        for name, values in built.parameters.items():
+            parameters[core_name(robot.name, name)] = values
+    for link in described.links:
+        source, target = (end.replace(".", ":", 1) for end in (link.source, link.target))
+        system.connect(source, target, link.scale, link.offset)
+    for component in system.components.values():
+        system.period_steps(component)
+    return system, parameters
+
+
+def _advance(master: Master, robots: list[_Robot], count: int, tables) -> None:
+    """Step the fleet's system `count` steps and hand every robot its rows."""
+    first = master.step_index
+    kept: list[list[np.ndarray]] = []
+    if tables is not None:
+        # FMUs in the compiled kernel; the lidars and planners (Python) step in the block's first
+        # step and hold their outputs to its end (the block is cut only at their periods).
+        master.run_blocks(
+            count,
+            tables,
+            lambda _first, _end, rows, _clean: kept.append([None if r is None else r.copy() for r in rows]),
+            block=count,
+            cut_after_python=lambda _k: False,
+        )
+    else:
+        master.run_recorded(count, lambda _first, _count, rows: kept.append(rows), block=count)
+    if len(kept) == 1:
+        histories = kept[0]
+    else:
+        histories = [
+            np.concatenate([part[i] for part in kept if part[i] is not None])
+            if any(part[i] is not None for part in kept)
+            else np.empty((0, 0))
+            for i in range(len(kept[0]))
+        ]
+    for each in robots:
+        each.take(histories, first, count)
 
 
 def _log_block(log: FleetLog, robots: list[_Robot], t_ns: int) -> None:
@@ -319,27 +345,27 @@ def _log_block(log: FleetLog, robots: list[_Robot], t_ns: int) -> None:
             each.logged_plan = planner.plan_version
 
 
-def _block_steps(robots: list[_Robot]) -> int:
+def _block_steps(master: Master) -> int:
     """Steps per block: the greatest common divisor of the periods (in steps) of every robot's
     Python components (lidar, planner), so each of their steps, the only ones that read the other
     robots, falls on a block's first step; 1 when a robot has a lidar stepped every step."""
     periods = [
-        each.built.system.period_steps(component)
-        for each in robots
-        for component in each.master.order
-        if component.name in (SEEN_BY, "planner") and not component.constant_outputs
+        master.system.period_steps(component)
+        for component in master.order
+        if component.name.partition(":")[2] in (SEEN_BY, "planner") and not component.constant_outputs
     ]
     return math.gcd(*periods) if periods else 1
 
 
-def _run(fleet: Fleet, robots: list[_Robot], trace: list | None, log: FleetLog | None) -> FleetOutcome:
+def _run(
+    fleet: Fleet, master: Master, robots: list[_Robot], trace: list | None, log: FleetLog | None
+) -> FleetOutcome:
     settings = fleet.settings
-    index = {each.robot.name: k for k, each in enumerate(robots)}
     contacts = FleetContacts([each.robot.name for each in robots], [each.robot.radius for each in robots])
     outcome = FleetOutcome([each.outcome for each in robots])
     h_ns = robots[0].built.system.macro_step_ns
-    steps = robots[0].master.steps_to_stop
-    stop_ns = robots[0].master.stop_time_ns
+    steps = master.steps_to_stop
+    stop_ns = master.stop_time_ns
     positions = np.array([each.position for each in robots])
     contacts.start(positions)
     if trace is not None:
@@ -353,21 +379,15 @@ def _run(fleet: Fleet, robots: list[_Robot], trace: list | None, log: FleetLog |
             if each.built.planner is not None:
                 log.write_plan(0, each.robot.name, each.built.planner.waypoints)
                 each.logged_plan = each.built.planner.plan_version
-    seen_rows = [np.array([index[name] for name in each.seen], dtype=np.intp) for each in robots]
-    block = _block_steps(robots)
+    block = _block_steps(master)
+    tables = master.kernel_tables(record=True, block=block)
     wall_start = time.perf_counter()
     reason = None
     k = 0
     last_pose_step = 0
     while k < steps and reason is None:
         count = min(block, steps - k)
-        # The other robots where they stand at the block's start, for the scans of its first step.
-        for each, rows in zip(robots, seen_rows, strict=True):
-            if each.lidar is not None:
-                others = positions[rows]
-                each.lidar.input_buffer[each.lidar_slots] = np.concatenate((others[:, 0], others[:, 1]))
-        for each in robots:
-            each.advance(count)
+        _advance(master, robots, count, tables)
         if log is not None:
             _log_block(log, robots, k * h_ns)
         for i in range(count):

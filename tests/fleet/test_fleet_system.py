@@ -54,3 +54,21 @@ def test_cosim_system_groups_the_robots(capsys):
     assert "robots (2; coordination none, on_collision stop, deadlock_after 30 s)" in text
     rows = [line.split() for line in text.splitlines()]
     assert ["robot2", "(35,", "19,", "3.14159)", "(12,", "19)", "r", "0.5", "m", "robot1"] in rows
+
+
+def test_the_fleet_is_one_system_with_every_lidar_before_any_vehicle():
+    from cosim.navigation.build import build_run
+    from cosim.navigation.fleet import fleet_system
+
+    fleet = load_scenario(SCENARIOS / "fleet_intersection.toml", fleet=True)
+    described = describe_fleet(fleet)
+    builts = [build_run(robot.scenario, described.robots[robot.name]) for robot in fleet.robots]
+    system, parameters = fleet_system(fleet, described, builts)
+    names = [component.name for component in system.order()]
+    assert sorted(names) == sorted(name.replace(".", ":", 1) for name in described.flat().components)
+    lidars = [names.index(f"{robot.name}:lidar") for robot in fleet.robots]
+    vehicles = [names.index(f"{robot.name}:vehicle") for robot in fleet.robots]
+    assert max(lidars) < min(vehicles)  # each scan at t sees every robot's pose at t
+    links = {(c.source, c.target) for c in system.connections}
+    assert ("robot4:vehicle.x", "robot2:lidar.robots_x[3]") in links
+    assert set(parameters) == {name for name in names if not name.endswith((":lidar", ":planner"))}
