@@ -33,7 +33,7 @@ than its best for `[fleet] deadlock_after` seconds (dwelling at a goal excluded)
 the start of that period; it stays deadlocked unless it makes progress again (then the period
 counts anew). The fleet outcome counts robots deadlocked at the end.
 
-A run that ends inside a block ends at that step: the robots' systems have advanced to the block's
+A run that ends inside a block ends at that step: the fleet's system has advanced to the block's
 end, but nothing after the step is judged or logged. The log (`cosim.navigation.fleet_log`)
 holds the robots' poses under their namespaces (`/robot1/odom`, TF `map -> robot1/odom ->
 robot1/base_link`), goals and the fleet outcome. Signals, scans and plans per robot come when a
