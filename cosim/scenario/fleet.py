@@ -220,6 +220,14 @@ def _mission(reader: TableReader) -> tuple[tuple[Goal, ...], int]:
         goals.append(
             Goal(goal.number("x"), goal.number("y"), _tolerance(goal), goal.number("dwell", 0.0, minimum=0.0))
         )
+        # Pure Pursuit's goal_tolerance is set once, from the first goal: it stops the robot within
+        # that distance of every goal, so a smaller tolerance later could never be met.
+        if goals[-1].tolerance < goals[0].tolerance:
+            raise goal.error(
+                "tolerance",
+                f"must be >= the first goal's ({goals[0].tolerance:g} m): the robot stops within that "
+                f"distance of every goal, got {goals[-1].tolerance:g}",
+            )
         goal.finish()
     return tuple(goals), reader.integer("repeat", 1, minimum=1, maximum=1_000_000)
 

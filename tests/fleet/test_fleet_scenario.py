@@ -38,7 +38,7 @@ goal = { x = 35.0, y = 19.0 }
 [[robots]]
 name = "b"
 start = { x = 35.0, y = 19.0, theta = 3.0 }
-mission = [{ x = 12.0, y = 19.0, dwell = 5.0 }, { x = 20.0, y = 6.0, tolerance = 0.5 }]
+mission = [{ x = 12.0, y = 19.0, dwell = 5.0 }, { x = 20.0, y = 6.0, tolerance = 1.5 }]
 repeat = 2
 vfh = { safety_distance = 0.6 }
 """
@@ -57,7 +57,7 @@ def test_each_robot_is_the_scenario_with_its_start_goal_and_sections():
     mission = fleet.robots[1].mission
     assert [(g.x, g.y, g.tolerance, g.dwell) for g in mission] == [
         (12.0, 19.0, 1.0, 5.0),
-        (20.0, 6.0, 0.5, 0.0),
+        (20.0, 6.0, 1.5, 0.0),
     ]
     assert fleet.robots[1].repeat == 2 and fleet.robots[0].repeat == 1
     assert fleet.settings.coordination == "none" and fleet.settings.on_collision == "stop"
@@ -118,6 +118,11 @@ def test_set_addresses_a_robot_by_name():
             r"^f\.toml: \[fleet\]\.on_collision: must be one of 'stop', 'continue'",
         ),
         (TWO, "[fleet]\ndeadlock_after = 0", r"^f\.toml: \[fleet\]\.deadlock_after: must be > 0"),
+        (
+            TWO.replace("tolerance = 1.5", "tolerance = 0.5"),
+            "",
+            r"^f\.toml: \[\[robots\]\]\[1\]\.mission\[1\]\.tolerance: must be >= the first goal's \(1 m\)",
+        ),
         (
             TWO,
             '[fleet]\ncoordination = "mapf"',
