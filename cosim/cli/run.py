@@ -169,7 +169,11 @@ def _handler(args) -> int:
     overrides = list(args.overrides)
     if args.max_steps is not None:
         overrides.append(f"simulation.max_steps={args.max_steps}")
-    scenario = load_scenario(args.scenario, overrides)
+    scenario = load_scenario(args.scenario, overrides, fleet=True)
+    if hasattr(scenario, "robots"):  # a fleet ([[robots]]): cosim.navigation.fleet
+        from cosim.navigation.fleet import run_fleet_command
+
+        return run_fleet_command(args, scenario)
     plotter = None
     if scenario.plot and not args.no_plot and getattr(args, "program", False):
         from cosim.cli.plotter import PlotProcess

@@ -56,7 +56,11 @@ def _handler(args) -> int:
         from cosim.cli.system_ssp import show_ssp
 
         return show_ssp(args, show_scenario)
-    scenario = load_scenario(args.scenario, args.overrides)
+    scenario = load_scenario(args.scenario, args.overrides, fleet=True)
+    if hasattr(scenario, "robots"):  # a fleet ([[robots]])
+        from cosim.cli.system_fleet import show_fleet
+
+        return show_fleet(args, scenario, format_system)
     return show_scenario(args, scenario, f"{scenario.name} ({scenario.source})")
 
 

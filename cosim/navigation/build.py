@@ -146,11 +146,12 @@ def replanning(scenario: Scenario) -> Replanning:
     )
 
 
-def build_run(scenario: Scenario) -> BuiltRun:
-    """Describe, check and build the system of `scenario`; plan the path."""
+def build_run(scenario: Scenario, description: SystemDescription | None = None) -> BuiltRun:
+    """Describe, check and build the system of `scenario` (or the `description` made of it: a
+    fleet robot's, `cosim.scenario.fleet_compose`); plan the path."""
     from cosim.world.lidar import Lidar
 
-    description = describe_system(scenario)
+    description = describe_system(scenario) if description is None else description
     grid = load_known_map(scenario)
     expansion = scenario.planner.expansion_distance
     inflated = grid.inflate(expansion) if expansion > 0 else grid
@@ -194,6 +195,7 @@ def build_run(scenario: Scenario) -> BuiltRun:
                 range_noise=lidar.noise,
                 seed=lidar.seed,
                 period=component.period,
+                robot_radii=component.robot_radii,
             )
         else:
             raise CosimError(

@@ -35,6 +35,8 @@ class ComponentDescription:
     feedthrough: output -> inputs it depends on directly (an FMU output without declared
         dependencies depends on every input; `state_outputs` override that).
     integration: the FMU's interface ("cs" or "me") and, for Model Exchange, its solver settings.
+    robot_radii: a lidar of a fleet robot: the footprint radii [m] of the other robots it sees at
+        its inputs robots_x[j], robots_y[j] (`cosim.scenario.fleet_compose`).
     state_outputs: outputs taken as states (no direct dependency) when the FMU declares no
         dependencies for them: a kinematic vehicle's pose integrates its inputs.
     """
@@ -57,6 +59,7 @@ class ComponentDescription:
     feedthrough: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
     state_outputs: tuple[str, ...] = ()
     integration: Integration = Integration(interface="cs")  # an FMU's interface (and solver), resolved
+    robot_radii: tuple[float, ...] = ()
 
     @property
     def period(self) -> float:

@@ -25,6 +25,7 @@ from cosim.core.system import LOOP_HANDLING
 from cosim.errors import PATH_LIMIT, CosimError, wrong_file_message
 from cosim.fmi.builtin import known_names
 from cosim.fmi.solvers import SOLVERS
+from cosim.scenario.fleet import Fleet, build_fleet, check_fleet_world, find_robot, is_fleet
 from cosim.scenario.limits import (
     MAX_COMPONENTS,
     MAX_LIDAR_BEAMS,
@@ -63,7 +64,7 @@ ISOLATIONS = ("process", "none")  # an FMU in a child process, or in the run's o
 ROLE_SECTIONS = ("vehicle", "pure_pursuit", "vfh", "mixer")
 SECTIONS = (
     "scenario", "map", "obstacles", "start", "goal", "planner", "vehicle", "pure_pursuit", "vfh",
-    "mixer", "lidar", "simulation", "output", "components", "connections", "system",
+    "mixer", "lidar", "simulation", "output", "components", "connections", "system", "robots", "fleet",
 )  # fmt: skip
 # Components of the navigation template that are not FMUs (`cosim.scenario.template`).
 PYTHON_COMPONENTS = ("planner", "lidar")
@@ -235,8 +236,15 @@ class Scenario:
         return "none" if spec.is_builtin else "process"
 
 
-def load_scenario(path: str | Path, overrides: list[str] | tuple[str, ...] = (), check_world: bool = True):
-    """Read, override and validate a scenario file; raise `CosimError` (one line) on any problem."""
+def load_scenario(
+    path: str | Path,
+    overrides: list[str] | tuple[str, ...] = (),
+    check_world: bool = True,
+    fleet: bool = False,
+):
+    """Read, override and validate a scenario file; raise `CosimError` (one line) on any problem.
+    A fleet (`[[robots]]`) is a `cosim.scenario.fleet.Fleet`, accepted only with `fleet=True`
+    (what takes one robot says so instead of failing on it)."""
     path = Path(path)
     source = str(path)
     try:
@@ -250,10 +258,18 @@ def load_scenario(path: str | Path, overrides: list[str] | tuple[str, ...] = (),
     except OSError as error:
         raise CosimError(f"{source}: cannot read: {error}") from None
     scenario = parse_scenario(text, source, path.resolve().parent, overrides, path=path)
+    if isinstance(scenario, Fleet) and not fleet:
+        raise CosimError(
+            f"{source}: a fleet ([[robots]]) runs with cosim run and shows with cosim system; "
+            "this takes one robot"
+        )
     if check_world:
         from cosim.world.distance import check_start_goal
 
-        check_start_goal(scenario)
+        if isinstance(scenario, Fleet):
+            check_fleet_world(scenario)
+        else:
+            check_start_goal(scenario)
     return scenario
 
 
@@ -275,6 +291,8 @@ def parse_scenario(
         raise CosimError(f"{source}: TOML value not readable: {shorten(str(error))}") from None
     for override in overrides:
         apply_override(raw, override, source)
+    if is_fleet(raw):  # [[robots]]: a Fleet of single-robot scenarios (cosim.scenario.fleet)
+        return build_fleet(raw, source, _build, base_dir, text, path, tuple(overrides))
     return _build(raw, source, base_dir, text, path, tuple(overrides))
 
 
@@ -296,6 +314,11 @@ def apply_override(raw: dict, override: str, source: str) -> None:
         )
     node: Any = raw
     for depth, part in enumerate(parts[:-1]):
+        if isinstance(node, list) and depth == 1 and parts[0] == "robots" and not part.isdigit():
+            node = find_robot(node, part)  # robots.robot2.vfh.safety_distance: a robot by its name
+            if node is None:
+                raise CosimError(f"--set {shown}: no robot named {describe(part)} in [[robots]]")
+            continue
         if isinstance(node, list):
             if not part.isdigit() or int(part) >= len(node):
                 raise CosimError(

@@ -12,12 +12,15 @@ Semantics follow MATLAB's `rangeSensor` (Navigation Toolbox):
   Gaussian noise of standard deviation `range_noise` [m]; each beam is cast at its nominal angle
   plus Gaussian noise of standard deviation `angle_noise` [rad], while the reported angle stays
   nominal (the sensor does not know its jitter).
+* Other robots of a fleet (`robot_radii`, one footprint circle each) are seen as circles at the
+  poses on the inputs `robots_x[j]`, `robots_y[j]` at the scan's time; a NaN position is no robot.
 * Cells outside the grid are free. Grid cells are hit on their boundary (exact for axis-aligned
   walls); circles, rectangles and polygons (cosim.world.shapes) are intersected exactly, moving
   ones at their pose at the scan's time (the start of the lidar's step).
 
 Outputs `ranges[k]` and `angles[k]`, k = 1..capacity (capacity >= beam count, the rest NaN), so
-the ports match VFH inputs of a fixed size. Inputs `x`, `y`, `theta`.
+the ports match VFH inputs of a fixed size. Inputs `x`, `y`, `theta` (and `robots_x[j]`,
+`robots_y[j]`, j = 1..len(robot_radii), for a fleet).
 
 The sweep is C (`lidar_scan` of native/world.c: Amanatides-Woo traversal of the grid, exact
 intersections with the shapes), given the grid, beams, shapes and buffers once as a struct.
@@ -35,7 +38,7 @@ from cosim.core.component import Port, PythonComponent, array_ports
 from cosim.errors import CosimError
 from cosim.world import kernels
 from cosim.world.obstacles import ObstacleArrays
-from cosim.world.shapes import Obstacle
+from cosim.world.shapes import Circle, Obstacle
 
 MAX_BEAMS = 100_000  # beams of one sweep (two output ports each); a scenario allows fewer (the VFH's 720)
 
@@ -75,6 +78,7 @@ class Lidar(kernels.Bound, PythonComponent):
         seed: int = 0,
         capacity: int | None = None,
         period: float = 0.1,
+        robot_radii: Sequence[float] = (),
     ) -> None:
         if angles is None:
             if (
@@ -118,8 +122,12 @@ class Lidar(kernels.Bound, PythonComponent):
         self.resolution = float(resolution)
         self.origin = (float(origin[0]), float(origin[1]))
         self.obstacles = list(obstacles)
+        # The other robots' footprints: the last circles of the world, moved by each scan's inputs.
+        self.robot_radii = np.asarray(robot_radii, dtype=float).reshape(-1)
+        robots = [Circle((math.nan, math.nan), float(radius)) for radius in self.robot_radii]
         # The shapes as arrays; moving ones are put at their pose of each scan's time.
-        self.world = ObstacleArrays(self.obstacles)
+        self.world = ObstacleArrays([*self.obstacles, *robots])
+        self._robot_rows = self.world.circles[len(self.world.circles) - len(robots) :]
         count = len(self.beam_angles)
         self._directions = np.empty((count, 2))  # scratch of the kernel, reused every scan
         # Each scan's noise is copied in here (zeros without noise), so the kernel keeps one address.
@@ -127,6 +135,10 @@ class Lidar(kernels.Bound, PythonComponent):
         self._range_jitter = np.zeros(count)
         outputs = array_ports("ranges", capacity, unit="m") + array_ports("angles", capacity, unit="rad")
         inputs = [Port("x", unit="m"), Port("y", unit="m"), Port("theta", unit="rad")]
+        if len(robots):
+            inputs += array_ports("robots_x", len(robots), unit="m") + array_ports(
+                "robots_y", len(robots), unit="m"
+            )
         super().__init__(name, inputs, outputs, period=period)
         self._ranges = self.output_buffer[:capacity]
         self._angles = self.output_buffer[capacity:]
@@ -162,12 +174,22 @@ class Lidar(kernels.Bound, PythonComponent):
         self._angles_written = False
 
     def on_initialize(self) -> None:
+        self._place_robots()
         self.scan(*self.input_buffer[:3], t=self.t0)
 
     def step(self, t: float, h: float) -> None:
         # The scan at the start of the step, from the pose the vehicle had then and the obstacles'
         # poses at that time (sample and hold).
+        self._place_robots()
         self.scan(*self.input_buffer[:3], t=t)
+
+    def _place_robots(self) -> None:
+        """The other robots' circles at the positions on the inputs (in place: the kernel keeps
+        reading the same array)."""
+        count = len(self._robot_rows)
+        if count:
+            self._robot_rows[:, 0] = self.input_buffer[3 : 3 + count]
+            self._robot_rows[:, 1] = self.input_buffer[3 + count : 3 + 2 * count]
 
     def measure(self, x: float, y: float, theta: float, directions: np.ndarray, t: float = 0.0) -> np.ndarray:
         """True distances [m] along unit `directions` (N x 2, world frame) at time t [s]; inf for no hit."""

@@ -758,7 +758,7 @@ def test_scenarios_readme_outcomes(workspace):
         r"--set planner\.replan=false\|true)`",
     )
     replanning = table_rows(text, "| scenario | replan = false")
-    shipped = sorted(p.stem for p in (REPO / "scenarios").glob("*.toml"))
+    shipped = sorted(p.stem for p in (REPO / "scenarios").glob("*.toml") if not p.stem.startswith("fleet_"))
     assert sorted(row[0].strip("`") for row in replanning) == shipped
     avoiders = table_rows(text, "| obstacles | avoider |")
     for name in ("warehouse_diff_drive_obstacles", "warehouse_diff_drive_large_obstacles"):

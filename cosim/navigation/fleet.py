@@ -1,0 +1,572 @@
+"""Run a fleet: every robot's system stepped together, robots seeing and touching each other.
+
+`run_fleet(fleet)` builds each robot as the single-robot run builds it (`build_run` with the
+robot's description from `cosim.scenario.fleet_compose.describe_fleet`: its lidar has the inputs
+`robots_x[j]`, `robots_y[j]`), puts every robot's components into ONE `System` (`fleet_system`:
+components `robot1:vehicle`, ..., the robots' own connections, and the links
+`robot2:vehicle.x -> robot1:lidar.robots_x[1]` by which the robots see each other) and steps it
+with one `Master`, a block of steps at a time. A block is the greatest common divisor of every
+robot's lidar and planner periods (10 steps for the template's 10 Hz lidar at 100 Hz), so Python
+components step only in a block's first step:
+
+1. the lidars read the vehicles' poses, which are states (no direct dependency on the vehicles'
+   inputs), so the master steps every lidar before any vehicle: each scan at t sees every robot
+   where it stands at t, whatever the robots' order;
+2. the master steps the block (FMUs in the compiled kernel, `Master.run_blocks`; lidars and
+   planners in Python in its first step), keeping each step's rows of every component;
+3. then, step by step through the block, the footprints are checked pairwise
+   (`cosim.world.fleet.FleetContacts`: exact first contact of circles moving linearly within
+   the step), and each robot against the walls and unknown obstacles (`OutcomeMonitor`, exactly
+   as for one robot);
+4. mission progress: a robot within its goal's tolerance has reached it; after its `dwell` the
+   planner is given the next goal (`PlannerComponent.set_goal`, a replan from the current pose)
+   at the end of that block (at most one block, 0.1 s, later); after the last goal (times
+   `repeat`) the robot has completed and stays where it is (still an obstacle for the others).
+
+The run ends when every robot has completed, at the stop time, or at the first collision when
+`[fleet] on_collision = "stop"` (robot-robot contact, or a robot hitting a wall or obstacle). With
+"continue" every robot-robot contact is reported once when it begins and the run goes on; a
+robot that hit a wall stops being judged (it has failed).
+
+Deadlock: a robot that has not completed and has come no closer than 0.5 m to its current goal
+than its best for `[fleet] deadlock_after` seconds (dwelling at a goal excluded) is deadlocked from
+the start of that period; it stays deadlocked unless it makes progress again (then the period
+counts anew). The fleet outcome counts robots deadlocked at the end.
+
+A run that ends inside a block ends at that step: the fleet's system has advanced to the block's
+end, but nothing after the step is judged or logged. The log (`cosim.navigation.fleet_log`)
+holds the robots' poses under their namespaces (`/robot1/odom`, TF `map -> robot1/odom ->
+robot1/base_link`), goals and the fleet outcome. Signals, scans and plans per robot come when a
+fleet is one system recorded through the run path's recorder (`cosim.record`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from cosim.core.master import NS_PER_S, Master
+from cosim.core.system import System
+from cosim.errors import CosimError
+from cosim.navigation.build import build_run
+from cosim.navigation.fleet_log import FleetLog, outcome_record
+from cosim.navigation.outcome import MODE_RECOVER, OutcomeMonitor
+from cosim.scenario.fleet import Fleet
+from cosim.scenario.fleet_compose import POSE_OF, SEEN_BY, describe_fleet
+from cosim.world.fleet import Contact, FleetContacts
+
+PROGRESS = 0.5  # [m] closer to the current goal than the best so far: progress (deadlock rule)
+STOPPED_SPEED = 0.01  # [m/s] below this a robot counts as stopped
+
+
+@dataclass
+class RobotOutcome:
+    """One robot's run. status: running, completed, collision (with a wall or obstacle; robot
+    contacts are in the fleet's `collisions`), no_path, stop_time."""
+
+    name: str
+    status: str = "running"
+    goals_reached: int = 0
+    goals: int = 0  # goals of the mission, times repeat
+    completion_time: float | None = None  # [s] when the last goal was reached
+    distance: float = 0.0  # [m]
+    min_clearance_walls: float = math.inf  # [m] footprint to the true map and obstacles
+    min_clearance_robots: float = math.inf  # [m] footprint to footprint
+    stopped_time: float = 0.0  # [s] slower than STOPPED_SPEED while not completed or dwelling
+    recovery_time: float = 0.0  # [s] in the mixer's recover mode
+    deadlocked_at: float | None = None  # [s] start of the no-progress period that made it deadlocked
+    collision: tuple[float, float, float] | None = None  # (t [s], x, y [m]) of hitting a wall or obstacle
+
+
+@dataclass
+class FleetOutcome:
+    robots: list[RobotOutcome]
+    collisions: list[Contact] = field(default_factory=list)
+    time: float = 0.0  # [s] simulated when the run ended
+    reason: str = (
+        "running"  # completed, collision, stop_time, all_ended (none still running, not all completed)
+    )
+    wall_time: float = 0.0  # [s]
+
+    @property
+    def completed(self) -> bool:
+        return all(robot.status == "completed" for robot in self.robots)
+
+    @property
+    def makespan(self) -> float | None:
+        """[s] until the last robot completed (None unless all did)."""
+        return max(robot.completion_time for robot in self.robots) if self.completed else None
+
+    @property
+    def deadlocks(self) -> list[RobotOutcome]:
+        return [
+            robot for robot in self.robots if robot.deadlocked_at is not None and robot.status != "completed"
+        ]
+
+    @property
+    def throughput(self) -> float:
+        """Goals reached per hour of simulated time."""
+        return (
+            sum(robot.goals_reached for robot in self.robots) * 3600.0 / self.time if self.time > 0 else 0.0
+        )
+
+    @property
+    def exit_code(self) -> int:
+        """0 only when every robot completed its goal or mission."""
+        return 0 if self.completed else 1
+
+
+class Progress:
+    """The deadlock rule for one robot (module docstring): `update(t, remaining)` with its distance
+    [m] to its current goal after the step that ended at t [s] returns the time since which it is
+    deadlocked, or None; `restart(t, remaining)` when it gets a new goal (or dwells)."""
+
+    def __init__(self, deadlock_after: float, t: float, remaining: float) -> None:
+        self.deadlock_after = deadlock_after
+        self.restart(t, remaining)
+
+    def restart(self, t: float, remaining: float) -> None:
+        self.best, self.best_time, self.deadlocked_at = remaining, t, None
+
+    def update(self, t: float, remaining: float) -> float | None:
+        if remaining < self.best - PROGRESS:
+            self.best, self.best_time, self.deadlocked_at = remaining, t, None
+        elif self.deadlocked_at is None and t - self.best_time >= self.deadlock_after - 1e-9:
+            self.deadlocked_at = self.best_time
+        return self.deadlocked_at
+
+
+class _Robot:
+    """One robot of the run: its built components (in the fleet's system), where the fleet's block
+    rows hold its pose, command and mode, its mission and its outcome."""
+
+    def __init__(self, robot, built, deadlock_after: float) -> None:
+        self.robot = robot
+        self.built = built
+        system = built.system  # the robot's own system: its components, ports and periods
+        vehicle, self.slot_x = system.resolve(f"{POSE_OF}.x", "output")
+        _, self.slot_y = system.resolve(f"{POSE_OF}.y", "output")
+        self.vehicle_outputs = vehicle.output_buffer
+        observed = built.description.observed
+        mode = observed.mode if observed else None
+        self.mode = system.resolve(mode, "output") if mode else None
+        self.theta = system.resolve(f"{POSE_OF}.theta", "output")[1]
+        self.commands = (
+            [system.resolve(r, "output") for r in observed.command] if observed and observed.command else None
+        )
+        self.goals = [goal for _ in range(robot.repeat) for goal in robot.mission]
+        self.goal_index = 0
+        self.dwell_until: float | None = None
+        scenario = robot.scenario
+        self.monitor = OutcomeMonitor(
+            built.world, scenario.goal, scenario.goal_tolerance, scenario.vehicle_radius, scenario.start
+        )
+        self.outcome = RobotOutcome(robot.name, goals=len(self.goals))
+        remaining = math.hypot(scenario.goal[0] - scenario.start[0], scenario.goal[1] - scenario.start[1])
+        self.progress = Progress(deadlock_after, 0.0, remaining)
+        self.logged_goal = scenario.goal
+        self.pending_goal = False
+        self.logged_plan = 0
+        self.scan_lidar = system.components.get(SEEN_BY)
+        if self.scan_lidar is not None and not hasattr(self.scan_lidar, "beam_angles"):
+            self.scan_lidar = None  # not the template's lidar
+        self.lidar_steps = system.period_steps(self.scan_lidar) if self.scan_lidar is not None else 1
+        self.vehicle = vehicle
+        self.vehicle_row = -1  # where the fleet's block rows hold the vehicle's, set by `place`
+        self.vehicle_period = system.period_steps(vehicle)
+        inputs = len(vehicle.inputs)
+        self.pose_columns = [inputs + vehicle.output_index[axis] for axis in ("x", "y", "theta")]
+        command = [vehicle.input_index.get(port) for port in ("v", "omega")]
+        self.command_columns = command if None not in command else None
+        self.mode_row = None
+        if self.mode is not None:
+            component, slot = self.mode
+            self.mode_row = [component, len(component.inputs) + slot, system.period_steps(component)]
+        self.poses = np.empty((0, 3))
+        self.commands_now = np.empty((0, 2))
+        self.modes = np.empty(0)
+        self._last = (np.array(self.pose, dtype=float), np.array(self.command, dtype=float), math.nan)
+
+    def place(self, order: list) -> None:
+        """Where the fleet system's block rows (components in `order`) hold this robot's."""
+        self.vehicle_row = next(i for i, component in enumerate(order) if component is self.vehicle)
+        if self.mode_row is not None:
+            component = self.mode_row[0]
+            self.mode_row[0] = next(i for i, c in enumerate(order) if c is component)
+
+    def take(self, histories: list[np.ndarray], first: int, count: int) -> None:
+        """Keep, from the rows of the block of `count` steps from step `first`, for each step the
+        pose at its end, the command applied in it and the avoidance mode."""
+        last_pose, last_command, last_mode = self._last
+        vehicle = histories[self.vehicle_row]
+        self.poses = _held(vehicle[:, self.pose_columns], first, count, self.vehicle_period, last_pose)
+        if self.command_columns is not None:
+            self.commands_now = _held(
+                vehicle[:, self.command_columns], first, count, self.vehicle_period, last_command
+            )
+        else:
+            self.commands_now = np.full((count, 2), math.nan)
+        if self.mode_row is not None:
+            row, column, period = self.mode_row
+            modes = _held(histories[row][:, [column]], first, count, period, np.array([last_mode]))
+            self.modes = modes[:, 0]
+        else:
+            self.modes = np.full(count, math.nan)
+        self._last = (self.poses[-1], self.commands_now[-1], self.modes[-1])
+
+    @property
+    def position(self) -> tuple[float, float]:
+        return float(self.vehicle_outputs[self.slot_x]), float(self.vehicle_outputs[self.slot_y])
+
+    @property
+    def pose(self) -> tuple[float, float, float]:
+        return (*self.position, float(self.vehicle_outputs[self.theta]))
+
+    @property
+    def command(self) -> tuple[float, float]:
+        if self.commands is None:
+            return math.nan, math.nan
+        (a, i), (b, j) = self.commands
+        return float(a.output_buffer[i]), float(b.output_buffer[j])
+
+    @property
+    def judged(self) -> bool:
+        return self.outcome.status == "running"
+
+
+def run_fleet(fleet: Fleet, trace: list | None = None, log_path: Path | None = None) -> FleetOutcome:
+    """Run `fleet` (module docstring); `CosimError` on bad input (before anything runs). `trace`,
+    when given, gets (t [s], positions (N x 2) [m]) at the start and after every step; `log_path`
+    gets the fleet's log (`cosim.navigation.fleet_log`)."""
+    described = describe_fleet(fleet)
+    robots = [
+        _Robot(robot, build_run(robot.scenario, described.robots[robot.name]), fleet.settings.deadlock_after)
+        for robot in fleet.robots
+    ]
+    system, parameters = fleet_system(fleet, described, [each.built for each in robots])
+    master = Master(system, parameters=parameters, stop_time=fleet.first.stop_time)
+    try:
+        try:
+            master.initialize()
+        except CosimError as error:
+            raise CosimError(f"{fleet.source}: initialising the system failed: {error}") from None
+        for each in robots:
+            each.place(master.order)
+        log = FleetLog(log_path, [each.robot.name for each in robots], fleet.text) if log_path else None
+        outcome = _run(fleet, master, robots, trace, log)
+        if log is not None:
+            log.close(outcome_record(outcome))
+        return outcome
+    finally:
+        try:
+            master.close()
+        except CosimError:
+            pass
+
+
+def core_name(robot: str, component: str) -> str:
+    """A robot's component in the fleet's `System`: `robot1:vehicle`. The core reads a reference
+    `component.port` up to its first dot, so the description's `robot1.vehicle` is spelt with a
+    colon there (a slash would make FMU temporary folders nested paths)."""
+    return f"{robot}:{component}"
+
+
+def fleet_system(fleet: Fleet, described, builts: list) -> tuple[System, dict]:
+    """One `System` of every robot's components (`core_name`), connections and the links between
+    robots, and the FMU parameters by component; the components are those `build_run` made."""
+    first = fleet.first
+    system = System(first.macro_step, first.master, first.algebraic_loops, first.loop_tolerance,
+                    first.loop_max_iterations)  # fmt: skip
+    parameters: dict[str, dict[str, float]] = {}
+    for robot, built in zip(fleet.robots, builts, strict=True):
+        for name, component in built.system.components.items():
+            component.name = core_name(robot.name, name)
+            system.add(component)
+        for c in built.system.connections:
+            system.connect(f"{robot.name}:{c.source}", f"{robot.name}:{c.target}", c.scale, c.offset)
+        for name, values in built.parameters.items():
+            parameters[core_name(robot.name, name)] = values
+    for link in described.links:
+        source, target = (end.replace(".", ":", 1) for end in (link.source, link.target))
+        system.connect(source, target, link.scale, link.offset)
+    for component in system.components.values():
+        system.period_steps(component)
+    return system, parameters
+
+
+def _advance(master: Master, robots: list[_Robot], count: int, tables) -> None:
+    """Step the fleet's system `count` steps and hand every robot its rows."""
+    first = master.step_index
+    kept: list[list[np.ndarray]] = []
+    if tables is not None:
+        # FMUs in the compiled kernel; the lidars and planners (Python) step in the block's first
+        # step and hold their outputs to its end (the block is cut only at their periods).
+        master.run_blocks(
+            count,
+            tables,
+            lambda _first, _end, rows, _clean: kept.append([None if r is None else r.copy() for r in rows]),
+            block=count,
+            cut_after_python=lambda _k: False,
+        )
+    else:
+        master.run_recorded(count, lambda _first, _count, rows: kept.append(rows), block=count)
+    if len(kept) == 1:
+        histories = kept[0]
+    else:
+        histories = [
+            np.concatenate([part[i] for part in kept if part[i] is not None])
+            if any(part[i] is not None for part in kept)
+            else np.empty((0, 0))
+            for i in range(len(kept[0]))
+        ]
+    for each in robots:
+        each.take(histories, first, count)
+
+
+def _log_block(log: FleetLog, robots: list[_Robot], t_ns: int) -> None:
+    """The scans taken at the block's start t_ns (a lidar scans only in a block's first step) and
+    the plans made in it (stamped t_ns: the planner steps with the lidar)."""
+    system_period = robots[0].built.system.macro_step_ns
+    for each in robots:
+        lidar = each.scan_lidar
+        if lidar is not None and (t_ns // system_period) % each.lidar_steps == 0:
+            count = len(lidar.beam_angles)
+            log.write_scan(
+                t_ns, each.robot.name, lidar.beam_angles, lidar.output_buffer[:count],
+                lidar.range_min, lidar.range_max, each.lidar_steps * system_period / NS_PER_S,
+            )  # fmt: skip
+        planner = each.built.planner
+        if planner is not None and planner.plan_version != each.logged_plan:
+            log.write_plan(t_ns, each.robot.name, planner.waypoints)
+            each.logged_plan = planner.plan_version
+
+
+def _block_steps(master: Master) -> int:
+    """Steps per block: the greatest common divisor of the periods (in steps) of every robot's
+    Python components (lidar, planner), so each of their steps, the only ones that read the other
+    robots, falls on a block's first step; 1 when a robot has a lidar stepped every step."""
+    periods = [
+        master.system.period_steps(component)
+        for component in master.order
+        if component.name.partition(":")[2] in (SEEN_BY, "planner") and not component.constant_outputs
+    ]
+    return math.gcd(*periods) if periods else 1
+
+
+def _run(
+    fleet: Fleet, master: Master, robots: list[_Robot], trace: list | None, log: FleetLog | None
+) -> FleetOutcome:
+    settings = fleet.settings
+    contacts = FleetContacts([each.robot.name for each in robots], [each.robot.radius for each in robots])
+    outcome = FleetOutcome([each.outcome for each in robots])
+    h_ns = robots[0].built.system.macro_step_ns
+    steps = master.steps_to_stop
+    stop_ns = master.stop_time_ns
+    positions = np.array([each.position for each in robots])
+    contacts.start(positions)
+    if trace is not None:
+        trace.append((0.0, positions))
+    pose_steps = max(1, round(1.0 / (fleet.first.pose_rate * fleet.first.macro_step)))
+    if log is not None:
+        log.write_map(robots[0].built.grid)
+        log.write_poses(0, [each.pose for each in robots], [each.command for each in robots])
+        for each in robots:
+            log.write_goal(0, each.robot.name, *each.monitor.goal)
+            if each.built.planner is not None:
+                log.write_plan(0, each.robot.name, each.built.planner.waypoints)
+                each.logged_plan = each.built.planner.plan_version
+    block = _block_steps(master)
+    tables = master.kernel_tables(record=True, block=block)
+    wall_start = time.perf_counter()
+    reason = None
+    k = 0
+    last_pose_step = 0
+    while k < steps and reason is None:
+        count = min(block, steps - k)
+        _advance(master, robots, count, tables)
+        if log is not None:
+            _log_block(log, robots, k * h_ns)
+        for i in range(count):
+            t = (k + i) * h_ns / NS_PER_S
+            end_ns = min((k + i + 1) * h_ns, stop_ns) if stop_ns is not None else (k + i + 1) * h_ns
+            t_next = end_ns / NS_PER_S
+            after = np.array([each.poses[i, :2] for each in robots])
+            began = contacts.step(t, t_next - t, positions, after)
+            outcome.collisions += began
+            for k_robot, each in enumerate(robots):
+                _judge(each, t_next, t_next - t, positions[k_robot], after[k_robot], i)
+            positions = after
+            outcome.time = t_next
+            if trace is not None:
+                trace.append((t_next, after))
+            if log is not None and (k + i + 1) % pose_steps == 0:
+                log.write_poses(
+                    end_ns, [each.poses[i] for each in robots], [each.commands_now[i] for each in robots]
+                )
+                last_pose_step = k + i + 1
+            if (began or any(each.outcome.status == "collision" for each in robots)) and (
+                settings.on_collision == "stop"
+            ):
+                reason = "collision"
+            elif all(not each.judged for each in robots):
+                reason = "completed" if outcome.completed else "all_ended"
+            if reason is not None:
+                break
+        k += i + 1
+        for each in robots:  # a new mission goal: given at the end of the block
+            if each.pending_goal and each.judged:
+                _next_goal(each, outcome.time)
+            each.pending_goal = False
+            if log is not None and each.monitor.goal != each.logged_goal:
+                log.write_goal(round(outcome.time * NS_PER_S), each.robot.name, *each.monitor.goal)
+                each.logged_goal = each.monitor.goal
+    if log is not None and last_pose_step != k:  # the pose at the end (step i of the last block)
+        log.write_poses(
+            round(outcome.time * NS_PER_S),
+            [each.poses[i] for each in robots],
+            [each.commands_now[i] for each in robots],
+        )
+    reason = reason or "stop_time"
+    for k_robot, each in enumerate(robots):
+        each.outcome.min_clearance_walls = each.monitor.outcome.min_clearance
+        each.outcome.min_clearance_robots = float(contacts.min_clearance[k_robot])
+        if each.outcome.status == "running":
+            each.outcome.status = "stop_time" if reason == "stop_time" else "stopped"
+    outcome.reason = reason
+    outcome.wall_time = time.perf_counter() - wall_start
+    return outcome
+
+
+def _held(rows: np.ndarray, first: int, count: int, period: int, last: np.ndarray) -> np.ndarray:
+    """Per step k = first .. first + count - 1, the row of the component's latest step <= k (its
+    rows are those of the steps k % period == 0; before its first step in the block, `last`)."""
+    if period == 1:
+        return rows
+    out = np.empty((count, rows.shape[1]))
+    value, j = last, 0
+    for i, k in enumerate(range(first, first + count)):
+        if k % period == 0:
+            value, j = rows[j], j + 1
+        out[i] = value
+    return out
+
+
+def _judge(each: _Robot, t: float, h: float, before, after, step: int = 0) -> None:
+    """One robot after the step that ended at t: distance, clearance, mode, mission, deadlock."""
+    result = each.outcome
+    if not each.judged:
+        return
+    moved = math.hypot(after[0] - before[0], after[1] - before[1])
+    result.distance += moved
+    if each.modes[step] == MODE_RECOVER:
+        result.recovery_time += h
+    monitor = each.monitor
+    _, why = monitor.check_positions((t,), (float(after[0]),), (float(after[1]),))
+    if why == "collision":
+        result.status = "collision"
+        result.collision = (t, float(after[0]), float(after[1]))
+        return
+    if each.pending_goal:  # at a goal, the next one given at the block's end
+        return
+    dwelling = each.dwell_until is not None
+    if moved < STOPPED_SPEED * h and not dwelling:
+        result.stopped_time += h
+    if dwelling:
+        if t + 1e-9 < each.dwell_until:
+            return
+        each.dwell_until = None
+        each.pending_goal = True
+        return
+    if why == "goal_reached":
+        monitor.outcome.reason, monitor.outcome.reached = "running", False
+        result.goals_reached += 1
+        goal = each.goals[each.goal_index]
+        each.goal_index += 1
+        if each.goal_index == len(each.goals):
+            result.status = "completed"
+            result.completion_time = t
+            result.deadlocked_at = None
+            return
+        result.deadlocked_at = None
+        if goal.dwell > 0:
+            each.dwell_until = t + goal.dwell
+            return
+        each.pending_goal = True
+        return
+    goal = each.goals[each.goal_index]
+    result.deadlocked_at = each.progress.update(t, math.hypot(goal.x - after[0], goal.y - after[1]))
+
+
+def _next_goal(each: _Robot, t: float) -> None:
+    """Give the planner the robot's next goal (a replan from where it stands)."""
+    goal = each.goals[each.goal_index]
+    x, y, theta = (float(value) for value in each.poses[-1])
+    planner = each.built.planner
+    why = planner.set_goal(goal.x, goal.y, t, (x, y, theta)) if planner is not None else "no planner"
+    if why is not None:
+        each.outcome.status = "no_path"
+        return
+    each.monitor.goal = (goal.x, goal.y)
+    each.monitor.tolerance = goal.tolerance
+    each.progress.restart(t, math.hypot(goal.x - x, goal.y - y))
+
+
+def format_fleet(fleet: Fleet, outcome: FleetOutcome) -> str:
+    """The summary table: a row per robot and the fleet's line."""
+    rows = [
+        ("robot", "status", "goals", "time [s]", "distance [m]", "clearance walls [m]",
+         "clearance robots [m]", "stopped [s]", "recovery [s]", "deadlocked")
+    ]  # fmt: skip
+    for robot in outcome.robots:
+        rows.append(
+            (
+                robot.name, robot.status, f"{robot.goals_reached}/{robot.goals}",
+                "-" if robot.completion_time is None else f"{robot.completion_time:.2f}",
+                f"{robot.distance:.2f}", f"{robot.min_clearance_walls:.3f}",
+                f"{robot.min_clearance_robots:.3f}",
+                f"{robot.stopped_time:.2f}", f"{robot.recovery_time:.2f}",
+                "-" if robot.deadlocked_at is None else f"since {robot.deadlocked_at:.2f} s",
+            )
+        )  # fmt: skip
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    lines = [
+        "  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True)).rstrip() for row in rows
+    ]
+    makespan = outcome.makespan
+    lines.append(
+        f"fleet: {outcome.reason} at t = {outcome.time:.2f} s; makespan "
+        f"{'-' if makespan is None else f'{makespan:.2f} s'}; throughput {outcome.throughput:.1f} goals/h; "
+        f"collisions {len(outcome.collisions)}; deadlocks {len(outcome.deadlocks)}; "
+        f"wall {outcome.wall_time:.2f} s"
+    )
+    lines += [f"  collision: {contact.describe()}" for contact in outcome.collisions]
+    lines += [
+        f"  collision: {robot.name} hits a wall or obstacle at t = {robot.collision[0]:.3f} s at "
+        f"({robot.collision[1]:.3f}, {robot.collision[2]:.3f})"
+        for robot in outcome.robots
+        if robot.collision is not None
+    ]
+    return "\n".join(lines)
+
+
+def run_fleet_command(args, fleet: Fleet) -> int:
+    """`cosim run FLEET.toml`: run, print the fleet summary; exit 0 only when every robot completed."""
+    import sys
+
+    if getattr(args, "live", False):
+        raise CosimError(f"{fleet.source}: --live shows one robot; a fleet's live view is not there yet")
+    from cosim.record.logfile import default_log_path
+
+    path = args.out if args.out is not None else default_log_path(fleet.first.log_pattern, fleet.name)
+    if Path(path).exists() and not args.force:
+        raise CosimError(f"{path}: already exists; give --force to overwrite it")
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    outcome = run_fleet(fleet, log_path=Path(path))
+    if not args.quiet:
+        print(format_fleet(fleet, outcome))
+        print(f"log: {path}", file=sys.stdout)
+    return outcome.exit_code

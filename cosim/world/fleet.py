@@ -1,0 +1,130 @@
+"""Robots of a fleet meeting each other: exact contact between footprint circles.
+
+Each robot's footprint is a circle (its `[vehicle] radius`) at its position. Within one macro step
+of length h a robot moves from its pose at t to its pose at t + h; over so short a step (1.5 cm at
+1.5 m/s and 10 ms) its path is taken as the straight segment between them. Two circles of radii
+r_a, r_b moving linearly touch when their centres' distance equals r_a + r_b: with the offset
+d(s) = d0 + s w between the centres (s in [0, 1] the fraction of the step, d0 the offset at t, w
+the change of the offset over the step), |d(s)|^2 = (r_a + r_b)^2 is a quadratic in s, and the
+first contact is its smaller root when it lies in [0, 1] (`first_contact`). The closest approach
+within the step is at s* = -d0.w / w.w, clamped to [0, 1] (`closest_approach`).
+
+`FleetContacts` checks every pair of robots each step (vectorised over the pairs), reports a
+contact once when it begins (`Contact`: both names, the time, both centres and radii at that
+time), and keeps each robot's minimum clearance to the other robots (footprint to footprint).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def first_contact(a0, a1, b0, b1, reach: float) -> float | None:
+    """The first fraction s in [0, 1] of a step at which points moving linearly from a0 to a1 and
+    from b0 to b1 come within `reach` [m] of each other (0 when they already are), or None."""
+    d0x, d0y = b0[0] - a0[0], b0[1] - a0[1]
+    wx, wy = (b1[0] - b0[0]) - (a1[0] - a0[0]), (b1[1] - b0[1]) - (a1[1] - a0[1])
+    c = d0x * d0x + d0y * d0y - reach * reach
+    if c <= 0.0:
+        return 0.0
+    a = wx * wx + wy * wy
+    b = d0x * wx + d0y * wy  # half the linear coefficient
+    if a == 0.0 or b >= 0.0:  # no relative motion, or moving apart from the start
+        return None
+    discriminant = b * b - a * c
+    if discriminant < 0.0:
+        return None
+    # The smaller root (-b - sqrt(disc)) / a, written as c / (-b + sqrt(disc)) (b < 0: no cancellation).
+    s = c / (-b + math.sqrt(discriminant))
+    return s if s <= 1.0 else None
+
+
+def closest_approach(a0, a1, b0, b1) -> tuple[float, float]:
+    """(s, distance): the fraction of the step at which the two linearly moving points are
+    closest, and their distance [m] then."""
+    d0 = np.subtract(b0, a0, dtype=float)
+    w = np.subtract(b1, b0, dtype=float) - np.subtract(a1, a0, dtype=float)
+    ww = float(w @ w)
+    s = 0.0 if ww == 0.0 else min(1.0, max(0.0, -float(d0 @ w) / ww))
+    return s, float(np.hypot(*(d0 + s * w)))
+
+
+@dataclass(frozen=True)
+class Contact:
+    """Two robots' footprints touching: the robots, the time [s] of the first contact, their
+    centres [m] then and their footprint radii [m]."""
+
+    first: str
+    second: str
+    time: float
+    first_center: tuple[float, float]
+    second_center: tuple[float, float]
+    first_radius: float
+    second_radius: float
+
+    def describe(self) -> str:
+        return (
+            f"{self.first} and {self.second} collide at t = {self.time:.3f} s: footprints "
+            f"(r {self.first_radius:g} m at ({self.first_center[0]:.3f}, {self.first_center[1]:.3f})) and "
+            f"(r {self.second_radius:g} m at ({self.second_center[0]:.3f}, {self.second_center[1]:.3f}))"
+        )
+
+
+class FleetContacts:
+    """Contacts and clearances between the robots' footprints, step by step (module docstring)."""
+
+    def __init__(self, names: Sequence[str], radii: Sequence[float]) -> None:
+        self.names = tuple(names)
+        self.radii = np.asarray(radii, dtype=float)
+        n = len(self.names)
+        self.first, self.second = np.triu_indices(n, k=1)
+        self.reach = self.radii[self.first] + self.radii[self.second]
+        self.touching = np.zeros(len(self.first), dtype=bool)  # pairs in contact at the last check
+        self.min_clearance = np.full(n, math.inf)  # [m] footprint to footprint, per robot
+        self.contacts: list[Contact] = []
+
+    def start(self, positions) -> list[Contact]:
+        """The positions (N x 2) at the start: contacts there are reported at time 0 (a scenario's
+        starts may not overlap, but positions given in code may)."""
+        return self.step(0.0, 0.0, positions, positions)
+
+    def step(self, t: float, h: float, before, after) -> list[Contact]:
+        """Check the step from t to t + h [s] in which the robots moved from `before` to `after`
+        (N x 2 positions [m]); return the contacts that began in it (also kept in `contacts`)."""
+        before = np.asarray(before, dtype=float)
+        after = np.asarray(after, dtype=float)
+        i, j = self.first, self.second
+        d0 = before[j] - before[i]
+        w = (after[j] - after[i]) - d0
+        ww = np.einsum("ij,ij->i", w, w)
+        dw = np.einsum("ij,ij->i", d0, w)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s_star = np.where(ww > 0.0, np.clip(-dw / ww, 0.0, 1.0), 0.0)
+        closest = np.hypot(*(d0 + s_star[:, None] * w).T)
+        gap = closest - self.reach
+        np.minimum.at(self.min_clearance, i, gap)
+        np.minimum.at(self.min_clearance, j, gap)
+        touching = gap <= 0.0
+        began: list[Contact] = []
+        for pair in np.flatnonzero(touching & ~self.touching):
+            a, b = int(i[pair]), int(j[pair])
+            s = first_contact(before[a], after[a], before[b], after[b], float(self.reach[pair]))
+            s = 0.0 if s is None else s  # rounding at a grazing touch: the closest approach's step
+            at_a = before[a] + s * (after[a] - before[a])
+            at_b = before[b] + s * (after[b] - before[b])
+            began.append(
+                Contact(
+                    self.names[a], self.names[b], t + s * h,
+                    (float(at_a[0]), float(at_a[1])), (float(at_b[0]), float(at_b[1])),
+                    float(self.radii[a]), float(self.radii[b]),
+                )
+            )  # fmt: skip
+        # A pair still touching at the step's end stays "in contact"; one that separated may touch again.
+        end_gap = np.hypot(*(after[j] - after[i]).T) - self.reach
+        self.touching = end_gap <= 0.0
+        self.contacts += began
+        return began
