@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fixtures.conftest_helpers import fixture_fmu
+from PIL import Image
 
 REPO = Path(__file__).resolve().parents[2]
 DOC_FILES = [
@@ -521,18 +522,27 @@ def test_python_api_script(workspace, run_log):
 
 # The synopsis lines of `cosim log`, each with the commands that fill its placeholders (LOG the
 # Quick start's log; OUT, DIR, IN files of the scratch folder) and choose each alternative.
+PLOT = (
+    "cosim log plot LOG [LOG ...] [--png OUT] [--signals vehicle.v_actual vfh.steering_dir ...] "
+    "[--dpi N] [--size WxH]"
+)
+ANIMATE = "cosim log animate LOG --out run.gif|run.mp4 [--fps 20] [--speed 10] [--dpi N] [--size WxH]"
+DIFF = "cosim log diff LOG_A LOG_B [--tolerance 1e-9] [--png OUT [--dpi N] [--size WxH]]"
 LOG_COMMANDS = {
     "cosim log info LOG": ["cosim log info logs/run.mcap"],
-    "cosim log plot LOG [--png OUT] [--signals vehicle.v_actual vfh.steering_dir ...]": [
-        "cosim log plot logs/run.mcap --png plot.png --signals vehicle.v_actual vfh.steering_dir"
+    PLOT: [
+        "cosim log plot logs/run.mcap --png plot.png --signals vehicle.v_actual vfh.steering_dir",
+        "cosim log plot logs/run.mcap logs/radius.mcap --png both.png --dpi 50 --size 800x500",
     ],
+    ANIMATE: ["cosim log animate logs/run.mcap --out run.gif --fps 5 --speed 40 --dpi 40 --size 320x240"],
     "cosim log export LOG --to csv|npz [--component vehicle mixer] [--out DIR]": [
         "cosim log export logs/run.mcap --to csv --component vehicle mixer --out csv",
         "cosim log export logs/run.mcap --to npz --out npz",
     ],
-    "cosim log diff LOG_A LOG_B [--tolerance 1e-9]": [
+    DIFF: [
         "cosim log diff logs/run.mcap logs/run.mcap --tolerance 1e-9",
-        "cosim log diff logs/run.mcap logs/radius.mcap --tolerance 1e-9",
+        "cosim log diff logs/run.mcap logs/radius.mcap --tolerance 1e-9 --png diff.png --dpi 50 "
+        "--size 800x600",
     ],
     "cosim log recover IN [--out OUT]": [
         "cosim log recover cut.mcap --out recovered.mcap",
@@ -560,15 +570,13 @@ def test_log_commands(workspace, run_log):
     info = check(bash(LOG_COMMANDS["cosim log info LOG"][0], workspace))
     for word in ("/odom", "goal_reached", "DifferentialDrive"):  # "duration, topics ..., outcome, FMUs"
         assert word in info
-    check(
-        bash(
-            LOG_COMMANDS["cosim log plot LOG [--png OUT] [--signals vehicle.v_actual vfh.steering_dir ...]"][
-                0
-            ],
-            workspace,
-        )
-    )
+    one, overlay = LOG_COMMANDS[PLOT]
+    check(bash(one, workspace))
     assert (workspace / "plot.png").stat().st_size > 0
+    check(bash(overlay, workspace))
+    assert Image.open(workspace / "both.png").size == (800, 500)
+    check(bash(LOG_COMMANDS[ANIMATE][0], workspace))
+    assert Image.open(workspace / "run.gif").size == (320, 240)
     csv_command, npz_command = LOG_COMMANDS[
         "cosim log export LOG --to csv|npz [--component vehicle mixer] [--out DIR]"
     ]
@@ -580,12 +588,11 @@ def test_log_commands(workspace, run_log):
     check(bash(npz_command, workspace))
     assert "vehicle.values" in np.load(workspace / "npz" / "run-signals.npz").files
     # "exit 0 equal, 1 different, 2 bad input"
-    equal, different = LOG_COMMANDS["cosim log diff LOG_A LOG_B [--tolerance 1e-9]"]
-    assert (
-        synopsis["cosim log diff LOG_A LOG_B [--tolerance 1e-9]"] == "exit 0 equal, 1 different, 2 bad input"
-    )
+    equal, different = LOG_COMMANDS[DIFF]
+    assert synopsis[DIFF] == "exit 0 equal, 1 different, 2 bad input"
     check(bash(equal, workspace), 0)
     check(bash(different, workspace), 1)
+    assert Image.open(workspace / "diff.png").size == (800, 600)
     check(bash("cosim log diff logs/run.mcap scenarios/README.md", workspace), 2)
     # "a cut log as a complete, indexed MCAP": the default OUT is IN with .recovered.mcap.
     with_out, default = LOG_COMMANDS["cosim log recover IN [--out OUT]"]
