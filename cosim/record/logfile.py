@@ -38,7 +38,7 @@ def default_log_path(pattern: str, name: str, now: datetime | None = None) -> Pa
 
 def navcosim_version() -> str:
     """The installed navcosim's version, as a log's metadata records it ("unknown" from a bare checkout)."""
-    found = _dist_info_version()
+    found = dist_info_version("navcosim")
     if found is not None:
         return found
     from importlib.metadata import PackageNotFoundError, version
@@ -49,12 +49,15 @@ def navcosim_version() -> str:
         return "unknown"
 
 
-def _dist_info_version() -> str | None:
-    """`importlib.metadata.version("navcosim")` when the first distribution it would find is an
-    installed `navcosim-*.dist-info` folder (a plain directory on `sys.path`, searched in its order
-    as importlib.metadata searches it), read from its METADATA's Version header; None otherwise
-    (then importlib.metadata decides). Importing importlib.metadata and its email parser is
-    ~10-20 ms of a run's start."""
+def dist_info_version(name: str) -> str | None:
+    """`importlib.metadata.version(name)` when the first distribution it would find is an installed
+    `<name>-*.dist-info` folder (a plain directory on `sys.path`, searched in its order as
+    importlib.metadata searches it), read from its METADATA's Version header; None otherwise (then
+    importlib.metadata decides). `name`: lower-case letters and digits (a name importlib.metadata
+    needs no normalising for). Importing importlib.metadata and its email parser is ~10-20 ms of a
+    run's start."""
+    if not (name.isalnum() and name.isascii() and name.islower()):
+        return None
     for entry in sys.path:
         try:
             children = os.listdir(entry or ".")
@@ -66,7 +69,7 @@ def _dist_info_version() -> str | None:
             low = child.lower()
             if not low.endswith((".dist-info", ".egg-info")):
                 continue
-            if low.rpartition(".")[0].partition("-")[0] != "navcosim":
+            if low.rpartition(".")[0].partition("-")[0] != name:
                 continue
             if not low.endswith(".dist-info"):
                 return None

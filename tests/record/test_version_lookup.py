@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from cosim.record.logfile import _dist_info_version, navcosim_version
+from cosim.record.logfile import dist_info_version, navcosim_version
 
 
 def _truth() -> str:
@@ -45,7 +45,22 @@ def test_a_made_up_path_gives_importlib_metadatas_version(tmp_path, monkeypatch,
         (info / "METADATA").rename(info / "PKG-INFO")
     folders = sorted({str(tmp_path / folder) for folder, _, _ in layout})
     monkeypatch.setattr(sys, "path", [str(tmp_path / "missing"), *folders])
-    fast = _dist_info_version()
+    fast = dist_info_version("navcosim")
     assert navcosim_version() == _truth()
     if fast is not None:
         assert fast == _truth()
+
+
+@pytest.mark.slow
+def test_the_progress_bars_tqdm_has_its_own_version():
+    # In a fresh process (this one may have imported tqdm): tqdm imported after the run's stand-in
+    # for `tqdm.version` has the version importlib.metadata reads, and importlib.metadata is not
+    # imported for it.
+    import subprocess
+
+    code = (
+        "import sys; from cosim.cli.run import _spare_tqdm_version_lookup as spare; spare(); import tqdm; "
+        "print(tqdm.__version__, 'importlib.metadata' in sys.modules)"
+    )
+    shown = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert shown.split() == [importlib.metadata.version("tqdm"), "False"]
