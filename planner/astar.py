@@ -30,9 +30,9 @@ from pathlib import Path
 import numpy as np
 
 from planner import native
+from planner.options import HEURISTICS as HEURISTICS  # the codes, re-exported
+from planner.options import TIE_BREAKERS as TIE_BREAKERS
 
-HEURISTICS = {"manhattan": 0, "euclidean": 1, "chebyshev": 2, "octile": 3, "thesis": 4, "zero": 5}
-TIE_BREAKERS = {"none": 0, "matlab": 1, "low_h": 2}
 FREE, BLOCKED, UNTRUSTED = 0, 1, 2
 
 SQRT2 = math.sqrt(2.0)

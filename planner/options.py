@@ -46,8 +46,12 @@ import math
 
 import numpy as np
 
-from planner.astar import HEURISTICS, TIE_BREAKERS
 from planner.errors import PlannerError
+
+# The compiled search's codes (`planner.astar`, which uses them from here: importing this module,
+# as validating a scenario does, neither loads nor compiles astar.c).
+HEURISTICS = {"manhattan": 0, "euclidean": 1, "chebyshev": 2, "octile": 3, "thesis": 4, "zero": 5}
+TIE_BREAKERS = {"none": 0, "matlab": 1, "low_h": 2}
 
 DEFAULTS: dict[str, object] = {
     "planner": "astar",

@@ -121,13 +121,20 @@ def _array_element(name: str) -> tuple[str | None, tuple[int, ...] | None]:
 
 def array_ports(base: str, count: int, columns: int = 0, unit: str = "", start: float = np.nan) -> list[Port]:
     """Ports `base[1]..base[count]`, or `base[k,c]` for c = 1..columns (row-major), NaN start."""
+    return list(_array_ports(base, count, columns, unit, start))
+
+
+@functools.lru_cache(maxsize=64)
+def _array_ports(base: str, count: int, columns: int, unit: str, start: float) -> tuple[Port, ...]:
+    """`array_ports`, made once per argument set (ports are read-only; describing and building a
+    system made a planner's 2000 waypoint ports four times)."""
     if columns:
-        return [
+        return tuple(
             Port(f"{base}[{row},{col}]", unit=unit, start=start)
             for row in range(1, count + 1)
             for col in range(1, columns + 1)
-        ]
-    return [Port(f"{base}[{row}]", unit=unit, start=start) for row in range(1, count + 1)]
+        )
+    return tuple(Port(f"{base}[{row}]", unit=unit, start=start) for row in range(1, count + 1))
 
 
 def check_unique_ports(component: str, kind: str, ports: Iterable[Port]) -> None:

@@ -192,7 +192,8 @@ def find_algebraic_loop(
     if key not in _LOOPS:
         if len(_LOOPS) >= _LOOPS_KEPT:
             _LOOPS.pop(next(iter(_LOOPS)))
-        loop = _search_algebraic_loop(pairs, dependencies)
+        acyclic = _has_cycle(pairs, dependencies) is False
+        loop = None if acyclic else _search_algebraic_loop(pairs, dependencies)
         _LOOPS[key] = None if loop is None else tuple(loop)
     loop = _LOOPS[key]
     return None if loop is None else list(loop)
@@ -202,6 +203,64 @@ def find_algebraic_loop(
 # every component's feedthrough, in order: the order decides which loop is named).
 _LOOPS: dict[tuple, tuple[str, ...] | None] = {}
 _LOOPS_KEPT = 8
+
+
+def _has_cycle(
+    pairs: tuple[tuple[str, str], ...], dependencies: tuple[tuple[str, tuple], ...]
+) -> bool | None:
+    """Whether the graph of `_search_algebraic_loop` has a cycle, decided on a graph of groups;
+    None when the ports do not allow it (then the search decides).
+
+    A group is the outputs of one component that depend on one and the same tuple of inputs (an FMU's
+    outputs without declared dependencies share the tuple of all its inputs): each of those inputs
+    reaches each of those outputs. Group G reaches group H when a connection goes from an output of G
+    to an input of H. When no port is both an output (a connection's source, a group's output) and an
+    input (a connection's target, a group's input), every edge of the port graph goes from an output to
+    an input or back, so a cycle of ports alternates connections and dependencies and gives a cycle of
+    groups, and a cycle of groups gives one of ports: one exists exactly when the other does. With a
+    2000-waypoint planner and a 720-beam lidar: ~6000 ports, 24 000 edges, 6 groups.
+    """
+    member_of: dict[str, int] = {}  # output -> its group
+    inputs_of: list[tuple[str, tuple]] = []  # group -> (component, inputs)
+    for component, outputs in dependencies:
+        numbers: dict[int, int] = {}
+        for output, depends in outputs:
+            if not depends:
+                continue
+            number = numbers.get(id(depends))
+            if number is None:
+                number = numbers[id(depends)] = len(inputs_of)
+                inputs_of.append((component, depends))
+            member_of[f"{component}.{output}"] = number
+    feeds: dict[str, list[int]] = {}  # input -> the groups it feeds
+    for number, (component, depends) in enumerate(inputs_of):
+        for name in depends:
+            feeds.setdefault(f"{component}.{name}", []).append(number)
+    sources = {source for source, _ in pairs}
+    targets = {target for _, target in pairs}
+    if not (sources | member_of.keys()).isdisjoint(targets | feeds.keys()):
+        return None
+    reaches: list[set[int]] = [set() for _ in inputs_of]
+    for source, target in pairs:
+        group = member_of.get(source)
+        if group is not None and target in feeds:
+            reaches[group].update(feeds[target])
+    colour = [0] * len(inputs_of)  # 1 = on the current path, 2 = finished
+    for start in range(len(inputs_of)):
+        if colour[start]:
+            continue
+        colour[start] = 1
+        stack = [(start, iter(reaches[start]))]
+        while stack:
+            node = next(stack[-1][1], None)
+            if node is None:
+                colour[stack.pop()[0]] = 2
+            elif colour[node] == 1:
+                return True
+            elif not colour[node]:
+                colour[node] = 1
+                stack.append((node, iter(reaches[node])))
+    return False
 
 
 def _search_algebraic_loop(

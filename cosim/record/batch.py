@@ -565,7 +565,7 @@ class MessageBlock:
             raw_times = np.array([t_ns for _, t_ns, _ in raw], dtype=np.uint64)
             raw_sizes = np.array([len(payload) for _, _, payload in raw], dtype=np.int64)
             sequences = np.empty(len(raw), dtype=np.int64)
-            for channel in np.unique(raw_channels).tolist():  # per channel, in write order
+            for channel in sorted(set(raw_channels.tolist())):  # per channel (np.unique imports numpy.ma)
                 at = np.flatnonzero(raw_channels == channel)
                 sequences[at] = self._sequence(channel, len(at)) + np.arange(len(at))
             message_sizes[order == RAW_STREAM] = MESSAGE_HEAD_SIZE + raw_sizes
@@ -583,7 +583,7 @@ class MessageBlock:
         if raw:
             # Messages of equal size as the rows of one array: head fields, then the payload bytes.
             where = np.flatnonzero(order == RAW_STREAM)
-            for size in np.unique(raw_sizes).tolist():
+            for size in sorted(set(raw_sizes.tolist())):
                 at = np.flatnonzero(raw_sizes == size)
                 heads = np.zeros(len(at), dtype=_HEAD_DTYPE)
                 heads["opcode"] = 5

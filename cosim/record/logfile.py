@@ -17,6 +17,7 @@ import errno
 import fcntl
 import os
 import stat
+import sys
 from datetime import datetime
 from pathlib import Path
 from typing import BinaryIO
@@ -37,12 +38,53 @@ def default_log_path(pattern: str, name: str, now: datetime | None = None) -> Pa
 
 def navcosim_version() -> str:
     """The installed navcosim's version, as a log's metadata records it ("unknown" from a bare checkout)."""
+    found = dist_info_version("navcosim")
+    if found is not None:
+        return found
     from importlib.metadata import PackageNotFoundError, version
 
     try:
         return version("navcosim")
     except PackageNotFoundError:
         return "unknown"
+
+
+def dist_info_version(name: str) -> str | None:
+    """`importlib.metadata.version(name)` when the first distribution it would find is an installed
+    `<name>-*.dist-info` folder (a plain directory on `sys.path`, searched in its order as
+    importlib.metadata searches it), read from its METADATA's Version header; None otherwise (then
+    importlib.metadata decides). `name`: lower-case letters and digits (a name importlib.metadata
+    needs no normalising for). Importing importlib.metadata and its email parser is ~10-20 ms of a
+    run's start."""
+    if not (name.isalnum() and name.isascii() and name.islower()):
+        return None
+    for entry in sys.path:
+        try:
+            children = os.listdir(entry or ".")
+        except NotADirectoryError:
+            return None  # a zip archive on sys.path: importlib.metadata looks inside
+        except OSError:
+            continue
+        for child in children:
+            low = child.lower()
+            if not low.endswith((".dist-info", ".egg-info")):
+                continue
+            if low.rpartition(".")[0].partition("-")[0] != name:
+                continue
+            if not low.endswith(".dist-info"):
+                return None
+            try:
+                with open(os.path.join(entry or ".", child, "METADATA"), encoding="utf-8") as stream:
+                    for line in stream:
+                        if not line.strip():
+                            return None
+                        name, _, value = line.partition(":")
+                        if name == "Version":
+                            return value.strip()
+            except OSError:
+                return None
+            return None
+    return None
 
 
 def claim_log(path: Path, force: bool = False) -> BinaryIO:
