@@ -153,23 +153,6 @@ def _announce(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
 
 
-def _spare_tqdm_version_lookup() -> None:
-    """Importing tqdm (the progress bar) runs `tqdm.version`, which imports importlib.metadata and
-    looks tqdm up (~10-15 ms of a run's start); when tqdm is an installed dist-info, the same
-    version string is read from it here and `tqdm.version` is that module already."""
-    if "tqdm" in sys.modules or "tqdm.version" in sys.modules:
-        return
-    from cosim.record.logfile import dist_info_version
-
-    version = dist_info_version("tqdm")
-    if version is not None:
-        import types
-
-        module = types.ModuleType("tqdm.version", "tqdm's version (cosim.cli.run)")
-        module.__version__ = version
-        sys.modules["tqdm.version"] = module
-
-
 def _handler(args) -> int:
     if args.scenario.suffix.lower() == ".ssp":
         return _run_ssp(args)
@@ -202,9 +185,6 @@ def _handler(args) -> int:
     prepare(fmus, scenario.fmi_version, kernels=(), announce=announce)
     from cosim.navigation.outcome import avoider_name, format_summary
     from cosim.navigation.run import run_scenario
-
-    if not args.quiet:
-        _spare_tqdm_version_lookup()
 
     try:
         sink = _live_sink(args, scenario.macro_step)

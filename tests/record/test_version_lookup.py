@@ -49,18 +49,3 @@ def test_a_made_up_path_gives_importlib_metadatas_version(tmp_path, monkeypatch,
     assert navcosim_version() == _truth()
     if fast is not None:
         assert fast == _truth()
-
-
-@pytest.mark.slow
-def test_the_progress_bars_tqdm_has_its_own_version():
-    # In a fresh process (this one may have imported tqdm): tqdm imported after the run's stand-in
-    # for `tqdm.version` has the version importlib.metadata reads, and importlib.metadata is not
-    # imported for it.
-    import subprocess
-
-    code = (
-        "import sys; from cosim.cli.run import _spare_tqdm_version_lookup as spare; spare(); import tqdm; "
-        "print(tqdm.__version__, 'importlib.metadata' in sys.modules)"
-    )
-    shown = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert shown.split() == [importlib.metadata.version("tqdm"), "False"]
