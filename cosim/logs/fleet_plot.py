@@ -8,8 +8,9 @@ outcome is a black-edged marker at its place with the robots and the time beside
 robot-robot contact at the point where the two footprints touch (on the line between the centres,
 one radius from the first), a robot hitting a wall or obstacle at the robot's centre. Right: each
 robot's speed (the distance between consecutive poses over their time step) and its distance to
-the goal in force, over time. The title: the scenario, the fleet's line (how it ended, collisions,
-makespan) and the log's file name.
+the goal in force, over time. The view holds the robots' trajectories, goals and plans. The
+title: the scenario, the fleet's line (how it ended, collisions, makespan) and the log's file
+name.
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ if TYPE_CHECKING:
     from cosim.logs.reader import Log
 
 COLLISION_COLOR = "#000000"
+VIEW_MARGIN = 3.0  # [m] at least around what the robots did
+VIEW_ASPECT = 1.6  # the view's least width / height
 
 
 def is_fleet_log(log: Log) -> bool:
@@ -59,11 +62,15 @@ def build_fleet_figure(log: Log, dpi: float = DPI, size=None):
                               ls="none", zorder=10)  # fmt: skip
         marker.set_gid(f"collision {index}")
         axes.annotate(
-            text, (x, y), xytext=(8, 8 + 11 * (index % 3)), textcoords="offset points", fontsize=7,
+            text, (x, y), xytext=(10, 6 + 12 * (index % 4)), textcoords="offset points", fontsize=7,
             color=COLLISION_COLOR, zorder=11,
             bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8},
         )  # fmt: skip
     axes.set_title("robots over the map (X: collision)", y=1.0)
+    if len(figure.axes) > 1:  # speeds from 0 (no offset notation for a near-constant speed)
+        speeds = figure.axes[1]
+        top = max((float(np.nanmax(line.get_ydata(), initial=0.0)) for line in speeds.lines), default=1.0)
+        speeds.set_ylim(0.0, max(1.1 * top, 0.1))
     figure.canvas.draw()
     return figure
 
@@ -73,10 +80,7 @@ def fleet_runs(log: Log) -> list[PlotData]:
     the first holds the map image; every one the view's limits (all robots and the map)."""
     fleet = log.fleet_outcome or {}
     grid = log.map("/map")
-    runs, bounds = [], []
-    if grid is not None:
-        x0, x1, y0, y1 = _extent(grid)
-        bounds.append(np.array([[x0, y0], [x1, y1]]))
+    runs, bounds = [], []  # the view: the robots' trajectories, goals and plans (the map where none)
     for name in log.robots:
         robot = fleet.get("robots", {}).get(name, {})
         status = robot.get("status", "?")
@@ -106,10 +110,20 @@ def fleet_runs(log: Log) -> list[PlotData]:
         runs.append(PlotData("fleet: no robot in this log", label="fleet"))
     if grid is not None:
         runs[0].image, runs[0].extent = map_image(grid, None), _extent(grid)
+    if not bounds and grid is not None:
+        x0, x1, y0, y1 = _extent(grid)
+        bounds.append(np.array([[x0, y0], [x1, y1]]))
     if bounds:
         low, high = np.min(np.vstack(bounds), axis=0), np.max(np.vstack(bounds), axis=0)
-        margin = 0.03 * max(float(np.max(high - low)), 1.0)
-        limits = (low[0] - margin, high[0] + margin, low[1] - margin, high[1] + margin)
+        margin = max(0.08 * float(np.max(high - low)), VIEW_MARGIN)
+        low, high = low - margin, high + margin
+        width, height = high - low
+        if width < VIEW_ASPECT * height:  # widened: a tall view leaves no room for the legend below
+            low[0], high[0] = (
+                low[0] - (VIEW_ASPECT * height - width) / 2,
+                high[0] + (VIEW_ASPECT * height - width) / 2,
+            )
+        limits = (low[0], high[0], low[1], high[1])
         for run in runs:
             run.limits = limits
     return runs
