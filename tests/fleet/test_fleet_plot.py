@@ -128,3 +128,25 @@ def test_log_info_prints_each_robot_and_every_collision(intersection, capsys):
             in captured.out
         )
     assert f"collisions {len(outcome.collisions)};" in captured.out
+
+
+def test_log_animate_of_a_fleet_shows_every_robot_where_its_odometry_puts_it(intersection, tmp_path):
+    from cosim.logs.animate import _FleetScene, animate_log, frame_times
+    from cosim.logs.plot_map import run_colour
+
+    path, outcome = intersection
+    logged = _odometry(path)
+    with open_log(path) as log:
+        video = animate_log(log, tmp_path / "fleet.gif", fps=10, speed=10, progress=False)
+        assert video.frames == len(frame_times(log.start_time, log.end_time, 10, 10))
+        scene = _FleetScene(log)
+        t = 4.0  # before any contact: each robot's footprint alone, centred where its odometry is
+        frame = scene.render(t)
+    for index, name in enumerate(sorted(logged)):
+        x, y = logged[name][round(t * 50)]  # 50 Hz from t = 0
+        column, row = scene.axes.transData.transform((x, y))
+        row, column = int(round(frame.shape[0] - row)), int(round(column))
+        near = {tuple(p) for p in frame[row - 2 : row + 3, column - 2 : column + 3, :3].reshape(-1, 3)}
+        colour = run_colour(index)  # beside the centre (the heading line starts there) its fill
+        assert tuple(int(colour[i : i + 2], 16) for i in (1, 3, 5)) in near
+    assert all(contact.time > t for contact in outcome.collisions)
