@@ -173,7 +173,10 @@ def _handler(args) -> int:
     if hasattr(scenario, "robots"):  # a fleet ([[robots]]): cosim.navigation.fleet
         from cosim.navigation.fleet import run_fleet_command
 
-        return run_fleet_command(args, scenario)
+        plot = scenario.first.plot and not args.no_plot
+        return run_fleet_command(
+            args, scenario, (lambda path: _plot_fleet(path, args.quiet)) if plot else None
+        )
     plotter = None
     if scenario.plot and not args.no_plot and getattr(args, "program", False):
         from cosim.cli.plotter import PlotProcess
@@ -301,6 +304,28 @@ def _draw_plot(log_path: Path, quiet: bool, trace, plotter) -> None:
         elif (problem := plotter.draw(data, partial)) is not None:
             print(f"cosim: note: no plot: {problem}", file=sys.stderr)
             return
+        os.replace(partial, png_path)
+    except (CosimError, OSError) as error:
+        print(f"cosim: note: no plot: {error}", file=sys.stderr)
+        return
+    finally:
+        partial.unlink(missing_ok=True)
+    if not quiet:
+        print(f"plot: {png_path}")
+
+
+def _plot_fleet(log_path: Path, quiet: bool) -> None:
+    """Draw a fleet run's PNG beside its log, from the log (`cosim.logs.fleet_plot`)."""
+    from cosim.logs.fleet_plot import plot_fleet
+    from cosim.logs.plot import skip_matplotlib_docstrings
+    from cosim.logs.reader import open_log
+
+    png_path = log_path.with_suffix(".png")
+    partial = png_path.with_name(f".{png_path.stem}.{os.getpid()}.png")  # renamed into place when drawn
+    try:
+        skip_matplotlib_docstrings()
+        with open_log(log_path) as log:
+            plot_fleet(log, partial)
         os.replace(partial, png_path)
     except (CosimError, OSError) as error:
         print(f"cosim: note: no plot: {error}", file=sys.stderr)

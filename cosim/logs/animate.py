@@ -6,7 +6,9 @@ in their own colour), the goal in force (the latest /goal), the unknown obstacle
 (the latest /obstacles message), the lidar beams of the latest /scan drawn from the pose the scan
 was taken at, the driven trajectory so far, the vehicle's footprint and heading coloured by the
 mixer's mode (follow / avoid / recover) and the time. The last frame shows the run's end time and
-its outcome ("goal reached at t = 74.2 s", "goal NOT reached (collision)").
+its outcome ("goal reached at t = 74.2 s", "goal NOT reached (collision)"). A fleet's log
+(`_FleetScene`): every robot in its colour (trail, footprint, heading, plan and goal in force),
+each collision's X from its time on, the fleet's line on the last frame.
 
 Frame k shows simulated time t0 + k * speed / fps [s] up to the log's end time t1, and one more
 frame at t1 when it falls between two: a run of D seconds has floor(D * fps / speed) + 1 frames,
@@ -97,7 +99,7 @@ def animate_log(
     if suffix == ".mp4" and ffmpeg is None:
         raise CosimError(f"--out {out}: MP4 needs ffmpeg, which is not installed (install it, or use .gif)")
     began = time.perf_counter()
-    scene = _Scene(log, size, dpi)
+    scene = _FleetScene(log, size, dpi) if log.fleet_outcome is not None else _Scene(log, size, dpi)
     times = frame_times(log.start_time, log.end_time, fps, speed)
     decimals = max(1, math.ceil(-math.log10(speed / fps)) + 1)  # consecutive frames never show one time
     last = len(times) - 1
@@ -321,6 +323,101 @@ class _Scene:
         mode_t, values = self.modes
         at = _latest(mode_t, t)
         return int(values[at]) if at >= 0 else 0
+
+
+class _FleetScene:
+    """The figure of a fleet's run: per robot (in its `run_colour`) the trail so far, the footprint
+    and heading, the plan and goal in force; each collision's X from its time on; the fleet's line
+    at the end."""
+
+    def __init__(self, log: Log, size: tuple[int, int] = (WIDTH, HEIGHT), dpi: float = DPI) -> None:
+        from cosim.logs.fleet_plot import collision_marks, fleet_runs
+        from cosim.logs.info import collision_texts, fleet_line
+        from cosim.logs.plot_map import run_colour
+
+        fleet = log.fleet_outcome or {}
+        runs = fleet_runs(log)
+        self.names = log.robots
+        if not self.names:
+            raise CosimError(f"{log.path}: a fleet's log without /<robot>/odom: nothing to animate")
+        self.trajectories = [log.robot_trajectory(name) for name in self.names]
+        self.plans = [run.plans for run in runs]
+        self.goals = [run.goals for run in runs]
+        self.radius = _footprint_radius(log)
+        self.final = fleet_line(fleet) if fleet else "fleet: no outcome recorded"
+        marks = collision_marks(fleet)
+        self.collisions = [(float(record["time"]), mark) for (record, _), mark in
+                           zip(collision_texts(fleet), marks, strict=True)]  # fmt: skip
+
+        self.figure = Figure(figsize=(size[0] / dpi, size[1] / dpi), dpi=dpi)
+        self.canvas = FigureCanvasAgg(self.figure)
+        axes = self.axes = self.figure.add_axes((0.07, 0.17, 0.9, 0.75))
+        handles, _ = draw_grid(axes, log)
+        x0, x1, y0, y1 = runs[0].limits
+        axes.set_xlim(x0, x1)
+        axes.set_ylim(y0, y1)
+        axes.set_aspect("equal", adjustable="box")
+        axes.set_xlabel("x [m]", fontsize=8)
+        axes.set_ylabel("y [m]", fontsize=8)
+        axes.tick_params(labelsize=7)
+        axes.grid(alpha=0.25)
+        axes.set_title(log.scenario_name or log.path.stem, fontsize=10)
+        moving = {"animated": True}
+        self.robots = []
+        for index, (name, trajectory) in enumerate(zip(self.names, self.trajectories, strict=True)):
+            colour = run_colour(index)
+            axes.plot(trajectory.x[0], trajectory.y[0], marker="o", color=colour, ms=6, ls="none", zorder=7)
+            (plan,) = axes.plot([], [], "--", color=colour, lw=1.0, alpha=0.7, zorder=5, **moving)
+            (goal,) = axes.plot([], [], marker="*", color=colour, ms=12, ls="none", zorder=7, **moving)
+            (trail,) = axes.plot([], [], "-", color=colour, lw=1.2, zorder=6, **moving)
+            body = patches.Circle((0, 0), self.radius, fc=colour, ec="black", lw=0.8, zorder=8, **moving)
+            axes.add_patch(body)
+            (heading,) = axes.plot([], [], "-", color="black", lw=1.3, zorder=9, **moving)
+            self.robots.append((plan, goal, trail, body, heading))
+            handles.append(patches.Patch(color=colour, label=name))
+        (self.crashes,) = axes.plot([], [], marker="X", mfc="#ffd60a", mec="black", mew=1.2, ms=11, ls="none",
+                                    zorder=10, **moving)  # fmt: skip
+        self.clock = axes.text(
+            0.01, 0.98, "", transform=axes.transAxes, ha="left", va="top", fontsize=9, zorder=10,
+            bbox={"boxstyle": "round", "fc": "white", "ec": "0.6", "alpha": 0.85}, **moving,
+        )  # fmt: skip
+        self.banner = axes.text(
+            0.5, 0.02, "", transform=axes.transAxes, ha="center", va="bottom", fontsize=8, zorder=11,
+            bbox={"boxstyle": "round", "fc": "white", "ec": "0.3", "alpha": 0.9}, **moving,
+        )  # fmt: skip
+        handles.append(Line2D([], [], marker="X", mfc="#ffd60a", mec="black", ls="none", label="collision"))
+        self.figure.legend(handles=handles, loc="lower center", ncol=6, fontsize=7, frameon=False)
+        self.canvas.draw()
+        self.background = self.canvas.copy_from_bbox(self.figure.bbox)
+
+    def render(self, t: float, decimals: int = 1, final: bool = False) -> np.ndarray:
+        """The frame at simulated time t [s] (RGBA, a copy); the `final` one shows the fleet's line."""
+        artists = []
+        for k, (plan, goal, trail, body, heading) in enumerate(self.robots):
+            traj = self.trajectories[k]
+            i = max(_latest(traj.t, t), 0)
+            x, y, theta = float(traj.x[i]), float(traj.y[i]), float(traj.theta[i])
+            trail.set_data(traj.x[: i + 1], traj.y[: i + 1])
+            body.center = (x, y)
+            reach = max(2.0 * self.radius, 1.0)
+            heading.set_data([x, x + reach * math.cos(theta)], [y, y + reach * math.sin(theta)])
+            plans = self.plans[k]
+            at = _latest(np.array([when for when, _ in plans]), t) if plans else -1
+            points = plans[at][1] if at >= 0 else np.zeros((0, 2))
+            plan.set_data(points[:, 0], points[:, 1])
+            goals = self.goals[k]
+            at = max(_latest(np.array([g[0] for g in goals]), t), 0) if goals else -1
+            goal.set_data(*(([goals[at][1]], [goals[at][2]]) if at >= 0 else ([], [])))
+            artists += [plan, goal, trail, body, heading]
+        happened = [mark for when, mark in self.collisions if when <= t + 1e-9]
+        self.crashes.set_data([m[0] for m in happened], [m[1] for m in happened])
+        self.clock.set_text(f"t = {t:.{decimals}f} s   collisions so far: {len(happened)}")
+        self.banner.set_text(self.final if final else "")
+        self.banner.set_visible(final)
+        self.canvas.restore_region(self.background)
+        for artist in [*artists, self.crashes, self.clock, self.banner]:
+            self.axes.draw_artist(artist)
+        return np.array(self.canvas.buffer_rgba())
 
 
 def _footprint_radius(log: Log) -> float:

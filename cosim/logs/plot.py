@@ -472,9 +472,9 @@ def figure_size(rows: int, size=None, dpi: float = DPI) -> tuple[float, float]:
     return 15.0, max(7.5, 1.9 * rows)
 
 
-def build_figure(data: PlotData | list[PlotData], dpi: float = DPI, size=None):
+def build_figure(data: PlotData | list[PlotData], dpi: float = DPI, size=None, title: str | None = None):
     """The drawn figure of `data` (its canvas drawn): `draw` writes its pixels; the map is
-    `figure.axes[0]`, then the panels top to bottom."""
+    `figure.axes[0]`, then the panels top to bottom. `title` replaces the picture's own."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -489,7 +489,8 @@ def build_figure(data: PlotData | list[PlotData], dpi: float = DPI, size=None):
     width, height = figure_size(rows, size, dpi)
     figure = Figure(figsize=(width, height), dpi=dpi)
     canvas = FigureCanvasAgg(figure)
-    title = runs[0].title if len(runs) == 1 else _overlay_title(runs)
+    if title is None:
+        title = runs[0].title if len(runs) == 1 else _overlay_title(runs)
     title_lines = title.count("\n") + 1
     # Fixed margins [inches] instead of a layout engine: room for the title above, the map's
     # legend below it, and the panels' tick labels.

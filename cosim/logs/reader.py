@@ -130,7 +130,7 @@ class Log:
                 f"incomplete log ({self._index.problem}): read up to its last complete chunk, "
                 f"t = {self.end_time:.3f} s"
             )
-        elif "outcome" not in self.metadata:
+        elif "outcome" not in self.metadata and "fleet_outcome" not in self.metadata:
             self.warnings.append("the log records no outcome (the run ended by an error)")
         profile = self._index.header.profile if self._index.header else ""
         if profile != "ros2":
@@ -215,7 +215,63 @@ class Log:
 
     @property
     def scenario_name(self) -> str | None:
-        return self.metadata.get("navcosim", {}).get("scenario_name")
+        name = self.metadata.get("navcosim", {}).get("scenario_name")
+        if name is None and self.fleet_outcome is not None and self.scenario_text:
+            # a fleet log has no `navcosim` record: its attached scenario names it
+            import tomllib
+
+            try:
+                name = tomllib.loads(self.scenario_text).get("scenario", {}).get("name")
+            except tomllib.TOMLDecodeError:
+                name = None
+        return name
+
+    @property
+    def fleet_outcome(self) -> dict | None:
+        """A fleet run's outcome (metadata `fleet_outcome`, each value JSON): reason, time [s],
+        makespan [s] or None, throughput_per_hour, deadlocks (names), robots (name -> status,
+        goals_reached, goals, completion_time, distance, clearances, collision [t, x, y] or None),
+        collisions ({robots: [a, b], time, centers: [[x, y], [x, y]], radii}); None for a log
+        that is not a fleet's (or a fleet run that did not end)."""
+        written = self.metadata.get("fleet_outcome")
+        return None if written is None else {key: json.loads(text) for key, text in written.items()}
+
+    @cached_property
+    def robots(self) -> list[str]:
+        """The fleet's robots: the namespaces of `/<robot>/odom` topics, in name order ([] for a
+        single robot's log)."""
+        names = {topic.name[1:-5] for topic in self.topics if re.fullmatch(r"/[^/]+/odom", topic.name)}
+        return sorted(names, key=_natural)
+
+    def robot_trajectory(self, robot: str) -> Trajectory:
+        """A fleet robot's driven poses: its `/<robot>/odom` messages (in `map`: its odom frame is
+        the identity under `map`)."""
+        rows = [
+            (
+                item.t,
+                item.message.pose.pose.position.x,
+                item.message.pose.pose.position.y,
+                rosmsg.yaw_of(item.message.pose.pose.orientation),
+            )
+            for item in self.messages(f"/{robot}/odom")
+        ]
+        t, x, y, theta = np.array(rows, dtype=float).reshape(-1, 4).T
+        return Trajectory(t, x, y, theta)
+
+    def robot_goals(self, robot: str) -> list[tuple[float, float, float]]:
+        """A fleet robot's goals as (log time [s], x, y [m]): its `/<robot>/goal` messages."""
+        if not self.has_topic(f"/{robot}/goal"):
+            return []
+        return [
+            (item.t, item.message.pose.position.x, item.message.pose.position.y)
+            for item in self.messages(f"/{robot}/goal")
+        ]
+
+    def robot_plans(self, robot: str) -> list[tuple[float, np.ndarray]]:
+        """A fleet robot's plans as (log time [s], N x 3 poses), as `plans()`."""
+        if not self.has_topic(f"/{robot}/plan"):
+            return []
+        return [(item.t, path_poses(item.message)) for item in self.messages(f"/{robot}/plan")]
 
     @property
     def outcome(self) -> dict[str, bool | int | float | str] | None:
@@ -530,6 +586,11 @@ def _marker_shapes(message) -> list:
             vertices = tuple((point.x, point.y) for point in marker.points[:-1])
             shapes.append(Polygon(vertices))
     return shapes
+
+
+def _natural(name: str) -> tuple:
+    """robot2 before robot10."""
+    return tuple((0, int(part), "") if part.isdigit() else (1, 0, part) for part in re.split(r"(\d+)", name))
 
 
 def _floats(text: str | None) -> tuple[float, ...] | None:

@@ -20,6 +20,7 @@ import numpy as np
 
 from cosim.core.component import closest_names
 from cosim.errors import CosimError
+from cosim.logs.fleet_plot import is_fleet_log, plot_fleet
 from cosim.logs.plot import DPI, GRID_ALPHA, collector_paused, plot_logs, write_png
 from cosim.logs.plot_map import run_colour
 
@@ -45,9 +46,12 @@ def plot_any(
 ) -> Path:
     """Draw `logs` (one, or several to overlay) to `png_path` as robots' runs when each is one,
     else as signals over time (module docstring); `signals` ("component.variable") None: the
-    picture's defaults; `dpi` [pixels per inch], `size` (width, height) [px] or None: the
+    picture's defaults; one fleet's log without `signals`: `cosim.logs.fleet_plot`;
+    `dpi` [pixels per inch], `size` (width, height) [px] or None: the
     picture's own. Returns the PNG path."""
     logs = logs if isinstance(logs, list) else [logs]
+    if len(logs) == 1 and signals is None and is_fleet_log(logs[0]):
+        return plot_fleet(logs[0], png_path, dpi, size)
     if all(is_robot_log(log) for log in logs):
         return plot_logs(logs, Path(png_path), signals, dpi, size)
     return plot_signals(logs, png_path, signals, dpi, size)

@@ -553,8 +553,10 @@ def format_fleet(fleet: Fleet, outcome: FleetOutcome) -> str:
     return "\n".join(lines)
 
 
-def run_fleet_command(args, fleet: Fleet) -> int:
-    """`cosim run FLEET.toml`: run, print the fleet summary; exit 0 only when every robot completed."""
+def run_fleet_command(args, fleet: Fleet, plot=None) -> int:
+    """`cosim run FLEET.toml`: run, print the fleet summary; exit 0 only when every robot completed.
+    `plot(log_path)`, when given, draws the PNG beside the log once it is written (the plot is a
+    later stage, `cosim.logs`: the CLI hands it in)."""
     import sys
 
     if getattr(args, "live", False):
@@ -569,4 +571,6 @@ def run_fleet_command(args, fleet: Fleet) -> int:
     if not args.quiet:
         print(format_fleet(fleet, outcome))
         print(f"log: {path}", file=sys.stdout)
+    if plot is not None:
+        plot(Path(path))
     return outcome.exit_code
