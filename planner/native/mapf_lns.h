@@ -318,10 +318,11 @@ static int intervals(Lns *l, int v) {
 }
 
 /* Heap order: f = max(t + goal distance, settle) ascending (consistent: the agent cannot rest on
- * its goal before settle), then later t first (deeper nodes: fewer ties re-expanded). */
+ * its goal before settle), then nearer the goal first, then later t first. Where settle dominates f
+ * (a goal others pass late) the ties are many: nearest first heads for the goal. */
 static int st_before(const Lns *l, int a, int b) {
     const StNode *x = &l->st[a], *y = &l->st[b];
-    return x->f < y->f || (x->f == y->f && (x->t > y->t || (x->t == y->t && x->h < y->h)));
+    return x->f < y->f || (x->f == y->f && (x->h < y->h || (x->h == y->h && x->t > y->t)));
 }
 
 static int st_push(Lns *l, int agent, int v, int t, int iv, int parent) {
@@ -540,10 +541,13 @@ static int lns_iterate(Lns *l, double deadline) {
 }
 
 /* Prioritized planning with eviction: the agents are planned one after the other from a queue
- * (random order at first), each by space-time A* against the ones planned. An agent that finds no
+ * (see lns_order_by_blocking), each by SIPP against the ones planned. An agent that finds no
  * path takes out the planned agents in its way and is planned again at once; they go to the back of
- * the queue. In its way: the agents on its start's cells in the first steps (it was walled in), the
- * ones resting on a shortest path of it, and the ones passing its goal after it could arrive. */
+ * the queue. In its way, first: the agents on its start's cells in the first steps (it was walled
+ * in) and the ones resting on a shortest path of it; if it still finds none: the ones that meet that
+ * path followed without waiting (on its cells at the same time steps, swapping with it, resting
+ * there by then). Few are taken out at first: each one taken out must be planned again. SIPP fails
+ * only where there is no path (or past the expansion cap), so a failure is a real blockade. */
 
 static void queue_push(Lns *l, int agent) { l->order[(l->queue_head + l->queue_n++) % l->N] = agent; }
 
@@ -563,29 +567,32 @@ static void evict(Lns *l, int agent) {
     l->cost[agent] = 0;
 }
 
-static void evict_blockers(Lns *l, int agent) {
+static void evict_blockers(Lns *l, int agent, int harder) {
     const int *d = l->dist + (size_t)agent * l->V;
-    int start = l->start[agent], goal = l->goal[agent], v = start;
+    int start = l->start[agent], goal = l->goal[agent], v = start, t = 0;
     l->n_hood = 0;
-    for (int t = 0; t <= 2; t++) {
-        evict(l, lns_occupant(l, start, t));
-        evict(l, resting_at(l, start, t));
+    for (int s = 0; s <= 2 && !harder; s++) {
+        evict(l, lns_occupant(l, start, s));
+        evict(l, resting_at(l, start, s));
         for (int k = 0; k < 4; k++) {
             int u = l->adj[4 * start + k];
-            if (u >= 0) { evict(l, lns_occupant(l, u, t)); evict(l, resting_at(l, u, t)); }
+            if (u >= 0) { evict(l, lns_occupant(l, u, s)); evict(l, resting_at(l, u, s)); }
         }
     }
-    while (v != goal) {  /* a shortest path, ties broken at random */
+    for (;;) {  /* a shortest path, ties broken at random */
+        evict(l, resting_at(l, v, harder ? t : INT_MAX - 1));
+        if (harder) evict(l, lns_occupant(l, v, t));
+        if (v == goal) break;
         int options[4], n = 0;
         for (int k = 0; k < 4; k++) {
             int u = l->adj[4 * v + k];
             if (u >= 0 && d[u] == d[v] - 1) options[n++] = u;
         }
-        v = options[lns_rnd(l) % (uint64_t)n];
-        evict(l, resting_at(l, v, INT_MAX - 1));
+        int u = options[lns_rnd(l) % (uint64_t)n], other = lns_occupant(l, u, t);
+        if (harder && other >= 0 && lns_at(l, other, t + 1) == v) evict(l, other);  /* a swap */
+        v = u;
+        t++;
     }
-    const Visits *list = &l->visits[goal];
-    for (int k = 0; k < list->n; k++) if (list->a[k].t >= d[start]) evict(l, list->a[k].agent);
     for (int k = l->n_hood - 1; k > 0; k--) {
         int r = (int)(lns_rnd(l) % (uint64_t)(k + 1)), t = l->hood[k];
         l->hood[k] = l->hood[r]; l->hood[r] = t;
@@ -597,25 +604,63 @@ static void evict_blockers(Lns *l, int agent) {
     l->n_hood = 0;
 }
 
+/* The first planning order: agents whose goal lies on many others' shortest paths last (resting
+ * there early would wall them off; planned last, they wait until the others have passed), agents
+ * whose start lies on many others' paths first (they leave it before the others come); ties in the
+ * random order of lns_init. Counts over one shortest path per agent. -1 out of memory. */
+static const long long *order_key;
+static int cmp_order(const void *a, const void *b) {
+    long long x = order_key[*(const int *)a], y = order_key[*(const int *)b];
+    return (x > y) - (x < y);
+}
+
+static int lns_order_by_blocking(Lns *l) {
+    int *through = calloc((size_t)l->V, sizeof(int));
+    long long *key = malloc((size_t)l->N * sizeof(long long));
+    if (!through || !key) { free(through); free(key); return -1; }
+    for (int i = 0; i < l->N; i++) {
+        const int *d = l->dist + (size_t)i * l->V;
+        for (int v = l->start[i];; ) {
+            through[v]++;
+            if (v == l->goal[i]) break;
+            for (int k = 0; k < 4; k++) {
+                int u = l->adj[4 * v + k];
+                if (u >= 0 && d[u] == d[v] - 1) { v = u; break; }
+            }
+        }
+    }
+    for (int r = 0; r < l->N; r++) {  /* the random position breaks ties */
+        int i = l->order[r];
+        key[i] = ((long long)(through[l->goal[i]] - through[l->start[i]]) << 32) + r;
+    }
+    order_key = key;
+    qsort(l->order, (size_t)l->N, sizeof(int), cmp_order);
+    free(through);
+    free(key);
+    return 0;
+}
+
 /* Plan from the queue until it is empty (1: every agent has a path, the solution is in the tables),
  * `pause` (2; a later call resumes), or out of memory (-1). A search under way runs until
  * `deadline`. */
 static int lns_prioritized(Lns *l, double pause, double deadline) {
-    if (!l->queue_ready) {  /* the first call: every agent, in the random order of lns_init */
+    if (!l->queue_ready) {  /* the first call: every agent, in the order above */
+        if (lns_order_by_blocking(l) < 0) return -1;
         l->queue_n = l->N;
         l->queue_ready = 1;
     }
     while (l->queue_n > 0) {
         if (clock_now() > pause) return 2;
-        int i = l->order[l->queue_head], cap = l->expansion_cap;
+        int i = l->order[l->queue_head];
         l->queue_head = (l->queue_head + 1) % l->N;
         l->queue_n--;
-        /* a first try on a short leash: a search that long is mostly walled in */
-        l->expansion_cap = cap / 8;
         int status = st_astar(l, i, l->start[i], deadline);
-        l->expansion_cap = cap;
         if (status == 1) {
-            evict_blockers(l, i);
+            evict_blockers(l, i, 0);
+            status = st_astar(l, i, l->start[i], deadline);
+        }
+        if (status == 1) {
+            evict_blockers(l, i, 1);
             status = st_astar(l, i, l->start[i], deadline);
         }
         if (status == 1) { queue_push(l, i); continue; }  /* still none: to the back of the queue */
