@@ -45,9 +45,8 @@ typedef struct {
      * (a pool: [lo, hi] and the earliest arrival found) */
     StNode *st; int st_n, st_cap;
     int *heap, heap_n, heap_cap;
-    int *iv_lo, *iv_hi, *iv_best, iv_n, iv_cap;
+    int *iv_lo, *iv_hi, *iv_best, *iv_before, iv_n, iv_cap;  /* before: the agent on it at lo - 1 */
     int *iv_first, *iv_count, *iv_stamp, generation;
-    int *times, times_cap;
     int expansion_cap, settle;      /* settle: the searched agent may rest on its goal from then on */
 } Lns;
 
@@ -122,6 +121,13 @@ static void occ_remove(Lns *l, long long key) {
     l->occ_count--;
 }
 
+/* A vertex's visits are kept sorted by time (its safe intervals are read off them in order). */
+static int visits_first_after(const Visits *list, int t) {  /* first index with time > t */
+    int lo = 0, hi = list->n;
+    while (lo < hi) { int mid = (lo + hi) / 2; if (list->a[mid].t <= t) lo = mid + 1; else hi = mid; }
+    return lo;
+}
+
 static int visits_add(Visits *list, int t, int agent) {
     if (list->n == list->cap) {
         int cap = list->cap ? 2 * list->cap : 4;
@@ -130,8 +136,10 @@ static int visits_add(Visits *list, int t, int agent) {
         list->a = grown;
         list->cap = cap;
     }
-    list->a[list->n].t = t;
-    list->a[list->n].agent = agent;
+    int k = visits_first_after(list, t);
+    memmove(list->a + k + 1, list->a + k, (size_t)(list->n - k) * sizeof(Visit));
+    list->a[k].t = t;
+    list->a[k].agent = agent;
     list->n++;
     return 0;
 }
@@ -140,8 +148,12 @@ static void lns_unvisit(Lns *l, int agent, int steps) {
     for (int t = 0; t < steps; t++) {
         occ_remove(l, st_key(l, l->path[agent][t], t));
         Visits *list = &l->visits[l->path[agent][t]];
-        for (int k = 0; k < list->n; k++)
-            if (list->a[k].agent == agent && list->a[k].t == t) { list->a[k] = list->a[--list->n]; break; }
+        for (int k = visits_first_after(list, t - 1); k < list->n && list->a[k].t == t; k++)
+            if (list->a[k].agent == agent) {
+                memmove(list->a + k, list->a + k + 1, (size_t)(list->n - k - 1) * sizeof(Visit));
+                list->n--;
+                break;
+            }
     }
 }
 
@@ -249,7 +261,7 @@ static void lns_free(Lns *l) {
     free(l->path); free(l->saved_path); free(l->cost); free(l->saved_cost); free(l->hood); free(l->order); free(l->in_hood);
     free(l->tabu); free(l->visits); free(l->rest_from); free(l->goal_agent); free(l->intersections); free(l->bfs_queue);
     free(l->bfs_stamp); free(l->occ_key); free(l->occ_agent); free(l->st); free(l->heap);
-    free(l->iv_lo); free(l->iv_hi); free(l->iv_best); free(l->iv_first); free(l->iv_count); free(l->iv_stamp); free(l->times);
+    free(l->iv_lo); free(l->iv_hi); free(l->iv_best); free(l->iv_before); free(l->iv_first); free(l->iv_count); free(l->iv_stamp);
 }
 
 /* -- safe interval path planning ------------------------------------------------------------------
@@ -262,11 +274,6 @@ static void lns_free(Lns *l) {
  * last interval (free for ever). The states are few (one per interval, not one per time step), so a
  * search is quick on long paths and proves quickly that there is no path at all. */
 
-static int cmp_int(const void *a, const void *b) {
-    int x = *(const int *)a, y = *(const int *)b;
-    return (x > y) - (x < y);
-}
-
 /* Room for `more` further intervals in the pool; -1 if out of memory. */
 static int iv_reserve(Lns *l, int more) {
     if (l->iv_n + more <= l->iv_cap) return 0;
@@ -278,7 +285,9 @@ static int iv_reserve(Lns *l, int more) {
     if (hi) l->iv_hi = hi;
     int *best = realloc(l->iv_best, (size_t)cap * sizeof(int));
     if (best) l->iv_best = best;
-    if (!lo || !hi || !best) return -1;
+    int *before = realloc(l->iv_before, (size_t)cap * sizeof(int));
+    if (before) l->iv_before = before;
+    if (!lo || !hi || !best || !before) return -1;
     l->iv_cap = cap;
     return 0;
 }
@@ -288,27 +297,20 @@ static int iv_reserve(Lns *l, int more) {
 static int intervals(Lns *l, int v) {
     if (l->iv_stamp[v] == l->generation) return 0;
     const Visits *list = &l->visits[v];
-    if (list->n > l->times_cap) {
-        int *grown = realloc(l->times, (size_t)list->n * sizeof(int));
-        if (!grown) return -1;
-        l->times = grown;
-        l->times_cap = list->n;
-    }
-    for (int k = 0; k < list->n; k++) l->times[k] = list->a[k].t;
-    qsort(l->times, (size_t)list->n, sizeof(int), cmp_int);
     if (iv_reserve(l, list->n + 1) < 0) return -1;
-    int rest = l->rest_from[v], from = 0, n = 0;
+    int rest = l->rest_from[v], from = 0, n = 0, before = -1;
     l->iv_first[v] = l->iv_n;
     for (int k = 0; k <= list->n; k++) {
-        int until = k < list->n ? l->times[k] - 1 : INT_MAX;  /* the free run before the next visit */
+        int until = k < list->n ? list->a[k].t - 1 : INT_MAX;  /* the free run before the next visit */
         if (rest != INT_MAX && until >= rest) until = rest - 1;
         if (until >= from) {
             l->iv_lo[l->iv_n + n] = from;
             l->iv_hi[l->iv_n + n] = until;
             l->iv_best[l->iv_n + n] = INT_MAX;
+            l->iv_before[l->iv_n + n] = before;
             n++;
         }
-        if (k < list->n) from = l->times[k] + 1;
+        if (k < list->n) { from = list->a[k].t + 1; before = list->a[k].agent; }
         if (from >= rest) break;
     }
     l->iv_n += n;
@@ -402,15 +404,16 @@ static int st_astar(Lns *l, int agent, int start, double deadline) {
             int first = l->iv_first[u], count = l->iv_count[u];
             /* leave v at a time in [node.t, hi]: enter u at a time in [node.t + 1, hi + 1] */
             int latest = hi == INT_MAX ? INT_MAX : hi + 1;
-            for (int j = first; j < first + count; j++) {
-                if (l->iv_hi[j] < node.t + 1) continue;
+            int lo = first, hi_j = first + count;  /* the first interval ending at node.t + 1 or later */
+            while (lo < hi_j) { int mid = (lo + hi_j) / 2; if (l->iv_hi[mid] < node.t + 1) lo = mid + 1; else hi_j = mid; }
+            for (int j = lo; j < first + count; j++) {
                 if (l->iv_lo[j] > latest) break;
                 int arrive = l->iv_lo[j] > node.t + 1 ? l->iv_lo[j] : node.t + 1;
                 int end = l->iv_hi[j] < latest ? l->iv_hi[j] : latest;
-                for (; arrive <= end; arrive++) {  /* not a swap with an agent going u -> v */
-                    int other = lns_occupant(l, u, arrive - 1);
-                    if (other < 0 || lns_at(l, other, arrive) != node.v) break;
-                }
+                /* not a swap with an agent going u -> v: only possible when u was taken the step
+                 * before, i.e. arriving at the interval's start; then one step later */
+                int other = l->iv_before[j];
+                if (arrive == l->iv_lo[j] && other >= 0 && lns_at(l, other, arrive) == node.v) arrive++;
                 if (arrive > end || arrive >= l->iv_best[j]) continue;
                 if (st_push(l, agent, u, arrive, j, id) < 0) return -1;
             }
