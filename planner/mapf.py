@@ -7,15 +7,16 @@ LaCAM (Okumura, AAAI 2023): a depth-first search over configurations (one cell p
 successors PIBT (Okumura et al. 2022; with a swap of two agents meeting head-on at the mouth of a
 dead end, after Okumura 2024) generates under constraints that a lazily grown tree adds agent by
 agent, so every successor is eventually tried and the search is complete; it takes turns with
-prioritized planning (agents one after the other by space-time A* against the ones before; an agent
-that finds no path evicts the planned agents in its way, which are planned again after it), which is
-quicker where PIBT's greedy steps need a deep search (dead ends of a maze, one-cell warehouse
-aisles). Then, until `time_limit` or a proof of optimality, two improvers share the best solution:
-LaCAM* (Okumura, IJCAI 2023; configurations met again link the search nodes, costs are rewired along
-the links, nodes that cannot beat the best sum of costs are pruned; an exhausted search proves the
-best one optimal) and a large neighbourhood search (Li et al., IJCAI 2021: a few agents at a time
-replanned by space-time A* against the others' paths, kept if the sum of costs drops). Goal
-distances are one breadth-first search per agent.
+prioritized planning (agents one after the other by SIPP, safe interval path planning, Phillips and
+Likhachev 2011, against the ones before; an agent that finds no path evicts the planned agents in its
+way, which are planned again after it), which gets three quarters of the time and is quicker where
+PIBT's greedy steps need a deep search (dead ends of a maze, one-cell warehouse aisles). Then, until
+`time_limit` or a proof of optimality, two improvers share the best solution: LaCAM* (Okumura, IJCAI
+2023; configurations met again link the search nodes, costs are rewired along the links, nodes that
+cannot beat the best sum of costs are pruned; an exhausted search proves the best one optimal) and a
+large neighbourhood search (Li et al., IJCAI 2021: a few agents at a time replanned by SIPP against
+the others' paths, kept if the sum of costs drops). Goal distances are one breadth-first search per
+agent.
 """
 
 from __future__ import annotations

@@ -489,13 +489,14 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
     find(m, start, &slot);
     m->table[slot] = 0;
     if (push(m, &m->open, 0) < 0) return;
-    /* LaCAM and prioritized planning in slices, each kept to half the time while both can go on */
+    /* LaCAM and prioritized planning in slices, planning kept to three quarters of the time while both
+     * can go on: with SIPP it is the quicker of the two where PIBT's greedy steps need a deep search */
     int outcome = LACAM_FOUND, planned = 0;
     double lacam_time = 0.0, planning_time = 0.0;
     if (is_goal(m, start)) m->goal_node = 0;
     while (m->goal_node < 0 && !planned && now() < deadline) {
         double began = now();
-        if (lacam_time < INFINITY && lacam_time <= planning_time) {
+        if (lacam_time < INFINITY && 3 * lacam_time <= planning_time) {
             outcome = lacam(m, began + FIRST_SLICE < deadline ? began + FIRST_SLICE : deadline, 1);
             lacam_time += now() - began;
             if (outcome == LACAM_FOUND || (outcome == LACAM_EXHAUSTED && !m->truncated)) break;

@@ -1,14 +1,14 @@
 /* Large neighbourhood search for MAPF (Li et al., IJCAI 2021: anytime MAPF via LNS): keep a
  * solution; repeatedly take a few agents out (a neighbourhood), replan them one after the other in
- * random order with space-time A* against everyone else's paths, and keep the new paths if their
+ * random order with SIPP (below) against everyone else's paths, and keep the new paths if their
  * sum of costs is lower. Neighbourhoods come from three rules, chosen by adaptive weights: the
  * agents met by a random walk that could shorten the most delayed agent's path, the agents passing
  * near a random intersection, and random agents.
  *
  * Agent i's path is p[0..c_i], c_i its cost (the time it reaches its goal for the last time); it
  * rests on its goal from c_i on. Occupancy: the (time, agent) visits of the steps t < c_j of the
- * paths, per vertex and in a hash table keyed by (time, vertex), and per vertex the time from which
- * an agent rests there.
+ * paths, per vertex (sorted by time) and in a hash table keyed by (time, vertex), and per vertex the
+ * time from which an agent rests there.
  */
 #include <limits.h>
 #include <stdint.h>
