@@ -489,13 +489,14 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
     find(m, start, &slot);
     m->table[slot] = 0;
     if (push(m, &m->open, 0) < 0) return;
-    /* LaCAM and prioritized planning in slices, each kept to half the time while both can go on */
+    /* LaCAM and prioritized planning in slices, planning kept to three quarters of the time while both
+     * can go on: with SIPP it is the quicker of the two where PIBT's greedy steps need a deep search */
     int outcome = LACAM_FOUND, planned = 0;
     double lacam_time = 0.0, planning_time = 0.0;
     if (is_goal(m, start)) m->goal_node = 0;
     while (m->goal_node < 0 && !planned && now() < deadline) {
         double began = now();
-        if (lacam_time < INFINITY && lacam_time <= planning_time) {
+        if (lacam_time < INFINITY && 3 * lacam_time <= planning_time) {
             outcome = lacam(m, began + FIRST_SLICE < deadline ? began + FIRST_SLICE : deadline, 1);
             lacam_time += now() - began;
             if (outcome == LACAM_FOUND || (outcome == LACAM_EXHAUSTED && !m->truncated)) break;
@@ -623,4 +624,38 @@ void mapf_free(void *handle) {
     free(m->dist); free(m->occ_now); free(m->occ_next); free(m->stamp); free(m->nxt); free(m->path);
     lns_free(&m->lns);
     free(m);
+}
+
+/* One agent's shortest path by the solver's SIPP against fixed paths of other agents (tests): agent
+ * k < n_others follows others[offset[k] .. offset[k + 1] - 1] and then rests on its last vertex.
+ * Writes up to `room` vertices of the path into out; returns its cost (arrival at the goal for
+ * good), -1 if there is none, -2 out of memory. */
+int mapf_single_path(int V, const int *adj, int n_others, const int *others, const int *offset, int start,
+                     int goal, int *out, int room) {
+    int N = n_others + 1, result = -2;
+    int *starts = malloc((size_t)N * sizeof(int)), *goals = malloc((size_t)N * sizeof(int));
+    int *dist = malloc((size_t)N * V * sizeof(int)), *queue = malloc((size_t)V * sizeof(int));
+    Mapf m;
+    memset(&m, 0, sizeof(m));
+    m.V = V; m.adj = adj;
+    Lns l;
+    memset(&l, 0, sizeof(l));
+    if (!starts || !goals || !dist || !queue) goto done;
+    for (int k = 0; k < n_others; k++) { starts[k] = others[offset[k]]; goals[k] = others[offset[k + 1] - 1]; }
+    starts[n_others] = start; goals[n_others] = goal;
+    for (int k = 0; k < N; k++) bfs(&m, goals[k], dist + (size_t)k * V, queue);
+    if (lns_init(&l, V, N, adj, starts, goals, dist, 0) < 0) goto done;
+    for (int k = 0; k < n_others; k++)
+        if (lns_set_path(&l, k, others + offset[k], offset[k + 1] - offset[k] - 1) < 0 || lns_occupy(&l, k) < 0) goto done;
+    result = -1;
+    if (dist[(size_t)n_others * V + start] < 0) goto done;
+    int status = st_astar(&l, n_others, start, INFINITY);
+    if (status == -1) result = -2;
+    if (status != 0) goto done;
+    result = l.cost[n_others];
+    for (int t = 0; t <= result && t < room; t++) out[t] = l.path[n_others][t];
+done:
+    lns_free(&l);
+    free(starts); free(goals); free(dist); free(queue);
+    return result;
 }

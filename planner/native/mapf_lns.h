@@ -1,14 +1,14 @@
 /* Large neighbourhood search for MAPF (Li et al., IJCAI 2021: anytime MAPF via LNS): keep a
  * solution; repeatedly take a few agents out (a neighbourhood), replan them one after the other in
- * random order with space-time A* against everyone else's paths, and keep the new paths if their
+ * random order with SIPP (below) against everyone else's paths, and keep the new paths if their
  * sum of costs is lower. Neighbourhoods come from three rules, chosen by adaptive weights: the
  * agents met by a random walk that could shorten the most delayed agent's path, the agents passing
  * near a random intersection, and random agents.
  *
  * Agent i's path is p[0..c_i], c_i its cost (the time it reaches its goal for the last time); it
  * rests on its goal from c_i on. Occupancy: the (time, agent) visits of the steps t < c_j of the
- * paths, per vertex and in a hash table keyed by (time, vertex), and per vertex the time from which
- * an agent rests there.
+ * paths, per vertex (sorted by time) and in a hash table keyed by (time, vertex), and per vertex the
+ * time from which an agent rests there.
  */
 #include <limits.h>
 #include <stdint.h>
@@ -22,7 +22,7 @@
 
 typedef struct { int t, agent; } Visit;
 typedef struct { Visit *a; int n, cap; } Visits;
-typedef struct { int v, t, parent, f, h; } StNode;  /* h: goal distance; f: see st_before */
+typedef struct { int v, t, iv, parent, child, f, h; } StNode;  /* t: arrival; iv: its safe interval */
 
 typedef struct {
     int V, N;
@@ -41,10 +41,12 @@ typedef struct {
     int **saved_path, *saved_cost;
     int *intersections, n_intersections;
     int *bfs_queue; int *bfs_stamp, bfs_gen;
-    /* space-time A*: nodes, binary heap of node ids, hash set of the (t, v) generated */
+    /* SIPP: nodes, binary heap of node ids; the safe intervals of the vertices met by one search
+     * (a pool: [lo, hi] and the earliest arrival found) */
     StNode *st; int st_n, st_cap;
     int *heap, heap_n, heap_cap;
-    long long *keys; int *stamp, table_size, generation;
+    int *iv_lo, *iv_hi, *iv_best, *iv_before, iv_n, iv_cap;  /* before: the agent on it at lo - 1 */
+    int *iv_first, *iv_count, *iv_stamp, generation;
     int expansion_cap, settle;      /* settle: the searched agent may rest on its goal from then on */
 } Lns;
 
@@ -119,6 +121,13 @@ static void occ_remove(Lns *l, long long key) {
     l->occ_count--;
 }
 
+/* A vertex's visits are kept sorted by time (its safe intervals are read off them in order). */
+static int visits_first_after(const Visits *list, int t) {  /* first index with time > t */
+    int lo = 0, hi = list->n;
+    while (lo < hi) { int mid = (lo + hi) / 2; if (list->a[mid].t <= t) lo = mid + 1; else hi = mid; }
+    return lo;
+}
+
 static int visits_add(Visits *list, int t, int agent) {
     if (list->n == list->cap) {
         int cap = list->cap ? 2 * list->cap : 4;
@@ -127,8 +136,10 @@ static int visits_add(Visits *list, int t, int agent) {
         list->a = grown;
         list->cap = cap;
     }
-    list->a[list->n].t = t;
-    list->a[list->n].agent = agent;
+    int k = visits_first_after(list, t);
+    memmove(list->a + k + 1, list->a + k, (size_t)(list->n - k) * sizeof(Visit));
+    list->a[k].t = t;
+    list->a[k].agent = agent;
     list->n++;
     return 0;
 }
@@ -137,8 +148,12 @@ static void lns_unvisit(Lns *l, int agent, int steps) {
     for (int t = 0; t < steps; t++) {
         occ_remove(l, st_key(l, l->path[agent][t], t));
         Visits *list = &l->visits[l->path[agent][t]];
-        for (int k = 0; k < list->n; k++)
-            if (list->a[k].agent == agent && list->a[k].t == t) { list->a[k] = list->a[--list->n]; break; }
+        for (int k = visits_first_after(list, t - 1); k < list->n && list->a[k].t == t; k++)
+            if (list->a[k].agent == agent) {
+                memmove(list->a + k, list->a + k + 1, (size_t)(list->n - k - 1) * sizeof(Visit));
+                list->n--;
+                break;
+            }
     }
 }
 
@@ -162,13 +177,6 @@ static void lns_vacate(Lns *l, int agent) {
 static int lns_occupant(const Lns *l, int v, int t) {
     int s = occ_find(l, st_key(l, v, t));
     return s < 0 ? -1 : l->occ_agent[s];
-}
-
-static int lns_last_visit(const Lns *l, int v) {
-    int last = -1;
-    const Visits *list = &l->visits[v];
-    for (int k = 0; k < list->n; k++) if (list->a[k].t > last) last = list->a[k].t;
-    return last;
 }
 
 /* Replace agent's path by a copy of p[0..cost]. */
@@ -219,9 +227,9 @@ static int lns_init(Lns *l, int V, int N, const int *adj, const int *start, cons
     l->intersections = malloc((size_t)V * sizeof(int));
     l->bfs_queue = malloc((size_t)V * sizeof(int));
     l->bfs_stamp = calloc((size_t)V, sizeof(int));
-    l->table_size = 1 << 14;
-    l->keys = malloc((size_t)l->table_size * sizeof(long long));
-    l->stamp = calloc((size_t)l->table_size, sizeof(int));
+    l->iv_first = malloc((size_t)V * sizeof(int));
+    l->iv_count = malloc((size_t)V * sizeof(int));
+    l->iv_stamp = calloc((size_t)V, sizeof(int));
     l->occ_size = 1 << 12;
     l->occ_key = malloc((size_t)l->occ_size * sizeof(long long));
     l->occ_agent = malloc((size_t)l->occ_size * sizeof(int));
@@ -229,8 +237,8 @@ static int lns_init(Lns *l, int V, int N, const int *adj, const int *start, cons
      * the old paths stay, and the time goes to other neighbourhoods */
     l->expansion_cap = 20 * V + 100000;
     if (!l->path || !l->saved_path || !l->cost || !l->saved_cost || !l->hood || !l->order || !l->in_hood || !l->tabu
-        || !l->visits || !l->rest_from || !l->intersections || !l->bfs_queue || !l->bfs_stamp || !l->keys
-        || !l->stamp || !l->goal_agent || !l->occ_key || !l->occ_agent) return -1;
+        || !l->visits || !l->rest_from || !l->intersections || !l->bfs_queue || !l->bfs_stamp || !l->iv_first
+        || !l->iv_count || !l->iv_stamp || !l->goal_agent || !l->occ_key || !l->occ_agent) return -1;
     for (int k = 0; k < l->occ_size; k++) l->occ_agent[k] = -1;
     for (int v = 0; v < V; v++) {
         l->rest_from[v] = INT_MAX;
@@ -252,50 +260,74 @@ static void lns_free(Lns *l) {
     for (int v = 0; l->visits && v < l->V; v++) free(l->visits[v].a);
     free(l->path); free(l->saved_path); free(l->cost); free(l->saved_cost); free(l->hood); free(l->order); free(l->in_hood);
     free(l->tabu); free(l->visits); free(l->rest_from); free(l->goal_agent); free(l->intersections); free(l->bfs_queue);
-    free(l->bfs_stamp); free(l->occ_key); free(l->occ_agent); free(l->st); free(l->heap); free(l->keys); free(l->stamp);
+    free(l->bfs_stamp); free(l->occ_key); free(l->occ_agent); free(l->st); free(l->heap);
+    free(l->iv_lo); free(l->iv_hi); free(l->iv_best); free(l->iv_before); free(l->iv_first); free(l->iv_count); free(l->iv_stamp);
 }
 
-/* -- space-time A* ------------------------------------------------------------------------------- */
+/* -- safe interval path planning ------------------------------------------------------------------
+ * SIPP (Phillips & Likhachev, ICRA 2011): the times a vertex is free of the other agents form safe
+ * intervals (maximal runs of free time steps); a search state is a (vertex, safe interval) pair
+ * reached at its earliest time, since an agent that arrives earlier in an interval can wait there
+ * until any later time of it. A move from v (interval [lo, hi], reached at t) to a neighbour u
+ * leaves v at some time d in [t, hi] and enters one of u's intervals at d + 1, at the earliest such
+ * time that is not a swap with an agent going u -> v. The goal is the agent's goal vertex in its
+ * last interval (free for ever). The states are few (one per interval, not one per time step), so a
+ * search is quick on long paths and proves quickly that there is no path at all. */
 
-
-/* A slot is in use if its stamp is the current generation: a new search clears the table in O(1). */
-static int st_seen(const Lns *l, long long key) {
-    for (uint64_t s = slot_of(key, l->table_size);; s = (s + 1) & (uint64_t)(l->table_size - 1)) {
-        if (l->stamp[s] != l->generation) return 0;
-        if (l->keys[s] == key) return 1;
-    }
+/* Room for `more` further intervals in the pool; -1 if out of memory. */
+static int iv_reserve(Lns *l, int more) {
+    if (l->iv_n + more <= l->iv_cap) return 0;
+    int cap = l->iv_cap ? 2 * l->iv_cap : 4096;
+    while (cap < l->iv_n + more) cap *= 2;
+    int *lo = realloc(l->iv_lo, (size_t)cap * sizeof(int));
+    if (lo) l->iv_lo = lo;
+    int *hi = realloc(l->iv_hi, (size_t)cap * sizeof(int));
+    if (hi) l->iv_hi = hi;
+    int *best = realloc(l->iv_best, (size_t)cap * sizeof(int));
+    if (best) l->iv_best = best;
+    int *before = realloc(l->iv_before, (size_t)cap * sizeof(int));
+    if (before) l->iv_before = before;
+    if (!lo || !hi || !best || !before) return -1;
+    l->iv_cap = cap;
+    return 0;
 }
 
-static int st_insert(Lns *l, long long key) {
-    if (2 * (l->st_n + 1) > l->table_size) {
-        int size = 2 * l->table_size;
-        long long *keys = malloc((size_t)size * sizeof(long long));
-        int *stamp = calloc((size_t)size, sizeof(int));
-        if (!keys || !stamp) { free(keys); free(stamp); return -1; }
-        for (int k = 0; k < l->st_n; k++) {
-            long long old = st_key(l, l->st[k].v, l->st[k].t);
-            uint64_t s = slot_of(old, size);
-            while (stamp[s] == 1) s = (s + 1) & (uint64_t)(size - 1);
-            keys[s] = old; stamp[s] = 1;
+/* The safe intervals of v in this search: pool entries iv_first[v] .. + iv_count[v], by time; -1 if
+ * out of memory. Unsafe: the times other agents visit v, and from the time an agent rests there. */
+static int intervals(Lns *l, int v) {
+    if (l->iv_stamp[v] == l->generation) return 0;
+    const Visits *list = &l->visits[v];
+    if (iv_reserve(l, list->n + 1) < 0) return -1;
+    int rest = l->rest_from[v], from = 0, n = 0, before = -1;
+    l->iv_first[v] = l->iv_n;
+    for (int k = 0; k <= list->n; k++) {
+        int until = k < list->n ? list->a[k].t - 1 : INT_MAX;  /* the free run before the next visit */
+        if (rest != INT_MAX && until >= rest) until = rest - 1;
+        if (until >= from) {
+            l->iv_lo[l->iv_n + n] = from;
+            l->iv_hi[l->iv_n + n] = until;
+            l->iv_best[l->iv_n + n] = INT_MAX;
+            l->iv_before[l->iv_n + n] = before;
+            n++;
         }
-        free(l->keys); free(l->stamp);
-        l->keys = keys; l->stamp = stamp; l->table_size = size; l->generation = 1;
+        if (k < list->n) { from = list->a[k].t + 1; before = list->a[k].agent; }
+        if (from >= rest) break;
     }
-    uint64_t s = slot_of(key, l->table_size);
-    while (l->stamp[s] == l->generation) s = (s + 1) & (uint64_t)(l->table_size - 1);
-    l->keys[s] = key;
-    l->stamp[s] = l->generation;
+    l->iv_n += n;
+    l->iv_count[v] = n;
+    l->iv_stamp[v] = l->generation;
     return 0;
 }
 
 /* Heap order: f = max(t + goal distance, settle) ascending (consistent: the agent cannot rest on
- * its goal before settle), then later t first (deeper nodes: fewer ties re-expanded). */
+ * its goal before settle), then nearer the goal first, then later t first. Where settle dominates f
+ * (a goal others pass late) the ties are many: nearest first heads for the goal. */
 static int st_before(const Lns *l, int a, int b) {
     const StNode *x = &l->st[a], *y = &l->st[b];
-    return x->f < y->f || (x->f == y->f && (x->t > y->t || (x->t == y->t && x->h < y->h)));
+    return x->f < y->f || (x->f == y->f && (x->h < y->h || (x->h == y->h && x->t > y->t)));
 }
 
-static int st_push(Lns *l, int agent, int v, int t, int parent) {
+static int st_push(Lns *l, int agent, int v, int t, int iv, int parent) {
     if (l->st_n == l->st_cap) {
         int cap = l->st_cap ? 2 * l->st_cap : 1024;
         StNode *grown = realloc(l->st, (size_t)cap * sizeof(StNode));
@@ -308,12 +340,11 @@ static int st_push(Lns *l, int agent, int v, int t, int parent) {
         if (!grown) return -1;
         l->heap = grown; l->heap_cap = cap;
     }
-    int id = l->st_n;
-    if (st_insert(l, st_key(l, v, t)) < 0) return -1;
+    int id = l->st_n++;
     int h = l->dist[(size_t)agent * l->V + v];
-    l->st[id].v = v; l->st[id].t = t; l->st[id].parent = parent; l->st[id].h = h;
+    l->st[id].v = v; l->st[id].t = t; l->st[id].iv = iv; l->st[id].parent = parent; l->st[id].h = h;
     l->st[id].f = t + h < l->settle ? l->settle : t + h;
-    l->st_n++;
+    l->iv_best[iv] = t;
     int k = l->heap_n++;
     while (k > 0 && st_before(l, id, l->heap[(k - 1) / 2])) { l->heap[k] = l->heap[(k - 1) / 2]; k = (k - 1) / 2; }
     l->heap[k] = id;
@@ -334,39 +365,58 @@ static int st_pop(Lns *l) {
     return top;
 }
 
-/* Shortest path of `agent` from `start` against the paths in the tables, into path[agent] (a new
- * array). 0 found, 1 none within the expansion cap or the horizon, 2 deadline, -1 out of memory. */
+/* Shortest path of `agent` from `start` against the paths in the tables (its own is not there),
+ * into path[agent] (a new array). 0 found, 1 none (or none within the expansion cap), 2 deadline,
+ * -1 out of memory. */
 static int st_astar(Lns *l, int agent, int start, double deadline) {
-    l->st_n = 0; l->heap_n = 0;
+    l->st_n = 0; l->heap_n = 0; l->iv_n = 0;
     l->generation++;
-    int goal = l->goal[agent], settle = lns_last_visit(l, goal) + 1, horizon = 0;
-    l->settle = settle;
-    for (int j = 0; j < l->N; j++) if (l->cost[j] > horizon) horizon = l->cost[j];
-    horizon += l->V;
-    if (st_push(l, agent, start, 0, -1) < 0) return -1;
+    int goal = l->goal[agent];
+    const int *d = l->dist + (size_t)agent * l->V;
+    if (intervals(l, goal) < 0 || intervals(l, start) < 0) return -1;
+    int last = l->iv_first[goal] + l->iv_count[goal] - 1;
+    if (l->iv_count[goal] == 0 || l->iv_hi[last] != INT_MAX) return 1;  /* someone rests there */
+    l->settle = l->iv_lo[last];
+    if (l->iv_count[start] == 0 || l->iv_lo[l->iv_first[start]] != 0) return 1;  /* taken at time 0 */
+    if (st_push(l, agent, start, 0, l->iv_first[start], -1) < 0) return -1;
     for (int expanded = 0; l->heap_n > 0 && expanded < l->expansion_cap; expanded++) {
-        if ((expanded & 4095) == 4095 && clock_now() > deadline) return 2;
+        if ((expanded & 1023) == 1023 && clock_now() > deadline) return 2;
         int id = st_pop(l);
         StNode node = l->st[id];
-        if (node.v == goal && node.t >= settle) {
+        if (node.t > l->iv_best[node.iv]) continue;  /* reached earlier since it was pushed */
+        int hi = l->iv_hi[node.iv];
+        if (node.v == goal && hi == INT_MAX) {
             int *out = malloc((size_t)(node.t + 1) * sizeof(int));
             if (!out) return -1;
-            for (int k = id; k >= 0; k = l->st[k].parent) out[l->st[k].t] = l->st[k].v;
+            for (int k = id; k >= 0; k = l->st[k].parent) {
+                int until = k == id ? node.t + 1 : l->st[l->st[k].child].t;
+                for (int t = l->st[k].t; t < until; t++) out[t] = l->st[k].v;
+                if (l->st[k].parent >= 0) l->st[l->st[k].parent].child = k;
+            }
             l->path[agent] = out;
             l->cost[agent] = node.t;
             return 0;
         }
-        if (node.t >= horizon) continue;
-        int t = node.t + 1;
-        for (int k = 0; k <= 4; k++) {
-            int u = k < 4 ? l->adj[4 * node.v + k] : node.v;
-            if (u < 0 || l->rest_from[u] <= t || l->dist[(size_t)agent * l->V + u] < 0) continue;
-            long long key = st_key(l, u, t);
-            if (st_seen(l, key)) continue;  /* first: this search's table is small and warm */
-            if (lns_occupant(l, u, t) >= 0) continue;
-            int other = u == node.v ? -1 : lns_occupant(l, u, node.t);  /* swap: other goes u -> v */
-            if (other >= 0 && lns_at(l, other, t) == node.v) continue;
-            if (st_push(l, agent, u, t, id) < 0) return -1;
+        for (int k = 0; k < 4; k++) {
+            int u = l->adj[4 * node.v + k];
+            if (u < 0 || d[u] < 0) continue;
+            if (intervals(l, u) < 0) return -1;
+            int first = l->iv_first[u], count = l->iv_count[u];
+            /* leave v at a time in [node.t, hi]: enter u at a time in [node.t + 1, hi + 1] */
+            int latest = hi == INT_MAX ? INT_MAX : hi + 1;
+            int lo = first, hi_j = first + count;  /* the first interval ending at node.t + 1 or later */
+            while (lo < hi_j) { int mid = (lo + hi_j) / 2; if (l->iv_hi[mid] < node.t + 1) lo = mid + 1; else hi_j = mid; }
+            for (int j = lo; j < first + count; j++) {
+                if (l->iv_lo[j] > latest) break;
+                int arrive = l->iv_lo[j] > node.t + 1 ? l->iv_lo[j] : node.t + 1;
+                int end = l->iv_hi[j] < latest ? l->iv_hi[j] : latest;
+                /* not a swap with an agent going u -> v: only possible when u was taken the step
+                 * before, i.e. arriving at the interval's start; then one step later */
+                int other = l->iv_before[j];
+                if (arrive == l->iv_lo[j] && other >= 0 && lns_at(l, other, arrive) == node.v) arrive++;
+                if (arrive > end || arrive >= l->iv_best[j]) continue;
+                if (st_push(l, agent, u, arrive, j, id) < 0) return -1;
+            }
         }
     }
     return 1;
@@ -494,10 +544,13 @@ static int lns_iterate(Lns *l, double deadline) {
 }
 
 /* Prioritized planning with eviction: the agents are planned one after the other from a queue
- * (random order at first), each by space-time A* against the ones planned. An agent that finds no
+ * (see lns_order_by_blocking), each by SIPP against the ones planned. An agent that finds no
  * path takes out the planned agents in its way and is planned again at once; they go to the back of
- * the queue. In its way: the agents on its start's cells in the first steps (it was walled in), the
- * ones resting on a shortest path of it, and the ones passing its goal after it could arrive. */
+ * the queue. In its way, first: the agents on its start's cells in the first steps (it was walled
+ * in) and the ones resting on a shortest path of it; if it still finds none: the ones that meet that
+ * path followed without waiting (on its cells at the same time steps, swapping with it, resting
+ * there by then). Few are taken out at first: each one taken out must be planned again. SIPP fails
+ * only where there is no path (or past the expansion cap), so a failure is a real blockade. */
 
 static void queue_push(Lns *l, int agent) { l->order[(l->queue_head + l->queue_n++) % l->N] = agent; }
 
@@ -517,29 +570,32 @@ static void evict(Lns *l, int agent) {
     l->cost[agent] = 0;
 }
 
-static void evict_blockers(Lns *l, int agent) {
+static void evict_blockers(Lns *l, int agent, int harder) {
     const int *d = l->dist + (size_t)agent * l->V;
-    int start = l->start[agent], goal = l->goal[agent], v = start;
+    int start = l->start[agent], goal = l->goal[agent], v = start, t = 0;
     l->n_hood = 0;
-    for (int t = 0; t <= 2; t++) {
-        evict(l, lns_occupant(l, start, t));
-        evict(l, resting_at(l, start, t));
+    for (int s = 0; s <= 2 && !harder; s++) {
+        evict(l, lns_occupant(l, start, s));
+        evict(l, resting_at(l, start, s));
         for (int k = 0; k < 4; k++) {
             int u = l->adj[4 * start + k];
-            if (u >= 0) { evict(l, lns_occupant(l, u, t)); evict(l, resting_at(l, u, t)); }
+            if (u >= 0) { evict(l, lns_occupant(l, u, s)); evict(l, resting_at(l, u, s)); }
         }
     }
-    while (v != goal) {  /* a shortest path, ties broken at random */
+    for (;;) {  /* a shortest path, ties broken at random */
+        evict(l, resting_at(l, v, harder ? t : INT_MAX - 1));
+        if (harder) evict(l, lns_occupant(l, v, t));
+        if (v == goal) break;
         int options[4], n = 0;
         for (int k = 0; k < 4; k++) {
             int u = l->adj[4 * v + k];
             if (u >= 0 && d[u] == d[v] - 1) options[n++] = u;
         }
-        v = options[lns_rnd(l) % (uint64_t)n];
-        evict(l, resting_at(l, v, INT_MAX - 1));
+        int u = options[lns_rnd(l) % (uint64_t)n], other = lns_occupant(l, u, t);
+        if (harder && other >= 0 && lns_at(l, other, t + 1) == v) evict(l, other);  /* a swap */
+        v = u;
+        t++;
     }
-    const Visits *list = &l->visits[goal];
-    for (int k = 0; k < list->n; k++) if (list->a[k].t >= d[start]) evict(l, list->a[k].agent);
     for (int k = l->n_hood - 1; k > 0; k--) {
         int r = (int)(lns_rnd(l) % (uint64_t)(k + 1)), t = l->hood[k];
         l->hood[k] = l->hood[r]; l->hood[r] = t;
@@ -551,25 +607,63 @@ static void evict_blockers(Lns *l, int agent) {
     l->n_hood = 0;
 }
 
+/* The first planning order: agents whose goal lies on many others' shortest paths last (resting
+ * there early would wall them off; planned last, they wait until the others have passed), agents
+ * whose start lies on many others' paths first (they leave it before the others come); ties in the
+ * random order of lns_init. Counts over one shortest path per agent. -1 out of memory. */
+static const long long *order_key;
+static int cmp_order(const void *a, const void *b) {
+    long long x = order_key[*(const int *)a], y = order_key[*(const int *)b];
+    return (x > y) - (x < y);
+}
+
+static int lns_order_by_blocking(Lns *l) {
+    int *through = calloc((size_t)l->V, sizeof(int));
+    long long *key = malloc((size_t)l->N * sizeof(long long));
+    if (!through || !key) { free(through); free(key); return -1; }
+    for (int i = 0; i < l->N; i++) {
+        const int *d = l->dist + (size_t)i * l->V;
+        for (int v = l->start[i];; ) {
+            through[v]++;
+            if (v == l->goal[i]) break;
+            for (int k = 0; k < 4; k++) {
+                int u = l->adj[4 * v + k];
+                if (u >= 0 && d[u] == d[v] - 1) { v = u; break; }
+            }
+        }
+    }
+    for (int r = 0; r < l->N; r++) {  /* the random position breaks ties */
+        int i = l->order[r];
+        key[i] = ((long long)(through[l->goal[i]] - through[l->start[i]]) << 32) + r;
+    }
+    order_key = key;
+    qsort(l->order, (size_t)l->N, sizeof(int), cmp_order);
+    free(through);
+    free(key);
+    return 0;
+}
+
 /* Plan from the queue until it is empty (1: every agent has a path, the solution is in the tables),
  * `pause` (2; a later call resumes), or out of memory (-1). A search under way runs until
  * `deadline`. */
 static int lns_prioritized(Lns *l, double pause, double deadline) {
-    if (!l->queue_ready) {  /* the first call: every agent, in the random order of lns_init */
+    if (!l->queue_ready) {  /* the first call: every agent, in the order above */
+        if (lns_order_by_blocking(l) < 0) return -1;
         l->queue_n = l->N;
         l->queue_ready = 1;
     }
     while (l->queue_n > 0) {
         if (clock_now() > pause) return 2;
-        int i = l->order[l->queue_head], cap = l->expansion_cap;
+        int i = l->order[l->queue_head];
         l->queue_head = (l->queue_head + 1) % l->N;
         l->queue_n--;
-        /* a first try on a short leash: a search that long is mostly walled in */
-        l->expansion_cap = cap / 8;
         int status = st_astar(l, i, l->start[i], deadline);
-        l->expansion_cap = cap;
         if (status == 1) {
-            evict_blockers(l, i);
+            evict_blockers(l, i, 0);
+            status = st_astar(l, i, l->start[i], deadline);
+        }
+        if (status == 1) {
+            evict_blockers(l, i, 1);
             status = st_astar(l, i, l->start[i], deadline);
         }
         if (status == 1) { queue_push(l, i); continue; }  /* still none: to the back of the queue */
