@@ -65,6 +65,7 @@ from cosim.record.system_run import (
     writing_failed,
 )
 from cosim.scenario.load import Scenario
+from cosim.world.imu import Imu
 
 
 @dataclass
@@ -233,11 +234,16 @@ class _RobotRun(SystemRun):
             )
         self.goal_steps = system.period_steps(planner) if self.goal_poll is not None and planner else 1
         # Then the recording: the signal channels, the header, the first records.
-        self.recording = StepRecording(system, master, recorder, built.description.observed, scenario)
+        sensors = () if scenario.imu is None else (Imu(scenario.imu, scenario.macro_step),)
+        self.recording = StepRecording(
+            system, master, recorder, built.description.observed, scenario, sensors
+        )
         _write_header(built, self)
         self.begin()
         self.recording.write_constant(master.start_time_ns)
         self.recording.write_pose(0)
+        if scenario.bumper:
+            recorder.write_bool("/bumper", 0, False)
         # Build (or load) the C kernels that would first run inside the loop, so the real-time factor
         # measures the simulation, not a first run's compilation.
         self.monitor.world.distance(*scenario.start[:2])
@@ -379,6 +385,8 @@ class _RobotRun(SystemRun):
             map(math.isfinite, recording.current_pose())
         ):
             recording.write_pose(end_ns)
+        if scenario.bumper and monitor.outcome.reason == "collision":  # the footprint touched at end_ns
+            recorder.write_bool("/bumper", end_ns, True)
         self.end_steps()
         reason = "fmu_failed" if failure else self.reason or "stop_time"
         outcome = monitor.finish(end_ns / NS_PER_S, reason)

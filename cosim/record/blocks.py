@@ -34,9 +34,13 @@ POSE_MESSAGES = 3  # a pose is written on /odom, /tf and /pose, in that order
 class StepOrder(NamedTuple):
     """Where each message of a step sorts: key = step * `per_step` + slot, the order in which the
     per-step path writes them: the signal records (slot = their entry's index), then /scan,
-    /obstacles, /cmd_vel, and the pose's messages."""
+    /obstacles, /cmd_vel, the pose's messages, and the pose sensors' (`StepRecording.sensors`)."""
 
     signals: int  # signal entries
+    sensors: int = 0  # pose sensors
+
+    def sensor(self, index: int) -> int:
+        return self.signals + 3 + POSE_MESSAGES + index
 
     @property
     def scan(self) -> int:
@@ -56,7 +60,7 @@ class StepOrder(NamedTuple):
 
     @property
     def per_step(self) -> int:
-        return self.signals + 3 + POSE_MESSAGES
+        return self.signals + 3 + POSE_MESSAGES + self.sensors
 
 
 class Column(NamedTuple):
@@ -163,7 +167,7 @@ class BlockRecording:
                 if np.array_equal(columns, np.arange(n_in + len(component.outputs))):
                     columns = slice(None)
             self.entries.append(BlockEntry(slot, i, columns, entry))
-        self.order = StepOrder(len(self.entries))
+        self.order = StepOrder(len(self.entries), len(recording.sensors))
         self.flush_at = 0  # [ns] flush once a step starting at or after it is collected
         # Records of components stepped by Python, taken from their live buffers: slot -> [(k, row)].
         self.live = {block.slot: [] for block in self.entries if block.columns is None}
@@ -192,6 +196,9 @@ class BlockRecording:
                 return False
         if recording.command is not None and not recorder.has_channel("/cmd_vel"):
             if due_from(first, recording.command.period) < end:
+                return False
+        for sensor in recording.sensors:
+            if not recorder.has_channel(sensor.topic) and due_from(first + 1, sensor.steps) - 1 < end:
                 return False
         return True
 
@@ -333,6 +340,16 @@ class BlockRecording:
                     values[:, column] = self._latest(where, steps)
             ends = np.minimum(start_ns + (steps + 1) * h_ns, recording.stop_ns)
             poses = (steps * per_step + order.pose, ends, values)
+        for index, sensor in enumerate(recording.sensors):
+            steps = np.arange(due_from(first + 1, sensor.steps) - 1, end, sensor.steps, dtype=np.int64)
+            ends = start_ns + (steps + 1) * h_ns
+            steps, ends = steps[ends <= recording.stop_ns], ends[ends <= recording.stop_ns]
+            x, y, theta = (self._latest(where, steps).tolist() for where in self.pose_columns)
+            for k, t_ns, pose in zip(
+                steps.tolist(), ends.tolist(), zip(x, y, theta, strict=True), strict=True
+            ):
+                key = k * per_step + order.sensor(index)
+                others.append(OtherMessage(key, t_ns, sensor.topic, sensor.sample(t_ns, *pose)))
         other = None
         if others:
             other = (

@@ -1,8 +1,9 @@
 """Write a run's log: one MCAP file of ROS 2 messages (cdr, profile "ros2"), zstd-compressed chunks.
 
 Topics: `/odom`, `/tf` (map -> base_link), `/pose`, `/scan`, `/cmd_vel`, `/plan`, `/map`,
-`/map_inflated`, `/obstacles`, `/goal`, and `/signals/<component>` (one generated float64 struct
-per component; see `cosim.record.rosmsg`). The run loop writes messages in time order.
+`/map_inflated`, `/obstacles`, `/goal`, `/imu`, `/bumper` (the table: `cosim.scenario.topics`), and
+`/signals/<component>` (one generated float64 struct per component; see `cosim.record.rosmsg`).
+The run loop writes messages in time order.
 
 Speed: signals, poses, commands and scans (the per-step topics) are held in a
 `cosim.record.batch.MessageBlock` and packed into MCAP records with NumPy, a block at a time
@@ -602,6 +603,14 @@ class Recorder:
     def write_cmd_vel(self, t_ns: int, v: float, omega: float) -> None:
         """The commanded body velocities [m/s, rad/s] on /cmd_vel (Twist has no stamp: log time only)."""
         self._hold(self._channel("/cmd_vel"), t_ns, rosmsg.twist_cdr(float(v), float(omega)))
+
+    def write_payload(self, topic: str, t_ns: int, payload: bytes) -> None:
+        """A message of `topic` (of the topic table) already in CDR: a sensor's (`StepRecording`)."""
+        self._hold(self._channel(topic), t_ns, payload)
+
+    def write_bool(self, topic: str, t_ns: int, value: bool) -> None:
+        """A std_msgs/Bool message on `topic` (/bumper)."""
+        self._write_message(topic, t_ns, rosmsg.make("std_msgs/msg/Bool", data=bool(value)))
 
     def _hold(self, channel: int, t_ns: int, payload: bytes) -> None:
         if self._closed:

@@ -101,6 +101,13 @@ LOG_TYPES = {
         "visualization_msgs/msg/MeshFile mesh_file; bool mesh_use_embedded_materials"
     ),
     "visualization_msgs/msg/MarkerArray": "visualization_msgs/msg/Marker[] markers",
+    "sensor_msgs/msg/Imu": (
+        "std_msgs/msg/Header header; geometry_msgs/msg/Quaternion orientation; "
+        "float64[9] orientation_covariance; geometry_msgs/msg/Vector3 angular_velocity; "
+        "float64[9] angular_velocity_covariance; geometry_msgs/msg/Vector3 linear_acceleration; "
+        "float64[9] linear_acceleration_covariance"
+    ),
+    "std_msgs/msg/Bool": "bool data",
 }
 
 

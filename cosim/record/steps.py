@@ -13,6 +13,8 @@ Log contents and rates (t = simulated time, integer nanoseconds):
 - `/scan`: every lidar step; `/cmd_vel`: every mixer step (v, omega of the mixer).
 - `/obstacles`: at t = 0, and at every lidar step at which a moving obstacle has moved (the poses
   that scan saw).
+- a pose sensor's topic (`/imu`): at every end of a step on its grid (t = n / rate, n >= 1, up
+  to the stop time), its message for the pose then (`PoseSensor`).
 
 `StepRecording.after_step(k, ...)` writes what step k produced, one step at a time (the Python
 loop, and the kernel's blocks replayed step by step: `cosim.record.replay`); `cosim.record.blocks`
@@ -24,7 +26,7 @@ name, resolved once into the named records below.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
@@ -76,6 +78,21 @@ class ConstantEntry(NamedTuple):
     component: object
     inputs: list[int]
     outputs: list[int]
+
+
+class PoseSensor(Protocol):
+    """A sensor that reads the robot's pose on its own grid (`cosim.world.imu.Imu`): its topic (of
+    the topic table), its period [macro steps], the pose at the start, and its message for the pose
+    at each sample, in time order (it may keep state between samples)."""
+
+    topic: str
+    steps: int
+
+    def start(self, t_ns: int, x: float, y: float, theta: float) -> None:
+        """The pose [m, m, rad] at the start t_ns [ns] (no message)."""
+
+    def sample(self, t_ns: int, x: float, y: float, theta: float) -> bytes:
+        """The CDR payload of the message at t_ns [ns] for the pose [m, m, rad] then."""
 
 
 class Reading(NamedTuple):
@@ -137,11 +154,13 @@ class StepRecording:
     """What the loop records at each step; index arrays are resolved once (module docstring).
 
     `system`, `master` (its step order and stop time), `recorder`, `observed` (the description's
-    `Observed`) and `scenario` (signal_arrays, pose_rate, macro_step, obstacles) of the run.
+    `Observed`) and `scenario` (signal_arrays, pose_rate, macro_step, obstacles) of the run;
+    `sensors`: the pose sensors the run records.
     """
 
-    def __init__(self, system, master, recorder, observed, scenario) -> None:
+    def __init__(self, system, master, recorder, observed, scenario, sensors: tuple[PoseSensor, ...] = ()):
         self.recorder = recorder
+        self.sensors = tuple(sensors)
         self.stop_ns = master.stop_time_ns  # a last step cut short ends there, and so does its pose
         # What the recording asks of the system, asked once: each component's period [steps], where
         # each observed output is read, the lidar.
@@ -194,6 +213,8 @@ class StepRecording:
                 SignalEntry(period, channel, first, second, gather, component, inputs, outputs)
             )
         self.pose = tuple(reading(*found[reference]) for reference in observed.pose)  # x, y, theta
+        for sensor in self.sensors:
+            sensor.start(master.start_time_ns, *self.current_pose())
         self.command = None
         if observed.command is not None:
             v, omega = (reading(*found[reference]) for reference in observed.command)
@@ -281,3 +302,7 @@ class StepRecording:
             recorder.write_cmd_vel(t_ns, command.v.value(), command.omega.value())
         if (k + 1) % self.pose_steps == 0:
             self.write_pose(min(t_ns + h_ns, self.stop_ns))
+        for sensor in self.sensors:
+            end_ns = t_ns + h_ns
+            if (k + 1) % sensor.steps == 0 and end_ns <= self.stop_ns:
+                recorder.write_payload(sensor.topic, end_ns, sensor.sample(end_ns, *self.current_pose()))

@@ -41,6 +41,7 @@ from cosim.scenario.limits import (
 )
 from cosim.scenario.schema import REQUIRED, TableReader, describe, did_you_mean, is_number, shorten
 from cosim.scenario.topics import REMAPPABLE_TOPICS
+from cosim.world.imu import ImuSettings
 from cosim.world.lidar import evenly_spaced_beams
 from cosim.world.motion import MOTIONS, Motion
 from cosim.world.shapes import Circle, Obstacle, Polygon, Rectangle
@@ -64,7 +65,8 @@ ISOLATIONS = ("process", "none")  # an FMU in a child process, or in the run's o
 ROLE_SECTIONS = ("vehicle", "pure_pursuit", "vfh", "mixer")
 SECTIONS = (
     "scenario", "map", "obstacles", "start", "goal", "planner", "vehicle", "pure_pursuit", "vfh",
-    "mixer", "lidar", "simulation", "output", "components", "connections", "system", "robots", "fleet",
+    "mixer", "lidar", "simulation", "output", "components", "connections", "system", "imu", "bumper",
+    "robots", "fleet",
 )  # fmt: skip
 # Components of the navigation template that are not FMUs (`cosim.scenario.template`).
 PYTHON_COMPONENTS = ("planner", "lidar")
@@ -224,6 +226,8 @@ class Scenario:
     # Component -> how the log names its FMU instead of the file's path: the archive member of an
     # FMU unpacked from an SSP (a path new in every run would make equal runs differ in bytes).
     fmu_labels: dict[str, str] = field(default_factory=dict)
+    imu: ImuSettings | None = None  # [imu]: /imu (cosim.world.imu); None without the section
+    bumper: bool = False  # [bumper]: /bumper, the footprint touching an obstacle
 
     def isolation(self, spec: ComponentSpec) -> str:
         """Where one FMU runs: "process" (a child process) or "none" (in the run's process). The
@@ -456,6 +460,10 @@ def _build(
     planner = _planner(TableReader(source, "[planner]", top.raw("planner", {})), vehicle_radius)
     lidar = _lidar(TableReader(source, "[lidar]", top.raw("lidar", {})), macro_step)
 
+    imu = _imu(top.table_of("imu"), macro_step) if top.has("imu") else None
+    bumper = top.has("bumper")
+    top.table_of("bumper").finish()  # no keys: present or not
+
     output = TableReader(source, "[output]", top.raw("output", {}))
     log_pattern = output.string("log", DEFAULT_LOG_PATTERN)
     try:
@@ -510,6 +518,8 @@ def _build(
         fmu_max_memory=fmu_max_memory,
         fmu_max_size=fmu_max_size,
         removed=removed,
+        imu=imu,
+        bumper=bumper,
     )
 
 
@@ -876,3 +886,22 @@ def _lidar(table: TableReader, macro_step: float) -> LidarSettings:
     _check_rate(table, "rate", rate, macro_step)
     table.finish()
     return LidarSettings(angles, range_min, range_max, noise, seed, rate)
+
+
+def _imu(table: TableReader, macro_step: float) -> ImuSettings:
+    """`[imu]`: rate [Hz], noise = {acceleration, angular_velocity, orientation} standard
+    deviations [m/s^2, rad/s, rad], bias = {acceleration, angular_velocity} (x, y, z each), seed."""
+    default = ImuSettings()
+    rate = table.number("rate", default.rate, minimum=0.0, exclusive_minimum=True)
+    _check_rate(table, "rate", rate, macro_step)
+    noise = table.table_of("noise")
+    standard_deviations = [
+        noise.number(key, 0.0, minimum=0.0) for key in ("acceleration", "angular_velocity", "orientation")
+    ]
+    noise.finish()
+    bias = table.table_of("bias")
+    biases = [bias.numbers(key, [0.0, 0.0, 0.0], length=3) for key in ("acceleration", "angular_velocity")]
+    bias.finish()
+    seed = table.integer("seed", default.seed, minimum=0)
+    table.finish()
+    return ImuSettings(rate, *standard_deviations, *biases, seed)

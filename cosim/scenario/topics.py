@@ -30,6 +30,9 @@ TOPICS = (
     Topic("/map_inflated", "nav_msgs/msg/OccupancyGrid", latched=True),
     Topic("/obstacles", "visualization_msgs/msg/MarkerArray", latched=True),
     Topic("/goal", "geometry_msgs/msg/PoseStamped", latched=True),
+    Topic("/imu", "sensor_msgs/msg/Imu"),  # with [imu] (cosim.world.imu)
+    # With [bumper]: false at t = 0, true when the footprint touches an obstacle (the outcome's collision).
+    Topic("/bumper", "std_msgs/msg/Bool", latched=True),
 )
 
 TOPIC_TYPES = {topic.name: topic.ros_type for topic in TOPICS}
