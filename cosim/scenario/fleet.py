@@ -38,6 +38,8 @@ from cosim.scenario.schema import TableReader, describe
 
 MAX_ROBOTS = 1000
 # Sections a robot may give for itself, over the scenario-wide ones.
+# Sections a fleet refuses: their topics exist only in a single-robot log.
+NOT_FOR_FLEETS = ("imu", "bumper")
 ROBOT_SECTIONS = ("vehicle", "pure_pursuit", "vfh", "mixer", "lidar", "planner", "components", "connections")
 COORDINATIONS = ("none",)
 PLANNED_COORDINATIONS = ("prioritized", "mapf")  # multi-agent path finding: to come
@@ -131,6 +133,9 @@ def build_fleet(raw: dict, source: str, build: Callable[..., Any], *args) -> Fle
     for key in ("start", "goal"):
         if key in raw:
             raise top.error(key, f"a fleet gives each robot its own {key} in [[robots]]; delete [{key}]")
+    for key in NOT_FOR_FLEETS:  # written by the single-robot recorder only, not by the fleet's log
+        if key in raw:
+            raise top.error(key, f"[{key}] is not recorded for a fleet yet ([[robots]]); delete [{key}]")
     settings = _settings(TableReader(source, "[fleet]", top.raw("fleet", {})))
     common = {key: value for key, value in raw.items() if key not in ("robots", "fleet")}
     scenario_table = raw.get("scenario") if isinstance(raw.get("scenario"), dict) else {}

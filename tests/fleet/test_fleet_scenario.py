@@ -134,6 +134,9 @@ def test_set_addresses_a_robot_by_name():
             r"^f\.toml: \[start\]: a fleet gives each robot its own start",
         ),
         ("", "[fleet]", r"^f\.toml: \[fleet\]: needs at least one \[\[robots\]\] table"),
+        # Topics only a single-robot log writes are refused, not silently left out.
+        (TWO + "\n[imu]\nrate = 50.0\n", "", r"^f\.toml: \[imu\]: \[imu\] is not recorded for a fleet yet"),
+        (TWO + "\n[bumper]\n", "", r"^f\.toml: \[bumper\]: \[bumper\] is not recorded for a fleet yet"),
     ],
 )
 def test_errors_name_the_file_and_the_key(robots, fleet, message):
