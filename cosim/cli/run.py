@@ -286,10 +286,8 @@ def _draw_plot(log_path: Path, quiet: bool, trace, plotter) -> None:
     except ImportError:
         print("cosim: note: no plot (cosim.logs.plot is not available)", file=sys.stderr)
         return
-    png_path = log_path.with_suffix(".png")
-    # Drawn beside and renamed into place, so an interrupt never leaves half a PNG.
-    partial = png_path.with_name(f".{png_path.stem}.{os.getpid()}.png")
-    try:
+
+    def draw(partial: Path) -> str | None:
         if plotter is None:
             plot.skip_matplotlib_docstrings()  # this process draws and exits: no help() text needed
         if trace is not None and not trace.dropped:
@@ -301,31 +299,37 @@ def _draw_plot(log_path: Path, quiet: bool, trace, plotter) -> None:
                 data = plot.collect(log)
         if plotter is None:
             plot.draw(data, partial)
-        elif (problem := plotter.draw(data, partial)) is not None:
-            print(f"cosim: note: no plot: {problem}", file=sys.stderr)
-            return
-        os.replace(partial, png_path)
-    except (CosimError, OSError) as error:
-        print(f"cosim: note: no plot: {error}", file=sys.stderr)
-        return
-    finally:
-        partial.unlink(missing_ok=True)
-    if not quiet:
-        print(f"plot: {png_path}")
+            return None
+        return plotter.draw(data, partial)
+
+    _png_beside(log_path, quiet, draw)
 
 
 def _plot_fleet(log_path: Path, quiet: bool) -> None:
     """Draw a fleet run's PNG beside its log, from the log (`cosim.logs.fleet_plot`)."""
-    from cosim.logs.fleet_plot import plot_fleet
-    from cosim.logs.plot import skip_matplotlib_docstrings
-    from cosim.logs.reader import open_log
 
-    png_path = log_path.with_suffix(".png")
-    partial = png_path.with_name(f".{png_path.stem}.{os.getpid()}.png")  # renamed into place when drawn
-    try:
+    def draw(partial: Path) -> None:
+        from cosim.logs.fleet_plot import plot_fleet
+        from cosim.logs.plot import skip_matplotlib_docstrings
+        from cosim.logs.reader import open_log
+
         skip_matplotlib_docstrings()
         with open_log(log_path) as log:
             plot_fleet(log, partial)
+
+    _png_beside(log_path, quiet, draw)
+
+
+def _png_beside(log_path: Path, quiet: bool, draw) -> None:
+    """The log's PNG (same stem) from `draw(partial)`, which returns None or why it drew nothing.
+    Drawn beside and renamed into place, so an interrupt never leaves half a PNG; a failure is a
+    note, not an error (the run and its log stand)."""
+    png_path = log_path.with_suffix(".png")
+    partial = png_path.with_name(f".{png_path.stem}.{os.getpid()}.png")
+    try:
+        if (problem := draw(partial)) is not None:
+            print(f"cosim: note: no plot: {problem}", file=sys.stderr)
+            return
         os.replace(partial, png_path)
     except (CosimError, OSError) as error:
         print(f"cosim: note: no plot: {error}", file=sys.stderr)
