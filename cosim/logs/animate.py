@@ -233,12 +233,7 @@ class _Scene:
         margin = 0.02 * max(float(np.max(high - low)), 1.0)
         axes.set_xlim(low[0] - margin, high[0] + margin)
         axes.set_ylim(low[1] - margin, high[1] + margin)
-        axes.set_aspect("equal", adjustable="box")
-        axes.set_xlabel("x [m]", fontsize=8)
-        axes.set_ylabel("y [m]", fontsize=8)
-        axes.tick_params(labelsize=7)
-        axes.grid(alpha=0.25)
-        axes.set_title(log.scenario_name or log.path.stem, fontsize=10)
+        _style_map(axes, log)
 
         moving = {"animated": True}
         self.beams = LineCollection([], colors="#16a34a", linewidths=0.5, alpha=0.45, zorder=3, **moving)
@@ -356,12 +351,7 @@ class _FleetScene:
         x0, x1, y0, y1 = runs[0].limits
         axes.set_xlim(x0, x1)
         axes.set_ylim(y0, y1)
-        axes.set_aspect("equal", adjustable="box")
-        axes.set_xlabel("x [m]", fontsize=8)
-        axes.set_ylabel("y [m]", fontsize=8)
-        axes.tick_params(labelsize=7)
-        axes.grid(alpha=0.25)
-        axes.set_title(log.scenario_name or log.path.stem, fontsize=10)
+        _style_map(axes, log)
         moving = {"animated": True}
         self.robots = []
         for index, (name, trajectory) in enumerate(zip(self.names, self.trajectories, strict=True)):
@@ -451,3 +441,13 @@ def _scans(log: Log, trajectory) -> list[tuple[float, np.ndarray]]:
         starts = np.broadcast_to((x, y), ends.shape)
         scans.append((item.t, np.stack((starts, ends), axis=1)))
     return scans
+
+
+def _style_map(axes, log) -> None:
+    """The map axes of a frame: equal scale, metre labels, a light grid, the run's name as title."""
+    axes.set_aspect("equal", adjustable="box")
+    axes.set_xlabel("x [m]", fontsize=8)
+    axes.set_ylabel("y [m]", fontsize=8)
+    axes.tick_params(labelsize=7)
+    axes.grid(alpha=0.25)
+    axes.set_title(log.scenario_name or log.path.stem, fontsize=10)

@@ -128,18 +128,8 @@ class FleetLog:
         binned = np.full(int(bins[-1]) + 1 if len(bins) else 0, np.nan, dtype=np.float32)
         values = np.asarray(ranges, dtype=np.float32)
         binned[bins] = np.where(np.isnan(values), np.float32(np.inf), values)
-        message = rosmsg.make(
-            SCAN,
-            header=rosmsg.header(t_ns, base_frame(name)),
-            angle_min=angle_min,
-            angle_max=angle_min + increment * (len(binned) - 1),
-            angle_increment=increment,
-            time_increment=0.0,
-            scan_time=period,
-            range_min=range_min,
-            range_max=range_max,
-            ranges=binned,
-            intensities=np.zeros(0, dtype=np.float32),
+        message = rosmsg.laser_scan(
+            t_ns, base_frame(name), angle_min, increment, binned, period, range_min, range_max
         )
         self._write(f"/{name}/scan", SCAN, t_ns, message)
 

@@ -748,18 +748,8 @@ class Recorder:
         if "/scan" not in self._channels:
             self._channel("/scan", {SCAN_LAYOUT_KEY: description})
         binned = np.full(int(bins[-1]) + 1 if len(bins) else 0, np.nan, dtype=np.float32)
-        message = rosmsg.make(
-            "sensor_msgs/msg/LaserScan",
-            header=rosmsg.header(0, ROBOT_FRAME),
-            angle_min=angle_min,
-            angle_max=angle_min + increment * (len(binned) - 1),
-            angle_increment=increment,
-            time_increment=0.0,
-            scan_time=scan_time,
-            range_min=range_min,
-            range_max=range_max,
-            ranges=binned,
-            intensities=np.zeros(0, dtype=np.float32),
+        message = rosmsg.laser_scan(
+            0, ROBOT_FRAME, angle_min, increment, binned, scan_time, range_min, range_max
         )
         template = rosmsg.serialize(message, TOPIC_TYPES["/scan"])
         tail = bytes(4)  # intensities: a sequence of length 0

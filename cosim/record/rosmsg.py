@@ -398,6 +398,33 @@ def color(r: float, g: float, b: float, a: float = 1.0):
     return _types["std_msgs/msg/ColorRGBA"](r=r, g=g, b=b, a=a)
 
 
+def laser_scan(
+    t_ns: int,
+    frame_id: str,
+    angle_min: float,
+    increment: float,
+    ranges,
+    scan_time: float,
+    range_min: float,
+    range_max: float,
+):
+    """A sensor_msgs/LaserScan of float32 `ranges` [m] on the grid angle_min + i * increment [rad],
+    no intensities (REP-117: +inf no return within range, NaN a bin no beam falls in)."""
+    return make(
+        "sensor_msgs/msg/LaserScan",
+        header=header(t_ns, frame_id),
+        angle_min=angle_min,
+        angle_max=angle_min + increment * (len(ranges) - 1),
+        angle_increment=increment,
+        time_increment=0.0,
+        scan_time=scan_time,
+        range_min=range_min,
+        range_max=range_max,
+        ranges=ranges,
+        intensities=np.zeros(0, dtype=np.float32),
+    )
+
+
 def make(typename: str, **fields):
     """A message of a standard type from keyword fields."""
     return _types[_known(typename)](**fields)
