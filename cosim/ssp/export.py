@@ -273,7 +273,8 @@ def run_exported(
 
     scenario = scenario_of(ssp, simulation)
     _check_against_ssd(ssp, scenario)
-    result = run_scenario(scenario, out_path, progress=progress, force=force)
+    # The caller draws its PNG from the log, so no in-memory trace is kept (memory flat in time).
+    result = run_scenario(scenario, out_path, progress=progress, force=force, trace=False)
     if result.failure is not None and not result.failure.startswith(f"{ssp.source}:"):
         result.failure = f"{ssp.source}: {result.failure}"  # as every SSP error line (the log keeps its own)
     return scenario, result
