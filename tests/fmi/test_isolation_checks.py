@@ -130,14 +130,18 @@ def bomb(tmp_path_factory) -> Path:
     return path
 
 
-def test_a_small_fmu_that_unpacks_to_2_gib_is_refused_without_extracting(bomb, monkeypatch):
+def test_a_small_fmu_that_unpacks_to_2_gib_is_refused_without_extracting(bomb, monkeypatch, tmp_path):
     assert bomb.stat().st_size < 3 * MIB
     with zipfile.ZipFile(bomb) as archive:
         assert archive.getinfo("resources/padding.bin").file_size == 2 * GIB
     extracted: list[str] = []
     monkeypatch.setattr(zipfile.ZipFile, "extractall", lambda *args, **kwargs: extracted.append("all"))
     monkeypatch.setattr(zipfile.ZipFile, "open", _refuse_reading(zipfile.ZipFile.open))
-    before = set(Path(tempfile.gettempdir()).glob("navcosim-*"))
+    # A temporary folder of the test's own: other runs on the machine come and go in /tmp.
+    temporary = tmp_path / "tmp"
+    temporary.mkdir()
+    monkeypatch.setenv("TMPDIR", str(temporary))
+    monkeypatch.setattr(tempfile, "tempdir", str(temporary))
     for kind in (FmuComponent, IsolatedFmuComponent):
         with pytest.raises(CosimError) as error:
             kind(bomb, "vehicle")
@@ -146,7 +150,7 @@ def test_a_small_fmu_that_unpacks_to_2_gib_is_refused_without_extracting(bomb, m
             "('resources/padding.bin' alone 2,048 MiB), more than the limit of 1,024 MiB; not extracted "
             "(raise the limit with [simulation] fmu_max_size, in MiB, if you trust it)"
         )
-    assert extracted == [] and set(Path(tempfile.gettempdir()).glob("navcosim-*")) == before
+    assert extracted == [] and list(temporary.iterdir()) == []
     assert DEFAULT_MAX_UNPACKED_SIZE == GIB
 
 
