@@ -2,10 +2,13 @@
 
 Per message, Python then only stores a row (a signal record's float64 values, a pose's five
 numbers) and the stream's number in the block's write order; `MessageBlock.pack` builds every
-record of the block with NumPy (MCAP message head + CDR payload, the template bytes with the
-varying fields written through a structured view), lays them out in the order they were written
-and hands them to `ChunkWriter.add_records`. The bytes are exactly what the per-message path writes
+record of the block in one C call (`cosim.core.kernel.pack_records`: per message in write order,
+the stream's template record (MCAP message head + CDR payload) with the sequence, log and publish
+time, the stamps and the float64 fields written in; a ready payload behind its head) and hands
+them to `ChunkWriter.add_records`. The bytes are exactly what the per-message path writes
 (`rosmsg.signals_payload`, `odometry_cdr`, `tf_cdr`, `pose_stamped_cdr`, any ready CDR bytes).
+`MessageBlock._records_numpy` builds the same bytes with NumPy structured views (the reference the
+tests hold the C build to, and the stand-in past `kernel.MAX_STREAMS` streams).
 
 `MessageBlock.add_batch` takes the messages of many steps at once (arrays in write order) and
 packs exactly where holding them one at a time would have packed (a stream's block full, or a
