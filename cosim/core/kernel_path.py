@@ -84,6 +84,8 @@ def run_blocks(
     jacobi = master.system.mode == "jacobi"
     tail_from = master._tail_from
     periods = [entry.period for entry in plan]
+    # A component's whole step [s]: `Master.step_seconds` before `tail_from`, where no step is cut.
+    whole = [period * h_ns / NS_PER_S for period in periods]
     stepping = [i for i in range(len(periods)) if tables.components[i, kernel.C_KIND] != kernel.KIND_IDLE]
     end = master.step_index + steps
     first = k = master.step_index
@@ -147,7 +149,9 @@ def run_blocks(
                     if gather is not None:
                         gather()
                         component.push_inputs()
-                    component.do_step((start_ns + k * h_ns) / NS_PER_S, master.step_seconds(k, period))
+                    cut = tail_from is not None and k >= tail_from
+                    h = master.step_seconds(k, period) if cut else whole[position]
+                    component.do_step((start_ns + k * h_ns) / NS_PER_S, h)
                     component.get_outputs()
                 except CosimError as error:
                     master.failure = error

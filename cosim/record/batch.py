@@ -607,13 +607,14 @@ class MessageBlock:
         for number, stream in enumerate(self.streams):
             if isinstance(stream, SignalStream) and stream.times:
                 times = np.array(stream.times, dtype=np.uint64)
-                width = stream.rows.shape[1]
+                width = stream.rows.shape[1]  # rows: float64, C-contiguous (made by `SignalStream`, `_grow`)
                 parts = [("values", 0, width)] if width else []
                 size += fixed(number, stream.records, times, stream.rows, parts)
                 carried.append(stream)
         if self.pose is not None and self.pose.count:
             times, rows, quaternion = self._pose_rows()
-            matrix = np.column_stack((rows[:, :2], quaternion, rows[:, 3:5]))  # x y qz qw v omega
+            # columns x, y, qz, qw, v, omega (float64 whatever the rows held)
+            matrix = np.column_stack((rows[:, :2], quaternion, rows[:, 3:5])).astype(np.float64, copy=False)
             pose = self.pose
             located = [("pose", 0, 2), ("qz", 2, 2)]  # x, y adjacent; qz, qw adjacent
             for number, records in zip(self.pose_streams, (pose.odom, pose.tf, pose.pose), strict=True):
