@@ -17,6 +17,14 @@
 
 (b) The same loop with every signal to MCAP and (c) each shipped scenario at full settings come
 from `benchmarks/bench_scenarios.py` (see there). `--parts a,b,c` runs them all into one table.
+
+(d) The robot run's stepping loop (`cosim.navigation.run._RobotRun.loop`: kernel blocks, lidar and
+    planner, outcome checks, every topic recorded to MCAP, no plot trace) of
+    scenarios/warehouse_diff_drive_one_obstacle.toml, without the start-up (build, header) and the
+    end (close): the median over `--repeat` runs in one process, and the floor measured in the
+    same runs: the time inside the loop's compiled calls that no recording can save (the C
+    stepping kernel and the C lidar sweeps). loop / floor is the figure to compare across
+    machines and runs (1.0: everything else free); issue 24 asks the loop >= 2x faster.
 """
 
 from __future__ import annotations
@@ -244,7 +252,63 @@ def part_c(steps: int) -> list[Row]:
     return scenarios(steps)
 
 
-PARTS: dict[str, Callable[[int], list[Row]]] = {"a": part_a, "b": part_b, "c": part_c}
+ROBOT_SCENARIO = REPO / "scenarios" / "warehouse_diff_drive_one_obstacle.toml"
+
+
+def part_d(_steps: int = 0, repeat: int = 7) -> list[Row]:
+    """The robot run's stepping loop and its floor (see the module docstring)."""
+    import statistics
+
+    from cosim.core import kernel
+    from cosim.navigation import run
+    from cosim.scenario.load import load_scenario
+    from cosim.world.lidar import Lidar
+
+    spent = {"floor": 0.0}
+    timed: list[tuple[float, float, int]] = []  # (loop [s], floor [s], steps) per run
+
+    def timing(function):
+        def call(*args, **kwargs):
+            start = time.perf_counter()
+            try:
+                return function(*args, **kwargs)
+            finally:
+                spent["floor"] += time.perf_counter() - start
+
+        return call
+
+    def loop(self) -> None:
+        spent["floor"] = 0.0
+        start = time.perf_counter()
+        loop.original(self)
+        timed.append((time.perf_counter() - start, spent["floor"], self.master.step_index))
+
+    patched = [(kernel.Kernel, "__call__"), (Lidar, "scan"), (run._RobotRun, "loop")]
+    originals = [getattr(owner, name) for owner, name in patched]
+    loop.original = run._RobotRun.loop
+    kernel.Kernel.__call__ = timing(kernel.Kernel.__call__)
+    Lidar.scan = timing(Lidar.scan)
+    run._RobotRun.loop = loop
+    try:
+        with tempfile.TemporaryDirectory() as scratch:
+            for index in range(repeat + 1):  # the first run warms the caches, uncounted
+                scenario = load_scenario(ROBOT_SCENARIO)
+                run.run_scenario(scenario, Path(scratch) / f"run{index}.mcap", force=True, trace=False)
+    finally:
+        for (owner, name), original in zip(patched, originals, strict=True):
+            setattr(owner, name, original)
+    counted = timed[1:]
+    seconds = statistics.median(loop for loop, _, _ in counted)
+    floor = statistics.median(floor for _, floor, _ in counted)
+    ratio = statistics.median(loop / floor for loop, floor, _ in counted)
+    note = (
+        f"median of {len(counted)}: loop {1e3 * seconds:.1f} ms, floor (C kernel + C lidar calls) "
+        f"{1e3 * floor:.1f} ms, loop / floor {ratio:.2f}"
+    )
+    return [Row("d", f"robot run loop, {ROBOT_SCENARIO.stem}", counted[0][2], seconds, note)]
+
+
+PARTS: dict[str, Callable[[int], list[Row]]] = {"a": part_a, "b": part_b, "c": part_c, "d": part_d}
 
 
 def print_table(rows: list[Row]) -> None:

@@ -93,3 +93,17 @@ def test_every_kernel_with_a_ctypes_struct_describes_itself():
         for target in structs.values()
     }
     assert mirrored <= listed
+
+
+def test_the_recording_tables_are_described():
+    """`cosim.core.kernel.pack_records` shares three numbered tables and the MCAP head offsets with
+    kernel.c: each is in the library's description, so the constants test above holds them."""
+    layout = _layout("cosim/core/native/kernel.c")
+    for name in ("STREAM_COLUMNS", "FIELD_COLUMNS", "RAW_COLUMNS", "MAX_STREAMS", "MESSAGE_HEAD_BYTES"):
+        assert name in layout
+    columns = {"P_": "STREAM_COLUMNS", "F_": "FIELD_COLUMNS", "RAW_": "RAW_COLUMNS"}
+    for prefix, total in columns.items():
+        numbered = sorted(
+            value for name, value in layout.items() if name.startswith(prefix) and name != total
+        )
+        assert numbered == list(range(layout[total])), prefix  # every column named, none twice

@@ -63,6 +63,25 @@ KINDS = (
 (KIND_UINT16, KIND_UINT32, KIND_INT64, KIND_UINT64) = range(7, 11)
 # Failure calls (as `NativeStep.fail`): 0 set, 1 doStep, 2 get, 3 asked to terminate, 4 not finite.
 
+# The recording's message records (`pack_records`): an MCAP Message record's head (opcode u8,
+# record length u64, channel u16, sequence u32, log time u64, publish time u64), and its byte offsets.
+MESSAGE_HEAD_BYTES, MESSAGE_FIELD_BYTES, OPCODE_MESSAGE = 31, 22, 5
+HEAD_LENGTH, HEAD_CHANNEL, HEAD_SEQUENCE, HEAD_LOG_TIME, HEAD_PUBLISH_TIME = 1, 9, 11, 15, 23
+# Columns of the stream table: kind, channel, first sequence, record bytes, template address,
+# times address (uint64 per message), matrix address (float64 rows), matrix columns, stamps (0-2)
+# and their byte offsets, the stream's first field-table row and count.
+(
+    P_KIND, P_CHANNEL, P_SEQUENCE, P_SIZE, P_TEMPLATE, P_TIMES, P_MATRIX, P_MATRIX_COLUMNS,
+    P_STAMP_COUNT, P_STAMP_FIRST, P_STAMP_SECOND, P_FIELD_FIRST, P_FIELD_COUNT,
+) = range(13)  # fmt: skip
+STREAM_COLUMNS = 13
+STREAM_NONE, STREAM_FIXED, STREAM_RAW = 0, 1, 2
+MAX_STREAMS = 1024  # streams of one pack at most
+F_OFFSET, F_COLUMN, F_COUNT = range(3)  # field table: record byte offset, matrix column, float64 count
+FIELD_COLUMNS = 3
+RAW_CHANNEL, RAW_SEQUENCE, RAW_TIME, RAW_START, RAW_SIZE = range(5)  # raw table: one row per message
+RAW_COLUMNS = 5
+
 
 _SOURCE = Path(__file__).resolve().parent / "native" / "kernel.c"
 _I64 = ctypes.c_int64
@@ -103,9 +122,12 @@ _LENGTHS = {"watch_addresses": 3, "watch_numbers": 6}
 _function = None
 
 
+_packer = None
+
+
 def _kernel():
     """The C function, loaded (built on a machine's first use) once per process."""
-    global _function
+    global _function, _packer
     if _function is None:
         from planner import native
 
@@ -113,7 +135,10 @@ def _kernel():
         if library.navcosim_tables_size() != ctypes.sizeof(_Tables):
             raise RuntimeError(f"{_SOURCE.name}: its Tables struct does not match kernel.py's _Tables")
         signature = (_I64, [_I64] * 6 + [ctypes.POINTER(_Tables), ctypes.POINTER(_I64)])
-        _function = native.bind(library, {"navcosim_step_kernel": signature}).navcosim_step_kernel
+        pack = (_I64, [_I64, _POINTER, _I64] + [_POINTER] * 5 + [_I64] + [_POINTER] * 3)
+        bound = native.bind(library, {"navcosim_step_kernel": signature, "navcosim_pack_records": pack})
+        _packer = bound.navcosim_pack_records
+        _function = bound.navcosim_step_kernel
     return _function
 
 
@@ -165,6 +190,45 @@ def step_kernel(
         checks, history, rows, watch_addresses, watch_numbers,
     )  # fmt: skip
     return kernel(first_step, steps, first_position, start_ns, h_ns, jacobi)
+
+
+def pack_records(
+    order: np.ndarray, streams: np.ndarray, fields: np.ndarray, raw: np.ndarray, blob: bytes, size: int
+) -> tuple[bytearray, np.ndarray, np.ndarray, np.ndarray]:
+    """MCAP Message records of held messages, in write order, built in C (kernel.c's
+    `navcosim_pack_records`): `order` (int64) the stream number of each message; `streams` the
+    stream table (int64, STREAM_COLUMNS per stream number: a fixed-layout stream's template record
+    with its stamps and float64 fields written per message from its times and matrix rows, or
+    STREAM_RAW); `fields` the field table (FIELD_COLUMNS); `raw` the raw messages' table
+    (RAW_COLUMNS, in their order) with their payloads in `blob`; `size` the records' total bytes.
+    Returns (records, offsets, channels, times) as `ChunkWriter.add_records` takes them. The
+    addresses in the tables must point at live arrays of the right length (the caller's)."""
+    _kernel()
+    count = len(order)
+    if len(streams) > MAX_STREAMS:
+        raise ValueError(f"pack_records: {len(streams)} streams, at most {MAX_STREAMS}")
+    tables = [np.ascontiguousarray(table, dtype=np.int64) for table in (order, streams, fields, raw)]
+    out = bytearray(size)
+    offsets = np.empty(count, dtype=np.int64)
+    channels = np.empty(count, dtype=np.int64)
+    times = np.empty(count, dtype=np.uint64)
+    written = _packer(
+        count,
+        tables[0].ctypes.data,
+        len(tables[1]),
+        tables[1].ctypes.data,
+        tables[2].ctypes.data,
+        tables[3].ctypes.data,
+        blob,
+        (ctypes.c_char * size).from_buffer(out) if size else None,
+        size,
+        offsets.ctypes.data,
+        channels.ctypes.data,
+        times.ctypes.data,
+    )
+    if written != size:
+        raise ValueError(f"pack_records: the records are {written} bytes, not the {size} expected")
+    return out, offsets, channels, times
 
 
 def warm_up() -> None:

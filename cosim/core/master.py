@@ -43,8 +43,8 @@ system whose stepped components are all FMUs stepped by C calls and nobody obser
 in the compiled kernel (`cosim.core.kernel`, C, reading tables filled by `cosim.core.fast_loop`);
 `Master.run_recorded` likewise, keeping the rows per block. `Master.run_blocks` steps through the
 same kernel, handing components that need Python back where they are due, recording the FMUs'
-buffers and watching a position; its callback runs per block of steps. All loops give
-bit-identical values.
+buffers and watching a position; its callback runs per block of steps (the block path itself is
+`cosim.core.kernel_path`). All loops give bit-identical values.
 
 Failures
 --------
@@ -60,7 +60,7 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
-from cosim.core import fast_loop
+from cosim.core import fast_loop, kernel_path
 from cosim.core.component import Component, State
 from cosim.core.fast_loop import PlanEntry
 from cosim.core.gather import make_gather
@@ -497,18 +497,7 @@ class Master:
         """The tables of `run_blocks` (`cosim.core.kernel`), or None when the kernel cannot run this
         system: no component steps by C calls, or Jacobi mode with a component that needs Python."""
         self._check_running()
-        skip = {entry.component.name for entry in self._plan if entry.component.constant_outputs}
-        tables = fast_loop.KernelTables(self._plan, self.system, skip, record, block)
-        stepped = [
-            native for native, (c, _, _) in zip(tables.native, self._plan, strict=True) if c.name not in skip
-        ]
-        if not any(native is not None for native in stepped):
-            return None
-        if self.system.mode == "jacobi" and any(native is None for native in stepped):
-            return None
-        if self._previous or self._loop_groups:
-            return None  # a delayed or iterated loop steps in Python (`_advance`)
-        return tables
+        return kernel_path.kernel_tables(self, record, block)
 
     def run_blocks(
         self,
@@ -519,112 +508,13 @@ class Master:
         before_block: Callable[[], None] | None = None,
         cut_after_python: Callable[[int], bool] | None = None,
     ) -> int:
-        """Advance up to `steps` macro steps through the compiled kernel (`cosim.core.kernel`);
-        components that need Python are stepped here where they are due. Returns the steps done.
-
-        After each stretch of complete steps [first, end) -- at most `block` steps, cut where a
-        Python component is due (before it steps), at the end of a step in which one stepped, and
-        after a step whose watched position (`tables.watch_*`) needs a look -- `on_block(first,
-        end, histories, clean)` is called: `histories[i]` holds component i's buffers (inputs,
-        then outputs) after each of its steps in the stretch when the tables record it, else None.
-        `clean` is True when no component has stepped yet in step `end`: then a true return
-        stops the run at `end` (the same place as the Python loop's callback would); otherwise
-        the return is ignored. `before_block()` is called before each call of the kernel.
-
-        `cut_after_python(k)`, when given, is asked after the Python components of step k have
-        stepped: False lets the stretch go on past step k (so Python components step only in the
-        first step of a stretch, and hold their buffers to its end); True, or no callable, ends
-        the stretch with step k.
-        """
+        """Advance up to `steps` macro steps through the compiled kernel, handing components that
+        need Python back where they are due; `on_block(first, end, histories, clean)` after each
+        stretch of steps. Returns the steps done. The arguments and callbacks are those of
+        `cosim.core.kernel_path.run_blocks`, which says what they mean."""
         self._check_running()
         self._check_steps(steps)
-        most = tables.record_block or block  # recorded: the rows the tables hold
-        if not 1 <= block <= most:
-            raise CosimError(f"block must be 1 to {max(1, most)} steps, got {block}")
-        from cosim.core import kernel
-
-        h_ns, start_ns = self.system.macro_step_ns, self.start_time_ns
-        jacobi = self.system.mode == "jacobi"
-        periods = [entry.period for entry in self._plan]
-        stepping = [i for i in range(len(periods)) if tables.components[i, kernel.C_KIND] != kernel.KIND_IDLE]
-        end = self.step_index + steps
-        first = k = self.step_index
-        position = 0
-        tables.rows[:] = 0
-        finish_step = False  # a Python component stepped: the kernel ends this step, then returns
-        while True:
-            if k >= end and position == 0:
-                break
-            if before_block is not None:
-                before_block()
-            count = 1 if finish_step else min(block, end - k)
-            tail = self._tail_from is not None and k >= self._tail_from
-            if tail:  # steps cut at the stop time go one at a time, with their step sizes
-                count = 1
-                for i in stepping:
-                    tables.step_sizes[i] = self.step_seconds(k, periods[i])
-            elif self._tail_from is not None:
-                count = min(count, self._tail_from - k)
-            code, k, position, failed, call, status, kind = tables.run(
-                k, count, position, start_ns, h_ns, jacobi
-            )
-            finish_step = False
-            clean = position == 0 or not any(k % periods[i] == 0 for i in stepping if i < position)
-            if k > first:
-                histories = tables.histories()
-                delivered = []
-                for i, history in enumerate(histories):
-                    if history is None:
-                        delivered.append(None)
-                        continue
-                    period = periods[i]
-                    n = (k + period - 1) // period - (first + period - 1) // period
-                    delivered.append(history[:n])
-                self.step_index = k
-                stop = on_block(first, k, delivered, clean) if on_block is not None else False
-                # Rows of step k already taken (components before `position`) move to the front.
-                for i, history in enumerate(histories):
-                    if history is not None:
-                        n = len(delivered[i])
-                        extra = len(history) - n
-                        if extra:
-                            history[:extra] = history[n:].copy()
-                        tables.rows[i] = extra
-                first = k
-                if stop and clean:
-                    break
-            self.step_index = k
-            if code == kernel.FAILED:
-                try:
-                    native = tables.native[failed]
-                    kind_name = kernel.KINDS[kind]
-                    native.fail(
-                        call, status, None if call in (0, 2) else (start_ns + k * h_ns) / NS_PER_S, kind_name
-                    )
-                except CosimError as error:
-                    self.failure = error
-                    raise
-                raise CosimError(f"component '{self._plan[failed].component.name}' failed at step {k}")
-            if code == kernel.HAND_BACK:
-                # This component, and the next ones due in this step while they need Python too.
-                while True:
-                    component, period, gather = self._plan[position]
-                    try:
-                        if gather is not None:
-                            gather()
-                            component.push_inputs()
-                        component.do_step((start_ns + k * h_ns) / NS_PER_S, self.step_seconds(k, period))
-                        component.get_outputs()
-                    except CosimError as error:
-                        self.failure = error
-                        raise
-                    position += 1
-                    following = next((i for i in stepping if i >= position and k % periods[i] == 0), None)
-                    if following is None or tables.native[following] is not None:
-                        break
-                    position = following
-                finish_step = cut_after_python is None or cut_after_python(k)
-        return self.step_index - (end - steps)
+        return kernel_path.run_blocks(self, steps, tables, on_block, block, before_block, cut_after_python)
 
     def _deliver(self, first: int, on_block, histories: list[np.ndarray], rows: np.ndarray) -> None:
         """Hand the rows of the steps that ran (all of them, or up to a failure) to `on_block`."""
@@ -643,13 +533,7 @@ class Master:
         is stepped needs Python (or none is stepped by C calls)."""
         key = (record, block)
         if key not in self._kernels:
-            tables = self.kernel_tables(record=record, block=block)
-            if tables is not None and any(
-                native is None and not component.constant_outputs
-                for native, (component, _, _) in zip(tables.native, self._plan, strict=True)
-            ):
-                tables = None
-            self._kernels[key] = tables
+            self._kernels[key] = kernel_path.all_native_tables(self, record, block)
         return self._kernels[key]
 
     def _advance(self, steps: int, callback: Callable[[Master], bool | None] | None = None) -> int:

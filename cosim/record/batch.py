@@ -2,10 +2,13 @@
 
 Per message, Python then only stores a row (a signal record's float64 values, a pose's five
 numbers) and the stream's number in the block's write order; `MessageBlock.pack` builds every
-record of the block with NumPy (MCAP message head + CDR payload, the template bytes with the
-varying fields written through a structured view), lays them out in the order they were written
-and hands them to `ChunkWriter.add_records`. The bytes are exactly what the per-message path writes
+record of the block in one C call (`cosim.core.kernel.pack_records`: per message in write order,
+the stream's template record (MCAP message head + CDR payload) with the sequence, log and publish
+time, the stamps and the float64 fields written in; a ready payload behind its head) and hands
+them to `ChunkWriter.add_records`. The bytes are exactly what the per-message path writes
 (`rosmsg.signals_payload`, `odometry_cdr`, `tf_cdr`, `pose_stamped_cdr`, any ready CDR bytes).
+`MessageBlock._records_numpy` builds the same bytes with NumPy structured views (the reference the
+tests hold the C build to, and the stand-in past `kernel.MAX_STREAMS` streams).
 
 `MessageBlock.add_batch` takes the messages of many steps at once (arrays in write order) and
 packs exactly where holding them one at a time would have packed (a stream's block full, or a
@@ -19,6 +22,7 @@ import struct
 
 import numpy as np
 
+from cosim.core import kernel
 from cosim.errors import CosimError
 from cosim.record import rosmsg
 from cosim.record.mcap_format import MESSAGE_FIELDS, MESSAGE_HEAD, MESSAGE_HEAD_SIZE, OP_MESSAGE
@@ -86,6 +90,12 @@ class _Records:
             np.uint8,
         )
         self.dtype = _record_dtype(fields, len(template_payload))
+        # Byte offsets in the record of the stamps (sec; nanosec follows) written per message.
+        self.stamps = [self.offset(name) for name in ("sec", "sec2") if name in fields]
+
+    def offset(self, name: str) -> int:
+        """Byte offset of field `name` in the record."""
+        return self.dtype.fields[name][1]
 
     def build(self, times: np.ndarray, sequence: int) -> np.ndarray:
         """Rows of records (len(times) x size bytes as a structured array), stamps and sequence set."""
@@ -241,6 +251,8 @@ class MessageBlock:
         self.definitions: list[tuple[int, list]] = []  # (message position, schema/channel records)
         self.batch_limit = 0  # messages held across skipped packs at most (0: pack every time)
         self.clock_due = None  # () -> True when held messages are to reach the file now (wall clock)
+        # Records built in C (`cosim.core.kernel.pack_records`); False: with NumPy (`_records_numpy`).
+        self.native = True
 
     def _grouped(self, number: int, messages: int) -> bool:
         """Account for a message of stream `number` (`messages` records) in the group; True when
@@ -529,6 +541,108 @@ class MessageBlock:
         if self.count == 0:
             return
         order = np.array(self.order, dtype=np.int64)
+        if self.native and len(self.streams) <= kernel.MAX_STREAMS:
+            data, offsets, channels, times = self._records_native(order)
+        else:
+            data, offsets, channels, times = self._records_numpy(order)
+        self.order = []
+        self.count = self.mark = self.group = 0
+        self.group_sizes = {}
+        first = 0
+        for position, definitions in self.definitions:
+            if position > first:
+                self._add_records(data, channels, times, offsets, first, position)
+            self.writer.put_definitions(definitions)
+            first = position
+        self.definitions = []
+        self._add_records(data, channels, times, offsets, first, len(offsets))
+
+    def _pose_rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The held poses, taken: (t_ns as uint64, rows of x, y, theta, v, omega, the orientation
+        quaternion's z and w)."""
+        times, rows = self.pose.take()
+        half = rows[:, 2] / 2.0
+        return times.astype(np.uint64), rows, np.column_stack((np.sin(half), np.cos(half)))
+
+    def _raw_sequences(self) -> list[int]:
+        """The sequence number of each held raw message (counting per channel, in held order)."""
+        counts: dict[int, int] = {}
+        for channel, _, _ in self.raw:
+            counts[channel] = counts.get(channel, 0) + 1
+        next_of = {channel: self._sequence(channel, count) for channel, count in sorted(counts.items())}
+        sequences = []
+        for channel, _, _ in self.raw:
+            sequences.append(next_of[channel])
+            next_of[channel] += 1
+        return sequences
+
+    def _records_native(self, order: np.ndarray) -> tuple[bytearray, np.ndarray, np.ndarray, np.ndarray]:
+        """The held messages' records built in C (`cosim.core.kernel.pack_records`): every held
+        message taken, the step streams carried (`SignalStream.carry`)."""
+        streams = np.zeros((len(self.streams), kernel.STREAM_COLUMNS), dtype=np.int64)
+        fields: list[tuple[int, int, int]] = []
+        alive: list[np.ndarray] = []  # arrays the tables point into, alive until the C call returns
+        carried: list[SignalStream] = []
+        size = 0
+
+        def fixed(number: int, records: _Records, times: np.ndarray, matrix: np.ndarray, parts) -> int:
+            count = len(times)
+            row = streams[number]
+            row[kernel.P_KIND] = kernel.STREAM_FIXED
+            row[kernel.P_CHANNEL] = records.channel
+            row[kernel.P_SEQUENCE] = self._sequence(records.channel, count)
+            row[kernel.P_SIZE] = records.size
+            row[kernel.P_TEMPLATE] = records.template.ctypes.data
+            row[kernel.P_TIMES] = times.ctypes.data
+            row[kernel.P_MATRIX] = matrix.ctypes.data
+            row[kernel.P_MATRIX_COLUMNS] = matrix.shape[1]
+            row[kernel.P_STAMP_COUNT] = len(records.stamps)
+            row[kernel.P_STAMP_FIRST : kernel.P_STAMP_FIRST + len(records.stamps)] = records.stamps
+            row[kernel.P_FIELD_FIRST] = len(fields)
+            row[kernel.P_FIELD_COUNT] = len(parts)
+            fields.extend((records.offset(name), column, width) for name, column, width in parts)
+            alive.extend((times, matrix))
+            return count * records.size
+
+        for number, stream in enumerate(self.streams):
+            if isinstance(stream, SignalStream) and stream.times:
+                times = np.array(stream.times, dtype=np.uint64)
+                width = stream.rows.shape[1]  # rows: float64, C-contiguous (made by `SignalStream`, `_grow`)
+                parts = [("values", 0, width)] if width else []
+                size += fixed(number, stream.records, times, stream.rows, parts)
+                carried.append(stream)
+        if self.pose is not None and self.pose.count:
+            times, rows, quaternion = self._pose_rows()
+            # columns x, y, qz, qw, v, omega (float64 whatever the rows held)
+            matrix = np.column_stack((rows[:, :2], quaternion, rows[:, 3:5])).astype(np.float64, copy=False)
+            pose = self.pose
+            located = [("pose", 0, 2), ("qz", 2, 2)]  # x, y adjacent; qz, qw adjacent
+            for number, records in zip(self.pose_streams, (pose.odom, pose.tf, pose.pose), strict=True):
+                parts = located + [("v", 4, 1), ("omega", 5, 1)] if records is pose.odom else located
+                size += fixed(number, records, times, matrix, parts)
+        raw_table = np.zeros((len(self.raw), kernel.RAW_COLUMNS), dtype=np.int64)
+        streams[RAW_STREAM, kernel.P_KIND] = kernel.STREAM_RAW
+        blob = b""
+        if self.raw:
+            lengths = [len(payload) for _, _, payload in self.raw]
+            raw_table[:, kernel.RAW_CHANNEL] = [channel for channel, _, _ in self.raw]
+            raw_table[:, kernel.RAW_SEQUENCE] = self._raw_sequences()
+            raw_table[:, kernel.RAW_TIME] = [t_ns for _, t_ns, _ in self.raw]
+            raw_table[:, kernel.RAW_SIZE] = lengths
+            raw_table[1:, kernel.RAW_START] = np.cumsum(lengths[:-1])
+            blob = b"".join([payload for _, _, payload in self.raw])
+            size += MESSAGE_HEAD_SIZE * len(self.raw) + len(blob)
+            self.raw = []
+        table = np.array(fields, dtype=np.int64).reshape(-1, kernel.FIELD_COLUMNS)
+        packed = kernel.pack_records(order, streams, table, raw_table, blob, size)
+        for stream in carried:
+            stream.carry()
+        return packed
+
+    def _records_numpy(self, order: np.ndarray) -> tuple[bytes, np.ndarray, np.ndarray, np.ndarray]:
+        """The held messages' records built with NumPy (the reference for `_records_native`, and
+        its stand-in for more streams than it takes): every held message taken, the step streams
+        carried."""
         parts: dict[int, tuple[np.ndarray, np.ndarray, int, np.ndarray]] = {}  # stream -> rows, times...
         for number, stream in enumerate(self.streams):
             if isinstance(stream, SignalStream) and stream.times:
@@ -539,10 +653,8 @@ class MessageBlock:
                 parts[number] = (records, times, stream.records.channel)
                 stream.carry()
         if self.pose is not None and self.pose.count:
-            times, rows = self.pose.take()
-            times = times.astype(np.uint64)
-            half = rows[:, 2] / 2.0
-            qz, qw = np.sin(half), np.cos(half)
+            times, rows, quaternion = self._pose_rows()
+            qz, qw = quaternion[:, 0], quaternion[:, 1]
             for number, records_of in zip(
                 self.pose_streams, (self.pose.odom, self.pose.tf, self.pose.pose), strict=True
             ):
@@ -604,18 +716,7 @@ class MessageBlock:
             channels[where] = raw_channels
             times[where] = raw_times
             self.raw = []
-        self.order = []
-        self.count = self.mark = self.group = 0
-        self.group_sizes = {}
-        data = out.tobytes()
-        first = 0
-        for position, definitions in self.definitions:
-            if position > first:
-                self._add_records(data, channels, times, offsets, first, position)
-            self.writer.put_definitions(definitions)
-            first = position
-        self.definitions = []
-        self._add_records(data, channels, times, offsets, first, len(offsets))
+        return out.tobytes(), offsets, channels, times
 
     def _add_records(self, data: bytes, channels, times, offsets, first: int, end: int) -> None:
         """Records first..end (exclusive) of a pack to the writer."""

@@ -171,6 +171,7 @@ class BlockRecording:
         self.flush_at = 0  # [ns] flush once a step starting at or after it is collected
         # Records of components stepped by Python, taken from their live buffers: slot -> [(k, row)].
         self.live = {block.slot: [] for block in self.entries if block.columns is None}
+        self.live_entries = [block for block in self.entries if block.columns is None]
         self.others: list[OtherMessage] = []
 
     def accepts(self, first: int, end: int, histories) -> bool:
@@ -214,20 +215,22 @@ class BlockRecording:
                     (self.start_ns + first * self.h_ns) // self.window_ns + windows
                 ) * self.window_ns
         start_ns, h_ns, per_step = self.start_ns, self.h_ns, self.order.per_step
-        before = dict(self.counts)
+        counts = self.counts
+        x_column, y_column = self.pose_columns[:2]
+        x_before, y_before = counts[x_column.index], counts[y_column.index]
         for i, rows in self.buffers.items():
             history = histories[i]
             n = len(history)
             if n:
-                at = self.counts[i] + 1
+                at = counts[i] + 1
                 rows[at : at + n] = history
-                self.counts[i] += n
+                counts[i] = at + n - 1
         self.end = end
         last = end - 1
         t_last = start_ns + last * h_ns
         # Records of components stepped by Python: due at most at the first step, from live buffers.
-        for block in self.entries:
-            if block.columns is None and first % block.entry.period == 0:
+        for block in self.live_entries:
+            if first % block.entry.period == 0:
                 self.live[block.slot].append((first, block.entry.record()))
         recording, recorder = self.recording, self.recorder
         scan = recording.scan
@@ -247,11 +250,13 @@ class BlockRecording:
                     key = k * per_step + self.order.obstacles
                     self.others.append(OtherMessage(key, t_ns, "/obstacles", payload))
         # The positions after each step, as the monitor checks them.
-        x_column, y_column = self.pose_columns[:2]
-        xs = self._values(x_column, first, end, before[x_column.index])
-        ys = self._values(y_column, first, end, before[y_column.index])
+        xs = self._values(x_column, first, end, x_before)
+        ys = self._values(y_column, first, end, y_before)
         stop_ns = recording.stop_ns
-        times = [min(start_ns + (k + 1) * h_ns, stop_ns) / NS_PER_S for k in range(first, end)]
+        if start_ns + end * h_ns <= stop_ns:  # no step of the block is cut at the stop time
+            times = [(start_ns + k * h_ns) / NS_PER_S for k in range(first + 1, end + 1)]
+        else:
+            times = [min(start_ns + (k + 1) * h_ns, stop_ns) / NS_PER_S for k in range(first, end)]
         index, reason = self.monitor.check_positions(times, xs, ys)
         if reason is not None and (index != end - first - 1 or not clean):
             raise RuntimeError(

@@ -394,6 +394,112 @@ int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_po
     return finish(result, DONE, k, 0, -1, 0, 0, 0);
 }
 
+/* ---- The recording's message records (`cosim.core.kernel.pack_records`) ----------------------
+ * A block of held messages becomes MCAP Message records here, in write order, with the bytes the
+ * per-message path writes: a record of a fixed-layout stream (a /signals channel, /odom, /tf,
+ * /pose) is its template (head and CDR payload) with the head's sequence, log and publish time,
+ * the payload's stamps (int32 sec, uint32 nanosec of the time) and its float64 fields written in;
+ * a raw message (any other payload) is a head and its payload bytes. */
+
+/* MCAP Message record: opcode u8, record length u64, channel u16, sequence u32, log time u64,
+ * publish time u64 (packed, little-endian), then the payload. */
+enum {
+    MESSAGE_HEAD_BYTES = 31, MESSAGE_FIELD_BYTES = 22, HEAD_LENGTH = 1, HEAD_CHANNEL = 9,
+    HEAD_SEQUENCE = 11, HEAD_LOG_TIME = 15, HEAD_PUBLISH_TIME = 23, OPCODE_MESSAGE = 5
+};
+/* Columns of the stream table (one row per stream number of the block). */
+enum {
+    P_KIND, P_CHANNEL, P_SEQUENCE, P_SIZE, P_TEMPLATE, P_TIMES, P_MATRIX, P_MATRIX_COLUMNS,
+    P_STAMP_COUNT, P_STAMP_FIRST, P_STAMP_SECOND, P_FIELD_FIRST, P_FIELD_COUNT, STREAM_COLUMNS
+};
+enum { STREAM_NONE = 0, STREAM_FIXED = 1, STREAM_RAW = 2 };
+/* Most streams of one block (signal channels, the pose's three, raw). */
+enum { MAX_STREAMS = 1024 };
+/* Columns of the field table: the record's byte offset, the matrix column, how many float64. */
+enum { F_OFFSET, F_COLUMN, F_COUNT, FIELD_COLUMNS };
+/* Columns of the raw table (one row per raw message, in the order they were held). */
+enum { RAW_CHANNEL, RAW_SEQUENCE, RAW_TIME, RAW_START, RAW_SIZE, RAW_COLUMNS };
+
+static inline void put_u64(uint8_t *at, uint64_t value) { memcpy(at, &value, 8); }
+static inline void put_u32(uint8_t *at, uint32_t value) { memcpy(at, &value, 4); }
+static inline void put_u16(uint8_t *at, uint16_t value) { memcpy(at, &value, 2); }
+
+/* Message records of the `n` messages whose stream numbers `order` lists, into `out` (`capacity`
+ * bytes): each message's byte offset, channel and log time into `offsets`, `channels`, `times`.
+ * The i-th message of a stream takes the stream's i-th time and matrix row (the i-th raw message
+ * the raw table's i-th row); sequences count up from each stream's first. Returns the bytes
+ * written, or -1 when they would not fit or a stream number has no stream. */
+int64_t navcosim_pack_records(int64_t n, const int64_t *order, int64_t stream_count, const int64_t *streams,
+                              const int64_t *fields, const int64_t *raw, const uint8_t *blob,
+                              uint8_t *out, int64_t capacity, int64_t *offsets, int64_t *channels,
+                              uint64_t *times) {
+    int64_t cursor[MAX_STREAMS];
+    if (stream_count > MAX_STREAMS) {
+        return -1;
+    }
+    memset(cursor, 0, sizeof(cursor));
+    int64_t raw_cursor = 0, at = 0;
+    for (int64_t i = 0; i < n; i++) {
+        int64_t s = order[i];
+        if (s < 0 || s >= stream_count) {
+            return -1;
+        }
+        const int64_t *stream = &streams[s * STREAM_COLUMNS];
+        uint8_t *record = out + at;
+        if (stream[P_KIND] == STREAM_RAW) {
+            const int64_t *message = &raw[raw_cursor * RAW_COLUMNS];
+            raw_cursor += 1;
+            int64_t size = message[RAW_SIZE];
+            if (at + MESSAGE_HEAD_BYTES + size > capacity) {
+                return -1;
+            }
+            uint64_t t = (uint64_t)message[RAW_TIME];
+            record[0] = OPCODE_MESSAGE;
+            put_u64(record + HEAD_LENGTH, (uint64_t)(MESSAGE_FIELD_BYTES + size));
+            put_u16(record + HEAD_CHANNEL, (uint16_t)message[RAW_CHANNEL]);
+            put_u32(record + HEAD_SEQUENCE, (uint32_t)message[RAW_SEQUENCE]);
+            put_u64(record + HEAD_LOG_TIME, t);
+            put_u64(record + HEAD_PUBLISH_TIME, t);
+            memcpy(record + MESSAGE_HEAD_BYTES, blob + message[RAW_START], (size_t)size);
+            offsets[i] = at;
+            channels[i] = message[RAW_CHANNEL];
+            times[i] = t;
+            at += MESSAGE_HEAD_BYTES + size;
+            continue;
+        }
+        if (stream[P_KIND] != STREAM_FIXED) {
+            return -1;
+        }
+        int64_t size = stream[P_SIZE];
+        if (at + size > capacity) {
+            return -1;
+        }
+        int64_t row = cursor[s]++;
+        uint64_t t = ((const uint64_t *)pointer(stream[P_TIMES]))[row];
+        memcpy(record, pointer(stream[P_TEMPLATE]), (size_t)size);
+        put_u32(record + HEAD_SEQUENCE, (uint32_t)(stream[P_SEQUENCE] + row));
+        put_u64(record + HEAD_LOG_TIME, t);
+        put_u64(record + HEAD_PUBLISH_TIME, t);
+        uint32_t sec = (uint32_t)(int32_t)(t / 1000000000u), nanosec = (uint32_t)(t % 1000000000u);
+        for (int64_t j = 0; j < stream[P_STAMP_COUNT]; j++) {
+            int64_t offset = stream[P_STAMP_FIRST + j];
+            put_u32(record + offset, sec);
+            put_u32(record + offset + 4, nanosec);
+        }
+        const double *values = (const double *)pointer(stream[P_MATRIX]) + row * stream[P_MATRIX_COLUMNS];
+        int64_t first = stream[P_FIELD_FIRST], end = first + stream[P_FIELD_COUNT];
+        for (int64_t f = first; f < end; f++) {
+            const int64_t *field = &fields[f * FIELD_COLUMNS];
+            memcpy(record + field[F_OFFSET], values + field[F_COLUMN], (size_t)(8 * field[F_COUNT]));
+        }
+        offsets[i] = at;
+        channels[i] = stream[P_CHANNEL];
+        times[i] = t;
+        at += size;
+    }
+    return at;
+}
+
 /* sizeof(Tables), so the Python side can check its mirror of the struct. */
 int64_t navcosim_tables_size(void) { return (int64_t)sizeof(Tables); }
 
@@ -466,5 +572,41 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_CONSTANT(KIND_INT64);
     LAYOUT_CONSTANT(KIND_UINT64);
     LAYOUT_CONSTANT(RESULT_SIZE);
+    LAYOUT_CONSTANT(MESSAGE_HEAD_BYTES);
+    LAYOUT_CONSTANT(MESSAGE_FIELD_BYTES);
+    LAYOUT_CONSTANT(HEAD_LENGTH);
+    LAYOUT_CONSTANT(HEAD_CHANNEL);
+    LAYOUT_CONSTANT(HEAD_SEQUENCE);
+    LAYOUT_CONSTANT(HEAD_LOG_TIME);
+    LAYOUT_CONSTANT(HEAD_PUBLISH_TIME);
+    LAYOUT_CONSTANT(OPCODE_MESSAGE);
+    LAYOUT_CONSTANT(P_KIND);
+    LAYOUT_CONSTANT(P_CHANNEL);
+    LAYOUT_CONSTANT(P_SEQUENCE);
+    LAYOUT_CONSTANT(P_SIZE);
+    LAYOUT_CONSTANT(P_TEMPLATE);
+    LAYOUT_CONSTANT(P_TIMES);
+    LAYOUT_CONSTANT(P_MATRIX);
+    LAYOUT_CONSTANT(P_MATRIX_COLUMNS);
+    LAYOUT_CONSTANT(P_STAMP_COUNT);
+    LAYOUT_CONSTANT(P_STAMP_FIRST);
+    LAYOUT_CONSTANT(P_STAMP_SECOND);
+    LAYOUT_CONSTANT(P_FIELD_FIRST);
+    LAYOUT_CONSTANT(P_FIELD_COUNT);
+    LAYOUT_CONSTANT(STREAM_COLUMNS);
+    LAYOUT_CONSTANT(STREAM_NONE);
+    LAYOUT_CONSTANT(STREAM_FIXED);
+    LAYOUT_CONSTANT(STREAM_RAW);
+    LAYOUT_CONSTANT(F_OFFSET);
+    LAYOUT_CONSTANT(F_COLUMN);
+    LAYOUT_CONSTANT(F_COUNT);
+    LAYOUT_CONSTANT(FIELD_COLUMNS);
+    LAYOUT_CONSTANT(RAW_CHANNEL);
+    LAYOUT_CONSTANT(RAW_SEQUENCE);
+    LAYOUT_CONSTANT(RAW_TIME);
+    LAYOUT_CONSTANT(RAW_START);
+    LAYOUT_CONSTANT(RAW_SIZE);
+    LAYOUT_CONSTANT(RAW_COLUMNS);
+    LAYOUT_CONSTANT(MAX_STREAMS);
     return n;
 }

@@ -1,0 +1,165 @@
+"""The master's kernel block path: a `Master` stepped through the compiled kernel, a block at a time.
+
+`kernel_tables` describes a master's plan to the kernel (`cosim.core.fast_loop.KernelTables`), or
+says the kernel cannot run it; `run_blocks` steps through those tables in stretches of steps:
+the kernel (`cosim.core.kernel`, C) steps the FMUs and keeps their buffers after each step, returns
+where a component that needs Python is due (stepped here, with the Python loop's arithmetic), and
+where a watched position needs a look; after each stretch the caller's `on_block` gets the rows.
+`Master.run`, `Master.run_recorded` and `Master.run_blocks` use it (`master` below is a
+`cosim.core.master.Master`, which imports this module); the Master owns the state (`step_index`,
+`failure`, its plan and stop time), this module only the stepping.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from cosim.core import fast_loop
+from cosim.core.timebase import NS_PER_S
+from cosim.errors import CosimError
+
+
+def kernel_tables(master, record: bool, block: int) -> fast_loop.KernelTables | None:
+    """The tables of `run_blocks` for `master`'s plan, or None when the kernel cannot run the
+    system: no component steps by C calls, Jacobi mode with a component that needs Python, or a
+    delayed or iterated algebraic loop (those step in the Python loop)."""
+    plan = master._plan
+    skip = {entry.component.name for entry in plan if entry.component.constant_outputs}
+    tables = fast_loop.KernelTables(plan, master.system, skip, record, block)
+    stepped = [native for native, (c, _, _) in zip(tables.native, plan, strict=True) if c.name not in skip]
+    if not any(native is not None for native in stepped):
+        return None
+    if master.system.mode == "jacobi" and any(native is None for native in stepped):
+        return None
+    if master._previous or master._loop_groups:
+        return None  # a delayed or iterated loop steps in Python (`Master._advance`)
+    return tables
+
+
+def all_native_tables(master, record: bool, block: int) -> fast_loop.KernelTables | None:
+    """`kernel_tables`, but None also when a component that is stepped needs Python (`Master.run`
+    and `Master.run_recorded` hand nothing back)."""
+    tables = kernel_tables(master, record, block)
+    if tables is not None and any(
+        native is None and not component.constant_outputs
+        for native, (component, _, _) in zip(tables.native, master._plan, strict=True)
+    ):
+        return None
+    return tables
+
+
+def run_blocks(
+    master,
+    steps: int,
+    tables: fast_loop.KernelTables,
+    on_block: Callable[[int, int, list, bool], bool | None] | None = None,
+    block: int = 1000,
+    before_block: Callable[[], None] | None = None,
+    cut_after_python: Callable[[int], bool] | None = None,
+) -> int:
+    """Advance `master` up to `steps` macro steps through the compiled kernel; components that need
+    Python are stepped here where they are due. Returns the steps done.
+
+    After each stretch of complete steps [first, end) -- at most `block` steps, cut where a
+    Python component is due (before it steps), at the end of a step in which one stepped, and
+    after a step whose watched position (`tables.watch_*`) needs a look -- `on_block(first,
+    end, histories, clean)` is called: `histories[i]` holds component i's buffers (inputs,
+    then outputs) after each of its steps in the stretch when the tables record it, else None.
+    `clean` is True when no component has stepped yet in step `end`: then a true return
+    stops the run at `end` (the same place as the Python loop's callback would); otherwise
+    the return is ignored. `before_block()` is called before each call of the kernel.
+
+    `cut_after_python(k)`, when given, is asked after the Python components of step k have
+    stepped: False lets the stretch go on past step k (so Python components step only in the
+    first step of a stretch, and hold their buffers to its end); True, or no callable, ends
+    the stretch with step k.
+    """
+    most = tables.record_block or block  # recorded: the rows the tables hold
+    if not 1 <= block <= most:
+        raise CosimError(f"block must be 1 to {max(1, most)} steps, got {block}")
+    from cosim.core import kernel
+
+    plan = master._plan
+    h_ns, start_ns = master.system.macro_step_ns, master.start_time_ns
+    jacobi = master.system.mode == "jacobi"
+    tail_from = master._tail_from
+    periods = [entry.period for entry in plan]
+    # A component's whole step [s]: `Master.step_seconds` before `tail_from`, where no step is cut.
+    whole = [period * h_ns / NS_PER_S for period in periods]
+    stepping = [i for i in range(len(periods)) if tables.components[i, kernel.C_KIND] != kernel.KIND_IDLE]
+    end = master.step_index + steps
+    first = k = master.step_index
+    position = 0
+    tables.rows[:] = 0
+    finish_step = False  # a Python component stepped: the kernel ends this step, then returns
+    while True:
+        if k >= end and position == 0:
+            break
+        if before_block is not None:
+            before_block()
+        count = 1 if finish_step else min(block, end - k)
+        tail = tail_from is not None and k >= tail_from
+        if tail:  # steps cut at the stop time go one at a time, with their step sizes
+            count = 1
+            for i in stepping:
+                tables.step_sizes[i] = master.step_seconds(k, periods[i])
+        elif tail_from is not None:
+            count = min(count, tail_from - k)
+        code, k, position, failed, call, status, kind = tables.run(k, count, position, start_ns, h_ns, jacobi)
+        finish_step = False
+        clean = position == 0 or not any(k % periods[i] == 0 for i in stepping if i < position)
+        if k > first:
+            histories = tables.histories()
+            delivered = []
+            for i, history in enumerate(histories):
+                if history is None:
+                    delivered.append(None)
+                    continue
+                period = periods[i]
+                n = (k + period - 1) // period - (first + period - 1) // period
+                delivered.append(history[:n])
+            master.step_index = k
+            stop = on_block(first, k, delivered, clean) if on_block is not None else False
+            # Rows of step k already taken (components before `position`) move to the front.
+            for i, history in enumerate(histories):
+                if history is not None:
+                    n = len(delivered[i])
+                    extra = len(history) - n
+                    if extra:
+                        history[:extra] = history[n:].copy()
+                    tables.rows[i] = extra
+            first = k
+            if stop and clean:
+                break
+        master.step_index = k
+        if code == kernel.FAILED:
+            try:
+                native = tables.native[failed]
+                at = None if call in (0, 2) else (start_ns + k * h_ns) / NS_PER_S
+                native.fail(call, status, at, kernel.KINDS[kind])
+            except CosimError as error:
+                master.failure = error
+                raise
+            raise CosimError(f"component '{plan[failed].component.name}' failed at step {k}")
+        if code == kernel.HAND_BACK:
+            # This component, and the next ones due in this step while they need Python too.
+            while True:
+                component, period, gather = plan[position]
+                try:
+                    if gather is not None:
+                        gather()
+                        component.push_inputs()
+                    cut = tail_from is not None and k >= tail_from
+                    h = master.step_seconds(k, period) if cut else whole[position]
+                    component.do_step((start_ns + k * h_ns) / NS_PER_S, h)
+                    component.get_outputs()
+                except CosimError as error:
+                    master.failure = error
+                    raise
+                position += 1
+                following = next((i for i in stepping if i >= position and k % periods[i] == 0), None)
+                if following is None or tables.native[following] is not None:
+                    break
+                position = following
+            finish_step = cut_after_python is None or cut_after_python(k)
+    return master.step_index - (end - steps)
