@@ -1,6 +1,6 @@
 """One compiled stepping kernel for every system: FMUs stepped by C calls, Python components handed back.
 
-The kernel (`cosim/core/native/kernel.c`, built and loaded by `planner.native`) is written once and
+The kernel (`cosim/core/native/kernel.c`, built and loaded by `native.load`) is written once and
 reads the system from tables of integers and floats (C function and buffer addresses, connection and
 transfer tables) that a run fills (`cosim.core.fast_loop.KernelTables`): no per-system code, and no
 compiling at run time beyond the first build of the library on a machine (about a second; a wheel
@@ -107,13 +107,13 @@ def _kernel():
     """The C function, loaded (built on a machine's first use) once per process."""
     global _function
     if _function is None:
-        from planner import native
+        from native.load import bind, load
 
-        library = native.load(_SOURCE)
+        library = load(_SOURCE)
         if library.navcosim_tables_size() != ctypes.sizeof(_Tables):
             raise RuntimeError(f"{_SOURCE.name}: its Tables struct does not match kernel.py's _Tables")
         signature = (_I64, [_I64] * 6 + [ctypes.POINTER(_Tables), ctypes.POINTER(_I64)])
-        _function = native.bind(library, {"navcosim_step_kernel": signature}).navcosim_step_kernel
+        _function = bind(library, {"navcosim_step_kernel": signature}).navcosim_step_kernel
     return _function
 
 
