@@ -1,9 +1,9 @@
 """Build hook: a wheel (`pip install .`) ships the project's FMUs prebuilt in `cosim/_fmus/` and its
-C kernels (`planner/native.py`) prebuilt in `cosim/_native/` and `planner/_native/`.
+C kernels (`native/load.py`) prebuilt in `cosim/_native/` and `planner/_native/`.
 
 Metadata lives in pyproject.toml; this file only adds those builds to `build_py`. An editable
 install (`pip install -e .`, uv too) builds them on first use instead (`cosim.fmi.builtin` and
-`planner.native`, keyed by a hash of the sources), because an editable install is never rebuilt
+`native.load`, keyed by a hash of the sources), because an editable install is never rebuilt
 after a C edit.
 """
 
@@ -34,7 +34,7 @@ class BuildPyWithFmus(build_py):
             build.build_all(Path(self.build_lib) / "cosim" / "_fmus")
         except build.FmuBuildError as error:
             sys.exit(f"navcosim: cannot build the FMUs: {error}")
-        native = _module("navcosim_native", ROOT / "planner" / "native.py")
+        native = _module("navcosim_native", ROOT / "native" / "load.py")
         try:
             native.build_all({ROOT / name: Path(self.build_lib) / name for name in ("cosim", "planner")})
         except native.NativeBuildError as error:

@@ -1,9 +1,9 @@
-"""Errors a user can cause in the orchestrator; see `planner.errors.NavcosimError`."""
+"""Errors a user can cause in the orchestrator; `NavcosimError` (`native.errors`) is their base."""
 
 import re
 import sys
 
-from planner.errors import NavcosimError
+from native.errors import NavcosimError
 
 
 class CosimError(NavcosimError):

@@ -9,7 +9,7 @@ derived from the FMI 2.0 one (`fmus/common/model_description.py`: arrays instead
 goes into the `fmi3/` folder beside the FMI 2.0 ones.
 
 Standalone on purpose (standard library only): `setup.py` imports it in pip's isolated build
-environment, and `cosim.fmus` imports it from a source checkout. Run
+environment, and `cosim.fmi.builtin` imports it from a source checkout. Run
 `python3 fmus/build.py [OUT_DIR] [--fmi 2|3]` (both versions by default).
 """
 

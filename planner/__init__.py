@@ -2,7 +2,7 @@
 
 This package never imports `cosim`. Its names are imported on first use, so that
 `import planner` (and everything that only needs `planner.errors`) stays fast: the
-search modules load their C kernels (`planner.native`).
+search modules load their C kernels (`native.load`).
 """
 
 from __future__ import annotations

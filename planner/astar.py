@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from planner import native
+from native.load import bind, load
 from planner.options import HEURISTICS as HEURISTICS  # the codes, re-exported
 from planner.options import TIE_BREAKERS as TIE_BREAKERS
 
@@ -93,7 +93,7 @@ def search_parameters(
     )  # fmt: skip
 
 
-_LIBRARY = native.load(Path(__file__).parent / "native" / "astar.c")
+_LIBRARY = load(Path(__file__).parent / "native" / "astar.c")
 # PyDLL: the kernels hold the GIL, as the compiled searches always did, so the shared work arrays
 # (planner.searchspace.workspace) are never used by two threads at once.
 _P = ctypes.c_void_p
@@ -112,9 +112,7 @@ _SIGNATURES = {  # name (after navcosim_): restype, argtypes
     "join_count": (_I, (_P, _P, _I, _I, _I, _I)),
     "join_paths": (_D, (_P, _P, _I, _I, _I, _I, _P, _P, _P)),
 }  # fmt: skip
-_KERNELS = native.bind(
-    _LIBRARY, {"navcosim_" + name: typed for name, typed in _SIGNATURES.items()}, hold_gil=True
-)
+_KERNELS = bind(_LIBRARY, {"navcosim_" + name: typed for name, typed in _SIGNATURES.items()}, hold_gil=True)
 _heuristic_cells = _KERNELS.navcosim_heuristic_cells
 _heap_key_of = _KERNELS.navcosim_heap_key_of
 _endpoint_node = _KERNELS.navcosim_endpoint_node

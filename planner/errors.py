@@ -1,12 +1,8 @@
-"""The one exception type for errors a user can cause.
+"""The planner's error a user can cause; `NavcosimError` (`native.errors`) is the project's base."""
 
-It lives in `planner` because `planner` never imports `cosim`; `cosim.errors.CosimError`
-derives from it, so `except NavcosimError` catches every user-facing error of the project.
-"""
+from native.errors import NavcosimError
 
-
-class NavcosimError(Exception):
-    """An error the user can cause and fix (bad input, bad file, no path). One-line message."""
+__all__ = ["NavcosimError", "PlannerError"]
 
 
 class PlannerError(NavcosimError):

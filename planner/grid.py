@@ -26,7 +26,8 @@ class OccupancyGrid:
     origin: (x, y) [m] of the lower-left corner of the grid.
     """
 
-    __slots__ = ("occupied", "resolution", "origin", "_cache")
+    # Weakly referable: what its `_cache` holds refers back to it weakly (no reference cycle).
+    __slots__ = ("occupied", "resolution", "origin", "_cache", "__weakref__")
 
     def __init__(
         self,

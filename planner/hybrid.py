@@ -36,7 +36,7 @@ import time
 
 import numpy as np
 
-from planner import native
+from native import load as native_load
 from planner.endpoints import check_endpoint_cell
 from planner.errors import PlannerError
 from planner.goal_distance import distance_to_goal
@@ -183,7 +183,7 @@ def _pose(value, role: str) -> tuple[float, float, float]:
 
 def _loaded_kernels() -> int:
     """C libraries loaded so far (the heuristic grid comes from grid A*'s search, another library)."""
-    return len(native._loaded)
+    return len(native_load._loaded)
 
 
 def plan_hybrid(grid: OccupancyGrid, start, goal, **options) -> PlanResult:

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from planner import native
+from native.load import bind, load
 
 TWO_PI = 2.0 * math.pi
 SOURCE = Path(__file__).resolve().parent / "native" / "hybrid.c"
@@ -42,7 +42,7 @@ def library() -> ctypes.CDLL:
     """The hybrid A* kernels (`planner/native/hybrid.c`), built on first use, loaded once."""
     global _library
     if _library is None:
-        _library = native.bind(native.load(SOURCE), _SIGNATURES)
+        _library = bind(load(SOURCE), _SIGNATURES)
     return _library
 
 

@@ -21,7 +21,7 @@ from typing import Protocol
 
 import numpy as np
 
-from planner import native
+from native.load import bind, load
 from planner.errors import PlannerError
 
 KERNEL_SOURCE = Path(__file__).parent / "native" / "distance.c"
@@ -31,8 +31,8 @@ KERNEL_SOURCE = Path(__file__).parent / "native" / "distance.c"
 def _kernels() -> ctypes.CDLL:
     """The distance transform and dilation kernels, loaded (built) on first use."""
     pointer, count, real = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double
-    return native.bind(
-        native.load(KERNEL_SOURCE),
+    return bind(
+        load(KERNEL_SOURCE),
         {
             "navcosim_distance_transform": (count, (pointer, count, count, real, real, pointer)),
             "navcosim_dilate_square": (None, (pointer, count, count, pointer)),

@@ -28,13 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
-from planner import native
+from native.load import bind, load
 from planner.errors import PlannerError
 from planner.grid import OccupancyGrid
 
 _INT_P = ctypes.POINTER(ctypes.c_int)
-_KERNELS = native.bind(
-    native.load(Path(__file__).parent / "native" / "mapf.c"),
+_KERNELS = bind(
+    load(Path(__file__).parent / "native" / "mapf.c"),
     {
         "mapf_solve": (
             ctypes.c_void_p,

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import ctypes
 import struct
+import weakref
 from time import perf_counter
 
 import numpy as np
@@ -79,9 +80,10 @@ def _prepare(grid: OccupancyGrid, options: dict, key: tuple | None):
         from planner.hybrid import plan_hybrid
 
         hybrid_options = {name: value for name, value in options.items() if name != "planner"}
+        held = weakref.ref(grid)  # the grid's cache holds this search: no strong reference back
 
         def search(start, goal) -> PlanResult:
-            return plan_hybrid(grid, start, goal, **hybrid_options)
+            return plan_hybrid(held(), start, goal, **hybrid_options)
 
     else:
         search = GridSearch(grid, resolve(options))
@@ -101,7 +103,6 @@ class GridSearch:
     """
 
     __slots__ = (
-        "grid",
         "space",
         "settings",
         "moves",
@@ -121,8 +122,8 @@ class GridSearch:
     )
 
     def __init__(self, grid: OccupancyGrid, settings: dict) -> None:
+        # No reference to the grid (its cache holds this search): `space.grid` is a weak one.
         space = search_map(grid, settings["expansion_distance"])
-        self.grid = grid
         self.space = space
         self.settings = settings
         self.name = settings["planner"]
@@ -238,7 +239,7 @@ class GridSearch:
                 if status == FOUND:
                     path, cells = self.work.path[:count].copy(), self.work.cells[:count].copy()
                     nodes = self.work.nodes[2, :searched].copy()
-                    explored = (nodes, space.width, self.grid.shape)
+                    explored = (nodes, space.width, self.shape)
         finally:
             if saved is not None:
                 space.restore(self.moves, saved)
@@ -252,7 +253,7 @@ class GridSearch:
             info["raw_path_nodes"] = len(cells)
             path = smooth_path(space, path, settings["smoothing"])
             length = float(np.hypot(*np.diff(path, axis=0).T).sum())
-            cells = self.grid.world_to_cells(path)
+            cells = space.grid.world_to_cells(path)
         return PlanResult(path, cells, length, len(path), searched, elapsed, explored, None, self.name, info)
 
     def _settings_note(self) -> str:

@@ -7,6 +7,8 @@ size in this module (the C kernels hold the GIL, so sharing them is safe).
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from planner.astar import HEAP_SLACK, WorkState
@@ -24,10 +26,13 @@ class SearchMap:
 
     blocked: uint8, (rows + 2) * (cols + 2), 0 free, 1 obstacle/inflated/border, 2 untrusted point.
     inflated: bool [rows, cols], the cells added by the expansion distance.
+    grid: the grid, held weakly: the grid's cache holds this map, and a strong reference back
+        would make a cycle that only the cyclic collector frees (a one-off grid's arrays would stay
+        until it ran).
     """
 
     __slots__ = (
-        "grid",
+        "_grid",
         "rows",
         "cols",
         "width",
@@ -40,7 +45,7 @@ class SearchMap:
 
     def __init__(self, grid: OccupancyGrid, expansion_distance: float) -> None:
         rows, cols = grid.shape
-        self.grid = grid
+        self._grid = weakref.ref(grid)
         self.rows, self.cols, self.width = rows, cols, cols + 2
         self.expansion_distance = expansion_distance
         self.inflated = inflation_mask(grid, expansion_distance)
@@ -56,6 +61,10 @@ class SearchMap:
         self.blocked = padded.ravel()
         self._costs: dict = {}
         self._moves: dict = {}
+
+    @property
+    def grid(self) -> OccupancyGrid:
+        return self._grid()
 
     def node(self, row: int, col: int) -> int:
         """Padded flat index of cell (row, col)."""

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from planner import native
+from native.load import bind, load
 from planner.astar import address
 from planner.errors import PlannerError
 from planner.searchspace import SearchMap
@@ -35,8 +35,8 @@ _INNER = (0.6, 0.3)  # B1, B2 as fractions of d from the corner
 
 
 _P, _I, _D = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double
-_KERNELS = native.bind(  # holds the GIL, as planner.astar's
-    native.load(Path(__file__).parent / "native" / "smoothing.c"),
+_KERNELS = bind(  # holds the GIL, as planner.astar's
+    load(Path(__file__).parent / "native" / "smoothing.c"),
     {
         "navcosim_segment_clear": (_I, (_P, _I, _D, _D, _D, _D)),
         "navcosim_polyline_clear": (_I, (_P, _I, _P, _I)),

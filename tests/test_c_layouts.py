@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from planner import native
+from native import load as native
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -1,6 +1,7 @@
-"""The package layout is the data flow: `cosim/` stages import only from themselves or from stages
-above them, and no module of `cosim/` or `planner/` is part of an import cycle (in-function and
-TYPE_CHECKING imports count: a cycle there still couples the modules)."""
+"""The package layout is the data flow: `native/` (the C build/load helper and the error base) imports
+neither `planner` nor `cosim`, `planner/` never imports `cosim`, `cosim/` stages import only from
+themselves or from stages above them, and no module of the three packages is part of an import cycle
+(in-function and TYPE_CHECKING imports count: a cycle there still couples the modules)."""
 
 from __future__ import annotations
 
@@ -48,11 +49,11 @@ def _imports(module: str, path: Path, known: dict[str, Path]) -> set[str]:
 
 
 def _graph() -> dict[str, set[str]]:
-    known = {**_modules("cosim"), **_modules("planner")}
+    known = {**_modules("cosim"), **_modules("planner"), **_modules("native")}
     return {module: _imports(module, path, known) for module, path in known.items()}
 
 
-@pytest.mark.parametrize("package", ["cosim", "planner"])
+@pytest.mark.parametrize("package", ["cosim", "planner", "native"])
 def test_no_import_cycles(package: str):
     graph = {
         m: {t for t in ts if t.startswith(package)} for m, ts in _graph().items() if m.startswith(package)
@@ -94,12 +95,18 @@ def test_cosim_stages_import_only_upstream():
     assert backwards == []
 
 
-def test_planner_never_imports_cosim():
+def _package(module: str) -> str:
+    return module.split(".")[0]
+
+
+@pytest.mark.parametrize(("package", "never"), [("planner", {"cosim"}), ("native", {"planner", "cosim"})])
+def test_shared_packages_never_import_their_users(package: str, never: set[str]):
     graph = _graph()
+    assert any(_package(m) == package for m in graph)
     assert [
         f"{m} -> {t}"
-        for m, ts in graph.items()
-        if m.startswith("planner")
-        for t in ts
-        if t.startswith("cosim")
+        for m, ts in sorted(graph.items())
+        if _package(m) == package
+        for t in sorted(ts)
+        if _package(t) in never
     ] == []

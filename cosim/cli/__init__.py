@@ -8,8 +8,8 @@ import importlib
 import os
 import sys
 
-from planner.errors import NavcosimError
-from planner.native import NativeBuildError
+from native.errors import NavcosimError
+from native.load import NativeBuildError
 
 COMMANDS = ("fmu", "plan", "run", "system", "log", "ssp", "sweep")
 

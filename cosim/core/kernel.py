@@ -1,6 +1,6 @@
 """One compiled stepping kernel for every system: FMUs stepped by C calls, Python components handed back.
 
-The kernel (`cosim/core/native/kernel.c`, built and loaded by `planner.native`) is written once and
+The kernel (`cosim/core/native/kernel.c`, built and loaded by `native.load`) is written once and
 reads the system from tables of integers and floats (C function and buffer addresses, connection and
 transfer tables) that a run fills (`cosim.core.fast_loop.KernelTables`): no per-system code, and no
 compiling at run time beyond the first build of the library on a machine (about a second; a wheel
@@ -129,14 +129,14 @@ def _kernel():
     """The C function, loaded (built on a machine's first use) once per process."""
     global _function, _packer
     if _function is None:
-        from planner import native
+        from native.load import bind, load
 
-        library = native.load(_SOURCE)
+        library = load(_SOURCE)
         if library.navcosim_tables_size() != ctypes.sizeof(_Tables):
             raise RuntimeError(f"{_SOURCE.name}: its Tables struct does not match kernel.py's _Tables")
         signature = (_I64, [_I64] * 6 + [ctypes.POINTER(_Tables), ctypes.POINTER(_I64)])
         pack = (_I64, [_I64, _POINTER, _I64] + [_POINTER] * 5 + [_I64] + [_POINTER] * 3)
-        bound = native.bind(library, {"navcosim_step_kernel": signature, "navcosim_pack_records": pack})
+        bound = bind(library, {"navcosim_step_kernel": signature, "navcosim_pack_records": pack})
         _packer = bound.navcosim_pack_records
         _function = bound.navcosim_step_kernel
     return _function

@@ -8,9 +8,9 @@ changes (checked by the files' times and sizes first: `build_if_stale`), so an e
 is picked up on the next call
 whatever installed the package (pip never rebuilds an editable install; uv only with cache-keys).
 
-A first run compiles the FMUs it uses and the C kernels it loads (`planner.native`): `prepare`
+A first run compiles the FMUs it uses and the C kernels it loads (`native.load`): `prepare`
 starts all of those builds at once on a pool of compiler processes, one per core, and says so;
-`builtin_fmu` and `planner.native.load` then wait for the one they need.
+`builtin_fmu` and `native.load.load` then wait for the one they need.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING
 
 import planner
 from cosim.errors import CosimError, shorten
-from planner import native
+from native import load as native_load
 
 if TYPE_CHECKING:  # imported when a build is started: concurrent.futures imports logging (~8 ms)
     from concurrent.futures import Future, ThreadPoolExecutor
@@ -188,7 +188,7 @@ def build_if_stale(name: str, source_root: Path, cache_dir: Path, fmi_version: i
             digest = build.source_hash(model_dir, fmi_version)
             recorded = stamp.read_text().splitlines()[:1] if stamp.is_file() else []
             if not (target.is_file() and recorded == [digest]):
-                compile_safely = native.run_compiler
+                compile_safely = native_load.run_compiler
                 build.build_fmu(model_dir, cache_dir, fmi_version=fmi_version, run_compiler=compile_safely)
             # Times read after the hash: a file edited in between hashes differently next time.
             lines = _stat_lines(build.source_files(model_dir, fmi_version), source_root)
@@ -277,17 +277,17 @@ def prepare(
             except OSError:
                 pass  # `build_if_stale` reports it
             stale.append(name)
-    uncompiled = native.missing(kernels)
+    uncompiled = native_load.missing(kernels)
     if not (stale or uncompiled):
         return  # a warm start: a few `stat` calls and hashes of the kernel sources
     pool = _executor()
-    started = native.start_builds(uncompiled[:1], pool)  # the longest first
+    started = native_load.start_builds(uncompiled[:1], pool)  # the longest first
     with _lock:
         for name in stale:
             _pending[(name, fmi_version, cache_dir)] = pool.submit(
                 build_if_stale, name, SOURCE_ROOT, cache_dir, fmi_version
             )
-    started += native.start_builds(uncompiled[1:], pool)
+    started += native_load.start_builds(uncompiled[1:], pool)
     if announce is not None and stale:
         announce(f"building FMUs {', '.join(stale)} (first use or changed sources) ...")
     if announce is not None and started:

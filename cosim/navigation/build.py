@@ -2,7 +2,7 @@
 
 `cosim.scenario.compose.describe_system` says what the system is (the navigation template plus
 the scenario's components and connections) and checks it as a whole; this module makes each
-component by its kind (an FMU, or the planner and lidar Python components), sets held inputs,
+component by its kind (`COMPONENT_KINDS`: an FMU, the planner, the lidar), sets held inputs,
 wires the connections, and plans the path. Everything that can fail because of the input happens
 here, before a log exists: the known map loads, every FMU loads, the plan is found, and the
 connection graph has no algebraic loop (unless `[simulation] algebraic_loops = "delay"`, the
@@ -12,7 +12,9 @@ default, runs it).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,6 +26,9 @@ from cosim.scenario.compose import describe_system
 from cosim.scenario.description import ComponentDescription, SystemDescription
 from cosim.scenario.load import Scenario
 from cosim.world.distance import WorldDistance, load_known_map
+
+if TYPE_CHECKING:
+    from planner import OccupancyGrid
 
 # Role outputs whose NaN is a value, whatever FMU fills the role: VFH's steering direction is NaN when
 # no direction is free, which the mixer answers with recovery. Every other FMU output must be finite
@@ -81,41 +86,10 @@ def make_fmu(
         fmu = fmu_component(path=component.fmu, name=component.name, **options)
     for name, value in component.held_inputs.items():
         if isinstance(value, str):  # a String's, or a Binary's in hex (`cosim.fmi.text`)
-            if not hasattr(fmu, "set_text"):
-                raise CosimError(
-                    f"{component.where}.{name}: String and Binary values move only with the FMU in the "
-                    'run\'s process: add isolation = "none" to the section'
-                )
             fmu.set_text(name, value)
         else:
             fmu.input_buffer[fmu.input_index[name]] = value
     return fmu
-
-
-def _fmu(scenario: Scenario, component: ComponentDescription) -> Component:
-    """An FMU of the scenario, where `Scenario.isolation` says, with its NaN allowance."""
-    from cosim.fmi.archive import MIB
-
-    spec = scenario.components[component.name]
-    outputs = set(component.outputs)
-    for port in spec.nan_outputs:
-        if port not in outputs:
-            raise CosimError(
-                f"{scenario.source}: {component.where}.nan_outputs: '{port}' is not an output of the FMU; "
-                f"outputs: {', '.join(component.outputs)[:400]}"
-            )
-    allowed = spec.nan_outputs + tuple(p for p in ROLE_NAN_OUTPUTS.get(component.name, ()) if p in outputs)
-    try:
-        return make_fmu(
-            component,
-            scenario.isolation(spec),
-            scenario.fmu_timeout,
-            round(scenario.fmu_max_size * MIB),
-            allowed,
-            round(scenario.fmu_max_memory * MIB),
-        )
-    except CosimError as error:
-        raise CosimError(f"{scenario.source}: {component.where}.fmu: {error}") from None
 
 
 def replanning(scenario: Scenario) -> Replanning:
@@ -146,11 +120,85 @@ def replanning(scenario: Scenario) -> Replanning:
     )
 
 
+def _fmu(scenario: Scenario, grid: OccupancyGrid, component: ComponentDescription) -> Component:
+    """An FMU of the scenario, where `Scenario.isolation` says, with its NaN allowance."""
+    from cosim.fmi.archive import MIB
+
+    spec = scenario.components[component.name]
+    outputs = set(component.outputs)
+    for port in spec.nan_outputs:
+        if port not in outputs:
+            raise CosimError(
+                f"{scenario.source}: {component.where}.nan_outputs: '{port}' is not an output of the FMU; "
+                f"outputs: {', '.join(component.outputs)[:400]}"
+            )
+    allowed = spec.nan_outputs + tuple(p for p in ROLE_NAN_OUTPUTS.get(component.name, ()) if p in outputs)
+    try:
+        return make_fmu(
+            component,
+            scenario.isolation(spec),
+            scenario.fmu_timeout,
+            round(scenario.fmu_max_size * MIB),
+            allowed,
+            round(scenario.fmu_max_memory * MIB),
+        )
+    except CosimError as error:
+        raise CosimError(f"{scenario.source}: {component.where}.fmu: {error}") from None
+
+
+def _planner(scenario: Scenario, grid: OccupancyGrid, component: ComponentDescription) -> Component:
+    """The planner on the known map, with its first plan made (a replanning one when it has inputs)."""
+    planner = PlannerComponent(
+        component.name,
+        grid,
+        scenario.start,
+        scenario.goal,
+        scenario.planner,
+        period=component.period,
+        replanning=replanning(scenario) if component.inputs else None,
+    )
+    try:
+        planner.plan_path()
+    except CosimError as error:
+        raise CosimError(f"{scenario.source}: {error}") from None
+    return planner
+
+
+def _lidar(scenario: Scenario, grid: OccupancyGrid, component: ComponentDescription) -> Component:
+    """The lidar casting on the true world: the map and the scenario's obstacles (and, for a fleet
+    robot, the other robots' footprints)."""
+    from cosim.world.lidar import Lidar
+
+    lidar = scenario.lidar
+    return Lidar(
+        component.name,
+        occupied=grid.occupied,
+        resolution=grid.resolution,
+        origin=grid.origin,
+        obstacles=scenario.obstacles,
+        angles=lidar.angles,
+        range_min=lidar.range_min,
+        range_max=lidar.range_max,
+        range_noise=lidar.noise,
+        seed=lidar.seed,
+        period=component.period,
+        robot_radii=component.robot_radii,
+    )
+
+
+# What makes a component of each `ComponentDescription.kind`: (scenario, known map, description) ->
+# component. A new kind is a new entry here; its name is also in `cosim.scenario.load.PYTHON_COMPONENTS`
+# when the navigation template declares it (tests/navigation/test_build_kinds.py keeps the two in step).
+COMPONENT_KINDS: dict[str, Callable[[Scenario, OccupancyGrid, ComponentDescription], Component]] = {
+    "fmu": _fmu,
+    "planner": _planner,
+    "lidar": _lidar,
+}
+
+
 def build_run(scenario: Scenario, description: SystemDescription | None = None) -> BuiltRun:
     """Describe, check and build the system of `scenario` (or the `description` made of it: a
     fleet robot's, `cosim.scenario.fleet_compose`); plan the path."""
-    from cosim.world.lidar import Lidar
-
     description = describe_system(scenario) if description is None else description
     grid = load_known_map(scenario)
     expansion = scenario.planner.expansion_distance
@@ -163,45 +211,8 @@ def build_run(scenario: Scenario, description: SystemDescription | None = None) 
         scenario.loop_tolerance,
         scenario.loop_max_iterations,
     )
-    plans = []
     for component in description.components.values():
-        if component.kind == "fmu":
-            made = _fmu(scenario, component)
-        elif component.kind == "planner":
-            made = PlannerComponent(
-                component.name,
-                grid,
-                scenario.start,
-                scenario.goal,
-                scenario.planner,
-                period=component.period,
-                replanning=replanning(scenario) if component.inputs else None,
-            )
-            try:
-                plans.append(made.plan_path())
-            except CosimError as error:
-                raise CosimError(f"{scenario.source}: {error}") from None
-        elif component.kind == "lidar":
-            lidar = scenario.lidar
-            made = Lidar(
-                component.name,
-                occupied=grid.occupied,
-                resolution=grid.resolution,
-                origin=grid.origin,
-                obstacles=scenario.obstacles,
-                angles=lidar.angles,
-                range_min=lidar.range_min,
-                range_max=lidar.range_max,
-                range_noise=lidar.noise,
-                seed=lidar.seed,
-                period=component.period,
-                robot_radii=component.robot_radii,
-            )
-        else:
-            raise CosimError(
-                f"{scenario.source}: {component.where}: unknown component kind '{component.kind}'"
-            )
-        system.add(made)
+        system.add(COMPONENT_KINDS[component.kind](scenario, grid, component))
     for connection in description.connections:
         system.connect(connection.source, connection.target, connection.scale, connection.offset)
     for made in system.components.values():
@@ -211,6 +222,6 @@ def build_run(scenario: Scenario, description: SystemDescription | None = None) 
         for name, component in description.components.items()
         if component.kind == "fmu"
     }
-    plan = plans[0] if plans else None
     planner = next((c for c in system.components.values() if isinstance(c, PlannerComponent)), None)
+    plan = planner.result if planner is not None else None
     return BuiltRun(scenario, description, system, parameters, grid, inflated, world, plan, planner)

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from cosim.world import kernels
-from planner import native
+from native.load import bind, load
 from planner.grid import OccupancyGrid
 
 _p, _i64, _f64 = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double
@@ -50,8 +50,8 @@ def _kernels() -> ctypes.CDLL:
     """native/costmap.c built (if needed) and loaded, its functions typed; once per process."""
     global _library
     if _library is None:
-        _library = native.bind(
-            native.load(Path(__file__).parent / "native" / "costmap.c"),
+        _library = bind(
+            load(Path(__file__).parent / "native" / "costmap.c"),
             {
                 "costmap_integrate_scan": (_i64, [_p, _f64, _f64, _f64]),
                 "costmap_new_marks_near": (ctypes.c_int, [_p, _p, _p, _i64, _f64]),

@@ -38,7 +38,6 @@ new waypoints are the component's outputs from that step on (`constant_outputs` 
 from __future__ import annotations
 
 import ctypes
-import gc
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -322,23 +321,15 @@ class PlannerComponent(PythonComponent):
             # Hybrid A* has no cost gradient: first keep half the expansion distance's extra margin.
             inflations.insert(0, (radius + self.settings.expansion_distance) / 2.0)
         error = None
-        try:
-            for inflation in inflations:
-                try:
-                    result = self._search(pose, inflation)
-                except PlannerError as failure:
-                    error = failure
-                    continue
-                self._use(result)
-                self.replans.append(Replan(t, reason, float(result.length), inflation))
-                return True
-        finally:
-            # Each search's one-off costmap grid keeps its prepared search, which keeps the grid: a
-            # reference cycle of a few arrays the size of the map, freed only by the cyclic
-            # collector. A run allocates few objects per step (and `cosim run` asks for young
-            # collections only every 20,000 allocations), so without this every replan's grids
-            # stayed until the end of the run: memory growing with simulated time.
-            gc.collect(1)
+        for inflation in inflations:
+            try:
+                result = self._search(pose, inflation)
+            except PlannerError as failure:
+                error = failure
+                continue
+            self._use(result)
+            self.replans.append(Replan(t, reason, float(result.length), inflation))
+            return True
         self.replans.append(Replan(t, reason, math.nan))
         self.no_path = f"no path from ({pose[0]:.2f}, {pose[1]:.2f}) m at t = {t:.2f} s: {error}"
         return False

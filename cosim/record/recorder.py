@@ -39,7 +39,6 @@ outputs (and the inputs last applied, held).
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import struct
@@ -55,6 +54,7 @@ from cosim.record.batch import RAW_STREAM, MessageBlock
 from cosim.record.inputs import METADATA_NAME as UNCONNECTED_INPUTS
 from cosim.record.inputs import unconnected_metadata
 from cosim.record.logfile import navcosim_version
+from cosim.record.markers import ObstacleMarkers, marker_array
 from cosim.record.writer import ChunkWriter
 from cosim.scenario.topics import TOPIC_TYPES
 
@@ -67,14 +67,11 @@ LIVE_CHUNK_DURATION = 0.5
 COMPRESSION_LEVEL = 1
 MAP_FRAME = rosmsg.MAP_FRAME
 ROBOT_FRAME = rosmsg.ROBOT_FRAME
-OBSTACLE_HEIGHT = 0.5  # [m], only for the 3D view
-LINE_WIDTH = 0.05  # [m] of polygon outlines
 SCAN_ANGLE_TOLERANCE = 1e-6  # [rad] below which beam angles count as exactly on the ROS angle grid
 SCAN_MAX_SUBDIVISION = 16
 BATCH_MESSAGES = 2048  # messages of `hold_steps` packed at once (at the next chunk window)
 CLOCK_EVERY = 16  # held messages between two looks at the wall clock for the OS flush
 _STAMP = struct.Struct("<iI")  # builtin_interfaces/Time: int32 sec, uint32 nanosec
-_FLOAT64 = struct.Struct("<d")
 
 SIGNAL_NAMES_KEY = rosmsg.SIGNAL_NAMES_KEY
 SIGNAL_UNITS_KEY = rosmsg.SIGNAL_UNITS_KEY
@@ -211,8 +208,7 @@ class RunTrace:
         if self.last_obstacles is None:
             return None
         t_ns, obstacles = self.last_obstacles
-        markers = [_marker(t_ns, index, obstacle) for index, obstacle in enumerate(obstacles)]
-        return rosmsg.make("visualization_msgs/msg/MarkerArray", markers=markers)
+        return marker_array(t_ns, obstacles)
 
 
 class _TracedBlock(MessageBlock):
@@ -285,7 +281,7 @@ class Recorder:
         self._sequences: dict[int, int] = {}
         self._signal_sizes: dict[int, int] = {}
         self._scan_layouts: dict[tuple, tuple] = {}  # (angles, limits) -> `_scan_template`
-        self._obstacle_templates: dict[tuple, _ObstacleTemplate] = {}  # shapes -> template
+        self._obstacle_markers = ObstacleMarkers(str(self.path))
         # Signals, poses, commands and scans are held for a block of steps and packed at once
         # (`cosim.record.batch`); any other write, a flush and close pack the block first.
         self._block = _TracedBlock(self._writer, self._sequences, window_ns=window_ns)
@@ -765,89 +761,17 @@ class Recorder:
         rectangles as cubes (same centre, size, yaw), polygons as closed line strips.
 
         Moving obstacles are republished with every scan, so circles and rectangles reuse the CDR
-        bytes of the first message of the same shapes (`_ObstacleTemplate`): only the stamps and
+        bytes of the first message of the same shapes (`cosim.record.markers`): only the stamps and
         the centres change. The message is held in the block like /scan (a direct write packs the
         block first); the block keeps the order of the messages, so the log reads the same."""
         self._hold(self._channel("/obstacles"), t_ns, self.obstacles_payload(t_ns, obstacles))
 
     def obstacles_payload(self, t_ns: int, obstacles: list) -> bytes:
         """The CDR bytes of the /obstacles message of `write_obstacles` (for it or `hold_steps`)."""
-        key = tuple(_marker_key(obstacle) for obstacle in obstacles)
-        if None in key:  # a polygon: its points change when it moves
-            payload = _serialize_obstacles(t_ns, obstacles)
-        else:
-            template = self._obstacle_templates.get(key)
-            if template is None:
-                template = _ObstacleTemplate(obstacles)
-                if template.fill(t_ns, obstacles) != _serialize_obstacles(t_ns, obstacles):
-                    raise CosimError(f"{self.path}: unexpected MarkerArray CDR layout")
-                self._obstacle_templates[key] = template
-            payload = template.fill(t_ns, obstacles)
+        payload = self._obstacle_markers.payload(t_ns, obstacles)
         if self.trace is not None:
             self.trace.add_obstacles(t_ns, obstacles)
         return payload
-
-
-def _serialize_obstacles(t_ns: int, obstacles: list) -> bytes:
-    markers = [_marker(t_ns, index, obstacle) for index, obstacle in enumerate(obstacles)]
-    message = rosmsg.make("visualization_msgs/msg/MarkerArray", markers=markers)
-    return rosmsg.serialize(message, TOPIC_TYPES["/obstacles"])
-
-
-def _marker_key(obstacle) -> tuple | None:
-    """What fixes a marker's bytes apart from its stamp and centre (None: more changes, a polygon)."""
-    kind = getattr(obstacle, "kind", None)
-    if kind == "circle":
-        return (kind, float(obstacle.radius))
-    if kind == "rectangle":
-        return (kind, tuple(float(v) for v in obstacle.size), float(obstacle.yaw))
-    return None
-
-
-_SENTINEL_NS = 1_234_567_891_987_654_321  # a stamp no run writes, to find in the template
-
-
-class _ObstacleTemplate:
-    """The /obstacles CDR of circles and rectangles with the byte offsets of every stamp and of each
-    marker's centre (x, y), found by serialising sentinel values (checked once against the full
-    serialisation by `Recorder.write_obstacles`)."""
-
-    def __init__(self, obstacles: list) -> None:
-        sentinels = [(-1.0e250 * (index + 1.5), 1.0e250 * (index + 1.5)) for index in range(len(obstacles))]
-        placed = [
-            dataclasses.replace(obstacle, center=centre)
-            for obstacle, centre in zip(obstacles, sentinels, strict=True)
-        ]
-        data = _serialize_obstacles(_SENTINEL_NS, placed)
-        self.data = bytearray(data)
-        stamp = _STAMP.pack(*divmod(_SENTINEL_NS, 1_000_000_000))
-        self.stamps = _offsets(data, stamp)
-        if len(self.stamps) != 2 * len(obstacles):  # the marker's header and its texture's
-            raise CosimError("unexpected MarkerArray CDR layout (stamps)")
-        self.centres = []
-        for cx, cy in sentinels:
-            (x_at,), (y_at,) = _offsets(data, _FLOAT64.pack(cx)), _offsets(data, _FLOAT64.pack(cy))
-            self.centres.append((x_at, y_at))
-
-    def fill(self, t_ns: int, obstacles: list) -> bytes:
-        data = self.data
-        stamp = _STAMP.pack(*divmod(int(t_ns), 1_000_000_000))
-        for at in self.stamps:
-            data[at : at + 8] = stamp
-        for (x_at, y_at), obstacle in zip(self.centres, obstacles, strict=True):
-            cx, cy = obstacle.center
-            data[x_at : x_at + 8] = _FLOAT64.pack(float(cx))
-            data[y_at : y_at + 8] = _FLOAT64.pack(float(cy))
-        return bytes(data)
-
-
-def _offsets(data: bytes, pattern: bytes) -> list[int]:
-    """Every offset of `pattern` in `data`."""
-    found, at = [], data.find(pattern)
-    while at >= 0:
-        found.append(at)
-        at = data.find(pattern, at + 1)
-    return found
 
 
 def scan_layout(angles: np.ndarray) -> tuple[float, float, np.ndarray, str]:
@@ -877,50 +801,6 @@ def scan_layout(angles: np.ndarray) -> tuple[float, float, np.ndarray, str]:
             uniform = subdivision == 1 and bins[-1] == count - 1
             return angle_min, increment, bins, "uniform" if uniform else "exact, NaN between beams"
     return angle_min, increment, bins, f"nearest bin, angle error up to {error:.3g} rad"
-
-
-def _marker(t_ns: int, index: int, obstacle):
-    kind = getattr(obstacle, "kind", None)
-    scale, points = rosmsg.vector3(LINE_WIDTH, LINE_WIDTH, LINE_WIDTH), []
-    if kind == "circle":
-        marker_type, (cx, cy), yaw = 3, obstacle.center, 0.0
-        diameter = 2.0 * float(obstacle.radius)
-        scale = rosmsg.vector3(diameter, diameter, OBSTACLE_HEIGHT)
-    elif kind == "rectangle":
-        marker_type, (cx, cy), yaw = 1, obstacle.center, float(obstacle.yaw)
-        scale = rosmsg.vector3(obstacle.size[0], obstacle.size[1], OBSTACLE_HEIGHT)
-    elif kind == "polygon":
-        marker_type, (cx, cy), yaw = 4, (0.0, 0.0), 0.0
-        vertices = np.asarray(obstacle.polygon(), dtype=float)
-        points = [rosmsg.point(px, py) for px, py in np.vstack([vertices, vertices[:1]])]
-    else:
-        raise CosimError(f"cannot write obstacle {obstacle!r} as a marker (not a cosim.world.shapes shape)")
-    height = OBSTACLE_HEIGHT / 2.0 if marker_type != 4 else 0.0
-    empty = np.zeros(0, dtype=np.uint8)
-    return rosmsg.make(
-        "visualization_msgs/msg/Marker",
-        header=rosmsg.header(t_ns, MAP_FRAME),
-        ns="obstacles",
-        id=index,
-        type=marker_type,
-        action=0,
-        pose=rosmsg.pose(float(cx), float(cy), yaw, height),
-        scale=scale,
-        color=rosmsg.color(0.85, 0.2, 0.15, 0.8),
-        lifetime=rosmsg.make("builtin_interfaces/msg/Duration", sec=0, nanosec=0),
-        frame_locked=False,
-        points=points,
-        colors=[],
-        texture_resource="",
-        texture=rosmsg.make(
-            "sensor_msgs/msg/CompressedImage", header=rosmsg.header(t_ns, MAP_FRAME), format="", data=empty
-        ),
-        uv_coordinates=[],
-        text=kind,
-        mesh_resource="",
-        mesh_file=rosmsg.make("visualization_msgs/msg/MeshFile", filename="", data=empty),
-        mesh_use_embedded_materials=False,
-    )
 
 
 __all__ = ["Recorder", "RunTrace", "TRACE_SIGNALS", "scan_layout", "TOPIC_TYPES"]

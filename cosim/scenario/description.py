@@ -19,8 +19,9 @@ TEMPLATE = "navigation template"  # `where` of what the template declares
 
 @dataclass(frozen=True)
 class ComponentDescription:
-    """One component. `kind` is "fmu" or the name of a Python component the builder knows
-    ("planner", "lidar").
+    """One component. `kind` says what makes it: "fmu", or a Python component of the navigation
+    template (`cosim.scenario.load.PYTHON_COMPONENTS`); `cosim.navigation.build.COMPONENT_KINDS`
+    holds the maker of each kind.
 
     where: the scenario section that declares it ("[vehicle]", "[components.lag]").
     rate: stepping rate [Hz]; None = every macro step.

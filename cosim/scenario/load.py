@@ -68,7 +68,8 @@ SECTIONS = (
     "mixer", "lidar", "simulation", "output", "components", "connections", "system", "imu", "bumper",
     "robots", "fleet",
 )  # fmt: skip
-# Components of the navigation template that are not FMUs (`cosim.scenario.template`).
+# Components of the navigation template that are not FMUs (`cosim.scenario.template`); each name is
+# also its kind, made by `cosim.navigation.build.COMPONENT_KINDS`.
 PYTHON_COMPONENTS = ("planner", "lidar")
 # Template components a `[components.NAME]` of the same name replaces by any FMU (the vehicle is
 # swapped in [vehicle]: the run reads the robot pose from it).

@@ -1,4 +1,4 @@
-"""The C kernels of `cosim.world` (native/world.c), loaded with `planner.native` on first use.
+"""The C kernels of `cosim.world` (native/world.c), loaded with `native.load` on first use.
 
 `library()` returns the loaded library with every function's `argtypes`/`restype` set once.
 `LidarArrays` and `WorldArrays` mirror the structs of world.c: the long-lived arrays (as cached
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from planner import native
+from native.load import bind, load
 
 SOURCE = Path(__file__).parent / "native" / "world.c"
 _library: ctypes.CDLL | None = None
@@ -105,8 +105,8 @@ def library() -> ctypes.CDLL:
     """world.c built (if needed) and loaded, its functions typed; once per process."""
     global _library
     if _library is None:
-        _library = native.bind(
-            native.load(SOURCE),
+        _library = bind(
+            load(SOURCE),
             {
                 "world_polygon_distance": (_f64, [_f64, _f64, _p, _i64, _i64]),
                 "world_distance": (_f64, [_p]),

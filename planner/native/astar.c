@@ -1,5 +1,5 @@
 /* Grid A* of chapter 3 (planner.astar): heuristics 3.1-3.4 and 3.6, the thesis's improvements, and
- * the bidirectional search of planner.bidirectional. Loaded with planner.native; the Python side
+ * the bidirectional search of planner.bidirectional. Loaded with native.load; the Python side
  * (planner/astar.py) documents the data layout, the heap keys and the status codes.
  *
  * Every floating-point operation is the one planner/astar.py's documented search does, in its order

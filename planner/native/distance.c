@@ -1,5 +1,5 @@
 /* Exact Euclidean distance transform and 3 x 3 dilation of a boolean grid (planner.inflation).
- * Loaded with planner.native.
+ * Loaded with native.load.
  *
  * Distance transform: the separable squared transform of Felzenszwalb and Huttenlocher ("Distance
  * Transforms of Sampled Functions", 2012). The squared distance from cell (r, c) to the nearest

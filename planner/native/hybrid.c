@@ -1,5 +1,5 @@
 /* Hybrid A*: the search loop of planner/hybrid_search.py, the curves of planner/reeds_shepp.py and
- * planner/dubins.py and the collision check of planner/hybrid_geometry.py, in C (planner/native.py
+ * planner/dubins.py and the collision check of planner/hybrid_geometry.py, in C (native/load.py
  * builds and loads it). The operations and their order are those of the Python/numba versions
  * these replaced, so the results are the same bit for bit.
  *

@@ -1,5 +1,5 @@
 /* Line of sight on the padded blocked map (planner.smoothing): the supercover walk of a segment,
- * a polyline made of them, and greedy farthest-visible pruning of a path. Loaded with planner.native.
+ * a polyline made of them, and greedy farthest-visible pruning of a path. Loaded with native.load.
  *
  * Coordinates u, v are in cells: u along the columns, v along the rows pointing down, cell
  * (row, col) = [col, col + 1) x [row, row + 1). Points are n x 2 float64 (u, v) rows.

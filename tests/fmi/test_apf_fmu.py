@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
-from fmu_helpers import FmuInstance, array_inputs
+from fmu_harness import FmuInstance, array_inputs
 
 from cosim import builtin_fmu
 from cosim.logs import open_log
@@ -36,7 +36,7 @@ PARAMETERS = {
 
 
 def apf(**overrides) -> FmuInstance:
-    return FmuInstance("ArtificialPotentialField", parameters={**PARAMETERS, **overrides})
+    return FmuInstance("ArtificialPotentialField").initialize({**PARAMETERS, **overrides})
 
 
 def run(fmu: FmuInstance, ranges, angles=ANGLES, target_dir: float = 0.0) -> dict:
@@ -327,7 +327,7 @@ def test_the_avoidance_mixer_takes_its_direction_unchanged():
         ([0.6], [0.3], 0.0, 1),  # obstacle ahead left: steer right, avoid
         ([0.15] * 3, [0.0, 2 * math.pi / 3, -2 * math.pi / 3], 0.0, 2),  # enclosed: NaN, recover
     ]
-    with apf() as field, FmuInstance("AvoidanceMixer") as mixer:
+    with apf() as field, FmuInstance("AvoidanceMixer").initialize() as mixer:
         for ranges, angles, target, mode in cases:
             steering = run(field, ranges, angles=angles, target_dir=target)["steering_dir"]
             mixer.set({"v_in": 0.5, "omega_in": 0.2, "target_dir": target, "steering_dir": steering})

@@ -13,7 +13,7 @@ from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
-from fmu3_harness import NAMES, Slave, _unpacked, fmu_path
+from fmu_harness import NAMES, FmuInstance, fmu_path, unpacked
 
 from cosim.fmi import builtin as fmus
 from cosim.fmi.inspect import validate
@@ -80,8 +80,8 @@ def unicycle_pose(x0, y0, theta0, v, omega, t):
     )
 
 
-def _assert_pose(slave: Slave, expected) -> None:
-    x, y, theta = (slave.get(n)[0] for n in ("x", "y", "theta"))
+def _assert_pose(slave: FmuInstance, expected) -> None:
+    x, y, theta = (slave.values(n)[0] for n in ("x", "y", "theta"))
     assert abs(x - expected[0]) <= TOLERANCE and abs(y - expected[1]) <= TOLERANCE
     assert abs(math.remainder(theta - expected[2], 2 * math.pi)) <= TOLERANCE and -math.pi < theta <= math.pi
 
@@ -91,12 +91,12 @@ def _assert_pose(slave: Slave, expected) -> None:
     [(1.0, 0.5, 0.3, 0.1), (0.7, -2.0, -2.9, 0.05), (-0.4, 0.0, 1.0, 0.2)],
 )
 def test_fmi3_differential_drive_follows_the_arc(v, omega, theta0, step_size):
-    drive = Slave("DifferentialDrive", 3)
+    drive = FmuInstance("DifferentialDrive", 3)
     drive.initialize(x0=1.0, y0=-2.0, theta0=theta0, v=v, omega=omega)
     for _ in range(60):
         drive.step(step_size)
     _assert_pose(drive, unicycle_pose(1.0, -2.0, theta0, v, omega, 60 * step_size))
-    assert drive.get("time") == [pytest.approx(60 * step_size, abs=1e-12)]
+    assert drive.values("time") == [pytest.approx(60 * step_size, abs=1e-12)]
     drive.free()
 
 
@@ -104,27 +104,27 @@ def test_fmi3_differential_drive_follows_the_arc(v, omega, theta0, step_size):
 def test_fmi3_bicycle_rear_axle_follows_the_circle(v, delta):
     """Front steering, rear-axle reference: a circle of radius L / tan(delta), yaw rate v tan(delta) / L."""
     wheelbase = 2.5
-    bicycle = Slave("Bicycle", 3)
+    bicycle = FmuInstance("Bicycle", 3)
     bicycle.initialize(wheelbase=wheelbase, x0=0.5, y0=0.25, theta0=0.8, v=v, steering_angle=delta)
     for _ in range(50):
         bicycle.step(0.1)
     omega = v * math.tan(delta) / wheelbase
     _assert_pose(bicycle, unicycle_pose(0.5, 0.25, 0.8, v, omega, 5.0))
-    assert bicycle.get("yaw_rate") == [pytest.approx(omega, abs=1e-14)]
+    assert bicycle.values("yaw_rate") == [pytest.approx(omega, abs=1e-14)]
     bicycle.free()
 
 
 # ---------------------------------------------------------------- controllers: FMI 3.0 == FMI 2.0
 
 
-def _pair(name: str, **parameters) -> tuple[Slave, Slave]:
-    pair = Slave(name, 2), Slave(name, 3)
+def _pair(name: str, **parameters) -> tuple[FmuInstance, FmuInstance]:
+    pair = FmuInstance(name, 2), FmuInstance(name, 3)
     for slave in pair:
         slave.initialize(**parameters)
     return pair
 
 
-def _assert_same_outputs(fmi2: Slave, fmi3: Slave) -> None:
+def _assert_same_outputs(fmi2: FmuInstance, fmi3: FmuInstance) -> None:
     first, second = fmi2.outputs(), fmi3.outputs()
     assert first.keys() == second.keys()
     for name in first:
@@ -151,9 +151,9 @@ def test_vfh_fmi3_equals_fmi2_with_one_set_per_array():
             slave.set(target_dir=target_dir)
             slave.step()
         _assert_same_outputs(fmi2, fmi3)
-        steered += not math.isnan(fmi3.get("steering_dir")[0])
+        steered += not math.isnan(fmi3.values("steering_dir")[0])
     assert steered > 10  # the comparison covered steering, not only blocked scans
-    assert fmi3.get("ranges") == pytest.approx(list(ranges), nan_ok=True)  # one get for the array
+    assert fmi3.values("ranges") == pytest.approx(list(ranges), nan_ok=True)  # one get for the array
     fmi2.free(), fmi3.free()
 
 
@@ -173,10 +173,10 @@ def test_pure_pursuit_fmi3_equals_fmi2_along_a_changing_plan():
             slave.set(x=x, y=y, theta=theta)
             slave.step()
         _assert_same_outputs(fmi2, fmi3)
-        v, omega = fmi3.get("v")[0], fmi3.get("omega")[0]
+        v, omega = fmi3.values("v")[0], fmi3.values("omega")[0]
         x, y, theta = x + 0.05 * v * math.cos(theta), y + 0.05 * v * math.sin(theta), theta + 0.05 * omega
-    assert fmi3.get("v")[0] == 0.5  # still following, the comparison saw a moving robot
-    waypoints_back = np.array(fmi3.get("waypoints")).reshape(1000, 2)  # row-major [i, j]
+    assert fmi3.values("v")[0] == 0.5  # still following, the comparison saw a moving robot
+    waypoints_back = np.array(fmi3.values("waypoints")).reshape(1000, 2)  # row-major [i, j]
     assert np.array_equal(waypoints_back[: len(plans[1])], plans[1])
     fmi2.free(), fmi3.free()
 
@@ -198,7 +198,7 @@ def test_avoidance_mixer_fmi3_equals_fmi2():
 # ---------------------------------------------------------------- misuse
 
 
-def _fails_with(slave: Slave, call, *args, message: str) -> None:
+def _fails_with(slave: FmuInstance, call, *args, message: str) -> None:
     with pytest.raises(FMICallException) as error:
         call(*args)
     assert error.value.status == FMI_ERROR
@@ -206,7 +206,7 @@ def _fails_with(slave: Slave, call, *args, message: str) -> None:
 
 
 def test_fmi3_glue_answers_misuse_naming_the_variable():
-    vfh = Slave("VectorFieldHistogram", 3)
+    vfh = FmuInstance("VectorFieldHistogram", 3)
     vr = {name: v.valueReference for name, v in vfh.variables.items()}
     _fails_with(vfh, vfh.fmu.doStep, 0.0, 0.05, message="fmi3DoStep is not allowed in state 'instantiated'")
     vfh.initialize()
@@ -241,12 +241,12 @@ def test_fmi3_glue_answers_misuse_naming_the_variable():
         message="variable free_sectors (value reference 17) is Int32",
     )
     vfh.step()  # misuse leaves the instance working
-    assert vfh.get("free_sectors") == [180]  # no readings: every one of the 180 sectors is free
+    assert vfh.values("free_sectors") == [180]  # no readings: every one of the 180 sectors is free
     vfh.free()
 
 
 def test_fmi3_wrong_instantiation_token_is_refused():
-    directory, description = _unpacked("DifferentialDrive", 3)
+    directory, description = unpacked("DifferentialDrive", 3)
     slave = FMU3Slave(
         guid="{00000000-0000-0000-0000-000000000000}",
         unzipDirectory=directory,

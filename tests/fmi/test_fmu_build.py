@@ -19,7 +19,7 @@ from cosim.cli import main
 from cosim.errors import CosimError
 from cosim.fmi import builtin as fmus
 from cosim.fmi.inspect import FMPY_HEADERS, fmpy_problems, required_functions, validate
-from planner import native
+from native import load as native
 
 REPO = Path(__file__).resolve().parents[2]
 NAMES = fmus.known_names()
@@ -338,7 +338,7 @@ def test_first_run_says_what_it_builds_and_builds_what_the_run_loads(tmp_path):
     code = (
         "import sys\n"
         "from cosim.cli import main\n"
-        "from planner import native\n"
+        "from native import load as native\n"
         "code = main(sys.argv[1:])\n"
         "print('loaded', ' '.join(sorted(str(path) for path in native._loaded)))\n"
     )

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 from fmpy.fmi1 import FMICallException
-from fmu_helpers import FmuInstance
+from fmu_harness import FmuInstance
 
 FMU_DIR = Path(__file__).resolve().parents[2] / "fmus"
 FMI2_ERROR = 3
@@ -85,7 +85,7 @@ BAD_PARAMETERS = [
 
 @pytest.mark.parametrize(("model", "parameters", "name"), BAD_PARAMETERS)
 def test_bad_parameter_fails_initialisation_naming_it(model, parameters, name):
-    with FmuInstance(model, parameters=parameters, initialize=False) as fmu:
+    with FmuInstance(model).initialize(parameters, exit=False) as fmu:
         with pytest.raises(FMICallException) as error:
             fmu.exit_initialization()
         assert error.value.status == FMI2_ERROR
@@ -103,7 +103,7 @@ def _set_fails_naming(fmu: FmuInstance, name: str, expected: str) -> None:
 
 @pytest.mark.parametrize("model", ALL_FMUS)
 def test_setting_an_output_or_a_fixed_parameter_after_initialisation_names_it(model):
-    with FmuInstance(model) as fmu:
+    with FmuInstance(model).initialize() as fmu:
         variables = fmu.description.modelVariables
         output = next(v for v in variables if v.causality == "output")
         parameter = next(v for v in variables if v.causality == "parameter" and v.variability == "fixed")

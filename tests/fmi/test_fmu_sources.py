@@ -14,8 +14,7 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 from fmpy.simulation import simulate_fmu
-from fmu3_harness import NAMES, fmu_path
-from fmu_harness import copy_sources
+from fmu_harness import NAMES, copy_sources, fmu_path
 
 from cosim.errors import CosimError
 from cosim.fmi import builtin as fmus

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
-from fmu3_harness import NAMES, Slave, fmu_path
+from fmu_harness import NAMES, FmuInstance, fmu_path
 
 FMI_ERROR = 3
 STEP = 0.05
@@ -48,7 +48,7 @@ def _array_input(name: str, shape: list[int], k: int) -> np.ndarray:
     return np.sin(0.3 * k + np.arange(math.prod(shape)).reshape(shape))
 
 
-def _drive(slave: Slave, name: str, k: int) -> None:
+def _drive(slave: FmuInstance, name: str, k: int) -> None:
     scalars, arrays = _layout(name)
     for array, shape in arrays.items():
         slave.set_array(array, _array_input(array, shape, k))
@@ -59,7 +59,7 @@ def _drive(slave: Slave, name: str, k: int) -> None:
     slave.set(**values)
 
 
-def _run(slave: Slave, name: str, first: int, last: int) -> list[dict[str, np.ndarray]]:
+def _run(slave: FmuInstance, name: str, first: int, last: int) -> list[dict[str, np.ndarray]]:
     """Outputs after each step k in first..last-1 (time t = k * STEP)."""
     history = []
     for k in range(first, last):
@@ -81,7 +81,7 @@ def _assert_identical(a: list[dict[str, np.ndarray]], b: list[dict[str, np.ndarr
 @pytest.mark.parametrize("fmi_version", [2, 3])
 @pytest.mark.parametrize("name", NAMES)
 def test_state_round_trip_is_bit_identical(name, fmi_version):
-    slave = Slave(name, fmi_version)
+    slave = FmuInstance(name, fmi_version)
     slave.initialize()
     _run(slave, name, 0, T1_STEPS)
     state = slave.fmu.getFMUState()
@@ -100,7 +100,7 @@ def test_state_round_trip_is_bit_identical(name, fmi_version):
     slave.fmu.freeFMUState(restored)
 
     # Into an instance that never stepped: the state carries everything, the instance nothing.
-    fresh = Slave(name, fmi_version, instance_name="fresh")
+    fresh = FmuInstance(name, fmi_version, instance_name="fresh")
     fresh.initialize()
     state = fresh.fmu.deserializeFMUState(serialized)
     fresh.fmu.setFMUState(state)
@@ -112,7 +112,7 @@ def test_state_round_trip_is_bit_identical(name, fmi_version):
 
 @pytest.mark.parametrize("fmi_version", [2, 3])
 def test_get_state_into_an_existing_state_overwrites_it(fmi_version):
-    drive = Slave("DifferentialDrive", fmi_version)
+    drive = FmuInstance("DifferentialDrive", fmi_version)
     drive.initialize(v=1.0)
     state = drive.fmu.getFMUState()
     drive.step(1.0)
@@ -120,14 +120,14 @@ def test_get_state_into_an_existing_state_overwrites_it(fmi_version):
     getter(drive.fmu.component, ctypes.byref(state))  # reuse: the saved pose is now x = 1
     drive.step(1.0)
     drive.fmu.setFMUState(state)
-    assert drive.get("x") == [pytest.approx(1.0, abs=1e-15)]
+    assert drive.values("x") == [pytest.approx(1.0, abs=1e-15)]
     drive.fmu.freeFMUState(state)
     drive.free()
 
 
 @pytest.mark.parametrize("fmi_version", [2, 3])
 def test_restoring_a_state_restores_time_and_lifecycle(fmi_version):
-    drive = Slave("DifferentialDrive", fmi_version)
+    drive = FmuInstance("DifferentialDrive", fmi_version)
     drive.initialize(v=1.0)
     for _ in range(4):
         drive.step(0.25)
@@ -136,16 +136,16 @@ def test_restoring_a_state_restores_time_and_lifecycle(fmi_version):
     drive.fmu.terminate()
     drive.fmu.setFMUState(state)  # back to stepping at t = 1 s
     drive.fmu.doStep(1.0, 0.5)
-    assert drive.get("x") == [pytest.approx(1.5, abs=1e-15)]
+    assert drive.values("x") == [pytest.approx(1.5, abs=1e-15)]
     if fmi_version == 3:
-        assert drive.get("time") == [1.5]
+        assert drive.values("time") == [1.5]
     else:
         assert drive.fmu.getRealStatus(2) == 1.5  # fmi2LastSuccessfulTime
     drive.fmu.freeFMUState(state)
     drive.free()
 
 
-def _deserialize_fails(slave: Slave, data: bytes, message: str) -> None:
+def _deserialize_fails(slave: FmuInstance, data: bytes, message: str) -> None:
     with pytest.raises(FMICallException) as error:
         slave.fmu.deserializeFMUState(data) if slave.fmi_version == 3 else slave.fmu.deSerializeFMUstate(data)
     assert error.value.status == FMI_ERROR
@@ -154,7 +154,7 @@ def _deserialize_fails(slave: Slave, data: bytes, message: str) -> None:
 
 @pytest.mark.parametrize("fmi_version", [2, 3])
 def test_foreign_or_damaged_serialized_states_are_refused(fmi_version):
-    drive = Slave("DifferentialDrive", fmi_version)
+    drive = FmuInstance("DifferentialDrive", fmi_version)
     drive.initialize()
     state = drive.fmu.getFMUState()
     serialized = drive.fmu.serializeFMUState(state)
@@ -162,14 +162,14 @@ def test_foreign_or_damaged_serialized_states_are_refused(fmi_version):
     _deserialize_fails(drive, serialized[:-1], "wrong size")
     _deserialize_fails(drive, b"x" * len(serialized), "not a serialized navcosim FMU state")
 
-    other = Slave("DifferentialDrive", 5 - fmi_version)  # the model's other FMI version
+    other = FmuInstance("DifferentialDrive", 5 - fmi_version)  # the model's other FMI version
     other.initialize()
     state = other.fmu.getFMUState()
     _deserialize_fails(drive, other.fmu.serializeFMUState(state), "the other FMI version")
     other.fmu.freeFMUState(state)
     other.free()
 
-    bicycle = Slave("Bicycle", fmi_version)
+    bicycle = FmuInstance("Bicycle", fmi_version)
     bicycle.initialize()
     state = bicycle.fmu.getFMUState()
     foreign = bicycle.fmu.serializeFMUState(state)

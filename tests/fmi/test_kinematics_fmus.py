@@ -6,16 +6,16 @@ import math
 
 import numpy as np
 import pytest
-from fmu_harness import Instance
+from fmu_harness import FmuInstance
 
 TOLERANCE = 1e-9
 
 
-def run(name: str, steps: int, step_size: float, **settings) -> Instance:
-    instance = Instance(name)
+def run(name: str, steps: int, step_size: float, **settings) -> FmuInstance:
+    instance = FmuInstance(name)
     instance.initialize(**settings)
     for k in range(steps):
-        instance.slave.doStep(k * step_size, step_size)
+        instance.fmu.doStep(k * step_size, step_size)
     return instance
 
 
@@ -35,8 +35,8 @@ def angle_difference(a, b):
     return math.remainder(a - b, 2 * math.pi)
 
 
-def assert_pose(instance: Instance, expected) -> None:
-    x, y, theta = instance.get("x", "y", "theta")
+def assert_pose(instance: FmuInstance, expected) -> None:
+    x, y, theta = instance.values("x", "y", "theta")
     assert abs(x - expected[0]) <= TOLERANCE and abs(y - expected[1]) <= TOLERANCE
     assert abs(angle_difference(theta, expected[2])) <= TOLERANCE
     assert -math.pi < theta <= math.pi
@@ -76,7 +76,7 @@ def test_differential_drive_wheel_speed_inputs_eq_4_4():
         wheel_speed_right=right,
     )
     v, omega = r * (right + left) / 2, r * (right - left) / d
-    assert drive.get("v_actual", "omega_actual") == pytest.approx([v, omega], abs=1e-15)
+    assert drive.values("v_actual", "omega_actual") == pytest.approx([v, omega], abs=1e-15)
     assert_pose(drive, unicycle_pose(0.0, 0.0, 0.0, v, omega, 2.0))
     drive.free()
 
@@ -84,9 +84,9 @@ def test_differential_drive_wheel_speed_inputs_eq_4_4():
 def test_differential_drive_clips_wheel_speeds_and_converts_back():
     # r = 0.05, d = 0.2: v = 1, omega = 2 needs wheels (16, 24) rad/s (eq 4.5); 24 clips to 20.
     drive = run("DifferentialDrive", 10, 0.1, wheel_speed_min=-20.0, wheel_speed_max=20.0, v=1.0, omega=2.0)
-    assert drive.get("wheel_speed_left_actual", "wheel_speed_right_actual") == pytest.approx([16.0, 20.0])
+    assert drive.values("wheel_speed_left_actual", "wheel_speed_right_actual") == pytest.approx([16.0, 20.0])
     v, omega = 0.05 * (20.0 + 16.0) / 2, 0.05 * (20.0 - 16.0) / 0.2
-    assert drive.get("v_actual", "omega_actual") == pytest.approx([v, omega], abs=1e-14)
+    assert drive.values("v_actual", "omega_actual") == pytest.approx([v, omega], abs=1e-14)
     assert_pose(drive, unicycle_pose(0.0, 0.0, 0.0, v, omega, 1.0))
     drive.free()
 
@@ -160,7 +160,7 @@ def test_bicycle_yaw_rate_and_slip_angle_eqs_4_6_and_4_7(mode):
     beta = math.atan((lf * tan_r + lr * tan_f) / (lf + lr))  # eq 4.7
     speed = v / math.cos(beta)  # speed of the reference point
     yaw_rate = speed * math.cos(beta) * (tan_f - tan_r) / (lf + lr)  # eq 4.6, delta_r signed as delta_f
-    assert bicycle.get("slip_angle", "yaw_rate", "steering_angle_actual") == pytest.approx(
+    assert bicycle.values("slip_angle", "yaw_rate", "steering_angle_actual") == pytest.approx(
         [beta, yaw_rate, delta], abs=1e-14
     )
     bicycle.free()
@@ -180,7 +180,7 @@ def test_bicycle_full_circle_front_steering():
 def test_bicycle_yaw_rate_input(mode, divisor, v, omega):
     bicycle = run("Bicycle", 30, 0.1, input_mode=1, steering_mode=mode, wheelbase=WHEELBASE, v=v, omega=omega)
     delta = math.atan(omega * WHEELBASE / (divisor * v))  # atan2 folded into (-pi/2, pi/2]
-    assert bicycle.get("steering_angle_actual", "yaw_rate") == pytest.approx([delta, omega], abs=1e-14)
+    assert bicycle.values("steering_angle_actual", "yaw_rate") == pytest.approx([delta, omega], abs=1e-14)
     assert_pose(bicycle, bicycle_pose(mode, v, delta, 0.0, 3.0))
     bicycle.free()
 
@@ -197,12 +197,12 @@ def test_bicycle_clips_steering_and_speed():
         v=5.0,
         steering_angle=1.2,
     )
-    assert bicycle.get("v_actual", "steering_angle_actual") == [2.0, 0.4]
+    assert bicycle.values("v_actual", "steering_angle_actual") == [2.0, 0.4]
     assert_pose(bicycle, bicycle_pose(0, 2.0, 0.4, 0.0, 2.0))
     bicycle.free()
     # A yaw rate the steering cannot reach: MATLAB converts, then clips the angle.
     bicycle = run("Bicycle", 1, 0.1, input_mode=1, wheelbase=WHEELBASE, v=1.0, omega=10.0)
-    assert bicycle.get("steering_angle_actual") == pytest.approx([math.pi / 4], abs=1e-15)
+    assert bicycle.values("steering_angle_actual") == pytest.approx([math.pi / 4], abs=1e-15)
     bicycle.free()
 
 
@@ -232,5 +232,5 @@ def test_bicycle_matches_a_fine_numerical_integration_of_eq_4_6():
         k3 = derivative(state + h / 2 * k2)
         k4 = derivative(state + h * k3)
         state = state + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    assert bicycle.get("x", "y", "theta") == pytest.approx(list(state), abs=1e-11)
+    assert bicycle.values("x", "y", "theta") == pytest.approx(list(state), abs=1e-11)
     bicycle.free()

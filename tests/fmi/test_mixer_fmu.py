@@ -6,14 +6,14 @@ from __future__ import annotations
 import math
 
 import pytest
-from fmu_helpers import FmuInstance
+from fmu_harness import FmuInstance
 
 FOLLOW, AVOID, RECOVER, STOPPED = 0, 1, 2, 3
 WHEELBASE, LOCK = 2.5, 0.6
 
 
 def mixer(**parameters) -> FmuInstance:
-    return FmuInstance("AvoidanceMixer", parameters=parameters)
+    return FmuInstance("AvoidanceMixer").initialize(parameters)
 
 
 def bicycle(**parameters) -> FmuInstance:

@@ -14,7 +14,7 @@ import math
 from pathlib import Path
 
 import pytest
-from fmu_harness import Instance, unpacked
+from fmu_harness import FmuInstance, unpacked
 
 from cosim.cli import main
 
@@ -68,14 +68,14 @@ def _outside(variable, bound: str, side: str):
 
 
 def _initialises(fmu: str, values: dict) -> bool:
-    instance = Instance(fmu)
+    instance = FmuInstance(fmu)
     try:
         instance.initialize(**values)
         return True
     except Exception:  # fmpy raises on fmi2Error
         return False
     finally:
-        instance.slave.freeInstance()
+        instance.free()
 
 
 @pytest.mark.parametrize("fmu, variable", BOUNDS, ids=[f"{f}.{v.name}" for f, v in BOUNDS])

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 from fmpy.fmi1 import FMICallException
-from fmu_helpers import FmuInstance, array_inputs
+from fmu_harness import FmuInstance, array_inputs
 
 CAPACITY = 1000
 
@@ -17,7 +17,7 @@ def follower(waypoints, parameters=None, pose=(0.0, 0.0, 0.0)) -> FmuInstance:
     inputs = {**array_inputs("waypoints", np.asarray(waypoints, dtype=float), CAPACITY)}
     inputs.update(x=pose[0], y=pose[1], theta=pose[2])
     parameters = {"max_angular_velocity": 100.0, **(parameters or {})}
-    return FmuInstance("PurePursuit", parameters=parameters, inputs=inputs)
+    return FmuInstance("PurePursuit").initialize({**parameters, **inputs})
 
 
 def drive_to(fmu: FmuInstance, pose) -> dict:
@@ -176,7 +176,7 @@ def test_a_new_plan_restarts_the_projection_search():
 
 
 def test_waypoint_capacity_is_exactly_1000_rows():
-    with FmuInstance("PurePursuit") as fmu:
+    with FmuInstance("PurePursuit").initialize() as fmu:
         assert "waypoints[1000,2]" in fmu.variables
         assert "waypoints[1001,1]" not in fmu.variables
         with pytest.raises(FMICallException):
@@ -266,7 +266,10 @@ def test_closed_loop_with_the_drive_follows_a_path_replanned_mid_run():
     """PurePursuit and DifferentialDrive stepped together: path A along x; at t = 6 s, path B from
     the vehicle's pose up to (x, 3). The vehicle leaves A and stops at B's goal."""
     parameters = {"desired_linear_velocity": 0.5, "lookahead_distance": 0.8, "goal_tolerance": 0.1}
-    with follower([[0, 0], [20, 0]], parameters) as controller, FmuInstance("DifferentialDrive") as drive:
+    with (
+        follower([[0, 0], [20, 0]], parameters) as controller,
+        FmuInstance("DifferentialDrive").initialize() as drive,
+    ):
         switched_at = None
         for step in range(600):
             pose = (drive.get("x"), drive.get("y"), drive.get("theta"))

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from fmu_helpers import FmuInstance, array_inputs
+from fmu_harness import FmuInstance, array_inputs
 
 CAPACITY = 720
 ANGLES = np.linspace(-math.pi, math.pi, CAPACITY, endpoint=False)  # a 360-degree lidar, 0.5 degree apart
@@ -36,7 +36,7 @@ def scan_inputs(ranges, angles=ANGLES, target_dir: float = 0.0) -> dict[str, flo
 
 
 def vfh(**parameters) -> FmuInstance:
-    return FmuInstance("VectorFieldHistogram", parameters=parameters)
+    return FmuInstance("VectorFieldHistogram").initialize(parameters)
 
 
 def run(fmu: FmuInstance, ranges, target_dir: float = 0.0, angles=ANGLES) -> dict:

@@ -11,7 +11,8 @@ from pathlib import Path
 import pytest
 from test_mapf_checker import check
 
-from planner import OccupancyGrid, PlannerError, native
+from native import load as native
+from planner import OccupancyGrid, PlannerError
 from planner.mapf import solve
 from planner.mapf_scen import read_scen
 
@@ -81,7 +82,8 @@ def test_builds_from_a_clean_checkout(tmp_path, repo_root):
     tree.mkdir()
     archive = subprocess.run(["git", "-C", str(repo_root), "stash", "create"], capture_output=True, text=True)
     commit = archive.stdout.strip() or "HEAD"
-    tar = subprocess.run(["git", "-C", str(repo_root), "archive", commit, "planner", "pyproject.toml"],
+    tracked = ["native", "planner", "pyproject.toml"]
+    tar = subprocess.run(["git", "-C", str(repo_root), "archive", commit, *tracked],
                          capture_output=True, check=True)  # fmt: skip
     subprocess.run(["tar", "-x", "-C", str(tree)], input=tar.stdout, check=True)
     script = textwrap.dedent(

@@ -2,9 +2,9 @@
 navcosim and by a second engine, fmpy's SSP master; nesting against the flat equivalent; the
 experiment and its overrides; parameter binding precedence; FMI 3.0 components; one-line errors.
 
-The second engine's conventions (reference/fmpy-pitfalls.md §8): it steps every FMU first and then
-copies the connections (Jacobi), starts every connector at 0.0, and records each step's outputs
-stamped with the step's start time, as our log does. The hand-written SSP therefore runs Jacobi
+The second engine's conventions (`fmpy.ssp.simulation.simulate_ssp`, fmpy 0.3.32): it steps every
+FMU first and then copies the connections (Jacobi), starts every connector at 0.0, and records each
+step's outputs stamped with the step's start time, as our log does. The hand-written SSP therefore runs Jacobi
 (from its annotation), and every connected output is 0.0 after initialisation, where both
 conventions agree; fmpy records inputs after the connections of the step are copied, so its row k
 holds the inputs of our step k + 1.

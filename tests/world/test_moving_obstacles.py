@@ -167,7 +167,8 @@ def test_republished_obstacles_read_back_at_their_poses(tmp_path: Path):
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
-    from cosim.record.recorder import Recorder, _serialize_obstacles
+    from cosim.record.markers import obstacles_cdr
+    from cosim.record.recorder import Recorder
 
     walker = Circle((2.0, 1.0), 0.3, Motion(velocity=(1.0, 0.5)))
     cart = Rectangle((5.0, 5.0), (1.0, 2.0), 0.4, Motion(((5.0, 5.0), (5.0, 9.0)), 2.0, "bounce"))
@@ -195,7 +196,7 @@ def test_republished_obstacles_read_back_at_their_poses(tmp_path: Path):
     assert [log_time for log_time, _ in raw] == [t_ns for _, t_ns in written]
     for (t, t_ns), (_, data) in zip(written, raw, strict=True):
         drawn = [triangle.at(t)] if t_ns == stamps[-1] + 1 else [shape.at(t) for shape in shapes]
-        assert data == _serialize_obstacles(t_ns, drawn)
+        assert data == obstacles_cdr(t_ns, drawn)
 
     with open(log, "rb") as stream:
         reader = make_reader(stream, decoder_factories=[DecoderFactory()])

@@ -4,7 +4,7 @@
  * Every table is a C-contiguous NumPy array; addresses (FMI functions, instances, value arrays,
  * the components' float64 buffers) are stored as int64. The arithmetic is the master's Python
  * loop's, in its order (`value * scale + offset`, the integer time base divided once by 1e9), and
- * the library is built with -ffp-contract=off and no fast-math (`planner/native.py`), so both loops
+ * the library is built with -ffp-contract=off and no fast-math (`native/load.py`), so both loops
  * give bit-identical values. See kernel.py for the return codes and the tables' columns.
  */
 #include <math.h>

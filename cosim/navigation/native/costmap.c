@@ -1,6 +1,6 @@
 /* Kernels of cosim.navigation.costmap: one lidar scan into the marks, and "a new mark near the plan?".
  *
- * Built by planner/native.py (C99, -ffp-contract=off, no fast-math): every floating-point
+ * Built by native/load.py (C99, -ffp-contract=off, no fast-math): every floating-point
  * operation is the one of the Python description, in the same order, so the results are those of
  * the numba kernels these replaced, bit for bit. The long-lived arrays and constants come in one
  * struct set up once by `Costmap` (its `ctypes.Structure` mirrors it field for field). */

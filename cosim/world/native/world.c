@@ -1,7 +1,7 @@
 /* Kernels of cosim.world: the exact clearance (distance.py), the lidar's ray casting (lidar.py)
  * and the point-polygon geometry they share (geometry.h, exported for geometry.py).
  *
- * Built by planner/native.py (C99, -ffp-contract=off, no fast-math): every floating-point
+ * Built by native/load.py (C99, -ffp-contract=off, no fast-math): every floating-point
  * operation is the one the Python docstrings describe, in the same order, so the results are
  * those of the numba kernels these replaced, bit for bit. The long-lived arrays and constants of
  * a lidar or a world come in one struct set up once in Python (the `ctypes.Structure`s of

@@ -1,4 +1,4 @@
-"""planner.native: C kernels built on first use, cached by source hash, loaded with ctypes."""
+"""native.load: C kernels built on first use, cached by source hash, loaded with ctypes."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from planner import native
+from native import load as native
 
 
 def _package(tmp_path, body: str, header: str | None = None):
