@@ -35,6 +35,12 @@ COMPILE_FLAGS = ["-std=c99", "-O2", "-fPIC", "-shared", "-Wall", "-Wextra", "-We
 # libm must be linked explicitly: a Python host has it loaded, other FMI hosts do not, and
 # --no-undefined turns a forgotten library into a link error instead of a load failure elsewhere.
 LINK_FLAGS = ["-lm", "-Wl,--no-undefined"]
+# The FMI glue (fmi2_glue.c, fmi3_glue.c: argument checks, copying values by reference, no
+# arithmetic on the model's values) is compiled at -Og into an object first: at -O2 it was ~80 %
+# of each FMU's compile time (0.21 s of CPU of the glue against 0.095 s at -Og; a first run builds
+# four FMUs), and a warm run's CPU time is the same with either (measured: ratio 1.00). The
+# model's own sources stay at -O2.
+GLUE_FLAGS = ["-Og", "-c"]
 GENERATION_TOOL = "navcosim fmus/build.py"
 FMI_VERSIONS = (2, 3)
 FMI3_SUBDIR = "fmi3"  # FMI 3.0 FMUs go to <out>/fmi3/<Name>.fmu, beside the FMI 2.0 <out>/<Name>.fmu
@@ -278,6 +284,20 @@ def _build_description(identifier: str, sources: list[str]) -> str:
     )
 
 
+_GLUE = re.compile(r"fmi\d_glue\.c")
+
+
+def _compile(command: list[str], model_dir: Path, run_compiler) -> None:
+    if run_compiler is None:
+        result = subprocess.run(command, capture_output=True, text=True)
+    else:
+        result = run_compiler(command)
+    if result.returncode != 0:
+        errors = [line for line in result.stderr.splitlines() if " error: " in line]
+        first = errors[0] if errors else result.stderr.strip()
+        raise FmuBuildError(f"compiling {model_dir.name} failed: {first}")
+
+
 def build_fmu(
     model_dir: Path, out_dir: Path, header_dir: Path | None = None, fmi_version: int = 2, run_compiler=None
 ) -> Path:
@@ -320,16 +340,19 @@ def build_fmu(
         sources = descriptions.c_sources(model_dir, fmi_version)
         binary = Path(temp) / f"{identifier}{suffix}"
         includes = [f"-I{include_dir}" for include_dir in (generated, model_dir, common_dir, headers_from)]
+        compile_flags = [flag for flag in COMPILE_FLAGS if flag != "-shared"]
+        objects = []
+        for source in sources:
+            if _GLUE.fullmatch(source.name):
+                objects.append(Path(temp) / f"{source.stem}.o")
+                _compile(
+                    [compiler, *compile_flags, *GLUE_FLAGS, *includes, str(source), "-o", str(objects[-1])],
+                    model_dir,
+                    run_compiler,
+                )
         command = [compiler, *COMPILE_FLAGS, *includes]
-        command += [str(s) for s in sources] + ["-o", str(binary), *LINK_FLAGS]
-        if run_compiler is None:
-            result = subprocess.run(command, capture_output=True, text=True)
-        else:
-            result = run_compiler(command)
-        if result.returncode != 0:
-            errors = [line for line in result.stderr.splitlines() if " error: " in line]
-            first = errors[0] if errors else result.stderr.strip()
-            raise FmuBuildError(f"compiling {model_dir.name} failed: {first}")
+        command += [str(s) for s in sources if not _GLUE.fullmatch(s.name)] + [str(o) for o in objects]
+        _compile([*command, "-o", str(binary), *LINK_FLAGS], model_dir, run_compiler)
         packed: dict[str, Path] = {}
         headers = [*sorted(common_dir.glob("*.h")), *sorted(model_dir.glob("*.h"))]
         headers += sorted(headers_from.glob(f"fmi{fmi_version}*.h"))
