@@ -46,7 +46,7 @@ CROSS_CORRIDOR_WIDTH = 9.5  # m, the narrowest cross corridor (left, right)
 
 FREE_VALUE = 254  # what ROS map_saver writes for free cells
 OCCUPIED_VALUE = 0
-WALL = RESOLUTION  # m, the outer wall of the shipped map: one cell
+STATION_FRONT = 3.5  # [m] from the station's counter to where a robot stops in front of it
 
 
 class Layout(NamedTuple):  # not a dataclass: tests load this file without registering a module
@@ -64,11 +64,11 @@ class Layout(NamedTuple):  # not a dataclass: tests load this file without regis
 
     @property
     def station_front(self) -> tuple[float, float] | None:
-        """[m] the point 2 m in front of the station's middle (where a robot dwells), or None."""
+        """[m] the point 3.5 m in front of the station's middle (where a robot dwells), or None."""
         if self.station is None:
             return None
         x_left, x_right, _, y_top = self.station
-        return ((x_left + x_right) / 2, y_top + 2.0)
+        return ((x_left + x_right) / 2, y_top + STATION_FRONT)
 
 
 def shipped_layout() -> Layout:
@@ -131,10 +131,10 @@ def regular_layout(
     counter = None
     if station is not None:
         station_width, station_depth = station
-        if not 0 < station_width < inner_width or not 0 < station_depth or station_depth + 3.0 > bottom:
+        if not 0 < station_width < inner_width or not 0 < station_depth or station_depth + 2 * STATION_FRONT > bottom:
             raise ValueError(
                 f"the station {station_width:g} m x {station_depth:g} m must fit in the bottom corridor "
-                f"({bottom:g} m high) with 3 m in front of it"
+                f"({bottom:g} m high) with {2 * STATION_FRONT:g} m in front of it"
             )
         x0 = snap(width / 2 - station_width / 2)
         counter = (x0, snap(x0 + station_width), resolution, snap(resolution + station_depth))
