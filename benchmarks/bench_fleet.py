@@ -231,7 +231,10 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError:
         print("IR-SIM is not installed (pip install ir-sim, the bench extra): navcosim only")
         anchor = False
+    if anchor and abs(round(duration / IRSIM_STEP) * IRSIM_STEP - duration) > 1e-9:
+        raise SystemExit(f"--duration must be a multiple of IR-SIM's {IRSIM_STEP:g} s step")
     print(f"fleet benchmark: {SCENARIO.name}'s first N robots, {duration:g} s simulated each", flush=True)
+    print(f"load average before: {os.getloadavg()[0]:.1f} (2 cores: more is other jobs' time)", flush=True)
     rows = []
     for count in counts:
         ours = measure("navcosim", count, duration)
@@ -262,6 +265,7 @@ def main(argv: list[str] | None = None) -> int:
     print()
     for row in table:
         print("  ".join(cell.rjust(width) for cell, width in zip(row, widths, strict=True)))
+    print(f"load average after: {os.getloadavg()[0]:.1f}")
     counts_done = [count for count, _, _ in rows]
     for name, index in (("navcosim", 1), ("IR-SIM", 2)):
         slope = exponent(counts_done, [per_second(row[index]) for row in rows])
