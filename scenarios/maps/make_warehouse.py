@@ -131,7 +131,8 @@ def regular_layout(
     counter = None
     if station is not None:
         station_width, station_depth = station
-        if not 0 < station_width < inner_width or not 0 < station_depth or station_depth + 2 * STATION_FRONT > bottom:
+        room = bottom - 2 * STATION_FRONT  # the station's depth and a robot's stop in front of it
+        if not 0 < station_width < inner_width or not 0 < station_depth <= room:
             raise ValueError(
                 f"the station {station_width:g} m x {station_depth:g} m must fit in the bottom corridor "
                 f"({bottom:g} m high) with {2 * STATION_FRONT:g} m in front of it"
