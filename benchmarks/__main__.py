@@ -28,6 +28,7 @@ BENCHMARKS = {
     "mcap_writers": ["bench_mcap_writers.py"],
     "png": ["bench_png.py"],
     "fmu_simulate": ["bench_fmu_simulate.py"],
+    "fleet": ["bench_fleet.py"],
 }
 
 

@@ -1,4 +1,5 @@
-"""Limits on what an FMU archive may unpack to, checked before anything is extracted.
+"""Limits on what an FMU archive may unpack to, checked before anything is extracted, and the
+folders instances are unpacked into (`unpack_instance`).
 
 An FMU is a zip archive; deflate packs a run of zeros about 1000:1, so a 2 MB file can hold a 2 GiB
 entry that would fill the disk (or the memory of a tmpfs) when extracted. The archive's central
@@ -9,7 +10,13 @@ what extraction can write: checking it refuses such an archive without inflating
 
 from __future__ import annotations
 
+import atexit
+import os
+import shutil
+import tempfile
+import threading
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
 
 from cosim.errors import CosimError
@@ -67,3 +74,75 @@ def check_unpacked_size(path: Path, archive: zipfile.ZipFile, limit: int | None 
 
 
 SIZE_HINT = "not extracted (raise the limit with [simulation] fmu_max_size, in MiB, if you trust it)"
+
+
+class _Shared:
+    """One extraction of an archive, shared by the instances using it, removed with the last."""
+
+    def __init__(self, folder: str) -> None:
+        self.folder = folder
+        self.users = 0
+
+
+_shared: dict[tuple, _Shared] = {}
+_shared_lock = threading.Lock()
+
+
+def unpack_instance(
+    path: Path, include: Callable[[str], bool], prefix: str, shareable: bool
+) -> tuple[str, Callable[[], None]]:
+    """A folder holding the members of the FMU at `path` that `include` accepts, for one instance,
+    and the function that gives it back (call it once, when the instance is freed).
+
+    An FMU that may be instantiated more than once per process (FMI's
+    `canBeInstantiatedOnlyOncePerProcess="false"`: it keeps no state in its shared library) is
+    extracted once per process and its instances share the folder (so the loader maps its library
+    once): a fleet of 50 robots unzipped and deleted 200 folders, ~10 ms each on this machine's
+    disk, for four FMUs. Any other FMU gets its own folder (its library loaded as a library of its
+    own, so static state stays per instance). Errors of the extraction propagate (`unpack_problem`
+    was checked before)."""
+    import fmpy
+
+    if not shareable:
+        folder = tempfile.mkdtemp(prefix=prefix)
+        try:
+            fmpy.extract(str(path), unzipdir=folder, include=include)
+        except BaseException:
+            shutil.rmtree(folder, ignore_errors=True)
+            raise
+        return folder, lambda: shutil.rmtree(folder, ignore_errors=True)
+    stat = os.stat(path)
+    key = (os.path.realpath(path), stat.st_size, stat.st_mtime_ns, include)
+    with _shared_lock:
+        entry = _shared.get(key)
+        if entry is None:
+            folder = tempfile.mkdtemp(prefix=f"navcosim-shared-{Path(path).stem[:40]}-")
+            try:
+                fmpy.extract(str(path), unzipdir=folder, include=include)
+            except BaseException:
+                shutil.rmtree(folder, ignore_errors=True)
+                raise
+            entry = _shared[key] = _Shared(folder)
+        entry.users += 1
+    released = False
+
+    def release() -> None:
+        nonlocal released
+        with _shared_lock:
+            if released:
+                return
+            released = True
+            entry.users -= 1
+            if entry.users == 0:
+                _shared.pop(key, None)
+                shutil.rmtree(entry.folder, ignore_errors=True)
+
+    return entry.folder, release
+
+
+@atexit.register
+def _remove_shared() -> None:
+    """Folders of instances never freed (a run that raised before `free`)."""
+    for entry in list(_shared.values()):
+        shutil.rmtree(entry.folder, ignore_errors=True)
+    _shared.clear()

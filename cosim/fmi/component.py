@@ -25,8 +25,6 @@ from __future__ import annotations
 import ctypes
 import math
 import os
-import shutil
-import tempfile
 import weakref
 from collections import deque
 from collections.abc import Collection, Mapping
@@ -42,6 +40,7 @@ from fmpy.fmi3 import FMU3Slave
 from cosim.core.component import Component, NativeStep, Port, State, closest_names
 from cosim.errors import CosimError, SimulationEnded
 from cosim.fmi import exit_guard
+from cosim.fmi.archive import unpack_instance
 from cosim.fmi.codegen import FMI_TYPE_NAMES, TransferGroup, native_step, step_functions, transfer_groups
 from cosim.fmi.description import file_identity, fmi1_variable_step
 from cosim.fmi.layout import fmu_layout, start_value
@@ -103,6 +102,7 @@ class FmuComponent(Component):
         self._plan_transfers()
         self._slave = None
         self._unzip_dir: str | None = None
+        self._release_files = None  # gives the folder back (`cosim.fmi.archive.unpack_instance`)
         self._fatal = False
         self._fmu_state: ctypes.c_void_p | None = None  # kept by `save_state`, freed with the instance
         self.log_messages: deque[str] = deque(maxlen=20)
@@ -238,11 +238,13 @@ class FmuComponent(Component):
         self._require("unpack", State.CREATED)
         if self._unzip_dir is not None:
             return
-        self._unzip_dir = tempfile.mkdtemp(prefix=f"navcosim-{self.name}-")
+        interface = self._interface()
+        shareable = interface is not None and interface.canBeInstantiatedOnlyOncePerProcess is False
         try:
-            fmpy.extract(str(self.path), unzipdir=self._unzip_dir, include=_needed_at_run_time)
+            self._unzip_dir, self._release_files = unpack_instance(
+                self.path, _needed_at_run_time, f"navcosim-{self.name}-", shareable
+            )
         except Exception as error:
-            self._discard_files()
             detail = " ".join(str(error).split())[:300]
             what = f"FMU '{self.path}' (component '{self.name}')"
             raise CosimError(f"{what} cannot be unpacked: {detail}") from None
@@ -640,7 +642,7 @@ class FmuComponent(Component):
 
     def _discard_files(self) -> None:
         if self._unzip_dir is not None:
-            shutil.rmtree(self._unzip_dir, ignore_errors=True)
+            self._release_files()  # (a folder shared with other instances goes with the last)
             self._unzip_dir = None
 
     def describe(self) -> dict[str, str]:

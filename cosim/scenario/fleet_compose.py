@@ -70,7 +70,15 @@ def describe_fleet(fleet: Fleet) -> FleetDescription:
         others = tuple(other.name for other in fleet.robots if other.name != robot.name)
         count = len(others)
         inputs = tuple(f"robots_{axis}[{j}]" for axis in ("x", "y") for j in range(1, count + 1))
-        feedthrough = {name: (*deps, *inputs) for name, deps in lidar.feedthrough.items()}
+        # One tuple per distinct dependency list, shared by the outputs that have it (1440 ports
+        # of a 720-beam lidar each holding its own copy of 3 + 2(N - 1) names was ~1 MB a robot).
+        extended: dict[tuple[str, ...], tuple[str, ...]] = {}
+        feedthrough = {}
+        for name, deps in lidar.feedthrough.items():
+            key = tuple(deps)
+            if key not in extended:
+                extended[key] = (*key, *inputs)
+            feedthrough[name] = extended[key]
         components = dict(description.components)
         components[SEEN_BY] = replace(
             lidar,

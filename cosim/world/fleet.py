@@ -98,13 +98,17 @@ class FleetContacts:
         before = np.asarray(before, dtype=float)
         after = np.asarray(after, dtype=float)
         i, j = self.first, self.second
-        d0 = before[j] - before[i]
-        w = (after[j] - after[i]) - d0
-        ww = np.einsum("ij,ij->i", w, w)
-        dw = np.einsum("ij,ij->i", d0, w)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            s_star = np.where(ww > 0.0, np.clip(-dw / ww, 0.0, 1.0), 0.0)
-        closest = np.hypot(*(d0 + s_star[:, None] * w).T)
+        # Per axis: gathering 1-D columns costs numpy a tenth of gathering the (N, 2) rows.
+        bx, by, ax, ay = before[:, 0], before[:, 1], after[:, 0], after[:, 1]
+        d0x, d0y = bx[j] - bx[i], by[j] - by[i]
+        d1x, d1y = ax[j] - ax[i], ay[j] - ay[i]  # the offset at the step's end
+        wx, wy = d1x - d0x, d1y - d0y
+        ww = wx * wx + wy * wy
+        dw = d0x * wx + d0y * wy
+        s_star = np.zeros_like(ww)
+        np.divide(-dw, ww, out=s_star, where=ww > 0.0)
+        np.clip(s_star, 0.0, 1.0, out=s_star)
+        closest = np.hypot(d0x + s_star * wx, d0y + s_star * wy)
         gap = closest - self.reach
         np.minimum.at(self.min_clearance, i, gap)
         np.minimum.at(self.min_clearance, j, gap)
@@ -124,7 +128,7 @@ class FleetContacts:
                 )
             )  # fmt: skip
         # A pair still touching at the step's end stays "in contact"; one that separated may touch again.
-        end_gap = np.hypot(*(after[j] - after[i]).T) - self.reach
+        end_gap = np.hypot(d1x, d1y) - self.reach
         self.touching = end_gap <= 0.0
         self.contacts += began
         return began

@@ -148,20 +148,28 @@ static void cast_grid(const Lidar *s, double x, double y, const double *directio
 }
 
 /* Lower `out` to the nearest hit [m] with the circles and polygon edges along each unit
- * direction; 0 when the sensor is inside a circle or a tangent ray starts on its outline. */
-static void cast_shapes(const Lidar *s, double x, double y, const double *directions, int64_t n, double *out)
+ * direction; 0 when the sensor is inside a circle or a tangent ray starts on its outline.
+ * A circle whose outline lies entirely farther than `cull` [m] from the sensor is skipped (the
+ * scan passes its range_max: any hit on such a circle is beyond the range, a missed reading
+ * whatever else the beam meets; `lidar_measure` passes infinity). The circles are the outer loop so
+ * that the test runs once a circle (a fleet's other robots are mostly out of range); each beam
+ * still meets its circles in their order, then the segments, as before. */
+static void cast_shapes(const Lidar *s, double x, double y, const double *directions, int64_t n, double *out,
+                        double cull)
 {
-    for (int64_t beam = 0; beam < n; beam++) {
-        double dx = directions[2 * beam], dy = directions[2 * beam + 1];
-        double best = out[beam];
-        for (int64_t index = 0; index < s->n_circles; index++) {
-            const double *circle = s->circles + 3 * index;
-            double offset_x = x - circle[0];
-            double offset_y = y - circle[1];
+    double reach = cull + 1e-9 * (1.0 + cull); /* a margin for the rounding of near vs hypot - r */
+    for (int64_t index = 0; index < s->n_circles; index++) {
+        const double *circle = s->circles + 3 * index;
+        double offset_x = x - circle[0];
+        double offset_y = y - circle[1];
+        if (!(hypot(offset_x, offset_y) - circle[2] <= reach))
+            continue; /* (also a NaN circle, no robot: every test below would fail for it) */
+        double c = offset_x * offset_x + offset_y * offset_y - circle[2] * circle[2];
+        for (int64_t beam = 0; beam < n; beam++) {
+            double dx = directions[2 * beam], dy = directions[2 * beam + 1];
             double b = dx * offset_x + dy * offset_y;
-            double c = offset_x * offset_x + offset_y * offset_y - circle[2] * circle[2];
             if (c <= 0) {
-                best = 0.0;
+                out[beam] = 0.0;
                 continue;
             }
             double discriminant = b * b - c;
@@ -170,10 +178,14 @@ static void cast_shapes(const Lidar *s, double x, double y, const double *direct
             double root = sqrt(discriminant);
             double near = -b - root, far = -b + root;
             if (near >= 0)
-                best = py_min(best, near);
+                out[beam] = py_min(out[beam], near);
             else if (far >= 0)
-                best = 0.0;
+                out[beam] = 0.0;
         }
+    }
+    for (int64_t beam = 0; beam < n; beam++) {
+        double dx = directions[2 * beam], dy = directions[2 * beam + 1];
+        double best = out[beam];
         for (int64_t index = 0; index < s->n_segments; index++) {
             const double *segment = s->segments + 4 * index;
             double ax = segment[0] - x;
@@ -207,7 +219,7 @@ static int inside_polygons(const Lidar *s, double x, double y)
 void lidar_measure(const Lidar *s, double x, double y, const double *directions, int64_t n, double *out)
 {
     cast_grid(s, x, y, directions, n, s->range_max, out);
-    cast_shapes(s, x, y, directions, n, out);
+    cast_shapes(s, x, y, directions, n, out, INFINITY);
     if (inside_polygons(s, x, y))
         for (int64_t beam = 0; beam < n; beam++)
             out[beam] = 0.0;
@@ -226,7 +238,7 @@ void lidar_scan(const Lidar *s, double x, double y, double theta)
         directions[2 * beam + 1] = sin(cast);
     }
     cast_grid(s, x, y, directions, count, s->range_max, ranges);
-    cast_shapes(s, x, y, directions, count, ranges);
+    cast_shapes(s, x, y, directions, count, ranges, s->range_max);
     int inside = inside_polygons(s, x, y);
     for (int64_t beam = 0; beam < count; beam++) {
         double distance = inside ? 0.0 : ranges[beam];
