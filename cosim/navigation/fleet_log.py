@@ -16,7 +16,8 @@ a fleet's log holds what a robot's does, per robot under its namespace:
   (`cosim.record.fleet_steps`);
 - `/<robot>/plan` after each block in which the robot replanned (stamped at the block's start,
   where its planner stepped), `/<robot>/goal` when it takes its next goal;
-- metadata `fleet_outcome` at the end (per robot and fleet figures, collisions; each value JSON).
+- metadata `fleet_outcome` at the end (per robot and fleet figures, collisions; each value JSON)
+  and, as every log, `outcome` (reached: every robot completed; reason; time [s]).
 """
 
 from __future__ import annotations
@@ -116,7 +117,9 @@ class FleetLog(SystemRun):
         self.recorder.add_metadata(
             "fleet_outcome", {key: json.dumps(value) for key, value in outcome_record(outcome).items()}
         )
-        self.recorder.close()
+        self.recorder.close(
+            {"reached": str(outcome.completed).lower(), "reason": outcome.reason, "time": repr(outcome.time)}
+        )
 
 
 def outcome_record(outcome) -> dict:
