@@ -34,7 +34,8 @@ def format_info(log: Log) -> str:
         name_width = max(13, *(len(component) for component in fmus))  # a fleet's: robot1:pure_pursuit
         for component, fmu in fmus.items():
             lines.append(
-                f"  {component:<{name_width}} {fmu.get('model_name', '?'):<22} FMI {fmu.get('fmi_version', '?'):<4} "
+                f"  {component:<{name_width}} {fmu.get('model_name', '?'):<22} "
+                f"FMI {fmu.get('fmi_version', '?'):<4} "
                 f"guid {fmu.get('guid', '?')}  by {fmu.get('generation_tool', '?')}"
             )
     lines.append("topics")

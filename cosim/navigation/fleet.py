@@ -26,7 +26,10 @@ components step only in a block's first step:
 The run ends when every robot has completed, at the stop time, or at the first collision when
 `[fleet] on_collision = "stop"` (robot-robot contact, or a robot hitting a wall or obstacle). With
 "continue" every robot-robot contact is reported once when it begins and the run goes on; a
-robot that hit a wall stops being judged (it has failed).
+robot that hit a wall or obstacle has failed: it is no longer judged, and at the end of that block
+(at most 0.1 s later) it is switched off (`_halt`: its components are no longer stepped), so it
+stays where it stands, an obstacle the others' lidars see. (Only the compiled kernel can leave
+components out: a fleet it cannot step, Jacobi with Python components, runs such a robot on.)
 
 Deadlock: a robot that has not completed and has come no closer than 0.5 m to its current goal
 than its best for `[fleet] deadlock_after` seconds (dwelling at a goal excluded) is deadlocked from
@@ -69,7 +72,9 @@ STOPPED_SPEED = 0.01  # [m/s] below this a robot counts as stopped
 @dataclass
 class RobotOutcome:
     """One robot's run. status: running, completed, collision (with a wall or obstacle; robot
-    contacts are in the fleet's `collisions`), no_path, stop_time."""
+    contacts are in the fleet's `collisions`), no_path, stop_time (still running at the stop
+    time), stopped (still running when the run ended otherwise: the first collision with
+    on_collision = "stop", an interrupt)."""
 
     name: str
     status: str = "running"
@@ -196,6 +201,7 @@ class _Robot:
         self.commands_now = np.empty((0, 2))
         self.modes = np.empty(0)
         self._last = (np.array(self.pose, dtype=float), np.array(self.command, dtype=float), math.nan)
+        self.halted = False  # switched off after hitting a wall or obstacle (`_halt`)
 
     def place(self, order: list) -> None:
         """Where the fleet system's block rows (components in `order`) hold this robot's."""
@@ -208,6 +214,12 @@ class _Robot:
         """Keep, from the rows of the block of `count` steps from step `first`, for each step the
         pose at its end, the command applied in it and the avoidance mode."""
         last_pose, last_command, last_mode = self._last
+        if self.halted:  # not stepped: where it stopped, commanding nothing
+            self.poses = np.tile(last_pose, (count, 1))
+            self.commands_now = np.zeros((count, 2))
+            self.modes = np.full(count, math.nan)
+            self._last = (last_pose, np.zeros(2), math.nan)
+            return
         vehicle = histories[self.vehicle_row]
         self.poses = _held(vehicle[:, self.pose_columns], first, count, self.vehicle_period, last_pose)
         if self.command_columns is not None:
@@ -469,6 +481,9 @@ def _run(
         k += i + 1
         if reason is None and interrupt.take() is not None:
             reason = "interrupted"
+        if tables is not None and reason is None:
+            if any(each.outcome.status == "collision" and not each.halted for each in robots):
+                tables = _halt(master, robots, log, block)
         for each in robots:  # a new mission goal: given at the end of the block
             if each.pending_goal and each.judged:
                 _next_goal(each, outcome.time)
@@ -488,6 +503,21 @@ def _run(
             each.outcome.status = "stop_time" if reason == "stop_time" else "stopped"
     outcome.reason = reason
     outcome.wall_time = time.perf_counter() - wall_start
+
+
+def _halt(master: Master, robots: list[_Robot], log: FleetLog | None, block: int):
+    """Switch off every robot that hit a wall or obstacle ([fleet] on_collision = "continue"): its
+    components are no longer stepped (the master steps no component with constant outputs), so it
+    stays where it stands, its pose still seen by the others' lidars. Returns the kernel's tables
+    for the robots still stepped."""
+    for each in robots:
+        if each.outcome.status == "collision" and not each.halted:
+            each.halted = True
+            for component in each.built.system.components.values():
+                component.constant_outputs = True
+            if log is not None:
+                log.steps.halt(each.robot.name)
+    return master.kernel_tables(record=True, block=block)
 
 
 def _held(rows: np.ndarray, first: int, count: int, period: int, last: np.ndarray) -> np.ndarray:

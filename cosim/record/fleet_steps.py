@@ -66,6 +66,7 @@ class _Robot:
         self.last_command = (
             [port.reading.value() for port in command[1]] if command is not None else None
         )  # after the last step handed over
+        self.halted = False  # no longer stepped (`FleetSteps.halt`)
         self.odom_frame = f"{name}/{rosmsg.ODOM_FRAME}"
         self.base_frame = f"{name}/{rosmsg.ROBOT_FRAME}"
 
@@ -115,6 +116,12 @@ class FleetSteps:
         """Each robot's recorder (`Recorder.namespaced`), by name."""
         return {robot.name: robot.view for robot in self.robots}
 
+    def halt(self, name: str) -> None:
+        """Robot `name` is no longer stepped (switched off by the fleet): no more records of its
+        components, scans or commands; its signals' last records come at the end of the run, its
+        poses from the fleet as before."""
+        next(robot for robot in self.robots if robot.name == name).halted = True
+
     def write_constant(self, t_ns: int) -> None:
         """The records of the components whose outputs are fixed for the run."""
         for robot in self.robots:
@@ -161,6 +168,8 @@ class FleetSteps:
         start_ns, h_ns, per_step = self.start_ns, self.h_ns, self.per_step
         signals, messages = [], []
         for number, robot in enumerate(self.robots):
+            if robot.halted:
+                continue
             for slot, index, columns, entry in robot.entries:
                 period = entry.period
                 rows = histories[index]

@@ -94,3 +94,56 @@ def test_a_fleet_of_one_records_the_single_robot_runs_signals(tmp_path):
         ]
         assert last_scan[0].t_ns == last_scan[1].t_ns
         np.testing.assert_array_equal(last_scan[0].message.ranges, last_scan[1].message.ranges)
+
+
+def test_a_robot_that_hits_a_wall_halts_and_stays_an_obstacle_for_the_others(tmp_path):
+    # Robot 1 starts with its footprint (r 0.5 m) 0.2 m into the rack whose edge is y = 15 m, so
+    # it hits it in its first step; with on_collision = "continue" it is switched off at the end of
+    # that block (t = 0.1 s) and stays there, while robot 2 drives past it along the aisle.
+    text = (SCENARIOS / "fleet_head_on.toml").read_text()
+    text = text.replace('on_collision = "stop"', 'on_collision = "continue"')
+    text = text.replace(
+        "start = { x = 12.0, y = 19.0, theta = 0.0 }",
+        "start = { x = 20.0, y = 15.3, theta = 0.0 }\nplanner = { expansion_distance = 0.1 }",
+    )
+    fleet = parse_scenario(text.replace("stop_time = 60.0", "stop_time = 20.0"), "wall.toml", SCENARIOS)
+    trace: list = []
+    log = tmp_path / "fleet.mcap"
+    outcome = run_fleet(fleet, trace, log_path=log)
+    robot1, robot2 = outcome.robots
+    assert robot1.status == "collision" and robot2.status == "completed"
+    t_hit, x_hit, y_hit = robot1.collision
+    halt = math.floor(t_hit * 10 + 1) / 10  # the end of the block (0.1 s) in which it hit
+    times = np.array([t for t, _ in trace])
+    positions = np.array([p[0] for _, p in trace])
+    assert times[-1] > halt + 10.0
+    stays = positions[times >= halt - 1e-9]
+    assert np.all(stays == stays[0])
+    assert math.dist(stays[0], (x_hit, y_hit)) <= 1.5 * (halt - t_hit) + 1e-9  # at most 1.5 m/s meanwhile
+    with open_log(log) as read:
+        odometry = read.robot_trajectory("robot1")
+        after = odometry.t >= halt - 1e-9
+        assert np.all(odometry.x[after] == stays[0][0]) and np.all(odometry.y[after] == stays[0][1])
+        assert read.signals("robot1:vehicle").t[-1] <= halt + 0.01 + 1e-9  # not stepped after the halt
+        # Robot 2's scans see robot 1's footprint where it stands: along each beam that meets the
+        # circle (centre at distance d, bearing off the beam a) the range is d cos a - sqrt(r^2 -
+        # d^2 sin^2 a); the rack behind it is farther.
+        poses = read.robot_trajectory("robot2")
+        at = {round(t * 1e9): pose for t, *pose in zip(poses.t, poses.x, poses.y, poses.theta, strict=True)}
+        seen = 0
+        for item in read.messages("/robot2/scan"):
+            if item.t < halt + 0.05 or item.t_ns not in at:
+                continue
+            x, y, theta = at[item.t_ns]
+            d = math.dist((x, y), stays[0])
+            bearing = math.atan2(stays[0][1] - y, stays[0][0] - x)
+            scan = item.message
+            angles = scan.angle_min + scan.angle_increment * np.arange(len(scan.ranges))
+            for angle, measured in zip(angles, np.asarray(scan.ranges, dtype=float), strict=True):
+                a = math.remainder(bearing - (angle + theta), math.tau)
+                if abs(d * math.sin(a)) < 0.4 and abs(a) < math.pi / 2 and d < 15.0:
+                    assert measured == pytest.approx(
+                        d * math.cos(a) - math.sqrt(0.25 - (d * math.sin(a)) ** 2), abs=1e-4
+                    )
+                    seen += 1
+        assert seen > 50
