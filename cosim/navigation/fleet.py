@@ -182,10 +182,6 @@ class _Robot:
         self.logged_goal = scenario.goal
         self.pending_goal = False
         self.logged_plan = 0
-        self.scan_lidar = system.components.get(SEEN_BY)
-        if self.scan_lidar is not None and not hasattr(self.scan_lidar, "beam_angles"):
-            self.scan_lidar = None  # not the template's lidar
-        self.lidar_steps = system.period_steps(self.scan_lidar) if self.scan_lidar is not None else 1
         self.vehicle = vehicle
         self.vehicle_row = -1  # where the fleet's block rows hold the vehicle's, set by `place`
         self.vehicle_period = system.period_steps(vehicle)
