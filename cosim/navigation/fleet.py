@@ -56,10 +56,11 @@ import numpy as np
 from cosim.core import interrupt
 from cosim.core.master import NS_PER_S, Master
 from cosim.core.system import System
-from cosim.errors import CosimError
+from cosim.errors import PATH_LIMIT, CosimError, shorten
 from cosim.navigation.build import build_run
 from cosim.navigation.fleet_log import FleetLog
 from cosim.navigation.outcome import MODE_RECOVER, OutcomeMonitor
+from cosim.record.logfile import is_regular_file
 from cosim.record.system_run import close_quietly, open_recorder, run_guarded, writing_failed
 from cosim.scenario.fleet import Fleet
 from cosim.scenario.fleet_compose import POSE_OF, SEEN_BY, describe_fleet
@@ -269,6 +270,9 @@ def run_fleet(
     everything the log gets, and `goals` (`cosim.record.live.GoalSource`) is answered that a
     fleet takes no goals. A failed FMU or SIGINT/SIGTERM ends the run with reason "fmu_failed"
     (`FleetOutcome.failure`) or "interrupted", the log finalised."""
+    if log_path is not None and not force and is_regular_file(Path(log_path)):
+        # Checked again, race-free, when the log is created; here to fail before the build.
+        raise CosimError(f"{shorten(log_path, PATH_LIMIT)}: already exists; give --force to overwrite it")
     with interrupt.catching_signals():
         described = describe_fleet(fleet)
         robots = [
