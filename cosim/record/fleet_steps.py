@@ -27,16 +27,23 @@ between blocks beyond what the recorder holds until it packs.
 
 from __future__ import annotations
 
+import math
+import struct
+from functools import partial
 from typing import NamedTuple
 
 import numpy as np
 
-from cosim.core.timebase import due_from
+from cosim.core.timebase import NS_PER_S, due_from
+from cosim.errors import CosimError
 from cosim.record import rosmsg
 from cosim.record.steps import SignalEntry, StepRecording
 
 ODOM = "nav_msgs/msg/Odometry"
 TF = "tf2_msgs/msg/TFMessage"
+_SENTINEL_NS = 1_234_567_891_987_654_321  # a stamp no run writes, to find in a template
+_STAMP = struct.Struct("<iI")  # builtin_interfaces/Time: int32 sec, uint32 nanosec
+_FLOAT64 = struct.Struct("<d")
 
 
 class _Entry(NamedTuple):
@@ -110,6 +117,7 @@ class FleetSteps:
         self.pose_slot = self.obstacle_slot + 1  # every robot's /odom and /pose, then /tf
         self.per_step = self.pose_slot + 2 * len(self.robots) + 1
         self.world = self.robots[0].recording  # the obstacles the fleet shares
+        self._tf: _Template | None = None  # the pose messages' templates, made on first use
 
     @property
     def views(self) -> dict[str, object]:
@@ -136,30 +144,20 @@ class FleetSteps:
 
     def pose_messages(self, t_ns: int, rows) -> list[tuple[int, bytes]]:
         """(channel, CDR payload) of every robot's /odom and /pose, then of the one /tf, at t_ns."""
-        messages, transforms = [], []
-        for robot, (x, y, theta, v, omega) in zip(self.robots, rows, strict=True):
+        if self._tf is None:
+            self._odometry = [_Template(partial(_odometry, robot), 6) for robot in self.robots]
+            self._tf = _Template(partial(_tf, self.robots), 4 * len(self.robots))
+            self._channels = [(r.view.channel("/odom"), r.view.channel("/pose")) for r in self.robots]
+        messages, poses = [], []
+        for odometry, (odom, pose), (x, y, theta, v, omega) in zip(
+            self._odometry, self._channels, rows, strict=True
+        ):
             x, y, theta, v, omega = float(x), float(y), float(theta), float(v), float(omega)
-            transforms.append(_transform(t_ns, rosmsg.MAP_FRAME, robot.odom_frame, 0.0, 0.0, 0.0))
-            transforms.append(_transform(t_ns, robot.odom_frame, robot.base_frame, x, y, theta))
-            odometry = rosmsg.make(
-                ODOM,
-                header=rosmsg.header(t_ns, robot.odom_frame),
-                child_frame_id=robot.base_frame,
-                pose=rosmsg.make(
-                    "geometry_msgs/msg/PoseWithCovariance",
-                    pose=rosmsg.pose(x, y, theta),
-                    covariance=np.zeros(36),
-                ),
-                twist=rosmsg.make(
-                    "geometry_msgs/msg/TwistWithCovariance",
-                    twist=rosmsg.twist(v, omega),
-                    covariance=np.zeros(36),
-                ),
-            )
-            messages.append((robot.view.channel("/odom"), rosmsg.serialize(odometry, ODOM)))
-            messages.append((robot.view.channel("/pose"), rosmsg.pose_stamped_cdr(t_ns, x, y, theta)))
-        tf = rosmsg.serialize(rosmsg.make(TF, transforms=transforms), TF)
-        messages.append((self.recorder.channel("/tf"), tf))
+            qz, qw = math.sin(theta / 2.0), math.cos(theta / 2.0)  # as `rosmsg.quaternion`
+            messages.append((odom, odometry.fill(t_ns, (x, y, qz, qw, v, omega))))
+            messages.append((pose, rosmsg.pose_stamped_cdr(t_ns, x, y, theta)))
+            poses += (x, y, qz, qw)
+        messages.append((self.recorder.channel("/tf"), self._tf.fill(t_ns, poses)))
         return messages
 
     def block(self, first: int, end: int, histories, poses=()) -> None:
@@ -245,7 +243,70 @@ class FleetSteps:
         return [float(column[j]) if j >= 0 else last for j in at.tolist()]
 
 
-def _transform(t_ns: int, parent: str, child: str, x: float, y: float, theta: float):
+class _Template:
+    """The CDR bytes of one message layout with the offsets of its stamps and of its varying float64
+    fields, found by serialising sentinel values once (`build(t_ns, values)` -> bytes): the layout
+    does not depend on the values, so `fill(t_ns, values)` gives the bytes `build` gives, without
+    building the message (the fleet writes 2 N + 1 pose messages at each pose time)."""
+
+    def __init__(self, build, count: int) -> None:
+        sentinels = [1.0e250 * (index + 1.5) for index in range(count)]
+        data = build(_SENTINEL_NS, sentinels)
+        self.data = bytearray(data)
+        self.stamps = _offsets(data, _STAMP.pack(*divmod(_SENTINEL_NS, NS_PER_S)))
+        self.fields = [_offsets(data, _FLOAT64.pack(value)) for value in sentinels]
+        if not self.stamps or any(len(found) != 1 for found in self.fields):
+            raise CosimError("unexpected CDR layout of a pose message")
+        self.fields = [found[0] for found in self.fields]
+
+    def fill(self, t_ns: int, values) -> bytes:
+        data = self.data
+        stamp = _STAMP.pack(*divmod(int(t_ns), NS_PER_S))
+        for at in self.stamps:
+            data[at : at + 8] = stamp
+        for at, value in zip(self.fields, values, strict=True):
+            data[at : at + 8] = _FLOAT64.pack(value)
+        return bytes(data)
+
+
+def _offsets(data: bytes, pattern: bytes) -> list[int]:
+    found, at = [], data.find(pattern)
+    while at >= 0:
+        found.append(at)
+        at = data.find(pattern, at + 1)
+    return found
+
+
+def _odometry(robot: _Robot, t_ns: int, values) -> bytes:
+    """/<robot>/odom: pose (x, y, qz, qw) in `<robot>/odom` of child `<robot>/base_link`, twist (v,
+    omega), zero covariances."""
+    x, y, qz, qw, v, omega = values
+    orientation = rosmsg.make("geometry_msgs/msg/Quaternion", x=0.0, y=0.0, z=qz, w=qw)
+    pose = rosmsg.make("geometry_msgs/msg/Pose", position=rosmsg.point(x, y), orientation=orientation)
+    message = rosmsg.make(
+        ODOM,
+        header=rosmsg.header(t_ns, robot.odom_frame),
+        child_frame_id=robot.base_frame,
+        pose=rosmsg.make("geometry_msgs/msg/PoseWithCovariance", pose=pose, covariance=np.zeros(36)),
+        twist=rosmsg.make(
+            "geometry_msgs/msg/TwistWithCovariance", twist=rosmsg.twist(v, omega), covariance=np.zeros(36)
+        ),
+    )
+    return rosmsg.serialize(message, ODOM)
+
+
+def _tf(robots: list[_Robot], t_ns: int, values) -> bytes:
+    """/tf: per robot `map -> <robot>/odom` (the identity) and `<robot>/odom -> <robot>/base_link`
+    (x, y, qz, qw of `values`, 4 per robot)."""
+    transforms = []
+    for number, robot in enumerate(robots):
+        x, y, qz, qw = values[4 * number : 4 * number + 4]
+        transforms.append(_transform(t_ns, rosmsg.MAP_FRAME, robot.odom_frame, 0.0, 0.0, 0.0, 1.0))
+        transforms.append(_transform(t_ns, robot.odom_frame, robot.base_frame, x, y, qz, qw))
+    return rosmsg.serialize(rosmsg.make(TF, transforms=transforms), TF)
+
+
+def _transform(t_ns: int, parent: str, child: str, x: float, y: float, qz: float, qw: float):
     return rosmsg.make(
         "geometry_msgs/msg/TransformStamped",
         header=rosmsg.header(t_ns, parent),
@@ -253,6 +314,6 @@ def _transform(t_ns: int, parent: str, child: str, x: float, y: float, theta: fl
         transform=rosmsg.make(
             "geometry_msgs/msg/Transform",
             translation=rosmsg.vector3(x, y, 0.0),
-            rotation=rosmsg.quaternion(theta),
+            rotation=rosmsg.make("geometry_msgs/msg/Quaternion", x=0.0, y=0.0, z=qz, w=qw),
         ),
     )

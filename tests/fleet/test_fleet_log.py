@@ -147,3 +147,21 @@ def test_a_robot_that_hits_a_wall_halts_and_stays_an_obstacle_for_the_others(tmp
                     )
                     seen += 1
         assert seen > 50
+
+
+def test_the_pose_templates_give_the_bytes_of_the_serialised_messages():
+    # /robotN/odom and /tf are patched into templates; rosbags serialising each message in full
+    # must give the same bytes, for any stamp and values (NaN twist, negative angles included).
+    from types import SimpleNamespace
+
+    from cosim.record import fleet_steps
+
+    robots = [SimpleNamespace(odom_frame=f"r{n}/odom", base_frame=f"r{n}/base_link") for n in ("1", "22")]
+    generator = np.random.default_rng(7)
+    odometry = fleet_steps._Template(lambda t, v: fleet_steps._odometry(robots[1], t, v), 6)
+    tf = fleet_steps._Template(lambda t, v: fleet_steps._tf(robots, t, v), 8)
+    for t_ns in (0, 10_000_000, 1_999_999_999_990, 7_359_000_001):
+        values = [*generator.normal(0.0, 30.0, 5), math.nan]
+        assert odometry.fill(t_ns, values) == fleet_steps._odometry(robots[1], t_ns, values)
+        values = list(generator.normal(0.0, 30.0, 8))
+        assert tf.fill(t_ns, values) == fleet_steps._tf(robots, t_ns, values)
