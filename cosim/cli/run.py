@@ -174,9 +174,19 @@ def _handler(args) -> int:
         from cosim.navigation.fleet import run_fleet_command
 
         plot = scenario.first.plot and not args.no_plot
-        return run_fleet_command(
-            args, scenario, (lambda path: _plot_fleet(path, args.quiet)) if plot else None
-        )
+        sink = _live_sink(args, scenario.first.macro_step)
+        try:
+            code = run_fleet_command(
+                args, scenario, (lambda path: _plot_fleet(path, args.quiet)) if plot else None, sink
+            )
+            if args.live and code != 2:
+                wait = "until Ctrl-C" if args.linger is None else f"for {args.linger:g} s"
+                print(f"live view: run ended; serving {sink.url} {wait}", file=sys.stderr, flush=True)
+                sink.linger(args.linger)
+            return code
+        finally:
+            if args.live:
+                sink.stop()
     plotter = None
     if scenario.plot and not args.no_plot and getattr(args, "program", False):
         from cosim.cli.plotter import PlotProcess

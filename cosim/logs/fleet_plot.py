@@ -6,7 +6,8 @@ the end (its last `/<robot>/plan`), its goals (`/<robot>/goal`: an earlier one h
 filled) and, for a robot that did not complete, an X where it ended; each collision of the fleet
 outcome is a black-edged marker at its place with the robots and the time beside it: a
 robot-robot contact at the point where the two footprints touch (on the line between the centres,
-one radius from the first), a robot hitting a wall or obstacle at the robot's centre. Right: each
+one radius from the first), a robot hitting a wall or obstacle at the robot's centre; the texts
+are placed so that none covers another or a marker. Right: each
 robot's speed (the distance between consecutive poses over their time step) and its distance to
 the goal in force, over time. The view holds the robots' trajectories, goals and plans. The
 title: the scenario, the fleet's line (how it ended, collisions, makespan) and the log's file
@@ -27,6 +28,10 @@ if TYPE_CHECKING:
     from cosim.logs.reader import Log
 
 COLLISION_COLOR = "#000000"
+MARKER_SIZE = 13  # [points] a collision's X
+LABEL_STEP = 12  # [points] between the places tried for a collision's text
+LABEL_SIZE = 7  # [points]
+LABEL_PAD = 0.15  # [font sizes] the white box around it
 VIEW_MARGIN = 3.0  # [m] at least around what the robots did
 VIEW_ASPECT = 1.6  # the view's least width / height
 
@@ -57,22 +62,59 @@ def build_fleet_figure(log: Log, dpi: float = DPI, size=None):
         for run in runs:
             if run.trajectory is not None and np.array_equal(line.get_xydata(), run.trajectory):
                 line.set_gid(f"trajectory {run.label}")
-    for index, (x, y, text) in enumerate(collision_marks(log.fleet_outcome or {})):
-        (marker,) = axes.plot(x, y, marker="X", mfc="#ffd60a", mec=COLLISION_COLOR, mew=1.5, ms=13,
-                              ls="none", zorder=10)  # fmt: skip
+    marks = collision_marks(log.fleet_outcome or {})
+    for index, (x, y, _) in enumerate(marks):
+        (marker,) = axes.plot(x, y, marker="X", mfc="#ffd60a", mec=COLLISION_COLOR, mew=1.5,
+                              ms=MARKER_SIZE, ls="none", zorder=10)  # fmt: skip
         marker.set_gid(f"collision {index}")
-        axes.annotate(
-            text, (x, y), xytext=(10, 6 + 12 * (index % 4)), textcoords="offset points", fontsize=7,
-            color=COLLISION_COLOR, zorder=11,
-            bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8},
-        )  # fmt: skip
     axes.set_title("robots over the map (X: collision)", y=1.0)
     if len(figure.axes) > 1:  # speeds from 0 (no offset notation for a near-constant speed)
         speeds = figure.axes[1]
         top = max((float(np.nanmax(line.get_ydata(), initial=0.0)) for line in speeds.lines), default=1.0)
         speeds.set_ylim(0.0, max(1.1 * top, 0.1))
+    figure.canvas.draw()  # the axes' final place: the labels are placed in pixels
+    _label_collisions(figure, axes, marks)
     figure.canvas.draw()
     return figure
+
+
+def _label_collisions(figure, axes, marks: list[tuple[float, float, str]]) -> None:
+    """Each collision's text beside its marker where it covers no other text and no marker: tried
+    right and left of it, then in steps of `LABEL_STEP` above and below (contacts at a crossing
+    lie within a metre of each other); a text moved off its marker's line gets a thin line to it."""
+    from matplotlib.transforms import Bbox
+
+    renderer = figure.canvas.get_renderer()
+    half = MARKER_SIZE / 2 * figure.dpi / 72  # [px] half the marker
+    taken = []
+    for x, y, _ in marks:
+        px, py = axes.transData.transform((x, y))
+        taken.append(Bbox.from_extents(px - half, py - half, px + half, py + half))
+    frame = axes.get_window_extent(renderer)
+    steps = [0] + [sign * n for n in range(1, 9) for sign in (1, -1)]
+    offsets = [(side * 10, LABEL_STEP * step) for step in steps for side in (1, -1)]
+    box_style = {"boxstyle": f"round,pad={LABEL_PAD}", "fc": "white", "ec": "none", "alpha": 0.8}
+    style = {"textcoords": "offset points", "fontsize": LABEL_SIZE, "color": COLLISION_COLOR, "zorder": 11,
+             "va": "center", "bbox": box_style}  # fmt: skip
+    pad = (LABEL_PAD * LABEL_SIZE + 0.5) * figure.dpi / 72  # [px] the white box around the text
+    for x, y, text in marks:
+        for dx, dy in offsets:
+            label = axes.annotate(text, (x, y), xytext=(dx, dy), ha="left" if dx > 0 else "right", **style)
+            box = label.get_window_extent(renderer).padded(pad)
+            if frame.contains(box.x0, box.y0) and frame.contains(box.x1, box.y1):
+                if not any(box.overlaps(other) for other in taken):
+                    break
+            label.remove()
+        else:
+            dx, dy = offsets[0]
+            label = axes.annotate(text, (x, y), xytext=(dx, dy), ha="left", **style)
+            box = label.get_window_extent(renderer).padded(pad)
+        if dy:  # off the marker's line: a leader to it
+            label.remove()
+            leader = {"arrowstyle": "-", "lw": 0.6, "color": COLLISION_COLOR, "shrinkB": half}
+            axes.annotate(text, (x, y), xytext=(dx, dy), ha="left" if dx > 0 else "right", arrowprops=leader,
+                          **style)  # fmt: skip
+        taken.append(box)
 
 
 def fleet_runs(log: Log) -> list[PlotData]:

@@ -31,9 +31,11 @@ def format_info(log: Log) -> str:
     fmus = log.fmus
     if fmus:
         lines.append("FMUs")
+        name_width = max(13, *(len(component) for component in fmus))  # a fleet's: robot1:pure_pursuit
         for component, fmu in fmus.items():
             lines.append(
-                f"  {component:<13} {fmu.get('model_name', '?'):<22} FMI {fmu.get('fmi_version', '?'):<4} "
+                f"  {component:<{name_width}} {fmu.get('model_name', '?'):<22} "
+                f"FMI {fmu.get('fmi_version', '?'):<4} "
                 f"guid {fmu.get('guid', '?')}  by {fmu.get('generation_tool', '?')}"
             )
     lines.append("topics")
@@ -47,7 +49,7 @@ def format_info(log: Log) -> str:
             "signals   " + ", ".join(f"{name} ({len(log.signal_names(name))})" for name in log.components)
         )
     elif log.fleet_outcome is not None:
-        lines.append("signals   none (a fleet's log: each robot's poses on /<robot>/odom)")
+        lines.append("signals   none (a fleet's log of navcosim 3f13a1e or older: poses on /<robot>/odom)")
     else:
         lines.append("signals   none (no /signals/<component> channels: not a navcosim run log)")
     if log.text_components:

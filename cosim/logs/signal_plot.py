@@ -46,12 +46,14 @@ def plot_any(
 ) -> Path:
     """Draw `logs` (one, or several to overlay) to `png_path` as robots' runs when each is one,
     else as signals over time (module docstring); `signals` ("component.variable") None: the
-    picture's defaults; one fleet's log without `signals`: `cosim.logs.fleet_plot`;
+    picture's defaults; one fleet's log: `cosim.logs.fleet_plot` (with `signals`: those over time);
     `dpi` [pixels per inch], `size` (width, height) [px] or None: the
     picture's own. Returns the PNG path."""
     logs = logs if isinstance(logs, list) else [logs]
-    if len(logs) == 1 and signals is None and is_fleet_log(logs[0]):
-        return plot_fleet(logs[0], png_path, dpi, size)
+    if len(logs) == 1 and is_fleet_log(logs[0]):  # its robots' signals: robot1:vehicle.x
+        if signals is None:
+            return plot_fleet(logs[0], png_path, dpi, size)
+        return plot_signals(logs, png_path, signals, dpi, size)
     if all(is_robot_log(log) for log in logs):
         return plot_logs(logs, Path(png_path), signals, dpi, size)
     return plot_signals(logs, png_path, signals, dpi, size)

@@ -26,7 +26,10 @@ components step only in a block's first step:
 The run ends when every robot has completed, at the stop time, or at the first collision when
 `[fleet] on_collision = "stop"` (robot-robot contact, or a robot hitting a wall or obstacle). With
 "continue" every robot-robot contact is reported once when it begins and the run goes on; a
-robot that hit a wall stops being judged (it has failed).
+robot that hit a wall or obstacle has failed: it is no longer judged, and at the end of that block
+(at most 0.1 s later) it is switched off (`_halt`: its components are no longer stepped), so it
+stays where it stands, an obstacle the others' lidars see. (Only the compiled kernel can leave
+components out: a fleet it cannot step, Jacobi with Python components, runs such a robot on.)
 
 Deadlock: a robot that has not completed and has come no closer than 0.5 m to its current goal
 than its best for `[fleet] deadlock_after` seconds (dwelling at a goal excluded) is deadlocked from
@@ -34,10 +37,11 @@ the start of that period; it stays deadlocked unless it makes progress again (th
 counts anew). The fleet outcome counts robots deadlocked at the end.
 
 A run that ends inside a block ends at that step: the fleet's system has advanced to the block's
-end, but nothing after the step is judged or logged. The log (`cosim.navigation.fleet_log`)
-holds the robots' poses under their namespaces (`/robot1/odom`, TF `map -> robot1/odom ->
-robot1/base_link`), goals and the fleet outcome. Signals, scans and plans per robot come when a
-fleet is one system recorded through the run path's recorder (`cosim.record`).
+end, but nothing after the step is judged or logged. The log (`cosim.navigation.fleet_log`) is the
+base run's (`cosim.record.system_run`) with every robot recorded as the single-robot run records
+one, under its namespace: `/robot1/signals/<component>`, `/robot1/scan`, `/robot1/cmd_vel`,
+`/robot1/odom`, ..., one TF tree `map -> robot1/odom -> robot1/base_link`, goals, plans and the
+fleet outcome.
 """
 
 from __future__ import annotations
@@ -49,12 +53,15 @@ from pathlib import Path
 
 import numpy as np
 
+from cosim.core import interrupt
 from cosim.core.master import NS_PER_S, Master
 from cosim.core.system import System
-from cosim.errors import CosimError
+from cosim.errors import PATH_LIMIT, CosimError, shorten
 from cosim.navigation.build import build_run
-from cosim.navigation.fleet_log import FleetLog, outcome_record
+from cosim.navigation.fleet_log import FleetLog
 from cosim.navigation.outcome import MODE_RECOVER, OutcomeMonitor
+from cosim.record.logfile import is_regular_file
+from cosim.record.system_run import close_quietly, open_recorder, run_guarded, writing_failed
 from cosim.scenario.fleet import Fleet
 from cosim.scenario.fleet_compose import POSE_OF, SEEN_BY, describe_fleet
 from cosim.world.fleet import Contact, FleetContacts
@@ -66,7 +73,9 @@ STOPPED_SPEED = 0.01  # [m/s] below this a robot counts as stopped
 @dataclass
 class RobotOutcome:
     """One robot's run. status: running, completed, collision (with a wall or obstacle; robot
-    contacts are in the fleet's `collisions`), no_path, stop_time."""
+    contacts are in the fleet's `collisions`), no_path, stop_time (still running at the stop
+    time), stopped (still running when the run ended otherwise: the first collision with
+    on_collision = "stop", an interrupt)."""
 
     name: str
     status: str = "running"
@@ -91,6 +100,7 @@ class FleetOutcome:
         "running"  # completed, collision, stop_time, all_ended (none still running, not all completed)
     )
     wall_time: float = 0.0  # [s]
+    failure: str | None = None  # the message of a failed FMU (reason fmu_failed)
 
     @property
     def completed(self) -> bool:
@@ -116,7 +126,9 @@ class FleetOutcome:
 
     @property
     def exit_code(self) -> int:
-        """0 only when every robot completed its goal or mission."""
+        """0 only when every robot completed its goal or mission; 2 when an FMU failed."""
+        if self.failure is not None:
+            return 2
         return 0 if self.completed else 1
 
 
@@ -171,10 +183,6 @@ class _Robot:
         self.logged_goal = scenario.goal
         self.pending_goal = False
         self.logged_plan = 0
-        self.scan_lidar = system.components.get(SEEN_BY)
-        if self.scan_lidar is not None and not hasattr(self.scan_lidar, "beam_angles"):
-            self.scan_lidar = None  # not the template's lidar
-        self.lidar_steps = system.period_steps(self.scan_lidar) if self.scan_lidar is not None else 1
         self.vehicle = vehicle
         self.vehicle_row = -1  # where the fleet's block rows hold the vehicle's, set by `place`
         self.vehicle_period = system.period_steps(vehicle)
@@ -190,6 +198,7 @@ class _Robot:
         self.commands_now = np.empty((0, 2))
         self.modes = np.empty(0)
         self._last = (np.array(self.pose, dtype=float), np.array(self.command, dtype=float), math.nan)
+        self.halted = False  # switched off after hitting a wall or obstacle (`_halt`)
 
     def place(self, order: list) -> None:
         """Where the fleet system's block rows (components in `order`) hold this robot's."""
@@ -202,6 +211,12 @@ class _Robot:
         """Keep, from the rows of the block of `count` steps from step `first`, for each step the
         pose at its end, the command applied in it and the avoidance mode."""
         last_pose, last_command, last_mode = self._last
+        if self.halted:  # not stepped: where it stopped, commanding nothing
+            self.poses = np.tile(last_pose, (count, 1))
+            self.commands_now = np.zeros((count, 2))
+            self.modes = np.full(count, math.nan)
+            self._last = (last_pose, np.zeros(2), math.nan)
+            return
         vehicle = histories[self.vehicle_row]
         self.poses = _held(vehicle[:, self.pose_columns], first, count, self.vehicle_period, last_pose)
         if self.command_columns is not None:
@@ -238,34 +253,83 @@ class _Robot:
         return self.outcome.status == "running"
 
 
-def run_fleet(fleet: Fleet, trace: list | None = None, log_path: Path | None = None) -> FleetOutcome:
+def run_fleet(
+    fleet: Fleet,
+    trace: list | None = None,
+    log_path: Path | None = None,
+    *,
+    force: bool = False,
+    progress: bool = False,
+    sink=None,
+    goals=None,
+) -> FleetOutcome:
     """Run `fleet` (module docstring); `CosimError` on bad input (before anything runs). `trace`,
     when given, gets (t [s], positions (N x 2) [m]) at the start and after every step; `log_path`
-    gets the fleet's log (`cosim.navigation.fleet_log`)."""
-    described = describe_fleet(fleet)
-    robots = [
-        _Robot(robot, build_run(robot.scenario, described.robots[robot.name]), fleet.settings.deadlock_after)
-        for robot in fleet.robots
-    ]
-    system, parameters = fleet_system(fleet, described, [each.built for each in robots])
-    master = Master(system, parameters=parameters, stop_time=fleet.first.stop_time)
-    try:
+    gets the fleet's log (`cosim.navigation.fleet_log`; an existing file only with `force`), with a
+    progress bar on stderr when `progress`; `sink` (`cosim.record.live.Sink`, the live view) gets
+    everything the log gets, and `goals` (`cosim.record.live.GoalSource`) is answered that a
+    fleet takes no goals. A failed FMU or SIGINT/SIGTERM ends the run with reason "fmu_failed"
+    (`FleetOutcome.failure`) or "interrupted", the log finalised."""
+    if log_path is not None and not force and is_regular_file(Path(log_path)):
+        # Checked again, race-free, when the log is created; here to fail before the build.
+        raise CosimError(f"{shorten(log_path, PATH_LIMIT)}: already exists; give --force to overwrite it")
+    with interrupt.catching_signals():
+        described = describe_fleet(fleet)
+        robots = [
+            _Robot(
+                robot, build_run(robot.scenario, described.robots[robot.name]), fleet.settings.deadlock_after
+            )
+            for robot in fleet.robots
+        ]
+        system, parameters = fleet_system(fleet, described, [each.built for each in robots])
+        master = Master(system, parameters=parameters, stop_time=fleet.first.stop_time)
         try:
             master.initialize()
         except CosimError as error:
+            close_quietly(master)
             raise CosimError(f"{fleet.source}: initialising the system failed: {error}") from None
+        except BaseException:
+            close_quietly(master)
+            raise
         for each in robots:
             each.place(master.order)
-        log = FleetLog(log_path, [each.robot.name for each in robots], fleet.text) if log_path else None
-        outcome = _run(fleet, master, robots, trace, log)
-        if log is not None:
-            log.close(outcome_record(outcome))
+        outcome = FleetOutcome([each.outcome for each in robots])
+        if log_path is None:
+            try:
+                _run(fleet, master, robots, trace, None, outcome)
+            finally:
+                close_quietly(master)
+            return outcome
+        with interrupt.deferred():
+            try:
+                recorder = open_recorder(log_path, force, fleet.name, sink=sink, trace=False)
+            except BaseException:
+                close_quietly(master)
+                raise
+            try:
+                stop_time = fleet.first.stop_time if progress else None
+                log = FleetLog(master, recorder, fleet, robots, stop_time, goals)
+                end = run_guarded(
+                    lambda: _run(fleet, master, robots, trace, log, outcome),
+                    lambda error: f"{error} (at t = {master.time:.3f} s)",
+                )
+                if end.failure is not None:
+                    outcome.reason, outcome.failure = "fmu_failed", end.failure
+                elif end.ended is not None:
+                    outcome.reason = "fmu_terminated"
+                elif end.interrupted:
+                    outcome.reason = "interrupted"
+                outcome.failure = log.close_master(
+                    outcome.failure, lambda e: f"terminating the system failed: {e}"
+                )
+                log.close(outcome, round(outcome.time * NS_PER_S))
+            except OSError as error:
+                close_quietly(master, recorder)
+                raise CosimError(writing_failed(error, Path(log_path))) from None
+            except BaseException:
+                close_quietly(master, recorder)
+                raise
         return outcome
-    finally:
-        try:
-            master.close()
-        except CosimError:
-            pass
 
 
 def core_name(robot: str, component: str) -> str:
@@ -298,8 +362,10 @@ def fleet_system(fleet: Fleet, described, builts: list) -> tuple[System, dict]:
     return system, parameters
 
 
-def _advance(master: Master, robots: list[_Robot], count: int, tables) -> None:
-    """Step the fleet's system `count` steps and hand every robot its rows."""
+def _advance(master: Master, robots: list[_Robot], count: int, tables) -> list:
+    """Step the fleet's system `count` steps, hand every robot its rows and return them (per
+    component of the master's order, its inputs and outputs after each of its steps; None for one
+    stepped by Python)."""
     first = master.step_index
     kept: list[list[np.ndarray]] = []
     if tables is not None:
@@ -320,28 +386,21 @@ def _advance(master: Master, robots: list[_Robot], count: int, tables) -> None:
         histories = [
             np.concatenate([part[i] for part in kept if part[i] is not None])
             if any(part[i] is not None for part in kept)
-            else np.empty((0, 0))
+            else None
             for i in range(len(kept[0]))
         ]
     for each in robots:
         each.take(histories, first, count)
+    return histories
 
 
-def _log_block(log: FleetLog, robots: list[_Robot], t_ns: int) -> None:
-    """The scans taken at the block's start t_ns (a lidar scans only in a block's first step) and
-    the plans made in it (stamped t_ns: the planner steps with the lidar)."""
-    system_period = robots[0].built.system.macro_step_ns
+def _log_plans(log: FleetLog, robots: list[_Robot], t_ns: int) -> None:
+    """The plans made in the block that starts at t_ns (stamped t_ns: a planner steps only in a
+    block's first step), or at its start (a new mission goal given at the end of the last block)."""
     for each in robots:
-        lidar = each.scan_lidar
-        if lidar is not None and (t_ns // system_period) % each.lidar_steps == 0:
-            count = len(lidar.beam_angles)
-            log.write_scan(
-                t_ns, each.robot.name, lidar.beam_angles, lidar.output_buffer[:count],
-                lidar.range_min, lidar.range_max, each.lidar_steps * system_period / NS_PER_S,
-            )  # fmt: skip
         planner = each.built.planner
         if planner is not None and planner.plan_version != each.logged_plan:
-            log.write_plan(t_ns, each.robot.name, planner.waypoints)
+            log.write_plan(t_ns, each.robot.name, planner.result.path)
             each.logged_plan = planner.plan_version
 
 
@@ -358,11 +417,16 @@ def _block_steps(master: Master) -> int:
 
 
 def _run(
-    fleet: Fleet, master: Master, robots: list[_Robot], trace: list | None, log: FleetLog | None
-) -> FleetOutcome:
+    fleet: Fleet,
+    master: Master,
+    robots: list[_Robot],
+    trace: list | None,
+    log: FleetLog | None,
+    outcome: FleetOutcome,
+) -> None:
+    """Step the fleet to its end (module docstring), filling `outcome` as it goes."""
     settings = fleet.settings
     contacts = FleetContacts([each.robot.name for each in robots], [each.robot.radius for each in robots])
-    outcome = FleetOutcome([each.outcome for each in robots])
     h_ns = robots[0].built.system.macro_step_ns
     steps = master.steps_to_stop
     stop_ns = master.stop_time_ns
@@ -371,14 +435,11 @@ def _run(
     if trace is not None:
         trace.append((0.0, positions))
     pose_steps = max(1, round(1.0 / (fleet.first.pose_rate * fleet.first.macro_step)))
+    for each in robots:  # the first plan: in the log's header
+        if each.built.planner is not None:
+            each.logged_plan = each.built.planner.plan_version
     if log is not None:
-        log.write_map(robots[0].built.grid)
-        log.write_poses(0, [each.pose for each in robots], [each.command for each in robots])
-        for each in robots:
-            log.write_goal(0, each.robot.name, *each.monitor.goal)
-            if each.built.planner is not None:
-                log.write_plan(0, each.robot.name, each.built.planner.waypoints)
-                each.logged_plan = each.built.planner.plan_version
+        log.write_poses(0, [(*each.pose, *each.command) for each in robots])
     block = _block_steps(master)
     tables = master.kernel_tables(record=True, block=block)
     wall_start = time.perf_counter()
@@ -387,9 +448,10 @@ def _run(
     last_pose_step = 0
     while k < steps and reason is None:
         count = min(block, steps - k)
-        _advance(master, robots, count, tables)
+        histories = _advance(master, robots, count, tables)
         if log is not None:
-            _log_block(log, robots, k * h_ns)
+            _log_plans(log, robots, k * h_ns)
+        poses = []  # the poses logged in the block: (step, t_ns, per robot x, y, theta, v, omega)
         for i in range(count):
             t = (k + i) * h_ns / NS_PER_S
             end_ns = min((k + i + 1) * h_ns, stop_ns) if stop_ns is not None else (k + i + 1) * h_ns
@@ -404,9 +466,7 @@ def _run(
             if trace is not None:
                 trace.append((t_next, after))
             if log is not None and (k + i + 1) % pose_steps == 0:
-                log.write_poses(
-                    end_ns, [each.poses[i] for each in robots], [each.commands_now[i] for each in robots]
-                )
+                poses.append((k + i, end_ns, [(*each.poses[i], *each.commands_now[i]) for each in robots]))
                 last_pose_step = k + i + 1
             if (began or any(each.outcome.status == "collision" for each in robots)) and (
                 settings.on_collision == "stop"
@@ -416,7 +476,14 @@ def _run(
                 reason = "completed" if outcome.completed else "all_ended"
             if reason is not None:
                 break
+        if log is not None:
+            log.block(k, k + i + 1, histories, poses)
         k += i + 1
+        if reason is None and interrupt.take() is not None:
+            reason = "interrupted"
+        if tables is not None and reason is None:
+            if any(each.outcome.status == "collision" and not each.halted for each in robots):
+                tables = _halt(master, robots, log, block)
         for each in robots:  # a new mission goal: given at the end of the block
             if each.pending_goal and each.judged:
                 _next_goal(each, outcome.time)
@@ -426,9 +493,7 @@ def _run(
                 each.logged_goal = each.monitor.goal
     if log is not None and last_pose_step != k:  # the pose at the end (step i of the last block)
         log.write_poses(
-            round(outcome.time * NS_PER_S),
-            [each.poses[i] for each in robots],
-            [each.commands_now[i] for each in robots],
+            round(outcome.time * NS_PER_S), [(*each.poses[i], *each.commands_now[i]) for each in robots]
         )
     reason = reason or "stop_time"
     for k_robot, each in enumerate(robots):
@@ -438,7 +503,21 @@ def _run(
             each.outcome.status = "stop_time" if reason == "stop_time" else "stopped"
     outcome.reason = reason
     outcome.wall_time = time.perf_counter() - wall_start
-    return outcome
+
+
+def _halt(master: Master, robots: list[_Robot], log: FleetLog | None, block: int):
+    """Switch off every robot that hit a wall or obstacle ([fleet] on_collision = "continue"): its
+    components are no longer stepped (the master steps no component with constant outputs), so it
+    stays where it stands, its pose still seen by the others' lidars. Returns the kernel's tables
+    for the robots still stepped."""
+    for each in robots:
+        if each.outcome.status == "collision" and not each.halted:
+            each.halted = True
+            for component in each.built.system.components.values():
+                component.constant_outputs = True
+            if log is not None:
+                log.steps.halt(each.robot.name)
+    return master.kernel_tables(record=True, block=block)
 
 
 def _held(rows: np.ndarray, first: int, count: int, period: int, last: np.ndarray) -> np.ndarray:
@@ -553,24 +632,31 @@ def format_fleet(fleet: Fleet, outcome: FleetOutcome) -> str:
     return "\n".join(lines)
 
 
-def run_fleet_command(args, fleet: Fleet, plot=None) -> int:
-    """`cosim run FLEET.toml`: run, print the fleet summary; exit 0 only when every robot completed.
-    `plot(log_path)`, when given, draws the PNG beside the log once it is written (the plot is a
-    later stage, `cosim.logs`: the CLI hands it in)."""
+def run_fleet_command(args, fleet: Fleet, plot=None, sink=None) -> int:
+    """`cosim run FLEET.toml`: run, print the fleet summary; exit 0 only when every robot completed
+    (2 when an FMU failed). `plot(log_path)`, when given, draws the PNG beside the log once it is
+    written (the plot is a later stage, `cosim.logs`: the CLI hands it in); `sink` (the live view,
+    `--realtime`) gets everything the log gets."""
     import sys
 
-    if getattr(args, "live", False):
-        raise CosimError(f"{fleet.source}: --live shows one robot; a fleet's live view is not there yet")
     from cosim.record.logfile import default_log_path
 
-    path = args.out if args.out is not None else default_log_path(fleet.first.log_pattern, fleet.name)
-    if Path(path).exists() and not args.force:
-        raise CosimError(f"{path}: already exists; give --force to overwrite it")
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    outcome = run_fleet(fleet, log_path=Path(path))
+    path = Path(args.out if args.out is not None else default_log_path(fleet.first.log_pattern, fleet.name))
+    live = getattr(args, "live", False)
+    outcome = run_fleet(
+        fleet,
+        log_path=path,
+        force=args.force,
+        progress=not args.quiet,
+        sink=sink,
+        goals=sink if live else None,
+    )
     if not args.quiet:
         print(format_fleet(fleet, outcome))
         print(f"log: {path}", file=sys.stdout)
+    if outcome.failure is not None:
+        print(f"cosim: error: {outcome.failure}; log (up to the failure): {path}", file=sys.stderr)
+        return outcome.exit_code
     if plot is not None:
-        plot(Path(path))
+        plot(path)
     return outcome.exit_code

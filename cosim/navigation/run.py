@@ -61,6 +61,7 @@ from cosim.record.system_run import (
     close_quietly,
     open_recorder,
     run_guarded,
+    scenario_attachments,
     update_bar,
     writing_failed,
 )
@@ -104,17 +105,7 @@ def _write_header(built: BuiltRun, steps: SystemRun) -> None:
         "master": scenario.master,
         "topics": ",".join(f"{topic}={name}" for topic, name in scenario.topics.items()),
     }
-    map_file = scenario.map_file
-    attachments = [
-        ("scenario.toml", "application/toml", scenario.text.encode()),
-        (map_file.name, "application/octet-stream", map_file.read_bytes()),
-    ]
-    if map_file.suffix in (".yaml", ".yml"):
-        for line in map_file.read_text().splitlines():
-            key, _, value = line.partition(":")
-            image = map_file.parent / value.strip().strip("'\"")
-            if key.strip() == "image" and image.is_file():
-                attachments.append((image.name, "image/x-portable-graymap", image.read_bytes()))
+    attachments = scenario_attachments(scenario.text, scenario.map_file)
     components = built.system.components.values()
     steps.write_header(scenario.name, details, components, scenario.fmu_labels, attachments)
     recorder.write_grid(0, built.grid, "/map")

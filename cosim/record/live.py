@@ -46,6 +46,12 @@ GOAL_SCHEMAS = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/PoseStamped")
 GOAL_FRAMES = ("map", "")  # the log's fixed frame; an empty frame_id is taken as it
 
 
+def latched(topic: str) -> bool:
+    """Whether a client joining late gets `topic`'s last message: a latched topic of the table
+    (`/plan`), under a fleet robot's namespace too (`/robot1/plan`)."""
+    return topic in LATCHED_TOPICS or topic[topic.find("/", 1) :] in LATCHED_TOPICS
+
+
 class Sink(Protocol):
     def channel(
         self, channel_id: int, topic: str, encoding: str, schema: tuple[str, str, bytes] | None, metadata
@@ -328,7 +334,7 @@ class FoxgloveLive:
         self.control.gate(t_ns)
         channel = self._channels[channel_id]
         topic = channel.topic()
-        if topic in LATCHED_TOPICS:
+        if latched(topic):
             with self._lock:
                 self._latched[topic] = (t_ns, payload)
         channel.log(payload, log_time=t_ns)
@@ -527,7 +533,7 @@ def _listener(live: FoxgloveLive):
 
     class Listener(ServerListener):
         def on_subscribe(self, client, channel) -> None:
-            if channel.topic in LATCHED_TOPICS:
+            if latched(channel.topic):
                 live.replay(channel.topic)
 
         def on_client_advertise(self, client, channel) -> None:

@@ -39,6 +39,7 @@ outputs (and the inputs last applied, held).
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import struct
@@ -296,6 +297,30 @@ class Recorder:
         self._until_clock = 1
         self._last_scan: tuple | None = None  # (angles, range_min, range_max, layout) of the last sweep
         self._closed = False
+        self.namespace = ""  # a fleet's robot (`namespaced`)
+        self.robot_frame = ROBOT_FRAME
+
+    def namespaced(self, namespace: str) -> Recorder:
+        """This recorder for one robot of a fleet, under its ROS namespace: the same file (writer,
+        held messages, schemas), the robot's own channels: a topic of the table is
+        `/<namespace><topic>` (after `topics`' renaming), the scan's frame `<namespace>/base_link`,
+        and the signals of component `<namespace>:<name>` (the fleet's name of the robot's
+        component) go on `/<namespace>/signals/<name>`. Close the recorder itself, not the view."""
+        view = copy.copy(self)
+        view.namespace = namespace
+        view.robot_frame = f"{namespace}/{ROBOT_FRAME}"
+        view.topics = {topic: f"/{namespace}{self.topics.get(topic, topic)}" for topic in TOPIC_TYPES}
+        view._channels = {}
+        view._pose_channels = None
+        view._scan_layouts = {}
+        view._last_scan = None
+        return view
+
+    def _component_topic(self, kind: str, component: str) -> str:
+        """`/<kind>/<component>`, or under a namespace `/<namespace>/<kind>/<name>` (`namespaced`)."""
+        if not self.namespace:
+            return f"/{kind}/{component}"
+        return f"/{self.namespace}/{kind}/{component.removeprefix(self.namespace + ':')}"
 
     # --- file-level records --------------------------------------------------------------
 
@@ -428,7 +453,7 @@ class Recorder:
         `initial` holds every value after initialisation and `period_ns` [ns] is the component's
         step; `hold_signals`/`hold_signal_rows` then take a step's applied inputs and end outputs
         and the records are stamped as the module docstring says."""
-        topic = f"/signals/{component}"
+        topic = self._component_topic("signals", component)
         if topic in self._channels:
             raise CosimError(f"{self.path}: signal channel {topic} registered twice")
         names = list(names)
@@ -462,7 +487,7 @@ class Recorder:
         """Register `/text_signals/<component>`: one field per String (`string`) or Binary
         (`uint8[]`) variable, the first `inputs` of them inputs; returns its handle for
         `write_text`."""
-        topic = f"/text_signals/{component}"
+        topic = self._component_topic("text_signals", component)
         if topic in self._channels:
             raise CosimError(f"{self.path}: text channel {topic} registered twice")
         fields = rosmsg.field_names(list(names))
@@ -527,6 +552,10 @@ class Recorder:
         """Whether `topic` (a name of `TOPIC_TYPES` or "/signals/<component>") is registered."""
         return topic in self._channels
 
+    def channel(self, topic: str) -> int:
+        """The handle of `topic` (a name of `TOPIC_TYPES`; registered on first use), for `hold_steps`."""
+        return self._channel(topic)
+
     def hold_steps(
         self,
         signals: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]],
@@ -540,7 +569,8 @@ class Recorder:
         `signals`: per signal channel (channel, keys, t_ns, rows) as for `hold_signal_rows`;
         `poses`: (keys, t_ns, rows of x, y, theta, v, omega) of /odom, /tf and /pose (one pose:
         keys key, key + 1, key + 2); `others`: (keys, t_ns, [(topic, CDR payload)]) of messages
-        of registered topics (`scan_payload`, `obstacles_payload`, ...). Stamps must not
+        of registered topics (`scan_payload`, `obstacles_payload`, ...), a topic given by its name or
+        its handle (`channel`: a namespaced recorder's too). Stamps must not
         decrease in key order."""
         if self._closed:
             raise CosimError(f"{self.path}: the log is already closed")
@@ -572,7 +602,10 @@ class Recorder:
         if others is not None and len(others[0]):
             other_keys, times, messages = others
             by_key = np.argsort(other_keys, kind="stable")
-            raw = [(self._channels[messages[j][0]], messages[j][1]) for j in by_key.tolist()]
+            raw = [
+                (topic if isinstance(topic, int) else self._channels[topic], payload)
+                for topic, payload in (messages[j] for j in by_key.tolist())
+            ]
             keys.append(other_keys)
             streams.append(np.full(len(other_keys), RAW_STREAM))
             stamps.append(times)
@@ -745,7 +778,7 @@ class Recorder:
             self._channel("/scan", {SCAN_LAYOUT_KEY: description})
         binned = np.full(int(bins[-1]) + 1 if len(bins) else 0, np.nan, dtype=np.float32)
         message = rosmsg.laser_scan(
-            0, ROBOT_FRAME, angle_min, increment, binned, scan_time, range_min, range_max
+            0, self.robot_frame, angle_min, increment, binned, scan_time, range_min, range_max
         )
         template = rosmsg.serialize(message, TOPIC_TYPES["/scan"])
         tail = bytes(4)  # intensities: a sequence of length 0

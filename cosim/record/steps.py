@@ -155,23 +155,33 @@ class StepRecording:
 
     `system`, `master` (its step order and stop time), `recorder`, `observed` (the description's
     `Observed`) and `scenario` (signal_arrays, pose_rate, macro_step, obstacles) of the run;
-    `sensors`: the pose sensors the run records.
+    `sensors`: the pose sensors the run records; `order`: the components recorded, in the master's
+    step order (default: all of `master.order`; a fleet's robot: its own).
     """
 
-    def __init__(self, system, master, recorder, observed, scenario, sensors: tuple[PoseSensor, ...] = ()):
+    def __init__(
+        self,
+        system,
+        master,
+        recorder,
+        observed,
+        scenario,
+        sensors: tuple[PoseSensor, ...] = (),
+        order: list | None = None,
+    ):
         self.recorder = recorder
         self.sensors = tuple(sensors)
         self.stop_ns = master.stop_time_ns  # a last step cut short ends there, and so does its pose
         # What the recording asks of the system, asked once: each component's period [steps], where
         # each observed output is read, the lidar.
-        periods = {name: system.period_steps(component) for name, component in system.components.items()}
+        periods = {component.name: system.period_steps(component) for component in system.components.values()}
         found = {reference: system.resolve(reference, "output") for _, reference in observed.references()}
         lidar = system.component(observed.scan.component) if observed.scan is not None else None
         h = system.macro_step  # [s]
         self.entries: list[SignalEntry] = []
         self.constant: list[ConstantEntry] = []
         arrays = scenario.signal_arrays
-        for component in master.order:
+        for component in master.order if order is None else order:
             # Array ports are on /plan and /scan; with [output].signal_arrays the array outputs are
             # recorded too (array inputs never: each is fed by an array output).
             inputs = [i for i, p in enumerate(component.inputs) if not p.is_array_element]

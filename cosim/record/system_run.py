@@ -73,6 +73,22 @@ def writing_failed(error: OSError, log_path: Path) -> str:
     return f"{where}: writing the log failed ({error.strerror or error})"
 
 
+def scenario_attachments(text: str, map_file: Path) -> list[tuple[str, str, bytes]]:
+    """What a scenario's log attaches, (name, media type, bytes) each: `scenario.toml` (the file as
+    given), the map file and, for a ROS map (.yaml), the image it names."""
+    attachments = [
+        ("scenario.toml", "application/toml", text.encode()),
+        (map_file.name, "application/octet-stream", map_file.read_bytes()),
+    ]
+    if map_file.suffix in (".yaml", ".yml"):
+        for line in map_file.read_text().splitlines():
+            key, _, value = line.partition(":")
+            image = map_file.parent / value.strip().strip("'\"")
+            if key.strip() == "image" and image.is_file():
+                attachments.append((image.name, "image/x-portable-graymap", image.read_bytes()))
+    return attachments
+
+
 class RunEnd(NamedTuple):
     """How a run's loop ended, besides reaching its end."""
 

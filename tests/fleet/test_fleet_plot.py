@@ -95,6 +95,21 @@ def test_each_collision_is_marked_where_the_footprints_touched(intersection):
         assert f"{contact.first}-{contact.second} t = {contact.time:.2f} s" in texts
 
 
+def test_no_collision_text_covers_another_or_a_marker(intersection):
+    path, _ = intersection
+    with open_log(path) as log:
+        figure = build_fleet_figure(log)
+    axes = figure.axes[0]
+    renderer = figure.canvas.get_renderer()
+    markers = [axes.transData.transform(line.get_xydata()[0]) for line in axes.lines
+               if (line.get_gid() or "").startswith("collision")]  # fmt: skip
+    boxes = [text.get_bbox_patch().get_window_extent(renderer) for text in axes.texts]
+    assert len(boxes) == len(markers) >= 3  # contacts within a metre of each other at the crossing
+    for i, box in enumerate(boxes):
+        assert not any(box.overlaps(other) for other in boxes[i + 1 :])
+        assert not any(box.contains(x, y) for x, y in markers)
+
+
 def test_a_head_on_fleet_runs_to_a_png_titled_by_the_fleet_line(tmp_path, capsys):
     log = tmp_path / "head_on.mcap"
     assert main(["run", str(SCENARIOS / "fleet_head_on.toml"), "--out", str(log)]) == 1

@@ -130,11 +130,14 @@ def test_the_log_holds_one_tf_tree_under_map_and_namespaced_odometry(tmp_path):
     positions = {round(t * 1e9): p for t, p in trace}
     parents: dict[str, str] = {}
     odometry = {"robot1": 0, "robot2": 0}
+    odometry_topics = [f"/{name}/odom" for name in odometry]
     scans = []
     headings: dict[int, float] = {}
     with open(log, "rb") as stream:
         reader = make_reader(stream)
-        for schema, channel, message in reader.iter_messages():
+        for schema, channel, message in reader.iter_messages(
+            topics=["/robot1/scan", "/tf", *odometry_topics]
+        ):
             data = store.deserialize_cdr(message.data, schema.name)
             if channel.topic == "/robot1/scan":
                 assert data.header.frame_id == "robot1/base_link"

@@ -1,0 +1,319 @@
+"""A fleet's per-step topics, a block of steps at a time: each robot's under its ROS namespace.
+
+A fleet is one `System` of every robot's components (`robot1:vehicle`, ...) stepped by one master a
+block of steps at a time. `FleetSteps` records each robot as the single-robot run records one
+(`cosim.record.steps.StepRecording` on the recorder's view of the robot, `Recorder.namespaced`):
+- `/<robot>/signals/<component>`: every scalar input and output of each of the robot's components
+  at each of its steps, stamped as in a robot's log (the record at t holds the inputs applied at t
+  and the outputs at t; the last one, at the end, the final outputs); a component whose outputs
+  never change once, at t = 0;
+- `/<robot>/scan` at each lidar step, `/<robot>/cmd_vel` at each step of the commanding component;
+- the world's `/obstacles` (the fleet shares them) when a moving obstacle has moved, at the first
+  robot's lidar steps, as in a robot's log;
+- the poses the fleet hands over (`poses`, `write_poses`): `/<robot>/odom` (frame `<robot>/odom`,
+  child `<robot>/base_link`, twist the command), `/<robot>/pose`, then one `/tf` message for every
+  robot (`map -> <robot>/odom`, the identity: odometry without drift, and `<robot>/odom ->
+  <robot>/base_link`, the pose): one tree under `map`.
+
+`block(first, end, histories, poses)` takes the rows of the steps [first, end) as the master hands
+them over (`Master.run_blocks`, `run_recorded`: per component of the master's order its inputs,
+then its outputs, after each of its steps; None for a component stepped by Python, which steps at
+most in the block's first step and holds its buffers to the block's end: the fleet cuts its blocks
+at those components' periods) and hands their messages to `Recorder.hold_steps` in time order
+(the key of a message: its step, then its place in the step: every robot's signal records, every
+robot's scan and command, the obstacles, then the poses of the step's end). Nothing is kept
+between blocks beyond what the recorder holds until it packs.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from functools import partial
+from typing import NamedTuple
+
+import numpy as np
+
+from cosim.core.timebase import NS_PER_S, due_from
+from cosim.errors import CosimError
+from cosim.record import rosmsg
+from cosim.record.steps import SignalEntry, StepRecording
+
+ODOM = "nav_msgs/msg/Odometry"
+TF = "tf2_msgs/msg/TFMessage"
+_SENTINEL_NS = 1_234_567_891_987_654_321  # a stamp no run writes, to find in a template
+_STAMP = struct.Struct("<iI")  # builtin_interfaces/Time: int32 sec, uint32 nanosec
+_FLOAT64 = struct.Struct("<d")
+
+
+class _Entry(NamedTuple):
+    slot: int  # its place among a step's messages
+    index: int  # its component in the master's order (`histories`)
+    columns: np.ndarray  # its record in the component's row
+    entry: SignalEntry
+
+
+class _Port(NamedTuple):
+    """Where an observed output is read: its component's rows (`index`, `column`, `period`), or,
+    stepped by Python (no rows), `reading` (its live buffer)."""
+
+    index: int
+    column: int
+    period: int
+    reading: object  # `cosim.record.steps.Reading`
+
+
+class _Robot:
+    def __init__(self, name: str, view, recording: StepRecording, entries: list[_Entry], command) -> None:
+        self.name = name
+        self.view = view
+        self.recording = recording
+        self.entries = entries
+        self.command = command  # (period, [_Port v, _Port omega]) or None
+        self.last_command = (
+            [port.reading.value() for port in command[1]] if command is not None else None
+        )  # after the last step handed over
+        self.halted = False  # no longer stepped (`FleetSteps.halt`)
+        self.odom_frame = f"{name}/{rosmsg.ODOM_FRAME}"
+        self.base_frame = f"{name}/{rosmsg.ROBOT_FRAME}"
+
+
+class FleetSteps:
+    """Records a fleet's robots (module docstring). `robots`: (name, system, observed, scenario) of
+    each robot in fleet order: its own system (whose components, named `<name>:<component>`, are
+    the fleet master's), the description's `Observed` and its scenario."""
+
+    def __init__(self, recorder, master, robots) -> None:
+        self.recorder = recorder
+        self.start_ns = master.start_time_ns
+        self.h_ns = master.system.macro_step_ns
+        index = {id(component): i for i, component in enumerate(master.order)}
+        self.robots: list[_Robot] = []
+        slot = 0
+        for name, system, observed, scenario in robots:
+            view = recorder.namespaced(name)
+            own = {id(component) for component in system.components.values()}
+            order = [component for component in master.order if id(component) in own]
+            recording = StepRecording(system, master, view, observed, scenario, order=order)
+            entries = []
+            for entry in recording.entries:
+                inputs = len(entry.component.inputs)
+                columns = np.array([*entry.inputs, *(inputs + s for s in entry.outputs)], dtype=np.intp)
+                entries.append(_Entry(slot, index[id(entry.component)], columns, entry))
+                slot += 1
+            command = None
+            if recording.command is not None:
+                ports = []
+                for reference, reading in zip(
+                    observed.command, (recording.command.v, recording.command.omega), strict=True
+                ):
+                    component, output = system.resolve(reference, "output")
+                    column = len(component.inputs) + output
+                    ports.append(_Port(index[id(component)], column, system.period_steps(component), reading))
+                command = (recording.command.period, ports)
+            self.robots.append(_Robot(name, view, recording, entries, command))
+        self.scan_slot = slot  # robot r's scan: scan_slot + 2 r, its command: + 1
+        self.obstacle_slot = slot + 2 * len(self.robots)
+        self.pose_slot = self.obstacle_slot + 1  # every robot's /odom and /pose, then /tf
+        self.per_step = self.pose_slot + 2 * len(self.robots) + 1
+        self.world = self.robots[0].recording  # the obstacles the fleet shares
+        self._tf: _Template | None = None  # the pose messages' templates, made on first use
+
+    @property
+    def views(self) -> dict[str, object]:
+        """Each robot's recorder (`Recorder.namespaced`), by name."""
+        return {robot.name: robot.view for robot in self.robots}
+
+    def halt(self, name: str) -> None:
+        """Robot `name` is no longer stepped (switched off by the fleet): no more records of its
+        components, scans or commands; its signals' last records come at the end of the run, its
+        poses from the fleet as before."""
+        next(robot for robot in self.robots if robot.name == name).halted = True
+
+    def write_constant(self, t_ns: int) -> None:
+        """The records of the components whose outputs are fixed for the run."""
+        for robot in self.robots:
+            robot.recording.write_constant(t_ns)
+
+    def write_poses(self, t_ns: int, rows) -> None:
+        """Every robot's pose messages at t_ns (`rows`: x, y, theta [m, m, rad], v, omega [m/s,
+        rad/s] per robot, in fleet order)."""
+        messages = self.pose_messages(t_ns, rows)
+        keys = np.arange(len(messages), dtype=np.int64)
+        self.recorder.hold_steps([], None, (keys, np.full(len(messages), t_ns, dtype=np.int64), messages))
+
+    def pose_messages(self, t_ns: int, rows) -> list[tuple[int, bytes]]:
+        """(channel, CDR payload) of every robot's /odom and /pose, then of the one /tf, at t_ns."""
+        if self._tf is None:
+            self._odometry = [_Template(partial(_odometry, robot), 6) for robot in self.robots]
+            self._tf = _Template(partial(_tf, self.robots), 4 * len(self.robots))
+            self._channels = [(r.view.channel("/odom"), r.view.channel("/pose")) for r in self.robots]
+        messages, poses = [], []
+        for odometry, (odom, pose), (x, y, theta, v, omega) in zip(
+            self._odometry, self._channels, rows, strict=True
+        ):
+            x, y, theta, v, omega = float(x), float(y), float(theta), float(v), float(omega)
+            qz, qw = math.sin(theta / 2.0), math.cos(theta / 2.0)  # as `rosmsg.quaternion`
+            messages.append((odom, odometry.fill(t_ns, (x, y, qz, qw, v, omega))))
+            messages.append((pose, rosmsg.pose_stamped_cdr(t_ns, x, y, theta)))
+            poses += (x, y, qz, qw)
+        messages.append((self.recorder.channel("/tf"), self._tf.fill(t_ns, poses)))
+        return messages
+
+    def block(self, first: int, end: int, histories, poses=()) -> None:
+        """The messages of steps [first, end) from their rows (module docstring); `poses`: (step k,
+        t_ns, rows as for `write_poses`) of the poses written at the end of step k."""
+        start_ns, h_ns, per_step = self.start_ns, self.h_ns, self.per_step
+        signals, messages = [], []
+        for number, robot in enumerate(self.robots):
+            if robot.halted:
+                continue
+            for slot, index, columns, entry in robot.entries:
+                period = entry.period
+                rows = histories[index]
+                if rows is None:  # stepped by Python: in the block's first step at most
+                    if first % period:
+                        continue
+                    steps = np.array([first], dtype=np.int64)
+                    values = entry.record()[None, :]
+                else:
+                    steps = np.arange(due_from(first, period), end, period, dtype=np.int64)
+                    values = rows[: len(steps), columns]
+                if len(steps):
+                    signals.append((entry.channel, steps * per_step + slot, start_ns + steps * h_ns, values))
+            recording, view = robot.recording, robot.view
+            scan = recording.scan
+            if scan is not None and first % scan.period == 0:  # a lidar steps in a block's first step
+                t_ns = start_ns + first * h_ns
+                payload = view.scan_payload(
+                    t_ns, scan.angles, scan.current(), scan.range_min, scan.range_max, scan.scan_time
+                )
+                messages.append(
+                    (first * per_step + self.scan_slot + 2 * number, t_ns, view.channel("/scan"), payload)
+                )
+            if robot.command is not None:
+                period, ports = robot.command
+                steps = np.arange(due_from(first, period), end, period, dtype=np.int64)
+                if len(steps):
+                    values = [self._held(histories, port, first, end, steps, last) for port, last in
+                              zip(ports, robot.last_command, strict=True)]  # fmt: skip
+                    channel = view.channel("/cmd_vel")
+                    slot = self.scan_slot + 2 * number + 1
+                    for k, v, omega in zip(steps.tolist(), *values, strict=True):
+                        messages.append(
+                            (k * per_step + slot, start_ns + k * h_ns, channel, rosmsg.twist_cdr(v, omega))
+                        )
+                    robot.last_command = [float(value[-1]) for value in values]
+        world = self.world
+        if world.moving:
+            steps = world.obstacle_steps
+            for k in range(due_from(first, steps), end, steps):
+                t_ns = start_ns + k * h_ns
+                obstacles = world.moved_obstacles(t_ns)
+                if obstacles is not None:
+                    payload = self.recorder.obstacles_payload(t_ns, obstacles)
+                    messages.append(
+                        (
+                            k * per_step + self.obstacle_slot,
+                            t_ns,
+                            self.recorder.channel("/obstacles"),
+                            payload,
+                        )
+                    )
+        for k, t_ns, rows in poses:
+            for j, (channel, payload) in enumerate(self.pose_messages(t_ns, rows)):
+                messages.append((k * per_step + self.pose_slot + j, t_ns, channel, payload))
+        others = None
+        if messages:
+            keys = np.array([message[0] for message in messages], dtype=np.int64)
+            times = np.array([message[1] for message in messages], dtype=np.int64)
+            others = (keys, times, [(channel, payload) for _, _, channel, payload in messages])
+        self.recorder.hold_steps(signals, None, others)
+
+    @staticmethod
+    def _held(histories, port: _Port, first: int, end: int, steps: np.ndarray, last: float) -> list[float]:
+        """The value of `port` after each of `steps` (in [first, end)): its component's latest row
+        at or before the step (before its first row in the block: `last`)."""
+        rows = histories[port.index]
+        if rows is None:
+            return [port.reading.value()] * len(steps)
+        due = due_from(first, port.period)
+        column = rows[: len(range(due, end, port.period)), port.column]
+        at = (steps - due) // port.period
+        return [float(column[j]) if j >= 0 else last for j in at.tolist()]
+
+
+class _Template:
+    """The CDR bytes of one message layout with the offsets of its stamps and of its varying float64
+    fields, found by serialising sentinel values once (`build(t_ns, values)` -> bytes): the layout
+    does not depend on the values, so `fill(t_ns, values)` gives the bytes `build` gives, without
+    building the message (the fleet writes 2 N + 1 pose messages at each pose time)."""
+
+    def __init__(self, build, count: int) -> None:
+        sentinels = [1.0e250 * (index + 1.5) for index in range(count)]
+        data = build(_SENTINEL_NS, sentinels)
+        self.data = bytearray(data)
+        self.stamps = _offsets(data, _STAMP.pack(*divmod(_SENTINEL_NS, NS_PER_S)))
+        self.fields = [_offsets(data, _FLOAT64.pack(value)) for value in sentinels]
+        if not self.stamps or any(len(found) != 1 for found in self.fields):
+            raise CosimError("unexpected CDR layout of a pose message")
+        self.fields = [found[0] for found in self.fields]
+
+    def fill(self, t_ns: int, values) -> bytes:
+        data = self.data
+        stamp = _STAMP.pack(*divmod(int(t_ns), NS_PER_S))
+        for at in self.stamps:
+            data[at : at + 8] = stamp
+        for at, value in zip(self.fields, values, strict=True):
+            data[at : at + 8] = _FLOAT64.pack(value)
+        return bytes(data)
+
+
+def _offsets(data: bytes, pattern: bytes) -> list[int]:
+    found, at = [], data.find(pattern)
+    while at >= 0:
+        found.append(at)
+        at = data.find(pattern, at + 1)
+    return found
+
+
+def _odometry(robot: _Robot, t_ns: int, values) -> bytes:
+    """/<robot>/odom: pose (x, y, qz, qw) in `<robot>/odom` of child `<robot>/base_link`, twist (v,
+    omega), zero covariances."""
+    x, y, qz, qw, v, omega = values
+    orientation = rosmsg.make("geometry_msgs/msg/Quaternion", x=0.0, y=0.0, z=qz, w=qw)
+    pose = rosmsg.make("geometry_msgs/msg/Pose", position=rosmsg.point(x, y), orientation=orientation)
+    message = rosmsg.make(
+        ODOM,
+        header=rosmsg.header(t_ns, robot.odom_frame),
+        child_frame_id=robot.base_frame,
+        pose=rosmsg.make("geometry_msgs/msg/PoseWithCovariance", pose=pose, covariance=np.zeros(36)),
+        twist=rosmsg.make(
+            "geometry_msgs/msg/TwistWithCovariance", twist=rosmsg.twist(v, omega), covariance=np.zeros(36)
+        ),
+    )
+    return rosmsg.serialize(message, ODOM)
+
+
+def _tf(robots: list[_Robot], t_ns: int, values) -> bytes:
+    """/tf: per robot `map -> <robot>/odom` (the identity) and `<robot>/odom -> <robot>/base_link`
+    (x, y, qz, qw of `values`, 4 per robot)."""
+    transforms = []
+    for number, robot in enumerate(robots):
+        x, y, qz, qw = values[4 * number : 4 * number + 4]
+        transforms.append(_transform(t_ns, rosmsg.MAP_FRAME, robot.odom_frame, 0.0, 0.0, 0.0, 1.0))
+        transforms.append(_transform(t_ns, robot.odom_frame, robot.base_frame, x, y, qz, qw))
+    return rosmsg.serialize(rosmsg.make(TF, transforms=transforms), TF)
+
+
+def _transform(t_ns: int, parent: str, child: str, x: float, y: float, qz: float, qw: float):
+    return rosmsg.make(
+        "geometry_msgs/msg/TransformStamped",
+        header=rosmsg.header(t_ns, parent),
+        child_frame_id=child,
+        transform=rosmsg.make(
+            "geometry_msgs/msg/Transform",
+            translation=rosmsg.vector3(x, y, 0.0),
+            rotation=rosmsg.make("geometry_msgs/msg/Quaternion", x=0.0, y=0.0, z=qz, w=qw),
+        ),
+    )
