@@ -53,6 +53,7 @@ from cosim.core.master import NS_PER_S, Master
 from cosim.core.system import System
 from cosim.errors import CosimError
 from cosim.navigation.build import build_run
+from cosim.navigation.coordination import FleetCoordination
 from cosim.navigation.fleet_log import FleetLog, outcome_record
 from cosim.navigation.outcome import MODE_RECOVER, OutcomeMonitor
 from cosim.scenario.fleet import Fleet
@@ -248,6 +249,7 @@ def run_fleet(fleet: Fleet, trace: list | None = None, log_path: Path | None = N
         for robot in fleet.robots
     ]
     system, parameters = fleet_system(fleet, described, [each.built for each in robots])
+    coordination = FleetCoordination.make(fleet, robots)  # None: "none" and no stops
     master = Master(system, parameters=parameters, stop_time=fleet.first.stop_time)
     try:
         try:
@@ -257,7 +259,7 @@ def run_fleet(fleet: Fleet, trace: list | None = None, log_path: Path | None = N
         for each in robots:
             each.place(master.order)
         log = FleetLog(log_path, [each.robot.name for each in robots], fleet.text) if log_path else None
-        outcome = _run(fleet, master, robots, trace, log)
+        outcome = _run(fleet, master, robots, trace, log, coordination)
         if log is not None:
             log.close(outcome_record(outcome))
         return outcome
@@ -358,7 +360,12 @@ def _block_steps(master: Master) -> int:
 
 
 def _run(
-    fleet: Fleet, master: Master, robots: list[_Robot], trace: list | None, log: FleetLog | None
+    fleet: Fleet,
+    master: Master,
+    robots: list[_Robot],
+    trace: list | None,
+    log: FleetLog | None,
+    coordination: FleetCoordination | None = None,
 ) -> FleetOutcome:
     settings = fleet.settings
     contacts = FleetContacts([each.robot.name for each in robots], [each.robot.radius for each in robots])
@@ -381,6 +388,8 @@ def _run(
                 each.logged_plan = each.built.planner.plan_version
     block = _block_steps(master)
     tables = master.kernel_tables(record=True, block=block)
+    if coordination is not None:  # the released cells (and halts) for the first block
+        coordination.before_block(0.0)
     wall_start = time.perf_counter()
     reason = None
     k = 0
@@ -419,11 +428,13 @@ def _run(
         k += i + 1
         for each in robots:  # a new mission goal: given at the end of the block
             if each.pending_goal and each.judged:
-                _next_goal(each, outcome.time)
+                _next_goal(each, outcome.time, coordination)
             each.pending_goal = False
             if log is not None and each.monitor.goal != each.logged_goal:
                 log.write_goal(round(outcome.time * NS_PER_S), each.robot.name, *each.monitor.goal)
                 each.logged_goal = each.monitor.goal
+        if coordination is not None and reason is None:
+            coordination.before_block(outcome.time)  # cells released, halts, re-solves
     if log is not None and last_pose_step != k:  # the pose at the end (step i of the last block)
         log.write_poses(
             round(outcome.time * NS_PER_S),
@@ -501,12 +512,16 @@ def _judge(each: _Robot, t: float, h: float, before, after, step: int = 0) -> No
     result.deadlocked_at = each.progress.update(t, math.hypot(goal.x - after[0], goal.y - after[1]))
 
 
-def _next_goal(each: _Robot, t: float) -> None:
-    """Give the planner the robot's next goal (a replan from where it stands)."""
+def _next_goal(each: _Robot, t: float, coordination: FleetCoordination | None = None) -> None:
+    """Give the planner the robot's next goal (a replan from where it stands; coordinated: the
+    coordinator re-solves before the next block)."""
     goal = each.goals[each.goal_index]
     x, y, theta = (float(value) for value in each.poses[-1])
     planner = each.built.planner
-    why = planner.set_goal(goal.x, goal.y, t, (x, y, theta)) if planner is not None else "no planner"
+    if coordination is not None and coordination.coordinator is not None:
+        why = None
+    else:
+        why = planner.set_goal(goal.x, goal.y, t, (x, y, theta)) if planner is not None else "no planner"
     if why is not None:
         each.outcome.status = "no_path"
         return

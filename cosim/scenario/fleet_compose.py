@@ -61,9 +61,9 @@ def describe_fleet(fleet: Fleet) -> FleetDescription:
     links: list[ConnectionDescription] = []
     radius = {robot.name: robot.radius for robot in fleet.robots}
     for robot in fleet.robots:
-        description = _own_sections(robot, describe_system(robot.scenario))
+        description = _slowed(robot, _own_sections(robot, describe_system(robot.scenario)))
         lidar = description.components.get(SEEN_BY)
-        if lidar is None or lidar.kind != "lidar" or len(fleet.robots) == 1:
+        if lidar is None or lidar.kind != "lidar" or len(fleet.robots) == 1 or fleet.settings.coordination != "none":
             robots[robot.name] = description  # no template lidar: this robot sees no one
             seen[robot.name] = ()
             continue
@@ -101,6 +101,32 @@ def _own_sections(robot, description: SystemDescription) -> SystemDescription:
             component = replace(component, where=f"{component.where} + {label}.{section}")
         components[name] = component
     return replace(description, components=components)
+
+
+def _slowed(robot, description: SystemDescription) -> SystemDescription:
+    """A robot with `speed_factor` f < 1: the connections into its vehicle's speed commands (`v`,
+    and `omega` of a differential drive) scaled by f, so it drives the same path f times as fast
+    (a bicycle's steering angle stays: same curvature)."""
+    factor = robot.speed_factor
+    if factor == 1.0:
+        return description
+    ports = ("v", "omega") if robot.scenario.vehicle_type == "differential" else ("v",)
+    targets = {f"{POSE_OF}.{port}" for port in ports}
+    connections = tuple(
+        replace(c, scale=c.scale * factor, offset=c.offset * factor, where=f"{c.where} x speed_factor")
+        if c.target in targets
+        else c
+        for c in description.connections
+    )
+    fed = {c.target for c in connections} & targets
+    if fed != targets:
+        from cosim.errors import CosimError
+
+        missing = ", ".join(sorted(targets - fed))
+        raise CosimError(
+            f"{robot.scenario.source}: speed_factor: nothing feeds {missing} to scale"
+        )
+    return replace(description, connections=connections)
 
 
 def qualified(robot: str, description: SystemDescription) -> SystemDescription:
