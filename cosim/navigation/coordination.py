@@ -68,6 +68,7 @@ CLEARANCE = 0.5  # [m] between a robot's footprint and its coordination cell's s
 LEFT_MARGIN = 0.05  # [m] the footprint grown by this is out of a cell: the robot has left it
 BLOCKED_AFTER = 10.0  # [s] with released moves and no movement: blocked, re-solve
 STUCK_DISTANCE = 0.25  # [m] moved less than this: not moving
+RELEASE_AHEAD = 3  # actions released beyond the done ones (a lifelong re-solve can still change the rest)
 MAPF_TIME_LIMIT = 1.0  # [s] of wall time per MAPF solve
 STOP_SHORT = 0.02  # [m] the stop point lies this much before the released end (Pure Pursuit's `<=`)
 
@@ -182,10 +183,12 @@ class ActionGraph:
 
     `done[i]` counts robot i's actions done (in order); `released[i]` counts its actions released
     (done ones included). `release()` extends every robot's released run as far as the
-    dependencies allow; `finish(i)` marks robot i's next action done (it must be released).
+    dependencies allow, up to `horizon` actions beyond the done ones (None: no limit); `finish(i)`
+    marks robot i's next action done (it must be released).
     """
 
-    def __init__(self, paths, held=None) -> None:
+    def __init__(self, paths, held=None, lead_in=None, horizon: int | None = None) -> None:
+        self.horizon = horizon
         paths = [np.asarray(path, dtype=np.int64).reshape(-1, 2) for path in paths]
         held = [set() for _ in paths] if held is None else [set(map(tuple, cells)) for cells in held]
         for cells, path in zip(held, paths, strict=True):
@@ -207,6 +210,8 @@ class ActionGraph:
             for k, action in enumerate(actions[1:], start=1):
                 leaving.setdefault(action.source, [[] for _ in range(n)])[i].append((action.time, k))
         self.held = held
+        # Per robot, the cells it drives through to its start cell (released before a re-solve).
+        self.lead_in = [list(cells) for cells in lead_in] if lead_in is not None else [[] for _ in paths]
         starts = [actions[0].target for actions in self.actions]
         for i, actions in enumerate(self.actions):
             for action in actions:
@@ -242,7 +247,8 @@ class ActionGraph:
         grown = []
         for i, actions in enumerate(self.actions):
             k = self.released[i]
-            while k < len(actions) and self.ready(i, k):
+            end = len(actions) if self.horizon is None else min(len(actions), self.done[i] + self.horizon)
+            while k < end and self.ready(i, k):
                 k += 1
             if k != self.released[i]:
                 self.released[i] = k
@@ -411,7 +417,7 @@ class Coordinator:
         import time
 
         n = len(self.agents)
-        starts, held = [], []
+        starts, held, lead_in = [], [], []
         for i in range(n):
             x, y = float(poses[i][0]), float(poses[i][1])
             if self.graph is None:
@@ -420,8 +426,17 @@ class Coordinator:
             else:
                 start = self.graph.committed(i)
                 pending = self.graph.pending(i)
+                step = self.graph.next_action(i)
+                way = self.graph.lead_in[i] if step is not None and step.settle else []
+                way = [*way, step.source] if step is not None else way
+                way = [cell for cell in [*way, *pending] if cell != start]
+                here = self.cells.cell_of(x, y)
+                if here in way:  # the cells behind the robot are passed
+                    way = way[len(way) - 1 - way[::-1].index(here) :]
+                lead_in.append(way)
             starts.append(start)
             cells = self.cells.overlapped(x, y, self.agents[i].radius + LEFT_MARGIN) | set(pending)
+            cells |= set(lead_in[i]) if lead_in else set()
             held.append(cells - {start})
         goals: list[Cell] = [None] * n  # type: ignore[list-item]
         taken: set[Cell] = set()
@@ -452,7 +467,7 @@ class Coordinator:
             self.failed_at = t
             return False
         self.failed_at = None
-        self.graph = ActionGraph(paths, held)
+        self.graph = ActionGraph(paths, held, lead_in or None, RELEASE_AHEAD)
         for agent in self.agents:
             agent.shown = None
         self._resolve = False
@@ -517,7 +532,8 @@ class Coordinator:
         actions = graph.actions[i]
         first = graph.done[i]
         last = graph.released[i]
-        cells = [actions[first].source] if first < len(actions) else []
+        cells = list(graph.lead_in[i]) if first == 0 else []
+        cells += [actions[first].source] if first < len(actions) else []
         cells += [action.target for action in actions[first:last]]
         if not cells:
             cells = [graph.committed(i)]
