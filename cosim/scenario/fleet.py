@@ -9,6 +9,8 @@ Each `[[robots]]` table makes one robot, the navigation template under its name:
     # mission = [{ x = 20.0, y = 6.0, dwell = 5.0 }, { x = 6.0, y = 6.0 }]
     # repeat = 3                                     # runs of the mission (with `mission` only)
     vfh = { safety_distance = 0.5 }                  # any template section, over the scenario's
+    # speed_factor = 0.5                             # 0 < f <= 1: the vehicle's commands times f
+    # stop = { at = 10.0, duration = 5.0 }           # [s]: the robot halts for that long
 
 A robot is checked as a single-robot scenario: the scenario-wide TOML with the robot's `start`,
 its (first) goal and its own sections put over the scenario's. A robot's section is merged key by
@@ -18,7 +20,9 @@ the robot's `connections` are added after the scenario's. So every robot is a co
 (`Robot.scenario`) and everything that checks or builds one robot serves each robot of a fleet.
 
 A fleet gives no top-level `[start]` or `[goal]` (each robot has its own). `[fleet]` holds
-`coordination` ("none": each robot plans alone), `on_collision` ("stop" ends the run at the first
+`coordination` ("none": each robot plans alone; "mapf": all robots planned together by multi-agent
+path finding, "prioritized": one after the other; both executed through an action dependency graph,
+`cosim.navigation.coordination`), `on_collision` ("stop" ends the run at the first
 robot-robot contact, "continue" records it and runs on) and `deadlock_after` [s] (a robot that
 made no progress for that long is deadlocked). `--set robots.robot2.vfh.safety_distance=0.5`
 addresses a robot by its name (`robots.1.…` by its position also works).
