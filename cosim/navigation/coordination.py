@@ -47,10 +47,14 @@ the cell's inner square nearest to the goal).
 **Lifelong re-solves.** When a robot needs its next mission goal, all robots are planned again:
 each from the cell of its last released action (where it is committed to go), its remaining goal
 as goal (a robot that completed or dwells stays where it is); the new graph starts with every
-robot's settle (its footprint cells and released cells protected until it has settled). A robot
-that has released moves ahead but has not moved `STUCK_DISTANCE` for `BLOCKED_AFTER` seconds
-(an unknown obstacle on its cell path that VFH could not pass; not a robot halted by `stop`) has
-that next cell marked blocked, and all robots are planned again.
+robot's settle (its footprint cells and released cells protected until it has settled). Unknown
+obstacles: the robots' lidars do not see each other (the coordinator keeps them apart), so what a
+robot's planner component marks in its costmap (it still takes every scan while it follows) is an
+obstacle not on the map; a coarse cell with such a mark on any robot's remaining path (its
+lead-in, released and planned cells) is blocked from then on, and all robots are planned again,
+around it (a robot already in that cell may leave it). And a robot that has released moves ahead
+but has not moved `STUCK_DISTANCE` for `BLOCKED_AFTER` seconds (something on its way that VFH could
+not pass; not a robot halted by `stop`) has its next cell blocked, and all are planned again.
 
 Speed: the MAPF solver is anytime: `MAPF_TIME_LIMIT` s of wall time per solve (small instances
 are proven optimal long before, so their plans are the same every run; a large fleet's plan can
@@ -104,6 +108,13 @@ class CoordinationGrid:
         self.grid = OccupancyGrid(blocked, self.size, grid.origin)
         self.origin = grid.origin
         self.rows, self.cols = rows, cols
+
+    def coarse(self, fine: np.ndarray) -> np.ndarray:
+        """A bool array of the map's shape (e.g. the lidar's marks) as coarse cells: True where any
+        of a coarse cell's map cells is."""
+        rows, cols, k = self.rows, self.cols, self.k
+        part = fine[fine.shape[0] - rows * k :, : cols * k]
+        return part.reshape(rows, k, cols, k).any(axis=(1, 3))
 
     def cell_of(self, x: float, y: float) -> Cell | None:
         """The cell containing (x, y) [m], or None outside the coarse grid."""
@@ -483,10 +494,14 @@ class Coordinator:
 
     # Execution
 
-    def update(self, t: float, poses) -> dict[int, np.ndarray]:
+    def update(self, t: float, poses, marks=None) -> dict[int, np.ndarray]:
         """Before the block from t [s]: done actions, re-solves, releases; the robots whose
-        waypoints changed and their new waypoints (N x 2 [m])."""
+        waypoints changed and their new waypoints (N x 2 [m]). `marks`: per robot, the map cells its
+        lidar has seen occupied beyond the known map (or None): a coarse cell with a mark on a
+        robot's remaining path is blocked, and all are planned again."""
         graph = self.graph
+        if marks is not None:
+            self._see(marks)
         for i, agent in enumerate(self.agents):
             x, y = float(poses[i][0]), float(poses[i][1])
             self._advance(i, x, y)
@@ -516,6 +531,23 @@ class Coordinator:
                 agent.shown = waypoints
                 changed[i] = waypoints
         return changed
+
+    def _see(self, marks) -> None:
+        """Block the coarse cells with unknown obstacles that lie on a robot's remaining path."""
+        seen = None
+        for fine in marks:
+            if fine is not None and fine.any():
+                coarse = self.cells.coarse(fine)
+                seen = coarse if seen is None else seen | coarse
+        if seen is None:
+            return
+        graph = self.graph
+        for i, actions in enumerate(graph.actions):
+            ahead = {action.target for action in actions[graph.done[i] :]} | set(graph.lead_in[i])
+            new = {cell for cell in ahead if seen[cell]} - self.blocked
+            if new:
+                self.blocked |= new
+                self._resolve = True
 
     def _advance(self, i: int, x: float, y: float) -> None:
         """Mark robot i's released actions done while their condition holds; release."""
@@ -641,6 +673,10 @@ class FleetCoordination:
                 wanted = (goal.x, goal.y)
             if wanted != coordinator.agents[k].goal:
                 coordinator.new_goal(k, wanted)
-        for k, waypoints in coordinator.update(t, poses).items():
+        marks = [
+            each.built.planner.costmap.marked if each.built.planner.replanning is not None else None
+            for each in self.robots
+        ]
+        for k, waypoints in coordinator.update(t, poses, marks).items():
             if k not in self.halted:
                 self.robots[k].built.planner.follow(waypoints, t)

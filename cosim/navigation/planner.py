@@ -254,13 +254,15 @@ class PlannerComponent(PythonComponent):
 
     def step(self, t: float, h: float) -> None:
         """Update the costmap and the progress from the inputs; replan when a trigger fires."""
-        if self.replanning is None or self.no_path is not None or self.following:
+        if self.replanning is None or self.no_path is not None:
             return
         inputs = self.input_buffer
         x, y, theta, steering = inputs.item(0), inputs.item(1), inputs.item(2), inputs.item(3)
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(theta)):
             return
         changed = self.costmap.integrate(x, y, theta, inputs[4:])
+        if self.following:  # the costmap only (a coordinator reads it)
+            return
         self._advance_progress(x, y)
         reason = self._trigger(t, steering, changed > 0)
         if reason is not None and t - self._last_replan >= self.replanning.replan_interval:
@@ -381,8 +383,9 @@ class PlannerComponent(PythonComponent):
     def follow(self, waypoints: np.ndarray | None, t: float) -> None:
         """Drive along `waypoints` (N x 2 [m]) given from outside from t [s] on (a fleet's
         coordinator: the cells released to the robot; a halted robot: its own position), not
-        replanning meanwhile; `follow(None, t)` goes back to the component's own plan, from where
-        the robot stands. Needs replanning (the outputs are not constant)."""
+        replanning meanwhile (the costmap still takes the scans); `follow(None, t)` goes back to
+        the component's own plan, from where the robot stands. Needs replanning (the outputs are
+        not constant)."""
         if waypoints is None:
             self.following = False
             self._use(self.result)

@@ -4,7 +4,10 @@
 (`cosim.scenario.compose.describe_system`: every problem names the file, the robot and the key),
 then makes the robots see each other: each robot's template lidar gets the inputs
 `robots_x[j]`, `robots_y[j]` (j = 1..N-1, the other robots in fleet order) and its footprint radii
-(`ComponentDescription.robot_radii`), fed by the other robots' `vehicle.x`, `vehicle.y`. Those
+(`ComponentDescription.robot_radii`), fed by the other robots' `vehicle.x`, `vehicle.y` (not with
+`[fleet] coordination` other than "none": the coordinator keeps the robots apart, and a lidar that
+sees only the world lets VFH and the costmap react to unknown obstacles alone). A robot's
+`speed_factor` scales the connections into its vehicle's `v` (and a differential drive's `omega`). Those
 links run from a vehicle's pose (a state: no direct dependency on the vehicle's inputs) to a
 lidar, so they close no algebraic loop.
 
@@ -63,7 +66,10 @@ def describe_fleet(fleet: Fleet) -> FleetDescription:
     for robot in fleet.robots:
         description = _slowed(robot, _own_sections(robot, describe_system(robot.scenario)))
         lidar = description.components.get(SEEN_BY)
-        if lidar is None or lidar.kind != "lidar" or len(fleet.robots) == 1 or fleet.settings.coordination != "none":
+        # Coordinated robots are kept apart by the coordinator: their lidars see the world only
+        # (VFH and the costmap then react to unknown obstacles, not to the other robots).
+        alone = fleet.settings.coordination == "none"
+        if lidar is None or lidar.kind != "lidar" or len(fleet.robots) == 1 or not alone:
             robots[robot.name] = description  # no template lidar: this robot sees no one
             seen[robot.name] = ()
             continue
@@ -123,9 +129,7 @@ def _slowed(robot, description: SystemDescription) -> SystemDescription:
         from cosim.errors import CosimError
 
         missing = ", ".join(sorted(targets - fed))
-        raise CosimError(
-            f"{robot.scenario.source}: speed_factor: nothing feeds {missing} to scale"
-        )
+        raise CosimError(f"{robot.scenario.source}: speed_factor: nothing feeds {missing} to scale")
     return replace(description, connections=connections)
 
 

@@ -120,3 +120,20 @@ def test_cosim_run_prints_a_coordinated_fleet_without_collisions(tmp_path):
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     assert "collisions 0; deadlocks 0" in result.stdout
+
+
+def test_an_unknown_obstacle_on_the_plan_is_seen_and_planned_around():
+    from cosim.scenario.load import parse_scenario
+
+    # A 1 m box on the aisle's centre line, where the plan of fleet_head_on_mapf runs.
+    text = (SCENARIOS / "fleet_head_on_mapf.toml").read_text()
+    box = '[[obstacles]]\ntype = "rectangle"\ncenter = [20.0, 19.0]\nsize = [1.0, 1.0]\n\n[[robots]]'
+    fleet = parse_scenario(text.replace("[[robots]]", box, 1), "box.toml", SCENARIOS)
+    trace: list = []
+    outcome = run_fleet(fleet, trace=trace)
+    print(format_fleet(fleet, outcome))
+    _assert_all_completed(outcome)  # a robot that hit the box would have status "collision"
+    _check_trace(fleet, trace)
+    # The robots' distance to the box's nearest side stayed above their radius.
+    for robot in outcome.robots:
+        assert robot.min_clearance_walls > 0.3
