@@ -320,6 +320,41 @@ class ActionGraph:
 def plan_paths(method: str, grid, starts: list[Cell], goals: list[Cell], time_limit: float = MAPF_TIME_LIMIT):
     """Paths (one (T + 1) x 2 array per robot) from `starts` to `goals` on the coarse `grid`
     (planner.OccupancyGrid) by `method` ("mapf" or "prioritized"); None when there is none."""
+    paths = _plan(method, grid, starts, goals, time_limit)
+    return paths if paths is not None and valid_paths(paths, starts, goals) else None
+
+
+def valid_paths(paths, starts, goals) -> bool:
+    """Whether `paths` go from `starts` to `goals` by 4-connected moves and waits with no two robots
+    in one cell nor swapping cells at any time step (each rests on its last cell afterwards)."""
+    if len(paths) != len(starts):
+        return False
+    length = max(len(path) for path in paths)
+    padded = []
+    for path, start, goal in zip(paths, starts, goals, strict=True):
+        path = np.asarray(path, dtype=np.int64).reshape(-1, 2)
+        if tuple(path[0]) != tuple(start) or tuple(path[-1]) != tuple(goal):
+            return False
+        if len(path) > 1 and np.abs(np.diff(path, axis=0)).sum(axis=1).max() > 1:
+            return False
+        padded.append(np.vstack([path, np.repeat(path[-1:], length - len(path), axis=0)]))
+    cells = np.stack(padded)  # robots x time x 2
+    for t in range(length):
+        here = [tuple(cell) for cell in cells[:, t]]
+        if len(set(here)) != len(here):
+            return False
+        if t > 0:
+            moves = {
+                (tuple(a), tuple(b))
+                for a, b in zip(cells[:, t - 1], cells[:, t], strict=True)
+                if tuple(a) != tuple(b)
+            }
+            if any((b, a) in moves for a, b in moves):
+                return False
+    return True
+
+
+def _plan(method: str, grid, starts, goals, time_limit: float):
     from planner import mapf
     from planner.errors import PlannerError
 
@@ -464,10 +499,10 @@ class Coordinator:
             agent = self.agents[i]
             cell = starts[i] if agent.goal is None else self.cells.cell_of(*agent.goal)
             agent.waiting = False
-            if cell in taken or not self.cells.free(cell) or cell in self.blocked:
-                cell, agent.waiting = starts[i], True
-            if cell in taken:  # its own start is someone's goal: it has to go; let the solver say
-                agent.waiting = True
+            if cell in taken or not self.cells.free(cell) or (cell in self.blocked and cell != starts[i]):
+                # Its goal is another's or blocked: it waits where it is, or, if another robot
+                # needs that cell as its goal, at the nearest cell no one needs.
+                cell, agent.waiting = self._nearest_untaken(starts[i], taken), True
             goals[i] = cell
             taken.add(cell)
         grid = self.cells.grid
@@ -483,7 +518,7 @@ class Coordinator:
         self.solve_time += time.perf_counter() - began
         self.solves += 1
         if paths is None:
-            self.failed_at = t
+            self.failed_at, self._resolve = t, False  # tried again a second later
             return False
         self.failed_at = None
         self.graph = ActionGraph(paths, held, lead_in or None, RELEASE_AHEAD)
@@ -491,6 +526,29 @@ class Coordinator:
             agent.shown = None
         self._resolve = False
         return True
+
+    def _nearest_untaken(self, start: Cell, taken: set[Cell]) -> Cell:
+        """The free cell nearest to `start` (4-connected steps) not in `taken` nor blocked."""
+        from collections import deque
+
+        occupied = self.cells.grid.occupied
+        seen, queue = {start}, deque([start])
+        while queue:
+            cell = queue.popleft()
+            if cell not in taken and (cell not in self.blocked or cell == start):
+                return cell
+            row, col = cell
+            for nxt in ((row - 1, col), (row + 1, col), (row, col - 1), (row, col + 1)):
+                if (
+                    0 <= nxt[0] < self.cells.rows
+                    and 0 <= nxt[1] < self.cells.cols
+                    and not occupied[nxt]
+                    and nxt not in self.blocked
+                    and nxt not in seen
+                ):
+                    seen.add(nxt)
+                    queue.append(nxt)
+        return start
 
     # Execution
 
@@ -505,13 +563,12 @@ class Coordinator:
         for i, agent in enumerate(self.agents):
             x, y = float(poses[i][0]), float(poses[i][1])
             self._advance(i, x, y)
-            if math.hypot(x - agent.moved_from[0], y - agent.moved_from[1]) >= STUCK_DISTANCE:
-                agent.moved_at, agent.moved_from = t, (x, y)
-            elif (
-                i not in self.halted
-                and graph.done[i] < graph.released[i]
-                and t - agent.moved_at >= BLOCKED_AFTER
+            if (
+                i in self.halted
+                or math.hypot(x - agent.moved_from[0], y - agent.moved_from[1]) >= STUCK_DISTANCE
             ):
+                agent.moved_at, agent.moved_from = t, (x, y)
+            elif graph.done[i] < graph.released[i] and t - agent.moved_at >= BLOCKED_AFTER:
                 nxt = graph.next_action(i)
                 if nxt is not None and not nxt.settle:
                     self.blocked.add(nxt.target)

@@ -69,6 +69,7 @@ def test_head_on_with_mapf_passes_without_contact_and_a_delayed_robot_only_takes
         "fleet_head_on_mapf.toml",
         "robots.robot1.speed_factor=0.5",
         "robots.robot2.stop={ at = 3.0, duration = 5.0 }",
+        "simulation.stop_time=120",
     )
     _assert_all_completed(delayed)
     _check_trace(fleet, trace)
@@ -87,6 +88,7 @@ def test_intersection_with_mapf_and_with_delays_has_no_contact_and_no_deadlock()
         "fleet_intersection_mapf.toml",
         "robots.robot1.speed_factor=0.5",
         "robots.robot3.stop={ at = 3.0, duration = 5.0 }",
+        "simulation.stop_time=120",
     )
     _assert_all_completed(delayed)
     _check_trace(fleet, trace)
