@@ -18,7 +18,8 @@ diagonal to each other stays s / sqrt(2) = 1.41 m > 2 r from the other two cells
 **Plans.** "mapf": `planner.mapf.solve` on that grid (4-connected moves and waits, no two robots in
 one cell or swapping cells in one step) from each robot's cell to the cell of its current goal.
 "prioritized": the robots one after the other in fleet order, each by a space-time search against
-the paths of the ones before (`planner.mapf.single_agent_path`: SIPP; the simple alternative). A
+the paths of the ones before (`planner.mapf.single_agent_path`: SIPP; the simple alternative); a
+robot that finds no path goes first in the next attempt (at most one attempt per robot). A
 goal cell that another robot already rests on or heads for (two robots with the same mission
 stop) makes the later robot wait where it is until the next re-solve.
 
@@ -54,7 +55,8 @@ obstacle not on the map; a coarse cell with such a mark on any robot's remaining
 lead-in, released and planned cells) is blocked from then on, and all robots are planned again,
 around it (a robot already in that cell may leave it). And a robot that has released moves ahead
 but has not moved `STUCK_DISTANCE` for `BLOCKED_AFTER` seconds (something on its way that VFH could
-not pass; not a robot halted by `stop`) has its next cell blocked, and all are planned again.
+not pass; not a robot halted by `stop`) has its next cell closed for the next plan, and all are
+planned again.
 
 Speed: the MAPF solver is anytime: `MAPF_TIME_LIMIT` s of wall time per solve (small instances
 are proven optimal long before, so their plans are the same every run; a large fleet's plan can
@@ -364,18 +366,33 @@ def _plan(method: str, grid, starts, goals, time_limit: float):
         except PlannerError:
             return None
         return [np.asarray(path, dtype=np.int64) for path in result.paths] if result.solved else None
-    paths: list[np.ndarray] = []
-    for start, goal in zip(starts, goals, strict=True):
-        # The robots not yet planned stand on their starts: the ones before must not run into them
-        # is what priority cannot promise; they are planned around as resting on their start.
-        try:
-            path = mapf.single_agent_path(grid, paths, start, goal)
-        except PlannerError:
+    # Prioritized: in priority order, each robot by SIPP against the paths of the ones before. A
+    # robot that finds no path (one planned before it runs over its start, or rests in its way)
+    # goes first in the next attempt; at most one attempt per robot.
+    n = len(starts)
+    order = list(range(n))
+    for _ in range(n):
+        paths: list[np.ndarray] = []
+        failed = None
+        for i in order:
+            try:
+                path = mapf.single_agent_path(grid, paths, starts[i], goals[i])
+            except PlannerError:
+                return None
+            if path is None:
+                failed = i
+                break
+            paths.append(np.asarray(path, dtype=np.int64))
+        if failed is None:
+            by_robot = [None] * n
+            for i, path in zip(order, paths, strict=True):
+                by_robot[i] = path
+            return by_robot
+        if order[0] == failed:
             return None
-        if path is None:
-            return None
-        paths.append(np.asarray(path, dtype=np.int64))
-    return paths
+        order.remove(failed)
+        order.insert(0, failed)
+    return None
 
 
 # -- the coordinator -------------------------------------------------------------------------------
@@ -410,9 +427,11 @@ class Coordinator:
         self.cells = CoordinationGrid(grid, max(agent.radius for agent in agents), clearance)
         self.agents = agents
         self.graph: ActionGraph | None = None
-        self.blocked: set[Cell] = set()
+        self.blocked: set[Cell] = set()  # cells with unknown obstacles (for good)
+        self.avoid: set[Cell] = set()  # cells a stuck robot could not enter (for the next plan)
         self.solves = 0
         self.solve_time = 0.0  # [s] of wall time planning
+        self.failures = 0  # solves that found no plan (the robots go on with the last one)
         self.failed_at: float | None = None
         self._resolve = False
         self.halted: set[int] = set()
@@ -506,11 +525,13 @@ class Coordinator:
             goals[i] = cell
             taken.add(cell)
         grid = self.cells.grid
-        if self.blocked:
+        closed = (self.blocked | self.avoid) - set(starts) - set(goals)
+        self.avoid = set()
+        if closed:
             from planner.grid import OccupancyGrid
 
             occupied = grid.occupied.copy()
-            for cell in self.blocked - set(starts):
+            for cell in closed:
                 occupied[cell] = True
             grid = OccupancyGrid(occupied, grid.resolution, grid.origin)
         began = time.perf_counter()
@@ -519,6 +540,7 @@ class Coordinator:
         self.solves += 1
         if paths is None:
             self.failed_at, self._resolve = t, False  # tried again a second later
+            self.failures += 1
             return False
         self.failed_at = None
         self.graph = ActionGraph(paths, held, lead_in or None, RELEASE_AHEAD)
@@ -571,7 +593,7 @@ class Coordinator:
             elif graph.done[i] < graph.released[i] and t - agent.moved_at >= BLOCKED_AFTER:
                 nxt = graph.next_action(i)
                 if nxt is not None and not nxt.settle:
-                    self.blocked.add(nxt.target)
+                    self.avoid.add(nxt.target)  # for the next plan only: no obstacle was seen
                     self._resolve = True
                 agent.moved_at = t
         if self._resolve or (self.failed_at is not None and t - self.failed_at >= 1.0):
