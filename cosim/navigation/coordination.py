@@ -43,7 +43,9 @@ the one ahead has wholly left; a robot never needs to stop at a cell's centre wh
 cell is released). Pure Pursuit stops within its goal tolerance of its LAST waypoint; the
 coordinator puts that last waypoint the tolerance beyond the last released centre, along the
 last move, so the robot stops at the centre itself (at the mission's goal cell: at the point of
-the cell's inner square nearest to the goal).
+the cell's inner square nearest to the goal); the waypoints end before the first reversal or
+return to a cell (a path that turns back passes by its end before), the rest follows once the
+robot is there.
 
 **Lifelong re-solves.** When a robot needs its next mission goal, all robots are planned again:
 each from the cell of its last released action (where it is committed to go), its remaining goal
@@ -502,7 +504,8 @@ class Coordinator:
                 step = self.graph.next_action(i)
                 way = self.graph.lead_in[i] if step is not None and step.settle else []
                 way = [*way, step.source] if step is not None else way
-                way = [cell for cell in [*way, *pending] if cell != start]
+                way = [*way, *pending]
+                way = way[: way.index(start)] if start in way else way  # the shortest part to the start
                 here = self.cells.cell_of(x, y)
                 if here in way:  # the cells behind the robot are passed
                     way = way[len(way) - 1 - way[::-1].index(here) :]
@@ -663,6 +666,15 @@ class Coordinator:
         if agent.goal is not None and not agent.waiting and last == len(actions):
             if self.cells.cell_of(*agent.goal) == final:
                 points[-1] = self.cells.inner_point(final, agent.goal[0], agent.goal[1], agent.radius)
+        # Up to the first reversal: Pure Pursuit stops near its last waypoint wherever it is on
+        # the path, and a path that turns back passes by its end before (the rest comes once the
+        # robot is there and the move into that cell is done).
+        for j in range(2, len(points)):
+            ahead = np.subtract(points[j], points[j - 1])
+            behind = np.subtract(points[j - 1], points[j - 2])
+            if float(np.dot(ahead, behind)) < 0.0 or points[j] in points[: j - 1]:
+                points = points[:j]
+                break
         end = np.array(points[-1])
         # The direction of arrival: along the last move, or from the robot when there is none.
         here = np.array([float(pose[0]), float(pose[1])])

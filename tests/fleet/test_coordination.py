@@ -269,3 +269,19 @@ def test_shipped_coordinated_scenarios_load():
     for name in ("fleet_head_on_mapf.toml", "fleet_intersection_mapf.toml"):
         fleet = load_scenario(HEAD_ON.parent / name, fleet=True)
         assert fleet.settings.coordination == "mapf"
+
+
+def test_waypoints_stop_before_the_path_turns_back():
+    # Pure Pursuit stops within its tolerance of the last waypoint: a released run that goes to a
+    # cell and back would end next to where it starts, and the robot would never leave.
+    coordinator = _coordinator([(13.0, 19.0)], [(35.0, 19.0)])
+    there_and_back = [(20, 6), (20, 7), (20, 6), (20, 5)]
+    coordinator.graph = ActionGraph([there_and_back])
+    waypoints = coordinator.waypoints(0, (13.0, 19.0, 0.0))
+    assert waypoints[:-1].tolist() == [[13.0, 19.0], [15.0, 19.0]]
+    assert waypoints[-1] == pytest.approx([15.98, 19.0])
+    # At (20, 7) with the move into it done, the rest is released as the next run.
+    coordinator.graph.finish(0)
+    coordinator.graph.finish(0)
+    waypoints = coordinator.waypoints(0, (15.0, 19.0, 0.0))
+    assert waypoints[:-1].tolist() == [[15.0, 19.0], [13.0, 19.0], [11.0, 19.0]]
