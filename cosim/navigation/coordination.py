@@ -107,7 +107,15 @@ class CoordinationGrid:
                 f"the map ({grid.shape[0]}x{grid.shape[1]} cells) is smaller than one coordination cell "
                 f"({self.size:g} m)"
             )
-        fine = np.asarray(grid.occupied)[grid.shape[0] - rows * self.k :, : cols * self.k]
+        known = np.asarray(grid.occupied)
+        # Map cells touching a known obstacle (8 neighbours): a lidar return off a wall's face can
+        # land in the free cell beside it; a mark there is no unknown obstacle.
+        padded = np.pad(known, 1)
+        self.near_known = np.zeros_like(known)
+        for dr in (0, 1, 2):
+            for dc in (0, 1, 2):
+                self.near_known |= padded[dr : dr + known.shape[0], dc : dc + known.shape[1]]
+        fine = known[grid.shape[0] - rows * self.k :, : cols * self.k]
         blocked = fine.reshape(rows, self.k, cols, self.k).any(axis=(1, 3))
         self.grid = OccupancyGrid(blocked, self.size, grid.origin)
         self.origin = grid.origin
@@ -619,7 +627,7 @@ class Coordinator:
         seen = None
         for fine in marks:
             if fine is not None and fine.any():
-                coarse = self.cells.coarse(fine)
+                coarse = self.cells.coarse(fine & ~self.cells.near_known)
                 seen = coarse if seen is None else seen | coarse
         if seen is None:
             return
