@@ -23,6 +23,11 @@ components step only in a block's first step:
    at the end of that block (at most one block, 0.1 s, later); after the last goal (times
    `repeat`) the robot has completed and stays where it is (still an obstacle for the others).
 
+With `[fleet] coordination` other than "none", or a robot's `stop`, `FleetCoordination` (in
+`cosim.navigation.coordination`) acts before every block: it hands each robot's planner component
+the cells its action dependency graph releases (or holds a stopped robot), and a mission's next
+goal is a re-solve of all robots' paths instead of a replan.
+
 The run ends when every robot has completed, at the stop time, or at the first collision when
 `[fleet] on_collision = "stop"` (robot-robot contact, or a robot hitting a wall or obstacle). With
 "continue" every robot-robot contact is reported once when it begins and the run goes on; a
