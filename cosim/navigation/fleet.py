@@ -23,6 +23,11 @@ components step only in a block's first step:
    at the end of that block (at most one block, 0.1 s, later); after the last goal (times
    `repeat`) the robot has completed and stays where it is (still an obstacle for the others).
 
+With `[fleet] coordination` other than "none", or a robot's `stop`, `FleetCoordination` (in
+`cosim.navigation.coordination`) acts before every block: it hands each robot's planner component
+the cells its action dependency graph releases (or holds a stopped robot), and a mission's next
+goal is a re-solve of all robots' paths instead of a replan.
+
 The run ends when every robot has completed, at the stop time, or at the first collision when
 `[fleet] on_collision = "stop"` (robot-robot contact, or a robot hitting a wall or obstacle). With
 "continue" every robot-robot contact is reported once when it begins and the run goes on; a
@@ -58,6 +63,7 @@ from cosim.core.master import NS_PER_S, Master
 from cosim.core.system import System
 from cosim.errors import PATH_LIMIT, CosimError, shorten
 from cosim.navigation.build import build_run
+from cosim.navigation.coordination import FleetCoordination
 from cosim.navigation.fleet_log import FleetLog
 from cosim.navigation.outcome import MODE_RECOVER, OutcomeMonitor
 from cosim.record.logfile import is_regular_file
@@ -282,6 +288,7 @@ def run_fleet(
             for robot in fleet.robots
         ]
         system, parameters = fleet_system(fleet, described, [each.built for each in robots])
+        coordination = FleetCoordination.make(fleet, robots)  # None: "none" and no stops
         master = Master(system, parameters=parameters, stop_time=fleet.first.stop_time)
         try:
             master.initialize()
@@ -296,7 +303,7 @@ def run_fleet(
         outcome = FleetOutcome([each.outcome for each in robots])
         if log_path is None:
             try:
-                _run(fleet, master, robots, trace, None, outcome)
+                _run(fleet, master, robots, trace, None, outcome, coordination)
             finally:
                 close_quietly(master)
             return outcome
@@ -310,7 +317,7 @@ def run_fleet(
                 stop_time = fleet.first.stop_time if progress else None
                 log = FleetLog(master, recorder, fleet, robots, stop_time, goals)
                 end = run_guarded(
-                    lambda: _run(fleet, master, robots, trace, log, outcome),
+                    lambda: _run(fleet, master, robots, trace, log, outcome, coordination),
                     lambda error: f"{error} (at t = {master.time:.3f} s)",
                 )
                 if end.failure is not None:
@@ -423,8 +430,10 @@ def _run(
     trace: list | None,
     log: FleetLog | None,
     outcome: FleetOutcome,
+    coordination: FleetCoordination | None = None,
 ) -> None:
-    """Step the fleet to its end (module docstring), filling `outcome` as it goes."""
+    """Step the fleet to its end (module docstring), filling `outcome` as it goes; `coordination`
+    releases each robot's cells before every block (`cosim.navigation.coordination`)."""
     settings = fleet.settings
     contacts = FleetContacts([each.robot.name for each in robots], [each.robot.radius for each in robots])
     h_ns = robots[0].built.system.macro_step_ns
@@ -442,6 +451,8 @@ def _run(
         log.write_poses(0, [(*each.pose, *each.command) for each in robots])
     block = _block_steps(master)
     tables = master.kernel_tables(record=True, block=block)
+    if coordination is not None:  # the released cells (and halts) for the first block
+        coordination.before_block(0.0)
     wall_start = time.perf_counter()
     reason = None
     k = 0
@@ -486,11 +497,13 @@ def _run(
                 tables = _halt(master, robots, log, block)
         for each in robots:  # a new mission goal: given at the end of the block
             if each.pending_goal and each.judged:
-                _next_goal(each, outcome.time)
+                _next_goal(each, outcome.time, coordination)
             each.pending_goal = False
             if log is not None and each.monitor.goal != each.logged_goal:
                 log.write_goal(round(outcome.time * NS_PER_S), each.robot.name, *each.monitor.goal)
                 each.logged_goal = each.monitor.goal
+        if coordination is not None and reason is None:
+            coordination.before_block(outcome.time)  # cells released, halts, re-solves
     if log is not None and last_pose_step != k:  # the pose at the end (step i of the last block)
         log.write_poses(
             round(outcome.time * NS_PER_S), [(*each.poses[i], *each.commands_now[i]) for each in robots]
@@ -580,12 +593,16 @@ def _judge(each: _Robot, t: float, h: float, before, after, step: int = 0) -> No
     result.deadlocked_at = each.progress.update(t, math.hypot(goal.x - after[0], goal.y - after[1]))
 
 
-def _next_goal(each: _Robot, t: float) -> None:
-    """Give the planner the robot's next goal (a replan from where it stands)."""
+def _next_goal(each: _Robot, t: float, coordination: FleetCoordination | None = None) -> None:
+    """Give the planner the robot's next goal (a replan from where it stands; coordinated: the
+    coordinator re-solves before the next block)."""
     goal = each.goals[each.goal_index]
     x, y, theta = (float(value) for value in each.poses[-1])
     planner = each.built.planner
-    why = planner.set_goal(goal.x, goal.y, t, (x, y, theta)) if planner is not None else "no planner"
+    if coordination is not None and coordination.coordinator is not None:
+        why = None
+    else:
+        why = planner.set_goal(goal.x, goal.y, t, (x, y, theta)) if planner is not None else "no planner"
     if why is not None:
         each.outcome.status = "no_path"
         return

@@ -202,6 +202,7 @@ class PlannerComponent(PythonComponent):
         self.replans: list[Replan] = []
         self.no_path: str | None = None  # why the goal cannot be reached any more
         self.plan_version = 0  # counts the plans made (1 after plan_path)
+        self.following = False  # waypoints given from outside (`follow`): no replanning
         if replanning is not None:
             self.costmap = Costmap(grid, replanning.angles, replanning.range_min, replanning.range_max)
             self._path_progress = path_progress()
@@ -259,6 +260,8 @@ class PlannerComponent(PythonComponent):
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(theta)):
             return
         changed = self.costmap.integrate(x, y, theta, inputs[4:])
+        if self.following:  # the costmap only (a coordinator reads it)
+            return
         self._advance_progress(x, y)
         reason = self._trigger(t, steering, changed > 0)
         if reason is not None and t - self._last_replan >= self.replanning.replan_interval:
@@ -367,6 +370,24 @@ class PlannerComponent(PythonComponent):
         if len(result.path) == 0:
             raise PlannerError("empty path")
         return result
+
+    def follow(self, waypoints: np.ndarray | None, t: float) -> None:
+        """Drive along `waypoints` (N x 2 [m]) given from outside from t [s] on (a fleet's
+        coordinator: the cells released to the robot; a halted robot: its own position), not
+        replanning meanwhile (the costmap still takes the scans); `follow(None, t)` goes back to
+        the component's own plan, from where the robot stands. Needs replanning (the outputs are
+        not constant)."""
+        if waypoints is None:
+            self.following = False
+            self._use(self.result)
+            self._blocked_since = None
+            self._progress_mark = (t, 0.0)
+            return
+        self.following = True
+        self.waypoints = np.ascontiguousarray(downsample_path(np.asarray(waypoints, dtype=float)))
+        self.output_buffer[:] = np.nan
+        self.output_buffer[: 2 * len(self.waypoints)] = self.waypoints.reshape(-1)
+        self.plan_version += 1
 
     def set_goal(self, x: float, y: float, t: float, pose: tuple[float, float, float]) -> str | None:
         """A new goal (x, y) [m] at time t [s] (the live view's /goal_pose): replan from `pose` to

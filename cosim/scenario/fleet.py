@@ -9,6 +9,8 @@ Each `[[robots]]` table makes one robot, the navigation template under its name:
     # mission = [{ x = 20.0, y = 6.0, dwell = 5.0 }, { x = 6.0, y = 6.0 }]
     # repeat = 3                                     # runs of the mission (with `mission` only)
     vfh = { safety_distance = 0.5 }                  # any template section, over the scenario's
+    # speed_factor = 0.5                             # 0 < f <= 1: the vehicle's commands times f
+    # stop = { at = 10.0, duration = 5.0 }           # [s]: the robot halts for that long
 
 A robot is checked as a single-robot scenario: the scenario-wide TOML with the robot's `start`,
 its (first) goal and its own sections put over the scenario's. A robot's section is merged key by
@@ -18,7 +20,9 @@ the robot's `connections` are added after the scenario's. So every robot is a co
 (`Robot.scenario`) and everything that checks or builds one robot serves each robot of a fleet.
 
 A fleet gives no top-level `[start]` or `[goal]` (each robot has its own). `[fleet]` holds
-`coordination` ("none": each robot plans alone), `on_collision` ("stop" ends the run at the first
+`coordination` ("none": each robot plans alone; "mapf": all robots planned together by multi-agent
+path finding, "prioritized": one after the other; both executed through an action dependency graph,
+`cosim.navigation.coordination`), `on_collision` ("stop" ends the run at the first
 robot-robot contact, "continue" records it and runs on) and `deadlock_after` [s] (a robot that
 made no progress for that long is deadlocked). `--set robots.robot2.vfh.safety_distance=0.5`
 addresses a robot by its name (`robots.1.…` by its position also works).
@@ -41,8 +45,7 @@ MAX_ROBOTS = 1000
 # Sections a fleet refuses: their topics exist only in a single-robot log.
 NOT_FOR_FLEETS = ("imu", "bumper")
 ROBOT_SECTIONS = ("vehicle", "pure_pursuit", "vfh", "mixer", "lidar", "planner", "components", "connections")
-COORDINATIONS = ("none",)
-PLANNED_COORDINATIONS = ("prioritized", "mapf")  # multi-agent path finding: to come
+COORDINATIONS = ("none", "prioritized", "mapf")
 ON_COLLISION = ("stop", "continue")
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 
@@ -68,6 +71,8 @@ class Robot:
     mission: tuple[Goal, ...]
     repeat: int = 1
     sections: tuple[str, ...] = ()  # the template sections the robot gives for itself
+    speed_factor: float = 1.0  # the vehicle's commands scaled by this (a slow robot)
+    stop: tuple[float, float] | None = None  # (at [s], duration [s]): the robot halts
 
     @property
     def radius(self) -> float:
@@ -162,6 +167,7 @@ def build_fleet(raw: dict, source: str, build: Callable[..., Any], *args) -> Fle
                 f"must be an inline table {{ x = …, y = …, theta = … }}, got {describe(robot_raw['start'])}",
             )
         mission, repeat = _mission(reader)
+        speed_factor, stop = _delays(reader)
         first = mission[0]
         robot_raw["goal"] = {"x": first.x, "y": first.y, "tolerance": first.tolerance}
         for section in ROBOT_SECTIONS:
@@ -172,8 +178,9 @@ def build_fleet(raw: dict, source: str, build: Callable[..., Any], *args) -> Fle
         robot_raw["scenario"] = dict(scenario_table)
         scenario = build(robot_raw, label, *args)
         own = tuple(section for section in ROBOT_SECTIONS if section in table)
-        robots.append(Robot(name, index, scenario, mission, repeat, own))
+        robots.append(Robot(name, index, scenario, mission, repeat, own, speed_factor, stop))
     _check_common(source, robots)
+    _check_coordination(source, robots, settings)
     first = robots[0].scenario
     return Fleet(
         source,
@@ -189,9 +196,6 @@ def build_fleet(raw: dict, source: str, build: Callable[..., Any], *args) -> Fle
 
 def _settings(table: TableReader) -> FleetSettings:
     default = FleetSettings
-    planned = table.table.get("coordination")
-    if planned in PLANNED_COORDINATIONS:
-        raise table.error("coordination", f"'{planned}' is not there yet; robots plan alone with 'none'")
     settings = FleetSettings(
         coordination=table.string("coordination", default.coordination, choices=COORDINATIONS),
         on_collision=table.string("on_collision", default.on_collision, choices=ON_COLLISION),
@@ -235,6 +239,37 @@ def _mission(reader: TableReader) -> tuple[tuple[Goal, ...], int]:
             )
         goal.finish()
     return tuple(goals), reader.integer("repeat", 1, minimum=1, maximum=1_000_000)
+
+
+def _delays(reader: TableReader) -> tuple[float, tuple[float, float] | None]:
+    """A robot's `speed_factor` (0 < f <= 1) and `stop = { at = t, duration = d }`."""
+    factor = reader.number("speed_factor", 1.0, minimum=0.0, maximum=1.0, exclusive_minimum=True)
+    if not reader.has("stop"):
+        return factor, None
+    table = TableReader(reader.source, f"{reader.where}.stop", reader.raw("stop"))
+    stop = (table.number("at", minimum=0.0), table.number("duration", minimum=0.0, exclusive_minimum=True))
+    table.finish()
+    return factor, stop
+
+
+def _check_coordination(source: str, robots: list[Robot], settings: FleetSettings) -> None:
+    """Coordination and stops hand the planner component waypoints at run time: its outputs must
+    not be constant ([planner] replan = true, the default)."""
+    for robot in robots:
+        if robot.scenario.planner.replan:
+            continue
+        why = (
+            f"[fleet] coordination = '{settings.coordination}'"
+            if settings.coordination != "none"
+            else "stop"
+            if robot.stop is not None
+            else None
+        )
+        if why is not None:
+            raise TableReader(source, f"[[robots]][{robot.index}]", {}).error(
+                "planner.replan",
+                f"{why} hands the planner new waypoints during the run: needs [planner] replan = true",
+            )
 
 
 def _tolerance(goal: TableReader) -> float:

@@ -4,7 +4,10 @@
 (`cosim.scenario.compose.describe_system`: every problem names the file, the robot and the key),
 then makes the robots see each other: each robot's template lidar gets the inputs
 `robots_x[j]`, `robots_y[j]` (j = 1..N-1, the other robots in fleet order) and its footprint radii
-(`ComponentDescription.robot_radii`), fed by the other robots' `vehicle.x`, `vehicle.y`. Those
+(`ComponentDescription.robot_radii`), fed by the other robots' `vehicle.x`, `vehicle.y` (not with
+`[fleet] coordination` other than "none": the coordinator keeps the robots apart, and a lidar that
+sees only the world lets VFH and the costmap react to unknown obstacles alone). A robot's
+`speed_factor` scales the connections into its vehicle's `v` (and a differential drive's `omega`). Those
 links run from a vehicle's pose (a state: no direct dependency on the vehicle's inputs) to a
 lidar, so they close no algebraic loop.
 
@@ -61,9 +64,12 @@ def describe_fleet(fleet: Fleet) -> FleetDescription:
     links: list[ConnectionDescription] = []
     radius = {robot.name: robot.radius for robot in fleet.robots}
     for robot in fleet.robots:
-        description = _own_sections(robot, describe_system(robot.scenario))
+        description = _slowed(robot, _own_sections(robot, describe_system(robot.scenario)))
         lidar = description.components.get(SEEN_BY)
-        if lidar is None or lidar.kind != "lidar" or len(fleet.robots) == 1:
+        # Coordinated robots are kept apart by the coordinator: their lidars see the world only
+        # (VFH and the costmap then react to unknown obstacles, not to the other robots).
+        alone = fleet.settings.coordination == "none"
+        if lidar is None or lidar.kind != "lidar" or len(fleet.robots) == 1 or not alone:
             robots[robot.name] = description  # no template lidar: this robot sees no one
             seen[robot.name] = ()
             continue
@@ -109,6 +115,30 @@ def _own_sections(robot, description: SystemDescription) -> SystemDescription:
             component = replace(component, where=f"{component.where} + {label}.{section}")
         components[name] = component
     return replace(description, components=components)
+
+
+def _slowed(robot, description: SystemDescription) -> SystemDescription:
+    """A robot with `speed_factor` f < 1: the connections into its vehicle's speed commands (`v`,
+    and `omega` of a differential drive) scaled by f, so it drives the same path f times as fast
+    (a bicycle's steering angle stays: same curvature)."""
+    factor = robot.speed_factor
+    if factor == 1.0:
+        return description
+    ports = ("v", "omega") if robot.scenario.vehicle_type == "differential" else ("v",)
+    targets = {f"{POSE_OF}.{port}" for port in ports}
+    connections = tuple(
+        replace(c, scale=c.scale * factor, offset=c.offset * factor, where=f"{c.where} x speed_factor")
+        if c.target in targets
+        else c
+        for c in description.connections
+    )
+    fed = {c.target for c in connections} & targets
+    if fed != targets:
+        from cosim.errors import CosimError
+
+        missing = ", ".join(sorted(targets - fed))
+        raise CosimError(f"{robot.scenario.source}: speed_factor: nothing feeds {missing} to scale")
+    return replace(description, connections=connections)
 
 
 def qualified(robot: str, description: SystemDescription) -> SystemDescription:

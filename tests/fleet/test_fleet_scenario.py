@@ -125,8 +125,8 @@ def test_set_addresses_a_robot_by_name():
         ),
         (
             TWO,
-            '[fleet]\ncoordination = "mapf"',
-            r"^f\.toml: \[fleet\]\.coordination: 'mapf' is not there yet",
+            '[fleet]\ncoordination = "cbs"',
+            r"^f\.toml: \[fleet\]\.coordination: must be one of 'none', 'prioritized', 'mapf'",
         ),
         (
             TWO + "\n[start]\nx = 1\ny = 1\n",
