@@ -63,6 +63,10 @@ typedef struct {
     int *table; long long table_size;   /* hash: node id or -1 */
     ivec open, work;
     int *occ_now, *occ_next, *nxt, *stamp; int gen;
+    /* dead-end trees (see pockets()): per vertex the top of the tree hanging off the graph's core
+     * that holds it (-1: in the core); per agent the agents whose goals lie deeper in its tree
+     * (dep_list[dep_first[i] .. dep_first[i + 1] - 1]) and whether one of them is not home yet */
+    int *top, *dep_first, *dep_list; char *deferred;
     uint64_t rng;
     double used, budget;  /* bytes */
     int truncated;        /* a node or constraint was refused for the budget */
@@ -229,6 +233,91 @@ static int new_node(Mapf *m, int parent, long long g) {
     return id;
 }
 
+/* -- dead-end trees ------------------------------------------------------------------------------
+ * Pruning the vertices of degree one, again and again, leaves the graph's core (the vertices on a
+ * cycle or between two) and trees hanging off it: dead ends. A dead end one cell wide fills from
+ * the bottom: an agent resting on its goal there walls off every goal deeper in, and an agent that
+ * must get deeper cannot pass it. PIBT pushes it deeper (ahead of the agent with priority), so the
+ * agent whose goal lies beyond it never gets there. Hence: while an agent whose goal lies deeper in
+ * the same tree (a descendant of this agent's goal) is not home, this agent is deferred: it keeps
+ * out of the tree (its cells rank after every other cell, among themselves by distance) and swaps
+ * out of the way (below) of an agent that comes in. Trees that are a whole component have no core to
+ * wait in and are left alone. */
+
+/* top and the dependents of every agent; -1 out of memory. */
+static int pockets(Mapf *m) {
+    int V = m->V, N = m->N, *degree = malloc((size_t)V * sizeof(int)), *parent = malloc((size_t)V * sizeof(int));
+    int *queue = malloc((size_t)V * sizeof(int)), *owner = malloc((size_t)V * sizeof(int));
+    m->top = malloc((size_t)V * sizeof(int));
+    m->dep_first = calloc((size_t)N + 1, sizeof(int));
+    m->deferred = calloc((size_t)N, 1);
+    int ok = degree && parent && queue && owner && m->top && m->dep_first && m->deferred;
+    if (ok) {
+        int head = 0, tail = 0;
+        for (int v = 0; v < V; v++) {
+            degree[v] = 0;
+            for (int k = 0; k < 4; k++) degree[v] += m->adj[4 * v + k] >= 0;
+            parent[v] = -2;  /* -2: in the core */
+            owner[v] = -1;
+            if (degree[v] == 1) queue[tail++] = v;
+        }
+        while (head < tail) {  /* prune: parent = the one neighbour left when it went */
+            int v = queue[head++];
+            parent[v] = -1;
+            for (int k = 0; k < 4; k++) {
+                int u = m->adj[4 * v + k];
+                if (u < 0 || parent[u] != -2) continue;
+                parent[v] = u;
+                if (--degree[u] == 1) queue[tail++] = u;
+            }
+        }
+        /* tops in reverse pruning order (a parent is pruned after its children) */
+        for (int v = 0; v < V; v++) m->top[v] = -1;
+        for (int k = tail - 1; k >= 0; k--) {
+            int v = queue[k], p = parent[v];
+            m->top[v] = p >= 0 && parent[p] == -2 ? v : p >= 0 ? m->top[p] : -2;  /* -2: a whole tree */
+        }
+        for (int v = 0; v < V; v++) if (m->top[v] == -2) m->top[v] = -1;
+        for (int i = 0; i < N; i++) owner[m->goal[i]] = i;
+        for (int pass = 0; pass < 2; pass++) {  /* count, then fill */
+            for (int j = 0; j < N; j++) {
+                if (m->top[m->goal[j]] < 0) continue;
+                for (int u = parent[m->goal[j]]; u >= 0 && parent[u] != -2; u = parent[u]) {
+                    int k = owner[u];
+                    if (k < 0) continue;
+                    if (pass == 0) m->dep_first[k + 1]++;
+                    else m->dep_list[m->dep_first[k] + degree[k]++] = j;  /* degree: reused as fill count */
+                }
+            }
+            if (pass == 0) {
+                for (int i = 0; i < N; i++) m->dep_first[i + 1] += m->dep_first[i];
+                m->dep_list = malloc((size_t)(m->dep_first[N] + 1) * sizeof(int));
+                if (!m->dep_list) { ok = 0; break; }
+                for (int i = 0; i < N && i < V; i++) degree[i] = 0;
+                if (N > V) { ok = 0; break; }
+            }
+        }
+    }
+    free(degree); free(parent); free(queue); free(owner);
+    return ok ? 0 : -1;
+}
+
+/* Which agents are deferred in configuration q. */
+static void defer(Mapf *m, const int *q) {
+    for (int k = 0; k < m->N; k++) {
+        char d = 0;
+        for (int e = m->dep_first[k]; e < m->dep_first[k + 1] && !d; e++) d = q[m->dep_list[e]] != m->goal[m->dep_list[e]];
+        m->deferred[k] = d;
+    }
+}
+
+/* How far vertex v is from where agent i wants to be: its goal distance, plus V in its goal's dead-end
+ * tree while it is deferred. */
+static int want(const Mapf *m, int i, int v) {
+    int d = m->dist[(size_t)i * m->V + v];
+    return m->deferred[i] && m->top[v] >= 0 && m->top[v] == m->top[m->goal[i]] ? d + m->V : d;
+}
+
 /* -- PIBT with swaps ------------------------------------------------------------------------------
  * Plain PIBT cannot pass two agents heading in opposite directions through a corridor: the one with
  * priority pushes the other back one step at a time, for ever. The swap (Okumura 2024, "Engineering
@@ -258,8 +347,7 @@ static int way_on(const Mapf *m, int v, int back) {
  * come back out of? The push is followed along the corridor (one way on); a branching lets the puller
  * step aside, and PIBT resolves pushes through corridors open at both ends. */
 static int swap_needed(const Mapf *m, int puller, int vp, int vq) {
-    const int *dq = m->dist + (size_t)puller * m->V;
-    if (dq[vp] >= dq[vq]) return 0;  /* the puller does not want to go where the pusher is */
+    if (want(m, puller, vp) >= want(m, puller, vq)) return 0;  /* the puller does not want to go where the pusher is */
     for (int steps = 0; steps < m->V; steps++) {
         int on = way_on(m, vq, vp);
         if (on == -2) return 0;
@@ -294,16 +382,17 @@ static int swap_partner(const Mapf *m, const int *q, int i, int best) {
 
 /* PIBT step of agent i (current config q; j the agent that pushed i, -1 if none). */
 static int pibt(Mapf *m, const int *q, int i, int j) {
-    int cand[5], n = 0, here = q[i];
-    const int *d = m->dist + (size_t)i * m->V;
+    int cand[5], key[5], n = 0, here = q[i];
     for (int k = 0; k < 4; k++) if (m->adj[4 * here + k] >= 0) cand[n++] = m->adj[4 * here + k];
     cand[n++] = here;
     /* shuffle, then stable insertion sort by (distance, occupied now): random ties */
     for (int k = n - 1; k > 0; k--) { int r = (int)(rnd(m) % (uint64_t)(k + 1)), t = cand[k]; cand[k] = cand[r]; cand[r] = t; }
+    for (int a = 0; a < n; a++) key[a] = 2 * want(m, i, cand[a]) + (m->occ_now[cand[a]] >= 0);
     for (int a = 1; a < n; a++) {
-        int v = cand[a], key = 2 * d[v] + (m->occ_now[v] >= 0), b = a - 1;
-        while (b >= 0 && 2 * d[cand[b]] + (m->occ_now[cand[b]] >= 0) > key) { cand[b + 1] = cand[b]; b--; }
+        int v = cand[a], kv = key[a], b = a - 1;
+        while (b >= 0 && key[b] > kv) { cand[b + 1] = cand[b]; key[b + 1] = key[b]; b--; }
         cand[b + 1] = v;
+        key[b + 1] = kv;
     }
     int partner = swap_partner(m, q, i, cand[0]);
     if (partner >= 0)  /* walk backwards: the farthest vertex first */
@@ -334,6 +423,7 @@ static int generate(Mapf *m, int s, int c, int *out) {
     int N = m->N, ok = 1;
     const int *q = config(m, s), *order = m->order + (size_t)s * N;
     for (int i = 0; i < N; i++) { m->occ_now[q[i]] = i; m->nxt[i] = -1; }
+    defer(m, q);
     for (int k = c; k >= 0 && m->pool[k].agent >= 0; k = m->pool[k].parent) {
         int i = m->pool[k].agent, u = m->pool[k].vertex;
         if (m->occ_next[u] >= 0) { ok = 0; break; }
@@ -571,7 +661,7 @@ void *mapf_solve(int V, const int *adj, int N, const int *start, const int *goal
     m->nxt = malloc((size_t)N * sizeof(int));
     m->table = malloc((size_t)m->table_size * sizeof(int));
     int ready = m->dist && queue && m->occ_now && m->occ_next && m->stamp && m->nxt && m->table
-                && lns_init(&m->lns, V, N, adj, start, goal, NULL, seed) == 0;
+                && lns_init(&m->lns, V, N, adj, start, goal, NULL, seed) == 0 && pockets(m) == 0;
     if (!ready) { free(queue); return m; }
     for (long long s = 0; s < m->table_size; s++) m->table[s] = -1;
     for (int v = 0; v < V; v++) { m->occ_now[v] = -1; m->occ_next[v] = -1; }
@@ -621,6 +711,7 @@ void mapf_free(void *handle) {
     for (int k = 0; k < m->n_nodes; k++) { free(m->nodes[k].queue.a); free(m->nodes[k].next.a); }
     free(m->nodes); free(m->cfg); free(m->pri); free(m->order); free(m->pool); free(m->table);
     free(m->open.a); free(m->work.a);
+    free(m->top); free(m->dep_first); free(m->dep_list); free(m->deferred);
     free(m->dist); free(m->occ_now); free(m->occ_next); free(m->stamp); free(m->nxt); free(m->path);
     lns_free(&m->lns);
     free(m);

@@ -80,6 +80,20 @@ def test_agents_reorder_in_a_dead_end():
     assert result.sum_of_costs == optimum
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_agents_resting_in_a_dead_end_let_a_deeper_goal_pass(seed):
+    """Two agents rest on their goals in a one-cell dead end; a third's goal lies deeper. Both must
+    come out to the open cells and go back in after it (the case of the maze's border corridors,
+    where PIBT pushed the resting agents deeper, ahead of the third, for ever). Valid, and the exact
+    optimum of the joint-state search."""
+    rows = ["...#####", "........"]
+    starts, goals = [(1, 4), (1, 5), (0, 0)], [(1, 4), (1, 5), (1, 7)]
+    result = solve_checked(rows, starts, goals, time_limit=5.0, seed=seed)
+    optimum = optimal_sum_of_costs(grid_of(rows).occupied.tolist(), starts, goals)
+    assert optimum is not None and optimum > result.lower_bound
+    assert result.sum_of_costs == optimum
+
+
 def test_random_instances_on_an_obstacle_grid():
     """Many agents on a 24 x 24 grid with 15 % obstacles: valid paths, and the improvement phase."""
     rng = np.random.default_rng(7)
