@@ -67,6 +67,11 @@ typedef struct {
      * that holds it (-1: in the core); per agent the agents whose goals lie deeper in its tree
      * (dep_list[dep_first[i] .. dep_first[i + 1] - 1]) and whether one of them is not home yet */
     int *top, *dep_first, *dep_list; char *deferred;
+    /* one-cell corridors of the core (see corridors()): per vertex its corridor (-1: none) and place
+     * 1..length in it; per corridor its length, the cells in order from cfirst, the vertices just
+     * past both ends, and the agents whose goals lie in it, in order (gfirst) */
+    int *chain, *cpos, *clen, *cfirst, *ccells, *cend, *gfirst, *gagent, n_chains;
+    int *dfr, *cur_dfr;  /* per node and agent: 2 * (agent it yields to) + side to leave by, or -1 */
     uint64_t rng;
     double used, budget;  /* bytes */
     int truncated;        /* a node or constraint was refused for the budget */
@@ -188,7 +193,7 @@ static int grow_nodes(Mapf *m) {
     if (m->n_nodes + 1 < m->cap_nodes) return 0;
     int cap = m->cap_nodes ? 2 * m->cap_nodes : 16;
     size_t N = (size_t)m->N;
-    double per_node = (double)(sizeof(Node) + 3 * N * sizeof(int));
+    double per_node = (double)(sizeof(Node) + 4 * N * sizeof(int));
     double room = (m->budget - m->used) / per_node;  /* nodes the budget still pays for */
     if (cap - m->cap_nodes > room) cap = m->cap_nodes + (int)room;  /* the last growth: what is left */
     if (cap <= m->n_nodes + 1) { m->truncated = 1; return -1; }
@@ -201,11 +206,15 @@ static int grow_nodes(Mapf *m) {
     if (pri) m->pri = pri;
     int *order = realloc(m->order, (size_t)cap * N * sizeof(int));
     if (order) m->order = order;
-    if (!nodes || !cfg || !pri || !order) { m->truncated = 1; return -1; }
+    int *dfr = realloc(m->dfr, (size_t)cap * N * sizeof(int));
+    if (dfr) m->dfr = dfr;
+    if (!nodes || !cfg || !pri || !order || !dfr) { m->truncated = 1; return -1; }
     m->cap_nodes = cap;
     m->used += more;
     return 0;
 }
+
+static void yielding(Mapf *m, const int *q, const int *prev, int *out);
 
 /* A new search node for configuration q (already copied at slot n_nodes). */
 static int new_node(Mapf *m, int parent, long long g) {
@@ -218,6 +227,7 @@ static int new_node(Mapf *m, int parent, long long g) {
     } else {
         for (int i = 0; i < N; i++) p[i] = (float)m->dist[(size_t)i * m->V + q[i]] / (float)(m->V + 1);
     }
+    yielding(m, q, parent >= 0 ? m->dfr + (size_t)parent * N : NULL, m->dfr + (size_t)id * N);
     int *order = m->order + (size_t)id * N;
     for (int i = 0; i < N; i++) order[i] = i;
     sort_pri = p;
@@ -311,10 +321,126 @@ static void defer(Mapf *m, const int *q) {
     }
 }
 
+/* -- one-cell corridors ----------------------------------------------------------------------------
+ * The same holds in a corridor of the core open at both ends (the aisles between a warehouse's
+ * shelves): an agent whose goal lies in it beyond another one's goal, seen from the side it comes
+ * in by, cannot pass the other one; PIBT pushes that one ahead of it, past its goal, from where it
+ * can come back only round the block (for ever pushing the first one back out of its goal). So when
+ * an agent not home (the leader) is in such a corridor or just before it heading in, and goals of
+ * others lie between it and its goal, those others yield: they leave the corridor by the leader's
+ * side (the corridor's cells rank after every other cell, falling towards that side), swap out of
+ * the leader's way, and stay out until the leader is home. A yielding agent makes no one else
+ * yield, so no two agents wait for each other. Unlike the dead ends this depends on where the leader
+ * came from, so it is kept per search node. */
+
+/* Find the corridors (chains of cells of degree two whose neighbours are in the core) and the goals
+ * in them; -1 out of memory. */
+static int corridors(Mapf *m) {
+    int V = m->V, N = m->N, *seq = malloc((size_t)V * sizeof(int)), *owner = malloc((size_t)V * sizeof(int));
+    m->chain = malloc((size_t)V * sizeof(int));
+    m->cpos = malloc((size_t)V * sizeof(int));
+    m->ccells = malloc((size_t)V * sizeof(int));
+    m->clen = malloc((size_t)V * sizeof(int));
+    m->cfirst = malloc((size_t)V * sizeof(int));
+    m->cend = malloc((size_t)2 * V * sizeof(int));
+    m->gfirst = calloc((size_t)V + 1, sizeof(int));
+    m->gagent = malloc((size_t)N * sizeof(int));
+    int ok = seq && owner && m->chain && m->cpos && m->ccells && m->clen && m->cfirst && m->cend && m->gfirst && m->gagent;
+    if (ok) {
+        for (int v = 0; v < V; v++) owner[v] = -1;
+        for (int i = 0; i < N; i++) owner[m->goal[i]] = i;
+        for (int v = 0; v < V; v++) {  /* -2: a corridor cell not yet placed */
+            int degree = 0, inner = m->top[v] < 0;
+            for (int k = 0; k < 4; k++) {
+                int u = m->adj[4 * v + k];
+                if (u >= 0) { degree++; inner &= m->top[u] < 0; }
+            }
+            m->chain[v] = degree == 2 && inner ? -2 : -1;
+        }
+        int used = 0;
+        for (int v = 0; v < V; v++) {
+            if (m->chain[v] != -2) continue;
+            int ends[2], n = 0, cycle = 0, half[2] = {0, 0};
+            for (int side = 0; side < 2 && !cycle; side++) {  /* walk both ways from v */
+                int prev = v, cur = -1;
+                for (int k = 0, seen = 0; k < 4; k++) if (m->adj[4 * v + k] >= 0 && seen++ == side) cur = m->adj[4 * v + k];
+                while (cur != v && m->chain[cur] == -2) {
+                    seq[n++] = cur;
+                    half[side]++;
+                    int next = -1;
+                    for (int k = 0; k < 4; k++) { int u = m->adj[4 * cur + k]; if (u >= 0 && u != prev) next = u; }
+                    prev = cur;
+                    cur = next;
+                }
+                if (cur == v) cycle = 1;
+                ends[side] = cur;
+            }
+            if (cycle) {  /* a ring of corridor cells alone: no ends to leave by */
+                m->chain[v] = -1;
+                for (int k = 0; k < n; k++) m->chain[seq[k]] = -1;
+                continue;
+            }
+            int c = m->n_chains++, length = n + 1;
+            m->cfirst[c] = used;
+            m->clen[c] = length;
+            m->cend[2 * c] = ends[0];       /* before place 1 */
+            m->cend[2 * c + 1] = ends[1];   /* after place length */
+            for (int k = half[0] - 1; k >= 0; k--) m->ccells[used++] = seq[k];
+            m->ccells[used++] = v;
+            for (int k = half[0]; k < n; k++) m->ccells[used++] = seq[k];
+            for (int k = 0; k < length; k++) {
+                int u = m->ccells[m->cfirst[c] + k];
+                m->chain[u] = c;
+                m->cpos[u] = k + 1;
+            }
+        }
+        for (int c = 0, g = 0; c < m->n_chains; c++) {
+            m->gfirst[c] = g;
+            for (int k = 0; k < m->clen[c]; k++) {
+                int a = owner[m->ccells[m->cfirst[c] + k]];
+                if (a >= 0) m->gagent[g++] = a;
+            }
+            m->gfirst[c + 1] = g;
+        }
+    }
+    free(seq); free(owner);
+    return ok ? 0 : -1;
+}
+
+/* The yielding of configuration q (row out) from its parent's (prev, NULL at the root). */
+static void yielding(Mapf *m, const int *q, const int *prev, int *out) {
+    int N = m->N;
+    for (int k = 0; k < N; k++) {
+        out[k] = prev ? prev[k] : -1;
+        if (out[k] >= 0 && q[out[k] >> 1] == m->goal[out[k] >> 1]) out[k] = -1;  /* the leader is home */
+    }
+    for (int a = 0; a < N; a++) {
+        int g = m->goal[a], c = m->chain[g], v = q[a];
+        if (c < 0 || v == g || out[a] >= 0) continue;
+        const int *d = m->dist + (size_t)a * m->V;
+        int at;  /* the leader's place: in the corridor, or just before an end heading in */
+        if (m->chain[v] == c) at = m->cpos[v];
+        else if (v == m->cend[2 * c] && d[m->ccells[m->cfirst[c]]] < d[v]) at = 0;
+        else if (v == m->cend[2 * c + 1] && d[m->ccells[m->cfirst[c] + m->clen[c] - 1]] < d[v]) at = m->clen[c] + 1;
+        else continue;
+        int to = m->cpos[g], lo = at < to ? at : to, hi = at < to ? to : at;
+        for (int e = m->gfirst[c]; e < m->gfirst[c + 1]; e++) {
+            int k = m->gagent[e], place = m->cpos[m->goal[k]];
+            if (k != a && place > lo && place < hi && out[k] < 0) out[k] = 2 * a + (at > to);
+        }
+    }
+}
+
 /* How far vertex v is from where agent i wants to be: its goal distance, plus V in its goal's dead-end
- * tree while it is deferred. */
+ * tree while it is deferred; while it yields, V plus the way out (by the leader's side) in its goal's
+ * corridor. */
 static int want(const Mapf *m, int i, int v) {
     int d = m->dist[(size_t)i * m->V + v];
+    if (m->cur_dfr && m->cur_dfr[i] >= 0) {
+        int c = m->chain[m->goal[i]];
+        if (m->chain[v] == c) return m->V + (m->cur_dfr[i] & 1 ? m->clen[c] + 1 - m->cpos[v] : m->cpos[v]);
+        return d;
+    }
     return m->deferred[i] && m->top[v] >= 0 && m->top[v] == m->top[m->goal[i]] ? d + m->V : d;
 }
 
@@ -347,7 +473,8 @@ static int way_on(const Mapf *m, int v, int back) {
  * come back out of? The push is followed along the corridor (one way on); a branching lets the puller
  * step aside, and PIBT resolves pushes through corridors open at both ends. */
 static int swap_needed(const Mapf *m, int puller, int vp, int vq) {
-    if (want(m, puller, vp) >= want(m, puller, vq)) return 0;  /* the puller does not want to go where the pusher is */
+    if (want(m, puller, vp) >= want(m, puller, vq)) return 0;
+    if (m->cur_dfr && m->cur_dfr[puller] >= 0 && m->chain[vq] == m->chain[m->goal[puller]]) return 1;  /* it must come out this way */  /* the puller does not want to go where the pusher is */
     for (int steps = 0; steps < m->V; steps++) {
         int on = way_on(m, vq, vp);
         if (on == -2) return 0;
@@ -424,6 +551,7 @@ static int generate(Mapf *m, int s, int c, int *out) {
     const int *q = config(m, s), *order = m->order + (size_t)s * N;
     for (int i = 0; i < N; i++) { m->occ_now[q[i]] = i; m->nxt[i] = -1; }
     defer(m, q);
+    m->cur_dfr = m->dfr + (size_t)s * N;
     for (int k = c; k >= 0 && m->pool[k].agent >= 0; k = m->pool[k].parent) {
         int i = m->pool[k].agent, u = m->pool[k].vertex;
         if (m->occ_next[u] >= 0) { ok = 0; break; }
@@ -586,7 +714,7 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
     if (is_goal(m, start)) m->goal_node = 0;
     while (m->goal_node < 0 && !planned && now() < deadline) {
         double began = now();
-        if (lacam_time < INFINITY && 3 * lacam_time <= planning_time) {
+        if (lacam_time < INFINITY && lacam_time <= planning_time) {
             outcome = lacam(m, began + FIRST_SLICE < deadline ? began + FIRST_SLICE : deadline, 1);
             lacam_time += now() - began;
             if (outcome == LACAM_FOUND || (outcome == LACAM_EXHAUSTED && !m->truncated)) break;
@@ -661,7 +789,7 @@ void *mapf_solve(int V, const int *adj, int N, const int *start, const int *goal
     m->nxt = malloc((size_t)N * sizeof(int));
     m->table = malloc((size_t)m->table_size * sizeof(int));
     int ready = m->dist && queue && m->occ_now && m->occ_next && m->stamp && m->nxt && m->table
-                && lns_init(&m->lns, V, N, adj, start, goal, NULL, seed) == 0 && pockets(m) == 0;
+                && lns_init(&m->lns, V, N, adj, start, goal, NULL, seed) == 0 && pockets(m) == 0 && corridors(m) == 0;
     if (!ready) { free(queue); return m; }
     for (long long s = 0; s < m->table_size; s++) m->table[s] = -1;
     for (int v = 0; v < V; v++) { m->occ_now[v] = -1; m->occ_next[v] = -1; }
@@ -711,6 +839,8 @@ void mapf_free(void *handle) {
     for (int k = 0; k < m->n_nodes; k++) { free(m->nodes[k].queue.a); free(m->nodes[k].next.a); }
     free(m->nodes); free(m->cfg); free(m->pri); free(m->order); free(m->pool); free(m->table);
     free(m->open.a); free(m->work.a);
+    free(m->chain); free(m->cpos); free(m->clen); free(m->cfirst); free(m->ccells); free(m->cend); free(m->gfirst);
+    free(m->gagent); free(m->dfr);
     free(m->top); free(m->dep_first); free(m->dep_list); free(m->deferred);
     free(m->dist); free(m->occ_now); free(m->occ_next); free(m->stamp); free(m->nxt); free(m->path);
     lns_free(&m->lns);

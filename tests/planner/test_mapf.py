@@ -94,6 +94,19 @@ def test_agents_resting_in_a_dead_end_let_a_deeper_goal_pass(seed):
     assert result.sum_of_costs == optimum
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_agents_resting_in_a_corridor_let_a_deeper_goal_pass(seed):
+    """A one-cell corridor open at both ends (a warehouse aisle): two agents rest on their goals in
+    it, a third's goal lies beyond them from the side it comes by. Valid, and the exact optimum of the
+    joint-state search (here the resting agents step out and back rather than the third going round)."""
+    rows = [".........", ".#######.", ".........", ".#######.", "........."]
+    starts, goals = [(2, 3), (2, 4), (0, 0)], [(2, 3), (2, 4), (2, 5)]
+    result = solve_checked(rows, starts, goals, time_limit=5.0, seed=seed)
+    optimum = optimal_sum_of_costs(grid_of(rows).occupied.tolist(), starts, goals)
+    assert optimum is not None and optimum > result.lower_bound
+    assert result.sum_of_costs == optimum
+
+
 def test_random_instances_on_an_obstacle_grid():
     """Many agents on a 24 x 24 grid with 15 % obstacles: valid paths, and the improvement phase."""
     rng = np.random.default_rng(7)
