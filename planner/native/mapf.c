@@ -3,10 +3,11 @@
  * First solution: LaCAM (Okumura, AAAI 2023), a depth-first search over configurations (one vertex
  * per agent) whose successors PIBT (Okumura et al., AIJ 2022) generates under constraints that a
  * lazily grown tree adds agent by agent, so every successor is eventually tried: complete. PIBT
- * swaps two agents that meet head-on at the mouth of a dead end (below). LaCAM shares the time with
- * prioritized planning with eviction (mapf_lns.h), which finds a first solution where PIBT's greedy
- * steps need a deep search (agents resting on goals in the dead ends of a maze, agents that must
- * pass each other in the one-cell aisles of a warehouse).
+ * swaps two agents that meet head-on at the mouth of a dead end, keeps agents resting in one-cell
+ * dead ends and corridors out of the way of an agent whose goal lies further in, and breaks distance
+ * ties along per-agent guides (all below). LaCAM shares the time (half each) with
+ * prioritized planning with eviction (mapf_lns.h), which is sometimes the quicker where PIBT's greedy
+ * steps need a deep search (agents that must pass each other in the one-cell aisles of a warehouse).
  * Then, until the time limit, two improvers share the best solution (its sum of costs bounds both):
  * - LaCAM* (Okumura, IJCAI 2023): configurations met again link the search nodes, costs g are
  *   rewired along the links (Dijkstra-like), nodes with g + h >= the best sum of costs are pruned;
@@ -20,8 +21,9 @@
  * h = sum of goal distances is admissible, and a sum of losses never exceeds the sum of costs (each
  * agent's time until it reaches its goal for the last time) of the same plan.
  *
- * Memory: the distance tables (4 bytes per agent and vertex) and everything the search keeps (per
- * node its configuration, the agents' PIBT priorities and order: 12 bytes per agent; constraints,
+ * Memory: the distance tables (4 bytes per agent and vertex), the guides (12 to 24 bytes per step of
+ * the agents' shortest paths) and everything the search keeps (per node its configuration, the
+ * agents' PIBT priorities, order and yielding: 16 bytes per agent; constraints,
  * successor lists, the hash table, the open stack) are charged to a byte budget. When it is spent,
  * no node is added: before a solution prioritized planning goes on alone (its paths are not
  * charged; without its solution the solver reports the budget), after one LaCAM* only revisits known
@@ -55,7 +57,7 @@ typedef struct {
 typedef struct {
     int V, N;
     const int *adj;       /* V x 4 */
-    const int *goal;
+    const int *goal, *start;
     int *dist;            /* N x V, -1 = unreachable */
     Node *nodes; int n_nodes, cap_nodes;
     int *cfg; float *pri; int *order;   /* rows of N per node (cfg: one spare row) */
@@ -71,7 +73,8 @@ typedef struct {
      * 1..length in it; per corridor its length, the cells in order from cfirst, the vertices just
      * past both ends, and the agents whose goals lie in it, in order (gfirst) */
     int *chain, *cpos, *clen, *cfirst, *ccells, *cend, *gfirst, *gagent, n_chains;
-    int *dfr, *cur_dfr;  /* per node and agent: 2 * (agent it yields to) + side to leave by, or -1 */
+    int *dfr, *cur_dfr;
+    long long *gkey; int *gnext; long long gsize;  /* guides: (agent * V + vertex) -> next vertex */  /* per node and agent: 2 * (agent it yields to) + side to leave by, or -1 */
     uint64_t rng;
     double used, budget;  /* bytes */
     int truncated;        /* a node or constraint was refused for the budget */
@@ -444,6 +447,67 @@ static int want(const Mapf *m, int i, int v) {
     return m->deferred[i] && m->top[v] >= 0 && m->top[v] == m->top[m->goal[i]] ? d + m->V : d;
 }
 
+/* -- guides ---------------------------------------------------------------------------------------
+ * Among an agent's shortest ways PIBT takes any; in a grid of one-cell aisles (a warehouse) agents
+ * heading opposite ways then meet head-on in the same aisle, where only a long detour or a deep
+ * search parts them. So each agent gets a guide: one shortest path from its start, chosen greedily
+ * (agents in random order) at every step to run against as few earlier guides as possible, on the
+ * edge used the other way. PIBT breaks distance ties towards the guide's next vertex. */
+static uint64_t guide_slot(const Mapf *m, long long key) {
+    uint64_t h = (uint64_t)key * 0x9E3779B97F4A7C15ULL;
+    return (h ^ (h >> 29)) & (uint64_t)(m->gsize - 1);
+}
+
+static int guide_next(const Mapf *m, int i, int v) {
+    if (!m->gsize) return -1;
+    long long key = (long long)i * m->V + v;
+    for (uint64_t s = guide_slot(m, key);; s = (s + 1) & (uint64_t)(m->gsize - 1)) {
+        if (m->gkey[s] < 0) return -1;
+        if (m->gkey[s] == key) return m->gnext[s];
+    }
+}
+
+/* The guides, if the budget pays for them (else none); -1 out of memory. */
+static int guides(Mapf *m) {
+    long long size = 1024;
+    while (size < 2 * (m->lower + 1)) size *= 2;
+    double bytes = (double)size * (sizeof(long long) + sizeof(int)) + 4.0 * m->V * sizeof(int) + m->N * sizeof(int);
+    if (m->used + bytes > m->budget) return 0;
+    int *flow = calloc((size_t)4 * m->V, sizeof(int)), *order = malloc((size_t)m->N * sizeof(int));
+    m->gkey = malloc((size_t)size * sizeof(long long));
+    m->gnext = malloc((size_t)size * sizeof(int));
+    if (!flow || !order || !m->gkey || !m->gnext) { free(flow); free(order); return -1; }
+    m->gsize = size;
+    m->used += (double)size * (sizeof(long long) + sizeof(int));
+    for (long long k = 0; k < size; k++) m->gkey[k] = -1;
+    for (int i = 0; i < m->N; i++) order[i] = i;
+    for (int k = m->N - 1; k > 0; k--) { int r = (int)(rnd(m) % (uint64_t)(k + 1)), t = order[k]; order[k] = order[r]; order[r] = t; }
+    for (int r = 0; r < m->N; r++) {
+        int i = order[r];
+        const int *d = m->dist + (size_t)i * m->V;
+        for (int v = m->start[i]; v != m->goal[i]; ) {
+            int best = -1, best_k = -1, against = INT_MAX, ties = 0;
+            for (int k = 0; k < 4; k++) {
+                int u = m->adj[4 * v + k];
+                if (u < 0 || d[u] != d[v] - 1) continue;
+                int back = 0;
+                for (int e = 0; e < 4; e++) if (m->adj[4 * u + e] == v) back = flow[4 * u + e];
+                if (back < against) { against = back; best = u; best_k = k; ties = 1; }
+                else if (back == against && rnd(m) % (uint64_t)++ties == 0) { best = u; best_k = k; }
+            }
+            flow[4 * v + best_k]++;
+            long long key = (long long)i * m->V + v;
+            uint64_t s = guide_slot(m, key);
+            while (m->gkey[s] >= 0) s = (s + 1) & (uint64_t)(size - 1);
+            m->gkey[s] = key;
+            m->gnext[s] = best;
+            v = best;
+        }
+    }
+    free(flow); free(order);
+    return 0;
+}
+
 /* -- PIBT with swaps ------------------------------------------------------------------------------
  * Plain PIBT cannot pass two agents heading in opposite directions through a corridor: the one with
  * priority pushes the other back one step at a time, for ever. The swap (Okumura 2024, "Engineering
@@ -512,9 +576,10 @@ static int pibt(Mapf *m, const int *q, int i, int j) {
     int cand[5], key[5], n = 0, here = q[i];
     for (int k = 0; k < 4; k++) if (m->adj[4 * here + k] >= 0) cand[n++] = m->adj[4 * here + k];
     cand[n++] = here;
-    /* shuffle, then stable insertion sort by (distance, occupied now): random ties */
+    /* shuffle, then stable insertion sort by (distance, off the guide, occupied now): random ties */
     for (int k = n - 1; k > 0; k--) { int r = (int)(rnd(m) % (uint64_t)(k + 1)), t = cand[k]; cand[k] = cand[r]; cand[r] = t; }
-    for (int a = 0; a < n; a++) key[a] = 2 * want(m, i, cand[a]) + (m->occ_now[cand[a]] >= 0);
+    int guide = guide_next(m, i, here);
+    for (int a = 0; a < n; a++) key[a] = 4 * want(m, i, cand[a]) + 2 * (cand[a] != guide) + (m->occ_now[cand[a]] >= 0);
     for (int a = 1; a < n; a++) {
         int v = cand[a], kv = key[a], b = a - 1;
         while (b >= 0 && key[b] > kv) { cand[b + 1] = cand[b]; key[b + 1] = key[b]; b--; }
@@ -772,7 +837,7 @@ void *mapf_solve(int V, const int *adj, int N, const int *start, const int *goal
     double t0 = now();
     Mapf *m = calloc(1, sizeof(Mapf));
     if (!m) return NULL;
-    m->V = V; m->N = N; m->adj = adj; m->goal = goal;
+    m->V = V; m->N = N; m->adj = adj; m->goal = goal; m->start = start;
     m->rng = seed * 2654435761ULL + 88172645463325252ULL;
     m->goal_node = -1; m->goal_g_taken = LLONG_MAX; m->first_time = -1.0; m->status = -3;
     m->budget = memory_bytes;
@@ -804,6 +869,7 @@ void *mapf_solve(int V, const int *adj, int N, const int *start, const int *goal
     m->lns.dist = m->dist;
     if (!reachable) { m->status = -1; return m; }
     if (!fits) { m->truncated = 1; m->status = -3; return m; }
+    if (guides(m) < 0) { m->status = -3; return m; }
     search(m, start, t0 + time_limit, t0);
     if (m->solved) {
         int makespan = 0;
@@ -840,7 +906,7 @@ void mapf_free(void *handle) {
     free(m->nodes); free(m->cfg); free(m->pri); free(m->order); free(m->pool); free(m->table);
     free(m->open.a); free(m->work.a);
     free(m->chain); free(m->cpos); free(m->clen); free(m->cfirst); free(m->ccells); free(m->cend); free(m->gfirst);
-    free(m->gagent); free(m->dfr);
+    free(m->gagent); free(m->dfr); free(m->gkey); free(m->gnext);
     free(m->top); free(m->dep_first); free(m->dep_list); free(m->deferred);
     free(m->dist); free(m->occ_now); free(m->occ_next); free(m->stamp); free(m->nxt); free(m->path);
     lns_free(&m->lns);
