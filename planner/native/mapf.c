@@ -41,6 +41,7 @@
 #define LACAM_SLICE 0.002
 #define LNS_SLICE 0.008
 #define FIRST_SLICE 0.05  /* s: LaCAM's turn while it looks for a first solution */
+#define STALL 200         /* nodes without a new least h: LaCAM no longer gets on alone */
 
 typedef struct { int *a; long long n, cap; } ivec;
 
@@ -82,6 +83,7 @@ typedef struct {
     /* the best solution lives in lns (its paths, its sum of costs) */
     Lns lns; int solved; long long best;
     int goal_node; long long goal_g_taken;
+    long long min_h; int improved_at;  /* the least h of a node so far, and the node count then */
     double first_time; int status;
     int *path; int length;
 } Mapf;
@@ -724,6 +726,7 @@ static int lacam(Mapf *m, double deadline, int stop_at_goal) {
         int id = new_node(m, s, m->nodes[s].g + step);
         if (id < 0) { if (!m->solved && m->goal_node < 0) return LACAM_BUDGET; continue; }
         m->table[slot] = id;
+        if (m->nodes[id].h < m->min_h) { m->min_h = m->nodes[id].h; m->improved_at = m->n_nodes; }
         push(m, &m->nodes[s].next, id);
         push(m, &m->open, id);
         if (m->goal_node < 0 && is_goal(m, q)) {
@@ -772,14 +775,18 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
     find(m, start, &slot);
     m->table[slot] = 0;
     if (push(m, &m->open, 0) < 0) return;
-    /* LaCAM and prioritized planning in slices, planning kept to three quarters of the time while both
-     * can go on: with SIPP it is the quicker of the two where PIBT's greedy steps need a deep search */
+    /* LaCAM alone while its nodes get nearer the goals (a new least h within the last STALL nodes: PIBT
+     * is on its way), else LaCAM and prioritized planning in slices, half the time each while both can
+     * go on: with SIPP planning is sometimes the quicker of the two where PIBT needs a deep search */
+    m->min_h = m->nodes[0].h;
+    m->improved_at = 0;
     int outcome = LACAM_FOUND, planned = 0;
     double lacam_time = 0.0, planning_time = 0.0;
     if (is_goal(m, start)) m->goal_node = 0;
     while (m->goal_node < 0 && !planned && now() < deadline) {
         double began = now();
-        if (lacam_time < INFINITY && lacam_time <= planning_time) {
+        int progressing = m->n_nodes - m->improved_at < STALL;
+        if (lacam_time < INFINITY && (progressing || lacam_time <= planning_time)) {
             outcome = lacam(m, began + FIRST_SLICE < deadline ? began + FIRST_SLICE : deadline, 1);
             lacam_time += now() - began;
             if (outcome == LACAM_FOUND || (outcome == LACAM_EXHAUSTED && !m->truncated)) break;
