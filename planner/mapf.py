@@ -11,16 +11,16 @@ dead ends and corridors in order: an agent resting on its goal between another a
 goal further in steps out of the way (by the side the other comes from) until the other is home,
 instead of being pushed in ahead of it for ever; and it breaks distance ties along a guide (a
 shortest path per agent chosen against the flow of the others' guides, so that fewer agents meet
-head-on in one-cell aisles). LaCAM takes turns, half the time each, with prioritized planning
-(agents one after the other by SIPP, safe interval path planning, Phillips and Likhachev 2011,
-against the ones before; an agent that finds no path evicts the planned agents in its way, which are
-planned again after it), which is sometimes the quicker of the two in one-cell warehouse aisles. Then, until
-`time_limit` or a proof of optimality, two improvers share the best solution: LaCAM* (Okumura, IJCAI
-2023; configurations met again link the search nodes, costs are rewired along the links, nodes that
-cannot beat the best sum of costs are pruned; an exhausted search proves the best one optimal) and a
-large neighbourhood search (Li et al., IJCAI 2021: a few agents at a time replanned by SIPP against
-the others' paths, kept if the sum of costs drops). Goal distances are one breadth-first search per
-agent.
+head-on in one-cell aisles). Once LaCAM no longer gets nearer the goals it takes turns, half the time
+each, with prioritized planning (agents one after the other by SIPP, safe interval path planning,
+Phillips and Likhachev 2011, against the ones before; an agent that finds no path evicts the planned
+agents in its way, which are planned again after it), which is sometimes the quicker of the two in
+one-cell warehouse aisles. Then, until `time_limit` or a proof of optimality, two improvers share
+the best solution: LaCAM* (Okumura, IJCAI 2023; configurations met again link the search nodes,
+costs are rewired along the links, nodes that cannot beat the best sum of costs are pruned; an
+exhausted search proves the best one optimal) and a large neighbourhood search (Li et al., IJCAI
+2021: a few agents at a time replanned by SIPP against the others' paths, kept if the sum of costs
+drops). Goal distances are one breadth-first search per agent.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@
  * lazily grown tree adds agent by agent, so every successor is eventually tried: complete. PIBT
  * swaps two agents that meet head-on at the mouth of a dead end, keeps agents resting in one-cell
  * dead ends and corridors out of the way of an agent whose goal lies further in, and breaks distance
- * ties along per-agent guides (all below). LaCAM shares the time (half each) with
+ * ties along per-agent guides (all below). Once LaCAM stalls it shares the time (half each) with
  * prioritized planning with eviction (mapf_lns.h), which is sometimes the quicker where PIBT's greedy
  * steps need a deep search (agents that must pass each other in the one-cell aisles of a warehouse).
  * Then, until the time limit, two improvers share the best solution (its sum of costs bounds both):
