@@ -333,8 +333,9 @@ static void defer(Mapf *m, const int *q) {
  * can come back only round the block (for ever pushing the first one back out of its goal). So when
  * an agent not home (the leader) is in such a corridor or just before it heading in, and goals of
  * others lie between it and its goal, those others yield: they leave the corridor by the leader's
- * side (the corridor's cells rank after every other cell, falling towards that side), swap out of
- * the leader's way, and stay out until the leader is home. A yielding agent makes no one else
+ * side (the corridor's cells rank after every other cell, falling towards that side, and the
+ * crossings at its ends just before them, so that they wait beyond a crossing, not on it), swap out
+ * of the leader's way, and stay out until the leader is home. A yielding agent makes no one else
  * yield, so no two agents wait for each other. Unlike the dead ends this depends on where the leader
  * came from, so it is kept per search node. */
 
@@ -444,6 +445,7 @@ static int want(const Mapf *m, int i, int v) {
     if (m->cur_dfr && m->cur_dfr[i] >= 0) {
         int c = m->chain[m->goal[i]];
         if (m->chain[v] == c) return m->V + (m->cur_dfr[i] & 1 ? m->clen[c] + 1 - m->cpos[v] : m->cpos[v]);
+        if (v == m->cend[2 * c] || v == m->cend[2 * c + 1]) return m->V;  /* wait beyond the crossing */
         return d;
     }
     return m->deferred[i] && m->top[v] >= 0 && m->top[v] == m->top[m->goal[i]] ? d + m->V : d;
