@@ -21,8 +21,8 @@
  * h = sum of goal distances is admissible, and a sum of losses never exceeds the sum of costs (each
  * agent's time until it reaches its goal for the last time) of the same plan.
  *
- * Memory: the distance tables (4 bytes per agent and vertex), the guides (12 to 24 bytes per step of
- * the agents' shortest paths) and everything the search keeps (per node its configuration, the
+ * Memory: the distance tables (4 bytes per agent and vertex), the guides (1 byte per agent and
+ * vertex) and everything the search keeps (per node its configuration, the
  * agents' PIBT priorities, order and yielding: 16 bytes per agent; constraints,
  * successor lists, the hash table, the open stack) are charged to a byte budget. When it is spent,
  * no node is added: before a solution prioritized planning goes on alone (its paths are not
@@ -75,7 +75,7 @@ typedef struct {
      * past both ends, and the agents whose goals lie in it, in order (gfirst) */
     int *chain, *cpos, *clen, *cfirst, *ccells, *cend, *gfirst, *gagent, n_chains;
     int *dfr, *cur_dfr;
-    long long *gkey; int *gnext; long long gsize;  /* guides: (agent * V + vertex) -> next vertex */  /* per node and agent: 2 * (agent it yields to) + side to leave by, or -1 */
+    unsigned char *gdir;  /* guides: N x V, the neighbour index (adj) of the next vertex, 255 none */  /* per node and agent: 2 * (agent it yields to) + side to leave by, or -1 */
     uint64_t rng;
     double used, budget;  /* bytes */
     int truncated;        /* a node or constraint was refused for the budget */
@@ -83,7 +83,8 @@ typedef struct {
     /* the best solution lives in lns (its paths, its sum of costs) */
     Lns lns; int solved; long long best;
     int goal_node; long long goal_g_taken;
-    long long min_h; int improved_at;  /* the least h of a node so far, and the node count then */
+    long long min_h; int improved_at;
+    uint64_t *radix;   /* 2 N: the priority sort's buffers */  /* the least h of a node so far, and the node count then */
     double first_time; int status;
     int *path; int length;
 } Mapf;
@@ -199,7 +200,10 @@ static int grow_nodes(Mapf *m) {
     int cap = m->cap_nodes ? 2 * m->cap_nodes : 16;
     size_t N = (size_t)m->N;
     double per_node = (double)(sizeof(Node) + 4 * N * sizeof(int));
-    double room = (m->budget - m->used) / per_node;  /* nodes the budget still pays for */
+    /* nodes the budget still pays for, leaving the hash table room to double (4 slots a node) and a
+     * tenth for constraints and successor lists (taking it all stopped the search at the next
+     * doubling of the hash table) */
+    double room = 0.9 * (m->budget - m->used) / (per_node + 4.0 * sizeof(int));
     if (cap - m->cap_nodes > room) cap = m->cap_nodes + (int)room;  /* the last growth: what is left */
     if (cap <= m->n_nodes + 1) { m->truncated = 1; return -1; }
     double more = (double)(cap - m->cap_nodes) * per_node;
@@ -234,9 +238,28 @@ static int new_node(Mapf *m, int parent, long long g) {
     }
     yielding(m, q, parent >= 0 ? m->dfr + (size_t)parent * N : NULL, m->dfr + (size_t)id * N);
     int *order = m->order + (size_t)id * N;
-    for (int i = 0; i < N; i++) order[i] = i;
-    sort_pri = p;
-    qsort(order, (size_t)N, sizeof(int), cmp_pri);
+    if (m->radix) {
+        /* radix sort by priority, highest first: a priority is a float >= 0, whose bits order as
+         * unsigned integers do; ties keep the agents' index order */
+        uint64_t *a = m->radix, *b = m->radix + N;
+        for (int i = 0; i < N; i++) {
+            uint32_t bits;
+            memcpy(&bits, &p[i], sizeof(bits));
+            a[i] = ((uint64_t)~bits << 32) | (uint32_t)i;
+        }
+        for (int shift = 32; shift < 64; shift += 8) {
+            int count[257] = {0};
+            for (int i = 0; i < N; i++) count[((a[i] >> shift) & 255) + 1]++;
+            for (int k = 0; k < 256; k++) count[k + 1] += count[k];
+            for (int i = 0; i < N; i++) b[count[(a[i] >> shift) & 255]++] = a[i];
+            uint64_t *t = a; a = b; b = t;
+        }
+        for (int i = 0; i < N; i++) order[i] = (int)(a[i] & 0xffffffffu);
+    } else {
+        for (int i = 0; i < N; i++) order[i] = i;
+        sort_pri = p;
+        qsort(order, (size_t)N, sizeof(int), cmp_pri);
+    }
     Node *node = &m->nodes[id];
     memset(node, 0, sizeof(*node));
     node->parent = parent;
@@ -457,33 +480,21 @@ static int want(const Mapf *m, int i, int v) {
  * search parts them. So each agent gets a guide: one shortest path from its start, chosen greedily
  * (agents in random order) at every step to run against as few earlier guides as possible, on the
  * edge used the other way. PIBT breaks distance ties towards the guide's next vertex. */
-static uint64_t guide_slot(const Mapf *m, long long key) {
-    uint64_t h = (uint64_t)key * 0x9E3779B97F4A7C15ULL;
-    return (h ^ (h >> 29)) & (uint64_t)(m->gsize - 1);
-}
-
 static int guide_next(const Mapf *m, int i, int v) {
-    if (!m->gsize) return -1;
-    long long key = (long long)i * m->V + v;
-    for (uint64_t s = guide_slot(m, key);; s = (s + 1) & (uint64_t)(m->gsize - 1)) {
-        if (m->gkey[s] < 0) return -1;
-        if (m->gkey[s] == key) return m->gnext[s];
-    }
+    if (!m->gdir) return -1;
+    unsigned char k = m->gdir[(size_t)i * m->V + v];
+    return k < 4 ? m->adj[4 * v + k] : -1;
 }
 
 /* The guides, if the budget pays for them (else none); -1 out of memory. */
 static int guides(Mapf *m) {
-    long long size = 1024;
-    while (size < 2 * (m->lower + 1)) size *= 2;
-    double bytes = (double)size * (sizeof(long long) + sizeof(int)) + 4.0 * m->V * sizeof(int) + m->N * sizeof(int);
+    double size = (double)m->N * m->V, bytes = size + 4.0 * m->V * sizeof(int) + m->N * sizeof(int);
     if (m->used + bytes > m->budget) return 0;
     int *flow = calloc((size_t)4 * m->V, sizeof(int)), *order = malloc((size_t)m->N * sizeof(int));
-    m->gkey = malloc((size_t)size * sizeof(long long));
-    m->gnext = malloc((size_t)size * sizeof(int));
-    if (!flow || !order || !m->gkey || !m->gnext) { free(flow); free(order); return -1; }
-    m->gsize = size;
-    m->used += (double)size * (sizeof(long long) + sizeof(int));
-    for (long long k = 0; k < size; k++) m->gkey[k] = -1;
+    m->gdir = malloc((size_t)m->N * m->V);
+    if (!flow || !order || !m->gdir) { free(flow); free(order); return -1; }
+    m->used += size;
+    memset(m->gdir, 255, (size_t)m->N * m->V);
     for (int i = 0; i < m->N; i++) order[i] = i;
     for (int k = m->N - 1; k > 0; k--) { int r = (int)(rnd(m) % (uint64_t)(k + 1)), t = order[k]; order[k] = order[r]; order[r] = t; }
     for (int r = 0; r < m->N; r++) {
@@ -500,11 +511,7 @@ static int guides(Mapf *m) {
                 else if (back == against && rnd(m) % (uint64_t)++ties == 0) { best = u; best_k = k; }
             }
             flow[4 * v + best_k]++;
-            long long key = (long long)i * m->V + v;
-            uint64_t s = guide_slot(m, key);
-            while (m->gkey[s] >= 0) s = (s + 1) & (uint64_t)(size - 1);
-            m->gkey[s] = key;
-            m->gnext[s] = best;
+            m->gdir[(size_t)i * m->V + v] = (unsigned char)best_k;
             v = best;
         }
     }
@@ -581,7 +588,10 @@ static int pibt(Mapf *m, const int *q, int i, int j) {
     for (int k = 0; k < 4; k++) if (m->adj[4 * here + k] >= 0) cand[n++] = m->adj[4 * here + k];
     cand[n++] = here;
     /* shuffle, then stable insertion sort by (distance, off the guide, occupied now): random ties */
-    for (int k = n - 1; k > 0; k--) { int r = (int)(rnd(m) % (uint64_t)(k + 1)), t = cand[k]; cand[k] = cand[r]; cand[r] = t; }
+    for (int k = n - 1; k > 0; k--) {  /* multiply-shift: a division here cost a sixth of PIBT */
+        int r = (int)(((rnd(m) >> 32) * (uint64_t)(k + 1)) >> 32), t = cand[k];
+        cand[k] = cand[r]; cand[r] = t;
+    }
     int guide = guide_next(m, i, here);
     for (int a = 0; a < n; a++) key[a] = 4 * want(m, i, cand[a]) + 2 * (cand[a] != guide) + (m->occ_now[cand[a]] >= 0);
     for (int a = 1; a < n; a++) {
@@ -861,6 +871,7 @@ void *mapf_solve(int V, const int *adj, int N, const int *start, const int *goal
     m->occ_next = malloc((size_t)V * sizeof(int));
     m->stamp = calloc((size_t)V, sizeof(int));
     m->nxt = malloc((size_t)N * sizeof(int));
+    m->radix = malloc((size_t)2 * N * sizeof(uint64_t));  /* NULL: qsort instead */
     m->table = malloc((size_t)m->table_size * sizeof(int));
     int ready = m->dist && queue && m->occ_now && m->occ_next && m->stamp && m->nxt && m->table
                 && lns_init(&m->lns, V, N, adj, start, goal, NULL, seed) == 0 && pockets(m) == 0 && corridors(m) == 0;
@@ -915,9 +926,9 @@ void mapf_free(void *handle) {
     free(m->nodes); free(m->cfg); free(m->pri); free(m->order); free(m->pool); free(m->table);
     free(m->open.a); free(m->work.a);
     free(m->chain); free(m->cpos); free(m->clen); free(m->cfirst); free(m->ccells); free(m->cend); free(m->gfirst);
-    free(m->gagent); free(m->dfr); free(m->gkey); free(m->gnext);
+    free(m->gagent); free(m->dfr); free(m->gdir);
     free(m->top); free(m->dep_first); free(m->dep_list); free(m->deferred);
-    free(m->dist); free(m->occ_now); free(m->occ_next); free(m->stamp); free(m->nxt); free(m->path);
+    free(m->dist); free(m->occ_now); free(m->occ_next); free(m->stamp); free(m->nxt); free(m->path); free(m->radix);
     lns_free(&m->lns);
     free(m);
 }
