@@ -82,6 +82,7 @@ typedef struct {
     long long lower;      /* sum of the agents' goal distances */
     /* the best solution lives in lns (its paths, its sum of costs) */
     Lns lns; int solved; long long best;
+    Lns pp;               /* prioritized planning's own tables (its solution is swapped into lns) */
     int goal_node; long long goal_g_taken;
     long long min_h; int improved_at;
     uint64_t *radix;   /* 2 N: the priority sort's buffers */  /* the least h of a node so far, and the node count then */
@@ -804,7 +805,7 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
             if (outcome == LACAM_FOUND || (outcome == LACAM_EXHAUSTED && !m->truncated)) break;
             if (outcome != LACAM_DEADLINE) lacam_time = INFINITY;  /* budget spent: planning alone */
         } else if (planning_time < INFINITY) {
-            int done = lns_prioritized(&m->lns, began + FIRST_SLICE, deadline);
+            int done = lns_prioritized(&m->pp, began + FIRST_SLICE, deadline);
             planning_time += now() - began;
             planned = done == 1;
             if (done == -1) planning_time = INFINITY;  /* out of memory: LaCAM alone from here */
@@ -818,14 +819,30 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
     }
     m->first_time = now() - t0;
     if (planned) {
+        Lns swap = m->lns; m->lns = m->pp; m->pp = swap;
         m->solved = 1;
         m->best = m->lns.soc;
     } else if (take_lacam_solution(m) < 0) {
         return;
     }
+    /* LaCAM's first solution can be far from the bound where planning's would be near it: planning
+     * goes on in turns with the improvers, for as long again as the first solution took (at least a
+     * tenth of the time limit), and its solution replaces the best one if cheaper */
     int lacam_open = outcome != LACAM_EXHAUSTED, lns_alive = 1, optimal = 0;
+    int planning = !planned && planning_time < INFINITY;
+    double planning_left = m->first_time > 0.1 * (deadline - t0) ? m->first_time : 0.1 * (deadline - t0);
     while (now() < deadline) {
         if (m->best <= m->lower) { optimal = 1; break; }
+        if (planning) {
+            double began = now(), until = began + LNS_SLICE;
+            int done = lns_prioritized(&m->pp, until < deadline ? until : deadline, deadline);
+            planning_left -= now() - began;
+            if (done == 1 && m->pp.soc < m->best) {
+                Lns swap = m->lns; m->lns = m->pp; m->pp = swap;
+                m->best = m->lns.soc;
+            }
+            if (done != 2 || planning_left <= 0) planning = 0;
+        }
         if (lacam_open) {
             double until = now() + LACAM_SLICE;
             outcome = lacam(m, until < deadline ? until : deadline, 0);
@@ -874,7 +891,8 @@ void *mapf_solve(int V, const int *adj, int N, const int *start, const int *goal
     m->radix = malloc((size_t)2 * N * sizeof(uint64_t));  /* NULL: qsort instead */
     m->table = malloc((size_t)m->table_size * sizeof(int));
     int ready = m->dist && queue && m->occ_now && m->occ_next && m->stamp && m->nxt && m->table
-                && lns_init(&m->lns, V, N, adj, start, goal, NULL, seed) == 0 && pockets(m) == 0 && corridors(m) == 0;
+                && lns_init(&m->lns, V, N, adj, start, goal, NULL, seed) == 0
+                && lns_init(&m->pp, V, N, adj, start, goal, NULL, seed) == 0 && pockets(m) == 0 && corridors(m) == 0;
     if (!ready) { free(queue); return m; }
     for (long long s = 0; s < m->table_size; s++) m->table[s] = -1;
     for (int v = 0; v < V; v++) { m->occ_now[v] = -1; m->occ_next[v] = -1; }
@@ -887,6 +905,7 @@ void *mapf_solve(int V, const int *adj, int N, const int *start, const int *goal
     }
     free(queue);
     m->lns.dist = m->dist;
+    m->pp.dist = m->dist;
     if (!reachable) { m->status = -1; return m; }
     if (!fits) { m->truncated = 1; m->status = -3; return m; }
     if (guides(m) < 0) { m->status = -3; return m; }
@@ -930,6 +949,7 @@ void mapf_free(void *handle) {
     free(m->top); free(m->dep_first); free(m->dep_list); free(m->deferred);
     free(m->dist); free(m->occ_now); free(m->occ_next); free(m->stamp); free(m->nxt); free(m->path); free(m->radix);
     lns_free(&m->lns);
+    lns_free(&m->pp);
     free(m);
 }
 
