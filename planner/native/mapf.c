@@ -826,11 +826,11 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
         return;
     }
     /* LaCAM's first solution can be far from the bound where planning's would be near it: planning
-     * goes on in turns with the improvers, for as long again as the first solution took (at least a
-     * tenth of the time limit), and its solution replaces the best one if cheaper */
+     * goes on in turns with the improvers, for as long again as the first solution took (at least
+     * 30 % of the time limit), and its solution replaces the best one if cheaper */
     int lacam_open = outcome != LACAM_EXHAUSTED, lns_alive = 1, optimal = 0;
     int planning = !planned && planning_time < INFINITY;
-    double planning_left = m->first_time > 0.1 * (deadline - t0) ? m->first_time : 0.1 * (deadline - t0);
+    double planning_left = m->first_time > 0.3 * (deadline - t0) ? m->first_time : 0.3 * (deadline - t0);
     while (now() < deadline) {
         if (m->best <= m->lower) { optimal = 1; break; }
         if (planning) {
