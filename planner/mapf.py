@@ -6,17 +6,21 @@ neighbour or waits; two agents never share a cell (vertex conflict) nor swap cel
 LaCAM (Okumura, AAAI 2023): a depth-first search over configurations (one cell per agent) whose
 successors PIBT (Okumura et al. 2022; with a swap of two agents meeting head-on at the mouth of a
 dead end, after Okumura 2024) generates under constraints that a lazily grown tree adds agent by
-agent, so every successor is eventually tried and the search is complete; it takes turns with
-prioritized planning (agents one after the other by SIPP, safe interval path planning, Phillips and
-Likhachev 2011, against the ones before; an agent that finds no path evicts the planned agents in its
-way, which are planned again after it), which gets three quarters of the time and is quicker where
-PIBT's greedy steps need a deep search (dead ends of a maze, one-cell warehouse aisles). Then, until
-`time_limit` or a proof of optimality, two improvers share the best solution: LaCAM* (Okumura, IJCAI
-2023; configurations met again link the search nodes, costs are rewired along the links, nodes that
-cannot beat the best sum of costs are pruned; an exhausted search proves the best one optimal) and a
-large neighbourhood search (Li et al., IJCAI 2021: a few agents at a time replanned by SIPP against
-the others' paths, kept if the sum of costs drops). Goal distances are one breadth-first search per
-agent.
+agent, so every successor is eventually tried and the search is complete. PIBT here keeps one-cell
+dead ends and corridors in order: an agent resting on its goal between another agent and that one's
+goal further in steps out of the way (by the side the other comes from) until the other is home,
+instead of being pushed in ahead of it for ever; and it breaks distance ties along a guide (a
+shortest path per agent chosen against the flow of the others' guides, so that fewer agents meet
+head-on in one-cell aisles). Once LaCAM no longer gets nearer the goals it takes turns, half the time
+each, with prioritized planning (agents one after the other by SIPP, safe interval path planning,
+Phillips and Likhachev 2011, against the ones before; an agent that finds no path evicts the planned
+agents in its way, which are planned again after it), which is sometimes the quicker of the two in
+one-cell warehouse aisles. Then, until `time_limit` or a proof of optimality, two improvers share
+the best solution: LaCAM* (Okumura, IJCAI 2023; configurations met again link the search nodes,
+costs are rewired along the links, nodes that cannot beat the best sum of costs are pruned; an
+exhausted search proves the best one optimal) and a large neighbourhood search (Li et al., IJCAI
+2021: a few agents at a time replanned by SIPP against the others' paths, kept if the sum of costs
+drops). Goal distances are one breadth-first search per agent.
 """
 
 from __future__ import annotations
@@ -60,7 +64,7 @@ _KERNELS = bind(
 
 # The kernel's status codes, and what MapfResult.status says for each.
 STATUS = {1: "optimal", 2: "time limit", 0: "time limit", -1: "unsolvable", -3: "memory limit"}
-DEFAULT_MEMORY = 1.0e9  # bytes: distance tables (4 per agent and cell) and search nodes (12 per agent)
+DEFAULT_MEMORY = 1.0e9  # bytes: distance tables (4 per agent and cell), guides, search nodes (16 per agent)
 
 
 @dataclass(frozen=True)

@@ -3,10 +3,11 @@
  * First solution: LaCAM (Okumura, AAAI 2023), a depth-first search over configurations (one vertex
  * per agent) whose successors PIBT (Okumura et al., AIJ 2022) generates under constraints that a
  * lazily grown tree adds agent by agent, so every successor is eventually tried: complete. PIBT
- * swaps two agents that meet head-on at the mouth of a dead end (below). LaCAM shares the time with
- * prioritized planning with eviction (mapf_lns.h), which finds a first solution where PIBT's greedy
- * steps need a deep search (agents resting on goals in the dead ends of a maze, agents that must
- * pass each other in the one-cell aisles of a warehouse).
+ * swaps two agents that meet head-on at the mouth of a dead end, keeps agents resting in one-cell
+ * dead ends and corridors out of the way of an agent whose goal lies further in, and breaks distance
+ * ties along per-agent guides (all below). Once LaCAM stalls it shares the time (half each) with
+ * prioritized planning with eviction (mapf_lns.h), which is sometimes the quicker where PIBT's greedy
+ * steps need a deep search (agents that must pass each other in the one-cell aisles of a warehouse).
  * Then, until the time limit, two improvers share the best solution (its sum of costs bounds both):
  * - LaCAM* (Okumura, IJCAI 2023): configurations met again link the search nodes, costs g are
  *   rewired along the links (Dijkstra-like), nodes with g + h >= the best sum of costs are pruned;
@@ -20,8 +21,9 @@
  * h = sum of goal distances is admissible, and a sum of losses never exceeds the sum of costs (each
  * agent's time until it reaches its goal for the last time) of the same plan.
  *
- * Memory: the distance tables (4 bytes per agent and vertex) and everything the search keeps (per
- * node its configuration, the agents' PIBT priorities and order: 12 bytes per agent; constraints,
+ * Memory: the distance tables (4 bytes per agent and vertex), the guides (1 byte per agent and
+ * vertex) and everything the search keeps (per node its configuration, the
+ * agents' PIBT priorities, order and yielding: 16 bytes per agent; constraints,
  * successor lists, the hash table, the open stack) are charged to a byte budget. When it is spent,
  * no node is added: before a solution prioritized planning goes on alone (its paths are not
  * charged; without its solution the solver reports the budget), after one LaCAM* only revisits known
@@ -39,6 +41,7 @@
 #define LACAM_SLICE 0.002
 #define LNS_SLICE 0.008
 #define FIRST_SLICE 0.05  /* s: LaCAM's turn while it looks for a first solution */
+#define STALL 200         /* nodes without a new least h: LaCAM no longer gets on alone */
 
 typedef struct { int *a; long long n, cap; } ivec;
 
@@ -55,7 +58,7 @@ typedef struct {
 typedef struct {
     int V, N;
     const int *adj;       /* V x 4 */
-    const int *goal;
+    const int *goal, *start;
     int *dist;            /* N x V, -1 = unreachable */
     Node *nodes; int n_nodes, cap_nodes;
     int *cfg; float *pri; int *order;   /* rows of N per node (cfg: one spare row) */
@@ -63,13 +66,26 @@ typedef struct {
     int *table; long long table_size;   /* hash: node id or -1 */
     ivec open, work;
     int *occ_now, *occ_next, *nxt, *stamp; int gen;
+    /* dead-end trees (see pockets()): per vertex the top of the tree hanging off the graph's core
+     * that holds it (-1: in the core); per agent the agents whose goals lie deeper in its tree
+     * (dep_list[dep_first[i] .. dep_first[i + 1] - 1]) and whether one of them is not home yet */
+    int *top, *dep_first, *dep_list; char *deferred;
+    /* one-cell corridors of the core (see corridors()): per vertex its corridor (-1: none) and place
+     * 1..length in it; per corridor its length, the cells in order from cfirst, the vertices just
+     * past both ends, and the agents whose goals lie in it, in order (gfirst) */
+    int *chain, *cpos, *clen, *cfirst, *ccells, *cend, *gfirst, *gagent, n_chains;
+    int *dfr, *cur_dfr;
+    unsigned char *gdir;  /* guides: N x V, the neighbour index (adj) of the next vertex, 255 none */  /* per node and agent: 2 * (agent it yields to) + side to leave by, or -1 */
     uint64_t rng;
     double used, budget;  /* bytes */
     int truncated;        /* a node or constraint was refused for the budget */
     long long lower;      /* sum of the agents' goal distances */
     /* the best solution lives in lns (its paths, its sum of costs) */
     Lns lns; int solved; long long best;
+    Lns pp;               /* prioritized planning's own tables (its solution is swapped into lns) */
     int goal_node; long long goal_g_taken;
+    long long min_h; int improved_at;
+    uint64_t *radix;   /* 2 N: the priority sort's buffers */  /* the least h of a node so far, and the node count then */
     double first_time; int status;
     int *path; int length;
 } Mapf;
@@ -184,8 +200,11 @@ static int grow_nodes(Mapf *m) {
     if (m->n_nodes + 1 < m->cap_nodes) return 0;
     int cap = m->cap_nodes ? 2 * m->cap_nodes : 16;
     size_t N = (size_t)m->N;
-    double per_node = (double)(sizeof(Node) + 3 * N * sizeof(int));
-    double room = (m->budget - m->used) / per_node;  /* nodes the budget still pays for */
+    double per_node = (double)(sizeof(Node) + 4 * N * sizeof(int));
+    /* nodes the budget still pays for, leaving the hash table room to double (4 slots a node) and a
+     * tenth for constraints and successor lists (taking it all stopped the search at the next
+     * doubling of the hash table) */
+    double room = 0.9 * (m->budget - m->used) / (per_node + 4.0 * sizeof(int));
     if (cap - m->cap_nodes > room) cap = m->cap_nodes + (int)room;  /* the last growth: what is left */
     if (cap <= m->n_nodes + 1) { m->truncated = 1; return -1; }
     double more = (double)(cap - m->cap_nodes) * per_node;
@@ -197,11 +216,15 @@ static int grow_nodes(Mapf *m) {
     if (pri) m->pri = pri;
     int *order = realloc(m->order, (size_t)cap * N * sizeof(int));
     if (order) m->order = order;
-    if (!nodes || !cfg || !pri || !order) { m->truncated = 1; return -1; }
+    int *dfr = realloc(m->dfr, (size_t)cap * N * sizeof(int));
+    if (dfr) m->dfr = dfr;
+    if (!nodes || !cfg || !pri || !order || !dfr) { m->truncated = 1; return -1; }
     m->cap_nodes = cap;
     m->used += more;
     return 0;
 }
+
+static void yielding(Mapf *m, const int *q, const int *prev, int *out);
 
 /* A new search node for configuration q (already copied at slot n_nodes). */
 static int new_node(Mapf *m, int parent, long long g) {
@@ -214,10 +237,30 @@ static int new_node(Mapf *m, int parent, long long g) {
     } else {
         for (int i = 0; i < N; i++) p[i] = (float)m->dist[(size_t)i * m->V + q[i]] / (float)(m->V + 1);
     }
+    yielding(m, q, parent >= 0 ? m->dfr + (size_t)parent * N : NULL, m->dfr + (size_t)id * N);
     int *order = m->order + (size_t)id * N;
-    for (int i = 0; i < N; i++) order[i] = i;
-    sort_pri = p;
-    qsort(order, (size_t)N, sizeof(int), cmp_pri);
+    if (m->radix) {
+        /* radix sort by priority, highest first: a priority is a float >= 0, whose bits order as
+         * unsigned integers do; ties keep the agents' index order */
+        uint64_t *a = m->radix, *b = m->radix + N;
+        for (int i = 0; i < N; i++) {
+            uint32_t bits;
+            memcpy(&bits, &p[i], sizeof(bits));
+            a[i] = ((uint64_t)~bits << 32) | (uint32_t)i;
+        }
+        for (int shift = 32; shift < 64; shift += 8) {
+            int count[257] = {0};
+            for (int i = 0; i < N; i++) count[((a[i] >> shift) & 255) + 1]++;
+            for (int k = 0; k < 256; k++) count[k + 1] += count[k];
+            for (int i = 0; i < N; i++) b[count[(a[i] >> shift) & 255]++] = a[i];
+            uint64_t *t = a; a = b; b = t;
+        }
+        for (int i = 0; i < N; i++) order[i] = (int)(a[i] & 0xffffffffu);
+    } else {
+        for (int i = 0; i < N; i++) order[i] = i;
+        sort_pri = p;
+        qsort(order, (size_t)N, sizeof(int), cmp_pri);
+    }
     Node *node = &m->nodes[id];
     memset(node, 0, sizeof(*node));
     node->parent = parent;
@@ -227,6 +270,254 @@ static int new_node(Mapf *m, int parent, long long g) {
     if (root < 0 || push(m, &node->queue, root) < 0) { free(node->queue.a); return -1; }
     m->n_nodes++;
     return id;
+}
+
+/* -- dead-end trees ------------------------------------------------------------------------------
+ * Pruning the vertices of degree one, again and again, leaves the graph's core (the vertices on a
+ * cycle or between two) and trees hanging off it: dead ends. A dead end one cell wide fills from
+ * the bottom: an agent resting on its goal there walls off every goal deeper in, and an agent that
+ * must get deeper cannot pass it. PIBT pushes it deeper (ahead of the agent with priority), so the
+ * agent whose goal lies beyond it never gets there. Hence: while an agent whose goal lies deeper in
+ * the same tree (a descendant of this agent's goal) is not home, this agent is deferred: it keeps
+ * out of the tree (its cells rank after every other cell, among themselves by distance) and swaps
+ * out of the way (below) of an agent that comes in. Trees that are a whole component have no core to
+ * wait in and are left alone. */
+
+/* top and the dependents of every agent; -1 out of memory. */
+static int pockets(Mapf *m) {
+    int V = m->V, N = m->N, *degree = malloc((size_t)V * sizeof(int)), *parent = malloc((size_t)V * sizeof(int));
+    int *queue = malloc((size_t)V * sizeof(int)), *owner = malloc((size_t)V * sizeof(int));
+    m->top = malloc((size_t)V * sizeof(int));
+    m->dep_first = calloc((size_t)N + 1, sizeof(int));
+    m->deferred = calloc((size_t)N, 1);
+    int ok = degree && parent && queue && owner && m->top && m->dep_first && m->deferred;
+    if (ok) {
+        int head = 0, tail = 0;
+        for (int v = 0; v < V; v++) {
+            degree[v] = 0;
+            for (int k = 0; k < 4; k++) degree[v] += m->adj[4 * v + k] >= 0;
+            parent[v] = -2;  /* -2: in the core */
+            owner[v] = -1;
+            if (degree[v] == 1) queue[tail++] = v;
+        }
+        while (head < tail) {  /* prune: parent = the one neighbour left when it went */
+            int v = queue[head++];
+            parent[v] = -1;
+            for (int k = 0; k < 4; k++) {
+                int u = m->adj[4 * v + k];
+                if (u < 0 || parent[u] != -2) continue;
+                parent[v] = u;
+                if (--degree[u] == 1) queue[tail++] = u;
+            }
+        }
+        /* tops in reverse pruning order (a parent is pruned after its children) */
+        for (int v = 0; v < V; v++) m->top[v] = -1;
+        for (int k = tail - 1; k >= 0; k--) {
+            int v = queue[k], p = parent[v];
+            m->top[v] = p >= 0 && parent[p] == -2 ? v : p >= 0 ? m->top[p] : -2;  /* -2: a whole tree */
+        }
+        for (int v = 0; v < V; v++) if (m->top[v] == -2) m->top[v] = -1;
+        for (int i = 0; i < N; i++) owner[m->goal[i]] = i;
+        for (int pass = 0; pass < 2; pass++) {  /* count, then fill */
+            for (int j = 0; j < N; j++) {
+                if (m->top[m->goal[j]] < 0) continue;
+                for (int u = parent[m->goal[j]]; u >= 0 && parent[u] != -2; u = parent[u]) {
+                    int k = owner[u];
+                    if (k < 0) continue;
+                    if (pass == 0) m->dep_first[k + 1]++;
+                    else m->dep_list[m->dep_first[k] + degree[k]++] = j;  /* degree: reused as fill count */
+                }
+            }
+            if (pass == 0) {
+                for (int i = 0; i < N; i++) m->dep_first[i + 1] += m->dep_first[i];
+                m->dep_list = malloc((size_t)(m->dep_first[N] + 1) * sizeof(int));
+                if (!m->dep_list) { ok = 0; break; }
+                for (int i = 0; i < N && i < V; i++) degree[i] = 0;
+                if (N > V) { ok = 0; break; }
+            }
+        }
+    }
+    free(degree); free(parent); free(queue); free(owner);
+    return ok ? 0 : -1;
+}
+
+/* Which agents are deferred in configuration q. */
+static void defer(Mapf *m, const int *q) {
+    for (int k = 0; k < m->N; k++) {
+        char d = 0;
+        for (int e = m->dep_first[k]; e < m->dep_first[k + 1] && !d; e++) d = q[m->dep_list[e]] != m->goal[m->dep_list[e]];
+        m->deferred[k] = d;
+    }
+}
+
+/* -- one-cell corridors ----------------------------------------------------------------------------
+ * The same holds in a corridor of the core open at both ends (the aisles between a warehouse's
+ * shelves): an agent whose goal lies in it beyond another one's goal, seen from the side it comes
+ * in by, cannot pass the other one; PIBT pushes that one ahead of it, past its goal, from where it
+ * can come back only round the block (for ever pushing the first one back out of its goal). So when
+ * an agent not home (the leader) is in such a corridor or just before it heading in, and goals of
+ * others lie between it and its goal, those others yield: they leave the corridor by the leader's
+ * side (the corridor's cells rank after every other cell, falling towards that side, and the
+ * crossings at its ends just before them, so that they wait beyond a crossing, not on it), swap out
+ * of the leader's way, and stay out until the leader is home. A yielding agent makes no one else
+ * yield, so no two agents wait for each other. Unlike the dead ends this depends on where the leader
+ * came from, so it is kept per search node. */
+
+/* Find the corridors (chains of cells of degree two whose neighbours are in the core) and the goals
+ * in them; -1 out of memory. */
+static int corridors(Mapf *m) {
+    int V = m->V, N = m->N, *seq = malloc((size_t)V * sizeof(int)), *owner = malloc((size_t)V * sizeof(int));
+    m->chain = malloc((size_t)V * sizeof(int));
+    m->cpos = malloc((size_t)V * sizeof(int));
+    m->ccells = malloc((size_t)V * sizeof(int));
+    m->clen = malloc((size_t)V * sizeof(int));
+    m->cfirst = malloc((size_t)V * sizeof(int));
+    m->cend = malloc((size_t)2 * V * sizeof(int));
+    m->gfirst = calloc((size_t)V + 1, sizeof(int));
+    m->gagent = malloc((size_t)N * sizeof(int));
+    int ok = seq && owner && m->chain && m->cpos && m->ccells && m->clen && m->cfirst && m->cend && m->gfirst && m->gagent;
+    if (ok) {
+        for (int v = 0; v < V; v++) owner[v] = -1;
+        for (int i = 0; i < N; i++) owner[m->goal[i]] = i;
+        for (int v = 0; v < V; v++) {  /* -2: a corridor cell not yet placed */
+            int degree = 0, inner = m->top[v] < 0;
+            for (int k = 0; k < 4; k++) {
+                int u = m->adj[4 * v + k];
+                if (u >= 0) { degree++; inner &= m->top[u] < 0; }
+            }
+            m->chain[v] = degree == 2 && inner ? -2 : -1;
+        }
+        int used = 0;
+        for (int v = 0; v < V; v++) {
+            if (m->chain[v] != -2) continue;
+            int ends[2], n = 0, cycle = 0, half[2] = {0, 0};
+            for (int side = 0; side < 2 && !cycle; side++) {  /* walk both ways from v */
+                int prev = v, cur = -1;
+                for (int k = 0, seen = 0; k < 4; k++) if (m->adj[4 * v + k] >= 0 && seen++ == side) cur = m->adj[4 * v + k];
+                while (cur != v && m->chain[cur] == -2) {
+                    seq[n++] = cur;
+                    half[side]++;
+                    int next = -1;
+                    for (int k = 0; k < 4; k++) { int u = m->adj[4 * cur + k]; if (u >= 0 && u != prev) next = u; }
+                    prev = cur;
+                    cur = next;
+                }
+                if (cur == v) cycle = 1;
+                ends[side] = cur;
+            }
+            if (cycle) {  /* a ring of corridor cells alone: no ends to leave by */
+                m->chain[v] = -1;
+                for (int k = 0; k < n; k++) m->chain[seq[k]] = -1;
+                continue;
+            }
+            int c = m->n_chains++, length = n + 1;
+            m->cfirst[c] = used;
+            m->clen[c] = length;
+            m->cend[2 * c] = ends[0];       /* before place 1 */
+            m->cend[2 * c + 1] = ends[1];   /* after place length */
+            for (int k = half[0] - 1; k >= 0; k--) m->ccells[used++] = seq[k];
+            m->ccells[used++] = v;
+            for (int k = half[0]; k < n; k++) m->ccells[used++] = seq[k];
+            for (int k = 0; k < length; k++) {
+                int u = m->ccells[m->cfirst[c] + k];
+                m->chain[u] = c;
+                m->cpos[u] = k + 1;
+            }
+        }
+        for (int c = 0, g = 0; c < m->n_chains; c++) {
+            m->gfirst[c] = g;
+            for (int k = 0; k < m->clen[c]; k++) {
+                int a = owner[m->ccells[m->cfirst[c] + k]];
+                if (a >= 0) m->gagent[g++] = a;
+            }
+            m->gfirst[c + 1] = g;
+        }
+    }
+    free(seq); free(owner);
+    return ok ? 0 : -1;
+}
+
+/* The yielding of configuration q (row out) from its parent's (prev, NULL at the root). */
+static void yielding(Mapf *m, const int *q, const int *prev, int *out) {
+    int N = m->N;
+    for (int k = 0; k < N; k++) {
+        out[k] = prev ? prev[k] : -1;
+        if (out[k] >= 0 && q[out[k] >> 1] == m->goal[out[k] >> 1]) out[k] = -1;  /* the leader is home */
+    }
+    for (int a = 0; a < N; a++) {
+        int g = m->goal[a], c = m->chain[g], v = q[a];
+        if (c < 0 || v == g || out[a] >= 0) continue;
+        const int *d = m->dist + (size_t)a * m->V;
+        int at;  /* the leader's place: in the corridor, or just before an end heading in */
+        if (m->chain[v] == c) at = m->cpos[v];
+        else if (v == m->cend[2 * c] && d[m->ccells[m->cfirst[c]]] < d[v]) at = 0;
+        else if (v == m->cend[2 * c + 1] && d[m->ccells[m->cfirst[c] + m->clen[c] - 1]] < d[v]) at = m->clen[c] + 1;
+        else continue;
+        int to = m->cpos[g], lo = at < to ? at : to, hi = at < to ? to : at;
+        for (int e = m->gfirst[c]; e < m->gfirst[c + 1]; e++) {
+            int k = m->gagent[e], place = m->cpos[m->goal[k]];
+            if (k != a && place > lo && place < hi && out[k] < 0) out[k] = 2 * a + (at > to);
+        }
+    }
+}
+
+/* How far vertex v is from where agent i wants to be: its goal distance, plus V in its goal's dead-end
+ * tree while it is deferred; while it yields, V plus the way out (by the leader's side) in its goal's
+ * corridor. */
+static int want(const Mapf *m, int i, int v) {
+    int d = m->dist[(size_t)i * m->V + v];
+    if (m->cur_dfr && m->cur_dfr[i] >= 0) {
+        int c = m->chain[m->goal[i]];
+        if (m->chain[v] == c) return m->V + (m->cur_dfr[i] & 1 ? m->clen[c] + 1 - m->cpos[v] : m->cpos[v]);
+        if (v == m->cend[2 * c] || v == m->cend[2 * c + 1]) return m->V;  /* wait beyond the crossing */
+        return d;
+    }
+    return m->deferred[i] && m->top[v] >= 0 && m->top[v] == m->top[m->goal[i]] ? d + m->V : d;
+}
+
+/* -- guides ---------------------------------------------------------------------------------------
+ * Among an agent's shortest ways PIBT takes any; in a grid of one-cell aisles (a warehouse) agents
+ * heading opposite ways then meet head-on in the same aisle, where only a long detour or a deep
+ * search parts them. So each agent gets a guide: one shortest path from its start, chosen greedily
+ * (agents in random order) at every step to run against as few earlier guides as possible, on the
+ * edge used the other way. PIBT breaks distance ties towards the guide's next vertex. */
+static int guide_next(const Mapf *m, int i, int v) {
+    if (!m->gdir) return -1;
+    unsigned char k = m->gdir[(size_t)i * m->V + v];
+    return k < 4 ? m->adj[4 * v + k] : -1;
+}
+
+/* The guides, if the budget pays for them (else none); -1 out of memory. */
+static int guides(Mapf *m) {
+    double size = (double)m->N * m->V, bytes = size + 4.0 * m->V * sizeof(int) + m->N * sizeof(int);
+    if (m->used + bytes > m->budget) return 0;
+    int *flow = calloc((size_t)4 * m->V, sizeof(int)), *order = malloc((size_t)m->N * sizeof(int));
+    m->gdir = malloc((size_t)m->N * m->V);
+    if (!flow || !order || !m->gdir) { free(flow); free(order); return -1; }
+    m->used += size;
+    memset(m->gdir, 255, (size_t)m->N * m->V);
+    for (int i = 0; i < m->N; i++) order[i] = i;
+    for (int k = m->N - 1; k > 0; k--) { int r = (int)(rnd(m) % (uint64_t)(k + 1)), t = order[k]; order[k] = order[r]; order[r] = t; }
+    for (int r = 0; r < m->N; r++) {
+        int i = order[r];
+        const int *d = m->dist + (size_t)i * m->V;
+        for (int v = m->start[i]; v != m->goal[i]; ) {
+            int best = -1, best_k = -1, against = INT_MAX, ties = 0;
+            for (int k = 0; k < 4; k++) {
+                int u = m->adj[4 * v + k];
+                if (u < 0 || d[u] != d[v] - 1) continue;
+                int back = 0;
+                for (int e = 0; e < 4; e++) if (m->adj[4 * u + e] == v) back = flow[4 * u + e];
+                if (back < against) { against = back; best = u; best_k = k; ties = 1; }
+                else if (back == against && rnd(m) % (uint64_t)++ties == 0) { best = u; best_k = k; }
+            }
+            flow[4 * v + best_k]++;
+            m->gdir[(size_t)i * m->V + v] = (unsigned char)best_k;
+            v = best;
+        }
+    }
+    free(flow); free(order);
+    return 0;
 }
 
 /* -- PIBT with swaps ------------------------------------------------------------------------------
@@ -258,8 +549,8 @@ static int way_on(const Mapf *m, int v, int back) {
  * come back out of? The push is followed along the corridor (one way on); a branching lets the puller
  * step aside, and PIBT resolves pushes through corridors open at both ends. */
 static int swap_needed(const Mapf *m, int puller, int vp, int vq) {
-    const int *dq = m->dist + (size_t)puller * m->V;
-    if (dq[vp] >= dq[vq]) return 0;  /* the puller does not want to go where the pusher is */
+    if (want(m, puller, vp) >= want(m, puller, vq)) return 0;
+    if (m->cur_dfr && m->cur_dfr[puller] >= 0 && m->chain[vq] == m->chain[m->goal[puller]]) return 1;  /* it must come out this way */  /* the puller does not want to go where the pusher is */
     for (int steps = 0; steps < m->V; steps++) {
         int on = way_on(m, vq, vp);
         if (on == -2) return 0;
@@ -294,16 +585,21 @@ static int swap_partner(const Mapf *m, const int *q, int i, int best) {
 
 /* PIBT step of agent i (current config q; j the agent that pushed i, -1 if none). */
 static int pibt(Mapf *m, const int *q, int i, int j) {
-    int cand[5], n = 0, here = q[i];
-    const int *d = m->dist + (size_t)i * m->V;
+    int cand[5], key[5], n = 0, here = q[i];
     for (int k = 0; k < 4; k++) if (m->adj[4 * here + k] >= 0) cand[n++] = m->adj[4 * here + k];
     cand[n++] = here;
-    /* shuffle, then stable insertion sort by (distance, occupied now): random ties */
-    for (int k = n - 1; k > 0; k--) { int r = (int)(rnd(m) % (uint64_t)(k + 1)), t = cand[k]; cand[k] = cand[r]; cand[r] = t; }
+    /* shuffle, then stable insertion sort by (distance, off the guide, occupied now): random ties */
+    for (int k = n - 1; k > 0; k--) {  /* multiply-shift: a division here cost a sixth of PIBT */
+        int r = (int)(((rnd(m) >> 32) * (uint64_t)(k + 1)) >> 32), t = cand[k];
+        cand[k] = cand[r]; cand[r] = t;
+    }
+    int guide = guide_next(m, i, here);
+    for (int a = 0; a < n; a++) key[a] = 4 * want(m, i, cand[a]) + 2 * (cand[a] != guide) + (m->occ_now[cand[a]] >= 0);
     for (int a = 1; a < n; a++) {
-        int v = cand[a], key = 2 * d[v] + (m->occ_now[v] >= 0), b = a - 1;
-        while (b >= 0 && 2 * d[cand[b]] + (m->occ_now[cand[b]] >= 0) > key) { cand[b + 1] = cand[b]; b--; }
+        int v = cand[a], kv = key[a], b = a - 1;
+        while (b >= 0 && key[b] > kv) { cand[b + 1] = cand[b]; key[b + 1] = key[b]; b--; }
         cand[b + 1] = v;
+        key[b + 1] = kv;
     }
     int partner = swap_partner(m, q, i, cand[0]);
     if (partner >= 0)  /* walk backwards: the farthest vertex first */
@@ -334,6 +630,8 @@ static int generate(Mapf *m, int s, int c, int *out) {
     int N = m->N, ok = 1;
     const int *q = config(m, s), *order = m->order + (size_t)s * N;
     for (int i = 0; i < N; i++) { m->occ_now[q[i]] = i; m->nxt[i] = -1; }
+    defer(m, q);
+    m->cur_dfr = m->dfr + (size_t)s * N;
     for (int k = c; k >= 0 && m->pool[k].agent >= 0; k = m->pool[k].parent) {
         int i = m->pool[k].agent, u = m->pool[k].vertex;
         if (m->occ_next[u] >= 0) { ok = 0; break; }
@@ -441,6 +739,7 @@ static int lacam(Mapf *m, double deadline, int stop_at_goal) {
         int id = new_node(m, s, m->nodes[s].g + step);
         if (id < 0) { if (!m->solved && m->goal_node < 0) return LACAM_BUDGET; continue; }
         m->table[slot] = id;
+        if (m->nodes[id].h < m->min_h) { m->min_h = m->nodes[id].h; m->improved_at = m->n_nodes; }
         push(m, &m->nodes[s].next, id);
         push(m, &m->open, id);
         if (m->goal_node < 0 && is_goal(m, q)) {
@@ -489,20 +788,24 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
     find(m, start, &slot);
     m->table[slot] = 0;
     if (push(m, &m->open, 0) < 0) return;
-    /* LaCAM and prioritized planning in slices, planning kept to three quarters of the time while both
-     * can go on: with SIPP it is the quicker of the two where PIBT's greedy steps need a deep search */
+    /* LaCAM alone while its nodes get nearer the goals (a new least h within the last STALL nodes: PIBT
+     * is on its way), else LaCAM and prioritized planning in slices, half the time each while both can
+     * go on: with SIPP planning is sometimes the quicker of the two where PIBT needs a deep search */
+    m->min_h = m->nodes[0].h;
+    m->improved_at = 0;
     int outcome = LACAM_FOUND, planned = 0;
     double lacam_time = 0.0, planning_time = 0.0;
     if (is_goal(m, start)) m->goal_node = 0;
     while (m->goal_node < 0 && !planned && now() < deadline) {
         double began = now();
-        if (lacam_time < INFINITY && 3 * lacam_time <= planning_time) {
+        int progressing = m->n_nodes - m->improved_at < STALL;
+        if (lacam_time < INFINITY && (progressing || lacam_time <= planning_time)) {
             outcome = lacam(m, began + FIRST_SLICE < deadline ? began + FIRST_SLICE : deadline, 1);
             lacam_time += now() - began;
             if (outcome == LACAM_FOUND || (outcome == LACAM_EXHAUSTED && !m->truncated)) break;
             if (outcome != LACAM_DEADLINE) lacam_time = INFINITY;  /* budget spent: planning alone */
         } else if (planning_time < INFINITY) {
-            int done = lns_prioritized(&m->lns, began + FIRST_SLICE, deadline);
+            int done = lns_prioritized(&m->pp, began + FIRST_SLICE, deadline);
             planning_time += now() - began;
             planned = done == 1;
             if (done == -1) planning_time = INFINITY;  /* out of memory: LaCAM alone from here */
@@ -516,14 +819,30 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
     }
     m->first_time = now() - t0;
     if (planned) {
+        Lns swap = m->lns; m->lns = m->pp; m->pp = swap;
         m->solved = 1;
         m->best = m->lns.soc;
     } else if (take_lacam_solution(m) < 0) {
         return;
     }
+    /* LaCAM's first solution can be far from the bound where planning's would be near it: planning
+     * goes on in turns with the improvers, for as long again as the first solution took (at least
+     * 30 % of the time limit), and its solution replaces the best one if cheaper */
     int lacam_open = outcome != LACAM_EXHAUSTED, lns_alive = 1, optimal = 0;
+    int planning = !planned && planning_time < INFINITY;
+    double planning_left = m->first_time > 0.3 * (deadline - t0) ? m->first_time : 0.3 * (deadline - t0);
     while (now() < deadline) {
         if (m->best <= m->lower) { optimal = 1; break; }
+        if (planning) {
+            double began = now(), until = began + LNS_SLICE;
+            int done = lns_prioritized(&m->pp, until < deadline ? until : deadline, deadline);
+            planning_left -= now() - began;
+            if (done == 1 && m->pp.soc < m->best) {
+                Lns swap = m->lns; m->lns = m->pp; m->pp = swap;
+                m->best = m->lns.soc;
+            }
+            if (done != 2 || planning_left <= 0) planning = 0;
+        }
         if (lacam_open) {
             double until = now() + LACAM_SLICE;
             outcome = lacam(m, until < deadline ? until : deadline, 0);
@@ -554,7 +873,7 @@ void *mapf_solve(int V, const int *adj, int N, const int *start, const int *goal
     double t0 = now();
     Mapf *m = calloc(1, sizeof(Mapf));
     if (!m) return NULL;
-    m->V = V; m->N = N; m->adj = adj; m->goal = goal;
+    m->V = V; m->N = N; m->adj = adj; m->goal = goal; m->start = start;
     m->rng = seed * 2654435761ULL + 88172645463325252ULL;
     m->goal_node = -1; m->goal_g_taken = LLONG_MAX; m->first_time = -1.0; m->status = -3;
     m->budget = memory_bytes;
@@ -569,9 +888,11 @@ void *mapf_solve(int V, const int *adj, int N, const int *start, const int *goal
     m->occ_next = malloc((size_t)V * sizeof(int));
     m->stamp = calloc((size_t)V, sizeof(int));
     m->nxt = malloc((size_t)N * sizeof(int));
+    m->radix = malloc((size_t)2 * N * sizeof(uint64_t));  /* NULL: qsort instead */
     m->table = malloc((size_t)m->table_size * sizeof(int));
     int ready = m->dist && queue && m->occ_now && m->occ_next && m->stamp && m->nxt && m->table
-                && lns_init(&m->lns, V, N, adj, start, goal, NULL, seed) == 0;
+                && lns_init(&m->lns, V, N, adj, start, goal, NULL, seed) == 0
+                && lns_init(&m->pp, V, N, adj, start, goal, NULL, seed) == 0 && pockets(m) == 0 && corridors(m) == 0;
     if (!ready) { free(queue); return m; }
     for (long long s = 0; s < m->table_size; s++) m->table[s] = -1;
     for (int v = 0; v < V; v++) { m->occ_now[v] = -1; m->occ_next[v] = -1; }
@@ -584,8 +905,10 @@ void *mapf_solve(int V, const int *adj, int N, const int *start, const int *goal
     }
     free(queue);
     m->lns.dist = m->dist;
+    m->pp.dist = m->dist;
     if (!reachable) { m->status = -1; return m; }
     if (!fits) { m->truncated = 1; m->status = -3; return m; }
+    if (guides(m) < 0) { m->status = -3; return m; }
     search(m, start, t0 + time_limit, t0);
     if (m->solved) {
         int makespan = 0;
@@ -621,8 +944,12 @@ void mapf_free(void *handle) {
     for (int k = 0; k < m->n_nodes; k++) { free(m->nodes[k].queue.a); free(m->nodes[k].next.a); }
     free(m->nodes); free(m->cfg); free(m->pri); free(m->order); free(m->pool); free(m->table);
     free(m->open.a); free(m->work.a);
-    free(m->dist); free(m->occ_now); free(m->occ_next); free(m->stamp); free(m->nxt); free(m->path);
+    free(m->chain); free(m->cpos); free(m->clen); free(m->cfirst); free(m->ccells); free(m->cend); free(m->gfirst);
+    free(m->gagent); free(m->dfr); free(m->gdir);
+    free(m->top); free(m->dep_first); free(m->dep_list); free(m->deferred);
+    free(m->dist); free(m->occ_now); free(m->occ_next); free(m->stamp); free(m->nxt); free(m->path); free(m->radix);
     lns_free(&m->lns);
+    lns_free(&m->pp);
     free(m);
 }
 

@@ -80,6 +80,54 @@ def test_agents_reorder_in_a_dead_end():
     assert result.sum_of_costs == optimum
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_agents_resting_in_a_dead_end_let_a_deeper_goal_pass(seed):
+    """Two agents rest on their goals in a one-cell dead end; a third's goal lies deeper. Both must
+    come out to the open cells and go back in after it (the case of the maze's border corridors,
+    where PIBT pushed the resting agents deeper, ahead of the third, for ever). Valid, and the exact
+    optimum of the joint-state search."""
+    rows = ["...#####", "........"]
+    starts, goals = [(1, 4), (1, 5), (0, 0)], [(1, 4), (1, 5), (1, 7)]
+    result = solve_checked(rows, starts, goals, time_limit=5.0, seed=seed)
+    optimum = optimal_sum_of_costs(grid_of(rows).occupied.tolist(), starts, goals)
+    assert optimum is not None and optimum > result.lower_bound
+    assert result.sum_of_costs == optimum
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_agents_resting_in_a_corridor_let_a_deeper_goal_pass(seed):
+    """A one-cell corridor open at both ends (a warehouse aisle): two agents rest on their goals in
+    it, a third's goal lies beyond them from the side it comes by. Valid, and the exact optimum of the
+    joint-state search (here the resting agents step out and back rather than the third going round)."""
+    rows = [".........", ".#######.", ".........", ".#######.", "........."]
+    starts, goals = [(2, 3), (2, 4), (0, 0)], [(2, 3), (2, 4), (2, 5)]
+    result = solve_checked(rows, starts, goals, time_limit=5.0, seed=seed)
+    optimum = optimal_sum_of_costs(grid_of(rows).occupied.tolist(), starts, goals)
+    assert optimum is not None and optimum > result.lower_bound
+    assert result.sum_of_costs == optimum
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_warehouse_of_one_cell_aisles(seed):
+    """Shelves 6 x 1 with one-cell aisles all round (corridors, crossings, dead ends at the wall
+    pockets), a third of the free cells taken by agents with random starts and goals: solved and valid
+    by the independent checker, and no better than the bound."""
+    rows = ["." * 17]
+    for _ in range(4):
+        rows += [".######.######.##", "." * 17]
+    rows[1] = "#" + rows[1][1:]  # a dead end at the wall: row 2's left end reaches only down
+    grid = grid_of(rows)
+    free = np.argwhere(~grid.occupied)
+    rng = np.random.default_rng(seed)
+    agents = len(free) // 3
+    starts = free[rng.choice(len(free), agents, replace=False)]
+    goals = free[rng.choice(len(free), agents, replace=False)]
+    result = solve(grid, starts, goals, time_limit=1.0, seed=seed)
+    assert result.solved
+    check(grid.occupied.tolist(), starts, goals, result)
+    assert result.sum_of_costs >= result.lower_bound
+
+
 def test_random_instances_on_an_obstacle_grid():
     """Many agents on a 24 x 24 grid with 15 % obstacles: valid paths, and the improvement phase."""
     rng = np.random.default_rng(7)

@@ -112,9 +112,11 @@ def optimal_sum_of_costs(occupied, starts, goals) -> int | None:
     goal and then stays there; a step costs one per unfinished agent. None if unsolvable."""
     starts = tuple(tuple(cell) for cell in starts)
     goals = tuple(tuple(cell) for cell in goals)
-    begin = (starts, tuple(False for _ in starts))
-    best = {begin: 0}
-    queue = [(0, begin)]
+    # an agent may finish at once on a goal it starts on (then it never moves and costs nothing)
+    on_goal = [(False, True) if s == g else (False,) for s, g in zip(starts, goals, strict=True)]
+    begins = [(starts, flags) for flags in itertools.product(*on_goal)]
+    best = dict.fromkeys(begins, 0)
+    queue = [(0, begin) for begin in begins]
     while queue:
         cost, (cells, finished) = heapq.heappop(queue)
         if cost > best[(cells, finished)]:
@@ -195,3 +197,8 @@ def test_reference_solver_on_known_optima():
     corridor = [[False, False, False]]
     assert optimal_sum_of_costs(corridor, [(0, 0), (0, 2)], [(0, 2), (0, 0)]) is None
     assert optimal_sum_of_costs(corridor, [(0, 0), (0, 1)], [(0, 1), (0, 2)]) == 2  # following is allowed
+    # an agent on its goal from the start costs nothing when it need not move, and its last arrival
+    # when it must step aside for another one (corridor: the agent at 1 must let the other pass)
+    assert optimal_sum_of_costs(corridor, [(0, 1), (0, 0)], [(0, 1), (0, 0)]) == 0
+    assert optimal_sum_of_costs(OPEN, [(1, 1), (1, 0)], [(1, 1), (1, 2)]) == 0 + 4
+    assert optimal_sum_of_costs(OPEN, [(0, 1), (1, 0)], [(0, 1), (1, 2)]) == 0 + 2
