@@ -13,7 +13,7 @@ from cosim.record.output import atomic_output, checked_output
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "log",
-        help="inspect run logs (MCAP): info, plot, animate, export, diff, recover",
+        help="inspect run logs (MCAP): info, plot, animate, export, diff, recover, layout",
         description="Inspect a run's MCAP log: summary, plots, signal tables, comparison of two runs, "
         "recovery of a cut log.",
     )
@@ -103,6 +103,18 @@ def register(subparsers) -> None:
     )
     recover.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
     recover.set_defaults(handler=_recover)
+
+    layout = commands.add_parser(
+        "layout",
+        help="a Foxglove layout made for the log: every robot's map, plan, scan, pose, goal and "
+        "speed in its own colour, the camera over the log's map",
+    )
+    layout.add_argument("log", type=Path, help="run log (.mcap), of a robot or a fleet")
+    layout.add_argument(
+        "--out", type=Path, metavar="OUT", help="layout file (default: LOG with .layout.json)"
+    )
+    layout.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
+    layout.set_defaults(handler=_layout)
 
 
 def _image_options(parser, default_size: str, default_dpi: str = "110") -> None:
@@ -246,4 +258,20 @@ def _recover(args) -> int:
         f"{recovery.attachments} attachments ({recovery.chunks_copied} chunks copied, "
         f"{recovery.chunks_rebuilt} rebuilt; the source was {state})"
     )
+    return 0
+
+
+def _layout(args) -> int:
+    import json
+
+    from cosim.logs.layout import foxglove_layout, robot_namespaces
+
+    out = checked_output(args.out or args.log.with_suffix(".layout.json"), args.force)
+    log = _open(args.log)
+    layout = _guard(args.log, lambda: foxglove_layout(log))
+    with atomic_output(out, args.force) as temporary:
+        Path(temporary).write_text(json.dumps(layout, indent=1) + "\n", encoding="utf-8")
+    robots = [name for name, _ in robot_namespaces(log)]
+    what = f"{len(robots)} robots" if log.robots else "the robot"
+    print(f"wrote {out} ({what}; Foxglove: Layouts -> Import from file...)")
     return 0

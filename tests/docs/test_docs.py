@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import ast
 import csv
+import json
 import math
 import os
 import re
@@ -548,6 +549,10 @@ LOG_COMMANDS = {
         "cosim log recover cut.mcap --out recovered.mcap",
         "cosim log recover cut.mcap",
     ],
+    "cosim log layout LOG [--out OUT]": [
+        "cosim log layout logs/run.mcap --out run.layout.json",
+        "cosim log layout logs/radius.mcap",
+    ],
 }
 
 
@@ -595,6 +600,13 @@ def test_log_commands(workspace, run_log):
     assert Image.open(workspace / "diff.png").size == (800, 600)
     check(bash("cosim log diff logs/run.mcap scenarios/README.md", workspace), 2)
     # "a cut log as a complete, indexed MCAP": the default OUT is IN with .recovered.mcap.
+    # "a Foxglove layout for this log": its 3D panel shows the log's /scan; the default OUT is
+    # LOG with .layout.json.
+    for command, out in zip(LOG_COMMANDS["cosim log layout LOG [--out OUT]"],
+                            ("run.layout.json", "logs/radius.layout.json"), strict=True):  # fmt: skip
+        check(bash(command, workspace))
+        layout = json.loads((workspace / out).read_text())
+        assert layout["configById"]["3D!navcosim"]["topics"]["/scan"]["visible"]
     with_out, default = LOG_COMMANDS["cosim log recover IN [--out OUT]"]
     for command, out in ((with_out, "recovered.mcap"), (default, "cut.recovered.mcap")):
         check(bash(command, workspace))
