@@ -13,9 +13,11 @@ included), and measures:
   Pure Pursuit, VFH, mixer and vehicle FMUs and its 360-beam lidar at 10 Hz seeing the map and the
   other robots; 10 ms macro step), run for the same simulated duration; the stepping loop's wall time
   (`FleetOutcome.wall_time`: every FMU stepped, every lidar scanning, contacts and outcome judged)
-  per simulated second, and the time to build and initialise the fleet. No log is written (IR-SIM
-  writes none either). A robot that collides or completes stops being judged but its components
-  keep stepping, so every N steps N full robots for the whole duration.
+  per simulated second, and the time to build and initialise the fleet, without a log (IR-SIM
+  writes none); then the same run with every signal and topic logged to MCAP as `cosim run` writes
+  it ("logged": issue 24's goal is stated with logging). A robot that collides or completes stops
+  being judged but its components keep stepping, so every N steps N full robots for the whole
+  duration.
 * IR-SIM 2.12 (`pip install ir-sim`, the `bench` extra), the anchor, in the same run: the same map
   (the PGM as IR-SIM's `obstacle_map`, same size in metres), the same N starts and first goals, the
   same robots as far as IR-SIM has them: differential drive, circle of radius 0.5 m, 1.5 m/s and
@@ -24,9 +26,10 @@ included), and measures:
   navcosim's robots keep stepping). IR-SIM scans every step, so its step is the lidar period, 0.1 s:
   the lidars run at 10 Hz in both; IR-SIM's kinematics at 10 Hz, navcosim's vehicle FMUs at 100 Hz.
 
-Printed: a table N, navcosim ms per simulated second, build s, peak RSS, IR-SIM ms per simulated
-second, its peak RSS, and the ratio navcosim / IR-SIM; then the cost-growth exponent of each (the slope
-of log cost against log N, least squares over the N measured): 1 is linear in N, 2 quadratic.
+Printed: a table N, navcosim ms per simulated second (without and with the log), build s, peak
+RSS, IR-SIM ms per simulated second, its peak RSS, and the ratio navcosim / IR-SIM; then the
+cost-growth exponent of each (the slope of log cost against log N, least squares over the N
+measured): 1 is linear in N, 2 quadratic.
 Issue 24's goal: <= 50 ms per simulated second at N = 50.
 """
 
@@ -77,7 +80,9 @@ def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: KiB
 
 
-def child_navcosim(count: int, duration: float) -> dict:
+def child_navcosim(count: int, duration: float, logged: bool = False) -> dict:
+    """navcosim's fleet; `logged`: every signal and topic recorded to an MCAP log as `cosim run`
+    writes it (in a temporary folder), else no log."""
     from cosim.navigation.fleet import run_fleet
     from cosim.scenario.load import load_scenario
 
@@ -86,7 +91,7 @@ def child_navcosim(count: int, duration: float) -> dict:
         path.write_text(fleet_text(count, duration))
         started = time.perf_counter()
         fleet = load_scenario(path, fleet=True)
-        outcome = run_fleet(fleet)
+        outcome = run_fleet(fleet, log_path=Path(folder) / "fleet.mcap" if logged else None)
         total = time.perf_counter() - started
     if not math.isclose(outcome.time, duration) and outcome.reason != "completed":
         raise SystemExit(f"navcosim ran {outcome.time} s of {duration} s ({outcome.reason})")
@@ -219,8 +224,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.child:
         simulator, count, duration = args.child
-        run = child_navcosim if simulator == "navcosim" else child_irsim
-        print(json.dumps(run(int(count), float(duration))), flush=True)
+        if simulator == "irsim":
+            result = child_irsim(int(count), float(duration))
+        else:
+            result = child_navcosim(int(count), float(duration), logged=simulator == "navcosim-log")
+        print(json.dumps(result), flush=True)
         return 0
     counts = args.robots or (QUICK_ROBOTS if args.quick else ROBOTS)
     duration = args.duration or (QUICK_DURATION if args.quick else DURATION)
@@ -238,22 +246,25 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for count in counts:
         ours = measure("navcosim", count, duration)
+        logged = measure("navcosim-log", count, duration)
         theirs = measure("irsim", count, duration) if anchor else None
-        rows.append((count, ours, theirs))
+        rows.append((count, ours, theirs, logged))
         cost = f"{1000 * ours['run'] / ours['simulated']:.1f} ms/sim-s" if ours else "failed"
         print(f"  N = {count}: navcosim {cost}", flush=True)
 
     def per_second(result):
         return None if result is None else 1000.0 * result["run"] / result["simulated"]
 
-    header = ("N", "navcosim ms/sim-s", "build s", "RSS MB", "IR-SIM ms/sim-s", "IR-SIM RSS MB", "ratio")
+    header = ("N", "navcosim ms/sim-s", "logged ms/sim-s", "build s", "RSS MB", "IR-SIM ms/sim-s",
+              "IR-SIM RSS MB", "ratio")  # fmt: skip
     table = [header]
-    for count, ours, theirs in rows:
-        mine, anchor_cost = per_second(ours), per_second(theirs)
+    for count, ours, theirs, logged in rows:
+        mine, anchor_cost, with_log = per_second(ours), per_second(theirs), per_second(logged)
         table.append(
             (
                 str(count),
                 "-" if mine is None else f"{mine:.1f}",
+                "-" if with_log is None else f"{with_log:.1f}",
                 "-" if ours is None else f"{ours['build']:.1f}",
                 "-" if ours is None else f"{ours['rss']:.0f}",
                 "-" if anchor_cost is None else f"{anchor_cost:.1f}",
@@ -266,12 +277,12 @@ def main(argv: list[str] | None = None) -> int:
     for row in table:
         print("  ".join(cell.rjust(width) for cell, width in zip(row, widths, strict=True)))
     print(f"load average after: {os.getloadavg()[0]:.1f}")
-    counts_done = [count for count, _, _ in rows]
-    for name, index in (("navcosim", 1), ("IR-SIM", 2)):
+    counts_done = [count for count, *_ in rows]
+    for name, index in (("navcosim", 1), ("navcosim logged", 3), ("IR-SIM", 2)):
         slope = exponent(counts_done, [per_second(row[index]) for row in rows])
         if slope is not None:
             print(f"cost growth in N ({name}): exponent {slope:.2f} (cost ~ N^{slope:.2f})")
-    failed = any(ours is None for _, ours, _ in rows)
+    failed = any(ours is None or logged is None for _, ours, _, logged in rows)
     return 1 if failed else 0
 
 
