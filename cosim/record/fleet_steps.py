@@ -253,8 +253,8 @@ class _Template:
         sentinels = [1.0e250 * (index + 1.5) for index in range(count)]
         data = build(_SENTINEL_NS, sentinels)
         self.data = bytearray(data)
-        self.stamps = _offsets(data, _STAMP.pack(*divmod(_SENTINEL_NS, NS_PER_S)))
-        self.fields = [_offsets(data, _FLOAT64.pack(value)) for value in sentinels]
+        self.stamps = rosmsg.pattern_offsets(data, _STAMP.pack(*divmod(_SENTINEL_NS, NS_PER_S)))
+        self.fields = [rosmsg.pattern_offsets(data, _FLOAT64.pack(value)) for value in sentinels]
         if not self.stamps or any(len(found) != 1 for found in self.fields):
             raise CosimError("unexpected CDR layout of a pose message")
         self.fields = [found[0] for found in self.fields]
@@ -267,14 +267,6 @@ class _Template:
         for at, value in zip(self.fields, values, strict=True):
             data[at : at + 8] = _FLOAT64.pack(value)
         return bytes(data)
-
-
-def _offsets(data: bytes, pattern: bytes) -> list[int]:
-    found, at = [], data.find(pattern)
-    while at >= 0:
-        found.append(at)
-        at = data.find(pattern, at + 1)
-    return found
 
 
 def _odometry(robot: _Robot, t_ns: int, values) -> bytes:

@@ -130,12 +130,13 @@ class _ObstacleTemplate:
         data = obstacles_cdr(_SENTINEL_NS, placed)
         self.data = bytearray(data)
         stamp = _STAMP.pack(*divmod(_SENTINEL_NS, 1_000_000_000))
-        self.stamps = _offsets(data, stamp)
+        self.stamps = rosmsg.pattern_offsets(data, stamp)
         if len(self.stamps) != 2 * len(obstacles):  # the marker's header and its texture's
             raise CosimError("unexpected MarkerArray CDR layout (stamps)")
         self.centres = []
         for cx, cy in sentinels:
-            (x_at,), (y_at,) = _offsets(data, _FLOAT64.pack(cx)), _offsets(data, _FLOAT64.pack(cy))
+            (x_at,) = rosmsg.pattern_offsets(data, _FLOAT64.pack(cx))
+            (y_at,) = rosmsg.pattern_offsets(data, _FLOAT64.pack(cy))
             self.centres.append((x_at, y_at))
 
     def fill(self, t_ns: int, obstacles: list) -> bytes:
@@ -148,12 +149,3 @@ class _ObstacleTemplate:
             data[x_at : x_at + 8] = _FLOAT64.pack(float(cx))
             data[y_at : y_at + 8] = _FLOAT64.pack(float(cy))
         return bytes(data)
-
-
-def _offsets(data: bytes, pattern: bytes) -> list[int]:
-    """Every offset of `pattern` in `data`."""
-    found, at = [], data.find(pattern)
-    while at >= 0:
-        found.append(at)
-        at = data.find(pattern, at + 1)
-    return found

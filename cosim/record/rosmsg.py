@@ -493,3 +493,13 @@ def odometry_cdr(t_ns: int, x: float, y: float, yaw: float, v: float, omega: flo
 def signals_payload(t_ns: int, values: np.ndarray) -> bytes:
     """CDR bytes of a signals struct: header, stamp, then the float64 values packed (8-aligned)."""
     return CDR_HEADER + _stamp.pack(*split_time(t_ns)) + values.tobytes()
+
+
+def pattern_offsets(data: bytes, pattern: bytes) -> list[int]:
+    """Every offset of `pattern` in `data`: where a byte template made once with sentinel values
+    (a stamp, a coordinate) is patched for each message."""
+    found, at = [], data.find(pattern)
+    while at >= 0:
+        found.append(at)
+        at = data.find(pattern, at + 1)
+    return found
