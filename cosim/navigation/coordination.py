@@ -79,6 +79,8 @@ STUCK_DISTANCE = 0.25  # [m] moved less than this: not moving
 RELEASE_AHEAD = 3  # actions released beyond the done ones (a lifelong re-solve can still change the rest)
 MAPF_TIME_LIMIT = 0.2  # [s] of wall time per MAPF solve (the first solution takes ~1 ms at 50 robots)
 STOP_SHORT = 0.02  # [m] the stop point lies this much before the released end (Pure Pursuit's `<=`)
+TURN_OFFSET = 0.3  # [m] a robot that must turn round first heads for a point this far to its side
+TURN_NEAR = 0.5  # [m] waypoints this close to a turning robot are passed (it turns where it stands)
 
 Cell = tuple[int, int]
 
@@ -619,7 +621,7 @@ class Coordinator:
             # The same cells: the same waypoints (the end's extension keeps the first direction).
             if agent.shown is None or not np.array_equal(waypoints[:-1], agent.shown[:-1]):
                 agent.shown = waypoints
-                changed[i] = waypoints
+                changed[i] = turn_round(poses[i], waypoints)
         return changed
 
     def _see(self, marks) -> None:
@@ -692,6 +694,30 @@ class Coordinator:
         direction = direction / max(float(np.hypot(*direction)), 1e-12)
         beyond = end + max(agent.tolerance - STOP_SHORT, 0.0) * direction
         return np.array([*points, beyond], dtype=float)
+
+
+def turn_round(pose, waypoints: np.ndarray) -> np.ndarray:
+    """`waypoints` for a robot at `pose` (x, y, theta) that must turn round first: starting at the
+    robot, by a point `TURN_OFFSET` to its side (the side the path lies on), then on from the first
+    waypoint more than `TURN_NEAR` away. Pure Pursuit turns a robot by 2 v sin(alpha) / L toward
+    its lookahead point at angle alpha: a lookahead point (nearly) straight behind gives sin(alpha)
+    ~ 0, and the robot drove on straight ahead for more than 1 m (out of its cell into the next
+    robot's) before it turned. From the side point alpha starts near 90 degrees: the robot turns
+    at once, within about TURN_OFFSET of where it stands. Waypoints ahead of the robot (less than
+    120 degrees off its heading) are returned as they are."""
+    x, y, theta = float(pose[0]), float(pose[1]), float(pose[2])
+    here = np.array([x, y])
+    far = np.hypot(*(waypoints - here).T) > TURN_NEAR
+    if not far.any():
+        return waypoints
+    first = int(np.argmax(far))
+    way = waypoints[first] - here
+    heading = np.array([math.cos(theta), math.sin(theta)])
+    if float(np.dot(way, heading)) >= -0.5 * float(np.hypot(*way)):
+        return waypoints
+    side = 1.0 if heading[0] * way[1] - heading[1] * way[0] >= 0.0 else -1.0
+    normal = side * np.array([-heading[1], heading[0]])
+    return np.array([here, here + TURN_OFFSET * normal, *waypoints[first:]], dtype=float)
 
 
 # -- the fleet run's hook --------------------------------------------------------------------------

@@ -56,3 +56,17 @@ def test_coordinated_fleet_starts_and_goals_lie_in_distinct_free_cells(name):
         for goal in robot.mission:
             assert _free(grid, size, _cell(grid, size, goal.x, goal.y)), f"{robot.name}: goal {goal}"
     assert len(fleet.robots) == {"fleet_missions_mapf.toml": 10, "fleet_fifty_mapf.toml": 50}[name]
+
+
+@pytest.mark.slow
+def test_fifty_coordinated_robots_leave_their_parking_rows_without_contact():
+    # The busiest part of the fifty-robot run: all leave the parking rows at once (10 s simulated).
+    from tests.fleet.test_coordination_run import _check_trace, _run
+
+    fleet, outcome, trace = _run("fleet_fifty_mapf.toml", "simulation.stop_time=10")
+    assert outcome.collisions == [] and outcome.deadlocks == []
+    _check_trace(fleet, trace)
+    # They do drive: most robots have left their start cells (some wait for others to pass).
+    first, last = trace[0][1], trace[-1][1]
+    moved = np.hypot(*(last - first).T)
+    assert (moved > 2.0).sum() >= 25, moved
