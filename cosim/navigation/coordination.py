@@ -699,15 +699,26 @@ class Coordinator:
 def turn_round(pose, waypoints: np.ndarray) -> np.ndarray:
     """`waypoints` for a robot at `pose` (x, y, theta) that must turn round first: starting at the
     robot, by a point `TURN_OFFSET` to its side (the side the path lies on), then on from the first
-    waypoint more than `TURN_NEAR` away. Pure Pursuit turns a robot by 2 v sin(alpha) / L toward
-    its lookahead point at angle alpha: a lookahead point (nearly) straight behind gives sin(alpha)
-    ~ 0, and the robot drove on straight ahead for more than 1 m (out of its cell into the next
-    robot's) before it turned. From the side point alpha starts near 90 degrees: the robot turns
-    at once, within about TURN_OFFSET of where it stands. Waypoints ahead of the robot (less than
-    120 degrees off its heading) are returned as they are."""
+    waypoint more than `TURN_NEAR` away after the path's segment nearest to the robot. Pure
+    Pursuit turns a robot by 2 v sin(alpha) / L toward its lookahead point at angle alpha: a
+    lookahead point (nearly) straight behind gives sin(alpha) ~ 0, and the robot drove on straight
+    ahead for more than 1 m (out of its cell into the next robot's) before it turned. From the side
+    point alpha starts near 90 degrees: the robot turns at once, within about TURN_OFFSET of where
+    it stands. Waypoints ahead of the robot (less than 120 degrees off its heading) are returned as
+    they are."""
     x, y, theta = float(pose[0]), float(pose[1]), float(pose[2])
     here = np.array([x, y])
+    if len(waypoints) < 2:
+        return waypoints
+    # The robot's place on the path: the segment nearest to it (the waypoints can begin with cells
+    # it has passed); the way on is the first waypoint after that segment's start beyond TURN_NEAR.
+    starts, ends = waypoints[:-1], waypoints[1:]
+    along = ends - starts
+    length2 = np.maximum((along * along).sum(axis=1), 1e-12)
+    s = np.clip(((here - starts) * along).sum(axis=1) / length2, 0.0, 1.0)
+    nearest = int(np.argmin(np.hypot(*(starts + s[:, None] * along - here).T)))
     far = np.hypot(*(waypoints - here).T) > TURN_NEAR
+    far[: nearest + 1] = False
     if not far.any():
         return waypoints
     first = int(np.argmax(far))

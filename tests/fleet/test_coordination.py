@@ -334,6 +334,13 @@ def test_a_robot_that_must_turn_round_turns_where_it_stands():
     assert turn_round((0.0, 0.0, 0.0), np.array([[0.0, 0.0], [-2.0, -1.0]]))[1, 1] == pytest.approx(
         -TURN_OFFSET
     )
-    # Waypoints ahead, or to the side, stay as they are.
-    for ahead in ([[0.0, 0.0], [2.0, 0.0]], [[0.0, 0.0], [0.0, 2.0]], [[0.1, 0.0], [-0.9, 1.9]]):
+    # Waypoints ahead, or to the side, stay as they are; so do cells already passed before them
+    # (the lead-in of a re-solve: seen sending a robot back 8 m).
+    for ahead in (
+        [[0.0, 0.0], [2.0, 0.0]],
+        [[0.0, 0.0], [0.0, 2.0]],
+        [[0.1, 0.0], [-0.9, 1.9]],
+        [[-8.0, 0.0], [-6.0, 0.0], [-4.0, 0.0], [-2.0, 0.0], [0.0, 0.0], [2.0, 0.0]],
+        [[-0.8, 0.1], [1.2, 0.0], [3.2, 0.0]],
+    ):
         np.testing.assert_array_equal(turn_round((0.0, 0.0, 0.0), np.array(ahead)), ahead)
