@@ -45,7 +45,9 @@ coordinator puts that last waypoint the tolerance beyond the last released centr
 last move, so the robot stops at the centre itself (at the mission's goal cell: at the point of
 the cell's inner square nearest to the goal); the waypoints end before the first reversal or
 return to a cell (a path that turns back passes by its end before), the rest follows once the
-robot is there.
+robot is there. A robot whose path beyond its nearest segment lies behind it (it must turn round)
+gets its waypoints from where it stands by a point to its side (`turn_round`): Pure Pursuit with
+its lookahead point straight behind does not turn and drove on out of the cell.
 
 **Lifelong re-solves.** When a robot needs its next mission goal, all robots are planned again:
 each from the cell of its last released action (where it is committed to go), its remaining goal
