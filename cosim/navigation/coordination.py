@@ -421,6 +421,7 @@ class Agent:
     tolerance: float
     goal: tuple[float, float] | None = None  # [m] current goal; None: stay (completed, dwelling)
     waiting: bool = False  # its goal cell was taken: it waits where it is
+    assigned: Cell | None = None  # the goal cell it heads for in the current plan (not waiting)
     shown: np.ndarray | None = None  # the waypoints it follows
     moved_at: float = 0.0  # [s] last time it moved STUCK_DISTANCE
     moved_from: tuple[float, float] = (math.nan, math.nan)
@@ -528,10 +529,22 @@ class Coordinator:
             held.append(cells - {start})
         goals: list[Cell] = [None] * n  # type: ignore[list-item]
         taken: set[Cell] = set()
-        order = sorted(range(n), key=lambda i: self.agents[i].goal is not None)  # resting robots first
+        # Resting robots first, then the robots already heading for their goal cell (assigned it in
+        # the last plan): a robot that asks for that cell later waits, it does not take the cell
+        # from one on its way (by fleet order the last robots waited at their shelves for 400 s,
+        # the cell passing to each robot with a lower index that came to need it meanwhile).
+        wanted = [None if agent.goal is None else self.cells.cell_of(*agent.goal) for agent in self.agents]
+
+        def rank(i: int) -> int:
+            agent = self.agents[i]
+            if agent.goal is None:
+                return 0
+            return 1 if agent.assigned is not None and agent.assigned == wanted[i] else 2
+
+        order = sorted(range(n), key=rank)
         for i in order:
             agent = self.agents[i]
-            cell = starts[i] if agent.goal is None else self.cells.cell_of(*agent.goal)
+            cell = starts[i] if agent.goal is None else wanted[i]
             agent.waiting = False
             if cell in taken or not self.cells.free(cell) or (cell in self.blocked and cell != starts[i]):
                 # Its goal is another's or blocked: it waits where it is, or, if another robot
@@ -539,6 +552,8 @@ class Coordinator:
                 cell, agent.waiting = self._nearest_untaken(starts[i], taken), True
             goals[i] = cell
             taken.add(cell)
+        for i, agent in enumerate(self.agents):
+            agent.assigned = None if agent.waiting or agent.goal is None else goals[i]
         grid = self.cells.grid
         closed = (self.blocked | self.avoid) - set(starts) - set(goals)
         self.avoid = set()

@@ -344,3 +344,19 @@ def test_a_robot_that_must_turn_round_turns_where_it_stands():
         [[-0.8, 0.1], [1.2, 0.0], [3.2, 0.0]],
     ):
         np.testing.assert_array_equal(turn_round((0.0, 0.0, 0.0), np.array(ahead)), ahead)
+
+
+def test_a_robot_on_its_way_to_a_shared_goal_cell_keeps_it():
+    # r1 heads for a drop slot; then r0 (first in fleet order) needs the same slot: r0 waits, r1
+    # goes on (by fleet order alone r0 took the cell and r1 waited, again at every such request).
+    poses = [(12.0, 41.0, 0.0), (20.0, 41.0, 0.0)]
+    coordinator = _coordinator([p[:2] for p in poses], [(14.0, 41.0), (30.0, 19.0)])
+    slot = (30.0, 19.0)
+    coordinator.agents[0].goal, coordinator.agents[1].goal = (14.0, 41.0), slot
+    coordinator.start(0.0, poses)
+    assert not coordinator.agents[1].waiting
+    coordinator.new_goal(0, slot)
+    coordinator.update(0.1, poses)
+    graph, cell = coordinator.graph, coordinator.cells.cell_of(*slot)
+    assert coordinator.agents[0].waiting and not coordinator.agents[1].waiting
+    assert graph.actions[1][-1].target == cell and graph.actions[0][-1].target != cell
