@@ -45,7 +45,9 @@ coordinator puts that last waypoint the tolerance beyond the last released centr
 last move, so the robot stops at the centre itself (at the mission's goal cell: at the point of
 the cell's inner square nearest to the goal); the waypoints end before the first reversal or
 return to a cell (a path that turns back passes by its end before), the rest follows once the
-robot is there.
+robot is there. A robot whose path beyond its nearest segment lies behind it (it must turn round)
+gets its waypoints from where it stands by a point to its side (`turn_round`): Pure Pursuit with
+its lookahead point straight behind does not turn and drove on out of the cell.
 
 **Lifelong re-solves.** When a robot needs its next mission goal, all robots are planned again:
 each from the cell of its last released action (where it is committed to go), its remaining goal
@@ -79,6 +81,8 @@ STUCK_DISTANCE = 0.25  # [m] moved less than this: not moving
 RELEASE_AHEAD = 3  # actions released beyond the done ones (a lifelong re-solve can still change the rest)
 MAPF_TIME_LIMIT = 0.2  # [s] of wall time per MAPF solve (the first solution takes ~1 ms at 50 robots)
 STOP_SHORT = 0.02  # [m] the stop point lies this much before the released end (Pure Pursuit's `<=`)
+TURN_OFFSET = 0.3  # [m] a robot that must turn round first heads for a point this far to its side
+TURN_NEAR = 0.5  # [m] waypoints this close to a turning robot are passed (it turns where it stands)
 
 Cell = tuple[int, int]
 
@@ -417,6 +421,7 @@ class Agent:
     tolerance: float
     goal: tuple[float, float] | None = None  # [m] current goal; None: stay (completed, dwelling)
     waiting: bool = False  # its goal cell was taken: it waits where it is
+    assigned: Cell | None = None  # the goal cell it heads for in the current plan (not waiting)
     shown: np.ndarray | None = None  # the waypoints it follows
     moved_at: float = 0.0  # [s] last time it moved STUCK_DISTANCE
     moved_from: tuple[float, float] = (math.nan, math.nan)
@@ -524,10 +529,22 @@ class Coordinator:
             held.append(cells - {start})
         goals: list[Cell] = [None] * n  # type: ignore[list-item]
         taken: set[Cell] = set()
-        order = sorted(range(n), key=lambda i: self.agents[i].goal is not None)  # resting robots first
+        # Resting robots first, then the robots already heading for their goal cell (assigned it in
+        # the last plan): a robot that asks for that cell later waits, it does not take the cell
+        # from one on its way (by fleet order the last robots waited at their shelves for 400 s,
+        # the cell passing to each robot with a lower index that came to need it meanwhile).
+        wanted = [None if agent.goal is None else self.cells.cell_of(*agent.goal) for agent in self.agents]
+
+        def rank(i: int) -> int:
+            agent = self.agents[i]
+            if agent.goal is None:
+                return 0
+            return 1 if agent.assigned is not None and agent.assigned == wanted[i] else 2
+
+        order = sorted(range(n), key=rank)
         for i in order:
             agent = self.agents[i]
-            cell = starts[i] if agent.goal is None else self.cells.cell_of(*agent.goal)
+            cell = starts[i] if agent.goal is None else wanted[i]
             agent.waiting = False
             if cell in taken or not self.cells.free(cell) or (cell in self.blocked and cell != starts[i]):
                 # Its goal is another's or blocked: it waits where it is, or, if another robot
@@ -535,6 +552,8 @@ class Coordinator:
                 cell, agent.waiting = self._nearest_untaken(starts[i], taken), True
             goals[i] = cell
             taken.add(cell)
+        for i, agent in enumerate(self.agents):
+            agent.assigned = None if agent.waiting or agent.goal is None else goals[i]
         grid = self.cells.grid
         closed = (self.blocked | self.avoid) - set(starts) - set(goals)
         self.avoid = set()
@@ -619,7 +638,7 @@ class Coordinator:
             # The same cells: the same waypoints (the end's extension keeps the first direction).
             if agent.shown is None or not np.array_equal(waypoints[:-1], agent.shown[:-1]):
                 agent.shown = waypoints
-                changed[i] = waypoints
+                changed[i] = turn_round(poses[i], waypoints)
         return changed
 
     def _see(self, marks) -> None:
@@ -692,6 +711,41 @@ class Coordinator:
         direction = direction / max(float(np.hypot(*direction)), 1e-12)
         beyond = end + max(agent.tolerance - STOP_SHORT, 0.0) * direction
         return np.array([*points, beyond], dtype=float)
+
+
+def turn_round(pose, waypoints: np.ndarray) -> np.ndarray:
+    """`waypoints` for a robot at `pose` (x, y, theta) that must turn round first: starting at the
+    robot, by a point `TURN_OFFSET` to its side (the side the path lies on), then on from the first
+    waypoint more than `TURN_NEAR` away after the path's segment nearest to the robot. Pure
+    Pursuit turns a robot by 2 v sin(alpha) / L toward its lookahead point at angle alpha: a
+    lookahead point (nearly) straight behind gives sin(alpha) ~ 0, and the robot drove on straight
+    ahead for more than 1 m (out of its cell into the next robot's) before it turned. From the side
+    point alpha starts near 90 degrees: the robot turns at once, within about TURN_OFFSET of where
+    it stands. Waypoints ahead of the robot (less than 120 degrees off its heading) are returned as
+    they are."""
+    x, y, theta = float(pose[0]), float(pose[1]), float(pose[2])
+    here = np.array([x, y])
+    if len(waypoints) < 2:
+        return waypoints
+    # The robot's place on the path: the segment nearest to it (the waypoints can begin with cells
+    # it has passed); the way on is the first waypoint after that segment's start beyond TURN_NEAR.
+    starts, ends = waypoints[:-1], waypoints[1:]
+    along = ends - starts
+    length2 = np.maximum((along * along).sum(axis=1), 1e-12)
+    s = np.clip(((here - starts) * along).sum(axis=1) / length2, 0.0, 1.0)
+    nearest = int(np.argmin(np.hypot(*(starts + s[:, None] * along - here).T)))
+    far = np.hypot(*(waypoints - here).T) > TURN_NEAR
+    far[: nearest + 1] = False
+    if not far.any():
+        return waypoints
+    first = int(np.argmax(far))
+    way = waypoints[first] - here
+    heading = np.array([math.cos(theta), math.sin(theta)])
+    if float(np.dot(way, heading)) >= -0.5 * float(np.hypot(*way)):
+        return waypoints
+    side = 1.0 if heading[0] * way[1] - heading[1] * way[0] >= 0.0 else -1.0
+    normal = side * np.array([-heading[1], heading[0]])
+    return np.array([here, here + TURN_OFFSET * normal, *waypoints[first:]], dtype=float)
 
 
 # -- the fleet run's hook --------------------------------------------------------------------------

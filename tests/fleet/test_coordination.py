@@ -7,6 +7,7 @@ two agents in one cell, no two swapping, and every agent at its goal at the end 
 
 from __future__ import annotations
 
+import math
 import random
 
 import numpy as np
@@ -14,11 +15,13 @@ import pytest
 
 from cosim.errors import CosimError
 from cosim.navigation.coordination import (
+    TURN_OFFSET,
     ActionGraph,
     Agent,
     CoordinationError,
     CoordinationGrid,
     Coordinator,
+    turn_round,
 )
 from cosim.scenario.fleet_compose import describe_fleet
 from cosim.scenario.load import load_scenario
@@ -285,3 +288,75 @@ def test_waypoints_stop_before_the_path_turns_back():
     coordinator.graph.finish(0)
     waypoints = coordinator.waypoints(0, (15.0, 19.0, 0.0))
     assert waypoints[:-1].tolist() == [[15.0, 19.0], [13.0, 19.0], [11.0, 19.0]]
+
+
+def _pursue(path, pose, steps=400, v=0.7, lookahead=0.3, omega_max=5.0, h=0.01):
+    # A plain Pure Pursuit (lookahead point `lookahead` along the path beyond the robot's nearest
+    # point, never going back; omega = v 2 sin(alpha) / L, clipped) on a unicycle: the robot's
+    # positions.
+    path = np.asarray(path, dtype=float)
+    dense = np.concatenate(
+        [
+            np.linspace(a, b, max(2, int(np.hypot(*(b - a)) / 0.01)), endpoint=False)
+            for a, b in zip(path, path[1:], strict=False)
+        ]
+        + [path[-1:]]
+    )
+    x, y, theta = pose
+    done, trail = 0, []
+    for _ in range(steps):
+        window = dense[done : done + 100]
+        done += int(np.argmin(np.hypot(window[:, 0] - x, window[:, 1] - y)))
+        ahead = dense[min(done + int(lookahead / 0.01), len(dense) - 1)]
+        alpha = math.atan2(ahead[1] - y, ahead[0] - x) - theta
+        omega = float(np.clip(v * 2.0 * math.sin(alpha) / lookahead, -omega_max, omega_max))
+        x, y, theta = x + v * math.cos(theta) * h, y + v * math.sin(theta) * h, theta + omega * h
+        trail.append((x, y))
+    return np.array(trail)
+
+
+def test_a_robot_that_must_turn_round_turns_where_it_stands():
+    # Facing +x at its cell's centre with the released cells behind it (-x): the waypoints as they
+    # are put the lookahead point straight behind the robot, sin(alpha) ~ 0, and it drives on
+    # ahead, out of its 2 m cell (seen: robot5 drove 1.2 m into robot6's cell at the station).
+    pose = (0.0, 1e-4, 0.0)
+    behind = np.array([[0.0, 0.0], [-2.0, 0.0], [-2.98, 0.0]])
+    assert _pursue(behind, pose)[:, 0].max() > 1.0
+    turned = turn_round(pose, behind)
+    # From the robot, by a point TURN_OFFSET to its side (the path's side: the robot stands 0.1 mm
+    # to its left, so right, -y), then on from the first waypoint beyond TURN_NEAR.
+    np.testing.assert_allclose(turned[:2], [[0.0, 1e-4], [0.0, 1e-4 - TURN_OFFSET]])
+    np.testing.assert_allclose(turned[2:], behind[1:])
+    trail = _pursue(turned, pose)
+    assert trail[:, 0].max() < 0.3 and np.abs(trail[:, 1]).max() < 0.5  # inside its cell (1 m each way)
+    assert trail[-1, 0] < -1.5  # and on its way
+    # Behind and to the right: it turns right.
+    assert turn_round((0.0, 0.0, 0.0), np.array([[0.0, 0.0], [-2.0, -1.0]]))[1, 1] == pytest.approx(
+        -TURN_OFFSET
+    )
+    # Waypoints ahead, or to the side, stay as they are; so do cells already passed before them
+    # (the lead-in of a re-solve: seen sending a robot back 8 m).
+    for ahead in (
+        [[0.0, 0.0], [2.0, 0.0]],
+        [[0.0, 0.0], [0.0, 2.0]],
+        [[0.1, 0.0], [-0.9, 1.9]],
+        [[-8.0, 0.0], [-6.0, 0.0], [-4.0, 0.0], [-2.0, 0.0], [0.0, 0.0], [2.0, 0.0]],
+        [[-0.8, 0.1], [1.2, 0.0], [3.2, 0.0]],
+    ):
+        np.testing.assert_array_equal(turn_round((0.0, 0.0, 0.0), np.array(ahead)), ahead)
+
+
+def test_a_robot_on_its_way_to_a_shared_goal_cell_keeps_it():
+    # r1 heads for a drop slot; then r0 (first in fleet order) needs the same slot: r0 waits, r1
+    # goes on (by fleet order alone r0 took the cell and r1 waited, again at every such request).
+    poses = [(12.0, 41.0, 0.0), (20.0, 41.0, 0.0)]
+    coordinator = _coordinator([p[:2] for p in poses], [(14.0, 41.0), (30.0, 19.0)])
+    slot = (30.0, 19.0)
+    coordinator.agents[0].goal, coordinator.agents[1].goal = (14.0, 41.0), slot
+    coordinator.start(0.0, poses)
+    assert not coordinator.agents[1].waiting
+    coordinator.new_goal(0, slot)
+    coordinator.update(0.1, poses)
+    graph, cell = coordinator.graph, coordinator.cells.cell_of(*slot)
+    assert coordinator.agents[0].waiting and not coordinator.agents[1].waiting
+    assert graph.actions[1][-1].target == cell and graph.actions[0][-1].target != cell
