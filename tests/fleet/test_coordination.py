@@ -126,6 +126,7 @@ def _execute(graph: ActionGraph, rng: random.Random, slow: int | None = None, sl
     return cells, slow_behind
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(6))
 def test_mapf_plans_executed_in_any_order_never_collide_nor_deadlock(seed):
     # A 6 x 8 room with a wall: agents to random distinct cells, planned by planner.mapf.

@@ -60,6 +60,7 @@ def _assert_all_completed(outcome) -> None:
     assert outcome.reason == "completed" and outcome.exit_code == 0
 
 
+@pytest.mark.slow
 def test_head_on_with_mapf_passes_without_contact_and_a_delayed_robot_only_takes_longer():
     fleet, outcome, trace = _run("fleet_head_on_mapf.toml")
     _assert_all_completed(outcome)
@@ -80,6 +81,7 @@ def test_head_on_with_mapf_passes_without_contact_and_a_delayed_robot_only_takes
     assert delayed.makespan > outcome.makespan
 
 
+@pytest.mark.slow
 def test_intersection_with_mapf_and_with_delays_has_no_contact_and_no_deadlock():
     fleet, outcome, trace = _run("fleet_intersection_mapf.toml")
     _assert_all_completed(outcome)
@@ -95,6 +97,7 @@ def test_intersection_with_mapf_and_with_delays_has_no_contact_and_no_deadlock()
     assert delayed.robots[2].stopped_time >= 5.0
 
 
+@pytest.mark.slow
 def test_prioritized_runs_through_the_same_execution():
     fleet, outcome, trace = _run("fleet_intersection_mapf.toml", "fleet.coordination=prioritized")
     _assert_all_completed(outcome)

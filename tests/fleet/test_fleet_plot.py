@@ -110,6 +110,7 @@ def test_no_collision_text_covers_another_or_a_marker(intersection):
         assert not any(box.contains(x, y) for x, y in markers)
 
 
+@pytest.mark.slow
 def test_a_head_on_fleet_runs_to_a_png_titled_by_the_fleet_line(tmp_path, capsys):
     log = tmp_path / "head_on.mcap"
     assert main(["run", str(SCENARIOS / "fleet_head_on.toml"), "--out", str(log)]) == 1

@@ -62,6 +62,7 @@ def test_fifty_robots_on_the_generated_map_go_to_shelves_the_station_and_back():
         assert (home.x, home.y) == robot.scenario.start[:2]
 
 
+@pytest.mark.slow
 def test_a_short_run_of_the_ten_robots():
     fleet = load_scenario(SCENARIOS / "fleet_missions.toml", ["simulation.stop_time=0.5"], fleet=True)
     trace: list = []

@@ -315,6 +315,7 @@ def test_has_the_ports_of_the_vector_field_histogram():
         ), name
 
 
+@pytest.mark.slow
 def test_fmpy_validation_finds_no_problem():
     assert validate_fmu(str(builtin_fmu("ArtificialPotentialField"))) == []
 

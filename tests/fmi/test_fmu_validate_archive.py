@@ -26,6 +26,7 @@ def test_a_valid_fmu_stays_valid():
     assert validate(builtin_fmu("DifferentialDrive")) == []
 
 
+@pytest.mark.slow
 def test_a_zip_bomb_is_a_problem_and_run_refuses_it_too(tmp_path):
     fmu = _with_member(tmp_path, "resources/zeros.bin", bytes(1100 * 2**20))  # deflates to ~1 MB
     problems = validate(fmu)

@@ -143,6 +143,7 @@ def test_a_bad_memory_limit_is_refused():
 # ---- unpacking, timed apart -----------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_unpacking_is_not_charged_to_the_fmi_call_timeout():
     """The padded fixture unpacks 256 MiB: give each FMI call a quarter of what unpacking it took
     here in-process. Charged to fmi2Instantiate (as before), that limit would fail it."""

@@ -50,6 +50,7 @@ def test_sampled_grids_equal_scipy(sampling):
         np.testing.assert_allclose(ours, theirs, rtol=1e-12, atol=0)
 
 
+@pytest.mark.slow
 def test_equals_brute_force():
     for mask in _random_grids(3, 60):
         for sampling in ((1.0, 1.0), (0.3, 0.8)):

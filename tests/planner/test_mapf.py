@@ -107,6 +107,7 @@ def test_agents_resting_in_a_corridor_let_a_deeper_goal_pass(seed):
     assert result.sum_of_costs == optimum
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_a_warehouse_of_one_cell_aisles(seed):
     """Shelves 6 x 1 with one-cell aisles all round (corridors, crossings, dead ends at the wall
@@ -128,6 +129,7 @@ def test_a_warehouse_of_one_cell_aisles(seed):
     assert result.sum_of_costs >= result.lower_bound
 
 
+@pytest.mark.slow
 def test_random_instances_on_an_obstacle_grid():
     """Many agents on a 24 x 24 grid with 15 % obstacles: valid paths, and the improvement phase."""
     rng = np.random.default_rng(7)

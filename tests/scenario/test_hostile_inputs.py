@@ -210,6 +210,7 @@ def test_5_mb_unknown_key_is_quoted_short(tmp_path, capsys):
     assert "[simulation].x: unknown key" in reject(tmp_path, capsys, text)
 
 
+@pytest.mark.slow
 def test_50_mb_map_path(tmp_path, capsys):
     text = example_text(**{f'"{WAREHOUSE}"': "'" + "m" * (50 * 1024 * 1024) + ".yaml'"})
     message = reject(tmp_path, capsys, text)

@@ -127,6 +127,7 @@ def test_limits_come_before_any_point_is_made(vary, options, message):
         make_spec(SCENARIO, [parse_vary(text) for text in vary], **options)
 
 
+@pytest.mark.slow
 def test_validation_loads_the_scenario_per_key_not_per_value(monkeypatch):
     import cosim.sweep.adapter as adapter
 
