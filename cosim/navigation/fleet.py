@@ -67,7 +67,13 @@ from cosim.navigation.coordination import FleetCoordination
 from cosim.navigation.fleet_log import FleetLog
 from cosim.navigation.outcome import MODE_RECOVER, OutcomeMonitor
 from cosim.record.logfile import is_regular_file
-from cosim.record.system_run import close_quietly, open_recorder, run_guarded, writing_failed
+from cosim.record.system_run import (
+    close_quietly,
+    initialize_or_close,
+    open_recorder,
+    run_guarded,
+    writing_failed,
+)
 from cosim.scenario.fleet import Fleet
 from cosim.scenario.fleet_compose import POSE_OF, SEEN_BY, describe_fleet
 from cosim.world.fleet import Contact, FleetContacts
@@ -290,14 +296,7 @@ def run_fleet(
         system, parameters = fleet_system(fleet, described, [each.built for each in robots])
         coordination = FleetCoordination.make(fleet, robots)  # None: "none" and no stops
         master = Master(system, parameters=parameters, stop_time=fleet.first.stop_time)
-        try:
-            master.initialize()
-        except CosimError as error:
-            close_quietly(master)
-            raise CosimError(f"{fleet.source}: initialising the system failed: {error}") from None
-        except BaseException:
-            close_quietly(master)
-            raise
+        initialize_or_close(master, fleet.source)
         for each in robots:
             each.place(master.order)
         outcome = FleetOutcome([each.outcome for each in robots])

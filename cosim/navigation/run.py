@@ -59,6 +59,7 @@ from cosim.record.steps import StepRecording
 from cosim.record.system_run import (
     SystemRun,
     close_quietly,
+    initialize_or_close,
     open_recorder,
     run_guarded,
     scenario_attachments,
@@ -159,14 +160,7 @@ def _build_and_run(
 ) -> RunResult:
     built = build_run(scenario)
     master = Master(built.system, parameters=built.parameters, stop_time=scenario.stop_time)
-    try:
-        master.initialize()
-    except CosimError as error:
-        close_quietly(master)
-        raise CosimError(f"{scenario.source}: initialising the system failed: {error}") from None
-    except BaseException:
-        close_quietly(master)
-        raise
+    initialize_or_close(master, scenario.source)
     with interrupt.deferred():
         try:
             recorder = open_recorder(

@@ -66,6 +66,20 @@ def close_quietly(master: Master, recorder=None, outcome: dict[str, str] | None 
             pass
 
 
+def initialize_or_close(master: Master, source, describe: Callable[[str], str] = str) -> None:
+    """Initialise `master`; when that fails, free what it made (its FMUs, their child processes)
+    and raise the one line "`source`: initialising the system failed: ..." (`describe` rewords the
+    error's text, e.g. with an SSP's own component names). Every run starts this way."""
+    try:
+        master.initialize()
+    except CosimError as error:
+        close_quietly(master)
+        raise CosimError(f"{source}: initialising the system failed: {describe(str(error))}") from None
+    except BaseException:
+        close_quietly(master)
+        raise
+
+
 def writing_failed(error: OSError, log_path: Path) -> str:
     """The one line saying the log could not be written (no space, an I/O error); what reached
     the file stays."""

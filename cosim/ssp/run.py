@@ -39,7 +39,13 @@ from cosim.core.loops import DEFAULT_MAX_ITERATIONS, DEFAULT_TOLERANCE
 from cosim.core.master import Master
 from cosim.core.system import LOOP_HANDLING, MODES
 from cosim.errors import PATH_LIMIT, CosimError, shorten
-from cosim.record.system_run import SystemRun, close_quietly, open_recorder, writing_failed
+from cosim.record.system_run import (
+    SystemRun,
+    close_quietly,
+    initialize_or_close,
+    open_recorder,
+    writing_failed,
+)
 from cosim.scenario.limits import MAX_STEPS, MAX_TIME, MIN_MACRO_STEP
 from cosim.ssp.read import DEFAULT_TIMEOUT, SspSystem, build_system, max_unpacked_size, open_ssp
 
@@ -226,15 +232,7 @@ def _run_fmus(
     system, parameters = build_system(ssp, run.macro_step, run.master, run.isolation, run.timeout, max_size)
     system.handle_loops(run.loops, run.loop_tolerance, run.loop_max_iterations)
     master = Master(system, start_time=run.start_time, parameters=parameters, stop_time=run.stop_time)
-    try:
-        master.initialize()
-    except CosimError as error:
-        close_quietly(master)
-        message = ssp.members(str(error))
-        raise CosimError(f"{ssp.source}: initialising the system failed: {message}") from None
-    except BaseException:
-        close_quietly(master)
-        raise
+    initialize_or_close(master, ssp.source, ssp.members)
     with interrupt.deferred():
         return _record(ssp, run, master, out_path, force)
 
