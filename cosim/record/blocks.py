@@ -240,15 +240,8 @@ class BlockRecording:
                 t_first, scan.angles, scan.current(), scan.range_min, scan.range_max, scan.scan_time
             )
             self.others.append(OtherMessage(first * per_step + self.order.scan, t_first, "/scan", payload))
-        if recording.moving:
-            steps = recording.obstacle_steps
-            for k in range(due_from(first, steps), end, steps):
-                t_ns = start_ns + k * h_ns
-                obstacles = recording.moved_obstacles(t_ns)
-                if obstacles is not None:
-                    payload = recorder.obstacles_payload(t_ns, obstacles)
-                    key = k * per_step + self.order.obstacles
-                    self.others.append(OtherMessage(key, t_ns, "/obstacles", payload))
+        for k, t_ns, payload in recording.obstacle_payloads(first, end, start_ns, h_ns):
+            self.others.append(OtherMessage(k * per_step + self.order.obstacles, t_ns, "/obstacles", payload))
         # The positions after each step, as the monitor checks them.
         xs = self._values(x_column, first, end, x_before)
         ys = self._values(y_column, first, end, y_before)

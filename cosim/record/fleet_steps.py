@@ -204,22 +204,10 @@ class FleetSteps:
                             (k * per_step + slot, start_ns + k * h_ns, channel, rosmsg.twist_cdr(v, omega))
                         )
                     robot.last_command = [float(value[-1]) for value in values]
-        world = self.world
-        if world.moving:
-            steps = world.obstacle_steps
-            for k in range(due_from(first, steps), end, steps):
-                t_ns = start_ns + k * h_ns
-                obstacles = world.moved_obstacles(t_ns)
-                if obstacles is not None:
-                    payload = self.recorder.obstacles_payload(t_ns, obstacles)
-                    messages.append(
-                        (
-                            k * per_step + self.obstacle_slot,
-                            t_ns,
-                            self.recorder.channel("/obstacles"),
-                            payload,
-                        )
-                    )
+        for k, t_ns, payload in self.world.obstacle_payloads(first, end, start_ns, h_ns):
+            messages.append(
+                (k * per_step + self.obstacle_slot, t_ns, self.recorder.channel("/obstacles"), payload)
+            )
         for k, t_ns, rows in poses:
             for j, (channel, payload) in enumerate(self.pose_messages(t_ns, rows)):
                 messages.append((k * per_step + self.pose_slot + j, t_ns, channel, payload))

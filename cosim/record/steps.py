@@ -30,7 +30,7 @@ from typing import NamedTuple, Protocol
 
 import numpy as np
 
-from cosim.core.timebase import NS_PER_S
+from cosim.core.timebase import NS_PER_S, due_from
 from cosim.world.shapes import moves
 
 
@@ -286,6 +286,18 @@ class StepRecording:
             return None
         self.obstacle_offsets = offsets
         return [obstacle.at(t) for obstacle in self.obstacles]
+
+    def obstacle_payloads(self, first: int, end: int, start_ns: int, h_ns: int):
+        """(k, t_ns, /obstacles payload) for each step k of first .. end - 1 at which the moving
+        obstacles are due (every `obstacle_steps`) and have moved since they were last taken."""
+        if not self.moving:
+            return
+        steps = self.obstacle_steps
+        for k in range(due_from(first, steps), end, steps):
+            t_ns = start_ns + k * h_ns
+            obstacles = self.moved_obstacles(t_ns)
+            if obstacles is not None:
+                yield k, t_ns, self.recorder.obstacles_payload(t_ns, obstacles)
 
     def after_step(self, k: int, t_ns: int, h_ns: int) -> None:
         """Record what step k (starting at t_ns) produced."""
