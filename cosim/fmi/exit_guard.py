@@ -87,18 +87,23 @@ def remove_hook(hook: Callable[[str], str | None]) -> None:
     _hooks.remove(hook)
 
 
-def _culprit() -> tuple[object | None, str]:
-    """The live component whose library is on the call stack, and the FMI function of its that was
-    called (the outermost of its frames); (None, "") when no FMU's code is on the stack."""
-    folders = {}
+def _culprit() -> tuple[list, str]:
+    """The live components whose library is on the call stack, and the FMI function of theirs that
+    was called (the outermost of their frames); ([], "") when no FMU's code is on the stack.
+
+    Instances of an FMU that may be instantiated more than once per process share one unpacked
+    folder, so one mapped library (`cosim.fmi.archive.unpack_instance`): the stack tells the
+    library, not which of its instances called exit(), and all of them are returned (in the order
+    they were instantiated)."""
+    folders: dict[str, list] = {}
     for reference in _live.values():
         component = reference()
         folder = getattr(component, "_unzip_dir", None)
         if folder:
-            folders[os.path.realpath(folder) + os.sep] = component
+            folders.setdefault(os.path.realpath(folder) + os.sep, []).append(component)
     frames = (ctypes.c_void_p * 256)()
     count = _LIBC.backtrace(frames, len(frames))
-    found, function = None, ""
+    found, function = [], ""
     info = _DL_INFO()
     for address in frames[:count]:
         # address - 1: inside the call instruction (after a call of exit(), which does not return,
@@ -106,29 +111,41 @@ def _culprit() -> tuple[object | None, str]:
         if not address or not _LIBC.dladdr(address - 1, ctypes.byref(info)) or not info[_FNAME]:
             continue
         library = os.path.realpath(os.fsdecode(ctypes.string_at(info[_FNAME])))
-        owner = next((c for folder, c in folders.items() if library.startswith(folder)), None)
-        if owner is None:
-            if found is not None:
+        owners = next((c for folder, c in folders.items() if library.startswith(folder)), None)
+        if owners is None:
+            if found:
                 break  # past the FMU's outermost frame
             continue
-        found = owner
+        found = owners
         if info[_SNAME]:
             function = ctypes.string_at(info[_SNAME]).decode(errors="replace")
     return found, function
 
 
+NAMED = 3  # instances named in the line when several share the library that called exit()
+
+
 def _message(status: int) -> str:
-    component, function = _culprit()
-    if component is None:
+    components, function = _culprit()
+    if not components:
         names = sorted(c.name for c in (r() for r in _live.values()) if c is not None)
         return (
             f"exit({status}) was called in this process outside the FMUs' code while FMU(s) "
             f'{", ".join(repr(n) for n in names)} ran in it (isolation = "none")'
         )
-    model = component.model_description.modelName
+    model = components[0].model_description.modelName
     where = f" in {function}" if function else ""
+    if len(components) == 1:
+        who = f"FMU '{components[0].name}' (model {model})"
+    else:
+        names = ", ".join(repr(c.name) for c in components[:NAMED])
+        more = f" and {len(components) - NAMED} more" if len(components) > NAMED else ""
+        who = (
+            f"one of the {len(components)} instances of FMU model {model} sharing one library "
+            f"({names}{more}; the stack does not tell which)"
+        )
     return (
-        f"FMU '{component.name}' (model {model}) ended the process with exit status {status} "
+        f"{who} ended the process with exit status {status} "
         f'(exit() inside the FMU; isolation = "none"){where}'
     )
 

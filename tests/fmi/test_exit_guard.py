@@ -43,10 +43,10 @@ from fixtures.build_fixtures import FAULTS
 from fixtures.conftest_helpers import fixture_fmu
 from cosim.fmi.component import FmuComponent
 components = []
-for name, fault in {faults!r}:
-    c = FmuComponent(fixture_fmu("fault_fmi2"), name)
+for kind, name, fault in {faults!r}:
+    c = FmuComponent(fixture_fmu(kind), name)
     c.instantiate()
-    c.setup(0.0, {{"fault": FAULTS.index(fault), "fault_time": 0.3}})
+    c.setup(0.0, {{"fault": FAULTS.index(fault), "fault_time": 0.3}} if fault else {{}})
     c.initialize()
     components.append(c)
 for k in range(10):
@@ -58,8 +58,17 @@ print("all steps done", flush=True)
 
 @pytest.mark.slow
 def test_exit_inside_an_fmu_in_this_process_is_a_failed_fmu():
-    """Two FMUs in the process, the second one's fixture calls exit(0) in its doStep at t = 0.3 s."""
-    completed = python(STEPPED.format(faults=[("healthy", "none"), ("vehicle", "exit")]))
+    """Two FMUs of other libraries in the process, the fault FMU calls exit(0) in its doStep at
+    t = 0.3 s: the line names it and the FMI function."""
+    completed = python(
+        STEPPED.format(
+            faults=[
+                ("gain_fmi2", "before", None),
+                ("fault_fmi2", "vehicle", "exit"),
+                ("gain_fmi3", "after", None),
+            ]
+        )
+    )
     assert completed.returncode == 2
     assert completed.stdout == ""
     assert completed.stderr == (
@@ -69,13 +78,31 @@ def test_exit_inside_an_fmu_in_this_process_is_a_failed_fmu():
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("order", [("vehicle", "healthy"), ("healthy", "vehicle")])
+def test_instances_sharing_a_library_are_all_named(order):
+    """Two instances of one FMU that may be instantiated more than once per process share one
+    unpacked library, so the call stack cannot tell which called exit(): the line names both (in
+    the order they were instantiated) and says so, whichever one exits, never the other alone."""
+    faults = {"vehicle": "exit", "healthy": "none"}
+    completed = python(STEPPED.format(faults=[("fault_fmi2", name, faults[name]) for name in order]))
+    assert completed.returncode == 2
+    names = ", ".join(repr(name) for name in order)
+    assert completed.stderr == (
+        "cosim: error: one of the 2 instances of FMU model fixture_fault_fmi2 sharing one library "
+        f"({names}; the stack does not tell which) ended the process with exit status 0 "
+        '(exit() inside the FMU; isolation = "none") in fmi2DoStep\n'
+    )
+
+
+@pytest.mark.slow
 def test_a_process_that_ends_by_itself_keeps_its_status():
     """No FMU called exit(): the interpreter's own end (sys.exit while an FMU is instantiated, and a
     normal end after it was freed) is neither reported nor changed."""
-    completed = python(STEPPED.format(faults=[("vehicle", "none")]) + "sys.exit(3)\n")
+    healthy = [("fault_fmi2", "vehicle", "none")]
+    completed = python(STEPPED.format(faults=healthy) + "sys.exit(3)\n")
     assert (completed.returncode, completed.stderr) == (3, "")
     assert completed.stdout == "all steps done\n"
-    freed = python(STEPPED.format(faults=[("vehicle", "none")]) + "components[0].free()\n")
+    freed = python(STEPPED.format(faults=healthy) + "components[0].free()\n")
     assert (freed.returncode, freed.stderr) == (0, "")
 
 
