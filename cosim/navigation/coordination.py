@@ -60,7 +60,8 @@ lead-in, released and planned cells) is blocked from then on, and all robots are
 around it (a robot already in that cell may leave it). And a robot that has released moves ahead
 but has not moved `STUCK_DISTANCE` for `BLOCKED_AFTER` seconds (something on its way that VFH could
 not pass; not a robot halted by `stop`) has its next cell closed for the next plan, and all are
-planned again.
+planned again, that robot from the cell where it stands (the cells released ahead of it given up:
+planned from its committed cell, its way there would still pass the closed cell).
 
 Speed: the MAPF solver is anytime: `MAPF_TIME_LIMIT` s of wall time per solve (small instances
 are proven optimal long before, so their plans are the same every run; a large fleet's plan can
@@ -444,6 +445,7 @@ class Coordinator:
         self.graph: ActionGraph | None = None
         self.blocked: set[Cell] = set()  # cells with unknown obstacles (for good)
         self.avoid: set[Cell] = set()  # cells a stuck robot could not enter (for the next plan)
+        self.stuck: set[int] = set()  # robots planned again from where they stand (next plan)
         self.solves = 0
         self.solve_time = 0.0  # [s] of wall time planning
         self.failures = 0  # solves that found no plan (the robots go on with the last one)
@@ -508,9 +510,14 @@ class Coordinator:
         starts, held, lead_in = [], [], []
         for i in range(n):
             x, y = float(poses[i][0]), float(poses[i][1])
-            if self.graph is None:
+            if self.graph is None or i in self.stuck:
+                # A stuck robot gives up the cells released ahead of it (the one it could not
+                # enter among them) and is planned from where it stands: from its committed cell
+                # its lead-in would still pass the closed cell.
                 start = self.cells.cell_of(x, y)
                 pending: list[Cell] = []
+                if self.graph is not None:
+                    lead_in.append([])
             else:
                 start = self.graph.committed(i)
                 pending = self.graph.pending(i)
@@ -556,7 +563,7 @@ class Coordinator:
             agent.assigned = None if agent.waiting or agent.goal is None else goals[i]
         grid = self.cells.grid
         closed = (self.blocked | self.avoid) - set(starts) - set(goals)
-        self.avoid = set()
+        self.avoid, self.stuck = set(), set()
         if closed:
             from planner.grid import OccupancyGrid
 
@@ -624,6 +631,7 @@ class Coordinator:
                 nxt = graph.next_action(i)
                 if nxt is not None and not nxt.settle:
                     self.avoid.add(nxt.target)  # for the next plan only: no obstacle was seen
+                    self.stuck.add(i)
                     self._resolve = True
                 agent.moved_at = t
         if self._resolve or (self.failed_at is not None and t - self.failed_at >= 1.0):
