@@ -131,8 +131,14 @@ def _from_environment() -> None:
     except BaseException:  # noqa: BLE001 - a warm-up must never stop the fork server
         pass
     import atexit
+    import gc
 
     atexit.register(_exit_at_once)
+    # What the workers inherit (~10^5 objects: the modules, the FMUs' descriptions) is never walked
+    # by their collector again, and it looks at young objects every 20,000 allocations instead of
+    # 700, as in `cosim run` (`cosim.cli`): ~5 % of a worker's CPU time otherwise.
+    gc.freeze()
+    gc.set_threshold(20_000, 20, 10)
 
 
 _from_environment()
