@@ -35,13 +35,20 @@ WARM_STOP_TIME = 0.5  # [s] of simulated time: a few lidar, controller and pose 
 
 
 def warm_up(scenario: str, overrides: list[str]) -> None:
-    """Run `scenario` with `overrides` for `WARM_STOP_TIME` s into a scratch folder, then remove it."""
+    """Run `scenario` with `overrides` for `WARM_STOP_TIME` s into a scratch folder, then remove it.
+    `scenario` may be a sweep file: then its scenario, with its `set` overrides before `overrides`
+    (as `cosim.sweep.build` merges them)."""
     import contextlib
     import shutil
     import tempfile
 
     import cosim.sweep.adapter as adapter
+    from cosim.sweep.spec import is_sweep_file, read_sweep_file
 
+    path = Path(scenario)
+    if path.suffix == ".toml" and is_sweep_file(path):
+        fields, _ = read_sweep_file(path)
+        path, overrides = Path(fields["scenario"]), [*fields["overrides"], *overrides]
     folder = tempfile.mkdtemp(prefix="navcosim-warm-")
     try:
         with (
@@ -49,7 +56,7 @@ def warm_up(scenario: str, overrides: list[str]) -> None:
             contextlib.redirect_stdout(sink),
             contextlib.redirect_stderr(sink),
         ):
-            loaded = adapter.load(Path(scenario), [*overrides, f"simulation.stop_time={WARM_STOP_TIME}"])
+            loaded = adapter.load(path, [*overrides, f"simulation.stop_time={WARM_STOP_TIME}"])
             adapter.run(loaded, Path(folder) / "warm.mcap")
     finally:
         shutil.rmtree(folder, ignore_errors=True)

@@ -64,3 +64,35 @@ def test_without_a_request_the_import_changes_nothing(tmp_path):
     lines = result.stdout.splitlines()
     assert lines[:3] == ["threshold 700 10 10", "frozen False", "default before True"]
     assert lines[3:] == ["last line", "teardown ran"] or lines[3:] == ["last lineteardown ran"]
+
+
+@pytest.mark.slow
+def test_a_sweep_file_warms_up_its_scenario_with_its_overrides_first(tmp_path, monkeypatch):
+    """`cosim sweep FILE` starts the fork server before it parses FILE: the warm-up reads the
+    scenario and the `set` overrides the file names, the command line's after them (as
+    `cosim.sweep.build` merges them). A misspelt key shows which overrides it ran with."""
+    import shutil
+    import tempfile
+
+    from cosim.errors import CosimError
+    from cosim.sweep.warm import warm_up
+
+    folder = tmp_path / "sweeps"
+    folder.mkdir()
+    shutil.copy(SCENARIO, folder / "scenario.toml")
+    shutil.copytree(SCENARIO.parent / "maps", folder / "maps")
+    sweep_file = folder / "noise.toml"
+    sweep_file.write_text(
+        '[sweep]\nscenario = "scenario.toml"\nset = ["lidar.seed=3", "vfh.robot_radus=0.5"]\n'
+        '[vary]\n"lidar.noise" = [0.0, 0.1]\n'
+    )
+    scratch = tmp_path / "scratch"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
+    with pytest.raises(CosimError, match="robot_radus"):  # the file's own override was applied
+        warm_up(str(sweep_file), ["simulation.stop_time=2"])
+    sweep_file.write_text(sweep_file.read_text().replace(', "vfh.robot_radus=0.5"', ""))
+    warm_up(str(sweep_file), ["simulation.stop_time=2"])  # raises if the short run fails
+    with pytest.raises(CosimError, match="stop_tme"):  # and the command line's
+        warm_up(str(sweep_file), ["simulation.stop_tme=2"])
+    assert list(scratch.iterdir()) == []
