@@ -353,8 +353,10 @@ def _cell_texts(axis, data: _Data, panel: str, columns, lines, replicates: int) 
             if not np.isfinite(mean):
                 continue
             text = f"{mean:.3g}" + (f"\n± {std:.2g}" if replicates > 1 and np.isfinite(std) else "")
-        # Centred in its cell, so never what the layout has to make room for: left out of it (each
-        # text in the layout is measured a few times over, 40 texts a tenth of the plot's time).
+        # Centred in its cell, inside the panel: left out of the layout (each text in it is measured
+        # a few times over, 40 texts a tenth of the plot's time). Only an edge cell's two-line
+        # outcome ("0/1", "stop time") on a grid of 7 or 8 columns may reach past the panel's edge,
+        # by a few pixels, into the tick marks' margin.
         axis.text(
             column,
             line,
