@@ -354,9 +354,8 @@ def _cell_texts(axis, data: _Data, panel: str, columns, lines, replicates: int) 
                 continue
             text = f"{mean:.3g}" + (f"\n± {std:.2g}" if replicates > 1 and np.isfinite(std) else "")
         # Centred in its cell, inside the panel: left out of the layout (each text in it is measured
-        # a few times over, 40 texts a tenth of the plot's time). Only an edge cell's two-line
-        # outcome ("0/1", "stop time") on a grid of 7 or 8 columns may reach past the panel's edge,
-        # by a few pixels, into the tick marks' margin.
+        # a few times over, 40 texts a tenth of the plot's time). The same pixels as when it was in
+        # it, up to an 8 x 8 grid whose edge cells hold two-line outcomes ("0/1", "stop time").
         axis.text(
             column,
             line,
