@@ -95,10 +95,10 @@ def start_fork_server(scenario: Path, overrides: tuple[str, ...]) -> None:
 def stop_fork_server() -> None:
     """Stop the local cluster's fork server (started by `start_fork_server`) and wait for it.
 
-    Left running, it would only stop when this process exits, and then take its time (it holds the
-    whole run stage: its C kernels, the FMUs) with this process's stdout and stderr still open, so
-    whoever reads them waits for it too (about 0.4 s on an idle 2-core machine). Stopped here, it
-    goes while the sweep draws its plot. A later sweep of this process starts a new one (warmed up
+    Left running, it would only stop when this process exits, with this process's stdout and
+    stderr still open, so whoever reads them would wait for it too. Stopped here, it goes while
+    the sweep draws its plot, at once (`_exit_at_once`: no teardown of the run stage it holds, its
+    C kernels, the FMUs, which took 0.1-0.5 s). A later sweep of this process starts a new one (warmed up
     on its own scenario). Uses `ForkServer._stop` (CPython's, since 3.8; nothing when not running).
     """
     from multiprocessing import forkserver
