@@ -24,7 +24,9 @@ ones to read on a busy machine:
 - `sweep of 8 / 8 runs`: `cosim sweep SCENARIO --vary lidar.seed=0:3:4 --vary lidar.noise=0.02,0.05`
   (a local cluster, one worker per core, drawing its sweep.png) against the same 8 points as 8
   sequential `cosim run --no-plot` processes, wall time; the ratio is to those 8 runs, not to the
-  floor.
+  floor;
+- `sweep of 8 --no-plot / 8 runs`: the same sweep without its sweep.png, in the same rounds (what
+  the plot adds to the sweep is the difference of the two rows).
 
 The issue's figures (issue 23, measured before the work) are printed beside the ratios.
 `--baseline DIR` runs the same commands in another checkout (e.g. `git worktree add /tmp/old <commit>`)
@@ -57,6 +59,7 @@ ISSUE_BEFORE = {
     "first run, FMUs built": "",
     "hybrid first call, cold": "",
     "sweep of 8 / 8 runs": "0.64x",
+    "sweep of 8 --no-plot / 8 runs": "",
 }
 GOALS = {
     "run --no-plot, warm": "<= 1.2x",
@@ -65,6 +68,7 @@ GOALS = {
     "first run, FMUs built": "",
     "hybrid first call, cold": "",
     "sweep of 8 / 8 runs": "<= 0.4x",
+    "sweep of 8 --no-plot / 8 runs": "",
 }
 SWEEP_POINTS = [(seed, noise) for seed in range(4) for noise in ("0.02", "0.05")]
 
@@ -184,7 +188,7 @@ def _sequential(scenario: str, scratch: Path, checkout: Path, env: dict[str, str
     return time.perf_counter() - started
 
 
-def _sweep(scenario: str, scratch: Path, checkout: Path, env: dict[str, str]) -> float:
+def _sweep(scenario: str, scratch: Path, checkout: Path, env: dict[str, str], *extra: str) -> float:
     """Wall seconds of `cosim sweep` over the same 8 points on a local cluster (into a new folder)."""
     out = Path(tempfile.mkdtemp(dir=scratch))
     vary = ["--vary", "lidar.seed=0:3:4", "--vary", "lidar.noise=0.02,0.05"]
@@ -198,24 +202,29 @@ def _sweep(scenario: str, scratch: Path, checkout: Path, env: dict[str, str]) ->
         "--out",
         str(out / "sweep"),
         "--quiet",
+        *extra,
     ]
     wall = _timed(command, checkout, env)[0]
     shutil.rmtree(out)
     return wall
 
 
-def measure_sweep(checkouts: dict[str, Path], scenario: str, repeat: int) -> dict[str, tuple[float, float]]:
-    """Per checkout the fastest wall seconds of 8 sequential runs and of the 8-run local sweep, in
-    rounds (sequential, sweep, for each checkout in turn)."""
+def measure_sweep(
+    checkouts: dict[str, Path], scenario: str, repeat: int
+) -> dict[str, tuple[float, float, float]]:
+    """Per checkout the fastest wall seconds of 8 sequential runs, of the 8-run local sweep and of
+    the same sweep with --no-plot, in rounds (sequential, sweep, sweep --no-plot, for each
+    checkout in turn)."""
     envs = {name: _environment(path) for name, path in checkouts.items()}
-    walls: dict[str, tuple[list[float], list[float]]] = {name: ([], []) for name in checkouts}
+    walls: dict[str, tuple[list[float], ...]] = {name: ([], [], []) for name in checkouts}
     with tempfile.TemporaryDirectory() as scratch:
         scratch = Path(scratch)
         for _ in range(repeat):
             for name, path in checkouts.items():
                 walls[name][0].append(_sequential(scenario, scratch, path, envs[name]))
                 walls[name][1].append(_sweep(scenario, scratch, path, envs[name]))
-    return {name: (min(sequential), min(sweep)) for name, (sequential, sweep) in walls.items()}
+                walls[name][2].append(_sweep(scenario, scratch, path, envs[name], "--no-plot"))
+    return {name: tuple(min(figures) for figures in rounds) for name, rounds in walls.items()}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -250,12 +259,13 @@ def main(argv: list[str] | None = None) -> int:
             row += f"{wall:>13.3f}s{wall / floor_wall:>7.2f}x{cpu:>7.3f}s{cpu / floor_cpu:>7.2f}x{rss:>6.0f}"
         print(row + f"{ISSUE_BEFORE[what]:>14}{GOALS[what]:>9}")
     if args.sweep_repeat > 0:
-        what = "sweep of 8 / 8 runs"
         sweeps = measure_sweep(checkouts, args.scenario, args.sweep_repeat)
-        row = f"{what:<30}"
-        for sequential, sweep in sweeps.values():
-            row += f"{sweep:>13.3f}s{sweep / sequential:>7.2f}x{'8 runs':>8}{sequential:>7.2f}s{'':>6}"
-        print(row + f"{ISSUE_BEFORE[what]:>14}{GOALS[what]:>9}")
+        for what, column in (("sweep of 8 / 8 runs", 1), ("sweep of 8 --no-plot / 8 runs", 2)):
+            row = f"{what:<30}"
+            for figures in sweeps.values():
+                sequential, sweep = figures[0], figures[column]
+                row += f"{sweep:>13.3f}s{sweep / sequential:>7.2f}x{'8 runs':>8}{sequential:>7.2f}s{'':>6}"
+            print(row + f"{ISSUE_BEFORE[what]:>14}{GOALS[what]:>9}")
     print(f"load average at the end {os.getloadavg()[0]:.2f}")
     return 0
 

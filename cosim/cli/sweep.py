@@ -115,7 +115,14 @@ def resume_command(args, out_dir: Path) -> str:
 
 def _handler(args) -> int:
     from cosim.sweep import build
+    from cosim.sweep.warm import start_fork_server, stop_fork_server
 
+    # The local cluster's fork server starts first, before the sweep is even parsed (numpy is
+    # imported for that): it warms up while this process parses, plans and imports Dask. Given a
+    # sweep file, it reads the scenario and overrides the file names (`cosim.sweep.warm.warm_up`).
+    local = args.scheduler is None and not args.dry_run
+    if local:
+        start_fork_server(args.scenario, tuple(args.overrides))
     spec, options = build(
         args.scenario,
         args.vary,
@@ -132,10 +139,8 @@ def _handler(args) -> int:
     )
     if args.dry_run:
         return _dry_run(spec, options)
-    if options.scheduler is None:
-        from cosim.sweep.warm import start_fork_server
-
-        start_fork_server(spec.scenario, spec.overrides)  # warms up while the engine is imported
+    if local and options.scheduler is not None:  # the sweep file names a scheduler: no local cluster
+        stop_fork_server()
     _freeze_at_exit()
     from cosim.sweep.engine import run_sweep
 
