@@ -7,7 +7,9 @@
  * dead ends and corridors out of the way of an agent whose goal lies further in, and breaks distance
  * ties along per-agent guides (all below). Once LaCAM stalls it shares the time (half each) with
  * prioritized planning with eviction (mapf_lns.h), which is sometimes the quicker where PIBT's greedy
- * steps need a deep search (agents that must pass each other in the one-cell aisles of a warehouse).
+ * steps need a deep search (agents that must pass each other in the one-cell aisles of a warehouse),
+ * and with a local repair (decompose()): the agents still away at LaCAM's node nearest the goals,
+ * stuck in knots far apart, are split into regions solved one by one as small instances.
  * Then, until the time limit, two improvers share the best solution (its sum of costs bounds both):
  * - LaCAM* (Okumura, IJCAI 2023): configurations met again link the search nodes, costs g are
  *   rewired along the links (Dijkstra-like), nodes with g + h >= the best sum of costs are pruned;
