@@ -44,6 +44,8 @@
 #define LNS_SLICE 0.008
 #define FIRST_SLICE 0.05  /* s: LaCAM's turn while it looks for a first solution */
 #define STALL 200         /* nodes without a new least h: LaCAM no longer gets on alone */
+#define PROBE_TIME 2.5    /* s: a restart's time */
+#define MAX_PROBES 8
 
 typedef struct { int *a; long long n, cap; } ivec;
 
@@ -87,7 +89,11 @@ typedef struct {
     Lns pp;               /* prioritized planning's own tables (its solution is swapped into lns) */
     int goal_node; long long goal_g_taken;
     long long min_h; int improved_at, best_node;
-    int nested;           /* a sub-solve of decompose(): first solution only, no decomposition */
+    int nested;           /* 0 the solve asked for; 1 a restart (first solution only, one repair);
+                           * 2 a piece of a repair (first solution only, no repair) */
+    int probes, pp_turns; /* restarts made, prioritized planning's turns before a first solution */
+    int repair_failed;    /* a local repair was tried and failed: restarts from then on */
+    int partial;          /* a piece's path ends nearer the goals, not on them */
     int tried_node;       /* decompose(): the best node last tried */
     uint64_t *radix;   /* 2 N: the priority sort's buffers */  /* the least h of a node so far, and the node count then */
     double first_time; int status;
@@ -791,22 +797,26 @@ static int uf_find(int *up, int x) {
 }
 
 /* -- local repair ----------------------------------------------------------------------------------
- * Where LaCAM stalls on a large instance most agents are home and the others are stuck in small
- * knots far apart (in a warehouse: agents that must pass each other in a one-cell aisle, between
- * agents resting on their goals). The search cannot untie twenty knots at once, but each knot alone
- * is a small instance. So from the configuration nearest the goals (least h), in rounds: every agent
- * not home gets a region (the cells within `radius` steps of a shortest path from where it is to
- * its goal); overlapping regions merge; each region with the agents in it (those home too) is
- * solved alone on its cells (LaCAM and prioritized planning, first solution only), every agent
- * outside the regions resting on its goal. The regions are disjoint and hold every agent that
- * moves, so the pieces solved go side by side while the agents of the others wait: the plan grows
- * by the longest piece and the next round starts where it ends, with fewer agents away. A round
- * that solves no piece doubles the radius (up to MAX_RADIUS). The plan: LaCAM's path to the
- * configuration, then the rounds. 1 solved (the plan is in lns), 0 not (time, or no piece solved at
- * the largest radius), -1 out of memory. */
+ * Where LaCAM stalls on a large instance most agents are home and the others are stuck in knots far
+ * apart (in a warehouse: agents that must pass each other in one-cell aisles, between agents resting
+ * on their goals). The search cannot untie twenty knots at once, but each knot alone is a small
+ * instance. So from the configuration nearest the goals (the first node on LaCAM's way to its least
+ * h that is within a quarter of it), in rounds: every agent not home gets a region (the cells
+ * within `radius` steps of a shortest path from where it is to its goal); overlapping regions merge;
+ * each region with the agents in it (those home too) is solved alone on its cells (LaCAM and
+ * prioritized planning, first solution only, PIECE_TIME at most), every agent outside the regions
+ * resting on its goal. A piece not solved still moves on to its LaCAM's configuration nearest the
+ * goals if that is nearer than where it started. The regions are disjoint and hold every agent that
+ * moves, so the pieces go side by side while the agents of the others wait: the plan grows by the
+ * longest piece and the next round starts where it ends, nearer the goals (the sum of distances
+ * drops every round, so the rounds end). A round that moves no piece doubles the radius (up to
+ * MAX_RADIUS). The plan: LaCAM's path to the configuration, then the rounds. 1 solved (the plan is
+ * in lns), 0 not (time, or no piece moved at the largest radius), -1 out of memory.
+ * If the repair fails, restarts (the whole instance again with another seed: other guides and ties,
+ * other knots, and one repair of its own) take turns with prioritized planning. */
 #define MIN_RADIUS 3
 #define MAX_RADIUS 6
-#define PIECE_TIME 0.5  /* s: a piece not solved by then is likely not solvable in its region */
+#define PIECE_TIME 0.1  /* s: a piece not solved by then is likely not solvable in its region */
 
 typedef struct {
     int *up, *owner, *depth, *queue, *local, *cells, *agents, *group, *sadj, *sstart, *sgoal, *at, *stamp, *first;
@@ -861,7 +871,7 @@ static int repair_round(Mapf *m, Repair *r, const int *q, int R, double deadline
         double left = deadline - now();
         if (left <= 0) break;
         Mapf *sub = solve_core(nv, r->sadj, na, r->sstart, r->sgoal, left < PIECE_TIME ? left : PIECE_TIME, rnd(m),
-                               m->budget - m->used, 1);
+                               m->budget - m->used, 2);
         if (!sub) { result = -1; break; }
         if (sub->length <= 0) { mapf_free(sub); continue; }  /* this knot waits for a later round */
         r->subs[root] = sub;
@@ -958,14 +968,35 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
             lacam_time += now() - began;
             if (outcome == LACAM_FOUND || (outcome == LACAM_EXHAUSTED && !m->truncated)) break;
             if (outcome != LACAM_DEADLINE) lacam_time = INFINITY;  /* budget spent: planning alone */
-        } else if (!m->nested && m->best_node != m->tried_node) {
+        } else if (m->nested < 2 && m->best_node != m->tried_node && !m->repair_failed) {
             /* stalled at a new least h: local repair, on planning's time */
             m->tried_node = m->best_node;
             int done = decompose(m, deadline);
             planning_time += now() - began;
             if (done == 1) { repaired = 1; break; }
             if (done < 0) m->tried_node = INT_MAX;  /* out of memory: no more tries */
+            if (done == 0) m->repair_failed = 1;
+            if (m->nested == 1) break;  /* a restart makes one try */
+        } else if (m->nested == 0 && m->repair_failed && m->probes <= m->pp_turns / 4 && m->probes < MAX_PROBES) {
+            /* the repair failed: where LaCAM's knots are too tangled, a restart (another seed: other
+             * guides and ties) often leaves knots that untie; its repair gets up to PROBE_TIME */
+            m->probes++;
+            double left = deadline - began;
+            Mapf *probe = solve_core(m->V, m->adj, m->N, m->start, m->goal, left < PROBE_TIME ? left : PROBE_TIME,
+                                     rnd(m), m->budget - m->used, 1);
+            planning_time += 0.5 * (now() - began);  /* half of it was LaCAM's */
+            if (probe && probe->length > 0) {
+                int loaded = lns_load(&m->lns, probe->path, probe->length);
+                mapf_free(probe);
+                if (loaded < 0) return;
+                m->solved = 1;
+                m->best = m->lns.soc;
+                repaired = 1;
+                break;
+            }
+            mapf_free(probe);
         } else if (planning_time < INFINITY) {
+            m->pp_turns++;
             int done = lns_prioritized(&m->pp, began + FIRST_SLICE, deadline);
             planning_time += now() - began;
             planned = done == 1;
@@ -1087,6 +1118,18 @@ static Mapf *solve_core(int V, const int *adj, int N, const int *start, const in
         m->length = makespan + 1;
         for (int t = 0; t <= makespan; t++)
             for (int i = 0; i < N; i++) m->path[(size_t)t * N + i] = lns_at(&m->lns, i, t);
+    } else if (nested == 2 && m->n_nodes > 0 && m->nodes[m->best_node].h < m->nodes[0].h) {
+        /* a piece not solved: LaCAM's way to its node nearest the goals, a step on (partial) */
+        int length = 0, from = m->best_node;  /* the first node on the way that is as near */
+        for (int k = m->best_node; k >= 0; k = m->nodes[k].parent) if (m->nodes[k].h <= m->nodes[m->best_node].h) from = k;
+        for (int k = from; k >= 0; k = m->nodes[k].parent) length++;
+        m->path = malloc((size_t)length * N * sizeof(int));
+        if (!m->path) return m;
+        m->length = length;
+        m->partial = 1;
+        int row = length - 1;
+        for (int k = from; k >= 0; k = m->nodes[k].parent, row--)
+            memcpy(m->path + (size_t)row * N, config(m, k), (size_t)N * sizeof(int));
     }
     return m;
 }
