@@ -977,9 +977,11 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
             if (done < 0) m->tried_node = INT_MAX;  /* out of memory: no more tries */
             if (done == 0) m->repair_failed = 1;
             if (m->nested == 1) break;  /* a restart makes one try */
-        } else if (m->nested == 0 && m->repair_failed && m->probes <= m->pp_turns / 4 && m->probes < MAX_PROBES) {
+        } else if (m->nested == 0 && m->repair_failed && m->probes <= m->pp_turns / 4 && m->probes < MAX_PROBES
+                   && (double)m->N * m->V * (sizeof(int) + 1) < 0.5 * (m->budget - m->used)) {
             /* the repair failed: where LaCAM's knots are too tangled, a restart (another seed: other
-             * guides and ties) often leaves knots that untie; its repair gets up to PROBE_TIME */
+             * guides and ties) often leaves knots that untie; its repair gets up to PROBE_TIME. It
+             * needs its own distance tables and guides, and room for its search, from the budget */
             m->probes++;
             double left = deadline - began;
             Mapf *probe = solve_core(m->V, m->adj, m->N, m->start, m->goal, left < PROBE_TIME ? left : PROBE_TIME,
