@@ -93,6 +93,7 @@ typedef struct {
                            * 2 a piece of a repair (first solution only, no repair) */
     int probes, pp_turns; /* restarts made, prioritized planning's turns before a first solution */
     int repair_failed;    /* a local repair was tried and failed: restarts from then on */
+    double setup_time;    /* s: the distance tables, guides and the rest before the search */
     int partial;          /* a piece's path ends nearer the goals, not on them */
     int tried_node;       /* decompose(): the best node last tried */
     uint64_t *radix;   /* 2 N: the priority sort's buffers */  /* the least h of a node so far, and the node count then */
@@ -978,10 +979,12 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
             if (done == 0) m->repair_failed = 1;
             if (m->nested == 1) break;  /* a restart makes one try */
         } else if (m->nested == 0 && m->repair_failed && m->probes <= m->pp_turns / 4 && m->probes < MAX_PROBES
-                   && (double)m->N * m->V * (sizeof(int) + 1) < 0.5 * (m->budget - m->used)) {
+                   && (double)m->N * m->V * (sizeof(int) + 1) < 0.5 * (m->budget - m->used)
+                   && deadline - began > 0.1 + 4.0 * m->setup_time) {
             /* the repair failed: where LaCAM's knots are too tangled, a restart (another seed: other
              * guides and ties) often leaves knots that untie; its repair gets up to PROBE_TIME. It
-             * needs its own distance tables and guides, and room for its search, from the budget */
+             * needs its own distance tables and guides, and room for its search, from the budget, and
+             * time for more than setting them up */
             m->probes++;
             double left = deadline - began;
             Mapf *probe = solve_core(m->V, m->adj, m->N, m->start, m->goal, left < PROBE_TIME ? left : PROBE_TIME,
@@ -1111,6 +1114,7 @@ static Mapf *solve_core(int V, const int *adj, int N, const int *start, const in
     if (!reachable) { m->status = -1; return m; }
     if (!fits) { m->truncated = 1; m->status = -3; return m; }
     if (guides(m) < 0) { m->status = -3; return m; }
+    m->setup_time = now() - t0;
     search(m, start, t0 + time_limit, t0);
     if (m->solved) {
         int makespan = 0;
