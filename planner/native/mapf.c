@@ -29,7 +29,8 @@
  * successor lists, the hash table, the open stack) are charged to a byte budget. When it is spent,
  * no node is added: before a solution prioritized planning goes on alone (its paths are not
  * charged; without its solution the solver reports the budget), after one LaCAM* only revisits known
- * nodes and can no longer prove optimality.
+ * nodes and can no longer prove optimality. The local repair's plan is charged while it is built;
+ * its pieces and the restarts are solves of their own, each given what is left of the budget.
  */
 #define _POSIX_C_SOURCE 199309L
 #include <limits.h>
