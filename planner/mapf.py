@@ -15,7 +15,12 @@ head-on in one-cell aisles). Once LaCAM no longer gets nearer the goals it takes
 each, with prioritized planning (agents one after the other by SIPP, safe interval path planning,
 Phillips and Likhachev 2011, against the ones before; an agent that finds no path evicts the planned
 agents in its way, which are planned again after it), which is sometimes the quicker of the two in
-one-cell warehouse aisles. Then, until `time_limit` or a proof of optimality, two improvers share
+one-cell warehouse aisles; and it repairs locally: from its configuration nearest the goals, the
+agents not yet home (stuck in knots far apart, where PIBT locked them in one-cell aisles) get regions
+(the cells near their shortest paths, merged where they overlap), and each region with the agents in
+it is solved alone as a small instance (or, if not solved, brought nearer its goals) while every
+other agent rests, in rounds until all are home; if that fails, restarts with other random choices
+make their own repair. Then, until `time_limit` or a proof of optimality, two improvers share
 the best solution: LaCAM* (Okumura, IJCAI 2023; configurations met again link the search nodes,
 costs are rewired along the links, nodes that cannot beat the best sum of costs are pruned; an
 exhausted search proves the best one optimal) and a large neighbourhood search (Li et al., IJCAI

@@ -7,7 +7,9 @@
  * dead ends and corridors out of the way of an agent whose goal lies further in, and breaks distance
  * ties along per-agent guides (all below). Once LaCAM stalls it shares the time (half each) with
  * prioritized planning with eviction (mapf_lns.h), which is sometimes the quicker where PIBT's greedy
- * steps need a deep search (agents that must pass each other in the one-cell aisles of a warehouse).
+ * steps need a deep search (agents that must pass each other in the one-cell aisles of a warehouse),
+ * and with a local repair (decompose()): the agents still away at LaCAM's node nearest the goals,
+ * stuck in knots far apart, are split into regions solved one by one as small instances.
  * Then, until the time limit, two improvers share the best solution (its sum of costs bounds both):
  * - LaCAM* (Okumura, IJCAI 2023): configurations met again link the search nodes, costs g are
  *   rewired along the links (Dijkstra-like), nodes with g + h >= the best sum of costs are pruned;
@@ -27,7 +29,8 @@
  * successor lists, the hash table, the open stack) are charged to a byte budget. When it is spent,
  * no node is added: before a solution prioritized planning goes on alone (its paths are not
  * charged; without its solution the solver reports the budget), after one LaCAM* only revisits known
- * nodes and can no longer prove optimality.
+ * nodes and can no longer prove optimality. The local repair's plan is charged while it is built;
+ * its pieces and the restarts are solves of their own, each given what is left of the budget.
  */
 #define _POSIX_C_SOURCE 199309L
 #include <limits.h>
@@ -42,6 +45,8 @@
 #define LNS_SLICE 0.008
 #define FIRST_SLICE 0.05  /* s: LaCAM's turn while it looks for a first solution */
 #define STALL 200         /* nodes without a new least h: LaCAM no longer gets on alone */
+#define PROBE_TIME 2.5    /* s: a restart's time */
+#define MAX_PROBES 8
 
 typedef struct { int *a; long long n, cap; } ivec;
 
@@ -84,7 +89,14 @@ typedef struct {
     Lns lns; int solved; long long best;
     Lns pp;               /* prioritized planning's own tables (its solution is swapped into lns) */
     int goal_node; long long goal_g_taken;
-    long long min_h; int improved_at;
+    long long min_h; int improved_at, best_node;
+    int nested;           /* 0 the solve asked for; 1 a restart (first solution only, one repair);
+                           * 2 a piece of a repair (first solution only, no repair) */
+    int probes, pp_turns; /* restarts made, prioritized planning's turns before a first solution */
+    int repair_failed;    /* a local repair was tried and failed: restarts from then on */
+    double setup_time;    /* s: the distance tables, guides and the rest before the search */
+    int partial;          /* a piece's path ends nearer the goals, not on them */
+    int tried_node;       /* decompose(): the best node last tried */
     uint64_t *radix;   /* 2 N: the priority sort's buffers */  /* the least h of a node so far, and the node count then */
     double first_time; int status;
     int *path; int length;
@@ -739,7 +751,7 @@ static int lacam(Mapf *m, double deadline, int stop_at_goal) {
         int id = new_node(m, s, m->nodes[s].g + step);
         if (id < 0) { if (!m->solved && m->goal_node < 0) return LACAM_BUDGET; continue; }
         m->table[slot] = id;
-        if (m->nodes[id].h < m->min_h) { m->min_h = m->nodes[id].h; m->improved_at = m->n_nodes; }
+        if (m->nodes[id].h < m->min_h) { m->min_h = m->nodes[id].h; m->improved_at = m->n_nodes; m->best_node = id; }
         push(m, &m->nodes[s].next, id);
         push(m, &m->open, id);
         if (m->goal_node < 0 && is_goal(m, q)) {
@@ -777,6 +789,160 @@ static int take_lacam_solution(Mapf *m) {
     return status;
 }
 
+static Mapf *solve_core(int V, const int *adj, int N, const int *start, const int *goal, double time_limit,
+                        uint64_t seed, double memory_bytes, int nested);
+void mapf_free(void *handle);
+
+static int uf_find(int *up, int x) {
+    while (up[x] != x) { up[x] = up[up[x]]; x = up[x]; }
+    return x;
+}
+
+/* -- local repair ----------------------------------------------------------------------------------
+ * Where LaCAM stalls on a large instance most agents are home and the others are stuck in knots far
+ * apart (in a warehouse: agents that must pass each other in one-cell aisles, between agents resting
+ * on their goals). The search cannot untie twenty knots at once, but each knot alone is a small
+ * instance. So from the configuration nearest the goals (the first node on LaCAM's way to its least
+ * h that is within a quarter of it), in rounds: every agent not home gets a region (the cells
+ * within `radius` steps of a shortest path from where it is to its goal); overlapping regions merge;
+ * each region with the agents in it (those home too) is solved alone on its cells (LaCAM and
+ * prioritized planning, first solution only, PIECE_TIME at most), every agent outside the regions
+ * resting on its goal. A piece not solved still moves on to its LaCAM's configuration nearest the
+ * goals if that is nearer than where it started. The regions are disjoint and hold every agent that
+ * moves, so the pieces go side by side while the agents of the others wait: the plan grows by the
+ * longest piece and the next round starts where it ends, nearer the goals (the sum of distances
+ * drops every round, so the rounds end). A round that moves no piece doubles the radius (up to
+ * MAX_RADIUS). The plan: LaCAM's path to the configuration, then the rounds. 1 solved (the plan is
+ * in lns), 0 not (time, or no piece moved at the largest radius), -1 out of memory.
+ * If the repair fails, restarts (the whole instance again with another seed: other guides and ties,
+ * other knots, and one repair of its own) take turns with prioritized planning. */
+#define MIN_RADIUS 3
+#define MAX_RADIUS 6
+#define PIECE_TIME 0.1  /* s: a piece not solved by then is likely not solvable in its region */
+
+typedef struct {
+    int *up, *owner, *depth, *queue, *local, *cells, *agents, *group, *sadj, *sstart, *sgoal, *at, *stamp, *first;
+    Mapf **subs;
+    int *here;  /* the configuration a round starts from */
+} Repair;
+
+/* One round from configuration q: appends the rows of the pieces solved to *rows (length *n_rows,
+ * capacity *cap); 1 if a piece was solved, 0 if none, -1 out of memory. */
+static int repair_round(Mapf *m, Repair *r, const int *q, int R, double deadline, int **rows, long long *n_rows,
+                        long long *cap) {
+    int V = m->V, N = m->N, result = 0, gen = 0;
+    for (int v = 0; v < V; v++) { r->owner[v] = -1; r->local[v] = -1; r->stamp[v] = 0; }
+    for (int i = 0; i < N; i++) { r->up[i] = i; r->at[i] = -1; r->subs[i] = NULL; }
+    for (int i = 0; i < N; i++) {
+        if (q[i] == m->goal[i]) continue;
+        const int *d = m->dist + (size_t)i * V;
+        int head = 0, tail = 0;
+        gen++;
+        for (int v = q[i];; ) {  /* sources: a shortest path; then breadth first to depth R */
+            r->stamp[v] = gen; r->depth[v] = 0; r->queue[tail++] = v;
+            if (v == m->goal[i]) break;
+            int next = -1;
+            for (int k = 0; k < 4 && next < 0; k++) { int u = m->adj[4 * v + k]; if (u >= 0 && d[u] == d[v] - 1) next = u; }
+            v = next;
+        }
+        while (head < tail) {
+            int v = r->queue[head++];
+            if (r->owner[v] < 0) r->owner[v] = i;
+            else { int a = uf_find(r->up, r->owner[v]), b = uf_find(r->up, i); if (a != b) r->up[a] = b; }
+            if (r->depth[v] >= R) continue;
+            for (int k = 0; k < 4; k++) {
+                int u = m->adj[4 * v + k];
+                if (u >= 0 && r->stamp[u] != gen) { r->stamp[u] = gen; r->depth[u] = r->depth[v] + 1; r->queue[tail++] = u; }
+            }
+        }
+    }
+    for (int i = 0; i < N; i++) r->group[i] = r->owner[q[i]] >= 0 ? uf_find(r->up, r->owner[q[i]]) : -1;
+    int longest = 1, used_cells = 0;
+    for (int root = 0; root < N; root++) {
+        if (q[root] == m->goal[root] || uf_find(r->up, root) != root) continue;
+        int nv = 0, na = 0, *mine = r->cells + used_cells;
+        r->first[root] = used_cells;
+        for (int v = 0; v < V; v++)
+            if (r->owner[v] >= 0 && uf_find(r->up, r->owner[v]) == root) { r->local[v] = nv; mine[nv++] = v; }
+        used_cells += nv;
+        for (int c = 0; c < nv; c++)
+            for (int k = 0; k < 4; k++) { int u = m->adj[4 * mine[c] + k]; r->sadj[4 * c + k] = u >= 0 ? r->local[u] : -1; }
+        for (int i = 0; i < N; i++)
+            if (r->group[i] == root) { r->agents[na] = i; r->sstart[na] = r->local[q[i]]; r->sgoal[na] = r->local[m->goal[i]]; na++; }
+        for (int c = 0; c < nv; c++) r->local[mine[c]] = -1;
+        double left = deadline - now();
+        if (left <= 0) break;
+        Mapf *sub = solve_core(nv, r->sadj, na, r->sstart, r->sgoal, left < PIECE_TIME ? left : PIECE_TIME, rnd(m),
+                               m->budget - m->used, 2);
+        if (!sub) { result = -1; break; }
+        if (sub->length <= 0) { mapf_free(sub); continue; }  /* this knot waits for a later round */
+        r->subs[root] = sub;
+        result = 1;
+        if (sub->length > longest) longest = sub->length;
+        for (int k = 0; k < na; k++) r->at[r->agents[k]] = k;  /* the agent's index in its piece */
+    }
+    if (result == 1) {
+        if (reserve(m, (void **)rows, cap, (*n_rows + longest - 1) * N, sizeof(int)) < 0) result = -1;
+        for (int t = 1; result == 1 && t < longest; t++, (*n_rows)++)
+            for (int i = 0; i < N; i++) {
+                int v = q[i], g = r->group[i];
+                Mapf *sub = g >= 0 ? r->subs[g] : NULL;
+                if (sub) v = r->cells[r->first[g] + sub->path[(size_t)(t < sub->length ? t : sub->length - 1) * sub->N + r->at[i]]];
+                (*rows)[(size_t)*n_rows * N + i] = v;
+            }
+    }
+    for (int i = 0; i < N; i++) if (r->subs[i]) mapf_free(r->subs[i]);
+    return result;
+}
+
+static int decompose(Mapf *m, double deadline) {
+    int V = m->V, N = m->N, result = 0, R = MIN_RADIUS;
+    Repair r = {
+        malloc((size_t)N * sizeof(int)), malloc((size_t)V * sizeof(int)), malloc((size_t)V * sizeof(int)),
+        malloc((size_t)V * sizeof(int)), malloc((size_t)V * sizeof(int)), malloc((size_t)V * sizeof(int)),
+        malloc((size_t)N * sizeof(int)), malloc((size_t)N * sizeof(int)), malloc((size_t)4 * V * sizeof(int)),
+        malloc((size_t)N * sizeof(int)), malloc((size_t)N * sizeof(int)), malloc((size_t)N * sizeof(int)),
+        malloc((size_t)V * sizeof(int)), malloc((size_t)N * sizeof(int)), calloc((size_t)N, sizeof(Mapf *)),
+        malloc((size_t)N * sizeof(int)),
+    };
+    int *rows = NULL;
+    long long n_rows = 0, cap = 0;
+    if (!r.up || !r.owner || !r.depth || !r.queue || !r.local || !r.cells || !r.agents || !r.group || !r.sadj
+        || !r.sstart || !r.sgoal || !r.at || !r.stamp || !r.first || !r.subs || !r.here) { result = -1; goto done; }
+    /* LaCAM's path to the best node wanders long near it: the plan starts from the first node on the
+     * path that is nearly as near the goals (h within a quarter of the least) */
+    int prefix = 0, from = m->best_node;
+    long long near = m->nodes[m->best_node].h + m->nodes[m->best_node].h / 4;
+    for (int k = m->best_node; k >= 0; k = m->nodes[k].parent) if (m->nodes[k].h <= near) from = k;
+    for (int k = from; k >= 0; k = m->nodes[k].parent) prefix++;
+    if (reserve(m, (void **)&rows, &cap, (long long)prefix * N, sizeof(int)) < 0) { result = -1; goto done; }
+    n_rows = prefix;
+    long long row = prefix - 1;
+    for (int k = from; k >= 0; k = m->nodes[k].parent, row--)
+        memcpy(rows + (size_t)row * N, config(m, k), (size_t)N * sizeof(int));
+    while (now() < deadline) {
+        const int *q = rows + (size_t)(n_rows - 1) * N;
+        if (is_goal(m, q)) {
+            if (lns_load(&m->lns, rows, (int)n_rows) < 0) { result = -1; break; }
+            m->solved = 1;
+            m->best = m->lns.soc;
+            result = 1;
+            break;
+        }
+        memcpy(r.here, q, (size_t)N * sizeof(int));  /* the rows may move */
+        int done = repair_round(m, &r, r.here, R, deadline, &rows, &n_rows, &cap);
+        if (done < 0) { result = -1; break; }
+        if (done == 1) R = MIN_RADIUS;
+        else if ((R *= 2) > MAX_RADIUS) break;
+    }
+done:
+    free(r.up); free(r.owner); free(r.depth); free(r.queue); free(r.local); free(r.cells); free(r.agents);
+    free(r.group); free(r.sadj); free(r.sstart); free(r.sgoal); free(r.at); free(r.stamp); free(r.first); free(r.subs); free(r.here);
+    m->used -= (double)cap * sizeof(int);
+    free(rows);
+    return result;
+}
+
 /* Status: 1 solved and proven optimal, 2 solved (stopped by the time limit), 0 time limit with no
  * solution, -1 unsolvable (search exhausted or an agent cannot reach its goal), -3 out of memory. */
 static void search(Mapf *m, const int *start, double deadline, double t0) {
@@ -793,7 +959,7 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
      * go on: with SIPP planning is sometimes the quicker of the two where PIBT needs a deep search */
     m->min_h = m->nodes[0].h;
     m->improved_at = 0;
-    int outcome = LACAM_FOUND, planned = 0;
+    int outcome = LACAM_FOUND, planned = 0, repaired = 0;
     double lacam_time = 0.0, planning_time = 0.0;
     if (is_goal(m, start)) m->goal_node = 0;
     while (m->goal_node < 0 && !planned && now() < deadline) {
@@ -804,7 +970,39 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
             lacam_time += now() - began;
             if (outcome == LACAM_FOUND || (outcome == LACAM_EXHAUSTED && !m->truncated)) break;
             if (outcome != LACAM_DEADLINE) lacam_time = INFINITY;  /* budget spent: planning alone */
+        } else if (m->nested < 2 && m->best_node != m->tried_node && !m->repair_failed) {
+            /* stalled at a new least h: local repair, on planning's time */
+            m->tried_node = m->best_node;
+            int done = decompose(m, deadline);
+            planning_time += now() - began;
+            if (done == 1) { repaired = 1; break; }
+            if (done < 0) m->tried_node = INT_MAX;  /* out of memory: no more tries */
+            if (done == 0) m->repair_failed = 1;
+            if (m->nested == 1) break;  /* a restart makes one try */
+        } else if (m->nested == 0 && m->repair_failed && m->probes <= m->pp_turns / 4 && m->probes < MAX_PROBES
+                   && (double)m->N * m->V * (sizeof(int) + 1) < 0.5 * (m->budget - m->used)
+                   && deadline - began > 0.1 + 4.0 * m->setup_time) {
+            /* the repair failed: where LaCAM's knots are too tangled, a restart (another seed: other
+             * guides and ties) often leaves knots that untie; its repair gets up to PROBE_TIME. It
+             * needs its own distance tables and guides, and room for its search, from the budget, and
+             * time for more than setting them up */
+            m->probes++;
+            double left = deadline - began;
+            Mapf *probe = solve_core(m->V, m->adj, m->N, m->start, m->goal, left < PROBE_TIME ? left : PROBE_TIME,
+                                     rnd(m), m->budget - m->used, 1);
+            planning_time += 0.5 * (now() - began);  /* half of it was LaCAM's */
+            if (probe && probe->length > 0) {
+                int loaded = lns_load(&m->lns, probe->path, probe->length);
+                mapf_free(probe);
+                if (loaded < 0) return;
+                m->solved = 1;
+                m->best = m->lns.soc;
+                repaired = 1;
+                break;
+            }
+            mapf_free(probe);
         } else if (planning_time < INFINITY) {
+            m->pp_turns++;
             int done = lns_prioritized(&m->pp, began + FIRST_SLICE, deadline);
             planning_time += now() - began;
             planned = done == 1;
@@ -813,7 +1011,7 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
             break;  /* neither can go on */
         }
     }
-    if (m->goal_node < 0 && !planned) {
+    if (m->goal_node < 0 && !planned && !repaired) {
         m->status = outcome == LACAM_BUDGET ? -3 : outcome == LACAM_EXHAUSTED && !m->truncated ? -1 : 0;
         return;
     }
@@ -822,9 +1020,10 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
         Lns swap = m->lns; m->lns = m->pp; m->pp = swap;
         m->solved = 1;
         m->best = m->lns.soc;
-    } else if (take_lacam_solution(m) < 0) {
+    } else if (!repaired && take_lacam_solution(m) < 0) {
         return;
     }
+    if (m->nested) { m->status = 2; return; }
     /* LaCAM's first solution can be far from the bound where planning's would be near it: planning
      * goes on in turns with the improvers, for as long again as the first solution took (at least
      * 30 % of the time limit), and its solution replaces the best one if cheaper */
@@ -870,6 +1069,11 @@ static void search(Mapf *m, const int *start, double deadline, double t0) {
 /* Solve: adj (V x 4), starts/goals (N vertices). Returns a handle to read the result from. */
 void *mapf_solve(int V, const int *adj, int N, const int *start, const int *goal, double time_limit,
                  unsigned long long seed, double memory_bytes) {
+    return solve_core(V, adj, N, start, goal, time_limit, seed, memory_bytes, 0);
+}
+
+static Mapf *solve_core(int V, const int *adj, int N, const int *start, const int *goal, double time_limit,
+                        uint64_t seed, double memory_bytes, int nested) {
     double t0 = now();
     Mapf *m = calloc(1, sizeof(Mapf));
     if (!m) return NULL;
@@ -877,6 +1081,8 @@ void *mapf_solve(int V, const int *adj, int N, const int *start, const int *goal
     m->rng = seed * 2654435761ULL + 88172645463325252ULL;
     m->goal_node = -1; m->goal_g_taken = LLONG_MAX; m->first_time = -1.0; m->status = -3;
     m->budget = memory_bytes;
+    m->nested = nested;
+    m->tried_node = -1;
     /* tables over the budget: one row, for the lower bound and the reachability verdict alone */
     m->table_size = 1 << 10;
     double tables = (double)N * V * sizeof(int) + (double)m->table_size * sizeof(int);
@@ -909,6 +1115,7 @@ void *mapf_solve(int V, const int *adj, int N, const int *start, const int *goal
     if (!reachable) { m->status = -1; return m; }
     if (!fits) { m->truncated = 1; m->status = -3; return m; }
     if (guides(m) < 0) { m->status = -3; return m; }
+    m->setup_time = now() - t0;
     search(m, start, t0 + time_limit, t0);
     if (m->solved) {
         int makespan = 0;
@@ -918,6 +1125,18 @@ void *mapf_solve(int V, const int *adj, int N, const int *start, const int *goal
         m->length = makespan + 1;
         for (int t = 0; t <= makespan; t++)
             for (int i = 0; i < N; i++) m->path[(size_t)t * N + i] = lns_at(&m->lns, i, t);
+    } else if (nested == 2 && m->n_nodes > 0 && m->nodes[m->best_node].h < m->nodes[0].h) {
+        /* a piece not solved: LaCAM's way to its node nearest the goals, a step on (partial) */
+        int length = 0, from = m->best_node;  /* the first node on the way that is as near */
+        for (int k = m->best_node; k >= 0; k = m->nodes[k].parent) if (m->nodes[k].h <= m->nodes[m->best_node].h) from = k;
+        for (int k = from; k >= 0; k = m->nodes[k].parent) length++;
+        m->path = malloc((size_t)length * N * sizeof(int));
+        if (!m->path) return m;
+        m->length = length;
+        m->partial = 1;
+        int row = length - 1;
+        for (int k = from; k >= 0; k = m->nodes[k].parent, row--)
+            memcpy(m->path + (size_t)row * N, config(m, k), (size_t)N * sizeof(int));
     }
     return m;
 }

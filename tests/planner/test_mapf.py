@@ -129,6 +129,33 @@ def test_a_warehouse_of_one_cell_aisles(seed):
     assert result.sum_of_costs >= result.lower_bound
 
 
+def warehouse_of_long_aisles() -> OccupancyGrid:
+    """Four rows of six shelves 10 x 2 between one-cell aisles (the Moving AI warehouse-10-20-10-2-1
+    in small), open margins three cells wide left and right."""
+    aisle = "." * 73
+    shelves = "..." + "".join("." + "#" * 10 for _ in range(6)) + "...."
+    return grid_of([aisle] + [shelves, shelves, aisle] * 4)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_dense_warehouse_of_long_aisles(seed):
+    """140 agents on 469 cells of one-cell aisles: PIBT locks knots of agents that must pass each
+    other in the aisles, where LaCAM's search stalls (the solver before the local repair found no
+    solution in 5 s for any of these seeds); the knots are untied region by region. Solved, and valid
+    by the independent checker."""
+    grid = warehouse_of_long_aisles()
+    free = np.argwhere(~grid.occupied)
+    rng = np.random.default_rng(seed)
+    agents = int(0.3 * len(free))
+    starts = free[rng.choice(len(free), agents, replace=False)]
+    goals = free[rng.choice(len(free), agents, replace=False)]
+    result = solve(grid, starts, goals, time_limit=5.0, seed=seed)
+    assert result.solved
+    check(grid.occupied.tolist(), starts, goals, result)
+    assert result.sum_of_costs >= result.lower_bound == lower_bound(grid.occupied.tolist(), starts, goals)
+
+
 @pytest.mark.slow
 def test_random_instances_on_an_obstacle_grid():
     """Many agents on a 24 x 24 grid with 15 % obstacles: valid paths, and the improvement phase."""
