@@ -1,0 +1,116 @@
+"""The graph work of a `System` done once per system and in linear time: whether it has an algebraic
+loop (`System._acyclic`, a graph of dependency groups over port indices), the step order (`System.order`,
+Kahn's algorithm with a heap), and the links, each remembered until the system changes.
+
+Truths: the plain depth-first search over every named port (`cosim.core.loops._search_algebraic_loop`),
+and Kahn's algorithm written out as the definition says it (scan for the first ready component, else
+the first one left), on random systems."""
+
+import random
+
+from cosim.core.component import Port, PythonComponent
+from cosim.core.loops import _search_algebraic_loop
+from cosim.core.system import System
+
+
+class _Node(PythonComponent):
+    def __init__(self, name, inputs, outputs, feedthrough):
+        super().__init__(name, [Port(n) for n in inputs], [Port(n) for n in outputs], feedthrough=feedthrough)
+
+    def step(self, t, h):
+        pass
+
+
+def _random_system(rng: random.Random, collide: bool) -> System:
+    system = System(0.01)
+    names = [f"c{n}" for n in range(rng.randint(1, 6))]
+    ports = {}
+    for name in names:
+        inputs = [f"u{k}" for k in range(rng.randint(1, 6))]
+        outputs = [f"y{k}" for k in range(rng.randint(1, 6))]
+        if collide and rng.random() < 0.5:  # an input and an output of one name: one node of names
+            outputs.append(inputs[0])
+        shared = rng.sample(inputs, rng.randint(0, len(inputs)))
+        feedthrough = {}
+        for output in outputs:
+            draw = rng.random()
+            if draw < 0.3:
+                feedthrough[output] = shared  # one object for several outputs
+            elif draw < 0.5:
+                feedthrough[output] = list(shared)  # the same inputs, another object
+            elif draw < 0.8:
+                feedthrough[output] = rng.sample(inputs, rng.randint(0, min(2, len(inputs))))
+            # else: not declared, it depends on every input
+        system.add(_Node(name, inputs, outputs, feedthrough))
+        ports[name] = (inputs, outputs)
+    free = [(name, port) for name in names for port in ports[name][0]]
+    rng.shuffle(free)
+    for name, port in free[: rng.randint(0, len(free))]:
+        source = rng.choice(names)
+        system.connect(f"{source}.{rng.choice(ports[source][1])}", f"{name}.{port}")
+    return system
+
+
+def _port_search(system: System):
+    pairs = tuple((c.source, c.target) for c in system.connections)
+    dependencies = tuple(
+        (name, tuple((output, tuple(depends)) for output, depends in c.feedthrough.items()))
+        for name, c in system.components.items()
+    )
+    return _search_algebraic_loop(pairs, dependencies)
+
+
+def test_the_system_finds_a_loop_exactly_when_the_search_over_named_ports_does():
+    rng = random.Random(24)
+    answers = {True: 0, False: 0}
+    for trial in range(1500):
+        system = _random_system(rng, collide=trial % 5 == 0)
+        truth = _port_search(system)
+        assert system._acyclic() == (truth is None)
+        assert system.algebraic_loop() == truth  # and the same loop named
+        assert (system._loop_ports() == {}) == (truth is None)
+        answers[truth is None] += 1
+    assert min(answers.values()) > 200  # both answers were exercised
+
+
+def test_a_loop_made_after_asking_is_found():
+    system = System(0.01)
+    system.add(_Node("a", ["u"], ["y"], {"y": ["u"]}))
+    system.add(_Node("b", ["u"], ["y"], {"y": ["u"]}))
+    system.connect("a.y", "b.u")
+    assert system.algebraic_loop() is None and system.order()[0].name == "a"
+    assert set(system.links()) == {"b"}
+    system.connect("b.y", "a.u")
+    assert system.algebraic_loop() == ["a.y", "b.u", "b.y", "a.u", "a.y"]
+    assert set(system.links()) == {"a", "b"}
+    assert system.delayed_links() == {("a", "b"), ("b", "a")}
+
+
+def _kahn_by_definition(edges, names):
+    indegree = dict.fromkeys(names, 0)
+    for _, consumer in edges:
+        indegree[consumer] += 1
+    order, remaining = [], list(names)
+    while remaining:
+        ready = next((n for n in remaining if indegree[n] == 0), remaining[0])
+        remaining.remove(ready)
+        order.append(ready)
+        for producer, consumer in edges:
+            if producer == ready and consumer in remaining:
+                indegree[consumer] -= 1
+    return order
+
+
+def test_the_order_is_kahns_algorithm_taking_the_first_ready_component():
+    rng = random.Random(7)
+    for _ in range(2000):
+        system = System(0.01)
+        names = [f"c{n}" for n in range(rng.randint(1, 9))]
+        for name in names:
+            system.add(_Node(name, ["u"], ["y"], {}))
+        edges = {(rng.choice(names), rng.choice(names)) for _ in range(rng.randint(0, 14))}
+        edges = {(p, c) for p, c in edges if p != c}
+        assert system._topological(edges) == _kahn_by_definition(edges, names)
+        subset = rng.sample(names, rng.randint(1, len(names)))
+        within = {(p, c) for p, c in edges if p in subset and c in subset}
+        assert system._topological(within, subset) == _kahn_by_definition(within, subset)
