@@ -124,6 +124,8 @@ class FmuComponent(Component):
     def text_port(self, name: str, direction: str) -> str | None:
         """The FMI type ("String", "Binary") of text input/output `name`; None if it is none."""
         ports = self.text_inputs if direction == "input" else self.text_outputs
+        if not ports:  # (most FMUs: asked once per connection)
+            return None
         return next((p.fmi_type for p in ports if p.name == name), None)
 
     def set_text(self, name: str, value: str | bytes) -> None:

@@ -353,11 +353,7 @@ def fleet_system(fleet: Fleet, described, builts: list) -> tuple[System, dict]:
                     first.loop_max_iterations)  # fmt: skip
     parameters: dict[str, dict[str, float]] = {}
     for robot, built in zip(fleet.robots, builts, strict=True):
-        for name, component in built.system.components.items():
-            component.name = core_name(robot.name, name)
-            system.add(component)
-        for c in built.system.connections:
-            system.connect(f"{robot.name}:{c.source}", f"{robot.name}:{c.target}", c.scale, c.offset)
+        system.merge(built.system, core_name(robot.name, ""))  # checked when `build_run` connected them
         for name, values in built.parameters.items():
             parameters[core_name(robot.name, name)] = values
     for link in described.links:

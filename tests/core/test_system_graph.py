@@ -8,9 +8,12 @@ the first one left), on random systems."""
 
 import random
 
+import pytest
+
 from cosim.core.component import Port, PythonComponent
 from cosim.core.loops import _search_algebraic_loop
 from cosim.core.system import System
+from cosim.errors import CosimError
 
 
 class _Node(PythonComponent):
@@ -114,3 +117,34 @@ def test_the_order_is_kahns_algorithm_taking_the_first_ready_component():
         subset = rng.sample(names, rng.randint(1, len(names)))
         within = {(p, c) for p, c in edges if p in subset and c in subset}
         assert system._topological(within, subset) == _kahn_by_definition(within, subset)
+
+
+def _robot() -> System:
+    system = System(0.01)
+    system.add(_Node("vehicle", ["v"], ["x", "y"], {"x": [], "y": []}))
+    system.add(_Node("control", ["x", "y"], ["v"], {}))
+    system.connect("vehicle.x", "control.x", scale=2.0)
+    system.connect("vehicle.y", "control.y", offset=-1.0)
+    system.connect("control.v", "vehicle.v")
+    return system
+
+
+def test_merging_systems_is_connecting_their_components_anew_under_the_new_names():
+    merged, connected = System(0.01), System(0.01)
+    for prefix in ("r1:", "r2:"):
+        merged.merge(_robot(), prefix)
+        robot = _robot()
+        for name, component in robot.components.items():
+            component.name = prefix + name
+            connected.add(component)
+        for c in robot.connections:
+            connected.connect(prefix + c.source, prefix + c.target, c.scale, c.offset)
+    assert list(merged.components) == list(connected.components)
+    assert all(merged.components[name].name == name for name in merged.components)
+    assert merged.connections == connected.connections
+    assert [c.name for c in merged.order()] == [c.name for c in connected.order()]
+    with pytest.raises(CosimError, match="already connected"):
+        merged.connect("r2:vehicle.x", "r1:control.x")
+    with pytest.raises(CosimError, match="'r1:vehicle' added twice"):
+        merged.merge(_robot(), "r1:")
+    assert len(merged.components) == 4
