@@ -231,16 +231,19 @@ class Component(ABC):
         """Complete the dependency dict: outputs not listed depend on every input."""
         complete: dict[str, list[str]] = {}
         inputs = self.input_index.keys()
+        checked: dict[int, list[str]] = {}  # id of a dependency sequence given -> its checked list
         for output, depends in feedthrough.items():
             if output not in self.output_index:
                 raise CosimError(f"component '{self.name}': feedthrough names unknown output '{output}'")
-            listed = list(depends)
-            if not inputs >= set(listed):  # (a set compare: a path follower's outputs name 2000 inputs)
-                name = next(name for name in listed if name not in inputs)
-                raise CosimError(
-                    f"component '{self.name}': output '{output}' depends on unknown input '{name}'"
-                )
-            complete[output] = listed
+            listed = checked.get(id(depends))
+            if listed is None:  # (outputs often share one sequence: a path follower's name 2000 inputs)
+                listed = checked[id(depends)] = list(depends)
+                if not inputs >= set(listed):
+                    name = next(name for name in listed if name not in inputs)
+                    raise CosimError(
+                        f"component '{self.name}': output '{output}' depends on unknown input '{name}'"
+                    )
+            complete[output] = listed.copy()
         every_input = [p.name for p in self.inputs]
         for port in self.outputs:
             if port.name not in complete:  # (each its own list, as callers may change one)

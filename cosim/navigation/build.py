@@ -66,7 +66,7 @@ def make_fmu(
     from cosim.fmi.model_exchange import fmu_component
 
     port_map = {port: {"name": m.variable, "scale": m.scale} for port, m in component.port_map.items()}
-    override = {output: list(depends) for output, depends in component.feedthrough.items()}
+    override = dict(component.feedthrough)  # (outputs sharing a tuple keep sharing it: checked once)
     options = {"port_map": port_map, "period": component.period, "feedthrough_override": override}
     options.update(max_unpacked_size=max_unpacked_size, nan_outputs=nan_outputs)
     given = component.integration

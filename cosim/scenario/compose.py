@@ -391,7 +391,21 @@ class _Composer:
             return None
 
         kept, replaced, dropped = [], [], []
+        # The usual template connection first: both ends there, neither component removed, replaced
+        # or broken, the input not fed by the scenario (the loop below would keep it too).
+        unusual = set(self.removed) | self.replacing | self.broken
+        outputs_of = {name: sets["outputs"] for name, sets in ports.items() if name not in unusual}
+        inputs_of = {name: sets["inputs"] for name, sets in ports.items() if name not in unusual}
         for connection in self.template:
+            source_name, _, source_port = connection.source.partition(".")
+            target_name, _, target_port = connection.target.partition(".")
+            if (
+                source_port in outputs_of.get(source_name, ())
+                and target_port in inputs_of.get(target_name, ())
+                and connection.target not in fed
+            ):
+                kept.append(connection)
+                continue
             reason = lost(connection.source, "outputs") or lost(connection.target, "inputs")
             if reason is not None:
                 dropped.append((connection, reason))
