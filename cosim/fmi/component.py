@@ -42,7 +42,7 @@ from cosim.errors import CosimError, SimulationEnded
 from cosim.fmi import exit_guard
 from cosim.fmi.archive import unpack_instance
 from cosim.fmi.codegen import FMI_TYPE_NAMES, TransferGroup, native_step, step_functions, transfer_groups
-from cosim.fmi.description import file_identity, fmi1_variable_step
+from cosim.fmi.description import file_identity, fmi1_variable_step, kept_unpacked
 from cosim.fmi.layout import fmu_layout, start_value
 from cosim.fmi.text import TextTransfer, check_text
 from cosim.fmi.types import C_TYPES, KINDS, TRANSFER_TYPES, WIDE, check_integer, exact_as_float
@@ -243,8 +243,9 @@ class FmuComponent(Component):
         interface = self._interface()
         shareable = interface is not None and interface.canBeInstantiatedOnlyOncePerProcess is False
         try:
+            kept = kept_unpacked(self.path) if shareable else None
             self._unzip_dir, self._release_files = unpack_instance(
-                self.path, _needed_at_run_time, f"navcosim-{self.name}-", shareable
+                self.path, _needed_at_run_time, f"navcosim-{self.name}-", shareable, kept
             )
         except Exception as error:
             detail = " ".join(str(error).split())[:300]
