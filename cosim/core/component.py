@@ -129,12 +129,22 @@ def _array_ports(base: str, count: int, columns: int, unit: str, start: float) -
     """`array_ports`, made once per argument set (ports are read-only; describing and building a
     system made a planner's 2000 waypoint ports four times)."""
     if columns:
-        return tuple(
-            Port(f"{base}[{row},{col}]", unit=unit, start=start)
-            for row in range(1, count + 1)
-            for col in range(1, columns + 1)
-        )
-    return tuple(Port(f"{base}[{row}]", unit=unit, start=start) for row in range(1, count + 1))
+        indices = [(row, col) for row in range(1, count + 1) for col in range(1, columns + 1)]
+        names = [f"{base}[{row},{col}]" for row, col in indices]
+    else:
+        indices = [(row,) for row in range(1, count + 1)]
+        names = [f"{base}[{row}]" for row in range(1, count + 1)]
+    if not base:
+        return tuple(Port(name, unit=unit, start=start) for name in names)
+    ports = []
+    for name, index in zip(names, indices, strict=True):  # the element known: no parsing of its name
+        port = object.__new__(Port)
+        port.__dict__.update(
+            name=name, type="real", unit=unit, description="", start=start, fmi_type="",
+            array_name=base, array_index=index,
+        )  # fmt: skip
+        ports.append(port)
+    return tuple(ports)
 
 
 def check_unique_ports(component: str, kind: str, ports: Iterable[Port]) -> None:
