@@ -573,8 +573,10 @@ class System:
         feeding: dict[str, set[str]] = {}
         for name, component in self.components.items():
             feeding[name] = set()
+            seen: set[int] = set()  # (outputs share their list of inputs: `Component.feedthrough`)
             for output, depends in component.feedthrough.items():
-                if f"{name}.{output}" in consumed:
+                if id(depends) not in seen and f"{name}.{output}" in consumed:
+                    seen.add(id(depends))
                     feeding[name].update(depends)
         edges = set()
         for name, links in self.links().items():
@@ -603,7 +605,8 @@ class System:
         }
         for name, links in self.links().items():
             component = self.components[name]
-            direct = {i for depends in component.feedthrough.values() for i in depends}
+            shared = {id(depends): depends for depends in component.feedthrough.values()}
+            direct = {i for depends in shared.values() for i in depends}
             for link in links:
                 if position[link.producer] >= position[name] and component.inputs[link.input].name in direct:
                     early.add(name)
