@@ -213,8 +213,7 @@ def build_run(scenario: Scenario, description: SystemDescription | None = None) 
     )
     for component in description.components.values():
         system.add(COMPONENT_KINDS[component.kind](scenario, grid, component))
-    for connection in description.connections:
-        system.connect(connection.source, connection.target, connection.scale, connection.offset)
+    system.connect_many((c.source, c.target, c.scale, c.offset) for c in description.connections)
     for made in system.components.values():
         system.period_steps(made)
     parameters = {

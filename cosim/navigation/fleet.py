@@ -377,9 +377,10 @@ def fleet_system(fleet: Fleet, described, builts: list) -> tuple[System, dict]:
         system.merge(built.system, core_name(robot.name, ""))  # checked when `build_run` connected them
         for name, values in built.parameters.items():
             parameters[core_name(robot.name, name)] = values
-    for link in described.links:
-        source, target = (end.replace(".", ":", 1) for end in (link.source, link.target))
-        system.connect(source, target, link.scale, link.offset)
+    system.connect_many(
+        (link.source.replace(".", ":", 1), link.target.replace(".", ":", 1), link.scale, link.offset)
+        for link in described.links
+    )
     for component in system.components.values():
         system.period_steps(component)
     return system, parameters

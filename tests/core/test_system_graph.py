@@ -148,3 +148,45 @@ def test_merging_systems_is_connecting_their_components_anew_under_the_new_names
     with pytest.raises(CosimError, match="'r1:vehicle' added twice"):
         merged.merge(_robot(), "r1:")
     assert len(merged.components) == 4
+
+
+class _Counter(PythonComponent):
+    def __init__(self):
+        super().__init__("c", [Port("n", "integer")], [Port("k", "integer")])
+
+    def step(self, t, h):
+        pass
+
+
+def _typed_system() -> System:
+    system = System(0.01)
+    system.add(_Node("a", ["u"], ["y", "z"], {}))
+    system.add(_Node("b", ["u", "v", "w"], ["y"], {}))
+    system.add(_Counter())
+    return system
+
+
+def _outcome(make, wiring):
+    system = _typed_system()
+    try:
+        make(system, wiring)
+    except CosimError as error:
+        return system.connections, str(error)
+    return system.connections, None
+
+
+def test_connecting_many_is_connecting_each_in_turn():
+    wirings = [
+        [("a.y", "b.u", 1.0, 0.0), ("a.z", "b.v", 2.0, -1.0), ("c.k", "b.w", 1.0, 0.0)],
+        [("a.y", "b.u", 1.0, 0.0), ("a.z", "b.u", 1.0, 0.0)],  # already connected
+        [("a.y", "b.x", 1.0, 0.0), ("a.y", "b.u", 1.0, 0.0)],  # no such input
+        [("a.y", "c.n", 1.0, 0.0)],  # a float cannot feed an integer
+        [("c.k", "a.u", 1.0, float("inf"))],  # not finite
+        [("a.y", "b.u", 1.0, 0.0), ("nobody.y", "b.v", 1.0, 0.0)],
+    ]
+    for wiring in wirings:
+        one_by_one = _outcome(lambda s, w: [s.connect(*c) for c in w], wiring)
+        many = _outcome(lambda s, w: s.connect_many(iter(w)), wiring)
+        assert many == one_by_one
+    assert _outcome(lambda s, w: s.connect_many(w), wirings[0])[1] is None
+    assert _outcome(lambda s, w: s.connect_many(w), wirings[3])[1].count("cannot convert") == 1
