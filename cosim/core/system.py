@@ -278,10 +278,11 @@ class System:
 
     def merge(self, other: System, prefix: str) -> None:
         """Take in every component of `other` under the name `prefix + name` (the component objects
-        themselves, renamed; `other` keeps them under their old names, and its connections) with its
-        connections between them, as `other` checked them when it made them; a name already taken is
-        a `CosimError`, before anything changes. A fleet puts its robots' systems into one this way
-        (connecting each of ~3,100 connections again cost as much as making them)."""
+        themselves, renamed: `other` keeps them under their old names) with its connections between
+        them, as `other` checked them when it made them: `other` gives its connections up (it is left
+        without any; a fleet's robots are ~3,100 connections each, kept once). A name already taken
+        is a `CosimError`, before anything changes. A fleet puts its robots' systems into one this
+        way (connecting each connection again cost as much as making them)."""
         names = {name: prefix + name for name in other.components}
         taken = [new for new in names.values() if new in self.components]
         if taken:
@@ -297,6 +298,7 @@ class System:
                 target = prefix + c.target
                 kept.append(Connection(prefix + c.source, target, c.scale, c.offset))
                 self._targets.add(target)
+            made.clear()
 
     def _connect_text(self, source: str, target: str, scale: float, offset: float) -> Connection | None:
         """A connection of String or Binary ports (`Component.text_port`), which the consumer itself

@@ -132,7 +132,9 @@ def _robot() -> System:
 def test_merging_systems_is_connecting_their_components_anew_under_the_new_names():
     merged, connected = System(0.01), System(0.01)
     for prefix in ("r1:", "r2:"):
-        merged.merge(_robot(), prefix)
+        robot = _robot()
+        merged.merge(robot, prefix)
+        assert robot.connections == [] and set(robot.components) == {"vehicle", "control"}  # given up
         robot = _robot()
         for name, component in robot.components.items():
             component.name = prefix + name
