@@ -199,28 +199,9 @@ class System:
 
     def connect(self, source: str, target: str, scale: float = 1.0, offset: float = 0.0) -> Connection:
         """Connect output `source` ("comp.port") to input `target`: input = output * scale + offset."""
-        # The usual case first, checked as below: two numeric ports, the input free, finite numbers.
-        source_name, _, source_port = source.partition(".")
-        target_name, _, target_port = target.partition(".")
-        producer = self.components.get(source_name)
-        consumer = self.components.get(target_name)
-        if producer is not None and consumer is not None:
-            output = producer.output_index.get(source_port)
-            input_ = consumer.input_index.get(target_port)
-            if (
-                output is not None
-                and input_ is not None
-                and target not in self._targets
-                and producer.text_port(source_port, "output") is None
-                and consumer.text_port(target_port, "input") is None
-                and connection_problem(producer.outputs[output], consumer.inputs[input_]) is None
-                and math.isfinite(scale)
-                and math.isfinite(offset)
-            ):
-                connection = Connection(source, target, float(scale), float(offset))
-                self.connections.append(connection)
-                self._targets.add(target)
-                return connection
+        usual = self._connect_usual(source, target, scale, offset, {})
+        if usual is not None:
+            return usual
         text = self._connect_text(source, target, scale, offset)
         if text is not None:
             return text
@@ -243,38 +224,47 @@ class System:
 
     def connect_many(self, connections: Iterable[tuple[str, str, float, float]]) -> None:
         """`connect` each (source, target, scale, offset) in turn: the same checks, the same error at
-        the first that fails (those before it made). The usual case is checked in one loop, the
-        conversion once per pair of port types (a system of a 2000-waypoint path makes ~3,100)."""
-        components, targets, made = self.components, self._targets, self.connections
-        converts: dict[tuple[str, str, str, str], bool] = {}  # `connection_problem` reads these only
-        isfinite = math.isfinite
+        the first that fails (those before it made); the type conversion is checked once per pair of
+        port types (a system of a 2000-waypoint path makes ~3,100)."""
+        converts: dict[tuple[str, str, str, str], bool] = {}
         for source, target, scale, offset in connections:
-            source_name, _, source_port = source.partition(".")
-            target_name, _, target_port = target.partition(".")
-            producer = components.get(source_name)
-            consumer = components.get(target_name)
-            if producer is not None and consumer is not None:
-                output = producer.output_index.get(source_port)
-                input_ = consumer.input_index.get(target_port)
-                if (
-                    output is not None
-                    and input_ is not None
-                    and target not in targets
-                    and producer.text_port(source_port, "output") is None
-                    and consumer.text_port(target_port, "input") is None
-                    and isfinite(scale)
-                    and isfinite(offset)
-                ):
-                    out, in_ = producer.outputs[output], consumer.inputs[input_]
-                    types = (out.fmi_type, out.type, in_.fmi_type, in_.type)
-                    fine = converts.get(types)
-                    if fine is None:
-                        fine = converts[types] = connection_problem(out, in_) is None
-                    if fine:
-                        made.append(Connection(source, target, float(scale), float(offset)))
-                        targets.add(target)
-                        continue
-            self.connect(source, target, scale, offset)  # the rest, and every error, as it says them
+            if self._connect_usual(source, target, scale, offset, converts) is None:
+                self.connect(source, target, scale, offset)  # the rest, and every error, as it says them
+
+    def _connect_usual(
+        self, source: str, target: str, scale: float, offset: float, converts: dict
+    ) -> Connection | None:
+        """The usual connection, checked as `connect` checks it: two numeric ports, the types
+        convertible (`converts` remembers `connection_problem` by the four type fields it reads), the
+        input free, finite numbers; None (nothing made) when it is not one."""
+        source_name, _, source_port = source.partition(".")
+        target_name, _, target_port = target.partition(".")
+        producer = self.components.get(source_name)
+        consumer = self.components.get(target_name)
+        if producer is None or consumer is None:
+            return None
+        output = producer.output_index.get(source_port)
+        input_ = consumer.input_index.get(target_port)
+        if (
+            output is None
+            or input_ is None
+            or target in self._targets
+            or producer.text_port(source_port, "output") is not None
+            or consumer.text_port(target_port, "input") is not None
+            or not (math.isfinite(scale) and math.isfinite(offset))
+        ):
+            return None
+        out, in_ = producer.outputs[output], consumer.inputs[input_]
+        types = (out.fmi_type, out.type, in_.fmi_type, in_.type)
+        fine = converts.get(types)
+        if fine is None:
+            fine = converts[types] = connection_problem(out, in_) is None
+        if not fine:
+            return None
+        connection = Connection(source, target, float(scale), float(offset))
+        self.connections.append(connection)
+        self._targets.add(target)
+        return connection
 
     def merge(self, other: System, prefix: str) -> None:
         """Take in every component of `other` under the name `prefix + name` (the component objects
