@@ -129,12 +129,22 @@ def _array_ports(base: str, count: int, columns: int, unit: str, start: float) -
     """`array_ports`, made once per argument set (ports are read-only; describing and building a
     system made a planner's 2000 waypoint ports four times)."""
     if columns:
-        return tuple(
-            Port(f"{base}[{row},{col}]", unit=unit, start=start)
-            for row in range(1, count + 1)
-            for col in range(1, columns + 1)
-        )
-    return tuple(Port(f"{base}[{row}]", unit=unit, start=start) for row in range(1, count + 1))
+        indices = [(row, col) for row in range(1, count + 1) for col in range(1, columns + 1)]
+        names = [f"{base}[{row},{col}]" for row, col in indices]
+    else:
+        indices = [(row,) for row in range(1, count + 1)]
+        names = [f"{base}[{row}]" for row in range(1, count + 1)]
+    if not base:
+        return tuple(Port(name, unit=unit, start=start) for name in names)
+    ports = []
+    for name, index in zip(names, indices, strict=True):  # the element known: no parsing of its name
+        port = object.__new__(Port)
+        port.__dict__.update(
+            name=name, type="real", unit=unit, description="", start=start, fmi_type="",
+            array_name=base, array_index=index,
+        )  # fmt: skip
+        ports.append(port)
+    return tuple(ports)
 
 
 def check_unique_ports(component: str, kind: str, ports: Iterable[Port]) -> None:
@@ -175,7 +185,9 @@ class Component(ABC):
         inputs, outputs, parameters: ordered `Port` lists.
         period: seconds between steps; 0 = every macro step. Must be a multiple of the macro step.
         feedthrough: output name -> names of the inputs it depends on directly (at the same
-            instant). An output missing from the dict depends on all inputs.
+            instant). An output missing from the dict depends on all inputs. Read-only: outputs
+            with the same dependencies share one list (a path follower's 7 outputs on its 2003
+            inputs, a planner's 2000 waypoints on one input).
         input_buffer, output_buffer: float64 arrays, one slot per input/output port.
     """
 
@@ -230,19 +242,24 @@ class Component(ABC):
     def _check_feedthrough(self, feedthrough: Mapping[str, Sequence[str]]) -> dict[str, list[str]]:
         """Complete the dependency dict: outputs not listed depend on every input."""
         complete: dict[str, list[str]] = {}
+        inputs = self.input_index.keys()
+        checked: dict[int, list[str]] = {}  # id of a dependency sequence given -> its checked list
         for output, depends in feedthrough.items():
             if output not in self.output_index:
                 raise CosimError(f"component '{self.name}': feedthrough names unknown output '{output}'")
-            for name in depends:
-                if name not in self.input_index:
+            listed = checked.get(id(depends))
+            if listed is None:  # (outputs often share one sequence: a path follower's name 2000 inputs)
+                listed = checked[id(depends)] = list(depends)
+                if not inputs >= set(listed):
+                    name = next(name for name in listed if name not in inputs)
                     raise CosimError(
                         f"component '{self.name}': output '{output}' depends on unknown input '{name}'"
                     )
-            complete[output] = list(depends)
+            complete[output] = listed
         every_input = [p.name for p in self.inputs]
         for port in self.outputs:
-            if port.name not in complete:  # (each its own list, as callers may change one)
-                complete[port.name] = every_input.copy()
+            if port.name not in complete:
+                complete[port.name] = every_input
         return complete
 
     def port(self, name: str) -> tuple[str, int]:

@@ -63,18 +63,21 @@ def make_gather(
             continue
         # One NumPy copy per kind of link, each with exactly the arithmetic of the scalar path (a
         # plain copy stays a copy: adding 0.0 would turn -0.0 into 0.0).
-        kinds: dict[str, list[Link]] = {"copy": [], "scaled": [], "affine": []}
-        for link in links:
-            c = link.connection
-            kinds["copy" if c.is_plain else "scaled" if c.offset == 0.0 else "affine"].append(link)
-        for kind, chosen in kinds.items():
-            if not chosen:
+        count = len(links)
+        sources = np.fromiter((link.output for link in links), np.intp, count)
+        targets = np.fromiter((link.input for link in links), np.intp, count)
+        scales = np.fromiter((link.connection.scale for link in links), np.float64, count)
+        offsets = np.fromiter((link.connection.offset for link in links), np.float64, count)
+        plain = (scales == 1.0) & (offsets == 0.0)
+        kinds = {"copy": plain, "scaled": ~plain & (offsets == 0.0), "affine": offsets != 0.0}
+        for kind, chosen in kinds.items():  # (a mask keeps the links' order)
+            if not chosen.any():
                 continue
             key = f"{number}_{kind}"
-            names[f"sources{key}"] = np.array([link.output for link in chosen], dtype=np.intp)
-            names[f"targets{key}"] = np.array([link.input for link in chosen], dtype=np.intp)
-            names[f"scales{key}"] = np.array([link.connection.scale for link in chosen])
-            names[f"offsets{key}"] = np.array([link.connection.offset for link in chosen])
+            names[f"sources{key}"] = sources[chosen]
+            names[f"targets{key}"] = targets[chosen]
+            names[f"scales{key}"] = scales[chosen]
+            names[f"offsets{key}"] = offsets[chosen]
             value = f"source_array{number}[sources{key}]"
             if kind != "copy":
                 value += f" * scales{key}" + (f" + offsets{key}" if kind == "affine" else "")

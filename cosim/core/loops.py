@@ -245,12 +245,18 @@ def _has_cycle(
         group = member_of.get(source)
         if group is not None and target in feeds:
             reaches[group].update(feeds[target])
-    colour = [0] * len(inputs_of)  # 1 = on the current path, 2 = finished
-    for start in range(len(inputs_of)):
+    return has_cycle(reaches)
+
+
+def has_cycle(successors: Sequence[Iterable[int]]) -> bool:
+    """Whether the graph of nodes 0 .. n-1, `successors[node]` the nodes it reaches, has a cycle
+    (an iterative depth-first search: linear in nodes and edges)."""
+    colour = [0] * len(successors)  # 1 = on the current path, 2 = finished
+    for start in range(len(successors)):
         if colour[start]:
             continue
         colour[start] = 1
-        stack = [(start, iter(reaches[start]))]
+        stack = [(start, iter(successors[start]))]
         while stack:
             node = next(stack[-1][1], None)
             if node is None:
@@ -259,7 +265,7 @@ def _has_cycle(
                 return True
             elif not colour[node]:
                 colour[node] = 1
-                stack.append((node, iter(reaches[node])))
+                stack.append((node, iter(successors[node])))
     return False
 
 

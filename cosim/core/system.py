@@ -42,12 +42,20 @@ An output `P.o` is *direct* when it depends directly on at least one of P's inpu
 
 from __future__ import annotations
 
+import heapq
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
 from cosim.core.component import Component, Port, closest_names
-from cosim.core.loops import DEFAULT_MAX_ITERATIONS, DEFAULT_TOLERANCE, cyclic_components, find_algebraic_loop
+from cosim.core.loops import (
+    DEFAULT_MAX_ITERATIONS,
+    DEFAULT_TOLERANCE,
+    cyclic_components,
+    find_algebraic_loop,
+    has_cycle,
+)
 from cosim.core.port_types import connection_problem
 from cosim.core.timebase import NS_PER_S, seconds_to_ns
 from cosim.errors import CosimError
@@ -59,7 +67,7 @@ MODES = ("gauss-seidel", "jacobi")
 LOOP_HANDLING = ("delay", "iterate", "error")  # `[simulation] algebraic_loops` (`System.loops`)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class Connection:
     """`source` output -> `target` input; the input receives `output * scale + offset`."""
 
@@ -67,6 +75,11 @@ class Connection:
     target: str
     scale: float = 1.0
     offset: float = 0.0  # [unit of the target input]
+
+    def __init__(self, source: str, target: str, scale: float = 1.0, offset: float = 0.0) -> None:
+        # Written out (not generated): a system of a 2000-waypoint path makes ~3,100 connections, and
+        # a frozen dataclass's generated __init__ sets each field through object.__setattr__.
+        self.__dict__.update(source=source, target=target, scale=scale, offset=offset)
 
     @property
     def is_plain(self) -> bool:
@@ -128,7 +141,9 @@ class System:
         self.connections: list[Connection] = []
         self.text_connections: list[Connection] = []  # String/Binary ones (`System._connect_text`)
         self._targets: set[str] = set()  # connected inputs: a set, so connecting N inputs is O(N)
-        self._links: tuple[list[Connection], dict[str, list[Link]]] = ([], {})
+        # What the system computes once for its graph as it is (`_cached`): the resolved links, whether
+        # it has an algebraic loop.
+        self._cache: dict[str, tuple[tuple, object]] = {}
 
     def handle_loops(
         self,
@@ -184,6 +199,9 @@ class System:
 
     def connect(self, source: str, target: str, scale: float = 1.0, offset: float = 0.0) -> Connection:
         """Connect output `source` ("comp.port") to input `target`: input = output * scale + offset."""
+        usual = self._connect_usual(source, target, scale, offset, {})
+        if usual is not None:
+            return usual
         text = self._connect_text(source, target, scale, offset)
         if text is not None:
             return text
@@ -203,6 +221,74 @@ class System:
         self.connections.append(connection)
         self._targets.add(target)
         return connection
+
+    def connect_many(self, connections: Iterable[tuple[str, str, float, float]]) -> None:
+        """`connect` each (source, target, scale, offset) in turn: the same checks, the same error at
+        the first that fails (those before it made); the type conversion is checked once per pair of
+        port types (a system of a 2000-waypoint path makes ~3,100)."""
+        converts: dict[tuple[str, str, str, str], bool] = {}
+        for source, target, scale, offset in connections:
+            if self._connect_usual(source, target, scale, offset, converts) is None:
+                self.connect(source, target, scale, offset)  # the rest, and every error, as it says them
+
+    def _connect_usual(
+        self, source: str, target: str, scale: float, offset: float, converts: dict
+    ) -> Connection | None:
+        """The usual connection, checked as `connect` checks it: two numeric ports, the types
+        convertible (`converts` remembers `connection_problem` by the four type fields it reads), the
+        input free, finite numbers; None (nothing made) when it is not one."""
+        source_name, _, source_port = source.partition(".")
+        target_name, _, target_port = target.partition(".")
+        producer = self.components.get(source_name)
+        consumer = self.components.get(target_name)
+        if producer is None or consumer is None:
+            return None
+        output = producer.output_index.get(source_port)
+        input_ = consumer.input_index.get(target_port)
+        if (
+            output is None
+            or input_ is None
+            or target in self._targets
+            or producer.text_port(source_port, "output") is not None
+            or consumer.text_port(target_port, "input") is not None
+            or not (math.isfinite(scale) and math.isfinite(offset))
+        ):
+            return None
+        out, in_ = producer.outputs[output], consumer.inputs[input_]
+        types = (out.fmi_type, out.type, in_.fmi_type, in_.type)
+        fine = converts.get(types)
+        if fine is None:
+            fine = converts[types] = connection_problem(out, in_) is None
+        if not fine:
+            return None
+        connection = Connection(source, target, float(scale), float(offset))
+        self.connections.append(connection)
+        self._targets.add(target)
+        return connection
+
+    def merge(self, other: System, prefix: str) -> None:
+        """Take in every component of `other` under the name `prefix + name` (the component objects
+        themselves, renamed: `other` keeps them under their old names) with its connections between
+        them, as `other` checked them when it made them: `other` gives its connections up (it is left
+        without any; a fleet's robots are ~3,100 connections each, kept once). A name already taken
+        is a `CosimError`, before anything changes. A fleet puts its robots' systems into one this
+        way (connecting each connection again cost as much as making them)."""
+        names = {name: prefix + name for name in other.components}
+        taken = [new for new in names.values() if new in self.components]
+        if taken:
+            raise CosimError(f"component '{taken[0]}' added twice")
+        for name, component in other.components.items():
+            component.name = names[name]
+            self.components[component.name] = component
+        for made, kept in (
+            (other.connections, self.connections),
+            (other.text_connections, self.text_connections),
+        ):
+            for c in made:
+                target = prefix + c.target
+                kept.append(Connection(prefix + c.source, target, c.scale, c.offset))
+                self._targets.add(target)
+            made.clear()
 
     def _connect_text(self, source: str, target: str, scale: float, offset: float) -> Connection | None:
         """A connection of String or Binary ports (`Component.text_port`), which the consumer itself
@@ -231,21 +317,46 @@ class System:
         self._targets.add(target)
         return connection
 
+    def _version(self) -> tuple:
+        """What the system's graph is made of, as far as the caches here can tell: the number of
+        components and of connections, and the last connection (both lists only grow: `add`,
+        `connect`, `merge`; a component's ports and dependencies never change once added)."""
+        connections = self.connections
+        return len(self.components), len(connections), connections[-1] if connections else None
+
+    def _cached(self, name: str):
+        """The value cached under `name` for the system as it is now (`_version`), or None."""
+        version, value = self._cache.get(name, (None, None))
+        if version is None:
+            return None
+        now = self._version()
+        same = version[0] == now[0] and version[1] == now[1] and version[2] is now[2]
+        return value if same else None
+
+    def _keep(self, name: str, value):
+        self._cache[name] = (self._version(), value)
+        return value
+
     def links(self) -> dict[str, list[Link]]:
         """The connections into each component (by name, in connection order), their ends resolved:
         (connection, producer name, output index, input index). Resolved once for the connections
         as they are (`connect` checked both ends, and a component's ports never change); the master
         reads them a dozen times while ordering and initialising a system of thousands."""
-        resolved_for, incoming = self._links
-        if resolved_for != self.connections:  # a list compare: the same objects, element by element
+        incoming = self._cached("links")
+        if incoming is None:
             incoming = {}
+            components = self.components
             for c in self.connections:
                 source_name, _, output = c.source.partition(".")
                 target_name, _, input_ = c.target.partition(".")
-                source_index = self.components[source_name].output_index[output]
-                target_index = self.components[target_name].input_index[input_]
-                incoming.setdefault(target_name, []).append(Link(c, source_name, source_index, target_index))
-            self._links = (list(self.connections), incoming)
+                source_index = components[source_name].output_index[output]
+                target_index = components[target_name].input_index[input_]
+                link = Link(c, source_name, source_index, target_index)
+                if target_name in incoming:
+                    incoming[target_name].append(link)
+                else:
+                    incoming[target_name] = [link]
+            self._keep("links", incoming)
         return incoming
 
     def period_steps(self, component: Component) -> int:
@@ -265,26 +376,104 @@ class System:
 
     def _topological(self, edges: set[tuple[str, str]], names: list[str] | None = None) -> list[str]:
         """Kahn's algorithm over `names` (default: every component); ready ones are taken in the
-        order of `names` (the order they were added)."""
+        order of `names` (the order they were added); when none is ready (a cycle), the first one
+        left in that order."""
         names = list(self.components) if names is None else names
-        indegree = dict.fromkeys(names, 0)
-        for _, consumer in edges:
-            indegree[consumer] += 1
+        position = {name: number for number, name in enumerate(names)}
+        indegree = [0] * len(names)
+        successors: list[list[int]] = [[] for _ in names]
+        for producer, consumer in edges:
+            indegree[position[consumer]] += 1
+            successors[position[producer]].append(position[consumer])
+        ready = [number for number, count in enumerate(indegree) if count == 0]  # a heap of positions
+        heapq.heapify(ready)
+        done = [False] * len(names)
         order: list[str] = []
-        remaining = list(names)
-        while remaining:
-            ready = next((n for n in remaining if indegree[n] == 0), remaining[0])
-            remaining.remove(ready)
-            order.append(ready)
-            for producer, consumer in edges:
-                if producer == ready and consumer in remaining:
+        first_left = 0  # every position before it is done
+        while len(order) < len(names):
+            if ready:
+                node = heapq.heappop(ready)
+            else:
+                while done[first_left]:
+                    first_left += 1
+                node = first_left
+            done[node] = True
+            order.append(names[node])
+            for consumer in successors[node]:
+                if not done[consumer]:
                     indegree[consumer] -= 1
+                    if indegree[consumer] == 0:
+                        heapq.heappush(ready, consumer)
         return order
 
     def algebraic_loop(self) -> list[str] | None:
         """A cycle of direct dependencies between ports ("comp.port", first = last), or None."""
+        if self._acyclic():
+            return None
         feedthrough = {name: c.feedthrough for name, c in self.components.items()}
         return find_algebraic_loop([(c.source, c.target) for c in self.connections], feedthrough)
+
+    def _acyclic(self) -> bool:
+        """Whether the graph of ports (connections and direct dependencies) has no cycle, decided
+        once for the system as it is, in time linear in its ports and connections.
+
+        Decided on a graph of groups: a group is the outputs of one component that depend on the
+        same inputs (`feedthrough`, compared by content); group G reaches group H when a connection
+        goes from an output of G to an input that an output of H depends on. A cycle of ports
+        alternates connections (output -> input) and dependencies (input -> output), so it gives a
+        cycle of groups, and a cycle of groups gives one of ports. That holds when no port name of
+        a component is both an input and an output (one node in the graph of names) and every
+        entry of `feedthrough` is an output; otherwise the search over the names decides."""
+        known = self._cached("acyclic")
+        if known is not None:
+            return known
+        components = self.components
+        if not all(
+            len(c.feedthrough) == len(c.output_index) and c.input_index.keys().isdisjoint(c.output_index)
+            for c in components.values()
+        ):
+            feedthrough = {name: c.feedthrough for name, c in components.items()}
+            pairs = [(c.source, c.target) for c in self.connections]
+            return self._keep("acyclic", find_algebraic_loop(pairs, feedthrough) is None)
+        group_of: dict[str, list[int]] = {}  # component -> the group of each output (-1: a state)
+        feeds: dict[str, list[list[int] | None]] = {}  # component -> per input, the groups it feeds
+        reaches: list[set[int]] = []  # group -> the groups it reaches
+        for name, component in components.items():
+            output_index, input_index = component.output_index, component.input_index
+            groups = [-1] * len(output_index)
+            fed: list[list[int] | None] = [None] * len(input_index)
+            by_identity: dict[int, int] = {}
+            by_content: dict[tuple[str, ...], int] = {}
+            for output, depends in component.feedthrough.items():
+                if not depends:
+                    continue
+                number = by_identity.get(id(depends))
+                if number is None:
+                    content = tuple(depends)
+                    number = by_content.get(content)
+                    if number is None:
+                        number = by_content[content] = len(reaches)
+                        reaches.append(set())
+                        for input_ in content:
+                            slot = input_index.get(input_)
+                            if slot is not None:  # (an unknown input is fed by no connection)
+                                if fed[slot] is None:
+                                    fed[slot] = [number]
+                                else:
+                                    fed[slot].append(number)
+                    by_identity[id(depends)] = number
+                groups[output_index[output]] = number
+            group_of[name] = groups
+            feeds[name] = fed
+        for consumer, links in self.links().items():
+            fed = feeds[consumer]
+            for link in links:
+                number = group_of[link.producer][link.output]
+                if number >= 0:
+                    targets = fed[link.input]
+                    if targets is not None:
+                        reaches[number].update(targets)
+        return self._keep("acyclic", not has_cycle(reaches))
 
     def check_algebraic_loops(self) -> None:
         """Raise `CosimError` naming a cycle of direct dependencies between ports, if any."""
@@ -299,19 +488,25 @@ class System:
             )
 
     def _direct_edges(self) -> set[tuple[str, str]]:
-        components = self.components
-        return {
-            (producer, consumer)
-            for consumer, links in self.links().items()
-            for link in links
-            if (producer := link.producer) != consumer
-            and components[producer].feedthrough[components[producer].outputs[link.output].name]
-        }
+        """(producer, consumer) for every connection from a direct output to another component."""
+        direct: dict[str, list[bool]] = {}  # producer -> per output, whether it is direct
+        edges = set()
+        for consumer, links in self.links().items():
+            for link in links:
+                producer = link.producer
+                if producer == consumer:
+                    continue
+                if producer not in direct:
+                    component = self.components[producer]
+                    direct[producer] = [bool(component.feedthrough[p.name]) for p in component.outputs]
+                if direct[producer][link.output]:
+                    edges.add((producer, consumer))
+        return edges
 
     def _loop_ports(self) -> dict[str, int]:
         """Port -> number of its strongly connected component in the graph of ports (connections
         and direct dependencies), for the ports on a cycle; empty without an algebraic loop."""
-        if self.mode != "gauss-seidel" or self.algebraic_loop() is None:
+        if self.mode != "gauss-seidel" or self._acyclic():
             return {}
         graph: dict[str, list[str]] = {}
         for c in self.connections:
@@ -406,8 +601,10 @@ class System:
         feeding: dict[str, set[str]] = {}
         for name, component in self.components.items():
             feeding[name] = set()
+            seen: set[int] = set()  # (outputs share their list of inputs: `Component.feedthrough`)
             for output, depends in component.feedthrough.items():
-                if f"{name}.{output}" in consumed:
+                if id(depends) not in seen and f"{name}.{output}" in consumed:
+                    seen.add(id(depends))
                     feeding[name].update(depends)
         edges = set()
         for name, links in self.links().items():
@@ -436,7 +633,8 @@ class System:
         }
         for name, links in self.links().items():
             component = self.components[name]
-            direct = {i for depends in component.feedthrough.values() for i in depends}
+            shared = {id(depends): depends for depends in component.feedthrough.values()}
+            direct = {i for depends in shared.values() for i in depends}
             for link in links:
                 if position[link.producer] >= position[name] and component.inputs[link.input].name in direct:
                     early.add(name)

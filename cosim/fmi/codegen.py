@@ -74,9 +74,16 @@ def transfer_groups(
         only = set(only) | {
             i for i, p in enumerate(ports) if p.name in elements and variables[p.name].variable.name in arrays
         }
+    by_type: dict[str, list[int]] = {}  # (one pass over the ports: a path follower has 2003 inputs)
+    for i, p in enumerate(ports):
+        if only is None or i in only:
+            if p.fmi_type in by_type:
+                by_type[p.fmi_type].append(i)
+            else:
+                by_type[p.fmi_type] = [i]
     groups = []
     for kind in TRANSFER_TYPES[fmi_version]:
-        slots = [i for i, p in enumerate(ports) if p.fmi_type == kind and (only is None or i in only)]
+        slots = by_type.get(kind)
         if slots:
             references = [
                 variables[ports[i].name].variable.valueReference

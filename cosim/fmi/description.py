@@ -92,6 +92,19 @@ def _kept_description(path: Path) -> Path | None:
     return path.with_name(f".{path.stem}.description.pickle")
 
 
+def kept_unpacked(path: Path) -> Path | None:
+    """Where a project FMU's files for its instances stay extracted (`cosim.fmi.archive.unpack_instance`),
+    named by this file version (modification time, size, inode); None for any other FMU."""
+    kept = _kept_description(path)
+    if kept is None:
+        return None
+    try:
+        status = os.stat(path)
+    except OSError:
+        return None
+    return path.with_name(f".{path.stem}.unpacked-{status.st_mtime_ns}-{status.st_size}-{status.st_ino}")
+
+
 def _kept_key(path: str) -> bytes:
     """What the kept parse must have been made from: this file (time, size, inode) and fmpy version."""
     status = os.stat(path)

@@ -22,6 +22,9 @@ scalars only.
 
 from __future__ import annotations
 
+import hashlib
+import os
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,8 +34,11 @@ import numpy as np
 
 from cosim.core.component import Port, check_unique_ports, closest_names
 from cosim.errors import CosimError
+from cosim.fmi import builtin as builtin_module
+from cosim.fmi import text as text_module
+from cosim.fmi import types as types_module
 from cosim.fmi.builtin import documented_nan_variables
-from cosim.fmi.description import checked_description, file_key, remember
+from cosim.fmi.description import _kept_description, _kept_key, checked_description, file_key, remember
 from cosim.fmi.text import TEXT_TYPES, TextPort, text_start
 from cosim.fmi.types import KINDS, WIDE, exact_as_float, transfer_type
 
@@ -102,8 +108,97 @@ def fmu_layout(
     key = None if identity is None else (identity, name, tuple(mapping.items()))
     if key is not None and key in _LAYOUTS:
         return _LAYOUTS[key]
-    layout = _make_layout(path, name, description, version, mapping)
+    kept = None if identity is None else _kept_layout(path, mapping)
+    layout = _read_kept_layout(kept, description) if kept is not None else None
+    if layout is None:
+        layout = _make_layout(path, name, description, version, mapping)
+        if kept is not None:
+            _keep_layout(kept, layout)
     return layout if key is None else remember(_LAYOUTS, key, layout)
+
+
+# A project FMU's layout is also kept on disk beside its kept description (`cosim.fmi.description`),
+# one file per port map, for the next process: reading it back takes half of making ~3,500 ports
+# again. It holds the layout without the description: the description and its variables are written
+# as references (their positions), resolved against the description the process has read. Its first
+# line says what it was made from: the FMU file (`_kept_key`: time, size, inode, fmpy's version), the
+# port map, and the code that makes a layout (these modules' times and sizes), so an edit to either
+# makes it another key.
+_KEPT_LAYOUT_FORMAT = b"navcosim layout 1"
+_LAYOUT_CODE = tuple(
+    Path(module.__file__)
+    for module in (
+        sys.modules[__name__],
+        sys.modules[Port.__module__],
+        text_module,
+        types_module,
+        builtin_module,
+    )
+)
+
+
+def _kept_layout(path: Path, mapping: dict[str, MappedVariable]) -> tuple[Path, bytes] | None:
+    """Where the layout of `path` through `mapping` is kept and the key it must have been kept under;
+    None for an FMU whose description is not kept (a user's: nothing is written next to it)."""
+    kept = _kept_description(path)
+    if kept is None:
+        return None
+    try:
+        code = [f"{status.st_mtime_ns} {status.st_size}" for status in map(os.stat, _LAYOUT_CODE)]
+        source = _kept_key(str(path))
+    except OSError:
+        return None
+    digest = hashlib.sha256(repr(tuple(mapping.items())).encode()).hexdigest()[:20]
+    key = b" ".join([_KEPT_LAYOUT_FORMAT, source, digest.encode(), " ".join(code).encode()])
+    return kept.with_name(f".{path.stem}.layout-{digest}.pickle"), key
+
+
+def _read_kept_layout(kept: tuple[Path, bytes], description) -> FmuLayout | None:
+    """The kept layout, its references resolved against `description`; None when there is none for
+    this key or it cannot be read (then it is made again)."""
+    import pickle
+
+    path, key = kept
+    variables = description.modelVariables
+
+    class Unpickler(pickle.Unpickler):
+        def persistent_load(self, reference):
+            return description if reference == -1 else variables[reference]
+
+    try:
+        with open(path, "rb") as stream:
+            if stream.readline().rstrip(b"\n") != key:
+                return None
+            layout = Unpickler(stream).load()
+    except Exception:  # noqa: BLE001 - whatever is wrong with the kept copy, the layout is made again
+        return None
+    return layout if isinstance(layout, FmuLayout) else None
+
+
+def _keep_layout(kept: tuple[Path, bytes], layout: FmuLayout) -> None:
+    """Write the layout beside the FMU (aside, then renamed: a reader never sees half of it); a failure
+    only means the next process makes it again."""
+    import io
+    import pickle
+
+    path, key = kept
+    description = layout.model_description
+    position = {id(variable): number for number, variable in enumerate(description.modelVariables)}
+
+    class Pickler(pickle.Pickler):
+        def persistent_id(self, obj):
+            if obj is description:
+                return -1
+            return position.get(id(obj))  # (ids of live objects: only the variables are in it)
+
+    partial = path.with_name(f"{path.name}.{os.getpid()}")
+    try:
+        payload = io.BytesIO()
+        Pickler(payload, protocol=pickle.HIGHEST_PROTOCOL).dump(layout)
+        partial.write_bytes(key + b"\n" + payload.getvalue())
+        os.replace(partial, path)
+    except Exception:  # noqa: BLE001 - not kept; nothing else changes
+        partial.unlink(missing_ok=True)
 
 
 def _make_layout(

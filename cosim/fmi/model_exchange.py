@@ -44,7 +44,7 @@ from fmpy.fmi3 import FMU3Model
 
 from cosim.core.component import NativeStep, State
 from cosim.errors import CosimError
-from cosim.fmi.component import FmuComponent
+from cosim.fmi.component import FmuComponent, functions_bound_once
 from cosim.fmi.solvers import SOLVERS, make_solver
 
 DEFAULT_TOLERANCE = 1e-5  # fmpy's relative tolerance when the FMU's DefaultExperiment gives none
@@ -78,7 +78,9 @@ class ModelExchangeComponent(FmuComponent):
         max_step: the longest solver step [s] (None: unbounded for CVode, h for rk4 / euler).
     """
 
-    _FMPY_CLASSES = {1: FMU1Model, 2: FMU2Model, 3: FMU3Model}
+    _FMPY_CLASSES = {
+        version: functions_bound_once(c) for version, c in ((1, FMU1Model), (2, FMU2Model), (3, FMU3Model))
+    }
 
     def __init__(
         self,

@@ -66,7 +66,7 @@ def make_fmu(
     from cosim.fmi.model_exchange import fmu_component
 
     port_map = {port: {"name": m.variable, "scale": m.scale} for port, m in component.port_map.items()}
-    override = {output: list(depends) for output, depends in component.feedthrough.items()}
+    override = dict(component.feedthrough)  # (outputs sharing a tuple keep sharing it: checked once)
     options = {"port_map": port_map, "period": component.period, "feedthrough_override": override}
     options.update(max_unpacked_size=max_unpacked_size, nan_outputs=nan_outputs)
     given = component.integration
@@ -196,11 +196,31 @@ COMPONENT_KINDS: dict[str, Callable[[Scenario, OccupancyGrid, ComponentDescripti
 }
 
 
+# Known maps of this process, by content (cells, resolution, origin): a fleet's robots share one
+# map object (a grid is read-only, and what the planner derives from it, its distance field and search
+# maps, is kept with it: made once for every robot instead of once per robot). A few are kept.
+_KNOWN_MAPS: dict[tuple, OccupancyGrid] = {}
+_KNOWN_MAPS_KEPT = 4
+
+
+def _known_map(scenario: Scenario) -> OccupancyGrid:
+    """`load_known_map(scenario)`, or the grid of the same content read before in this process."""
+    grid = load_known_map(scenario)
+    key = (grid.occupied.shape, grid.occupied.tobytes(), grid.resolution, tuple(grid.origin))
+    known = _KNOWN_MAPS.get(key)
+    if known is not None:
+        return known
+    if len(_KNOWN_MAPS) >= _KNOWN_MAPS_KEPT:
+        _KNOWN_MAPS.pop(next(iter(_KNOWN_MAPS)))
+    _KNOWN_MAPS[key] = grid
+    return grid
+
+
 def build_run(scenario: Scenario, description: SystemDescription | None = None) -> BuiltRun:
     """Describe, check and build the system of `scenario` (or the `description` made of it: a
     fleet robot's, `cosim.scenario.fleet_compose`); plan the path."""
     description = describe_system(scenario) if description is None else description
-    grid = load_known_map(scenario)
+    grid = _known_map(scenario)
     expansion = scenario.planner.expansion_distance
     inflated = grid.inflate(expansion) if expansion > 0 else grid
     world = WorldDistance(grid, scenario.obstacles)
@@ -213,8 +233,7 @@ def build_run(scenario: Scenario, description: SystemDescription | None = None) 
     )
     for component in description.components.values():
         system.add(COMPONENT_KINDS[component.kind](scenario, grid, component))
-    for connection in description.connections:
-        system.connect(connection.source, connection.target, connection.scale, connection.offset)
+    system.connect_many((c.source, c.target, c.scale, c.offset) for c in description.connections)
     for made in system.components.values():
         system.period_steps(made)
     parameters = {

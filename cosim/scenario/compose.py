@@ -205,10 +205,7 @@ class _Composer:
             self.broken.add(component.name)
             return
         description = plain.model_description
-        variables = {variable.name: variable for variable in description.modelVariables}
-        own: dict[str, list[str]] = {}
-        for variable in description.modelVariables:
-            own.setdefault(variable.causality, []).append(variable.name)
+        variables, own, declared = _variables(description)
         self.own[component.name] = own
         port_map = self._port_map(component, variables)
         fmu = plain
@@ -220,7 +217,6 @@ class _Composer:
         self.text_ports[component.name] = fmu.text
         self.text_outputs[component.name] = fmu.text_outputs
         # A state output: the template says it is one and the FMU declares no dependencies for it.
-        declared = {u.variable.name for u in description.outputs if u.dependencies is not None}
         feedthrough = dict(fmu.feedthrough)
         for port in component.state_outputs:
             variable = port_map[port].variable if port in port_map else port
@@ -391,7 +387,21 @@ class _Composer:
             return None
 
         kept, replaced, dropped = [], [], []
+        # The usual template connection first: both ends there, neither component removed, replaced
+        # or broken, the input not fed by the scenario (the loop below would keep it too).
+        unusual = set(self.removed) | self.replacing | self.broken
+        outputs_of = {name: sets["outputs"] for name, sets in ports.items() if name not in unusual}
+        inputs_of = {name: sets["inputs"] for name, sets in ports.items() if name not in unusual}
         for connection in self.template:
+            source_name, _, source_port = connection.source.partition(".")
+            target_name, _, target_port = connection.target.partition(".")
+            if (
+                source_port in outputs_of.get(source_name, ())
+                and target_port in inputs_of.get(target_name, ())
+                and connection.target not in fed
+            ):
+                kept.append(connection)
+                continue
             reason = lost(connection.source, "outputs") or lost(connection.target, "inputs")
             if reason is not None:
                 dropped.append((connection, reason))
@@ -649,6 +659,28 @@ def _fmu_interface(path: Path, name: str, port_map: dict, max_size: int) -> _Fmu
             _INTERFACES.pop(next(iter(_INTERFACES)))
         _INTERFACES[key] = interface
     return interface
+
+
+# `_variables` of the last few descriptions (fmpy's, shared and read-only: `cosim.fmi.description`),
+# each kept with its description: a fleet describes the same four FMUs for every robot.
+_VARIABLES: dict[int, tuple] = {}
+
+
+def _variables(description) -> tuple[dict, dict[str, list[str]], set[str]]:
+    """An FMU description's variables by name, their names by causality, and the outputs that
+    declare their dependencies (all read-only)."""
+    known = _VARIABLES.get(id(description))
+    if known is not None and known[0] is description:
+        return known[1:]
+    variables = {variable.name: variable for variable in description.modelVariables}
+    own: dict[str, list[str]] = {}
+    for variable in description.modelVariables:
+        own.setdefault(variable.causality, []).append(variable.name)
+    declared = {u.variable.name for u in description.outputs if u.dependencies is not None}
+    if len(_VARIABLES) >= _INTERFACES_KEPT:
+        _VARIABLES.pop(next(iter(_VARIABLES)))
+    _VARIABLES[id(description)] = (description, variables, own, declared)
+    return variables, own, declared
 
 
 def _algebraic_loop(pairs: list[tuple[str, str]], feedthrough: dict) -> list[str] | None:

@@ -68,7 +68,7 @@ class ComponentDescription:
         return 0.0 if self.rate is None else 1.0 / self.rate
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class ConnectionDescription:
     """`target` input = `source` output * scale + offset; `where` says who declared it."""
 
@@ -77,6 +77,13 @@ class ConnectionDescription:
     scale: float = 1.0
     offset: float = 0.0
     where: str = TEMPLATE
+
+    def __init__(
+        self, source: str, target: str, scale: float = 1.0, offset: float = 0.0, where: str = TEMPLATE
+    ) -> None:
+        # Written out (not generated): the template makes ~3,100 a robot, and a frozen dataclass's
+        # generated __init__ sets each field through object.__setattr__.
+        self.__dict__.update(source=source, target=target, scale=scale, offset=offset, where=where)
 
     @property
     def source_component(self) -> str:
