@@ -449,6 +449,7 @@ def _run(
     if log is not None:
         log.write_poses(0, [(*each.pose, *each.command) for each in robots])
     block = _block_steps(master)
+    stop_on_collision = settings.on_collision == "stop"
     tables = master.kernel_tables(record=True, block=block)
     if coordination is not None:  # the released cells (and halts) for the first block
         coordination.before_block(0.0)
@@ -462,15 +463,25 @@ def _run(
         if log is not None:
             _log_plans(log, robots, k * h_ns)
         poses = []  # the poses logged in the block: (step, t_ns, per robot x, y, theta, v, omega)
-        for i in range(count):
-            t = (k + i) * h_ns / NS_PER_S
-            end_ns = min((k + i + 1) * h_ns, stop_ns) if stop_ns is not None else (k + i + 1) * h_ns
-            t_next = end_ns / NS_PER_S
+        ends_ns = [(k + i + 1) * h_ns for i in range(count)]
+        if stop_ns is not None:
+            ends_ns = [min(end_ns, stop_ns) for end_ns in ends_ns]
+        ends = [end_ns / NS_PER_S for end_ns in ends_ns]
+        starts = [(k + i) * h_ns / NS_PER_S for i in range(count)]
+        lengths = [end - start for start, end in zip(starts, ends, strict=True)]
+        last = count - 1
+        if not stop_on_collision:  # nothing ends the run but the robots' own ends: judged a robot at a time
+            ended = [_judge_block(each, ends, lengths, positions[r]) for r, each in enumerate(robots)]
+            if all(not each.judged for each in robots):  # ends with the step in which the last one ended
+                last = max((step for step in ended if step is not None), default=0)
+        for i in range(last + 1):
+            t_next, end_ns = ends[i], ends_ns[i]
             after = np.array([each.poses[i, :2] for each in robots])
-            began = contacts.step(t, t_next - t, positions, after)
+            began = contacts.step(starts[i], lengths[i], positions, after)
             outcome.collisions += began
-            for k_robot, each in enumerate(robots):
-                _judge(each, t_next, t_next - t, positions[k_robot], after[k_robot], i)
+            if stop_on_collision:
+                for k_robot, each in enumerate(robots):
+                    _judge(each, t_next, lengths[i], positions[k_robot], after[k_robot], i)
             positions = after
             outcome.time = t_next
             if trace is not None:
@@ -478,11 +489,9 @@ def _run(
             if log is not None and (k + i + 1) % pose_steps == 0:
                 poses.append((k + i, end_ns, [(*each.poses[i], *each.commands_now[i]) for each in robots]))
                 last_pose_step = k + i + 1
-            if (began or any(each.outcome.status == "collision" for each in robots)) and (
-                settings.on_collision == "stop"
-            ):
+            if stop_on_collision and (began or any(each.outcome.status == "collision" for each in robots)):
                 reason = "collision"
-            elif all(not each.judged for each in robots):
+            elif (stop_on_collision or i == last) and all(not each.judged for each in robots):
                 reason = "completed" if outcome.completed else "all_ended"
             if reason is not None:
                 break
@@ -590,6 +599,68 @@ def _judge(each: _Robot, t: float, h: float, before, after, step: int = 0) -> No
         return
     goal = each.goals[each.goal_index]
     result.deadlocked_at = each.progress.update(t, math.hypot(goal.x - after[0], goal.y - after[1]))
+
+
+def _judge_block(each: _Robot, ends: list[float], lengths: list[float], start) -> int | None:
+    """`_judge` for every step of the block whose steps end at `ends` [s] and last `lengths` [s],
+    the robot at `start` (x, y) [m] before the first; returns the step in which it stopped being
+    judged, None when it did not. The steps up to the next goal reached or collision are checked
+    in one `OutcomeMonitor.check_positions` call, with the same arithmetic, in the same order, as
+    step by step; a robot dwelling or waiting for its next goal is judged step by step."""
+    if not each.judged:
+        return None
+    result, monitor, progress = each.outcome, each.monitor, each.progress
+    xs, ys = each.poses[:, 0].tolist(), each.poses[:, 1].tolist()
+    modes = each.modes.tolist()
+    bx, by = float(start[0]), float(start[1])
+    count = len(ends)
+    i = 0
+    while i < count:
+        if each.pending_goal or each.dwell_until is not None:
+            _judge(each, ends[i], lengths[i], (bx, by), (xs[i], ys[i]), i)
+            bx, by = xs[i], ys[i]
+            if not each.judged:
+                return i
+            i += 1
+            continue
+        index, why = monitor.check_positions(ends[i:], xs[i:], ys[i:])
+        event = i + index  # the step that reached a goal or collided (count: none)
+        goal = each.goals[each.goal_index]
+        for j in range(i, min(event + 1, count)):
+            x, y, h = xs[j], ys[j], lengths[j]
+            moved = math.hypot(x - bx, y - by)
+            bx, by = x, y
+            result.distance += moved
+            if modes[j] == MODE_RECOVER:
+                result.recovery_time += h
+            if j == event:
+                break
+            if moved < STOPPED_SPEED * h:
+                result.stopped_time += h
+            result.deadlocked_at = progress.update(ends[j], math.hypot(goal.x - x, goal.y - y))
+        if why is None:
+            return None
+        t, x, y = ends[event], xs[event], ys[event]
+        if why == "collision":
+            result.status = "collision"
+            result.collision = (t, x, y)
+            return event
+        if moved < STOPPED_SPEED * lengths[event]:  # reached a goal (neither dwelling nor waiting)
+            result.stopped_time += lengths[event]
+        monitor.outcome.reason, monitor.outcome.reached = "running", False
+        result.goals_reached += 1
+        each.goal_index += 1
+        result.deadlocked_at = None
+        if each.goal_index == len(each.goals):
+            result.status = "completed"
+            result.completion_time = t
+            return event
+        if goal.dwell > 0:
+            each.dwell_until = t + goal.dwell
+        else:
+            each.pending_goal = True
+        i = event + 1
+    return None
 
 
 def _next_goal(each: _Robot, t: float, coordination: FleetCoordination | None = None) -> None:
