@@ -472,15 +472,15 @@ class MessageBlock:
         """End (exclusive) of the first message in order[first:end] that fills its stream's block."""
         stop = None
         part = order[first:end]
+        counts = np.bincount(part, minlength=len(self.streams)).tolist()
         sizes = self.group_sizes
         ends = [(RAW_STREAM, self.capacity - sizes.get(RAW_STREAM, 0))]
         if self.pose is not None:
             ends.append((self.pose_streams[2], self.capacity - sizes.get(self.pose_streams[0], 0)))
         ends += [(n, self.capacity - sizes.get(n, 0)) for n in self.stream_of.values()]
         for number, room in ends:
-            where = np.flatnonzero(part == number)
-            if len(where) >= room > 0:
-                candidate = first + int(where[room - 1]) + 1
+            if counts[number] >= room > 0:  # only then is the room-th message's place needed
+                candidate = first + int(np.flatnonzero(part == number)[room - 1]) + 1
                 stop = candidate if stop is None else min(stop, candidate)
         return stop
 
@@ -492,25 +492,31 @@ class MessageBlock:
         stamps = times[first:end]
         if self.group == 0 and self.window_ns:
             self.deadline = self._window_end(int(stamps[0]))
-        counts = np.bincount(part, minlength=len(self.streams)).tolist()
+        counts = np.bincount(part, minlength=len(self.streams))
+        # Each stream's stamps in held order: one stable sort instead of a mask per stream.
+        by_stream = np.argsort(part, kind="stable")
+        grouped = stamps[by_stream]
+        grouped_list = grouped.tolist()
+        bounds = np.cumsum(counts).tolist()
+        counts = counts.tolist()
         sizes = self.group_sizes
-        for number, n in enumerate(counts):
-            if not n:
-                continue
+        for number in np.flatnonzero(counts).tolist():
+            n = counts[number]
             if number == self.pose_streams[1] or number == self.pose_streams[2]:
                 continue
+            low = bounds[number] - n
             sizes[number] = sizes.get(number, 0) + n
             stream = self.streams[number]
             if number == RAW_STREAM:
                 at = cursors[RAW_STREAM]
                 for (channel, payload), t_ns in zip(
-                    raw[at : at + n], stamps[part == RAW_STREAM].tolist(), strict=True
+                    raw[at : at + n], grouped_list[low : low + n], strict=True
                 ):
                     self.raw.append((channel, t_ns, payload))
                 cursors[RAW_STREAM] = at + n
             elif number == self.pose_streams[0]:
                 at = cursors[number]
-                self.pose.add_rows(stamps[part == number], pose_rows[at : at + n])
+                self.pose.add_rows(grouped[low : low + n], pose_rows[at : at + n])
                 cursors[number] = at + n
             elif isinstance(stream, SignalStream):
                 at = cursors[number]
@@ -526,7 +532,7 @@ class MessageBlock:
                         raise CosimError(f"signal channel {stream.records.channel}: a step after end_steps")
                     stream.rows[held : held + n, :split] = rows[:, :split]
                     stream.rows[held + 1 : held + n + 1, split:] = rows[:, split:]
-                stream.times.extend(stamps[part == number].tolist())
+                stream.times.extend(grouped_list[low : low + n])
         self.order.extend(part.tolist())
         self.count += end - first
         self.group += end - first
