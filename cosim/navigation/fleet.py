@@ -59,6 +59,8 @@ from pathlib import Path
 import numpy as np
 
 from cosim.core import interrupt
+from cosim.core.component import Component
+from cosim.core.gather import make_gather
 from cosim.core.master import NS_PER_S, Master
 from cosim.core.system import System
 from cosim.errors import PATH_LIMIT, CosimError, shorten
@@ -368,12 +370,99 @@ def fleet_system(fleet: Fleet, described, builts: list) -> tuple[System, dict]:
     return system, parameters
 
 
-def _advance(master: Master, robots: list[_Robot], count: int, tables) -> list:
+class _PythonSteps:
+    """The fleet's components stepped by Python (lidars, planners), stepped here at a block's first
+    step (`step`), all of them before the compiled kernel steps the FMUs through the whole block in
+    one call: the kernel's tables skip them (as components with constant outputs: the kernel neither
+    steps them nor copies their outputs), so after they stepped their outputs are copied into the
+    FMUs that read them (`feeds`, the master's arithmetic), and hold to the block's end as the
+    kernel would have copied them. The same values as the kernel handing each back where it is due
+    (`Master.run_blocks`), in fewer kernel calls, when no FMU a Python component reads or feeds
+    comes before it in the master's order (`make`: None otherwise)."""
+
+    def __init__(self, master: Master, steps: list, feeds: list) -> None:
+        self.master = master
+        self.steps = steps  # (component, period, gather of its inputs or None), in the master's order
+        self.feeds = feeds  # copy of the Python components' outputs into each FMU that reads them
+
+    @classmethod
+    def make(cls, master: Master) -> _PythonSteps | None:
+        system = master.system
+        if system.mode == "jacobi":  # every component reads the outputs of the step before
+            return None
+        python = [
+            c for c in master.order if type(c).native_step is Component.native_step and not c.constant_outputs
+        ]
+        if not python:
+            return None
+        names = {c.name for c in python}
+        place = {c.name: i for i, c in enumerate(master.order)}
+        links = system.links()
+        consumers = set()
+        for consumer, fed in links.items():
+            for link in fed:
+                if link.producer in names and consumer not in names:
+                    if place[consumer] < place[link.producer]:
+                        return None  # it reads the Python component's previous output
+                    consumers.add(consumer)
+                elif consumer in names and link.producer not in names:
+                    if (
+                        place[link.producer] < place[consumer]
+                        and not system.components[link.producer].constant_outputs
+                    ):
+                        return None  # the Python component reads its output of the same step
+        steps = [(c, system.period_steps(c), make_gather(system, c)) for c in python]
+        order = sorted(consumers, key=place.__getitem__)
+        feeds = [make_gather(system, system.components[name], producers=names) for name in order]
+        return cls(master, steps, feeds)
+
+    def tables(self, block: int):
+        """The kernel's tables without the Python components; None when the kernel cannot step the
+        rest alone."""
+        from cosim.core import kernel
+
+        for component, _, _ in self.steps:
+            component.constant_outputs = True
+        try:
+            tables = self.master.kernel_tables(record=True, block=block)
+        finally:
+            for component, _, _ in self.steps:
+                component.constant_outputs = False
+        if tables is None or (tables.components[:, kernel.C_KIND] == kernel.KIND_PYTHON).any():
+            return None
+        return tables
+
+    def step(self, k: int) -> None:
+        """Step the Python components due at step k, then copy their outputs to the FMUs."""
+        master = self.master
+        t = (master.start_time_ns + k * master.system.macro_step_ns) / NS_PER_S
+        for component, period, gather in self.steps:
+            if k % period:
+                continue
+            try:
+                if gather is not None:
+                    gather()
+                    component.push_inputs()
+                component.do_step(t, master.step_seconds(k, period))
+                component.get_outputs()
+            except CosimError as error:
+                master.failure = error
+                raise
+        for feed in self.feeds:
+            feed()
+
+
+def _advance(
+    master: Master, robots: list[_Robot], count: int, tables, python: _PythonSteps | None = None
+) -> list:
     """Step the fleet's system `count` steps, hand every robot its rows and return them (per
     component of the master's order, its inputs and outputs after each of its steps; None for one
-    stepped by Python)."""
+    stepped by Python). `python`: the Python components, stepped before the kernel steps the rest
+    (`tables` then without them)."""
     first = master.step_index
     kept: list[list[np.ndarray]] = []
+    if python is not None:
+        python.step(first)
     if tables is not None:
         # FMUs in the compiled kernel; the lidars and planners (Python) step in the block's first
         # step and hold their outputs to its end (the block is cut only at their periods).
@@ -450,7 +539,7 @@ def _run(
         log.write_poses(0, [(*each.pose, *each.command) for each in robots])
     block = _block_steps(master)
     stop_on_collision = settings.on_collision == "stop"
-    tables = master.kernel_tables(record=True, block=block)
+    tables, python = _tables(master, block)
     if coordination is not None:  # the released cells (and halts) for the first block
         coordination.before_block(0.0)
     wall_start = time.perf_counter()
@@ -459,7 +548,7 @@ def _run(
     last_pose_step = 0
     while k < steps and reason is None:
         count = min(block, steps - k)
-        histories = _advance(master, robots, count, tables)
+        histories = _advance(master, robots, count, tables, python)
         if log is not None:
             _log_plans(log, robots, k * h_ns)
         poses = []  # the poses logged in the block: (step, t_ns, per robot x, y, theta, v, omega)
@@ -502,7 +591,7 @@ def _run(
             reason = "interrupted"
         if tables is not None and reason is None:
             if any(each.outcome.status == "collision" and not each.halted for each in robots):
-                tables = _halt(master, robots, log, block)
+                tables, python = _halt(master, robots, log, block)
         for each in robots:  # a new mission goal: given at the end of the block
             if each.pending_goal and each.judged:
                 _next_goal(each, outcome.time, coordination)
@@ -530,7 +619,7 @@ def _halt(master: Master, robots: list[_Robot], log: FleetLog | None, block: int
     """Switch off every robot that hit a wall or obstacle ([fleet] on_collision = "continue"): its
     components are no longer stepped (the master steps no component with constant outputs), so it
     stays where it stands, its pose still seen by the others' lidars. Returns the kernel's tables
-    for the robots still stepped."""
+    for the robots still stepped, and their Python components (`_tables`)."""
     for each in robots:
         if each.outcome.status == "collision" and not each.halted:
             each.halted = True
@@ -538,7 +627,18 @@ def _halt(master: Master, robots: list[_Robot], log: FleetLog | None, block: int
                 component.constant_outputs = True
             if log is not None:
                 log.steps.halt(each.robot.name)
-    return master.kernel_tables(record=True, block=block)
+    return _tables(master, block)
+
+
+def _tables(master: Master, block: int) -> tuple:
+    """The kernel's tables for a block and the Python components stepped apart from it
+    (`_PythonSteps`), or the tables with every component (the kernel handing the Python ones back)
+    and None, or (None, None) when the kernel cannot step the fleet."""
+    python = _PythonSteps.make(master)
+    tables = python.tables(block) if python is not None else None
+    if tables is None:
+        return master.kernel_tables(record=True, block=block), None
+    return tables, python
 
 
 def _held(rows: np.ndarray, first: int, count: int, period: int, last: np.ndarray) -> np.ndarray:
