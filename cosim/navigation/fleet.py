@@ -563,10 +563,17 @@ def _run(
             ended = [_judge_block(each, ends, lengths, positions[r]) for r, each in enumerate(robots)]
             if all(not each.judged for each in robots):  # ends with the step in which the last one ended
                 last = max((step for step in ended if step is not None), default=0)
+        stacked = np.stack([each.poses[: last + 1, :2] for each in robots], axis=1)  # step, robot, x y
+        if not stop_on_collision:  # every step up to the last is checked: all at once
+            began_in = contacts.steps(starts, lengths, np.concatenate((positions[None], stacked)))
         for i in range(last + 1):
             t_next, end_ns = ends[i], ends_ns[i]
-            after = np.array([each.poses[i, :2] for each in robots])
-            began = contacts.step(starts[i], lengths[i], positions, after)
+            after = stacked[i]
+            began = (
+                began_in[i]
+                if not stop_on_collision
+                else contacts.step(starts[i], lengths[i], positions, after)
+            )
             outcome.collisions += began
             if stop_on_collision:
                 for k_robot, each in enumerate(robots):
