@@ -18,6 +18,7 @@ two messages lands where it would have.
 
 from __future__ import annotations
 
+import itertools
 import struct
 
 import numpy as np
@@ -145,9 +146,29 @@ class SignalStream:
         self.rows = np.empty((capacity + 1, size))
         if split is not None:
             self.rows[0] = initial
+        # Its row of the pack's stream table (`cosim.core.kernel.pack_records`), the columns that
+        # do not change from pack to pack, and its field-table row (None: no values).
+        records = self.records
+        self.table = np.zeros(kernel.STREAM_COLUMNS, dtype=np.int64)
+        self.table[kernel.P_KIND] = kernel.STREAM_FIXED
+        self.table[kernel.P_CHANNEL] = channel
+        self.table[kernel.P_SIZE] = records.size
+        self.table[kernel.P_TEMPLATE] = records.template.ctypes.data
+        self.table[kernel.P_MATRIX_COLUMNS] = size
+        self.table[kernel.P_STAMP_COUNT] = len(records.stamps)
+        self.table[kernel.P_STAMP_FIRST : kernel.P_STAMP_FIRST + len(records.stamps)] = records.stamps
+        self.table[kernel.P_FIELD_COUNT] = 1 if size else 0
+        self.field = (records.offset("values"), 0, size) if size else None
+        self._addressed: tuple[np.ndarray, int] | None = None
         self.times: list[int] = []
         self.pending_ns: int | None = None  # [ns] when the pending record's outputs hold (None: first step)
         self.ended = False
+
+    def address(self) -> int:
+        """The address of `rows` (a new array when they grew)."""
+        if self._addressed is None or self._addressed[0] is not self.rows:
+            self._addressed = (self.rows, self.rows.ctypes.data)
+        return self._addressed[1]
 
     def carry(self) -> None:
         """After the held rows were packed: the pending record becomes row 0, with the inputs of
@@ -610,13 +631,32 @@ class MessageBlock:
             alive.extend((times, matrix))
             return count * records.size
 
-        for number, stream in enumerate(self.streams):
-            if isinstance(stream, SignalStream) and stream.times:
-                times = np.array(stream.times, dtype=np.uint64)
-                width = stream.rows.shape[1]  # rows: float64, C-contiguous (made by `SignalStream`, `_grow`)
-                parts = [("values", 0, width)] if width else []
-                size += fixed(number, stream.records, times, stream.rows, parts)
-                carried.append(stream)
+        numbers = [
+            n for n, stream in enumerate(self.streams) if type(stream) is SignalStream and stream.times
+        ]
+        if numbers:  # the signal streams' rows at once: their fixed columns kept (`SignalStream.table`)
+            carried = [self.streams[n] for n in numbers]
+            counts = [len(stream.times) for stream in carried]
+            total = sum(counts)
+            times = np.fromiter(itertools.chain.from_iterable(s.times for s in carried), np.uint64, total)
+            alive.append(times)
+            starts = np.zeros(len(counts), dtype=np.int64)
+            np.cumsum(counts[:-1], out=starts[1:])
+            rows = np.array([stream.table for stream in carried])
+            rows[:, kernel.P_SEQUENCE] = [
+                self._sequence(stream.records.channel, count)
+                for stream, count in zip(carried, counts, strict=True)
+            ]
+            rows[:, kernel.P_TIMES] = times.ctypes.data + 8 * starts
+            # rows: float64, C-contiguous (made by `SignalStream`, `_grow`)
+            rows[:, kernel.P_MATRIX] = [stream.address() for stream in carried]
+            alive += [stream.rows for stream in carried]
+            with_values = rows[:, kernel.P_FIELD_COUNT] > 0
+            rows[with_values, kernel.P_FIELD_FIRST] = np.arange(int(with_values.sum()))
+            streams[numbers] = rows
+            fields += [stream.field for stream in carried if stream.field is not None]
+            sizes = rows[:, kernel.P_SIZE]
+            size += int(np.dot(sizes, counts))
         if self.pose is not None and self.pose.count:
             times, rows, quaternion = self._pose_rows()
             # columns x, y, qz, qw, v, omega (float64 whatever the rows held)
