@@ -577,18 +577,24 @@ class Recorder:
         block = self._block
         keys, streams, stamps = [], [], []
         signal_rows = {}
+        numbers, counts = [], []
+        stream_of, signal_sizes = block.stream_of, self._signal_sizes
         for channel, channel_keys, times, rows in signals:
-            if not len(channel_keys):
+            count = len(channel_keys)
+            if not count:
                 continue
-            number = block.stream_of[channel]
+            number = stream_of[channel]
             if number in signal_rows:
                 raise CosimError(f"{self.path}: channel {channel} given twice")
-            if rows.ndim != 2 or rows.shape[1] != self._signal_sizes[channel] or len(rows) != len(times):
+            if rows.ndim != 2 or rows.shape[1] != signal_sizes[channel] or len(rows) != len(times):
                 raise CosimError(f"{self.path}: signal rows of shape {rows.shape} for channel {channel}")
             signal_rows[number] = rows
             keys.append(channel_keys)
-            streams.append(np.full(len(channel_keys), number))
+            numbers.append(number)
+            counts.append(count)
             stamps.append(times)
+        if numbers:
+            streams.append(np.repeat(np.array(numbers, dtype=np.int64), counts))
         pose_rows = None
         if poses is not None and len(poses[0]):
             if self._pose_channels is None:
