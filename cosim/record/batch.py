@@ -530,10 +530,12 @@ class MessageBlock:
             stream = self.streams[number]
             if number == RAW_STREAM:
                 at = cursors[RAW_STREAM]
-                for (channel, payload), t_ns in zip(
-                    raw[at : at + n], grouped_list[low : low + n], strict=True
-                ):
-                    self.raw.append((channel, t_ns, payload))
+                self.raw += [
+                    (channel, t_ns, payload)
+                    for (channel, payload), t_ns in zip(
+                        raw[at : at + n], grouped_list[low : low + n], strict=True
+                    )
+                ]
                 cursors[RAW_STREAM] = at + n
             elif number == self.pose_streams[0]:
                 at = cursors[number]
@@ -591,16 +593,21 @@ class MessageBlock:
         half = rows[:, 2] / 2.0
         return times.astype(np.uint64), rows, np.column_stack((np.sin(half), np.cos(half)))
 
-    def _raw_sequences(self) -> list[int]:
-        """The sequence number of each held raw message (counting per channel, in held order)."""
-        counts: dict[int, int] = {}
-        for channel, _, _ in self.raw:
-            counts[channel] = counts.get(channel, 0) + 1
-        next_of = {channel: self._sequence(channel, count) for channel, count in sorted(counts.items())}
-        sequences = []
-        for channel, _, _ in self.raw:
-            sequences.append(next_of[channel])
-            next_of[channel] += 1
+    def _raw_sequences(self, channels: np.ndarray) -> np.ndarray:
+        """The sequence number of each held raw message (of `channels`: counting per channel, in
+        held order; the channels' counters advanced in channel order)."""
+        by_channel = np.argsort(channels, kind="stable")
+        grouped = channels[by_channel]
+        starts = np.flatnonzero(np.diff(grouped, prepend=grouped[0] - 1))
+        counts = np.diff(np.append(starts, len(grouped)))
+        firsts = [
+            self._sequence(int(channel), int(count))
+            for channel, count in zip(grouped[starts], counts, strict=True)
+        ]
+        sequences = np.empty(len(channels), dtype=np.int64)
+        sequences[by_channel] = np.repeat(np.array(firsts, dtype=np.int64) - starts, counts) + np.arange(
+            len(grouped)
+        )
         return sequences
 
     def _records_native(self, order: np.ndarray) -> tuple[bytearray, np.ndarray, np.ndarray, np.ndarray]:
@@ -670,13 +677,14 @@ class MessageBlock:
         streams[RAW_STREAM, kernel.P_KIND] = kernel.STREAM_RAW
         blob = b""
         if self.raw:
-            lengths = [len(payload) for _, _, payload in self.raw]
-            raw_table[:, kernel.RAW_CHANNEL] = [channel for channel, _, _ in self.raw]
-            raw_table[:, kernel.RAW_SEQUENCE] = self._raw_sequences()
-            raw_table[:, kernel.RAW_TIME] = [t_ns for _, t_ns, _ in self.raw]
+            channels, stamps, payloads = zip(*self.raw, strict=True)
+            lengths = list(map(len, payloads))
+            raw_table[:, kernel.RAW_CHANNEL] = channels
+            raw_table[:, kernel.RAW_SEQUENCE] = self._raw_sequences(raw_table[:, kernel.RAW_CHANNEL])
+            raw_table[:, kernel.RAW_TIME] = stamps
             raw_table[:, kernel.RAW_SIZE] = lengths
             raw_table[1:, kernel.RAW_START] = np.cumsum(lengths[:-1])
-            blob = b"".join([payload for _, _, payload in self.raw])
+            blob = b"".join(payloads)
             size += MESSAGE_HEAD_SIZE * len(self.raw) + len(blob)
             self.raw = []
         table = np.array(fields, dtype=np.int64).reshape(-1, kernel.FIELD_COLUMNS)
