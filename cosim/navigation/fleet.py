@@ -63,6 +63,7 @@ from cosim.core.component import Component
 from cosim.core.gather import make_gather
 from cosim.core.master import NS_PER_S, Master
 from cosim.core.system import System
+from cosim.core.timebase import due_from
 from cosim.errors import PATH_LIMIT, CosimError, shorten
 from cosim.navigation.build import build_run
 from cosim.navigation.coordination import FleetCoordination
@@ -653,12 +654,10 @@ def _held(rows: np.ndarray, first: int, count: int, period: int, last: np.ndarra
     rows are those of the steps k % period == 0; before its first step in the block, `last`)."""
     if period == 1:
         return rows
-    out = np.empty((count, rows.shape[1]))
-    value, j = last, 0
-    for i, k in enumerate(range(first, first + count)):
-        if k % period == 0:
-            value, j = rows[j], j + 1
-        out[i] = value
+    # Row j holds from step due + j period on (due: the first step k >= first with k % period == 0).
+    latest = (np.arange(first, first + count) - due_from(first, period)) // period
+    out = rows[np.maximum(latest, 0)] if len(rows) else np.empty((count, len(last)))
+    out[latest < 0] = last
     return out
 
 
