@@ -13,11 +13,16 @@ components step only in a block's first step:
    inputs), so the master steps every lidar before any vehicle: each scan at t sees every robot
    where it stands at t, whatever the robots' order;
 2. the master steps the block (FMUs in the compiled kernel, `Master.run_blocks`; lidars and
-   planners in Python in its first step), keeping each step's rows of every component;
+   planners in Python in its first step), keeping each step's rows of every component: every
+   Python component first, then every FMU through the whole block in one kernel call
+   (`_PythonSteps`), when no FMU a Python component reads or feeds comes before it in the
+   master's order (the same values as the kernel handing each back where it is due);
 3. then, step by step through the block, the footprints are checked pairwise
    (`cosim.world.fleet.FleetContacts`: exact first contact of circles moving linearly within
    the step), and each robot against the walls and unknown obstacles (`OutcomeMonitor`, exactly
-   as for one robot);
+   as for one robot); with on_collision = "continue" (nothing but the robots' own ends ends the
+   run) a robot at a time for the block's steps, and the pairs for all of them at once, with the
+   same arithmetic in the same order;
 4. mission progress: a robot within its goal's tolerance has reached it; after its `dwell` the
    planner is given the next goal (`PlannerComponent.set_goal`, a replan from the current pose)
    at the end of that block (at most one block, 0.1 s, later); after the last goal (times
