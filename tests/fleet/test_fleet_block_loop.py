@@ -133,17 +133,18 @@ def test_a_fleet_run_is_that_of_the_step_by_step_loop(tmp_path, monkeypatch):
     overrides = ["simulation.stop_time=40"]
     fleet = load_scenario(SCENARIOS / "fleet_missions.toml", overrides, fleet=True)
     made = []
-    python_steps = fleet_module._PythonSteps.make.__func__
-    monkeypatch.setattr(
-        fleet_module._PythonSteps,
-        "make",
-        classmethod(lambda cls, m: made.append(python_steps(cls, m)) or made[-1]),
-    )
+    make = fleet_module._PythonSteps.make.__func__
+
+    def recorded(cls, master, previous=None):
+        made.append(make(cls, master, previous))
+        return made[-1]
+
+    monkeypatch.setattr(fleet_module._PythonSteps, "make", classmethod(recorded))
     fast = fleet_module.run_fleet(fleet, log_path=tmp_path / "fast.mcap")
-    assert made and made[0] is not None  # the Python components were stepped apart
+    assert len(made) > 1 and None not in made  # stepped apart, also after robots were switched off
 
     monkeypatch.setattr(fleet_module, "_judge_block", _judge_step_by_step)
-    monkeypatch.setattr(fleet_module._PythonSteps, "make", classmethod(lambda cls, master: None))
+    monkeypatch.setattr(fleet_module._PythonSteps, "make", classmethod(lambda *_: None))
     monkeypatch.setattr(FleetContacts, "steps", _contacts_step_by_step)
     fleet = load_scenario(SCENARIOS / "fleet_missions.toml", overrides, fleet=True)
     slow = fleet_module.run_fleet(fleet, log_path=tmp_path / "slow.mcap")
