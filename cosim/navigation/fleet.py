@@ -13,11 +13,16 @@ components step only in a block's first step:
    inputs), so the master steps every lidar before any vehicle: each scan at t sees every robot
    where it stands at t, whatever the robots' order;
 2. the master steps the block (FMUs in the compiled kernel, `Master.run_blocks`; lidars and
-   planners in Python in its first step), keeping each step's rows of every component;
+   planners in Python in its first step), keeping each step's rows of every component: every
+   Python component first, then every FMU through the whole block in one kernel call
+   (`_PythonSteps`), when no FMU a Python component reads or feeds comes before it in the
+   master's order (the same values as the kernel handing each back where it is due);
 3. then, step by step through the block, the footprints are checked pairwise
    (`cosim.world.fleet.FleetContacts`: exact first contact of circles moving linearly within
    the step), and each robot against the walls and unknown obstacles (`OutcomeMonitor`, exactly
-   as for one robot);
+   as for one robot); with on_collision = "continue" (nothing but the robots' own ends ends the
+   run) a robot at a time for the block's steps, and the pairs for all of them at once, with the
+   same arithmetic in the same order;
 4. mission progress: a robot within its goal's tolerance has reached it; after its `dwell` the
    planner is given the next goal (`PlannerComponent.set_goal`, a replan from the current pose)
    at the end of that block (at most one block, 0.1 s, later); after the last goal (times
@@ -61,8 +66,11 @@ from pathlib import Path
 import numpy as np
 
 from cosim.core import interrupt
+from cosim.core.component import Component
+from cosim.core.gather import make_gather
 from cosim.core.master import NS_PER_S, Master
 from cosim.core.system import System
+from cosim.core.timebase import due_from
 from cosim.errors import PATH_LIMIT, CosimError, shorten
 from cosim.navigation.build import build_run
 from cosim.navigation.coordination import FleetCoordination
@@ -391,12 +399,114 @@ def fleet_system(fleet: Fleet, described, builts: list) -> tuple[System, dict]:
     return system, parameters
 
 
-def _advance(master: Master, robots: list[_Robot], count: int, tables) -> list:
+class _PythonSteps:
+    """The fleet's components stepped by Python (lidars, planners), stepped here at a block's first
+    step (`step`), all of them before the compiled kernel steps the FMUs through the whole block in
+    one call: the kernel's tables skip them (as components with constant outputs: the kernel neither
+    steps them nor copies their outputs), so after they stepped their outputs are copied into the
+    FMUs that read them (`feeds`, the master's arithmetic), and hold to the block's end as the
+    kernel would have copied them. The same values as the kernel handing each back where it is due
+    (`Master.run_blocks`), in fewer kernel calls, when no FMU a Python component reads or feeds
+    comes before it in the master's order (`make`: None otherwise)."""
+
+    def __init__(self, master: Master, steps: list, feeds: list, gathers: dict) -> None:
+        self.master = master
+        self.steps = steps  # (component, period, gather of its inputs or None), in the master's order
+        self.feeds = feeds  # copy of the Python components' outputs into each FMU that reads them
+        self.gathers = gathers  # (consumer, its Python producers or None: all) -> gather, for `make`
+
+    @classmethod
+    def make(cls, master: Master, previous: _PythonSteps | None = None) -> _PythonSteps | None:
+        """The fleet's Python components, or None (class docstring); `previous`: those before a
+        robot was switched off, whose gathers are kept (a gather per robot component: generating
+        them takes a quarter of a second at N = 50)."""
+        system = master.system
+        if system.mode == "jacobi":  # every component reads the outputs of the step before
+            return None
+        python = [
+            c for c in master.order if type(c).native_step is Component.native_step and not c.constant_outputs
+        ]
+        if not python:
+            return None
+        names = {c.name for c in python}
+        place = {c.name: i for i, c in enumerate(master.order)}
+        links = system.links()
+        consumers: dict[str, set[str]] = {}  # FMU -> the Python components it reads
+        for consumer, fed in links.items():
+            for link in fed:
+                if link.producer in names and consumer not in names:
+                    if place[consumer] < place[link.producer]:
+                        return None  # it reads the Python component's previous output
+                    consumers.setdefault(consumer, set()).add(link.producer)
+                elif consumer in names and link.producer not in names:
+                    if (
+                        place[link.producer] < place[consumer]
+                        and not system.components[link.producer].constant_outputs
+                    ):
+                        return None  # the Python component reads its output of the same step
+        gathers = {}
+        kept = previous.gathers if previous is not None else {}
+
+        def gather(name: str, producers: frozenset | None):
+            key = (name, producers)
+            if key not in gathers:
+                gathers[key] = (
+                    kept[key] if key in kept else make_gather(system, system.components[name], producers)
+                )
+            return gathers[key]
+
+        steps = [(c, system.period_steps(c), gather(c.name, None)) for c in python]
+        order = sorted(consumers, key=place.__getitem__)
+        feeds = [gather(name, frozenset(consumers[name])) for name in order]
+        return cls(master, steps, feeds, gathers)
+
+    def tables(self, block: int):
+        """The kernel's tables without the Python components; None when the kernel cannot step the
+        rest alone."""
+        from cosim.core import kernel
+
+        for component, _, _ in self.steps:
+            component.constant_outputs = True
+        try:
+            tables = self.master.kernel_tables(record=True, block=block)
+        finally:
+            for component, _, _ in self.steps:
+                component.constant_outputs = False
+        if tables is None or (tables.components[:, kernel.C_KIND] == kernel.KIND_PYTHON).any():
+            return None
+        return tables
+
+    def step(self, k: int) -> None:
+        """Step the Python components due at step k, then copy their outputs to the FMUs."""
+        master = self.master
+        t = (master.start_time_ns + k * master.system.macro_step_ns) / NS_PER_S
+        for component, period, gather in self.steps:
+            if k % period:
+                continue
+            try:
+                if gather is not None:
+                    gather()
+                    component.push_inputs()
+                component.do_step(t, master.step_seconds(k, period))
+                component.get_outputs()
+            except CosimError as error:
+                master.failure = error
+                raise
+        for feed in self.feeds:
+            feed()
+
+
+def _advance(
+    master: Master, robots: list[_Robot], count: int, tables, python: _PythonSteps | None = None
+) -> list:
     """Step the fleet's system `count` steps, hand every robot its rows and return them (per
     component of the master's order, its inputs and outputs after each of its steps; None for one
-    stepped by Python)."""
+    stepped by Python). `python`: the Python components, stepped before the kernel steps the rest
+    (`tables` then without them)."""
     first = master.step_index
     kept: list[list[np.ndarray]] = []
+    if python is not None:
+        python.step(first)
     if tables is not None:
         # FMUs in the compiled kernel; the lidars and planners (Python) step in the block's first
         # step and hold their outputs to its end (the block is cut only at their periods).
@@ -472,7 +582,8 @@ def _run(
     if log is not None:
         log.write_poses(0, [(*each.pose, *each.command) for each in robots])
     block = _block_steps(master)
-    tables = master.kernel_tables(record=True, block=block)
+    stop_on_collision = settings.on_collision == "stop"
+    tables, python = _tables(master, block)
     if coordination is not None:  # the released cells (and halts) for the first block
         coordination.before_block(0.0)
     wall_start = time.perf_counter()
@@ -481,19 +592,36 @@ def _run(
     last_pose_step = 0
     while k < steps and reason is None:
         count = min(block, steps - k)
-        histories = _advance(master, robots, count, tables)
+        histories = _advance(master, robots, count, tables, python)
         if log is not None:
             _log_plans(log, robots, k * h_ns)
         poses = []  # the poses logged in the block: (step, t_ns, per robot x, y, theta, v, omega)
-        for i in range(count):
-            t = (k + i) * h_ns / NS_PER_S
-            end_ns = min((k + i + 1) * h_ns, stop_ns) if stop_ns is not None else (k + i + 1) * h_ns
-            t_next = end_ns / NS_PER_S
-            after = np.array([each.poses[i, :2] for each in robots])
-            began = contacts.step(t, t_next - t, positions, after)
+        ends_ns = [(k + i + 1) * h_ns for i in range(count)]
+        if stop_ns is not None:
+            ends_ns = [min(end_ns, stop_ns) for end_ns in ends_ns]
+        ends = [end_ns / NS_PER_S for end_ns in ends_ns]
+        starts = [(k + i) * h_ns / NS_PER_S for i in range(count)]
+        lengths = [end - start for start, end in zip(starts, ends, strict=True)]
+        last = count - 1
+        if not stop_on_collision:  # nothing ends the run but the robots' own ends: judged a robot at a time
+            ended = [_judge_block(each, ends, lengths, positions[r]) for r, each in enumerate(robots)]
+            if all(not each.judged for each in robots):  # ends with the step in which the last one ended
+                last = max((step for step in ended if step is not None), default=0)
+        stacked = np.stack([each.poses[: last + 1, :2] for each in robots], axis=1)  # step, robot, x y
+        if not stop_on_collision:  # every step up to the last is checked: all at once
+            began_in = contacts.steps(starts, lengths, np.concatenate((positions[None], stacked)))
+        for i in range(last + 1):
+            t_next, end_ns = ends[i], ends_ns[i]
+            after = stacked[i]
+            began = (
+                began_in[i]
+                if not stop_on_collision
+                else contacts.step(starts[i], lengths[i], positions, after)
+            )
             outcome.collisions += began
-            for k_robot, each in enumerate(robots):
-                _judge(each, t_next, t_next - t, positions[k_robot], after[k_robot], i)
+            if stop_on_collision:
+                for k_robot, each in enumerate(robots):
+                    _judge(each, t_next, lengths[i], positions[k_robot], after[k_robot], i)
             positions = after
             outcome.time = t_next
             if trace is not None:
@@ -501,11 +629,9 @@ def _run(
             if log is not None and (k + i + 1) % pose_steps == 0:
                 poses.append((k + i, end_ns, [(*each.poses[i], *each.commands_now[i]) for each in robots]))
                 last_pose_step = k + i + 1
-            if (began or any(each.outcome.status == "collision" for each in robots)) and (
-                settings.on_collision == "stop"
-            ):
+            if stop_on_collision and (began or any(each.outcome.status == "collision" for each in robots)):
                 reason = "collision"
-            elif all(not each.judged for each in robots):
+            elif (stop_on_collision or i == last) and all(not each.judged for each in robots):
                 reason = "completed" if outcome.completed else "all_ended"
             if reason is not None:
                 break
@@ -516,7 +642,7 @@ def _run(
             reason = "interrupted"
         if tables is not None and reason is None:
             if any(each.outcome.status == "collision" and not each.halted for each in robots):
-                tables = _halt(master, robots, log, block)
+                tables, python = _halt(master, robots, log, block, python)
         for each in robots:  # a new mission goal: given at the end of the block
             if each.pending_goal and each.judged:
                 _next_goal(each, outcome.time, coordination)
@@ -540,11 +666,11 @@ def _run(
     outcome.wall_time = time.perf_counter() - wall_start
 
 
-def _halt(master: Master, robots: list[_Robot], log: FleetLog | None, block: int):
+def _halt(master: Master, robots: list[_Robot], log: FleetLog | None, block: int, python=None):
     """Switch off every robot that hit a wall or obstacle ([fleet] on_collision = "continue"): its
     components are no longer stepped (the master steps no component with constant outputs), so it
     stays where it stands, its pose still seen by the others' lidars. Returns the kernel's tables
-    for the robots still stepped."""
+    for the robots still stepped, and their Python components (`_tables`)."""
     for each in robots:
         if each.outcome.status == "collision" and not each.halted:
             each.halted = True
@@ -552,7 +678,18 @@ def _halt(master: Master, robots: list[_Robot], log: FleetLog | None, block: int
                 component.constant_outputs = True
             if log is not None:
                 log.steps.halt(each.robot.name)
-    return master.kernel_tables(record=True, block=block)
+    return _tables(master, block, python)
+
+
+def _tables(master: Master, block: int, previous: _PythonSteps | None = None) -> tuple:
+    """The kernel's tables for a block and the Python components stepped apart from it
+    (`_PythonSteps`; `previous`: those until now), or the tables with every component (the kernel
+    handing the Python ones back) and None, or (None, None) when the kernel cannot step the fleet."""
+    python = _PythonSteps.make(master, previous)
+    tables = python.tables(block) if python is not None else None
+    if tables is None:
+        return master.kernel_tables(record=True, block=block), None
+    return tables, python
 
 
 def _held(rows: np.ndarray, first: int, count: int, period: int, last: np.ndarray) -> np.ndarray:
@@ -560,12 +697,10 @@ def _held(rows: np.ndarray, first: int, count: int, period: int, last: np.ndarra
     rows are those of the steps k % period == 0; before its first step in the block, `last`)."""
     if period == 1:
         return rows
-    out = np.empty((count, rows.shape[1]))
-    value, j = last, 0
-    for i, k in enumerate(range(first, first + count)):
-        if k % period == 0:
-            value, j = rows[j], j + 1
-        out[i] = value
+    # Row j holds from step due + j period on (due: the first step k >= first with k % period == 0).
+    latest = (np.arange(first, first + count) - due_from(first, period)) // period
+    out = rows[np.maximum(latest, 0)] if len(rows) else np.empty((count, len(last)))
+    out[latest < 0] = last
     return out
 
 
@@ -613,6 +748,68 @@ def _judge(each: _Robot, t: float, h: float, before, after, step: int = 0) -> No
         return
     goal = each.goals[each.goal_index]
     result.deadlocked_at = each.progress.update(t, math.hypot(goal.x - after[0], goal.y - after[1]))
+
+
+def _judge_block(each: _Robot, ends: list[float], lengths: list[float], start) -> int | None:
+    """`_judge` for every step of the block whose steps end at `ends` [s] and last `lengths` [s],
+    the robot at `start` (x, y) [m] before the first; returns the step in which it stopped being
+    judged, None when it did not. The steps up to the next goal reached or collision are checked
+    in one `OutcomeMonitor.check_positions` call, with the same arithmetic, in the same order, as
+    step by step; a robot dwelling or waiting for its next goal is judged step by step."""
+    if not each.judged:
+        return None
+    result, monitor, progress = each.outcome, each.monitor, each.progress
+    xs, ys = each.poses[:, 0].tolist(), each.poses[:, 1].tolist()
+    modes = each.modes.tolist()
+    bx, by = float(start[0]), float(start[1])
+    count = len(ends)
+    i = 0
+    while i < count:
+        if each.pending_goal or each.dwell_until is not None:
+            _judge(each, ends[i], lengths[i], (bx, by), (xs[i], ys[i]), i)
+            bx, by = xs[i], ys[i]
+            if not each.judged:
+                return i
+            i += 1
+            continue
+        index, why = monitor.check_positions(ends[i:], xs[i:], ys[i:])
+        event = i + index  # the step that reached a goal or collided (count: none)
+        goal = each.goals[each.goal_index]
+        for j in range(i, min(event + 1, count)):
+            x, y, h = xs[j], ys[j], lengths[j]
+            moved = math.hypot(x - bx, y - by)
+            bx, by = x, y
+            result.distance += moved
+            if modes[j] == MODE_RECOVER:
+                result.recovery_time += h
+            if j == event:
+                break
+            if moved < STOPPED_SPEED * h:
+                result.stopped_time += h
+            result.deadlocked_at = progress.update(ends[j], math.hypot(goal.x - x, goal.y - y))
+        if why is None:
+            return None
+        t, x, y = ends[event], xs[event], ys[event]
+        if why == "collision":
+            result.status = "collision"
+            result.collision = (t, x, y)
+            return event
+        if moved < STOPPED_SPEED * lengths[event]:  # reached a goal (neither dwelling nor waiting)
+            result.stopped_time += lengths[event]
+        monitor.outcome.reason, monitor.outcome.reached = "running", False
+        result.goals_reached += 1
+        each.goal_index += 1
+        result.deadlocked_at = None
+        if each.goal_index == len(each.goals):
+            result.status = "completed"
+            result.completion_time = t
+            return event
+        if goal.dwell > 0:
+            each.dwell_until = t + goal.dwell
+        else:
+            each.pending_goal = True
+        i = event + 1
+    return None
 
 
 def _next_goal(each: _Robot, t: float, coordination: FleetCoordination | None = None) -> None:

@@ -18,6 +18,7 @@ two messages lands where it would have.
 
 from __future__ import annotations
 
+import itertools
 import struct
 
 import numpy as np
@@ -145,9 +146,29 @@ class SignalStream:
         self.rows = np.empty((capacity + 1, size))
         if split is not None:
             self.rows[0] = initial
+        # Its row of the pack's stream table (`cosim.core.kernel.pack_records`), the columns that
+        # do not change from pack to pack, and its field-table row (None: no values).
+        records = self.records
+        self.table = np.zeros(kernel.STREAM_COLUMNS, dtype=np.int64)
+        self.table[kernel.P_KIND] = kernel.STREAM_FIXED
+        self.table[kernel.P_CHANNEL] = channel
+        self.table[kernel.P_SIZE] = records.size
+        self.table[kernel.P_TEMPLATE] = records.template.ctypes.data
+        self.table[kernel.P_MATRIX_COLUMNS] = size
+        self.table[kernel.P_STAMP_COUNT] = len(records.stamps)
+        self.table[kernel.P_STAMP_FIRST : kernel.P_STAMP_FIRST + len(records.stamps)] = records.stamps
+        self.table[kernel.P_FIELD_COUNT] = 1 if size else 0
+        self.field = (records.offset("values"), 0, size) if size else None
+        self._addressed: tuple[np.ndarray, int] | None = None
         self.times: list[int] = []
         self.pending_ns: int | None = None  # [ns] when the pending record's outputs hold (None: first step)
         self.ended = False
+
+    def address(self) -> int:
+        """The address of `rows` (a new array when they grew)."""
+        if self._addressed is None or self._addressed[0] is not self.rows:
+            self._addressed = (self.rows, self.rows.ctypes.data)
+        return self._addressed[1]
 
     def carry(self) -> None:
         """After the held rows were packed: the pending record becomes row 0, with the inputs of
@@ -472,15 +493,15 @@ class MessageBlock:
         """End (exclusive) of the first message in order[first:end] that fills its stream's block."""
         stop = None
         part = order[first:end]
+        counts = np.bincount(part, minlength=len(self.streams)).tolist()
         sizes = self.group_sizes
         ends = [(RAW_STREAM, self.capacity - sizes.get(RAW_STREAM, 0))]
         if self.pose is not None:
             ends.append((self.pose_streams[2], self.capacity - sizes.get(self.pose_streams[0], 0)))
         ends += [(n, self.capacity - sizes.get(n, 0)) for n in self.stream_of.values()]
         for number, room in ends:
-            where = np.flatnonzero(part == number)
-            if len(where) >= room > 0:
-                candidate = first + int(where[room - 1]) + 1
+            if counts[number] >= room > 0:  # only then is the room-th message's place needed
+                candidate = first + int(np.flatnonzero(part == number)[room - 1]) + 1
                 stop = candidate if stop is None else min(stop, candidate)
         return stop
 
@@ -492,25 +513,33 @@ class MessageBlock:
         stamps = times[first:end]
         if self.group == 0 and self.window_ns:
             self.deadline = self._window_end(int(stamps[0]))
-        counts = np.bincount(part, minlength=len(self.streams)).tolist()
+        counts = np.bincount(part, minlength=len(self.streams))
+        # Each stream's stamps in held order: one stable sort instead of a mask per stream.
+        by_stream = np.argsort(part, kind="stable")
+        grouped = stamps[by_stream]
+        grouped_list = grouped.tolist()
+        bounds = np.cumsum(counts).tolist()
+        counts = counts.tolist()
         sizes = self.group_sizes
-        for number, n in enumerate(counts):
-            if not n:
-                continue
+        for number in np.flatnonzero(counts).tolist():
+            n = counts[number]
             if number == self.pose_streams[1] or number == self.pose_streams[2]:
                 continue
+            low = bounds[number] - n
             sizes[number] = sizes.get(number, 0) + n
             stream = self.streams[number]
             if number == RAW_STREAM:
                 at = cursors[RAW_STREAM]
-                for (channel, payload), t_ns in zip(
-                    raw[at : at + n], stamps[part == RAW_STREAM].tolist(), strict=True
-                ):
-                    self.raw.append((channel, t_ns, payload))
+                self.raw += [
+                    (channel, t_ns, payload)
+                    for (channel, payload), t_ns in zip(
+                        raw[at : at + n], grouped_list[low : low + n], strict=True
+                    )
+                ]
                 cursors[RAW_STREAM] = at + n
             elif number == self.pose_streams[0]:
                 at = cursors[number]
-                self.pose.add_rows(stamps[part == number], pose_rows[at : at + n])
+                self.pose.add_rows(grouped[low : low + n], pose_rows[at : at + n])
                 cursors[number] = at + n
             elif isinstance(stream, SignalStream):
                 at = cursors[number]
@@ -526,7 +555,7 @@ class MessageBlock:
                         raise CosimError(f"signal channel {stream.records.channel}: a step after end_steps")
                     stream.rows[held : held + n, :split] = rows[:, :split]
                     stream.rows[held + 1 : held + n + 1, split:] = rows[:, split:]
-                stream.times.extend(stamps[part == number].tolist())
+                stream.times.extend(grouped_list[low : low + n])
         self.order.extend(part.tolist())
         self.count += end - first
         self.group += end - first
@@ -564,16 +593,21 @@ class MessageBlock:
         half = rows[:, 2] / 2.0
         return times.astype(np.uint64), rows, np.column_stack((np.sin(half), np.cos(half)))
 
-    def _raw_sequences(self) -> list[int]:
-        """The sequence number of each held raw message (counting per channel, in held order)."""
-        counts: dict[int, int] = {}
-        for channel, _, _ in self.raw:
-            counts[channel] = counts.get(channel, 0) + 1
-        next_of = {channel: self._sequence(channel, count) for channel, count in sorted(counts.items())}
-        sequences = []
-        for channel, _, _ in self.raw:
-            sequences.append(next_of[channel])
-            next_of[channel] += 1
+    def _raw_sequences(self, channels: np.ndarray) -> np.ndarray:
+        """The sequence number of each held raw message (of `channels`: counting per channel, in
+        held order; the channels' counters advanced in channel order)."""
+        by_channel = np.argsort(channels, kind="stable")
+        grouped = channels[by_channel]
+        starts = np.flatnonzero(np.diff(grouped, prepend=grouped[0] - 1))
+        counts = np.diff(np.append(starts, len(grouped)))
+        firsts = [
+            self._sequence(int(channel), int(count))
+            for channel, count in zip(grouped[starts], counts, strict=True)
+        ]
+        sequences = np.empty(len(channels), dtype=np.int64)
+        sequences[by_channel] = np.repeat(np.array(firsts, dtype=np.int64) - starts, counts) + np.arange(
+            len(grouped)
+        )
         return sequences
 
     def _records_native(self, order: np.ndarray) -> tuple[bytearray, np.ndarray, np.ndarray, np.ndarray]:
@@ -604,13 +638,32 @@ class MessageBlock:
             alive.extend((times, matrix))
             return count * records.size
 
-        for number, stream in enumerate(self.streams):
-            if isinstance(stream, SignalStream) and stream.times:
-                times = np.array(stream.times, dtype=np.uint64)
-                width = stream.rows.shape[1]  # rows: float64, C-contiguous (made by `SignalStream`, `_grow`)
-                parts = [("values", 0, width)] if width else []
-                size += fixed(number, stream.records, times, stream.rows, parts)
-                carried.append(stream)
+        numbers = [
+            n for n, stream in enumerate(self.streams) if type(stream) is SignalStream and stream.times
+        ]
+        if numbers:  # the signal streams' rows at once: their fixed columns kept (`SignalStream.table`)
+            carried = [self.streams[n] for n in numbers]
+            counts = [len(stream.times) for stream in carried]
+            total = sum(counts)
+            times = np.fromiter(itertools.chain.from_iterable(s.times for s in carried), np.uint64, total)
+            alive.append(times)
+            starts = np.zeros(len(counts), dtype=np.int64)
+            np.cumsum(counts[:-1], out=starts[1:])
+            rows = np.array([stream.table for stream in carried])
+            rows[:, kernel.P_SEQUENCE] = [
+                self._sequence(stream.records.channel, count)
+                for stream, count in zip(carried, counts, strict=True)
+            ]
+            rows[:, kernel.P_TIMES] = times.ctypes.data + 8 * starts
+            # rows: float64, C-contiguous (made by `SignalStream`, `_grow`)
+            rows[:, kernel.P_MATRIX] = [stream.address() for stream in carried]
+            alive += [stream.rows for stream in carried]
+            with_values = rows[:, kernel.P_FIELD_COUNT] > 0
+            rows[with_values, kernel.P_FIELD_FIRST] = np.arange(int(with_values.sum()))
+            streams[numbers] = rows
+            fields += [stream.field for stream in carried if stream.field is not None]
+            sizes = rows[:, kernel.P_SIZE]
+            size += int(np.dot(sizes, counts))
         if self.pose is not None and self.pose.count:
             times, rows, quaternion = self._pose_rows()
             # columns x, y, qz, qw, v, omega (float64 whatever the rows held)
@@ -624,13 +677,14 @@ class MessageBlock:
         streams[RAW_STREAM, kernel.P_KIND] = kernel.STREAM_RAW
         blob = b""
         if self.raw:
-            lengths = [len(payload) for _, _, payload in self.raw]
-            raw_table[:, kernel.RAW_CHANNEL] = [channel for channel, _, _ in self.raw]
-            raw_table[:, kernel.RAW_SEQUENCE] = self._raw_sequences()
-            raw_table[:, kernel.RAW_TIME] = [t_ns for _, t_ns, _ in self.raw]
+            channels, stamps, payloads = zip(*self.raw, strict=True)
+            lengths = list(map(len, payloads))
+            raw_table[:, kernel.RAW_CHANNEL] = channels
+            raw_table[:, kernel.RAW_SEQUENCE] = self._raw_sequences(raw_table[:, kernel.RAW_CHANNEL])
+            raw_table[:, kernel.RAW_TIME] = stamps
             raw_table[:, kernel.RAW_SIZE] = lengths
             raw_table[1:, kernel.RAW_START] = np.cumsum(lengths[:-1])
-            blob = b"".join([payload for _, _, payload in self.raw])
+            blob = b"".join(payloads)
             size += MESSAGE_HEAD_SIZE * len(self.raw) + len(blob)
             self.raw = []
         table = np.array(fields, dtype=np.int64).reshape(-1, kernel.FIELD_COLUMNS)

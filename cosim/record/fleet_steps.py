@@ -117,7 +117,7 @@ class FleetSteps:
         self.pose_slot = self.obstacle_slot + 1  # every robot's /odom and /pose, then /tf
         self.per_step = self.pose_slot + 2 * len(self.robots) + 1
         self.world = self.robots[0].recording  # the obstacles the fleet shares
-        self._tf: _Template | None = None  # the pose messages' templates, made on first use
+        self._poses: _Poses | None = None  # the pose messages' templates, made on first use
 
     @property
     def views(self) -> dict[str, object]:
@@ -144,20 +144,27 @@ class FleetSteps:
 
     def pose_messages(self, t_ns: int, rows) -> list[tuple[int, bytes]]:
         """(channel, CDR payload) of every robot's /odom and /pose, then of the one /tf, at t_ns."""
-        if self._tf is None:
-            self._odometry = [_Template(partial(_odometry, robot), 6) for robot in self.robots]
-            self._tf = _Template(partial(_tf, self.robots), 4 * len(self.robots))
-            self._channels = [(r.view.channel("/odom"), r.view.channel("/pose")) for r in self.robots]
-        messages, poses = [], []
-        for odometry, (odom, pose), (x, y, theta, v, omega) in zip(
-            self._odometry, self._channels, rows, strict=True
-        ):
+        if self._poses is None:
+            self._poses = _Poses(self.robots)
+            self._channels = [
+                *(r.view.channel("/odom") for r in self.robots),
+                *(r.view.channel("/pose") for r in self.robots),
+                self.recorder.channel("/tf"),
+            ]
+        odometry, poses = [], []
+        for x, y, theta, v, omega in rows:
             x, y, theta, v, omega = float(x), float(y), float(theta), float(v), float(omega)
             qz, qw = math.sin(theta / 2.0), math.cos(theta / 2.0)  # as `rosmsg.quaternion`
-            messages.append((odom, odometry.fill(t_ns, (x, y, qz, qw, v, omega))))
-            messages.append((pose, rosmsg.pose_stamped_cdr(t_ns, x, y, theta)))
+            odometry += (x, y, qz, qw, v, omega)
             poses += (x, y, qz, qw)
-        messages.append((self.recorder.channel("/tf"), self._tf.fill(t_ns, poses)))
+        payloads = self._poses.fill(t_ns, odometry + poses + poses)
+        count = len(self.robots)
+        channels = self._channels
+        messages = []
+        for number in range(count):
+            messages.append((channels[number], payloads[number]))
+            messages.append((channels[count + number], payloads[count + number]))
+        messages.append((channels[-1], payloads[-1]))
         return messages
 
     def block(self, first: int, end: int, histories, poses=()) -> None:
@@ -165,6 +172,7 @@ class FleetSteps:
         t_ns, rows as for `write_poses`) of the poses written at the end of step k."""
         start_ns, h_ns, per_step = self.start_ns, self.h_ns, self.per_step
         signals, messages = [], []
+        due: dict[int, tuple] = {}  # period -> the steps' count, keys (slot 0) and stamps, for all robots
         for number, robot in enumerate(self.robots):
             if robot.halted:
                 continue
@@ -174,13 +182,16 @@ class FleetSteps:
                 if rows is None:  # stepped by Python: in the block's first step at most
                     if first % period:
                         continue
-                    steps = np.array([first], dtype=np.int64)
-                    values = entry.record()[None, :]
-                else:
+                    keys, times = np.array([first * per_step + slot]), np.array([start_ns + first * h_ns])
+                    signals.append((entry.channel, keys, times, entry.record()[None, :]))
+                    continue
+                shared = due.get(period)
+                if shared is None:
                     steps = np.arange(due_from(first, period), end, period, dtype=np.int64)
-                    values = rows[: len(steps), columns]
-                if len(steps):
-                    signals.append((entry.channel, steps * per_step + slot, start_ns + steps * h_ns, values))
+                    shared = due[period] = (len(steps), steps * per_step, start_ns + steps * h_ns)
+                count, keys, times = shared
+                if count:
+                    signals.append((entry.channel, keys + slot, times, rows[:count, columns]))
             recording, view = robot.recording, robot.view
             scan = recording.scan
             if scan is not None and first % scan.period == 0:  # a lidar steps in a block's first step
@@ -255,6 +266,55 @@ class _Template:
         for at, value in zip(self.fields, values, strict=True):
             data[at : at + 8] = _FLOAT64.pack(value)
         return bytes(data)
+
+
+class _Poses:
+    """The CDR bytes of every robot's /odom, then every robot's /pose, then the one /tf at a time:
+    their `_Template`s in one byte array, whose stamps and float64 fields are written by two
+    fancy-index assignments (`fill(t_ns, values)`: per robot x, y, qz, qw, v, omega of its /odom,
+    then per robot x, y, qz, qw of its /pose, then of its /tf transform)."""
+
+    def __init__(self, robots: list[_Robot]) -> None:
+        pose = _Template(_pose_stamped, 4)
+        sample = rosmsg.pose_stamped_cdr(_SENTINEL_NS, 1.5, -2.5, 0.75)
+        if pose.fill(_SENTINEL_NS, (1.5, -2.5, math.sin(0.375), math.cos(0.375))) != sample:
+            raise CosimError("unexpected CDR layout of a pose message")
+        templates = [
+            *(_Template(partial(_odometry, robot), 6) for robot in robots),
+            *(pose for _ in robots),
+            _Template(partial(_tf, robots), 4 * len(robots)),
+        ]
+        sizes = [len(template.data) for template in templates]
+        starts = np.concatenate(([0], np.cumsum(sizes))).tolist()
+        self.bounds = list(zip(starts[:-1], starts[1:], strict=True))
+        self.data = np.concatenate([np.frombuffer(bytes(template.data), np.uint8) for template in templates])
+        stamps = [
+            start + at for start, template in zip(starts, templates, strict=False) for at in template.stamps
+        ]
+        fields = [
+            start + at for start, template in zip(starts, templates, strict=False) for at in template.fields
+        ]
+        self.stamp_bytes = (np.array(stamps, dtype=np.intp)[:, None] + np.arange(8)).reshape(-1)
+        self.field_bytes = (np.array(fields, dtype=np.intp)[:, None] + np.arange(8)).reshape(-1)
+        self.stamps = len(stamps)
+
+    def fill(self, t_ns: int, values: list[float]) -> list[bytes]:
+        stamp = np.frombuffer(_STAMP.pack(*divmod(int(t_ns), NS_PER_S)), np.uint8)
+        self.data[self.stamp_bytes] = np.tile(stamp, self.stamps)
+        self.data[self.field_bytes] = np.array(values, dtype="<f8").view(np.uint8)
+        data = self.data.tobytes()
+        return [data[start:end] for start, end in self.bounds]
+
+
+def _pose_stamped(t_ns: int, values) -> bytes:
+    """/<robot>/pose: x, y, qz, qw of `values` in frame map (the bytes of `rosmsg.pose_stamped_cdr`)."""
+    x, y, qz, qw = values
+    orientation = rosmsg.make("geometry_msgs/msg/Quaternion", x=0.0, y=0.0, z=qz, w=qw)
+    pose = rosmsg.make("geometry_msgs/msg/Pose", position=rosmsg.point(x, y), orientation=orientation)
+    message = rosmsg.make(
+        "geometry_msgs/msg/PoseStamped", header=rosmsg.header(t_ns, rosmsg.MAP_FRAME), pose=pose
+    )
+    return rosmsg.serialize(message, "geometry_msgs/msg/PoseStamped")
 
 
 def _odometry(robot: _Robot, t_ns: int, values) -> bytes:

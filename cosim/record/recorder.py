@@ -577,18 +577,24 @@ class Recorder:
         block = self._block
         keys, streams, stamps = [], [], []
         signal_rows = {}
+        numbers, counts = [], []
+        stream_of, signal_sizes = block.stream_of, self._signal_sizes
         for channel, channel_keys, times, rows in signals:
-            if not len(channel_keys):
+            count = len(channel_keys)
+            if not count:
                 continue
-            number = block.stream_of[channel]
+            number = stream_of[channel]
             if number in signal_rows:
                 raise CosimError(f"{self.path}: channel {channel} given twice")
-            if rows.ndim != 2 or rows.shape[1] != self._signal_sizes[channel] or len(rows) != len(times):
+            if rows.ndim != 2 or rows.shape[1] != signal_sizes[channel] or len(rows) != len(times):
                 raise CosimError(f"{self.path}: signal rows of shape {rows.shape} for channel {channel}")
             signal_rows[number] = rows
             keys.append(channel_keys)
-            streams.append(np.full(len(channel_keys), number))
+            numbers.append(number)
+            counts.append(count)
             stamps.append(times)
+        if numbers:
+            streams.append(np.repeat(np.array(numbers, dtype=np.int64), counts))
         pose_rows = None
         if poses is not None and len(poses[0]):
             if self._pose_channels is None:
@@ -667,11 +673,12 @@ class Recorder:
             headings = np.append(headings, headings[-1])
         else:
             headings = np.zeros(len(points))
-        poses = [
-            rosmsg.pose_stamped(t_ns, px, py, yaw)
-            for (px, py), yaw in zip(points[:, :2], headings, strict=True)
-        ]
-        message = rosmsg.make("nav_msgs/msg/Path", header=rosmsg.header(t_ns, MAP_FRAME), poses=poses)
+        if self.trace is None and len(points):
+            payload = _path_layout().cdr(t_ns, points[:, 0], points[:, 1], headings)
+            if payload is not None:
+                self._write(self._channel("/plan"), t_ns, payload)
+                return
+        message = _path_message(t_ns, points[:, 0], points[:, 1], headings)
         self._write_message("/plan", t_ns, message)
         if self.trace is not None:
             self.trace.plans.append((int(t_ns), message))
@@ -837,3 +844,99 @@ def scan_layout(angles: np.ndarray) -> tuple[float, float, np.ndarray, str]:
 
 
 __all__ = ["Recorder", "RunTrace", "TRACE_SIGNALS", "scan_layout", "TOPIC_TYPES"]
+
+
+def _path_cdr(t_ns: int, xs, ys, headings) -> bytes:
+    return rosmsg.serialize(_path_message(t_ns, xs, ys, headings), "nav_msgs/msg/Path")
+
+
+def _path_message(t_ns: int, xs, ys, headings):
+    """nav_msgs/Path in frame map: a PoseStamped (frame map, stamped t_ns) per point."""
+    poses = [rosmsg.pose_stamped(t_ns, px, py, yaw) for px, py, yaw in zip(xs, ys, headings, strict=True)]
+    return rosmsg.make("nav_msgs/msg/Path", header=rosmsg.header(t_ns, MAP_FRAME), poses=poses)
+
+
+class _PathLayout:
+    """The CDR bytes of a /plan Path without building its messages (a plan has hundreds of poses):
+    the bytes before the poses, the first pose's and each further pose's (CDR aligns the float64s
+    to 8 bytes, so the first pose may be padded differently), a layout that does not depend on the
+    values, found once by serialising paths of sentinel values, with the offsets of the stamps and
+    of x, y, qz, qw (the quaternion's z, w, as `rosmsg.quaternion` computes them). `cdr(t_ns, xs,
+    ys, headings)` is None when the layout is not so (the message is built then)."""
+
+    def __init__(self) -> None:
+        self.usable = False
+        empty = _path_cdr(_SENTINEL_NS, [], [], [])
+        sentinels = [1.0e250 * (index + 1.5) for index in range(4)]
+        one = _path_cdr(_SENTINEL_NS, sentinels[:1], sentinels[2:3], [0.0])
+        two = _path_cdr(_SENTINEL_NS, sentinels[:2], sentinels[2:], [0.0, 0.0])
+        if not empty.endswith(struct.pack("<I", 0)):
+            return
+        self.head = bytearray(empty[:-4])  # the poses' count (uint32) ends the empty path
+        stamp = _STAMP.pack(*divmod(_SENTINEL_NS, 1_000_000_000))
+        self.head_stamps = rosmsg.pattern_offsets(bytes(self.head), stamp)
+        self.first = self._pose(one[len(empty) :], stamp, sentinels[0], sentinels[2])
+        self.rest = self._pose(two[len(one) :], stamp, sentinels[1], sentinels[3])
+        if self.first is None or self.rest is None or not self.head_stamps:
+            return
+        self.usable = True
+        # The same bytes as the messages serialised, or never used.
+        for count in (1, 2, 3, 6):
+            xs = [0.37 * i - 5.1 for i in range(count)]
+            ys = [-1.3 * i + 2.9 for i in range(count)]
+            headings = [0.91 * i - 2.7 for i in range(count)]
+            if self.cdr(123_456_789_012, xs, ys, headings) != _path_cdr(123_456_789_012, xs, ys, headings):
+                self.usable = False
+                return
+
+    @staticmethod
+    def _pose(data: bytes, stamp: bytes, x: float, y: float) -> tuple | None:
+        """(bytes as uint8, stamp offsets, offset of x) of one pose, or None: y, z, the quaternion
+        do not follow x."""
+        stamps = rosmsg.pattern_offsets(data, stamp)
+        found = [rosmsg.pattern_offsets(data, struct.pack("<d", value)) for value in (x, y)]
+        if not stamps or any(len(at) != 1 for at in found):
+            return None
+        at = found[0][0]
+        if found[1][0] != at + 8 or at + 56 > len(data):
+            return None
+        return np.frombuffer(data, np.uint8), stamps, at
+
+    def cdr(self, t_ns: int, xs, ys, headings) -> bytes | None:
+        if not self.usable:
+            return None
+        count = len(xs)
+        stamp = _STAMP.pack(*divmod(int(t_ns), 1_000_000_000))
+        head = self.head
+        for at in self.head_stamps:
+            head[at : at + 8] = stamp
+        halves = [yaw / 2.0 for yaw in np.asarray(headings, dtype=float).tolist()]
+        values = np.empty((count, 7))  # x, y, z, then the quaternion x, y, z, w
+        values[:, 0] = xs
+        values[:, 1] = ys
+        values[:, 2:5] = 0.0
+        values[:, 5] = [math.sin(half) for half in halves]
+        values[:, 6] = [math.cos(half) for half in halves]
+        parts = [bytes(head), struct.pack("<I", count)]
+        stamp_bytes = np.frombuffer(stamp, np.uint8)
+        for (pose, stamps, at), rows in ((self.first, values[:1]), (self.rest, values[1:])):
+            if not len(rows):
+                continue
+            block = np.tile(pose, len(rows)).reshape(len(rows), len(pose))
+            for offset in stamps:
+                block[:, offset : offset + 8] = stamp_bytes
+            block[:, at : at + 56] = rows.view(np.uint8)
+            parts.append(block.tobytes())
+        return b"".join(parts)
+
+
+_SENTINEL_NS = 1_234_567_891_987_654_321  # a stamp no run writes, to find in a template
+_STAMP = struct.Struct("<iI")  # builtin_interfaces/Time: int32 sec, uint32 nanosec
+_PATH_LAYOUT: _PathLayout | None = None
+
+
+def _path_layout() -> _PathLayout:
+    global _PATH_LAYOUT
+    if _PATH_LAYOUT is None:
+        _PATH_LAYOUT = _PathLayout()
+    return _PATH_LAYOUT

@@ -92,6 +92,50 @@ class FleetContacts:
         starts may not overlap, but positions given in code may)."""
         return self.step(0.0, 0.0, positions, positions)
 
+    def steps(self, starts: Sequence[float], lengths: Sequence[float], positions) -> list[list[Contact]]:
+        """`step` for consecutive steps at once: step s from starts[s] to starts[s] + lengths[s]
+        [s], the robots moving from positions[s] to positions[s + 1] (S + 1 x N x 2 positions [m]);
+        the contacts that began in each step. The same arithmetic as `step`, a step per row."""
+        positions = np.asarray(positions, dtype=float)
+        i, j = self.first, self.second
+        x, y = positions[:, :, 0], positions[:, :, 1]
+        dx, dy = x[:, j] - x[:, i], y[:, j] - y[:, i]  # the offsets at each step's start and end
+        d0x, d0y, d1x, d1y = dx[:-1], dy[:-1], dx[1:], dy[1:]
+        wx, wy = d1x - d0x, d1y - d0y
+        ww = wx * wx + wy * wy
+        dw = d0x * wx + d0y * wy
+        s_star = np.zeros_like(ww)
+        np.divide(-dw, ww, out=s_star, where=ww > 0.0)
+        np.clip(s_star, 0.0, 1.0, out=s_star)
+        gap = np.hypot(d0x + s_star * wx, d0y + s_star * wy) - self.reach
+        closest = gap.min(axis=0)
+        np.minimum.at(self.min_clearance, i, closest)
+        np.minimum.at(self.min_clearance, j, closest)
+        end_touching = np.hypot(d1x, d1y) - self.reach <= 0.0
+        previous = np.vstack((self.touching[None, :], end_touching[:-1]))
+        began: list[list[Contact]] = [[] for _ in range(len(ww))]
+        for step, pair in zip(*np.nonzero((gap <= 0.0) & ~previous), strict=True):
+            began[step].append(
+                self._contact(int(pair), starts[step], lengths[step], positions[step], positions[step + 1])
+            )
+        self.touching = end_touching[-1] if len(ww) else self.touching
+        for contacts in began:
+            self.contacts += contacts
+        return began
+
+    def _contact(self, pair: int, t: float, h: float, before, after) -> Contact:
+        """The contact of `pair`, which began in the step from t to t + h [s]."""
+        a, b = int(self.first[pair]), int(self.second[pair])
+        s = first_contact(before[a], after[a], before[b], after[b], float(self.reach[pair]))
+        s = 0.0 if s is None else s  # rounding at a grazing touch: the closest approach's step
+        at_a = before[a] + s * (after[a] - before[a])
+        at_b = before[b] + s * (after[b] - before[b])
+        return Contact(
+            self.names[a], self.names[b], t + s * h,
+            (float(at_a[0]), float(at_a[1])), (float(at_b[0]), float(at_b[1])),
+            float(self.radii[a]), float(self.radii[b]),
+        )  # fmt: skip
+
     def step(self, t: float, h: float, before, after) -> list[Contact]:
         """Check the step from t to t + h [s] in which the robots moved from `before` to `after`
         (N x 2 positions [m]); return the contacts that began in it (also kept in `contacts`)."""

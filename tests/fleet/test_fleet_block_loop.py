@@ -1,0 +1,155 @@
+"""The fleet loop's block-at-a-time shortcuts against the step-at-a-time code they replace: contacts
+checked for a whole block (`FleetContacts.steps`) against `FleetContacts.step` per step; the bytes
+of /plan and of the fleet's pose messages patched into layouts against the serialised messages; and
+a fleet run (judged a robot at a time per block, its Python components stepped apart from the
+compiled kernel) against the same run judged step by step with the kernel handing each Python
+component back: the same outcome and the same log, message for message."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from cosim.navigation import fleet as fleet_module
+from cosim.navigation.fleet_log import outcome_record
+from cosim.record import recorder, rosmsg
+from cosim.record.fleet_steps import _odometry, _Poses, _tf
+from cosim.scenario.load import load_scenario
+from cosim.world.fleet import FleetContacts
+
+SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
+
+
+def _walk(rng, robots: int, steps: int) -> np.ndarray:
+    """Positions (steps + 1 x robots x 2) of robots wandering in a 3 m square: they meet often."""
+    start = rng.uniform(0.0, 3.0, (robots, 2))
+    moves = rng.normal(0.0, 0.08, (steps, robots, 2))
+    moves[steps // 2] = 0.0  # a step without motion (no relative motion: ww = 0)
+    return np.concatenate((start[None], start[None] + np.cumsum(moves, axis=0)))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_contacts_of_a_block_are_those_of_its_steps(seed):
+    rng = np.random.default_rng(seed)
+    names = [f"robot{k}" for k in range(6)]
+    radii = rng.uniform(0.2, 0.5, len(names))
+    path = _walk(rng, len(names), 60)
+    h = 0.01
+    by_step, by_block = FleetContacts(names, radii), FleetContacts(names, radii)
+    by_step.start(path[0])
+    by_block.start(path[0])
+    expected = [by_step.step(k * h, h, path[k], path[k + 1]) for k in range(60)]
+    found: list = []
+    for first, end in ((0, 7), (7, 17), (17, 18), (18, 40), (40, 60)):  # blocks of any length
+        starts = [k * h for k in range(first, end)]
+        found += by_block.steps(starts, [h] * (end - first), path[first : end + 1])
+    assert sum(len(contacts) for contacts in expected) > 0  # the robots did touch
+    assert found == expected
+    assert by_block.contacts == by_step.contacts
+    assert np.array_equal(by_block.min_clearance, by_step.min_clearance)
+    assert np.array_equal(by_block.touching, by_step.touching)
+
+
+@pytest.mark.parametrize("count", [1, 2, 3, 17, 400])
+def test_plan_bytes_are_those_of_the_serialised_path(count):
+    rng = np.random.default_rng(count)
+    points = np.cumsum(rng.normal(0.0, 0.3, (count, 2)), axis=0)
+    steps = np.diff(points, axis=0)
+    headings = np.append(np.arctan2(steps[:, 1], steps[:, 0]), 0.0)[:count]
+    t_ns = int(rng.integers(0, 10**12))
+    layout = recorder._path_layout()
+    assert layout.usable
+    expected = rosmsg.serialize(
+        rosmsg.make(
+            "nav_msgs/msg/Path",
+            header=rosmsg.header(t_ns, "map"),
+            poses=[
+                rosmsg.pose_stamped(t_ns, x, y, yaw) for (x, y), yaw in zip(points, headings, strict=True)
+            ],
+        ),
+        "nav_msgs/msg/Path",
+    )
+    assert layout.cdr(t_ns, points[:, 0], points[:, 1], headings) == expected
+
+
+def test_fleet_pose_bytes_are_those_of_the_serialised_messages():
+    robots = [SimpleNamespace(odom_frame=f"{name}/odom", base_frame=f"{name}/base_link")
+              for name in ("robot1", "robot10", "r")]  # fmt: skip
+    poses = _Poses(robots)
+    rng = np.random.default_rng(7)
+    for t_ns in (0, 1_500_000_000, 123_456_789_012):
+        rows = rng.normal(0.0, 3.0, (len(robots), 5))  # x, y, theta, v, omega
+        quaternions = [(math.sin(theta / 2.0), math.cos(theta / 2.0)) for theta in rows[:, 2]]
+        odometry, stamped, transforms = [], [], []
+        for (x, y, _, v, omega), (qz, qw) in zip(rows.tolist(), quaternions, strict=True):
+            odometry += (x, y, qz, qw, v, omega)
+            stamped += (x, y, qz, qw)
+        transforms = stamped
+        payloads = poses.fill(t_ns, odometry + stamped + transforms)
+        expected = [_odometry(robot, t_ns, odometry[6 * k : 6 * k + 6]) for k, robot in enumerate(robots)]
+        expected += [rosmsg.pose_stamped_cdr(t_ns, x, y, theta) for x, y, theta in rows[:, :3].tolist()]
+        expected.append(_tf(robots, t_ns, transforms))
+        assert payloads == expected
+
+
+def _judge_step_by_step(each, ends, lengths, start):
+    """The loop's judging before blocks: `_judge` for every step."""
+    if not each.judged:
+        return None
+    before = start
+    for i, (t, h) in enumerate(zip(ends, lengths, strict=True)):
+        after = each.poses[i, :2]
+        fleet_module._judge(each, t, h, before, after, i)
+        before = after
+        if not each.judged:
+            return i
+    return None
+
+
+def _contacts_step_by_step(self, starts, lengths, positions):
+    return [
+        self.step(t, h, positions[k], positions[k + 1])
+        for k, (t, h) in enumerate(zip(starts, lengths, strict=True))
+    ]
+
+
+def _messages(path: Path) -> list:
+    with open(path, "rb") as stream:
+        return [
+            (channel.topic, message.sequence, message.log_time, message.data)
+            for _, channel, message in make_reader(stream).iter_messages(log_time_order=False)
+        ]
+
+
+@pytest.mark.slow
+def test_a_fleet_run_is_that_of_the_step_by_step_loop(tmp_path, monkeypatch):
+    """fleet_missions for 40 s: contacts at once, robots hitting racks (halted), goals reached and
+    dwelt at; with on_collision = "continue" every shortcut is taken."""
+    overrides = ["simulation.stop_time=40"]
+    fleet = load_scenario(SCENARIOS / "fleet_missions.toml", overrides, fleet=True)
+    made = []
+    make = fleet_module._PythonSteps.make.__func__
+
+    def recorded(cls, master, previous=None):
+        made.append(make(cls, master, previous))
+        return made[-1]
+
+    monkeypatch.setattr(fleet_module._PythonSteps, "make", classmethod(recorded))
+    fast = fleet_module.run_fleet(fleet, log_path=tmp_path / "fast.mcap")
+    assert len(made) > 1 and None not in made  # stepped apart, also after robots were switched off
+
+    monkeypatch.setattr(fleet_module, "_judge_block", _judge_step_by_step)
+    monkeypatch.setattr(fleet_module._PythonSteps, "make", classmethod(lambda *_: None))
+    monkeypatch.setattr(FleetContacts, "steps", _contacts_step_by_step)
+    fleet = load_scenario(SCENARIOS / "fleet_missions.toml", overrides, fleet=True)
+    slow = fleet_module.run_fleet(fleet, log_path=tmp_path / "slow.mcap")
+
+    assert fast.collisions and any(robot.collision for robot in fast.robots)
+    assert any(robot.goals_reached for robot in fast.robots)
+    assert outcome_record(fast) == outcome_record(slow)
+    assert _messages(tmp_path / "fast.mcap") == _messages(tmp_path / "slow.mcap")
