@@ -65,6 +65,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cosim import release_collector
 from cosim.core import interrupt
 from cosim.core.component import Component
 from cosim.core.gather import make_gather
@@ -123,6 +124,9 @@ class FleetOutcome:
     )
     wall_time: float = 0.0  # [s]
     failure: str | None = None  # the message of a failed FMU (reason fmu_failed)
+    # [fleet] coordination's planning: method, solves, failures (solves without a plan), planning_time
+    # [s of wall]; None without a coordinator
+    coordination: dict | None = None
 
     @property
     def completed(self) -> bool:
@@ -310,6 +314,7 @@ def run_fleet(
             coordination = FleetCoordination.make(fleet, robots)  # None: "none" and no stops
             master = Master(system, parameters=parameters, stop_time=fleet.first.stop_time)
             initialize_or_close(master, fleet.source)
+        release_collector()  # the loop starts: the collector is on again (`cosim.hold_collector`)
         for each in robots:
             each.place(master.order)
         outcome = FleetOutcome([each.outcome for each in robots])
@@ -664,6 +669,14 @@ def _run(
             each.outcome.status = "stop_time" if reason == "stop_time" else "stopped"
     outcome.reason = reason
     outcome.wall_time = time.perf_counter() - wall_start
+    coordinator = coordination.coordinator if coordination is not None else None
+    if coordinator is not None:
+        outcome.coordination = {
+            "method": coordinator.method,
+            "solves": coordinator.solves,
+            "failures": coordinator.failures,
+            "planning_time": coordinator.solve_time,
+        }
 
 
 def _halt(master: Master, robots: list[_Robot], log: FleetLog | None, block: int, python=None):
@@ -858,6 +871,12 @@ def format_fleet(fleet: Fleet, outcome: FleetOutcome) -> str:
         f"collisions {len(outcome.collisions)}; deadlocks {len(outcome.deadlocks)}; "
         f"wall {outcome.wall_time:.2f} s"
     )
+    if outcome.coordination is not None:
+        c = outcome.coordination
+        lines.append(
+            f"coordination: {c['method']}: {c['solves']} solves ({c['failures']} without a plan), "
+            f"{c['planning_time']:.2f} s of wall time planning"
+        )
     lines += [f"  collision: {contact.describe()}" for contact in outcome.collisions]
     lines += [
         f"  collision: {robot.name} hits a wall or obstacle at t = {robot.collision[0]:.3f} s at "

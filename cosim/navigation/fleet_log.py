@@ -157,6 +157,11 @@ def outcome_record(outcome) -> dict:
         "deadlocks": [robot.name for robot in outcome.deadlocks],
         "robots": robots,
         "collisions": collisions,
+        # the planning's counts (its wall time is in the printed summary only: the log is the same
+        # whenever the run is)
+        "coordination": None
+        if outcome.coordination is None
+        else {key: outcome.coordination[key] for key in ("method", "solves", "failures")},
     }
     if outcome.failure:
         record["failure"] = outcome.failure

@@ -8,7 +8,9 @@ footprints at once (what the action dependency graph promises).
 
 from __future__ import annotations
 
+import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -125,6 +127,20 @@ def test_cosim_run_prints_a_coordinated_fleet_without_collisions(tmp_path):
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     assert "collisions 0; deadlocks 0" in result.stdout
+    # the planning's line, and its counts in the log's fleet_outcome (read by the mcap package)
+    line = next(line for line in result.stdout.splitlines() if line.startswith("coordination: "))
+    match = re.fullmatch(
+        r"coordination: mapf: (\d+) solves \(0 without a plan\), [0-9.]+ s of wall time planning", line
+    )
+    assert match, line
+    from mcap.reader import make_reader
+
+    with open(tmp_path / "f.mcap", "rb") as stream:
+        metadata = {m.name: m.metadata for m in make_reader(stream).iter_metadata()}
+    planning = json.loads(metadata["fleet_outcome"]["coordination"])
+    # 2 robots, one goal each: the first plan, then a re-solve when each completes
+    assert planning == {"method": "mapf", "solves": int(match.group(1)), "failures": 0}
+    assert planning["solves"] >= 1
 
 
 def test_an_unknown_obstacle_on_the_plan_is_seen_and_planned_around():
