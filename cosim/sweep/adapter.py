@@ -78,7 +78,7 @@ def run(scenario, log_path: Path) -> RunOutput:
     from cosim.navigation.outcome import outcome_metadata
     from cosim.navigation.run import run_scenario
 
-    result = run_scenario(scenario, log_path, progress=False)
+    result = run_scenario(scenario, log_path, progress=False, trace=False)  # a sweep draws no run PNG
     outcome = outcome_metadata(result.outcome)
     failure = result.failure
     if failure is None and outcome.get("reason") == "interrupted":

@@ -179,9 +179,13 @@ class BundleBuilder:
         for index, values, overrides, files, point in self._runs:
             digest = hashlib.sha256()
             digest.update(b"navcosim sweep run\0" + self.text.encode() + b"\0")
-            # Names as written, not bundle paths: the bundle root depends on the other runs.
+            # Names as written, not bundle paths: the bundle root depends on the other runs. A file
+            # no key names (a map YAML's image) by its content alone: its resolved path would make
+            # the same sweep in another folder other runs (`--resume` there would redo them all).
             for key, written, path in sorted(files, key=lambda item: (item[0] or "", item[1])):
-                digest.update(f"{key or ''} {written} {self._paths[path]}\0".encode())
+                digest.update(
+                    f"{key or ''} {written if key is not None else ''} {self._paths[path]}\0".encode()
+                )
             digest.update("\0".join(overrides).encode())
             references = tuple(FileReference(key, written, relative[path]) for key, written, path in files)
             run_id = digest.hexdigest()[:RUN_ID_LENGTH]

@@ -126,6 +126,19 @@ def test_run_ids_follow_the_scenario_its_files_and_overrides(tmp_path):
     assert {run.run_id for run in plan(spec)[1]}.isdisjoint(again)
 
 
+def test_run_ids_do_not_depend_on_the_folder_the_sweep_lies_in(tmp_path):
+    """The same scenario and map in two folders: the same runs (a map YAML's image is found by its
+    resolved path, which must not enter the run id), so `--resume` after moving a sweep's folder
+    redoes nothing."""
+    ids = []
+    for name in ("first", "second/deeper"):
+        folder = tmp_path / name
+        folder.mkdir(parents=True)
+        spec = make_spec(_copy_scenario(folder), [parse_vary("lidar.seed=0,1")], overrides=[])
+        ids.append([run.run_id for run in plan(spec)[1]])
+    assert ids[0] == ids[1] and len(set(ids[0])) == 2
+
+
 def test_sweep_file_merges_with_arguments(tmp_path):
     sweep_file = tmp_path / "sweep.toml"
     sweep_file.write_text(
