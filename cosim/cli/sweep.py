@@ -122,7 +122,7 @@ def _handler(args) -> int:
     # sweep file, it reads the scenario and overrides the file names (`cosim.sweep.warm.warm_up`).
     local = args.scheduler is None and not args.dry_run
     if local:
-        start_fork_server(args.scenario, tuple(args.overrides))
+        start_fork_server(args.scenario, tuple(args.overrides), announce=not args.quiet)
     spec, options = build(
         args.scenario,
         args.vary,

@@ -34,10 +34,12 @@ WARM_ENV = "NAVCOSIM_SWEEP_WARM"
 WARM_STOP_TIME = 0.5  # [s] of simulated time: a few lidar, controller and pose steps
 
 
-def warm_up(scenario: str, overrides: list[str]) -> None:
+def warm_up(scenario: str, overrides: list[str], announce: bool = False) -> None:
     """Run `scenario` with `overrides` for `WARM_STOP_TIME` s into a scratch folder, then remove it.
     `scenario` may be a sweep file: then its scenario, with its `set` overrides before `overrides`
-    (as `cosim.sweep.build` merges them)."""
+    (as `cosim.sweep.build` merges them). `announce`: say on stderr what the first use builds
+    (`cosim.fmi.builtin.prepare`: one line per kind of build, as `cosim run` does; the workers
+    forked later find it built)."""
     import contextlib
     import shutil
     import tempfile
@@ -57,13 +59,30 @@ def warm_up(scenario: str, overrides: list[str]) -> None:
             contextlib.redirect_stderr(sink),
         ):
             loaded = adapter.load(path, [*overrides, f"simulation.stop_time={WARM_STOP_TIME}"])
+        if announce:
+            import sys
+
+            from cosim.fmi.builtin import prepare
+
+            def say(line: str) -> None:
+                print(f"cosim sweep: {line}", file=sys.stderr, flush=True)
+
+            components = getattr(loaded, "components", {})
+            fmus = [spec.fmu for spec in components.values() if spec.is_builtin]
+            prepare(fmus, loaded.fmi_version, announce=say)
+        with (
+            open(os.devnull, "w") as sink,
+            contextlib.redirect_stdout(sink),
+            contextlib.redirect_stderr(sink),
+        ):
             adapter.run(loaded, Path(folder) / "warm.mcap")
     finally:
         shutil.rmtree(folder, ignore_errors=True)
 
 
-def start_fork_server(scenario: Path, overrides: tuple[str, ...]) -> None:
-    """Start the local cluster's fork server now, warming it up on `scenario` with `overrides`.
+def start_fork_server(scenario: Path, overrides: tuple[str, ...], announce: bool = False) -> None:
+    """Start the local cluster's fork server now, warming it up on `scenario` with `overrides`
+    (`announce`: saying what a first use builds, `warm_up`).
 
     The server imports `WORKER_PRELOAD` and makes a short run (`cosim.sweep.warm`) while this
     process goes on importing Dask and planning; the workers forked from it later start warm. It
@@ -78,7 +97,9 @@ def start_fork_server(scenario: Path, overrides: tuple[str, ...]) -> None:
 
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload(WORKER_PRELOAD)
-    request = json.dumps({"scenario": str(Path(scenario).resolve()), "overrides": list(overrides)})
+    request = json.dumps(
+        {"scenario": str(Path(scenario).resolve()), "overrides": list(overrides), "announce": announce}
+    )
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     saved = os.environ.get(WARM_ENV)
     os.environ[WARM_ENV] = request
@@ -134,7 +155,11 @@ def _from_environment() -> None:
         return
     try:
         request = json.loads(text)
-        warm_up(str(request["scenario"]), [str(item) for item in request["overrides"]])
+        warm_up(
+            str(request["scenario"]),
+            [str(item) for item in request["overrides"]],
+            bool(request.get("announce", False)),
+        )
     except BaseException:  # noqa: BLE001 - a warm-up must never stop the fork server
         pass
     import atexit
