@@ -86,6 +86,7 @@ def register(subparsers) -> None:
 
 def _handler(args: argparse.Namespace) -> int:
     words = args.words
+    _prepare_kernels(words, args.planner)
     if len(words) == 2 and words[0] == "compare":
         return _compare(args, Path(words[1]))
     if len(words) == 2 and words[0] == "mapf":
@@ -96,6 +97,24 @@ def _handler(args: argparse.Namespace) -> int:
             f"got {' '.join(words)!r}"
         )
     return _plan_one(args, Path(words[0]))
+
+
+def _prepare_kernels(words: list[str], planner_name: str) -> None:
+    """Start compiling the planner kernels this command loads, side by side, with one line on stderr
+    when a first use compiles any (as `cosim run` says what it builds); they load as they finish."""
+    import sys
+
+    import planner
+    from cosim.fmi.builtin import prepare
+
+    native = Path(planner.__file__).parent / "native"
+    if words[:1] == ["mapf"]:
+        names = ["mapf.c"]
+    elif words[:1] == ["compare"] or planner_name == "hybrid":
+        names = ["hybrid.c", "astar.c", "distance.c"]  # the longest to compile first
+    else:
+        names = ["astar.c", "distance.c"]
+    prepare((), kernels=[native / name for name in names], announce=lambda line: print(line, file=sys.stderr))
 
 
 # -- input ---------------------------------------------------------------------------------------
