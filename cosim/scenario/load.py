@@ -385,6 +385,13 @@ def _build(
     master = simulation.string("master", "gauss-seidel", choices=("gauss-seidel", "jacobi"))
     controller_rate = simulation.number("controller_rate", 20.0, minimum=0.0, exclusive_minimum=True)
     algebraic_loops = simulation.string("algebraic_loops", Scenario.algebraic_loops, choices=LOOP_HANDLING)
+    if master == "jacobi" and algebraic_loops != "delay":
+        raise simulation.error(
+            "algebraic_loops",
+            f"'{algebraic_loops}' has no effect with master = 'jacobi' (a Jacobi master steps every "
+            "component on the outputs of the step before, so no loop is iterated or refused): remove "
+            "it, or use master = 'gauss-seidel'",
+        )
     loop_tolerance = simulation.number(
         "loop_tolerance", Scenario.loop_tolerance, minimum=0.0, exclusive_minimum=True, maximum=1.0
     )
