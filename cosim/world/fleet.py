@@ -74,6 +74,18 @@ class Contact:
         )
 
 
+def _closest_gaps(d0x, d0y, d1x, d1y, reach):
+    """The least gap [m] over a step of each pair whose offset goes linearly from (d0x, d0y) to
+    (d1x, d1y) (arrays of any one shape): the distance at the closest approach minus `reach`."""
+    wx, wy = d1x - d0x, d1y - d0y
+    ww = wx * wx + wy * wy
+    dw = d0x * wx + d0y * wy
+    s_star = np.zeros_like(ww)
+    np.divide(-dw, ww, out=s_star, where=ww > 0.0)
+    np.clip(s_star, 0.0, 1.0, out=s_star)
+    return np.hypot(d0x + s_star * wx, d0y + s_star * wy) - reach
+
+
 class FleetContacts:
     """Contacts and clearances between the robots' footprints, step by step (module docstring)."""
 
@@ -100,25 +112,19 @@ class FleetContacts:
         i, j = self.first, self.second
         x, y = positions[:, :, 0], positions[:, :, 1]
         dx, dy = x[:, j] - x[:, i], y[:, j] - y[:, i]  # the offsets at each step's start and end
-        d0x, d0y, d1x, d1y = dx[:-1], dy[:-1], dx[1:], dy[1:]
-        wx, wy = d1x - d0x, d1y - d0y
-        ww = wx * wx + wy * wy
-        dw = d0x * wx + d0y * wy
-        s_star = np.zeros_like(ww)
-        np.divide(-dw, ww, out=s_star, where=ww > 0.0)
-        np.clip(s_star, 0.0, 1.0, out=s_star)
-        gap = np.hypot(d0x + s_star * wx, d0y + s_star * wy) - self.reach
+        d1x, d1y = dx[1:], dy[1:]
+        gap = _closest_gaps(dx[:-1], dy[:-1], d1x, d1y, self.reach)
         closest = gap.min(axis=0)
         np.minimum.at(self.min_clearance, i, closest)
         np.minimum.at(self.min_clearance, j, closest)
         end_touching = np.hypot(d1x, d1y) - self.reach <= 0.0
         previous = np.vstack((self.touching[None, :], end_touching[:-1]))
-        began: list[list[Contact]] = [[] for _ in range(len(ww))]
+        began: list[list[Contact]] = [[] for _ in range(len(gap))]
         for step, pair in zip(*np.nonzero((gap <= 0.0) & ~previous), strict=True):
             began[step].append(
                 self._contact(int(pair), starts[step], lengths[step], positions[step], positions[step + 1])
             )
-        self.touching = end_touching[-1] if len(ww) else self.touching
+        self.touching = end_touching[-1] if len(gap) else self.touching
         for contacts in began:
             self.contacts += contacts
         return began
@@ -146,31 +152,14 @@ class FleetContacts:
         bx, by, ax, ay = before[:, 0], before[:, 1], after[:, 0], after[:, 1]
         d0x, d0y = bx[j] - bx[i], by[j] - by[i]
         d1x, d1y = ax[j] - ax[i], ay[j] - ay[i]  # the offset at the step's end
-        wx, wy = d1x - d0x, d1y - d0y
-        ww = wx * wx + wy * wy
-        dw = d0x * wx + d0y * wy
-        s_star = np.zeros_like(ww)
-        np.divide(-dw, ww, out=s_star, where=ww > 0.0)
-        np.clip(s_star, 0.0, 1.0, out=s_star)
-        closest = np.hypot(d0x + s_star * wx, d0y + s_star * wy)
-        gap = closest - self.reach
+        gap = _closest_gaps(d0x, d0y, d1x, d1y, self.reach)
         np.minimum.at(self.min_clearance, i, gap)
         np.minimum.at(self.min_clearance, j, gap)
         touching = gap <= 0.0
-        began: list[Contact] = []
-        for pair in np.flatnonzero(touching & ~self.touching):
-            a, b = int(i[pair]), int(j[pair])
-            s = first_contact(before[a], after[a], before[b], after[b], float(self.reach[pair]))
-            s = 0.0 if s is None else s  # rounding at a grazing touch: the closest approach's step
-            at_a = before[a] + s * (after[a] - before[a])
-            at_b = before[b] + s * (after[b] - before[b])
-            began.append(
-                Contact(
-                    self.names[a], self.names[b], t + s * h,
-                    (float(at_a[0]), float(at_a[1])), (float(at_b[0]), float(at_b[1])),
-                    float(self.radii[a]), float(self.radii[b]),
-                )
-            )  # fmt: skip
+        began = [
+            self._contact(int(pair), t, h, before, after)
+            for pair in np.flatnonzero(touching & ~self.touching)
+        ]
         # A pair still touching at the step's end stays "in contact"; one that separated may touch again.
         end_gap = np.hypot(d1x, d1y) - self.reach
         self.touching = end_gap <= 0.0
