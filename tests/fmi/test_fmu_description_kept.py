@@ -9,11 +9,9 @@ import shutil
 from pathlib import Path
 
 import fmpy
-import pytest
 from fmpy.model_description import ModelVariable
 
 from cosim.fmi import description
-from cosim.fmi.builtin import builtin_fmu
 
 FIELDS = ("name", "valueReference", "type", "causality", "variability", "start", "unit", "description")
 
@@ -24,24 +22,14 @@ def _summary(parsed) -> tuple:
     return parsed.guid, parsed.coSimulation.modelIdentifier, variables, outputs
 
 
-@pytest.fixture
-def cache(tmp_path: Path, monkeypatch) -> Path:
-    """A project FMU cache holding a built PurePursuit (its many variables)."""
-    folder = tmp_path / "fmus"
-    folder.mkdir()
-    shutil.copy2(builtin_fmu("PurePursuit"), folder / "PurePursuit.fmu")
-    monkeypatch.setenv("NAVCOSIM_FMU_CACHE", str(folder))
-    return folder
-
-
 def _parse(path: Path):
     return description._parsed_description.__wrapped__(str(path.resolve()), *description.file_identity(path))
 
 
-def test_the_kept_parse_is_the_parse(cache: Path):
-    fmu = cache / "PurePursuit.fmu"
+def test_the_kept_parse_is_the_parse(fmu_cache: Path):
+    fmu = fmu_cache / "PurePursuit.fmu"
     first = _parse(fmu)
-    kept = cache / ".PurePursuit.description.pickle"
+    kept = fmu_cache / ".PurePursuit.description.pickle"
     assert kept.is_file()
     again = _parse(fmu)
     assert again is not first
@@ -57,10 +45,10 @@ def test_the_kept_parse_is_the_parse(cache: Path):
     assert any(dependency is variable for variable in again.modelVariables)  # shared, not copied
 
 
-def test_another_file_version_is_parsed_again(cache: Path, monkeypatch):
-    fmu = cache / "PurePursuit.fmu"
+def test_another_file_version_is_parsed_again(fmu_cache: Path, monkeypatch):
+    fmu = fmu_cache / "PurePursuit.fmu"
     _parse(fmu)
-    kept = cache / ".PurePursuit.description.pickle"
+    kept = fmu_cache / ".PurePursuit.description.pickle"
     calls = []
     monkeypatch.setattr(fmpy, "read_model_description", lambda path: calls.append(path) or "parsed")
     assert _parse(fmu) != "parsed" and calls == []  # the kept one
@@ -72,9 +60,9 @@ def test_another_file_version_is_parsed_again(cache: Path, monkeypatch):
     assert _parse(fmu) == "parsed" and len(calls) == 2
 
 
-def test_nothing_is_kept_beside_a_users_fmu(cache: Path, tmp_path: Path):
+def test_nothing_is_kept_beside_a_users_fmu(fmu_cache: Path, tmp_path: Path):
     mine = tmp_path / "mine"
     mine.mkdir()
-    shutil.copy2(cache / "PurePursuit.fmu", mine / "PurePursuit.fmu")
+    shutil.copy2(fmu_cache / "PurePursuit.fmu", mine / "PurePursuit.fmu")
     _parse(mine / "PurePursuit.fmu")
     assert sorted(p.name for p in mine.iterdir()) == ["PurePursuit.fmu"]

@@ -18,16 +18,6 @@ from cosim.fmi.builtin import builtin_fmu
 from cosim.fmi.description import checked_description, file_key, kept_unpacked
 
 
-@pytest.fixture
-def cache(tmp_path: Path, monkeypatch) -> Path:
-    """A project FMU cache holding a built PurePursuit (2000 waypoint inputs)."""
-    folder = tmp_path / "fmus"
-    folder.mkdir()
-    shutil.copy2(builtin_fmu("PurePursuit"), folder / "PurePursuit.fmu")
-    monkeypatch.setenv("NAVCOSIM_FMU_CACHE", str(folder))
-    return folder
-
-
 def _ports(layout) -> tuple:
     ports = [(p.name, p.type, p.unit, p.description, repr(p.start), p.fmi_type, p.array_name, p.array_index)
              for p in (*layout.inputs, *layout.outputs, *layout.parameters)]  # fmt: skip
@@ -42,13 +32,13 @@ def _fresh(fmu: Path, port_map: dict):
 
 
 @pytest.mark.parametrize("port_map", [{}, {"east": {"name": "x", "scale": 2.0}}])
-def test_the_kept_layout_is_the_layout(cache: Path, port_map: dict):
-    fmu = cache / "PurePursuit.fmu"
+def test_the_kept_layout_is_the_layout(fmu_cache: Path, port_map: dict):
+    fmu = fmu_cache / "PurePursuit.fmu"
     description, version = checked_description(fmu, None, file_key(fmu, None))
     mapping = layouts._parse_port_map(port_map, fmu)
     made = layouts._make_layout(fmu, "pure_pursuit", description, version, mapping)
     first = _fresh(fmu, port_map)
-    assert len(list(cache.glob(".PurePursuit.layout-*.pickle"))) == 1
+    assert len(list(fmu_cache.glob(".PurePursuit.layout-*.pickle"))) == 1
     again = _fresh(fmu, port_map)
     assert again is not first
     assert _ports(again) == _ports(first) == _ports(made)
@@ -60,11 +50,11 @@ def test_the_kept_layout_is_the_layout(cache: Path, port_map: dict):
     assert {p.name for p in again.inputs} == names - {"x"} | ({"east"} if port_map else {"x"})
 
 
-def test_another_port_map_or_a_damaged_copy_makes_the_layout_again(cache: Path):
-    fmu = cache / "PurePursuit.fmu"
+def test_another_port_map_or_a_damaged_copy_makes_the_layout_again(fmu_cache: Path):
+    fmu = fmu_cache / "PurePursuit.fmu"
     plain = _fresh(fmu, {})
     mapped = _fresh(fmu, {"east": "x"})
-    kept = sorted(cache.glob(".PurePursuit.layout-*.pickle"))
+    kept = sorted(fmu_cache.glob(".PurePursuit.layout-*.pickle"))
     assert len(kept) == 2 and "east" in {p.name for p in mapped.inputs} - {p.name for p in plain.inputs}
     for path in kept:
         path.write_bytes(path.read_bytes()[:-100])  # cut short: cannot be read
@@ -82,10 +72,10 @@ def test_a_users_fmu_keeps_nothing_beside_it(tmp_path: Path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["PurePursuit.fmu"]
 
 
-def test_the_extraction_is_kept_for_the_next_process(cache: Path):
-    fmu = cache / "PurePursuit.fmu"
+def test_the_extraction_is_kept_for_the_next_process(fmu_cache: Path):
+    fmu = fmu_cache / "PurePursuit.fmu"
     kept = kept_unpacked(fmu)
-    assert kept is not None and kept.parent == cache and not kept.exists()
+    assert kept is not None and kept.parent == fmu_cache and not kept.exists()
     folder, release = unpack_instance(fmu, lambda member: not member.startswith("sources/"), "t-", True, kept)
     assert Path(folder) == kept
     assert (kept / "binaries").is_dir() and (kept / "modelDescription.xml").is_file()
@@ -96,7 +86,9 @@ def test_the_extraction_is_kept_for_the_next_process(cache: Path):
     assert Path(again) == kept and (kept / "modelDescription.xml").stat().st_mtime_ns == written
     release_again()
     assert kept.is_dir()
-    assert [p.name for p in cache.iterdir() if p.name.startswith(kept.name)] == [kept.name]  # no leftovers
-    shutil.copy2(fmu, cache / "copy.fmu")
-    (cache / "copy.fmu").replace(fmu)  # a rebuilt FMU: another version, extracted anew
+    assert [p.name for p in fmu_cache.iterdir() if p.name.startswith(kept.name)] == [
+        kept.name
+    ]  # no leftovers
+    shutil.copy2(fmu, fmu_cache / "copy.fmu")
+    (fmu_cache / "copy.fmu").replace(fmu)  # a rebuilt FMU: another version, extracted anew
     assert kept_unpacked(fmu) != kept
