@@ -58,8 +58,8 @@ robot's planner component marks in its costmap (it still takes every scan while 
 obstacle not on the map; a coarse cell with such a mark on any robot's remaining path (its
 lead-in, released and planned cells) is blocked from then on, and all robots are planned again,
 around it (a robot already in that cell may leave it). And a robot that has released moves ahead
-but has not moved `STUCK_DISTANCE` for `BLOCKED_AFTER` seconds (something on its way that VFH could
-not pass; not a robot halted by `stop`) has its next cell closed for the next plan, and all are
+but has not moved `STUCK_DISTANCE` for `BLOCKED_AFTER` seconds since it had any (something on its
+way that VFH could not pass; not a robot halted by `stop`, nor one waiting for a release) has its next cell closed for the next plan, and all are
 planned again, that robot from the cell where it stands (the cells released ahead of it given up:
 planned from its committed cell, its way there would still pass the closed cell).
 
@@ -624,6 +624,7 @@ class Coordinator:
             self._advance(i, x, y)
             if (
                 i in self.halted
+                or graph.done[i] >= graph.released[i]  # nothing released: waiting is not being stuck
                 or math.hypot(x - agent.moved_from[0], y - agent.moved_from[1]) >= STUCK_DISTANCE
             ):
                 agent.moved_at, agent.moved_from = t, (x, y)

@@ -30,11 +30,11 @@ def _targets(coordinator) -> list:
     return [action.target for action in coordinator.graph.actions[0] if not action.settle]
 
 
-def _stand(coordinator, pose, until: float, t: float = 0.0) -> float:
-    """update() every block while the robot stands at `pose` from t to `until` [s]; the last t."""
+def _stand(coordinator, poses, until: float, t: float = 0.0) -> float:
+    """update() every block while the robots stand at `poses` from t to `until` [s]; the last t."""
     while t < until - 1e-9:
         t = round(t + H, 9)
-        coordinator.update(t, [pose])
+        coordinator.update(t, poses)
     return t
 
 
@@ -49,9 +49,9 @@ def test_a_robot_that_stands_with_released_moves_closes_its_next_cell_and_is_pla
     blocked = nxt.target
     assert blocked in first
     solves = coordinator.solves
-    t = _stand(coordinator, (*START, 0.0), BLOCKED_AFTER - H, t=H)
+    t = _stand(coordinator, [(*START, 0.0)], BLOCKED_AFTER - H, t=H)
     assert coordinator.solves == solves  # not yet: 10 s have not passed since it last moved
-    _stand(coordinator, (*START, 0.0), BLOCKED_AFTER + H, t=t)
+    _stand(coordinator, [(*START, 0.0)], BLOCKED_AFTER + H, t=t)
     assert coordinator.solves == solves + 1
     after = _targets(coordinator)
     assert blocked not in after  # planned around the cell it could not enter
@@ -83,5 +83,40 @@ def test_a_robot_that_moves_or_is_halted_is_never_taken_for_blocked():
     halted.update(H, [(*START, 0.0)])
     halted.halted.add(0)
     solves = halted.solves
-    _stand(halted, (*START, 0.0), 3 * BLOCKED_AFTER, t=H)
+    _stand(halted, [(*START, 0.0)], 3 * BLOCKED_AFTER, t=H)
     assert halted.solves == solves
+
+
+def test_waiting_for_a_release_is_not_standing_still():
+    """A follower that waited more than `BLOCKED_AFTER` for its leader to leave a cell (nothing
+    released to it: the dependency graph holds it) is not taken for blocked the moment its move is
+    released: the clock starts at the release (it triggered at once, and the re-solve sent robots
+    round cells that were free)."""
+    from cosim.navigation.coordination import RELEASE_AHEAD, ActionGraph
+
+    coordinator = _coordinator([(15.0, 19.0), (13.0, 19.0)], [(19.0, 19.0), (17.0, 19.0)])
+    row = coordinator.cells.cell_of(13.0, 19.0)[0]
+    # Leader 0 from the cell east of 1, both driving east along the row, 1 one cell behind.
+    leader = [(row, 7), (row, 8), (row, 9)]
+    follower = [(row, 6), (row, 7), (row, 8)]
+    assert [coordinator.cells.cell_of(*p) for p in ((15.0, 19.0), (13.0, 19.0))] == [leader[0], follower[0]]
+    coordinator.graph = ActionGraph([leader, follower], None, None, RELEASE_AHEAD)
+    for agent, pose in zip(coordinator.agents, ((15.0, 19.0), (13.0, 19.0)), strict=True):
+        agent.moved_at, agent.moved_from = 0.0, pose
+    coordinator.halted.add(0)  # the leader stands (halted, so never blocked itself)
+    poses = [(15.0, 19.0, 0.0), (13.0, 19.0, 0.0)]
+    t = 0.0
+    while t < 1.5 * BLOCKED_AFTER:
+        t = round(t + H, 9)
+        coordinator.update(t, poses)
+    graph = coordinator.graph
+    assert graph.done[1] == graph.released[1] == 1  # settled, its move into the leader's cell held
+    solves = coordinator.solves
+    released_at = round(t + H, 9)
+    poses[0] = (17.0, 19.0, 0.0)  # the leader has left its first cell: the follower's move is released
+    coordinator.update(released_at, poses)
+    assert graph.released[1] > graph.done[1] and coordinator.solves == solves
+    t = _stand(coordinator, poses, released_at + BLOCKED_AFTER - 2 * H, t=released_at)
+    assert coordinator.solves == solves and coordinator.graph is graph  # not blocked: 10 s not yet gone
+    _stand(coordinator, poses, released_at + BLOCKED_AFTER + H, t=t)
+    assert coordinator.solves == solves + 1  # standing 10 s with its move released: blocked
