@@ -59,9 +59,10 @@ obstacle not on the map; a coarse cell with such a mark on any robot's remaining
 lead-in, released and planned cells) is blocked from then on, and all robots are planned again,
 around it (a robot already in that cell may leave it). And a robot that has released moves ahead
 but has not moved `STUCK_DISTANCE` for `BLOCKED_AFTER` seconds since it had any (something on its
-way that VFH could not pass; not a robot halted by `stop`, nor one waiting for a release) has its next cell closed for the next plan, and all are
-planned again, that robot from the cell where it stands (the cells released ahead of it given up:
-planned from its committed cell, its way there would still pass the closed cell).
+way that VFH could not pass; not a robot halted by `stop`, nor one waiting for a release) has its
+next cell closed for the next plan, and all are planned again, that robot from the cell where it
+stands (the cells released ahead of it given up: planned from its committed cell, its way there
+would still pass the closed cell).
 
 Speed: the MAPF solver is anytime: `MAPF_TIME_LIMIT` s of wall time per solve (small instances
 are proven optimal long before, so their plans are the same every run; a large fleet's plan can
