@@ -245,11 +245,10 @@ class BlockRecording:
         # The positions after each step, as the monitor checks them.
         xs = self._values(x_column, first, end, x_before)
         ys = self._values(y_column, first, end, y_before)
-        stop_ns = recording.stop_ns
-        if start_ns + end * h_ns <= stop_ns:  # no step of the block is cut at the stop time
-            times = [(start_ns + k * h_ns) / NS_PER_S for k in range(first + 1, end + 1)]
-        else:
-            times = [min(start_ns + (k + 1) * h_ns, stop_ns) / NS_PER_S for k in range(first, end)]
+        # The end of each step [s] (a step cut at the stop time ends there): integer nanoseconds,
+        # exact in float64, divided once (as Python's int / int, correctly rounded).
+        ends = start_ns + np.arange(first + 1, end + 1, dtype=np.int64) * h_ns
+        times = np.minimum(ends, recording.stop_ns) / NS_PER_S
         index, reason = self.monitor.check_positions(times, xs, ys)
         if reason is not None and (index != end - first - 1 or not clean):
             raise RuntimeError(
@@ -262,15 +261,15 @@ class BlockRecording:
             self.flush()  # a killed run loses no more wall time of steps than the recorder's flushes
         return reason
 
-    def _values(self, where: Column, first: int, end: int, before: int) -> list[float]:
+    def _values(self, where: Column, first: int, end: int, before: int) -> np.ndarray:
         """The value at `where` after each step in [first, end) (held between its component's steps)."""
         rows = self.buffers[where.index]
         period = self.periods[where.index]
         if period == 1:
-            return rows[before + 1 : before + 1 + end - first, where.column].tolist()
+            return rows[before + 1 : before + 1 + end - first, where.column]
         due = due_from(first, period)
         at = before + 1 + (np.arange(first, end) - due) // period
-        return rows[at, where.column].tolist()
+        return rows[at, where.column]
 
     def _latest(self, where: Column, steps: np.ndarray) -> np.ndarray:
         """The value at `where` (in the collected rows) after each of `steps`."""
