@@ -156,8 +156,9 @@ class OutcomeMonitor:
 
 
 class _CompiledChecks:
-    """`OutcomeMonitor.check_positions` in C for a static `WorldDistance`: the monitor's state is
-    copied into world.c's `Monitor` struct, checked there step by step, and copied back."""
+    """`OutcomeMonitor.check_positions` in C for a static `WorldDistance`: the positions and times
+    are copied into one array the C struct (world.c's `Monitor`) points at, the monitor's state
+    into the struct, checked there step by step, and copied back."""
 
     def __init__(self, world) -> None:
         from cosim.world import kernels
@@ -173,14 +174,20 @@ class _CompiledChecks:
             n_bounds=len(self.bounds),
         )
         self.address = ctypes.addressof(self.state)
-        # The numbers from `radius` on, written and read as one block of doubles (one call each).
+        self._points(1024)
+        # The numbers from `radius` on, written and read as one block (one call each).
         self.offset = kernels.MonitorArrays.radius.offset
         self.at = kernels.MonitorArrays.last_x.offset
         self.pack = struct.Struct("=13d").pack_into
-        self.unpack = struct.Struct("=8d").unpack_from
-        self.reason = ctypes.c_int64()
-        self.reason_address = ctypes.addressof(self.reason)
+        self.unpack = struct.Struct("=8dq").unpack_from
         self.function = kernels.library().world_check_positions
+
+    def _points(self, capacity: int) -> None:
+        """Room for `capacity` steps: rows x, y, t."""
+        self.points = np.empty((3, capacity))
+        self.capacity = capacity
+        self.state.points = self.points.ctypes.data
+        self.state.capacity = capacity
 
     @classmethod
     def for_world(cls, world) -> _CompiledChecks | None:
@@ -194,11 +201,14 @@ class _CompiledChecks:
 
     def __call__(self, monitor: OutcomeMonitor, times, xs, ys) -> tuple[int, str | None]:
         n = len(times)
-        if n == 0:
-            return monitor._check_in_python(times, xs, ys)
-        arrays = [np.ascontiguousarray(values, dtype=np.float64) for values in (xs, ys, times)]
-        if any(len(array) != n for array in arrays):
-            raise ValueError("check_positions: times, xs and ys differ in length")
+        if n == 0 or len(xs) != n or len(ys) != n:
+            return monitor._check_in_python(times, xs, ys)  # (which raises for differing lengths)
+        if n > self.capacity:
+            self._points(2 * n)
+        points = self.points
+        points[0, :n] = xs
+        points[1, :n] = ys
+        points[2, :n] = times
         outcome = monitor.outcome
         goal_x, goal_y = monitor.goal
         last_x, last_y = monitor.last_xy
@@ -206,32 +216,29 @@ class _CompiledChecks:
             self.state, self.offset, monitor.radius, goal_x, goal_y, monitor.tolerance, monitor._speed,
             last_x, last_y, outcome.distance, outcome.min_clearance, *monitor._anchor,
         )  # fmt: skip
-        index = self.function(
-            self.address, n, arrays[0].ctypes.data, arrays[1].ctypes.data, arrays[2].ctypes.data,
-            self.reason_address,
-        )  # fmt: skip
-        reason_code = self.reason.value
-        last_x, last_y, outcome.distance, outcome.min_clearance, *anchor = self.unpack(self.state, self.at)
+        index = self.function(self.address, n)
+        last_x, last_y, outcome.distance, outcome.min_clearance, *anchor, code = self.unpack(
+            self.state, self.at
+        )
         monitor.last_xy = (last_x, last_y)
         monitor._anchor = tuple(anchor)
+        if code == 0:  # CHECK_GOING
+            outcome.time = points.item(2, n - 1)
+            return n, None
         kernels = self.kernels
-        if reason_code == kernels.CHECK_PYTHON:
+        if code == kernels.CHECK_PYTHON:
             # The rest from step `index` on, in Python (which indexes off the grid there).
             rest, reason = monitor._check_in_python(
-                arrays[2][index:].tolist(), arrays[0][index:].tolist(), arrays[1][index:].tolist()
+                points[2, index:n].tolist(), points[0, index:n].tolist(), points[1, index:n].tolist()
             )
             return index + rest, reason
-        reason = None
-        if reason_code == kernels.CHECK_COLLISION:
-            x, y = float(arrays[0][index]), float(arrays[1][index])
-            outcome.reason = "collision"
-            outcome.collision_point = (x, y)
-            reason = "collision"
-        elif reason_code == kernels.CHECK_GOAL:
+        if code == kernels.CHECK_COLLISION:
+            outcome.reason = reason = "collision"
+            outcome.collision_point = (points.item(0, index), points.item(1, index))
+        else:
             outcome.reached = True
-            outcome.reason = "goal_reached"
-            reason = "goal_reached"
-        outcome.time = float(arrays[2][min(index, n - 1)])
+            outcome.reason = reason = "goal_reached"
+        outcome.time = points.item(2, index)
         return index, reason
 
 

@@ -61,13 +61,15 @@ class LidarArrays(ctypes.Structure):
 class MonitorArrays(ctypes.Structure):
     """`Monitor` of world.c: a static world's position checks (`OutcomeMonitor.check_positions`):
     the world's struct, its centre field and the polygons' bounding circles, the vehicle and goal,
-    and the monitor's state (read and written back by each call)."""
+    the monitor's state (read and written back by each call), why the last call stopped, and the
+    positions and times of a call (rows x, y, t of a 3 x capacity array)."""
 
     _fields_ = [
         ("world", _p), ("centre_field", _p), ("bounds", _p), ("n_bounds", _i64),
         ("radius", _f64), ("goal_x", _f64), ("goal_y", _f64), ("tolerance", _f64), ("speed", _f64),
         ("last_x", _f64), ("last_y", _f64), ("distance", _f64), ("min_clearance", _f64),
         ("anchor_x", _f64), ("anchor_y", _f64), ("anchor_t", _f64), ("anchor_bound", _f64),
+        ("reason", _i64), ("points", _p), ("capacity", _i64),
     ]  # fmt: skip
 
 
@@ -131,7 +133,7 @@ def library() -> ctypes.CDLL:
                 "lidar_measure": (None, [_p, _f64, _f64, _p, _i64, _p]),
                 "lidar_scan": (None, [_p, _f64, _f64, _f64]),
                 "world_hypot": (_f64, [_f64, _f64]),
-                "world_check_positions": (_i64, [_p, _i64, _p, _p, _p, _p]),
+                "world_check_positions": (_i64, [_p, _i64]),
             },
         )
     return _library

@@ -97,6 +97,9 @@ typedef struct {
      * minimum clearance and the anchor of the lower bound (x, y, t, bound). */
     double last_x, last_y, distance, min_clearance;
     double anchor_x, anchor_y, anchor_t, anchor_bound;
+    int64_t reason;       /* why the last call stopped: CHECK_* */
+    const double *points; /* 3 x capacity: the steps' x, then y, then t (end of the step [s]) */
+    int64_t capacity;
 } Monitor;
 
 enum { CHECK_GOING = 0, CHECK_COLLISION = 1, CHECK_GOAL = 2, CHECK_PYTHON = 3 };
@@ -123,13 +126,18 @@ static int inside_map(const World *w, double x, double y)
     return w->x_min <= x && x < w->x_max && w->y_min <= y && y < w->y_max;
 }
 
-/* `OutcomeMonitor.check_positions` for a static world, the same operations in the same order
- * (Python's hypot, min and max): the index of the step that ends the run with its reason in
- * *reason (CHECK_COLLISION, CHECK_GOAL), or n and CHECK_GOING; CHECK_PYTHON at a step whose cell
- * is off the grid (its state untouched: Python takes over there). */
-int64_t world_check_positions(Monitor *m, int64_t n, const double *xs, const double *ys, const double *times,
-                              int64_t *reason)
+/* `OutcomeMonitor.check_positions` for a static world and n <= capacity steps, the same operations
+ * in the same order (Python's hypot, min and max): the index of the step that ends the run with
+ * its reason in m->reason (CHECK_COLLISION, CHECK_GOAL), or n and CHECK_GOING; CHECK_PYTHON at a
+ * step whose cell is off the grid (its state untouched: Python takes over there). */
+int64_t world_check_positions(Monitor *m, int64_t n)
 {
+    const double *xs = m->points, *ys = m->points + m->capacity, *times = m->points + 2 * m->capacity;
+    int64_t *reason = &m->reason;
+    if (n > m->capacity) {
+        *reason = CHECK_PYTHON;
+        return 0;
+    }
     const World *w = m->world;
     World query = *w;
     double half = w->resolution / 2.0;
@@ -424,6 +432,9 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_FIELD(Monitor, anchor_y);
     LAYOUT_FIELD(Monitor, anchor_t);
     LAYOUT_FIELD(Monitor, anchor_bound);
+    LAYOUT_FIELD(Monitor, reason);
+    LAYOUT_FIELD(Monitor, points);
+    LAYOUT_FIELD(Monitor, capacity);
     LAYOUT_SIZE(Lidar);
     LAYOUT_FIELD(Lidar, occupied_up);
     LAYOUT_FIELD(Lidar, rows);
