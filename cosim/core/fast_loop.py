@@ -161,6 +161,12 @@ class KernelTables:
 
     def histories(self) -> list[np.ndarray | None]:
         """Per component, its rows so far as a (rows, inputs + outputs) view, None when not recorded."""
+        rows = self.rows.tolist()
+        return [None if block is None else block[: rows[i]] for i, block in enumerate(self.row_arrays())]
+
+    def row_arrays(self) -> list[np.ndarray | None]:
+        """Per component, the whole (capacity, inputs + outputs) array its rows go into (the first
+        `rows[i]` hold rows), None when not recorded; the same arrays for the tables' life."""
         if self._blocks is None:
             self._blocks = []
             for shape in self.record_shapes:
@@ -169,8 +175,7 @@ class KernelTables:
                     continue
                 offset, capacity, width = shape
                 self._blocks.append(self.history[offset : offset + capacity * width].reshape(capacity, width))
-        rows = self.rows.tolist()
-        return [None if block is None else block[: rows[i]] for i, block in enumerate(self._blocks)]
+        return self._blocks
 
     def warm_up(self) -> None:
         """Load the kernel (building its library on a machine's first use) and bind these tables."""

@@ -87,10 +87,19 @@ def run_blocks(
     # A component's whole step [s]: `Master.step_seconds` before `tail_from`, where no step is cut.
     whole = [period * h_ns / NS_PER_S for period in periods]
     stepping = [i for i in range(len(periods)) if tables.components[i, kernel.C_KIND] != kernel.KIND_IDLE]
+    # Per position of the plan: the stepping components before it, and from it on.
+    before = [[i for i in stepping if i < position] for position in range(len(plan) + 1)]
+    after = [[i for i in stepping if i >= position] for position in range(len(plan) + 1)]
+    # The recorded components: (index, period, all their rows' array); rows so far in `tables.rows`.
+    blocks = tables.row_arrays()
+    recorded = [(i, periods[i], block) for i, block in enumerate(blocks) if block is not None]
+    unrecorded = [None] * len(blocks)
+    rows = tables.rows
+    step = tables.run
     end = master.step_index + steps
     first = k = master.step_index
     position = 0
-    tables.rows[:] = 0
+    rows[:] = 0
     finish_step = False  # a Python component stepped: the kernel ends this step, then returns
     while True:
         if k >= end and position == 0:
@@ -105,29 +114,28 @@ def run_blocks(
                 tables.step_sizes[i] = master.step_seconds(k, periods[i])
         elif tail_from is not None:
             count = min(count, tail_from - k)
-        code, k, position, failed, call, status, kind = tables.run(k, count, position, start_ns, h_ns, jacobi)
+        code, k, position, failed, call, status, kind = step(k, count, position, start_ns, h_ns, jacobi)
         finish_step = False
-        clean = position == 0 or not any(k % periods[i] == 0 for i in stepping if i < position)
+        clean = position == 0 or not any(k % periods[i] == 0 for i in before[position])
         if k > first:
-            histories = tables.histories()
-            delivered = []
-            for i, history in enumerate(histories):
-                if history is None:
-                    delivered.append(None)
-                    continue
-                period = periods[i]
-                n = (k + period - 1) // period - (first + period - 1) // period
-                delivered.append(history[:n])
+            # Each recorded component's rows of the steps [first, k); rows of step k already
+            # taken (components before `position`) are kept for the next stretch.
+            taken = rows.tolist()
+            delivered = unrecorded.copy()
+            kept = []
+            for i, period, history in recorded:
+                held = taken[i]
+                n = min((k + period - 1) // period - (first + period - 1) // period, held)
+                delivered[i] = history[:n]
+                kept.append((i, n, held))
             master.step_index = k
             stop = on_block(first, k, delivered, clean) if on_block is not None else False
-            # Rows of step k already taken (components before `position`) move to the front.
-            for i, history in enumerate(histories):
-                if history is not None:
-                    n = len(delivered[i])
-                    extra = len(history) - n
-                    if extra:
-                        history[:extra] = history[n:].copy()
-                    tables.rows[i] = extra
+            for i, n, held in kept:
+                extra = held - n
+                if extra:
+                    history = blocks[i]
+                    history[:extra] = history[n:held].copy()
+                rows[i] = extra
             first = k
             if stop and clean:
                 break
@@ -157,7 +165,7 @@ def run_blocks(
                     master.failure = error
                     raise
                 position += 1
-                following = next((i for i in stepping if i >= position and k % periods[i] == 0), None)
+                following = next((i for i in after[position] if k % periods[i] == 0), None)
                 if following is None or tables.native[following] is not None:
                     break
                 position = following

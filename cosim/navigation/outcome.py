@@ -80,9 +80,13 @@ class OutcomeMonitor:
         it is looked at. A static `WorldDistance` is checked in C (`world_check_positions` of
         cosim/world/native/world.c: the same operations, Python's hypot reproduced), the rest here."""
         compiled = self._compiled
-        if compiled is None:
-            return self._check_in_python(times, xs, ys)
-        return compiled(self, times, xs, ys)
+        if compiled is not None:
+            return compiled(self, times, xs, ys)
+        # Python floats, whatever came in: the arithmetic below is Python's.
+        times, xs, ys = (
+            values.tolist() if isinstance(values, np.ndarray) else values for values in (times, xs, ys)
+        )
+        return self._check_in_python(times, xs, ys)
 
     def _check_in_python(self, times, xs, ys) -> tuple[int, str | None]:
         outcome = self.outcome

@@ -88,6 +88,23 @@ class OtherMessage(NamedTuple):
     payload: bytes
 
 
+def read_columns(component) -> list[slice]:
+    """The columns of a component's row (its inputs, then its outputs) that the recording reads:
+    its scalar inputs (their run of slots, or all inputs when arrays lie between them, as
+    `cosim.record.replay` holds them) and its outputs; one slice when they meet."""
+    n_in, n_out = len(component.inputs), len(component.outputs)
+    slots = [i for i, port in enumerate(component.inputs) if not port.is_array_element]
+    if not slots:
+        inputs = slice(n_in, n_in)
+    elif slots == list(range(slots[0], slots[-1] + 1)):
+        inputs = slice(slots[0], slots[-1] + 1)
+    else:
+        inputs = slice(0, n_in)
+    if inputs.stop == n_in:
+        return [slice(inputs.start, n_in + n_out)]
+    return [inputs, slice(n_in, n_in + n_out)]
+
+
 class BlockRecording:
     """Records and checks blocks of kernel steps from their rows (module docstring).
 
@@ -120,6 +137,7 @@ class BlockRecording:
         self.first = self.end = None  # steps collected, not yet flushed: [first, end)
         self.handed = time.monotonic()  # [s] wall clock of the last flush
         self.buffers: dict[int, np.ndarray] = {}
+        self.ends_first, self.ends_table = 0, np.empty(0)  # `_ends`
 
     def _column(self, reference: str) -> Column:
         """Where an observed "component.port" output sits in the collected rows."""
@@ -147,7 +165,9 @@ class BlockRecording:
         self.command_columns = [self._column(r) for r in observed.command] if observed.command else None
         self.mode_column = self._column(observed.mode) if observed.mode else None
         # Rows collected: per recorded component, row 0 the last row before the collected steps.
+        # Only the columns anyone reads are copied in (`spans`): the scalar inputs and the outputs.
         self.buffers = {}
+        self.spans: dict[int, list[slice]] = {}
         for i, component in enumerate(self.components):
             if recorded[i]:
                 n_in = len(component.inputs)
@@ -155,6 +175,7 @@ class BlockRecording:
                 rows[0, :n_in] = component.input_buffer
                 rows[0, n_in:] = component.output_buffer
                 self.buffers[i] = rows
+                self.spans[i] = read_columns(component)
         self.counts = dict.fromkeys(self.buffers, 0)
         self.entries: list[BlockEntry] = []
         for slot, entry in enumerate(recording.entries):
@@ -218,12 +239,14 @@ class BlockRecording:
         counts = self.counts
         x_column, y_column = self.pose_columns[:2]
         x_before, y_before = counts[x_column.index], counts[y_column.index]
+        spans = self.spans
         for i, rows in self.buffers.items():
             history = histories[i]
             n = len(history)
             if n:
                 at = counts[i] + 1
-                rows[at : at + n] = history
+                for span in spans[i]:
+                    rows[at : at + n, span] = history[:, span]
                 counts[i] = at + n - 1
         self.end = end
         last = end - 1
@@ -245,11 +268,7 @@ class BlockRecording:
         # The positions after each step, as the monitor checks them.
         xs = self._values(x_column, first, end, x_before)
         ys = self._values(y_column, first, end, y_before)
-        # The end of each step [s] (a step cut at the stop time ends there): integer nanoseconds,
-        # exact in float64, divided once (as Python's int / int, correctly rounded).
-        ends = start_ns + np.arange(first + 1, end + 1, dtype=np.int64) * h_ns
-        times = np.minimum(ends, recording.stop_ns) / NS_PER_S
-        index, reason = self.monitor.check_positions(times, xs, ys)
+        index, reason = self.monitor.check_positions(self._ends(first, end), xs, ys)
         if reason is not None and (index != end - first - 1 or not clean):
             raise RuntimeError(
                 f"the compiled loop ran past step {first + index}, where the run ends ({reason})"
@@ -260,6 +279,17 @@ class BlockRecording:
         elif time.monotonic() - self.handed >= self.recorder.flush_interval:
             self.flush()  # a killed run loses no more wall time of steps than the recorder's flushes
         return reason
+
+    def _ends(self, first: int, end: int) -> np.ndarray:
+        """The end [s] of each step in [first, end) (a step cut at the stop time ends there):
+        integer nanoseconds, exact in float64, divided once (as Python's int / int, correctly
+        rounded); from a table of `STEPS` steps made at a time."""
+        table_first = self.ends_first
+        if not table_first <= first or end > table_first + len(self.ends_table):
+            table_first = self.ends_first = first
+            steps = np.arange(first + 1, first + max(self.STEPS, end - first) + 1, dtype=np.int64)
+            self.ends_table = np.minimum(self.start_ns + steps * self.h_ns, self.recording.stop_ns) / NS_PER_S
+        return self.ends_table[first - table_first : end - table_first]
 
     def _values(self, where: Column, first: int, end: int, before: int) -> np.ndarray:
         """The value at `where` after each step in [first, end) (held between its component's steps)."""
