@@ -45,9 +45,19 @@ class KernelTables:
     `plan` is the master's `PlanEntry`s in step order; `skip` names components
     that are never stepped (constant outputs), whose connections are not copied again either.
     A component whose `native_step()` is None is handed back to Python where it is due.
+    `python_rows` (with `record`): those components have rows too, which `run_blocks` writes
+    after their steps, so a stretch of steps goes on through them (see there).
     """
 
-    def __init__(self, plan: list[PlanEntry], system, skip: set[str], record: bool, block: int) -> None:
+    def __init__(
+        self,
+        plan: list[PlanEntry],
+        system,
+        skip: set[str],
+        record: bool,
+        block: int,
+        python_rows: bool = False,
+    ) -> None:
         from cosim.core import kernel as K
 
         n = len(plan)
@@ -89,7 +99,13 @@ class KernelTables:
                 link_numbers.append((connection.scale, connection.offset))
             row[K.C_LINK_COUNT] = len(links) - row[K.C_LINK_FIRST]
             if native is None:
-                self.record_shapes.append(None)
+                if record and python_rows:  # rows written by `run_blocks` (C_RECORD stays 0)
+                    width = len(component.inputs) + len(component.outputs)
+                    capacity = block // period + 2
+                    self.record_shapes.append((record_offset, capacity, width))
+                    record_offset += capacity * width
+                else:
+                    self.record_shapes.append(None)
                 continue
             row[K.C_VERSION] = native.fmi_version
             row[K.C_HANDLE] = native.handle
@@ -151,6 +167,7 @@ class KernelTables:
         self.checks = np.array(checks, dtype=np.int64).reshape(-1, 3)
         self.history = np.zeros(max(1, record_offset))
         self.record_block = block if record else None  # the most steps per kernel call the rows hold
+        self.python_rows = bool(record and python_rows)
         self.rows = np.zeros(n, dtype=np.int64)
         self._blocks: list[np.ndarray | None] | None = None
         self.watch_addresses = np.zeros(3, dtype=np.int64)

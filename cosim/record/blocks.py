@@ -158,9 +158,18 @@ class BlockRecording:
         if not all(recorded[self._column(reference).index] for reference in needed):
             self.usable = False
             return
+        # A lidar with rows (`KernelTables` with `python_rows`): each scan from its row.
+        self.scan_rows: tuple[int, np.ndarray | slice] | None = None
         if recording.scan is not None and recorded[self.index[observed.scan.component]]:
-            self.usable = False  # ranges inside the rows: replayed step by step
-            return
+            lidar = self.index[observed.scan.component]
+            component = self.components[lidar]
+            n_in = len(component.inputs)
+            columns = [n_in + i for i, port in enumerate(component.outputs) if port.array_name == "ranges"]
+            run = columns == list(range(columns[0], columns[0] + len(columns))) if columns else False
+            self.scan_rows = (
+                lidar,
+                slice(columns[0], columns[-1] + 1) if run else np.array(columns, np.intp),
+            )
         self.pose_columns = [self._column(reference) for reference in observed.pose]
         self.command_columns = [self._column(r) for r in observed.command] if observed.command else None
         self.mode_column = self._column(observed.mode) if observed.mode else None
@@ -195,6 +204,17 @@ class BlockRecording:
         self.live_entries = [block for block in self.entries if block.columns is None]
         self.others: list[OtherMessage] = []
 
+    @property
+    def settled(self) -> bool:
+        """Whether every topic a block writes has had its first message (a block holding one is
+        replayed step by step, so the run loop keeps such blocks short)."""
+        recording, recorder = self.recording, self.recorder
+        return (
+            (recording.scan is None or recorder.has_channel("/scan"))
+            and (recording.command is None or recorder.has_channel("/cmd_vel"))
+            and all(recorder.has_channel(sensor.topic) for sensor in recording.sensors)
+        )
+
     def accepts(self, first: int, end: int, histories) -> bool:
         """Whether the block [first, end) can be recorded from its rows (else: step by step)."""
         if not self.ready:
@@ -212,9 +232,12 @@ class BlockRecording:
         recording, recorder = self.recording, self.recorder
         if recording.scan is not None:
             period = recording.scan.period
-            if due_from(first + 1, period) < end:
+            if self.scan_rows is not None:  # every scan from its row
+                if not recorder.has_channel("/scan") and due_from(first, period) < end:
+                    return False
+            elif due_from(first + 1, period) < end:
                 return False  # a scan after the first step: its ranges are not held
-            if not recorder.has_channel("/scan") and first % period == 0:
+            elif not recorder.has_channel("/scan") and first % period == 0:
                 return False
         if recording.command is not None and not recorder.has_channel("/cmd_vel"):
             if due_from(first, recording.command.period) < end:
@@ -257,7 +280,16 @@ class BlockRecording:
                 self.live[block.slot].append((first, block.entry.record()))
         recording, recorder = self.recording, self.recorder
         scan = recording.scan
-        if scan is not None and first % scan.period == 0:
+        if scan is not None and self.scan_rows is not None:
+            lidar, columns = self.scan_rows
+            period = scan.period
+            for k, row in zip(range(due_from(first, period), end, period), histories[lidar], strict=True):
+                t_ns = start_ns + k * h_ns
+                payload = recorder.scan_payload(
+                    t_ns, scan.angles, row[columns], scan.range_min, scan.range_max, scan.scan_time
+                )
+                self.others.append(OtherMessage(k * per_step + self.order.scan, t_ns, "/scan", payload))
+        elif scan is not None and first % scan.period == 0:
             t_first = start_ns + first * h_ns
             payload = recorder.scan_payload(
                 t_first, scan.angles, scan.current(), scan.range_min, scan.range_max, scan.scan_time
