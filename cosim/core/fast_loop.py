@@ -44,7 +44,9 @@ class KernelTables:
 
     `plan` is the master's `PlanEntry`s in step order; `skip` names components
     that are never stepped (constant outputs), whose connections are not copied again either.
-    A component whose `native_step()` is None is handed back to Python where it is due.
+    A component whose `native_step()` is None is handed back to Python where it is due, unless
+    its `kernel_sweep()` gives (C function address, its argument): then the kernel steps it by
+    that call on its first three inputs (the lidar's sweep: `cosim.world.lidar.Lidar`).
     `python_rows` (with `record`): those components have rows too, which `run_blocks` writes
     after their steps, so a stretch of steps goes on through them (see there).
     """
@@ -68,9 +70,14 @@ class KernelTables:
         record_offset = 0
         fed = system.links()
         self.record_shapes: list[tuple[int, int] | None] = []
+        self.python: list[bool] = []  # whether each component is handed back to Python
         for i, (component, period, _) in enumerate(plan):
             native = component.native_step()
             self.native.append(native)
+            # A component stepped by one C call on its inputs x, y, theta (`Lidar.kernel_sweep`).
+            sweep = getattr(component, "kernel_sweep", None)
+            sweep = sweep() if native is None and callable(sweep) else None
+            self.python.append(native is None and sweep is None and component.name not in skip)
             row = components[i]
             row[K.C_PERIOD] = period
             step_sizes[i] = period * system.macro_step_ns / 1e9
@@ -79,6 +86,11 @@ class KernelTables:
                 self.record_shapes.append(None)
                 continue
             row[K.C_KIND] = K.KIND_NATIVE if native is not None else K.KIND_PYTHON
+            if sweep is not None:
+                row[K.C_KIND] = K.KIND_SWEEP
+                row[K.C_STEP], row[K.C_HANDLE] = sweep
+                # With `python_rows` the kernel returns before it (POLL), where a stretch could end.
+                row[K.C_FLAGS] = 1 if record and python_rows else 0
             row[K.C_IN_ADDRESS] = ctypes.addressof(component.input_cbuffer)
             row[K.C_IN_COUNT] = len(component.inputs)
             row[K.C_OUT_ADDRESS] = ctypes.addressof(component.output_cbuffer)
@@ -98,6 +110,17 @@ class KernelTables:
                 )
                 link_numbers.append((connection.scale, connection.offset))
             row[K.C_LINK_COUNT] = len(links) - row[K.C_LINK_FIRST]
+            if sweep is not None:
+                if record:
+                    width = len(component.inputs) + len(component.outputs)
+                    capacity = block // period + 2
+                    row[K.C_RECORD] = 1
+                    row[K.C_RECORD_OFFSET] = record_offset
+                    self.record_shapes.append((record_offset, capacity, width))
+                    record_offset += capacity * width
+                else:
+                    self.record_shapes.append(None)
+                continue
             if native is None:
                 if record and python_rows:  # rows written by `run_blocks` (C_RECORD stays 0)
                     width = len(component.inputs) + len(component.outputs)

@@ -29,10 +29,10 @@ def kernel_tables(
     plan = master._plan
     skip = {entry.component.name for entry in plan if entry.component.constant_outputs}
     tables = fast_loop.KernelTables(plan, master.system, skip, record, block, python_rows)
-    stepped = [native for native, (c, _, _) in zip(tables.native, plan, strict=True) if c.name not in skip]
-    if not any(native is not None for native in stepped):
+    stepped = [python for python, (c, _, _) in zip(tables.python, plan, strict=True) if c.name not in skip]
+    if all(stepped):  # no component steps by C calls
         return None
-    if master.system.mode == "jacobi" and any(native is None for native in stepped):
+    if master.system.mode == "jacobi" and any(stepped):
         return None
     if master._previous or master._loop_groups:
         return None  # a delayed or iterated loop steps in Python (`Master._advance`)
@@ -43,10 +43,7 @@ def all_native_tables(master, record: bool, block: int) -> fast_loop.KernelTable
     """`kernel_tables`, but None also when a component that is stepped needs Python (`Master.run`
     and `Master.run_recorded` hand nothing back)."""
     tables = kernel_tables(master, record, block)
-    if tables is not None and any(
-        native is None and not component.constant_outputs
-        for native, (component, _, _) in zip(tables.native, master._plan, strict=True)
-    ):
+    if tables is not None and any(tables.python):
         return None
     return tables
 
@@ -82,7 +79,9 @@ def run_blocks(
     written here after each of their steps: then a stretch is not cut where a Python component
     is due (it goes on through their steps, up to `block` steps) unless `end_before_python(k)`,
     asked there, is true (e.g. a signal to notice where the cut would have been); a Python
-    component that fails hands the stretch's steps before its own over first.
+    component that fails hands the stretch's steps before its own over first. A component the
+    kernel steps by one C call (a sweep: the lidar) is such a place too: the kernel returns
+    before it (POLL) and steps it when called again.
     """
     most = tables.record_block or block  # recorded: the rows the tables hold
     if not 1 <= block <= most:
@@ -157,7 +156,7 @@ def run_blocks(
         # A hand-back with `python_rows` does not end the stretch while step k fits in it.
         going_on = (
             python_rows
-            and code == kernel.HAND_BACK
+            and (code == kernel.HAND_BACK or code == kernel.POLL)
             and k - first < block
             and (end_before_python is None or not end_before_python(k))
         )
@@ -201,7 +200,7 @@ def run_blocks(
                     rows[position] = at + 1
                 position += 1
                 following = next((i for i in after[position] if k % periods[i] == 0), None)
-                if following is None or tables.native[following] is not None:
+                if following is None or not tables.python[following]:
                     break
                 position = following
             finish_step = cut_after_python is None or cut_after_python(k)
