@@ -88,21 +88,28 @@ class OtherMessage(NamedTuple):
     payload: bytes
 
 
-def read_columns(component) -> list[slice]:
-    """The columns of a component's row (its inputs, then its outputs) that the recording reads:
-    its scalar inputs (their run of slots, or all inputs when arrays lie between them, as
-    `cosim.record.replay` holds them) and its outputs; one slice when they meet."""
-    n_in, n_out = len(component.inputs), len(component.outputs)
+def read_columns(component, outputs: set[int]) -> list[slice]:
+    """The columns of a component's row (its inputs, then its outputs) that the recording reads,
+    as runs: its scalar inputs (their run of slots, or all inputs when arrays lie between them, as
+    `cosim.record.replay` holds them) and its `outputs` slots (recorded or observed). The other
+    columns of the collected rows are never read (a replay sets them for its steps, then puts the
+    live values back)."""
+    n_in = len(component.inputs)
     slots = [i for i, port in enumerate(component.inputs) if not port.is_array_element]
     if not slots:
-        inputs = slice(n_in, n_in)
+        columns = []
     elif slots == list(range(slots[0], slots[-1] + 1)):
-        inputs = slice(slots[0], slots[-1] + 1)
+        columns = slots
     else:
-        inputs = slice(0, n_in)
-    if inputs.stop == n_in:
-        return [slice(inputs.start, n_in + n_out)]
-    return [inputs, slice(n_in, n_in + n_out)]
+        columns = list(range(n_in))
+    columns += sorted(n_in + slot for slot in outputs)
+    runs: list[slice] = []
+    for column in columns:
+        if runs and runs[-1].stop == column:
+            runs[-1] = slice(runs[-1].start, column + 1)
+        else:
+            runs.append(slice(column, column + 1))
+    return runs
 
 
 class BlockRecording:
@@ -174,7 +181,14 @@ class BlockRecording:
         self.command_columns = [self._column(r) for r in observed.command] if observed.command else None
         self.mode_column = self._column(observed.mode) if observed.mode else None
         # Rows collected: per recorded component, row 0 the last row before the collected steps.
-        # Only the columns anyone reads are copied in (`spans`): the scalar inputs and the outputs.
+        # Only the columns anyone reads are copied in (`spans`): the scalar inputs and the outputs
+        # recorded or observed (the scans are made from the lidar's rows as they come).
+        read: dict[int, set[int]] = {i: set() for i in range(len(self.components))}
+        for entry in recording.entries:
+            read[self.index[entry.component.name]].update(entry.outputs)
+        mode = [self.mode_column] if self.mode_column is not None else []
+        for where in [*self.pose_columns, *(self.command_columns or ()), *mode]:
+            read[where.index].add(where.column - len(self.components[where.index].inputs))
         self.buffers = {}
         self.spans: dict[int, list[slice]] = {}
         for i, component in enumerate(self.components):
@@ -184,7 +198,7 @@ class BlockRecording:
                 rows[0, :n_in] = component.input_buffer
                 rows[0, n_in:] = component.output_buffer
                 self.buffers[i] = rows
-                self.spans[i] = read_columns(component)
+                self.spans[i] = read_columns(component, read[i])
         self.counts = dict.fromkeys(self.buffers, 0)
         self.entries: list[BlockEntry] = []
         for slot, entry in enumerate(recording.entries):
