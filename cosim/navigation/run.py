@@ -15,11 +15,14 @@ at each replan (stamped with the start of the planner step that made it) and `/g
 given during the run.
 
 The loop: the FMUs step in the compiled kernel (`Master.run_blocks`, `cosim.core.kernel`), which
-keeps their buffers after each step and hands the Python components (lidar, planner) back where
-they are due. A block of steps ends before every Python component's step, at the end of a step in
-which one stepped when that step has something to do (a new plan, no path, a goal poll; else the
-block goes on: `cut_after_python`), and after any step whose position may end the run (not
-finite, near the goal, or outside the circle that the true obstacles cannot reach: `SafeCircle`).
+keeps their buffers after each step, sweeps a noise-free lidar itself, and hands the Python
+components (planner, a noisy lidar) back where they are due; their rows are kept too
+(`python_rows`), so a block goes on through their steps, up to 1000 steps. It ends at the end of
+a step in which one stepped when that step has something to do (a new plan, no path, a goal poll)
+or while a topic awaits its first message (`cut_after_python`), before a Python component's step
+or a sweep when a signal came (`end_before_python`), and after any step whose position may end
+the run (not finite, near the goal, or outside the circle that the true obstacles cannot reach:
+`SafeCircle`).
 Each block goes to the recording (`cosim.record.replay`): recorded and checked from its rows
 (`cosim.record.blocks`: the positions of all its steps through `OutcomeMonitor.check_positions`,
 the rows turned into messages with NumPy every few chunk windows), or, when the rows cannot describe

@@ -1,11 +1,13 @@
 """The kernel path's recording and checks, a block of steps at a time (`cosim.record.replay`).
 
-Within a block only the kernel's components step (a component stepped by Python steps at most in
-the block's first step, and its live buffers hold that step's values to the block's end), so what
-the per-step recording (`cosim.record.steps.StepRecording.after_step`) and the outcome checks do
-step by step can be done over the block's rows: the positions are checked in one call of the
-monitor's `check_positions` (the same arithmetic, step by step, in Python floats), and the rows
-are copied into buffers that collect the steps of several blocks. `flush()` turns those steps
+Every component of a block has rows (the kernel's, and, with `python_rows` tables, those
+`run_blocks` writes for the lidar and planner), or is stepped by Python at most in the block's
+first step (its live buffers hold that step's values to the block's end), so what the per-step
+recording (`cosim.record.steps.StepRecording.after_step`) and the outcome checks do step by step
+can be done over the block's rows: the positions are checked in one call of the monitor's
+`check_positions` (the same arithmetic, step by step: in C for a static world), each scan is made
+from the lidar's row, and the columns the recording reads are copied into buffers that collect
+the steps of several blocks. `flush()` turns those steps
 into their messages with NumPy (signal records, /odom /tf /pose at the pose rate, /cmd_vel and the
 mixer's mode at the mixer's rate; scans and moved obstacles were made at their steps) and hands
 them to `Recorder.hold_steps`, which writes the bytes of the per-step path. Steps are flushed
