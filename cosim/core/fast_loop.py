@@ -232,6 +232,13 @@ class KernelTables:
             )  # fmt: skip
         return self._kernel
 
+    def step_under_way(self) -> int:
+        """The step the kernel's last call was in when it returned, or is in now (an FMU that
+        ends the process inside a call: `cosim.fmi.exit_guard`)."""
+        from cosim.core import kernel as K
+
+        return self._bound()._result[K.R_STEP]
+
     def run(self, first_step: int, steps: int, position: int, start_ns: int, h_ns: int, jacobi: bool):
         """`cosim.core.kernel.step_kernel` on these tables. Change the arrays in place only (the
         kernel holds their addresses): `watch_addresses[:] = ...`, `rows[:] = 0`."""

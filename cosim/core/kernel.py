@@ -46,6 +46,7 @@ G_SLOT_FIRST, G_SLOT_COUNT = 7, 8
 GROUP_COLUMNS = 9
 KIND_REAL, KIND_INTEGER, KIND_BOOLEAN = 0, 1, 2
 RESULT_SIZE = 7  # int64 elements of the result: code, step, position, component, call, status, kind
+R_STEP = 1  # the result's step: also written at the start of each step, so it is the step under way
 # Every group kind by its code (kernel.c's KIND_*): real double, integer int32, boolean, then FMI 3.0's
 # other numeric types (an int64 or uint64 beyond 2^53 is read as NaN, for the output check to stop at).
 KINDS = (

@@ -135,73 +135,84 @@ def run_blocks(
             rows[i] = extra
         return stop
 
-    while True:
-        if k >= end and position == 0:
-            break
-        if before_block is not None:
-            before_block()
-        # At most `block` steps a stretch (a stretch of `python_rows` goes on through hand-backs).
-        count = 1 if finish_step else min(block - (k - first) if python_rows else block, end - k)
-        tail = tail_from is not None and k >= tail_from
-        if tail:  # steps cut at the stop time go one at a time, with their step sizes
-            count = 1
-            for i in stepping:
-                tables.step_sizes[i] = master.step_seconds(k, periods[i])
-        elif tail_from is not None:
-            count = min(count, tail_from - k)
-        code, k, position, failed, call, status, kind = step(k, count, position, start_ns, h_ns, jacobi)
-        finish_step = False
-        clean = position == 0 or not any(k % periods[i] == 0 for i in before[position])
-        master.step_index = k
-        # A hand-back with `python_rows` does not end the stretch while step k fits in it.
-        going_on = (
-            python_rows
-            and (code == kernel.HAND_BACK or code == kernel.POLL)
-            and k - first < block
-            and (end_before_python is None or not end_before_python(k))
-        )
-        if k > first and not going_on:
-            stop = deliver(first, k, clean)
-            first = k
-            if stop and clean:
+    def deliver_pending() -> None:
+        """The rows of the stretch's steps before the one under way, to `on_block` (an FMU that
+        ends the process inside the kernel: `cosim.fmi.exit_guard` finalises the log)."""
+        under_way = max(first, tables.step_under_way())
+        if under_way > first:
+            deliver(first, under_way, False)
+
+    master.deliver_pending = deliver_pending
+    try:
+        while True:
+            if k >= end and position == 0:
                 break
-        master.step_index = k
-        if code == kernel.FAILED:
-            try:
-                native = tables.native[failed]
-                at = None if call in (0, 2) else (start_ns + k * h_ns) / NS_PER_S
-                native.fail(call, status, at, kernel.KINDS[kind])
-            except CosimError as error:
-                master.failure = error
-                raise
-            raise CosimError(f"component '{plan[failed].component.name}' failed at step {k}")
-        if code == kernel.HAND_BACK:
-            # This component, and the next ones due in this step while they need Python too.
-            while True:
-                component, period, gather = plan[position]
+            if before_block is not None:
+                before_block()
+            # At most `block` steps a stretch (a stretch of `python_rows` goes on through hand-backs).
+            count = 1 if finish_step else min(block - (k - first) if python_rows else block, end - k)
+            tail = tail_from is not None and k >= tail_from
+            if tail:  # steps cut at the stop time go one at a time, with their step sizes
+                count = 1
+                for i in stepping:
+                    tables.step_sizes[i] = master.step_seconds(k, periods[i])
+            elif tail_from is not None:
+                count = min(count, tail_from - k)
+            code, k, position, failed, call, status, kind = step(k, count, position, start_ns, h_ns, jacobi)
+            finish_step = False
+            clean = position == 0 or not any(k % periods[i] == 0 for i in before[position])
+            master.step_index = k
+            # A hand-back with `python_rows` does not end the stretch while step k fits in it.
+            going_on = (
+                python_rows
+                and (code == kernel.HAND_BACK or code == kernel.POLL)
+                and k - first < block
+                and (end_before_python is None or not end_before_python(k))
+            )
+            if k > first and not going_on:
+                stop = deliver(first, k, clean)
+                first = k
+                if stop and clean:
+                    break
+            master.step_index = k
+            if code == kernel.FAILED:
                 try:
-                    if gather is not None:
-                        gather()
-                        component.push_inputs()
-                    cut = tail_from is not None and k >= tail_from
-                    h = master.step_seconds(k, period) if cut else whole[position]
-                    component.do_step((start_ns + k * h_ns) / NS_PER_S, h)
-                    component.get_outputs()
+                    native = tables.native[failed]
+                    at = None if call in (0, 2) else (start_ns + k * h_ns) / NS_PER_S
+                    native.fail(call, status, at, kernel.KINDS[kind])
                 except CosimError as error:
-                    if python_rows and k > first:  # the steps before this one, as a cut would
-                        deliver(first, k, False)
                     master.failure = error
                     raise
-                if python_rows:  # its row: inputs, then outputs, after the step
-                    at = rows.item(position)
-                    history = blocks[position]
-                    history[at, : input_counts[position]] = component.input_buffer
-                    history[at, input_counts[position] :] = component.output_buffer
-                    rows[position] = at + 1
-                position += 1
-                following = next((i for i in after[position] if k % periods[i] == 0), None)
-                if following is None or not tables.python[following]:
-                    break
-                position = following
-            finish_step = cut_after_python is None or cut_after_python(k)
+                raise CosimError(f"component '{plan[failed].component.name}' failed at step {k}")
+            if code == kernel.HAND_BACK:
+                # This component, and the next ones due in this step while they need Python too.
+                while True:
+                    component, period, gather = plan[position]
+                    try:
+                        if gather is not None:
+                            gather()
+                            component.push_inputs()
+                        cut = tail_from is not None and k >= tail_from
+                        h = master.step_seconds(k, period) if cut else whole[position]
+                        component.do_step((start_ns + k * h_ns) / NS_PER_S, h)
+                        component.get_outputs()
+                    except CosimError as error:
+                        if python_rows and k > first:  # the steps before this one, as a cut would
+                            deliver(first, k, False)
+                        master.failure = error
+                        raise
+                    if python_rows:  # its row: inputs, then outputs, after the step
+                        at = rows.item(position)
+                        history = blocks[position]
+                        history[at, : input_counts[position]] = component.input_buffer
+                        history[at, input_counts[position] :] = component.output_buffer
+                        rows[position] = at + 1
+                    position += 1
+                    following = next((i for i in after[position] if k % periods[i] == 0), None)
+                    if following is None or not tables.python[following]:
+                        break
+                    position = following
+                finish_step = cut_after_python is None or cut_after_python(k)
+    finally:
+        master.deliver_pending = None
     return master.step_index - (end - steps)

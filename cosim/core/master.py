@@ -124,6 +124,9 @@ class Master:
             self.order = [c for c in self.order if c is not self._signals] + [self._signals]
         self.step_index = 0
         self.failure: CosimError | None = None
+        # While `run_blocks` runs: hands the rows of the steps before the one under way to its
+        # `on_block` (for an FMU that ends the process inside the kernel: `cosim.fmi.exit_guard`).
+        self.deliver_pending: Callable[[], None] | None = None
         self._initialized = False
         self._closed = False
         self._kernels: dict[tuple[bool, int], fast_loop.KernelTables | None] = {}

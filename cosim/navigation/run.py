@@ -418,6 +418,8 @@ class _RobotRun(SystemRun):
     def fmu_exited(self, message: str) -> str:
         """An FMU in this process called exit() (`cosim.fmi.exit_guard`): finalise the log as for a
         failed FMU (the FMUs are not freed: the process ends inside one of them)."""
+        if self.master.deliver_pending is not None:  # the kernel's steps before the one under way
+            self.master.deliver_pending()
         self.flush()
         failure = f"{message} (after t = {self.master.time:.3f} s)"
         self.finish(failure, None, free=False)

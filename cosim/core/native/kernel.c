@@ -346,6 +346,7 @@ int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_po
     int64_t end = first_step + steps;
     bool watching = t->watch_addresses[0] != 0;
     while (k < end) {
+        result[R_STEP] = k; /* the step under way, for a caller whose FMU ends the process in it */
         double time = (double)(start_ns + k * h_ns) / 1e9;
         if (jacobi) {
             for (int64_t i = 0; i < n; i++) {
