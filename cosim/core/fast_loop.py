@@ -44,10 +44,22 @@ class KernelTables:
 
     `plan` is the master's `PlanEntry`s in step order; `skip` names components
     that are never stepped (constant outputs), whose connections are not copied again either.
-    A component whose `native_step()` is None is handed back to Python where it is due.
+    A component whose `native_step()` is None is handed back to Python where it is due, unless
+    its `kernel_sweep()` gives (C function address, its argument): then the kernel steps it by
+    that call on its first three inputs (the lidar's sweep: `cosim.world.lidar.Lidar`).
+    `python_rows` (with `record`): those components have rows too, which `run_blocks` writes
+    after their steps, so a stretch of steps goes on through them (see there).
     """
 
-    def __init__(self, plan: list[PlanEntry], system, skip: set[str], record: bool, block: int) -> None:
+    def __init__(
+        self,
+        plan: list[PlanEntry],
+        system,
+        skip: set[str],
+        record: bool,
+        block: int,
+        python_rows: bool = False,
+    ) -> None:
         from cosim.core import kernel as K
 
         n = len(plan)
@@ -58,9 +70,14 @@ class KernelTables:
         record_offset = 0
         fed = system.links()
         self.record_shapes: list[tuple[int, int] | None] = []
+        self.python: list[bool] = []  # whether each component is handed back to Python
         for i, (component, period, _) in enumerate(plan):
             native = component.native_step()
             self.native.append(native)
+            # A component stepped by one C call on its inputs x, y, theta (`Lidar.kernel_sweep`).
+            sweep = getattr(component, "kernel_sweep", None)
+            sweep = sweep() if native is None and callable(sweep) else None
+            self.python.append(native is None and sweep is None and component.name not in skip)
             row = components[i]
             row[K.C_PERIOD] = period
             step_sizes[i] = period * system.macro_step_ns / 1e9
@@ -69,6 +86,11 @@ class KernelTables:
                 self.record_shapes.append(None)
                 continue
             row[K.C_KIND] = K.KIND_NATIVE if native is not None else K.KIND_PYTHON
+            if sweep is not None:
+                row[K.C_KIND] = K.KIND_SWEEP
+                row[K.C_STEP], row[K.C_HANDLE] = sweep
+                # With `python_rows` the kernel returns before it (POLL), where a stretch could end.
+                row[K.C_FLAGS] = 1 if record and python_rows else 0
             row[K.C_IN_ADDRESS] = ctypes.addressof(component.input_cbuffer)
             row[K.C_IN_COUNT] = len(component.inputs)
             row[K.C_OUT_ADDRESS] = ctypes.addressof(component.output_cbuffer)
@@ -88,8 +110,25 @@ class KernelTables:
                 )
                 link_numbers.append((connection.scale, connection.offset))
             row[K.C_LINK_COUNT] = len(links) - row[K.C_LINK_FIRST]
+            if sweep is not None:
+                if record:
+                    width = len(component.inputs) + len(component.outputs)
+                    capacity = block // period + 2
+                    row[K.C_RECORD] = 1
+                    row[K.C_RECORD_OFFSET] = record_offset
+                    self.record_shapes.append((record_offset, capacity, width))
+                    record_offset += capacity * width
+                else:
+                    self.record_shapes.append(None)
+                continue
             if native is None:
-                self.record_shapes.append(None)
+                if record and python_rows:  # rows written by `run_blocks` (C_RECORD stays 0)
+                    width = len(component.inputs) + len(component.outputs)
+                    capacity = block // period + 2
+                    self.record_shapes.append((record_offset, capacity, width))
+                    record_offset += capacity * width
+                else:
+                    self.record_shapes.append(None)
                 continue
             row[K.C_VERSION] = native.fmi_version
             row[K.C_HANDLE] = native.handle
@@ -151,6 +190,7 @@ class KernelTables:
         self.checks = np.array(checks, dtype=np.int64).reshape(-1, 3)
         self.history = np.zeros(max(1, record_offset))
         self.record_block = block if record else None  # the most steps per kernel call the rows hold
+        self.python_rows = bool(record and python_rows)
         self.rows = np.zeros(n, dtype=np.int64)
         self._blocks: list[np.ndarray | None] | None = None
         self.watch_addresses = np.zeros(3, dtype=np.int64)
@@ -161,6 +201,12 @@ class KernelTables:
 
     def histories(self) -> list[np.ndarray | None]:
         """Per component, its rows so far as a (rows, inputs + outputs) view, None when not recorded."""
+        rows = self.rows.tolist()
+        return [None if block is None else block[: rows[i]] for i, block in enumerate(self.row_arrays())]
+
+    def row_arrays(self) -> list[np.ndarray | None]:
+        """Per component, the whole (capacity, inputs + outputs) array its rows go into (the first
+        `rows[i]` hold rows), None when not recorded; the same arrays for the tables' life."""
         if self._blocks is None:
             self._blocks = []
             for shape in self.record_shapes:
@@ -169,8 +215,7 @@ class KernelTables:
                     continue
                 offset, capacity, width = shape
                 self._blocks.append(self.history[offset : offset + capacity * width].reshape(capacity, width))
-        rows = self.rows.tolist()
-        return [None if block is None else block[: rows[i]] for i, block in enumerate(self._blocks)]
+        return self._blocks
 
     def warm_up(self) -> None:
         """Load the kernel (building its library on a machine's first use) and bind these tables."""
@@ -186,6 +231,13 @@ class KernelTables:
                 self.watch_addresses, self.watch_numbers,
             )  # fmt: skip
         return self._kernel
+
+    def step_under_way(self) -> int:
+        """The step the kernel's last call was in when it returned, or is in now (an FMU that
+        ends the process inside a call: `cosim.fmi.exit_guard`)."""
+        from cosim.core import kernel as K
+
+        return self._bound()._result[K.R_STEP]
 
     def run(self, first_step: int, steps: int, position: int, start_ns: int, h_ns: int, jacobi: bool):
         """`cosim.core.kernel.step_kernel` on these tables. Change the arrays in place only (the

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 # Return codes of `step_kernel` (first element of the result).
-DONE, HAND_BACK, WATCH, FAILED = 0, 1, 2, 3
+DONE, HAND_BACK, WATCH, FAILED, POLL = 0, 1, 2, 3, 4
 # Columns of the component table.
 (
     C_KIND, C_PERIOD, C_VERSION, C_HANDLE, C_STEP, C_FLAGS, C_LAST_TIME, C_LINK_FIRST, C_LINK_COUNT,
@@ -37,13 +37,16 @@ DONE, HAND_BACK, WATCH, FAILED = 0, 1, 2, 3
     C_IN_ADDRESS, C_IN_COUNT, C_OUT_ADDRESS, C_OUT_COUNT, C_RECORD, C_RECORD_OFFSET,
 ) = range(21)  # fmt: skip
 COMPONENT_COLUMNS = 21
-KIND_IDLE, KIND_NATIVE, KIND_PYTHON = 0, 1, 2  # never stepped (constant outputs), by C calls, by Python
+# Never stepped (constant outputs), by FMI calls, by Python, by one C call on its inputs x, y, theta
+# (a sweep: the lidar's, `KernelTables`).
+KIND_IDLE, KIND_NATIVE, KIND_PYTHON, KIND_SWEEP = 0, 1, 2, 3
 # Columns of the transfer-group table.
 G_KIND, G_FUNCTION, G_REFERENCES, G_REFERENCE_COUNT, G_VALUE_COUNT, G_VALUES, G_DIRECT = range(7)
 G_SLOT_FIRST, G_SLOT_COUNT = 7, 8
 GROUP_COLUMNS = 9
 KIND_REAL, KIND_INTEGER, KIND_BOOLEAN = 0, 1, 2
 RESULT_SIZE = 7  # int64 elements of the result: code, step, position, component, call, status, kind
+R_STEP = 1  # the result's step: also written at the start of each step, so it is the step under way
 # Every group kind by its code (kernel.c's KIND_*): real double, integer int32, boolean, then FMI 3.0's
 # other numeric types (an int64 or uint64 beyond 2^53 is read as NaN, for the output check to stop at).
 KINDS = (
@@ -182,7 +185,9 @@ def step_kernel(
     `first_step + steps - 1`. Returns (code, step, position, component, call, status, kind):
     DONE (all steps ran; step = the next one), HAND_BACK (component `position` of step `step`
     needs Python), WATCH (the position after step `step - 1` is to be checked), FAILED (component
-    `component` failed at step `step`: `call`, `status`, `kind` of the set/get group).
+    `component` failed at step `step`: `call`, `status`, `kind` of the set/get group), POLL (a
+    sweep whose C_FLAGS is 1 is due at `position` of step `step`: the caller looks, then calls
+    again from there, which steps it).
 
     For repeated calls on the same tables, `Kernel(tables...)(first_step, ...)` skips the checks."""
     kernel = Kernel(

@@ -19,17 +19,20 @@ from cosim.core.timebase import NS_PER_S
 from cosim.errors import CosimError
 
 
-def kernel_tables(master, record: bool, block: int) -> fast_loop.KernelTables | None:
+def kernel_tables(
+    master, record: bool, block: int, python_rows: bool = False
+) -> fast_loop.KernelTables | None:
     """The tables of `run_blocks` for `master`'s plan, or None when the kernel cannot run the
     system: no component steps by C calls, Jacobi mode with a component that needs Python, or a
-    delayed or iterated algebraic loop (those step in the Python loop)."""
+    delayed or iterated algebraic loop (those step in the Python loop). `python_rows`: the
+    components that need Python have rows too (`KernelTables`)."""
     plan = master._plan
     skip = {entry.component.name for entry in plan if entry.component.constant_outputs}
-    tables = fast_loop.KernelTables(plan, master.system, skip, record, block)
-    stepped = [native for native, (c, _, _) in zip(tables.native, plan, strict=True) if c.name not in skip]
-    if not any(native is not None for native in stepped):
+    tables = fast_loop.KernelTables(plan, master.system, skip, record, block, python_rows)
+    stepped = [python for python, (c, _, _) in zip(tables.python, plan, strict=True) if c.name not in skip]
+    if all(stepped):  # no component steps by C calls
         return None
-    if master.system.mode == "jacobi" and any(native is None for native in stepped):
+    if master.system.mode == "jacobi" and any(stepped):
         return None
     if master._previous or master._loop_groups:
         return None  # a delayed or iterated loop steps in Python (`Master._advance`)
@@ -40,10 +43,7 @@ def all_native_tables(master, record: bool, block: int) -> fast_loop.KernelTable
     """`kernel_tables`, but None also when a component that is stepped needs Python (`Master.run`
     and `Master.run_recorded` hand nothing back)."""
     tables = kernel_tables(master, record, block)
-    if tables is not None and any(
-        native is None and not component.constant_outputs
-        for native, (component, _, _) in zip(tables.native, master._plan, strict=True)
-    ):
+    if tables is not None and any(tables.python):
         return None
     return tables
 
@@ -56,6 +56,7 @@ def run_blocks(
     block: int = 1000,
     before_block: Callable[[], None] | None = None,
     cut_after_python: Callable[[int], bool] | None = None,
+    end_before_python: Callable[[int], bool] | None = None,
 ) -> int:
     """Advance `master` up to `steps` macro steps through the compiled kernel; components that need
     Python are stepped here where they are due. Returns the steps done.
@@ -73,6 +74,14 @@ def run_blocks(
     stepped: False lets the stretch go on past step k (so Python components step only in the
     first step of a stretch, and hold their buffers to its end); True, or no callable, ends
     the stretch with step k.
+
+    Tables made with `python_rows` (`kernel_tables`) give the Python components rows too,
+    written here after each of their steps: then a stretch is not cut where a Python component
+    is due (it goes on through their steps, up to `block` steps) unless `end_before_python(k)`,
+    asked there, is true (e.g. a signal to notice where the cut would have been); a Python
+    component that fails hands the stretch's steps before its own over first. A component the
+    kernel steps by one C call (a sweep: the lidar) is such a place too: the kernel returns
+    before it (POLL) and steps it when called again.
     """
     most = tables.record_block or block  # recorded: the rows the tables hold
     if not 1 <= block <= most:
@@ -87,79 +96,123 @@ def run_blocks(
     # A component's whole step [s]: `Master.step_seconds` before `tail_from`, where no step is cut.
     whole = [period * h_ns / NS_PER_S for period in periods]
     stepping = [i for i in range(len(periods)) if tables.components[i, kernel.C_KIND] != kernel.KIND_IDLE]
+    # Per position of the plan: the stepping components before it, and from it on.
+    before = [[i for i in stepping if i < position] for position in range(len(plan) + 1)]
+    after = [[i for i in stepping if i >= position] for position in range(len(plan) + 1)]
+    # The recorded components: (index, period, all their rows' array); rows so far in `tables.rows`.
+    blocks = tables.row_arrays()
+    recorded = [(i, periods[i], block) for i, block in enumerate(blocks) if block is not None]
+    unrecorded = [None] * len(blocks)
+    rows = tables.rows
+    step = tables.run
+    # Python components with rows (`python_rows`): their input counts, by plan position.
+    python_rows = tables.python_rows
+    input_counts = [len(entry.component.inputs) for entry in plan]
     end = master.step_index + steps
     first = k = master.step_index
     position = 0
-    tables.rows[:] = 0
+    rows[:] = 0
     finish_step = False  # a Python component stepped: the kernel ends this step, then returns
-    while True:
-        if k >= end and position == 0:
-            break
-        if before_block is not None:
-            before_block()
-        count = 1 if finish_step else min(block, end - k)
-        tail = tail_from is not None and k >= tail_from
-        if tail:  # steps cut at the stop time go one at a time, with their step sizes
-            count = 1
-            for i in stepping:
-                tables.step_sizes[i] = master.step_seconds(k, periods[i])
-        elif tail_from is not None:
-            count = min(count, tail_from - k)
-        code, k, position, failed, call, status, kind = tables.run(k, count, position, start_ns, h_ns, jacobi)
-        finish_step = False
-        clean = position == 0 or not any(k % periods[i] == 0 for i in stepping if i < position)
-        if k > first:
-            histories = tables.histories()
-            delivered = []
-            for i, history in enumerate(histories):
-                if history is None:
-                    delivered.append(None)
-                    continue
-                period = periods[i]
-                n = (k + period - 1) // period - (first + period - 1) // period
-                delivered.append(history[:n])
-            master.step_index = k
-            stop = on_block(first, k, delivered, clean) if on_block is not None else False
-            # Rows of step k already taken (components before `position`) move to the front.
-            for i, history in enumerate(histories):
-                if history is not None:
-                    n = len(delivered[i])
-                    extra = len(history) - n
-                    if extra:
-                        history[:extra] = history[n:].copy()
-                    tables.rows[i] = extra
-            first = k
-            if stop and clean:
-                break
+
+    def deliver(first: int, k: int, clean: bool):
+        """`on_block` with each recorded component's rows of the steps [first, k); rows of step
+        k already taken (components before the kernel's position) are kept for the next stretch."""
+        taken = rows.tolist()
+        delivered = unrecorded.copy()
+        kept = []
+        for i, period, history in recorded:
+            held = taken[i]
+            n = min((k + period - 1) // period - (first + period - 1) // period, held)
+            delivered[i] = history[:n]
+            kept.append((i, n, held))
         master.step_index = k
-        if code == kernel.FAILED:
-            try:
-                native = tables.native[failed]
-                at = None if call in (0, 2) else (start_ns + k * h_ns) / NS_PER_S
-                native.fail(call, status, at, kernel.KINDS[kind])
-            except CosimError as error:
-                master.failure = error
-                raise
-            raise CosimError(f"component '{plan[failed].component.name}' failed at step {k}")
-        if code == kernel.HAND_BACK:
-            # This component, and the next ones due in this step while they need Python too.
-            while True:
-                component, period, gather = plan[position]
+        stop = on_block(first, k, delivered, clean) if on_block is not None else False
+        for i, n, held in kept:
+            extra = held - n
+            if extra:
+                history = blocks[i]
+                history[:extra] = history[n:held].copy()
+            rows[i] = extra
+        return stop
+
+    def deliver_pending() -> None:
+        """The rows of the stretch's steps before the one under way, to `on_block` (an FMU that
+        ends the process inside the kernel: `cosim.fmi.exit_guard` finalises the log)."""
+        under_way = max(first, tables.step_under_way())
+        if under_way > first:
+            deliver(first, under_way, False)
+
+    master.deliver_pending = deliver_pending
+    try:
+        while True:
+            if k >= end and position == 0:
+                break
+            if before_block is not None:
+                before_block()
+            # At most `block` steps a stretch (a stretch of `python_rows` goes on through hand-backs).
+            count = 1 if finish_step else min(block - (k - first) if python_rows else block, end - k)
+            tail = tail_from is not None and k >= tail_from
+            if tail:  # steps cut at the stop time go one at a time, with their step sizes
+                count = 1
+                for i in stepping:
+                    tables.step_sizes[i] = master.step_seconds(k, periods[i])
+            elif tail_from is not None:
+                count = min(count, tail_from - k)
+            code, k, position, failed, call, status, kind = step(k, count, position, start_ns, h_ns, jacobi)
+            finish_step = False
+            clean = position == 0 or not any(k % periods[i] == 0 for i in before[position])
+            master.step_index = k
+            # A hand-back with `python_rows` does not end the stretch while step k fits in it.
+            going_on = (
+                python_rows
+                and (code == kernel.HAND_BACK or code == kernel.POLL)
+                and k - first < block
+                and (end_before_python is None or not end_before_python(k))
+            )
+            if k > first and not going_on:
+                stop = deliver(first, k, clean)
+                first = k
+                if stop and clean:
+                    break
+            master.step_index = k
+            if code == kernel.FAILED:
                 try:
-                    if gather is not None:
-                        gather()
-                        component.push_inputs()
-                    cut = tail_from is not None and k >= tail_from
-                    h = master.step_seconds(k, period) if cut else whole[position]
-                    component.do_step((start_ns + k * h_ns) / NS_PER_S, h)
-                    component.get_outputs()
+                    native = tables.native[failed]
+                    at = None if call in (0, 2) else (start_ns + k * h_ns) / NS_PER_S
+                    native.fail(call, status, at, kernel.KINDS[kind])
                 except CosimError as error:
                     master.failure = error
                     raise
-                position += 1
-                following = next((i for i in stepping if i >= position and k % periods[i] == 0), None)
-                if following is None or tables.native[following] is not None:
-                    break
-                position = following
-            finish_step = cut_after_python is None or cut_after_python(k)
+                raise CosimError(f"component '{plan[failed].component.name}' failed at step {k}")
+            if code == kernel.HAND_BACK:
+                # This component, and the next ones due in this step while they need Python too.
+                while True:
+                    component, period, gather = plan[position]
+                    try:
+                        if gather is not None:
+                            gather()
+                            component.push_inputs()
+                        cut = tail_from is not None and k >= tail_from
+                        h = master.step_seconds(k, period) if cut else whole[position]
+                        component.do_step((start_ns + k * h_ns) / NS_PER_S, h)
+                        component.get_outputs()
+                    except CosimError as error:
+                        if python_rows and k > first:  # the steps before this one, as a cut would
+                            deliver(first, k, False)
+                        master.failure = error
+                        raise
+                    if python_rows:  # its row: inputs, then outputs, after the step
+                        at = rows.item(position)
+                        history = blocks[position]
+                        history[at, : input_counts[position]] = component.input_buffer
+                        history[at, input_counts[position] :] = component.output_buffer
+                        rows[position] = at + 1
+                    position += 1
+                    following = next((i for i in after[position] if k % periods[i] == 0), None)
+                    if following is None or not tables.python[following]:
+                        break
+                    position = following
+                finish_step = cut_after_python is None or cut_after_python(k)
+    finally:
+        master.deliver_pending = None
     return master.step_index - (end - steps)

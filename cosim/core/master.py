@@ -124,6 +124,9 @@ class Master:
             self.order = [c for c in self.order if c is not self._signals] + [self._signals]
         self.step_index = 0
         self.failure: CosimError | None = None
+        # While `run_blocks` runs: hands the rows of the steps before the one under way to its
+        # `on_block` (for an FMU that ends the process inside the kernel: `cosim.fmi.exit_guard`).
+        self.deliver_pending: Callable[[], None] | None = None
         self._initialized = False
         self._closed = False
         self._kernels: dict[tuple[bool, int], fast_loop.KernelTables | None] = {}
@@ -493,11 +496,15 @@ class Master:
             done += count
         return steps
 
-    def kernel_tables(self, record: bool = False, block: int = KERNEL_BLOCK) -> fast_loop.KernelTables | None:
+    def kernel_tables(
+        self, record: bool = False, block: int = KERNEL_BLOCK, python_rows: bool = False
+    ) -> fast_loop.KernelTables | None:
         """The tables of `run_blocks` (`cosim.core.kernel`), or None when the kernel cannot run this
-        system: no component steps by C calls, or Jacobi mode with a component that needs Python."""
+        system: no component steps by C calls, or Jacobi mode with a component that needs Python.
+        `python_rows` (with `record`): the components that need Python have rows too, and the
+        stretches of `run_blocks` go on through their steps (`cosim.core.kernel_path`)."""
         self._check_running()
-        return kernel_path.kernel_tables(self, record, block)
+        return kernel_path.kernel_tables(self, record, block, python_rows)
 
     def run_blocks(
         self,
@@ -507,6 +514,7 @@ class Master:
         block: int = KERNEL_BLOCK,
         before_block: Callable[[], None] | None = None,
         cut_after_python: Callable[[int], bool] | None = None,
+        end_before_python: Callable[[int], bool] | None = None,
     ) -> int:
         """Advance up to `steps` macro steps through the compiled kernel, handing components that
         need Python back where they are due; `on_block(first, end, histories, clean)` after each
@@ -514,7 +522,9 @@ class Master:
         `cosim.core.kernel_path.run_blocks`, which says what they mean."""
         self._check_running()
         self._check_steps(steps)
-        return kernel_path.run_blocks(self, steps, tables, on_block, block, before_block, cut_after_python)
+        return kernel_path.run_blocks(
+            self, steps, tables, on_block, block, before_block, cut_after_python, end_before_python
+        )
 
     def _deliver(self, first: int, on_block, histories: list[np.ndarray], rows: np.ndarray) -> None:
         """Hand the rows of the steps that ran (all of them, or up to a failure) to `on_block`."""

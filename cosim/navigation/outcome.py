@@ -21,7 +21,10 @@ from __future__ import annotations
 
 import ctypes
 import math
+import struct
 from dataclasses import dataclass
+
+import numpy as np
 
 from cosim.record.steps import Reading
 
@@ -64,6 +67,7 @@ class OutcomeMonitor:
         self._speed = getattr(world, "max_speed", 0.0)
         self._moving = bool(getattr(world, "moving", False))
         self._anchor = (self.last_xy[0], self.last_xy[1], 0.0, -math.inf)
+        self._compiled = _CompiledChecks.for_world(world)
         self.check_position(0.0, *self.last_xy)
 
     def check_position(self, t: float, x: float, y: float) -> str | None:
@@ -71,9 +75,20 @@ class OutcomeMonitor:
         return self.check_positions((t,), (x,), (y,))[1]
 
     def check_positions(self, times, xs, ys) -> tuple[int, str | None]:
-        """`check_position` for consecutive steps (sequences of Python floats): (index of the step
-        that ends the run, why) or (len(times), None); no step after the one that ends it is
-        looked at."""
+        """`check_position` for consecutive steps (sequences of floats, or float64 arrays): (index
+        of the step that ends the run, why) or (len(times), None); no step after the one that ends
+        it is looked at. A static `WorldDistance` is checked in C (`world_check_positions` of
+        cosim/world/native/world.c: the same operations, Python's hypot reproduced), the rest here."""
+        compiled = self._compiled
+        if compiled is not None:
+            return compiled(self, times, xs, ys)
+        # Python floats, whatever came in: the arithmetic below is Python's.
+        times, xs, ys = (
+            values.tolist() if isinstance(values, np.ndarray) else values for values in (times, xs, ys)
+        )
+        return self._check_in_python(times, xs, ys)
+
+    def _check_in_python(self, times, xs, ys) -> tuple[int, str | None]:
         outcome = self.outcome
         radius = self.radius
         speed = self._speed
@@ -142,6 +157,93 @@ class OutcomeMonitor:
             self.outcome.reason = reason
             self.outcome.time = t
         return self.outcome
+
+
+class _CompiledChecks:
+    """`OutcomeMonitor.check_positions` in C for a static `WorldDistance`: the positions and times
+    are copied into one array the C struct (world.c's `Monitor`) points at, the monitor's state
+    into the struct, checked there step by step, and copied back."""
+
+    def __init__(self, world) -> None:
+        from cosim.world import kernels
+
+        self.kernels = kernels
+        self.world = world  # its struct, arrays and field stay alive with it
+        self.field = np.ascontiguousarray(world.centre_field, dtype=np.float64)
+        self.bounds = np.ascontiguousarray(world.shapes.bounds, dtype=np.float64).reshape(-1, 3)
+        self.state = kernels.MonitorArrays(
+            world=world._address,
+            centre_field=self.field.ctypes.data,
+            bounds=self.bounds.ctypes.data,
+            n_bounds=len(self.bounds),
+        )
+        self.address = ctypes.addressof(self.state)
+        self._points(1024)
+        # The numbers from `radius` on, written and read as one block (one call each).
+        self.offset = kernels.MonitorArrays.radius.offset
+        self.at = kernels.MonitorArrays.last_x.offset
+        self.pack = struct.Struct("=13d").pack_into
+        self.unpack = struct.Struct("=8dq").unpack_from
+        self.function = kernels.library().world_check_positions
+
+    def _points(self, capacity: int) -> None:
+        """Room for `capacity` steps: rows x, y, t."""
+        self.points = np.empty((3, capacity))
+        self.capacity = capacity
+        self.state.points = self.points.ctypes.data
+        self.state.capacity = capacity
+
+    @classmethod
+    def for_world(cls, world) -> _CompiledChecks | None:
+        """The C checks of `world`, or None: not a `WorldDistance`, or its obstacles move (their
+        poses are Python's, `WorldDistance.at`)."""
+        from cosim.world.distance import WorldDistance
+
+        if type(world) is not WorldDistance or world.moving or world.max_speed != 0.0:
+            return None
+        return cls(world)
+
+    def __call__(self, monitor: OutcomeMonitor, times, xs, ys) -> tuple[int, str | None]:
+        n = len(times)
+        if n == 0 or len(xs) != n or len(ys) != n:
+            return monitor._check_in_python(times, xs, ys)  # (which raises for differing lengths)
+        if n > self.capacity:
+            self._points(2 * n)
+        points = self.points
+        points[0, :n] = xs
+        points[1, :n] = ys
+        points[2, :n] = times
+        outcome = monitor.outcome
+        goal_x, goal_y = monitor.goal
+        last_x, last_y = monitor.last_xy
+        self.pack(
+            self.state, self.offset, monitor.radius, goal_x, goal_y, monitor.tolerance, monitor._speed,
+            last_x, last_y, outcome.distance, outcome.min_clearance, *monitor._anchor,
+        )  # fmt: skip
+        index = self.function(self.address, n)
+        last_x, last_y, outcome.distance, outcome.min_clearance, *anchor, code = self.unpack(
+            self.state, self.at
+        )
+        monitor.last_xy = (last_x, last_y)
+        monitor._anchor = tuple(anchor)
+        if code == 0:  # CHECK_GOING
+            outcome.time = points.item(2, n - 1)
+            return n, None
+        kernels = self.kernels
+        if code == kernels.CHECK_PYTHON:
+            # The rest from step `index` on, in Python (which indexes off the grid there).
+            rest, reason = monitor._check_in_python(
+                points[2, index:n].tolist(), points[0, index:n].tolist(), points[1, index:n].tolist()
+            )
+            return index + rest, reason
+        if code == kernels.CHECK_COLLISION:
+            outcome.reason = reason = "collision"
+            outcome.collision_point = (points.item(0, index), points.item(1, index))
+        else:
+            outcome.reached = True
+            outcome.reason = reason = "goal_reached"
+        outcome.time = points.item(2, index)
+        return index, reason
 
 
 class SafeCircle:

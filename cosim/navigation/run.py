@@ -15,11 +15,14 @@ at each replan (stamped with the start of the planner step that made it) and `/g
 given during the run.
 
 The loop: the FMUs step in the compiled kernel (`Master.run_blocks`, `cosim.core.kernel`), which
-keeps their buffers after each step and hands the Python components (lidar, planner) back where
-they are due. A block of steps ends before every Python component's step, at the end of a step in
-which one stepped when that step has something to do (a new plan, no path, a goal poll; else the
-block goes on: `cut_after_python`), and after any step whose position may end the run (not
-finite, near the goal, or outside the circle that the true obstacles cannot reach: `SafeCircle`).
+keeps their buffers after each step, sweeps a noise-free lidar itself, and hands the Python
+components (planner, a noisy lidar) back where they are due; their rows are kept too
+(`python_rows`), so a block goes on through their steps, up to 1000 steps. It ends at the end of
+a step in which one stepped when that step has something to do (a new plan, no path, a goal poll)
+or while a topic awaits its first message (`cut_after_python`), before a Python component's step
+or a sweep when a signal came (`end_before_python`), and after any step whose position may end
+the run (not finite, near the goal, or outside the circle that the true obstacles cannot reach:
+`SafeCircle`).
 Each block goes to the recording (`cosim.record.replay`): recorded and checked from its rows
 (`cosim.record.blocks`: the positions of all its steps through `OutcomeMonitor.check_positions`,
 the rows turned into messages with NumPy every few chunk windows), or, when the rows cannot describe
@@ -232,7 +235,7 @@ class _RobotRun(SystemRun):
         # Build (or load) the C kernels that would first run inside the loop, so the real-time factor
         # measures the simulation, not a first run's compilation.
         self.monitor.world.distance(*scenario.start[:2])
-        self.tables = master.kernel_tables(record=True) if _use_kernel() else None
+        self.tables = master.kernel_tables(record=True, python_rows=True) if _use_kernel() else None
         if self.tables is not None:
             self.tables.warm_up()
         self.start_clock(scenario.stop_time if progress else None)
@@ -240,6 +243,7 @@ class _RobotRun(SystemRun):
         self.h_ns = system.macro_step_ns
         self.reason: str | None = None  # why the loop stopped
         self.replay: BlockReplay | None = None
+        self.signal: str | None = None  # a signal taken at a kernel hand-back, for `stop`
 
     def finish_step(self, k: int) -> str | None:
         """Record what step k produced and check the outcome; why the run ends after it, or None."""
@@ -277,8 +281,10 @@ class _RobotRun(SystemRun):
 
     def stop(self, reason: str | None, poll_signal: bool, sim_time: float) -> bool:
         """After a step (Python loop) or a block (kernel): whether the run ends, and why."""
-        if reason is None and poll_signal and interrupt.take() is not None:
-            reason = "interrupted"
+        if reason is None and poll_signal:
+            signal, self.signal = self.signal or interrupt.take(), None
+            if signal is not None:
+                reason = "interrupted"
         self.show_progress(sim_time)
         if reason is not None:
             self.reason = reason
@@ -293,13 +299,25 @@ class _RobotRun(SystemRun):
         """The kernel's per-block callback."""
         return self.stop(self.replay.replay(first, end, histories, clean), clean, self.master.time)
 
+    def end_before_python(self, k: int) -> bool:
+        """Whether a kernel block ends before the Python components of step k (a block goes on
+        through them otherwise): when a signal came, so the run stops where it always did."""
+        if self.signal is None:
+            self.signal = interrupt.take()
+        return self.signal is not None
+
     def cut_after_python(self, k: int) -> bool:
         """Whether a kernel block ends after step k, in which a Python component stepped: when the
         step's end has something to do (a new plan to write, a planner that found no path, a goal
-        to poll for)."""
+        to poll for), and while a topic has yet to get its first message (`BlockRecording.settled`)."""
         planner = self.planner
-        return self.goal_poll is not None or (
-            planner is not None and (planner.plan_version != self.plan_version or planner.no_path is not None)
+        return (
+            self.goal_poll is not None
+            or not self.replay.fast.settled
+            or (
+                planner is not None
+                and (planner.plan_version != self.plan_version or planner.no_path is not None)
+            )
         )
 
     def loop(self) -> None:
@@ -325,6 +343,7 @@ class _RobotRun(SystemRun):
             block=watch.block,
             before_block=watch.watch,
             cut_after_python=self.cut_after_python,
+            end_before_python=self.end_before_python,
         )
 
     def run(self) -> RunResult:
@@ -399,6 +418,8 @@ class _RobotRun(SystemRun):
     def fmu_exited(self, message: str) -> str:
         """An FMU in this process called exit() (`cosim.fmi.exit_guard`): finalise the log as for a
         failed FMU (the FMUs are not freed: the process ends inside one of them)."""
+        if self.master.deliver_pending is not None:  # the kernel's steps before the one under way
+            self.master.deliver_pending()
         self.flush()
         failure = f"{message} (after t = {self.master.time:.3f} s)"
         self.finish(failure, None, free=False)

@@ -1,11 +1,13 @@
 """The kernel path's recording and checks, a block of steps at a time (`cosim.record.replay`).
 
-Within a block only the kernel's components step (a component stepped by Python steps at most in
-the block's first step, and its live buffers hold that step's values to the block's end), so what
-the per-step recording (`cosim.record.steps.StepRecording.after_step`) and the outcome checks do
-step by step can be done over the block's rows: the positions are checked in one call of the
-monitor's `check_positions` (the same arithmetic, step by step, in Python floats), and the rows
-are copied into buffers that collect the steps of several blocks. `flush()` turns those steps
+Every component of a block has rows (the kernel's, and, with `python_rows` tables, those
+`run_blocks` writes for the lidar and planner), or is stepped by Python at most in the block's
+first step (its live buffers hold that step's values to the block's end), so what the per-step
+recording (`cosim.record.steps.StepRecording.after_step`) and the outcome checks do step by step
+can be done over the block's rows: the positions are checked in one call of the monitor's
+`check_positions` (the same arithmetic, step by step: in C for a static world), each scan is made
+from the lidar's row, and the columns the recording reads are copied into buffers that collect
+the steps of several blocks. `flush()` turns those steps
 into their messages with NumPy (signal records, /odom /tf /pose at the pose rate, /cmd_vel and the
 mixer's mode at the mixer's rate; scans and moved obstacles were made at their steps) and hands
 them to `Recorder.hold_steps`, which writes the bytes of the per-step path. Steps are flushed
@@ -88,6 +90,30 @@ class OtherMessage(NamedTuple):
     payload: bytes
 
 
+def read_columns(component, outputs: set[int]) -> list[slice]:
+    """The columns of a component's row (its inputs, then its outputs) that the recording reads,
+    as runs: its scalar inputs (their run of slots, or all inputs when arrays lie between them, as
+    `cosim.record.replay` holds them) and its `outputs` slots (recorded or observed). The other
+    columns of the collected rows are never read (a replay sets them for its steps, then puts the
+    live values back)."""
+    n_in = len(component.inputs)
+    slots = [i for i, port in enumerate(component.inputs) if not port.is_array_element]
+    if not slots:
+        columns = []
+    elif slots == list(range(slots[0], slots[-1] + 1)):
+        columns = slots
+    else:
+        columns = list(range(n_in))
+    columns += sorted(n_in + slot for slot in outputs)
+    runs: list[slice] = []
+    for column in columns:
+        if runs and runs[-1].stop == column:
+            runs[-1] = slice(runs[-1].start, column + 1)
+        else:
+            runs.append(slice(column, column + 1))
+    return runs
+
+
 class BlockRecording:
     """Records and checks blocks of kernel steps from their rows (module docstring).
 
@@ -120,6 +146,7 @@ class BlockRecording:
         self.first = self.end = None  # steps collected, not yet flushed: [first, end)
         self.handed = time.monotonic()  # [s] wall clock of the last flush
         self.buffers: dict[int, np.ndarray] = {}
+        self.ends_first, self.ends_table = 0, np.empty(0)  # `_ends`
 
     def _column(self, reference: str) -> Column:
         """Where an observed "component.port" output sits in the collected rows."""
@@ -140,14 +167,32 @@ class BlockRecording:
         if not all(recorded[self._column(reference).index] for reference in needed):
             self.usable = False
             return
+        # A lidar with rows (`KernelTables` with `python_rows`): each scan from its row.
+        self.scan_rows: tuple[int, np.ndarray | slice] | None = None
         if recording.scan is not None and recorded[self.index[observed.scan.component]]:
-            self.usable = False  # ranges inside the rows: replayed step by step
-            return
+            lidar = self.index[observed.scan.component]
+            component = self.components[lidar]
+            n_in = len(component.inputs)
+            columns = [n_in + i for i, port in enumerate(component.outputs) if port.array_name == "ranges"]
+            run = columns == list(range(columns[0], columns[0] + len(columns))) if columns else False
+            self.scan_rows = (
+                lidar,
+                slice(columns[0], columns[-1] + 1) if run else np.array(columns, np.intp),
+            )
         self.pose_columns = [self._column(reference) for reference in observed.pose]
         self.command_columns = [self._column(r) for r in observed.command] if observed.command else None
         self.mode_column = self._column(observed.mode) if observed.mode else None
         # Rows collected: per recorded component, row 0 the last row before the collected steps.
+        # Only the columns anyone reads are copied in (`spans`): the scalar inputs and the outputs
+        # recorded or observed (the scans are made from the lidar's rows as they come).
+        read: dict[int, set[int]] = {i: set() for i in range(len(self.components))}
+        for entry in recording.entries:
+            read[self.index[entry.component.name]].update(entry.outputs)
+        mode = [self.mode_column] if self.mode_column is not None else []
+        for where in [*self.pose_columns, *(self.command_columns or ()), *mode]:
+            read[where.index].add(where.column - len(self.components[where.index].inputs))
         self.buffers = {}
+        self.spans: dict[int, list[slice]] = {}
         for i, component in enumerate(self.components):
             if recorded[i]:
                 n_in = len(component.inputs)
@@ -155,6 +200,7 @@ class BlockRecording:
                 rows[0, :n_in] = component.input_buffer
                 rows[0, n_in:] = component.output_buffer
                 self.buffers[i] = rows
+                self.spans[i] = read_columns(component, read[i])
         self.counts = dict.fromkeys(self.buffers, 0)
         self.entries: list[BlockEntry] = []
         for slot, entry in enumerate(recording.entries):
@@ -174,6 +220,17 @@ class BlockRecording:
         self.live_entries = [block for block in self.entries if block.columns is None]
         self.others: list[OtherMessage] = []
 
+    @property
+    def settled(self) -> bool:
+        """Whether every topic a block writes has had its first message (a block holding one is
+        replayed step by step, so the run loop keeps such blocks short)."""
+        recording, recorder = self.recording, self.recorder
+        return (
+            (recording.scan is None or recorder.has_channel("/scan"))
+            and (recording.command is None or recorder.has_channel("/cmd_vel"))
+            and all(recorder.has_channel(sensor.topic) for sensor in recording.sensors)
+        )
+
     def accepts(self, first: int, end: int, histories) -> bool:
         """Whether the block [first, end) can be recorded from its rows (else: step by step)."""
         if not self.ready:
@@ -191,9 +248,12 @@ class BlockRecording:
         recording, recorder = self.recording, self.recorder
         if recording.scan is not None:
             period = recording.scan.period
-            if due_from(first + 1, period) < end:
+            if self.scan_rows is not None:  # every scan from its row
+                if not recorder.has_channel("/scan") and due_from(first, period) < end:
+                    return False
+            elif due_from(first + 1, period) < end:
                 return False  # a scan after the first step: its ranges are not held
-            if not recorder.has_channel("/scan") and first % period == 0:
+            elif not recorder.has_channel("/scan") and first % period == 0:
                 return False
         if recording.command is not None and not recorder.has_channel("/cmd_vel"):
             if due_from(first, recording.command.period) < end:
@@ -218,12 +278,14 @@ class BlockRecording:
         counts = self.counts
         x_column, y_column = self.pose_columns[:2]
         x_before, y_before = counts[x_column.index], counts[y_column.index]
+        spans = self.spans
         for i, rows in self.buffers.items():
             history = histories[i]
             n = len(history)
             if n:
                 at = counts[i] + 1
-                rows[at : at + n] = history
+                for span in spans[i]:
+                    rows[at : at + n, span] = history[:, span]
                 counts[i] = at + n - 1
         self.end = end
         last = end - 1
@@ -234,7 +296,16 @@ class BlockRecording:
                 self.live[block.slot].append((first, block.entry.record()))
         recording, recorder = self.recording, self.recorder
         scan = recording.scan
-        if scan is not None and first % scan.period == 0:
+        if scan is not None and self.scan_rows is not None:
+            lidar, columns = self.scan_rows
+            period = scan.period
+            for k, row in zip(range(due_from(first, period), end, period), histories[lidar], strict=True):
+                t_ns = start_ns + k * h_ns
+                payload = recorder.scan_payload(
+                    t_ns, scan.angles, row[columns], scan.range_min, scan.range_max, scan.scan_time
+                )
+                self.others.append(OtherMessage(k * per_step + self.order.scan, t_ns, "/scan", payload))
+        elif scan is not None and first % scan.period == 0:
             t_first = start_ns + first * h_ns
             payload = recorder.scan_payload(
                 t_first, scan.angles, scan.current(), scan.range_min, scan.range_max, scan.scan_time
@@ -245,12 +316,7 @@ class BlockRecording:
         # The positions after each step, as the monitor checks them.
         xs = self._values(x_column, first, end, x_before)
         ys = self._values(y_column, first, end, y_before)
-        stop_ns = recording.stop_ns
-        if start_ns + end * h_ns <= stop_ns:  # no step of the block is cut at the stop time
-            times = [(start_ns + k * h_ns) / NS_PER_S for k in range(first + 1, end + 1)]
-        else:
-            times = [min(start_ns + (k + 1) * h_ns, stop_ns) / NS_PER_S for k in range(first, end)]
-        index, reason = self.monitor.check_positions(times, xs, ys)
+        index, reason = self.monitor.check_positions(self._ends(first, end), xs, ys)
         if reason is not None and (index != end - first - 1 or not clean):
             raise RuntimeError(
                 f"the compiled loop ran past step {first + index}, where the run ends ({reason})"
@@ -262,15 +328,26 @@ class BlockRecording:
             self.flush()  # a killed run loses no more wall time of steps than the recorder's flushes
         return reason
 
-    def _values(self, where: Column, first: int, end: int, before: int) -> list[float]:
+    def _ends(self, first: int, end: int) -> np.ndarray:
+        """The end [s] of each step in [first, end) (a step cut at the stop time ends there):
+        integer nanoseconds, exact in float64, divided once (as Python's int / int, correctly
+        rounded); from a table of `STEPS` steps made at a time."""
+        table_first = self.ends_first
+        if not table_first <= first or end > table_first + len(self.ends_table):
+            table_first = self.ends_first = first
+            steps = np.arange(first + 1, first + max(self.STEPS, end - first) + 1, dtype=np.int64)
+            self.ends_table = np.minimum(self.start_ns + steps * self.h_ns, self.recording.stop_ns) / NS_PER_S
+        return self.ends_table[first - table_first : end - table_first]
+
+    def _values(self, where: Column, first: int, end: int, before: int) -> np.ndarray:
         """The value at `where` after each step in [first, end) (held between its component's steps)."""
         rows = self.buffers[where.index]
         period = self.periods[where.index]
         if period == 1:
-            return rows[before + 1 : before + 1 + end - first, where.column].tolist()
+            return rows[before + 1 : before + 1 + end - first, where.column]
         due = due_from(first, period)
         at = before + 1 + (np.arange(first, end) - due) // period
-        return rows[at, where.column].tolist()
+        return rows[at, where.column]
 
     def _latest(self, where: Column, steps: np.ndarray) -> np.ndarray:
         """The value at `where` (in the collected rows) after each of `steps`."""

@@ -58,6 +58,26 @@ class LidarArrays(ctypes.Structure):
     ]  # fmt: skip
 
 
+class MonitorArrays(ctypes.Structure):
+    """`Monitor` of world.c: a static world's position checks (`OutcomeMonitor.check_positions`):
+    the world's struct, its centre field and the polygons' bounding circles, the vehicle and goal,
+    the monitor's state (read and written back by each call), why the last call stopped, and the
+    positions and times of a call (rows x, y, t of a 3 x capacity array)."""
+
+    _fields_ = [
+        ("world", _p), ("centre_field", _p), ("bounds", _p), ("n_bounds", _i64),
+        ("radius", _f64), ("goal_x", _f64), ("goal_y", _f64), ("tolerance", _f64), ("speed", _f64),
+        ("last_x", _f64), ("last_y", _f64), ("distance", _f64), ("min_clearance", _f64),
+        ("anchor_x", _f64), ("anchor_y", _f64), ("anchor_t", _f64), ("anchor_bound", _f64),
+        ("reason", _i64), ("points", _p), ("capacity", _i64),
+    ]  # fmt: skip
+
+
+# `world_check_positions`'s reasons: none (all steps checked), collision, goal reached, and a step
+# it leaves to Python (a cell off the grid).
+CHECK_GOING, CHECK_COLLISION, CHECK_GOAL, CHECK_PYTHON = 0, 1, 2, 3
+
+
 class ArrayRefs:
     """Addresses of arrays checked once (dtype, C order), each array kept alive by this object."""
 
@@ -112,6 +132,8 @@ def library() -> ctypes.CDLL:
                 "world_distance": (_f64, [_p]),
                 "lidar_measure": (None, [_p, _f64, _f64, _p, _i64, _p]),
                 "lidar_scan": (None, [_p, _f64, _f64, _f64]),
+                "world_hypot": (_f64, [_f64, _f64]),
+                "world_check_positions": (_i64, [_p, _i64]),
             },
         )
     return _library

@@ -23,7 +23,8 @@ the ports match VFH inputs of a fixed size. Inputs `x`, `y`, `theta` (and `robot
 `robots_y[j]`, j = 1..len(robot_radii), for a fleet).
 
 The sweep is C (`lidar_scan` of native/world.c: Amanatides-Woo traversal of the grid, exact
-intersections with the shapes), given the grid, beams, shapes and buffers once as a struct.
+intersections with the shapes), given the grid, beams, shapes and buffers once as a struct; the
+master's compiled kernel calls it itself where a step needs nothing else (`kernel_sweep`).
 """
 
 from __future__ import annotations
@@ -172,6 +173,15 @@ class Lidar(kernels.Bound, PythonComponent):
         self._address = ctypes.addressof(self._arrays)
         library = kernels.library()
         self._scan, self._measure = library.lidar_scan, library.lidar_measure
+
+    def kernel_sweep(self) -> tuple[int, int] | None:
+        """How the master's compiled kernel may step this lidar (`cosim.core.fast_loop`): the
+        address of `lidar_scan` and of this lidar's struct, the call `step` makes on the inputs x,
+        y, theta; None when a step needs Python: noise (drawn from NumPy's generator), other
+        robots (placed from their inputs) or moving obstacles (posed at each scan's time)."""
+        if self.angle_noise > 0 or self.range_noise > 0 or len(self._robot_rows) or self.world.moving:
+            return None
+        return ctypes.cast(self._scan, ctypes.c_void_p).value, self._address
 
     def on_setup(self, t0: float, parameters: Mapping[str, float]) -> None:
         self._rng = np.random.default_rng(self.seed)

@@ -72,10 +72,10 @@ def test_log_topics_and_counts_match_the_rates(short_run):
 def test_signal_finalises_the_log(signal_number, tmp_path: Path):
     log = tmp_path / "interrupted.mcap"
     process = subprocess.Popen(
-        # A fine macro step (2 million steps) makes the run last many seconds however fast the
+        # A fine macro step (10 million steps) makes the run last many seconds however fast the
         # machine, so the signal arrives mid-run.
         [sys.executable, "-m", "cosim", "run", str(EXAMPLE), "--out", str(log), "--no-plot", "--quiet"]
-        + ["--set", "simulation.macro_step=0.0001"],
+        + ["--set", "simulation.macro_step=0.00002"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

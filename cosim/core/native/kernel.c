@@ -15,7 +15,7 @@
 #include "../../../planner/native/layout.h"
 
 /* Return codes (first element of the result). */
-enum { DONE = 0, HAND_BACK = 1, WATCH = 2, FAILED = 3 };
+enum { DONE = 0, HAND_BACK = 1, WATCH = 2, FAILED = 3, POLL = 4 };
 
 /* Columns of the component table. */
 enum {
@@ -24,7 +24,7 @@ enum {
     C_IN_ADDRESS, C_IN_COUNT, C_OUT_ADDRESS, C_OUT_COUNT, C_RECORD, C_RECORD_OFFSET,
     COMPONENT_COLUMNS
 };
-enum { KIND_IDLE = 0, KIND_NATIVE = 1, KIND_PYTHON = 2 };
+enum { KIND_IDLE = 0, KIND_NATIVE = 1, KIND_PYTHON = 2, KIND_SWEEP = 3 };
 
 /* Columns of the transfer-group table. */
 enum {
@@ -52,6 +52,9 @@ enum { R_CODE, R_STEP, R_POSITION, R_COMPONENT, R_CALL, R_STATUS, R_KIND, RESULT
 typedef int (*Transfer2)(void *, const void *, size_t, void *);
 /* fmi3Set/Get<T>(instance, value references, count, values, value count). */
 typedef int (*Transfer3)(void *, const void *, size_t, void *, size_t);
+/* A component stepped by one C call on its inputs x, y, theta (the lidar's sweep, `lidar_scan` of
+ * cosim/world/native/world.c): (its struct, x, y, theta); it writes its own outputs. */
+typedef void (*Sweep)(const void *, double, double, double);
 /* fmi2DoStep(instance, t, h, noSetFMUStatePriorToCurrentPoint). */
 typedef int (*Step2)(void *, double, double, int);
 /* fmi3DoStep(instance, t, h, noSetFMUStatePriorToCurrentPoint, &eventHandlingNeeded,
@@ -309,6 +312,13 @@ HOT int64_t step_native(const Tables *t, int64_t i, int64_t k, double time, int6
     return DONE;
 }
 
+/* A sweep component's step: its C call on its first three inputs, then its row. */
+HOT void step_sweep(const Tables *t, int64_t i) {
+    const double *inputs = pointer(COMPONENT(t, i, C_IN_ADDRESS));
+    ((Sweep)(intptr_t)COMPONENT(t, i, C_STEP))(pointer(COMPONENT(t, i, C_HANDLE)), inputs[0], inputs[1], inputs[2]);
+    record(t, i);
+}
+
 /* Whether component i steps at step k (k % period == 0; a 64-bit division costs tens of cycles,
  * so not for the components stepped every step). */
 HOT bool due(const Tables *t, int64_t i, int64_t k) {
@@ -336,6 +346,7 @@ int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_po
     int64_t end = first_step + steps;
     bool watching = t->watch_addresses[0] != 0;
     while (k < end) {
+        result[R_STEP] = k; /* the step under way, for a caller whose FMU ends the process in it */
         double time = (double)(start_ns + k * h_ns) / 1e9;
         if (jacobi) {
             for (int64_t i = 0; i < n; i++) {
@@ -344,6 +355,9 @@ int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_po
                         return finish(result, HAND_BACK, k, i, i, 0, 0, 0);
                     }
                     gather(t, i);
+                    if (COMPONENT(t, i, C_KIND) == KIND_SWEEP) {
+                        continue;
+                    }
                     int64_t kind = 0, status = set_inputs(t, i, &kind);
                     if (status > 1) {
                         return finish(result, FAILED, k, i, i, 0, status, kind);
@@ -355,6 +369,8 @@ int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_po
                     if (step_native(t, i, k, time, result, false) == FAILED) {
                         return FAILED;
                     }
+                } else if (COMPONENT(t, i, C_KIND) == KIND_SWEEP && due(t, i, k)) {
+                    step_sweep(t, i);
                 }
             }
         } else {
@@ -364,8 +380,15 @@ int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_po
                     if (COMPONENT(t, i, C_KIND) == KIND_PYTHON) {
                         return finish(result, HAND_BACK, k, i, i, 0, 0, 0);
                     }
+                    /* A polled sweep (C_FLAGS 1): the caller looks first, unless the call starts here. */
+                    if (COMPONENT(t, i, C_KIND) == KIND_SWEEP && COMPONENT(t, i, C_FLAGS) == 1 &&
+                        (k != first_step || i != first_position)) {
+                        return finish(result, POLL, k, i, i, 0, 0, 0);
+                    }
                     gather(t, i);
-                    if (step_native(t, i, k, time, result, true) == FAILED) {
+                    if (COMPONENT(t, i, C_KIND) == KIND_SWEEP) {
+                        step_sweep(t, i);
+                    } else if (step_native(t, i, k, time, result, true) == FAILED) {
                         return FAILED;
                     }
                 }
@@ -525,6 +548,7 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_CONSTANT(HAND_BACK);
     LAYOUT_CONSTANT(WATCH);
     LAYOUT_CONSTANT(FAILED);
+    LAYOUT_CONSTANT(POLL);
     LAYOUT_CONSTANT(C_KIND);
     LAYOUT_CONSTANT(C_PERIOD);
     LAYOUT_CONSTANT(C_VERSION);
@@ -550,6 +574,7 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_CONSTANT(KIND_IDLE);
     LAYOUT_CONSTANT(KIND_NATIVE);
     LAYOUT_CONSTANT(KIND_PYTHON);
+    LAYOUT_CONSTANT(KIND_SWEEP);
     LAYOUT_CONSTANT(G_KIND);
     LAYOUT_CONSTANT(G_FUNCTION);
     LAYOUT_CONSTANT(G_REFERENCES);

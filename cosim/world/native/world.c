@@ -10,6 +10,7 @@
 #include <stdint.h>
 
 #include "geometry.h"
+#include "pyhypot.h"
 #include "../../../planner/native/layout.h"
 
 double world_polygon_distance(double x, double y, const double *vertices, int64_t first, int64_t stop)
@@ -76,6 +77,146 @@ double world_distance(const World *w)
     for (int64_t polygon = 0; polygon < w->n_starts - 1; polygon++)
         best = py_min(best, polygon_distance(x, y, w->vertices, w->starts[polygon], w->starts[polygon + 1]));
     return best;
+}
+
+/* Python's math.hypot (pyhypot.h), for the tests that compare it with Python's. */
+double world_hypot(double x, double y)
+{
+    return py_hypot(x, y);
+}
+
+/* ------------------------------------------------- position checks (outcome.py check_positions) */
+
+typedef struct {
+    const World *world;        /* the grid and shapes of a static world (`WorldDistance`) */
+    const double *centre_field; /* rows x cols: each cell centre's distance [m] to the nearest occupied centre */
+    const double *bounds;      /* n_bounds x 3: bounding circles of the polygons, cx, cy, r */
+    int64_t n_bounds;
+    double radius, goal_x, goal_y, tolerance, speed;
+    /* The monitor's state, read and written back: the last position, the distance driven, the
+     * minimum clearance and the anchor of the lower bound (x, y, t, bound). */
+    double last_x, last_y, distance, min_clearance;
+    double anchor_x, anchor_y, anchor_t, anchor_bound;
+    int64_t reason;       /* why the last call stopped: CHECK_* */
+    const double *points; /* 3 x capacity: the steps' x, then y, then t (end of the step [s]) */
+    int64_t capacity;
+} Monitor;
+
+enum { CHECK_GOING = 0, CHECK_COLLISION = 1, CHECK_GOAL = 2, CHECK_PYTHON = 3 };
+
+/* The cell (row, col) of a point inside the map and its distance to the cell's centre, as
+ * `WorldDistance._cell`; 0 when the cell is off the grid (rounding at the far edge), where Python
+ * indexes out of bounds. */
+static int world_cell(const World *w, double x, double y, int64_t *row, int64_t *col, double *offset)
+{
+    int64_t c = (int64_t)((x - w->x_min) / w->resolution);
+    int64_t r = w->rows - 1 - (int64_t)((y - w->y_min) / w->resolution);
+    if (c < 0 || c >= w->cols || r < 0 || r >= w->rows)
+        return 0;
+    double centre_x = w->x_min + ((double)c + 0.5) * w->resolution;
+    double centre_y = w->y_min + ((double)(w->rows - 1 - r) + 0.5) * w->resolution;
+    *row = r;
+    *col = c;
+    *offset = py_hypot(x - centre_x, y - centre_y);
+    return 1;
+}
+
+static int inside_map(const World *w, double x, double y)
+{
+    return w->x_min <= x && x < w->x_max && w->y_min <= y && y < w->y_max;
+}
+
+/* `OutcomeMonitor.check_positions` for a static world and n <= capacity steps, the same operations
+ * in the same order (Python's hypot, min and max): the index of the step that ends the run with
+ * its reason in m->reason (CHECK_COLLISION, CHECK_GOAL), or n and CHECK_GOING; CHECK_PYTHON at a
+ * step whose cell is off the grid (its state untouched: Python takes over there). */
+int64_t world_check_positions(Monitor *m, int64_t n)
+{
+    const double *xs = m->points, *ys = m->points + m->capacity, *times = m->points + 2 * m->capacity;
+    int64_t *reason = &m->reason;
+    if (n > m->capacity) {
+        *reason = CHECK_PYTHON;
+        return 0;
+    }
+    const World *w = m->world;
+    World query = *w;
+    double half = w->resolution / 2.0;
+    double last_x = m->last_x, last_y = m->last_y, distance = m->distance, min_clearance = m->min_clearance;
+    double anchor_x = m->anchor_x, anchor_y = m->anchor_y, anchor_t = m->anchor_t, anchor_bound = m->anchor_bound;
+    int64_t i = 0;
+    *reason = CHECK_GOING;
+    for (; i < n; i++) {
+        double x = xs[i], y = ys[i], t = times[i];
+        int inside = isfinite(x) && isfinite(y) && inside_map(w, x, y);
+        int64_t row = 0, col = 0;
+        double offset = 0.0;
+        if (inside && !world_cell(w, x, y, &row, &col, &offset)) {
+            *reason = CHECK_PYTHON;
+            break;
+        }
+        distance += py_hypot(x - last_x, y - last_y);
+        last_x = x;
+        last_y = y;
+        if (!(isfinite(x) && isfinite(y))) {
+            *reason = CHECK_COLLISION;
+            break;
+        }
+        double margin = min_clearance + m->radius;
+        double drift = m->speed != 0.0 ? m->speed * (t - anchor_t) : 0.0;
+        if (anchor_bound - py_hypot(x - anchor_x, y - anchor_y) - drift < margin) {
+            double bound = 0.0;
+            if (inside) {
+                double edge = py_min(py_min(py_min(x - w->x_min, w->x_max - x), y - w->y_min), w->y_max - y);
+                bound = py_min(m->centre_field[row * w->cols + col] - offset - sqrt(2.0) * half, edge);
+                for (int64_t c = 0; c < w->n_circles; c++) {
+                    const double *circle = w->circles + 3 * c;
+                    bound = py_min(bound, py_hypot(x - circle[0], y - circle[1]) - circle[2]);
+                }
+                for (int64_t c = 0; c < m->n_bounds; c++) {
+                    const double *circle = m->bounds + 3 * c;
+                    bound = py_min(bound, py_hypot(x - circle[0], y - circle[1]) - circle[2]);
+                }
+                bound = py_max(0.0, bound);
+            }
+            anchor_x = x;
+            anchor_y = y;
+            anchor_t = t;
+            anchor_bound = bound;
+            if (bound < margin) {
+                double exact = 0.0;
+                if (inside) {
+                    query.x = x;
+                    query.y = y;
+                    query.row = row;
+                    query.col = col;
+                    query.offset = offset;
+                    query.field = m->centre_field[row * w->cols + col];
+                    exact = world_distance(&query);
+                }
+                anchor_bound = exact;
+                double clearance = exact - m->radius;
+                if (clearance < min_clearance)
+                    min_clearance = clearance;
+                if (clearance < 0.0) {
+                    *reason = CHECK_COLLISION;
+                    break;
+                }
+            }
+        }
+        if (py_hypot(x - m->goal_x, y - m->goal_y) <= m->tolerance) {
+            *reason = CHECK_GOAL;
+            break;
+        }
+    }
+    m->last_x = last_x;
+    m->last_y = last_y;
+    m->distance = distance;
+    m->min_clearance = min_clearance;
+    m->anchor_x = anchor_x;
+    m->anchor_y = anchor_y;
+    m->anchor_t = anchor_t;
+    m->anchor_bound = anchor_bound;
+    return i;
 }
 
 /* ---------------------------------------------------------------------------- lidar (lidar.py) */
@@ -273,6 +414,27 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_FIELD(World, col);
     LAYOUT_FIELD(World, offset);
     LAYOUT_FIELD(World, field);
+    LAYOUT_SIZE(Monitor);
+    LAYOUT_FIELD(Monitor, world);
+    LAYOUT_FIELD(Monitor, centre_field);
+    LAYOUT_FIELD(Monitor, bounds);
+    LAYOUT_FIELD(Monitor, n_bounds);
+    LAYOUT_FIELD(Monitor, radius);
+    LAYOUT_FIELD(Monitor, goal_x);
+    LAYOUT_FIELD(Monitor, goal_y);
+    LAYOUT_FIELD(Monitor, tolerance);
+    LAYOUT_FIELD(Monitor, speed);
+    LAYOUT_FIELD(Monitor, last_x);
+    LAYOUT_FIELD(Monitor, last_y);
+    LAYOUT_FIELD(Monitor, distance);
+    LAYOUT_FIELD(Monitor, min_clearance);
+    LAYOUT_FIELD(Monitor, anchor_x);
+    LAYOUT_FIELD(Monitor, anchor_y);
+    LAYOUT_FIELD(Monitor, anchor_t);
+    LAYOUT_FIELD(Monitor, anchor_bound);
+    LAYOUT_FIELD(Monitor, reason);
+    LAYOUT_FIELD(Monitor, points);
+    LAYOUT_FIELD(Monitor, capacity);
     LAYOUT_SIZE(Lidar);
     LAYOUT_FIELD(Lidar, occupied_up);
     LAYOUT_FIELD(Lidar, rows);
