@@ -30,6 +30,7 @@ import ctypes
 import hashlib
 import os
 import re
+import shlex
 import shutil
 import subprocess
 import sys
@@ -83,6 +84,16 @@ def compiler() -> str:
         "no C compiler found (cc, gcc or clang on PATH, or $CC): navcosim compiles its kernels "
         "and FMUs from C on first use"
     )
+
+
+def compiler_found() -> bool:
+    """Whether `compiler()` names a program that exists (a first use then says what it compiles;
+    without one, the build's own one-line error is all a user sees)."""
+    try:
+        words = shlex.split(compiler())
+    except (NativeBuildError, ValueError):
+        return False
+    return bool(words) and shutil.which(words[0]) is not None
 
 
 def _sources(source: Path) -> list[Path]:

@@ -288,6 +288,8 @@ def prepare(
                 build_if_stale, name, SOURCE_ROOT, cache_dir, fmi_version
             )
     started += native_load.start_builds(uncompiled[1:], pool)
+    if not native_load.compiler_found():
+        announce = None  # the builds fail at once: their one-line error says it all
     if announce is not None and stale:
         announce(f"building FMUs {', '.join(stale)} (first use or changed sources) ...")
     if announce is not None and started:
