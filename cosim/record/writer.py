@@ -268,25 +268,38 @@ class ChunkWriter:
         pairs[:, 1] = offsets[by_channel] + base
         grouped = channels[by_channel]
         starts = np.flatnonzero(grouped[1:] != grouped[:-1]) + 1
-        bounds = [0, *starts.tolist(), len(grouped)]
-        data = pairs.tobytes()
+        bounds = [0, *(16 * starts).tolist(), 16 * len(grouped)]  # byte bounds of each channel's pairs
+        data = memoryview(pairs.tobytes())
         first, last = int(times.min()), int(times.max())
-        for begin_row, end_row in zip(bounds[:-1], bounds[1:], strict=True):
-            channel = int(grouped[begin_row])
-            index = self._index.get(channel)
+        # The totals once; per channel only its index entries and its count.
+        indexes, counts = self._index, self._counts
+        for channel, begin_byte, end_byte in zip(
+            grouped[np.concatenate(([0], starts))].tolist(), bounds[:-1], bounds[1:], strict=True
+        ):
+            index = indexes.get(channel)
             if index is None:
-                index = self._index[channel] = array("Q")
-            index.frombytes(data[begin_row * 16 : end_row * 16])
-            self._count(channel, end_row - begin_row, first, last)
+                index = indexes[channel] = array("Q")
+            index.frombytes(data[begin_byte:end_byte])
+            counts[channel] = counts.get(channel, 0) + (end_byte - begin_byte) // 16
+        self._count_totals(len(grouped), first, last)
 
     def _count(self, channel: int, count: int, first: int, last: int) -> None:
-        self._count_file(channel, count, first, last)
+        self._counts[channel] = self._counts.get(channel, 0) + count
+        self._count_totals(count, first, last)
+
+    def _count_file(self, channel: int, count: int, first: int, last: int) -> None:
+        self._counts[channel] = self._counts.get(channel, 0) + count
+        self._count_file_totals(count, first, last)
+
+    def _count_totals(self, count: int, first: int, last: int) -> None:
+        """`count` messages in [first, last] counted in the open chunk and the file (the channels'
+        counts apart)."""
+        self._count_file_totals(count, first, last)
         self._chunk_messages += count
         self._chunk_start = min(self._chunk_start, first)
         self._chunk_end = max(self._chunk_end, last)
 
-    def _count_file(self, channel: int, count: int, first: int, last: int) -> None:
-        self._counts[channel] = self._counts.get(channel, 0) + count
+    def _count_file_totals(self, count: int, first: int, last: int) -> None:
         if self._message_count == 0:
             self._start_time, self._end_time = first, last
         self._message_count += count
