@@ -520,14 +520,35 @@ class MessageBlock:
         grouped_list = grouped.tolist()
         bounds = np.cumsum(counts).tolist()
         counts = counts.tolist()
-        sizes = self.group_sizes
+        sizes, streams = self.group_sizes, self.streams
         for number in np.flatnonzero(counts).tolist():
             n = counts[number]
+            stream = streams[number]
+            low = bounds[number] - n
+            if type(stream) is SignalStream:  # the most messages: tested first
+                sizes[number] = sizes.get(number, 0) + n
+                at = cursors[number]
+                rows = signal_rows[number]
+                if at or n != len(rows):
+                    rows = rows[at : at + n]
+                cursors[number] = at + n
+                times = stream.times
+                held = len(times)
+                if held + n + 1 > len(stream.rows):
+                    self._grow(stream, held + n)
+                split = stream.split
+                if split is None:
+                    stream.rows[held : held + n] = rows
+                else:
+                    if stream.ended:
+                        raise CosimError(f"signal channel {stream.records.channel}: a step after end_steps")
+                    stream.rows[held : held + n, :split] = rows[:, :split]
+                    stream.rows[held + 1 : held + n + 1, split:] = rows[:, split:]
+                times += grouped_list[low : low + n]
+                continue
             if number == self.pose_streams[1] or number == self.pose_streams[2]:
                 continue
-            low = bounds[number] - n
             sizes[number] = sizes.get(number, 0) + n
-            stream = self.streams[number]
             if number == RAW_STREAM:
                 at = cursors[RAW_STREAM]
                 self.raw += [
@@ -541,21 +562,6 @@ class MessageBlock:
                 at = cursors[number]
                 self.pose.add_rows(grouped[low : low + n], pose_rows[at : at + n])
                 cursors[number] = at + n
-            elif isinstance(stream, SignalStream):
-                at = cursors[number]
-                rows = signal_rows[number][at : at + n]
-                cursors[number] = at + n
-                held = len(stream.times)
-                self._grow(stream, held + n)
-                split = stream.split
-                if split is None:
-                    stream.rows[held : held + n] = rows
-                else:
-                    if stream.ended:
-                        raise CosimError(f"signal channel {stream.records.channel}: a step after end_steps")
-                    stream.rows[held : held + n, :split] = rows[:, :split]
-                    stream.rows[held + 1 : held + n + 1, split:] = rows[:, split:]
-                stream.times.extend(grouped_list[low : low + n])
         self.order.extend(part.tolist())
         self.count += end - first
         self.group += end - first

@@ -49,7 +49,7 @@ _FLOAT64 = struct.Struct("<d")
 class _Entry(NamedTuple):
     slot: int  # its place among a step's messages
     index: int  # its component in the master's order (`histories`)
-    columns: np.ndarray  # its record in the component's row
+    columns: np.ndarray | slice  # its record in the component's row (a slice: adjacent columns)
     entry: SignalEntry
 
 
@@ -99,6 +99,8 @@ class FleetSteps:
             for entry in recording.entries:
                 inputs = len(entry.component.inputs)
                 columns = np.array([*entry.inputs, *(inputs + s for s in entry.outputs)], dtype=np.intp)
+                if len(columns) and (columns == np.arange(columns[0], columns[0] + len(columns))).all():
+                    columns = slice(int(columns[0]), int(columns[0]) + len(columns))  # a view, not a copy
                 entries.append(_Entry(slot, index[id(entry.component)], columns, entry))
                 slot += 1
             command = None

@@ -19,7 +19,6 @@ the same bytes: a chunk ends when it holds more than `chunk_size` bytes of recor
 from __future__ import annotations
 
 import struct
-import sys
 import zlib
 from array import array
 from concurrent.futures import ThreadPoolExecutor
@@ -54,10 +53,68 @@ from cosim.record.mcap_format import (
     OP_MESSAGE_INDEX,
 )
 
-_LITTLE_ENDIAN = sys.byteorder == "little"  # the index pairs' array("Q") bytes are the file's "<u8"
 # A chunk of fewer bytes is compressed inline: handing it to the thread and back (two wake-ups
 # and GIL hand-offs, ~0.15-0.2 ms) costs more than compressing it (~0.1 ms for 50 kB).
 THREADED_BYTES = 256 * 1024
+
+
+_INDEX_HEAD_DTYPE = np.dtype(
+    {
+        "names": ["opcode", "length", "channel", "size"],
+        "formats": ["u1", "<u8", "<u2", "<u4"],
+        "offsets": [0, 1, 9, 11],
+        "itemsize": MESSAGE_INDEX_HEAD.size,
+    }
+)  # a MessageIndex record's head (MESSAGE_INDEX_HEAD) as a structured record
+
+
+def _place(out: np.ndarray, starts: np.ndarray, rows: np.ndarray) -> None:
+    """Copy row j of `rows` (bytes) to out[starts[j]:]: one fancy-index assignment of whole rows
+    (as raw items of their size), through a view of `out` whose item r starts at byte r (items
+    overlap; the items written do not)."""
+    size = rows.shape[1]
+    if size == 0 or len(starts) == 0:
+        return
+    item = np.dtype(f"V{size}")
+    view = np.ndarray((len(out) - size + 1,), item, out, 0, (1,))
+    view[starts] = np.ascontiguousarray(rows).view(item).reshape(-1)
+
+
+def _grouped_pairs(index: dict, runs: list) -> tuple[list[int], list[int], np.ndarray]:
+    """(channel ids ascending, their pair counts, every (log time, offset) pair as little-endian
+    uint64 rows grouped by channel in that order, each channel's in write order) of a chunk's
+    index entries: `index` channel -> pairs (in write order), `runs` (channels, pairs) in write
+    order."""
+    ids = sorted(index)
+    parts = [_pair_rows(index[channel]) for channel in ids]
+    if not runs:
+        return ids, [len(part) for part in parts], _concatenated(parts)
+    channels = np.concatenate([run[0] for run in runs])
+    pairs = np.concatenate([run[1] for run in runs])
+    if parts:  # messages one at a time too: offsets rise in write order within the chunk
+        channels = np.concatenate(
+            [channels, *(np.full(len(p), c, np.int64) for c, p in zip(ids, parts, strict=True))]
+        )
+        pairs = np.concatenate([pairs, *parts])
+        by_channel = np.lexsort((pairs[:, 1], channels))
+    else:  # channel ids fit uint16 (MCAP): a stable sort of those keeps write order
+        by_channel = np.argsort(channels.astype(np.uint16), kind="stable")
+    channels, pairs = channels.take(by_channel), pairs.take(by_channel, axis=0)
+    ids = sorted(set(ids).union(channels[np.flatnonzero(np.diff(channels, prepend=-1))].tolist()))
+    keys = np.array(ids, dtype=np.int64)
+    counts = np.searchsorted(channels, keys, side="right") - np.searchsorted(channels, keys, side="left")
+    return ids, counts.tolist(), pairs
+
+
+def _pair_rows(pairs) -> np.ndarray:
+    """(log time, offset) pairs (an (n, 2) array or a flat array("Q")) as (n, 2) little-endian uint64."""
+    if isinstance(pairs, array):
+        pairs = np.frombuffer(pairs, dtype=np.uint64) if len(pairs) else np.zeros(0, dtype=np.uint64)
+    return np.asarray(pairs).astype("<u8", copy=False).reshape(-1, 2)
+
+
+def _concatenated(parts: list[np.ndarray]) -> np.ndarray:
+    return np.concatenate(parts) if parts else np.zeros((0, 2), dtype="<u8")
 
 
 class ChunkWriter:
@@ -80,6 +137,10 @@ class ChunkWriter:
         self._chunk_end = 0
         self._chunk_messages = 0
         self._index: dict[int, array] = {}  # channel -> (log time, offset) pairs of the open chunk
+        # (channels, (log time, offset) pairs) of each run of records appended (`_append`) to the
+        # open chunk, in write order: grouped by channel when the chunk ends.
+        self._runs: list[tuple[np.ndarray, np.ndarray]] = []
+        self._run_counts = np.zeros(0, dtype=np.int64)  # messages per channel id in `_runs` so far
         self._schemas: dict[int, Schema] = {}
         self._channels: dict[int, Channel] = {}
         self._unwritten: list = []  # schemas/channels not yet written into a chunk
@@ -256,37 +317,41 @@ class ChunkWriter:
     def _append(
         self, records: bytes, channels: np.ndarray, times: np.ndarray, offsets: np.ndarray, end: int
     ) -> None:
-        """Records `offsets[0]:end` of `records` into the open chunk, with their index entries."""
+        """Records `offsets[0]:end` of `records` into the open chunk, with their index entries
+        (kept as a run, grouped by channel when the chunk ends: `_write_message_indexes`)."""
         begin = int(offsets[0])
         base = len(self._chunk) - begin
         self._chunk += memoryview(records)[begin:end]
-        # Index entries grouped by channel (a stable sort keeps each channel's write order): one
-        # contiguous run of (time, offset) pairs per channel instead of a mask per channel.
-        by_channel = np.argsort(channels, kind="stable")
         pairs = np.empty((len(times), 2), dtype="<u8")
-        pairs[:, 0] = times[by_channel]
-        pairs[:, 1] = offsets[by_channel] + base
-        grouped = channels[by_channel]
-        starts = np.flatnonzero(grouped[1:] != grouped[:-1]) + 1
-        bounds = [0, *starts.tolist(), len(grouped)]
-        data = pairs.tobytes()
-        first, last = int(times.min()), int(times.max())
-        for begin_row, end_row in zip(bounds[:-1], bounds[1:], strict=True):
-            channel = int(grouped[begin_row])
-            index = self._index.get(channel)
-            if index is None:
-                index = self._index[channel] = array("Q")
-            index.frombytes(data[begin_row * 16 : end_row * 16])
-            self._count(channel, end_row - begin_row, first, last)
+        pairs[:, 0] = times
+        pairs[:, 1] = offsets + base
+        channels = np.asarray(channels, dtype=np.int64)
+        self._runs.append((channels, pairs))
+        counts = np.bincount(channels)
+        if len(counts) > len(self._run_counts):
+            self._run_counts = np.concatenate(
+                (self._run_counts, np.zeros(len(counts) - len(self._run_counts), dtype=np.int64))
+            )
+        self._run_counts[: len(counts)] += counts
+        self._count_totals(len(channels), int(times.min()), int(times.max()))
 
     def _count(self, channel: int, count: int, first: int, last: int) -> None:
-        self._count_file(channel, count, first, last)
+        self._counts[channel] = self._counts.get(channel, 0) + count
+        self._count_totals(count, first, last)
+
+    def _count_file(self, channel: int, count: int, first: int, last: int) -> None:
+        self._counts[channel] = self._counts.get(channel, 0) + count
+        self._count_file_totals(count, first, last)
+
+    def _count_totals(self, count: int, first: int, last: int) -> None:
+        """`count` messages in [first, last] counted in the open chunk and the file (the channels'
+        counts apart)."""
+        self._count_file_totals(count, first, last)
         self._chunk_messages += count
         self._chunk_start = min(self._chunk_start, first)
         self._chunk_end = max(self._chunk_end, last)
 
-    def _count_file(self, channel: int, count: int, first: int, last: int) -> None:
-        self._counts[channel] = self._counts.get(channel, 0) + count
+    def _count_file_totals(self, count: int, first: int, last: int) -> None:
         if self._message_count == 0:
             self._start_time, self._end_time = first, last
         self._message_count += count
@@ -301,9 +366,10 @@ class ChunkWriter:
         if self._chunk_messages == 0:
             return
         data = self._chunk  # never appended to again: the next chunk is a new bytearray
-        pending = (data, self._index, self._chunk_start, self._chunk_end)
+        pending = (data, (self._index, self._runs), self._chunk_start, self._chunk_end)
         self._chunk = bytearray()
         self._index = {}
+        self._runs = []
         self._chunk_messages = 0
         self._drain()
         if len(data) < THREADED_BYTES:
@@ -322,7 +388,12 @@ class ChunkWriter:
         self._write_chunk(future.result(), *pending)
 
     def _write_chunk(
-        self, compressed: bytes, data: bytearray, index: dict[int, array], chunk_start: int, chunk_end: int
+        self,
+        compressed: bytes,
+        data: bytearray,
+        index: tuple[dict[int, array], list],
+        chunk_start: int,
+        chunk_end: int,
     ) -> None:
         """The Chunk record of `data` (compressed), then its message indexes."""
         stream = self._stream
@@ -331,8 +402,17 @@ class ChunkWriter:
         stream.write(CHUNK_HEAD.pack(OP_CHUNK, length, chunk_start, chunk_end, len(data), zlib.crc32(data)))
         stream.write(struct.pack("<I4sQ", 4, b"zstd", len(compressed)))
         stream.write(compressed)
+        by_channel, runs = index
         self._write_message_indexes(
-            index, start, 1 + 8 + length, chunk_start, chunk_end, "zstd", len(compressed), len(data)
+            by_channel,
+            start,
+            1 + 8 + length,
+            chunk_start,
+            chunk_end,
+            "zstd",
+            len(compressed),
+            len(data),
+            runs,
         )
 
     def _write_message_indexes(
@@ -345,26 +425,39 @@ class ChunkWriter:
         compression: str,
         compressed_size: int,
         uncompressed_size: int,
+        runs: list[tuple[np.ndarray, np.ndarray]] = (),
     ) -> None:
         """The MessageIndex records after the chunk at `start` (one per channel, in channel order;
-        each channel's (log time, offset) pairs as an (n, 2) array or a flat array("Q"))
-        and its ChunkIndex for the summary."""
+        each channel's (log time, offset) pairs in `index` as an (n, 2) array or a flat
+        array("Q"), and in `runs`, (channels, pairs) in write order, `_append`) and its ChunkIndex
+        for the summary. The records are built at once: every pair grouped by channel, the heads
+        and the pairs placed in one byte array."""
         stream = self._stream
         index_start = stream.tell()
+        ids, counts, pairs = _grouped_pairs(index, runs)
         offsets = {}
-        parts = []
         position = index_start
-        for channel in sorted(index):
-            pairs = index[channel]
-            if isinstance(pairs, array) and _LITTLE_ENDIAN:
-                body = pairs.tobytes()
-            else:
-                body = np.ascontiguousarray(pairs, dtype="<u8").tobytes()
-            offsets[channel] = position
-            part = MESSAGE_INDEX_HEAD.pack(OP_MESSAGE_INDEX, 2 + 4 + len(body), channel, len(body)) + body
-            parts.append(part)
-            position += len(part)
-        stream.write(b"".join(parts))
+        if ids:
+            counts = np.asarray(counts, dtype=np.int64)
+            sizes = MESSAGE_INDEX_HEAD.size + 16 * counts
+            starts = np.zeros(len(ids), dtype=np.int64)
+            np.cumsum(sizes[:-1], out=starts[1:])
+            out = np.empty(int(starts[-1] + sizes[-1]), dtype=np.uint8)
+            heads = np.empty(len(ids), dtype=_INDEX_HEAD_DTYPE)
+            heads["opcode"] = OP_MESSAGE_INDEX
+            heads["length"] = 2 + 4 + 16 * counts
+            heads["channel"] = ids
+            heads["size"] = 16 * counts
+            _place(out, starts, heads.view(np.uint8).reshape(len(ids), MESSAGE_INDEX_HEAD.size))
+            # Pair j of a channel at its record's start + head + 16 j.
+            firsts = np.zeros(len(ids), dtype=np.int64)
+            np.cumsum(counts[:-1], out=firsts[1:])
+            rank = np.arange(len(pairs), dtype=np.int64) - np.repeat(firsts, counts)
+            places = np.repeat(starts + MESSAGE_INDEX_HEAD.size, counts) + 16 * rank
+            _place(out, places, pairs.view(np.uint8).reshape(len(pairs), 16))
+            stream.write(memoryview(out))
+            offsets = dict(zip(ids, (index_start + starts).tolist(), strict=True))
+            position = index_start + len(out)
         self._chunk_indexes.append(
             ChunkIndex(
                 message_start_time=start_time,
@@ -418,6 +511,9 @@ class ChunkWriter:
         """End the data section; write the summary, its offsets and the footer."""
         self._finish_chunk()
         self._drain()
+        for channel in np.flatnonzero(self._run_counts).tolist():  # the channels' counts of `_append`
+            self._counts[channel] = self._counts.get(channel, 0) + int(self._run_counts[channel])
+        self._run_counts = np.zeros(0, dtype=np.int64)
         if self._pool is not None:
             self._pool.shutdown()
             self._pool = None
