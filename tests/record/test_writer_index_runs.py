@@ -14,8 +14,8 @@ import zstandard
 from mcap.records import Chunk, MessageIndex
 from mcap.stream_reader import StreamReader
 
-from cosim.record.mcap_format import MESSAGE_HEAD
 from cosim.record.writer import ChunkWriter
+from tests.record.test_writer_records import add_packed
 
 CHANNELS = (3, 1, 5, 2, 4)  # the messages' channels drawn from these, in no order
 
@@ -39,20 +39,7 @@ def _write(messages, modes, chunk_size: int) -> bytes:
                 writer.add_message(channel, t_ns, payload, sequences[channel])
                 sequences[channel] += 1
             continue
-        records, offsets, position = [], [], 0
-        for channel, t_ns, payload in part:
-            head = MESSAGE_HEAD.pack(5, 22 + len(payload), channel, sequences[channel], t_ns, t_ns)
-            record = head + payload
-            sequences[channel] += 1
-            records.append(record)
-            offsets.append(position)
-            position += len(record)
-        writer.add_records(
-            b"".join(records),
-            np.array([channel for channel, _, _ in part], dtype=np.int64),
-            np.array([t_ns for _, t_ns, _ in part], dtype=np.uint64),
-            np.array(offsets, dtype=np.int64),
-        )
+        add_packed(writer, part, sequences)
     writer.finish()
     return stream.getvalue()
 

@@ -24,6 +24,25 @@ def _messages(count: int, seed: int) -> list[tuple[int, int, bytes]]:
     ]
 
 
+def add_packed(writer: ChunkWriter, part, sequences: dict[int, int]) -> None:
+    """`part` (channel, t_ns, payload) handed to `writer.add_records` as one batch of Message
+    records packed here by the format's layout (opcode 5, length, channel, sequence, log and
+    publish time, payload), `sequences` counting per channel."""
+    records, offsets, position = [], [], 0
+    for channel, t_ns, payload in part:
+        record = MESSAGE_HEAD.pack(5, 22 + len(payload), channel, sequences[channel], t_ns, t_ns) + payload
+        sequences[channel] += 1
+        records.append(record)
+        offsets.append(position)
+        position += len(record)
+    writer.add_records(
+        b"".join(records),
+        np.array([channel for channel, _, _ in part], dtype=np.int64),
+        np.array([t_ns for _, t_ns, _ in part], dtype=np.uint64),
+        np.array(offsets, dtype=np.int64),
+    )
+
+
 def _file(messages, batches: list[int] | None, chunk_size: int, window_ns: int) -> bytes:
     stream = io.BytesIO()
     writer = ChunkWriter(stream, chunk_size=chunk_size, chunk_duration_ns=window_ns)
@@ -41,21 +60,7 @@ def _file(messages, batches: list[int] | None, chunk_size: int, window_ns: int) 
         for size in batches:
             part = messages[first : first + size]
             first += size
-            records, offsets, position = [], [], 0
-            for channel, t_ns, payload in part:
-                record = (
-                    MESSAGE_HEAD.pack(5, 22 + len(payload), channel, sequences[channel], t_ns, t_ns) + payload
-                )
-                sequences[channel] += 1
-                records.append(record)
-                offsets.append(position)
-                position += len(record)
-            writer.add_records(
-                b"".join(records),
-                np.array([channel for channel, _, _ in part], dtype=np.int64),
-                np.array([t_ns for _, t_ns, _ in part], dtype=np.uint64),
-                np.array(offsets, dtype=np.int64),
-            )
+            add_packed(writer, part, sequences)
     writer.finish()
     return stream.getvalue()
 
