@@ -6,8 +6,9 @@ Topics: `/odom`, `/tf` (map -> base_link), `/pose`, `/scan`, `/cmd_vel`, `/plan`
 The run loop writes messages in time order.
 
 Speed: signals, poses, commands and scans (the per-step topics) are held in a
-`cosim.record.batch.MessageBlock` and packed into MCAP records with NumPy, a block at a time
-(at most 512 records of a channel); the records and their order are exactly those of writing one
+`cosim.record.batch.MessageBlock` and packed into MCAP records a block at a time, in C
+(`navcosim_pack_records` of the core kernel; a NumPy build of the same records is kept as the tested
+reference) (at most 512 records of a channel); the records and their order are exactly those of writing one
 message at a time. Any other write, `flush()` and `close()` pack the held messages first. The run
 loop's kernel path hands over many steps at once (`hold_steps`): their packs are skipped where they
 were due and done every `BATCH_MESSAGES` messages, with the same bytes (a schema or channel
