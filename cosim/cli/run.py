@@ -173,6 +173,14 @@ def _handler(args) -> int:
     if hasattr(scenario, "robots"):  # a fleet ([[robots]]): cosim.navigation.fleet
         from cosim.navigation.fleet import run_fleet_command
 
+        by_version: dict[int, list[str]] = {}  # the robots' project FMUs, built side by side
+        for robot in scenario.robots:
+            by_version.setdefault(robot.scenario.fmi_version, []).extend(
+                spec.fmu for spec in robot.scenario.components.values() if spec.is_builtin
+            )
+        for version, fmus in by_version.items():
+            prepare(fmus, version, kernels=(), announce=announce)
+
         plot = scenario.first.plot and not args.no_plot
         sink = _live_sink(args, scenario.first.macro_step)
         try:
