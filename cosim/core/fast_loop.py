@@ -111,24 +111,10 @@ class KernelTables:
                 link_numbers.append((connection.scale, connection.offset))
             row[K.C_LINK_COUNT] = len(links) - row[K.C_LINK_FIRST]
             if sweep is not None:
-                if record:
-                    width = len(component.inputs) + len(component.outputs)
-                    capacity = block // period + 2
-                    row[K.C_RECORD] = 1
-                    row[K.C_RECORD_OFFSET] = record_offset
-                    self.record_shapes.append((record_offset, capacity, width))
-                    record_offset += capacity * width
-                else:
-                    self.record_shapes.append(None)
+                record_offset = self._reserve(record, component, period, block, record_offset, row)
                 continue
-            if native is None:
-                if record and python_rows:  # rows written by `run_blocks` (C_RECORD stays 0)
-                    width = len(component.inputs) + len(component.outputs)
-                    capacity = block // period + 2
-                    self.record_shapes.append((record_offset, capacity, width))
-                    record_offset += capacity * width
-                else:
-                    self.record_shapes.append(None)
+            if native is None:  # rows written by `run_blocks` with python_rows (C_RECORD stays 0)
+                record_offset = self._reserve(record and python_rows, component, period, block, record_offset)
                 continue
             row[K.C_VERSION] = native.fmi_version
             row[K.C_HANDLE] = native.handle
@@ -171,15 +157,7 @@ class KernelTables:
             checks += [(output_base + 8 * slot, 0, slot) for slot in native.finite_outputs]
             checks += [(output_base + 8 * slot, 1, slot) for slot in native.nan_outputs]
             row[K.C_CHECK_COUNT] = len(checks) - row[K.C_CHECK_FIRST]
-            if record:
-                width = len(component.inputs) + len(component.outputs)
-                capacity = block // period + 2
-                row[K.C_RECORD] = 1
-                row[K.C_RECORD_OFFSET] = record_offset
-                self.record_shapes.append((record_offset, capacity, width))
-                record_offset += capacity * width
-            else:
-                self.record_shapes.append(None)
+            record_offset = self._reserve(record, component, period, block, record_offset, row)
         self.components = components
         self.step_sizes = step_sizes
         self.link_addresses = np.array(links, dtype=np.int64).reshape(-1, 3)
@@ -198,6 +176,23 @@ class KernelTables:
         # What the tables point into stays alive with them.
         self._keep = [entry.component for entry in plan]
         self._kernel = None
+
+    def _reserve(self, record: bool, component, period: int, block: int, offset: int, row=None) -> int:
+        """Room for `component`'s rows (its inputs then outputs, once per step of a block) at
+        `offset` of the record buffer when `record`, its shape kept in `record_shapes` (else None);
+        `row` given: the kernel writes them there (C_RECORD). Returns the next free offset."""
+        if not record:
+            self.record_shapes.append(None)
+            return offset
+        from cosim.core import kernel as K
+
+        width = len(component.inputs) + len(component.outputs)
+        capacity = block // period + 2
+        if row is not None:
+            row[K.C_RECORD] = 1
+            row[K.C_RECORD_OFFSET] = offset
+        self.record_shapes.append((offset, capacity, width))
+        return offset + capacity * width
 
     def histories(self) -> list[np.ndarray | None]:
         """Per component, its rows so far as a (rows, inputs + outputs) view, None when not recorded."""
