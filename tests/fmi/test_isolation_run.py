@@ -92,7 +92,9 @@ def reference(tmp_path_factory) -> tuple[np.ndarray, np.ndarray]:
     return odom_stamps(log_path)
 
 
-@pytest.mark.parametrize("fault", [f for f in FAULTS if f != "none"])
+@pytest.mark.parametrize(
+    "fault", [pytest.param(f, marks=pytest.mark.slow) if f == "hang" else f for f in FAULTS if f != "none"]
+)
 def test_each_fault_exits_2_with_one_line_and_a_log_up_to_the_fault(tmp_path, capfd, reference, fault):
     path = scenario(tmp_path, fault)
     log_path = tmp_path / f"{fault}.mcap"

@@ -60,6 +60,7 @@ def test_missing_file(tmp_path):
         read_scen(tmp_path / "missing.scen")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, agents", [("room-64-64-8", 60), ("warehouse-10-20-10-2-1", 100)])
 def test_moving_ai_instances_are_solved_and_valid(name, agents):
     grid = OccupancyGrid.from_file(DATA / f"{name}.map")

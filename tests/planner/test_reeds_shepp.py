@@ -87,6 +87,7 @@ def test_the_brute_force_lists_48_distinct_words():
     assert len(signatures) == 48
 
 
+@pytest.mark.slow
 def test_every_candidate_ends_at_the_goal_and_all_48_words_occur():
     rng = np.random.default_rng(1)
     seen = set()

@@ -153,6 +153,7 @@ def test_a_flood_of_unknown_subscriptions_is_one_warning_and_the_stream_goes_on(
     assert len(lines) <= 3, err
 
 
+@pytest.mark.slow
 def test_a_message_over_the_size_limit_closes_that_client_with_one_line(server, capfd):
     async def flood() -> int:
         async with websockets.connect(server.url, subprotocols=[CLASSIC]) as client:

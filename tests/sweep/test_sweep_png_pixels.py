@@ -46,10 +46,9 @@ CASES = {
 }
 
 
-# Each case draws its figure twice (~1 s): the quick loop draws the grid, CI every layout.
-@pytest.mark.parametrize(
-    "case", [case if case == "grid" else pytest.param(case, marks=pytest.mark.slow) for case in CASES]
-)
+# Each case draws its figure twice (~1 s): CI draws every layout, the quick loop none.
+@pytest.mark.slow
+@pytest.mark.parametrize("case", CASES)
 def test_sweep_png_has_the_pixels_savefig_writes(case, tmp_path):
     make_rows, keys, grid, replicates = CASES[case]
     rows = make_rows()

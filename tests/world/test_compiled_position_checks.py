@@ -45,6 +45,7 @@ def test_hypot_matches_python_on_special_values():
             assert _bits(got) == _bits(expected) or (math.isnan(got) and math.isnan(expected)), (x, y)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1])
 def test_hypot_matches_python_bit_for_bit_on_a_million_random_pairs(seed):
     hypot = _compiled_hypot()
