@@ -150,7 +150,8 @@ def template_components(scenario: Scenario) -> list[ComponentDescription]:
     start = {"x0": start_x, "y0": start_y, "theta0": start_theta}
     mixer_defaults = {"vehicle_type": 0 if scenario.vehicle_type == "differential" else 1}
     for name in ("wheelbase", "max_steering_angle"):
-        if name in vehicle.parameters:
+        # A string here is no number for the mixer: the vehicle FMU's own parameter check names it.
+        if name in vehicle.parameters and not isinstance(vehicle.parameters[name], str):
             mixer_defaults[name] = vehicle.parameters[name]
     beams = len(scenario.lidar.angles)
     removed = set(scenario.removed) - {POSE_COMPONENT}
