@@ -175,9 +175,7 @@ def _handler(args) -> int:
 
         by_version: dict[int, list[str]] = {}  # the robots' project FMUs, built side by side
         for robot in scenario.robots:
-            by_version.setdefault(robot.scenario.fmi_version, []).extend(
-                spec.fmu for spec in robot.scenario.components.values() if spec.is_builtin
-            )
+            by_version.setdefault(robot.scenario.fmi_version, []).extend(robot.scenario.project_fmus)
         for version, fmus in by_version.items():
             prepare(fmus, version, kernels=(), announce=announce)
 
@@ -202,8 +200,7 @@ def _handler(args) -> int:
         # Forked before the live view's server starts, so the child holds none of its threads
         # or sockets. It prepares the plot while the run goes.
         plotter = PlotProcess.start()
-    fmus = [spec.fmu for spec in scenario.components.values() if spec.is_builtin]
-    prepare(fmus, scenario.fmi_version, kernels=(), announce=announce)
+    prepare(scenario.project_fmus, scenario.fmi_version, kernels=(), announce=announce)
     from cosim.navigation.outcome import avoider_name, format_summary
     from cosim.navigation.run import run_scenario
 

@@ -240,6 +240,11 @@ class Scenario:
             return self.fmu_isolation
         return "none" if spec.is_builtin else "process"
 
+    @property
+    def project_fmus(self) -> list[str]:
+        """The names of the project's own FMUs its components use (what a first run builds)."""
+        return [spec.fmu for spec in self.components.values() if spec.is_builtin]
+
 
 def load_scenario(
     path: str | Path,

@@ -67,9 +67,7 @@ def warm_up(scenario: str, overrides: list[str], announce: bool = False) -> None
             def say(line: str) -> None:
                 print(f"cosim sweep: {line}", file=sys.stderr, flush=True)
 
-            components = getattr(loaded, "components", {})
-            fmus = [spec.fmu for spec in components.values() if spec.is_builtin]
-            prepare(fmus, loaded.fmi_version, announce=say)
+            prepare(loaded.project_fmus, loaded.fmi_version, announce=say)
         with (
             open(os.devnull, "w") as sink,
             contextlib.redirect_stdout(sink),
