@@ -24,8 +24,10 @@ class PlotProcess:
     """A forked child that has imported matplotlib and waits for the data of one plot."""
 
     @classmethod
-    def start(cls) -> PlotProcess | None:
-        """The child, or None where there is none (no fork, or it failed): then draw in-process."""
+    def start(cls, scenario=None) -> PlotProcess | None:
+        """The child, or None where there is none (no fork, or it failed): then draw in-process.
+        Given the run's `scenario` (`cosim.scenario.load.Scenario`), the child also drafts the
+        figure while the run goes (`draft`)."""
         if not sys.platform.startswith("linux"):
             return None
         try:
@@ -44,7 +46,7 @@ class PlotProcess:
         if pid == 0:
             os.close(data_write)
             os.close(reply_read)
-            _child(data_read, reply_write)  # never returns
+            _child(data_read, reply_write, scenario)  # never returns
         os.close(data_read)
         os.close(reply_write)
         return cls(pid, data_write, reply_read)
@@ -109,7 +111,7 @@ class PlotProcess:
             self.pid = 0
 
 
-def _child(data_read: int, reply_write: int) -> None:
+def _child(data_read: int, reply_write: int, scenario) -> None:
     answer = "failed"
     try:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -117,12 +119,16 @@ def _child(data_read: int, reply_write: int) -> None:
         from cosim.logs.plot import draw, prepare_drawing
 
         prepare_drawing()
+        drafted = None if scenario is None else draft(scenario)
         with os.fdopen(data_read, "rb") as pipe:
             payload = pipe.read()
         if not payload:
             os._exit(0)
         data, png_path = pickle.loads(payload)
-        draw(data, Path(png_path))
+        if drafted is None:
+            draw(data, Path(png_path))
+        else:
+            drafted.finish(data, Path(png_path))
         answer = "ok"
     except OSError as error:
         answer = f"no plot: {error}"
@@ -135,3 +141,56 @@ def _child(data_read: int, reply_write: int) -> None:
             os.write(reply_write, answer.encode()[:4000])
         finally:
             os._exit(0)
+
+
+def draft(scenario):
+    """The run's figure drafted from `preview(scenario)` (`cosim.logs.plot.Draft`), or None when
+    that fails (the run's data is then drawn afresh: a draft is only ever a head start)."""
+    from cosim.logs.plot import Draft
+
+    try:
+        return Draft(preview(scenario))
+    except Exception:  # noqa: BLE001 (a scenario the guess does not cover: no draft, the same plot)
+        return None
+
+
+def preview(scenario):
+    """What the plot of a run of `scenario` shows that is known before the run, as a
+    `cosim.logs.plot.PlotData`: the map as the run logs it (the scenario's map, inflated by the
+    planner's expansion distance; the resolution rounded to float32 as in the log), the view that
+    shows it and the start and goal, a two-line title and, without data, the panels the default
+    series of its components fill (speed and turning for a vehicle or mixer, the directions for
+    pure pursuit or VFH, the lidar's minimum range, the distance to the goal). `Draft.fits` checks
+    it against the run's own data."""
+    import numpy as np
+
+    from cosim.logs.plot import _extent, map_image, view_limits
+    from cosim.logs.plot_data import PlotData, Series
+    from cosim.world.distance import load_known_map
+    from planner.grid import OccupancyGrid
+
+    grid = load_known_map(scenario)
+    expansion = scenario.planner.expansion_distance
+    inflated = grid.inflate(expansion) if expansion > 0 else grid
+    resolution = float(f"{float(np.float32(grid.resolution)):.7g}")
+    logged = OccupancyGrid(grid.occupied, resolution, (float(grid.origin[0]), float(grid.origin[1])))
+    extent = _extent(logged)
+    x0, x1, y0, y1 = extent
+    bounds = [np.array([[x0, y0], [x1, y1]]), np.array([scenario.start[:2]]), np.array([scenario.goal])]
+    components = set(scenario.components)
+    panels = []
+    if components & {"vehicle", "mixer"}:
+        turning = "rad" if scenario.vehicle_type == "bicycle" else "rad/s"
+        panels += [("speed", "m/s"), ("turning", turning)]
+    if components & {"pure_pursuit", "vfh"}:
+        panels.append(("direction", "rad"))
+    panels += [("range", "m"), ("goal", "m")]
+    empty = np.zeros(0)
+    return PlotData(
+        f"{scenario.name}\n",
+        image=map_image(logged, inflated),
+        extent=extent,
+        has_zone=inflated.shape == grid.shape,
+        limits=view_limits(bounds),
+        series=[Series(panel, unit, empty, empty, panel) for panel, unit in panels],
+    )

@@ -199,7 +199,7 @@ def _handler(args) -> int:
 
         # Forked before the live view's server starts, so the child holds none of its threads
         # or sockets. It prepares the plot while the run goes.
-        plotter = PlotProcess.start()
+        plotter = PlotProcess.start(scenario)
     prepare(scenario.project_fmus, scenario.fmi_version, kernels=(), announce=announce)
     from cosim.navigation.outcome import avoider_name, format_summary
     from cosim.navigation.run import run_scenario
