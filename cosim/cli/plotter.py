@@ -120,15 +120,25 @@ def _child(data_read: int, reply_write: int, scenario) -> None:
 
         prepare_drawing()
         drafted = None if scenario is None else draft(scenario)
+        helper = None if drafted is None else PanelHelper.start(drafted, (data_read, reply_write))
         with os.fdopen(data_read, "rb") as pipe:
             payload = pipe.read()
         if not payload:
             os._exit(0)
         data, png_path = pickle.loads(payload)
-        if drafted is None:
+        if drafted is None or not drafted.fits(data):
+            if helper is not None:
+                helper.cancel()
             draw(data, Path(png_path))
-        else:
+        elif helper is None:
             drafted.finish(data, Path(png_path))
+        else:
+            helper.draw(payload)
+            drafted.draw_run(data, ("map",))
+            if helper.paste(drafted):
+                drafted.write(Path(png_path))
+            else:  # the helper failed, or the two parts overlap: drawn afresh
+                draw(data, Path(png_path))
         answer = "ok"
     except OSError as error:
         answer = f"no plot: {error}"
@@ -139,6 +149,116 @@ def _child(data_read: int, reply_write: int, scenario) -> None:
     finally:
         try:
             os.write(reply_write, answer.encode()[:4000])
+        finally:
+            os._exit(0)
+
+
+class PanelHelper:
+    """A fork of the plot process, made once its draft is ready, that draws the panels of the
+    run's figure while the plot process draws the map and the title (`cosim.logs.plot.Draft.
+    draw_run`: the two parts of the picture do not overlap, which `paste` checks). It gets the
+    run's data as the plot process got it, and gives back the box of its pixels, written into
+    memory the two share. It ends when its pipe closes without data (the plot process ended)."""
+
+    @classmethod
+    def start(cls, drafted, inherited: tuple[int, ...]) -> PanelHelper | None:
+        """The helper of `drafted`, or None (no fork); `inherited`: the plot process's own pipe
+        ends, closed in the helper."""
+        import mmap
+
+        shape = drafted.pixels().shape
+        try:
+            shared = mmap.mmap(-1, shape[0] * shape[1] * shape[2])
+            data_read, data_write = os.pipe()
+            done_read, done_write = os.pipe()
+        except OSError:
+            return None
+        try:
+            pid = os.fork()
+        except OSError:
+            for fd in (data_read, data_write, done_read, done_write):
+                os.close(fd)
+            return None
+        if pid == 0:
+            for fd in (data_write, done_read, *inherited):
+                os.close(fd)
+            _panels(drafted, data_read, done_write, shared)  # never returns
+        os.close(data_read)
+        os.close(done_write)
+        return cls(pid, data_write, done_read, shared, shape)
+
+    def __init__(self, pid: int, data_write: int, done_read: int, shared, shape) -> None:
+        self.pid = pid
+        self._data = data_write
+        self._done = done_read
+        self._shared = shared
+        self._shape = shape
+
+    def draw(self, payload: bytes) -> None:
+        """Have the helper draw the panels of the data in `payload` (as the plot process got it);
+        a helper that is gone answers nothing (`paste`)."""
+        try:
+            with os.fdopen(self._data, "wb") as pipe:
+                self._data = None
+                pipe.write(payload)
+        except OSError:
+            pass
+
+    def paste(self, drafted) -> bool:
+        """Wait for the helper, and put its pixels into `drafted`'s canvas when they do not
+        overlap what it drew; whether they were."""
+        import numpy as np
+
+        with os.fdopen(self._done, "rb") as pipe:
+            self._done = None
+            answer = pipe.read().decode(errors="replace").split()
+        self._reap()
+        if len(answer) != 4:
+            return False
+        top, bottom, left, right = (int(value) for value in answer)
+        for above, below, west, east in drafted.map_boxes():
+            if top < below and above < bottom and left < east and west < right:
+                return False
+        shared = np.frombuffer(self._shared, dtype=np.uint8).reshape(self._shape)
+        drafted.pixels()[top:bottom, left:right] = shared[top:bottom, left:right]
+        return True
+
+    def cancel(self) -> None:
+        """No panels wanted: the helper sees its pipe close and ends."""
+        self._reap()
+
+    def _reap(self) -> None:
+        for fd in (self._data, self._done):
+            if fd is not None:
+                os.close(fd)
+        self._data = self._done = None
+        if self.pid:
+            try:
+                os.waitpid(self.pid, 0)
+            except ChildProcessError:
+                pass
+            self.pid = 0
+
+
+def _panels(drafted, data_read: int, done_write: int, shared) -> None:
+    answer = ""
+    try:
+        import numpy as np
+
+        with os.fdopen(data_read, "rb") as pipe:
+            payload = pipe.read()
+        if payload:
+            data, _ = pickle.loads(payload)
+            drafted.draw_run(data, ("panels",))
+            top, bottom, left, right = drafted.panels_box()
+            view = np.frombuffer(shared, dtype=np.uint8).reshape(drafted.pixels().shape)
+            view[top:bottom, left:right] = drafted.pixels()[top:bottom, left:right]
+            answer = f"{top} {bottom} {left} {right}"
+    except Exception:  # noqa: BLE001 (no answer: the plot process draws the panels itself)
+        answer = ""
+    finally:
+        try:
+            os.write(done_write, answer.encode())
         finally:
             os._exit(0)
 

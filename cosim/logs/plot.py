@@ -495,7 +495,8 @@ def build_figure(data: PlotData | list[PlotData], dpi: float = DPI, size=None, t
     else:
         draw_overlay_map(map_axes, runs)
     _ticks_in_view(map_axes)
-    _draw_run(figure, grid, panels, runs, title)
+    _draw_panels(figure, grid, panels, runs)
+    figure.suptitle(title, fontsize=13)
     figure.canvas.draw()
     return figure
 
@@ -535,10 +536,9 @@ def _new_figure(panels: int, title_lines: int, dpi: float, size):
     return figure, grid
 
 
-def _draw_run(figure, grid, panels, runs: list[PlotData], title: str, made=None) -> list:
-    """The panels (`_draw_series`, their ticks fixed) and the title; returns the panels' axes."""
+def _draw_panels(figure, grid, panels, runs: list[PlotData], made=None) -> list:
+    """The panels (`_draw_series`), their ticks fixed; returns the panels' axes."""
     panel_axes = _draw_series(figure, grid, panels, runs, made)
-    figure.suptitle(title, fontsize=13)
     for axes in panel_axes:
         _ticks_in_view(axes)
     for axes in panel_axes[:-1]:  # the bottom panel labels the time axis they share
@@ -594,26 +594,69 @@ class Draft:
         """Draw `data` to a PNG at `png_path` (as `draw` does), over the draft when it fits."""
         if not self.fits(data):
             return draw(data, png_path, self.dpi)
+        self.draw_run(data)
+        return self.write(png_path)
+
+    def draw_run(self, data: PlotData, parts: tuple[str, ...] = ("map", "panels")) -> None:
+        """Draw `data` (which `fits`) over the drafted frame: the "map" part is the run over the
+        map, its legend and the title, the "panels" part the panels. Each part can be drawn by a
+        copy of the draft in another process (`cosim.cli.plotter`) and its pixels put together
+        (`map_box`, `panels_box`, `pixels`)."""
         with collector_paused():
             figure, axes = self.figure, self.map_axes
-            drafted = set(axes.get_children())
-            draw_map_run(axes, data)
-            made = self.panel_axes or None
-            panel_axes = _draw_run(figure, self.grid, _panels([data]), [data], data.title, made)
             canvas = figure.canvas
             renderer = canvas.get_renderer()
             canvas.restore_region(self.background)
-            added = [artist for artist in axes.get_children() if artist not in drafted]
-            for artist in sorted(added, key=lambda artist: artist.get_zorder()):  # as Axes.draw sorts
-                artist.draw(renderer)
-            for panel in panel_axes:
-                panel.draw(renderer)
-            for text in figure.texts:
-                text.draw(renderer)
-            png_path = Path(png_path)
-            png_path.parent.mkdir(parents=True, exist_ok=True)
-            write_png(png_path, np.asarray(canvas.buffer_rgba()), self.dpi)
-            return png_path
+            if "map" in parts:
+                drafted = set(axes.get_children())
+                draw_map_run(axes, data)
+                figure.suptitle(data.title, fontsize=13)
+                added = [artist for artist in axes.get_children() if artist not in drafted]
+                for artist in sorted(added, key=lambda artist: artist.get_zorder()):  # as Axes.draw sorts
+                    artist.draw(renderer)
+            if "panels" in parts:
+                made = self.panel_axes or None
+                self.panel_axes = _draw_panels(figure, self.grid, _panels([data]), [data], made)
+                for panel in self.panel_axes:
+                    panel.draw(renderer)
+            if "map" in parts:
+                for text in figure.texts:  # drawn after every axes, as a figure draws them
+                    text.draw(renderer)
+
+    def pixels(self) -> np.ndarray:
+        """The canvas' RGBA pixels (rows x columns x 4, row 0 at the top), writable."""
+        return np.asarray(self.figure.canvas.buffer_rgba())
+
+    def map_boxes(self) -> list[tuple[int, int, int, int]]:
+        """(top, bottom, left, right) [pixel rows and columns, end excluded] around each thing the
+        "map" part of `draw_run` drew: the map panel with its legend, and the title."""
+        renderer = self.figure.canvas.get_renderer()
+        boxes = [self.map_axes.get_tightbbox(renderer)]
+        boxes += [text.get_window_extent(renderer) for text in self.figure.texts]
+        return [self._pixel_box([box]) for box in boxes]
+
+    def panels_box(self) -> tuple[int, int, int, int]:
+        """As `map_boxes`, one box around the panels the "panels" part drew."""
+        renderer = self.figure.canvas.get_renderer()
+        return self._pixel_box([axes.get_tightbbox(renderer) for axes in self.figure.axes[1:]])
+
+    def _pixel_box(self, boxes, margin: int = 3) -> tuple[int, int, int, int]:
+        from matplotlib.transforms import Bbox
+
+        box = Bbox.union([box for box in boxes if box is not None])
+        height, width = self.pixels().shape[:2]
+        top = max(int(np.floor(height - box.y1)) - margin, 0)
+        bottom = min(int(np.ceil(height - box.y0)) + margin, height)
+        left = max(int(np.floor(box.x0)) - margin, 0)
+        right = min(int(np.ceil(box.x1)) + margin, width)
+        return top, bottom, left, right
+
+    def write(self, png_path: str | Path) -> Path:
+        """Write the canvas to a PNG at `png_path`; returns its path."""
+        png_path = Path(png_path)
+        png_path.parent.mkdir(parents=True, exist_ok=True)
+        write_png(png_path, self.pixels(), self.dpi)
+        return png_path
 
 
 def _overlay_title(runs: list[PlotData]) -> str:
