@@ -17,6 +17,8 @@ the map and its inflated zone, one collection for the obstacles, their tracks, e
 text boxes naming each panel's series (no legend per panel), ticks only inside the view, the upper
 panels' unlabelled time ticks as two lines (matplotlib's own pixels: tests/logs/test_plot_render.py), the
 cyclic garbage collector paused, and the PNG written straight from the canvas (`write_png`).
+`cosim run` drafts its figure while the run goes (`Draft`: the map frame drawn from the scenario,
+the run drawn over it after) and draws the map and the panels in two processes: the same pixels.
 matplotlib is imported when a plot is drawn, not with this module.
 """
 
@@ -636,9 +638,22 @@ class Draft:
         return [self._pixel_box([box]) for box in boxes]
 
     def panels_box(self) -> tuple[int, int, int, int]:
-        """As `map_boxes`, one box around the panels the "panels" part drew."""
+        """As `map_boxes`, one box around the panels the "panels" part drew, to the right edge of
+        the figure: their axes, their y labels (left of their tick labels), the bottom one's time
+        label (below its tick labels) and the top one's tick labels (which may stand out above
+        it). From these few texts: a tight box of every artist costs a tenth of the panels' time."""
         renderer = self.figure.canvas.get_renderer()
-        return self._pixel_box([axes.get_tightbbox(renderer) for axes in self.figure.axes[1:]])
+        panels = self.figure.axes[1:]
+        boxes = [axes.bbox for axes in panels] + [
+            axes.yaxis.label.get_window_extent(renderer) for axes in panels
+        ]
+        boxes.append(panels[-1].xaxis.label.get_window_extent(renderer))
+        low, high = sorted(panels[0].get_ylim())
+        for tick in panels[0].yaxis.get_major_ticks():
+            if tick.label1.get_visible() and low <= tick.get_loc() <= high:
+                boxes.append(tick.label1.get_window_extent(renderer))
+        top, bottom, left, _ = self._pixel_box(boxes)
+        return top, bottom, left, self.pixels().shape[1]
 
     def _pixel_box(self, boxes, margin: int = 3) -> tuple[int, int, int, int]:
         from matplotlib.transforms import Bbox
