@@ -125,7 +125,9 @@ def _child(data_read: int, reply_write: int, scenario) -> None:
 
         prepare_drawing()
         drafted = None if scenario is None else draft(scenario)
-        helper = None if drafted is None else PanelHelper.start(drafted, (data_read, reply_write))
+        helper = None
+        if drafted is not None and _free_core():
+            helper = PanelHelper.start(drafted, (data_read, reply_write))
         with os.fdopen(data_read, "rb") as pipe:
             payload = pipe.read()
         if not payload:
@@ -156,6 +158,17 @@ def _child(data_read: int, reply_write: int, scenario) -> None:
             os.write(reply_write, answer.encode()[:4000])
         finally:
             os._exit(0)
+
+
+def _free_core() -> bool:
+    """Whether the machine seems to have a core to spare for the helper (the load average of the
+    last minute below the number of cores this process may use): on a busy machine the helper's
+    fork and copy would only add their CPU time."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+        return cores >= 2 and os.getloadavg()[0] < cores
+    except (AttributeError, OSError):
+        return False
 
 
 class PanelHelper:
