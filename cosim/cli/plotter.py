@@ -18,9 +18,11 @@ cheap (Linux), and only in `cosim` itself, never in a process that calls `cosim.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import pickle
 import signal
+import struct
 import sys
 from pathlib import Path
 
@@ -65,11 +67,25 @@ class PlotProcess:
     def draw(self, data, png_path: Path) -> str | None:
         """Have the child draw `data` (a `cosim.logs.plot.PlotData`) to `png_path`; None when it
         did, else why not. A child that died without answering is drawn for in this process."""
-        payload = pickle.dumps((data, str(png_path)), protocol=pickle.HIGHEST_PROTOCOL)
+        return self.draw_source(None, png_path, data)
+
+    def draw_source(self, source, png_path: Path, data=None) -> str | None:
+        """As `draw`, of the data `cosim.logs.plot.collect` gathers from `source` (a log or a
+        `TraceSource`): the panels' part (`collect_signals`) is sent first, so that they are drawn
+        while this process gathers the map's (`collect_map`: the plans, ~10 ms)."""
+        from cosim.logs.plot import collect_map, collect_signals
+
+        if data is None:
+            data = collect_signals(source)
+        mapped = source is None
         try:
             with os.fdopen(self._data, "wb") as pipe:
                 self._data = None
-                pipe.write(payload)
+                _send(pipe, _panels_part(data))
+                if not mapped:
+                    collect_map(data, source)
+                    mapped = True
+                _send(pipe, (dataclasses.replace(data, series=[], modes=None), str(png_path)))
             with os.fdopen(self._reply, "rb") as pipe:
                 self._reply = None
                 answer = pipe.read().decode(errors="replace")
@@ -86,6 +102,8 @@ class PlotProcess:
             return answer.removeprefix("no plot: ")
         from cosim.logs.plot import draw  # the child failed: the parent draws
 
+        if not mapped:
+            collect_map(data, source)
         draw(data, png_path)
         return None
 
@@ -116,6 +134,26 @@ class PlotProcess:
             self.pid = 0
 
 
+def _send(pipe, value) -> None:
+    """One frame of the pipe to the plot process: its length (8 bytes) and `value` pickled."""
+    payload = pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
+    pipe.write(struct.pack(">Q", len(payload)) + payload)
+    pipe.flush()
+
+
+def _frame(pipe) -> bytes:
+    """The next frame's pickled bytes (`_send`), or b"" at the end of the pipe."""
+    head = pipe.read(8)
+    if len(head) < 8:
+        return b""
+    return pipe.read(struct.unpack(">Q", head)[0])
+
+
+def _panels_part(data):
+    """What the panels of `data` (a `PlotData`) need: the series, the mixer's modes, the avoider."""
+    return type(data)("", series=data.series, modes=data.modes, avoider=data.avoider)
+
+
 def _child(data_read: int, reply_write: int, scenario) -> None:
     answer = "failed"
     try:
@@ -129,10 +167,17 @@ def _child(data_read: int, reply_write: int, scenario) -> None:
         if drafted is not None and _free_core():
             helper = PanelHelper.start(drafted, (data_read, reply_write))
         with os.fdopen(data_read, "rb") as pipe:
-            payload = pipe.read()
-        if not payload:
+            panels = _frame(pipe)
+            if not panels:
+                os._exit(0)
+            if helper is not None:
+                helper.draw(panels)  # it draws the panels while the map's part comes
+            mapped = _frame(pipe)
+        if not mapped:
             os._exit(0)
-        data, png_path = pickle.loads(payload)
+        panels = pickle.loads(panels)
+        data, png_path = pickle.loads(mapped)
+        data = dataclasses.replace(data, series=panels.series, modes=panels.modes)
         if drafted is None or not drafted.fits(data):
             if helper is not None:
                 helper.cancel()
@@ -140,7 +185,6 @@ def _child(data_read: int, reply_write: int, scenario) -> None:
         elif helper is None:
             drafted.finish(data, Path(png_path))
         else:
-            helper.draw(payload)
             drafted.draw_run(data, ("map",))
             if helper.paste(drafted):
                 drafted.write(Path(png_path))
@@ -213,8 +257,8 @@ class PanelHelper:
         self._shape = shape
 
     def draw(self, payload: bytes) -> None:
-        """Have the helper draw the panels of the data in `payload` (as the plot process got it);
-        a helper that is gone answers nothing (`paste`)."""
+        """Have the helper draw the panels of `payload` (the panels' part of the data, pickled, as
+        the plot process got it); a helper that is gone answers nothing (`paste`)."""
         try:
             with os.fdopen(self._data, "wb") as pipe:
                 self._data = None
@@ -242,7 +286,13 @@ class PanelHelper:
         return True
 
     def cancel(self) -> None:
-        """No panels wanted: the helper sees its pipe close and ends."""
+        """No panels wanted: the helper is ended (it sees its pipe close, or is killed while it
+        draws) and reaped."""
+        if self._data is None and self.pid:
+            try:
+                os.kill(self.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
         self._reap()
 
     def _reap(self) -> None:
@@ -266,8 +316,7 @@ def _panels(drafted, data_read: int, done_write: int, shared) -> None:
         with os.fdopen(data_read, "rb") as pipe:
             payload = pipe.read()
         if payload:
-            data, _ = pickle.loads(payload)
-            drafted.draw_run(data, ("panels",))
+            drafted.draw_run(pickle.loads(payload), ("panels",))
             top, bottom, left, right = drafted.panels_box()
             view = np.frombuffer(shared, dtype=np.uint8).reshape(drafted.pixels().shape)
             view[top:bottom, left:right] = drafted.pixels()[top:bottom, left:right]

@@ -83,16 +83,22 @@ def plot_trace(trace, png_path: str | Path) -> Path:
 
 def collect(source, signals: list[str] | None = None) -> PlotData:
     """The arrays the plot of `source` (a `Log`, or a `TraceSource`) shows."""
+    data = collect_signals(source, signals)
+    collect_map(data, source)
+    return data
+
+
+def collect_signals(source, signals: list[str] | None = None) -> PlotData:
+    """`collect` without the map panel's arrays (`collect_map` adds them): the series, the mixer's
+    modes, the title and names, which the panels need (`cosim.cli.plotter` sends them first)."""
     series = _chosen_series(source, signals) if signals else _default_series(source)
-    data = PlotData(
+    return PlotData(
         _title(source),
         series=series,
         modes=_modes(source),
         label=source.path.stem,
         avoider=avoider_name(source.metadata),
     )
-    _collect_map(data, source)
-    return data
 
 
 # --- a run's trace, read as a log -------------------------------------------------------------
@@ -255,7 +261,9 @@ def _extent(grid) -> tuple[float, float, float, float]:
     return (x0, x0 + cols * grid.resolution, y0, y0 + rows * grid.resolution)
 
 
-def _collect_map(data: PlotData, source) -> None:
+def collect_map(data: PlotData, source) -> None:
+    """Add the map panel's arrays of `source` to `data` (`collect_signals`' of it): the map, the
+    obstacles, plans, trajectory, start and goals, and the view."""
     bounds: list[np.ndarray] = []  # points that must be inside the view [m]
     grid, inflated = source.map("/map"), source.map("/map_inflated")
     if grid is not None:

@@ -113,7 +113,7 @@ def test_the_panel_helper_draws_the_panels_in_a_fork(run, tmp_path):
     drafted = plot.Draft(preview(scenario))
     helper = PanelHelper.start(drafted, ())
     pid = helper.pid
-    helper.draw(pickle.dumps((data, "unused.png")))
+    helper.draw(pickle.dumps(data))
     drafted.draw_run(data, ("map",))
     assert helper.paste(drafted)
     assert np.array_equal(_pixels(drafted.write(tmp_path / "helped.png")), _drawn(data, tmp_path))
@@ -144,6 +144,6 @@ def test_a_helper_that_died_gives_no_pixels(run):
     drafted = plot.Draft(preview(scenario))
     helper = PanelHelper.start(drafted, ())
     os.kill(helper.pid, signal.SIGKILL)
-    helper.draw(pickle.dumps((data, "unused.png")))  # into a closed pipe: no error
+    helper.draw(pickle.dumps(data))  # into a closed pipe: no error
     drafted.draw_run(data, ("map",))
     assert not helper.paste(drafted)
