@@ -53,7 +53,9 @@ class PlotProcess:
         if pid == 0:
             os.close(data_write)
             os.close(reply_read)
+            _own_group()
             _child(data_read, reply_write, scenario)  # never returns
+        _own_group(pid)  # here too: whichever runs first, the group exists when `_kill` ends it
         os.close(data_read)
         os.close(reply_write)
         return cls(pid, data_write, reply_read)
@@ -115,11 +117,15 @@ class PlotProcess:
         self._reap()
 
     def _kill(self) -> None:
+        """End the child and its helper at once: they are the child's process group."""
         if self.pid:
             try:
-                os.kill(self.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
+                os.killpg(self.pid, signal.SIGKILL)
+            except OSError:  # no such group (it could not be made): the child alone
+                try:
+                    os.kill(self.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
 
     def _reap(self) -> None:
         for fd in (self._data, self._reply):
@@ -132,6 +138,16 @@ class PlotProcess:
             except ChildProcessError:
                 pass
             self.pid = 0
+
+
+def _own_group(pid: int = 0) -> None:
+    """Make the plot process (`pid`, 0: this one) the leader of its own process group, which its
+    helper joins, so that `PlotProcess._kill` ends both at once. It ignores the signals of the
+    terminal's group anyway (the parent decides)."""
+    try:
+        os.setpgid(pid, 0)
+    except OSError:  # (the child already runs in its group, or is gone)
+        pass
 
 
 def _send(pipe, value) -> None:

@@ -242,3 +242,50 @@ def test_a_draft_that_does_not_fit_is_drawn_afresh(cosim_run, tmp_path: Path, mo
         assert process.draw_source(log, tmp_path / "x.png") is None
     assert (tmp_path / "afresh").exists()
     assert (tmp_path / "x.png").read_bytes() == plot.plot_run(cosim_run, tmp_path / "y.png").read_bytes()
+
+
+def _children_of(parent: int) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        try:
+            if entry.name.isdigit():
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+                if int(fields[1]) == parent and fields[0] != "Z":
+                    found.append(int(entry.name))
+        except OSError:
+            pass
+    return found
+
+
+def _gone(pid: int) -> bool:
+    """No such process, or only its exit status left (a zombie, about to be reaped by init)."""
+    try:
+        return (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0] == "Z"
+    except OSError:
+        return True
+
+
+@pytest.mark.slow
+def test_a_cancelled_child_ends_its_helper_too(monkeypatch):
+    """A run that fails after the child drafted and forked its helper: both are ended at once (the
+    child's process group), none is left waiting."""
+    from cosim.cli import plotter
+    from cosim.scenario.load import load_scenario
+
+    monkeypatch.setattr(plotter, "_free_core", lambda: True)
+    process = PlotProcess.start(load_scenario(EXAMPLE, ["simulation.stop_time=3"]))
+    helpers: list[int] = []
+    for _ in range(600):  # the child imports matplotlib and drafts first (a few 0.1 s)
+        helpers = _children_of(process.pid)
+        if helpers:
+            break
+        time.sleep(0.05)
+    assert helpers, "the child made no helper"
+    assert os.getpgid(helpers[0]) == os.getpgid(process.pid) == process.pid != os.getpgid(0)
+    process.cancel()
+    assert process.exit_status == -signal.SIGKILL
+    for _ in range(200):  # SIGKILL is delivered when the helper is next scheduled
+        if _gone(helpers[0]):
+            break
+        time.sleep(0.05)
+    assert _gone(helpers[0])
