@@ -709,13 +709,14 @@ def write_png(path: Path, pixels: np.ndarray, dpi: float) -> None:
 
     height, width = pixels.shape[:2]
     rows = np.empty((height, 1 + 3 * width), dtype=np.uint8)  # a filter byte (0: none) per row
-    rows[:, 0] = 0
-    rows[:, 1:].reshape(height, width, 3)[:] = pixels[:, :, :3]
-    halves = (rows[: height // 2], rows[height // 2 :])
+    halves = ((0, height // 2), (height // 2, height))
 
     def deflate(index: int) -> bytes:
+        low, high = halves[index]
+        rows[low:high, 0] = 0
+        rows[low:high, 1:].reshape(high - low, width, 3)[:] = pixels[low:high, :, :3]
         stream = zlib.compressobj(1, zlib.DEFLATED, -15)  # raw: no zlib header or checksum
-        body = stream.compress(halves[index])
+        body = stream.compress(rows[low:high])
         return body + stream.flush(zlib.Z_FINISH if index == 1 else zlib.Z_SYNC_FLUSH)
 
     with ThreadPoolExecutor(2) as pool:
