@@ -609,9 +609,11 @@ class Draft:
 
     def draw_run(self, data: PlotData, parts: tuple[str, ...] = ("map", "panels")) -> None:
         """Draw `data` (which `fits`) over the drafted frame: the "map" part is the run over the
-        map, its legend and the title, the "panels" part the panels. Each part can be drawn by a
-        copy of the draft in another process (`cosim.cli.plotter`) and its pixels put together
-        (`map_box`, `panels_box`, `pixels`)."""
+        map, its legend and the title, "upper" the panels but the bottom one, "bottom" the bottom
+        panel, "panels" both. Parts can be drawn by copies of the draft in two processes
+        (`cosim.cli.plotter`) and their pixels put together (`map_boxes`, `panels_box`)."""
+        upper = "upper" in parts or "panels" in parts
+        bottom = "bottom" in parts or "panels" in parts
         with collector_paused():
             figure, axes = self.figure, self.map_axes
             canvas = figure.canvas
@@ -624,10 +626,10 @@ class Draft:
                 added = [artist for artist in axes.get_children() if artist not in drafted]
                 for artist in sorted(added, key=lambda artist: artist.get_zorder()):  # as Axes.draw sorts
                     artist.draw(renderer)
-            if "panels" in parts:
+            if upper or bottom:  # every panel's artists: they share the time axis's limits
                 made = self.panel_axes or None
                 self.panel_axes = _draw_panels(figure, self.grid, _panels([data]), [data], made)
-                for panel in self.panel_axes:
+                for panel in self.panel_axes[: -1 if not bottom else None][0 if upper else -1 :]:
                     panel.draw(renderer)
             if "map" in parts:
                 for text in figure.texts:  # drawn after every axes, as a figure draws them
@@ -650,25 +652,33 @@ class Draft:
         titles = [self._pixel_box([text.get_window_extent(renderer)]) for text in self.figure.texts]
         return [self._pixel_box(boxes), *titles]
 
-    def panels_box(self) -> tuple[int, int, int, int]:
-        """As `map_boxes`, one box around the panels the "panels" part drew, to the right edge of
-        the figure: their axes, their y labels (left of their tick labels), the bottom one's time
-        label (below its tick labels) and the top one's tick labels (which may stand out above
-        it). From these few texts: a tight box of every artist costs a tenth of the panels' time."""
+    def panels_box(self, part: str = "panels") -> tuple[int, int, int, int]:
+        """As `map_boxes`, one box around the panels of `part` ("upper", "bottom", "panels"), to
+        the right edge of the figure: their axes, their y labels (left of their tick labels), the
+        y tick labels in view (which may stand out above or below an axes), the tick marks under
+        an upper panel, the bottom one's time tick labels and label. From these few texts: a tight
+        box of every artist costs a tenth of the panels' time."""
+        import matplotlib as mpl
+        from matplotlib.transforms import Bbox
+
         renderer = self.figure.canvas.get_renderer()
         panels = self.figure.axes[1:]
-        boxes = [axes.bbox for axes in panels] + [
-            axes.yaxis.label.get_window_extent(renderer) for axes in panels
-        ]
-        boxes.append(panels[-1].xaxis.label.get_window_extent(renderer))
-        low, high = sorted(panels[0].get_ylim())
-        for tick in panels[0].yaxis.get_major_ticks():
-            if tick.label1.get_visible() and low <= tick.get_loc() <= high:
-                boxes.append(tick.label1.get_window_extent(renderer))
+        chosen = {"upper": panels[:-1], "bottom": panels[-1:]}.get(part, panels)
+        marks = mpl.rcParams["xtick.major.size"] * self.dpi / 72.0 + 1.0  # [px] under an upper panel
+        boxes = []
+        for axes in chosen:
+            boxes += [axes.bbox, axes.yaxis.label.get_window_extent(renderer)]
+            boxes += _tick_label_boxes(axes.yaxis, axes.get_ylim(), renderer)
+            if axes is panels[-1]:
+                boxes.append(axes.xaxis.label.get_window_extent(renderer))
+                boxes += _tick_label_boxes(axes.xaxis, axes.get_xlim(), renderer)
+            else:
+                x0, y0, x1, _ = axes.bbox.extents
+                boxes.append(Bbox.from_extents(x0, y0 - marks, x1, y0))
         top, bottom, left, _ = self._pixel_box(boxes)
         return top, bottom, left, self.pixels().shape[1]
 
-    def _pixel_box(self, boxes, margin: int = 3) -> tuple[int, int, int, int]:
+    def _pixel_box(self, boxes, margin: int = 2) -> tuple[int, int, int, int]:
         from matplotlib.transforms import Bbox
 
         box = Bbox.union([box for box in boxes if box is not None])
@@ -685,6 +695,16 @@ class Draft:
         png_path.parent.mkdir(parents=True, exist_ok=True)
         write_png(png_path, self.pixels(), self.dpi)
         return png_path
+
+
+def _tick_label_boxes(axis, limits, renderer) -> list:
+    """The window boxes of the tick labels `axis` draws for a view of `limits`."""
+    low, high = sorted(limits)
+    return [
+        tick.label1.get_window_extent(renderer)
+        for tick in axis.get_major_ticks()
+        if tick.label1.get_visible() and low <= tick.get_loc() <= high
+    ]
 
 
 def _overlay_title(runs: list[PlotData]) -> str:
