@@ -607,31 +607,29 @@ class Draft:
         self.draw_run(data)
         return self.write(png_path)
 
-    def draw_run(self, data: PlotData, parts: tuple[str, ...] = ("map", "panels")) -> None:
-        """Draw `data` (which `fits`) over the drafted frame: the "map" part is the run over the
-        map, its legend and the title, "upper" the panels but the bottom one, "bottom" the bottom
-        panel, "panels" both. Parts can be drawn by copies of the draft in two processes
-        (`cosim.cli.plotter`) and their pixels put together (`map_boxes`, `panels_box`)."""
-        upper = "upper" in parts or "panels" in parts
-        bottom = "bottom" in parts or "panels" in parts
+    def draw_run(self, data: PlotData, map_part: bool = True, panels: slice = slice(None)) -> None:
+        """Draw `data` (which `fits`) over the drafted frame: with `map_part` the run over the map,
+        its legend and the title, and the panels `panels` (top to bottom; `slice(0)`: none). Parts
+        can be drawn by copies of the draft in two processes (`cosim.cli.plotter`) and their
+        pixels put together (`map_boxes`, `panels_box`)."""
         with collector_paused():
             figure, axes = self.figure, self.map_axes
             canvas = figure.canvas
             renderer = canvas.get_renderer()
             canvas.restore_region(self.background)
-            if "map" in parts:
+            if map_part:
                 drafted = set(axes.get_children())
                 draw_map_run(axes, data)
                 figure.suptitle(data.title, fontsize=13)
                 added = [artist for artist in axes.get_children() if artist not in drafted]
                 for artist in sorted(added, key=lambda artist: artist.get_zorder()):  # as Axes.draw sorts
                     artist.draw(renderer)
-            if upper or bottom:  # every panel's artists: they share the time axis's limits
+            if range(self.rows)[panels]:  # every panel's artists: they share the time axis's limits
                 made = self.panel_axes or None
                 self.panel_axes = _draw_panels(figure, self.grid, _panels([data]), [data], made)
-                for panel in self.panel_axes[: -1 if not bottom else None][0 if upper else -1 :]:
+                for panel in self.panel_axes[panels]:
                     panel.draw(renderer)
-            if "map" in parts:
+            if map_part:
                 for text in figure.texts:  # drawn after every axes, as a figure draws them
                     text.draw(renderer)
 
@@ -640,7 +638,7 @@ class Draft:
         return np.asarray(self.figure.canvas.buffer_rgba())
 
     def map_boxes(self) -> list[tuple[int, int, int, int]]:
-        """(top, bottom, left, right) [pixel rows and columns, end excluded] around what the "map"
+        """(top, bottom, left, right) [pixel rows and columns, end excluded] around what the map
         part of `draw_run` drew over the frame: the map's axes (its artists are clipped to them)
         with the legend and the texts written on the map (which may reach out of it), and the
         title. From these few boxes: a tight box of every artist costs a seventh of the part's time."""
@@ -652,9 +650,9 @@ class Draft:
         titles = [self._pixel_box([text.get_window_extent(renderer)]) for text in self.figure.texts]
         return [self._pixel_box(boxes), *titles]
 
-    def panels_box(self, part: str = "panels") -> tuple[int, int, int, int]:
-        """As `map_boxes`, one box around the panels of `part` ("upper", "bottom", "panels"), to
-        the right edge of the figure: their axes, their y labels (left of their tick labels), the
+    def panels_box(self, panels: slice = slice(None)) -> tuple[int, int, int, int]:
+        """As `map_boxes`, one box around the panels `panels` (top to bottom), to the right edge
+        of the figure: their axes, their y labels (left of their tick labels), the
         y tick labels in view (which may stand out above or below an axes), the tick marks under
         an upper panel, the bottom one's time tick labels and label. From these few texts: a tight
         box of every artist costs a tenth of the panels' time."""
@@ -662,14 +660,14 @@ class Draft:
         from matplotlib.transforms import Bbox
 
         renderer = self.figure.canvas.get_renderer()
-        panels = self.figure.axes[1:]
-        chosen = {"upper": panels[:-1], "bottom": panels[-1:]}.get(part, panels)
+        every = self.figure.axes[1:]
+        chosen = every[panels]
         marks = mpl.rcParams["xtick.major.size"] * self.dpi / 72.0 + 1.0  # [px] under an upper panel
         boxes = []
         for axes in chosen:
             boxes += [axes.bbox, axes.yaxis.label.get_window_extent(renderer)]
             boxes += _tick_label_boxes(axes.yaxis, axes.get_ylim(), renderer)
-            if axes is panels[-1]:
+            if axes is every[-1]:
                 boxes.append(axes.xaxis.label.get_window_extent(renderer))
                 boxes += _tick_label_boxes(axes.xaxis, axes.get_xlim(), renderer)
             else:

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cosim.cli import plotter
 from cosim.cli.plotter import PanelHelper, preview
 from cosim.logs import plot
 from cosim.logs.plot_data import PlotData
@@ -81,23 +82,26 @@ def test_a_draft_that_does_not_fit_draws_afresh(run, tmp_path):
         assert np.array_equal(_pixels(drafted.finish(data, tmp_path / f"{name}.png")), drawn)
 
 
-def test_the_two_parts_drawn_apart_and_put_together_are_the_picture(run, tmp_path):
-    """The map, title and bottom panel as one part, the upper panels as the other, each drawn by
-    its own copy of the draft (as the plot process and its helper draw them): every pixel either
-    part changed is inside its boxes, the boxes do not overlap, and the upper panels' box pasted
-    into the other part's picture gives `draw`'s picture."""
+@pytest.mark.parametrize("split", [0, 1, 4], ids=["map|panels", "map+top|lower", "map+upper|bottom"])
+def test_the_two_parts_drawn_apart_and_put_together_are_the_picture(run, tmp_path, split):
+    """The map and title with the panels above `split` as one part, the panels from `split` down
+    as the other, each drawn by its own copy of the draft (as the plot process and its helper
+    draw them, split at 1): every pixel either part changed is inside its boxes, the boxes do not
+    overlap, and the other part's box pasted into the map's picture gives `draw`'s picture."""
     scenario, data = run
     guess = preview(scenario)
     map_part, panels_part = plot.Draft(guess), plot.Draft(guess)
     frame = map_part.pixels().copy()
-    map_part.draw_run(data, ("map", "bottom"))
-    panels_part.draw_run(data, ("upper",))
-    top, bottom, left, right = panels_part.panels_box("upper")
+    above_split, below_split = slice(0, split), slice(split, None)
+    map_part.draw_run(data, True, above_split)
+    panels_part.draw_run(data, False, below_split)
+    top, bottom, left, right = panels_part.panels_box(below_split)
     inside = np.zeros(frame.shape[:2], dtype=bool)
     inside[top:bottom, left:right] = True
     assert not ((panels_part.pixels() != frame).any(axis=2) & ~inside).any()
     inside[:] = False
-    for above, below, west, east in [*map_part.map_boxes(), map_part.panels_box("bottom")]:
+    boxes = map_part.map_boxes() + ([map_part.panels_box(above_split)] if split else [])
+    for above, below, west, east in boxes:
         inside[above:below, west:east] = True
         assert not (top < below and above < bottom and left < east and west < right)
     assert not ((map_part.pixels() != frame).any(axis=2) & ~inside).any()
@@ -115,7 +119,7 @@ def test_the_panel_helper_draws_the_panels_in_a_fork(run, tmp_path):
     helper = PanelHelper.start(drafted, ())
     pid = helper.pid
     helper.draw(pickle.dumps(data))
-    drafted.draw_run(data, ("map", "bottom"))
+    drafted.draw_run(data, panels=plotter.TOP)
     assert helper.paste(drafted)
     assert np.array_equal(_pixels(drafted.write(tmp_path / "helped.png")), _drawn(data, tmp_path))
     with pytest.raises(ChildProcessError):
@@ -146,5 +150,5 @@ def test_a_helper_that_died_gives_no_pixels(run):
     helper = PanelHelper.start(drafted, ())
     os.kill(helper.pid, signal.SIGKILL)
     helper.draw(pickle.dumps(data))  # into a closed pipe: no error
-    drafted.draw_run(data, ("map", "bottom"))
+    drafted.draw_run(data, panels=plotter.TOP)
     assert not helper.paste(drafted)
