@@ -2,20 +2,27 @@
 
 Importing matplotlib and loading its font (`cosim.logs.plot.prepare_drawing`, ~0.15 s of CPU)
 does not depend on the run, so `cosim` forks a child for it before building the run: on a machine
-with a free core it is done by the time the run ends. The run's `PlotData` (arrays: a few MB at
-most) then goes to the child through a pipe, the child draws the PNG and answers with one line;
-the parent waits for it. The child ignores SIGINT and SIGTERM (the parent decides), leaves with
-`os._exit` (no clean-up of the parent's objects it shares), and gives up when the pipe closes
-without data (the parent died); a parent that will not plot ends it (`cancel`). Only where
-`os.fork` is safe and cheap (Linux), and only in `cosim` itself, never in a process that calls
-`cosim.cli.main([...])`.
+with a free core it is done by the time the run ends. The child then drafts the figure from the
+scenario (`preview`: the map as the run will log it, the view, the panels; `cosim.logs.plot.Draft`
+draws the map frame) and forks a helper (`PanelHelper`) that holds a copy of that draft. The run's
+`PlotData` (arrays: a few MB at most) then goes to the child through a pipe and on to the helper;
+the helper draws the panels while the child draws the run over the map, the legend and the title,
+the child takes the helper's pixels from memory the two share, writes the PNG and answers with one
+line; the parent waits for it. Whatever does not fit the draft, or a helper that failed, is drawn
+afresh by the child (`cosim.logs.plot.draw`): always the same picture. The child ignores SIGINT
+and SIGTERM (the parent decides), leaves with `os._exit` (no clean-up of the parent's objects it
+shares), and gives up when the pipe closes without data (the parent died: the helper then sees its
+own pipe close); a parent that will not plot ends it (`cancel`). Only where `os.fork` is safe and
+cheap (Linux), and only in `cosim` itself, never in a process that calls `cosim.cli.main([...])`.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import pickle
 import signal
+import struct
 import sys
 from pathlib import Path
 
@@ -24,8 +31,10 @@ class PlotProcess:
     """A forked child that has imported matplotlib and waits for the data of one plot."""
 
     @classmethod
-    def start(cls) -> PlotProcess | None:
-        """The child, or None where there is none (no fork, or it failed): then draw in-process."""
+    def start(cls, scenario=None) -> PlotProcess | None:
+        """The child, or None where there is none (no fork, or it failed): then draw in-process.
+        Given the run's `scenario` (`cosim.scenario.load.Scenario`), the child also drafts the
+        figure while the run goes (`draft`)."""
         if not sys.platform.startswith("linux"):
             return None
         try:
@@ -44,7 +53,9 @@ class PlotProcess:
         if pid == 0:
             os.close(data_write)
             os.close(reply_read)
-            _child(data_read, reply_write)  # never returns
+            _own_group()
+            _child(data_read, reply_write, scenario)  # never returns
+        _own_group(pid)  # here too: whichever runs first, the group exists when `_kill` ends it
         os.close(data_read)
         os.close(reply_write)
         return cls(pid, data_write, reply_read)
@@ -58,11 +69,25 @@ class PlotProcess:
     def draw(self, data, png_path: Path) -> str | None:
         """Have the child draw `data` (a `cosim.logs.plot.PlotData`) to `png_path`; None when it
         did, else why not. A child that died without answering is drawn for in this process."""
-        payload = pickle.dumps((data, str(png_path)), protocol=pickle.HIGHEST_PROTOCOL)
+        return self.draw_source(None, png_path, data)
+
+    def draw_source(self, source, png_path: Path, data=None) -> str | None:
+        """As `draw`, of the data `cosim.logs.plot.collect` gathers from `source` (a log or a
+        `TraceSource`): the panels' part (`collect_signals`) is sent first, so that they are drawn
+        while this process gathers the map's (`collect_map`: the plans, ~10 ms)."""
+        from cosim.logs.plot import collect_map, collect_signals
+
+        if data is None:
+            data = collect_signals(source)
+        mapped = source is None
         try:
             with os.fdopen(self._data, "wb") as pipe:
                 self._data = None
-                pipe.write(payload)
+                _send(pipe, _panels_part(data))
+                if not mapped:
+                    collect_map(data, source)
+                    mapped = True
+                _send(pipe, (dataclasses.replace(data, series=[], modes=None), str(png_path)))
             with os.fdopen(self._reply, "rb") as pipe:
                 self._reply = None
                 answer = pipe.read().decode(errors="replace")
@@ -79,6 +104,8 @@ class PlotProcess:
             return answer.removeprefix("no plot: ")
         from cosim.logs.plot import draw  # the child failed: the parent draws
 
+        if not mapped:
+            collect_map(data, source)
         draw(data, png_path)
         return None
 
@@ -90,11 +117,15 @@ class PlotProcess:
         self._reap()
 
     def _kill(self) -> None:
+        """End the child and its helper at once: they are the child's process group."""
         if self.pid:
             try:
-                os.kill(self.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
+                os.killpg(self.pid, signal.SIGKILL)
+            except OSError:  # no such group (it could not be made): the child alone
+                try:
+                    os.kill(self.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
 
     def _reap(self) -> None:
         for fd in (self._data, self._reply):
@@ -109,7 +140,37 @@ class PlotProcess:
             self.pid = 0
 
 
-def _child(data_read: int, reply_write: int) -> None:
+def _own_group(pid: int = 0) -> None:
+    """Make the plot process (`pid`, 0: this one) the leader of its own process group, which its
+    helper joins, so that `PlotProcess._kill` ends both at once. It ignores the signals of the
+    terminal's group anyway (the parent decides)."""
+    try:
+        os.setpgid(pid, 0)
+    except OSError:  # (the child already runs in its group, or is gone)
+        pass
+
+
+def _send(pipe, value) -> None:
+    """One frame of the pipe to the plot process: its length (8 bytes) and `value` pickled."""
+    payload = pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
+    pipe.write(struct.pack(">Q", len(payload)) + payload)
+    pipe.flush()
+
+
+def _frame(pipe) -> bytes:
+    """The next frame's pickled bytes (`_send`), or b"" at the end of the pipe."""
+    head = pipe.read(8)
+    if len(head) < 8:
+        return b""
+    return pipe.read(struct.unpack(">Q", head)[0])
+
+
+def _panels_part(data):
+    """What the panels of `data` (a `PlotData`) need: the series, the mixer's modes, the avoider."""
+    return type(data)("", series=data.series, modes=data.modes, avoider=data.avoider)
+
+
+def _child(data_read: int, reply_write: int, scenario) -> None:
     answer = "failed"
     try:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -117,12 +178,34 @@ def _child(data_read: int, reply_write: int) -> None:
         from cosim.logs.plot import draw, prepare_drawing
 
         prepare_drawing()
+        drafted = None if scenario is None else draft(scenario)
+        helper = None
+        if drafted is not None and range(drafted.rows)[LOWER] and _free_core():
+            helper = PanelHelper.start(drafted, (data_read, reply_write))
         with os.fdopen(data_read, "rb") as pipe:
-            payload = pipe.read()
-        if not payload:
+            panels = _frame(pipe)
+            if not panels:
+                os._exit(0)
+            if helper is not None:
+                helper.draw(panels)  # it draws the panels while the map's part comes
+            mapped = _frame(pipe)
+        if not mapped:
             os._exit(0)
-        data, png_path = pickle.loads(payload)
-        draw(data, Path(png_path))
+        panels = pickle.loads(panels)
+        data, png_path = pickle.loads(mapped)
+        data = dataclasses.replace(data, series=panels.series, modes=panels.modes)
+        if drafted is None or not drafted.fits(data):
+            if helper is not None:
+                helper.cancel()
+            draw(data, Path(png_path))
+        elif helper is None:
+            drafted.finish(data, Path(png_path))
+        else:
+            drafted.draw_run(data, panels=TOP)
+            if helper.paste(drafted):
+                drafted.write(Path(png_path))
+            else:  # the helper failed, or the two parts overlap: drawn afresh
+                draw(data, Path(png_path))
         answer = "ok"
     except OSError as error:
         answer = f"no plot: {error}"
@@ -135,3 +218,190 @@ def _child(data_read: int, reply_write: int) -> None:
             os.write(reply_write, answer.encode()[:4000])
         finally:
             os._exit(0)
+
+
+def _free_core() -> bool:
+    """Whether the machine seems to have a core to spare for the helper (the load average of the
+    last minute below the number of cores this process may use): on a busy machine the helper's
+    fork and copy would only add their CPU time."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+        return cores >= 2 and os.getloadavg()[0] < cores
+    except (AttributeError, OSError):
+        return False
+
+
+# The plot process draws the map, its legend and the title (~45 ms of CPU here), its helper the
+# panels (~72 ms). Moving a panel to the plot process does not shorten the longer of the two: each
+# process that draws a panel makes every panel's artists (they share the time axis's limits).
+TOP, LOWER = slice(0, 0), slice(0, None)
+
+
+class PanelHelper:
+    """A fork of the plot process, made once its draft is ready, that draws the panels of the
+    run's figure (`LOWER`) while the plot process draws the map, the legend and the title (`TOP`:
+    no panel; `cosim.logs.plot.Draft.draw_run`: the two parts of the picture do not overlap, which
+    `paste` checks). It gets the
+    run's data as the plot process got it, and gives back the box of its pixels, written into
+    memory the two share. It ends when its pipe closes without data (the plot process ended)."""
+
+    @classmethod
+    def start(cls, drafted, inherited: tuple[int, ...]) -> PanelHelper | None:
+        """The helper of `drafted`, or None (no fork); `inherited`: the plot process's own pipe
+        ends, closed in the helper."""
+        import mmap
+
+        shape = drafted.pixels().shape
+        try:
+            shared = mmap.mmap(-1, shape[0] * shape[1] * shape[2])
+            data_read, data_write = os.pipe()
+            done_read, done_write = os.pipe()
+        except OSError:
+            return None
+        try:
+            pid = os.fork()
+        except OSError:
+            for fd in (data_read, data_write, done_read, done_write):
+                os.close(fd)
+            return None
+        if pid == 0:
+            for fd in (data_write, done_read, *inherited):
+                os.close(fd)
+            _panels(drafted, data_read, done_write, shared)  # never returns
+        os.close(data_read)
+        os.close(done_write)
+        return cls(pid, data_write, done_read, shared, shape)
+
+    def __init__(self, pid: int, data_write: int, done_read: int, shared, shape) -> None:
+        self.pid = pid
+        self._data = data_write
+        self._done = done_read
+        self._shared = shared
+        self._shape = shape
+
+    def draw(self, payload: bytes) -> None:
+        """Have the helper draw the panels of `payload` (the panels' part of the data, pickled, as
+        the plot process got it); a helper that is gone answers nothing (`paste`)."""
+        try:
+            with os.fdopen(self._data, "wb") as pipe:
+                self._data = None
+                pipe.write(payload)
+        except OSError:
+            pass
+
+    def paste(self, drafted) -> bool:
+        """Wait for the helper, and put its pixels into `drafted`'s canvas when they do not
+        overlap what it drew; whether they were."""
+        import numpy as np
+
+        with os.fdopen(self._done, "rb") as pipe:
+            self._done = None
+            answer = pipe.read().decode(errors="replace").split()
+        self._reap()
+        if len(answer) != 4:
+            return False
+        top, bottom, left, right = (int(value) for value in answer)
+        boxes = drafted.map_boxes() + ([drafted.panels_box(TOP)] if range(drafted.rows)[TOP] else [])
+        for above, below, west, east in boxes:
+            if top < below and above < bottom and left < east and west < right:
+                return False
+        shared = np.frombuffer(self._shared, dtype=np.uint8).reshape(self._shape)
+        drafted.pixels()[top:bottom, left:right] = shared[top:bottom, left:right]
+        return True
+
+    def cancel(self) -> None:
+        """No panels wanted: the helper is ended (it sees its pipe close, or is killed while it
+        draws) and reaped."""
+        if self._data is None and self.pid:
+            try:
+                os.kill(self.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        self._reap()
+
+    def _reap(self) -> None:
+        for fd in (self._data, self._done):
+            if fd is not None:
+                os.close(fd)
+        self._data = self._done = None
+        if self.pid:
+            try:
+                os.waitpid(self.pid, 0)
+            except ChildProcessError:
+                pass
+            self.pid = 0
+
+
+def _panels(drafted, data_read: int, done_write: int, shared) -> None:
+    answer = ""
+    try:
+        import numpy as np
+
+        with os.fdopen(data_read, "rb") as pipe:
+            payload = pipe.read()
+        if payload:
+            drafted.draw_run(pickle.loads(payload), False, LOWER)
+            top, bottom, left, right = drafted.panels_box(LOWER)
+            view = np.frombuffer(shared, dtype=np.uint8).reshape(drafted.pixels().shape)
+            view[top:bottom, left:right] = drafted.pixels()[top:bottom, left:right]
+            answer = f"{top} {bottom} {left} {right}"
+    except Exception:  # noqa: BLE001 (no answer: the plot process draws the panels itself)
+        answer = ""
+    finally:
+        try:
+            os.write(done_write, answer.encode())
+        finally:
+            os._exit(0)
+
+
+def draft(scenario):
+    """The run's figure drafted from `preview(scenario)` (`cosim.logs.plot.Draft`), or None when
+    that fails (the run's data is then drawn afresh: a draft is only ever a head start)."""
+    from cosim.logs.plot import Draft
+
+    try:
+        return Draft(preview(scenario))
+    except Exception:  # noqa: BLE001 (a scenario the guess does not cover: no draft, the same plot)
+        return None
+
+
+def preview(scenario):
+    """What the plot of a run of `scenario` shows that is known before the run, as a
+    `cosim.logs.plot.PlotData`: the map as the run logs it (the scenario's map, inflated by the
+    planner's expansion distance; the resolution rounded to float32 as in the log), the view that
+    shows it and the start and goal, a two-line title and, without data, the panels the default
+    series of its components fill (speed and turning for a vehicle or mixer, the directions for
+    pure pursuit or VFH, the lidar's minimum range, the distance to the goal). `Draft.fits` checks
+    it against the run's own data."""
+    import numpy as np
+
+    from cosim.logs.plot import _extent, map_image, view_limits
+    from cosim.logs.plot_data import PlotData, Series
+    from cosim.world.distance import load_known_map
+    from planner.grid import OccupancyGrid
+
+    grid = load_known_map(scenario)
+    expansion = scenario.planner.expansion_distance
+    inflated = grid.inflate(expansion) if expansion > 0 else grid
+    resolution = float(f"{float(np.float32(grid.resolution)):.7g}")
+    logged = OccupancyGrid(grid.occupied, resolution, (float(grid.origin[0]), float(grid.origin[1])))
+    extent = _extent(logged)
+    x0, x1, y0, y1 = extent
+    bounds = [np.array([[x0, y0], [x1, y1]]), np.array([scenario.start[:2]]), np.array([scenario.goal])]
+    components = set(scenario.components)
+    panels = []
+    if components & {"vehicle", "mixer"}:
+        turning = "rad" if scenario.vehicle_type == "bicycle" else "rad/s"
+        panels += [("speed", "m/s"), ("turning", turning)]
+    if components & {"pure_pursuit", "vfh"}:
+        panels.append(("direction", "rad"))
+    panels += [("range", "m"), ("goal", "m")]
+    empty = np.zeros(0)
+    return PlotData(
+        f"{scenario.name}\n",
+        image=map_image(logged, inflated),
+        extent=extent,
+        has_zone=inflated.shape == grid.shape,
+        limits=view_limits(bounds),
+        series=[Series(panel, unit, empty, empty, panel) for panel, unit in panels],
+    )

@@ -199,7 +199,7 @@ def _handler(args) -> int:
 
         # Forked before the live view's server starts, so the child holds none of its threads
         # or sockets. It prepares the plot while the run goes.
-        plotter = PlotProcess.start()
+        plotter = PlotProcess.start(scenario)
     prepare(scenario.project_fmus, scenario.fmi_version, kernels=(), announce=announce)
     from cosim.navigation.outcome import avoider_name, format_summary
     from cosim.navigation.run import run_scenario
@@ -302,20 +302,20 @@ def _draw_plot(log_path: Path, quiet: bool, trace, plotter) -> None:
         print("cosim: note: no plot (cosim.logs.plot is not available)", file=sys.stderr)
         return
 
-    def draw(partial: Path) -> str | None:
-        if plotter is None:
-            plot.skip_matplotlib_docstrings()  # this process draws and exits: no help() text needed
-        if trace is not None and not trace.dropped:
-            data = plot.collect(plot.TraceSource(trace))
-        else:
-            from cosim.logs.reader import open_log
+    def draw_source(source, partial: Path) -> str | None:
+        if plotter is not None:
+            return plotter.draw_source(source, partial)
+        plot.skip_matplotlib_docstrings()  # this process draws and exits: no help() text needed
+        plot.draw(plot.collect(source), partial)
+        return None
 
-            with open_log(log_path) as log:
-                data = plot.collect(log)
-        if plotter is None:
-            plot.draw(data, partial)
-            return None
-        return plotter.draw(data, partial)
+    def draw(partial: Path) -> str | None:
+        if trace is not None and not trace.dropped:
+            return draw_source(plot.TraceSource(trace), partial)
+        from cosim.logs.reader import open_log
+
+        with open_log(log_path) as log:
+            return draw_source(log, partial)
 
     _png_beside(log_path, quiet, draw)
 

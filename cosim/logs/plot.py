@@ -17,6 +17,8 @@ the map and its inflated zone, one collection for the obstacles, their tracks, e
 text boxes naming each panel's series (no legend per panel), ticks only inside the view, the upper
 panels' unlabelled time ticks as two lines (matplotlib's own pixels: tests/logs/test_plot_render.py), the
 cyclic garbage collector paused, and the PNG written straight from the canvas (`write_png`).
+`cosim run` drafts its figure while the run goes (`Draft`: the map frame drawn from the scenario,
+the run drawn over it after) and draws the map and the panels in two processes: the same pixels.
 matplotlib is imported when a plot is drawn, not with this module.
 """
 
@@ -30,7 +32,7 @@ import numpy as np
 
 from cosim.errors import CosimError
 from cosim.logs.plot_data import MODE_COLORS, ZONE_RGBA, PlotData, Series, mode_name
-from cosim.logs.plot_map import draw_map, draw_overlay_map, run_colour
+from cosim.logs.plot_map import draw_map, draw_map_frame, draw_map_run, draw_overlay_map, run_colour
 
 if TYPE_CHECKING:
     from cosim.logs.reader import Log, Signals, Trajectory
@@ -81,16 +83,22 @@ def plot_trace(trace, png_path: str | Path) -> Path:
 
 def collect(source, signals: list[str] | None = None) -> PlotData:
     """The arrays the plot of `source` (a `Log`, or a `TraceSource`) shows."""
+    data = collect_signals(source, signals)
+    collect_map(data, source)
+    return data
+
+
+def collect_signals(source, signals: list[str] | None = None) -> PlotData:
+    """`collect` without the map panel's arrays (`collect_map` adds them): the series, the mixer's
+    modes, the title and names, which the panels need (`cosim.cli.plotter` sends them first)."""
     series = _chosen_series(source, signals) if signals else _default_series(source)
-    data = PlotData(
+    return PlotData(
         _title(source),
         series=series,
         modes=_modes(source),
         label=source.path.stem,
         avoider=avoider_name(source.metadata),
     )
-    _collect_map(data, source)
-    return data
 
 
 # --- a run's trace, read as a log -------------------------------------------------------------
@@ -253,7 +261,9 @@ def _extent(grid) -> tuple[float, float, float, float]:
     return (x0, x0 + cols * grid.resolution, y0, y0 + rows * grid.resolution)
 
 
-def _collect_map(data: PlotData, source) -> None:
+def collect_map(data: PlotData, source) -> None:
+    """Add the map panel's arrays of `source` to `data` (`collect_signals`' of it): the map, the
+    obstacles, plans, trajectory, start and goals, and the view."""
     bounds: list[np.ndarray] = []  # points that must be inside the view [m]
     grid, inflated = source.map("/map"), source.map("/map_inflated")
     if grid is not None:
@@ -291,10 +301,17 @@ def _collect_map(data: PlotData, source) -> None:
         if point is not None:
             bounds.append(np.array([point[:2]]))
     bounds += [points for _, points in data.plans]
-    if bounds:
-        low, high = np.min(np.vstack(bounds), axis=0), np.max(np.vstack(bounds), axis=0)
-        margin = 0.03 * max(float(np.max(high - low)), 1.0)
-        data.limits = (low[0] - margin, high[0] + margin, low[1] - margin, high[1] + margin)
+    data.limits = view_limits(bounds)
+
+
+def view_limits(bounds: list[np.ndarray]) -> tuple[float, float, float, float] | None:
+    """The map view (x0, x1, y0, y1) [m] that shows every point of `bounds` (N x 2 arrays [m]),
+    with a margin; None for no points."""
+    if not bounds:
+        return None
+    low, high = np.min(np.vstack(bounds), axis=0), np.max(np.vstack(bounds), axis=0)
+    margin = 0.03 * max(float(np.max(high - low)), 1.0)
+    return (low[0] - margin, high[0] + margin, low[1] - margin, high[1] + margin)
 
 
 def reverse_segments(poses: np.ndarray) -> np.ndarray:
@@ -460,7 +477,7 @@ def draw(data: PlotData | list[PlotData], png_path: str | Path, dpi: float = DPI
         figure = build_figure(data, dpi, size)
         png_path = Path(png_path)
         png_path.parent.mkdir(parents=True, exist_ok=True)
-        write_png(png_path, np.asarray(figure.canvas.buffer_rgba())[:, :, :3], dpi)  # the figure is opaque
+        write_png(png_path, np.asarray(figure.canvas.buffer_rgba()), dpi)  # the figure is opaque
         return png_path
 
 
@@ -475,23 +492,44 @@ def figure_size(rows: int, size=None, dpi: float = DPI) -> tuple[float, float]:
 def build_figure(data: PlotData | list[PlotData], dpi: float = DPI, size=None, title: str | None = None):
     """The drawn figure of `data` (its canvas drawn): `draw` writes its pixels; the map is
     `figure.axes[0]`, then the panels top to bottom. `title` replaces the picture's own."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
     runs = data if isinstance(data, list) else [data]
     if not runs:
         raise CosimError("no run to plot")
+    panels = _panels(runs)
+    if title is None:
+        title = runs[0].title if len(runs) == 1 else _overlay_title(runs)
+    figure, grid = _new_figure(len(panels), title.count("\n") + 1, dpi, size)
+    map_axes = figure.add_subplot(grid[:, 0])
+    if len(runs) == 1:
+        draw_map(map_axes, runs[0])
+    else:
+        draw_overlay_map(map_axes, runs)
+    _ticks_in_view(map_axes)
+    _draw_panels(figure, grid, panels, runs)
+    figure.suptitle(title, fontsize=13)
+    figure.canvas.draw()
+    return figure
+
+
+def _panels(runs: list[PlotData]) -> dict[str, list[tuple[int, Series]]]:
+    """The series of `runs` by panel, in order: (run index, series) each."""
     panels: dict[str, list[tuple[int, Series]]] = {}
     for index, run in enumerate(runs):
         for item in run.series:
             panels.setdefault(item.panel, []).append((index, item))
-    rows = max(len(panels), 1)
+    return panels
+
+
+def _new_figure(panels: int, title_lines: int, dpi: float, size):
+    """An empty figure on an Agg canvas for a map and `panels` rows of panels, under a title of
+    `title_lines` lines: (figure, grid spec: the map spans column 0, the panels column 1)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    rows = max(panels, 1)
     width, height = figure_size(rows, size, dpi)
     figure = Figure(figsize=(width, height), dpi=dpi)
-    canvas = FigureCanvasAgg(figure)
-    if title is None:
-        title = runs[0].title if len(runs) == 1 else _overlay_title(runs)
-    title_lines = title.count("\n") + 1
+    FigureCanvasAgg(figure)
     # Fixed margins [inches] instead of a layout engine: room for the title above, the map's
     # legend below it, and the panels' tick labels.
     grid = figure.add_gridspec(
@@ -505,19 +543,166 @@ def build_figure(data: PlotData | list[PlotData], dpi: float = DPI, size=None, t
         wspace=0.14,
         hspace=0.12,
     )
-    map_axes = figure.add_subplot(grid[:, 0])
-    if len(runs) == 1:
-        draw_map(map_axes, runs[0])
-    else:
-        draw_overlay_map(map_axes, runs)
-    panel_axes = _draw_series(figure, grid, panels, runs)
-    figure.suptitle(title, fontsize=13)
-    for axes in figure.axes:
+    return figure, grid
+
+
+def _draw_panels(figure, grid, panels, runs: list[PlotData], made=None) -> list:
+    """The panels (`_draw_series`), their ticks fixed; returns the panels' axes."""
+    panel_axes = _draw_series(figure, grid, panels, runs, made)
+    for axes in panel_axes:
         _ticks_in_view(axes)
     for axes in panel_axes[:-1]:  # the bottom panel labels the time axis they share
         _unlabelled_x_ticks(axes)
-    canvas.draw()
-    return figure
+    return panel_axes
+
+
+class Draft:
+    """The figure of a run drawn ahead, while the run goes, from what is known before it (`cosim
+    run`'s plot process: `cosim.cli.plotter`): the layout for the panels `preview` has (only how
+    many matters) and the map frame of `preview` (`draw_map_frame`: the map image, the view's
+    limits, ticks, labels; the view is the map and the start and goal with a margin, which a run
+    inside the map does not widen). When the run's data has the same frame (`fits`), `finish` draws
+    only the rest over those pixels: the run over the map and its legend, the panels, the title,
+    each artist as `build_figure` draws it and in the same order (what the frame holds lies under
+    all of it), so the picture is `draw`'s. Otherwise it is drawn afresh by `draw`."""
+
+    def __init__(self, preview: PlotData, dpi: float = DPI) -> None:
+        self.preview = preview
+        self.dpi = dpi
+        self.rows = len(_panels([preview]))
+        with collector_paused():
+            self.figure, self.grid = _new_figure(self.rows, preview.title.count("\n") + 1, dpi, None)
+            self.map_axes = self.figure.add_subplot(self.grid[:, 0])
+            draw_map_frame(self.map_axes, preview)
+            _ticks_in_view(self.map_axes)
+            self.panel_axes = _panel_axes(self.figure, self.grid, self.rows)  # drawn by `finish`
+            for axes in self.panel_axes:
+                axes.set_visible(False)
+            canvas = self.figure.canvas
+            canvas.draw()
+            self.background = canvas.copy_from_bbox(self.figure.bbox)
+            for axes in self.panel_axes:
+                axes.set_visible(True)
+
+    def fits(self, data: PlotData) -> bool:
+        """Whether `data` has the drafted frame: the same map image and view, panel rows and title lines."""
+        preview = self.preview
+        return (
+            len(_panels([data])) == self.rows
+            and data.title.count("\n") == preview.title.count("\n")
+            and data.limits is not None
+            and data.limits == preview.limits
+            and data.extent == preview.extent
+            and data.has_zone == preview.has_zone
+            and data.image is not None
+            and preview.image is not None
+            and data.image.shape == preview.image.shape
+            and bool(np.array_equal(data.image, preview.image))
+        )
+
+    def finish(self, data: PlotData, png_path: str | Path) -> Path:
+        """Draw `data` to a PNG at `png_path` (as `draw` does), over the draft when it fits."""
+        if not self.fits(data):
+            return draw(data, png_path, self.dpi)
+        self.draw_run(data)
+        return self.write(png_path)
+
+    def draw_run(self, data: PlotData, map_part: bool = True, panels: slice = slice(None)) -> None:
+        """Draw `data` (which `fits`) over the drafted frame: with `map_part` the run over the map,
+        its legend and the title, and the panels `panels` (top to bottom; `slice(0)`: none). Parts
+        can be drawn by copies of the draft in two processes (`cosim.cli.plotter`) and their
+        pixels put together (`map_boxes`, `panels_box`)."""
+        with collector_paused():
+            figure, axes = self.figure, self.map_axes
+            canvas = figure.canvas
+            renderer = canvas.get_renderer()
+            canvas.restore_region(self.background)
+            if map_part:
+                drafted = set(axes.get_children())
+                draw_map_run(axes, data)
+                figure.suptitle(data.title, fontsize=13)
+                added = [artist for artist in axes.get_children() if artist not in drafted]
+                for artist in sorted(added, key=lambda artist: artist.get_zorder()):  # as Axes.draw sorts
+                    artist.draw(renderer)
+            if range(self.rows)[panels]:  # every panel's artists: they share the time axis's limits
+                made = self.panel_axes or None
+                self.panel_axes = _draw_panels(figure, self.grid, _panels([data]), [data], made)
+                for panel in self.panel_axes[panels]:
+                    panel.draw(renderer)
+            if map_part:
+                for text in figure.texts:  # drawn after every axes, as a figure draws them
+                    text.draw(renderer)
+
+    def pixels(self) -> np.ndarray:
+        """The canvas' RGBA pixels (rows x columns x 4, row 0 at the top), writable."""
+        return np.asarray(self.figure.canvas.buffer_rgba())
+
+    def map_boxes(self) -> list[tuple[int, int, int, int]]:
+        """(top, bottom, left, right) [pixel rows and columns, end excluded] around what the map
+        part of `draw_run` drew over the frame: the map's axes (its artists are clipped to them)
+        with the legend and the texts written on the map (which may reach out of it), and the
+        title. From these few boxes: a tight box of every artist costs a seventh of the part's time."""
+        renderer = self.figure.canvas.get_renderer()
+        axes = self.map_axes
+        boxes = [axes.bbox] + [text.get_window_extent(renderer) for text in axes.texts]
+        if axes.get_legend() is not None:
+            boxes.append(axes.get_legend().get_window_extent(renderer))
+        titles = [self._pixel_box([text.get_window_extent(renderer)]) for text in self.figure.texts]
+        return [self._pixel_box(boxes), *titles]
+
+    def panels_box(self, panels: slice = slice(None)) -> tuple[int, int, int, int]:
+        """As `map_boxes`, one box around the panels `panels` (top to bottom), to the right edge
+        of the figure: their axes, their y labels (left of their tick labels), the
+        y tick labels in view (which may stand out above or below an axes), the tick marks under
+        an upper panel, the bottom one's time tick labels and label. From these few texts: a tight
+        box of every artist costs a tenth of the panels' time."""
+        import matplotlib as mpl
+        from matplotlib.transforms import Bbox
+
+        renderer = self.figure.canvas.get_renderer()
+        every = self.figure.axes[1:]
+        chosen = every[panels]
+        marks = mpl.rcParams["xtick.major.size"] * self.dpi / 72.0 + 1.0  # [px] under an upper panel
+        boxes = []
+        for axes in chosen:
+            boxes += [axes.bbox, axes.yaxis.label.get_window_extent(renderer)]
+            boxes += _tick_label_boxes(axes.yaxis, axes.get_ylim(), renderer)
+            if axes is every[-1]:
+                boxes.append(axes.xaxis.label.get_window_extent(renderer))
+                boxes += _tick_label_boxes(axes.xaxis, axes.get_xlim(), renderer)
+            else:
+                x0, y0, x1, _ = axes.bbox.extents
+                boxes.append(Bbox.from_extents(x0, y0 - marks, x1, y0))
+        top, bottom, left, _ = self._pixel_box(boxes)
+        return top, bottom, left, self.pixels().shape[1]
+
+    def _pixel_box(self, boxes, margin: int = 2) -> tuple[int, int, int, int]:
+        from matplotlib.transforms import Bbox
+
+        box = Bbox.union([box for box in boxes if box is not None])
+        height, width = self.pixels().shape[:2]
+        top = max(int(np.floor(height - box.y1)) - margin, 0)
+        bottom = min(int(np.ceil(height - box.y0)) + margin, height)
+        left = max(int(np.floor(box.x0)) - margin, 0)
+        right = min(int(np.ceil(box.x1)) + margin, width)
+        return top, bottom, left, right
+
+    def write(self, png_path: str | Path) -> Path:
+        """Write the canvas to a PNG at `png_path`; returns its path."""
+        png_path = Path(png_path)
+        png_path.parent.mkdir(parents=True, exist_ok=True)
+        write_png(png_path, self.pixels(), self.dpi)
+        return png_path
+
+
+def _tick_label_boxes(axis, limits, renderer) -> list:
+    """The window boxes of the tick labels `axis` draws for a view of `limits`."""
+    low, high = sorted(limits)
+    return [
+        tick.label1.get_window_extent(renderer)
+        for tick in axis.get_major_ticks()
+        if tick.label1.get_visible() and low <= tick.get_loc() <= high
+    ]
 
 
 def _overlay_title(runs: list[PlotData]) -> str:
@@ -529,16 +714,33 @@ def _overlay_title(runs: list[PlotData]) -> str:
 
 
 def write_png(path: Path, pixels: np.ndarray, dpi: float) -> None:
-    """Write an 8-bit RGB image (rows x columns x 3, row 0 at the top) as a PNG: no filter on the
-    rows and zlib level 1. A plot is mostly flat colour, so this is a quarter larger than Pillow's
-    default (adaptive filters, level 6) in a tenth of its time, and a third of Pillow's time at
-    level 1. The pixel density (`dpi`) is recorded as Pillow and matplotlib record it."""
+    """Write an 8-bit RGB image (rows x columns x 3, or x 4 whose 4th byte is left out; row 0 at
+    the top) as a PNG: no filter on the rows and zlib level 1. A plot is mostly flat colour, so this
+    is a quarter larger than Pillow's default (adaptive filters, level 6) in a tenth of its time,
+    and a third of Pillow's time at level 1. The rows are compressed in two halves side by side
+    (zlib lets other threads run): each half a raw deflate stream, the first ended on a byte
+    boundary without closing the stream (a sync flush), so the two are one stream, as pigz does.
+    The pixel density (`dpi`) is recorded as Pillow and matplotlib record it."""
     import struct
     import zlib
+    from concurrent.futures import ThreadPoolExecutor
 
-    height, width, _ = pixels.shape
-    rows = np.zeros((height, 1 + 3 * width), dtype=np.uint8)  # a filter byte (0: none) per row
-    rows[:, 1:] = pixels.reshape(height, 3 * width)
+    height, width = pixels.shape[:2]
+    rows = np.empty((height, 1 + 3 * width), dtype=np.uint8)  # a filter byte (0: none) per row
+    halves = ((0, height // 2), (height // 2, height))
+
+    def deflate(index: int) -> bytes:
+        low, high = halves[index]
+        rows[low:high, 0] = 0
+        rows[low:high, 1:].reshape(high - low, width, 3)[:] = pixels[low:high, :, :3]
+        stream = zlib.compressobj(1, zlib.DEFLATED, -15)  # raw: no zlib header or checksum
+        body = stream.compress(rows[low:high])
+        return body + stream.flush(zlib.Z_FINISH if index == 1 else zlib.Z_SYNC_FLUSH)
+
+    with ThreadPoolExecutor(2) as pool:
+        second = pool.submit(deflate, 1)
+        first = deflate(0)
+        compressed = b"\x78\x01" + first + second.result() + struct.pack(">I", zlib.adler32(rows))
 
     def chunk(kind: bytes, body: bytes) -> bytes:
         return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
@@ -548,7 +750,7 @@ def write_png(path: Path, pixels: np.ndarray, dpi: float) -> None:
         b"\x89PNG\r\n\x1a\n"
         + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0))  # 8-bit RGB
         + chunk(b"pHYs", struct.pack(">IIB", per_metre, per_metre, 1))
-        + chunk(b"IDAT", zlib.compress(rows.tobytes(), 1))
+        + chunk(b"IDAT", compressed)
         + chunk(b"IEND", b"")
     )
 
@@ -624,16 +826,26 @@ def _unlabelled_x_ticks(axes) -> None:
 LINE_STYLES = ("-", "--", ":", "-.")  # the series of one run that share a panel, in an overlay
 
 
-def _draw_series(figure, grid, panels: dict[str, list[tuple[int, Series]]], runs: list[PlotData]) -> list:
+def _panel_axes(figure, grid, rows: int) -> list:
+    """The panels' axes, top to bottom in the grid's column 1, sharing the time axis."""
+    made: list = []
+    for row in range(rows):
+        made.append(figure.add_subplot(grid[row, 1], sharex=made[0] if made else None))
+    return made
+
+
+def _draw_series(
+    figure, grid, panels: dict[str, list[tuple[int, Series]]], runs: list[PlotData], made=None
+) -> list:
     """One panel (axes) per entry of `panels` ((run index, series) each), top to bottom, sharing the
-    time axis; returns them. One run: each series in the next default colour, the mixer's modes
-    shaded; an overlay: each run in its colour, a panel's series told apart by line style."""
+    time axis (`made`: those axes, made before: `_panel_axes`); returns them. One run: each series
+    in the next default colour, the mixer's modes shaded; an overlay: each run in its colour, a
+    panel's series told apart by line style."""
     overlay = len(runs) > 1
-    first_axes = None
+    if made is None:
+        made = _panel_axes(figure, grid, len(panels))
     drawn = []
-    for row, items in enumerate(panels.values()):
-        axes = figure.add_subplot(grid[row, 1], sharex=first_axes)
-        first_axes = first_axes or axes
+    for row, (items, axes) in enumerate(zip(panels.values(), made, strict=False)):
         drawn.append(axes)
         if overlay:
             # the k-th series of each run in this panel gets the k-th style, named as the first run names it

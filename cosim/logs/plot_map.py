@@ -28,13 +28,35 @@ def run_colour(index: int) -> str:
 
 def draw_map(axes, data: PlotData) -> None:
     """The map panel of one run (module docstring)."""
+    draw_map_frame(axes, data)
+    draw_map_run(axes, data)
+
+
+def draw_map_frame(axes, data: PlotData) -> None:
+    """What of the map panel is drawn under the run and known before it (`cosim.logs.plot.Draft`):
+    the map image, the view's limits, the axes' labels, title and grid. Every artist of
+    `draw_map_run` is above these (zorder 3 and up: the grid and ticks are at 1.5, the spines at 2.5)."""
+    if data.image is not None:
+        axes.imshow(data.image, extent=data.extent, origin="upper", interpolation="nearest", zorder=0)
+    if data.limits is not None:
+        axes.set_xlim(*data.limits[:2])
+        axes.set_ylim(*data.limits[2:])
+    axes.set_aspect("equal", adjustable="box")
+    axes.set_xlabel("x [m]")
+    axes.set_ylabel("y [m]")
+    axes.set_title("trajectory over the map", y=1.0)  # y given: no search for what might be above
+    axes.grid(alpha=0.25)
+
+
+def draw_map_run(axes, data: PlotData) -> None:
+    """The run over the map frame (`draw_map_frame`): obstacles, plans, trajectory, start, goals,
+    and the legend below the map."""
     from matplotlib.collections import LineCollection, PolyCollection
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
     handles: list = []
     if data.image is not None:
-        axes.imshow(data.image, extent=data.extent, origin="upper", interpolation="nearest", zorder=0)
         if data.has_zone:
             handles.append(Patch(color=ZONE_RGBA[:3], label="inflated zone (planner)"))
         handles.append(Patch(color="0.15", label="map: occupied"))
@@ -83,9 +105,6 @@ def draw_map(axes, data: PlotData) -> None:
             Line2D([], [], marker="o", color="#2a9d8f", ls="none", ms=9, label="start (and heading)")
         )
     handles += _draw_goals(axes, data, GOAL_COLOR)
-    if data.limits is not None:
-        axes.set_xlim(*data.limits[:2])
-        axes.set_ylim(*data.limits[2:])
     if data.image is None and data.trajectory is None:
         axes.text(
             0.5,
@@ -95,11 +114,6 @@ def draw_map(axes, data: PlotData) -> None:
             va="center",
             transform=axes.transAxes,
         )
-    axes.set_aspect("equal", adjustable="box")
-    axes.set_xlabel("x [m]")
-    axes.set_ylabel("y [m]")
-    axes.set_title("trajectory over the map", y=1.0)  # y given: no search for what might be above
-    axes.grid(alpha=0.25)
     if handles:  # below the map, so it never hides part of it
         axes.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, fontsize=8)
 

@@ -191,3 +191,101 @@ def test_an_interrupt_while_the_child_draws_ends_the_child(cosim_run, tmp_path: 
     assert process.exit_status == -signal.SIGKILL
     assert _not_running(pid)
     assert not (tmp_path / "x.png").exists()
+
+
+def _counting_afresh(monkeypatch, marker: Path) -> None:
+    """`plot.draw` in a forked process leaves `marker`: the picture was drawn afresh, not drafted."""
+    parent = os.getpid()
+    draw = plot.draw
+
+    def counted(data, png_path, *options):
+        if os.getpid() != parent:
+            marker.touch()
+        return draw(data, png_path, *options)
+
+    monkeypatch.setattr(plot, "draw", counted)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("helped", [True, False], ids=["helper", "alone"])
+def test_a_drafted_picture_is_the_picture_of_the_log(cosim_run, tmp_path: Path, monkeypatch, helped):
+    """The child drafts from the scenario, gets the panels' part first and the map's after
+    (`draw_source`), with or without its helper: the log's own picture, and not drawn afresh."""
+    from cosim.cli import plotter
+    from cosim.logs.reader import open_log
+    from cosim.scenario.load import load_scenario
+
+    monkeypatch.setattr(plotter, "_free_core", lambda: helped)
+    _counting_afresh(monkeypatch, tmp_path / "afresh")
+    process = PlotProcess.start(load_scenario(EXAMPLE, ["simulation.stop_time=3"]))
+    pid = process.pid
+    with open_log(cosim_run) as log:
+        assert process.draw_source(log, tmp_path / "x.png") is None
+    assert not (tmp_path / "afresh").exists()
+    assert (tmp_path / "x.png").read_bytes() == plot.plot_run(cosim_run, tmp_path / "y.png").read_bytes()
+    assert _not_running(pid)
+
+
+@pytest.mark.slow
+def test_a_draft_that_does_not_fit_is_drawn_afresh(cosim_run, tmp_path: Path, monkeypatch):
+    """A scenario whose map frame is not the run's (another inflation: another map image): the
+    helper's panels are not used, the picture is drawn afresh, and it is the log's picture."""
+    from cosim.cli import plotter
+    from cosim.logs.reader import open_log
+    from cosim.scenario.load import load_scenario
+
+    monkeypatch.setattr(plotter, "_free_core", lambda: True)
+    _counting_afresh(monkeypatch, tmp_path / "afresh")
+    other = load_scenario(EXAMPLE, ["simulation.stop_time=3", "planner.expansion_distance=0.5"])
+    process = PlotProcess.start(other)
+    with open_log(cosim_run) as log:
+        assert process.draw_source(log, tmp_path / "x.png") is None
+    assert (tmp_path / "afresh").exists()
+    assert (tmp_path / "x.png").read_bytes() == plot.plot_run(cosim_run, tmp_path / "y.png").read_bytes()
+
+
+def _children_of(parent: int) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        try:
+            if entry.name.isdigit():
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+                if int(fields[1]) == parent and fields[0] != "Z":
+                    found.append(int(entry.name))
+        except OSError:
+            pass
+    return found
+
+
+def _gone(pid: int) -> bool:
+    """No such process, or only its exit status left (a zombie, about to be reaped by init)."""
+    try:
+        return (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0] == "Z"
+    except OSError:
+        return True
+
+
+@pytest.mark.slow
+def test_a_cancelled_child_ends_its_helper_too(monkeypatch):
+    """A run that fails after the child drafted and forked its helper: both are ended at once (the
+    child's process group), none is left waiting."""
+    from cosim.cli import plotter
+    from cosim.scenario.load import load_scenario
+
+    monkeypatch.setattr(plotter, "_free_core", lambda: True)
+    process = PlotProcess.start(load_scenario(EXAMPLE, ["simulation.stop_time=3"]))
+    helpers: list[int] = []
+    for _ in range(600):  # the child imports matplotlib and drafts first (a few 0.1 s)
+        helpers = _children_of(process.pid)
+        if helpers:
+            break
+        time.sleep(0.05)
+    assert helpers, "the child made no helper"
+    assert os.getpgid(helpers[0]) == os.getpgid(process.pid) == process.pid != os.getpgid(0)
+    process.cancel()
+    assert process.exit_status == -signal.SIGKILL
+    for _ in range(200):  # SIGKILL is delivered when the helper is next scheduled
+        if _gone(helpers[0]):
+            break
+        time.sleep(0.05)
+    assert _gone(helpers[0])

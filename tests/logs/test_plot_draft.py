@@ -1,0 +1,154 @@
+"""The PNG of `cosim run` is drafted while the run goes (`cosim.logs.plot.Draft`, made by the plot
+process of `cosim.cli.plotter` from the scenario): the map frame first, the run over it after. The
+independent truth is `cosim.logs.plot.draw` of the same data, the one picture drawn in one go: the
+draft's picture must be it pixel for pixel, whether the draft fits the run or not, and whether its
+two parts (the map, the panels) are drawn by one process or by two and put together. The guess of
+the frame from the scenario (`cosim.cli.plotter.preview`) must fit real runs of each kind."""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.cli import plotter
+from cosim.cli.plotter import PanelHelper, preview
+from cosim.logs import plot
+from cosim.logs.plot_data import PlotData
+from cosim.navigation.run import run_scenario
+from cosim.scenario.load import load_scenario
+
+REPO = Path(__file__).resolve().parents[2]
+pytestmark = pytest.mark.slow  # three runs, each picture drawn a few times, forks
+SCENARIOS = {
+    # VFH takes over (the mode shading and its label), a replan
+    "one_obstacle": ("warehouse_diff_drive_one_obstacle.toml", ["simulation.stop_time=30"]),
+    # moving obstacles (tracks), stopped before the goal (the end marker)
+    "moving_short": ("warehouse_moving_crossing.toml", ["simulation.stop_time=12"]),
+    # the bicycle's steering panel
+    "bicycle_short": ("warehouse_bicycle_one_obstacle.toml", ["simulation.stop_time=8"]),
+}
+
+
+@pytest.fixture(scope="module", params=sorted(SCENARIOS))
+def run(request, tmp_path_factory):
+    """(scenario, the plot's data of its run, as `cosim run` hands it to the plot process)."""
+    file, overrides = SCENARIOS[request.param]
+    scenario = load_scenario(REPO / "scenarios" / file, overrides)
+    log_path = tmp_path_factory.mktemp(request.param) / f"{request.param}.mcap"
+    result = run_scenario(scenario, log_path, trace=True)
+    return scenario, plot.collect(plot.TraceSource(result.trace))
+
+
+def _pixels(path: Path) -> np.ndarray:
+    from matplotlib.image import imread
+
+    return imread(path)
+
+
+def _drawn(data: PlotData, tmp_path: Path) -> np.ndarray:
+    return _pixels(plot.draw(data, tmp_path / "drawn.png"))
+
+
+def test_the_scenario_gives_the_frame_of_its_run(run):
+    scenario, data = run
+    drafted = plot.Draft(preview(scenario))
+    assert drafted.fits(data)
+    assert drafted.rows == len({series.panel for series in data.series}) == 5
+
+
+def test_a_draft_that_fits_draws_the_picture_of_draw(run, tmp_path):
+    scenario, data = run
+    drafted = plot.Draft(preview(scenario))
+    assert drafted.fits(data)
+    finished = _pixels(drafted.finish(data, tmp_path / "draft.png"))
+    assert np.array_equal(finished, _drawn(data, tmp_path))
+
+
+def test_a_draft_that_does_not_fit_draws_afresh(run, tmp_path):
+    """A run that left the drafted view (here: a view half as wide), or has another number of
+    panels: the picture is still `draw`'s."""
+    scenario, data = run
+    guess = preview(scenario)
+    x0, x1, y0, y1 = guess.limits
+    narrow = plot.Draft(dataclasses.replace(guess, limits=(x0, (x0 + x1) / 2, y0, y1)))
+    fewer = plot.Draft(dataclasses.replace(guess, series=guess.series[:-1]))
+    drawn = _drawn(data, tmp_path)
+    for name, drafted in (("narrow", narrow), ("fewer", fewer)):
+        assert not drafted.fits(data)
+        assert np.array_equal(_pixels(drafted.finish(data, tmp_path / f"{name}.png")), drawn)
+
+
+@pytest.mark.parametrize("split", [0, 1, 4], ids=["map|panels", "map+top|lower", "map+upper|bottom"])
+def test_the_two_parts_drawn_apart_and_put_together_are_the_picture(run, tmp_path, split):
+    """The map and title with the panels above `split` as one part, the panels from `split` down
+    as the other, each drawn by its own copy of the draft (as the plot process and its helper
+    draw them, split at 1): every pixel either part changed is inside its boxes, the boxes do not
+    overlap, and the other part's box pasted into the map's picture gives `draw`'s picture."""
+    scenario, data = run
+    guess = preview(scenario)
+    map_part, panels_part = plot.Draft(guess), plot.Draft(guess)
+    frame = map_part.pixels().copy()
+    above_split, below_split = slice(0, split), slice(split, None)
+    map_part.draw_run(data, True, above_split)
+    panels_part.draw_run(data, False, below_split)
+    top, bottom, left, right = panels_part.panels_box(below_split)
+    inside = np.zeros(frame.shape[:2], dtype=bool)
+    inside[top:bottom, left:right] = True
+    assert not ((panels_part.pixels() != frame).any(axis=2) & ~inside).any()
+    inside[:] = False
+    boxes = map_part.map_boxes() + ([map_part.panels_box(above_split)] if split else [])
+    for above, below, west, east in boxes:
+        inside[above:below, west:east] = True
+        assert not (top < below and above < bottom and left < east and west < right)
+    assert not ((map_part.pixels() != frame).any(axis=2) & ~inside).any()
+    map_part.pixels()[top:bottom, left:right] = panels_part.pixels()[top:bottom, left:right]
+    assert np.array_equal(_pixels(map_part.write(tmp_path / "pasted.png")), _drawn(data, tmp_path))
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the helper is forked on Linux")
+def test_the_panel_helper_draws_the_panels_in_a_fork(run, tmp_path):
+    import os
+    import pickle
+
+    scenario, data = run
+    drafted = plot.Draft(preview(scenario))
+    helper = PanelHelper.start(drafted, ())
+    pid = helper.pid
+    helper.draw(pickle.dumps(data))
+    drafted.draw_run(data, panels=plotter.TOP)
+    assert helper.paste(drafted)
+    assert np.array_equal(_pixels(drafted.write(tmp_path / "helped.png")), _drawn(data, tmp_path))
+    with pytest.raises(ChildProcessError):
+        os.waitpid(pid, os.WNOHANG)  # reaped
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the helper is forked on Linux")
+def test_a_helper_not_wanted_ends(run):
+    import os
+
+    scenario, _ = run
+    helper = PanelHelper.start(plot.Draft(preview(scenario)), ())
+    pid = helper.pid
+    helper.cancel()
+    with pytest.raises(ChildProcessError):
+        os.waitpid(pid, os.WNOHANG)  # it saw its pipe close, ended and was reaped
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the helper is forked on Linux")
+def test_a_helper_that_died_gives_no_pixels(run):
+    """The plot process then draws the picture afresh (`cosim.cli.plotter`)."""
+    import os
+    import pickle
+    import signal
+
+    scenario, data = run
+    drafted = plot.Draft(preview(scenario))
+    helper = PanelHelper.start(drafted, ())
+    os.kill(helper.pid, signal.SIGKILL)
+    helper.draw(pickle.dumps(data))  # into a closed pipe: no error
+    drafted.draw_run(data, panels=plotter.TOP)
+    assert not helper.paste(drafted)
