@@ -219,6 +219,7 @@ class _TracedBlock(MessageBlock):
     trace: RunTrace | None = None
 
     def pack(self) -> None:
+        self.settle()
         if self.count and self.trace is not None:
             self.trace.take_block(self)
         super().pack()
@@ -394,6 +395,7 @@ class Recorder:
 
     def _schema(self, typename: str, definition: str | None = None) -> int:
         if typename not in self._schemas:
+            self._block.settle()  # collected steps go before the definition
             text = definition if definition is not None else rosmsg.message_definition(typename)
             self._schemas[typename] = self._writer.register_schema(typename, "ros2msg", text.encode())
             self._block.registered()
@@ -402,6 +404,7 @@ class Recorder:
     def _channel(self, topic: str, metadata: dict[str, str] | None = None) -> int:
         channel = self._channels.get(topic)
         if channel is None:
+            self._block.settle()
             schema = self._schema(TOPIC_TYPES[topic])
             name = self.topics.get(topic, topic)
             channel = self._writer.register_channel(name, "cdr", schema, metadata or {})
@@ -413,6 +416,9 @@ class Recorder:
     def _write(self, channel: int, t_ns: int, data: bytes) -> None:
         if self._closed:
             raise CosimError(f"{self.path}: the log is already closed")
+        collector = self._block.collector
+        if collector is not None and collector.written(channel, t_ns, data):
+            return
         self._block.pack()
         sequence = self._sequences[channel]
         self._sequences[channel] = sequence + 1
@@ -457,6 +463,7 @@ class Recorder:
         topic = self._component_topic("signals", component)
         if topic in self._channels:
             raise CosimError(f"{self.path}: signal channel {topic} registered twice")
+        self._block.settle()
         names = list(names)
         fields = rosmsg.field_names(names)
         typename = rosmsg.signals_type_name(component)
@@ -491,6 +498,7 @@ class Recorder:
         topic = self._component_topic("text_signals", component)
         if topic in self._channels:
             raise CosimError(f"{self.path}: text channel {topic} registered twice")
+        self._block.settle()
         fields = rosmsg.field_names(list(names))
         schema = self._schema(
             rosmsg.text_type_name(component), rosmsg.text_definition(fields, list(fmi_types))
@@ -556,6 +564,23 @@ class Recorder:
     def channel(self, topic: str) -> int:
         """The handle of `topic` (a name of `TOPIC_TYPES`; registered on first use), for `hold_steps`."""
         return self._channel(topic)
+
+    def collect(self, collector) -> None:
+        """Steps are collected outside the recorder (`cosim.record.fleet_steps.FleetSteps`):
+        `collector.flush()` hands them over (`hold_steps`) before anything else is held, packed or
+        registered, and `collector.written(channel, t_ns, payload)` may keep a message written
+        meanwhile (True) to hold it after them."""
+        self._block.collector = collector
+
+    def fixed_channel(self, topic: str, layout) -> int:
+        """The handle of `topic` (`channel`), whose messages `hold_steps` then takes as rows of
+        float64 fields, as a signal channel's (`cosim.record.batch.FixedLayout`: every message of
+        the topic has its layout)."""
+        channel = self._channel(topic)
+        if channel not in self._block.signals:
+            self._block.add_fixed_channel(channel, layout)
+            self._signal_sizes[channel] = len(layout.columns)
+        return channel
 
     def hold_steps(
         self,
