@@ -53,6 +53,7 @@ class _Entry(NamedTuple):
     index: int  # its component in the master's order (`histories`)
     columns: np.ndarray | slice  # its record in the component's row (a slice: adjacent columns)
     entry: SignalEntry
+    kept: np.ndarray | slice | None = None  # its record in the flush's kept columns (`FleetSteps._kept`)
 
 
 class _Port(NamedTuple):
@@ -63,6 +64,7 @@ class _Port(NamedTuple):
     column: int
     period: int
     reading: object  # `cosim.record.steps.Reading`
+    kept: int = 0  # its column in the flush's kept columns (`FleetSteps._kept`)
 
 
 class _Robot:
@@ -121,6 +123,7 @@ class FleetSteps:
                     ports.append(_Port(index[id(component)], column, system.period_steps(component), reading))
                 command = (recording.command.period, ports)
             self.robots.append(_Robot(name, view, recording, entries, command))
+        self.kept = self._kept(master.order)
         self.scan_slot = slot  # robot r's scan: scan_slot + 2 r, its command: + 1
         self.obstacle_slot = slot + 2 * len(self.robots)
         self.pose_slot = self.obstacle_slot + 1  # every robot's /odom and /pose, then /tf
@@ -143,6 +146,55 @@ class FleetSteps:
         self.windows = self.WINDOWS if recorder.batching else 1
         self.flush_at = 0
         recorder.collect(self)
+
+    def _kept(self, order: list) -> dict[int, tuple[list[slice], int]]:
+        """The columns of a component's rows the flush reads (its entry's, its commands'), kept in
+        a compact matrix when they are not all of them (array inputs such as a VFH's ranges are not
+        recorded): component index -> (runs of kept columns, their count); the entries' and ports'
+        `kept` columns address that matrix."""
+        needed: dict[int, set[int]] = {}
+        for robot in self.robots:
+            for entry in robot.entries:
+                columns = entry.columns
+                taken = range(columns.start, columns.stop) if isinstance(columns, slice) else columns.tolist()
+                needed.setdefault(entry.index, set()).update(taken)
+            for port in robot.command[1] if robot.command is not None else ():
+                needed.setdefault(port.index, set()).add(port.column)
+        kept = {}
+        place: dict[int, dict[int, int]] = {}
+        for index, columns in needed.items():
+            columns = sorted(columns)
+            component = order[index]
+            if columns == list(range(len(component.inputs) + len(component.outputs))):
+                place[index] = {column: column for column in columns}
+                continue
+            runs: list[slice] = []
+            for column in columns:
+                if runs and runs[-1].stop == column:
+                    runs[-1] = slice(runs[-1].start, column + 1)
+                else:
+                    runs.append(slice(column, column + 1))
+            kept[index] = (runs, len(columns))
+            place[index] = {column: at for at, column in enumerate(columns)}
+        for robot in self.robots:
+            entries = []
+            for entry in robot.entries:
+                columns = entry.columns
+                taken = range(columns.start, columns.stop) if isinstance(columns, slice) else columns.tolist()
+                at = [place[entry.index][column] for column in taken]
+                if at == list(range(at[0], at[0] + len(at))) if at else True:
+                    compact = slice(at[0], at[0] + len(at)) if at else slice(0, 0)
+                else:
+                    compact = np.array(at, dtype=np.intp)
+                entries.append(entry._replace(kept=compact))
+            robot.entries = entries
+            if robot.command is not None:
+                period, ports = robot.command
+                robot.command = (
+                    period,
+                    [port._replace(kept=place[port.index][port.column]) for port in ports],
+                )
+        return kept
 
     @property
     def views(self) -> dict[str, object]:
@@ -293,7 +345,7 @@ class FleetSteps:
         for robot in self.robots:
             if robot.halted:
                 continue
-            for slot, index, _, entry in robot.entries:
+            for slot, index, _, entry, _ in robot.entries:
                 if kinds[index] and first % entry.period == 0:  # stepped by Python: its live buffers
                     self.live.setdefault(slot, []).append((first, entry.record()))
         self.others += [(2 * key, t_ns, channel, payload) for key, t_ns, channel, payload in others]
@@ -330,7 +382,21 @@ class FleetSteps:
             found = rows_of.get(index)
             if found is None:
                 parts = [part[index] for part in collected]
-                found = rows_of[index] = parts[0] if len(parts) == 1 else np.concatenate(parts)
+                kept = self.kept.get(index)
+                if kept is None:  # every column
+                    found = parts[0] if len(parts) == 1 else np.concatenate(parts)
+                else:  # the columns read, one run at a time
+                    runs, width = kept
+                    found = np.empty((sum(len(part) for part in parts), width))
+                    at = 0
+                    for part in parts:
+                        end = at + len(part)
+                        column = 0
+                        for run in runs:
+                            found[at:end, column : column + run.stop - run.start] = part[:, run]
+                            column += run.stop - run.start
+                        at = end
+                rows_of[index] = found
             return found
 
         signals = []
@@ -338,7 +404,7 @@ class FleetSteps:
         for number, robot in enumerate(self.robots):
             if robot.halted:
                 continue
-            for slot, index, columns, entry in robot.entries:
+            for slot, index, _, entry, columns in robot.entries:
                 if kinds[index]:  # stepped by Python: in a block's first step at most
                     records = live.get(slot)
                     if records:
@@ -363,7 +429,7 @@ class FleetSteps:
                 values = np.empty((len(steps), 2))
                 for column, (port, last) in enumerate(zip(ports, robot.last_command, strict=True)):
                     values[:, column] = _latest(
-                        rows(port.index)[:, port.column], first, port.period, steps, last
+                        rows(port.index)[:, port.kept], first, port.period, steps, last
                     )
                 robot.last_command = values[-1].tolist()
                 signals.append((robot.cmd_channel, steps * per_step + slot, start_ns + steps * h_ns, values))
