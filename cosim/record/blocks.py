@@ -27,7 +27,6 @@ from typing import NamedTuple
 import numpy as np
 
 from cosim.core.timebase import NS_PER_S, due_from
-from cosim.record.rosmsg import twist_cdr
 from cosim.record.steps import SignalEntry, StepRecording
 
 POSE_MESSAGES = 3  # a pose is written on /odom, /tf and /pose, in that order
@@ -386,16 +385,9 @@ class BlockRecording:
             steps = np.arange(due_from(first, period), end, period, dtype=np.int64)
             if len(steps):
                 v_column, omega_column = self.command_columns
-                v = self._latest(v_column, steps).tolist()
-                omega = self._latest(omega_column, steps).tolist()
-                for k, t_ns, a, b in zip(
-                    (steps * per_step + order.cmd_vel).tolist(),
-                    (start_ns + steps * h_ns).tolist(),
-                    v,
-                    omega,
-                    strict=True,
-                ):
-                    others.append(OtherMessage(k, t_ns, "/cmd_vel", twist_cdr(a, b)))
+                values = np.column_stack((self._latest(v_column, steps), self._latest(omega_column, steps)))
+                keys = steps * per_step + order.cmd_vel
+                signals.append((self.recorder.cmd_vel_channel(), keys, start_ns + steps * h_ns, values))
         if self.mode_column is not None:
             mode = recording.mode
             steps = np.arange(due_from(first, mode.period), end, mode.period, dtype=np.int64)

@@ -259,13 +259,14 @@ class FleetSteps:
     def _odometry(rows) -> np.ndarray:
         """Per robot x, y, qz, qw, v, omega of its /odom (`rows`: x, y, theta, v, omega per robot);
         the quaternion as `rosmsg.quaternion` computes it."""
-        values = []
-        for x, y, theta, v, omega in rows:
-            theta = float(theta)
-            values.append(
-                (float(x), float(y), math.sin(theta / 2.0), math.cos(theta / 2.0), float(v), float(omega))
-            )
-        return np.array(values, dtype=np.float64).reshape(-1, 6)
+        given = np.array(rows, dtype=np.float64).reshape(-1, 5)
+        halves = (given[:, 2] / 2.0).tolist()
+        values = np.empty((len(given), 6))
+        values[:, :2] = given[:, :2]
+        values[:, 2] = [math.sin(half) for half in halves]
+        values[:, 3] = [math.cos(half) for half in halves]
+        values[:, 4:] = given[:, 3:]
+        return values
 
     def _pose_messages(self, taken: list, per_step: int, slot: int) -> tuple[list, tuple | None]:
         """The pose messages of `taken` ((step k, t_ns, `_odometry` rows) per pose time): the rows of
@@ -317,7 +318,7 @@ class FleetSteps:
                 steps = np.arange(due_from(first, period), end, period, dtype=np.int64)
                 if len(steps):
                     if robot.cmd_channel is None:
-                        robot.cmd_channel = view.fixed_channel("/cmd_vel", _TWIST)
+                        robot.cmd_channel = view.cmd_vel_channel()
                     if any(histories[port.index] is None for port in ports):  # read now, from live buffers
                         values = [self._held(histories, port, first, end, steps, last)
                                   for port, last in zip(ports, robot.last_command, strict=True)]  # fmt: skip
@@ -489,21 +490,6 @@ def _layout(build, count: int) -> FixedLayout:
     names = tuple(f"f{column}" for column in range(count))
     fields |= {name: ("<f8", at) for name, at in zip(names, template.fields, strict=True)}
     return FixedLayout(bytes(template.data), fields, names)
-
-
-def _twist_layout() -> FixedLayout:
-    """/cmd_vel (geometry_msgs/Twist, no stamp): v and omega (`rosmsg.twist_cdr`)."""
-    sentinels = (1.0e250 * 1.5, 1.0e250 * 2.5)
-    data = rosmsg.twist_cdr(*sentinels)
-    found = [rosmsg.pattern_offsets(data, _FLOAT64.pack(value)) for value in sentinels]
-    if any(len(at) != 1 for at in found):
-        raise CosimError("unexpected CDR layout of a twist message")
-    return FixedLayout(
-        rosmsg.twist_cdr(0.0, 0.0), {"v": ("<f8", found[0][0]), "omega": ("<f8", found[1][0])}, ("v", "omega")
-    )
-
-
-_TWIST = _twist_layout()
 
 
 class _Filled:

@@ -52,7 +52,7 @@ import numpy as np
 
 from cosim.errors import CosimError
 from cosim.record import rosmsg
-from cosim.record.batch import RAW_STREAM, MessageBlock
+from cosim.record.batch import RAW_STREAM, FixedLayout, MessageBlock
 from cosim.record.inputs import METADATA_NAME as UNCONNECTED_INPUTS
 from cosim.record.inputs import unconnected_metadata
 from cosim.record.logfile import navcosim_version
@@ -572,7 +572,7 @@ class Recorder:
         meanwhile (True) to hold it after them."""
         self._block.collector = collector
 
-    def fixed_channel(self, topic: str, layout) -> int:
+    def fixed_channel(self, topic: str, layout: FixedLayout) -> int:
         """The handle of `topic` (`channel`), whose messages `hold_steps` then takes as rows of
         float64 fields, as a signal channel's (`cosim.record.batch.FixedLayout`: every message of
         the topic has its layout)."""
@@ -663,7 +663,15 @@ class Recorder:
 
     def write_cmd_vel(self, t_ns: int, v: float, omega: float) -> None:
         """The commanded body velocities [m/s, rad/s] on /cmd_vel (Twist has no stamp: log time only)."""
-        self._hold(self._channel("/cmd_vel"), t_ns, rosmsg.twist_cdr(float(v), float(omega)))
+        if self._closed:
+            raise CosimError(f"{self.path}: the log is already closed")
+        values = np.array((float(v), float(omega)))
+        self._held(self._block.add_signals(self.cmd_vel_channel(), int(t_ns), values))
+
+    def cmd_vel_channel(self) -> int:
+        """The handle of /cmd_vel, whose messages are rows of v, omega for `hold_steps`' signals
+        (every /cmd_vel message goes that way: `write_cmd_vel` too)."""
+        return self.fixed_channel("/cmd_vel", _twist_layout())
 
     def write_payload(self, topic: str, t_ns: int, payload: bytes) -> None:
         """A message of `topic` (of the topic table) already in CDR: a sensor's (`StepRecording`)."""
@@ -954,6 +962,23 @@ class _PathLayout:
             block[:, at : at + 56] = rows.view(np.uint8)
             parts.append(block.tobytes())
         return b"".join(parts)
+
+
+_TWIST_LAYOUT: FixedLayout | None = None
+
+
+def _twist_layout() -> FixedLayout:
+    """/cmd_vel (geometry_msgs/Twist, no stamp) as rows of v, omega (`rosmsg.twist_cdr`)."""
+    global _TWIST_LAYOUT
+    if _TWIST_LAYOUT is None:
+        sentinels = (1.0e250 * 1.5, 1.0e250 * 2.5)
+        data = rosmsg.twist_cdr(*sentinels)
+        found = [rosmsg.pattern_offsets(data, struct.pack("<d", value)) for value in sentinels]
+        if any(len(at) != 1 for at in found):
+            raise CosimError("unexpected CDR layout of a twist message")
+        fields = {"v": ("<f8", found[0][0]), "omega": ("<f8", found[1][0])}
+        _TWIST_LAYOUT = FixedLayout(rosmsg.twist_cdr(0.0, 0.0), fields, ("v", "omega"))
+    return _TWIST_LAYOUT
 
 
 _SENTINEL_NS = 1_234_567_891_987_654_321  # a stamp no run writes, to find in a template
