@@ -161,6 +161,7 @@ class SignalStream:
         else:
             payload, fields = layout.payload, dict(layout.fields)
             self.parts = [(name, column, 1) for column, name in enumerate(layout.columns)]
+        self.layout = layout
         self.records = _Records(channel, payload, fields)
         self.split = split
         self.period_ns = period_ns
@@ -362,6 +363,27 @@ class MessageBlock:
         self.signals[channel] = SignalStream(channel, len(layout.columns), self.capacity, layout=layout)
         self.stream_of[channel] = len(self.streams)
         self.streams.append(self.signals[channel])
+
+    def fixed_row(self, channel: int, t_ns: int, payload: bytes) -> np.ndarray | None:
+        """The row of a message of a fixed-layout channel (`add_fixed_channel`) given as its CDR
+        payload, or None when the channel is not one; a payload of another layout is refused (the
+        channel's messages are numbered as rows)."""
+        stream = self.signals.get(channel)
+        if stream is None or stream.layout is None:
+            return None
+        records = stream.records
+        row = np.zeros(len(stream.layout.columns))
+        record = None
+        if len(payload) + MESSAGE_HEAD_SIZE == records.size:
+            for name, column, count in stream.parts:
+                at = records.offset(name) - MESSAGE_HEAD_SIZE
+                row[column : column + count] = np.frombuffer(payload, "<f8", count, at)
+            record = records.build(np.array([t_ns], dtype=np.uint64), 0)
+            for name, column, _ in stream.parts:
+                record[name] = row[column]
+        if record is None or record.view(np.uint8)[MESSAGE_HEAD_SIZE:].tobytes() != bytes(payload):
+            raise CosimError(f"channel {channel}: a message not of the channel's layout")
+        return row
 
     def settle(self) -> None:
         """Hand the steps a collector holds back (`collector`) to the block, before anything else

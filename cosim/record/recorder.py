@@ -601,6 +601,8 @@ class Recorder:
         if self._closed:
             raise CosimError(f"{self.path}: the log is already closed")
         block = self._block
+        if others is not None and len(others[0]):
+            signals, others = self._fixed_others(signals, others)
         keys, streams, stamps = [], [], []
         signal_rows = {}
         numbers, counts = [], []
@@ -650,6 +652,32 @@ class Recorder:
         if self._sync_due():
             self._sync()
 
+    def _fixed_others(self, signals: list, others: tuple) -> tuple[list, tuple]:
+        """`hold_steps`' others whose channel is held as rows (`fixed_channel`) as its signals (rows
+        in key order, with the rows given for the channel, if any)."""
+        other_keys, times, messages = others
+        channels = [topic if isinstance(topic, int) else self._channels[topic] for topic, _ in messages]
+        fixed = [j for j, channel in enumerate(channels) if channel in self._block.signals]
+        if not fixed:
+            return signals, others
+        other_keys, times = np.asarray(other_keys, dtype=np.int64), np.asarray(times, dtype=np.int64)
+        given = {channel: (keys, stamps, rows) for channel, keys, stamps, rows in signals}
+        for channel in dict.fromkeys(channels[j] for j in fixed):
+            at = [j for j in fixed if channels[j] == channel]
+            rows = np.array(
+                [self._block.fixed_row(channel, int(times[j]), messages[j][1]) for j in at], dtype=np.float64
+            )
+            keys, stamps = other_keys[at], times[at]
+            if channel in given:
+                keys = np.concatenate((given[channel][0], keys))
+                stamps = np.concatenate((given[channel][1], stamps))
+                rows = np.concatenate((given[channel][2], rows))
+            by_key = np.argsort(keys, kind="stable")
+            given[channel] = (keys[by_key], stamps[by_key], rows[by_key])
+        kept = [j for j in range(len(messages)) if channels[j] not in self._block.signals]
+        signals = [(channel, *value) for channel, value in given.items()]
+        return signals, (other_keys[kept], times[kept], [messages[j] for j in kept])
+
     # --- robot topics --------------------------------------------------------------------
 
     def write_pose(self, t_ns: int, x: float, y: float, theta: float, v: float, omega: float) -> None:
@@ -684,6 +712,10 @@ class Recorder:
     def _hold(self, channel: int, t_ns: int, payload: bytes) -> None:
         if self._closed:
             raise CosimError(f"{self.path}: the log is already closed")
+        row = self._block.fixed_row(channel, int(t_ns), payload)
+        if row is not None:  # a channel held as rows (`fixed_channel`)
+            self._held(self._block.add_signals(channel, int(t_ns), row))
+            return
         self._held(self._block.add_raw(channel, int(t_ns), payload))
 
     def write_goal(self, t_ns: int, x: float, y: float, theta: float | None) -> None:
