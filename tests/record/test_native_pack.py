@@ -184,3 +184,27 @@ def test_head_constants_are_the_mcap_message_record():
         kernel.HEAD_LOG_TIME,
         kernel.HEAD_PUBLISH_TIME,
     )
+
+
+def test_a_payload_of_another_layout_on_a_channel_held_as_rows_is_refused(tmp_path):
+    # /cmd_vel is held as rows of v, omega: a Twist with another non-zero field has no such row
+    # (its bytes could not be rebuilt), so it is refused instead of written wrong.
+    from cosim.errors import CosimError
+
+    with Recorder(tmp_path / "twist.mcap", trace=False) as recorder:
+        recorder.write_cmd_vel(0, 0.25, -1.5)
+        channel = recorder.cmd_vel_channel()
+        payload = rosmsg.twist_cdr(0.75, 2.0)
+        row = recorder._block.fixed_row(channel, 10, payload)
+        assert row.tolist() == [0.75, 2.0]
+        other = rosmsg.CDR_HEADER + np.array([0.75, 0.5, 0.0, 0.0, 0.0, 2.0]).tobytes()
+        with pytest.raises(CosimError, match="layout"):
+            recorder.write_payload("/cmd_vel", 10, other)
+        with pytest.raises(CosimError, match="layout"):
+            recorder.write_payload("/cmd_vel", 10, payload + b"\0")
+        recorder.write_payload("/cmd_vel", 20, payload)
+    messages = [
+        (m.log_time, m.sequence, bytes(m.data))
+        for _, _, m in make_reader(open(tmp_path / "twist.mcap", "rb")).iter_messages()
+    ]
+    assert messages == [(0, 0, rosmsg.twist_cdr(0.25, -1.5)), (20, 1, payload)]
