@@ -141,6 +141,7 @@ class FleetSteps:
         self.live: dict[int, list] = {}  # slot -> [(k, record)] of a component stepped by Python
         self.poses: list[tuple] = []  # (k, t_ns, `_odometry` rows)
         self.deferred: set[int] = set()  # robots whose commands are read from the rows at the flush
+        self.planned: tuple | None = None  # (kinds, `_plan`)
         self.handed = time.monotonic()  # [s] wall clock of the last flush
         self.window_ns = recorder.window_ns
         self.windows = self.WINDOWS if recorder.batching else 1
@@ -207,6 +208,7 @@ class FleetSteps:
         poses from the fleet as before."""
         self.flush()  # the steps collected so far still record it
         next(robot for robot in self.robots if robot.name == name).halted = True
+        self.planned = None
 
     def write_constant(self, t_ns: int) -> None:
         """The records of the components whose outputs are fixed for the run."""
@@ -297,35 +299,38 @@ class FleetSteps:
         kinds = tuple(rows is None for rows in histories)
         if self.first is not None and (kinds != self.kinds or end - self.first > self.STEPS):
             self.flush()
-        # What may register a channel first (the collected steps go before it: `Recorder.settle`).
+        robots, live = self._plan(kinds)
+        # What may register a channel first (the collected steps go before it: `Recorder.settle`):
+        # each robot's scan, then its command, robot after robot.
         others = []
-        commands = []  # (robot number, its command steps in the block)
-        for number, robot in enumerate(self.robots):
-            if robot.halted:
-                continue
-            recording, view = robot.recording, robot.view
-            scan = recording.scan
+        commands = []  # robots whose commands are read from the rows at the flush
+        due: dict[int, np.ndarray] = {}  # period -> its steps in the block
+        for number, robot, scan, python in robots:
             if scan is not None and first % scan.period == 0:  # a lidar steps in a block's first step
                 t_ns = start_ns + first * h_ns
+                view = robot.view
                 payload = view.scan_payload(
                     t_ns, scan.angles, scan.current(), scan.range_min, scan.range_max, scan.scan_time
                 )
                 others.append(
                     (first * per_step + self.scan_slot + 2 * number, t_ns, view.channel("/scan"), payload)
                 )
-            if robot.command is not None:
-                period, ports = robot.command
-                steps = np.arange(due_from(first, period), end, period, dtype=np.int64)
-                if len(steps):
-                    if robot.cmd_channel is None:
-                        robot.cmd_channel = view.cmd_vel_channel()
-                    if any(histories[port.index] is None for port in ports):  # read now, from live buffers
-                        values = [self._held(histories, port, first, end, steps, last)
-                                  for port, last in zip(ports, robot.last_command, strict=True)]  # fmt: skip
-                        robot.commands.append((steps, np.array(values).T))
-                        robot.last_command = [float(value[-1]) for value in values]
-                    else:
-                        commands.append(number)
+            if python is None:
+                continue
+            period, ports = robot.command
+            steps = due.get(period)
+            if steps is None:
+                steps = due[period] = np.arange(due_from(first, period), end, period, dtype=np.int64)
+            if len(steps):
+                if robot.cmd_channel is None:
+                    robot.cmd_channel = robot.view.cmd_vel_channel()
+                if python:  # read now, from live buffers
+                    values = [self._held(histories, port, first, end, steps, last)
+                              for port, last in zip(ports, robot.last_command, strict=True)]  # fmt: skip
+                    robot.commands.append((steps, np.array(values).T))
+                    robot.last_command = [float(value[-1]) for value in values]
+                else:
+                    commands.append(number)
         for k, t_ns, payload in self.world.obstacle_payloads(first, end, start_ns, h_ns):
             others.append(
                 (k * per_step + self.obstacle_slot, t_ns, self.recorder.channel("/obstacles"), payload)
@@ -343,12 +348,9 @@ class FleetSteps:
         )
         for number in commands:
             self.deferred.add(number)
-        for robot in self.robots:
-            if robot.halted:
-                continue
-            for slot, index, _, entry, _ in robot.entries:
-                if kinds[index] and first % entry.period == 0:  # stepped by Python: its live buffers
-                    self.live.setdefault(slot, []).append((first, entry.record()))
+        for slot, entry in live:  # stepped by Python: their live buffers
+            if first % entry.period == 0:
+                self.live.setdefault(slot, []).append((first, entry.record()))
         self.others += [(2 * key, t_ns, channel, payload) for key, t_ns, channel, payload in others]
         self.poses += taken
         t_last = start_ns + (end - 1) * h_ns
@@ -356,6 +358,24 @@ class FleetSteps:
             self.flush()
         elif time.monotonic() - self.handed >= self.recorder.flush_interval:
             self.flush()  # a killed run loses no more wall time of steps than the recorder's flushes
+
+    def _plan(self, kinds: tuple[bool, ...]) -> tuple[list, list]:
+        """What a block records of the robots still stepped, for components stepped by Python where
+        `kinds` says (made again when that or a robot's halt changes it): per robot (its number,
+        the robot, its scan ports or None, whether a command port is stepped by Python or None: no
+        command), and (slot, entry) of each entry stepped by Python."""
+        if self.planned is None or self.planned[0] != kinds:
+            robots, live = [], []
+            for number, robot in enumerate(self.robots):
+                if robot.halted:
+                    continue
+                python = None
+                if robot.command is not None:
+                    python = any(kinds[port.index] for port in robot.command[1])
+                robots.append((number, robot, robot.recording.scan, python))
+                live += [(entry.slot, entry.entry) for entry in robot.entries if kinds[entry.index]]
+            self.planned = (kinds, (robots, live))
+        return self.planned[1]
 
     def written(self, channel: int, t_ns: int, payload: bytes) -> bool:
         """A message written to the log while steps are collected (a plan, a goal): held after
