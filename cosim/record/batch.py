@@ -118,6 +118,11 @@ def _stamp_fields(offset: int) -> dict[str, tuple]:
     return {"sec": ("<i4", offset), "nanosec": ("<u4", offset + 4)}
 
 
+def _field_count(fmt) -> int:
+    """float64 values of a field of format `fmt` ("<f8", or ("<f8", (count,)) for an array)."""
+    return fmt[1][0] if isinstance(fmt, tuple) else 1
+
+
 class FixedLayout(NamedTuple):
     """The records of a channel of one fixed CDR layout whose float64 fields each take a column of
     a stream's rows (a fleet robot's /odom, /pose, /cmd_vel: `MessageBlock.add_fixed_channel`):
@@ -128,6 +133,11 @@ class FixedLayout(NamedTuple):
     payload: bytes
     fields: dict[str, tuple]
     columns: tuple[str, ...]
+
+    @property
+    def width(self) -> int:
+        """The rows' columns: one per float64 of the fields of `columns`."""
+        return sum(_field_count(self.fields[name][0]) for name in self.columns)
 
 
 class SignalStream:
@@ -160,7 +170,11 @@ class SignalStream:
             self.parts = [("values", 0, size)] if size else []
         else:
             payload, fields = layout.payload, dict(layout.fields)
-            self.parts = [(name, column, 1) for column, name in enumerate(layout.columns)]
+            self.parts, column = [], 0
+            for name in layout.columns:
+                count = _field_count(fields[name][0])
+                self.parts.append((name, column, count))
+                column += count
         self.layout = layout
         self.records = _Records(channel, payload, fields)
         self.split = split
@@ -360,7 +374,7 @@ class MessageBlock:
 
     def add_fixed_channel(self, channel: int, layout: FixedLayout) -> None:
         """A channel of fixed layout held as rows (`FixedLayout`), as a signal channel is."""
-        self.signals[channel] = SignalStream(channel, len(layout.columns), self.capacity, layout=layout)
+        self.signals[channel] = SignalStream(channel, layout.width, self.capacity, layout=layout)
         self.stream_of[channel] = len(self.streams)
         self.streams.append(self.signals[channel])
 
@@ -372,15 +386,16 @@ class MessageBlock:
         if stream is None or stream.layout is None:
             return None
         records = stream.records
-        row = np.zeros(len(stream.layout.columns))
+        row = np.zeros(stream.layout.width)
         record = None
         if len(payload) + MESSAGE_HEAD_SIZE == records.size:
             for name, column, count in stream.parts:
                 at = records.offset(name) - MESSAGE_HEAD_SIZE
                 row[column : column + count] = np.frombuffer(payload, "<f8", count, at)
             record = records.build(np.array([t_ns], dtype=np.uint64), 0)
-            for name, column, _ in stream.parts:
-                record[name] = row[column]
+            for name, column, count in stream.parts:
+                shaped = record.dtype[name].shape != ()
+                record[name] = row[column : column + count] if shaped else row[column]
         if record is None or record.view(np.uint8)[MESSAGE_HEAD_SIZE:].tobytes() != bytes(payload):
             raise CosimError(f"channel {channel}: a message not of the channel's layout")
         return row
@@ -775,7 +790,7 @@ class MessageBlock:
                 records = stream.records.build(times, self._sequence(stream.records.channel, len(times)))
                 for name, column, count in stream.parts:
                     values = stream.rows[: len(times), column : column + count]
-                    records[name] = values if name == "values" else values[:, 0]
+                    records[name] = values[:, 0] if records.dtype[name].shape == () else values
                 parts[number] = (records, times, stream.records.channel)
                 stream.carry()
         if self.pose is not None and self.pose.count:

@@ -218,6 +218,7 @@ class BlockRecording:
         self.live = {block.slot: [] for block in self.entries if block.columns is None}
         self.live_entries = [block for block in self.entries if block.columns is None]
         self.others: list[OtherMessage] = []
+        self.scans: list[tuple[np.ndarray, np.ndarray]] = []  # (steps, ranges) of the sweeps collected
 
     @property
     def settled(self) -> bool:
@@ -293,23 +294,19 @@ class BlockRecording:
         for block in self.live_entries:
             if first % block.entry.period == 0:
                 self.live[block.slot].append((first, block.entry.record()))
-        recording, recorder = self.recording, self.recorder
+        recording = self.recording
         scan = recording.scan
-        if scan is not None and self.scan_rows is not None:
+        if scan is not None and self.scan_rows is not None:  # the sweeps from the lidar's rows
             lidar, columns = self.scan_rows
-            period = scan.period
-            for k, row in zip(range(due_from(first, period), end, period), histories[lidar], strict=True):
-                t_ns = start_ns + k * h_ns
-                payload = recorder.scan_payload(
-                    t_ns, scan.angles, row[columns], scan.range_min, scan.range_max, scan.scan_time
-                )
-                self.others.append(OtherMessage(k * per_step + self.order.scan, t_ns, "/scan", payload))
-        elif scan is not None and first % scan.period == 0:
-            t_first = start_ns + first * h_ns
-            payload = recorder.scan_payload(
-                t_first, scan.angles, scan.current(), scan.range_min, scan.range_max, scan.scan_time
-            )
-            self.others.append(OtherMessage(first * per_step + self.order.scan, t_first, "/scan", payload))
+            rows = histories[lidar]
+            if len(rows):
+                steps = np.arange(due_from(first, scan.period), end, scan.period, dtype=np.int64)
+                if len(steps) != len(rows):
+                    raise RuntimeError(f"the lidar has {len(rows)} rows for {len(steps)} steps")
+                ranges = rows[:, columns]  # a copy (the kernel writes its rows again), not a view
+                self.scans.append((steps, ranges.copy() if isinstance(columns, slice) else ranges))
+        elif scan is not None and first % scan.period == 0:  # from its live buffers
+            self.scans.append((np.array([first], dtype=np.int64), scan.current()[None, :].copy()))
         for k, t_ns, payload in recording.obstacle_payloads(first, end, start_ns, h_ns):
             self.others.append(OtherMessage(k * per_step + self.order.obstacles, t_ns, "/obstacles", payload))
         # The positions after each step, as the monitor checks them.
@@ -380,6 +377,17 @@ class BlockRecording:
                 rows = rows[:, columns] if not isinstance(columns, slice) else rows
             signals.append((entry.channel, steps * per_step + slot, start_ns + steps * h_ns, rows))
         others = self.others
+        if self.scans:
+            scan = recording.scan
+            steps = np.concatenate([steps for steps, _ in self.scans])
+            ranges = np.concatenate([ranges for _, ranges in self.scans])
+            self.scans = []
+            limits = (scan.range_min, scan.range_max, scan.scan_time)
+            times = start_ns + steps * h_ns
+            rows = self.recorder.scan_rows(times, scan.angles, ranges, *limits)
+            signals.append(
+                (self.recorder.scan_channel(scan.angles, *limits), steps * per_step + order.scan, times, rows)
+            )
         if recording.command is not None:
             period = recording.command.period
             steps = np.arange(due_from(first, period), end, period, dtype=np.int64)

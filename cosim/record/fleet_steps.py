@@ -80,6 +80,7 @@ class _Robot:
         self.halted = False  # no longer stepped (`FleetSteps.halt`)
         self.cmd_channel: int | None = None  # its /cmd_vel (`Recorder.fixed_channel`), on first use
         self.commands: list[tuple[np.ndarray, np.ndarray]] = []  # read from live buffers: (steps, v omega)
+        self.sweeps: list[tuple[int, np.ndarray]] = []  # (step, ranges) of its lidar's collected sweeps
         self.odom_frame = f"{name}/{rosmsg.ODOM_FRAME}"
         self.base_frame = f"{name}/{rosmsg.ROBOT_FRAME}"
 
@@ -303,18 +304,13 @@ class FleetSteps:
         # What may register a channel first (the collected steps go before it: `Recorder.settle`):
         # each robot's scan, then its command, robot after robot.
         others = []
+        sweeps = []  # (robot, its ranges) of the lidars stepped in the block
         commands = []  # robots whose commands are read from the rows at the flush
         due: dict[int, np.ndarray] = {}  # period -> its steps in the block
         for number, robot, scan, python in robots:
             if scan is not None and first % scan.period == 0:  # a lidar steps in a block's first step
-                t_ns = start_ns + first * h_ns
-                view = robot.view
-                payload = view.scan_payload(
-                    t_ns, scan.angles, scan.current(), scan.range_min, scan.range_max, scan.scan_time
-                )
-                others.append(
-                    (first * per_step + self.scan_slot + 2 * number, t_ns, view.channel("/scan"), payload)
-                )
+                robot.view.scan_channel(scan.angles, scan.range_min, scan.range_max, scan.scan_time)
+                sweeps.append((robot, scan.current().copy()))
             if python is None:
                 continue
             period, ports = robot.command
@@ -348,6 +344,8 @@ class FleetSteps:
         )
         for number in commands:
             self.deferred.add(number)
+        for robot, ranges in sweeps:
+            robot.sweeps.append((first, ranges))
         for slot, entry in live:  # stepped by Python: their live buffers
             if first % entry.period == 0:
                 self.live.setdefault(slot, []).append((first, entry.record()))
@@ -443,6 +441,17 @@ class FleetSteps:
                 count, keys, times = shared
                 if count:
                     signals.append((entry.channel, keys + 2 * slot, times, rows(index)[:count, columns]))
+            if robot.sweeps:
+                scan, view = robot.recording.scan, robot.view
+                limits = (scan.range_min, scan.range_max, scan.scan_time)
+                steps = np.array([k for k, _ in robot.sweeps], dtype=np.int64)
+                times = start_ns + steps * h_ns
+                sweep_rows = view.scan_rows(
+                    times, scan.angles, np.array([r for _, r in robot.sweeps]), *limits
+                )
+                robot.sweeps = []
+                keys = steps * per_step + 2 * (self.scan_slot + 2 * number)
+                signals.append((view.scan_channel(scan.angles, *limits), keys, times, sweep_rows))
             slot = 2 * (self.scan_slot + 2 * number + 1)
             if number in deferred:
                 period, ports = robot.command

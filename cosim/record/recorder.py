@@ -579,7 +579,7 @@ class Recorder:
         channel = self._channel(topic)
         if channel not in self._block.signals:
             self._block.add_fixed_channel(channel, layout)
-            self._signal_sizes[channel] = len(layout.columns)
+            self._signal_sizes[channel] = layout.width
         return channel
 
     def hold_steps(
@@ -805,26 +805,7 @@ class Recorder:
         spaced angles, so beams go into bins of a uniform grid (see `scan_layout`); bins without a
         beam hold NaN (no measurement). Returns the message's CDR bytes (the first sweep registers
         /scan), for `write_scan` or `hold_steps`."""
-        last = self._last_scan
-        if (
-            last is not None
-            and angles is last[0]
-            and (range_min, range_max, scan_time) == (last[1], last[2], last[4])
-        ):
-            layout = last[3]  # the run loop passes the same angle array every sweep
-        else:
-            angle_array = np.asarray(angles, dtype=float)
-            key = (angle_array.tobytes(), float(range_min), float(range_max), float(scan_time))
-            layout = self._scan_layouts.get(key)
-            if layout is None:
-                layout = self._scan_template(
-                    angle_array, float(range_min), float(range_max), float(scan_time)
-                )
-                self._scan_layouts[key] = layout
-            # Keyed by identity only for a read-only array, which cannot change between sweeps.
-            frozen = isinstance(angles, np.ndarray) and not angles.flags.writeable
-            self._last_scan = (angles, range_min, range_max, layout, scan_time) if frozen else None
-        bins, binned, head, tail = layout
+        bins, binned, head, tail = self._scan_layout(angles, range_min, range_max, scan_time)
         if bins is None:  # one beam per bin, in order
             binned[:] = ranges
             np.copyto(binned, np.inf, where=np.isnan(binned))
@@ -840,6 +821,65 @@ class Recorder:
         if self.trace is not None:
             self.trace.add_scan(t_ns, binned, range_min, range_max)
         return payload
+
+    def scan_channel(
+        self, angles: np.ndarray, range_min: float, range_max: float, scan_time: float = 0.0
+    ) -> int:
+        """The handle of /scan for sweeps of this layout (registered by the first, as `scan_payload`
+        registers it), whose messages `hold_steps` takes as rows (`scan_rows`)."""
+        self._scan_layout(angles, range_min, range_max, scan_time)
+        return self._channels["/scan"]
+
+    def scan_rows(
+        self,
+        t_ns: np.ndarray,
+        angles: np.ndarray,
+        ranges: np.ndarray,
+        range_min: float,
+        range_max: float,
+        scan_time: float = 0.0,
+    ) -> np.ndarray:
+        """The rows on `scan_channel` of sweeps at `t_ns` [ns] (`ranges`: one sweep a row), for
+        `hold_steps`' signals: the bytes of `scan_payload`'s messages (each row: the ranges as
+        float32 on the LaserScan's bins, padded with the empty intensities' zero length to whole
+        float64s)."""
+        bins, binned, _, _ = self._scan_layout(angles, range_min, range_max, scan_time)
+        count = len(binned)
+        out = np.empty((len(ranges), count + count % 2), dtype=np.float32)
+        out[:, :count] = binned  # bins without a beam: NaN
+        out[:, count:] = 0.0  # the first 4 bytes of the tail (a sequence of length 0)
+        if bins is None:  # one beam per bin, in order
+            beams = out[:, :count]
+            beams[...] = ranges
+            np.copyto(beams, np.inf, where=np.isnan(beams))
+        else:
+            beams = np.asarray(ranges, dtype=np.float32)
+            out[:, bins] = np.where(np.isnan(beams), np.float32(np.inf), beams)
+        if self.trace is not None:
+            for t, row in zip(np.asarray(t_ns).tolist(), out, strict=True):
+                self.trace.add_scan(t, row[:count], range_min, range_max)
+        return out.view(np.float64)
+
+    def _scan_layout(self, angles, range_min: float, range_max: float, scan_time: float) -> tuple:
+        """(bins, binned, head, tail) of the LaserScan layout of these sweeps (`_scan_template`),
+        made and the /scan channel registered on first use."""
+        last = self._last_scan
+        if (
+            last is not None
+            and angles is last[0]
+            and (range_min, range_max, scan_time) == (last[1], last[2], last[4])
+        ):
+            return last[3]  # the run loop passes the same angle array every sweep
+        angle_array = np.asarray(angles, dtype=float)
+        key = (angle_array.tobytes(), float(range_min), float(range_max), float(scan_time))
+        layout = self._scan_layouts.get(key)
+        if layout is None:
+            layout = self._scan_template(angle_array, float(range_min), float(range_max), float(scan_time))
+            self._scan_layouts[key] = layout
+        # Keyed by identity only for a read-only array, which cannot change between sweeps.
+        frozen = isinstance(angles, np.ndarray) and not angles.flags.writeable
+        self._last_scan = (angles, range_min, range_max, layout, scan_time) if frozen else None
+        return layout
 
     def _scan_template(
         self, angles: np.ndarray, range_min: float, range_max: float, scan_time: float
@@ -860,6 +900,14 @@ class Recorder:
             raise CosimError(f"{self.path}: unexpected LaserScan CDR layout")
         if np.array_equal(bins, np.arange(len(binned))):
             bins = None  # each beam its own bin, in order: filled by a slice
+        # Every /scan message is a row of a fixed layout (`scan_rows`; a payload becomes its row):
+        # the stamp, then the ranges and the intensities' length (zero) as whole float64s.
+        count = len(binned)
+        fields = {"sec": ("<i4", 4), "nanosec": ("<u4", 8)}
+        fields["ranges"] = (("<f8", ((count + 1) // 2,)), len(head))
+        if head[4:12] != bytes(8) or len(tail) != 4:  # the stamp of t = 0; the intensities' length
+            raise CosimError(f"{self.path}: unexpected LaserScan CDR layout")
+        self.fixed_channel("/scan", FixedLayout(template, fields, ("ranges",)))
         return bins, binned, head, tail
 
     def write_obstacles(self, t_ns: int, obstacles: list) -> None:
