@@ -5,13 +5,13 @@ Every component of a block has rows (the kernel's, and, with `python_rows` table
 first step (its live buffers hold that step's values to the block's end), so what the per-step
 recording (`cosim.record.steps.StepRecording.after_step`) and the outcome checks do step by step
 can be done over the block's rows: the positions are checked in one call of the monitor's
-`check_positions` (the same arithmetic, step by step: in C for a static world), each scan is made
-from the lidar's row, and the columns the recording reads are copied into buffers that collect
-the steps of several blocks. `flush()` turns those steps
-into their messages with NumPy (signal records, /odom /tf /pose at the pose rate, /cmd_vel and the
-mixer's mode at the mixer's rate; scans and moved obstacles were made at their steps) and hands
-them to `Recorder.hold_steps`, which writes the bytes of the per-step path. Steps are flushed
-every `WINDOWS` chunk windows of simulated time or the recorder's `flush_interval` of wall time,
+`check_positions` (the same arithmetic, step by step: in C for a static world), the lidar's
+ranges are kept from its rows, and the columns the recording reads are copied into buffers that
+collect the steps of several blocks. `flush()` turns those steps into their messages with NumPy
+(signal records, /odom /tf /pose at the pose rate, /cmd_vel and the mixer's mode at the mixer's
+rate, every sweep's /scan row at once: `Recorder.scan_rows`; moved obstacles were made at their
+steps) and hands them to `Recorder.hold_steps`, which writes the bytes of the per-step path.
+Steps are flushed every `WINDOWS` chunk windows of simulated time or the recorder's `flush_interval` of wall time,
 whichever comes first (every window with a live view), before anything else is written (a new
 plan, a goal), when the buffers are full, and at the end of the run. A block the rows cannot
 describe (a component stepped by Python due after its first step, a topic's first message) is

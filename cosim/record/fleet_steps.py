@@ -19,10 +19,17 @@ block of steps at a time. `FleetSteps` records each robot as the single-robot ru
 them over (`Master.run_blocks`, `run_recorded`: per component of the master's order its inputs,
 then its outputs, after each of its steps; None for a component stepped by Python, which steps at
 most in the block's first step and holds its buffers to the block's end: the fleet cuts its blocks
-at those components' periods) and hands their messages to `Recorder.hold_steps` in time order
-(the key of a message: its step, then its place in the step: every robot's signal records, every
-robot's scan and command, the obstacles, then the poses of the step's end). Nothing is kept
-between blocks beyond what the recorder holds until it packs.
+at those components' periods) and collects them; `flush()` hands their messages to
+`Recorder.hold_steps` in time order (the key of a message: its step, then its place in the step:
+every robot's signal records, every robot's scan and command, the obstacles, then the poses of the
+step's end). Per-stream work (hundreds of streams at N = 50) is done once per flush, not per
+block: steps are flushed every `WINDOWS` chunk windows of simulated time or the recorder's
+`flush_interval` of wall time, whichever comes first (as `cosim.record.blocks` does for one robot),
+before a robot halts, and before anything else reaches the recorder (`Recorder.collect`: a schema or
+channel registered, metadata, the end), except a message written meanwhile (a plan, a goal), which
+is held after the collected steps and before the next block's. Every robot's /scan, /cmd_vel,
+/odom and /pose are rows of fixed-layout streams (`Recorder.fixed_channel`), packed in C; only /tf
+and /obstacles are CDR payloads. The bytes are those of each block handed over as it comes.
 """
 
 from __future__ import annotations

@@ -6,7 +6,9 @@ Topics: `/odom`, `/tf` (map -> base_link), `/pose`, `/scan`, `/cmd_vel`, `/plan`
 The run loop writes messages in time order.
 
 Speed: signals, poses, commands and scans (the per-step topics) are held in a
-`cosim.record.batch.MessageBlock` and packed into MCAP records a block at a time, in C
+`cosim.record.batch.MessageBlock` (/cmd_vel and /scan, as the signals, as rows of float64 fields of
+a fixed layout: `fixed_channel`; a message given as CDR bytes becomes its row) and packed into MCAP
+records a block at a time, in C
 (`navcosim_pack_records` of the core kernel; a NumPy build of the same records is kept as the tested
 reference) (at most 512 records of a channel); the records and their order are exactly those of writing one
 message at a time. Any other write, `flush()` and `close()` pack the held messages first. The run
