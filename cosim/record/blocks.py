@@ -11,9 +11,10 @@ collect the steps of several blocks. `flush()` turns those steps into their mess
 (signal records, /odom /tf /pose at the pose rate, /cmd_vel and the mixer's mode at the mixer's
 rate, every sweep's /scan row at once: `Recorder.scan_rows`; moved obstacles were made at their
 steps) and hands them to `Recorder.hold_steps`, which writes the bytes of the per-step path.
-Steps are flushed every `WINDOWS` chunk windows of simulated time or the recorder's `flush_interval` of wall time,
-whichever comes first (every window with a live view), before anything else is written (a new
-plan, a goal), when the buffers are full, and at the end of the run. A block the rows cannot
+Steps are flushed every `WINDOWS` chunk windows of simulated time or the recorder's
+`flush_interval` of wall time, whichever comes first (every window with a live view), before
+anything else is written (a new plan, a goal), when the buffers are full, and at the end of the
+run. A block the rows cannot
 describe (a component stepped by Python due after its first step, a topic's first message) is
 flushed and replayed step by step (`cosim.record.replay`).
 """

@@ -376,7 +376,14 @@ class Recorder:
         """Write `outcome` as metadata "outcome", then the summary and footer. Idempotent."""
         if self._closed:
             return
-        self._closed = True
+        try:
+            self._block.settle()  # steps collected outside the recorder (`collect`), while it is open
+        finally:
+            self._closed = True
+            self._finish(outcome)
+
+    def _finish(self, outcome: dict[str, str] | None) -> None:
+        """`close` after the collected steps: the held messages, the outcome, summary and footer."""
         try:
             self._block.pack()
             if outcome is not None:

@@ -208,3 +208,45 @@ def test_a_payload_of_another_layout_on_a_channel_held_as_rows_is_refused(tmp_pa
         for _, _, m in make_reader(open(tmp_path / "twist.mcap", "rb")).iter_messages()
     ]
     assert messages == [(0, 0, rosmsg.twist_cdr(0.25, -1.5)), (20, 1, payload)]
+
+
+def test_steps_collected_outside_the_recorder_reach_the_log_before_anything_else_and_at_close(tmp_path):
+    # A collector (`Recorder.collect`: the fleet's steps) is flushed before a message is written
+    # around it and at close, so the log holds its rows in time order and is complete.
+    path = tmp_path / "collected.mcap"
+    recorder = Recorder(path, trace=False)
+    channel = recorder.signal_channel("c", ["a", "b"])
+
+    class Collector:
+        def __init__(self) -> None:
+            self.pending: list[tuple[int, np.ndarray]] = []
+
+        def flush(self) -> None:
+            taken, self.pending = self.pending, []
+            if taken:
+                times = np.array([t_ns for t_ns, _ in taken], dtype=np.int64)
+                rows = np.array([row for _, row in taken])
+                recorder.hold_steps([(channel, times, times, rows)])
+
+        def written(self, channel: int, t_ns: int, payload: bytes) -> bool:
+            return False
+
+    collector = Collector()
+    recorder.collect(collector)
+    collector.pending += [(k * 10, np.array([k, -k], dtype=float)) for k in range(3)]
+    recorder.write_goal(30, 1.0, 2.0, None)  # registers /goal: the collected rows go first
+    collector.pending += [(k * 10, np.array([k, -k], dtype=float)) for k in range(4, 6)]
+    recorder.close()  # no end_steps: the collected rows still reach the log, which is complete
+    with open(path, "rb") as stream:
+        reader = make_reader(stream)
+        assert reader.get_summary() is not None
+        messages = [
+            (c.topic, m.log_time, bytes(m.data)) for _, c, m in reader.iter_messages(log_time_order=False)
+        ]
+    expected = [
+        ("/signals/c", k * 10, rosmsg.signals_payload(k * 10, np.array([k, -k], float))) for k in range(3)
+    ]
+    assert messages[:3] == expected and messages[3][:2] == ("/goal", 30)
+    assert messages[4:] == [
+        ("/signals/c", k * 10, rosmsg.signals_payload(k * 10, np.array([k, -k], float))) for k in range(4, 6)
+    ]
