@@ -137,7 +137,6 @@ class FleetSteps:
         self.pose_slot = self.obstacle_slot + 1  # every robot's /odom and /pose, then /tf
         self.per_step = self.pose_slot + 2 * len(self.robots) + 1
         self.world = self.robots[0].recording  # the obstacles the fleet shares
-        self._poses: _Poses | None = None  # the pose messages' templates, made on first use
         self._channels: list[int] | None = None  # `_pose_channels`
         self._tf: _Filled | None = None
         # Steps collected, not yet handed to the recorder (`block`, `flush`): [first, end).
@@ -229,24 +228,6 @@ class FleetSteps:
         self.flush()
         signals, tf = self._pose_messages([(0, t_ns, self._odometry(rows))], 0, 2 * len(self.robots))
         self.recorder.hold_steps(signals, None, tf)
-
-    def pose_messages(self, t_ns: int, rows) -> list[tuple[int, bytes]]:
-        """(channel, CDR payload) of every robot's /odom and /pose, then of the one /tf, at t_ns
-        (the bytes `write_poses` writes)."""
-        if self._poses is None:
-            self._poses = _Poses(self.robots)
-        channels = self._pose_channels()
-        values = self._odometry(rows)
-        payloads = self._poses.fill(
-            t_ns, [*values.reshape(-1).tolist(), *values[:, :4].reshape(-1).tolist() * 2]
-        )
-        count = len(self.robots)
-        messages = []
-        for number in range(count):
-            messages.append((channels[number], payloads[number]))
-            messages.append((channels[count + number], payloads[count + number]))
-        messages.append((channels[-1], payloads[-1]))
-        return messages
 
     def _pose_channels(self) -> list[int]:
         """Every robot's /odom, then every robot's /pose (held as rows: `Recorder.fixed_channel`),
@@ -569,44 +550,6 @@ class _Template:
         for at, value in zip(self.fields, values, strict=True):
             data[at : at + 8] = _FLOAT64.pack(value)
         return bytes(data)
-
-
-class _Poses:
-    """The CDR bytes of every robot's /odom, then every robot's /pose, then the one /tf at a time:
-    their `_Template`s in one byte array, whose stamps and float64 fields are written by two
-    fancy-index assignments (`fill(t_ns, values)`: per robot x, y, qz, qw, v, omega of its /odom,
-    then per robot x, y, qz, qw of its /pose, then of its /tf transform)."""
-
-    def __init__(self, robots: list[_Robot]) -> None:
-        pose = _Template(_pose_stamped, 4)
-        sample = rosmsg.pose_stamped_cdr(_SENTINEL_NS, 1.5, -2.5, 0.75)
-        if pose.fill(_SENTINEL_NS, (1.5, -2.5, math.sin(0.375), math.cos(0.375))) != sample:
-            raise CosimError("unexpected CDR layout of a pose message")
-        templates = [
-            *(_Template(partial(_odometry, robot), 6) for robot in robots),
-            *(pose for _ in robots),
-            _Template(partial(_tf, robots), 4 * len(robots)),
-        ]
-        sizes = [len(template.data) for template in templates]
-        starts = np.concatenate(([0], np.cumsum(sizes))).tolist()
-        self.bounds = list(zip(starts[:-1], starts[1:], strict=True))
-        self.data = np.concatenate([np.frombuffer(bytes(template.data), np.uint8) for template in templates])
-        stamps = [
-            start + at for start, template in zip(starts, templates, strict=False) for at in template.stamps
-        ]
-        fields = [
-            start + at for start, template in zip(starts, templates, strict=False) for at in template.fields
-        ]
-        self.stamp_bytes = (np.array(stamps, dtype=np.intp)[:, None] + np.arange(8)).reshape(-1)
-        self.field_bytes = (np.array(fields, dtype=np.intp)[:, None] + np.arange(8)).reshape(-1)
-        self.stamps = len(stamps)
-
-    def fill(self, t_ns: int, values: list[float]) -> list[bytes]:
-        stamp = np.frombuffer(_STAMP.pack(*divmod(int(t_ns), NS_PER_S)), np.uint8)
-        self.data[self.stamp_bytes] = np.tile(stamp, self.stamps)
-        self.data[self.field_bytes] = np.array(values, dtype="<f8").view(np.uint8)
-        data = self.data.tobytes()
-        return [data[start:end] for start, end in self.bounds]
 
 
 def _pose_stamped(t_ns: int, values) -> bytes:
