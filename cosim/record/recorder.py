@@ -605,8 +605,9 @@ class Recorder:
         `poses`: (keys, t_ns, rows of x, y, theta, v, omega) of /odom, /tf and /pose (one pose:
         keys key, key + 1, key + 2); `others`: (keys, t_ns, [(topic, CDR payload)]) of messages
         of registered topics (`scan_payload`, `obstacles_payload`, ...), a topic given by its name or
-        its handle (`channel`: a namespaced recorder's too). Stamps must not
-        decrease in key order."""
+        its handle (`channel`: a namespaced recorder's too); one of a channel held as rows
+        (`fixed_channel`: /cmd_vel, /scan) becomes its row. Stamps must not decrease in key order;
+        others of equal keys are written in the order given."""
         if self._closed:
             raise CosimError(f"{self.path}: the log is already closed")
         block = self._block
