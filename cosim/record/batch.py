@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import itertools
 import struct
+from typing import NamedTuple
 
 import numpy as np
 
@@ -117,8 +118,31 @@ def _stamp_fields(offset: int) -> dict[str, tuple]:
     return {"sec": ("<i4", offset), "nanosec": ("<u4", offset + 4)}
 
 
+def _field_count(fmt) -> int:
+    """float64 values of a field of format `fmt` ("<f8", or ("<f8", (count,)) for an array)."""
+    return fmt[1][0] if isinstance(fmt, tuple) else 1
+
+
+class FixedLayout(NamedTuple):
+    """The records of a channel of one fixed CDR layout whose float64 fields each take a column of
+    a stream's rows (a fleet robot's /odom, /pose, /cmd_vel: `MessageBlock.add_fixed_channel`):
+    the payload of any one message, its fields (name -> (format, byte offset in the payload);
+    "sec"/"nanosec" and "sec2"/"nanosec2" the stamps written per message) and the float64 fields
+    the columns go into, in column order."""
+
+    payload: bytes
+    fields: dict[str, tuple]
+    columns: tuple[str, ...]
+
+    @property
+    def width(self) -> int:
+        """The rows' columns: one per float64 of the fields of `columns`."""
+        return sum(_field_count(self.fields[name][0]) for name in self.columns)
+
+
 class SignalStream:
-    """Rows of one `/signals/<component>` channel: `values` float64 per record.
+    """Rows of one `/signals/<component>` channel: `values` float64 per record (or, with a
+    `FixedLayout`, rows of another channel of fixed layout, one float64 field per column).
 
     A step stream (`split` = number of inputs) is handed a step's applied inputs and its end
     outputs; row n gets the inputs, and the outputs go into row n + 1, the record of the
@@ -135,11 +159,23 @@ class SignalStream:
         initial: np.ndarray | None = None,
         period_ns: int = 0,
         start_ns: int = 0,
+        layout: FixedLayout | None = None,
     ) -> None:
-        payload = rosmsg.signals_payload(0, np.zeros(size))
-        fields = _stamp_fields(_CDR)
-        if size:
-            fields["values"] = (("<f8", (size,)), rosmsg.SIGNAL_VALUES_OFFSET)
+        if layout is None:
+            payload = rosmsg.signals_payload(0, np.zeros(size))
+            fields = _stamp_fields(_CDR)
+            if size:
+                fields["values"] = (("<f8", (size,)), rosmsg.SIGNAL_VALUES_OFFSET)
+            # (field, first column, columns) of the rows written into each record
+            self.parts = [("values", 0, size)] if size else []
+        else:
+            payload, fields = layout.payload, dict(layout.fields)
+            self.parts, column = [], 0
+            for name in layout.columns:
+                count = _field_count(fields[name][0])
+                self.parts.append((name, column, count))
+                column += count
+        self.layout = layout
         self.records = _Records(channel, payload, fields)
         self.split = split
         self.period_ns = period_ns
@@ -157,8 +193,8 @@ class SignalStream:
         self.table[kernel.P_MATRIX_COLUMNS] = size
         self.table[kernel.P_STAMP_COUNT] = len(records.stamps)
         self.table[kernel.P_STAMP_FIRST : kernel.P_STAMP_FIRST + len(records.stamps)] = records.stamps
-        self.table[kernel.P_FIELD_COUNT] = 1 if size else 0
-        self.field = (records.offset("values"), 0, size) if size else None
+        self.table[kernel.P_FIELD_COUNT] = len(self.parts)
+        self.fields = [(records.offset(name), column, count) for name, column, count in self.parts]
         self._addressed: tuple[np.ndarray, int] | None = None
         self.times: list[int] = []
         self.pending_ns: int | None = None  # [ns] when the pending record's outputs hold (None: first step)
@@ -274,6 +310,9 @@ class MessageBlock:
         self.clock_due = None  # () -> True when held messages are to reach the file now (wall clock)
         # Records built in C (`cosim.core.kernel.pack_records`); False: with NumPy (`_records_numpy`).
         self.native = True
+        # Steps collected outside the block (`Recorder.collect`): its `flush()` hands them over
+        # (through `add_batch`), called before any other message is held, packed or registered.
+        self.collector = None
 
     def _grouped(self, number: int, messages: int) -> bool:
         """Account for a message of stream `number` (`messages` records) in the group; True when
@@ -333,11 +372,46 @@ class MessageBlock:
         self.stream_of[channel] = len(self.streams)
         self.streams.append(self.signals[channel])
 
+    def add_fixed_channel(self, channel: int, layout: FixedLayout) -> None:
+        """A channel of fixed layout held as rows (`FixedLayout`), as a signal channel is."""
+        self.signals[channel] = SignalStream(channel, layout.width, self.capacity, layout=layout)
+        self.stream_of[channel] = len(self.streams)
+        self.streams.append(self.signals[channel])
+
+    def fixed_row(self, channel: int, t_ns: int, payload: bytes) -> np.ndarray | None:
+        """The row of a message of a fixed-layout channel (`add_fixed_channel`) given as its CDR
+        payload, or None when the channel is not one; a payload of another layout is refused (the
+        channel's messages are numbered as rows)."""
+        stream = self.signals.get(channel)
+        if stream is None or stream.layout is None:
+            return None
+        records = stream.records
+        row = np.zeros(stream.layout.width)
+        record = None
+        if len(payload) + MESSAGE_HEAD_SIZE == records.size:
+            for name, column, count in stream.parts:
+                at = records.offset(name) - MESSAGE_HEAD_SIZE
+                row[column : column + count] = np.frombuffer(payload, "<f8", count, at)
+            record = records.build(np.array([t_ns], dtype=np.uint64), 0)
+            for name, column, count in stream.parts:
+                shaped = record.dtype[name].shape != ()
+                record[name] = row[column : column + count] if shaped else row[column]
+        if record is None or record.view(np.uint8)[MESSAGE_HEAD_SIZE:].tobytes() != bytes(payload):
+            raise CosimError(f"channel {channel}: a message not of the channel's layout")
+        return row
+
+    def settle(self) -> None:
+        """Hand the steps a collector holds back (`collector`) to the block, before anything else
+        is held, packed or registered: they come first in the log."""
+        if self.collector is not None:
+            self.collector.flush()
+
     def add_signals(
         self, channel: int, t_ns: int, values: np.ndarray, more: np.ndarray | None = None
     ) -> bool:
         """Hold one signal record (`values`, then `more` when given); True when the block is full
         (the caller packs it). On a step stream: a step's inputs and end outputs (`SignalStream`)."""
+        self.settle()
         stream = self.signals[channel]
         held = len(stream.times)
         self._grow(stream, held + 1)
@@ -367,6 +441,7 @@ class MessageBlock:
         """Hold many records at once: (channel, times [ns], rows) per channel, in the order one
         record at a time would have been written (by time, then by position in `blocks`).
         Packs first when they do not fit next to what is held."""
+        self.settle()
         counts = [len(times) for _, times, _ in blocks]
         if any(
             len(self.signals[c].times) + n >= len(self.signals[c].rows)
@@ -399,6 +474,7 @@ class MessageBlock:
         """Hold the last record of every step stream: the final outputs, stamped when they hold
         (the end of the component's last step) or at `end_ns` when that is earlier (the run
         stopped inside a slower component's step, or before its first); then no more steps."""
+        self.settle()
         for channel, stream in self.signals.items():
             if stream.split is None or stream.ended:
                 continue
@@ -425,6 +501,7 @@ class MessageBlock:
         return self.pose_streams
 
     def add_pose(self, channels: tuple[int, int, int], row: tuple) -> bool:
+        self.settle()
         self.pose_stream(channels)
         self.pose.rows.append(row)
         self.pose.count += 1
@@ -435,6 +512,7 @@ class MessageBlock:
         return full or self._due(row[0])
 
     def add_raw(self, channel: int, t_ns: int, payload: bytes) -> bool:
+        self.settle()
         self.raw.append((channel, t_ns, payload))
         self.order.append(RAW_STREAM)
         return self._grouped(RAW_STREAM, 1) or self._due(t_ns)
@@ -455,6 +533,7 @@ class MessageBlock:
         `signal_rows`: per signal stream number, its rows in order (a step stream's row: the
         step's inputs, then its end outputs); `pose_rows`: per pose, x, y, theta, v, omega;
         `raw`: per RAW_STREAM message, (channel, payload)."""
+        self.settle()
         order = np.asarray(order, dtype=np.int64)
         times = np.asarray(times, dtype=np.int64)
         cursors = dict.fromkeys(signal_rows, 0)
@@ -573,6 +652,7 @@ class MessageBlock:
 
     def pack(self) -> None:
         """Build the held messages' records and append them to the writer in write order."""
+        self.settle()
         if self.count == 0:
             return
         order = np.array(self.order, dtype=np.int64)
@@ -664,10 +744,10 @@ class MessageBlock:
             # rows: float64, C-contiguous (made by `SignalStream`, `_grow`)
             rows[:, kernel.P_MATRIX] = [stream.address() for stream in carried]
             alive += [stream.rows for stream in carried]
-            with_values = rows[:, kernel.P_FIELD_COUNT] > 0
-            rows[with_values, kernel.P_FIELD_FIRST] = np.arange(int(with_values.sum()))
+            field_counts = rows[:, kernel.P_FIELD_COUNT]
+            rows[:, kernel.P_FIELD_FIRST] = np.cumsum(field_counts) - field_counts
             streams[numbers] = rows
-            fields += [stream.field for stream in carried if stream.field is not None]
+            fields += itertools.chain.from_iterable(stream.fields for stream in carried)
             sizes = rows[:, kernel.P_SIZE]
             size += int(np.dot(sizes, counts))
         if self.pose is not None and self.pose.count:
@@ -708,8 +788,9 @@ class MessageBlock:
             if isinstance(stream, SignalStream) and stream.times:
                 times = np.array(stream.times, dtype=np.uint64)
                 records = stream.records.build(times, self._sequence(stream.records.channel, len(times)))
-                if stream.rows.shape[1]:
-                    records["values"] = stream.rows[: len(times)]
+                for name, column, count in stream.parts:
+                    values = stream.rows[: len(times), column : column + count]
+                    records[name] = values[:, 0] if records.dtype[name].shape == () else values
                 parts[number] = (records, times, stream.records.channel)
                 stream.carry()
         if self.pose is not None and self.pose.count:

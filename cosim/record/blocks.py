@@ -5,15 +5,16 @@ Every component of a block has rows (the kernel's, and, with `python_rows` table
 first step (its live buffers hold that step's values to the block's end), so what the per-step
 recording (`cosim.record.steps.StepRecording.after_step`) and the outcome checks do step by step
 can be done over the block's rows: the positions are checked in one call of the monitor's
-`check_positions` (the same arithmetic, step by step: in C for a static world), each scan is made
-from the lidar's row, and the columns the recording reads are copied into buffers that collect
-the steps of several blocks. `flush()` turns those steps
-into their messages with NumPy (signal records, /odom /tf /pose at the pose rate, /cmd_vel and the
-mixer's mode at the mixer's rate; scans and moved obstacles were made at their steps) and hands
-them to `Recorder.hold_steps`, which writes the bytes of the per-step path. Steps are flushed
-every `WINDOWS` chunk windows of simulated time or the recorder's `flush_interval` of wall time,
-whichever comes first (every window with a live view), before anything else is written (a new
-plan, a goal), when the buffers are full, and at the end of the run. A block the rows cannot
+`check_positions` (the same arithmetic, step by step: in C for a static world), the lidar's
+ranges are kept from its rows, and the columns the recording reads are copied into buffers that
+collect the steps of several blocks. `flush()` turns those steps into their messages with NumPy
+(signal records, /odom /tf /pose at the pose rate, /cmd_vel and the mixer's mode at the mixer's
+rate, every sweep's /scan row at once: `Recorder.scan_rows`; moved obstacles were made at their
+steps) and hands them to `Recorder.hold_steps`, which writes the bytes of the per-step path.
+Steps are flushed every `WINDOWS` chunk windows of simulated time or the recorder's
+`flush_interval` of wall time, whichever comes first (every window with a live view), before
+anything else is written (a new plan, a goal), when the buffers are full, and at the end of the
+run. A block the rows cannot
 describe (a component stepped by Python due after its first step, a topic's first message) is
 flushed and replayed step by step (`cosim.record.replay`).
 """
@@ -27,7 +28,6 @@ from typing import NamedTuple
 import numpy as np
 
 from cosim.core.timebase import NS_PER_S, due_from
-from cosim.record.rosmsg import twist_cdr
 from cosim.record.steps import SignalEntry, StepRecording
 
 POSE_MESSAGES = 3  # a pose is written on /odom, /tf and /pose, in that order
@@ -219,6 +219,7 @@ class BlockRecording:
         self.live = {block.slot: [] for block in self.entries if block.columns is None}
         self.live_entries = [block for block in self.entries if block.columns is None]
         self.others: list[OtherMessage] = []
+        self.scans: list[tuple[np.ndarray, np.ndarray]] = []  # (steps, ranges) of the sweeps collected
 
     @property
     def settled(self) -> bool:
@@ -294,23 +295,19 @@ class BlockRecording:
         for block in self.live_entries:
             if first % block.entry.period == 0:
                 self.live[block.slot].append((first, block.entry.record()))
-        recording, recorder = self.recording, self.recorder
+        recording = self.recording
         scan = recording.scan
-        if scan is not None and self.scan_rows is not None:
+        if scan is not None and self.scan_rows is not None:  # the sweeps from the lidar's rows
             lidar, columns = self.scan_rows
-            period = scan.period
-            for k, row in zip(range(due_from(first, period), end, period), histories[lidar], strict=True):
-                t_ns = start_ns + k * h_ns
-                payload = recorder.scan_payload(
-                    t_ns, scan.angles, row[columns], scan.range_min, scan.range_max, scan.scan_time
-                )
-                self.others.append(OtherMessage(k * per_step + self.order.scan, t_ns, "/scan", payload))
-        elif scan is not None and first % scan.period == 0:
-            t_first = start_ns + first * h_ns
-            payload = recorder.scan_payload(
-                t_first, scan.angles, scan.current(), scan.range_min, scan.range_max, scan.scan_time
-            )
-            self.others.append(OtherMessage(first * per_step + self.order.scan, t_first, "/scan", payload))
+            rows = histories[lidar]
+            if len(rows):
+                steps = np.arange(due_from(first, scan.period), end, scan.period, dtype=np.int64)
+                if len(steps) != len(rows):
+                    raise RuntimeError(f"the lidar has {len(rows)} rows for {len(steps)} steps")
+                ranges = rows[:, columns]  # a copy (the kernel writes its rows again), not a view
+                self.scans.append((steps, ranges.copy() if isinstance(columns, slice) else ranges))
+        elif scan is not None and first % scan.period == 0:  # from its live buffers
+            self.scans.append((np.array([first], dtype=np.int64), scan.current()[None, :].copy()))
         for k, t_ns, payload in recording.obstacle_payloads(first, end, start_ns, h_ns):
             self.others.append(OtherMessage(k * per_step + self.order.obstacles, t_ns, "/obstacles", payload))
         # The positions after each step, as the monitor checks them.
@@ -381,21 +378,25 @@ class BlockRecording:
                 rows = rows[:, columns] if not isinstance(columns, slice) else rows
             signals.append((entry.channel, steps * per_step + slot, start_ns + steps * h_ns, rows))
         others = self.others
+        if self.scans:
+            scan = recording.scan
+            steps = np.concatenate([steps for steps, _ in self.scans])
+            ranges = np.concatenate([ranges for _, ranges in self.scans])
+            self.scans = []
+            limits = (scan.range_min, scan.range_max, scan.scan_time)
+            times = start_ns + steps * h_ns
+            rows = self.recorder.scan_rows(times, scan.angles, ranges, *limits)
+            signals.append(
+                (self.recorder.scan_channel(scan.angles, *limits), steps * per_step + order.scan, times, rows)
+            )
         if recording.command is not None:
             period = recording.command.period
             steps = np.arange(due_from(first, period), end, period, dtype=np.int64)
             if len(steps):
                 v_column, omega_column = self.command_columns
-                v = self._latest(v_column, steps).tolist()
-                omega = self._latest(omega_column, steps).tolist()
-                for k, t_ns, a, b in zip(
-                    (steps * per_step + order.cmd_vel).tolist(),
-                    (start_ns + steps * h_ns).tolist(),
-                    v,
-                    omega,
-                    strict=True,
-                ):
-                    others.append(OtherMessage(k, t_ns, "/cmd_vel", twist_cdr(a, b)))
+                values = np.column_stack((self._latest(v_column, steps), self._latest(omega_column, steps)))
+                keys = steps * per_step + order.cmd_vel
+                signals.append((self.recorder.cmd_vel_channel(), keys, start_ns + steps * h_ns, values))
         if self.mode_column is not None:
             mode = recording.mode
             steps = np.arange(due_from(first, mode.period), end, mode.period, dtype=np.int64)

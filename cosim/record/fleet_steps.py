@@ -19,16 +19,24 @@ block of steps at a time. `FleetSteps` records each robot as the single-robot ru
 them over (`Master.run_blocks`, `run_recorded`: per component of the master's order its inputs,
 then its outputs, after each of its steps; None for a component stepped by Python, which steps at
 most in the block's first step and holds its buffers to the block's end: the fleet cuts its blocks
-at those components' periods) and hands their messages to `Recorder.hold_steps` in time order
-(the key of a message: its step, then its place in the step: every robot's signal records, every
-robot's scan and command, the obstacles, then the poses of the step's end). Nothing is kept
-between blocks beyond what the recorder holds until it packs.
+at those components' periods) and collects them; `flush()` hands their messages to
+`Recorder.hold_steps` in time order (the key of a message: its step, then its place in the step:
+every robot's signal records, every robot's scan and command, the obstacles, then the poses of the
+step's end). Per-stream work (hundreds of streams at N = 50) is done once per flush, not per
+block: steps are flushed every `WINDOWS` chunk windows of simulated time or the recorder's
+`flush_interval` of wall time, whichever comes first (as `cosim.record.blocks` does for one robot),
+before a robot halts, and before anything else reaches the recorder (`Recorder.collect`: a schema or
+channel registered, metadata, the end), except a message written meanwhile (a plan, a goal), which
+is held after the collected steps and before the next block's. Every robot's /scan, /cmd_vel,
+/odom and /pose are rows of fixed-layout streams (`Recorder.fixed_channel`), packed in C; only /tf
+and /obstacles are CDR payloads. The bytes are those of each block handed over as it comes.
 """
 
 from __future__ import annotations
 
 import math
 import struct
+import time
 from functools import partial
 from typing import NamedTuple
 
@@ -37,6 +45,7 @@ import numpy as np
 from cosim.core.timebase import NS_PER_S, due_from
 from cosim.errors import CosimError
 from cosim.record import rosmsg
+from cosim.record.batch import FixedLayout
 from cosim.record.steps import SignalEntry, StepRecording
 
 ODOM = "nav_msgs/msg/Odometry"
@@ -51,6 +60,7 @@ class _Entry(NamedTuple):
     index: int  # its component in the master's order (`histories`)
     columns: np.ndarray | slice  # its record in the component's row (a slice: adjacent columns)
     entry: SignalEntry
+    kept: np.ndarray | slice | None = None  # its record in the flush's kept columns (`FleetSteps._kept`)
 
 
 class _Port(NamedTuple):
@@ -61,6 +71,7 @@ class _Port(NamedTuple):
     column: int
     period: int
     reading: object  # `cosim.record.steps.Reading`
+    kept: int = 0  # its column in the flush's kept columns (`FleetSteps._kept`)
 
 
 class _Robot:
@@ -74,6 +85,9 @@ class _Robot:
             [port.reading.value() for port in command[1]] if command is not None else None
         )  # after the last step handed over
         self.halted = False  # no longer stepped (`FleetSteps.halt`)
+        self.cmd_channel: int | None = None  # its /cmd_vel (`Recorder.fixed_channel`), on first use
+        self.commands: list[tuple[np.ndarray, np.ndarray]] = []  # read from live buffers: (steps, v omega)
+        self.sweeps: list[tuple[int, np.ndarray]] = []  # (step, ranges) of its lidar's collected sweeps
         self.odom_frame = f"{name}/{rosmsg.ODOM_FRAME}"
         self.base_frame = f"{name}/{rosmsg.ROBOT_FRAME}"
 
@@ -82,6 +96,9 @@ class FleetSteps:
     """Records a fleet's robots (module docstring). `robots`: (name, system, observed, scenario) of
     each robot in fleet order: its own system (whose components, named `<name>:<component>`, are
     the fleet master's), the description's `Observed` and its scenario."""
+
+    STEPS = 2048  # steps collected at most between two flushes
+    WINDOWS = 2  # chunk windows collected at most between two flushes (1 with a live view)
 
     def __init__(self, recorder, master, robots) -> None:
         self.recorder = recorder
@@ -114,12 +131,78 @@ class FleetSteps:
                     ports.append(_Port(index[id(component)], column, system.period_steps(component), reading))
                 command = (recording.command.period, ports)
             self.robots.append(_Robot(name, view, recording, entries, command))
+        self.kept = self._kept(master.order)
         self.scan_slot = slot  # robot r's scan: scan_slot + 2 r, its command: + 1
         self.obstacle_slot = slot + 2 * len(self.robots)
         self.pose_slot = self.obstacle_slot + 1  # every robot's /odom and /pose, then /tf
         self.per_step = self.pose_slot + 2 * len(self.robots) + 1
         self.world = self.robots[0].recording  # the obstacles the fleet shares
-        self._poses: _Poses | None = None  # the pose messages' templates, made on first use
+        self._channels: list[int] | None = None  # `_pose_channels`
+        self._tf: _Filled | None = None
+        # Steps collected, not yet handed to the recorder (`block`, `flush`): [first, end).
+        self.first = self.end = None
+        self.kinds: tuple[bool, ...] = ()  # per component: stepped by Python (no rows)
+        self.collected: list[list] = []  # each block's histories
+        # (key, t_ns, channel, payload); keys doubled (`flush`): odd, written between two blocks
+        self.others: list[tuple] = []
+        self.live: dict[int, list] = {}  # slot -> [(k, record)] of a component stepped by Python
+        self.poses: list[tuple] = []  # (k, t_ns, `_odometry` rows)
+        self.deferred: set[int] = set()  # robots whose commands are read from the rows at the flush
+        self.planned: tuple | None = None  # (kinds, `_plan`)
+        self.handed = time.monotonic()  # [s] wall clock of the last flush
+        self.window_ns = recorder.window_ns
+        self.windows = self.WINDOWS if recorder.batching else 1
+        self.flush_at = 0
+        recorder.collect(self)
+
+    def _kept(self, order: list) -> dict[int, tuple[list[slice], int]]:
+        """The columns of a component's rows the flush reads (its entry's, its commands'), kept in
+        a compact matrix when they are not all of them (array inputs such as a VFH's ranges are not
+        recorded): component index -> (runs of kept columns, their count); the entries' and ports'
+        `kept` columns address that matrix."""
+        needed: dict[int, set[int]] = {}
+        for robot in self.robots:
+            for entry in robot.entries:
+                columns = entry.columns
+                taken = range(columns.start, columns.stop) if isinstance(columns, slice) else columns.tolist()
+                needed.setdefault(entry.index, set()).update(taken)
+            for port in robot.command[1] if robot.command is not None else ():
+                needed.setdefault(port.index, set()).add(port.column)
+        kept = {}
+        place: dict[int, dict[int, int]] = {}
+        for index, columns in needed.items():
+            columns = sorted(columns)
+            component = order[index]
+            if columns == list(range(len(component.inputs) + len(component.outputs))):
+                place[index] = {column: column for column in columns}
+                continue
+            runs: list[slice] = []
+            for column in columns:
+                if runs and runs[-1].stop == column:
+                    runs[-1] = slice(runs[-1].start, column + 1)
+                else:
+                    runs.append(slice(column, column + 1))
+            kept[index] = (runs, len(columns))
+            place[index] = {column: at for at, column in enumerate(columns)}
+        for robot in self.robots:
+            entries = []
+            for entry in robot.entries:
+                columns = entry.columns
+                taken = range(columns.start, columns.stop) if isinstance(columns, slice) else columns.tolist()
+                at = [place[entry.index][column] for column in taken]
+                if at == list(range(at[0], at[0] + len(at))) if at else True:
+                    compact = slice(at[0], at[0] + len(at)) if at else slice(0, 0)
+                else:
+                    compact = np.array(at, dtype=np.intp)
+                entries.append(entry._replace(kept=compact))
+            robot.entries = entries
+            if robot.command is not None:
+                period, ports = robot.command
+                robot.command = (
+                    period,
+                    [port._replace(kept=place[port.index][port.column]) for port in ports],
+                )
+        return kept
 
     @property
     def views(self) -> dict[str, object]:
@@ -130,7 +213,9 @@ class FleetSteps:
         """Robot `name` is no longer stepped (switched off by the fleet): no more records of its
         components, scans or commands; its signals' last records come at the end of the run, its
         poses from the fleet as before."""
+        self.flush()  # the steps collected so far still record it
         next(robot for robot in self.robots if robot.name == name).halted = True
+        self.planned = None
 
     def write_constant(self, t_ns: int) -> None:
         """The records of the components whose outputs are fixed for the run."""
@@ -140,96 +225,251 @@ class FleetSteps:
     def write_poses(self, t_ns: int, rows) -> None:
         """Every robot's pose messages at t_ns (`rows`: x, y, theta [m, m, rad], v, omega [m/s,
         rad/s] per robot, in fleet order)."""
-        messages = self.pose_messages(t_ns, rows)
-        keys = np.arange(len(messages), dtype=np.int64)
-        self.recorder.hold_steps([], None, (keys, np.full(len(messages), t_ns, dtype=np.int64), messages))
+        self.flush()
+        signals, tf = self._pose_messages([(0, t_ns, self._odometry(rows))], 0, 2 * len(self.robots))
+        self.recorder.hold_steps(signals, None, tf)
 
-    def pose_messages(self, t_ns: int, rows) -> list[tuple[int, bytes]]:
-        """(channel, CDR payload) of every robot's /odom and /pose, then of the one /tf, at t_ns."""
-        if self._poses is None:
-            self._poses = _Poses(self.robots)
+    def _pose_channels(self) -> list[int]:
+        """Every robot's /odom, then every robot's /pose (held as rows: `Recorder.fixed_channel`),
+        then the /tf channel; registered on first use, in that order."""
+        if self._channels is None:
+            odometry = [_layout(partial(_odometry, robot), 6) for robot in self.robots]
+            pose = _layout(_pose_stamped, 4)
             self._channels = [
-                *(r.view.channel("/odom") for r in self.robots),
-                *(r.view.channel("/pose") for r in self.robots),
+                *(
+                    r.view.fixed_channel("/odom", layout)
+                    for r, layout in zip(self.robots, odometry, strict=True)
+                ),
+                *(r.view.fixed_channel("/pose", pose) for r in self.robots),
                 self.recorder.channel("/tf"),
             ]
-        odometry, poses = [], []
-        for x, y, theta, v, omega in rows:
-            x, y, theta, v, omega = float(x), float(y), float(theta), float(v), float(omega)
-            qz, qw = math.sin(theta / 2.0), math.cos(theta / 2.0)  # as `rosmsg.quaternion`
-            odometry += (x, y, qz, qw, v, omega)
-            poses += (x, y, qz, qw)
-        payloads = self._poses.fill(t_ns, odometry + poses + poses)
+            self._tf = _Filled(_Template(partial(_tf, self.robots), 4 * len(self.robots)))
+        return self._channels
+
+    @staticmethod
+    def _odometry(rows) -> np.ndarray:
+        """Per robot x, y, qz, qw, v, omega of its /odom (`rows`: x, y, theta, v, omega per robot);
+        the quaternion as `rosmsg.quaternion` computes it."""
+        given = np.array(rows, dtype=np.float64).reshape(-1, 5)
+        halves = (given[:, 2] / 2.0).tolist()
+        values = np.empty((len(given), 6))
+        values[:, :2] = given[:, :2]
+        values[:, 2] = [math.sin(half) for half in halves]
+        values[:, 3] = [math.cos(half) for half in halves]
+        values[:, 4:] = given[:, 3:]
+        return values
+
+    def _pose_messages(self, taken: list, per_step: int, slot: int) -> tuple[list, tuple | None]:
+        """The pose messages of `taken` ((step k, t_ns, `_odometry` rows) per pose time): the rows of
+        every robot's /odom and /pose (keys k * per_step + slot + 2 r, + 1) for `hold_steps`'
+        signals, and the /tf messages (key k * per_step + slot + 2 N) as its others."""
+        channels = self._pose_channels()
+        if not taken:
+            return [], None
         count = len(self.robots)
-        channels = self._channels
-        messages = []
+        steps = np.array([k for k, _, _ in taken], dtype=np.int64)
+        times = np.array([t_ns for _, t_ns, _ in taken], dtype=np.int64)
+        values = np.stack([rows for _, _, rows in taken])  # pose time, robot, column
+        base = steps * per_step + slot
+        signals = []
         for number in range(count):
-            messages.append((channels[number], payloads[number]))
-            messages.append((channels[count + number], payloads[count + number]))
-        messages.append((channels[-1], payloads[-1]))
-        return messages
+            signals.append((channels[number], base + 2 * number, times, values[:, number]))
+            signals.append((channels[count + number], base + 2 * number + 1, times, values[:, number, :4]))
+        tf = self._tf
+        payloads = [(channels[-1], tf.fill(t_ns, rows[:, :4])) for (_, t_ns, rows) in taken]
+        return signals, (base + 2 * count, times, payloads)
 
     def block(self, first: int, end: int, histories, poses=()) -> None:
-        """The messages of steps [first, end) from their rows (module docstring); `poses`: (step k,
-        t_ns, rows as for `write_poses`) of the poses written at the end of step k."""
+        """Collect the steps [first, end) from their rows (module docstring); `poses`: (step k,
+        t_ns, rows as for `write_poses`) of the poses written at the end of step k. The arrays
+        of `histories` that own their data (base None) are kept until the steps are flushed: the
+        caller must not change them after (the others are copied)."""
         start_ns, h_ns, per_step = self.start_ns, self.h_ns, self.per_step
-        signals, messages = [], []
+        kinds = tuple(rows is None for rows in histories)
+        if self.first is not None and (kinds != self.kinds or end - self.first > self.STEPS):
+            self.flush()
+        robots, live = self._plan(kinds)
+        # What may register a channel first (the collected steps go before it: `Recorder.settle`):
+        # each robot's scan, then its command, robot after robot.
+        others = []
+        sweeps = []  # (robot, its ranges) of the lidars stepped in the block
+        commands = []  # robots whose commands are read from the rows at the flush
+        due: dict[int, np.ndarray] = {}  # period -> its steps in the block
+        for number, robot, scan, python in robots:
+            if scan is not None and first % scan.period == 0:  # a lidar steps in a block's first step
+                robot.view.scan_channel(scan.angles, scan.range_min, scan.range_max, scan.scan_time)
+                sweeps.append((robot, scan.current().copy()))
+            if python is None:
+                continue
+            period, ports = robot.command
+            steps = due.get(period)
+            if steps is None:
+                steps = due[period] = np.arange(due_from(first, period), end, period, dtype=np.int64)
+            if len(steps):
+                if robot.cmd_channel is None:
+                    robot.cmd_channel = robot.view.cmd_vel_channel()
+                if python:  # read now, from live buffers
+                    values = [self._held(histories, port, first, end, steps, last)
+                              for port, last in zip(ports, robot.last_command, strict=True)]  # fmt: skip
+                    robot.commands.append((steps, np.array(values).T))
+                    robot.last_command = [float(value[-1]) for value in values]
+                else:
+                    commands.append(number)
+        for k, t_ns, payload in self.world.obstacle_payloads(first, end, start_ns, h_ns):
+            others.append(
+                (k * per_step + self.obstacle_slot, t_ns, self.recorder.channel("/obstacles"), payload)
+            )
+        taken = [(k, t_ns, self._odometry(rows)) for k, t_ns, rows in poses]
+        if taken:
+            self._pose_channels()
+        # Then the block joins the collected steps.
+        if self.first is None:
+            self.first, self.kinds = first, kinds
+            self.flush_at = ((start_ns + first * h_ns) // self.window_ns + self.windows) * self.window_ns
+        self.end = end
+        self.collected.append(
+            [rows if rows is None or rows.base is None else rows.copy() for rows in histories]
+        )
+        for number in commands:
+            self.deferred.add(number)
+        for robot, ranges in sweeps:
+            robot.sweeps.append((first, ranges))
+        for slot, entry in live:  # stepped by Python: their live buffers
+            if first % entry.period == 0:
+                self.live.setdefault(slot, []).append((first, entry.record()))
+        self.others += [(2 * key, t_ns, channel, payload) for key, t_ns, channel, payload in others]
+        self.poses += taken
+        t_last = start_ns + (end - 1) * h_ns
+        if t_last >= self.flush_at or end - self.first >= self.STEPS:
+            self.flush()
+        elif time.monotonic() - self.handed >= self.recorder.flush_interval:
+            self.flush()  # a killed run loses no more wall time of steps than the recorder's flushes
+
+    def _plan(self, kinds: tuple[bool, ...]) -> tuple[list, list]:
+        """What a block records of the robots still stepped, for components stepped by Python where
+        `kinds` says (made again when that or a robot's halt changes it): per robot (its number,
+        the robot, its scan ports or None, whether a command port is stepped by Python or None: no
+        command), and (slot, entry) of each entry stepped by Python."""
+        if self.planned is None or self.planned[0] != kinds:
+            robots, live = [], []
+            for number, robot in enumerate(self.robots):
+                if robot.halted:
+                    continue
+                python = None
+                if robot.command is not None:
+                    python = any(kinds[port.index] for port in robot.command[1])
+                robots.append((number, robot, robot.recording.scan, python))
+                live += [(entry.slot, entry.entry) for entry in robot.entries if kinds[entry.index]]
+            self.planned = (kinds, (robots, live))
+        return self.planned[1]
+
+    def written(self, channel: int, t_ns: int, payload: bytes) -> bool:
+        """A message written to the log while steps are collected (a plan, a goal): held after
+        them (True), or False when none are (the recorder writes it)."""
+        if self.first is None:
+            return False
+        self.others.append((2 * self.end * self.per_step - 1, t_ns, channel, payload))  # odd: between
+        return True
+
+    def flush(self) -> None:
+        """Hand the collected steps' messages to `Recorder.hold_steps`."""
+        if self.first is None:
+            return
+        first, end, kinds, collected = self.first, self.end, self.kinds, self.collected
+        others, live, taken, deferred = self.others, self.live, self.poses, self.deferred
+        self.first = self.end = None
+        self.collected, self.others, self.live, self.poses, self.deferred = [], [], {}, [], set()
+        self.handed = time.monotonic()
+        start_ns, h_ns = self.start_ns, self.h_ns
+        # Keys doubled: a message written between two blocks (`written`) sorts between them (odd key).
+        per_step = 2 * self.per_step
+        rows_of: dict[int, np.ndarray] = {}
+
+        def rows(index: int) -> np.ndarray:
+            found = rows_of.get(index)
+            if found is None:
+                parts = [part[index] for part in collected]
+                kept = self.kept.get(index)
+                if kept is None:  # every column
+                    found = parts[0] if len(parts) == 1 else np.concatenate(parts)
+                else:  # the columns read, one run at a time
+                    runs, width = kept
+                    found = np.empty((sum(len(part) for part in parts), width))
+                    at = 0
+                    for part in parts:
+                        end = at + len(part)
+                        column = 0
+                        for run in runs:
+                            found[at:end, column : column + run.stop - run.start] = part[:, run]
+                            column += run.stop - run.start
+                        at = end
+                rows_of[index] = found
+            return found
+
+        signals = []
         due: dict[int, tuple] = {}  # period -> the steps' count, keys (slot 0) and stamps, for all robots
         for number, robot in enumerate(self.robots):
             if robot.halted:
                 continue
-            for slot, index, columns, entry in robot.entries:
-                period = entry.period
-                rows = histories[index]
-                if rows is None:  # stepped by Python: in the block's first step at most
-                    if first % period:
-                        continue
-                    keys, times = np.array([first * per_step + slot]), np.array([start_ns + first * h_ns])
-                    signals.append((entry.channel, keys, times, entry.record()[None, :]))
+            for slot, index, _, entry, columns in robot.entries:
+                if kinds[index]:  # stepped by Python: in a block's first step at most
+                    records = live.get(slot)
+                    if records:
+                        steps = np.array([k for k, _ in records], dtype=np.int64)
+                        values = np.array([row for _, row in records])
+                        signals.append(
+                            (entry.channel, steps * per_step + 2 * slot, start_ns + steps * h_ns, values)
+                        )
                     continue
+                period = entry.period
                 shared = due.get(period)
                 if shared is None:
                     steps = np.arange(due_from(first, period), end, period, dtype=np.int64)
                     shared = due[period] = (len(steps), steps * per_step, start_ns + steps * h_ns)
                 count, keys, times = shared
                 if count:
-                    signals.append((entry.channel, keys + slot, times, rows[:count, columns]))
-            recording, view = robot.recording, robot.view
-            scan = recording.scan
-            if scan is not None and first % scan.period == 0:  # a lidar steps in a block's first step
-                t_ns = start_ns + first * h_ns
-                payload = view.scan_payload(
-                    t_ns, scan.angles, scan.current(), scan.range_min, scan.range_max, scan.scan_time
+                    signals.append((entry.channel, keys + 2 * slot, times, rows(index)[:count, columns]))
+            if robot.sweeps:
+                scan, view = robot.recording.scan, robot.view
+                limits = (scan.range_min, scan.range_max, scan.scan_time)
+                steps = np.array([k for k, _ in robot.sweeps], dtype=np.int64)
+                times = start_ns + steps * h_ns
+                sweep_rows = view.scan_rows(
+                    times, scan.angles, np.array([r for _, r in robot.sweeps]), *limits
                 )
-                messages.append(
-                    (first * per_step + self.scan_slot + 2 * number, t_ns, view.channel("/scan"), payload)
-                )
-            if robot.command is not None:
+                robot.sweeps = []
+                keys = steps * per_step + 2 * (self.scan_slot + 2 * number)
+                signals.append((view.scan_channel(scan.angles, *limits), keys, times, sweep_rows))
+            slot = 2 * (self.scan_slot + 2 * number + 1)
+            if number in deferred:
                 period, ports = robot.command
                 steps = np.arange(due_from(first, period), end, period, dtype=np.int64)
-                if len(steps):
-                    values = [self._held(histories, port, first, end, steps, last) for port, last in
-                              zip(ports, robot.last_command, strict=True)]  # fmt: skip
-                    channel = view.channel("/cmd_vel")
-                    slot = self.scan_slot + 2 * number + 1
-                    for k, v, omega in zip(steps.tolist(), *values, strict=True):
-                        messages.append(
-                            (k * per_step + slot, start_ns + k * h_ns, channel, rosmsg.twist_cdr(v, omega))
-                        )
-                    robot.last_command = [float(value[-1]) for value in values]
-        for k, t_ns, payload in self.world.obstacle_payloads(first, end, start_ns, h_ns):
-            messages.append(
-                (k * per_step + self.obstacle_slot, t_ns, self.recorder.channel("/obstacles"), payload)
-            )
-        for k, t_ns, rows in poses:
-            for j, (channel, payload) in enumerate(self.pose_messages(t_ns, rows)):
-                messages.append((k * per_step + self.pose_slot + j, t_ns, channel, payload))
-        others = None
-        if messages:
-            keys = np.array([message[0] for message in messages], dtype=np.int64)
-            times = np.array([message[1] for message in messages], dtype=np.int64)
-            others = (keys, times, [(channel, payload) for _, _, channel, payload in messages])
-        self.recorder.hold_steps(signals, None, others)
+                values = np.empty((len(steps), 2))
+                for column, (port, last) in enumerate(zip(ports, robot.last_command, strict=True)):
+                    values[:, column] = _latest(
+                        rows(port.index)[:, port.kept], first, port.period, steps, last
+                    )
+                robot.last_command = values[-1].tolist()
+                signals.append((robot.cmd_channel, steps * per_step + slot, start_ns + steps * h_ns, values))
+            elif robot.commands:
+                steps = np.concatenate([steps for steps, _ in robot.commands])
+                values = np.concatenate([values for _, values in robot.commands])
+                robot.commands = []
+                signals.append((robot.cmd_channel, steps * per_step + slot, start_ns + steps * h_ns, values))
+        poses, tf = self._pose_messages(taken, self.per_step, self.pose_slot)
+        signals += [(channel, 2 * keys, times, values) for channel, keys, times, values in poses]
+        if tf is not None:
+            keys, times, payloads = tf
+            others += [
+                (2 * key, t_ns, *payload)
+                for key, t_ns, payload in zip(keys.tolist(), times.tolist(), payloads, strict=True)
+            ]
+        other = None
+        if others:
+            keys = np.array([key for key, _, _, _ in others], dtype=np.int64)
+            times = np.array([message[1] for message in others], dtype=np.int64)
+            other = (keys, times, [(channel, payload) for _, _, channel, payload in others])
+        self.recorder.hold_steps(signals, None, other)
 
     @staticmethod
     def _held(histories, port: _Port, first: int, end: int, steps: np.ndarray, last: float) -> list[float]:
@@ -242,6 +482,48 @@ class FleetSteps:
         column = rows[: len(range(due, end, port.period)), port.column]
         at = (steps - due) // port.period
         return [float(column[j]) if j >= 0 else last for j in at.tolist()]
+
+
+def _latest(column: np.ndarray, first: int, period: int, steps: np.ndarray, last: float) -> np.ndarray:
+    """The value of a column of a component's rows from step `first` on (one row per step k with
+    k % period == 0) after each of `steps`: its latest row at or before the step (`last` before
+    its first)."""
+    at = (steps - due_from(first, period)) // period
+    values = column[np.maximum(at, 0)]
+    if len(at) and at[0] < 0:
+        values = np.where(at >= 0, values, last)
+    return values
+
+
+def _layout(build, count: int) -> FixedLayout:
+    """The `FixedLayout` of messages `build(t_ns, values)` makes (`count` float64 values, at most two
+    stamps), found by serialising sentinel values once (`_Template`)."""
+    template = _Template(build, count)
+    if len(template.stamps) > 2:
+        raise CosimError("unexpected CDR layout of a pose message")
+    fields = {}
+    for suffix, at in zip(("", "2"), template.stamps, strict=False):
+        fields |= {"sec" + suffix: ("<i4", at), "nanosec" + suffix: ("<u4", at + 4)}
+    names = tuple(f"f{column}" for column in range(count))
+    fields |= {name: ("<f8", at) for name, at in zip(names, template.fields, strict=True)}
+    return FixedLayout(bytes(template.data), fields, names)
+
+
+class _Filled:
+    """A `_Template`'s bytes for a time and values by two fancy-index assignments (the /tf message of
+    every robot: `fill(t_ns, values)`, values an array of the template's float64 fields)."""
+
+    def __init__(self, template: _Template) -> None:
+        self.data = np.frombuffer(bytes(template.data), np.uint8).copy()
+        self.stamp_bytes = (np.array(template.stamps, dtype=np.intp)[:, None] + np.arange(8)).reshape(-1)
+        self.field_bytes = (np.array(template.fields, dtype=np.intp)[:, None] + np.arange(8)).reshape(-1)
+        self.stamps = len(template.stamps)
+
+    def fill(self, t_ns: int, values: np.ndarray) -> bytes:
+        stamp = np.frombuffer(_STAMP.pack(*divmod(int(t_ns), NS_PER_S)), np.uint8)
+        self.data[self.stamp_bytes] = np.tile(stamp, self.stamps)
+        self.data[self.field_bytes] = np.ascontiguousarray(values, dtype="<f8").reshape(-1).view(np.uint8)
+        return self.data.tobytes()
 
 
 class _Template:
@@ -268,44 +550,6 @@ class _Template:
         for at, value in zip(self.fields, values, strict=True):
             data[at : at + 8] = _FLOAT64.pack(value)
         return bytes(data)
-
-
-class _Poses:
-    """The CDR bytes of every robot's /odom, then every robot's /pose, then the one /tf at a time:
-    their `_Template`s in one byte array, whose stamps and float64 fields are written by two
-    fancy-index assignments (`fill(t_ns, values)`: per robot x, y, qz, qw, v, omega of its /odom,
-    then per robot x, y, qz, qw of its /pose, then of its /tf transform)."""
-
-    def __init__(self, robots: list[_Robot]) -> None:
-        pose = _Template(_pose_stamped, 4)
-        sample = rosmsg.pose_stamped_cdr(_SENTINEL_NS, 1.5, -2.5, 0.75)
-        if pose.fill(_SENTINEL_NS, (1.5, -2.5, math.sin(0.375), math.cos(0.375))) != sample:
-            raise CosimError("unexpected CDR layout of a pose message")
-        templates = [
-            *(_Template(partial(_odometry, robot), 6) for robot in robots),
-            *(pose for _ in robots),
-            _Template(partial(_tf, robots), 4 * len(robots)),
-        ]
-        sizes = [len(template.data) for template in templates]
-        starts = np.concatenate(([0], np.cumsum(sizes))).tolist()
-        self.bounds = list(zip(starts[:-1], starts[1:], strict=True))
-        self.data = np.concatenate([np.frombuffer(bytes(template.data), np.uint8) for template in templates])
-        stamps = [
-            start + at for start, template in zip(starts, templates, strict=False) for at in template.stamps
-        ]
-        fields = [
-            start + at for start, template in zip(starts, templates, strict=False) for at in template.fields
-        ]
-        self.stamp_bytes = (np.array(stamps, dtype=np.intp)[:, None] + np.arange(8)).reshape(-1)
-        self.field_bytes = (np.array(fields, dtype=np.intp)[:, None] + np.arange(8)).reshape(-1)
-        self.stamps = len(stamps)
-
-    def fill(self, t_ns: int, values: list[float]) -> list[bytes]:
-        stamp = np.frombuffer(_STAMP.pack(*divmod(int(t_ns), NS_PER_S)), np.uint8)
-        self.data[self.stamp_bytes] = np.tile(stamp, self.stamps)
-        self.data[self.field_bytes] = np.array(values, dtype="<f8").view(np.uint8)
-        data = self.data.tobytes()
-        return [data[start:end] for start, end in self.bounds]
 
 
 def _pose_stamped(t_ns: int, values) -> bytes:

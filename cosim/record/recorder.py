@@ -6,7 +6,9 @@ Topics: `/odom`, `/tf` (map -> base_link), `/pose`, `/scan`, `/cmd_vel`, `/plan`
 The run loop writes messages in time order.
 
 Speed: signals, poses, commands and scans (the per-step topics) are held in a
-`cosim.record.batch.MessageBlock` and packed into MCAP records a block at a time, in C
+`cosim.record.batch.MessageBlock` (/cmd_vel and /scan, as the signals, as rows of float64 fields of
+a fixed layout: `fixed_channel`; a message given as CDR bytes becomes its row) and packed into MCAP
+records a block at a time, in C
 (`navcosim_pack_records` of the core kernel; a NumPy build of the same records is kept as the tested
 reference) (at most 512 records of a channel); the records and their order are exactly those of writing one
 message at a time. Any other write, `flush()` and `close()` pack the held messages first. The run
@@ -52,7 +54,7 @@ import numpy as np
 
 from cosim.errors import CosimError
 from cosim.record import rosmsg
-from cosim.record.batch import RAW_STREAM, MessageBlock
+from cosim.record.batch import RAW_STREAM, FixedLayout, MessageBlock
 from cosim.record.inputs import METADATA_NAME as UNCONNECTED_INPUTS
 from cosim.record.inputs import unconnected_metadata
 from cosim.record.logfile import navcosim_version
@@ -219,6 +221,7 @@ class _TracedBlock(MessageBlock):
     trace: RunTrace | None = None
 
     def pack(self) -> None:
+        self.settle()
         if self.count and self.trace is not None:
             self.trace.take_block(self)
         super().pack()
@@ -373,7 +376,14 @@ class Recorder:
         """Write `outcome` as metadata "outcome", then the summary and footer. Idempotent."""
         if self._closed:
             return
-        self._closed = True
+        try:
+            self._block.settle()  # steps collected outside the recorder (`collect`), while it is open
+        finally:
+            self._closed = True
+            self._finish(outcome)
+
+    def _finish(self, outcome: dict[str, str] | None) -> None:
+        """`close` after the collected steps: the held messages, the outcome, summary and footer."""
         try:
             self._block.pack()
             if outcome is not None:
@@ -394,6 +404,7 @@ class Recorder:
 
     def _schema(self, typename: str, definition: str | None = None) -> int:
         if typename not in self._schemas:
+            self._block.settle()  # collected steps go before the definition
             text = definition if definition is not None else rosmsg.message_definition(typename)
             self._schemas[typename] = self._writer.register_schema(typename, "ros2msg", text.encode())
             self._block.registered()
@@ -402,6 +413,7 @@ class Recorder:
     def _channel(self, topic: str, metadata: dict[str, str] | None = None) -> int:
         channel = self._channels.get(topic)
         if channel is None:
+            self._block.settle()
             schema = self._schema(TOPIC_TYPES[topic])
             name = self.topics.get(topic, topic)
             channel = self._writer.register_channel(name, "cdr", schema, metadata or {})
@@ -413,6 +425,9 @@ class Recorder:
     def _write(self, channel: int, t_ns: int, data: bytes) -> None:
         if self._closed:
             raise CosimError(f"{self.path}: the log is already closed")
+        collector = self._block.collector
+        if collector is not None and collector.written(channel, t_ns, data):
+            return
         self._block.pack()
         sequence = self._sequences[channel]
         self._sequences[channel] = sequence + 1
@@ -457,6 +472,7 @@ class Recorder:
         topic = self._component_topic("signals", component)
         if topic in self._channels:
             raise CosimError(f"{self.path}: signal channel {topic} registered twice")
+        self._block.settle()
         names = list(names)
         fields = rosmsg.field_names(names)
         typename = rosmsg.signals_type_name(component)
@@ -491,6 +507,7 @@ class Recorder:
         topic = self._component_topic("text_signals", component)
         if topic in self._channels:
             raise CosimError(f"{self.path}: text channel {topic} registered twice")
+        self._block.settle()
         fields = rosmsg.field_names(list(names))
         schema = self._schema(
             rosmsg.text_type_name(component), rosmsg.text_definition(fields, list(fmi_types))
@@ -557,6 +574,23 @@ class Recorder:
         """The handle of `topic` (a name of `TOPIC_TYPES`; registered on first use), for `hold_steps`."""
         return self._channel(topic)
 
+    def collect(self, collector) -> None:
+        """Steps are collected outside the recorder (`cosim.record.fleet_steps.FleetSteps`):
+        `collector.flush()` hands them over (`hold_steps`) before anything else is held, packed or
+        registered, and `collector.written(channel, t_ns, payload)` may keep a message written
+        meanwhile (True) to hold it after them."""
+        self._block.collector = collector
+
+    def fixed_channel(self, topic: str, layout: FixedLayout) -> int:
+        """The handle of `topic` (`channel`), whose messages `hold_steps` then takes as rows of
+        float64 fields, as a signal channel's (`cosim.record.batch.FixedLayout`: every message of
+        the topic has its layout)."""
+        channel = self._channel(topic)
+        if channel not in self._block.signals:
+            self._block.add_fixed_channel(channel, layout)
+            self._signal_sizes[channel] = layout.width
+        return channel
+
     def hold_steps(
         self,
         signals: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]],
@@ -571,11 +605,14 @@ class Recorder:
         `poses`: (keys, t_ns, rows of x, y, theta, v, omega) of /odom, /tf and /pose (one pose:
         keys key, key + 1, key + 2); `others`: (keys, t_ns, [(topic, CDR payload)]) of messages
         of registered topics (`scan_payload`, `obstacles_payload`, ...), a topic given by its name or
-        its handle (`channel`: a namespaced recorder's too). Stamps must not
-        decrease in key order."""
+        its handle (`channel`: a namespaced recorder's too); one of a channel held as rows
+        (`fixed_channel`: /cmd_vel, /scan) becomes its row. Stamps must not decrease in key order;
+        others of equal keys are written in the order given."""
         if self._closed:
             raise CosimError(f"{self.path}: the log is already closed")
         block = self._block
+        if others is not None and len(others[0]):
+            signals, others = self._fixed_others(signals, others)
         keys, streams, stamps = [], [], []
         signal_rows = {}
         numbers, counts = [], []
@@ -625,6 +662,32 @@ class Recorder:
         if self._sync_due():
             self._sync()
 
+    def _fixed_others(self, signals: list, others: tuple) -> tuple[list, tuple]:
+        """`hold_steps`' others whose channel is held as rows (`fixed_channel`) as its signals (rows
+        in key order, with the rows given for the channel, if any)."""
+        other_keys, times, messages = others
+        channels = [topic if isinstance(topic, int) else self._channels[topic] for topic, _ in messages]
+        fixed = [j for j, channel in enumerate(channels) if channel in self._block.signals]
+        if not fixed:
+            return signals, others
+        other_keys, times = np.asarray(other_keys, dtype=np.int64), np.asarray(times, dtype=np.int64)
+        given = {channel: (keys, stamps, rows) for channel, keys, stamps, rows in signals}
+        for channel in dict.fromkeys(channels[j] for j in fixed):
+            at = [j for j in fixed if channels[j] == channel]
+            rows = np.array(
+                [self._block.fixed_row(channel, int(times[j]), messages[j][1]) for j in at], dtype=np.float64
+            )
+            keys, stamps = other_keys[at], times[at]
+            if channel in given:
+                keys = np.concatenate((given[channel][0], keys))
+                stamps = np.concatenate((given[channel][1], stamps))
+                rows = np.concatenate((given[channel][2], rows))
+            by_key = np.argsort(keys, kind="stable")
+            given[channel] = (keys[by_key], stamps[by_key], rows[by_key])
+        kept = [j for j in range(len(messages)) if channels[j] not in self._block.signals]
+        signals = [(channel, *value) for channel, value in given.items()]
+        return signals, (other_keys[kept], times[kept], [messages[j] for j in kept])
+
     # --- robot topics --------------------------------------------------------------------
 
     def write_pose(self, t_ns: int, x: float, y: float, theta: float, v: float, omega: float) -> None:
@@ -638,7 +701,15 @@ class Recorder:
 
     def write_cmd_vel(self, t_ns: int, v: float, omega: float) -> None:
         """The commanded body velocities [m/s, rad/s] on /cmd_vel (Twist has no stamp: log time only)."""
-        self._hold(self._channel("/cmd_vel"), t_ns, rosmsg.twist_cdr(float(v), float(omega)))
+        if self._closed:
+            raise CosimError(f"{self.path}: the log is already closed")
+        values = np.array((float(v), float(omega)))
+        self._held(self._block.add_signals(self.cmd_vel_channel(), int(t_ns), values))
+
+    def cmd_vel_channel(self) -> int:
+        """The handle of /cmd_vel, whose messages are rows of v, omega for `hold_steps`' signals
+        (every /cmd_vel message goes that way: `write_cmd_vel` too)."""
+        return self.fixed_channel("/cmd_vel", _twist_layout())
 
     def write_payload(self, topic: str, t_ns: int, payload: bytes) -> None:
         """A message of `topic` (of the topic table) already in CDR: a sensor's (`StepRecording`)."""
@@ -651,6 +722,10 @@ class Recorder:
     def _hold(self, channel: int, t_ns: int, payload: bytes) -> None:
         if self._closed:
             raise CosimError(f"{self.path}: the log is already closed")
+        row = self._block.fixed_row(channel, int(t_ns), payload)
+        if row is not None:  # a channel held as rows (`fixed_channel`)
+            self._held(self._block.add_signals(channel, int(t_ns), row))
+            return
         self._held(self._block.add_raw(channel, int(t_ns), payload))
 
     def write_goal(self, t_ns: int, x: float, y: float, theta: float | None) -> None:
@@ -740,26 +815,7 @@ class Recorder:
         spaced angles, so beams go into bins of a uniform grid (see `scan_layout`); bins without a
         beam hold NaN (no measurement). Returns the message's CDR bytes (the first sweep registers
         /scan), for `write_scan` or `hold_steps`."""
-        last = self._last_scan
-        if (
-            last is not None
-            and angles is last[0]
-            and (range_min, range_max, scan_time) == (last[1], last[2], last[4])
-        ):
-            layout = last[3]  # the run loop passes the same angle array every sweep
-        else:
-            angle_array = np.asarray(angles, dtype=float)
-            key = (angle_array.tobytes(), float(range_min), float(range_max), float(scan_time))
-            layout = self._scan_layouts.get(key)
-            if layout is None:
-                layout = self._scan_template(
-                    angle_array, float(range_min), float(range_max), float(scan_time)
-                )
-                self._scan_layouts[key] = layout
-            # Keyed by identity only for a read-only array, which cannot change between sweeps.
-            frozen = isinstance(angles, np.ndarray) and not angles.flags.writeable
-            self._last_scan = (angles, range_min, range_max, layout, scan_time) if frozen else None
-        bins, binned, head, tail = layout
+        bins, binned, head, tail = self._scan_layout(angles, range_min, range_max, scan_time)
         if bins is None:  # one beam per bin, in order
             binned[:] = ranges
             np.copyto(binned, np.inf, where=np.isnan(binned))
@@ -775,6 +831,65 @@ class Recorder:
         if self.trace is not None:
             self.trace.add_scan(t_ns, binned, range_min, range_max)
         return payload
+
+    def scan_channel(
+        self, angles: np.ndarray, range_min: float, range_max: float, scan_time: float = 0.0
+    ) -> int:
+        """The handle of /scan for sweeps of this layout (registered by the first, as `scan_payload`
+        registers it), whose messages `hold_steps` takes as rows (`scan_rows`)."""
+        self._scan_layout(angles, range_min, range_max, scan_time)
+        return self._channels["/scan"]
+
+    def scan_rows(
+        self,
+        t_ns: np.ndarray,
+        angles: np.ndarray,
+        ranges: np.ndarray,
+        range_min: float,
+        range_max: float,
+        scan_time: float = 0.0,
+    ) -> np.ndarray:
+        """The rows on `scan_channel` of sweeps at `t_ns` [ns] (`ranges`: one sweep a row), for
+        `hold_steps`' signals: the bytes of `scan_payload`'s messages (each row: the ranges as
+        float32 on the LaserScan's bins, padded with the empty intensities' zero length to whole
+        float64s)."""
+        bins, binned, _, _ = self._scan_layout(angles, range_min, range_max, scan_time)
+        count = len(binned)
+        out = np.empty((len(ranges), count + count % 2), dtype=np.float32)
+        out[:, :count] = binned  # bins without a beam: NaN
+        out[:, count:] = 0.0  # the first 4 bytes of the tail (a sequence of length 0)
+        if bins is None:  # one beam per bin, in order
+            beams = out[:, :count]
+            beams[...] = ranges
+            np.copyto(beams, np.inf, where=np.isnan(beams))
+        else:
+            beams = np.asarray(ranges, dtype=np.float32)
+            out[:, bins] = np.where(np.isnan(beams), np.float32(np.inf), beams)
+        if self.trace is not None:
+            for t, row in zip(np.asarray(t_ns).tolist(), out, strict=True):
+                self.trace.add_scan(t, row[:count], range_min, range_max)
+        return out.view(np.float64)
+
+    def _scan_layout(self, angles, range_min: float, range_max: float, scan_time: float) -> tuple:
+        """(bins, binned, head, tail) of the LaserScan layout of these sweeps (`_scan_template`),
+        made and the /scan channel registered on first use."""
+        last = self._last_scan
+        if (
+            last is not None
+            and angles is last[0]
+            and (range_min, range_max, scan_time) == (last[1], last[2], last[4])
+        ):
+            return last[3]  # the run loop passes the same angle array every sweep
+        angle_array = np.asarray(angles, dtype=float)
+        key = (angle_array.tobytes(), float(range_min), float(range_max), float(scan_time))
+        layout = self._scan_layouts.get(key)
+        if layout is None:
+            layout = self._scan_template(angle_array, float(range_min), float(range_max), float(scan_time))
+            self._scan_layouts[key] = layout
+        # Keyed by identity only for a read-only array, which cannot change between sweeps.
+        frozen = isinstance(angles, np.ndarray) and not angles.flags.writeable
+        self._last_scan = (angles, range_min, range_max, layout, scan_time) if frozen else None
+        return layout
 
     def _scan_template(
         self, angles: np.ndarray, range_min: float, range_max: float, scan_time: float
@@ -795,6 +910,14 @@ class Recorder:
             raise CosimError(f"{self.path}: unexpected LaserScan CDR layout")
         if np.array_equal(bins, np.arange(len(binned))):
             bins = None  # each beam its own bin, in order: filled by a slice
+        # Every /scan message is a row of a fixed layout (`scan_rows`; a payload becomes its row):
+        # the stamp, then the ranges and the intensities' length (zero) as whole float64s.
+        count = len(binned)
+        fields = {"sec": ("<i4", 4), "nanosec": ("<u4", 8)}
+        fields["ranges"] = (("<f8", ((count + 1) // 2,)), len(head))
+        if head[4:12] != bytes(8) or len(tail) != 4:  # the stamp of t = 0; the intensities' length
+            raise CosimError(f"{self.path}: unexpected LaserScan CDR layout")
+        self.fixed_channel("/scan", FixedLayout(template, fields, ("ranges",)))
         return bins, binned, head, tail
 
     def write_obstacles(self, t_ns: int, obstacles: list) -> None:
@@ -929,6 +1052,23 @@ class _PathLayout:
             block[:, at : at + 56] = rows.view(np.uint8)
             parts.append(block.tobytes())
         return b"".join(parts)
+
+
+_TWIST_LAYOUT: FixedLayout | None = None
+
+
+def _twist_layout() -> FixedLayout:
+    """/cmd_vel (geometry_msgs/Twist, no stamp) as rows of v, omega (`rosmsg.twist_cdr`)."""
+    global _TWIST_LAYOUT
+    if _TWIST_LAYOUT is None:
+        sentinels = (1.0e250 * 1.5, 1.0e250 * 2.5)
+        data = rosmsg.twist_cdr(*sentinels)
+        found = [rosmsg.pattern_offsets(data, struct.pack("<d", value)) for value in sentinels]
+        if any(len(at) != 1 for at in found):
+            raise CosimError("unexpected CDR layout of a twist message")
+        fields = {"v": ("<f8", found[0][0]), "omega": ("<f8", found[1][0])}
+        _TWIST_LAYOUT = FixedLayout(rosmsg.twist_cdr(0.0, 0.0), fields, ("v", "omega"))
+    return _TWIST_LAYOUT
 
 
 _SENTINEL_NS = 1_234_567_891_987_654_321  # a stamp no run writes, to find in a template

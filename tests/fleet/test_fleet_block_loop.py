@@ -18,7 +18,7 @@ from mcap.reader import make_reader
 from cosim.navigation import fleet as fleet_module
 from cosim.navigation.fleet_log import outcome_record
 from cosim.record import recorder, rosmsg
-from cosim.record.fleet_steps import _odometry, _Poses, _tf
+from cosim.record.fleet_steps import _Filled, _layout, _odometry, _pose_stamped, _Template, _tf
 from cosim.scenario.load import load_scenario
 from cosim.world.fleet import FleetContacts
 
@@ -77,24 +77,48 @@ def test_plan_bytes_are_those_of_the_serialised_path(count):
     assert layout.cdr(t_ns, points[:, 0], points[:, 1], headings) == expected
 
 
-def test_fleet_pose_bytes_are_those_of_the_serialised_messages():
+def test_fleet_pose_bytes_are_those_of_the_serialised_messages(tmp_path):
+    # Each robot's /odom and /pose are rows of a fixed layout packed in C, the /tf of every robot a
+    # template filled per time: the bytes of the messages serialised in full, read back.
+    from functools import partial
+
     robots = [SimpleNamespace(odom_frame=f"{name}/odom", base_frame=f"{name}/base_link")
               for name in ("robot1", "robot10", "r")]  # fmt: skip
-    poses = _Poses(robots)
     rng = np.random.default_rng(7)
-    for t_ns in (0, 1_500_000_000, 123_456_789_012):
-        rows = rng.normal(0.0, 3.0, (len(robots), 5))  # x, y, theta, v, omega
-        quaternions = [(math.sin(theta / 2.0), math.cos(theta / 2.0)) for theta in rows[:, 2]]
-        odometry, stamped, transforms = [], [], []
-        for (x, y, _, v, omega), (qz, qw) in zip(rows.tolist(), quaternions, strict=True):
-            odometry += (x, y, qz, qw, v, omega)
-            stamped += (x, y, qz, qw)
-        transforms = stamped
-        payloads = poses.fill(t_ns, odometry + stamped + transforms)
-        expected = [_odometry(robot, t_ns, odometry[6 * k : 6 * k + 6]) for k, robot in enumerate(robots)]
-        expected += [rosmsg.pose_stamped_cdr(t_ns, x, y, theta) for x, y, theta in rows[:, :3].tolist()]
-        expected.append(_tf(robots, t_ns, transforms))
-        assert payloads == expected
+    stamps = [0, 1_500_000_000, 123_456_789_012]
+    rows = rng.normal(0.0, 3.0, (len(stamps), len(robots), 5))  # x, y, theta, v, omega
+    rows[1, 2, 3:] = math.nan  # no command: a NaN twist
+    quaternions = np.stack((np.sin(rows[..., 2] / 2.0), np.cos(rows[..., 2] / 2.0)), axis=-1)
+    for (k, r), theta in np.ndenumerate(rows[..., 2]):
+        quaternions[k, r] = (math.sin(theta / 2.0), math.cos(theta / 2.0))  # as `rosmsg.quaternion`
+    values = np.concatenate((rows[..., :2], quaternions, rows[..., 3:]), axis=-1)  # x, y, qz, qw, v, omega
+    tf = _Filled(_Template(partial(_tf, robots), 4 * len(robots)))
+    path = tmp_path / "poses.mcap"
+    with recorder.Recorder(path, trace=False) as log:
+        signals = []
+        times = np.array(stamps, dtype=np.int64)
+        for r, robot in enumerate(robots):
+            view = log.namespaced(f"n{r}")
+            odom = view.fixed_channel("/odom", _layout(partial(_odometry, robot), 6))
+            pose = view.fixed_channel("/pose", _layout(_pose_stamped, 4))
+            signals += [
+                (odom, 10 * times + 2 * r, times, values[:, r]),
+                (pose, 10 * times + 2 * r + 1, times, values[:, r, :4]),
+            ]
+        log.hold_steps(signals)
+    read: dict[str, list[bytes]] = {}
+    with open(path, "rb") as stream:
+        for _, channel, message in make_reader(stream).iter_messages(log_time_order=False):
+            read.setdefault(channel.topic, []).append(bytes(message.data))
+    for r, robot in enumerate(robots):
+        assert read[f"/n{r}/odom"] == [
+            _odometry(robot, t_ns, values[k, r].tolist()) for k, t_ns in enumerate(stamps)
+        ]
+        assert read[f"/n{r}/pose"] == [
+            rosmsg.pose_stamped_cdr(t_ns, *rows[k, r, :3].tolist()) for k, t_ns in enumerate(stamps)
+        ]
+    for k, t_ns in enumerate(stamps):
+        assert tf.fill(t_ns, values[k, :, :4]) == _tf(robots, t_ns, values[k, :, :4].reshape(-1).tolist())
 
 
 def _judge_step_by_step(each, ends, lengths, start):

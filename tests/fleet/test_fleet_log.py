@@ -165,3 +165,26 @@ def test_the_pose_templates_give_the_bytes_of_the_serialised_messages():
         assert odometry.fill(t_ns, values) == fleet_steps._odometry(robots[1], t_ns, values)
         values = list(generator.normal(0.0, 30.0, 8))
         assert tf.fill(t_ns, values) == fleet_steps._tf(robots, t_ns, values)
+
+
+def test_steps_collected_over_windows_give_the_bytes_of_blocks_handed_over_one_by_one(tmp_path, monkeypatch):
+    # The fleet's steps are collected for up to two chunk windows and handed to the recorder at
+    # once, with the plans written meanwhile held between the right steps: the file must be the one
+    # of each block handed over as it comes (the steps flushed after every block).
+    from cosim.record import fleet_steps
+
+    text = (SCENARIOS / "fleet_head_on.toml").read_text()
+    collected = tmp_path / "collected.mcap"
+    run_fleet(parse_scenario(text, "head_on.toml", SCENARIOS), log_path=collected)
+    block = fleet_steps.FleetSteps.block
+
+    def one_by_one(self, *args, **kwargs):
+        block(self, *args, **kwargs)
+        self.flush()
+
+    monkeypatch.setattr(fleet_steps.FleetSteps, "block", one_by_one)
+    handed = tmp_path / "handed.mcap"
+    run_fleet(parse_scenario(text, "head_on.toml", SCENARIOS), log_path=handed)
+    assert collected.read_bytes() == handed.read_bytes()
+    plans = _read(collected, ["/robot1/plan", "/robot2/plan"])
+    assert sum(len(found) for found in plans.values()) > 2  # plans written during the run, not only at t = 0

@@ -184,3 +184,69 @@ def test_head_constants_are_the_mcap_message_record():
         kernel.HEAD_LOG_TIME,
         kernel.HEAD_PUBLISH_TIME,
     )
+
+
+def test_a_payload_of_another_layout_on_a_channel_held_as_rows_is_refused(tmp_path):
+    # /cmd_vel is held as rows of v, omega: a Twist with another non-zero field has no such row
+    # (its bytes could not be rebuilt), so it is refused instead of written wrong.
+    from cosim.errors import CosimError
+
+    with Recorder(tmp_path / "twist.mcap", trace=False) as recorder:
+        recorder.write_cmd_vel(0, 0.25, -1.5)
+        channel = recorder.cmd_vel_channel()
+        payload = rosmsg.twist_cdr(0.75, 2.0)
+        row = recorder._block.fixed_row(channel, 10, payload)
+        assert row.tolist() == [0.75, 2.0]
+        other = rosmsg.CDR_HEADER + np.array([0.75, 0.5, 0.0, 0.0, 0.0, 2.0]).tobytes()
+        with pytest.raises(CosimError, match="layout"):
+            recorder.write_payload("/cmd_vel", 10, other)
+        with pytest.raises(CosimError, match="layout"):
+            recorder.write_payload("/cmd_vel", 10, payload + b"\0")
+        recorder.write_payload("/cmd_vel", 20, payload)
+    messages = [
+        (m.log_time, m.sequence, bytes(m.data))
+        for _, _, m in make_reader(open(tmp_path / "twist.mcap", "rb")).iter_messages()
+    ]
+    assert messages == [(0, 0, rosmsg.twist_cdr(0.25, -1.5)), (20, 1, payload)]
+
+
+def test_steps_collected_outside_the_recorder_reach_the_log_before_anything_else_and_at_close(tmp_path):
+    # A collector (`Recorder.collect`: the fleet's steps) is flushed before a message is written
+    # around it and at close, so the log holds its rows in time order and is complete.
+    path = tmp_path / "collected.mcap"
+    recorder = Recorder(path, trace=False)
+    channel = recorder.signal_channel("c", ["a", "b"])
+
+    class Collector:
+        def __init__(self) -> None:
+            self.pending: list[tuple[int, np.ndarray]] = []
+
+        def flush(self) -> None:
+            taken, self.pending = self.pending, []
+            if taken:
+                times = np.array([t_ns for t_ns, _ in taken], dtype=np.int64)
+                rows = np.array([row for _, row in taken])
+                recorder.hold_steps([(channel, times, times, rows)])
+
+        def written(self, channel: int, t_ns: int, payload: bytes) -> bool:
+            return False
+
+    collector = Collector()
+    recorder.collect(collector)
+    collector.pending += [(k * 10, np.array([k, -k], dtype=float)) for k in range(3)]
+    recorder.write_goal(30, 1.0, 2.0, None)  # registers /goal: the collected rows go first
+    collector.pending += [(k * 10, np.array([k, -k], dtype=float)) for k in range(4, 6)]
+    recorder.close()  # no end_steps: the collected rows still reach the log, which is complete
+    with open(path, "rb") as stream:
+        reader = make_reader(stream)
+        assert reader.get_summary() is not None
+        messages = [
+            (c.topic, m.log_time, bytes(m.data)) for _, c, m in reader.iter_messages(log_time_order=False)
+        ]
+    expected = [
+        ("/signals/c", k * 10, rosmsg.signals_payload(k * 10, np.array([k, -k], float))) for k in range(3)
+    ]
+    assert messages[:3] == expected and messages[3][:2] == ("/goal", 30)
+    assert messages[4:] == [
+        ("/signals/c", k * 10, rosmsg.signals_payload(k * 10, np.array([k, -k], float))) for k in range(4, 6)
+    ]
