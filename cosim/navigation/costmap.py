@@ -21,6 +21,7 @@ of the marks); `marked` is therefore read-only outside `integrate`.
 from __future__ import annotations
 
 import ctypes
+import math
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +41,8 @@ class _Arrays(ctypes.Structure):
         ("origin_x", _f64), ("origin_y", _f64), ("resolution", _f64),
         ("angles", _p), ("count", _i64), ("ranges", _p), ("clear_to", _f64),
         ("row_marks", _p), ("col_marks", _p), ("cos_angles", _p), ("sin_angles", _p),
+        ("uniform", _i64), ("first_angle", _f64), ("step", _f64),
+        ("near_from", _p), ("near_to", _p), ("near_cell", _p),
     ]  # fmt: skip
 
 
@@ -85,6 +88,14 @@ class Costmap(kernels.Bound):
         self._col_marks = np.zeros(cols, dtype=np.int64)
         # The beams' directions to a few ulp, for the kernel's cheap first look at each beam.
         self._cos_angles, self._sin_angles = np.cos(self.angles), np.sin(self.angles)
+        # Beams evenly spread round the full turn (a 360-degree lidar): the kernel then finds the
+        # beams near each mark once a scan, and traverses a beam only where a mark may lie on it.
+        count = len(self.angles)
+        self._step = 2.0 * math.pi / count
+        spread = self.angles[0] + np.arange(count) * self._step
+        self._uniform = bool(np.all(np.abs(self.angles - spread) <= 1e-9))
+        self._near_from, self._near_to = np.empty(count), np.empty(count)  # the kernel's scratch
+        self._near_cell = np.empty(count, dtype=np.int64)
         self._bind()
 
     _BOUND = ("_arrays", "_address", "_integrate", "_new_marks_near")
@@ -100,6 +111,9 @@ class Costmap(kernels.Bound):
             clear_to=self.clear_to,
             row_marks=self._row_marks.ctypes.data, col_marks=self._col_marks.ctypes.data,
             cos_angles=self._cos_angles.ctypes.data, sin_angles=self._sin_angles.ctypes.data,
+            uniform=int(self._uniform), first_angle=float(self.angles[0]), step=self._step,
+            near_from=self._near_from.ctypes.data, near_to=self._near_to.ctypes.data,
+            near_cell=self._near_cell.ctypes.data,
         )  # fmt: skip
         self._address = ctypes.addressof(self._arrays)
         library = _kernels()

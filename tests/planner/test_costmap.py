@@ -98,6 +98,55 @@ def test_integrate_equals_a_full_traversal_while_marks_come_and_go(range_min):
     assert changes > 500 and marked.any()  # marks were set and cleared all along
 
 
+def _disc_ranges(x, y, theta, angles, discs, range_max):
+    """Ranges [m] from (x, y) at heading theta to the nearest of `discs` (cx, cy, r) (NaN: none
+    within range_max): returns on obstacles that move a little from scan to scan."""
+    ranges = np.full(len(angles), np.nan)
+    for k, angle in enumerate(angles):
+        dx, dy = math.cos(theta + angle), math.sin(theta + angle)
+        for cx, cy, r in discs:
+            b = dx * (x - cx) + dy * (y - cy)
+            c = (x - cx) ** 2 + (y - cy) ** 2 - r * r
+            if b * b - c >= 0 and -b - math.sqrt(b * b - c) >= 0:
+                near = -b - math.sqrt(b * b - c)
+                if near <= range_max and not near >= ranges[k]:
+                    ranges[k] = near
+    return ranges
+
+
+@pytest.mark.parametrize("count", [360, 64])
+def test_a_full_turn_of_even_beams_equals_a_full_traversal_among_moving_discs(count):
+    """Beams evenly spread round the full turn: the kernel finds the beams near each mark once a
+    scan and traverses a beam only there. Discs that drift from scan to scan leave marks that later
+    rays cross (cleared), returns on marks already there, marks set and cleared in one scan."""
+    from cosim.world.lidar import evenly_spaced_beams
+
+    rng = np.random.default_rng(11)
+    occupied = np.zeros((40, 60), dtype=bool)
+    occupied[0, :] = occupied[-1, :] = occupied[:, 0] = occupied[:, -1] = True
+    grid = OccupancyGrid(occupied, 0.5, (0.0, 0.0))
+    angles = evenly_spaced_beams(-math.pi, math.pi, count)
+    range_max = 12.0
+    costmap = Costmap(grid, angles, 0.0, range_max)
+    assert costmap._uniform
+    marked = np.zeros_like(occupied)
+    discs = [(rng.uniform(3, 27), rng.uniform(3, 17), rng.uniform(0.3, 1.2)) for _ in range(12)]
+    x, y, theta = 15.0, 10.0, 0.3
+    changes = 0
+    for scan in range(60):
+        discs = [(cx + rng.normal(0, 0.3), cy + rng.normal(0, 0.3), r) for cx, cy, r in discs]
+        x, y = x + rng.normal(0, 0.4), y + rng.normal(0, 0.4)
+        theta += rng.normal(0, 0.5) + (2 * math.pi if scan == 30 else 0.0)
+        ranges = _disc_ranges(x, y, theta, angles, discs, range_max)
+        expected = _reference_integrate(
+            marked, occupied, grid.origin, grid.resolution, x, y, theta, angles, ranges, range_max
+        )
+        assert costmap.integrate(x, y, theta, ranges) == expected
+        assert np.array_equal(costmap.marked, marked)
+        changes += expected
+    assert changes > 200 and marked.sum() > 20
+
+
 def test_marks_change_only_through_integrate():
     grid = OccupancyGrid(np.zeros((8, 8), dtype=bool), 0.5, (0.0, 0.0))
     costmap = Costmap(grid, np.array([0.0]), 0.0, 3.0)

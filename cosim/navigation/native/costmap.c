@@ -22,6 +22,12 @@ typedef struct {
     int64_t *row_marks;    /* rows: marked cells in each row (kept by the kernel, with `marked`) */
     int64_t *col_marks;    /* cols: marked cells in each column */
     const double *cos_angles, *sin_angles; /* count: cos and sin of the beam angles, to a few ulp */
+    /* Beams evenly spread round the full turn (`uniform` 1): angles[k] = first_angle + k step to
+     * 1e-9 rad, step = 2 pi / count. Then each scan finds the beams near each mark (`near_*`). */
+    int64_t uniform;
+    double first_angle, step;
+    double *near_from, *near_to; /* count each, scratch: where a beam's marks may lie (cell units) */
+    int64_t *near_cell;          /* count, scratch: the one mark near the beam, -1 none, -2 several */
 } Costmap;
 
 /* Limits of the approximate direction's use (see costmap_integrate_scan): angles [rad], distances
@@ -73,6 +79,69 @@ static int ray_near_box(double gx, double gy, double dx, double dy, double limit
     if (!clip_to_slab(gy, dy, (double)y_lo - 1.0, (double)y_hi + 2.0, &t_lo, &t_hi))
         return 0;
     return t_lo <= t_hi;
+}
+
+/* The traversal of costmap_integrate_scan moved on to its state at distance s (cell units), from a
+ * state whose steps were all taken below s: every x step below s, then every y step below s, each
+ * with the loop's own additions in its order. The loop takes x when next_x < next_y, else y: it
+ * takes the x steps X_0 < X_1 < ... and the y steps Y_0 < Y_1 < ... merged in order (a y first on
+ * a tie), so it passes through the state with i x steps and j y steps taken exactly when
+ * X_{i-1} < Y_j and Y_{j-1} <= X_i; with i, j the counts of steps below s, X_{i-1} < s <= Y_j and
+ * Y_{j-1} < s <= X_i. The cells it leaves before s are skipped. */
+static inline void skip_to(double s, double *next_x, double *next_y, int64_t *ix, int64_t *iy, double delta_x,
+                           double delta_y, int64_t step_x, int64_t step_y)
+{
+    double x = *next_x, y = *next_y;
+    int64_t cx = *ix, cy = *iy;
+    while (x < s) {
+        x += delta_x;
+        cx += step_x;
+    }
+    while (y < s) {
+        y += delta_y;
+        cy += step_y;
+    }
+    *next_x = x;
+    *next_y = y;
+    *ix = cx;
+    *iy = cy;
+}
+
+/* A cell's half diagonal and more (cell units): a ray that touches a cell passes within this of its
+ * centre. */
+#define CELL_REACH 0.7072
+
+/* Note the mark at cell (cx, cy) (traversal units) for the beams that may touch it, for a scan from
+ * (gx, gy) (cell units) at heading theta, with evenly spread beams (`Costmap.uniform`): a ray that
+ * touches the cell passes within CELL_REACH of its centre, at distance rho from the sensor, so its
+ * direction is within asin(CELL_REACH / rho) of the centre's and it touches the cell between
+ * rho - 2 CELL_REACH and rho + CELL_REACH along the ray. The window of beams is widened by 1e-6 rad
+ * and a beam on either side (the beams' angles are within 1e-9 rad of the even spread, the
+ * rounding of the angles here far less); `near_from`/`near_to` get [rho - 2, rho + 2]. */
+static void note_mark(const Costmap *m, double gx, double gy, double theta, int64_t cx, int64_t cy)
+{
+    double px = (double)cx + 0.5 - gx, py = (double)cy + 0.5 - gy;
+    double rho = hypot(px, py);
+    int64_t count = m->count, lo = 0, hi = count - 1;
+    if (rho > 1.0) {
+        double width = asin(CELL_REACH / rho) + 1e-6;
+        double centre = (atan2(py, px) - theta - m->first_angle) / m->step;
+        double reach = width / m->step + 1.0;
+        lo = (int64_t)floor(centre - reach);
+        hi = (int64_t)floor(centre + reach) + 1;
+        if (hi - lo >= count) {
+            lo = 0;
+            hi = count - 1;
+        }
+    }
+    int64_t cell = (m->rows - 1 - cy) * m->cols + cx;
+    for (int64_t k = lo; k <= hi; k++) {
+        int64_t beam = k % count;
+        beam += beam < 0 ? count : 0;
+        m->near_from[beam] = py_min(m->near_from[beam], rho - 2.0);
+        m->near_to[beam] = py_max(m->near_to[beam], rho + 2.0);
+        m->near_cell[beam] = m->near_cell[beam] == -1 ? cell : -2;
+    }
 }
 
 /* Mark each return's cell and clear the marked cells before it (see costmap.py's docstring), for
@@ -128,6 +197,19 @@ int64_t costmap_integrate_scan(const Costmap *m, double x, double y, double thet
         }
     int fast = fabs(theta) <= FAST_ANGLE && fabs(gx) <= FAST_COORDINATE && fabs(gy) <= FAST_COORDINATE;
     double cos_theta = fast ? cos(theta) : 0.0, sin_theta = fast ? sin(theta) : 0.0;
+    int by_marks = fast && m->uniform; /* the beams near each mark, found once a scan */
+    if (by_marks) {
+        for (int64_t beam = 0; beam < m->count; beam++) {
+            m->near_from[beam] = INFINITY;
+            m->near_to[beam] = -INFINITY;
+            m->near_cell[beam] = -1;
+        }
+        for (int64_t r = 0; x_lo <= x_hi && r < rows; r++)
+            if (row_marks[r])
+                for (int64_t c = x_lo; c <= x_hi; c++)
+                    if (marked[r * cols + c])
+                        note_mark(m, gx, gy, theta, c, rows - 1 - r);
+    }
     for (int64_t beam = 0; beam < m->count; beam++) {
         double distance = m->ranges[beam];
         int hit = isfinite(distance);
@@ -137,22 +219,39 @@ int64_t costmap_integrate_scan(const Costmap *m, double x, double y, double thet
                 continue;
         }
         double limit = distance / resolution;
+        /* The marked cells the ray may visit lie within [from, to] along it (cell units). */
+        double from = -INFINITY, to = INFINITY;
+        int may_clear = 1;
         if (fast && fabs(m->angles[beam]) <= FAST_ANGLE && limit <= FAST_LIMIT) {
             double ca = m->cos_angles[beam], sa = m->sin_angles[beam];
             double ax = cos_theta * ca - sin_theta * sa, ay = sin_theta * ca + cos_theta * sa;
-            if (!(x_lo <= x_hi && ray_near_box(gx, gy, ax, ay, limit, x_lo, x_hi, y_lo, y_hi))) {
-                if (!hit)
-                    continue; /* clears nothing, marks nothing */
+            int near;
+            if (by_marks) {
+                /* The ray's cells reach no further than limit + 1.5 (the last one's far side). */
+                near = m->near_from[beam] <= limit + 1.0;
+                from = m->near_from[beam] - 1.0;
+                to = m->near_to[beam] + 1.0;
+            } else {
+                near = x_lo <= x_hi && ray_near_box(gx, gy, ax, ay, limit, x_lo, x_hi, y_lo, y_hi);
+            }
+            /* Where the approximate mark point certainly lies (-1: not certain or outside the grid). */
+            int64_t certain = -1, outside = 0;
+            if (hit && (!near || m->near_cell[beam] >= 0)) {
                 double px = gx + ax * (limit + 1e-6), py = gy + ay * (limit + 1e-6);
                 double cx = floor_near(px - MARK_SLACK), cy = floor_near(py - MARK_SLACK);
                 if (cx == floor_near(px + MARK_SLACK) && cy == floor_near(py + MARK_SLACK)) {
-                    /* The exact mark point lies in cell (cx, cy). */
-                    if (!(cx >= 0 && cx < (double)cols && cy >= 0 && cy < (double)rows))
-                        continue;
-                    int64_t cell = (rows - 1 - (int64_t)cy) * cols + (int64_t)cx;
-                    if (marked[cell] || known[cell])
-                        continue;
+                    if (cx >= 0 && cx < (double)cols && cy >= 0 && cy < (double)rows)
+                        certain = (rows - 1 - (int64_t)cy) * cols + (int64_t)cx;
+                    else
+                        outside = 1;
                 }
+            }
+            if (!near) {
+                if (!hit || outside || (certain >= 0 && (marked[certain] || known[certain])))
+                    continue; /* clears nothing, marks nothing */
+                may_clear = 0;
+            } else if (by_marks && certain >= 0 && certain == m->near_cell[beam] && marked[certain]) {
+                continue; /* the only mark near the ray is its return's own cell: never cleared, marked */
             }
         }
         double dx = cos(theta + m->angles[beam]);
@@ -165,7 +264,9 @@ int64_t costmap_integrate_scan(const Costmap *m, double x, double y, double thet
         double next_y = dy > 0 ? ((double)(iy + 1) - gy) / dy : (dy < 0 ? (gy - (double)iy) / -dy : INFINITY);
         double delta_x = dx != 0 ? 1.0 / fabs(dx) : INFINITY;
         double delta_y = dy != 0 ? 1.0 / fabs(dy) : INFINITY;
-        int traverse = x_lo <= x_hi && ray_near_box(gx, gy, dx, dy, limit, x_lo, x_hi, y_lo, y_hi);
+        int traverse = may_clear && x_lo <= x_hi && ray_near_box(gx, gy, dx, dy, limit, x_lo, x_hi, y_lo, y_hi);
+        if (traverse && from > 0.0)
+            skip_to(py_min(from, limit), &next_x, &next_y, &ix, &iy, delta_x, delta_y, step_x, step_y);
         while (traverse) {
             double leaving = py_min(next_x, next_y); /* where the ray leaves cell (ix, iy) */
             if (hit && leaving >= limit)
@@ -179,8 +280,8 @@ int64_t costmap_integrate_scan(const Costmap *m, double x, double y, double thet
                     changed++;
                 }
             }
-            if (leaving >= limit)
-                break;
+            if (leaving >= limit || leaving >= to)
+                break; /* (past `to`: the cells further on are unmarked) */
             if (next_x < next_y) {
                 next_x += delta_x;
                 ix += step_x;
@@ -210,6 +311,8 @@ int64_t costmap_integrate_scan(const Costmap *m, double x, double y, double thet
                         y_lo = int_min(y_lo, cy);
                         y_hi = int_max(y_hi, cy);
                     }
+                    if (by_marks)
+                        note_mark(m, gx, gy, theta, cx, cy);
                     changed++;
                 }
             }
@@ -299,5 +402,11 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_FIELD(Costmap, col_marks);
     LAYOUT_FIELD(Costmap, cos_angles);
     LAYOUT_FIELD(Costmap, sin_angles);
+    LAYOUT_FIELD(Costmap, uniform);
+    LAYOUT_FIELD(Costmap, first_angle);
+    LAYOUT_FIELD(Costmap, step);
+    LAYOUT_FIELD(Costmap, near_from);
+    LAYOUT_FIELD(Costmap, near_to);
+    LAYOUT_FIELD(Costmap, near_cell);
     return n;
 }
