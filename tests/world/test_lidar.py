@@ -103,6 +103,46 @@ def test_grid_ray_casting_agrees_with_a_brute_force_march():
     assert ranges[hit] == pytest.approx(expected[hit], abs=2e-4)
 
 
+def test_the_grid_and_the_shapes_together_give_the_nearer_of_each_bit_for_bit():
+    """The sweep casts the shapes first and stops a beam's grid traversal past their nearest hit:
+    each distance is exactly the smaller of the grid's alone and the shapes' alone, shapes before,
+    at (a circle touching a wall's face) and behind the walls, the sensor in free space."""
+    rng = np.random.default_rng(3)
+    occupied = rng.random((80, 90)) < 0.02
+    occupied[:, 80] = True  # a wall whose face is x = 8.0 m
+    occupied[35:45, 15:25] = False  # the sensor's surroundings
+    circles = [Circle((9.0, 4.0), 1.0)]  # touches the wall's face at (8.0, 4.0)
+    circles += [Circle((rng.uniform(0, 9), rng.uniform(0, 8)), rng.uniform(0.1, 0.6)) for _ in range(25)]
+    shapes = [
+        *circles,
+        Rectangle((3.0, 6.5), (1.0, 0.4), yaw=0.3),
+        Polygon(((6.0, 1.0), (7.0, 1.5), (6.5, 2.5))),
+    ]
+    directions = np.column_stack([np.cos(a := np.linspace(-math.pi, math.pi, 720)), np.sin(a)])
+
+    def lidar(occupied, obstacles):
+        return Lidar(occupied=occupied, resolution=0.1, obstacles=obstacles, angles=[0.0], range_max=9.0)
+
+    both, grid, alone = lidar(occupied, shapes), lidar(occupied, []), lidar(None, shapes)
+    for x, y in [(2.0, 4.0), (2.03, 3.91), (2.2, 3.7)]:
+        expected = np.minimum(grid.measure(x, y, 0.0, directions), alone.measure(x, y, 0.0, directions))
+        measured = both.measure(x, y, 0.0, directions)
+        assert np.array_equal(measured, expected)
+        assert (measured < grid.measure(x, y, 0.0, directions)).sum() > 50  # shapes in front of walls
+    # The beam to the circle's touching point meets the wall and the circle at 6 m, to rounding.
+    wall = np.zeros_like(occupied)
+    wall[:, 80] = True
+    beam = np.array([[1.0, 0.0]])
+    at_wall = lidar(wall, []).measure(2.0, 4.0, 0.0, beam)[0]
+    at_circle = lidar(None, circles[:1]).measure(2.0, 4.0, 0.0, beam)[0]
+    assert at_wall == pytest.approx(6.0, abs=1e-12) and at_circle == pytest.approx(6.0, abs=1e-12)
+    assert lidar(wall, circles[:1]).measure(2.0, 4.0, 0.0, beam)[0] == min(at_wall, at_circle)
+    # A circle 1e-12 m behind the wall's face: the wall, just nearer, is still found.
+    behind = [Circle((9.0 + 1e-12, 4.0), 1.0)]
+    assert lidar(None, behind).measure(2.0, 4.0, 0.0, beam)[0] > at_wall
+    assert lidar(wall, behind).measure(2.0, 4.0, 0.0, beam)[0] == at_wall
+
+
 def noisy_scan(seed, range_noise, angle_noise):
     """2000 beams, all at nominal angle 0, against a wall at x = 5 m."""
     wall = Rectangle((5.5, 0.0), (1.0, 100.0))

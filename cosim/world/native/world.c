@@ -240,9 +240,13 @@ typedef struct {
     double *ranges;     /* the output, >= count */
 } Lidar;
 
-/* Distance [m] to the first occupied cell along each direction (inf when none within max_range).
- * Amanatides-Woo traversal: the ray visits cells in order, always crossing the nearer of the next
- * vertical or horizontal cell boundary. */
+/* Lower `out` to the distance [m] to the first occupied cell along each direction, where that is
+ * nearer (`out` unchanged when none lies within max_range). Amanatides-Woo traversal: the ray
+ * visits cells in order, always crossing the nearer of the next vertical or horizontal cell
+ * boundary. A cell is entered at `travelled` (cell units), never less than the cells before it,
+ * so the traversal stops once travelled * resolution exceeds out[beam] (the shapes' nearest hit):
+ * an occupied cell from there on would not lower it. The bound in cell units is taken a few ulp
+ * high (1e-12 relative), so a cell entered at or below out[beam] is still visited. */
 static void cast_grid(const Lidar *s, double x, double y, const double *directions, int64_t n, double max_range,
                       double *out)
 {
@@ -250,11 +254,13 @@ static void cast_grid(const Lidar *s, double x, double y, const double *directio
     double resolution = s->resolution;
     double gx = (x - s->origin_x) / resolution;
     double gy = (y - s->origin_y) / resolution;
-    double limit = max_range / resolution;
+    double range_limit = max_range / resolution;
     int64_t start_x = (int64_t)floor(gx);
     int64_t start_y = (int64_t)floor(gy);
     for (int64_t beam = 0; beam < n; beam++) {
         double dx = directions[2 * beam], dy = directions[2 * beam + 1];
+        double bound = out[beam] / resolution * (1.0 + 1e-12);
+        double limit = bound < range_limit ? bound : range_limit;
         int64_t ix = start_x, iy = start_y;
         int64_t step_x = dx > 0 ? 1 : -1;
         int64_t step_y = dy > 0 ? 1 : -1;
@@ -263,11 +269,10 @@ static void cast_grid(const Lidar *s, double x, double y, const double *directio
         double delta_x = dx != 0 ? 1.0 / fabs(dx) : INFINITY;
         double delta_y = dy != 0 ? 1.0 / fabs(dy) : INFINITY;
         double travelled = 0.0;
-        out[beam] = INFINITY;
         while (travelled <= limit) {
             if (0 <= ix && ix < cols && 0 <= iy && iy < rows) {
                 if (s->occupied_up[iy * cols + ix]) {
-                    out[beam] = travelled * resolution;
+                    out[beam] = py_min(travelled * resolution, out[beam]);
                     break;
                 }
             } else if ((ix < 0 && step_x < 0) || (ix >= cols && step_x > 0)) {
@@ -359,8 +364,10 @@ static int inside_polygons(const Lidar *s, double x, double y)
  * inf for no hit within range_max, all 0 inside a polygon. */
 void lidar_measure(const Lidar *s, double x, double y, const double *directions, int64_t n, double *out)
 {
-    cast_grid(s, x, y, directions, n, s->range_max, out);
+    for (int64_t beam = 0; beam < n; beam++)
+        out[beam] = INFINITY;
     cast_shapes(s, x, y, directions, n, out, INFINITY);
+    cast_grid(s, x, y, directions, n, s->range_max, out);
     if (inside_polygons(s, x, y))
         for (int64_t beam = 0; beam < n; beam++)
             out[beam] = 0.0;
@@ -378,8 +385,10 @@ void lidar_scan(const Lidar *s, double x, double y, double theta)
         directions[2 * beam] = cos(cast);
         directions[2 * beam + 1] = sin(cast);
     }
-    cast_grid(s, x, y, directions, count, s->range_max, ranges);
+    for (int64_t beam = 0; beam < count; beam++)
+        ranges[beam] = INFINITY;
     cast_shapes(s, x, y, directions, count, ranges, s->range_max);
+    cast_grid(s, x, y, directions, count, s->range_max, ranges);
     int inside = inside_polygons(s, x, y);
     for (int64_t beam = 0; beam < count; beam++) {
         double distance = inside ? 0.0 : ranges[beam];
