@@ -58,6 +58,10 @@ def _kernels() -> ctypes.CDLL:
             {
                 "costmap_integrate_scan": (_i64, [_p, _f64, _f64, _f64]),
                 "costmap_new_marks_near": (ctypes.c_int, [_p, _p, _p, _i64, _f64]),
+                "costmap_new_marks_maybe_near": (
+                    ctypes.c_int,
+                    [_p, _p, _p, _p, _i64, _i64, _f64, _f64, _f64],
+                ),
                 "path_progress": (_f64, [_p, _p, _i64, _i64, _f64, _f64, ctypes.POINTER(_i64)]),
             },
         )
@@ -98,7 +102,7 @@ class Costmap(kernels.Bound):
         self._near_cell = np.empty(count, dtype=np.int64)
         self._bind()
 
-    _BOUND = ("_arrays", "_address", "_integrate", "_new_marks_near")
+    _BOUND = ("_arrays", "_address", "_integrate", "_new_marks_near", "_maybe_near")
 
     def _bind(self) -> None:
         """The kernel's struct: addresses of the marks, known cells, beams, scan buffer and counts."""
@@ -118,6 +122,7 @@ class Costmap(kernels.Bound):
         self._address = ctypes.addressof(self._arrays)
         library = _kernels()
         self._integrate, self._new_marks_near = library.costmap_integrate_scan, library.costmap_new_marks_near
+        self._maybe_near = library.costmap_new_marks_maybe_near
 
     @property
     def marked(self) -> np.ndarray:
@@ -163,3 +168,17 @@ class Costmap(kernels.Bound):
                 self._address, since.ctypes.data, points.ctypes.data, len(points), float(radius)
             )
         )
+
+    def new_marks_maybe_near(
+        self, since: np.ndarray, plan: tuple[int, int, int], first: int, low: float, high: float,
+        radius: float,
+    ) -> bool:  # fmt: skip
+        """False when `new_marks_near` is certainly False for every point interpolated on the plan
+        at arc lengths `low` to `high` [m] (np.interp of the plan's points against their arc
+        lengths), so those points need not be made: no mark newer than `since` in the window it
+        would search round the box of the plan's points that bracket them. `plan`: addresses of
+        the points (N x 2) and arc lengths (N), C-contiguous float64, and N; `first`: a point whose
+        arc length is at most `low`. `since` is the costmap's shape (C-contiguous bool), unchecked."""
+        points, arc, count = plan
+        address = since.ctypes.data
+        return bool(self._maybe_near(self._address, address, points, arc, count, first, low, high, radius))

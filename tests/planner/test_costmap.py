@@ -205,3 +205,42 @@ def test_path_progress_is_the_numpy_description_bit_for_bit():
         progress = function(points.ctypes.data, arc.ctypes.data, first, stop, x, y, ctypes.byref(segment))
         expected_segment, expected = _progress_numpy(points, arc, first, stop, x, y)
         assert (segment.value, progress) == (expected_segment, expected)
+
+
+def test_the_look_round_the_plan_never_misses_a_new_mark_near_its_points():
+    """`new_marks_maybe_near` says "no" only when `new_marks_near` on the planner's points ahead
+    (np.interp every half cell along the plan, as `PlannerComponent._plan_ahead` makes them) is
+    False; and it does say "no" for marks away from the plan."""
+    rng = np.random.default_rng(5)
+    grid = OccupancyGrid(np.zeros((40, 50), dtype=bool), 0.5, (1.0, -2.0))
+    costmap = Costmap(grid, evenly_spaced_beams_full(90), 0.0, 10.0)
+    answers = set()
+    for _ in range(300):
+        waypoints = np.cumsum(rng.normal(0.0, 1.2, (rng.integers(2, 12), 2)), axis=0) + (13.0, 8.0)
+        waypoints[rng.random(len(waypoints)) < 0.1] = waypoints[0]  # repeated points: zero-length segments
+        waypoints = np.ascontiguousarray(waypoints)
+        arc = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(waypoints, axis=0).T))))
+        since = costmap.snapshot()
+        x, y, theta = rng.uniform(2, 24), rng.uniform(-1, 17), rng.uniform(-4, 4)
+        ranges = rng.uniform(0.3, 10.0, 90)
+        ranges[rng.random(90) < 0.5] = np.nan
+        costmap.integrate(x, y, theta, ranges)
+        segment = int(rng.integers(0, len(waypoints) - 1))
+        progress = arc[segment] + rng.uniform(0.0, 1.0) * (arc[segment + 1] - arc[segment])
+        horizon, spacing, radius = rng.uniform(0.5, 4.0), 0.25, rng.uniform(0.2, 1.0)
+        along = np.arange(progress, min(progress + horizon, arc[-1]) + spacing, spacing)
+        along = along[along <= arc[-1]]
+        points = np.column_stack(
+            (np.interp(along, arc, waypoints[:, 0]), np.interp(along, arc, waypoints[:, 1]))
+        )
+        exact = costmap.new_marks_near(points, radius, since)
+        high = min(progress + horizon, arc[-1]) + 2.0 * spacing
+        plan = (waypoints.ctypes.data, arc.ctypes.data, len(waypoints))
+        maybe = costmap.new_marks_maybe_near(since, plan, segment, progress, high, radius)
+        assert maybe or not exact
+        answers.add((maybe, exact))
+    assert answers == {(False, False), (True, False), (True, True)}
+
+
+def evenly_spaced_beams_full(count):
+    return np.linspace(-math.pi, math.pi, count, endpoint=False)

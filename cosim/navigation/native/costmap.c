@@ -349,6 +349,54 @@ int costmap_new_marks_near(const Costmap *m, const uint8_t *since, const double 
     return 0;
 }
 
+/* Can `costmap_new_marks_near` find a new mark (marked now, not in `since`) near the points of the
+ * plan (points n x 2, arc n: arc length [m] at each point) interpolated at arc lengths from `low`
+ * to `high` [m], given that each such point lies on a segment between two of the plan's points
+ * whose arc lengths bracket it? 0 when certainly not: no new mark in the window that search
+ * examines round any point of the bounding box of those plan points (widened by 1e-9 relative,
+ * far more than the interpolation's rounding); 1 when it may. `first`: a point whose arc length is
+ * at most `low` (the planner's current segment). */
+int costmap_new_marks_maybe_near(const Costmap *m, const uint8_t *since, const double *points, const double *arc,
+                                 int64_t n, int64_t first, double low, double high, double radius)
+{
+    if (n <= 0 || first < 0 || first >= n || !(low >= arc[first]))
+        return 1;
+    while (first + 1 < n && arc[first + 1] <= low)
+        first++;
+    int64_t last = first;
+    while (last + 1 < n && !(arc[last] >= high))
+        last++;
+    double x_min = INFINITY, x_max = -INFINITY, y_min = INFINITY, y_max = -INFINITY;
+    for (int64_t k = first; k <= last; k++) {
+        x_min = py_min(x_min, points[2 * k]);
+        x_max = py_max(x_max, points[2 * k]);
+        y_min = py_min(y_min, points[2 * k + 1]);
+        y_max = py_max(y_max, points[2 * k + 1]);
+    }
+    if (!(isfinite(x_min) && isfinite(x_max) && isfinite(y_min) && isfinite(y_max)))
+        return 1;
+    x_min -= 1e-9 * (1.0 + fabs(x_min));
+    x_max += 1e-9 * (1.0 + fabs(x_max));
+    y_min -= 1e-9 * (1.0 + fabs(y_min));
+    y_max += 1e-9 * (1.0 + fabs(y_max));
+    int64_t rows = m->rows, cols = m->cols;
+    double resolution = m->resolution;
+    int64_t reach = (int64_t)ceil(radius / resolution) + 1; /* as costmap_new_marks_near */
+    double lo_x = floor((x_min - m->origin_x) / resolution), hi_x = floor((x_max - m->origin_x) / resolution);
+    double lo_y = floor((y_min - m->origin_y) / resolution), hi_y = floor((y_max - m->origin_y) / resolution);
+    if (!(fabs(lo_x) < 1e15 && fabs(hi_x) < 1e15 && fabs(lo_y) < 1e15 && fabs(hi_y) < 1e15))
+        return 1;
+    int64_t cx_lo = int_max((int64_t)lo_x - reach, 0), cx_stop = int_min((int64_t)hi_x + reach + 1, cols);
+    int64_t cy_lo = int_max((int64_t)lo_y - reach, 0), cy_stop = int_min((int64_t)hi_y + reach + 1, rows);
+    for (int64_t cy = cy_lo; cy < cy_stop; cy++) {
+        int64_t row = rows - 1 - cy;
+        for (int64_t cx = cx_lo; cx < cx_stop; cx++)
+            if (m->marked[row * cols + cx] && !since[row * cols + cx])
+                return 1;
+    }
+    return 0;
+}
+
 /* The planner's progress along its plan (`PlannerComponent._advance_progress`): of the segments
  * points[first..stop] (points n x 2, segment j from point j to j + 1), the one whose closest point
  * is nearest to (x, y), the first of equals. Its index goes to *segment; returns the progress [m]
