@@ -14,8 +14,10 @@ lies within `radius` of any of the points: a newly seen obstacle on the plan.
 
 Both run in C (native/costmap.c: Amanatides-Woo traversal of each beam), given the marks, the
 known cells and the beams once as a struct. Only marked cells can be cleared, so a beam is
-traversed only when it passes near the box of the marks (kept from per-row and per-column counts
-of the marks); `marked` is therefore read-only outside `integrate`.
+traversed only where it may meet a mark: for beams evenly spread round the full turn, over the
+distances where a mark lies within its window of directions (found from each mark once a scan);
+for others, when it passes near the box of the marks (kept from per-row and per-column counts of
+the marks). `marked` is therefore read-only outside `integrate`.
 """
 
 from __future__ import annotations

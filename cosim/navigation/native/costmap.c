@@ -107,28 +107,37 @@ static inline void skip_to(double s, double *next_x, double *next_y, int64_t *ix
     *iy = cy;
 }
 
-/* A cell's half diagonal and more (cell units): a ray that touches a cell passes within this of its
- * centre. */
-#define CELL_REACH 0.7072
-
 /* Note the mark at cell (cx, cy) (traversal units) for the beams that may touch it, for a scan from
- * (gx, gy) (cell units) at heading theta, with evenly spread beams (`Costmap.uniform`): a ray that
- * touches the cell passes within CELL_REACH of its centre, at distance rho from the sensor, so its
- * direction is within asin(CELL_REACH / rho) of the centre's and it touches the cell between
- * rho - 2 CELL_REACH and rho + CELL_REACH along the ray. The window of beams is widened by 1e-6 rad
- * and a beam on either side (the beams' angles are within 1e-9 rad of the even spread, the
- * rounding of the angles here far less); `near_from`/`near_to` get [rho - 2, rho + 2]. */
+ * (gx, gy) (cell units) at heading theta, with evenly spread beams (`Costmap.uniform`). A ray that
+ * touches the cell points between the directions of its corners (seen from outside the cell, they
+ * span less than a half turn) and touches it at distances from the cell's nearest point to its
+ * farthest corner. The beams whose angles lie in that span, widened by 1e-8 rad (the beams' angles
+ * are within 1e-9 rad of the even spread; theta + angle and atan2 round far less), get the
+ * distances in `near_from` (less 1e-6) and `near_to`; every beam when the sensor is within
+ * 1e-3 cells of the cell. */
+#define HALF_TURN 3.14159265358979323846
 static void note_mark(const Costmap *m, double gx, double gy, double theta, int64_t cx, int64_t cy)
 {
-    double px = (double)cx + 0.5 - gx, py = (double)cy + 0.5 - gy;
-    double rho = hypot(px, py);
+    double x0 = (double)cx - gx, y0 = (double)cy - gy; /* the cell's lower left corner */
+    double nearest_x = x0 > 0.0 ? x0 : (x0 + 1.0 < 0.0 ? x0 + 1.0 : 0.0);
+    double nearest_y = y0 > 0.0 ? y0 : (y0 + 1.0 < 0.0 ? y0 + 1.0 : 0.0);
+    double near = hypot(nearest_x, nearest_y);
+    double far = 0.0;
     int64_t count = m->count, lo = 0, hi = count - 1;
-    if (rho > 1.0) {
-        double width = asin(CELL_REACH / rho) + 1e-6;
-        double centre = (atan2(py, px) - theta - m->first_angle) / m->step;
-        double reach = width / m->step + 1.0;
-        lo = (int64_t)floor(centre - reach);
-        hi = (int64_t)floor(centre + reach) + 1;
+    double corners[4][2] = {{x0, y0}, {x0 + 1.0, y0}, {x0, y0 + 1.0}, {x0 + 1.0, y0 + 1.0}};
+    for (int corner = 0; corner < 4; corner++)
+        far = py_max(far, hypot(corners[corner][0], corners[corner][1]));
+    if (near > 1e-3) {
+        double centre = atan2(y0 + 0.5, x0 + 0.5), low = 0.0, high = 0.0;
+        for (int corner = 0; corner < 4; corner++) {
+            double turn = atan2(corners[corner][1], corners[corner][0]) - centre;
+            turn += turn > HALF_TURN ? -2.0 * HALF_TURN : (turn < -HALF_TURN ? 2.0 * HALF_TURN : 0.0);
+            low = py_min(low, turn);
+            high = py_max(high, turn);
+        }
+        double base = centre - theta - m->first_angle;
+        lo = (int64_t)ceil((base + low - 1e-8) / m->step);
+        hi = (int64_t)floor((base + high + 1e-8) / m->step);
         if (hi - lo >= count) {
             lo = 0;
             hi = count - 1;
@@ -138,8 +147,8 @@ static void note_mark(const Costmap *m, double gx, double gy, double theta, int6
     for (int64_t k = lo; k <= hi; k++) {
         int64_t beam = k % count;
         beam += beam < 0 ? count : 0;
-        m->near_from[beam] = py_min(m->near_from[beam], rho - 2.0);
-        m->near_to[beam] = py_max(m->near_to[beam], rho + 2.0);
+        m->near_from[beam] = py_min(m->near_from[beam], near - 1e-6);
+        m->near_to[beam] = py_max(m->near_to[beam], far);
         m->near_cell[beam] = m->near_cell[beam] == -1 ? cell : -2;
     }
 }
@@ -147,19 +156,24 @@ static void note_mark(const Costmap *m, double gx, double gy, double theta, int6
 /* Mark each return's cell and clear the marked cells before it (see costmap.py's docstring), for
  * the scan in `ranges` taken at pose (x, y, theta). Returns the number of changed cells.
  *
- * Only marked cells can be cleared, so a beam is traversed only when it passes within a cell of the
- * box of the marked cells (the box grows with each mark of this scan): the cells a skipped beam
- * would visit are all unmarked. A pose that is not finite (or absurdly far, 1e15 cells) changes
- * nothing.
+ * Only marked cells can be cleared, so a beam is traversed only where it may meet one. A pose that
+ * is not finite (or absurdly far, 1e15 cells) changes nothing.
  *
  * The exact direction (cos and sin of theta + angle, as the Python kernel had them) costs most of
  * a beam that is not traversed. So a beam first takes an approximate direction from the angle sum
  * formula: it differs from the exact one by less than 2e-12 (theta and angle within FAST_ANGLE),
- * so less than 1e-7 cells at the end of a ray of FAST_LIMIT cells. That decides, exactly, a beam
- * that passes a cell or more from the box of the marks and whose return's cell is certain (its
- * approximate mark point is more than MARK_SLACK from a cell boundary; the exact point lies 1e-6
- * cells past the surface) and outside the grid, known or already marked: such a beam changes
- * nothing. Every other beam takes the exact direction and the exact path below. */
+ * so less than 1e-7 cells at the end of a ray of FAST_LIMIT cells. Where the marks may lie:
+ * - beams evenly spread round the full turn (`uniform`, a 360-degree lidar): the beams that may
+ *   touch each mark, and at what distances, are found once a scan from the mark (`note_mark`;
+ *   the marks set during the scan are noted as they are set). A beam meets no mark when none lies
+ *   nearer than its limit; else it is traversed only over the distances where its marks lie
+ *   (`skip_to` to the first, stopping past the last); a beam whose one mark is its return's own
+ *   cell, already marked, changes nothing (the traversal stops before the return's cell);
+ * - other beams: a beam that passes a cell or more from the box of the marks meets none.
+ * A beam that meets no mark and whose return's cell is certain (its approximate mark point is
+ * more than MARK_SLACK from a cell boundary; the exact point lies 1e-6 cells past the surface) and
+ * outside the grid, known or already marked changes nothing. Every other beam takes the exact
+ * direction and the exact path below. */
 int64_t costmap_integrate_scan(const Costmap *m, double x, double y, double theta)
 {
     int64_t rows = m->rows, cols = m->cols;
@@ -227,8 +241,9 @@ int64_t costmap_integrate_scan(const Costmap *m, double x, double y, double thet
             double ax = cos_theta * ca - sin_theta * sa, ay = sin_theta * ca + cos_theta * sa;
             int near;
             if (by_marks) {
-                /* The ray's cells reach no further than limit + 1.5 (the last one's far side). */
-                near = m->near_from[beam] <= limit + 1.0;
+                /* The traversal looks at cells it enters before `limit`, and a mark lies no nearer
+                 * than near_from along the ray. */
+                near = m->near_from[beam] < limit;
                 from = m->near_from[beam] - 1.0;
                 to = m->near_to[beam] + 1.0;
             } else {
