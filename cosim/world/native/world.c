@@ -238,7 +238,41 @@ typedef struct {
     int64_t n_starts;
     double *directions; /* count x 2 scratch */
     double *ranges;     /* the output, >= count */
+    /* rows x cols as occupied_up: the Chebyshev distance (cells) from each cell to the nearest
+     * occupied one, at most 255 (`lidar_clearance`); 0 marks an occupied cell. */
+    const uint8_t *clearance;
 } Lidar;
+
+/* `Lidar.clearance` of an occupancy grid (rows x cols, nonzero occupied): two passes of the
+ * chamfer with the eight neighbours at distance 1, the exact Chebyshev distance to the nearest
+ * occupied cell of the grid (cells outside it are free), at most 255. */
+void lidar_clearance(const uint8_t *occupied, int64_t rows, int64_t cols, uint8_t *out)
+{
+    for (int64_t r = 0; r < rows; r++)
+        for (int64_t c = 0; c < cols; c++) {
+            int64_t d = occupied[r * cols + c] ? 0 : 255;
+            if (d && r > 0) {
+                for (int64_t k = c - 1; k <= c + 1; k++)
+                    if (0 <= k && k < cols)
+                        d = int_min(d, (int64_t)out[(r - 1) * cols + k] + 1);
+            }
+            if (d && c > 0)
+                d = int_min(d, (int64_t)out[r * cols + c - 1] + 1);
+            out[r * cols + c] = (uint8_t)d;
+        }
+    for (int64_t r = rows - 1; r >= 0; r--)
+        for (int64_t c = cols - 1; c >= 0; c--) {
+            int64_t d = out[r * cols + c];
+            if (d && r < rows - 1) {
+                for (int64_t k = c - 1; k <= c + 1; k++)
+                    if (0 <= k && k < cols)
+                        d = int_min(d, (int64_t)out[(r + 1) * cols + k] + 1);
+            }
+            if (d && c < cols - 1)
+                d = int_min(d, (int64_t)out[r * cols + c + 1] + 1);
+            out[r * cols + c] = (uint8_t)d;
+        }
+}
 
 /* Lower `out` to the distance [m] to the first occupied cell along each direction, where that is
  * nearer (`out` unchanged when none lies within max_range). Amanatides-Woo traversal: the ray
@@ -246,7 +280,17 @@ typedef struct {
  * boundary. A cell is entered at `travelled` (cell units), never less than the cells before it,
  * so the traversal stops once travelled * resolution exceeds out[beam] (the shapes' nearest hit):
  * an occupied cell from there on would not lower it. The bound in cell units is taken a few ulp
- * high (1e-12 relative), so a cell entered at or below out[beam] is still visited. */
+ * high (1e-12 relative), so a cell entered at or below out[beam] is still visited.
+ *
+ * Free space is crossed in strides: from a cell entered at `travelled` whose clearance is c >= 6,
+ * the ray's points up to L = (c - 2.01) / max(|dx|, |dy|) further lie within c - 1 cells
+ * (Chebyshev) of it, all free, so the traversal moves straight on to its state at travelled + L:
+ * every x step below that distance, then every y step, with the additions of the cell-by-cell loop
+ * in its order. The loop takes x when next_x < next_y, else y: the x steps X_0 < X_1 < ... and
+ * the y steps Y_0 < Y_1 < ... merged in order (a y first on a tie), so it passes through the state
+ * with i x steps and j y steps taken exactly when X_{i-1} < Y_j and Y_{j-1} <= X_i; with i, j the
+ * counts of steps below s, X_{i-1} < s <= Y_j and Y_{j-1} < s <= X_i. From there the loop goes on
+ * as before: the distances it reports are the cell-by-cell loop's. */
 static void cast_grid(const Lidar *s, double x, double y, const double *directions, int64_t n, double max_range,
                       double *out)
 {
@@ -257,6 +301,7 @@ static void cast_grid(const Lidar *s, double x, double y, const double *directio
     double range_limit = max_range / resolution;
     int64_t start_x = (int64_t)floor(gx);
     int64_t start_y = (int64_t)floor(gy);
+    const uint8_t *clearance = s->clearance;
     for (int64_t beam = 0; beam < n; beam++) {
         double dx = directions[2 * beam], dy = directions[2 * beam + 1];
         double bound = out[beam] / resolution * (1.0 + 1e-12);
@@ -268,12 +313,27 @@ static void cast_grid(const Lidar *s, double x, double y, const double *directio
         double next_y = dy > 0 ? ((double)(iy + 1) - gy) / dy : (dy < 0 ? (gy - (double)iy) / -dy : INFINITY);
         double delta_x = dx != 0 ? 1.0 / fabs(dx) : INFINITY;
         double delta_y = dy != 0 ? 1.0 / fabs(dy) : INFINITY;
+        double stride = 1.0 / py_max(fabs(dx), fabs(dy)); /* distance per cell of Chebyshev offset */
         double travelled = 0.0;
         while (travelled <= limit) {
             if (0 <= ix && ix < cols && 0 <= iy && iy < rows) {
-                if (s->occupied_up[iy * cols + ix]) {
+                int64_t c = clearance[iy * cols + ix];
+                if (!c) {
                     out[beam] = py_min(travelled * resolution, out[beam]);
                     break;
+                }
+                if (c >= 6) {
+                    double target = travelled + ((double)c - 2.01) * stride;
+                    while (next_x < target) {
+                        next_x += delta_x;
+                        ix += step_x;
+                    }
+                    while (next_y < target) {
+                        next_y += delta_y;
+                        iy += step_y;
+                    }
+                    /* Then one step as below from the cell reached, free (a stride shorter than the
+                     * cell leaves it where it was): `travelled` is that step's. */
                 }
             } else if ((ix < 0 && step_x < 0) || (ix >= cols && step_x > 0)) {
                 break; /* left the grid for good in x */
@@ -466,5 +526,6 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_FIELD(Lidar, n_starts);
     LAYOUT_FIELD(Lidar, directions);
     LAYOUT_FIELD(Lidar, ranges);
+    LAYOUT_FIELD(Lidar, clearance);
     return n;
 }
