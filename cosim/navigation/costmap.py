@@ -97,9 +97,10 @@ class Costmap(kernels.Bound):
         # Beams evenly spread round the full turn (a 360-degree lidar): the kernel then finds the
         # beams near each mark once a scan, and traverses a beam only where a mark may lie on it.
         count = len(self.angles)
-        self._step = 2.0 * math.pi / count
-        spread = self.angles[0] + np.arange(count) * self._step
-        self._uniform = bool(np.all(np.abs(self.angles - spread) <= 1e-9))
+        self._step = 2.0 * math.pi / max(count, 1)
+        self._first = float(self.angles[0]) if count else 0.0
+        spread = self._first + np.arange(count) * self._step
+        self._uniform = count > 0 and bool(np.all(np.abs(self.angles - spread) <= 1e-9))
         self._near_from, self._near_to = np.empty(count), np.empty(count)  # the kernel's scratch
         self._near_cell = np.empty(count, dtype=np.int64)
         self._bind()
@@ -117,7 +118,7 @@ class Costmap(kernels.Bound):
             clear_to=self.clear_to,
             row_marks=self._row_marks.ctypes.data, col_marks=self._col_marks.ctypes.data,
             cos_angles=self._cos_angles.ctypes.data, sin_angles=self._sin_angles.ctypes.data,
-            uniform=int(self._uniform), first_angle=float(self.angles[0]), step=self._step,
+            uniform=int(self._uniform), first_angle=self._first, step=self._step,
             near_from=self._near_from.ctypes.data, near_to=self._near_to.ctypes.data,
             near_cell=self._near_cell.ctypes.data,
         )  # fmt: skip
