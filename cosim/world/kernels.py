@@ -133,6 +133,7 @@ def library() -> ctypes.CDLL:
                 "lidar_measure": (None, [_p, _f64, _f64, _p, _i64, _p]),
                 "lidar_scan": (None, [_p, _f64, _f64, _f64]),
                 "lidar_clearance": (None, [_p, _i64, _i64, _p]),
+                "fleet_gaps": (None, [_p, _i64, _i64, _p, _p, _i64, _p, _p, _p, _p]),
                 "world_hypot": (_f64, [_f64, _f64]),
                 "world_check_positions": (_i64, [_p, _i64]),
             },

@@ -459,6 +459,54 @@ void lidar_scan(const Lidar *s, double x, double y, double theta)
     }
 }
 
+/* ------------------------------------------------------------- fleet contacts (fleet.py) */
+
+/* `FleetContacts.steps`'s gaps: robots at positions[k] (steps + 1 rows of n x 2) before step k and
+ * positions[k + 1] after it; for each step k and pair p (robots first[p], second[p]) the least gap
+ * [m] over the step, gap[k * pairs + p] (the distance at the closest approach of the linearly
+ * moving offset minus reach[p]), and the gap at the step's end, end_gap[k * pairs + p]. The
+ * operations of the NumPy description it replaced, in its order, element by element: the offsets
+ * b - a, w = d1 - d0, s* = -(d0.w) / (w.w) where w.w > 0 (else 0) clipped to [0, 1], then
+ * hypot(d0 + s* w) - reach (hypot: NumPy's is the C library's).
+ *
+ * Both are +inf instead for a pair that is certainly farther apart during the step than
+ * floor[a] and floor[b] and 0 (the callers' minimum clearances: such a gap changes neither, nor
+ * any contact): on each axis the offset stays at least the smaller of its magnitudes at the ends
+ * when it keeps its sign, and the distance is at least the larger axis's bound (taken 1e-12
+ * relative low, far more than the rounding). */
+void fleet_gaps(const double *positions, int64_t steps, int64_t n, const int64_t *first, const int64_t *second,
+                int64_t pairs, const double *reach, const double *floor_, double *gap, double *end_gap)
+{
+    for (int64_t k = 0; k < steps; k++) {
+        const double *before = positions + 2 * n * k, *after = positions + 2 * n * (k + 1);
+        for (int64_t p = 0; p < pairs; p++) {
+            int64_t a = first[p], b = second[p];
+            double d0x = before[2 * b] - before[2 * a], d0y = before[2 * b + 1] - before[2 * a + 1];
+            double d1x = after[2 * b] - after[2 * a], d1y = after[2 * b + 1] - after[2 * a + 1];
+            double low_x = d0x * d1x > 0.0 ? py_min(fabs(d0x), fabs(d1x)) : 0.0;
+            double low_y = d0y * d1y > 0.0 ? py_min(fabs(d0y), fabs(d1y)) : 0.0;
+            double low = py_max(low_x, low_y) * (1.0 - 1e-12) - reach[p];
+            if (low > 0.0 && low > floor_[a] && low > floor_[b]) {
+                gap[k * pairs + p] = INFINITY;
+                end_gap[k * pairs + p] = INFINITY;
+                continue;
+            }
+            double wx = d1x - d0x, wy = d1y - d0y;
+            double ww = wx * wx + wy * wy;
+            double dw = d0x * wx + d0y * wy;
+            double s_star = 0.0;
+            if (ww > 0.0)
+                s_star = -dw / ww;
+            if (s_star < 0.0)
+                s_star = 0.0;
+            else if (s_star > 1.0)
+                s_star = 1.0;
+            gap[k * pairs + p] = hypot(d0x + s_star * wx, d0y + s_star * wy) - reach[p];
+            end_gap[k * pairs + p] = hypot(d1x, d1y) - reach[p];
+        }
+    }
+}
+
 /* The tables Python mirrors (see layout.h). */
 int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
 {
