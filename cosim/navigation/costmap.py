@@ -14,13 +14,16 @@ lies within `radius` of any of the points: a newly seen obstacle on the plan.
 
 Both run in C (native/costmap.c: Amanatides-Woo traversal of each beam), given the marks, the
 known cells and the beams once as a struct. Only marked cells can be cleared, so a beam is
-traversed only when it passes near the box of the marks (kept from per-row and per-column counts
-of the marks); `marked` is therefore read-only outside `integrate`.
+traversed only where it may meet a mark: for beams evenly spread round the full turn, over the
+distances where a mark lies within its window of directions (found from each mark once a scan);
+for others, when it passes near the box of the marks (kept from per-row and per-column counts of
+the marks). `marked` is therefore read-only outside `integrate`.
 """
 
 from __future__ import annotations
 
 import ctypes
+import math
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +43,8 @@ class _Arrays(ctypes.Structure):
         ("origin_x", _f64), ("origin_y", _f64), ("resolution", _f64),
         ("angles", _p), ("count", _i64), ("ranges", _p), ("clear_to", _f64),
         ("row_marks", _p), ("col_marks", _p), ("cos_angles", _p), ("sin_angles", _p),
+        ("uniform", _i64), ("first_angle", _f64), ("step", _f64),
+        ("near_from", _p), ("near_to", _p), ("near_cell", _p),
     ]  # fmt: skip
 
 
@@ -55,6 +60,10 @@ def _kernels() -> ctypes.CDLL:
             {
                 "costmap_integrate_scan": (_i64, [_p, _f64, _f64, _f64]),
                 "costmap_new_marks_near": (ctypes.c_int, [_p, _p, _p, _i64, _f64]),
+                "costmap_new_marks_maybe_near": (
+                    ctypes.c_int,
+                    [_p, _p, _p, _p, _i64, _i64, _f64, _f64, _f64],
+                ),
                 "path_progress": (_f64, [_p, _p, _i64, _i64, _f64, _f64, ctypes.POINTER(_i64)]),
             },
         )
@@ -85,9 +94,18 @@ class Costmap(kernels.Bound):
         self._col_marks = np.zeros(cols, dtype=np.int64)
         # The beams' directions to a few ulp, for the kernel's cheap first look at each beam.
         self._cos_angles, self._sin_angles = np.cos(self.angles), np.sin(self.angles)
+        # Beams evenly spread round the full turn (a 360-degree lidar): the kernel then finds the
+        # beams near each mark once a scan, and traverses a beam only where a mark may lie on it.
+        count = len(self.angles)
+        self._step = 2.0 * math.pi / max(count, 1)
+        self._first = float(self.angles[0]) if count else 0.0
+        spread = self._first + np.arange(count) * self._step
+        self._uniform = count > 0 and bool(np.all(np.abs(self.angles - spread) <= 1e-9))
+        self._near_from, self._near_to = np.empty(count), np.empty(count)  # the kernel's scratch
+        self._near_cell = np.empty(count, dtype=np.int64)
         self._bind()
 
-    _BOUND = ("_arrays", "_address", "_integrate", "_new_marks_near")
+    _BOUND = ("_arrays", "_address", "_integrate", "_new_marks_near", "_maybe_near")
 
     def _bind(self) -> None:
         """The kernel's struct: addresses of the marks, known cells, beams, scan buffer and counts."""
@@ -100,10 +118,14 @@ class Costmap(kernels.Bound):
             clear_to=self.clear_to,
             row_marks=self._row_marks.ctypes.data, col_marks=self._col_marks.ctypes.data,
             cos_angles=self._cos_angles.ctypes.data, sin_angles=self._sin_angles.ctypes.data,
+            uniform=int(self._uniform), first_angle=self._first, step=self._step,
+            near_from=self._near_from.ctypes.data, near_to=self._near_to.ctypes.data,
+            near_cell=self._near_cell.ctypes.data,
         )  # fmt: skip
         self._address = ctypes.addressof(self._arrays)
         library = _kernels()
         self._integrate, self._new_marks_near = library.costmap_integrate_scan, library.costmap_new_marks_near
+        self._maybe_near = library.costmap_new_marks_maybe_near
 
     @property
     def marked(self) -> np.ndarray:
@@ -149,3 +171,17 @@ class Costmap(kernels.Bound):
                 self._address, since.ctypes.data, points.ctypes.data, len(points), float(radius)
             )
         )
+
+    def new_marks_maybe_near(
+        self, since: np.ndarray, plan: tuple[int, int, int], first: int, low: float, high: float,
+        radius: float,
+    ) -> bool:  # fmt: skip
+        """False when `new_marks_near` is certainly False for every point interpolated on the plan
+        at arc lengths `low` to `high` [m] (np.interp of the plan's points against their arc
+        lengths), so those points need not be made: no mark newer than `since` in the window it
+        would search round the box of the plan's points that bracket them. `plan`: addresses of
+        the points (N x 2) and arc lengths (N), C-contiguous float64, and N; `first`: a point whose
+        arc length is at most `low`. `since` is the costmap's shape (C-contiguous bool), unchecked."""
+        points, arc, count = plan
+        address = since.ctypes.data
+        return bool(self._maybe_near(self._address, address, points, arc, count, first, low, high, radius))

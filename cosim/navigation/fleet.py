@@ -213,9 +213,9 @@ class _Robot:
         self.vehicle_row = -1  # where the fleet's block rows hold the vehicle's, set by `place`
         self.vehicle_period = system.period_steps(vehicle)
         inputs = len(vehicle.inputs)
-        self.pose_columns = [inputs + vehicle.output_index[axis] for axis in ("x", "y", "theta")]
+        self.pose_columns = _columns([inputs + vehicle.output_index[axis] for axis in ("x", "y", "theta")])
         command = [vehicle.input_index.get(port) for port in ("v", "omega")]
-        self.command_columns = command if None not in command else None
+        self.command_columns = _columns(command) if None not in command else None
         self.mode_row = None
         if self.mode is not None:
             component, slot = self.mode
@@ -257,7 +257,8 @@ class _Robot:
             self.modes = modes[:, 0]
         else:
             self.modes = np.full(count, math.nan)
-        self._last = (self.poses[-1], self.commands_now[-1], self.modes[-1])
+        # Copies: the rows may be views of buffers the next block refills (`_columns`).
+        self._last = (self.poses[-1].copy(), self.commands_now[-1].copy(), self.modes[-1])
 
     @property
     def position(self) -> tuple[float, float]:
@@ -703,6 +704,14 @@ def _tables(master: Master, block: int, previous: _PythonSteps | None = None) ->
     if tables is None:
         return master.kernel_tables(record=True, block=block), None
     return tables, python
+
+
+def _columns(columns: list[int]) -> list[int] | slice:
+    """Columns of a component's block rows: a slice when they are consecutive (a view of the
+    rows, no copy: nothing writes into a robot's poses or commands), else the list."""
+    if all(b == a + 1 for a, b in zip(columns, columns[1:], strict=False)):
+        return slice(columns[0], columns[-1] + 1)
+    return columns
 
 
 def _held(rows: np.ndarray, first: int, count: int, period: int, last: np.ndarray) -> np.ndarray:

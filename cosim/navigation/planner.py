@@ -295,12 +295,31 @@ class PlannerComponent(PythonComponent):
         elif t - mark_time >= settings.replan_stall_time:
             return "stalled"
         # The marks only change with a scan; a finding held back by the interval is kept.
-        if new_marks and not self._obstacle_on_plan and settings.resolves_obstacles:
+        if (
+            new_marks
+            and not self._obstacle_on_plan
+            and settings.resolves_obstacles
+            and self._marks_maybe_ahead()
+        ):
             ahead = self._plan_ahead(settings.replan_horizon)
             self._obstacle_on_plan = self.costmap.new_marks_near(
                 ahead, settings.vehicle_radius, self._marks_at_plan
             )
         return "obstacle_on_plan" if self._obstacle_on_plan else None
+
+    def _marks_maybe_ahead(self) -> bool:
+        """False when no point of `_plan_ahead` can have a new mark near it (`Costmap.new_marks_maybe_near`:
+        a look at the marks round the plan's points that bracket them, without making them)."""
+        settings = self.replanning
+        spacing = self.grid.resolution / 2.0
+        # `_plan_ahead`'s points lie at arc lengths from the progress to at most a spacing past
+        # min(progress + horizon, plan's end) (np.arange stops short of its stop, up to rounding).
+        high = min(self._progress + settings.replan_horizon, self._arc[-1]) + 2.0 * spacing
+        points, arc = self._plan_addresses
+        return self.costmap.new_marks_maybe_near(
+            self._marks_at_plan, (points, arc, len(self.waypoints)), self._segment, self._progress, high,
+            settings.vehicle_radius,
+        )  # fmt: skip
 
     def _plan_ahead(self, horizon: float) -> np.ndarray:
         """Points every half cell along the plan from the progress to `horizon` [m] further."""

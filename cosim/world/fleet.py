@@ -9,9 +9,10 @@ the change of the offset over the step), |d(s)|^2 = (r_a + r_b)^2 is a quadratic
 first contact is its smaller root when it lies in [0, 1] (`first_contact`). The closest approach
 within the step is at s* = -d0.w / w.w, clamped to [0, 1] (`closest_approach`).
 
-`FleetContacts` checks every pair of robots each step (vectorised over the pairs), reports a
-contact once when it begins (`Contact`: both names, the time, both centres and radii at that
-time), and keeps each robot's minimum clearance to the other robots (footprint to footprint).
+`FleetContacts` checks every pair of robots each step (the gaps in C, `fleet_gaps` of
+native/world.c), reports a contact once when it begins (`Contact`: both names, the time, both
+centres and radii at that time), and keeps each robot's minimum clearance to the other robots
+(footprint to footprint).
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+
+from cosim.world import kernels
 
 
 def first_contact(a0, a1, b0, b1, reach: float) -> float | None:
@@ -74,18 +77,6 @@ class Contact:
         )
 
 
-def _closest_gaps(d0x, d0y, d1x, d1y, reach):
-    """The least gap [m] over a step of each pair whose offset goes linearly from (d0x, d0y) to
-    (d1x, d1y) (arrays of any one shape): the distance at the closest approach minus `reach`."""
-    wx, wy = d1x - d0x, d1y - d0y
-    ww = wx * wx + wy * wy
-    dw = d0x * wx + d0y * wy
-    s_star = np.zeros_like(ww)
-    np.divide(-dw, ww, out=s_star, where=ww > 0.0)
-    np.clip(s_star, 0.0, 1.0, out=s_star)
-    return np.hypot(d0x + s_star * wx, d0y + s_star * wy) - reach
-
-
 class FleetContacts:
     """Contacts and clearances between the robots' footprints, step by step (module docstring)."""
 
@@ -93,8 +84,10 @@ class FleetContacts:
         self.names = tuple(names)
         self.radii = np.asarray(radii, dtype=float)
         n = len(self.names)
-        self.first, self.second = np.triu_indices(n, k=1)
-        self.reach = self.radii[self.first] + self.radii[self.second]
+        self.first, self.second = (
+            np.ascontiguousarray(index, dtype=np.int64) for index in np.triu_indices(n, k=1)
+        )
+        self.reach = np.ascontiguousarray(self.radii[self.first] + self.radii[self.second])
         self.touching = np.zeros(len(self.first), dtype=bool)  # pairs in contact at the last check
         self.min_clearance = np.full(n, math.inf)  # [m] footprint to footprint, per robot
         self.contacts: list[Contact] = []
@@ -108,16 +101,13 @@ class FleetContacts:
         """`step` for consecutive steps at once: step s from starts[s] to starts[s] + lengths[s]
         [s], the robots moving from positions[s] to positions[s + 1] (S + 1 x N x 2 positions [m]);
         the contacts that began in each step. The same arithmetic as `step`, a step per row."""
-        positions = np.asarray(positions, dtype=float)
+        positions = np.ascontiguousarray(positions, dtype=float)
         i, j = self.first, self.second
-        x, y = positions[:, :, 0], positions[:, :, 1]
-        dx, dy = x[:, j] - x[:, i], y[:, j] - y[:, i]  # the offsets at each step's start and end
-        d1x, d1y = dx[1:], dy[1:]
-        gap = _closest_gaps(dx[:-1], dy[:-1], d1x, d1y, self.reach)
+        gap, end_gap = self._gaps(positions)
         closest = gap.min(axis=0)
         np.minimum.at(self.min_clearance, i, closest)
         np.minimum.at(self.min_clearance, j, closest)
-        end_touching = np.hypot(d1x, d1y) - self.reach <= 0.0
+        end_touching = end_gap <= 0.0
         previous = np.vstack((self.touching[None, :], end_touching[:-1]))
         began: list[list[Contact]] = [[] for _ in range(len(gap))]
         for step, pair in zip(*np.nonzero((gap <= 0.0) & ~previous), strict=True):
@@ -128,6 +118,22 @@ class FleetContacts:
         for contacts in began:
             self.contacts += contacts
         return began
+
+    def _gaps(self, positions: np.ndarray, floor: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """For each step k (robots from positions[k] to positions[k + 1], S + 1 x N x 2 [m],
+        C-contiguous float64) and pair: the least gap [m] over the step (the distance at the
+        closest approach of the linearly moving offset, minus the pair's reach) and the gap at the
+        step's end; S x pairs each (`fleet_gaps` of native/world.c). Both are +inf for a pair
+        certainly farther apart than 0 and both robots' `floor` (N, default: the minimum
+        clearances; inf: every gap exact)."""
+        count, pairs = len(positions) - 1, len(self.first)
+        gap, end_gap = np.empty((count, pairs)), np.empty((count, pairs))
+        floor = self.min_clearance if floor is None else np.ascontiguousarray(floor, dtype=float)
+        kernels.library().fleet_gaps(
+            positions.ctypes.data, count, positions.shape[1], self.first.ctypes.data, self.second.ctypes.data,
+            pairs, self.reach.ctypes.data, floor.ctypes.data, gap.ctypes.data, end_gap.ctypes.data,
+        )  # fmt: skip
+        return gap, end_gap
 
     def _contact(self, pair: int, t: float, h: float, before, after) -> Contact:
         """The contact of `pair`, which began in the step from t to t + h [s]."""
@@ -148,11 +154,8 @@ class FleetContacts:
         before = np.asarray(before, dtype=float)
         after = np.asarray(after, dtype=float)
         i, j = self.first, self.second
-        # Per axis: gathering 1-D columns costs numpy a tenth of gathering the (N, 2) rows.
-        bx, by, ax, ay = before[:, 0], before[:, 1], after[:, 0], after[:, 1]
-        d0x, d0y = bx[j] - bx[i], by[j] - by[i]
-        d1x, d1y = ax[j] - ax[i], ay[j] - ay[i]  # the offset at the step's end
-        gap = _closest_gaps(d0x, d0y, d1x, d1y, self.reach)
+        gaps, end_gaps = self._gaps(np.stack((before, after)))
+        gap, end_gap = gaps[0], end_gaps[0]
         np.minimum.at(self.min_clearance, i, gap)
         np.minimum.at(self.min_clearance, j, gap)
         touching = gap <= 0.0
@@ -161,7 +164,6 @@ class FleetContacts:
             for pair in np.flatnonzero(touching & ~self.touching)
         ]
         # A pair still touching at the step's end stays "in contact"; one that separated may touch again.
-        end_gap = np.hypot(d1x, d1y) - self.reach
         self.touching = end_gap <= 0.0
         self.contacts += began
         return began

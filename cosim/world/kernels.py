@@ -54,7 +54,7 @@ class LidarArrays(ctypes.Structure):
         ("circles", _p), ("n_circles", _i64),
         ("segments", _p), ("n_segments", _i64),
         ("vertices", _p), ("starts", _p), ("n_starts", _i64),
-        ("directions", _p), ("ranges", _p),
+        ("directions", _p), ("ranges", _p), ("clearance", _p),
     ]  # fmt: skip
 
 
@@ -132,6 +132,8 @@ def library() -> ctypes.CDLL:
                 "world_distance": (_f64, [_p]),
                 "lidar_measure": (None, [_p, _f64, _f64, _p, _i64, _p]),
                 "lidar_scan": (None, [_p, _f64, _f64, _f64]),
+                "lidar_clearance": (None, [_p, _i64, _i64, _p]),
+                "fleet_gaps": (None, [_p, _i64, _i64, _p, _p, _i64, _p, _p, _p, _p]),
                 "world_hypot": (_f64, [_f64, _f64]),
                 "world_check_positions": (_i64, [_p, _i64]),
             },

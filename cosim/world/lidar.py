@@ -22,9 +22,11 @@ Outputs `ranges[k]` and `angles[k]`, k = 1..capacity (capacity >= beam count, th
 the ports match VFH inputs of a fixed size. Inputs `x`, `y`, `theta` (and `robots_x[j]`,
 `robots_y[j]`, j = 1..len(robot_radii), for a fleet).
 
-The sweep is C (`lidar_scan` of native/world.c: Amanatides-Woo traversal of the grid, exact
-intersections with the shapes), given the grid, beams, shapes and buffers once as a struct; the
-master's compiled kernel calls it itself where a step needs nothing else (`kernel_sweep`).
+The sweep is C (`lidar_scan` of native/world.c: exact intersections with the shapes, then
+Amanatides-Woo traversal of the grid up to the shapes' nearest hit, crossing free space in strides
+given by each cell's distance to the nearest occupied one), given the grid, beams, shapes and
+buffers once as a struct; the master's compiled kernel calls it itself where a step needs nothing
+else (`kernel_sweep`).
 """
 
 from __future__ import annotations
@@ -120,6 +122,12 @@ class Lidar(kernels.Bound, PythonComponent):
         self.range_noise, self.angle_noise, self.seed = float(range_noise), float(angle_noise), seed
         grid = np.zeros((1, 1), dtype=bool) if occupied is None else np.asarray(occupied, dtype=bool)
         self.occupied_up = np.ascontiguousarray(grid[::-1])  # row 0 at the bottom: y grows with the row
+        # Each cell's Chebyshev distance (cells) to the nearest occupied one, at most 255: the sweep
+        # crosses free space in strides (native/world.c's cast_grid).
+        self._clearance = np.empty(self.occupied_up.shape, dtype=np.uint8)
+        kernels.library().lidar_clearance(
+            self.occupied_up.view(np.uint8).ctypes.data, *self.occupied_up.shape, self._clearance.ctypes.data
+        )
         self.resolution = float(resolution)
         self.origin = (float(origin[0]), float(origin[1]))
         self.obstacles = list(obstacles)
@@ -169,6 +177,7 @@ class Lidar(kernels.Bound, PythonComponent):
             starts=refs.pointer(world.starts, np.int64), n_starts=len(world.starts),
             directions=refs.pointer(self._directions, np.float64, writable=True),
             ranges=refs.pointer(self._ranges, np.float64, writable=True),
+            clearance=refs.pointer(self._clearance, np.uint8),
         )  # fmt: skip
         self._address = ctypes.addressof(self._arrays)
         library = kernels.library()

@@ -103,3 +103,49 @@ def test_lidar_sees_other_robots_circles_at_their_inputs():
 def test_a_lidar_without_robots_has_its_three_inputs():
     lidar = Lidar(angles=[0.0])
     assert [p.name for p in lidar.inputs] == ["x", "y", "theta"]
+
+
+def _numpy_gaps(positions, first, second, reach):
+    """The NumPy description the C kernel replaced: per step and pair, the least gap over the step
+    (closest approach of the linearly moving offset minus reach) and the gap at the step's end."""
+    x, y = positions[:, :, 0], positions[:, :, 1]
+    dx, dy = x[:, second] - x[:, first], y[:, second] - y[:, first]
+    d0x, d0y, d1x, d1y = dx[:-1], dy[:-1], dx[1:], dy[1:]
+    wx, wy = d1x - d0x, d1y - d0y
+    ww = wx * wx + wy * wy
+    dw = d0x * wx + d0y * wy
+    s_star = np.zeros_like(ww)
+    np.divide(-dw, ww, out=s_star, where=ww > 0.0)
+    np.clip(s_star, 0.0, 1.0, out=s_star)
+    return np.hypot(d0x + s_star * wx, d0y + s_star * wy) - reach, np.hypot(d1x, d1y) - reach
+
+
+def test_the_gaps_are_the_numpy_descriptions_bit_for_bit():
+    """`fleet_gaps` (C) against the NumPy arithmetic it replaced: robots moving, standing still
+    (no relative motion), on top of each other, approaching and passing within a step."""
+    rng = np.random.default_rng(4)
+    n, steps = 9, 12
+    radii = rng.uniform(0.2, 0.8, n)
+    contacts = FleetContacts([f"r{k}" for k in range(n)], radii)
+    start = rng.uniform(0.0, 6.0, (1, n, 2))
+    moves = rng.normal(0.0, 0.3, (steps, n, 2))
+    moves[:, 2] = 0.0  # stands still
+    moves[:, 3] = moves[:, 4]  # moves with robot 4: no relative motion
+    positions = np.concatenate((start, start + np.cumsum(moves, axis=0)))
+    positions[:, 5] = positions[:, 6]  # on top of each other
+    positions = np.ascontiguousarray(positions)
+    gap, end_gap = contacts._gaps(positions, np.full(n, np.inf))
+    expected_gap, expected_end = _numpy_gaps(positions, contacts.first, contacts.second, contacts.reach)
+    assert np.array_equal(gap, expected_gap) and np.array_equal(end_gap, expected_end)
+    assert (gap <= 0).any() and (gap > 0).any()
+    # With floors (the clearances so far), a pair certainly farther apart than both robots' floor
+    # and 0 gets +inf: every other gap is exact, and no skipped one was within the floors.
+    floor = rng.uniform(-0.2, 1.5, n)
+    gap, end_gap = contacts._gaps(positions, floor)
+    skipped = np.isinf(gap)
+    assert np.array_equal(np.isinf(end_gap), skipped) and 0 < skipped.sum() < skipped.size
+    assert np.array_equal(gap[~skipped], expected_gap[~skipped])
+    assert np.array_equal(end_gap[~skipped], expected_end[~skipped])
+    above = np.maximum(np.maximum(floor[contacts.first], floor[contacts.second]), 0.0)
+    assert (expected_gap[skipped] > np.broadcast_to(above, gap.shape)[skipped]).all()
+    assert (expected_end[skipped] > 0).all()

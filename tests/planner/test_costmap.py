@@ -98,6 +98,55 @@ def test_integrate_equals_a_full_traversal_while_marks_come_and_go(range_min):
     assert changes > 500 and marked.any()  # marks were set and cleared all along
 
 
+def _disc_ranges(x, y, theta, angles, discs, range_max):
+    """Ranges [m] from (x, y) at heading theta to the nearest of `discs` (cx, cy, r) (NaN: none
+    within range_max): returns on obstacles that move a little from scan to scan."""
+    ranges = np.full(len(angles), np.nan)
+    for k, angle in enumerate(angles):
+        dx, dy = math.cos(theta + angle), math.sin(theta + angle)
+        for cx, cy, r in discs:
+            b = dx * (x - cx) + dy * (y - cy)
+            c = (x - cx) ** 2 + (y - cy) ** 2 - r * r
+            if b * b - c >= 0 and -b - math.sqrt(b * b - c) >= 0:
+                near = -b - math.sqrt(b * b - c)
+                if near <= range_max and not near >= ranges[k]:
+                    ranges[k] = near
+    return ranges
+
+
+@pytest.mark.parametrize("count", [360, 64])
+def test_a_full_turn_of_even_beams_equals_a_full_traversal_among_moving_discs(count):
+    """Beams evenly spread round the full turn: the kernel finds the beams near each mark once a
+    scan and traverses a beam only there. Discs that drift from scan to scan leave marks that later
+    rays cross (cleared), returns on marks already there, marks set and cleared in one scan."""
+    from cosim.world.lidar import evenly_spaced_beams
+
+    rng = np.random.default_rng(11)
+    occupied = np.zeros((40, 60), dtype=bool)
+    occupied[0, :] = occupied[-1, :] = occupied[:, 0] = occupied[:, -1] = True
+    grid = OccupancyGrid(occupied, 0.5, (0.0, 0.0))
+    angles = evenly_spaced_beams(-math.pi, math.pi, count)
+    range_max = 12.0
+    costmap = Costmap(grid, angles, 0.0, range_max)
+    assert costmap._uniform
+    marked = np.zeros_like(occupied)
+    discs = [(rng.uniform(3, 27), rng.uniform(3, 17), rng.uniform(0.3, 1.2)) for _ in range(12)]
+    x, y, theta = 15.0, 10.0, 0.3
+    changes = 0
+    for scan in range(60):
+        discs = [(cx + rng.normal(0, 0.3), cy + rng.normal(0, 0.3), r) for cx, cy, r in discs]
+        x, y = x + rng.normal(0, 0.4), y + rng.normal(0, 0.4)
+        theta += rng.normal(0, 0.5) + (2 * math.pi if scan == 30 else 0.0)
+        ranges = _disc_ranges(x, y, theta, angles, discs, range_max)
+        expected = _reference_integrate(
+            marked, occupied, grid.origin, grid.resolution, x, y, theta, angles, ranges, range_max
+        )
+        assert costmap.integrate(x, y, theta, ranges) == expected
+        assert np.array_equal(costmap.marked, marked)
+        changes += expected
+    assert changes > 200 and marked.sum() > 20
+
+
 def test_marks_change_only_through_integrate():
     grid = OccupancyGrid(np.zeros((8, 8), dtype=bool), 0.5, (0.0, 0.0))
     costmap = Costmap(grid, np.array([0.0]), 0.0, 3.0)
@@ -156,3 +205,42 @@ def test_path_progress_is_the_numpy_description_bit_for_bit():
         progress = function(points.ctypes.data, arc.ctypes.data, first, stop, x, y, ctypes.byref(segment))
         expected_segment, expected = _progress_numpy(points, arc, first, stop, x, y)
         assert (segment.value, progress) == (expected_segment, expected)
+
+
+def test_the_look_round_the_plan_never_misses_a_new_mark_near_its_points():
+    """`new_marks_maybe_near` says "no" only when `new_marks_near` on the planner's points ahead
+    (np.interp every half cell along the plan, as `PlannerComponent._plan_ahead` makes them) is
+    False; and it does say "no" for marks away from the plan."""
+    rng = np.random.default_rng(5)
+    grid = OccupancyGrid(np.zeros((40, 50), dtype=bool), 0.5, (1.0, -2.0))
+    costmap = Costmap(grid, evenly_spaced_beams_full(90), 0.0, 10.0)
+    answers = set()
+    for _ in range(300):
+        waypoints = np.cumsum(rng.normal(0.0, 1.2, (rng.integers(2, 12), 2)), axis=0) + (13.0, 8.0)
+        waypoints[rng.random(len(waypoints)) < 0.1] = waypoints[0]  # repeated points: zero-length segments
+        waypoints = np.ascontiguousarray(waypoints)
+        arc = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(waypoints, axis=0).T))))
+        since = costmap.snapshot()
+        x, y, theta = rng.uniform(2, 24), rng.uniform(-1, 17), rng.uniform(-4, 4)
+        ranges = rng.uniform(0.3, 10.0, 90)
+        ranges[rng.random(90) < 0.5] = np.nan
+        costmap.integrate(x, y, theta, ranges)
+        segment = int(rng.integers(0, len(waypoints) - 1))
+        progress = arc[segment] + rng.uniform(0.0, 1.0) * (arc[segment + 1] - arc[segment])
+        horizon, spacing, radius = rng.uniform(0.5, 4.0), 0.25, rng.uniform(0.2, 1.0)
+        along = np.arange(progress, min(progress + horizon, arc[-1]) + spacing, spacing)
+        along = along[along <= arc[-1]]
+        points = np.column_stack(
+            (np.interp(along, arc, waypoints[:, 0]), np.interp(along, arc, waypoints[:, 1]))
+        )
+        exact = costmap.new_marks_near(points, radius, since)
+        high = min(progress + horizon, arc[-1]) + 2.0 * spacing
+        plan = (waypoints.ctypes.data, arc.ctypes.data, len(waypoints))
+        maybe = costmap.new_marks_maybe_near(since, plan, segment, progress, high, radius)
+        assert maybe or not exact
+        answers.add((maybe, exact))
+    assert answers == {(False, False), (True, False), (True, True)}
+
+
+def evenly_spaced_beams_full(count):
+    return np.linspace(-math.pi, math.pi, count, endpoint=False)

@@ -103,6 +103,106 @@ def test_grid_ray_casting_agrees_with_a_brute_force_march():
     assert ranges[hit] == pytest.approx(expected[hit], abs=2e-4)
 
 
+def test_the_grid_and_the_shapes_together_give_the_nearer_of_each_bit_for_bit():
+    """The sweep casts the shapes first and stops a beam's grid traversal past their nearest hit:
+    each distance is exactly the smaller of the grid's alone and the shapes' alone, shapes before,
+    at (a circle touching a wall's face) and behind the walls, the sensor in free space."""
+    rng = np.random.default_rng(3)
+    occupied = rng.random((80, 90)) < 0.02
+    occupied[:, 80] = True  # a wall whose face is x = 8.0 m
+    occupied[35:45, 15:25] = False  # the sensor's surroundings
+    circles = [Circle((9.0, 4.0), 1.0)]  # touches the wall's face at (8.0, 4.0)
+    circles += [Circle((rng.uniform(0, 9), rng.uniform(0, 8)), rng.uniform(0.1, 0.6)) for _ in range(25)]
+    shapes = [
+        *circles,
+        Rectangle((3.0, 6.5), (1.0, 0.4), yaw=0.3),
+        Polygon(((6.0, 1.0), (7.0, 1.5), (6.5, 2.5))),
+    ]
+    directions = np.column_stack([np.cos(a := np.linspace(-math.pi, math.pi, 720)), np.sin(a)])
+
+    def lidar(occupied, obstacles):
+        return Lidar(occupied=occupied, resolution=0.1, obstacles=obstacles, angles=[0.0], range_max=9.0)
+
+    both, grid, alone = lidar(occupied, shapes), lidar(occupied, []), lidar(None, shapes)
+    for x, y in [(2.0, 4.0), (2.03, 3.91), (2.2, 3.7)]:
+        expected = np.minimum(grid.measure(x, y, 0.0, directions), alone.measure(x, y, 0.0, directions))
+        measured = both.measure(x, y, 0.0, directions)
+        assert np.array_equal(measured, expected)
+        assert (measured < grid.measure(x, y, 0.0, directions)).sum() > 50  # shapes in front of walls
+    # The beam to the circle's touching point meets the wall and the circle at 6 m, to rounding.
+    wall = np.zeros_like(occupied)
+    wall[:, 80] = True
+    beam = np.array([[1.0, 0.0]])
+    at_wall = lidar(wall, []).measure(2.0, 4.0, 0.0, beam)[0]
+    at_circle = lidar(None, circles[:1]).measure(2.0, 4.0, 0.0, beam)[0]
+    assert at_wall == pytest.approx(6.0, abs=1e-12) and at_circle == pytest.approx(6.0, abs=1e-12)
+    assert lidar(wall, circles[:1]).measure(2.0, 4.0, 0.0, beam)[0] == min(at_wall, at_circle)
+    # A circle 1e-12 m behind the wall's face: the wall, just nearer, is still found.
+    behind = [Circle((9.0 + 1e-12, 4.0), 1.0)]
+    assert lidar(None, behind).measure(2.0, 4.0, 0.0, beam)[0] > at_wall
+    assert lidar(wall, behind).measure(2.0, 4.0, 0.0, beam)[0] == at_wall
+
+
+def cell_by_cell(occupied, resolution, origin, x, y, directions, range_max):
+    """Second implementation: the Amanatides-Woo traversal one cell at a time, the distance where
+    the ray enters the first occupied cell (inf for none within range_max), the same IEEE
+    operations in the same order (occupied: row 0 at the top)."""
+    rows, cols = occupied.shape
+    gx, gy = (x - origin[0]) / resolution, (y - origin[1]) / resolution
+    limit = range_max / resolution
+    out = []
+    for dx, dy in directions:
+        ix, iy = math.floor(gx), math.floor(gy)
+        step_x, step_y = (1 if dx > 0 else -1), (1 if dy > 0 else -1)
+        next_x = ((ix + 1) - gx) / dx if dx > 0 else ((gx - ix) / -dx if dx < 0 else math.inf)
+        next_y = ((iy + 1) - gy) / dy if dy > 0 else ((gy - iy) / -dy if dy < 0 else math.inf)
+        delta_x, delta_y = (1.0 / abs(dx) if dx else math.inf), (1.0 / abs(dy) if dy else math.inf)
+        travelled, found = 0.0, math.inf
+        while travelled <= limit:
+            if 0 <= ix < cols and 0 <= iy < rows:
+                if occupied[rows - 1 - iy, ix]:
+                    found = travelled * resolution
+                    break
+            elif (ix < 0 and step_x < 0) or (ix >= cols and step_x > 0):
+                break
+            elif (iy < 0 and step_y < 0) or (iy >= rows and step_y > 0):
+                break
+            if next_x < next_y:
+                travelled, next_x, ix = next_x, next_x + delta_x, ix + step_x
+            else:
+                travelled, next_y, iy = next_y, next_y + delta_y, iy + step_y
+        out.append(found)
+    return np.array(out)
+
+
+def test_strides_through_free_space_give_the_cell_by_cell_distances_bit_for_bit():
+    """The sweep crosses free space in strides (each cell's distance to the nearest occupied one);
+    every distance is the one-cell-at-a-time traversal's, to the last bit: open halls, narrow gaps,
+    beams along the axes and diagonals, sensors on cell corners and outside the grid."""
+    rng = np.random.default_rng(9)
+    occupied = np.zeros((120, 150), dtype=bool)
+    occupied[0, :] = occupied[:, 0] = occupied[:, -1] = True  # the bottom edge is open
+    occupied[60, 20:130] = True  # a long wall with gaps
+    occupied[60, 50:52] = occupied[60, 90] = False
+    occupied[rng.random(occupied.shape) < 0.002] = True  # scattered posts
+    occupied[30:34, 70:110] = True
+    angles = np.concatenate(
+        (np.linspace(-math.pi, math.pi, 361), [0.0, math.pi / 2, math.pi / 4, -3 * math.pi / 4])
+    )
+    directions = np.column_stack((np.cos(angles), np.sin(angles)))
+    directions = np.vstack((directions, [[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]]))  # exact axes
+    lidar = Lidar(occupied=occupied, resolution=0.25, origin=(-3.0, 1.5), angles=[0.0], range_max=40.0)
+    assert lidar._clearance.max() > 10  # strides of several cells
+    poses = [(15.0, 12.0), (15.25, 12.25), (2.1, 28.7), (33.0, 31.0), (20.0, -2.0), (-10.0, 10.0)]
+    poses += [(rng.uniform(-5, 40), rng.uniform(0, 33)) for _ in range(20)]
+    hits = 0
+    for x, y in poses:
+        expected = cell_by_cell(occupied, 0.25, (-3.0, 1.5), x, y, directions, 40.0)
+        assert np.array_equal(lidar.measure(x, y, 0.0, directions), expected), (x, y)
+        hits += int(np.isfinite(expected).sum())
+    assert hits > 5000
+
+
 def noisy_scan(seed, range_noise, angle_noise):
     """2000 beams, all at nominal angle 0, against a wall at x = 5 m."""
     wall = Rectangle((5.5, 0.0), (1.0, 100.0))

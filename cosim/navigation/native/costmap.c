@@ -22,6 +22,12 @@ typedef struct {
     int64_t *row_marks;    /* rows: marked cells in each row (kept by the kernel, with `marked`) */
     int64_t *col_marks;    /* cols: marked cells in each column */
     const double *cos_angles, *sin_angles; /* count: cos and sin of the beam angles, to a few ulp */
+    /* Beams evenly spread round the full turn (`uniform` 1): angles[k] = first_angle + k step to
+     * 1e-9 rad, step = 2 pi / count. Then each scan finds the beams near each mark (`near_*`). */
+    int64_t uniform;
+    double first_angle, step;
+    double *near_from, *near_to; /* count each, scratch: where a beam's marks may lie (cell units) */
+    int64_t *near_cell;          /* count, scratch: the one mark near the beam, -1 none, -2 several */
 } Costmap;
 
 /* Limits of the approximate direction's use (see costmap_integrate_scan): angles [rad], distances
@@ -75,22 +81,99 @@ static int ray_near_box(double gx, double gy, double dx, double dy, double limit
     return t_lo <= t_hi;
 }
 
+/* The traversal of costmap_integrate_scan moved on to its state at distance s (cell units), from a
+ * state whose steps were all taken below s: every x step below s, then every y step below s, each
+ * with the loop's own additions in its order. The loop takes x when next_x < next_y, else y: it
+ * takes the x steps X_0 < X_1 < ... and the y steps Y_0 < Y_1 < ... merged in order (a y first on
+ * a tie), so it passes through the state with i x steps and j y steps taken exactly when
+ * X_{i-1} < Y_j and Y_{j-1} <= X_i; with i, j the counts of steps below s, X_{i-1} < s <= Y_j and
+ * Y_{j-1} < s <= X_i. The cells it leaves before s are skipped. */
+static inline void skip_to(double s, double *next_x, double *next_y, int64_t *ix, int64_t *iy, double delta_x,
+                           double delta_y, int64_t step_x, int64_t step_y)
+{
+    double x = *next_x, y = *next_y;
+    int64_t cx = *ix, cy = *iy;
+    while (x < s) {
+        x += delta_x;
+        cx += step_x;
+    }
+    while (y < s) {
+        y += delta_y;
+        cy += step_y;
+    }
+    *next_x = x;
+    *next_y = y;
+    *ix = cx;
+    *iy = cy;
+}
+
+/* Note the mark at cell (cx, cy) (traversal units) for the beams that may touch it, for a scan from
+ * (gx, gy) (cell units) at heading theta, with evenly spread beams (`Costmap.uniform`). A ray that
+ * touches the cell points between the directions of its corners (seen from outside the cell, they
+ * span less than a half turn) and touches it at distances from the cell's nearest point to its
+ * farthest corner. The beams whose angles lie in that span, widened by 1e-8 rad (the beams' angles
+ * are within 1e-9 rad of the even spread; theta + angle and atan2 round far less), get the
+ * distances in `near_from` (less 1e-6) and `near_to`; every beam when the sensor is within
+ * 1e-3 cells of the cell. */
+#define HALF_TURN 3.14159265358979323846
+static void note_mark(const Costmap *m, double gx, double gy, double theta, int64_t cx, int64_t cy)
+{
+    double x0 = (double)cx - gx, y0 = (double)cy - gy; /* the cell's lower left corner */
+    double nearest_x = x0 > 0.0 ? x0 : (x0 + 1.0 < 0.0 ? x0 + 1.0 : 0.0);
+    double nearest_y = y0 > 0.0 ? y0 : (y0 + 1.0 < 0.0 ? y0 + 1.0 : 0.0);
+    double near = hypot(nearest_x, nearest_y);
+    double far = 0.0;
+    int64_t count = m->count, lo = 0, hi = count - 1;
+    double corners[4][2] = {{x0, y0}, {x0 + 1.0, y0}, {x0, y0 + 1.0}, {x0 + 1.0, y0 + 1.0}};
+    for (int corner = 0; corner < 4; corner++)
+        far = py_max(far, hypot(corners[corner][0], corners[corner][1]));
+    if (near > 1e-3) {
+        double centre = atan2(y0 + 0.5, x0 + 0.5), low = 0.0, high = 0.0;
+        for (int corner = 0; corner < 4; corner++) {
+            double turn = atan2(corners[corner][1], corners[corner][0]) - centre;
+            turn += turn > HALF_TURN ? -2.0 * HALF_TURN : (turn < -HALF_TURN ? 2.0 * HALF_TURN : 0.0);
+            low = py_min(low, turn);
+            high = py_max(high, turn);
+        }
+        double base = centre - theta - m->first_angle;
+        lo = (int64_t)ceil((base + low - 1e-8) / m->step);
+        hi = (int64_t)floor((base + high + 1e-8) / m->step);
+        if (hi - lo >= count) {
+            lo = 0;
+            hi = count - 1;
+        }
+    }
+    int64_t cell = (m->rows - 1 - cy) * m->cols + cx;
+    for (int64_t k = lo; k <= hi; k++) {
+        int64_t beam = k % count;
+        beam += beam < 0 ? count : 0;
+        m->near_from[beam] = py_min(m->near_from[beam], near - 1e-6);
+        m->near_to[beam] = py_max(m->near_to[beam], far);
+        m->near_cell[beam] = m->near_cell[beam] == -1 ? cell : -2;
+    }
+}
+
 /* Mark each return's cell and clear the marked cells before it (see costmap.py's docstring), for
  * the scan in `ranges` taken at pose (x, y, theta). Returns the number of changed cells.
  *
- * Only marked cells can be cleared, so a beam is traversed only when it passes within a cell of the
- * box of the marked cells (the box grows with each mark of this scan): the cells a skipped beam
- * would visit are all unmarked. A pose that is not finite (or absurdly far, 1e15 cells) changes
- * nothing.
+ * Only marked cells can be cleared, so a beam is traversed only where it may meet one. A pose that
+ * is not finite (or absurdly far, 1e15 cells) changes nothing.
  *
  * The exact direction (cos and sin of theta + angle, as the Python kernel had them) costs most of
  * a beam that is not traversed. So a beam first takes an approximate direction from the angle sum
  * formula: it differs from the exact one by less than 2e-12 (theta and angle within FAST_ANGLE),
- * so less than 1e-7 cells at the end of a ray of FAST_LIMIT cells. That decides, exactly, a beam
- * that passes a cell or more from the box of the marks and whose return's cell is certain (its
- * approximate mark point is more than MARK_SLACK from a cell boundary; the exact point lies 1e-6
- * cells past the surface) and outside the grid, known or already marked: such a beam changes
- * nothing. Every other beam takes the exact direction and the exact path below. */
+ * so less than 1e-7 cells at the end of a ray of FAST_LIMIT cells. Where the marks may lie:
+ * - beams evenly spread round the full turn (`uniform`, a 360-degree lidar): the beams that may
+ *   touch each mark, and at what distances, are found once a scan from the mark (`note_mark`;
+ *   the marks set during the scan are noted as they are set). A beam meets no mark when none lies
+ *   nearer than its limit; else it is traversed only over the distances where its marks lie
+ *   (`skip_to` to the first, stopping past the last); a beam whose one mark is its return's own
+ *   cell, already marked, changes nothing (the traversal stops before the return's cell);
+ * - other beams: a beam that passes a cell or more from the box of the marks meets none.
+ * A beam that meets no mark and whose return's cell is certain (its approximate mark point is
+ * more than MARK_SLACK from a cell boundary; the exact point lies 1e-6 cells past the surface) and
+ * outside the grid, known or already marked changes nothing. Every other beam takes the exact
+ * direction and the exact path below. */
 int64_t costmap_integrate_scan(const Costmap *m, double x, double y, double theta)
 {
     int64_t rows = m->rows, cols = m->cols;
@@ -128,6 +211,19 @@ int64_t costmap_integrate_scan(const Costmap *m, double x, double y, double thet
         }
     int fast = fabs(theta) <= FAST_ANGLE && fabs(gx) <= FAST_COORDINATE && fabs(gy) <= FAST_COORDINATE;
     double cos_theta = fast ? cos(theta) : 0.0, sin_theta = fast ? sin(theta) : 0.0;
+    int by_marks = fast && m->uniform; /* the beams near each mark, found once a scan */
+    if (by_marks) {
+        for (int64_t beam = 0; beam < m->count; beam++) {
+            m->near_from[beam] = INFINITY;
+            m->near_to[beam] = -INFINITY;
+            m->near_cell[beam] = -1;
+        }
+        for (int64_t r = 0; x_lo <= x_hi && r < rows; r++)
+            if (row_marks[r])
+                for (int64_t c = x_lo; c <= x_hi; c++)
+                    if (marked[r * cols + c])
+                        note_mark(m, gx, gy, theta, c, rows - 1 - r);
+    }
     for (int64_t beam = 0; beam < m->count; beam++) {
         double distance = m->ranges[beam];
         int hit = isfinite(distance);
@@ -137,22 +233,40 @@ int64_t costmap_integrate_scan(const Costmap *m, double x, double y, double thet
                 continue;
         }
         double limit = distance / resolution;
+        /* The marked cells the ray may visit lie within [from, to] along it (cell units). */
+        double from = -INFINITY, to = INFINITY;
+        int may_clear = 1;
         if (fast && fabs(m->angles[beam]) <= FAST_ANGLE && limit <= FAST_LIMIT) {
             double ca = m->cos_angles[beam], sa = m->sin_angles[beam];
             double ax = cos_theta * ca - sin_theta * sa, ay = sin_theta * ca + cos_theta * sa;
-            if (!(x_lo <= x_hi && ray_near_box(gx, gy, ax, ay, limit, x_lo, x_hi, y_lo, y_hi))) {
-                if (!hit)
-                    continue; /* clears nothing, marks nothing */
+            int near;
+            if (by_marks) {
+                /* The traversal looks at cells it enters before `limit`, and a mark lies no nearer
+                 * than near_from along the ray. */
+                near = m->near_from[beam] < limit;
+                from = m->near_from[beam] - 1.0;
+                to = m->near_to[beam] + 1.0;
+            } else {
+                near = x_lo <= x_hi && ray_near_box(gx, gy, ax, ay, limit, x_lo, x_hi, y_lo, y_hi);
+            }
+            /* Where the approximate mark point certainly lies (-1: not certain or outside the grid). */
+            int64_t certain = -1, outside = 0;
+            if (hit && (!near || m->near_cell[beam] >= 0)) {
                 double px = gx + ax * (limit + 1e-6), py = gy + ay * (limit + 1e-6);
                 double cx = floor_near(px - MARK_SLACK), cy = floor_near(py - MARK_SLACK);
                 if (cx == floor_near(px + MARK_SLACK) && cy == floor_near(py + MARK_SLACK)) {
-                    /* The exact mark point lies in cell (cx, cy). */
-                    if (!(cx >= 0 && cx < (double)cols && cy >= 0 && cy < (double)rows))
-                        continue;
-                    int64_t cell = (rows - 1 - (int64_t)cy) * cols + (int64_t)cx;
-                    if (marked[cell] || known[cell])
-                        continue;
+                    if (cx >= 0 && cx < (double)cols && cy >= 0 && cy < (double)rows)
+                        certain = (rows - 1 - (int64_t)cy) * cols + (int64_t)cx;
+                    else
+                        outside = 1;
                 }
+            }
+            if (!near) {
+                if (!hit || outside || (certain >= 0 && (marked[certain] || known[certain])))
+                    continue; /* clears nothing, marks nothing */
+                may_clear = 0;
+            } else if (by_marks && certain >= 0 && certain == m->near_cell[beam] && marked[certain]) {
+                continue; /* the only mark near the ray is its return's own cell: never cleared, marked */
             }
         }
         double dx = cos(theta + m->angles[beam]);
@@ -165,7 +279,9 @@ int64_t costmap_integrate_scan(const Costmap *m, double x, double y, double thet
         double next_y = dy > 0 ? ((double)(iy + 1) - gy) / dy : (dy < 0 ? (gy - (double)iy) / -dy : INFINITY);
         double delta_x = dx != 0 ? 1.0 / fabs(dx) : INFINITY;
         double delta_y = dy != 0 ? 1.0 / fabs(dy) : INFINITY;
-        int traverse = x_lo <= x_hi && ray_near_box(gx, gy, dx, dy, limit, x_lo, x_hi, y_lo, y_hi);
+        int traverse = may_clear && x_lo <= x_hi && ray_near_box(gx, gy, dx, dy, limit, x_lo, x_hi, y_lo, y_hi);
+        if (traverse && from > 0.0)
+            skip_to(py_min(from, limit), &next_x, &next_y, &ix, &iy, delta_x, delta_y, step_x, step_y);
         while (traverse) {
             double leaving = py_min(next_x, next_y); /* where the ray leaves cell (ix, iy) */
             if (hit && leaving >= limit)
@@ -179,8 +295,8 @@ int64_t costmap_integrate_scan(const Costmap *m, double x, double y, double thet
                     changed++;
                 }
             }
-            if (leaving >= limit)
-                break;
+            if (leaving >= limit || leaving >= to)
+                break; /* (past `to`: the cells further on are unmarked) */
             if (next_x < next_y) {
                 next_x += delta_x;
                 ix += step_x;
@@ -210,6 +326,8 @@ int64_t costmap_integrate_scan(const Costmap *m, double x, double y, double thet
                         y_lo = int_min(y_lo, cy);
                         y_hi = int_max(y_hi, cy);
                     }
+                    if (by_marks)
+                        note_mark(m, gx, gy, theta, cx, cy);
                     changed++;
                 }
             }
@@ -242,6 +360,54 @@ int costmap_new_marks_near(const Costmap *m, const uint8_t *since, const double 
                 }
             }
         }
+    }
+    return 0;
+}
+
+/* Can `costmap_new_marks_near` find a new mark (marked now, not in `since`) near the points of the
+ * plan (points n x 2, arc n: arc length [m] at each point) interpolated at arc lengths from `low`
+ * to `high` [m], given that each such point lies on a segment between two of the plan's points
+ * whose arc lengths bracket it? 0 when certainly not: no new mark in the window that search
+ * examines round any point of the bounding box of those plan points (widened by 1e-9 relative,
+ * far more than the interpolation's rounding); 1 when it may. `first`: a point whose arc length is
+ * at most `low` (the planner's current segment). */
+int costmap_new_marks_maybe_near(const Costmap *m, const uint8_t *since, const double *points, const double *arc,
+                                 int64_t n, int64_t first, double low, double high, double radius)
+{
+    if (n <= 0 || first < 0 || first >= n || !(low >= arc[first]))
+        return 1;
+    while (first + 1 < n && arc[first + 1] <= low)
+        first++;
+    int64_t last = first;
+    while (last + 1 < n && !(arc[last] >= high))
+        last++;
+    double x_min = INFINITY, x_max = -INFINITY, y_min = INFINITY, y_max = -INFINITY;
+    for (int64_t k = first; k <= last; k++) {
+        x_min = py_min(x_min, points[2 * k]);
+        x_max = py_max(x_max, points[2 * k]);
+        y_min = py_min(y_min, points[2 * k + 1]);
+        y_max = py_max(y_max, points[2 * k + 1]);
+    }
+    if (!(isfinite(x_min) && isfinite(x_max) && isfinite(y_min) && isfinite(y_max)))
+        return 1;
+    x_min -= 1e-9 * (1.0 + fabs(x_min));
+    x_max += 1e-9 * (1.0 + fabs(x_max));
+    y_min -= 1e-9 * (1.0 + fabs(y_min));
+    y_max += 1e-9 * (1.0 + fabs(y_max));
+    int64_t rows = m->rows, cols = m->cols;
+    double resolution = m->resolution;
+    int64_t reach = (int64_t)ceil(radius / resolution) + 1; /* as costmap_new_marks_near */
+    double lo_x = floor((x_min - m->origin_x) / resolution), hi_x = floor((x_max - m->origin_x) / resolution);
+    double lo_y = floor((y_min - m->origin_y) / resolution), hi_y = floor((y_max - m->origin_y) / resolution);
+    if (!(fabs(lo_x) < 1e15 && fabs(hi_x) < 1e15 && fabs(lo_y) < 1e15 && fabs(hi_y) < 1e15))
+        return 1;
+    int64_t cx_lo = int_max((int64_t)lo_x - reach, 0), cx_stop = int_min((int64_t)hi_x + reach + 1, cols);
+    int64_t cy_lo = int_max((int64_t)lo_y - reach, 0), cy_stop = int_min((int64_t)hi_y + reach + 1, rows);
+    for (int64_t cy = cy_lo; cy < cy_stop; cy++) {
+        int64_t row = rows - 1 - cy;
+        for (int64_t cx = cx_lo; cx < cx_stop; cx++)
+            if (m->marked[row * cols + cx] && !since[row * cols + cx])
+                return 1;
     }
     return 0;
 }
@@ -299,5 +465,11 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_FIELD(Costmap, col_marks);
     LAYOUT_FIELD(Costmap, cos_angles);
     LAYOUT_FIELD(Costmap, sin_angles);
+    LAYOUT_FIELD(Costmap, uniform);
+    LAYOUT_FIELD(Costmap, first_angle);
+    LAYOUT_FIELD(Costmap, step);
+    LAYOUT_FIELD(Costmap, near_from);
+    LAYOUT_FIELD(Costmap, near_to);
+    LAYOUT_FIELD(Costmap, near_cell);
     return n;
 }

@@ -238,11 +238,59 @@ typedef struct {
     int64_t n_starts;
     double *directions; /* count x 2 scratch */
     double *ranges;     /* the output, >= count */
+    /* rows x cols as occupied_up: the Chebyshev distance (cells) from each cell to the nearest
+     * occupied one, at most 255 (`lidar_clearance`); 0 marks an occupied cell. */
+    const uint8_t *clearance;
 } Lidar;
 
-/* Distance [m] to the first occupied cell along each direction (inf when none within max_range).
- * Amanatides-Woo traversal: the ray visits cells in order, always crossing the nearer of the next
- * vertical or horizontal cell boundary. */
+/* `Lidar.clearance` of an occupancy grid (rows x cols, nonzero occupied): two passes of the
+ * chamfer with the eight neighbours at distance 1, the exact Chebyshev distance to the nearest
+ * occupied cell of the grid (cells outside it are free), at most 255. */
+void lidar_clearance(const uint8_t *occupied, int64_t rows, int64_t cols, uint8_t *out)
+{
+    for (int64_t r = 0; r < rows; r++)
+        for (int64_t c = 0; c < cols; c++) {
+            int64_t d = occupied[r * cols + c] ? 0 : 255;
+            if (d && r > 0) {
+                for (int64_t k = c - 1; k <= c + 1; k++)
+                    if (0 <= k && k < cols)
+                        d = int_min(d, (int64_t)out[(r - 1) * cols + k] + 1);
+            }
+            if (d && c > 0)
+                d = int_min(d, (int64_t)out[r * cols + c - 1] + 1);
+            out[r * cols + c] = (uint8_t)d;
+        }
+    for (int64_t r = rows - 1; r >= 0; r--)
+        for (int64_t c = cols - 1; c >= 0; c--) {
+            int64_t d = out[r * cols + c];
+            if (d && r < rows - 1) {
+                for (int64_t k = c - 1; k <= c + 1; k++)
+                    if (0 <= k && k < cols)
+                        d = int_min(d, (int64_t)out[(r + 1) * cols + k] + 1);
+            }
+            if (d && c < cols - 1)
+                d = int_min(d, (int64_t)out[r * cols + c + 1] + 1);
+            out[r * cols + c] = (uint8_t)d;
+        }
+}
+
+/* Lower `out` to the distance [m] to the first occupied cell along each direction, where that is
+ * nearer (`out` unchanged when none lies within max_range). Amanatides-Woo traversal: the ray
+ * visits cells in order, always crossing the nearer of the next vertical or horizontal cell
+ * boundary. A cell is entered at `travelled` (cell units), never less than the cells before it,
+ * so the traversal stops once travelled * resolution exceeds out[beam] (the shapes' nearest hit):
+ * an occupied cell from there on would not lower it. The bound in cell units is taken a few ulp
+ * high (1e-12 relative), so a cell entered at or below out[beam] is still visited.
+ *
+ * Free space is crossed in strides: from a cell entered at `travelled` whose clearance is c >= 6,
+ * the ray's points up to L = (c - 2.01) / max(|dx|, |dy|) further lie within c - 1 cells
+ * (Chebyshev) of it, all free, so the traversal moves straight on to its state at travelled + L:
+ * every x step below that distance, then every y step, with the additions of the cell-by-cell loop
+ * in its order. The loop takes x when next_x < next_y, else y: the x steps X_0 < X_1 < ... and
+ * the y steps Y_0 < Y_1 < ... merged in order (a y first on a tie), so it passes through the state
+ * with i x steps and j y steps taken exactly when X_{i-1} < Y_j and Y_{j-1} <= X_i; with i, j the
+ * counts of steps below s, X_{i-1} < s <= Y_j and Y_{j-1} < s <= X_i. From there the loop goes on
+ * as before: the distances it reports are the cell-by-cell loop's. */
 static void cast_grid(const Lidar *s, double x, double y, const double *directions, int64_t n, double max_range,
                       double *out)
 {
@@ -250,11 +298,14 @@ static void cast_grid(const Lidar *s, double x, double y, const double *directio
     double resolution = s->resolution;
     double gx = (x - s->origin_x) / resolution;
     double gy = (y - s->origin_y) / resolution;
-    double limit = max_range / resolution;
+    double range_limit = max_range / resolution;
     int64_t start_x = (int64_t)floor(gx);
     int64_t start_y = (int64_t)floor(gy);
+    const uint8_t *clearance = s->clearance;
     for (int64_t beam = 0; beam < n; beam++) {
         double dx = directions[2 * beam], dy = directions[2 * beam + 1];
+        double bound = out[beam] / resolution * (1.0 + 1e-12);
+        double limit = bound < range_limit ? bound : range_limit;
         int64_t ix = start_x, iy = start_y;
         int64_t step_x = dx > 0 ? 1 : -1;
         int64_t step_y = dy > 0 ? 1 : -1;
@@ -262,13 +313,27 @@ static void cast_grid(const Lidar *s, double x, double y, const double *directio
         double next_y = dy > 0 ? ((double)(iy + 1) - gy) / dy : (dy < 0 ? (gy - (double)iy) / -dy : INFINITY);
         double delta_x = dx != 0 ? 1.0 / fabs(dx) : INFINITY;
         double delta_y = dy != 0 ? 1.0 / fabs(dy) : INFINITY;
+        double stride = 1.0 / py_max(fabs(dx), fabs(dy)); /* distance per cell of Chebyshev offset */
         double travelled = 0.0;
-        out[beam] = INFINITY;
         while (travelled <= limit) {
             if (0 <= ix && ix < cols && 0 <= iy && iy < rows) {
-                if (s->occupied_up[iy * cols + ix]) {
-                    out[beam] = travelled * resolution;
+                int64_t c = clearance[iy * cols + ix];
+                if (!c) {
+                    out[beam] = py_min(travelled * resolution, out[beam]);
                     break;
+                }
+                if (c >= 6) {
+                    double target = travelled + ((double)c - 2.01) * stride;
+                    while (next_x < target) {
+                        next_x += delta_x;
+                        ix += step_x;
+                    }
+                    while (next_y < target) {
+                        next_y += delta_y;
+                        iy += step_y;
+                    }
+                    /* Then one step as below from the cell reached, free (a stride shorter than the
+                     * cell leaves it where it was): `travelled` is that step's. */
                 }
             } else if ((ix < 0 && step_x < 0) || (ix >= cols && step_x > 0)) {
                 break; /* left the grid for good in x */
@@ -359,8 +424,10 @@ static int inside_polygons(const Lidar *s, double x, double y)
  * inf for no hit within range_max, all 0 inside a polygon. */
 void lidar_measure(const Lidar *s, double x, double y, const double *directions, int64_t n, double *out)
 {
-    cast_grid(s, x, y, directions, n, s->range_max, out);
+    for (int64_t beam = 0; beam < n; beam++)
+        out[beam] = INFINITY;
     cast_shapes(s, x, y, directions, n, out, INFINITY);
+    cast_grid(s, x, y, directions, n, s->range_max, out);
     if (inside_polygons(s, x, y))
         for (int64_t beam = 0; beam < n; beam++)
             out[beam] = 0.0;
@@ -378,8 +445,10 @@ void lidar_scan(const Lidar *s, double x, double y, double theta)
         directions[2 * beam] = cos(cast);
         directions[2 * beam + 1] = sin(cast);
     }
-    cast_grid(s, x, y, directions, count, s->range_max, ranges);
+    for (int64_t beam = 0; beam < count; beam++)
+        ranges[beam] = INFINITY;
     cast_shapes(s, x, y, directions, count, ranges, s->range_max);
+    cast_grid(s, x, y, directions, count, s->range_max, ranges);
     int inside = inside_polygons(s, x, y);
     for (int64_t beam = 0; beam < count; beam++) {
         double distance = inside ? 0.0 : ranges[beam];
@@ -387,6 +456,54 @@ void lidar_scan(const Lidar *s, double x, double y, double theta)
             ranges[beam] = NAN;
         else
             ranges[beam] = distance + s->range_jitter[beam];
+    }
+}
+
+/* ------------------------------------------------------------- fleet contacts (fleet.py) */
+
+/* `FleetContacts.steps`'s gaps: robots at positions[k] (steps + 1 rows of n x 2) before step k and
+ * positions[k + 1] after it; for each step k and pair p (robots first[p], second[p]) the least gap
+ * [m] over the step, gap[k * pairs + p] (the distance at the closest approach of the linearly
+ * moving offset minus reach[p]), and the gap at the step's end, end_gap[k * pairs + p]. The
+ * operations of the NumPy description it replaced, in its order, element by element: the offsets
+ * b - a, w = d1 - d0, s* = -(d0.w) / (w.w) where w.w > 0 (else 0) clipped to [0, 1], then
+ * hypot(d0 + s* w) - reach (hypot: NumPy's is the C library's).
+ *
+ * Both are +inf instead for a pair that is certainly farther apart during the step than
+ * floor[a] and floor[b] and 0 (the callers' minimum clearances: such a gap changes neither, nor
+ * any contact): on each axis the offset stays at least the smaller of its magnitudes at the ends
+ * when it keeps its sign, and the distance is at least the larger axis's bound (taken 1e-12
+ * relative low, far more than the rounding). */
+void fleet_gaps(const double *positions, int64_t steps, int64_t n, const int64_t *first, const int64_t *second,
+                int64_t pairs, const double *reach, const double *floor_, double *gap, double *end_gap)
+{
+    for (int64_t k = 0; k < steps; k++) {
+        const double *before = positions + 2 * n * k, *after = positions + 2 * n * (k + 1);
+        for (int64_t p = 0; p < pairs; p++) {
+            int64_t a = first[p], b = second[p];
+            double d0x = before[2 * b] - before[2 * a], d0y = before[2 * b + 1] - before[2 * a + 1];
+            double d1x = after[2 * b] - after[2 * a], d1y = after[2 * b + 1] - after[2 * a + 1];
+            double low_x = d0x * d1x > 0.0 ? py_min(fabs(d0x), fabs(d1x)) : 0.0;
+            double low_y = d0y * d1y > 0.0 ? py_min(fabs(d0y), fabs(d1y)) : 0.0;
+            double low = py_max(low_x, low_y) * (1.0 - 1e-12) - reach[p];
+            if (low > 0.0 && low > floor_[a] && low > floor_[b]) {
+                gap[k * pairs + p] = INFINITY;
+                end_gap[k * pairs + p] = INFINITY;
+                continue;
+            }
+            double wx = d1x - d0x, wy = d1y - d0y;
+            double ww = wx * wx + wy * wy;
+            double dw = d0x * wx + d0y * wy;
+            double s_star = 0.0;
+            if (ww > 0.0)
+                s_star = -dw / ww;
+            if (s_star < 0.0)
+                s_star = 0.0;
+            else if (s_star > 1.0)
+                s_star = 1.0;
+            gap[k * pairs + p] = hypot(d0x + s_star * wx, d0y + s_star * wy) - reach[p];
+            end_gap[k * pairs + p] = hypot(d1x, d1y) - reach[p];
+        }
     }
 }
 
@@ -457,5 +574,6 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_FIELD(Lidar, n_starts);
     LAYOUT_FIELD(Lidar, directions);
     LAYOUT_FIELD(Lidar, ranges);
+    LAYOUT_FIELD(Lidar, clearance);
     return n;
 }
