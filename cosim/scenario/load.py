@@ -71,6 +71,8 @@ SECTIONS = (
 # Components of the navigation template that are not FMUs (`cosim.scenario.template`); each name is
 # also its kind, made by `cosim.navigation.build.COMPONENT_KINDS`.
 PYTHON_COMPONENTS = ("planner", "lidar")
+# The template's components in the order a system lists them (`cosim.scenario.template.ORDER`).
+TEMPLATE_ORDER = ("planner", "pure_pursuit", "lidar", "vfh", "mixer", "vehicle")
 # Template components a `[components.NAME]` of the same name replaces by any FMU (the vehicle is
 # swapped in [vehicle]: the run reads the robot pose from it).
 REPLACEABLE = ("pure_pursuit", "vfh", "mixer")
@@ -242,8 +244,11 @@ class Scenario:
 
     @property
     def project_fmus(self) -> list[str]:
-        """The names of the project's own FMUs its components use (what a first run builds)."""
-        return [spec.fmu for spec in self.components.values() if spec.is_builtin]
+        """The names of the project's own FMUs its components use (what a first run builds), in the
+        order the run reads them: the template's (`TEMPLATE_ORDER`), then the added components'."""
+        position = {name: number for number, name in enumerate(TEMPLATE_ORDER)}
+        names = sorted(self.components, key=lambda name: position.get(name, len(position)))
+        return [self.components[name].fmu for name in names if self.components[name].is_builtin]
 
 
 def load_scenario(
@@ -274,13 +279,21 @@ def load_scenario(
             "this takes one robot"
         )
     if check_world:
-        from cosim.world.distance import check_start_goal
-
-        if isinstance(scenario, Fleet):
-            check_fleet_world(scenario)
-        else:
-            check_start_goal(scenario)
+        check_scenario_world(scenario)
     return scenario
+
+
+def check_scenario_world(scenario) -> None:
+    """What `load_scenario` checks after the file (unless `check_world=False`): the start and goal of
+    a scenario or of each robot of a fleet against the map and the obstacles; `CosimError` otherwise.
+    Apart, so that `cosim run` starts building the FMUs the file names before waiting for the
+    kernels this check loads."""
+    from cosim.world.distance import check_start_goal
+
+    if isinstance(scenario, Fleet):
+        check_fleet_world(scenario)
+    else:
+        check_start_goal(scenario)
 
 
 def parse_scenario(
