@@ -112,11 +112,13 @@ def _sources(source: Path) -> list[Path]:
     return seen
 
 
-def run_compiler(command: list[str]) -> subprocess.CompletedProcess:
-    """`subprocess.run(command, capture_output=True, text=True)`, safe to call from a thread of a
-    process that forks (see `_spawning`). OSError if the command cannot be started."""
+def run_compiler(command: list[str], cwd: str | Path | None = None) -> subprocess.CompletedProcess:
+    """`subprocess.run(command, capture_output=True, text=True, cwd=cwd)`, safe to call from a thread
+    of a process that forks (see `_spawning`). OSError if the command cannot be started."""
     with _spawning:
-        process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        process = subprocess.Popen(
+            command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd
+        )
     stdout, stderr = process.communicate()
     return subprocess.CompletedProcess(command, process.returncode, stdout, stderr)
 
