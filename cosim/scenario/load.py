@@ -25,7 +25,6 @@ from cosim.core.system import LOOP_HANDLING
 from cosim.errors import PATH_LIMIT, CosimError, wrong_file_message
 from cosim.fmi.builtin import known_names
 from cosim.fmi.solvers import SOLVERS
-from cosim.scenario.fleet import Fleet, build_fleet, check_fleet_world, find_robot, is_fleet
 from cosim.scenario.limits import (
     MAX_COMPONENTS,
     MAX_LIDAR_BEAMS,
@@ -273,7 +272,7 @@ def load_scenario(
     except OSError as error:
         raise CosimError(f"{source}: cannot read: {error}") from None
     scenario = parse_scenario(text, source, path.resolve().parent, overrides, path=path)
-    if isinstance(scenario, Fleet) and not fleet:
+    if not isinstance(scenario, Scenario) and not fleet:
         raise CosimError(
             f"{source}: a fleet ([[robots]]) runs with cosim run and shows with cosim system; "
             "this takes one robot"
@@ -288,12 +287,19 @@ def check_scenario_world(scenario) -> None:
     a scenario or of each robot of a fleet against the map and the obstacles; `CosimError` otherwise.
     Apart, so that `cosim run` starts building the FMUs the file names before waiting for the
     kernels this check loads."""
-    from cosim.world.distance import check_start_goal
+    if isinstance(scenario, Scenario):
+        from cosim.world.distance import check_start_goal
 
-    if isinstance(scenario, Fleet):
-        check_fleet_world(scenario)
-    else:
         check_start_goal(scenario)
+    else:
+        from cosim.scenario.fleet import check_fleet_world
+
+        check_fleet_world(scenario)
+
+
+def is_fleet(raw: dict) -> bool:
+    """Whether parsed scenario TOML describes a fleet (`cosim.scenario.fleet`, imported only then)."""
+    return "robots" in raw or "fleet" in raw
 
 
 def parse_scenario(
@@ -315,6 +321,8 @@ def parse_scenario(
     for override in overrides:
         apply_override(raw, override, source)
     if is_fleet(raw):  # [[robots]]: a Fleet of single-robot scenarios (cosim.scenario.fleet)
+        from cosim.scenario.fleet import build_fleet
+
         return build_fleet(raw, source, _build, base_dir, text, path, tuple(overrides))
     return _build(raw, source, base_dir, text, path, tuple(overrides))
 
@@ -338,6 +346,8 @@ def apply_override(raw: dict, override: str, source: str) -> None:
     node: Any = raw
     for depth, part in enumerate(parts[:-1]):
         if isinstance(node, list) and depth == 1 and parts[0] == "robots" and not part.isdigit():
+            from cosim.scenario.fleet import find_robot
+
             node = find_robot(node, part)  # robots.robot2.vfh.safety_distance: a robot by its name
             if node is None:
                 raise CosimError(f"--set {shown}: no robot named {describe(part)} in [[robots]]")
