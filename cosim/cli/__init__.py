@@ -104,8 +104,9 @@ def exit_program(code: int):
     the output flushed, the other threads joined and the exit handlers run as the interpreter's own
     exit does them, then `os._exit`, without the teardown that deallocates every module and object
     one by one (~20 ms after a run; its log, FMUs and PNG are closed and written by then). Any
-    other command: `sys.exit(code)`."""
-    if not _quick_exit[0]:
+    other command, or a run under a profiler or tracer (cProfile writes its figures after the
+    program returns): `sys.exit(code)`."""
+    if not _quick_exit[0] or sys.getprofile() is not None or sys.gettrace() is not None:
         sys.exit(code)
     import atexit
     import threading

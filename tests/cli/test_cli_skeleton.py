@@ -115,3 +115,18 @@ def test_other_commands_exit_as_python_does(monkeypatch):
     with pytest.raises(SystemExit) as done:
         cli.exit_program(2)
     assert done.value.code == 2
+
+
+def test_a_run_under_a_profiler_exits_as_python_does(monkeypatch):
+    """Under a profiler (cProfile writes its figures after the program returns) the quick exit is
+    `sys.exit` too."""
+    import cosim.cli as cli
+
+    monkeypatch.setattr(cli, "_quick_exit", [True])
+    sys.setprofile(lambda *arguments: None)
+    try:
+        with pytest.raises(SystemExit) as done:
+            cli.exit_program(1)
+    finally:
+        sys.setprofile(None)
+    assert done.value.code == 1
