@@ -315,10 +315,9 @@ def prepare(
     is not up to date and each kernel of `kernels` not compiled yet; returns at once. A first run
     then waits for the longest build, not for their sum. Builds start in the order a run needs them
     (`_NeedOrderedPool`): the kernels of `BEFORE_FMUS`, then the FMUs in the order given, then the
-    other kernels, whichever call of `prepare` queued them. `announce` gets
-    one line per kind of build started ("building FMUs ...", "compiling kernels ..."); nothing when
-    all are built. Errors come later, from the `builtin_fmu` or kernel load that waits for the
-    failed build."""
+    other kernels, whichever call of `prepare` queued them. `announce` gets one line per kind of
+    build started ("building FMUs ...", "compiling kernels ..."); nothing when all are built.
+    Errors come later, from the `builtin_fmu` or kernel load that waits for the failed build."""
     fmi_version = _check_version(fmi_version)
     kernels = [Path(path) for path in kernels if Path(path).is_file()]
     stale: list[str] = []
