@@ -195,19 +195,20 @@ def _handler(args) -> int:
         finally:
             if args.live:
                 sink.stop()
-    prepare(scenario.project_fmus, scenario.fmi_version, kernels=(), announce=announce)
-    check_scenario_world(scenario)
     plotter = None
     if scenario.plot and not args.no_plot and getattr(args, "program", False):
         from cosim.cli.plotter import PlotProcess
 
-        # Forked before the live view's server starts, so the child holds none of its threads
-        # or sockets. It prepares the plot while the run goes.
+        # Forked before the live view's server starts and before the FMU builds (whose threads
+        # import modules), so the child holds none of their threads, sockets or locks. It prepares
+        # the plot while the run goes.
         plotter = PlotProcess.start()
-    from cosim.navigation.outcome import avoider_name, format_summary
-    from cosim.navigation.run import run_scenario
-
     try:
+        prepare(scenario.project_fmus, scenario.fmi_version, kernels=(), announce=announce)
+        check_scenario_world(scenario)
+        from cosim.navigation.outcome import avoider_name, format_summary
+        from cosim.navigation.run import run_scenario
+
         sink = _live_sink(args, scenario.macro_step)
     except BaseException:
         if plotter is not None:
