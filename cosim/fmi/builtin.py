@@ -314,10 +314,12 @@ def prepare(
     """Start building, side by side, each project FMU of `fmu_names` (FMI `fmi_version`) whose build
     is not up to date and each kernel of `kernels` not compiled yet; returns at once. A first run
     then waits for the longest build, not for their sum. Builds start in the order a run needs them
-    (`_NeedOrderedPool`): the kernels of `BEFORE_FMUS`, then the FMUs in the order given, then the
-    other kernels, whichever call of `prepare` queued them. `announce` gets one line per kind of
-    build started ("building FMUs ...", "compiling kernels ..."); nothing when all are built.
-    Errors come later, from the `builtin_fmu` or kernel load that waits for the failed build."""
+    (`_NeedOrderedPool`): the kernels given first that are in `BEFORE_FMUS`, then the FMUs in the
+    order given, then the other kernels in the order given, whichever call of `prepare` queued
+    them (a command that compiles only kernels, `cosim plan`, has them in its own order).
+    `announce` gets one line per kind of build started ("building FMUs ...", "compiling kernels
+    ..."); nothing when all are built. Errors come later, from the `builtin_fmu` or kernel load
+    that waits for the failed build."""
     fmi_version = _check_version(fmi_version)
     kernels = [Path(path) for path in kernels if Path(path).is_file()]
     stale: list[str] = []
@@ -347,10 +349,11 @@ def prepare(
                 (1, number), build_if_stale, name, SOURCE_ROOT, cache_dir, fmi_version
             )
     early = {path.resolve() for path in BEFORE_FMUS}
+    ahead = True  # the kernels given before any outside `BEFORE_FMUS` go before the FMUs
     started = []
     for number, source in enumerate(uncompiled):
-        rank = (0 if source in early else 2, number)
-        started += native_load.start_builds([source], _Ranked(pool, rank))
+        ahead = ahead and source in early
+        started += native_load.start_builds([source], _Ranked(pool, (0 if ahead else 2, number)))
     if not native_load.compiler_found():
         announce = None  # the builds fail at once: their one-line error says it all
     if announce is not None and stale:

@@ -384,8 +384,8 @@ def test_a_free_build_thread_takes_the_queued_build_of_lowest_rank():
 
 
 def test_a_run_needs_the_early_kernels_before_its_fmus(tmp_path, monkeypatch):
-    """`prepare` ranks every kernel of `BEFORE_FMUS` before the FMUs (in the order given), and the
-    other kernels after them, whichever call queued them."""
+    """`prepare` ranks the kernels given first that are in `BEFORE_FMUS` before the FMUs, and the
+    other kernels after them in the order given, whichever call queued them."""
     monkeypatch.setattr(fmus, "_pending", {})
     monkeypatch.setattr(native, "_pending", {})
     monkeypatch.setattr(native, "_loaded", {})
@@ -406,3 +406,8 @@ def test_a_run_needs_the_early_kernels_before_its_fmus(tmp_path, monkeypatch):
     order = [name for _, name in sorted(queued)]
     assert order == ["distance", "world", "astar", "PurePursuit", "DifferentialDrive", "costmap", "kernel"]
     assert [path.stem for path in fmus.RUN_KERNELS] == ["distance", "world", "astar", "costmap", "kernel"]
+    queued.clear()
+    monkeypatch.setattr(native, "_pending", {})
+    native_dir = fmus.BEFORE_FMUS[0].parent  # planner/native: `cosim plan compare` gives its own order
+    fmus.prepare((), kernels=[native_dir / "hybrid.c", native_dir / "astar.c", native_dir / "distance.c"])
+    assert [name for _, name in sorted(queued)] == ["hybrid", "astar", "distance"]
