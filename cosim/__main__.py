@@ -9,11 +9,11 @@ import sys
 
 def run() -> None:
     try:
-        from cosim.cli import main
+        from cosim.cli import exit_program, main
     except KeyboardInterrupt:
         print("cosim: interrupted (SIGINT)", file=sys.stderr)
         sys.exit(1)
-    sys.exit(main())
+    exit_program(main())
 
 
 if __name__ == "__main__":

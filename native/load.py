@@ -54,6 +54,7 @@ SUFFIX = ".dylib" if sys.platform == "darwin" else ".so"
 _INCLUDE = re.compile(rb'^\s*#\s*include\s+"([^"]+)"', re.MULTILINE)
 _loaded: dict[Path, ctypes.CDLL] = {}
 _pending: dict[Path, Future] = {}  # builds started by `start_builds`, until `load` takes them
+_found: dict[Path, Path] = {}  # libraries `missing` found built, until `load` takes them (once)
 _lock = threading.Lock()
 # Compilers are started under this lock, and a fork (from another thread) waits for it: a process
 # forked while `subprocess` holds a compiler's pipes open in this one would keep their write ends,
@@ -112,11 +113,13 @@ def _sources(source: Path) -> list[Path]:
     return seen
 
 
-def run_compiler(command: list[str]) -> subprocess.CompletedProcess:
-    """`subprocess.run(command, capture_output=True, text=True)`, safe to call from a thread of a
-    process that forks (see `_spawning`). OSError if the command cannot be started."""
+def run_compiler(command: list[str], cwd: str | Path | None = None) -> subprocess.CompletedProcess:
+    """`subprocess.run(command, capture_output=True, text=True, cwd=cwd)`, safe to call from a thread
+    of a process that forks (see `_spawning`). OSError if the command cannot be started."""
     with _spawning:
-        process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        process = subprocess.Popen(
+            command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd
+        )
     stdout, stderr = process.communicate()
     return subprocess.CompletedProcess(command, process.returncode, stdout, stderr)
 
@@ -210,8 +213,12 @@ def missing(sources) -> list[Path]:
         with _lock:
             if source in _loaded or source in _pending:
                 continue
-        if _find(source) is None:
+        built = _find(source)
+        if built is None:
             found.append(source)
+        else:
+            with _lock:
+                _found[source] = built  # `load` need not hash the sources again
     return found
 
 
@@ -240,8 +247,11 @@ def load(source: str | Path) -> ctypes.CDLL:
         return library
     with _lock:
         pending = _pending.pop(source, None)
+        found = _found.pop(source, None)
     if pending is not None:
         path = pending.result()  # its NativeBuildError, if the build failed (a later load tries again)
+    elif found is not None and found.is_file():
+        path = found
     else:
         path = _find(source) or _build_into_cache(source)
     library = ctypes.CDLL(str(path))

@@ -164,20 +164,22 @@ def _handler(args) -> int:
 
     announce = None if args.quiet else _announce
     prepare((), announce=announce)  # the kernels, compiled while the modules that load them import
-    from cosim.scenario.load import load_scenario
+    from cosim.scenario.load import check_scenario_world, load_scenario
 
     overrides = list(args.overrides)
     if args.max_steps is not None:
         overrides.append(f"simulation.max_steps={args.max_steps}")
-    scenario = load_scenario(args.scenario, overrides, fleet=True)
+    # The FMUs the file names start building before the start and goal are checked (which loads
+    # kernels that may still be compiling).
+    scenario = load_scenario(args.scenario, overrides, check_world=False, fleet=True)
     if hasattr(scenario, "robots"):  # a fleet ([[robots]]): cosim.navigation.fleet
-        from cosim.navigation.fleet import run_fleet_command
-
         by_version: dict[int, list[str]] = {}  # the robots' project FMUs, built side by side
         for robot in scenario.robots:
             by_version.setdefault(robot.scenario.fmi_version, []).extend(robot.scenario.project_fmus)
         for version, fmus in by_version.items():
             prepare(fmus, version, kernels=(), announce=announce)
+        check_scenario_world(scenario)
+        from cosim.navigation.fleet import run_fleet_command
 
         plot = scenario.first.plot and not args.no_plot
         sink = _live_sink(args, scenario.first.macro_step)
@@ -197,14 +199,16 @@ def _handler(args) -> int:
     if scenario.plot and not args.no_plot and getattr(args, "program", False):
         from cosim.cli.plotter import PlotProcess
 
-        # Forked before the live view's server starts, so the child holds none of its threads
-        # or sockets. It prepares the plot while the run goes.
+        # Forked before the live view's server starts and before the FMU builds (whose threads
+        # import modules), so the child holds none of their threads, sockets or locks. It prepares
+        # the plot while the run goes.
         plotter = PlotProcess.start(scenario)
-    prepare(scenario.project_fmus, scenario.fmi_version, kernels=(), announce=announce)
-    from cosim.navigation.outcome import avoider_name, format_summary
-    from cosim.navigation.run import run_scenario
-
     try:
+        prepare(scenario.project_fmus, scenario.fmi_version, kernels=(), announce=announce)
+        check_scenario_world(scenario)
+        from cosim.navigation.outcome import avoider_name, format_summary
+        from cosim.navigation.run import run_scenario
+
         sink = _live_sink(args, scenario.macro_step)
     except BaseException:
         if plotter is not None:

@@ -10,13 +10,18 @@ whatever installed the package (pip never rebuilds an editable install; uv only 
 
 A first run compiles the FMUs it uses and the C kernels it loads (`native.load`): `prepare`
 starts all of those builds at once on a pool of compiler processes, one per core, and says so;
-`builtin_fmu` and `native.load.load` then wait for the one they need.
+`builtin_fmu` and `native.load.load` then wait for the one they need. A free core takes the queued
+build the run needs first (`_NeedOrderedPool`, `RUN_KERNELS`): the kernels that check the scenario
+and the longest one, the FMUs in the order the run reads them, then the other kernels, so the
+master's stepping kernel, loaded last, compiles while the run sets up.
 """
 
 from __future__ import annotations
 
 import fcntl
+import heapq
 import importlib.util
+import itertools
 import os
 import threading
 from collections.abc import Callable, Iterable
@@ -30,23 +35,30 @@ from cosim.errors import CosimError, shorten
 from native import load as native_load
 
 if TYPE_CHECKING:  # imported when a build is started: concurrent.futures imports logging (~8 ms)
-    from concurrent.futures import Future, ThreadPoolExecutor
+    from concurrent.futures import Future
 
 GENERATION_TOOL = "navcosim"  # how the project FMUs' generationTool starts
 
 PACKAGE_DIR = Path(__file__).resolve().parent.parent  # the `cosim` package
 SHIPPED_DIR = PACKAGE_DIR / "_fmus"
 SOURCE_ROOT = PACKAGE_DIR.parent / "fmus"
-# The compiled kernels every scenario run loads: the grid search and the distance transform of the
-# planner, the master's stepping kernel, the world's distances and lidar, the costmap
-# (tests/fmi/test_fmu_build.py holds this list to what a run loads).
-RUN_KERNELS = (
-    Path(planner.__file__).parent / "native" / "astar.c",
-    PACKAGE_DIR / "core" / "native" / "kernel.c",
+# The compiled kernels every scenario run loads (tests/fmi/test_fmu_build.py holds this list to what a
+# run loads), in the order a first run starts their builds (`prepare`): the planner's distance
+# transform and the world's distances, which check the scenario's start and goal before its FMUs are
+# read; the planner's grid search, loaded right after the FMUs and the longest to compile (~0.55 s of
+# CPU, as long as two FMUs: started before them, it ends with them); those three before the FMUs
+# (`BEFORE_FMUS`). After the FMUs, the costmap, loaded with the grid search, and the master's
+# stepping kernel, loaded last when the run starts (compiled while the run sets up).
+BEFORE_FMUS = (
     Path(planner.__file__).parent / "native" / "distance.c",
     PACKAGE_DIR / "world" / "native" / "world.c",
+    Path(planner.__file__).parent / "native" / "astar.c",
+)
+RUN_KERNELS = (
+    *BEFORE_FMUS,
     PACKAGE_DIR / "navigation" / "native" / "costmap.c",
-)  # the longest to compile first
+    PACKAGE_DIR / "core" / "native" / "kernel.c",
+)
 
 
 def documented_nan_variables(description) -> tuple[str, ...]:
@@ -232,18 +244,64 @@ def builtin_fmu(name: str, fmi_version: int = 2) -> Path:
 _pending: dict[tuple[str, int, Path], Future] = {}  # FMU builds `prepare` started, until used
 _fresh: set[tuple[str, int, Path]] = set()  # FMUs `prepare` found up to date, until used
 _lock = threading.Lock()
-_builders: ThreadPoolExecutor | None = None
 
 
-def _executor() -> ThreadPoolExecutor:
-    """The pool that runs the builds `prepare` starts: one compiler process per core at a time. Its
-    threads end when the builds do; the interpreter waits for them at exit, so no build is left
+class _NeedOrderedPool:
+    """Builds on one thread per core (each runs one compiler process at a time), where a free thread
+    takes the queued build with the lowest rank, not the oldest: a first run queues its kernels at
+    once and its FMUs when the scenario names them, and needs the FMUs before most of the kernels.
+    The threads end when the builds do; the interpreter waits for them at exit, so no build is left
     half-done (each writes a temporary file and renames it: a reader never sees half of one)."""
-    global _builders
-    if _builders is None:
+
+    def __init__(self, workers: int) -> None:
         from concurrent.futures import ThreadPoolExecutor
 
-        _builders = ThreadPoolExecutor(max_workers=os.cpu_count() or 1, thread_name_prefix="navcosim-build")
+        self._threads = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="navcosim-build")
+        self._queue: list[tuple] = []  # a heap of (rank, number, future, function, arguments)
+        self._numbers = itertools.count()  # equal ranks in the order they came
+        self._lock = threading.Lock()
+
+    def submit(self, rank: tuple, function: Callable, *arguments) -> Future:
+        """Queue `function(*arguments)` at `rank`; its future."""
+        from concurrent.futures import Future
+
+        future: Future = Future()
+        with self._lock:
+            heapq.heappush(self._queue, (rank, next(self._numbers), future, function, arguments))
+        self._threads.submit(self._run_first)  # one turn of a thread for each build queued
+        return future
+
+    def _run_first(self) -> None:
+        with self._lock:
+            _, _, future, function, arguments = heapq.heappop(self._queue)
+        if not future.set_running_or_notify_cancel():
+            return
+        try:
+            result = function(*arguments)
+        except BaseException as error:  # noqa: BLE001 - handed to whoever waits for the build
+            future.set_exception(error)
+        else:
+            future.set_result(result)
+
+
+class _Ranked:
+    """The pool as an executor whose builds all get one rank (what `native.load.start_builds` takes)."""
+
+    def __init__(self, pool: _NeedOrderedPool, rank: tuple) -> None:
+        self._pool, self._rank = pool, rank
+
+    def submit(self, function: Callable, *arguments) -> Future:
+        return self._pool.submit(self._rank, function, *arguments)
+
+
+_builders: _NeedOrderedPool | None = None
+
+
+def _executor() -> _NeedOrderedPool:
+    """The pool that runs the builds `prepare` starts: one compiler process per core at a time."""
+    global _builders
+    if _builders is None:
+        _builders = _NeedOrderedPool(os.cpu_count() or 1)
     return _builders
 
 
@@ -255,9 +313,13 @@ def prepare(
 ) -> None:
     """Start building, side by side, each project FMU of `fmu_names` (FMI `fmi_version`) whose build
     is not up to date and each kernel of `kernels` not compiled yet; returns at once. A first run
-    then waits for the longest build, not for their sum. `announce` gets one line per kind of build
-    started ("building FMUs ...", "compiling kernels ..."); nothing when all are built.
-    Errors come later, from the `builtin_fmu` or kernel load that waits for the failed build."""
+    then waits for the longest build, not for their sum. Builds start in the order a run needs them
+    (`_NeedOrderedPool`): the kernels given first that are in `BEFORE_FMUS`, then the FMUs in the
+    order given, then the other kernels in the order given, whichever call of `prepare` queued
+    them (a command that compiles only kernels, `cosim plan`, has them in its own order).
+    `announce` gets one line per kind of build started ("building FMUs ...", "compiling kernels
+    ..."); nothing when all are built. Errors come later, from the `builtin_fmu` or kernel load
+    that waits for the failed build."""
     fmi_version = _check_version(fmi_version)
     kernels = [Path(path) for path in kernels if Path(path).is_file()]
     stale: list[str] = []
@@ -281,13 +343,17 @@ def prepare(
     if not (stale or uncompiled):
         return  # a warm start: a few `stat` calls and hashes of the kernel sources
     pool = _executor()
-    started = native_load.start_builds(uncompiled[:1], pool)  # the longest first
     with _lock:
-        for name in stale:
+        for number, name in enumerate(stale):
             _pending[(name, fmi_version, cache_dir)] = pool.submit(
-                build_if_stale, name, SOURCE_ROOT, cache_dir, fmi_version
+                (1, number), build_if_stale, name, SOURCE_ROOT, cache_dir, fmi_version
             )
-    started += native_load.start_builds(uncompiled[1:], pool)
+    early = {path.resolve() for path in BEFORE_FMUS}
+    ahead = True  # the kernels given before any outside `BEFORE_FMUS` go before the FMUs
+    started = []
+    for number, source in enumerate(uncompiled):
+        ahead = ahead and source in early
+        started += native_load.start_builds([source], _Ranked(pool, (0 if ahead else 2, number)))
     if not native_load.compiler_found():
         announce = None  # the builds fail at once: their one-line error says it all
     if announce is not None and stale:

@@ -110,11 +110,6 @@ class Fleet:
         return self.robots[0].scenario
 
 
-def is_fleet(raw: dict) -> bool:
-    """Whether parsed scenario TOML describes a fleet."""
-    return "robots" in raw or "fleet" in raw
-
-
 def find_robot(robots: list, part: str):
     """The robot table named `part` in a `[[robots]]` list (for `--set robots.NAME.…`), or None."""
     for item in robots:

@@ -25,7 +25,6 @@ from cosim.core.system import LOOP_HANDLING
 from cosim.errors import PATH_LIMIT, CosimError, wrong_file_message
 from cosim.fmi.builtin import known_names
 from cosim.fmi.solvers import SOLVERS
-from cosim.scenario.fleet import Fleet, build_fleet, check_fleet_world, find_robot, is_fleet
 from cosim.scenario.limits import (
     MAX_COMPONENTS,
     MAX_LIDAR_BEAMS,
@@ -71,6 +70,8 @@ SECTIONS = (
 # Components of the navigation template that are not FMUs (`cosim.scenario.template`); each name is
 # also its kind, made by `cosim.navigation.build.COMPONENT_KINDS`.
 PYTHON_COMPONENTS = ("planner", "lidar")
+# The template's components in the order a system lists them (`cosim.scenario.template.ORDER`).
+TEMPLATE_ORDER = ("planner", "pure_pursuit", "lidar", "vfh", "mixer", "vehicle")
 # Template components a `[components.NAME]` of the same name replaces by any FMU (the vehicle is
 # swapped in [vehicle]: the run reads the robot pose from it).
 REPLACEABLE = ("pure_pursuit", "vfh", "mixer")
@@ -242,8 +243,11 @@ class Scenario:
 
     @property
     def project_fmus(self) -> list[str]:
-        """The names of the project's own FMUs its components use (what a first run builds)."""
-        return [spec.fmu for spec in self.components.values() if spec.is_builtin]
+        """The names of the project's own FMUs its components use (what a first run builds), in the
+        order the run reads them: the template's (`TEMPLATE_ORDER`), then the added components'."""
+        position = {name: number for number, name in enumerate(TEMPLATE_ORDER)}
+        names = sorted(self.components, key=lambda name: position.get(name, len(position)))
+        return [self.components[name].fmu for name in names if self.components[name].is_builtin]
 
 
 def load_scenario(
@@ -268,19 +272,34 @@ def load_scenario(
     except OSError as error:
         raise CosimError(f"{source}: cannot read: {error}") from None
     scenario = parse_scenario(text, source, path.resolve().parent, overrides, path=path)
-    if isinstance(scenario, Fleet) and not fleet:
+    if not isinstance(scenario, Scenario) and not fleet:
         raise CosimError(
             f"{source}: a fleet ([[robots]]) runs with cosim run and shows with cosim system; "
             "this takes one robot"
         )
     if check_world:
+        check_scenario_world(scenario)
+    return scenario
+
+
+def check_scenario_world(scenario) -> None:
+    """What `load_scenario` checks after the file (unless `check_world=False`): the start and goal of
+    a scenario or of each robot of a fleet against the map and the obstacles; `CosimError` otherwise.
+    Apart, so that `cosim run` starts building the FMUs the file names before waiting for the
+    kernels this check loads."""
+    if isinstance(scenario, Scenario):
         from cosim.world.distance import check_start_goal
 
-        if isinstance(scenario, Fleet):
-            check_fleet_world(scenario)
-        else:
-            check_start_goal(scenario)
-    return scenario
+        check_start_goal(scenario)
+    else:
+        from cosim.scenario.fleet import check_fleet_world
+
+        check_fleet_world(scenario)
+
+
+def is_fleet(raw: dict) -> bool:
+    """Whether parsed scenario TOML describes a fleet (`cosim.scenario.fleet`, imported only then)."""
+    return "robots" in raw or "fleet" in raw
 
 
 def parse_scenario(
@@ -302,6 +321,8 @@ def parse_scenario(
     for override in overrides:
         apply_override(raw, override, source)
     if is_fleet(raw):  # [[robots]]: a Fleet of single-robot scenarios (cosim.scenario.fleet)
+        from cosim.scenario.fleet import build_fleet
+
         return build_fleet(raw, source, _build, base_dir, text, path, tuple(overrides))
     return _build(raw, source, base_dir, text, path, tuple(overrides))
 
@@ -325,6 +346,8 @@ def apply_override(raw: dict, override: str, source: str) -> None:
     node: Any = raw
     for depth, part in enumerate(parts[:-1]):
         if isinstance(node, list) and depth == 1 and parts[0] == "robots" and not part.isdigit():
+            from cosim.scenario.fleet import find_robot
+
             node = find_robot(node, part)  # robots.robot2.vfh.safety_distance: a robot by its name
             if node is None:
                 raise CosimError(f"--set {shown}: no robot named {describe(part)} in [[robots]]")

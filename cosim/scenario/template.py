@@ -60,10 +60,10 @@ from cosim.scenario.description import (
     Observed,
     ScanSource,
 )
-from cosim.scenario.load import ComponentSpec, Scenario
+from cosim.scenario.load import TEMPLATE_ORDER, ComponentSpec, Scenario
 
 WAYPOINT_CAPACITY = 1000  # rows of the planner's waypoints output (PurePursuit's waypoints input)
-ORDER = ("planner", "pure_pursuit", "lidar", "vfh", "mixer", "vehicle")
+ORDER = TEMPLATE_ORDER
 POSE_COMPONENT = "vehicle"  # the run reads the robot pose from its x, y, theta; it cannot be removed
 VEHICLE_INPUTS = {"differential": ("v", "omega"), "bicycle": ("v", "steering_angle")}
 POSE = ("x", "y", "theta")

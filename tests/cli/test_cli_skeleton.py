@@ -81,3 +81,52 @@ def test_an_interrupt_while_the_cli_imports_is_one_line():
     )
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert (done.returncode, done.stderr) == (1, "cosim: interrupted (SIGINT)\n")
+
+
+@pytest.mark.slow
+def test_the_quick_exit_still_joins_threads_runs_exit_handlers_and_flushes(tmp_path):
+    """`exit_program` after a `cosim run` ends without the interpreter's teardown, but as its exit
+    would: a running non-daemon thread finishes, exit handlers run, buffered output comes out, and
+    the exit status is the command's."""
+    script = (
+        "import atexit, pathlib, sys, threading, time\n"
+        "import cosim.cli as cli\n"
+        "out = pathlib.Path(sys.argv[1])\n"
+        "def late():\n"
+        "    time.sleep(0.3)\n"
+        "    (out / 'thread').write_text('joined')\n"
+        "threading.Thread(target=late).start()\n"
+        "atexit.register(lambda: (out / 'atexit').write_text('ran'))\n"
+        "sys.stdout.write('buffered, no newline')\n"
+        "cli._quick_exit[0] = True\n"
+        "cli.exit_program(3)\n"
+        "print('never')\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script, str(tmp_path)], capture_output=True, text=True)
+    assert (done.returncode, done.stdout, done.stderr) == (3, "buffered, no newline", "")
+    assert (tmp_path / "thread").read_text() == "joined" and (tmp_path / "atexit").read_text() == "ran"
+
+
+def test_other_commands_exit_as_python_does(monkeypatch):
+    """Without a `cosim run` before it, `exit_program` is `sys.exit`: the interpreter's own exit."""
+    import cosim.cli as cli
+
+    monkeypatch.setattr(cli, "_quick_exit", [False])
+    with pytest.raises(SystemExit) as done:
+        cli.exit_program(2)
+    assert done.value.code == 2
+
+
+def test_a_run_under_a_profiler_exits_as_python_does(monkeypatch):
+    """Under a profiler (cProfile writes its figures after the program returns) the quick exit is
+    `sys.exit` too."""
+    import cosim.cli as cli
+
+    monkeypatch.setattr(cli, "_quick_exit", [True])
+    sys.setprofile(lambda *arguments: None)
+    try:
+        with pytest.raises(SystemExit) as done:
+            cli.exit_program(1)
+    finally:
+        sys.setprofile(None)
+    assert done.value.code == 1

@@ -348,8 +348,10 @@ def test_first_run_says_what_it_builds_and_builds_what_the_run_loads(tmp_path):
     assert first.returncode == 0, first.stderr
     steps = [line for line in first.stderr.splitlines() if "(first use or changed sources)" in line]
     assert len(steps) == 2
-    assert steps[0].startswith("compiling kernels astar, kernel, distance, world, costmap ")
-    fmu_names = "DifferentialDrive, PurePursuit, VectorFieldHistogram, AvoidanceMixer"
+    assert steps[0].startswith("compiling kernels distance, world, astar, costmap, kernel ")
+    fmu_names = (
+        "PurePursuit, VectorFieldHistogram, AvoidanceMixer, DifferentialDrive"  # as the run reads them
+    )
     assert steps[1].startswith(f"building FMUs {fmu_names} ")
     loaded = first.stdout.splitlines()[-1].split()[1:]
     assert sorted(loaded) == sorted(str(path.resolve()) for path in fmus.RUN_KERNELS)
@@ -357,3 +359,55 @@ def test_first_run_says_what_it_builds_and_builds_what_the_run_loads(tmp_path):
     assert built == sorted(native.library_name(path.resolve()) for path in fmus.RUN_KERNELS)
     again = subprocess.run(command, capture_output=True, text=True, env=environment, cwd=REPO, timeout=600)
     assert again.returncode == 0 and "first use" not in again.stderr
+
+
+def test_a_free_build_thread_takes_the_queued_build_of_lowest_rank():
+    """The build pool runs queued builds by rank (equal ranks in the order they came), not in the
+    order they were queued: a first run queues its FMUs after kernels it needs later. A build's
+    exception reaches whoever waits for it."""
+    import threading
+
+    pool = fmus._NeedOrderedPool(1)
+    release, ran = threading.Event(), []
+    first = pool.submit((9, 0), release.wait)  # holds the only thread while the others queue
+    futures = [
+        pool.submit(rank, ran.append, label) for rank, label in [((2, 0), "c"), ((1, 5), "b"), ((0, 1), "a2")]
+    ]
+    futures.append(fmus._Ranked(pool, (0, 0)).submit(ran.append, "a1"))
+    failed = pool.submit((1, 9), int, "not a number")
+    release.set()
+    assert first.result(timeout=30) is True
+    assert [future.result(timeout=30) for future in futures] == [None] * 4
+    assert ran == ["a1", "a2", "b", "c"]
+    with pytest.raises(ValueError, match="not a number"):
+        failed.result(timeout=30)
+
+
+def test_a_run_needs_the_early_kernels_before_its_fmus(tmp_path, monkeypatch):
+    """`prepare` ranks the kernels given first that are in `BEFORE_FMUS` before the FMUs, and the
+    other kernels after them in the order given, whichever call queued them."""
+    monkeypatch.setattr(fmus, "_pending", {})
+    monkeypatch.setattr(native, "_pending", {})
+    monkeypatch.setattr(native, "_loaded", {})
+    monkeypatch.setenv("NAVCOSIM_FMU_CACHE", str(tmp_path / "fmus"))
+    monkeypatch.setenv("NAVCOSIM_NATIVE_CACHE", str(tmp_path / "native"))
+    queued: list[tuple[tuple, str]] = []
+
+    class Recording:
+        def submit(self, rank, function, *arguments):
+            queued.append((rank, getattr(arguments[0], "stem", arguments[0])))
+            from concurrent.futures import Future
+
+            return Future()
+
+    monkeypatch.setattr(fmus, "_builders", Recording())
+    fmus.prepare((), kernels=fmus.RUN_KERNELS)
+    fmus.prepare(["PurePursuit", "DifferentialDrive"], 2, kernels=())
+    order = [name for _, name in sorted(queued)]
+    assert order == ["distance", "world", "astar", "PurePursuit", "DifferentialDrive", "costmap", "kernel"]
+    assert [path.stem for path in fmus.RUN_KERNELS] == ["distance", "world", "astar", "costmap", "kernel"]
+    queued.clear()
+    monkeypatch.setattr(native, "_pending", {})
+    native_dir = fmus.BEFORE_FMUS[0].parent  # planner/native: `cosim plan compare` gives its own order
+    fmus.prepare((), kernels=[native_dir / "hybrid.c", native_dir / "astar.c", native_dir / "distance.c"])
+    assert [name for _, name in sorted(queued)] == ["hybrid", "astar", "distance"]

@@ -50,19 +50,27 @@ def test_another_file_version_is_parsed_again(fmu_cache: Path, monkeypatch):
     _parse(fmu)
     kept = fmu_cache / ".PurePursuit.description.pickle"
     calls = []
-    monkeypatch.setattr(fmpy, "read_model_description", lambda path: calls.append(path) or "parsed")
+    monkeypatch.setattr(
+        fmpy, "read_model_description", lambda path, validate=True: calls.append(validate) or "parsed"
+    )
     assert _parse(fmu) != "parsed" and calls == []  # the kept one
     os.utime(fmu, ns=(fmu.stat().st_atime_ns, fmu.stat().st_mtime_ns + 1))  # "rebuilt"
-    assert _parse(fmu) == "parsed" and len(calls) == 1
+    assert _parse(fmu) == "parsed" and calls == [False]  # a project FMU: no schema validation
     key, _, payload = kept.read_bytes().partition(b"\n")
     assert key == description._kept_key(str(fmu.resolve()))
     kept.write_bytes(key + b"\n" + payload[: len(payload) // 2])  # cut short
     assert _parse(fmu) == "parsed" and len(calls) == 2
 
 
-def test_nothing_is_kept_beside_a_users_fmu(fmu_cache: Path, tmp_path: Path):
+def test_nothing_is_kept_beside_a_users_fmu(fmu_cache: Path, tmp_path: Path, monkeypatch):
     mine = tmp_path / "mine"
     mine.mkdir()
     shutil.copy2(fmu_cache / "PurePursuit.fmu", mine / "PurePursuit.fmu")
+    validated = []
+    parse = fmpy.read_model_description
+    monkeypatch.setattr(
+        fmpy, "read_model_description", lambda path, validate=True: validated.append(validate) or parse(path)
+    )
     _parse(mine / "PurePursuit.fmu")
     assert sorted(p.name for p in mine.iterdir()) == ["PurePursuit.fmu"]
+    assert validated == [True]  # a user's FMU is checked against the FMI schema

@@ -167,3 +167,30 @@ def test_override_of_a_list_item_out_of_range(tmp_path: Path, capsys):
     assert err.splitlines() == [
         "cosim: error: --set vfh.distance_limits.2=25: no item 2 in vfh.distance_limits (items 0 to 1)"
     ]
+
+
+def test_the_world_check_comes_apart_from_the_file():
+    """`load_scenario(check_world=False)` accepts a start inside the unknown obstacle;
+    `check_scenario_world` then says what `load_scenario` says of it."""
+    from cosim.errors import CosimError
+    from cosim.scenario.load import check_scenario_world, load_scenario
+
+    path = REPO / "scenarios" / "warehouse_diff_drive_one_obstacle.toml"
+    overrides = ["start.x=60.0", "start.y=19.25"]  # the centre of its [[obstacles]] box
+    with pytest.raises(CosimError) as whole:
+        load_scenario(path, overrides)
+    scenario = load_scenario(path, overrides, check_world=False)
+    with pytest.raises(CosimError) as apart:
+        check_scenario_world(scenario)
+    assert str(apart.value) == str(whole.value) and "[start]" in str(whole.value)
+
+
+def test_project_fmus_come_in_the_order_a_run_reads_them():
+    """A first run builds the project FMUs in the order the system description reads them."""
+    from cosim.scenario.compose import describe_system
+    from cosim.scenario.load import load_scenario
+
+    scenario = load_scenario(REPO / "scenarios" / "warehouse_diff_drive_one_obstacle.toml")
+    described = [name for name in describe_system(scenario).components if name in scenario.components]
+    assert scenario.project_fmus == [scenario.components[name].fmu for name in described]
+    assert scenario.project_fmus[-1] == "DifferentialDrive"
