@@ -145,7 +145,7 @@ def _handler(args) -> int:
     from cosim.sweep.engine import run_sweep
 
     try:
-        result = run_sweep(spec, options, progress=not args.quiet, plot=not args.no_plot)
+        result = run_sweep(spec, options, progress=not args.quiet, plot=not args.no_plot, exits=True)
     except KeyboardInterrupt as interrupt:
         kept = getattr(interrupt, "sweep_kept", None)
         if kept is not None:

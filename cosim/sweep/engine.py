@@ -401,7 +401,6 @@ def _execute(
     called once the check passed, before any row is kept; a failed check raises `CosimError`. The
     workers send the logs that `keep_logs` keeps."""
     from distributed import as_completed
-    from tqdm import tqdm
 
     from cosim.sweep.worker import BundlePlugin, TaskResult, check_task, run_task
 
@@ -429,7 +428,10 @@ def _execute(
         if error is not None:
             raise CosimError(f"{error} (checked on the run with {' '.join(first.overrides)})")
         checked()
-        bar = tqdm(total=total, initial=total - len(pending), unit="run", desc="sweep", disable=not progress)
+        if progress:  # (tqdm's import is 0.02-0.05 s of a quiet sweep's CPU otherwise)
+            from tqdm import tqdm
+
+            bar = tqdm(total=total, initial=total - len(pending), unit="run", desc="sweep")
         for future in as_completed(list(futures), loop=client.loop):
             run = futures.pop(future)
             try:
@@ -442,9 +444,10 @@ def _execute(
             rows[run.run_id] = row
             results.append(row)
             failed += row["status"] != COMPLETED
-            bar.update(1)
-            if failed:
-                bar.set_postfix(failed=failed)
+            if bar is not None:
+                bar.update(1)
+                if failed:
+                    bar.set_postfix(failed=failed)
     finally:
         if bar is not None:
             bar.close()
@@ -523,11 +526,20 @@ def _record_problem(row: dict[str, str], run: Run, out_dir: Path) -> str | None:
     return _outcome_problem(row, record.get("outcome"), "outcome record")
 
 
-def _load_plotting() -> None:
+def _load_plotting(exits: bool) -> None:
     """Import the plot module (matplotlib: ~0.3 s of CPU) while the local cluster starts: the
     cluster waits for its fork server to warm up (`cosim.sweep.warm`), which takes longer than
-    this process's own start, so the import fits in that wait instead of delaying the plot."""
-    import cosim.sweep.plot  # noqa: F401
+    this process's own start, so the import fits in that wait instead of delaying the plot.
+    `exits` (the process ends after the sweep, as `cosim sweep` does): as `cosim run`'s plot, skip
+    the docstrings matplotlib writes for `help()` (0.1 s of the import's 0.27 s of CPU) and load
+    the font now (`cosim.logs.plot.prepare_drawing`). The collector is paused meanwhile, in every
+    thread (the main thread imports Dask then), as `prepare_drawing` pauses it."""
+    from cosim.logs.plot import collector_paused, prepare_drawing
+
+    with collector_paused():
+        if exits:
+            prepare_drawing()
+        import cosim.sweep.plot  # noqa: F401
 
 
 def check_options(options: SweepOptions) -> None:
@@ -539,10 +551,12 @@ def check_options(options: SweepOptions) -> None:
 
 
 def run_sweep(
-    spec: SweepSpec, options: SweepOptions, progress: bool = True, plot: bool = True
+    spec: SweepSpec, options: SweepOptions, progress: bool = True, plot: bool = True, exits: bool = False
 ) -> SweepResult:
     """Run the sweep; the rows of finished runs are in DIR even when this is interrupted (the
-    interrupt then carries a note saying which rows are kept and how to resume)."""
+    interrupt then carries a note saying which rows are kept and how to resume). `exits`: the
+    process ends after the sweep (`cosim sweep`), so the plot may skip what only a later `help()`
+    would use (`_load_plotting`)."""
     from concurrent.futures import ThreadPoolExecutor
 
     from cosim.sweep.effect import outcome_warnings, seed_warnings
@@ -620,7 +634,7 @@ def run_sweep(
         try:
             with ThreadPoolExecutor(2) as pool:
                 if plot:
-                    pool.submit(_load_plotting)  # its errors surface when `draw` imports it again
+                    pool.submit(_load_plotting, exits)  # its errors surface when `draw` imports it again
                 with connect(options.scheduler, options.workers, len(pending)) as (client, workers):
                     _execute(
                         client,
