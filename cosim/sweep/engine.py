@@ -529,7 +529,8 @@ def _record_problem(row: dict[str, str], run: Run, out_dir: Path) -> str | None:
 def _load_plotting(exits: bool) -> None:
     """Import the plot module (matplotlib: ~0.3 s of CPU) while the local cluster starts: the
     cluster waits for its fork server to warm up (`cosim.sweep.warm`), which takes longer than
-    this process's own start, so the import fits in that wait instead of delaying the plot.
+    this process's import of Dask and the cluster's start, so the import fits in that wait
+    instead of delaying the plot.
     `exits` (the process ends after the sweep, as `cosim sweep` does): as `cosim run`'s plot, skip
     the docstrings matplotlib writes for `help()` (0.1 s of the import's 0.27 s of CPU) and load
     the font now (`cosim.logs.plot.prepare_drawing`). The collector is paused meanwhile, in every
@@ -634,6 +635,10 @@ def run_sweep(
         try:
             with ThreadPoolExecutor(2) as pool:
                 if plot:
+                    # After Dask's import, which would share this process's interpreter lock with it
+                    # and so reach the cluster's start later; while the cluster waits for its workers.
+                    import distributed  # noqa: F401
+
                     pool.submit(_load_plotting, exits)  # its errors surface when `draw` imports it again
                 with connect(options.scheduler, options.workers, len(pending)) as (client, workers):
                     _execute(
