@@ -24,8 +24,9 @@ class PlotProcess:
     """A forked child that has imported matplotlib and waits for the data of one plot."""
 
     @classmethod
-    def start(cls) -> PlotProcess | None:
-        """The child, or None where there is none (no fork, or it failed): then draw in-process."""
+    def start(cls, drawer=None) -> PlotProcess | None:
+        """The child, or None where there is none (no fork, or it failed): then draw in-process.
+        `drawer(data, png_path)` draws (default: a run's PNG, `cosim.logs.plot.draw`)."""
         if not sys.platform.startswith("linux"):
             return None
         try:
@@ -44,13 +45,14 @@ class PlotProcess:
         if pid == 0:
             os.close(data_write)
             os.close(reply_read)
-            _child(data_read, reply_write)  # never returns
+            _child(data_read, reply_write, drawer)  # never returns
         os.close(data_read)
         os.close(reply_write)
-        return cls(pid, data_write, reply_read)
+        return cls(pid, data_write, reply_read, drawer)
 
-    def __init__(self, pid: int, data_write: int, reply_read: int) -> None:
+    def __init__(self, pid: int, data_write: int, reply_read: int, drawer=None) -> None:
         self.pid = pid
+        self._drawer = drawer
         self.exit_status: int | None = None  # the child's, once reaped (negative: killed by a signal)
         self._data = data_write
         self._reply = reply_read
@@ -79,7 +81,7 @@ class PlotProcess:
             return answer.removeprefix("no plot: ")
         from cosim.logs.plot import draw  # the child failed: the parent draws
 
-        draw(data, png_path)
+        (self._drawer or draw)(data, png_path)
         return None
 
     def cancel(self) -> None:
@@ -109,7 +111,7 @@ class PlotProcess:
             self.pid = 0
 
 
-def _child(data_read: int, reply_write: int) -> None:
+def _child(data_read: int, reply_write: int, drawer=None) -> None:
     answer = "failed"
     try:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -122,7 +124,7 @@ def _child(data_read: int, reply_write: int) -> None:
         if not payload:
             os._exit(0)
         data, png_path = pickle.loads(payload)
-        draw(data, Path(png_path))
+        (drawer or draw)(data, Path(png_path))
         answer = "ok"
     except OSError as error:
         answer = f"no plot: {error}"

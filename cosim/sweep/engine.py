@@ -543,6 +543,17 @@ def _load_plotting(exits: bool) -> None:
         import cosim.sweep.plot  # noqa: F401
 
 
+def draw_plot(arguments: dict, png_path: Path) -> Path | None:
+    """Draw sweep.png (`cosim.sweep.plot.plot_sweep` with `arguments`, its other arguments) with
+    the collector paused (a figure is ~10^5 young objects, in a process that holds Dask's), here
+    or in a plot process (`cosim.cli.plotter`, which `cosim sweep` starts); None when no row."""
+    from cosim.logs.plot import collector_paused
+    from cosim.sweep.plot import plot_sweep
+
+    with collector_paused():
+        return plot_sweep(png_path=png_path, **arguments)
+
+
 def check_options(options: SweepOptions) -> None:
     """`CosimError` (one line) on options that exclude each other or are out of range."""
     if options.workers is not None and options.scheduler is not None:
@@ -552,12 +563,20 @@ def check_options(options: SweepOptions) -> None:
 
 
 def run_sweep(
-    spec: SweepSpec, options: SweepOptions, progress: bool = True, plot: bool = True, exits: bool = False
+    spec: SweepSpec,
+    options: SweepOptions,
+    progress: bool = True,
+    plot: bool = True,
+    exits: bool = False,
+    plotter=None,
 ) -> SweepResult:
     """Run the sweep; the rows of finished runs are in DIR even when this is interrupted (the
     interrupt then carries a note saying which rows are kept and how to resume). `exits`: the
     process ends after the sweep (`cosim sweep`), so the plot may skip what only a later `help()`
-    would use (`_load_plotting`)."""
+    would use (`_load_plotting`). `plotter()`: a process that prepares to draw sweep.png while the
+    sweep runs, then draws it while the cluster closes (`cosim sweep` gives
+    `cosim.cli.plotter.PlotProcess` with `draw_plot`), called before this process has a thread;
+    None, or when it gives None: sweep.png is drawn here."""
     from concurrent.futures import ThreadPoolExecutor
 
     from cosim.sweep.effect import outcome_warnings, seed_warnings
@@ -603,21 +622,30 @@ def run_sweep(
             points = group_points(ordered(), spec.keys, outcome_keys)
             write_aggregate(out_dir / AGGREGATE_FILE, points, spec.keys, outcome_keys)
 
-    def draw() -> Path | None:
-        from cosim.sweep.plot import plot_sweep
+    def plot_arguments() -> dict:
+        return {
+            "rows": ordered(),
+            "keys": spec.keys,
+            "outcome_keys": outcome_keys,
+            "grid": spec.method == "grid",
+            "title": f"{name}: {spec.method} sweep",
+            "replicates": spec.replicates,
+        }
 
-        return plot_sweep(
-            ordered(),
-            spec.keys,
-            outcome_keys,
-            out_dir / PLOT_FILE,
-            grid=spec.method == "grid",
-            title=f"{name}: {spec.method} sweep",
-            replicates=spec.replicates,
-        )
+    def draw() -> Path | None:
+        return draw_plot(plot_arguments(), out_dir / PLOT_FILE)
+
+    def draw_in(child) -> Path | None:
+        """Have the plot process draw; when it cannot (it says why), draw here, as without one."""
+        if not ordered():
+            child.cancel()
+            return None
+        if child.draw(plot_arguments(), out_dir / PLOT_FILE) is not None:
+            return draw()
+        return out_dir / PLOT_FILE
 
     started = time.perf_counter()
-    workers, plot_path, plotting = None, None, None
+    workers, plot_path, plotting, child = None, None, None, None
     if pending:
         writing = False
 
@@ -639,7 +667,9 @@ def run_sweep(
                     # and so reach the cluster's start later; while the cluster waits for its workers.
                     import distributed  # noqa: F401
 
-                    pool.submit(_load_plotting, exits)  # its errors surface when `draw` imports it again
+                    child = plotter() if plotter is not None else None  # (no thread has started yet)
+                    if child is None:  # its errors surface when `draw` imports it again
+                        pool.submit(_load_plotting, exits)
                 with connect(options.scheduler, options.workers, len(pending)) as (client, workers):
                     _execute(
                         client,
@@ -657,7 +687,7 @@ def run_sweep(
                     )
                     finish_tables()
                     if plot:  # drawn while the cluster closes
-                        plotting = pool.submit(draw)
+                        plotting = pool.submit(draw) if child is None else pool.submit(draw_in, child)
                 if options.scheduler is None:  # stops while the plot is drawn
                     stopping = pool.submit(stop_fork_server)
                 plot_path = plotting.result() if plotting is not None else None
@@ -677,6 +707,8 @@ def run_sweep(
                 )
             raise
         finally:
+            if child is not None:  # no plot (an error, an interrupt): it ends at once
+                child.cancel()
             if writing:
                 results.rewrite(ordered())
     else:

@@ -24,6 +24,8 @@ from cosim.logs import open_log
 from cosim.navigation.outcome import outcome_metadata
 from cosim.navigation.run import run_scenario
 from cosim.scenario.load import load_scenario
+from cosim.sweep.adapter import outcome_keys
+from cosim.sweep.plot import plot_sweep
 from cosim.sweep.results import TIMING_COLUMNS
 from cosim.sweep.warm import WARM_ENV, warm_up
 
@@ -114,6 +116,17 @@ def test_every_log_equals_a_run_without_dask(local_sweep, tmp_path):
             hashlib.sha256(direct.read_bytes()).digest()
             == hashlib.sha256((out / row["log"]).read_bytes()).digest()
         )
+
+
+@pytest.mark.slow
+def test_the_plot_process_draws_the_png_this_process_draws(local_sweep, tmp_path):
+    # `cosim sweep` draws sweep.png in a plot process forked before the cluster starts, from the rows
+    # it sends there; drawn here from the rows results.csv kept, it is the same file, byte for byte.
+    out, _ = local_sweep
+    keys = ["pure_pursuit.desired_linear_velocity", "lidar.noise"]
+    title = f"{load_scenario(SCENARIO, []).name}: grid sweep"
+    here = plot_sweep(_rows(out), keys, outcome_keys(), tmp_path / "sweep.png", grid=True, title=title)
+    assert here is not None and here.read_bytes() == (out / "sweep.png").read_bytes()
 
 
 @pytest.mark.slow
