@@ -331,6 +331,10 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
                 processes=True,
                 host="127.0.0.1",
                 dashboard_address=None,
+                # No dashboard, but the scheduler serves HTTP anyway, by default on port 8787: where
+                # that port is taken (another Dask, a second sweep) it warned on stderr, even under
+                # --quiet, and bound another. A free port of 127.0.0.1 from the start.
+                scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
                 silence_logs=logging.CRITICAL,
             )
     finally:

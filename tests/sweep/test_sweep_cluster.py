@@ -9,6 +9,7 @@ import hashlib
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -329,3 +330,19 @@ def test_a_failed_warm_up_never_stops_the_fork_server(request_text, tmp_path):
     result = _import_warm(request_text, tmp_path)
     assert result.returncode == 0 and result.stdout == "None\n" and result.stderr == "", result
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow
+def test_a_quiet_local_sweep_says_nothing_when_port_8787_is_taken(tmp_path):
+    # Dask's scheduler serves HTTP even without a dashboard, by default on port 8787; where another
+    # program holds that port, Dask warned on stderr that it bound another, through --quiet.
+    with socket.socket() as holder:
+        try:
+            holder.bind(("127.0.0.1", 8787))
+            holder.listen()
+        except OSError:  # taken already, by someone else: the case to check all the same
+            pass
+        result = _sweep(tmp_path / "sweep", "--workers", "2", "--quiet", "--no-plot")
+    assert result.returncode == 0, result.stderr
+    assert result.stderr == "" and result.stdout == ""
+    assert len(_rows(tmp_path / "sweep")) == 4
