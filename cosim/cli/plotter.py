@@ -31,10 +31,11 @@ class PlotProcess:
     """A forked child that has imported matplotlib and waits for the data of one plot."""
 
     @classmethod
-    def start(cls, scenario=None) -> PlotProcess | None:
+    def start(cls, scenario=None, drawer=None) -> PlotProcess | None:
         """The child, or None where there is none (no fork, or it failed): then draw in-process.
         Given the run's `scenario` (`cosim.scenario.load.Scenario`), the child also drafts the
-        figure while the run goes (`draft`)."""
+        figure while the run goes (`draft`). `drawer(data, png_path)`: another picture than a run's
+        PNG (sweep.png's `cosim.sweep.engine.draw_plot`), drawn from one frame, without a draft."""
         if not sys.platform.startswith("linux"):
             return None
         try:
@@ -54,14 +55,15 @@ class PlotProcess:
             os.close(data_write)
             os.close(reply_read)
             _own_group()
-            _child(data_read, reply_write, scenario)  # never returns
+            _child(data_read, reply_write, scenario, drawer)  # never returns
         _own_group(pid)  # here too: whichever runs first, the group exists when `_kill` ends it
         os.close(data_read)
         os.close(reply_write)
-        return cls(pid, data_write, reply_read)
+        return cls(pid, data_write, reply_read, drawer)
 
-    def __init__(self, pid: int, data_write: int, reply_read: int) -> None:
+    def __init__(self, pid: int, data_write: int, reply_read: int, drawer=None) -> None:
         self.pid = pid
+        self._drawer = drawer
         self.exit_status: int | None = None  # the child's, once reaped (negative: killed by a signal)
         self._data = data_write
         self._reply = reply_read
@@ -83,11 +85,14 @@ class PlotProcess:
         try:
             with os.fdopen(self._data, "wb") as pipe:
                 self._data = None
-                _send(pipe, _panels_part(data))
-                if not mapped:
-                    collect_map(data, source)
-                    mapped = True
-                _send(pipe, (dataclasses.replace(data, series=[], modes=None), str(png_path)))
+                if self._drawer is not None:  # another picture: one frame
+                    _send(pipe, (data, str(png_path)))
+                else:
+                    _send(pipe, _panels_part(data))
+                    if not mapped:
+                        collect_map(data, source)
+                        mapped = True
+                    _send(pipe, (dataclasses.replace(data, series=[], modes=None), str(png_path)))
             with os.fdopen(self._reply, "rb") as pipe:
                 self._reply = None
                 answer = pipe.read().decode(errors="replace")
@@ -104,6 +109,9 @@ class PlotProcess:
             return answer.removeprefix("no plot: ")
         from cosim.logs.plot import draw  # the child failed: the parent draws
 
+        if self._drawer is not None:
+            self._drawer(data, png_path)
+            return None
         if not mapped:
             collect_map(data, source)
         draw(data, png_path)
@@ -170,12 +178,12 @@ def _panels_part(data):
     return type(data)("", series=data.series, modes=data.modes, avoider=data.avoider)
 
 
-def _child(data_read: int, reply_write: int, scenario) -> None:
+def _child(data_read: int, reply_write: int, scenario, drawer=None) -> None:
     answer = "failed"
     try:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        from cosim.logs.plot import draw, prepare_drawing
+        from cosim.logs.plot import prepare_drawing
 
         prepare_drawing()
         drafted = None if scenario is None else draft(scenario)
@@ -186,26 +194,17 @@ def _child(data_read: int, reply_write: int, scenario) -> None:
             panels = _frame(pipe)
             if not panels:
                 os._exit(0)
-            if helper is not None:
-                helper.draw(panels)  # it draws the panels while the map's part comes
-            mapped = _frame(pipe)
-        if not mapped:
-            os._exit(0)
-        panels = pickle.loads(panels)
-        data, png_path = pickle.loads(mapped)
-        data = dataclasses.replace(data, series=panels.series, modes=panels.modes)
-        if drafted is None or not drafted.fits(data):
-            if helper is not None:
-                helper.cancel()
-            draw(data, Path(png_path))
-        elif helper is None:
-            drafted.finish(data, Path(png_path))
+            if drawer is None:
+                if helper is not None:
+                    helper.draw(panels)  # it draws the panels while the map's part comes
+                mapped = _frame(pipe)
+        if drawer is not None:  # another picture, in one frame: (data, png_path)
+            data, png_path = pickle.loads(panels)
+            drawer(data, Path(png_path))
         else:
-            drafted.draw_run(data, panels=TOP)
-            if helper.paste(drafted):
-                drafted.write(Path(png_path))
-            else:  # the helper failed, or the two parts overlap: drawn afresh
-                draw(data, Path(png_path))
+            if not mapped:
+                os._exit(0)
+            _draw_run(pickle.loads(panels), pickle.loads(mapped), drafted, helper)
         answer = "ok"
     except OSError as error:
         answer = f"no plot: {error}"
@@ -218,6 +217,27 @@ def _child(data_read: int, reply_write: int, scenario) -> None:
             os.write(reply_write, answer.encode()[:4000])
         finally:
             os._exit(0)
+
+
+def _draw_run(panels, mapped, drafted, helper) -> None:
+    """The run's PNG from its two frames (`PlotProcess.draw_source`): over the draft where it fits
+    (its panels by the helper, if any), else afresh."""
+    from cosim.logs.plot import draw
+
+    data, png_path = mapped
+    data = dataclasses.replace(data, series=panels.series, modes=panels.modes)
+    if drafted is None or not drafted.fits(data):
+        if helper is not None:
+            helper.cancel()
+        draw(data, Path(png_path))
+    elif helper is None:
+        drafted.finish(data, Path(png_path))
+    else:
+        drafted.draw_run(data, panels=TOP)
+        if helper.paste(drafted):
+            drafted.write(Path(png_path))
+        else:  # the helper failed, or the two parts overlap: drawn afresh
+            draw(data, Path(png_path))
 
 
 def _free_core() -> bool:

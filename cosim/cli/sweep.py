@@ -12,6 +12,7 @@ from __future__ import annotations
 import atexit
 import gc
 import sys
+from functools import partial
 from pathlib import Path
 
 _exit_registered = False
@@ -142,10 +143,17 @@ def _handler(args) -> int:
     if local and options.scheduler is not None:  # the sweep file names a scheduler: no local cluster
         stop_fork_server()
     _freeze_at_exit()
-    from cosim.sweep.engine import run_sweep
+    from cosim.sweep.engine import draw_plot, run_sweep
 
+    plotter = None
+    if getattr(args, "program", False) and not args.no_plot:  # `cosim` itself, as `cosim run`'s plot
+        from cosim.cli.plotter import PlotProcess
+
+        plotter = partial(PlotProcess.start, drawer=draw_plot)
     try:
-        result = run_sweep(spec, options, progress=not args.quiet, plot=not args.no_plot)
+        result = run_sweep(
+            spec, options, progress=not args.quiet, plot=not args.no_plot, exits=True, plotter=plotter
+        )
     except KeyboardInterrupt as interrupt:
         kept = getattr(interrupt, "sweep_kept", None)
         if kept is not None:

@@ -331,6 +331,10 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
                 processes=True,
                 host="127.0.0.1",
                 dashboard_address=None,
+                # No dashboard, but the scheduler serves HTTP anyway, by default on port 8787: where
+                # that port is taken (another Dask, a second sweep) it warned on stderr, even under
+                # --quiet, and bound another. A free port of 127.0.0.1 from the start.
+                scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
                 silence_logs=logging.CRITICAL,
             )
     finally:
@@ -401,7 +405,6 @@ def _execute(
     called once the check passed, before any row is kept; a failed check raises `CosimError`. The
     workers send the logs that `keep_logs` keeps."""
     from distributed import as_completed
-    from tqdm import tqdm
 
     from cosim.sweep.worker import BundlePlugin, TaskResult, check_task, run_task
 
@@ -429,7 +432,10 @@ def _execute(
         if error is not None:
             raise CosimError(f"{error} (checked on the run with {' '.join(first.overrides)})")
         checked()
-        bar = tqdm(total=total, initial=total - len(pending), unit="run", desc="sweep", disable=not progress)
+        if progress:  # (tqdm's import is 0.02-0.05 s of a quiet sweep's CPU otherwise)
+            from tqdm import tqdm
+
+            bar = tqdm(total=total, initial=total - len(pending), unit="run", desc="sweep")
         for future in as_completed(list(futures), loop=client.loop):
             run = futures.pop(future)
             try:
@@ -442,9 +448,10 @@ def _execute(
             rows[run.run_id] = row
             results.append(row)
             failed += row["status"] != COMPLETED
-            bar.update(1)
-            if failed:
-                bar.set_postfix(failed=failed)
+            if bar is not None:
+                bar.update(1)
+                if failed:
+                    bar.set_postfix(failed=failed)
     finally:
         if bar is not None:
             bar.close()
@@ -523,11 +530,32 @@ def _record_problem(row: dict[str, str], run: Run, out_dir: Path) -> str | None:
     return _outcome_problem(row, record.get("outcome"), "outcome record")
 
 
-def _load_plotting() -> None:
+def _load_plotting(exits: bool) -> None:
     """Import the plot module (matplotlib: ~0.3 s of CPU) while the local cluster starts: the
     cluster waits for its fork server to warm up (`cosim.sweep.warm`), which takes longer than
-    this process's own start, so the import fits in that wait instead of delaying the plot."""
-    import cosim.sweep.plot  # noqa: F401
+    this process's import of Dask and the cluster's start, so the import fits in that wait
+    instead of delaying the plot.
+    `exits` (the process ends after the sweep, as `cosim sweep` does): as `cosim run`'s plot, skip
+    the docstrings matplotlib writes for `help()` (0.1 s of the import's 0.27 s of CPU) and load
+    the font now (`cosim.logs.plot.prepare_drawing`). The collector is paused meanwhile, in every
+    thread (the main thread imports Dask then), as `prepare_drawing` pauses it."""
+    from cosim.logs.plot import collector_paused, prepare_drawing
+
+    with collector_paused():
+        if exits:
+            prepare_drawing()
+        import cosim.sweep.plot  # noqa: F401
+
+
+def draw_plot(arguments: dict, png_path: Path) -> Path | None:
+    """Draw sweep.png (`cosim.sweep.plot.plot_sweep` with `arguments`, its other arguments) with
+    the collector paused (a figure is ~10^5 young objects, in a process that holds Dask's), here
+    or in a plot process (`cosim.cli.plotter`, which `cosim sweep` starts); None when no row."""
+    from cosim.logs.plot import collector_paused
+    from cosim.sweep.plot import plot_sweep
+
+    with collector_paused():
+        return plot_sweep(png_path=png_path, **arguments)
 
 
 def check_options(options: SweepOptions) -> None:
@@ -539,10 +567,20 @@ def check_options(options: SweepOptions) -> None:
 
 
 def run_sweep(
-    spec: SweepSpec, options: SweepOptions, progress: bool = True, plot: bool = True
+    spec: SweepSpec,
+    options: SweepOptions,
+    progress: bool = True,
+    plot: bool = True,
+    exits: bool = False,
+    plotter=None,
 ) -> SweepResult:
     """Run the sweep; the rows of finished runs are in DIR even when this is interrupted (the
-    interrupt then carries a note saying which rows are kept and how to resume)."""
+    interrupt then carries a note saying which rows are kept and how to resume). `exits`: the
+    process ends after the sweep (`cosim sweep`), so the plot may skip what only a later `help()`
+    would use (`_load_plotting`). `plotter()`: a process that prepares to draw sweep.png while the
+    sweep runs, then draws it while the cluster closes (`cosim sweep` gives
+    `cosim.cli.plotter.PlotProcess` with `draw_plot`), called before this process has a thread;
+    None, or when it gives None: sweep.png is drawn here."""
     from concurrent.futures import ThreadPoolExecutor
 
     from cosim.sweep.effect import outcome_warnings, seed_warnings
@@ -588,21 +626,30 @@ def run_sweep(
             points = group_points(ordered(), spec.keys, outcome_keys)
             write_aggregate(out_dir / AGGREGATE_FILE, points, spec.keys, outcome_keys)
 
-    def draw() -> Path | None:
-        from cosim.sweep.plot import plot_sweep
+    def plot_arguments() -> dict:
+        return {
+            "rows": ordered(),
+            "keys": spec.keys,
+            "outcome_keys": outcome_keys,
+            "grid": spec.method == "grid",
+            "title": f"{name}: {spec.method} sweep",
+            "replicates": spec.replicates,
+        }
 
-        return plot_sweep(
-            ordered(),
-            spec.keys,
-            outcome_keys,
-            out_dir / PLOT_FILE,
-            grid=spec.method == "grid",
-            title=f"{name}: {spec.method} sweep",
-            replicates=spec.replicates,
-        )
+    def draw() -> Path | None:
+        return draw_plot(plot_arguments(), out_dir / PLOT_FILE)
+
+    def draw_in(child) -> Path | None:
+        """Have the plot process draw; when it cannot (it says why), draw here, as without one."""
+        if not ordered():
+            child.cancel()
+            return None
+        if child.draw(plot_arguments(), out_dir / PLOT_FILE) is not None:
+            return draw()
+        return out_dir / PLOT_FILE
 
     started = time.perf_counter()
-    workers, plot_path, plotting = None, None, None
+    workers, plot_path, plotting, child = None, None, None, None
     if pending:
         writing = False
 
@@ -620,7 +667,13 @@ def run_sweep(
         try:
             with ThreadPoolExecutor(2) as pool:
                 if plot:
-                    pool.submit(_load_plotting)  # its errors surface when `draw` imports it again
+                    # After Dask's import, which would share this process's interpreter lock with it
+                    # and so reach the cluster's start later; while the cluster waits for its workers.
+                    import distributed  # noqa: F401
+
+                    child = plotter() if plotter is not None else None  # (no thread has started yet)
+                    if child is None:  # its errors surface when `draw` imports it again
+                        pool.submit(_load_plotting, exits)
                 with connect(options.scheduler, options.workers, len(pending)) as (client, workers):
                     _execute(
                         client,
@@ -638,7 +691,7 @@ def run_sweep(
                     )
                     finish_tables()
                     if plot:  # drawn while the cluster closes
-                        plotting = pool.submit(draw)
+                        plotting = pool.submit(draw) if child is None else pool.submit(draw_in, child)
                 if options.scheduler is None:  # stops while the plot is drawn
                     stopping = pool.submit(stop_fork_server)
                 plot_path = plotting.result() if plotting is not None else None
@@ -658,6 +711,8 @@ def run_sweep(
                 )
             raise
         finally:
+            if child is not None:  # no plot (an error, an interrupt): it ends at once
+                child.cancel()
             if writing:
                 results.rewrite(ordered())
     else:

@@ -21,16 +21,19 @@ import json
 import os
 from pathlib import Path
 
+from cosim.sweep.hold import WARM_ENV
+
 # Imported once by the local cluster's fork server, so its workers start with them loaded; the last
-# one (this module) also makes a short run of the sweep's scenario there.
+# one (this module) also makes a short run of the sweep's scenario there, and switches the
+# collector, which the first one switched off, on again.
 WORKER_PRELOAD = [
+    "cosim.sweep.hold",  # first: no cyclic garbage collection while the server loads and warms up
     "distributed",
     "cosim.scenario.load",
     "cosim.navigation.run",
     "cosim.sweep.worker",
     "cosim.sweep.warm",
 ]
-WARM_ENV = "NAVCOSIM_SWEEP_WARM"
 WARM_STOP_TIME = 0.5  # [s] of simulated time: a few lidar, controller and pose steps
 
 
@@ -166,9 +169,11 @@ def _from_environment() -> None:
     atexit.register(_exit_at_once)
     # What the workers inherit (~10^5 objects: the modules, the FMUs' descriptions) is never walked
     # by their collector again, and it looks at young objects every 20,000 allocations instead of
-    # 700, as in `cosim run` (`cosim.cli`): ~5 % of a worker's CPU time otherwise.
+    # 700, as in `cosim run` (`cosim.cli`): ~5 % of a worker's CPU time otherwise. The collector was
+    # off since the server's first import (`cosim.sweep.hold`).
     gc.freeze()
     gc.set_threshold(20_000, 20, 10)
+    gc.enable()
 
 
 _from_environment()

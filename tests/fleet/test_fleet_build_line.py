@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
-FMUS = "DifferentialDrive, PurePursuit, VectorFieldHistogram, AvoidanceMixer"
+FMUS = "PurePursuit, VectorFieldHistogram, AvoidanceMixer, DifferentialDrive"  # as the run reads them
 
 
 @pytest.mark.slow

@@ -9,6 +9,7 @@ import hashlib
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -24,6 +25,8 @@ from cosim.logs import open_log
 from cosim.navigation.outcome import outcome_metadata
 from cosim.navigation.run import run_scenario
 from cosim.scenario.load import load_scenario
+from cosim.sweep.adapter import outcome_keys
+from cosim.sweep.plot import plot_sweep
 from cosim.sweep.results import TIMING_COLUMNS
 from cosim.sweep.warm import WARM_ENV, warm_up
 
@@ -114,6 +117,17 @@ def test_every_log_equals_a_run_without_dask(local_sweep, tmp_path):
             hashlib.sha256(direct.read_bytes()).digest()
             == hashlib.sha256((out / row["log"]).read_bytes()).digest()
         )
+
+
+@pytest.mark.slow
+def test_the_plot_process_draws_the_png_this_process_draws(local_sweep, tmp_path):
+    # `cosim sweep` draws sweep.png in a plot process forked before the cluster starts, from the rows
+    # it sends there; drawn here from the rows results.csv kept, it is the same file, byte for byte.
+    out, _ = local_sweep
+    keys = ["pure_pursuit.desired_linear_velocity", "lidar.noise"]
+    title = f"{load_scenario(SCENARIO, []).name}: grid sweep"
+    here = plot_sweep(_rows(out), keys, outcome_keys(), tmp_path / "sweep.png", grid=True, title=title)
+    assert here is not None and here.read_bytes() == (out / "sweep.png").read_bytes()
 
 
 @pytest.mark.slow
@@ -316,3 +330,19 @@ def test_a_failed_warm_up_never_stops_the_fork_server(request_text, tmp_path):
     result = _import_warm(request_text, tmp_path)
     assert result.returncode == 0 and result.stdout == "None\n" and result.stderr == "", result
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow
+def test_a_quiet_local_sweep_says_nothing_when_port_8787_is_taken(tmp_path):
+    # Dask's scheduler serves HTTP even without a dashboard, by default on port 8787; where another
+    # program holds that port, Dask warned on stderr that it bound another, through --quiet.
+    with socket.socket() as holder:
+        try:
+            holder.bind(("127.0.0.1", 8787))
+            holder.listen()
+        except OSError:  # taken already, by someone else: the case to check all the same
+            pass
+        result = _sweep(tmp_path / "sweep", "--workers", "2", "--quiet", "--no-plot")
+    assert result.returncode == 0, result.stderr
+    assert result.stderr == "" and result.stdout == ""
+    assert len(_rows(tmp_path / "sweep")) == 4

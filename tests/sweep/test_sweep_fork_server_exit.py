@@ -1,6 +1,7 @@
 """The sweep's fork server (`cosim.sweep.warm`, imported with a warm-up request in the environment)
 leaves without the interpreter's teardown, yet with what it printed written out, and hands its
-workers a frozen heap and cosim's collector thresholds. Observed from outside, in a fresh Python
+workers a frozen heap and cosim's collector thresholds, the collector on again after its first
+import (`cosim.sweep.hold`) switched it off. Observed from outside, in a fresh Python
 process: an `atexit` handler registered before the import must not run, the lines printed before
 the exit must arrive, and `gc` must report its state as Python's own API reads it."""
 
@@ -22,7 +23,10 @@ PROGRAM = """
 import atexit, gc, sys
 atexit.register(lambda: print("teardown ran"))
 before = gc.get_threshold()
+import cosim.sweep.hold
+print("held", not gc.isenabled())
 import cosim.sweep.warm
+print("collecting", gc.isenabled())
 print("threshold", *gc.get_threshold())
 print("frozen", gc.get_freeze_count() > 0)
 print("default before", before == (700, 10, 10))
@@ -52,7 +56,14 @@ def test_the_fork_server_exits_at_once_with_its_output_written(request_text, tmp
     assert result.returncode == 0, result
     lines = result.stdout.splitlines()
     assert "teardown ran" not in lines  # the teardown was skipped: the handler before ours never ran
-    assert lines == ["threshold 20000 20 10", "frozen True", "default before True", "last line"]
+    assert lines == [
+        "held True",
+        "collecting True",
+        "threshold 20000 20 10",
+        "frozen True",
+        "default before True",
+        "last line",
+    ]
     assert result.stderr == "unflushed stderr line"
     assert list(tmp_path.iterdir()) == []  # the warm-up's scratch folder is gone
 
@@ -62,8 +73,14 @@ def test_without_a_request_the_import_changes_nothing(tmp_path):
     result = _fork_server_import(None, tmp_path)
     assert result.returncode == 0, result
     lines = result.stdout.splitlines()
-    assert lines[:3] == ["threshold 700 10 10", "frozen False", "default before True"]
-    assert lines[3:] == ["last line", "teardown ran"] or lines[3:] == ["last lineteardown ran"]
+    assert lines[:5] == [
+        "held False",
+        "collecting True",
+        "threshold 700 10 10",
+        "frozen False",
+        "default before True",
+    ]
+    assert lines[5:] == ["last line", "teardown ran"] or lines[5:] == ["last lineteardown ran"]
 
 
 @pytest.mark.slow
