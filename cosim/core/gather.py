@@ -131,3 +131,35 @@ def make_gather(
             lines.append(f"    target_array[targets{key}] = {value}")
     exec("\n".join(lines), names)  # noqa: S102 - generated from our own templates
     return names["gather"]
+
+
+class Snapshot:
+    """One flat copy of several producers' outputs (`take`: one NumPy call), from which a consumer's
+    plain links from many of them are copied in one index copy (`gather`): a fleet's lidar reading
+    two values from each of 50 vehicles, rather than 100 per-value copies. Only for producers whose
+    outputs do not change between `take` and the gathers."""
+
+    def __init__(self, producers: list[Component]) -> None:
+        self.buffers = [producer.output_buffer for producer in producers]
+        starts = np.cumsum([0] + [len(buffer) for buffer in self.buffers]).tolist()
+        self.start = {producer.name: start for producer, start in zip(producers, starts, strict=False)}
+        self.values = np.empty(starts[-1])
+
+    def take(self) -> None:
+        """Copy the producers' outputs now."""
+        if self.buffers:
+            np.concatenate(self.buffers, out=self.values)
+
+    def gather(self, consumer: Component, links: list[Link]) -> Callable[[], None]:
+        """A function copying `links` (plain copies, from producers of the snapshot) into the
+        consumer's inputs from the last `take`."""
+        if any(not link.connection.is_plain for link in links):
+            raise ValueError("a snapshot gathers plain copies only")
+        sources = np.array([self.start[link.producer] + link.output for link in links], np.intp)
+        targets = np.array([link.input for link in links], np.intp)
+        values, target = self.values, consumer.input_buffer
+
+        def gather() -> None:
+            target[targets] = values[sources]
+
+        return gather

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from cosim.core.component import Port, PythonComponent
-from cosim.core.gather import _runs, make_gather
+from cosim.core.gather import Snapshot, _runs, make_gather
 from cosim.core.system import System
 
 
@@ -100,3 +100,41 @@ def test_an_interleaved_path_and_a_scan_are_copied_as_a_few_slices():
     assert runs("consecutive_runs") == [(0, 1, 0, 5), (10, 1, 5, 5)]
     assert runs("scattered") is None
     assert runs("reversed") is None
+
+
+def test_a_snapshot_gathers_plain_links_from_many_producers_as_taken():
+    """Two values from each of five producers into one consumer, through one snapshot: the values
+    at `take` (not those written after it), each link's output into its input."""
+    system = System(0.1)
+    producers = [system.add(Box(f"p{k}", outputs=3)) for k in range(5)]
+    sink = system.add(Box("sink", inputs=12))
+    wired = []
+    for k in range(5):
+        for out, into in ((0, 2 * k), (2, 2 * k + 1)):
+            system.connect(f"p{k}.out[{out + 1}]", f"sink.in[{into + 1}]")
+            wired.append((k, out, into))
+    for k, producer in enumerate(producers):
+        producer.output_buffer[:] = [k + 0.25, -0.0 if k == 2 else k + 0.5, k + 0.75]
+    snapshot = Snapshot(producers[::-1])  # any order of producers
+    gather = snapshot.gather(sink, system.links()["sink"])
+    snapshot.take()
+    expected = sink.input_buffer.copy()
+    for k, out, into in wired:
+        expected[into] = producers[k].output_buffer[out]
+    for producer in producers:  # after the snapshot: not seen until the next `take`
+        producer.output_buffer[:] = 99.0
+    gather()
+    assert sink.input_buffer.tobytes() == expected.tobytes()
+    assert sink.input_buffer[10:].tolist() == [-7.0, -7.0]  # unconnected: start values
+    snapshot.take()
+    gather()
+    assert sink.input_buffer[:10].tolist() == [99.0] * 10
+
+
+def test_a_snapshot_refuses_a_scaled_link():
+    system = System(0.1)
+    producer = system.add(Box("p", outputs=1))
+    sink = system.add(Box("sink", inputs=1))
+    system.connect("p.out[1]", "sink.in[1]", scale=2.0)
+    with pytest.raises(ValueError, match="plain copies only"):
+        Snapshot([producer]).gather(sink, system.links()["sink"])
