@@ -56,6 +56,7 @@ fleet outcome.
 
 from __future__ import annotations
 
+import functools
 import gc
 import math
 import time
@@ -256,7 +257,7 @@ class _Robot:
             self.commands_now = np.full((count, 2), math.nan)
         if self.mode_row is not None:
             row, column, period = self.mode_row
-            modes = _held(histories[row][:, [column]], first, count, period, np.array([last_mode]))
+            modes = _held(histories[row][:, column : column + 1], first, count, period, np.array([last_mode]))
             self.modes = modes[:, 0]
         else:
             self.modes = np.full(count, math.nan)
@@ -750,11 +751,19 @@ def _held(rows: np.ndarray, first: int, count: int, period: int, last: np.ndarra
     rows are those of the steps k % period == 0; before its first step in the block, `last`)."""
     if period == 1:
         return rows
-    # Row j holds from step due + j period on (due: the first step k >= first with k % period == 0).
-    latest = (np.arange(first, first + count) - due_from(first, period)) // period
-    out = rows[np.maximum(latest, 0)] if len(rows) else np.empty((count, len(last)))
-    out[latest < 0] = last
+    lead = due_from(first, period) - first  # the steps before its first in the block
+    out = rows[_held_rows(lead, count, period)] if len(rows) else np.empty((count, len(last)))
+    out[:lead] = last
     return out
+
+
+@functools.lru_cache(maxsize=256)
+def _held_rows(lead: int, count: int, period: int) -> np.ndarray:
+    """`_held`'s row per step (row j holds from step lead + j period on; 0 before), the same for
+    every robot and block of the same phase: made once (read-only)."""
+    rows = np.maximum((np.arange(count) - lead) // period, 0)
+    rows.setflags(write=False)
+    return rows
 
 
 def _judge(each: _Robot, t: float, h: float, before, after, step: int = 0) -> None:
