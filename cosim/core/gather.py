@@ -38,27 +38,24 @@ def _runs(sources: np.ndarray, targets: np.ndarray) -> list[tuple[int, int, int,
     than `_SLICE_COPY_LIMIT`, or an input is written twice (then the links' order decides)."""
     order = np.argsort(targets, kind="stable")
     sources, targets = sources[order], targets[order]
-    if len(targets) > 1 and (np.diff(targets) == 0).any():
+    count = len(targets)
+    steps = np.diff(sources)
+    # Per pair of neighbours: the outputs' stride when the inputs are consecutive, else 0.
+    link = np.where((np.diff(targets) == 1) & (steps >= 1), steps, 0)
+    if (np.diff(targets) == 0).any():
         return None
+    changes = np.flatnonzero(np.diff(link)) + 1  # where a stretch of equal strides starts
     runs = []
     first = 0
-    count = len(targets)
     while first < count:
         if len(runs) == _SLICE_COPY_LIMIT:
             return None
-        end = first + 1
-        stride = (
-            int(sources[end] - sources[first]) if end < count and targets[end] == targets[first] + 1 else 1
-        )
-        if stride < 1:
-            stride, end = 1, first + 1
+        if first < count - 1 and link[first]:  # on while the stride stays the same
+            stride = int(link[first])
+            later = np.searchsorted(changes, first, side="right")
+            end = (int(changes[later]) if later < len(changes) else count - 1) + 1
         else:
-            while (
-                end < count
-                and targets[end] == targets[end - 1] + 1
-                and sources[end] == sources[end - 1] + stride
-            ):
-                end += 1
+            stride, end = 1, first + 1
         runs.append((int(sources[first]), stride, int(targets[first]), end - first))
         first = end
     return runs

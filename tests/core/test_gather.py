@@ -138,3 +138,20 @@ def test_a_snapshot_refuses_a_scaled_link():
     system.connect("p.out[1]", "sink.in[1]", scale=2.0)
     with pytest.raises(ValueError, match="plain copies only"):
         Snapshot([producer]).gather(sink, system.links()["sink"])
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_shuffled_strided_stretches_are_found_as_they_were_made(seed):
+    """Random wirings of one to five stretches (consecutive inputs from outputs at a stride), apart
+    from each other, in shuffled connection order: the stretches found are those made (up to four;
+    five: None, an index copy)."""
+    rng = np.random.default_rng(seed)
+    made, pairs, target = [], [], 0
+    for _ in range(1 + seed % 5):
+        length, stride, start = int(rng.integers(2, 30)), int(rng.integers(1, 4)), int(rng.integers(0, 50))
+        made.append((start, stride, target, length))
+        pairs += [(start + stride * i, target + i) for i in range(length)]
+        target += length + int(rng.integers(1, 3))  # a gap: the next stretch is another
+    rng.shuffle(pairs)
+    sources, targets = np.array(pairs).T
+    assert _runs(sources, targets) == (made if len(made) <= 4 else None)
