@@ -56,6 +56,7 @@ fleet outcome.
 
 from __future__ import annotations
 
+import functools
 import gc
 import math
 import time
@@ -68,7 +69,7 @@ import numpy as np
 from cosim import release_collector
 from cosim.core import interrupt
 from cosim.core.component import Component
-from cosim.core.gather import make_gather
+from cosim.core.gather import Snapshot, make_gather
 from cosim.core.master import NS_PER_S, Master
 from cosim.core.system import System
 from cosim.core.timebase import due_from
@@ -91,6 +92,9 @@ from cosim.world.fleet import Contact, FleetContacts
 
 PROGRESS = 0.5  # [m] closer to the current goal than the best so far: progress (deadlock rule)
 STOPPED_SPEED = 0.01  # [m/s] below this a robot counts as stopped
+# From this many plain links from components the kernel steps, a Python component's inputs are
+# copied from one snapshot of their outputs in one index copy (`_PythonSteps.make`), not one by one.
+_SNAPSHOT_LINKS = 16
 
 
 @dataclass
@@ -253,7 +257,7 @@ class _Robot:
             self.commands_now = np.full((count, 2), math.nan)
         if self.mode_row is not None:
             row, column, period = self.mode_row
-            modes = _held(histories[row][:, [column]], first, count, period, np.array([last_mode]))
+            modes = _held(histories[row][:, column : column + 1], first, count, period, np.array([last_mode]))
             self.modes = modes[:, 0]
         else:
             self.modes = np.full(count, math.nan)
@@ -415,8 +419,9 @@ class _PythonSteps:
     (`Master.run_blocks`), in fewer kernel calls, when no FMU a Python component reads or feeds
     comes before it in the master's order (`make`: None otherwise)."""
 
-    def __init__(self, master: Master, steps: list, feeds: list, gathers: dict) -> None:
+    def __init__(self, master: Master, steps: list, feeds: list, gathers: dict, snapshot=None) -> None:
         self.master = master
+        self.snapshot = snapshot  # outputs of components not stepped here, read by many links (`make`)
         self.steps = steps  # (component, period, gather of its inputs or None), in the master's order
         self.feeds = feeds  # copy of the Python components' outputs into each FMU that reads them
         self.gathers = gathers  # (consumer, its Python producers or None: all) -> gather, for `make`
@@ -461,10 +466,35 @@ class _PythonSteps:
                 )
             return gathers[key]
 
-        steps = [(c, system.period_steps(c), gather(c.name, None)) for c in python]
+        # Many plain links from components not stepped here (a lidar reading every vehicle): copied
+        # from one snapshot of those components' outputs, taken before the block's steps.
+        outside: dict[str, list] = {}
+        for c in python:
+            fed = [link for link in links.get(c.name, ()) if link.producer not in names]
+            if len(fed) >= _SNAPSHOT_LINKS and all(link.connection.is_plain for link in fed):
+                outside[c.name] = fed
+        read = {link.producer for fed in outside.values() for link in fed}
+        snapshot = Snapshot([c for c in master.order if c.name in read]) if outside else None
+
+        def step_gather(c):
+            if c.name not in outside:
+                return gather(c.name, None)
+            inside = frozenset(link.producer for link in links[c.name] if link.producer in names)
+            from_snapshot = snapshot.gather(c, outside[c.name])
+            rest = gather(c.name, inside) if inside else None
+            if rest is None:
+                return from_snapshot
+
+            def both() -> None:
+                from_snapshot()
+                rest()
+
+            return both
+
+        steps = [(c, system.period_steps(c), step_gather(c)) for c in python]
         order = sorted(consumers, key=place.__getitem__)
         feeds = [gather(name, frozenset(consumers[name])) for name in order]
-        return cls(master, steps, feeds, gathers)
+        return cls(master, steps, feeds, gathers, snapshot)
 
     def tables(self, block: int):
         """The kernel's tables without the Python components; None when the kernel cannot step the
@@ -486,6 +516,8 @@ class _PythonSteps:
         """Step the Python components due at step k, then copy their outputs to the FMUs."""
         master = self.master
         t = (master.start_time_ns + k * master.system.macro_step_ns) / NS_PER_S
+        if self.snapshot is not None:  # (none of those components steps before the gathers)
+            self.snapshot.take()
         for component, period, gather in self.steps:
             if k % period:
                 continue
@@ -719,11 +751,19 @@ def _held(rows: np.ndarray, first: int, count: int, period: int, last: np.ndarra
     rows are those of the steps k % period == 0; before its first step in the block, `last`)."""
     if period == 1:
         return rows
-    # Row j holds from step due + j period on (due: the first step k >= first with k % period == 0).
-    latest = (np.arange(first, first + count) - due_from(first, period)) // period
-    out = rows[np.maximum(latest, 0)] if len(rows) else np.empty((count, len(last)))
-    out[latest < 0] = last
+    lead = due_from(first, period) - first  # the steps before its first in the block
+    out = rows[_held_rows(lead, count, period)] if len(rows) else np.empty((count, len(last)))
+    out[:lead] = last
     return out
+
+
+@functools.lru_cache(maxsize=256)
+def _held_rows(lead: int, count: int, period: int) -> np.ndarray:
+    """`_held`'s row per step (row j holds from step lead + j period on; 0 before), the same for
+    every robot and block of the same phase: made once (read-only)."""
+    rows = np.maximum((np.arange(count) - lead) // period, 0)
+    rows.setflags(write=False)
+    return rows
 
 
 def _judge(each: _Robot, t: float, h: float, before, after, step: int = 0) -> None:

@@ -166,6 +166,7 @@ def test_a_fleet_run_is_that_of_the_step_by_step_loop(tmp_path, monkeypatch):
     monkeypatch.setattr(fleet_module._PythonSteps, "make", classmethod(recorded))
     fast = fleet_module.run_fleet(fleet, log_path=tmp_path / "fast.mcap")
     assert len(made) > 1 and None not in made  # stepped apart, also after robots were switched off
+    assert all(each.snapshot is not None for each in made)  # lidars read the 10 vehicles' poses at once
 
     monkeypatch.setattr(fleet_module, "_judge_block", _judge_step_by_step)
     monkeypatch.setattr(fleet_module._PythonSteps, "make", classmethod(lambda *_: None))
