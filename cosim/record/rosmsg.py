@@ -148,10 +148,12 @@ class _LazyMsgdef:
     def __init__(self, store, typename: str) -> None:
         self.name = typename
         self.fields = [(normalize_fieldname(name), desc) for name, desc in store.fielddefs[typename][1]]
-        self.cls = store.types[typename]
         self._store = store
 
     def __getattr__(self, attribute: str):  # called for what is not made yet
+        if attribute == "cls":  # the class too: serialising a type's empty sequence needs no class
+            self.cls = self._store.types[self.name]
+            return self.cls
         if attribute not in _MSGDEF_MAKERS:
             raise AttributeError(attribute)
         made = _MSGDEF_MAKERS[attribute](self.fields, self.name, self._store)
