@@ -41,7 +41,6 @@ Costs are metres: a straight step costs `resolution`, a diagonal one sqrt(2) * r
 
 from __future__ import annotations
 
-import difflib
 import math
 
 import numpy as np
@@ -129,6 +128,8 @@ def resolve(options: dict) -> dict:
     names the first bad one)."""
     unknown = [name for name in options if name not in DEFAULTS]
     if unknown:
+        import difflib  # only for this message: a run that names its options right never loads it
+
         name = unknown[0]
         close = difflib.get_close_matches(name, DEFAULTS, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else f" (valid: {', '.join(sorted(DEFAULTS))})"

@@ -75,7 +75,7 @@ def _parsed_description(path: str, mtime_ns: int, size: int):
     return description
 
 
-_KEPT_FORMAT = b"navcosim fmpy description 3"  # 3: pickled from cosim.fmi.description
+_KEPT_FORMAT = b"navcosim fmpy description 4"  # 4: variables made without Python calls
 
 
 def _kept_description(path: Path) -> Path | None:
@@ -249,9 +249,10 @@ for _name, _default in _variable_defaults().items():
     setattr(_KeptVariable, _name, _default)
 
 
-def _new_kept_variable() -> _KeptVariable:
-    """An empty `_KeptVariable` (unpickling: its state follows)."""
-    return object.__new__(_KeptVariable)
+# What unpickling a kept variable calls with (variable, state): the setter of its `__dict__`, so that
+# making one runs no Python (`object.__new__`, then this C setter; fmpy's and `__setstate__` would be two
+# Python calls a variable, a third of reading a 2000-variable description). Pickled by name.
+_SET_KEPT_STATE = _KeptVariable.__dict__["__dict__"].__set__
 
 
 def _kept_pickler(stream, protocol: int):
@@ -262,6 +263,8 @@ def _kept_pickler(stream, protocol: int):
 
     class Pickler(pickle.Pickler):
         def reducer_override(self, obj):
+            if obj is _SET_KEPT_STATE:
+                return "_SET_KEPT_STATE"  # a global of this module
             if type(obj) is not ModelVariable:
                 return NotImplemented
             state = {}
@@ -269,6 +272,6 @@ def _kept_pickler(stream, protocol: int):
                 value = getattr(obj, name)
                 if value is not default and (type(value) is not type(default) or value != default):
                     state[name] = value
-            return _new_kept_variable, (), state
+            return object.__new__, (_KeptVariable,), state, None, None, _SET_KEPT_STATE
 
     return Pickler(stream, protocol=protocol)

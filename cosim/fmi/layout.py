@@ -159,17 +159,15 @@ def _read_kept_layout(kept: tuple[Path, bytes], description) -> FmuLayout | None
     import pickle
 
     path, key = kept
-    variables = description.modelVariables
-
-    class Unpickler(pickle.Unpickler):
-        def persistent_load(self, reference):
-            return description if reference == -1 else variables[reference]
-
     try:
         with open(path, "rb") as stream:
             if stream.readline().rstrip(b"\n") != key:
                 return None
-            layout = Unpickler(stream).load()
+            unpickler = pickle.Unpickler(stream)
+            # A reference is a variable's position, or -1 for the description (the last item here):
+            # looked up by the list itself, no Python call per port.
+            unpickler.persistent_load = [*description.modelVariables, description].__getitem__
+            layout = unpickler.load()
     except Exception:  # noqa: BLE001 - whatever is wrong with the kept copy, the layout is made again
         return None
     return layout if isinstance(layout, FmuLayout) else None

@@ -16,6 +16,8 @@ import keyword
 import math
 import re
 import struct
+import sys
+from types import ModuleType
 
 import numpy as np
 from rosbags.interfaces import Nodetype
@@ -146,10 +148,12 @@ class _LazyMsgdef:
     def __init__(self, store, typename: str) -> None:
         self.name = typename
         self.fields = [(normalize_fieldname(name), desc) for name, desc in store.fielddefs[typename][1]]
-        self.cls = store.types[typename]
         self._store = store
 
     def __getattr__(self, attribute: str):  # called for what is not made yet
+        if attribute == "cls":  # the class too: serialising a type's empty sequence needs no class
+            self.cls = self._store.types[self.name]
+            return self.cls
         if attribute not in _MSGDEF_MAKERS:
             raise AttributeError(attribute)
         made = _MSGDEF_MAKERS[attribute](self.fields, self.name, self._store)
@@ -173,6 +177,7 @@ try:  # rosbags' generators (internal): where they are not as expected, the stoc
     from rosbags.serde import cdr as _cdr
     from rosbags.serde import ros1 as _ros1
     from rosbags.typesys.base import normalize_fieldname
+    from rosbags.typesys.codegen import generate_python_code
     from rosbags.typesys.store import Typestore
 
     _MSGDEF_MAKERS = {
@@ -203,8 +208,37 @@ except (ImportError, AttributeError, TypeError):
 
 if _LAZY:
 
+    class _LazyTypes(dict):
+        """A type store's `types`: each registered type's class (rosbags' generated dataclass, made
+        by rosbags' code generator as `register` makes it) is made on first use, one type at a time:
+        a run uses about two thirds of `LOG_TYPES`, and making all of them cost ~8 ms."""
+
+        def __init__(self, fielddefs: dict) -> None:
+            super().__init__()
+            self._fielddefs = fielddefs
+
+        def __missing__(self, typename: str):
+            if typename not in self._fielddefs:
+                raise KeyError(typename)
+            module = ModuleType("rosbags.usertypes")
+            sys.modules[module.__name__] = module  # as `Typestore.register` does (dataclasses looks it up)
+            exec(generate_python_code({typename: self._fielddefs[typename]}), module.__dict__)  # noqa: S102
+            made = self[typename] = getattr(module, typename.replace("/", "__"))
+            return made
+
+        def __contains__(self, typename: object) -> bool:
+            return dict.__contains__(self, typename) or typename in self._fielddefs
+
+        def get(self, typename: str, default=None):
+            return self[typename] if typename in self else default
+
     class _LogTypestore(Typestore):
-        """rosbags' type store, making each type's functions as they are used (`_LazyMsgdef`)."""
+        """rosbags' type store, making each type's class (`_LazyTypes`) and functions
+        (`_LazyMsgdef`) as they are used."""
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.types = _LazyTypes(self.fielddefs)
 
         def get_msgdef(self, typename: str):
             if typename not in self.cache:
@@ -213,8 +247,12 @@ if _LAZY:
 
 
 def _log_typestore():
-    store = _LogTypestore() if _LAZY else get_typestore(Stores.EMPTY)
-    store.register(log_fielddefs())
+    if not _LAZY:
+        store = get_typestore(Stores.EMPTY)
+        store.register(log_fielddefs())
+        return store
+    store = _LogTypestore()
+    store.fielddefs.update(log_fielddefs())  # what `register` records of them; classes on first use
     return store
 
 

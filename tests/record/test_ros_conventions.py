@@ -235,3 +235,34 @@ def test_the_log_type_store_serialises_as_rosbags_does():
         little = bytes(ours.serialize_cdr(message, name, little_endian=True))
         assert _outcome(ours.cdr_to_ros1, little, name) == _outcome(humble.cdr_to_ros1, little, name)
         assert bytes(ours.serialize_ros1(ours.deserialize_ros1(ros1, name), name)) == ros1
+
+
+def test_the_log_type_store_makes_the_classes_rosbags_registers():
+    """`rosmsg.TYPESTORE` makes each class on first use: the same definitions, fields and constants as
+    rosbags' `Typestore.register` of all `LOG_TYPES` at once, and nothing for a name it does not hold."""
+    import dataclasses
+
+    from rosbags.typesys.store import Typestore
+
+    from cosim.record import rosmsg
+
+    registered = Typestore()
+    registered.register(rosmsg.log_fielddefs())
+    ours = rosmsg.TYPESTORE
+    assert "navcosim_msgs/msg/NoSuchType" not in ours.types
+    assert ours.types.get("navcosim_msgs/msg/NoSuchType") is None
+    for name in rosmsg.LOG_TYPES:
+        assert name in ours.types
+        theirs, made = registered.types[name], ours.types[name]
+        assert ours.fielddefs[name] == registered.fielddefs[name]
+        assert ours.types[name] is made
+        assert [(f.name, f.type, f.default) for f in dataclasses.fields(made)] == [
+            (f.name, f.type, f.default) for f in dataclasses.fields(theirs)
+        ]
+        constants = {key: value for key, value in vars(theirs).items() if key.isupper()}
+        assert {key: value for key, value in vars(made).items() if key.isupper()} == constants
+        assert (made.__name__, made.__module__, made.__msgtype__) == (
+            theirs.__name__,
+            theirs.__module__,
+            theirs.__msgtype__,
+        )

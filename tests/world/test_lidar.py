@@ -273,3 +273,38 @@ def test_lidar_in_a_master_scans_at_its_period():
         assert lidar.output_buffer[0] == pytest.approx(1.0)  # held until k = 10
         master.step()
         assert lidar.output_buffer[0] == pytest.approx(0.5)
+
+
+def test_range_noise_is_numpys_generator_with_the_seed_drawn_scan_by_scan():
+    """The noise is NumPy's default generator seeded with `seed` (made at setup, only with noise):
+    each scan draws the next `count` normals of that one stream."""
+    wall = Rectangle((5.5, 0.0), (1.0, 100.0))
+    lidar = Lidar(obstacles=[wall], angles=np.zeros(500), range_noise=0.05, seed=11)
+    first, _ = scan(lidar, 0.0, 0.0, 0.0)
+    lidar.scan(0.0, 0.0, 0.0)  # the next scan of the same run
+    second = lidar.get_outputs()[: lidar.capacity].copy()
+    expected = np.random.default_rng(11).normal(0.0, 0.05, 1000)
+    assert np.allclose(first - 5.0, expected[:500], rtol=0.0, atol=1e-6)
+    assert np.allclose(second - 5.0, expected[500:], rtol=0.0, atol=1e-6)
+
+
+@pytest.mark.slow
+def test_a_noiseless_lidar_does_not_load_numpys_random_module():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "import numpy as np\n"
+        "from cosim.world.lidar import Lidar\n"
+        "from cosim.world.shapes import Rectangle\n"
+        "lidar = Lidar(obstacles=[Rectangle((5.5, 0.0), (1.0, 100.0))], angles=np.zeros(8))\n"
+        "lidar.instantiate()\n"
+        "lidar.setup(0.0, {})\n"
+        "lidar.set_inputs([0, 1, 2], [0.0, 0.0, 0.0])\n"
+        "lidar.initialize()\n"
+        "assert np.allclose(lidar.get_outputs()[:8], 5.0)\n"
+        "print('numpy.random' in sys.modules)\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert result.stdout.strip() == "False"
