@@ -12,7 +12,11 @@ where a watched position needs a look; after each stretch the caller's `on_block
 
 from __future__ import annotations
 
+import bisect
+import itertools
 from collections.abc import Callable
+
+import numpy as np
 
 from cosim.core import fast_loop
 from cosim.core.timebase import NS_PER_S
@@ -95,10 +99,11 @@ def run_blocks(
     periods = [entry.period for entry in plan]
     # A component's whole step [s]: `Master.step_seconds` before `tail_from`, where no step is cut.
     whole = [period * h_ns / NS_PER_S for period in periods]
-    stepping = [i for i in range(len(periods)) if tables.components[i, kernel.C_KIND] != kernel.KIND_IDLE]
-    # Per position of the plan: the stepping components before it, and from it on.
-    before = [[i for i in stepping if i < position] for position in range(len(plan) + 1)]
-    after = [[i for i in stepping if i >= position] for position in range(len(plan) + 1)]
+    stepping = np.flatnonzero(tables.components[: len(periods), kernel.C_KIND] != kernel.KIND_IDLE).tolist()
+    # Per position of the plan, the stepping components before it are stepping[: split[position]],
+    # those from it on stepping[split[position] :] (a fleet calls this once per block: no lists of
+    # lists of every position, which cost ~1.5 ms a call at 50 robots).
+    split = [bisect.bisect_left(stepping, position) for position in range(len(plan) + 1)]
     # The recorded components: (index, period, all their rows' array); rows so far in `tables.rows`.
     blocks = tables.row_arrays()
     recorded = [(i, periods[i], block) for i, block in enumerate(blocks) if block is not None]
@@ -160,7 +165,7 @@ def run_blocks(
                 count = min(count, tail_from - k)
             code, k, position, failed, call, status, kind = step(k, count, position, start_ns, h_ns, jacobi)
             finish_step = False
-            clean = position == 0 or not any(k % periods[i] == 0 for i in before[position])
+            clean = position == 0 or not any(k % periods[i] == 0 for i in stepping[: split[position]])
             master.step_index = k
             # A hand-back with `python_rows` does not end the stretch while step k fits in it.
             going_on = (
@@ -208,7 +213,10 @@ def run_blocks(
                         history[at, input_counts[position] :] = component.output_buffer
                         rows[position] = at + 1
                     position += 1
-                    following = next((i for i in after[position] if k % periods[i] == 0), None)
+                    following = next(
+                        (i for i in itertools.islice(stepping, split[position], None) if k % periods[i] == 0),
+                        None,
+                    )
                     if following is None or not tables.python[following]:
                         break
                     position = following
