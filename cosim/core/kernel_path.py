@@ -112,7 +112,7 @@ def run_blocks(
     step = tables.run
     # Python components with rows (`python_rows`): their input counts, by plan position.
     python_rows = tables.python_rows
-    input_counts = [len(entry.component.inputs) for entry in plan]
+    input_counts = [len(entry.component.inputs) for entry in plan] if python_rows else []
     end = master.step_index + steps
     first = k = master.step_index
     position = 0
