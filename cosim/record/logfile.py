@@ -51,11 +51,11 @@ def navcosim_version() -> str:
 
 def dist_info_version(name: str) -> str | None:
     """`importlib.metadata.version(name)` when the first distribution it would find is an installed
-    `<name>-*.dist-info` folder (a plain directory on `sys.path`, searched in its order as
-    importlib.metadata searches it), read from its METADATA's Version header; None otherwise (then
-    importlib.metadata decides). `name`: lower-case letters and digits (a name importlib.metadata
-    needs no normalising for). Importing importlib.metadata and its email parser is ~10-20 ms of a
-    run's start."""
+    `<name>-*.dist-info` or `<name>*.egg-info` folder (a plain directory on `sys.path`, searched in
+    its order as importlib.metadata searches it), read from its METADATA's (else PKG-INFO's) Version
+    header; None otherwise (then importlib.metadata decides). `name`: lower-case letters and digits
+    (a name importlib.metadata needs no normalising for). Importing importlib.metadata and its email
+    parser is ~10-20 ms of a run's start."""
     if not (name.isalnum() and name.isascii() and name.islower()):
         return None
     for entry in sys.path:
@@ -71,10 +71,14 @@ def dist_info_version(name: str) -> str | None:
                 continue
             if low.rpartition(".")[0].partition("-")[0] != name:
                 continue
-            if not low.endswith(".dist-info"):
-                return None
+            # importlib.metadata reads a folder's METADATA, else its PKG-INFO (an editable
+            # install's `<name>.egg-info` folder in the checkout has only PKG-INFO)
+            folder = os.path.join(entry or ".", child)
+            metadata = os.path.join(folder, "METADATA")
+            if not os.path.isfile(metadata):
+                metadata = os.path.join(folder, "PKG-INFO")
             try:
-                with open(os.path.join(entry or ".", child, "METADATA"), encoding="utf-8") as stream:
+                with open(metadata, encoding="utf-8") as stream:
                     for line in stream:
                         if not line.strip():
                             return None

@@ -34,6 +34,7 @@ def test_the_installed_version_is_importlib_metadatas():
         [("a", "other-1.0.dist-info", "1.0"), ("b", "navcosim-5.0rc1.dist-info", "5.0rc1")],
         [("a", "navcosim_extra-1.0.dist-info", "1.0"), ("b", "navcosim-2.0.dist-info", "2.0")],
         [("a", "navcosim-0.3.egg-info", "0.3"), ("b", "navcosim-2.0.dist-info", "2.0")],
+        [("a", "navcosim.egg-info", "0.1.0"), ("b", "navcosim-2.0.dist-info", "2.0")],
         [("a", "other-1.0.dist-info", "1.0")],
     ],
 )
@@ -49,3 +50,13 @@ def test_a_made_up_path_gives_importlib_metadatas_version(tmp_path, monkeypatch,
     assert navcosim_version() == _truth()
     if fast is not None:
         assert fast == _truth()
+
+
+def test_an_editable_checkouts_egg_info_is_read_without_importlib_metadata(tmp_path, monkeypatch):
+    """`pip install -e .` leaves `navcosim.egg-info/PKG-INFO` in the checkout, first on `sys.path`
+    under `python -m cosim`: its version is read directly, and it is importlib.metadata's."""
+    _dist(tmp_path / "a", "navcosim.egg-info", "0.1.0")
+    info = tmp_path / "a" / "navcosim.egg-info"
+    (info / "METADATA").rename(info / "PKG-INFO")
+    monkeypatch.setattr(sys, "path", [str(tmp_path / "a")])
+    assert dist_info_version("navcosim") == "0.1.0" == _truth()
