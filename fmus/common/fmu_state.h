@@ -11,7 +11,6 @@
 #include <stdbool.h>
 #include <stddef.h>
 
-#include "config.h"
 #include "model.h"
 
 typedef struct FmuState FmuState;
