@@ -7,7 +7,7 @@
  * identity, data size and generated variable table (per value reference and type, whether the
  * variable exists, its name and when it may be set, from the model's modelDescription.xml, the
  * single source of the variable list) through `fmi2_model` (fmi2_model.h), which the generated
- * `model_binding.h` defines in fmu_state.c. So the build compiles it once for every FMU.
+ * `model_binding.h` defines in the model's model.c. So the build compiles it once for every FMU.
  *
  * FMU state (get/set/free, serialise/deserialise) is a copy of the instance's model data, time and
  * state-machine position (fmu_state.c, shared with the FMI 3.0 glue).
@@ -559,7 +559,7 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
 
 /* A state saved by fmi2GetFMUstate: model data, time and state-machine position (fmu_state.c). */
 static int state_valid(ModelInstance *comp, fmi2FMUstate FMUstate, const char *function) {
-    if (!fmu_state_is_valid((const FmuState *)FMUstate)) {
+    if (!fmu_state_is_valid((const FmuState *)FMUstate, fmi2_model.data_size)) {
         model_log_error(comp, "%s: the FMU state is NULL, freed or not from this FMU", function);
         return 0;
     }
@@ -577,7 +577,7 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
     if (*FMUstate != NULL && !state_valid(comp, *FMUstate, "fmi2GetFMUstate")) {
         return fmi2Error;
     }
-    state = *FMUstate != NULL ? (FmuState *)*FMUstate : fmu_state_new();
+    state = *FMUstate != NULL ? (FmuState *)*FMUstate : fmu_state_new(fmi2_model.data_size);
     if (state == NULL) {
         model_log_error(comp, "fmi2GetFMUstate: out of memory");
         return fmi2Error;
@@ -621,7 +621,7 @@ fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, si
         !arguments_valid(comp, size, 1, size, "fmi2SerializedFMUstateSize")) {
         return fmi2Error;
     }
-    *size = fmu_state_serialized_size();
+    *size = fmu_state_serialized_size(fmi2_model.data_size);
     return fmi2OK;
 }
 
@@ -632,12 +632,12 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byt
         !arguments_valid(comp, serializedState, 1, serializedState, "fmi2SerializeFMUstate")) {
         return fmi2Error;
     }
-    if (size < fmu_state_serialized_size()) {
+    if (size < fmu_state_serialized_size(fmi2_model.data_size)) {
         model_log_error(comp, "fmi2SerializeFMUstate: buffer of %zu bytes, the state needs %zu", size,
-                        fmu_state_serialized_size());
+                        fmu_state_serialized_size(fmi2_model.data_size));
         return fmi2Error;
     }
-    fmu_state_serialize((const FmuState *)FMUstate, 2, (unsigned char *)serializedState);
+    fmu_state_serialize((const FmuState *)FMUstate, 2, fmi2_model.guid, (unsigned char *)serializedState);
     return fmi2OK;
 }
 
@@ -653,12 +653,12 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
     if (*FMUstate != NULL && !state_valid(comp, *FMUstate, "fmi2DeSerializeFMUstate")) {
         return fmi2Error;
     }
-    state = *FMUstate != NULL ? (FmuState *)*FMUstate : fmu_state_new();
+    state = *FMUstate != NULL ? (FmuState *)*FMUstate : fmu_state_new(fmi2_model.data_size);
     if (state == NULL) {
         model_log_error(comp, "fmi2DeSerializeFMUstate: out of memory");
         return fmi2Error;
     }
-    problem = fmu_state_deserialize(state, 2, (const unsigned char *)serializedState, size);
+    problem = fmu_state_deserialize(state, 2, fmi2_model.guid, (const unsigned char *)serializedState, size);
     if (problem != NULL) {
         if (*FMUstate == NULL) {
             fmu_state_free(state);

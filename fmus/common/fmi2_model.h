@@ -1,8 +1,8 @@
 /*
  * What the FMI 2.0 glue (fmi2_glue.c) knows of the model it is linked with: the one object
- * `fmi2_model`, defined by the generated `model_binding.h` (compiled in fmu_state.c, the shared C
- * compiled with each model). The glue itself holds nothing of a model, so it is compiled once for
- * every FMU and linked into each one.
+ * `fmi2_model`, defined by the generated `model_binding.h` that each model's model.c includes. The
+ * glue (and fmu_state.c) hold nothing of a model, so they are compiled once for every FMU and
+ * linked into each one.
  */
 #ifndef NAVCOSIM_FMI2_MODEL_H
 #define NAVCOSIM_FMI2_MODEL_H
