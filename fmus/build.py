@@ -2,11 +2,13 @@
 
 Every folder under `fmus/` holding a `modelDescription.xml` (FMI 2.0) is an FMU. Its `*.c` files are
 compiled together with the shared C of `fmus/common/` and one FMI version's glue into
-`binaries/<platform>/<modelIdentifier>.so`, and packed with the model description and all sources
-(declared in `<SourceFiles>` for FMI 2.0 and in `sources/buildDescription.xml`, so any FMI tool can
-rebuild the binary) into `<Name>.fmu`. The FMI 3.0 FMU of the same model gets its description
-derived from the FMI 2.0 one (`fmus/common/model_description.py`: arrays instead of scalars) and
-goes into the `fmi3/` folder beside the FMI 2.0 ones.
+`binaries/<platform>/<modelIdentifier>.so` (the FMI 2.0 glue and fmu_state.c hold nothing of a
+model: compiled once per process, they are linked into every FMI 2.0 FMU), and packed with the
+model description and all sources (declared in `<SourceFiles>` for FMI 2.0 and in
+`sources/buildDescription.xml`, so any FMI tool can rebuild the binary) into `<Name>.fmu`. The
+FMI 3.0 FMU of the same model gets its description derived from the FMI 2.0 one
+(`fmus/common/model_description.py`: arrays instead of scalars) and goes into the `fmi3/` folder
+beside the FMI 2.0 ones.
 
 Standalone on purpose (standard library only): `setup.py` imports it in pip's isolated build
 environment, and `cosim.fmi.builtin` imports it from a source checkout. Run
@@ -43,9 +45,10 @@ LINK_FLAGS = ["-lm", "-Wl,--no-undefined"]
 # The shared C of `common/` (the FMI glue fmi2_glue.c or fmi3_glue.c: argument checks, copying
 # values by reference, no arithmetic on the model's values but the new time t + h, one IEEE addition
 # at any optimisation level; fmu_state.c: FMU state copies) is compiled at -Og into objects first,
-# both by one compiler call: the glue at -O2 was ~80 % of each FMU's compile time (0.21 s of CPU
-# against 0.095 s at -Og; a first run builds four FMUs), and a warm run's CPU time is the same with
-# either (measured: ratio 1.00; at -O0 it is 4 % more). The model's own sources stay at -O2.
+# both by one compiler call (for FMI 2.0 once per process, see SHARED_GLUE): the glue at -O2 was
+# ~80 % of each FMU's compile time (0.21 s of CPU against 0.095 s at -Og; a first run builds four
+# FMUs), and a warm run's CPU time is the same with either (measured: ratio 1.00; at -O0 it is 4 %
+# more). The model's own sources stay at -O2.
 GLUE_FLAGS = ["-Og", "-c"]
 GENERATION_TOOL = "navcosim fmus/build.py"
 FMI_VERSIONS = (2, 3)
