@@ -7,6 +7,7 @@
 #include <math.h>
 
 #include "apf.h"
+#include "model_binding.h" /* generated: what the glue, compiled once for every model, needs to know of this one */
 
 void model_set_start_values(ModelData *data) {
     data->distance_limit_min = 0.05;

@@ -33,6 +33,7 @@
 #include "angles.h"
 #include "config.h"
 #include "model.h"
+#include "model_binding.h" /* generated: what the glue, compiled once for every model, needs to know of this one */
 
 void model_set_start_values(ModelData *data) {
     data->vehicle_type = VEHICLE_DIFFERENTIAL;

@@ -11,6 +11,7 @@
 #include "config.h"
 #include "model.h"
 #include "planar_motion.h"
+#include "model_binding.h" /* generated: what the glue, compiled once for every model, needs to know of this one */
 
 void model_set_start_values(ModelData *m) {
     m->input_mode = INPUT_VELOCITIES;

@@ -16,6 +16,7 @@
 #include "angles.h"
 #include "model.h"
 #include "pure_pursuit.h"
+#include "model_binding.h" /* generated: what the glue, compiled once for every model, needs to know of this one */
 
 void model_set_start_values(ModelData *data) {
     /* MATLAB's defaults (controllerPurePursuit); goal_tolerance has no MATLAB counterpart. */

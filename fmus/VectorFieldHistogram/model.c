@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "vfh.h"
+#include "model_binding.h" /* generated: what the glue, compiled once for every model, needs to know of this one */
 
 void model_set_start_values(ModelData *data) {
     data->num_angular_sectors = 180;

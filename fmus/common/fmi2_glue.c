@@ -3,10 +3,11 @@
  *
  * The glue owns the instance lifecycle, the FMI state machine, logging and get/set with their
  * value-reference checks; the model (fmus/<Model>/model.c, see model.h) owns only its maths and
- * says where each variable is stored. The build compiles this file together with one model and a
- * generated `variable_table.h` that gives, per value reference and type, whether the variable
- * exists, its name and when it may be set (from the model's modelDescription.xml, the single
- * source of the variable list).
+ * says where each variable is stored. This file holds nothing of a model: it reaches the model's
+ * identity, data size and generated variable table (per value reference and type, whether the
+ * variable exists, its name and when it may be set, from the model's modelDescription.xml, the
+ * single source of the variable list) through `fmi2_model` (fmi2_model.h), which the generated
+ * `model_binding.h` defines in the model's model.c. So the build compiles it once for every FMU.
  *
  * FMU state (get/set/free, serialise/deserialise) is a copy of the instance's model data, time and
  * state-machine position (fmu_state.c, shared with the FMI 3.0 glue).
@@ -20,31 +21,13 @@
 #include <string.h>
 
 #include "fmi2Functions.h"
-#include "config.h"
+#include "fmi2_model.h"
 #include "fmu_state.h"
 #include "model.h"
 
-/* When a variable may be set; the generated table holds one of these per value reference. */
-enum VariableAccess {
-    ACCESS_UNKNOWN = 0,   /* no variable of this type has this value reference */
-    ACCESS_READ_ONLY = 1, /* output, local, calculated parameter, constant */
-    ACCESS_FIXED = 2,     /* fixed parameter: settable until initialisation ends */
-    ACCESS_ANY_TIME = 3,  /* input or tunable parameter */
-};
-
-#include "variable_table.h"
-
-/* One FMI type's part of the generated variable table. */
-typedef struct {
-    const char *type_name;
-    const unsigned char *access; /* enum VariableAccess per value reference */
-    const char *const *names;    /* variable name per value reference, NULL where none */
-    size_t size;
-} VariableTable;
-
-static const VariableTable REAL_VARIABLES = {"Real", real_access, real_names, REAL_TABLE_SIZE};
-static const VariableTable INTEGER_VARIABLES = {"Integer", integer_access, integer_names, INTEGER_TABLE_SIZE};
-static const VariableTable BOOLEAN_VARIABLES = {"Boolean", boolean_access, boolean_names, BOOLEAN_TABLE_SIZE};
+#define REAL_VARIABLES (&fmi2_model.real)
+#define INTEGER_VARIABLES (&fmi2_model.integer)
+#define BOOLEAN_VARIABLES (&fmi2_model.boolean)
 
 /* FMI 2.0 co-simulation states (a bit each, so a function lists the states it accepts). */
 enum InstanceState {
@@ -65,7 +48,7 @@ struct ModelInstance {
     int logging_on;
     enum InstanceState state;
     double time; /* [s] communication point the instance has reached */
-    ModelData data;
+    ModelData *data; /* fmi2_model.data_size bytes */
 };
 
 /* ---------------------------------------------------------------- logging */
@@ -107,7 +90,7 @@ void model_log_info(ModelInstance *comp, const char *format, ...) {
     va_end(args);
 }
 
-ModelData *model_data(ModelInstance *comp) { return &comp->data; }
+ModelData *model_data(ModelInstance *comp) { return comp->data; }
 
 static const char *state_name(enum InstanceState state) {
     switch (state) {
@@ -181,19 +164,19 @@ static int missing_storage(ModelInstance *comp, const VariableTable *table, unsi
  * get and set dereference the model's pointers without a check per value. (The loops run over the
  * arrays, never empty, as a type without variables has TABLE_SIZE 0.) */
 static int storage_matches_description(ModelInstance *comp) {
-    for (unsigned vr = 0; vr < sizeof real_access; vr++) {
-        if (real_access[vr] != ACCESS_UNKNOWN && model_real(&comp->data, vr) == NULL) {
-            return missing_storage(comp, &REAL_VARIABLES, vr);
+    for (unsigned vr = 0; vr < fmi2_model.real.size; vr++) {
+        if (fmi2_model.real.access[vr] != ACCESS_UNKNOWN && model_real(comp->data, vr) == NULL) {
+            return missing_storage(comp, REAL_VARIABLES, vr);
         }
     }
-    for (unsigned vr = 0; vr < sizeof integer_access; vr++) {
-        if (integer_access[vr] != ACCESS_UNKNOWN && model_integer(&comp->data, vr) == NULL) {
-            return missing_storage(comp, &INTEGER_VARIABLES, vr);
+    for (unsigned vr = 0; vr < fmi2_model.integer.size; vr++) {
+        if (fmi2_model.integer.access[vr] != ACCESS_UNKNOWN && model_integer(comp->data, vr) == NULL) {
+            return missing_storage(comp, INTEGER_VARIABLES, vr);
         }
     }
-    for (unsigned vr = 0; vr < sizeof boolean_access; vr++) {
-        if (boolean_access[vr] != ACCESS_UNKNOWN && model_boolean(&comp->data, vr) == NULL) {
-            return missing_storage(comp, &BOOLEAN_VARIABLES, vr);
+    for (unsigned vr = 0; vr < fmi2_model.boolean.size; vr++) {
+        if (fmi2_model.boolean.access[vr] != ACCESS_UNKNOWN && model_boolean(comp->data, vr) == NULL) {
+            return missing_storage(comp, BOOLEAN_VARIABLES, vr);
         }
     }
     return 1;
@@ -210,14 +193,14 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     (void)visible;
     if (fmuType != fmi2CoSimulation) {
         if (logger != NULL) {
-            logger(environment, name, fmi2Error, "logError", "%s supports co-simulation only", MODEL_IDENTIFIER);
+            logger(environment, name, fmi2Error, "logError", "%s supports co-simulation only", fmi2_model.identifier);
         }
         return NULL;
     }
-    if (fmuGUID == NULL || strcmp(fmuGUID, MODEL_GUID) != 0) {
+    if (fmuGUID == NULL || strcmp(fmuGUID, fmi2_model.guid) != 0) {
         if (logger != NULL) {
             logger(environment, name, fmi2Error, "logError", "GUID '%s' does not match this FMU's '%s'",
-                   fmuGUID != NULL ? fmuGUID : "(null)", MODEL_GUID);
+                   fmuGUID != NULL ? fmuGUID : "(null)", fmi2_model.guid);
         }
         return NULL;
     }
@@ -226,7 +209,10 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         return NULL;
     }
     comp->instance_name = malloc(strlen(name) + 1);
-    if (comp->instance_name == NULL) {
+    comp->data = calloc(1, fmi2_model.data_size);
+    if (comp->instance_name == NULL || comp->data == NULL) {
+        free(comp->instance_name);
+        free(comp->data);
         free(comp);
         return NULL;
     }
@@ -235,7 +221,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     comp->environment = environment;
     comp->logging_on = loggingOn;
     comp->state = STATE_INSTANTIATED;
-    model_set_start_values(&comp->data);
+    model_set_start_values(comp->data);
     if (!storage_matches_description(comp)) {
         fmi2FreeInstance(comp);
         return NULL;
@@ -249,6 +235,7 @@ void fmi2FreeInstance(fmi2Component c) {
         return;
     }
     free(comp->instance_name);
+    free(comp->data);
     free(comp);
 }
 
@@ -281,7 +268,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     if (!state_allows(comp, STATE_INITIALIZATION_MODE, "fmi2ExitInitializationMode")) {
         return fmi2Error;
     }
-    status = model_initialize(comp, &comp->data);
+    status = model_initialize(comp, comp->data);
     if (status == MODEL_ERROR || status == MODEL_DISCARD) {
         comp->state = STATE_ERROR;
         return fmi2Error;
@@ -304,8 +291,8 @@ fmi2Status fmi2Reset(fmi2Component c) {
     if (!state_allows(comp, STATES_ANY, "fmi2Reset")) {
         return fmi2Error;
     }
-    memset(&comp->data, 0, sizeof comp->data);
-    model_set_start_values(&comp->data);
+    memset(comp->data, 0, fmi2_model.data_size);
+    model_set_start_values(comp->data);
     comp->state = STATE_INSTANTIATED;
     comp->time = 0.0;
     return fmi2OK;
@@ -366,10 +353,10 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
         return fmi2Error;
     }
     for (size_t i = 0; i < nvr; i++) {
-        if (!may_access(comp, &REAL_VARIABLES, vr[i], 0)) {
+        if (!may_access(comp, REAL_VARIABLES, vr[i], 0)) {
             return fmi2Error;
         }
-        const double *variable = model_real(&comp->data, vr[i]);
+        const double *variable = model_real(comp->data, vr[i]);
         value[i] = *variable;
     }
     return fmi2OK;
@@ -381,10 +368,10 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
         return fmi2Error;
     }
     for (size_t i = 0; i < nvr; i++) {
-        if (!may_access(comp, &INTEGER_VARIABLES, vr[i], 0)) {
+        if (!may_access(comp, INTEGER_VARIABLES, vr[i], 0)) {
             return fmi2Error;
         }
-        const int *variable = model_integer(&comp->data, vr[i]);
+        const int *variable = model_integer(comp->data, vr[i]);
         value[i] = *variable;
     }
     return fmi2OK;
@@ -396,10 +383,10 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
         return fmi2Error;
     }
     for (size_t i = 0; i < nvr; i++) {
-        if (!may_access(comp, &BOOLEAN_VARIABLES, vr[i], 0)) {
+        if (!may_access(comp, BOOLEAN_VARIABLES, vr[i], 0)) {
             return fmi2Error;
         }
-        const bool *variable = model_boolean(&comp->data, vr[i]);
+        const bool *variable = model_boolean(comp->data, vr[i]);
         value[i] = *variable ? fmi2True : fmi2False;
     }
     return fmi2OK;
@@ -421,23 +408,24 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
     ModelInstance *comp = (ModelInstance *)c;
+    const unsigned char *watched = fmi2_model.real_watched;
     if (!call_valid(comp, vr, nvr, value, "fmi2SetReal", 1)) {
         return fmi2Error;
     }
     for (size_t i = 0; i < nvr; i++) {
-        if (!may_access(comp, &REAL_VARIABLES, vr[i], 1)) {
+        if (!may_access(comp, REAL_VARIABLES, vr[i], 1)) {
             return fmi2Error;
         }
-        double *variable = model_real(&comp->data, vr[i]);
-#ifdef MODEL_WATCHES_REAL
+        double *variable = model_real(comp->data, vr[i]);
+        if (watched == NULL) {
+            *variable = value[i];
+            continue;
+        }
         const double previous = *variable; /* store first, then test: the faster order for VFH's 1441 values */
         *variable = value[i];
-        if (MODEL_WATCHES_REAL(vr[i]) && !(previous == value[i] || (isnan(previous) && isnan(value[i])))) {
-            model_real_changed(&comp->data, vr[i]);
+        if (watched[vr[i]] && !(previous == value[i] || (isnan(previous) && isnan(value[i])))) {
+            fmi2_model.real_changed(comp->data, vr[i]);
         }
-#else
-        *variable = value[i];
-#endif
     }
     return fmi2OK;
 }
@@ -448,10 +436,10 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
         return fmi2Error;
     }
     for (size_t i = 0; i < nvr; i++) {
-        if (!may_access(comp, &INTEGER_VARIABLES, vr[i], 1)) {
+        if (!may_access(comp, INTEGER_VARIABLES, vr[i], 1)) {
             return fmi2Error;
         }
-        int *variable = model_integer(&comp->data, vr[i]);
+        int *variable = model_integer(comp->data, vr[i]);
         *variable = value[i];
     }
     return fmi2OK;
@@ -463,10 +451,10 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
         return fmi2Error;
     }
     for (size_t i = 0; i < nvr; i++) {
-        if (!may_access(comp, &BOOLEAN_VARIABLES, vr[i], 1)) {
+        if (!may_access(comp, BOOLEAN_VARIABLES, vr[i], 1)) {
             return fmi2Error;
         }
-        bool *variable = model_boolean(&comp->data, vr[i]);
+        bool *variable = model_boolean(comp->data, vr[i]);
         *variable = value[i] != fmi2False;
     }
     return fmi2OK;
@@ -501,7 +489,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     }
     {
         fmi2Status status = model_result(
-            comp, model_do_step(comp, &comp->data, currentCommunicationPoint, communicationStepSize));
+            comp, model_do_step(comp, comp->data, currentCommunicationPoint, communicationStepSize));
         if (status <= fmi2Warning) {
             comp->time = currentCommunicationPoint + communicationStepSize;
         }
@@ -571,7 +559,7 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
 
 /* A state saved by fmi2GetFMUstate: model data, time and state-machine position (fmu_state.c). */
 static int state_valid(ModelInstance *comp, fmi2FMUstate FMUstate, const char *function) {
-    if (!fmu_state_is_valid((const FmuState *)FMUstate)) {
+    if (!fmu_state_is_valid((const FmuState *)FMUstate, fmi2_model.data_size)) {
         model_log_error(comp, "%s: the FMU state is NULL, freed or not from this FMU", function);
         return 0;
     }
@@ -589,12 +577,12 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
     if (*FMUstate != NULL && !state_valid(comp, *FMUstate, "fmi2GetFMUstate")) {
         return fmi2Error;
     }
-    state = *FMUstate != NULL ? (FmuState *)*FMUstate : fmu_state_new();
+    state = *FMUstate != NULL ? (FmuState *)*FMUstate : fmu_state_new(fmi2_model.data_size);
     if (state == NULL) {
         model_log_error(comp, "fmi2GetFMUstate: out of memory");
         return fmi2Error;
     }
-    fmu_state_save(state, &comp->data, comp->time, (int)comp->state);
+    fmu_state_save(state, comp->data, comp->time, (int)comp->state);
     *FMUstate = state;
     return fmi2OK;
 }
@@ -605,7 +593,7 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
     if (!state_allows(comp, STATES_ANY, "fmi2SetFMUstate") || !state_valid(comp, FMUstate, "fmi2SetFMUstate")) {
         return fmi2Error;
     }
-    fmu_state_restore((const FmuState *)FMUstate, &comp->data, &comp->time, &instance_state);
+    fmu_state_restore((const FmuState *)FMUstate, comp->data, &comp->time, &instance_state);
     comp->state = (enum InstanceState)instance_state;
     return fmi2OK;
 }
@@ -633,7 +621,7 @@ fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, si
         !arguments_valid(comp, size, 1, size, "fmi2SerializedFMUstateSize")) {
         return fmi2Error;
     }
-    *size = fmu_state_serialized_size();
+    *size = fmu_state_serialized_size(fmi2_model.data_size);
     return fmi2OK;
 }
 
@@ -644,12 +632,12 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byt
         !arguments_valid(comp, serializedState, 1, serializedState, "fmi2SerializeFMUstate")) {
         return fmi2Error;
     }
-    if (size < fmu_state_serialized_size()) {
+    if (size < fmu_state_serialized_size(fmi2_model.data_size)) {
         model_log_error(comp, "fmi2SerializeFMUstate: buffer of %zu bytes, the state needs %zu", size,
-                        fmu_state_serialized_size());
+                        fmu_state_serialized_size(fmi2_model.data_size));
         return fmi2Error;
     }
-    fmu_state_serialize((const FmuState *)FMUstate, 2, (unsigned char *)serializedState);
+    fmu_state_serialize((const FmuState *)FMUstate, 2, fmi2_model.guid, (unsigned char *)serializedState);
     return fmi2OK;
 }
 
@@ -665,12 +653,12 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
     if (*FMUstate != NULL && !state_valid(comp, *FMUstate, "fmi2DeSerializeFMUstate")) {
         return fmi2Error;
     }
-    state = *FMUstate != NULL ? (FmuState *)*FMUstate : fmu_state_new();
+    state = *FMUstate != NULL ? (FmuState *)*FMUstate : fmu_state_new(fmi2_model.data_size);
     if (state == NULL) {
         model_log_error(comp, "fmi2DeSerializeFMUstate: out of memory");
         return fmi2Error;
     }
-    problem = fmu_state_deserialize(state, 2, (const unsigned char *)serializedState, size);
+    problem = fmu_state_deserialize(state, 2, fmi2_model.guid, (const unsigned char *)serializedState, size);
     if (problem != NULL) {
         if (*FMUstate == NULL) {
             fmu_state_free(state);

@@ -645,7 +645,7 @@ fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueRefere
 /* ---------------------------------------------------------------- FMU state */
 
 static int state_valid(ModelInstance *comp, fmi3FMUState FMUState, const char *function) {
-    if (!fmu_state_is_valid((const FmuState *)FMUState)) {
+    if (!fmu_state_is_valid((const FmuState *)FMUState, sizeof(ModelData))) {
         model_log_error(comp, "%s: the FMU state is NULL, freed or not from this FMU", function);
         return 0;
     }
@@ -663,7 +663,7 @@ fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
     if (*FMUState != NULL && !state_valid(comp, *FMUState, "fmi3GetFMUState")) {
         return fmi3Error;
     }
-    state = *FMUState != NULL ? (FmuState *)*FMUState : fmu_state_new();
+    state = *FMUState != NULL ? (FmuState *)*FMUState : fmu_state_new(sizeof(ModelData));
     if (state == NULL) {
         model_log_error(comp, "fmi3GetFMUState: out of memory");
         return fmi3Error;
@@ -707,7 +707,7 @@ fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUSta
         !pointer_given(comp, size, "fmi3SerializedFMUStateSize", "size")) {
         return fmi3Error;
     }
-    *size = fmu_state_serialized_size();
+    *size = fmu_state_serialized_size(sizeof(ModelData));
     return fmi3OK;
 }
 
@@ -719,12 +719,12 @@ fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState, f
         !pointer_given(comp, serializedState, "fmi3SerializeFMUState", "serializedState")) {
         return fmi3Error;
     }
-    if (size < fmu_state_serialized_size()) {
+    if (size < fmu_state_serialized_size(sizeof(ModelData))) {
         model_log_error(comp, "fmi3SerializeFMUState: buffer of %zu bytes, the state needs %zu", size,
-                        fmu_state_serialized_size());
+                        fmu_state_serialized_size(sizeof(ModelData)));
         return fmi3Error;
     }
-    fmu_state_serialize((const FmuState *)FMUState, 3, serializedState);
+    fmu_state_serialize((const FmuState *)FMUState, 3, MODEL_GUID, serializedState);
     return fmi3OK;
 }
 
@@ -741,12 +741,12 @@ fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte seriali
     if (*FMUState != NULL && !state_valid(comp, *FMUState, "fmi3DeserializeFMUState")) {
         return fmi3Error;
     }
-    state = *FMUState != NULL ? (FmuState *)*FMUState : fmu_state_new();
+    state = *FMUState != NULL ? (FmuState *)*FMUState : fmu_state_new(sizeof(ModelData));
     if (state == NULL) {
         model_log_error(comp, "fmi3DeserializeFMUState: out of memory");
         return fmi3Error;
     }
-    problem = fmu_state_deserialize(state, 3, serializedState, size);
+    problem = fmu_state_deserialize(state, 3, MODEL_GUID, serializedState, size);
     if (problem != NULL) {
         if (*FMUState == NULL) {
             fmu_state_free(state);

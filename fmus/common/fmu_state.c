@@ -12,7 +12,8 @@ struct FmuState {
     uint32_t tag;
     int instance_state;
     double time; /* [s] */
-    ModelData data;
+    size_t size; /* bytes of `data`: sizeof(ModelData) */
+    unsigned char data[];
 };
 
 /* Serialised layout: magic, FMI version, GUID, payload sizes, then the payload. */
@@ -28,10 +29,11 @@ typedef struct {
     uint32_t reserved;
 } Header;
 
-FmuState *fmu_state_new(void) {
-    FmuState *state = calloc(1, sizeof *state);
+FmuState *fmu_state_new(size_t data_size) {
+    FmuState *state = calloc(1, sizeof *state + data_size);
     if (state != NULL) {
         state->tag = STATE_TAG;
+        state->size = data_size;
     }
     return state;
 }
@@ -43,45 +45,48 @@ void fmu_state_free(FmuState *state) {
     }
 }
 
-bool fmu_state_is_valid(const FmuState *state) { return state != NULL && state->tag == STATE_TAG; }
+bool fmu_state_is_valid(const FmuState *state, size_t data_size) {
+    return state != NULL && state->tag == STATE_TAG && state->size == data_size;
+}
 
 void fmu_state_save(FmuState *state, const ModelData *data, double time, int instance_state) {
-    memcpy(&state->data, data, sizeof state->data);
+    memcpy(state->data, data, state->size);
     state->time = time;
     state->instance_state = instance_state;
 }
 
 void fmu_state_restore(const FmuState *state, ModelData *data, double *time, int *instance_state) {
-    memcpy(data, &state->data, sizeof *data);
+    memcpy(data, state->data, state->size);
     *time = state->time;
     *instance_state = state->instance_state;
 }
 
-size_t fmu_state_serialized_size(void) { return sizeof(Header) + sizeof(ModelData); }
+size_t fmu_state_serialized_size(size_t data_size) { return sizeof(Header) + data_size; }
 
-static void make_header(Header *header, int fmi_version) {
+static void make_header(Header *header, int fmi_version, const char *guid, size_t data_size) {
     memset(header, 0, sizeof *header);
     strncpy(header->magic, MAGIC, MAGIC_SIZE - 1);
-    strncpy(header->guid, MODEL_GUID, GUID_SIZE - 1);
+    strncpy(header->guid, guid, GUID_SIZE - 1);
     header->fmi_version = (uint32_t)fmi_version;
-    header->data_size = (uint32_t)sizeof(ModelData);
+    header->data_size = (uint32_t)data_size;
 }
 
-void fmu_state_serialize(const FmuState *state, int fmi_version, unsigned char *bytes) {
+void fmu_state_serialize(const FmuState *state, int fmi_version, const char *guid, unsigned char *bytes) {
     Header header;
-    make_header(&header, fmi_version);
+    make_header(&header, fmi_version, guid, state->size);
     header.time = state->time;
     header.instance_state = state->instance_state;
     memcpy(bytes, &header, sizeof header);
-    memcpy(bytes + sizeof header, &state->data, sizeof state->data);
+    memcpy(bytes + sizeof header, state->data, state->size);
 }
 
-const char *fmu_state_deserialize(FmuState *state, int fmi_version, const unsigned char *bytes, size_t size) {
+const char *fmu_state_deserialize(FmuState *state, int fmi_version, const char *guid, const unsigned char *bytes,
+                                  size_t size) {
     Header expected, found;
-    if (size != fmu_state_serialized_size()) {
+    if (size != fmu_state_serialized_size(state->size)) {
         return "the serialized state has the wrong size for this FMU";
     }
-    make_header(&expected, fmi_version);
+    make_header(&expected, fmi_version, guid, state->size);
     memcpy(&found, bytes, sizeof found);
     if (memcmp(found.magic, expected.magic, MAGIC_SIZE) != 0) {
         return "the bytes are not a serialized navcosim FMU state";
@@ -95,6 +100,6 @@ const char *fmu_state_deserialize(FmuState *state, int fmi_version, const unsign
     state->tag = STATE_TAG;
     state->time = found.time;
     state->instance_state = found.instance_state;
-    memcpy(&state->data, bytes + sizeof found, sizeof state->data);
+    memcpy(state->data, bytes + sizeof found, state->size);
     return NULL;
 }

@@ -153,6 +153,42 @@ def test_glue_compiles_against_our_minimal_fmi2_header(tmp_path):
         assert validate(path) == []
 
 
+def test_fmi2_glue_is_compiled_once_without_any_model_and_linked_into_each_fmu(tmp_path):
+    """The FMI 2.0 glue and fmu_state.c hold nothing of a model: one compiler call builds them,
+    with no model folder or generated table on its include path, and each FMU links those objects
+    yet answers its own GUID, variables and equations (fmpy instantiates with the description's
+    GUID and the glue checks it)."""
+    import fmpy
+
+    sources = copy_sources(REPO / "fmus", tmp_path / "fmus")
+    glue = sources / "common" / "fmi2_glue.c"
+    glue.write_text(glue.read_text() + f"/* {tmp_path.name} */\n")  # not the process's compiled glue
+    build = _build_module(sources)
+    commands: list[list[str]] = []
+
+    def run_compiler(command, cwd=None):
+        commands.append(command)
+        return subprocess.run(command, capture_output=True, text=True, cwd=cwd)
+
+    built = {
+        name: build.build_fmu(sources / name, tmp_path / "out", run_compiler=run_compiler)
+        for name in ("DifferentialDrive", "Bicycle")
+    }
+    glue_calls = [c for c in commands if str(glue) in c]
+    assert len(glue_calls) == 1 and str(sources / "common" / "fmu_state.c") in glue_calls[0]
+    includes = [flag for flag in glue_calls[0] if flag.startswith("-I")]
+    assert f"-I{sources / 'common'}" in includes and len(includes) == 2
+    model_calls = [c for c in commands if c not in glue_calls]
+    assert len(model_calls) == 2
+    objects = [[part for part in c if part.endswith(".o")] for c in model_calls]
+    assert objects[0] == objects[1] and len(objects[0]) == 2
+    wheels = {"input_mode": 1, "wheel_speed_left": 10.0, "wheel_speed_right": 10.0}  # r = 0.05 m
+    checks = {"DifferentialDrive": (wheels, "x", 0.5), "Bicycle": ({"v": 2.0}, "x", 2.0)}  # 1 s straight
+    for name, (start_values, output, expected) in checks.items():
+        result = fmpy.simulate_fmu(str(built[name]), start_values=start_values, stop_time=1.0)
+        assert result[output][-1] == pytest.approx(expected, abs=1e-12)
+
+
 def test_build_error_is_one_line(tmp_path):
     sources = copy_sources(REPO / "fmus", tmp_path / "fmus")
     model = sources / "Bicycle" / "model.c"

@@ -185,3 +185,24 @@ def test_foreign_or_damaged_serialized_states_are_refused(fmi_version):
     assert "the FMU state is NULL" in drive.messages[-1]
     drive.step()  # refusals leave the instance working
     drive.free()
+
+
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_a_live_state_of_another_model_is_refused_when_its_data_size_differs(fmi_version):
+    """A state object (not its bytes) of another FMU carries its data size: setting it is refused
+    instead of copying the other model's bytes over this one's."""
+    drive, bicycle = FmuInstance("DifferentialDrive", fmi_version), FmuInstance("Bicycle", fmi_version)
+    drive.initialize()
+    bicycle.initialize()
+    own, foreign = drive.fmu.getFMUState(), bicycle.fmu.getFMUState()
+    assert len(drive.fmu.serializeFMUState(own)) != len(bicycle.fmu.serializeFMUState(foreign))
+    with pytest.raises(FMICallException) as error:
+        drive.fmu.setFMUState(foreign)
+    assert error.value.status == FMI_ERROR
+    assert "not from this FMU" in drive.messages[-1], drive.messages
+    drive.fmu.setFMUState(own)  # its own state still restores
+    drive.step()
+    drive.fmu.freeFMUState(own)
+    bicycle.fmu.freeFMUState(foreign)
+    drive.free()
+    bicycle.free()
