@@ -105,6 +105,11 @@ def read_columns(component, outputs: set[int]) -> list[slice]:
     else:
         columns = list(range(n_in))
     columns += sorted(n_in + slot for slot in outputs)
+    return column_runs(columns)
+
+
+def column_runs(columns: list[int]) -> list[slice]:
+    """Ascending `columns` as runs of consecutive columns ([0, 1, 2, 5, 6] -> 0:3, 5:7)."""
     runs: list[slice] = []
     for column in columns:
         if runs and runs[-1].stop == column:

@@ -46,6 +46,7 @@ from cosim.core.timebase import NS_PER_S, due_from
 from cosim.errors import CosimError
 from cosim.record import rosmsg
 from cosim.record.batch import FixedLayout
+from cosim.record.blocks import column_runs
 from cosim.record.steps import SignalEntry, StepRecording
 
 ODOM = "nav_msgs/msg/Odometry"
@@ -176,13 +177,7 @@ class FleetSteps:
             if columns == list(range(len(component.inputs) + len(component.outputs))):
                 place[index] = {column: column for column in columns}
                 continue
-            runs: list[slice] = []
-            for column in columns:
-                if runs and runs[-1].stop == column:
-                    runs[-1] = slice(runs[-1].start, column + 1)
-                else:
-                    runs.append(slice(column, column + 1))
-            kept[index] = (runs, len(columns))
+            kept[index] = (column_runs(columns), len(columns))
             place[index] = {column: at for at, column in enumerate(columns)}
         for robot in self.robots:
             entries = []
