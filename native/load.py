@@ -61,8 +61,22 @@ _lock = threading.Lock()
 # and the build would wait for that process to end (`cosim run` forks its plotter, which lives as
 # long as the run). `subprocess` itself forks without the hooks, so starting under it is safe.
 _spawning = threading.RLock()
+
+
+def _after_fork_in_child() -> None:
+    """A forked process has none of its parent's build threads: their builds (`_pending`) would
+    never finish here, and `_lock` may have been held by one of them. The child forgets them and
+    builds (or finds, if the parent's build has landed) what it loads itself; the cache's rename
+    keeps two processes building one library apart. (`cosim run`'s plot process drafts its figure
+    with the distance kernel while a first run's builds go on.)"""
+    global _lock, _pending
+    _lock = threading.Lock()
+    _pending = {}
+    _spawning.release()
+
+
 os.register_at_fork(
-    before=_spawning.acquire, after_in_parent=_spawning.release, after_in_child=_spawning.release
+    before=_spawning.acquire, after_in_parent=_spawning.release, after_in_child=_after_fork_in_child
 )
 
 

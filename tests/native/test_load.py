@@ -143,6 +143,43 @@ def test_started_builds_are_waited_for_by_load(tmp_path, monkeypatch):
         assert native.start_builds([good], pool) == []  # built: found in the cache
 
 
+def test_a_forked_child_loads_what_its_parent_is_still_building(tmp_path, monkeypatch):
+    """A process forked while a build of its parent is pending (`cosim run`'s plot process, during a
+    first run's builds) has no build thread: its `load` builds or finds the library itself instead
+    of waiting for the parent's build forever."""
+    import os
+    import threading
+    import time
+    from concurrent.futures import ThreadPoolExecutor
+
+    monkeypatch.setattr(native, "_loaded", {})
+    monkeypatch.setattr(native, "_pending", {})
+    monkeypatch.setenv("NAVCOSIM_NATIVE_CACHE", str(tmp_path / "cache"))
+    good = _package(tmp_path, HYPOT)
+    hold = threading.Event()
+    with ThreadPoolExecutor(1) as pool:
+        pool.submit(hold.wait)  # the one build thread is busy: the build below waits in the queue
+        assert native.start_builds([good], pool) == [good.resolve()]
+        pid = os.fork()
+        if pid == 0:  # the child: exit 0 when the kernel loaded and computes
+            code = 1
+            try:
+                library = native.bind(native.load(good), {"hyp": (ctypes.c_double, [ctypes.c_double] * 2)})
+                code = 0 if library.hyp(3.0, 4.0) == 5.0 else 2
+            finally:
+                os._exit(code)
+        deadline = time.monotonic() + 120.0  # a guard against a hang, not a speed limit
+        while (done := os.waitpid(pid, os.WNOHANG))[0] == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        if done[0] == 0:
+            os.kill(pid, 9)
+            os.waitpid(pid, 0)
+        hold.set()
+        assert done[0] == pid, "the child waited for its parent's build"
+        assert os.waitstatus_to_exitcode(done[1]) == 0
+        assert native.load(good) is not None  # the parent's own build still completes
+
+
 def test_run_compiler_is_subprocess_run():
     done = native.run_compiler(["sh", "-c", "echo out; echo err >&2; exit 3"])
     assert (done.returncode, done.stdout, done.stderr) == (3, "out\n", "err\n")
