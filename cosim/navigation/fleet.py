@@ -78,6 +78,7 @@ from cosim.navigation.build import build_run
 from cosim.navigation.coordination import FleetCoordination
 from cosim.navigation.fleet_log import FleetLog
 from cosim.navigation.outcome import MODE_RECOVER, OutcomeMonitor
+from cosim.record.blocks import column_runs
 from cosim.record.logfile import is_regular_file
 from cosim.record.system_run import (
     close_quietly,
@@ -741,9 +742,8 @@ def _tables(master: Master, block: int, previous: _PythonSteps | None = None) ->
 def _columns(columns: list[int]) -> list[int] | slice:
     """Columns of a component's block rows: a slice when they are consecutive (a view of the
     rows, no copy: nothing writes into a robot's poses or commands), else the list."""
-    if all(b == a + 1 for a, b in zip(columns, columns[1:], strict=False)):
-        return slice(columns[0], columns[-1] + 1)
-    return columns
+    runs = column_runs(columns)
+    return runs[0] if len(runs) == 1 else columns
 
 
 def _held(rows: np.ndarray, first: int, count: int, period: int, last: np.ndarray) -> np.ndarray:
