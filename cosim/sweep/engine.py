@@ -267,11 +267,33 @@ def probe_scheduler(address: str, timeout: float) -> None:
         raise CosimError(f"--scheduler {address}: not a Dask scheduler (it answered {shown!r})")
 
 
+class _UnboundSyncFuture(logging.Filter):
+    """Drops one error that distributed logs after a Ctrl-C: when the interrupt reaches a blocking
+    client call (`distributed.utils.sync`) before its coroutine has made the future it waits on,
+    the cancel callback it schedules reads that still-unbound variable and tornado logs the
+    NameError with its traceback (distributed 2026.8). The interrupt itself is handled; the
+    traceback only told the user of a bug that is not theirs. Every other callback error passes."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        kind, _, trace = record.exc_info or (None, None, None)
+        if kind is not NameError or trace is None:
+            return True
+        while trace.tb_next is not None:
+            trace = trace.tb_next
+        code = trace.tb_frame.f_code
+        return not (code.co_name == "cancel" and Path(code.co_filename).match("distributed/utils.py"))
+
+
+_SYNC_FILTER = _UnboundSyncFuture()
+
+
 @contextmanager
 def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterator[tuple[object, int]]:
     """A client on `scheduler`, or on a new LocalCluster of `workers` processes (default: one per
     core, never more than there are runs); yields (client, number of workers)."""
     from distributed import Client, LocalCluster
+
+    logging.getLogger("tornado.application").addFilter(_SYNC_FILTER)  # once: filters are a set
 
     if scheduler is not None:
         probe_scheduler(scheduler, CONNECT_TIMEOUT)
