@@ -317,18 +317,30 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
         finally:
             client.close()
         return
-    from multiprocessing import get_context
+    from multiprocessing import forkserver, get_context
 
     import dask
     import distributed.utils
 
     count = max(1, min(workers or os.cpu_count() or 1, pending))
-    # The workers fork from the fork server (`start_fork_server`, started with SIGINT ignored, as
-    # the cluster's own processes are here). Distributed's sampling profiler is off: it costs a run
-    # about a sixth more CPU time and nobody reads it here. Distributed would import its optional
-    # packages here (pandas: most of a second) only to name them as the server's preload, which
-    # `start_fork_server` set already.
+    # The workers fork from the fork server (`start_fork_server`), which ignores SIGINT, as they do;
+    # one that is not running (the sweep did not start it, or it ended) starts here, with SIGINT
+    # ignored too, before the cluster would start it. Distributed's sampling profiler is off: it
+    # costs a run about a sixth more CPU time and nobody reads it here. Distributed would import its
+    # optional packages here (pandas: most of a second) only to name them as the server's preload,
+    # which `start_fork_server` set already.
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        get_context("forkserver").set_forkserver_preload(WORKER_PRELOAD)  # if not started yet
+        forkserver.ensure_running()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    # A Ctrl-C while the cluster starts (most of a second: its workers wait for the fork server to
+    # warm up) is held until it has started, then the cluster is closed and the interrupt goes on.
+    # Ignored, as it was over the whole start, the sweep went on as if no key had been pressed;
+    # raised inside Dask's start, it would cut that short midway, with no cluster here to close.
+    interrupts: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda number, frame: interrupts.append(number))
     try:
         settings = {
             "distributed.worker.profile.enabled": False,
@@ -343,7 +355,6 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
             "distributed.admin.system-monitor.interval": "5s",
             "distributed.admin.system-monitor.disk": False,
         }
-        get_context("forkserver").set_forkserver_preload(WORKER_PRELOAD)  # if not started yet
         if hasattr(distributed.utils, "_forkserver_preload_set"):
             distributed.utils._forkserver_preload_set = True
         with dask.config.set(settings):
@@ -362,6 +373,8 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
     finally:
         signal.signal(signal.SIGINT, previous)
     try:
+        if interrupts:  # to the handler held before (`Interrupted`, KeyboardInterrupt), the cluster closed
+            signal.raise_signal(signal.SIGINT)
         client = Client(cluster, set_as_default=False)
         try:
             yield client, count

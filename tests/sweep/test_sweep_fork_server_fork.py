@@ -2,10 +2,13 @@
 the run stage (`cosim.sweep.warm._fork_server_here`), and a fresh interpreter where a second thread
 makes forking unsafe. Observed from outside, through /proc: the server's command line (a fork has
 its parent's, a fresh one multiprocessing's `-c ... forkserver`), the signals it and the workers it
-forks ignore, the descriptors it holds, its exit once stopped."""
+forks ignore, the descriptors it holds, its exit once stopped. A Ctrl-C while the local cluster
+starts ends the sweep's connection with KeyboardInterrupt, not a cluster that goes on."""
 
 from __future__ import annotations
 
+import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -70,3 +73,39 @@ def test_the_fork_server_is_forked_when_alone_and_holds_nothing_of_the_caller(mo
         "worker of the server True ignores SIGINT True",
         "server gone True",
     ]
+
+
+INTERRUPTED = """
+import os, signal, threading
+import distributed
+from cosim.sweep import engine
+threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGINT)).start()
+try:
+    with engine.connect(None, 1, 1) as (client, count):
+        print("connected", count)
+except KeyboardInterrupt:
+    print("interrupted")
+"""
+
+
+@pytest.mark.slow
+def test_a_ctrl_c_while_the_local_cluster_starts_is_not_lost():
+    # The cluster's start takes longer than 0.05 s anywhere: its fork server, a fresh interpreter
+    # here, imports Dask before the worker can start. SIGINT was ignored over the whole start.
+    process = subprocess.Popen(
+        [sys.executable, "-c", INTERRUPTED],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    try:
+        stdout, stderr = process.communicate(timeout=300)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+    assert process.returncode == 0, stderr
+    assert stdout.splitlines() == ["interrupted"]
+    assert "Traceback" not in stderr
