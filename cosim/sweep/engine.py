@@ -321,6 +321,7 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
 
     import dask
     import distributed.utils
+    from distributed.nanny import WorkerProcess
 
     count = max(1, min(workers or os.cpu_count() or 1, pending))
     # The workers fork from the fork server (`start_fork_server`), which ignores SIGINT, as they do;
@@ -341,6 +342,7 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
     # raised inside Dask's start, it would cut that short midway, with no cluster here to close.
     interrupts: list[int] = []
     previous = signal.signal(signal.SIGINT, lambda number, frame: interrupts.append(number))
+    polling = None
     try:
         settings = {
             "distributed.worker.profile.enabled": False,
@@ -357,6 +359,12 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
         }
         if hasattr(distributed.utils, "_forkserver_preload_set"):
             distributed.utils._forkserver_preload_set = True
+        # A nanny looks for its new worker's "started" message every 50 ms (Dask's default): a
+        # worker that is up waits 25 ms on average, the last of them up to 50, before the cluster
+        # counts it. Every 5 ms instead while this cluster starts (~40 polls of a queue: nothing).
+        polling = getattr(WorkerProcess, "_init_msg_interval", None)
+        if polling is not None:
+            WorkerProcess._init_msg_interval = min(polling, 0.005)
         with dask.config.set(settings):
             cluster = LocalCluster(
                 n_workers=count,
@@ -372,6 +380,8 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
             )
     finally:
         signal.signal(signal.SIGINT, previous)
+        if polling is not None:
+            WorkerProcess._init_msg_interval = polling
     try:
         if interrupts:  # to the handler held before (`Interrupted`, KeyboardInterrupt), the cluster closed
             signal.raise_signal(signal.SIGINT)
