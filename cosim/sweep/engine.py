@@ -445,10 +445,14 @@ def _execute(
     total,
     checked,
     keep_logs: str,
+    local: bool = False,
 ):
     """Check `first` on a worker, then run `pending`, writing each row as it comes. `checked()` is
     called once the check passed, before any row is kept; a failed check raises `CosimError`. The
-    workers send the logs that `keep_logs` keeps."""
+    workers send the logs that `keep_logs` keeps. `local`: the cluster is this sweep's own and
+    closes next, its workers with it: each removes the bundle's files as it closes
+    (`BundlePlugin.teardown`), so the plugin is not unregistered first (a round trip to every
+    worker); the workers of a scheduler stay, and it is."""
     from distributed import as_completed
 
     from cosim.sweep.worker import BundlePlugin, TaskResult, check_task, run_task
@@ -504,7 +508,8 @@ def _execute(
         for future in futures:
             future.cancel()
         try:
-            client.unregister_worker_plugin(plugin.name)
+            if not local:
+                client.unregister_worker_plugin(plugin.name)
         except Exception:  # the cluster is going away anyway; its workers drop the plugin then
             pass
 
@@ -733,6 +738,7 @@ def run_sweep(
                         len(runs),
                         checked,
                         options.keep_logs,
+                        local=options.scheduler is None,
                     )
                     finish_tables()
                     if plot:  # drawn while the cluster closes
