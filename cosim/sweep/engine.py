@@ -495,7 +495,7 @@ def _execute(
             future.release()
             row = _row(run, keys, result, out_dir)
             rows[run.run_id] = row
-            results.append(row)
+            results.append(row, durable=bool(futures))  # the last row: rewritten next
             failed += row["status"] != COMPLETED
             if bar is not None:
                 bar.update(1)
