@@ -109,3 +109,25 @@ def test_a_ctrl_c_while_the_local_cluster_starts_is_not_lost():
     assert process.returncode == 0, stderr
     assert stdout.splitlines() == ["interrupted"]
     assert "Traceback" not in stderr
+
+
+@pytest.mark.slow
+def test_a_local_sweep_leaves_no_files_of_its_workers_behind(tmp_path):
+    # Each worker lays the bundle out in a folder of its own under TMPDIR (`BundlePlugin.setup`)
+    # and removes it as it closes with the sweep's cluster; the fork server's warm-up run its own.
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    command = [sys.executable, "-m", "cosim", "sweep", str(SCENARIO), "--set", "simulation.stop_time=4"]
+    command += ["--vary", "lidar.noise=0.0,0.1", "--workers", "2", "--out", str(tmp_path / "out")]
+    result = subprocess.run(
+        [*command, "--no-plot", "--quiet"],
+        cwd=REPO,
+        env={**os.environ, "TMPDIR": str(scratch)},
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert result.returncode == 0, result.stderr
+    assert len(list((tmp_path / "out" / "runs").glob("*.mcap"))) == 2
+    left = sorted(path.name for path in scratch.iterdir() if path.name.startswith("navcosim-"))
+    assert left == []
