@@ -317,18 +317,32 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
         finally:
             client.close()
         return
-    from multiprocessing import get_context
+    from multiprocessing import forkserver, get_context
 
     import dask
     import distributed.utils
+    from distributed.nanny import WorkerProcess
 
     count = max(1, min(workers or os.cpu_count() or 1, pending))
-    # The workers fork from the fork server (`start_fork_server`, started with SIGINT ignored, as
-    # the cluster's own processes are here). Distributed's sampling profiler is off: it costs a run
-    # about a sixth more CPU time and nobody reads it here. Distributed would import its optional
-    # packages here (pandas: most of a second) only to name them as the server's preload, which
-    # `start_fork_server` set already.
+    # The workers fork from the fork server (`start_fork_server`), which ignores SIGINT, as they do;
+    # one that is not running (the sweep did not start it, or it ended) starts here, with SIGINT
+    # ignored too, before the cluster would start it. Distributed's sampling profiler is off: it
+    # costs a run about a sixth more CPU time and nobody reads it here. Distributed would import its
+    # optional packages here (pandas: most of a second) only to name them as the server's preload,
+    # which `start_fork_server` set already.
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        get_context("forkserver").set_forkserver_preload(WORKER_PRELOAD)  # if not started yet
+        forkserver.ensure_running()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    # A Ctrl-C while the cluster starts (most of a second: its workers wait for the fork server to
+    # warm up) is held until it has started, then the cluster is closed and the interrupt goes on.
+    # Ignored, as it was over the whole start, the sweep went on as if no key had been pressed;
+    # raised inside Dask's start, it would cut that short midway, with no cluster here to close.
+    interrupts: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda number, frame: interrupts.append(number))
+    polling = None
     try:
         settings = {
             "distributed.worker.profile.enabled": False,
@@ -343,9 +357,14 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
             "distributed.admin.system-monitor.interval": "5s",
             "distributed.admin.system-monitor.disk": False,
         }
-        get_context("forkserver").set_forkserver_preload(WORKER_PRELOAD)  # if not started yet
         if hasattr(distributed.utils, "_forkserver_preload_set"):
             distributed.utils._forkserver_preload_set = True
+        # A nanny looks for its new worker's "started" message every 50 ms (Dask's default): a
+        # worker that is up waits 25 ms on average, the last of them up to 50, before the cluster
+        # counts it. Every 5 ms instead while this cluster starts (~40 polls of a queue: nothing).
+        polling = getattr(WorkerProcess, "_init_msg_interval", None)
+        if polling is not None:
+            WorkerProcess._init_msg_interval = min(polling, 0.005)
         with dask.config.set(settings):
             cluster = LocalCluster(
                 n_workers=count,
@@ -361,7 +380,11 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
             )
     finally:
         signal.signal(signal.SIGINT, previous)
+        if polling is not None:
+            WorkerProcess._init_msg_interval = polling
     try:
+        if interrupts:  # to the handler held before (`Interrupted`, KeyboardInterrupt), the cluster closed
+            signal.raise_signal(signal.SIGINT)
         client = Client(cluster, set_as_default=False)
         try:
             yield client, count
@@ -422,10 +445,14 @@ def _execute(
     total,
     checked,
     keep_logs: str,
+    local: bool = False,
 ):
     """Check `first` on a worker, then run `pending`, writing each row as it comes. `checked()` is
     called once the check passed, before any row is kept; a failed check raises `CosimError`. The
-    workers send the logs that `keep_logs` keeps."""
+    workers send the logs that `keep_logs` keeps. `local`: the cluster is this sweep's own and
+    closes next, its workers with it: each removes the bundle's files as it closes
+    (`BundlePlugin.teardown`), so the plugin is not unregistered first (a round trip to every
+    worker); the workers of a scheduler stay, and it is."""
     from distributed import as_completed
 
     from cosim.sweep.worker import BundlePlugin, TaskResult, check_task, run_task
@@ -468,7 +495,7 @@ def _execute(
             future.release()
             row = _row(run, keys, result, out_dir)
             rows[run.run_id] = row
-            results.append(row)
+            results.append(row, durable=bool(futures))  # the last row: rewritten next
             failed += row["status"] != COMPLETED
             if bar is not None:
                 bar.update(1)
@@ -481,7 +508,8 @@ def _execute(
         for future in futures:
             future.cancel()
         try:
-            client.unregister_worker_plugin(plugin.name)
+            if not local:
+                client.unregister_worker_plugin(plugin.name)
         except Exception:  # the cluster is going away anyway; its workers drop the plugin then
             pass
 
@@ -710,6 +738,7 @@ def run_sweep(
                         len(runs),
                         checked,
                         options.keep_logs,
+                        local=options.scheduler is None,
                     )
                     finish_tables()
                     if plot:  # drawn while the cluster closes

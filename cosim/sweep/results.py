@@ -59,11 +59,15 @@ class ResultsFile:
         temporary.write_text(_csv_text(self.header, rows, True), encoding="utf-8")
         os.replace(temporary, self.path)
 
-    def append(self, row: dict[str, str]) -> None:
+    def append(self, row: dict[str, str], durable: bool = True) -> None:
+        """Add `row` at the end, on the disk (`fsync`) before this returns; not `durable`: only
+        handed to the system (kept as well if this process dies), for a row that `rewrite` writes
+        again at once, where waiting for the disk (up to tens of ms) would only delay the end."""
         with open(self.path, "a", encoding="utf-8") as stream:
             stream.write(_csv_text(self.header, [row], False))
             stream.flush()
-            os.fsync(stream.fileno())
+            if durable:
+                os.fsync(stream.fileno())
 
 
 def read_rows(path: Path) -> list[dict[str, str]]:

@@ -3,13 +3,15 @@
 A `LocalCluster` of the sweep starts its worker processes by forking them from one server process
 (multiprocessing's "forkserver"), which imports the modules it is told to preload before it forks
 anything. This module starts that server (`start_fork_server`, first thing in a sweep, so that it
-warms up while the sweep is planned and Dask imported) and is one of the modules it preloads: when
-the sweep set `WARM_ENV` (the scenario path and the sweep's fixed overrides, as JSON) in the
-server's environment, importing it makes a short run of
-that scenario (`WARM_STOP_TIME` simulated seconds) into a scratch folder, which imports the whole
-run stage, loads every C kernel the run uses (building any that is missing) and loads the FMUs'
-descriptions. Each forked worker inherits all of that, so the work is done once per sweep,
-while the client is still importing Dask and planning, instead of once per worker in its first run.
+warms up while the sweep is planned): a fork of the sweep's own process once that has imported
+Dask and the run stage (`_fork_server_here`: one import of them for both), or, where forking this
+process is not safe, a fresh interpreter as multiprocessing starts it, which preloads them itself
+and this module last: when the sweep set `WARM_ENV` (the scenario path and the sweep's fixed
+overrides, as JSON) in the server's environment, importing it warms up. Warming up (`warm_up`) is
+a short run of that scenario (`WARM_STOP_TIME` simulated seconds) into a scratch folder, which
+imports the whole run stage, loads every C kernel the run uses (building any that is missing) and
+loads the FMUs' descriptions. Each forked worker inherits all of that, so the work is done once per
+sweep, while the client plans and starts the cluster, instead of once per worker in its first run.
 
 Best effort: whatever goes wrong here is swallowed (the sweep's check of its first run, on a
 worker, reports a bad scenario with its own message), and nothing is printed.
@@ -85,12 +87,13 @@ def start_fork_server(scenario: Path, overrides: tuple[str, ...], announce: bool
     """Start the local cluster's fork server now, warming it up on `scenario` with `overrides`
     (`announce`: saying what a first use builds, `warm_up`).
 
-    The server imports `WORKER_PRELOAD` and makes a short run (`cosim.sweep.warm`) while this
-    process goes on importing Dask and planning; the workers forked from it later start warm. It
-    inherits an ignored SIGINT (the only disposition that survives exec), and so do the workers it
-    forks: Ctrl-C in a terminal reaches the whole process group, and the interrupt must end the
-    sweep here, which then closes them, instead of each one printing its own traceback. Does
-    nothing when the server already runs (an earlier sweep of this process started it).
+    The server has `WORKER_PRELOAD` imported (here, before this process forks it; or by itself, a
+    fresh interpreter) and makes a short run while this process goes on planning; the workers
+    forked from it later start warm. It ignores SIGINT (a fresh one inherits the disposition, the
+    only one that survives exec), and so do the workers it forks: Ctrl-C in a terminal reaches the
+    whole process group, and the interrupt must end the sweep here, which then closes them, instead
+    of each one printing its own traceback. Does nothing when the server already runs (an earlier
+    sweep of this process started it).
     """
     import multiprocessing
     import signal
@@ -98,9 +101,10 @@ def start_fork_server(scenario: Path, overrides: tuple[str, ...], announce: bool
 
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload(WORKER_PRELOAD)
-    request = json.dumps(
-        {"scenario": str(Path(scenario).resolve()), "overrides": list(overrides), "announce": announce}
-    )
+    fields = {"scenario": str(Path(scenario).resolve()), "overrides": list(overrides), "announce": announce}
+    if _fork_server_here(fields):
+        return
+    request = json.dumps(fields)
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     saved = os.environ.get(WARM_ENV)
     os.environ[WARM_ENV] = request
@@ -112,6 +116,131 @@ def start_fork_server(scenario: Path, overrides: tuple[str, ...], announce: bool
             os.environ.pop(WARM_ENV, None)
         else:
             os.environ[WARM_ENV] = saved
+
+
+def _fork_server_here(request: dict) -> bool:
+    """Start the fork server as a fork of this process, once it has imported what the server
+    preloads (Dask and the run stage, `WORKER_PRELOAD`); False (nothing done) where that is not
+    safe, and `start_fork_server` then starts a fresh interpreter as multiprocessing does.
+
+    A fresh server imports Dask itself: ~0.3 s of CPU, done a second time beside this process's own
+    import, on a 2-core machine where the two also share the cores with the plot process. Forked,
+    the server only warms up (`warm_up`) and then serves: multiprocessing's own server loop
+    (`multiprocessing.forkserver.main`), set up as `ForkServer.ensure_running` sets up the one it
+    starts (a listening socket, an "alive" pipe whose end stays here), so Dask's nannies ask it for
+    their workers as they would ask that one. Only with one thread here (forking a process with
+    others can leave their locks held in the child: `cosim.sweep(...)` from a notebook gets the
+    fresh interpreter), and only with the CPython server this was written against (3.11-3.13)."""
+    import importlib
+    import inspect
+    import signal
+    import socket
+    import sys
+    import threading
+    from multiprocessing import connection, forkserver, util
+
+    server = getattr(forkserver, "_forkserver", None)
+    expected = ["listener_fd", "alive_r", "preload", "main_path", "sys_path"]
+    if (
+        not sys.platform.startswith("linux")
+        or threading.active_count() != 1
+        or not hasattr(os, "fork")
+        or list(inspect.signature(forkserver.main).parameters) != expected
+        or any(
+            not hasattr(server, name)
+            for name in ("_lock", "_forkserver_address", "_forkserver_alive_fd", "_forkserver_pid")
+        )
+        or hasattr(server, "_forkserver_authkey")
+    ):
+        return False
+    with server._lock:
+        if server._forkserver_pid is not None:  # one runs already; one that ended is started afresh
+            return os.waitpid(server._forkserver_pid, os.WNOHANG)[0] == 0
+    for name in WORKER_PRELOAD:
+        if name not in ("cosim.sweep.hold", "cosim.sweep.warm"):  # (they act on a request only)
+            importlib.import_module(name)
+    if threading.active_count() != 1:  # an import started one
+        return False
+    listener = socket.socket(socket.AF_UNIX)
+    address = connection.arbitrary_address("AF_UNIX")
+    listener.bind(address)
+    if not util.is_abstract_socket_namespace(address):
+        os.chmod(address, 0o600)
+    listener.listen()
+    alive_r, alive_w = os.pipe()
+    for stream in (sys.stdout, sys.stderr):  # nothing buffered is written twice
+        stream.flush()
+    # The signals this process handles (SIGINT and SIGTERM raise `Interrupted` in `cosim`) wait
+    # while it forks: the server sets its own dispositions first, and one that came meanwhile is
+    # then ignored there or ends it, and is taken here as ever.
+    held = {signal.SIGINT, signal.SIGTERM}
+    signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        pid = os.fork()
+        if pid == 0:
+            _serve(listener, alive_r, request, held)  # never returns
+    except OSError:  # no fork: a fresh interpreter then
+        pid = None
+    finally:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, held)
+    os.close(alive_r)
+    listener.close()
+    if pid is None:
+        os.close(alive_w)
+        return False
+    with server._lock:
+        server._forkserver_address = address
+        server._forkserver_alive_fd = alive_w
+        server._forkserver_pid = pid
+    return True
+
+
+def _serve(listener, alive_r: int, request: dict, held: set) -> None:
+    """The forked fork server: the sweep's signal handlers undone (SIGINT ignored, as in the
+    workers it forks: `start_fork_server`; `held`, the signals blocked over the fork, let through
+    then), a warm-up with the collector off, the heap frozen (`_from_environment`), then
+    multiprocessing's server loop until the alive pipe closes; out by `os._exit`, never through
+    this process's exit handlers or teardown, nor back into the sweep's code whatever happens."""
+    import gc
+    import signal
+    import sys
+    import threading
+    from multiprocessing import forkserver
+
+    try:
+        gc.disable()
+        signal.set_wakeup_fd(-1)
+        for number in signal.valid_signals():
+            try:
+                if callable(signal.getsignal(number)):
+                    signal.signal(number, signal.SIG_DFL)
+            except (OSError, ValueError):
+                pass
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, held)
+        forkserver._forkserver._lock = threading.Lock()  # (held by no thread here)
+        listener_fd = listener.detach()
+        # The descriptors this process holds besides the server's two (a caller's files and pipes)
+        # are not the server's, as a fresh one's are not: whoever reads a pipe to its end would
+        # wait for the server and its workers too.
+        low, high = sorted((listener_fd, alive_r))
+        for start, stop in ((3, low), (low + 1, high), (high + 1, os.sysconf("SC_OPEN_MAX"))):
+            os.closerange(start, stop)
+        try:
+            warm_up(str(request["scenario"]), list(request["overrides"]), bool(request["announce"]))
+        except BaseException:  # noqa: BLE001 - a warm-up must never stop the fork server
+            pass
+        gc.freeze()
+        gc.set_threshold(20_000, 20, 10)
+        gc.enable()
+        forkserver.main(listener_fd, alive_r, [])
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (AttributeError, OSError, ValueError):
+                pass
+        os._exit(0)
 
 
 def stop_fork_server() -> None:

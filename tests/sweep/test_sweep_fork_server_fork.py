@@ -1,0 +1,133 @@
+"""The local cluster's fork server is a fork of the sweep's process once that has imported Dask and
+the run stage (`cosim.sweep.warm._fork_server_here`), and a fresh interpreter where a second thread
+makes forking unsafe. Observed from outside, through /proc: the server's command line (a fork has
+its parent's, a fresh one multiprocessing's `-c ... forkserver`), the signals it and the workers it
+forks ignore, the descriptors it holds, its exit once stopped. A Ctrl-C while the local cluster
+starts ends the sweep's connection with KeyboardInterrupt, not a cluster that goes on."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+SCENARIO = REPO / "scenarios" / "warehouse_diff_drive_one_obstacle.toml"
+
+PROGRAM = """
+import os, select, signal, sys, threading, time
+from pathlib import Path
+if sys.argv[1] == "thread":
+    threading.Thread(target=threading.Event().wait, daemon=True).start()
+from multiprocessing import forkserver, get_context
+from cosim.sweep.warm import start_fork_server, stop_fork_server
+
+def ignores_sigint(pid):
+    with open(f"/proc/{pid}/status") as status:
+        mask = next(int(line.split()[1], 16) for line in status if line.startswith("SigIgn:"))
+    return bool(mask & 1 << signal.SIGINT - 1)
+
+read_end, write_end = os.pipe()  # a caller's pipe, open while the server starts
+start_fork_server(Path(sys.argv[2]), ("lidar.seed=1",))
+server = forkserver._forkserver._forkserver_pid
+with open(f"/proc/{server}/cmdline", "rb") as theirs, open("/proc/self/cmdline", "rb") as mine:
+    print("fork" if theirs.read() == mine.read() else "fresh")
+os.close(write_end)
+print("pipe closed", bool(select.select([read_end], [], [], 20)[0]) and os.read(read_end, 1) == b"")
+print("server ignores SIGINT", ignores_sigint(server), "here", ignores_sigint(os.getpid()))
+worker = get_context("forkserver").Process(target=time.sleep, args=(30,))
+worker.start()
+with open(f"/proc/{worker.pid}/status") as status:
+    parent = next(int(line.split()[1]) for line in status if line.startswith("PPid:"))
+print("worker of the server", parent == server, "ignores SIGINT", ignores_sigint(worker.pid))
+worker.kill()
+worker.join()
+stop_fork_server()
+print("server gone", not os.path.exists(f"/proc/{server}"))
+"""
+
+
+def _program(mode: str) -> list[str]:
+    result = subprocess.run(
+        [sys.executable, "-c", PROGRAM, mode, str(SCENARIO)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=REPO,
+    )
+    assert result.returncode == 0, result.stderr
+    return result.stdout.splitlines()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mode, server", [("alone", "fork"), ("thread", "fresh")])
+def test_the_fork_server_is_forked_when_alone_and_holds_nothing_of_the_caller(mode, server):
+    assert _program(mode) == [
+        server,
+        "pipe closed True",  # the server does not hold the caller's pipe open
+        "server ignores SIGINT True here False",
+        "worker of the server True ignores SIGINT True",
+        "server gone True",
+    ]
+
+
+INTERRUPTED = """
+import os, signal, threading
+import distributed
+from cosim.sweep import engine
+threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGINT)).start()
+try:
+    with engine.connect(None, 1, 1) as (client, count):
+        print("connected", count)
+except KeyboardInterrupt:
+    print("interrupted")
+"""
+
+
+@pytest.mark.slow
+def test_a_ctrl_c_while_the_local_cluster_starts_is_not_lost():
+    # The cluster's start takes longer than 0.05 s anywhere: its fork server, a fresh interpreter
+    # here, imports Dask before the worker can start. SIGINT was ignored over the whole start.
+    process = subprocess.Popen(
+        [sys.executable, "-c", INTERRUPTED],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    try:
+        stdout, stderr = process.communicate(timeout=300)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+    assert process.returncode == 0, stderr
+    assert stdout.splitlines() == ["interrupted"]
+    assert "Traceback" not in stderr
+
+
+@pytest.mark.slow
+def test_a_local_sweep_leaves_no_files_of_its_workers_behind(tmp_path):
+    # Each worker lays the bundle out in a folder of its own under TMPDIR (`BundlePlugin.setup`)
+    # and removes it as it closes with the sweep's cluster; the fork server's warm-up run its own.
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    command = [sys.executable, "-m", "cosim", "sweep", str(SCENARIO), "--set", "simulation.stop_time=4"]
+    command += ["--vary", "lidar.noise=0.0,0.1", "--workers", "2", "--out", str(tmp_path / "out")]
+    result = subprocess.run(
+        [*command, "--no-plot", "--quiet"],
+        cwd=REPO,
+        env={**os.environ, "TMPDIR": str(scratch)},
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert result.returncode == 0, result.stderr
+    assert len(list((tmp_path / "out" / "runs").glob("*.mcap"))) == 2
+    left = sorted(path.name for path in scratch.iterdir() if path.name.startswith("navcosim-"))
+    assert left == []
