@@ -138,14 +138,15 @@ def test_messages_have_their_fields_constants_and_equality():
 @pytest.mark.slow
 def test_a_run_imports_neither_rosbags_nor_difflib(tmp_path):
     """A scenario run (the CLI's `cosim run`, in a fresh process) writes its whole log without
-    importing rosbags (its messages are packed) or difflib (only for "did you mean" messages)."""
+    importing rosbags (its messages are packed), difflib (only for "did you mean" messages) or
+    concurrent.futures (only for a chunk large enough to compress on a thread)."""
     scenario = REPO / "scenarios" / "warehouse_diff_drive_one_obstacle.toml"
     code = (
         "import sys\n"
         "from cosim.cli import main\n"
         f"code = main(['run', {str(scenario)!r}, '--out', {str(tmp_path / 'run.mcap')!r}, '--no-plot',"
         " '--quiet', '--set', 'simulation.stop_time=2.0'])\n"
-        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('rosbags', 'difflib')))\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('rosbags', 'difflib', 'concurrent')))\n"
         "sys.exit(code)\n"
     )
     done = subprocess.run(
