@@ -18,6 +18,7 @@ NumPy loads a whole channel with one ``frombuffer``.
 
 from __future__ import annotations
 
+import functools
 import keyword
 import math
 import re
@@ -425,9 +426,10 @@ def _definition_body(typename: str) -> str:
     return "".join(f"{line}\n" for line in lines)
 
 
+@functools.cache
 def _log_fields(typename: str) -> tuple[list[tuple[str, str, int]], list[tuple[str, str]]]:
     """The constants (name, type, value) and the fields (type, name) of a type of `LOG_TYPES`, as
-    written there."""
+    written there (read-only: made once per type)."""
     constants, fields = [], []
     for entry in LOG_TYPES[typename].split("; "):
         kind, _, name = entry.partition(" ")
