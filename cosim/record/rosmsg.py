@@ -498,6 +498,14 @@ class Message:
         fields = ", ".join(f"{name}={getattr(self, name)!r}" for name in self.__slots__)
         return f"{type(self).__name__}({fields})"
 
+    def __reduce__(self):  # pickled by its type's name: the classes are made on first use
+        return _message, (self.__msgtype__, tuple(getattr(self, name) for name in self.__slots__))
+
+
+def _message(typename: str, values: tuple) -> Message:
+    """The message of `typename` with these field values (unpickling a `Message`)."""
+    return _types[typename](*values)
+
 
 class _MessageClasses(dict):
     """The `Message` class of each type of `LOG_TYPES`, made on first use (no generated code)."""

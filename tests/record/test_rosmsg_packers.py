@@ -5,6 +5,7 @@ nor difflib (they cost a warm `cosim run` ~20 ms)."""
 
 from __future__ import annotations
 
+import pickle
 import subprocess
 import sys
 from pathlib import Path
@@ -26,7 +27,7 @@ def _ours(message):
         return [_ours(item) for item in message]
     if not hasattr(message, "__msgtype__"):
         return message
-    cls = rosmsg.make.__globals__["_types"][message.__msgtype__]
+    cls = rosmsg._types[message.__msgtype__]
     return cls(**{name: _ours(getattr(message, name)) for name in cls.__slots__})
 
 
@@ -118,7 +119,7 @@ def test_a_field_rosbags_would_refuse_is_left_to_rosbags():
 
 
 def test_messages_have_their_fields_constants_and_equality():
-    marker_type = rosmsg.make.__globals__["_types"]["visualization_msgs/msg/Marker"]
+    marker_type = rosmsg._types["visualization_msgs/msg/Marker"]
     assert (marker_type.CUBE, marker_type.DELETEALL, marker_type.__msgtype__) == (
         1,
         3,
@@ -129,6 +130,10 @@ def test_messages_have_their_fields_constants_and_equality():
     assert rosmsg.time_msg(1_500_000_000) == rosmsg.make(
         "builtin_interfaces/msg/Time", sec=1, nanosec=500_000_000
     )
+    path = rosmsg.make(
+        "nav_msgs/msg/Path", header=rosmsg.header(3), poses=[rosmsg.pose_stamped(3, 1, 2, 0.5)]
+    )
+    assert pickle.loads(pickle.dumps(path)) == path
     with pytest.raises(TypeError, match="missing the fields nanosec"):
         rosmsg.make("builtin_interfaces/msg/Time", sec=1)
     with pytest.raises(TypeError, match="unexpected or repeated field 'nsec'"):
