@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
 
     if argv is None:
         _collect_young_objects_rarely()
-        _dataclass_code().install()
+        _dataclass_code(_command(sys.argv[1:])).install()
     try:
         # Called without arguments, main() is the program (`cosim`, `python -m cosim`): signals stay
         # handled until the process exits. Called with a list (tests, scripts), they are given back.
@@ -144,16 +144,15 @@ class DataclassCode:
     `__eq__`, ...), kept across processes. `dataclasses` compiles them from their source text for
     every class in every process (~50 classes in a `cosim run`, ~15 ms of its start); installed
     (`install`), the `exec` that `dataclasses` calls takes the code compiled before from the same
-    text, read from `path` (one marshal file per bytecode version), and `save` writes what was
-    compiled anew. The text alone makes the code (compiled as `exec` compiles it there: file name
-    "<string>", no future flags inherited), so a class is the same whichever way its code came.
-    Only for the program (`main()` without arguments), as the collector's settings."""
-
-    KEPT = 4096  # texts kept in the file at most; beyond, only those this process used
+    text, read from `path` (one marshal file per command and bytecode version: each code object is
+    unmarshalled when its text comes), and `save` writes what was compiled anew. The text alone
+    makes the code (compiled as `exec` compiles it there: file name "<string>", no future flags
+    inherited), so a class is the same whichever way its code came. Only for the program (`main()`
+    without arguments), as the collector's settings."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        self.code: dict[str, CodeType] = {}
+        self.code: dict[str, CodeType | bytes] = {}  # text -> code, or its marshal bytes until used
         self.used: set[str] = set()
         self.compiled = 0  # texts compiled by this process (not found in the file)
 
@@ -184,22 +183,39 @@ class DataclassCode:
             globals = frame.f_globals  # noqa: A001
             locals = frame.f_locals if locals is None else locals  # noqa: A001
         if isinstance(source, str):
-            code = self.code.get(source)
-            if type(code) is not CodeType:
-                code = self.code[source] = compile(source, "<string>", "exec", dont_inherit=True)
-                self.compiled += 1
-            self.used.add(source)
-            source = code
+            source = self._code(source)
         return builtins.exec(source, globals, locals)
 
+    def _code(self, text: str) -> CodeType:
+        import marshal
+
+        code = self.code.get(text)
+        if type(code) is bytes:
+            try:
+                code = marshal.loads(code)
+            except (EOFError, ValueError, TypeError):
+                code = None
+        if type(code) is not CodeType:
+            code = compile(text, "<string>", "exec", dont_inherit=True)
+            self.compiled += 1
+        self.code[text] = code
+        self.used.add(text)
+        return code
+
     def save(self) -> None:
-        """Write the cache (replaced whole, so concurrent processes each leave a complete file)
-        when this process compiled code it did not find; a failure to write is ignored."""
+        """Write the cache when this process compiled code it did not find: what it read and made,
+        or, when that is more than twice what it used, only what it used (a file grows with what
+        its command needs, not without end); replaced whole, so concurrent processes each leave a
+        complete file. A failure to write is ignored."""
         if not self.compiled:
             return
         import marshal
 
-        kept = self.code if len(self.code) <= self.KEPT else {text: self.code[text] for text in self.used}
+        texts = self.code if len(self.code) <= 2 * len(self.used) else self.used
+        kept = {}
+        for text in texts:
+            code = self.code[text]
+            kept[text] = code if type(code) is bytes else marshal.dumps(code)
         temporary = self.path.with_name(f".{self.path.name}.{os.getpid()}")
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -217,13 +233,14 @@ class DataclassCode:
 _dataclass_codes: list[DataclassCode] = []
 
 
-def _dataclass_code() -> DataclassCode:
-    """The program's `DataclassCode`, in the folder of the built kernels (`native.load.build_folder`)."""
+def _dataclass_code(command: str | None = None) -> DataclassCode:
+    """The program's `DataclassCode` for `command` (None: the help, a typo), in the folder of the
+    built kernels (`native.load.build_folder`). Made on the first call."""
     if not _dataclass_codes:
         from importlib.util import MAGIC_NUMBER
 
-        name = f"dataclass-code-{sys.implementation.cache_tag}-{MAGIC_NUMBER.hex()}.marshal"
-        _dataclass_codes.append(DataclassCode(build_folder(Path(__file__)) / name))
+        tag = f"{command or 'cosim'}-{sys.implementation.cache_tag}-{MAGIC_NUMBER.hex()}"
+        _dataclass_codes.append(DataclassCode(build_folder(Path(__file__)) / f"dataclass-code-{tag}.marshal"))
     return _dataclass_codes[0]
 
 

@@ -82,6 +82,33 @@ def test_an_unreadable_cache_is_an_empty_one(tmp_path):
         assert DataclassCode(path).compiled == 0 and path.read_bytes() != garbage
 
 
+def test_the_file_keeps_what_its_command_uses(tmp_path):
+    """Entries this process did not use stay while they are at most as many as those it used; a
+    file of more is cut to what was used (so it does not grow without end); a damaged entry is
+    compiled again."""
+    import marshal
+
+    path = tmp_path / "code.marshal"
+    unused = {f"x = {k}": marshal.dumps(compile(f"x = {k}", "<string>", "exec")) for k in range(4)}
+    path.write_bytes(marshal.dumps(unused))
+    code = DataclassCode(path)
+    _made_with(code)
+    code.save()
+    assert set(unused) < set(marshal.loads(path.read_bytes()))  # 4 unused beside 6 used: kept
+    many = {f"y = {k}": marshal.dumps(compile(f"y = {k}", "<string>", "exec")) for k in range(20)}
+    path.write_bytes(marshal.dumps(many))
+    code = DataclassCode(path)
+    _made_with(code)
+    code.save()
+    kept = marshal.loads(path.read_bytes())
+    assert len(kept) == len(GENERATED) and not set(many) & set(kept)
+    damaged = {text: data[:5] for text, data in kept.items()}
+    path.write_bytes(marshal.dumps(damaged))
+    code = DataclassCode(path)
+    _same_class(_made_with(code), _make())
+    assert code.compiled == len(GENERATED)
+
+
 @pytest.mark.slow
 def test_the_program_keeps_the_code_for_its_next_process(tmp_path):
     """Two `cosim log info` processes: the first writes the cache in the kernels' folder
@@ -98,7 +125,7 @@ def test_the_program_keeps_the_code_for_its_next_process(tmp_path):
     command = [sys.executable, "-m", "cosim", "log", "info", str(log)]
     first = subprocess.run(command, capture_output=True, text=True, env=env, cwd=REPO)
     assert first.returncode == 0, first.stderr
-    (kept,) = (tmp_path / "cache").glob("dataclass-code-*.marshal")
+    (kept,) = (tmp_path / "cache").glob("dataclass-code-log-*.marshal")
     written = kept.stat().st_mtime_ns
     second = subprocess.run(command, capture_output=True, text=True, env=env, cwd=REPO)
     assert second.returncode == 0, second.stderr
