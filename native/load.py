@@ -177,6 +177,15 @@ def _cache_dirs(source: Path) -> list[Path]:
     return dirs
 
 
+def build_folder(anchor: Path) -> Path:
+    """Where the kernels of the package holding `anchor` (a file in it) are built when no shipped
+    one is found: the first folder after the shipped one (`$NAVCOSIM_NATIVE_CACHE`, else
+    `<repo>/build/native/` in a source checkout, else `~/.cache/navcosim/native/`). Other per-user
+    build products of a command may be kept there too; it may not exist yet."""
+    dirs = _cache_dirs(Path(anchor).resolve())
+    return (dirs[1:] or dirs)[0]
+
+
 def build(source: Path, out_dir: Path, cc: str | None = None) -> Path:
     """Compile `source` into `out_dir/<library_name>`; the path."""
     cc = cc or compiler()

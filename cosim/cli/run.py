@@ -153,7 +153,29 @@ def _announce(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
 
 
+def _tqdm_version_without_metadata() -> None:
+    """Before the progress bar's first import of tqdm: tqdm's package imports `tqdm.version`, which
+    asks importlib.metadata for tqdm's version (importing it and its email parser: ~8 ms of a run
+    that shows the bar). When tqdm's installed dist-info gives the version directly (the string
+    importlib.metadata would give: `cosim.record.logfile.dist_info_version`), `tqdm.version` is a
+    module holding it; otherwise tqdm finds its version itself."""
+    if "tqdm" in sys.modules or "tqdm.version" in sys.modules:
+        return
+    from types import ModuleType
+
+    from cosim.record.logfile import dist_info_version
+
+    version = dist_info_version("tqdm")
+    if version is None:
+        return
+    module = ModuleType("tqdm.version", "`tqdm` version, as its installed dist-info names it.")
+    module.__version__ = version
+    sys.modules[module.__name__] = module
+
+
 def _handler(args) -> int:
+    if not args.quiet:
+        _tqdm_version_without_metadata()
     if args.scenario.suffix.lower() == ".ssp":
         return _run_ssp(args)
     if getattr(args, "program", False):

@@ -22,7 +22,6 @@ their own topics.
 from __future__ import annotations
 
 import ctypes
-import difflib
 import enum
 import functools
 import re
@@ -157,6 +156,8 @@ def check_unique_ports(component: str, kind: str, ports: Iterable[Port]) -> None
 
 def closest_names(name: str, candidates: Iterable[str], limit: int = 12) -> str:
     """The candidates as a comma-separated list, closest to `name` first (for error messages)."""
+    import difflib  # only for an error message: not imported by a run that has none
+
     candidates = list(candidates)
     close = difflib.get_close_matches(name, candidates, n=limit, cutoff=0.0)
     rest = [c for c in candidates if c not in close]

@@ -36,17 +36,26 @@ def default_log_path(pattern: str, name: str, now: datetime | None = None) -> Pa
     return Path(pattern.format(scenario=name, timestamp=stamp))
 
 
-def navcosim_version() -> str:
-    """The installed navcosim's version, as a log's metadata records it ("unknown" from a bare checkout)."""
-    found = dist_info_version("navcosim")
-    if found is not None:
-        return found
-    from importlib.metadata import PackageNotFoundError, version
+_versions: dict[tuple[str, ...], str] = {}  # `navcosim_version()` by the `sys.path` it was found on
 
-    try:
-        return version("navcosim")
-    except PackageNotFoundError:
-        return "unknown"
+
+def navcosim_version() -> str:
+    """The installed navcosim's version, as a log's metadata records it ("unknown" from a bare
+    checkout). Looked up once per `sys.path` (a run's header asks twice)."""
+    key = tuple(sys.path)
+    known = _versions.get(key)
+    if known is not None:
+        return known
+    found = dist_info_version("navcosim")
+    if found is None:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            found = version("navcosim")
+        except PackageNotFoundError:
+            found = "unknown"
+    _versions[key] = found
+    return found
 
 
 def dist_info_version(name: str) -> str | None:

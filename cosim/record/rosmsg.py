@@ -4,7 +4,13 @@ Every channel of a navcosim log is a ROS 2 message (``cdr`` encoding, ``ros2msg`
 Foxglove, ``ros2 bag``, rosbags and @mcap/core read the whole file.
 Standard messages are ROS 2 Humble's, serialised by a rosbags type store that holds only those a log
 is made of (`LOG_TYPES`; rosbags' whole Humble store, hundreds of types, costs ~0.2 s to import,
-and is loaded only when a message outside them is asked for). Each component's signals get one
+and is loaded only when a message outside them is asked for). The messages a run writes at its
+start (the maps, the plan, the goal, the obstacles, the scan's template, a bumper) have layouts
+fixed by their few strings and sequences: `make` builds them as plain `Message` objects and
+`serialize` packs them with `struct` (`_PACKERS`; the tests compare every byte with rosbags'), so a
+run neither imports rosbags (~8 ms) nor generates its classes and serialisers (~12 ms); every other
+message, and the schemas of types outside `LOG_TYPES`, go through rosbags (`TYPESTORE`, made on
+first use). Each component's signals get one
 generated struct, ``navcosim_msgs/msg/<Component>Signals``: a ``builtin_interfaces/Time stamp``
 followed by one ``float64`` per variable, so every record of a channel has the same size and
 NumPy loads a whole channel with one ``frombuffer``.
@@ -12,6 +18,7 @@ NumPy loads a whole channel with one ``frombuffer``.
 
 from __future__ import annotations
 
+import functools
 import keyword
 import math
 import re
@@ -20,10 +27,7 @@ import sys
 from types import ModuleType
 
 import numpy as np
-from rosbags.interfaces import Nodetype
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-TYPESTORE_NAME = Stores.ROS2_HUMBLE
 SIGNALS_PACKAGE = "navcosim_msgs"
 CDR_HEADER = b"\x00\x01\x00\x00"  # CDR little-endian encapsulation, options 0
 SIGNAL_STAMP_BYTES = 8  # builtin_interfaces/Time: int32 sec, uint32 nanosec
@@ -46,7 +50,9 @@ _stamp = struct.Struct("<iI")
 
 def new_typestore():
     """A fresh rosbags type store (ROS 2 Humble); callers register their own custom types in it."""
-    return get_typestore(TYPESTORE_NAME)
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_HUMBLE)
 
 
 # The ROS 2 Humble messages a navcosim log is made of, with every message they contain, as in
@@ -115,6 +121,8 @@ LOG_TYPES = {
 
 def _field_type(text: str):
     """rosbags' description of a field type written as in `LOG_TYPES`."""
+    from rosbags.interfaces import Nodetype
+
     if text.endswith("]"):
         element, _, size = text[:-1].partition("[")
         kind = Nodetype.ARRAY if size else Nodetype.SEQUENCE
@@ -140,28 +148,6 @@ def log_fielddefs() -> dict:
     return definitions
 
 
-class _LazyMsgdef:
-    """A rosbags `Msgdef` whose 13 generated functions (CDR and ROS 1, each endianness, sizes and
-    conversions) are made one by one on first use, not all at once: a run serialises a handful of
-    types little-endian, and generating every function of a Marker and what it contains cost ~0.1 s."""
-
-    def __init__(self, store, typename: str) -> None:
-        self.name = typename
-        self.fields = [(normalize_fieldname(name), desc) for name, desc in store.fielddefs[typename][1]]
-        self._store = store
-
-    def __getattr__(self, attribute: str):  # called for what is not made yet
-        if attribute == "cls":  # the class too: serialising a type's empty sequence needs no class
-            self.cls = self._store.types[self.name]
-            return self.cls
-        if attribute not in _MSGDEF_MAKERS:
-            raise AttributeError(attribute)
-        made = _MSGDEF_MAKERS[attribute](self.fields, self.name, self._store)
-        for name, value in made.items():
-            setattr(self, name, value)
-        return made[attribute]
-
-
 def _sizes(generate, prefix: str):
     def make(fields, typename, store):
         function, size = generate(fields, store)
@@ -170,48 +156,74 @@ def _sizes(generate, prefix: str):
     return make
 
 
-try:  # rosbags' generators (internal): where they are not as expected, the stock store is used
-    from dataclasses import fields as _dataclass_fields
+def _log_typestore():
+    """rosbags' type store of `LOG_TYPES`, making each type's class (`_LazyTypes`) and functions
+    (`_LazyMsgdef`) as they are used (rosbags' stock store where its internals are not as expected)."""
+    try:  # rosbags' generators (internal): where they are not as expected, the stock store is used
+        from dataclasses import fields as dataclass_fields
 
-    from rosbags.interfaces import Msgdef
-    from rosbags.serde import cdr as _cdr
-    from rosbags.serde import ros1 as _ros1
-    from rosbags.typesys.base import normalize_fieldname
-    from rosbags.typesys.codegen import generate_python_code
-    from rosbags.typesys.store import Typestore
+        from rosbags.interfaces import Msgdef
+        from rosbags.serde import cdr, ros1
+        from rosbags.typesys.base import normalize_fieldname
+        from rosbags.typesys.codegen import generate_python_code
+        from rosbags.typesys.store import Typestore
 
-    _MSGDEF_MAKERS = {
-        **dict.fromkeys(("getsize_cdr", "size_cdr"), _sizes(_cdr.generate_getsize_cdr, "cdr")),
-        **dict.fromkeys(("getsize_ros1", "size_ros1"), _sizes(_ros1.generate_getsize_ros1, "ros1")),
-        "serialize_cdr_le": lambda f, t, s: {"serialize_cdr_le": _cdr.generate_serialize_cdr(f, s, "le")},
-        "serialize_cdr_be": lambda f, t, s: {"serialize_cdr_be": _cdr.generate_serialize_cdr(f, s, "be")},
-        "deserialize_cdr_le": lambda f, t, s: {
-            "deserialize_cdr_le": _cdr.generate_deserialize_cdr(f, s, "le")
-        },
-        "deserialize_cdr_be": lambda f, t, s: {
-            "deserialize_cdr_be": _cdr.generate_deserialize_cdr(f, s, "be")
-        },
-        "serialize_ros1": lambda f, t, s: {"serialize_ros1": _ros1.generate_serialize_ros1(f, s)},
-        "deserialize_ros1": lambda f, t, s: {"deserialize_ros1": _ros1.generate_deserialize_ros1(f, s)},
-        "getsize_ros1_to_cdr": lambda f, t, s: {
-            "getsize_ros1_to_cdr": _ros1.generate_ros1_to_cdr(f, t, s, copy=False)
-        },
-        "ros1_to_cdr": lambda f, t, s: {"ros1_to_cdr": _ros1.generate_ros1_to_cdr(f, t, s, copy=True)},
-        "getsize_cdr_to_ros1": lambda f, t, s: {
-            "getsize_cdr_to_ros1": _ros1.generate_cdr_to_ros1(f, t, s, copy=False)
-        },
-        "cdr_to_ros1": lambda f, t, s: {"cdr_to_ros1": _ros1.generate_cdr_to_ros1(f, t, s, copy=True)},
-    }
-    _LAZY = {field.name for field in _dataclass_fields(Msgdef)} == {"name", "fields", "cls", *_MSGDEF_MAKERS}
-except (ImportError, AttributeError, TypeError):
-    _LAZY = False
+        makers = {
+            **dict.fromkeys(("getsize_cdr", "size_cdr"), _sizes(cdr.generate_getsize_cdr, "cdr")),
+            **dict.fromkeys(("getsize_ros1", "size_ros1"), _sizes(ros1.generate_getsize_ros1, "ros1")),
+            "serialize_cdr_le": lambda f, t, s: {"serialize_cdr_le": cdr.generate_serialize_cdr(f, s, "le")},
+            "serialize_cdr_be": lambda f, t, s: {"serialize_cdr_be": cdr.generate_serialize_cdr(f, s, "be")},
+            "deserialize_cdr_le": lambda f, t, s: {
+                "deserialize_cdr_le": cdr.generate_deserialize_cdr(f, s, "le")
+            },
+            "deserialize_cdr_be": lambda f, t, s: {
+                "deserialize_cdr_be": cdr.generate_deserialize_cdr(f, s, "be")
+            },
+            "serialize_ros1": lambda f, t, s: {"serialize_ros1": ros1.generate_serialize_ros1(f, s)},
+            "deserialize_ros1": lambda f, t, s: {"deserialize_ros1": ros1.generate_deserialize_ros1(f, s)},
+            "getsize_ros1_to_cdr": lambda f, t, s: {
+                "getsize_ros1_to_cdr": ros1.generate_ros1_to_cdr(f, t, s, copy=False)
+            },
+            "ros1_to_cdr": lambda f, t, s: {"ros1_to_cdr": ros1.generate_ros1_to_cdr(f, t, s, copy=True)},
+            "getsize_cdr_to_ros1": lambda f, t, s: {
+                "getsize_cdr_to_ros1": ros1.generate_cdr_to_ros1(f, t, s, copy=False)
+            },
+            "cdr_to_ros1": lambda f, t, s: {"cdr_to_ros1": ros1.generate_cdr_to_ros1(f, t, s, copy=True)},
+        }
+        lazy = {field.name for field in dataclass_fields(Msgdef)} == {"name", "fields", "cls", *makers}
+    except (ImportError, AttributeError, TypeError):
+        lazy = False
+    if not lazy:
+        from rosbags.typesys import Stores, get_typestore
 
-if _LAZY:
+        store = get_typestore(Stores.EMPTY)
+        store.register(log_fielddefs())
+        return store
+
+    class _LazyMsgdef:
+        """A rosbags `Msgdef` whose 13 generated functions (CDR and ROS 1, each endianness, sizes
+        and conversions) are made one by one on first use, not all at once: generating every
+        function of a Marker and what it contains cost ~0.1 s."""
+
+        def __init__(self, store, typename: str) -> None:
+            self.name = typename
+            self.fields = [(normalize_fieldname(name), desc) for name, desc in store.fielddefs[typename][1]]
+            self._store = store
+
+        def __getattr__(self, attribute: str):  # called for what is not made yet
+            if attribute == "cls":  # the class too: serialising a type's empty sequence needs no class
+                self.cls = self._store.types[self.name]
+                return self.cls
+            if attribute not in makers:
+                raise AttributeError(attribute)
+            made = makers[attribute](self.fields, self.name, self._store)
+            for name, value in made.items():
+                setattr(self, name, value)
+            return made[attribute]
 
     class _LazyTypes(dict):
         """A type store's `types`: each registered type's class (rosbags' generated dataclass, made
-        by rosbags' code generator as `register` makes it) is made on first use, one type at a time:
-        a run uses about two thirds of `LOG_TYPES`, and making all of them cost ~8 ms."""
+        by rosbags' code generator as `register` makes it) is made on first use, one type at a time."""
 
         def __init__(self, fielddefs: dict) -> None:
             super().__init__()
@@ -245,41 +257,55 @@ if _LAZY:
                 self.cache[typename] = _LazyMsgdef(self, typename)
             return self.cache[typename]
 
-
-def _log_typestore():
-    if not _LAZY:
-        store = get_typestore(Stores.EMPTY)
-        store.register(log_fielddefs())
-        return store
     store = _LogTypestore()
     store.fielddefs.update(log_fielddefs())  # what `register` records of them; classes on first use
     return store
 
 
-TYPESTORE = _log_typestore()
-_humble = None  # rosbags' whole Humble store, loaded for a message outside `LOG_TYPES`
+_stores: dict[str, object] = {}  # "log": `TYPESTORE`; "humble": rosbags' whole Humble store
+
+
+def _typestore():
+    """`TYPESTORE`, made on first use."""
+    store = _stores.get("log")
+    if store is None:
+        store = _stores["log"] = _log_typestore()
+    return store
+
+
+def __getattr__(name: str):
+    # `TYPESTORE`: rosbags' type store of `LOG_TYPES` (and of the Humble types `_known` adds), made
+    # on first use: a run that writes only `_PACKERS`' messages never imports rosbags.
+    if name == "TYPESTORE":
+        return _typestore()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def _known(typename: str) -> str:
     """`typename`, after registering it (and what it contains) from rosbags' Humble store into
     `TYPESTORE` when it is not one of `LOG_TYPES`; an unknown name is left for rosbags to refuse."""
-    global _humble
-    if typename not in TYPESTORE.fielddefs:
-        if _humble is None:
-            _humble = new_typestore()
+    if typename in LOG_TYPES:
+        return typename
+    store = _typestore()
+    if typename not in store.fielddefs:
+        from rosbags.interfaces import Nodetype
+
+        humble = _stores.get("humble")
+        if humble is None:
+            humble = _stores["humble"] = new_typestore()
         wanted, pending = {}, [typename]
         while pending:
             name = pending.pop()
-            if name in wanted or name in TYPESTORE.fielddefs or name not in _humble.fielddefs:
+            if name in wanted or name in store.fielddefs or name not in humble.fielddefs:
                 continue
-            wanted[name] = _humble.fielddefs[name]
+            wanted[name] = humble.fielddefs[name]
             for _, description in wanted[name][1]:
                 while description[0] in (Nodetype.ARRAY, Nodetype.SEQUENCE):
                     description = description[1][0]
                 if description[0] == Nodetype.NAME:
                     pending.append(description[1])
         if wanted:
-            TYPESTORE.register(wanted)
+            store.register(wanted)
     return typename
 
 
@@ -368,12 +394,57 @@ def text_payload(t_ns: int, values: list[str | bytes]) -> bytes:
 
 
 def message_definition(typename: str) -> str:
-    """ros2msg schema text of a standard message (with its dependencies)."""
-    return TYPESTORE.generate_msgdef(_known(typename), ros_version=2)[0]
+    """ros2msg schema text of a standard message (with its dependencies), as rosbags'
+    `generate_msgdef(typename, ros_version=2)` writes it: made from `LOG_TYPES` for theirs, by rosbags
+    for any other."""
+    if typename not in LOG_TYPES:
+        return _typestore().generate_msgdef(_known(typename), ros_version=2)[0]
+    used: list[str] = []  # the types it contains, in the order rosbags lists them
+
+    def visit(name: str) -> None:
+        for kind, _ in _log_fields(name)[1]:
+            element = kind.partition("[")[0]
+            if "/" in element and element not in used:
+                used.append(element)
+                visit(element)
+
+    visit(typename)
+    sections = [f"{SEPARATOR}\nMSG: {_short_name(name)}\n{_definition_body(name)}" for name in used]
+    return _definition_body(typename) + "".join(sections)
+
+
+def _short_name(typename: str) -> str:
+    """`pkg/msg/Type` -> `pkg/Type`, as a ros2msg schema names a type."""
+    return typename.replace("/msg/", "/")
+
+
+def _definition_body(typename: str) -> str:
+    """The ros2msg lines of one type of `LOG_TYPES`: its constants, then its fields."""
+    constants, fields = _log_fields(typename)
+    lines = [f"{kind} {name}={value}" for name, kind, value in constants]
+    lines += [f"{_short_name(kind)} {name}" for kind, name in fields]
+    return "".join(f"{line}\n" for line in lines)
+
+
+@functools.cache
+def _log_fields(typename: str) -> tuple[list[tuple[str, str, int]], list[tuple[str, str]]]:
+    """The constants (name, type, value) and the fields (type, name) of a type of `LOG_TYPES`, as
+    written there (read-only: made once per type)."""
+    constants, fields = [], []
+    for entry in LOG_TYPES[typename].split("; "):
+        kind, _, name = entry.partition(" ")
+        name, equals, value = name.partition("=")
+        if equals:
+            constants.append((name, kind, int(value)))
+        else:
+            fields.append((kind, name))
+    return constants, fields
 
 
 def register_definition(typestore, typename: str, definition: str) -> None:
     """Register a ros2msg schema text (main type and the `MSG:` sections) into `typestore`."""
+    from rosbags.typesys import get_types_from_msg
+
     sections = definition.split(SEPARATOR + "\n")
     types = dict(get_types_from_msg(sections[0], typename))
     for section in sections[1:]:
@@ -389,7 +460,66 @@ def register_definition(typestore, typename: str, definition: str) -> None:
 
 # --- construction --------------------------------------------------------------------------
 
-_types = TYPESTORE.types
+
+class Message:
+    """A message of a type of `LOG_TYPES` as `make` builds it: its fields (in the order of the
+    definition; a Python keyword gets a trailing `_`, as in rosbags' classes) as attributes, its
+    constants as class attributes, its type name in `__msgtype__`; equal to a message of the same
+    type with equal fields. rosbags serialises it as one of its own classes (it reads the fields)."""
+
+    __slots__ = ()
+    __msgtype__ = ""
+
+    def __init__(self, *values, **fields) -> None:
+        names = self.__slots__
+        if len(values) > len(names):
+            raise TypeError(f"{type(self).__name__}() takes {len(names)} fields, got {len(values)}")
+        given = dict(zip(names, values, strict=False))
+        for name, value in fields.items():
+            if name not in names or name in given:
+                raise TypeError(f"{type(self).__name__}() got an unexpected or repeated field {name!r}")
+            given[name] = value
+        if len(given) != len(names):
+            missing = ", ".join(name for name in names if name not in given)
+            raise TypeError(f"{type(self).__name__}() is missing the fields {missing}")
+        for name in names:
+            object.__setattr__(self, name, given[name])
+
+    def __eq__(self, other):
+        if type(other) is not type(self):
+            return NotImplemented
+        return tuple(getattr(self, name) for name in self.__slots__) == tuple(
+            getattr(other, name) for name in other.__slots__
+        )
+
+    __hash__ = None
+
+    def __repr__(self) -> str:
+        fields = ", ".join(f"{name}={getattr(self, name)!r}" for name in self.__slots__)
+        return f"{type(self).__name__}({fields})"
+
+    def __reduce__(self):  # pickled by its type's name: the classes are made on first use
+        return _message, (self.__msgtype__, tuple(getattr(self, name) for name in self.__slots__))
+
+
+def _message(typename: str, values: tuple) -> Message:
+    """The message of `typename` with these field values (unpickling a `Message`)."""
+    return _types[typename](*values)
+
+
+class _MessageClasses(dict):
+    """The `Message` class of each type of `LOG_TYPES`, made on first use (no generated code)."""
+
+    def __missing__(self, typename: str):
+        constants, fields = _log_fields(typename)
+        names = tuple(name + "_" if keyword.iskeyword(name) else name for _, name in fields)
+        attributes = {"__slots__": names, "__msgtype__": typename, "__module__": __name__}
+        attributes.update((name, value) for name, _, value in constants)
+        made = self[typename] = type(typename.replace("/", "__"), (Message,), attributes)
+        return made
+
+
+_types = _MessageClasses()
 
 
 def time_msg(t_ns: int):
@@ -464,13 +594,187 @@ def laser_scan(
 
 
 def make(typename: str, **fields):
-    """A message of a standard type from keyword fields."""
-    return _types[_known(typename)](**fields)
+    """A message of a standard type from keyword fields: a `Message` for a type of `LOG_TYPES`,
+    else an instance of rosbags' class of that type."""
+    if typename in LOG_TYPES:
+        return _types[typename](**fields)
+    return _typestore().types[_known(typename)](**fields)
 
 
 def serialize(message, typename: str) -> bytes:
-    """CDR bytes (little endian, with encapsulation header) of a message."""
-    return bytes(TYPESTORE.serialize_cdr(message, _known(typename)))
+    """CDR bytes (little endian, with encapsulation header) of a message: packed by `_PACKERS` for
+    a `Message` of their types whose fields hold what rosbags expects (arrays of the field's
+    dtype), else by rosbags (which raises for fields it cannot serialise)."""
+    packer = _PACKERS.get(typename)
+    if packer is not None and getattr(message, "__msgtype__", None) == typename and _LITTLE:
+        try:
+            data = packer(message)
+        except (struct.error, TypeError, AttributeError, ValueError, OverflowError):
+            data = None  # as rosbags would have it: its serialisation says what is wrong
+        if data is not None:
+            return data
+    return bytes(_typestore().serialize_cdr(message, _known(typename)))
+
+
+# --- packers: the messages a run writes at its start, without rosbags ----------------------
+# CDR (the encoding rosbags writes): each primitive aligned to its size, counted from the end of
+# the 4-byte encapsulation header, with zero bytes; a string is a uint32 length counting a closing
+# NUL, its UTF-8 bytes and the NUL; a sequence a uint32 count and its elements (a primitive
+# sequence's data aligned to its element only when it has any). `_PACKERS[typename](message)`
+# returns None when a field is not what rosbags expects (an array of another dtype), and rosbags
+# serialises it.
+_LITTLE = sys.byteorder == "little"  # rosbags' `serialize_cdr` writes the machine's byte order
+_I32_PAIR = struct.Struct("<iI")
+_U32 = struct.Struct("<I")
+_POSE = struct.Struct("<7d")
+
+
+class _Cdr:
+    """CDR bytes under construction (after the encapsulation header)."""
+
+    __slots__ = ("data",)
+
+    def __init__(self) -> None:
+        self.data = bytearray(CDR_HEADER)
+
+    def align(self, size: int) -> None:
+        self.data += bytes(-(len(self.data) - len(CDR_HEADER)) % size)
+
+    def pack(self, layout: struct.Struct, size: int, *values) -> None:
+        self.align(size)
+        self.data += layout.pack(*values)
+
+    def string(self, text: str) -> None:
+        encoded = text.encode()
+        self.pack(_U32, 4, len(encoded) + 1)
+        self.data += encoded + b"\0"
+
+    def header(self, header) -> None:
+        self.pack(_I32_PAIR, 4, header.stamp.sec, header.stamp.nanosec)
+        self.string(header.frame_id)
+
+    def pose(self, pose) -> None:
+        position, orientation = pose.position, pose.orientation
+        q = (orientation.x, orientation.y, orientation.z, orientation.w)
+        self.pack(_POSE, 8, position.x, position.y, position.z, *q)
+
+    def array(self, values, dtype: str) -> bool:
+        """A primitive sequence of `dtype`; False (nothing written) when `values` is not a NumPy
+        array of that dtype."""
+        if not isinstance(values, np.ndarray) or values.dtype != np.dtype(dtype) or values.ndim != 1:
+            return False
+        self.pack(_U32, 4, len(values))
+        if len(values):
+            self.align(values.itemsize)
+            self.data += values.tobytes()
+        return True
+
+    def messages(self, items, write) -> None:
+        """A sequence of messages, each written by `write(item)`."""
+        self.pack(_U32, 4, len(items))
+        for item in items:
+            write(item)
+
+    def result(self) -> bytes:
+        return bytes(self.data)
+
+
+def _pack_pose_stamped(message) -> bytes:
+    out = _Cdr()
+    out.header(message.header)
+    out.pose(message.pose)
+    return out.result()
+
+
+def _pack_path(message) -> bytes:
+    out = _Cdr()
+    out.header(message.header)
+
+    def pose_stamped(item) -> None:
+        out.header(item.header)
+        out.pose(item.pose)
+
+    out.messages(message.poses, pose_stamped)
+    return out.result()
+
+
+_GRID_INFO = struct.Struct("<fII")
+
+
+def _pack_occupancy_grid(message) -> bytes | None:
+    out, info = _Cdr(), message.info
+    out.header(message.header)
+    out.pack(_I32_PAIR, 4, info.map_load_time.sec, info.map_load_time.nanosec)
+    out.pack(_GRID_INFO, 4, info.resolution, info.width, info.height)
+    out.pose(info.origin)
+    return out.result() if out.array(message.data, "i1") else None
+
+
+_SCAN_FIELDS = struct.Struct("<7f")
+
+
+def _pack_laser_scan(message) -> bytes | None:
+    out, m = _Cdr(), message
+    out.header(m.header)
+    out.pack(
+        _SCAN_FIELDS, 4,
+        m.angle_min, m.angle_max, m.angle_increment, m.time_increment, m.scan_time, m.range_min, m.range_max,
+    )  # fmt: skip
+    if not (out.array(m.ranges, "<f4") and out.array(m.intensities, "<f4")):
+        return None
+    return out.result()
+
+
+_BOOL = struct.Struct("<?")
+_MARKER_IDS = struct.Struct("<iii")
+_VECTOR3 = struct.Struct("<3d")
+_COLOR = struct.Struct("<4f")
+_UV = struct.Struct("<2f")
+
+
+def _pack_bool(message) -> bytes:
+    return CDR_HEADER + _BOOL.pack(message.data)
+
+
+def _pack_marker_array(message) -> bytes | None:
+    out = _Cdr()
+    complete = True
+
+    def marker(m) -> None:
+        nonlocal complete
+        out.header(m.header)
+        out.string(m.ns)
+        out.pack(_MARKER_IDS, 4, m.id, m.type, m.action)
+        out.pose(m.pose)
+        out.pack(_VECTOR3, 8, m.scale.x, m.scale.y, m.scale.z)
+        out.pack(_COLOR, 4, m.color.r, m.color.g, m.color.b, m.color.a)
+        out.pack(_I32_PAIR, 4, m.lifetime.sec, m.lifetime.nanosec)
+        out.pack(_BOOL, 1, m.frame_locked)
+        out.messages(m.points, lambda p: out.pack(_VECTOR3, 8, p.x, p.y, p.z))
+        out.messages(m.colors, lambda c: out.pack(_COLOR, 4, c.r, c.g, c.b, c.a))
+        out.string(m.texture_resource)
+        out.header(m.texture.header)
+        out.string(m.texture.format)
+        complete = out.array(m.texture.data, "u1") and complete
+        out.messages(m.uv_coordinates, lambda uv: out.pack(_UV, 4, uv.u, uv.v))
+        out.string(m.text)
+        out.string(m.mesh_resource)
+        out.string(m.mesh_file.filename)
+        complete = out.array(m.mesh_file.data, "u1") and complete
+        out.pack(_BOOL, 1, m.mesh_use_embedded_materials)
+
+    out.messages(message.markers, marker)
+    return out.result() if complete else None
+
+
+_PACKERS = {
+    "geometry_msgs/msg/PoseStamped": _pack_pose_stamped,
+    "nav_msgs/msg/Path": _pack_path,
+    "nav_msgs/msg/OccupancyGrid": _pack_occupancy_grid,
+    "sensor_msgs/msg/LaserScan": _pack_laser_scan,
+    "std_msgs/msg/Bool": _pack_bool,
+    "visualization_msgs/msg/MarkerArray": _pack_marker_array,
+}
 
 
 # --- hot paths: fixed-layout messages packed directly --------------------------------------

@@ -21,7 +21,7 @@ from __future__ import annotations
 import struct
 import zlib
 from array import array
-from concurrent.futures import ThreadPoolExecutor
+from typing import TYPE_CHECKING
 
 import numpy as np
 import zstandard
@@ -41,6 +41,9 @@ from mcap.records import (
     Statistics,
     SummaryOffset,
 )
+
+if TYPE_CHECKING:  # imported when the first large chunk is compressed: it imports logging (~2.5 ms)
+    from concurrent.futures import ThreadPoolExecutor
 
 from cosim.record.mcap_format import (
     CHUNK_HEAD,
@@ -376,6 +379,8 @@ class ChunkWriter:
             self._write_chunk(self._compressor.compress(data), *pending)
             return
         if self._pool is None:
+            from concurrent.futures import ThreadPoolExecutor
+
             self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="mcap-zstd")
         self._pending = (self._pool.submit(self._compressor.compress, data), *pending)
 

@@ -8,7 +8,6 @@ is left at `finish()` is an unknown key, reported with a "did you mean". Every e
 from __future__ import annotations
 
 import datetime
-import difflib
 import math
 from collections.abc import Callable, Iterable
 from typing import Any
@@ -24,6 +23,8 @@ def did_you_mean(name: str, candidates: Iterable[str]) -> str:
     """' (did you mean 'x'?)' for the closest candidate, or '' when nothing is close."""
     if len(name) > QUOTE_LIMIT:  # no name that long is close to a key, and matching it is slow
         return ""
+    import difflib  # only for an error message: not imported by a run that has none
+
     close = difflib.get_close_matches(name, list(candidates), n=1, cutoff=0.6)
     return f" (did you mean '{close[0]}'?)" if close else ""
 
