@@ -542,20 +542,27 @@ def _advance(
 ) -> list:
     """Step the fleet's system `count` steps, hand every robot its rows and return them (per
     component of the master's order, its inputs and outputs after each of its steps; None for one
-    stepped by Python). `python`: the Python components, stepped before the kernel steps the rest
-    (`tables` then without them)."""
+    stepped by Python), valid until the next call (views of the kernel's buffers). `python`: the
+    Python components, stepped before the kernel steps the rest (`tables` then without them)."""
     first = master.step_index
     kept: list[list[np.ndarray]] = []
     if python is not None:
         python.step(first)
     if tables is not None:
         # FMUs in the compiled kernel; the lidars and planners (Python) step in the block's first
-        # step and hold their outputs to its end (the block is cut only at their periods).
+        # step and hold their outputs to its end (the block is cut only at their periods). The
+        # rows are views of the kernel's buffers, which its next call refills: copied only then
+        # (a block is mostly one stretch), else valid until the next block's steps.
+        def copy_kept() -> None:
+            for part in kept:
+                part[:] = [r if r is None or r.base is None else r.copy() for r in part]
+
         master.run_blocks(
             count,
             tables,
-            lambda _first, _end, rows, _clean: kept.append([None if r is None else r.copy() for r in rows]),
+            lambda _first, _end, rows, _clean: kept.append(list(rows)),
             block=count,
+            before_block=copy_kept,
             cut_after_python=lambda _k: False,
         )
     else:
