@@ -23,6 +23,7 @@ the marks). `marked` is therefore read-only outside `integrate`.
 from __future__ import annotations
 
 import ctypes
+import hashlib
 import math
 from pathlib import Path
 
@@ -31,6 +32,7 @@ import numpy as np
 from cosim.world import kernels
 from native.load import bind, load
 from planner.grid import OccupancyGrid
+from planner.inflation import distance_to_nearest, set_obstacle_distance
 
 _p, _i64, _f64 = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double
 
@@ -65,6 +67,7 @@ def _kernels() -> ctypes.CDLL:
                     [_p, _p, _p, _p, _i64, _i64, _f64, _f64, _f64],
                 ),
                 "path_progress": (_f64, [_p, _p, _i64, _i64, _f64, _f64, ctypes.POINTER(_i64)]),
+                "costmap_distance": (None, [_p, _p, _i64, _p]),
             },
         )
     return _library
@@ -74,6 +77,33 @@ def path_progress():
     """native/costmap.c's `path_progress(points, arc, first, stop, x, y, &segment)` (addresses of
     C-contiguous float64 arrays; see there), for the planner's progress along its plan."""
     return _kernels().path_progress
+
+
+_KNOWN: dict[tuple, tuple[np.ndarray, np.ndarray, int] | None] = {}  # `_known_distance`, by content
+
+
+def _known_distance(known: np.ndarray) -> tuple[np.ndarray, int] | None:
+    """The squared distance (cells, exact integers) from every cell to the nearest cell of `known`
+    (bool, C order) and an integer at least every finite distance, or None when none is known; the
+    same arrays for equal maps (a fleet's robots share theirs; the last few kept)."""
+    key = (known.shape, hashlib.blake2b(known.view(np.uint8).data, digest_size=16).digest())
+    if key in _KNOWN:
+        found = _KNOWN[key]
+        if found is None or np.array_equal(found[0], known):
+            return None if found is None else found[1:]
+    found = None
+    if known.any():
+        distance = distance_to_nearest(known)
+        finite = distance[np.isfinite(distance)]
+        squared = np.rint(distance * distance)  # each the square root of an integer: exact
+        squared.flags.writeable = False
+        copy = known.copy()
+        copy.flags.writeable = False
+        found = (copy, squared, math.ceil(float(finite.max())) if len(finite) else 0)
+    if len(_KNOWN) >= 8:
+        _KNOWN.pop(next(iter(_KNOWN)))
+    _KNOWN[key] = found
+    return None if found is None else found[1:]
 
 
 class Costmap(kernels.Bound):
@@ -144,8 +174,31 @@ class Costmap(kernels.Bound):
         return self._integrate(self._address, float(x), float(y), float(theta))
 
     def grid(self) -> OccupancyGrid:
-        """Known obstacles plus the marks, as a grid."""
-        return OccupancyGrid(self._known | self._marked, self.known.resolution, self.known.origin)
+        """Known obstacles plus the marks, as a grid (with its `planner.inflation.obstacle_distance`
+        when the marks give it cheaper than a transform of the whole grid: `_distance`)."""
+        grid = OccupancyGrid(self._known | self._marked, self.known.resolution, self.known.origin)
+        distance = self._distance()
+        if distance is not None:
+            set_obstacle_distance(grid, distance)
+        return grid
+
+    def _distance(self) -> np.ndarray | None:
+        """The distance (cells) from every cell to the nearest known or marked cell, as
+        `planner.inflation.distance_to_nearest` gives it, from the known cells' transform (made
+        once per known map) lowered round each mark (native/costmap.c's `costmap_distance`);
+        None without known cells, or when the marks' squares would cover the grid four times over
+        (a square's cell costs a compare, the transform's several operations a cell)."""
+        known = _known_distance(self._known)
+        if known is None:
+            return None
+        squared, reach = known
+        rows, cols = self._marked.shape
+        marks = int(self._row_marks.sum())
+        if marks * (2 * reach + 1) ** 2 > 4 * rows * cols:
+            return None
+        out = np.empty((rows, cols))
+        _kernels().costmap_distance(self._address, squared.ctypes.data, reach, out.ctypes.data)
+        return out
 
     def inflated(self, radius: float) -> OccupancyGrid:
         """`grid()` inflated by `radius` [m] (the planner's rule)."""

@@ -424,6 +424,40 @@ int costmap_new_marks_maybe_near(const Costmap *m, const uint8_t *since, const d
     return 0;
 }
 
+/* The distance (cell units) from every cell to the nearest known or marked cell into out (rows x
+ * cols), given known_d2, the squared distances to the nearest known cell (integers, exact), and
+ * reach >= every finite one's square root: a mark can be the nearest only to cells less than that
+ * far from it, so each mark lowers the squared distances in the square of cells `reach` round it;
+ * then the square roots. Integers throughout, so the values are those of the exact transform of
+ * the known and marked cells (planner/native/distance.c) bit for bit. */
+void costmap_distance(const Costmap *m, const double *known_d2, int64_t reach, double *out)
+{
+    int64_t rows = m->rows, cols = m->cols;
+    for (int64_t cell = 0; cell < rows * cols; cell++)
+        out[cell] = known_d2[cell];
+    for (int64_t r = 0; r < rows; r++) {
+        if (!m->row_marks[r])
+            continue;
+        for (int64_t c = 0; c < cols; c++) {
+            if (!m->marked[r * cols + c])
+                continue;
+            int64_t r_stop = int_min(r + reach + 1, rows), c_stop = int_min(c + reach + 1, cols);
+            for (int64_t q = int_max(r - reach, 0); q < r_stop; q++) {
+                double dr = (double)(q - r);
+                double *line = out + q * cols;
+                for (int64_t p = int_max(c - reach, 0); p < c_stop; p++) {
+                    double dc = (double)(p - c);
+                    double d2 = dr * dr + dc * dc;
+                    if (d2 < line[p])
+                        line[p] = d2;
+                }
+            }
+        }
+    }
+    for (int64_t cell = 0; cell < rows * cols; cell++)
+        out[cell] = sqrt(out[cell]);
+}
+
 /* The planner's progress along its plan (`PlannerComponent._advance_progress`): of the segments
  * points[first..stop] (points n x 2, segment j from point j to j + 1), the one whose closest point
  * is nearest to (x, y), the first of equals. Its index goes to *segment; returns the progress [m]
