@@ -646,6 +646,7 @@ def _run(
             if log is not None:
                 _log_plans(log, robots, k * h_ns)
             poses = []  # the poses logged in the block: (step, t_ns, per robot x, y, theta, v, omega)
+            pose_rows = None
             ends_ns = [(k + i + 1) * h_ns for i in range(count)]
             if stop_ns is not None:
                 ends_ns = [min(end_ns, stop_ns) for end_ns in ends_ns]
@@ -654,9 +655,8 @@ def _run(
             lengths = [end - start for start, end in zip(starts, ends, strict=True)]
             last = count - 1
             stacked = np.stack([each.poses[:, :2] for each in robots], axis=1)  # step, robot, x y
-            if (
-                not stop_on_collision
-            ):  # nothing ends the run but the robots' own ends: judged a robot at a time
+            # Nothing ends the run but the robots' own ends: judged a robot at a time.
+            if not stop_on_collision:
                 if judge is not None:
                     ended = judge.block(robots, ends, lengths, positions, stacked)
                 else:
@@ -683,9 +683,15 @@ def _run(
                 if trace is not None:
                     trace.append((t_next, after))
                 if log is not None and (k + i + 1) % pose_steps == 0:
-                    poses.append(
-                        (k + i, end_ns, [(*each.poses[i], *each.commands_now[i]) for each in robots])
-                    )
+                    if pose_rows is None:  # per step, robot: x, y, theta, v, omega
+                        pose_rows = np.concatenate(
+                            (
+                                np.stack([each.poses for each in robots], axis=1),
+                                np.stack([each.commands_now for each in robots], axis=1),
+                            ),
+                            axis=2,
+                        )
+                    poses.append((k + i, end_ns, pose_rows[i]))
                     last_pose_step = k + i + 1
                 if stop_on_collision and (
                     began or any(each.outcome.status == "collision" for each in robots)
