@@ -79,31 +79,45 @@ def path_progress():
     return _kernels().path_progress
 
 
-_KNOWN: dict[tuple, tuple[np.ndarray, np.ndarray, int] | None] = {}  # `_known_distance`, by content
+class _KnownMap:
+    """A known map's cells (bool, C order, read-only), shared by the costmaps of equal maps (`_known_map`:
+    a fleet's robots read one copy), and their transform, made on first use (`transform`)."""
+
+    def __init__(self, cells: np.ndarray) -> None:
+        self.cells = cells
+        self._transform: tuple[np.ndarray, int] | None = None
+        self._made = False
+
+    def transform(self) -> tuple[np.ndarray, int] | None:
+        """The squared distance (cells, exact integers) from every cell to the nearest known one and
+        an integer at least every finite distance; None when no cell is known."""
+        if not self._made:
+            self._made = True
+            if self.cells.any():
+                distance = distance_to_nearest(self.cells)
+                finite = distance[np.isfinite(distance)]
+                squared = np.rint(distance * distance)  # each the square root of an integer: exact
+                squared.flags.writeable = False
+                self._transform = (squared, math.ceil(float(finite.max())) if len(finite) else 0)
+        return self._transform
 
 
-def _known_distance(known: np.ndarray) -> tuple[np.ndarray, int] | None:
-    """The squared distance (cells, exact integers) from every cell to the nearest cell of `known`
-    (bool, C order) and an integer at least every finite distance, or None when none is known; the
-    same arrays for equal maps (a fleet's robots share theirs; the last few kept)."""
-    key = (known.shape, hashlib.blake2b(known.view(np.uint8).data, digest_size=16).digest())
-    if key in _KNOWN:
-        found = _KNOWN[key]
-        if found is None or np.array_equal(found[0], known):
-            return None if found is None else found[1:]
-    found = None
-    if known.any():
-        distance = distance_to_nearest(known)
-        finite = distance[np.isfinite(distance)]
-        squared = np.rint(distance * distance)  # each the square root of an integer: exact
-        squared.flags.writeable = False
-        copy = known.copy()
-        copy.flags.writeable = False
-        found = (copy, squared, math.ceil(float(finite.max())) if len(finite) else 0)
+_KNOWN: dict[tuple, _KnownMap] = {}  # `_known_map`, by content (the last few)
+
+
+def _known_map(occupied: np.ndarray) -> _KnownMap:
+    """The shared `_KnownMap` of these cells."""
+    cells = np.ascontiguousarray(occupied, dtype=np.bool_)
+    key = (cells.shape, hashlib.blake2b(cells.view(np.uint8).data, digest_size=16).digest())
+    found = _KNOWN.get(key)
+    if found is not None and np.array_equal(found.cells, cells):
+        return found
+    copy = cells.copy()
+    copy.flags.writeable = False
     if len(_KNOWN) >= 8:
         _KNOWN.pop(next(iter(_KNOWN)))
-    _KNOWN[key] = found
-    return None if found is None else found[1:]
+    _KNOWN[key] = found = _KnownMap(copy)
+    return found
 
 
 class Costmap(kernels.Bound):
@@ -112,7 +126,8 @@ class Costmap(kernels.Bound):
     def __init__(self, known: OccupancyGrid, angles: np.ndarray, range_min: float, range_max: float):
         self.known = known
         self._marked = np.zeros(known.shape, dtype=np.bool_)
-        self._known = np.ascontiguousarray(known.occupied, dtype=np.bool_)
+        self._shared = _known_map(known.occupied)  # read-only, shared by equal maps' costmaps
+        self._known = self._shared.cells
         self.angles = np.array(angles, dtype=float)  # a read-only copy: the kernel keeps cos and sin of them
         self.angles.flags.writeable = False
         self.clear_to = float(range_max) if range_min == 0.0 else 0.0
@@ -188,7 +203,7 @@ class Costmap(kernels.Bound):
         once per known map) lowered round each mark (native/costmap.c's `costmap_distance`);
         None without known cells, or when the marks' squares would cover the grid four times over
         (a square's cell costs a compare, the transform's several operations a cell)."""
-        known = _known_distance(self._known)
+        known = self._shared.transform()
         if known is None:
             return None
         squared, reach = known
