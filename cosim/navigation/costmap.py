@@ -8,7 +8,10 @@ cleared. A beam reads NaN both without a return and below `range_min`; with `ran
 NaN beam is not used to clear (the obstacle may be closer than the sensor sees).
 
 `inflated(radius)` is the known map plus the marks, inflated by `radius` [m] with the planner's
-rule (a cell is blocked when its centre is within `radius` of an obstacle cell's centre).
+rule (a cell is blocked when its centre is within `radius` of an obstacle cell's centre). The grid
+of `grid()` carries its obstacle distance, which that rule reads: the known map's exact transform
+(made once per map and shared, as the known cells are, by the costmaps of equal maps) lowered
+round each mark, the transform of the whole grid bit for bit.
 `new_marks_near(points, radius, since)` says whether a cell marked after the snapshot `since`
 lies within `radius` of any of the points: a newly seen obstacle on the plan.
 

@@ -21,8 +21,9 @@ components step only in a block's first step:
    (`cosim.world.fleet.FleetContacts`: exact first contact of circles moving linearly within
    the step), and each robot against the walls and unknown obstacles (`OutcomeMonitor`, exactly
    as for one robot); with on_collision = "continue" (nothing but the robots' own ends ends the
-   run) a robot at a time for the block's steps, and the pairs for all of them at once, with the
-   same arithmetic in the same order;
+   run) a robot at a time for the block's steps (every robot in a static world in one C call,
+   `_FleetJudge`), and the pairs for all of them at once, with the same arithmetic in the same
+   order;
 4. mission progress: a robot within its goal's tolerance has reached it; after its `dwell` the
    planner is given the next goal (`PlannerComponent.set_goal`, a replan from the current pose)
    at the end of that block (at most one block, 0.1 s, later); after the last goal (times
