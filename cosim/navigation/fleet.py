@@ -553,7 +553,9 @@ def _advance(
         # FMUs in the compiled kernel; the lidars and planners (Python) step in the block's first
         # step and hold their outputs to its end (the block is cut only at their periods). The
         # rows are views of the kernel's buffers, which its next call refills: copied only then
-        # (a block is mostly one stretch), else valid until the next block's steps.
+        # (a block is mostly one stretch), else valid until the next block's steps; copied at
+        # once after a stretch that ended inside a step (not `clean`: the rows of that step
+        # already taken are moved to the buffers' start as soon as they are handed over).
         def copy_kept() -> None:
             for part in kept:
                 part[:] = [r if r is None or r.base is None else r.copy() for r in part]
@@ -561,7 +563,9 @@ def _advance(
         master.run_blocks(
             count,
             tables,
-            lambda _first, _end, rows, _clean: kept.append(list(rows)),
+            lambda _first, _end, rows, clean: kept.append(
+                list(rows) if clean else [None if r is None else r.copy() for r in rows]
+            ),
             block=count,
             before_block=copy_kept,
             cut_after_python=lambda _k: False,
