@@ -8,7 +8,10 @@ cleared. A beam reads NaN both without a return and below `range_min`; with `ran
 NaN beam is not used to clear (the obstacle may be closer than the sensor sees).
 
 `inflated(radius)` is the known map plus the marks, inflated by `radius` [m] with the planner's
-rule (a cell is blocked when its centre is within `radius` of an obstacle cell's centre).
+rule (a cell is blocked when its centre is within `radius` of an obstacle cell's centre). The grid
+of `grid()` carries its obstacle distance, which that rule reads: the known map's exact transform
+(made once per map and shared, as the known cells are, by the costmaps of equal maps) lowered
+round each mark, the transform of the whole grid bit for bit.
 `new_marks_near(points, radius, since)` says whether a cell marked after the snapshot `since`
 lies within `radius` of any of the points: a newly seen obstacle on the plan.
 
@@ -23,6 +26,7 @@ the marks). `marked` is therefore read-only outside `integrate`.
 from __future__ import annotations
 
 import ctypes
+import hashlib
 import math
 from pathlib import Path
 
@@ -31,6 +35,7 @@ import numpy as np
 from cosim.world import kernels
 from native.load import bind, load
 from planner.grid import OccupancyGrid
+from planner.inflation import distance_to_nearest, set_obstacle_distance
 
 _p, _i64, _f64 = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double
 
@@ -65,6 +70,7 @@ def _kernels() -> ctypes.CDLL:
                     [_p, _p, _p, _p, _i64, _i64, _f64, _f64, _f64],
                 ),
                 "path_progress": (_f64, [_p, _p, _i64, _i64, _f64, _f64, ctypes.POINTER(_i64)]),
+                "costmap_distance": (None, [_p, _p, _i64, _p]),
             },
         )
     return _library
@@ -76,13 +82,55 @@ def path_progress():
     return _kernels().path_progress
 
 
+class _KnownMap:
+    """A known map's cells (bool, C order, read-only), shared by the costmaps of equal maps (`_known_map`:
+    a fleet's robots read one copy), and their transform, made on first use (`transform`)."""
+
+    def __init__(self, cells: np.ndarray) -> None:
+        self.cells = cells
+        self._transform: tuple[np.ndarray, int] | None = None
+        self._made = False
+
+    def transform(self) -> tuple[np.ndarray, int] | None:
+        """The squared distance (cells, exact integers) from every cell to the nearest known one and
+        an integer at least every finite distance; None when no cell is known."""
+        if not self._made:
+            self._made = True
+            if self.cells.any():
+                distance = distance_to_nearest(self.cells)
+                finite = distance[np.isfinite(distance)]
+                squared = np.rint(distance * distance)  # each the square root of an integer: exact
+                squared.flags.writeable = False
+                self._transform = (squared, math.ceil(float(finite.max())) if len(finite) else 0)
+        return self._transform
+
+
+_KNOWN: dict[tuple, _KnownMap] = {}  # `_known_map`, by content (the last few)
+
+
+def _known_map(occupied: np.ndarray) -> _KnownMap:
+    """The shared `_KnownMap` of these cells."""
+    cells = np.ascontiguousarray(occupied, dtype=np.bool_)
+    key = (cells.shape, hashlib.blake2b(cells.view(np.uint8).data, digest_size=16).digest())
+    found = _KNOWN.get(key)
+    if found is not None and np.array_equal(found.cells, cells):
+        return found
+    copy = cells.copy()
+    copy.flags.writeable = False
+    if len(_KNOWN) >= 8:
+        _KNOWN.pop(next(iter(_KNOWN)))
+    _KNOWN[key] = found = _KnownMap(copy)
+    return found
+
+
 class Costmap(kernels.Bound):
     """The known map (`planner.OccupancyGrid`) plus lidar marks; see the module docstring."""
 
     def __init__(self, known: OccupancyGrid, angles: np.ndarray, range_min: float, range_max: float):
         self.known = known
         self._marked = np.zeros(known.shape, dtype=np.bool_)
-        self._known = np.ascontiguousarray(known.occupied, dtype=np.bool_)
+        self._shared = _known_map(known.occupied)  # read-only, shared by equal maps' costmaps
+        self._known = self._shared.cells
         self.angles = np.array(angles, dtype=float)  # a read-only copy: the kernel keeps cos and sin of them
         self.angles.flags.writeable = False
         self.clear_to = float(range_max) if range_min == 0.0 else 0.0
@@ -144,8 +192,31 @@ class Costmap(kernels.Bound):
         return self._integrate(self._address, float(x), float(y), float(theta))
 
     def grid(self) -> OccupancyGrid:
-        """Known obstacles plus the marks, as a grid."""
-        return OccupancyGrid(self._known | self._marked, self.known.resolution, self.known.origin)
+        """Known obstacles plus the marks, as a grid (with its `planner.inflation.obstacle_distance`
+        when the marks give it cheaper than a transform of the whole grid: `_distance`)."""
+        grid = OccupancyGrid(self._known | self._marked, self.known.resolution, self.known.origin)
+        distance = self._distance()
+        if distance is not None:
+            set_obstacle_distance(grid, distance)
+        return grid
+
+    def _distance(self) -> np.ndarray | None:
+        """The distance (cells) from every cell to the nearest known or marked cell, as
+        `planner.inflation.distance_to_nearest` gives it, from the known cells' transform (made
+        once per known map) lowered round each mark (native/costmap.c's `costmap_distance`);
+        None without known cells, or when the marks' squares would cover the grid four times over
+        (a square's cell costs a compare, the transform's several operations a cell)."""
+        known = self._shared.transform()
+        if known is None:
+            return None
+        squared, reach = known
+        rows, cols = self._marked.shape
+        marks = int(self._row_marks.sum())
+        if marks * (2 * reach + 1) ** 2 > 4 * rows * cols:
+            return None
+        out = np.empty((rows, cols))
+        _kernels().costmap_distance(self._address, squared.ctypes.data, reach, out.ctypes.data)
+        return out
 
     def inflated(self, radius: float) -> OccupancyGrid:
         """`grid()` inflated by `radius` [m] (the planner's rule)."""

@@ -21,8 +21,9 @@ components step only in a block's first step:
    (`cosim.world.fleet.FleetContacts`: exact first contact of circles moving linearly within
    the step), and each robot against the walls and unknown obstacles (`OutcomeMonitor`, exactly
    as for one robot); with on_collision = "continue" (nothing but the robots' own ends ends the
-   run) a robot at a time for the block's steps, and the pairs for all of them at once, with the
-   same arithmetic in the same order;
+   run) a robot at a time for the block's steps (every robot in a static world in one C call,
+   `_FleetJudge`), and the pairs for all of them at once, with the same arithmetic in the same
+   order;
 4. mission progress: a robot within its goal's tolerance has reached it; after its `dwell` the
    planner is given the next goal (`PlannerComponent.set_goal`, a replan from the current pose)
    at the end of that block (at most one block, 0.1 s, later); after the last goal (times
@@ -56,9 +57,11 @@ fleet outcome.
 
 from __future__ import annotations
 
+import ctypes
 import functools
 import gc
 import math
+import struct
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -540,20 +543,31 @@ def _advance(
 ) -> list:
     """Step the fleet's system `count` steps, hand every robot its rows and return them (per
     component of the master's order, its inputs and outputs after each of its steps; None for one
-    stepped by Python). `python`: the Python components, stepped before the kernel steps the rest
-    (`tables` then without them)."""
+    stepped by Python), valid until the next call (views of the kernel's buffers). `python`: the
+    Python components, stepped before the kernel steps the rest (`tables` then without them)."""
     first = master.step_index
     kept: list[list[np.ndarray]] = []
     if python is not None:
         python.step(first)
     if tables is not None:
         # FMUs in the compiled kernel; the lidars and planners (Python) step in the block's first
-        # step and hold their outputs to its end (the block is cut only at their periods).
+        # step and hold their outputs to its end (the block is cut only at their periods). The
+        # rows are views of the kernel's buffers, which its next call refills: copied only then
+        # (a block is mostly one stretch), else valid until the next block's steps; copied at
+        # once after a stretch that ended inside a step (not `clean`: the rows of that step
+        # already taken are moved to the buffers' start as soon as they are handed over).
+        def copy_kept() -> None:
+            for part in kept:
+                part[:] = [r if r is None or r.base is None else r.copy() for r in part]
+
         master.run_blocks(
             count,
             tables,
-            lambda _first, _end, rows, _clean: kept.append([None if r is None else r.copy() for r in rows]),
+            lambda _first, _end, rows, clean: kept.append(
+                list(rows) if clean else [None if r is None else r.copy() for r in rows]
+            ),
             block=count,
+            before_block=copy_kept,
             cut_after_python=lambda _k: False,
         )
     else:
@@ -623,74 +637,95 @@ def _run(
     block = _block_steps(master)
     stop_on_collision = settings.on_collision == "stop"
     tables, python = _tables(master, block)
+    judge = _FleetJudge.make(robots) if not stop_on_collision else None
     if coordination is not None:  # the released cells (and halts) for the first block
         coordination.before_block(0.0)
     wall_start = time.perf_counter()
     reason = None
     k = 0
     last_pose_step = 0
-    while k < steps and reason is None:
-        count = min(block, steps - k)
-        histories = _advance(master, robots, count, tables, python)
-        if log is not None:
-            _log_plans(log, robots, k * h_ns)
-        poses = []  # the poses logged in the block: (step, t_ns, per robot x, y, theta, v, omega)
-        ends_ns = [(k + i + 1) * h_ns for i in range(count)]
-        if stop_ns is not None:
-            ends_ns = [min(end_ns, stop_ns) for end_ns in ends_ns]
-        ends = [end_ns / NS_PER_S for end_ns in ends_ns]
-        starts = [(k + i) * h_ns / NS_PER_S for i in range(count)]
-        lengths = [end - start for start, end in zip(starts, ends, strict=True)]
-        last = count - 1
-        if not stop_on_collision:  # nothing ends the run but the robots' own ends: judged a robot at a time
-            ended = [_judge_block(each, ends, lengths, positions[r]) for r, each in enumerate(robots)]
-            if all(not each.judged for each in robots):  # ends with the step in which the last one ended
-                last = max((step for step in ended if step is not None), default=0)
-        stacked = np.stack([each.poses[: last + 1, :2] for each in robots], axis=1)  # step, robot, x y
-        if not stop_on_collision:  # every step up to the last is checked: all at once
-            began_in = contacts.steps(starts, lengths, np.concatenate((positions[None], stacked)))
-        for i in range(last + 1):
-            t_next, end_ns = ends[i], ends_ns[i]
-            after = stacked[i]
-            began = (
-                began_in[i]
-                if not stop_on_collision
-                else contacts.step(starts[i], lengths[i], positions, after)
-            )
-            outcome.collisions += began
-            if stop_on_collision:
-                for k_robot, each in enumerate(robots):
-                    _judge(each, t_next, lengths[i], positions[k_robot], after[k_robot], i)
-            positions = after
-            outcome.time = t_next
-            if trace is not None:
-                trace.append((t_next, after))
-            if log is not None and (k + i + 1) % pose_steps == 0:
-                poses.append((k + i, end_ns, [(*each.poses[i], *each.commands_now[i]) for each in robots]))
-                last_pose_step = k + i + 1
-            if stop_on_collision and (began or any(each.outcome.status == "collision" for each in robots)):
-                reason = "collision"
-            elif (stop_on_collision or i == last) and all(not each.judged for each in robots):
-                reason = "completed" if outcome.completed else "all_ended"
-            if reason is not None:
-                break
-        if log is not None:
-            log.block(k, k + i + 1, histories, poses)
-        k += i + 1
-        if reason is None and interrupt.take() is not None:
-            reason = "interrupted"
-        if tables is not None and reason is None:
-            if any(each.outcome.status == "collision" and not each.halted for each in robots):
-                tables, python = _halt(master, robots, log, block, python)
-        for each in robots:  # a new mission goal: given at the end of the block
-            if each.pending_goal and each.judged:
-                _next_goal(each, outcome.time, coordination)
-            each.pending_goal = False
-            if log is not None and each.monitor.goal != each.logged_goal:
-                log.write_goal(round(outcome.time * NS_PER_S), each.robot.name, *each.monitor.goal)
-                each.logged_goal = each.monitor.goal
-        if coordination is not None and reason is None:
-            coordination.before_block(outcome.time)  # cells released, halts, re-solves
+    try:
+        while k < steps and reason is None:
+            count = min(block, steps - k)
+            histories = _advance(master, robots, count, tables, python)
+            if log is not None:
+                _log_plans(log, robots, k * h_ns)
+            poses = []  # the poses logged in the block: (step, t_ns, per robot x, y, theta, v, omega)
+            pose_rows = None
+            ends_ns = [(k + i + 1) * h_ns for i in range(count)]
+            if stop_ns is not None:
+                ends_ns = [min(end_ns, stop_ns) for end_ns in ends_ns]
+            ends = [end_ns / NS_PER_S for end_ns in ends_ns]
+            starts = [(k + i) * h_ns / NS_PER_S for i in range(count)]
+            lengths = [end - start for start, end in zip(starts, ends, strict=True)]
+            last = count - 1
+            stacked = np.stack([each.poses[:, :2] for each in robots], axis=1)  # step, robot, x y
+            # Nothing ends the run but the robots' own ends: judged a robot at a time.
+            if not stop_on_collision:
+                if judge is not None:
+                    ended = judge.block(robots, ends, lengths, positions, stacked)
+                else:
+                    ended = [_judge_block(each, ends, lengths, positions[r]) for r, each in enumerate(robots)]
+                if all(not each.judged for each in robots):  # ends with the step in which the last one ended
+                    last = max((step for step in ended if step is not None), default=0)
+                    stacked = stacked[: last + 1]
+            if not stop_on_collision:  # every step up to the last is checked: all at once
+                began_in = contacts.steps(starts, lengths, np.concatenate((positions[None], stacked)))
+            for i in range(last + 1):
+                t_next, end_ns = ends[i], ends_ns[i]
+                after = stacked[i]
+                began = (
+                    began_in[i]
+                    if not stop_on_collision
+                    else contacts.step(starts[i], lengths[i], positions, after)
+                )
+                outcome.collisions += began
+                if stop_on_collision:
+                    for k_robot, each in enumerate(robots):
+                        _judge(each, t_next, lengths[i], positions[k_robot], after[k_robot], i)
+                positions = after
+                outcome.time = t_next
+                if trace is not None:
+                    trace.append((t_next, after))
+                if log is not None and (k + i + 1) % pose_steps == 0:
+                    if pose_rows is None:  # per step, robot: x, y, theta, v, omega
+                        pose_rows = np.concatenate(
+                            (
+                                np.stack([each.poses for each in robots], axis=1),
+                                np.stack([each.commands_now for each in robots], axis=1),
+                            ),
+                            axis=2,
+                        )
+                    poses.append((k + i, end_ns, pose_rows[i]))
+                    last_pose_step = k + i + 1
+                if stop_on_collision and (
+                    began or any(each.outcome.status == "collision" for each in robots)
+                ):
+                    reason = "collision"
+                elif (stop_on_collision or i == last) and all(not each.judged for each in robots):
+                    reason = "completed" if outcome.completed else "all_ended"
+                if reason is not None:
+                    break
+            if log is not None:
+                log.block(k, k + i + 1, histories, poses)
+            k += i + 1
+            if reason is None and interrupt.take() is not None:
+                reason = "interrupted"
+            if tables is not None and reason is None:
+                if any(each.outcome.status == "collision" and not each.halted for each in robots):
+                    tables, python = _halt(master, robots, log, block, python)
+            for each in robots:  # a new mission goal: given at the end of the block
+                if each.pending_goal and each.judged:
+                    _next_goal(each, outcome.time, coordination)
+                each.pending_goal = False
+                if log is not None and each.monitor.goal != each.logged_goal:
+                    log.write_goal(round(outcome.time * NS_PER_S), each.robot.name, *each.monitor.goal)
+                    each.logged_goal = each.monitor.goal
+            if coordination is not None and reason is None:
+                coordination.before_block(outcome.time)  # cells released, halts, re-solves
+    finally:  # the numbers judged in C back in the robots' outcomes
+        if judge is not None:
+            judge.release_all(robots)
     if log is not None and last_pose_step != k:  # the pose at the end (step i of the last block)
         log.write_poses(
             round(outcome.time * NS_PER_S), [(*each.poses[i], *each.commands_now[i]) for each in robots]
@@ -812,12 +847,15 @@ def _judge(each: _Robot, t: float, h: float, before, after, step: int = 0) -> No
     result.deadlocked_at = each.progress.update(t, math.hypot(goal.x - after[0], goal.y - after[1]))
 
 
-def _judge_block(each: _Robot, ends: list[float], lengths: list[float], start) -> int | None:
+def _judge_block(each: _Robot, ends: list[float], lengths: list[float], start, done=None) -> int | None:
     """`_judge` for every step of the block whose steps end at `ends` [s] and last `lengths` [s],
     the robot at `start` (x, y) [m] before the first; returns the step in which it stopped being
     judged, None when it did not. The steps up to the next goal reached or collision are checked
     in one `OutcomeMonitor.check_positions` call, with the same arithmetic, in the same order, as
-    step by step; a robot dwelling or waiting for its next goal is judged step by step."""
+    step by step; a robot dwelling or waiting for its next goal is judged step by step. `done`:
+    (event, why, moved, x, y) of `_FleetJudge`, which judged the steps before `event` and the
+    distance and recovery time of `event` (moved in it, to x, y) in C: why is "goal_reached" or
+    "collision" there, or None when step `event` is left to this function."""
     if not each.judged:
         return None
     result, monitor, progress = each.outcome, each.monitor, each.progress
@@ -827,30 +865,37 @@ def _judge_block(each: _Robot, ends: list[float], lengths: list[float], start) -
     count = len(ends)
     i = 0
     while i < count:
-        if each.pending_goal or each.dwell_until is not None:
+        goal = each.goals[each.goal_index]
+        if done is not None:
+            event, why, moved, bx, by = done
+            done = None
+            if why is None:
+                i = event
+                continue
+        elif each.pending_goal or each.dwell_until is not None:
             _judge(each, ends[i], lengths[i], (bx, by), (xs[i], ys[i]), i)
             bx, by = xs[i], ys[i]
             if not each.judged:
                 return i
             i += 1
             continue
-        index, why = monitor.check_positions(ends[i:], xs[i:], ys[i:])
-        event = i + index  # the step that reached a goal or collided (count: none)
-        goal = each.goals[each.goal_index]
-        for j in range(i, min(event + 1, count)):
-            x, y, h = xs[j], ys[j], lengths[j]
-            moved = math.hypot(x - bx, y - by)
-            bx, by = x, y
-            result.distance += moved
-            if modes[j] == MODE_RECOVER:
-                result.recovery_time += h
-            if j == event:
-                break
-            if moved < STOPPED_SPEED * h:
-                result.stopped_time += h
-            result.deadlocked_at = progress.update(ends[j], math.hypot(goal.x - x, goal.y - y))
-        if why is None:
-            return None
+        else:
+            index, why = monitor.check_positions(ends[i:], xs[i:], ys[i:])
+            event = i + index  # the step that reached a goal or collided (count: none)
+            for j in range(i, min(event + 1, count)):
+                x, y, h = xs[j], ys[j], lengths[j]
+                moved = math.hypot(x - bx, y - by)
+                bx, by = x, y
+                result.distance += moved
+                if modes[j] == MODE_RECOVER:
+                    result.recovery_time += h
+                if j == event:
+                    break
+                if moved < STOPPED_SPEED * h:
+                    result.stopped_time += h
+                result.deadlocked_at = progress.update(ends[j], math.hypot(goal.x - x, goal.y - y))
+            if why is None:
+                return None
         t, x, y = ends[event], xs[event], ys[event]
         if why == "collision":
             result.status = "collision"
@@ -872,6 +917,122 @@ def _judge_block(each: _Robot, ends: list[float], lengths: list[float], start) -
             each.pending_goal = True
         i = event + 1
     return None
+
+
+class _FleetJudge:
+    """`_judge_block` of every robot in one C call a block (`fleet_judge` of world.c: the same
+    operations in the same order), for the robots whose checks are compiled (a static world:
+    `OutcomeMonitor`'s `_CompiledChecks`) and that neither dwell nor wait for their next goal.
+    Such a robot's numbers (its outcome's distance, stopped and recovery times, deadlock; its
+    `Progress`; its monitor's state) are kept in its C struct from block to block (`hold`) and come
+    back to Python (`release`) when it reaches a goal, collides, or reaches a step its checks leave
+    to Python, where `_judge_block` goes on; and for every robot at the end of the run
+    (`release_all`, before anything reads them). `_judge_block` judges the other robots."""
+
+    # The Judge fields from `active` to `time` (`hold`), and from `last_x` to `reason` (`release`).
+    _HOLD = struct.Struct("=q13d")
+    _RELEASE = struct.Struct("=17d2q")
+
+    def __init__(self, robots: list[_Robot]) -> None:
+        from cosim.world import kernels
+
+        self.kernels = kernels
+        self.function = kernels.library().fleet_judge
+        self.judges = (kernels.JudgeArrays * len(robots))()
+        self.address = ctypes.addressof(self.judges)
+        size = ctypes.sizeof(kernels.JudgeArrays)
+        self.hold_at = [r * size + kernels.JudgeArrays.active.offset for r in range(len(robots))]
+        self.release_at = [r * size + kernels.JudgeArrays.last_x.offset for r in range(len(robots))]
+        self.compiled = [each.monitor._compiled for each in robots]
+        self.held = [False] * len(robots)
+        self.ended = np.zeros(len(robots), dtype=np.int64)
+        for judge, compiled in zip(self.judges, self.compiled, strict=True):
+            if compiled is not None:
+                judge.monitor = compiled.address
+            judge.stopped_speed, judge.progress, judge.recover = STOPPED_SPEED, PROGRESS, MODE_RECOVER
+
+    @classmethod
+    def make(cls, robots: list[_Robot]) -> _FleetJudge | None:
+        """The judge of `robots`, or None when none has compiled checks."""
+        if all(each.monitor._compiled is None for each in robots):
+            return None
+        return cls(robots)
+
+    def hold(self, r: int, each: _Robot) -> None:
+        """Robot r's numbers into its struct: judged in C from now on."""
+        result, progress, monitor = each.outcome, each.progress, each.monitor
+        goal = each.goals[each.goal_index]
+        nan = math.nan
+        self._HOLD.pack_into(
+            self.judges, self.hold_at[r], 1, nan, nan, result.distance, result.recovery_time,
+            result.stopped_time, nan if result.deadlocked_at is None else result.deadlocked_at,
+            progress.best, progress.best_time,
+            nan if progress.deadlocked_at is None else progress.deadlocked_at,
+            progress.deadlock_after, goal.x, goal.y, monitor.outcome.time,
+        )  # fmt: skip
+        self.compiled[r].put(monitor)
+        self.held[r] = True
+
+    def release(self, r: int, each: _Robot) -> tuple[float, float, float, int, int]:
+        """Robot r's numbers back from its struct (judged in Python from now on); returns the
+        position after the last step judged, the distance moved in the last, its step and why
+        the judging ended there (CHECK_*)."""
+        result, progress, monitor = each.outcome, each.progress, each.monitor
+        (x, y, result.distance, result.recovery_time, result.stopped_time, dead, progress.best,
+         progress.best_time, progress_dead, _, _, _, monitor.outcome.time, _, _, _, moved, event,
+         code) = self._RELEASE.unpack_from(self.judges, self.release_at[r])  # fmt: skip
+        result.deadlocked_at = None if dead != dead else dead
+        progress.deadlocked_at = None if progress_dead != progress_dead else progress_dead
+        self.compiled[r].get(monitor)
+        self.judges[r].active = 0
+        self.held[r] = False
+        return x, y, moved, event, code
+
+    def release_all(self, robots: list[_Robot]) -> None:
+        for r, each in enumerate(robots):
+            if self.held[r]:
+                self.release(r, each)
+
+    def block(self, robots: list[_Robot], ends: list[float], lengths: list[float], starts: np.ndarray,
+              positions: np.ndarray) -> list[int | None]:  # fmt: skip
+        """`_judge_block` of every robot (`starts`: N x 2 before the block's first step,
+        `positions`: steps x N x 2 after each); per robot the step in which it stopped being judged."""
+        count = len(ends)
+        held, compiled = self.held, self.compiled
+        for r, each in enumerate(robots):
+            wanted = (
+                compiled[r] is not None
+                and each.outcome.status == "running"
+                and not each.pending_goal
+                and each.dwell_until is None
+                and count <= compiled[r].capacity
+            )
+            if wanted != held[r]:
+                if wanted:
+                    self.hold(r, each)
+                else:
+                    self.release(r, each)
+        ended: list[int | None] = [None] * len(robots)
+        python = [r for r in range(len(robots)) if not held[r]]
+        if len(python) < len(robots):
+            modes = np.stack([each.modes for each in robots], axis=1)
+            starts = np.ascontiguousarray(starts, dtype=np.float64)
+            times, steps = np.array(ends), np.array(lengths)
+            events = self.function(
+                self.address, len(robots), starts.ctypes.data, positions.ctypes.data, modes.ctypes.data,
+                times.ctypes.data, steps.ctypes.data, count, self.ended.ctypes.data,
+            )  # fmt: skip
+            kernels = self.kernels
+            for r in self.ended[:events].tolist():
+                each = robots[r]
+                x, y, moved, event, code = self.release(r, each)
+                why = None
+                if code != kernels.CHECK_PYTHON:
+                    why = each.monitor._compiled.ended(each.monitor, event, code, count)
+                ended[r] = _judge_block(each, ends, lengths, starts[r], (event, why, moved, x, y))
+        for r in python:
+            ended[r] = _judge_block(robots[r], ends, lengths, starts[r])
+        return ended
 
 
 def _next_goal(each: _Robot, t: float, coordination: FleetCoordination | None = None) -> None:

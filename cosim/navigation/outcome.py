@@ -213,6 +213,19 @@ class _CompiledChecks:
         points[0, :n] = xs
         points[1, :n] = ys
         points[2, :n] = times
+        self.put(monitor)
+        index = self.function(self.address, n)
+        code = self.get(monitor)
+        if code == self.kernels.CHECK_PYTHON:
+            # The rest from step `index` on, in Python (which indexes off the grid there).
+            rest, reason = monitor._check_in_python(
+                points[2, index:n].tolist(), points[0, index:n].tolist(), points[1, index:n].tolist()
+            )
+            return index + rest, reason
+        return index, self.ended(monitor, index, code, n)
+
+    def put(self, monitor: OutcomeMonitor) -> None:
+        """The monitor's goal and state into the struct."""
         outcome = monitor.outcome
         goal_x, goal_y = monitor.goal
         last_x, last_y = monitor.last_xy
@@ -220,30 +233,34 @@ class _CompiledChecks:
             self.state, self.offset, monitor.radius, goal_x, goal_y, monitor.tolerance, monitor._speed,
             last_x, last_y, outcome.distance, outcome.min_clearance, *monitor._anchor,
         )  # fmt: skip
-        index = self.function(self.address, n)
+
+    def get(self, monitor: OutcomeMonitor) -> int:
+        """The monitor's state from the struct (after a call); returns why the call stopped."""
+        outcome = monitor.outcome
         last_x, last_y, outcome.distance, outcome.min_clearance, *anchor, code = self.unpack(
             self.state, self.at
         )
         monitor.last_xy = (last_x, last_y)
         monitor._anchor = tuple(anchor)
+        return code
+
+    def ended(self, monitor: OutcomeMonitor, index: int, code: int, n: int) -> str | None:
+        """The monitor's outcome after a call over n steps that returned `index` for `code`
+        (CHECK_GOING, CHECK_COLLISION or CHECK_GOAL, the points still in place): why the run
+        ends, or None."""
+        outcome = monitor.outcome
+        points = self.points
         if code == 0:  # CHECK_GOING
             outcome.time = points.item(2, n - 1)
-            return n, None
-        kernels = self.kernels
-        if code == kernels.CHECK_PYTHON:
-            # The rest from step `index` on, in Python (which indexes off the grid there).
-            rest, reason = monitor._check_in_python(
-                points[2, index:n].tolist(), points[0, index:n].tolist(), points[1, index:n].tolist()
-            )
-            return index + rest, reason
-        if code == kernels.CHECK_COLLISION:
+            return None
+        if code == self.kernels.CHECK_COLLISION:
             outcome.reason = reason = "collision"
             outcome.collision_point = (points.item(0, index), points.item(1, index))
         else:
             outcome.reached = True
             outcome.reason = reason = "goal_reached"
         outcome.time = points.item(2, index)
-        return index, reason
+        return reason
 
 
 class SafeCircle:

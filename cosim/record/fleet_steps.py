@@ -133,6 +133,13 @@ class FleetSteps:
                 command = (recording.command.period, ports)
             self.robots.append(_Robot(name, view, recording, entries, command))
         self.kept = self._kept(master.order)
+        # Per component with kept columns, those columns as one slice or an index array.
+        self.taken = {
+            index: runs[0]
+            if len(runs) == 1
+            else np.concatenate([np.arange(run.start, run.stop) for run in runs])
+            for index, (runs, _) in self.kept.items()
+        }
         self.scan_slot = slot  # robot r's scan: scan_slot + 2 r, its command: + 1
         self.obstacle_slot = slot + 2 * len(self.robots)
         self.pose_slot = self.obstacle_slot + 1  # every robot's /odom and /pose, then /tf
@@ -322,9 +329,7 @@ class FleetSteps:
             self.first, self.kinds = first, kinds
             self.flush_at = ((start_ns + first * h_ns) // self.window_ns + self.windows) * self.window_ns
         self.end = end
-        self.collected.append(
-            [rows if rows is None or rows.base is None else rows.copy() for rows in histories]
-        )
+        self.collected.append(self._compact(histories))
         for number in commands:
             self.deferred.add(number)
         for robot, ranges in sweeps:
@@ -339,6 +344,23 @@ class FleetSteps:
             self.flush()
         elif time.monotonic() - self.handed >= self.recorder.flush_interval:
             self.flush()  # a killed run loses no more wall time of steps than the recorder's flushes
+
+    def _compact(self, histories) -> list:
+        """A block's rows as the flush reads them: of a component with `kept` columns only those,
+        in their compact order (a copy); the others as they are when they own their data, else a
+        copy (the caller's buffers may be refilled)."""
+        taken = self.taken
+        out = []
+        for index, rows in enumerate(histories):
+            if rows is None:
+                out.append(None)
+                continue
+            columns = taken.get(index)
+            if columns is not None:
+                out.append(rows[:, columns] if not isinstance(columns, slice) else rows[:, columns].copy())
+            else:
+                out.append(rows if rows.base is None else rows.copy())
+        return out
 
     def _plan(self, kinds: tuple[bool, ...]) -> tuple[list, list]:
         """What a block records of the robots still stepped, for components stepped by Python where
@@ -383,21 +405,8 @@ class FleetSteps:
         def rows(index: int) -> np.ndarray:
             found = rows_of.get(index)
             if found is None:
-                parts = [part[index] for part in collected]
-                kept = self.kept.get(index)
-                if kept is None:  # every column
-                    found = parts[0] if len(parts) == 1 else np.concatenate(parts)
-                else:  # the columns read, one run at a time
-                    runs, width = kept
-                    found = np.empty((sum(len(part) for part in parts), width))
-                    at = 0
-                    for part in parts:
-                        end = at + len(part)
-                        column = 0
-                        for run in runs:
-                            found[at:end, column : column + run.stop - run.start] = part[:, run]
-                            column += run.stop - run.start
-                        at = end
+                parts = [part[index] for part in collected]  # (`_compact`)
+                found = parts[0] if len(parts) == 1 else np.concatenate(parts)
                 rows_of[index] = found
             return found
 

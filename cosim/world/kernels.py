@@ -73,6 +73,22 @@ class MonitorArrays(ctypes.Structure):
     ]  # fmt: skip
 
 
+class JudgeArrays(ctypes.Structure):
+    """`Judge` of world.c: one robot of `fleet_judge` (a fleet's block of steps judged in C): its
+    monitor's struct, whether it is judged there, the numbers of its outcome, deadlock rule and
+    monitor that the judging changes (kept in the struct while it is), the rule's constants, and
+    the step and reason that ended it."""
+
+    _fields_ = [
+        ("monitor", _p), ("active", _i64), ("last_x", _f64), ("last_y", _f64),
+        ("distance", _f64), ("recovery_time", _f64), ("stopped_time", _f64), ("deadlocked_at", _f64),
+        ("best", _f64), ("best_time", _f64), ("progress_deadlocked_at", _f64),
+        ("deadlock_after", _f64), ("goal_x", _f64), ("goal_y", _f64), ("time", _f64),
+        ("stopped_speed", _f64), ("progress", _f64), ("recover", _f64),
+        ("moved", _f64), ("event", _i64), ("reason", _i64),
+    ]  # fmt: skip
+
+
 # `world_check_positions`'s reasons: none (all steps checked), collision, goal reached, and a step
 # it leaves to Python (a cell off the grid).
 CHECK_GOING, CHECK_COLLISION, CHECK_GOAL, CHECK_PYTHON = 0, 1, 2, 3
@@ -136,6 +152,7 @@ def library() -> ctypes.CDLL:
                 "fleet_gaps": (None, [_p, _i64, _i64, _p, _p, _i64, _p, _p, _p, _p]),
                 "world_hypot": (_f64, [_f64, _f64]),
                 "world_check_positions": (_i64, [_p, _i64]),
+                "fleet_judge": (_i64, [_p, _i64, _p, _p, _p, _p, _p, _i64, _p]),
             },
         )
     return _library

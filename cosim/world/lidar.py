@@ -32,6 +32,7 @@ else (`kernel_sweep`).
 from __future__ import annotations
 
 import ctypes
+import hashlib
 import math
 from collections.abc import Mapping, Sequence
 
@@ -58,6 +59,31 @@ def evenly_spaced_beams(angle_min: float, angle_max: float, count: int) -> np.nd
         return np.array([float(angle_min)])
     full_turn = angle_max - angle_min >= 2 * math.pi - 1e-9
     return np.linspace(angle_min, angle_max, count, endpoint=not full_turn)
+
+
+_GRIDS: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}  # `_grid_arrays` of the grids seen, by content
+
+
+def _grid_arrays(grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The grid (bool, row 0 at the top) with row 0 at the bottom, and its clearance (native/world.c's
+    `lidar_clearance`), read-only: the same arrays for every grid of the same cells (a fleet's
+    lidars share their map: one copy for the sweeps to read, not one a robot in the caches). The
+    last few grids are kept."""
+    occupied_up = np.array(grid[::-1], dtype=bool, order="C")  # (a copy: made read-only below)
+    key = (occupied_up.shape, hashlib.blake2b(occupied_up.view(np.uint8).data, digest_size=16).digest())
+    found = _GRIDS.get(key)
+    if found is not None and np.array_equal(found[0], occupied_up):
+        return found
+    clearance = np.empty(occupied_up.shape, dtype=np.uint8)
+    kernels.library().lidar_clearance(
+        occupied_up.view(np.uint8).ctypes.data, *occupied_up.shape, clearance.ctypes.data
+    )
+    occupied_up.flags.writeable = False
+    clearance.flags.writeable = False
+    if len(_GRIDS) >= 8:
+        _GRIDS.pop(next(iter(_GRIDS)))
+    _GRIDS[key] = (occupied_up, clearance)
+    return occupied_up, clearance
 
 
 class Lidar(kernels.Bound, PythonComponent):
@@ -121,13 +147,10 @@ class Lidar(kernels.Bound, PythonComponent):
         self.range_min, self.range_max = float(range_min), float(range_max)
         self.range_noise, self.angle_noise, self.seed = float(range_noise), float(angle_noise), seed
         grid = np.zeros((1, 1), dtype=bool) if occupied is None else np.asarray(occupied, dtype=bool)
-        self.occupied_up = np.ascontiguousarray(grid[::-1])  # row 0 at the bottom: y grows with the row
-        # Each cell's Chebyshev distance (cells) to the nearest occupied one, at most 255: the sweep
-        # crosses free space in strides (native/world.c's cast_grid).
-        self._clearance = np.empty(self.occupied_up.shape, dtype=np.uint8)
-        kernels.library().lidar_clearance(
-            self.occupied_up.view(np.uint8).ctypes.data, *self.occupied_up.shape, self._clearance.ctypes.data
-        )
+        # Row 0 at the bottom: y grows with the row. With each cell's Chebyshev distance (cells) to
+        # the nearest occupied one, at most 255: the sweep crosses free space in strides
+        # (native/world.c's cast_grid). Both read-only, shared by the lidars of equal grids.
+        self.occupied_up, self._clearance = _grid_arrays(grid)
         self.resolution = float(resolution)
         self.origin = (float(origin[0]), float(origin[1]))
         self.obstacles = list(obstacles)

@@ -169,6 +169,7 @@ def test_a_fleet_run_is_that_of_the_step_by_step_loop(tmp_path, monkeypatch):
     assert all(each.snapshot is not None for each in made)  # lidars read the 10 vehicles' poses at once
 
     monkeypatch.setattr(fleet_module, "_judge_block", _judge_step_by_step)
+    monkeypatch.setattr(fleet_module._FleetJudge, "make", classmethod(lambda *_: None))
     monkeypatch.setattr(fleet_module._PythonSteps, "make", classmethod(lambda *_: None))
     monkeypatch.setattr(FleetContacts, "steps", _contacts_step_by_step)
     fleet = load_scenario(SCENARIOS / "fleet_missions.toml", overrides, fleet=True)

@@ -244,3 +244,30 @@ def test_the_look_round_the_plan_never_misses_a_new_mark_near_its_points():
 
 def evenly_spaced_beams_full(count):
     return np.linspace(-math.pi, math.pi, count, endpoint=False)
+
+
+def test_the_costmap_grids_obstacle_distance_is_the_full_transform_bit_for_bit():
+    """`Costmap.grid()` carries its obstacle distance, made from the known map's transform lowered
+    round each mark: equal to the exact transform of the whole grid (known cells and marks) as
+    marks come and go, and whatever the known map (a fresh one each time: not the shared one)."""
+    from cosim.world.lidar import evenly_spaced_beams
+    from planner.inflation import distance_to_nearest, obstacle_distance
+
+    rng = np.random.default_rng(5)
+    occupied = np.zeros((40, 60), dtype=bool)
+    occupied[0, :] = occupied[:, -1] = True
+    occupied[rng.integers(0, 40, 300), rng.integers(0, 60, 300)] = True  # near everywhere: small squares
+    grid = OccupancyGrid(occupied, 0.5, (0.0, 0.0))
+    angles = evenly_spaced_beams(-math.pi, math.pi, 90)
+    costmap = Costmap(grid, angles, 0.0, 12.0)
+    discs = [(rng.uniform(3, 27), rng.uniform(3, 17), rng.uniform(0.3, 1.2)) for _ in range(12)]
+    x, y, theta = 15.0, 10.0, 0.3
+    for _ in range(20):
+        discs = [(cx + rng.normal(0, 0.3), cy + rng.normal(0, 0.3), r) for cx, cy, r in discs]
+        x, y, theta = x + rng.normal(0, 0.4), y + rng.normal(0, 0.4), theta + rng.normal(0, 0.5)
+        costmap.integrate(x, y, theta, _disc_ranges(x, y, theta, angles, discs, 12.0))
+        seen = costmap.grid()
+        assert "obstacle_distance" in seen._cache  # made from the marks, not transformed
+        expected = distance_to_nearest(seen.occupied) * seen.resolution
+        assert np.array_equal(obstacle_distance(seen), expected)
+    assert costmap.marked.sum() > 10

@@ -148,7 +148,10 @@ def test_a_cell_rounded_off_the_grid_is_left_to_python():
             monitor.check_positions([0.01, 0.02], [1.5, x], [3.0, 3.0])
 
 
-def test_the_monitor_struct_mirrors_the_c_struct():
+@pytest.mark.parametrize(
+    ("struct", "mirror"), [("Monitor", kernels.MonitorArrays), ("Judge", kernels.JudgeArrays)]
+)
+def test_the_monitor_struct_mirrors_the_c_struct(struct, mirror):
     from native import load as native
 
     library = native.load(kernels.SOURCE)
@@ -159,7 +162,6 @@ def test_the_monitor_struct_mirrors_the_c_struct():
     names, values = (ctypes.c_char_p * count)(), (ctypes.c_int64 * count)()
     function(names, values, count)
     layout = {name.decode(): value for name, value in zip(names, values, strict=True)}
-    mirror = kernels.MonitorArrays
-    assert layout["sizeof Monitor"] == ctypes.sizeof(mirror)
-    fields = {key.split(".", 1)[1]: value for key, value in layout.items() if key.startswith("Monitor.")}
+    assert layout[f"sizeof {struct}"] == ctypes.sizeof(mirror)
+    fields = {key.split(".", 1)[1]: value for key, value in layout.items() if key.startswith(f"{struct}.")}
     assert fields == {name: getattr(mirror, name).offset for name, *_ in mirror._fields_}

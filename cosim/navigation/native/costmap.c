@@ -122,15 +122,27 @@ static void note_mark(const Costmap *m, double gx, double gy, double theta, int6
     double nearest_x = x0 > 0.0 ? x0 : (x0 + 1.0 < 0.0 ? x0 + 1.0 : 0.0);
     double nearest_y = y0 > 0.0 ? y0 : (y0 + 1.0 < 0.0 ? y0 + 1.0 : 0.0);
     double near = hypot(nearest_x, nearest_y);
-    double far = 0.0;
+    /* The farthest corner: on each axis the end farther from the sensor (equal ends: either). */
+    double far = hypot(x0 + 0.5 < 0.0 ? x0 : x0 + 1.0, y0 + 0.5 < 0.0 ? y0 : y0 + 1.0);
     int64_t count = m->count, lo = 0, hi = count - 1;
     double corners[4][2] = {{x0, y0}, {x0 + 1.0, y0}, {x0, y0 + 1.0}, {x0 + 1.0, y0 + 1.0}};
-    for (int corner = 0; corner < 4; corner++)
-        far = py_max(far, hypot(corners[corner][0], corners[corner][1]));
     if (near > 1e-3) {
+        /* The corners span less than a half turn, so one lies clockwise of another exactly when
+         * their cross product is negative: the most clockwise and counter-clockwise corners are
+         * found so, and only their directions taken (to rounding, which the window's 1e-8 rad
+         * covers many times over, the least and greatest of the four). */
+        int first = 0, last = 0;
+        for (int corner = 1; corner < 4; corner++) {
+            const double *c = corners[corner], *a = corners[first], *b = corners[last];
+            if (a[0] * c[1] - a[1] * c[0] < 0.0)
+                first = corner;
+            if (b[0] * c[1] - b[1] * c[0] > 0.0)
+                last = corner;
+        }
         double centre = atan2(y0 + 0.5, x0 + 0.5), low = 0.0, high = 0.0;
-        for (int corner = 0; corner < 4; corner++) {
-            double turn = atan2(corners[corner][1], corners[corner][0]) - centre;
+        for (int end = 0; end < 2; end++) {
+            const double *corner = corners[end ? last : first];
+            double turn = atan2(corner[1], corner[0]) - centre;
             turn += turn > HALF_TURN ? -2.0 * HALF_TURN : (turn < -HALF_TURN ? 2.0 * HALF_TURN : 0.0);
             low = py_min(low, turn);
             high = py_max(high, turn);
@@ -410,6 +422,40 @@ int costmap_new_marks_maybe_near(const Costmap *m, const uint8_t *since, const d
                 return 1;
     }
     return 0;
+}
+
+/* The distance (cell units) from every cell to the nearest known or marked cell into out (rows x
+ * cols), given known_d2, the squared distances to the nearest known cell (integers, exact), and
+ * reach >= every finite one's square root: a mark can be the nearest only to cells less than that
+ * far from it, so each mark lowers the squared distances in the square of cells `reach` round it;
+ * then the square roots. Integers throughout, so the values are those of the exact transform of
+ * the known and marked cells (planner/native/distance.c) bit for bit. */
+void costmap_distance(const Costmap *m, const double *known_d2, int64_t reach, double *out)
+{
+    int64_t rows = m->rows, cols = m->cols;
+    for (int64_t cell = 0; cell < rows * cols; cell++)
+        out[cell] = known_d2[cell];
+    for (int64_t r = 0; r < rows; r++) {
+        if (!m->row_marks[r])
+            continue;
+        for (int64_t c = 0; c < cols; c++) {
+            if (!m->marked[r * cols + c])
+                continue;
+            int64_t r_stop = int_min(r + reach + 1, rows), c_stop = int_min(c + reach + 1, cols);
+            for (int64_t q = int_max(r - reach, 0); q < r_stop; q++) {
+                double dr = (double)(q - r);
+                double *line = out + q * cols;
+                for (int64_t p = int_max(c - reach, 0); p < c_stop; p++) {
+                    double dc = (double)(p - c);
+                    double d2 = dr * dr + dc * dc;
+                    if (d2 < line[p])
+                        line[p] = d2;
+                }
+            }
+        }
+    }
+    for (int64_t cell = 0; cell < rows * cols; cell++)
+        out[cell] = sqrt(out[cell]);
 }
 
 /* The planner's progress along its plan (`PlannerComponent._advance_progress`): of the segments

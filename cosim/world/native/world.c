@@ -507,6 +507,109 @@ void fleet_gaps(const double *positions, int64_t steps, int64_t n, const int64_t
     }
 }
 
+/* ------------------------------------------------------- judging a fleet's robots (fleet.py) */
+
+/* One robot of `fleet_judge`: its position checks, the numbers of its outcome and of its deadlock
+ * rule that a block's steps change (kept here from block to block while it is judged here), and
+ * what ended its judging in the last block. */
+typedef struct {
+    Monitor *monitor; /* its `world_check_positions` (points for at least a block's steps) */
+    int64_t active;   /* judged by `fleet_judge` (else left alone) */
+    double last_x, last_y;                          /* out: the position after the last step judged */
+    double distance, recovery_time, stopped_time;   /* its RobotOutcome's, added to */
+    double deadlocked_at;                           /* its RobotOutcome's (NaN: None) */
+    double best, best_time, progress_deadlocked_at; /* its Progress (NaN: None) */
+    double deadlock_after, goal_x, goal_y;          /* the Progress's setting; the current goal */
+    double time;                                    /* its monitor's outcome time: the last step checked */
+    double stopped_speed, progress, recover;        /* fleet.py's STOPPED_SPEED, PROGRESS, MODE_RECOVER */
+    double moved;          /* out: the distance moved in the step of the event */
+    int64_t event, reason; /* out: that step (n: none) and why (CHECK_*) */
+} Judge;
+
+/* `_judge_block` of fleet.py for each active robot r of the block's n steps (starts robots x 2:
+ * the positions before the first step; positions n x robots x 2 after each step, modes n x robots
+ * the avoidance mode held in it, ends and lengths [s] of the steps), up to the step in which it
+ * reached its goal or collided, or the step its checks leave to Python (CHECK_PYTHON: nothing of
+ * that step taken into account), the same operations in the same order (Python's hypot): the
+ * positions checked in one `world_check_positions` call, then per step the distance moved, the
+ * recovery time, the stopped time and the deadlock rule (`Progress.update`; in the step of an
+ * event its distance and recovery time only). A robot that ends so is no longer active; its index
+ * goes to `ended`. Returns how many did. Its monitor must not read a moving world. */
+int64_t fleet_judge(Judge *judges, int64_t robots, const double *starts, const double *positions,
+                    const double *modes, const double *ends, const double *lengths, int64_t n, int64_t *ended)
+{
+    int64_t count = 0;
+    for (int64_t r = 0; r < robots; r++) {
+        Judge *j = judges + r;
+        if (!j->active)
+            continue;
+        Monitor *m = j->monitor;
+        if (n > m->capacity || n < 1) {
+            j->last_x = starts[2 * r];
+            j->last_y = starts[2 * r + 1];
+            j->event = 0;
+            j->reason = CHECK_PYTHON;
+            j->active = 0;
+            ended[count++] = r;
+            continue;
+        }
+        double *xs = (double *)m->points, *ys = xs + m->capacity, *times = ys + m->capacity;
+        for (int64_t k = 0; k < n; k++) {
+            xs[k] = positions[2 * (k * robots + r)];
+            ys[k] = positions[2 * (k * robots + r) + 1];
+            times[k] = ends[k];
+        }
+        int64_t event = world_check_positions(m, n);
+        int64_t reason = m->reason;
+        int64_t stop = reason == CHECK_PYTHON ? event : (event < n ? event + 1 : n);
+        double bx = starts[2 * r], by = starts[2 * r + 1], moved = 0.0;
+        double distance = j->distance, recovery = j->recovery_time, stopped = j->stopped_time;
+        double dead = j->deadlocked_at, best = j->best, best_time = j->best_time;
+        double progress_dead = j->progress_deadlocked_at;
+        for (int64_t k = 0; k < stop; k++) {
+            double x = xs[k], y = ys[k], h = lengths[k];
+            moved = py_hypot(x - bx, y - by);
+            bx = x;
+            by = y;
+            distance += moved;
+            if (modes[k * robots + r] == j->recover)
+                recovery += h;
+            if (k == event)
+                break;
+            if (moved < j->stopped_speed * h)
+                stopped += h;
+            double remaining = py_hypot(j->goal_x - x, j->goal_y - y), t = ends[k];
+            if (remaining < best - j->progress) {
+                best = remaining;
+                best_time = t;
+                progress_dead = NAN;
+            } else if (isnan(progress_dead) && t - best_time >= j->deadlock_after - 1e-9) {
+                progress_dead = best_time;
+            }
+            dead = progress_dead;
+        }
+        j->last_x = bx;
+        j->last_y = by;
+        j->distance = distance;
+        j->recovery_time = recovery;
+        j->stopped_time = stopped;
+        j->deadlocked_at = dead;
+        j->best = best;
+        j->best_time = best_time;
+        j->progress_deadlocked_at = progress_dead;
+        j->moved = moved;
+        j->event = event;
+        j->reason = reason;
+        if (reason == CHECK_GOING) {
+            j->time = times[n - 1];
+        } else {
+            j->active = 0;
+            ended[count++] = r;
+        }
+    }
+    return count;
+}
+
 /* The tables Python mirrors (see layout.h). */
 int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
 {
@@ -552,6 +655,28 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_FIELD(Monitor, reason);
     LAYOUT_FIELD(Monitor, points);
     LAYOUT_FIELD(Monitor, capacity);
+    LAYOUT_SIZE(Judge);
+    LAYOUT_FIELD(Judge, monitor);
+    LAYOUT_FIELD(Judge, active);
+    LAYOUT_FIELD(Judge, last_x);
+    LAYOUT_FIELD(Judge, last_y);
+    LAYOUT_FIELD(Judge, distance);
+    LAYOUT_FIELD(Judge, recovery_time);
+    LAYOUT_FIELD(Judge, stopped_time);
+    LAYOUT_FIELD(Judge, deadlocked_at);
+    LAYOUT_FIELD(Judge, best);
+    LAYOUT_FIELD(Judge, best_time);
+    LAYOUT_FIELD(Judge, progress_deadlocked_at);
+    LAYOUT_FIELD(Judge, deadlock_after);
+    LAYOUT_FIELD(Judge, goal_x);
+    LAYOUT_FIELD(Judge, goal_y);
+    LAYOUT_FIELD(Judge, time);
+    LAYOUT_FIELD(Judge, stopped_speed);
+    LAYOUT_FIELD(Judge, progress);
+    LAYOUT_FIELD(Judge, recover);
+    LAYOUT_FIELD(Judge, moved);
+    LAYOUT_FIELD(Judge, event);
+    LAYOUT_FIELD(Judge, reason);
     LAYOUT_SIZE(Lidar);
     LAYOUT_FIELD(Lidar, occupied_up);
     LAYOUT_FIELD(Lidar, rows);
