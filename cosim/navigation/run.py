@@ -235,7 +235,9 @@ class _RobotRun(SystemRun):
         # Build (or load) the C kernels that would first run inside the loop, so the real-time factor
         # measures the simulation, not a first run's compilation.
         self.monitor.world.distance(*scenario.start[:2])
-        self.tables = master.kernel_tables(record=True, python_rows=True) if _use_kernel() else None
+        self.tables = None
+        if _use_kernel():
+            self.tables = master.kernel_tables(record=True, python_rows=True, scalar_rows=True)
         if self.tables is not None:
             self.tables.warm_up()
         self.start_clock(scenario.stop_time if progress else None)

@@ -22,14 +22,14 @@ enum {
     C_KIND, C_PERIOD, C_VERSION, C_HANDLE, C_STEP, C_FLAGS, C_LAST_TIME, C_LINK_FIRST, C_LINK_COUNT,
     C_SET_FIRST, C_SET_COUNT, C_GET_FIRST, C_GET_COUNT, C_CHECK_FIRST, C_CHECK_COUNT,
     C_IN_ADDRESS, C_IN_COUNT, C_OUT_ADDRESS, C_OUT_COUNT, C_RECORD, C_RECORD_OFFSET,
-    COMPONENT_COLUMNS
+    C_RECORD_IN_FIRST, C_RECORD_IN_COUNT, COMPONENT_COLUMNS
 };
 enum { KIND_IDLE = 0, KIND_NATIVE = 1, KIND_PYTHON = 2, KIND_SWEEP = 3 };
 
 /* Columns of the transfer-group table. */
 enum {
     G_KIND, G_FUNCTION, G_REFERENCES, G_REFERENCE_COUNT, G_VALUE_COUNT, G_VALUES, G_DIRECT,
-    G_SLOT_FIRST, G_SLOT_COUNT, GROUP_COLUMNS
+    G_SLOT_FIRST, G_SLOT_COUNT, G_SENT, G_SENT_REFERENCES, GROUP_COLUMNS
 };
 /* FMI value types of a group: REAL double, INTEGER int32, BOOLEAN int32 (FMI 2.0) or bool (FMI 3.0),
  * then FMI 3.0's other numeric types. An INT64/UINT64 value beyond 2^53, which a double may not hold,
@@ -66,7 +66,7 @@ typedef struct {
     int64_t n;                       /* components (rows of `components`) */
     const int64_t *components;       /* n x COMPONENT_COLUMNS */
     const double *step_sizes;        /* n: each component's step [s] */
-    const int64_t *link_addresses;   /* links x 3: source address, target address, kind */
+    const int64_t *link_addresses;   /* links x 3: source address, target address, kind (`gather`) */
     const double *link_numbers;      /* links x 2: scale, offset */
     const int64_t *groups;           /* groups x GROUP_COLUMNS */
     const int64_t *slot_addresses;   /* slots: buffer address of each value of a group */
@@ -102,11 +102,16 @@ HOT int64_t transfer(int64_t function, int64_t handle, int64_t references, int64
                                           pointer(values), (size_t)value_count);
 }
 
-/* Copy the component's connected inputs from their producers' outputs. */
+/* Copy the component's connected inputs from their producers' outputs. A link of kind 3 is a run
+ * of plain links (consecutive sources to consecutive targets): link_numbers[j * 2] values. */
 HOT void gather(const Tables *t, int64_t i) {
     int64_t first = COMPONENT(t, i, C_LINK_FIRST), end = first + COMPONENT(t, i, C_LINK_COUNT);
     for (int64_t j = first; j < end; j++) {
         const int64_t *link = &t->link_addresses[j * 3];
+        if (link[2] == 3) {
+            memcpy(pointer(link[1]), pointer(link[0]), sizeof(double) * (size_t)t->link_numbers[j * 2]);
+            continue;
+        }
         double value = load_f64(link[0]);
         if (link[2] == 1) {
             value = value * t->link_numbers[j * 2];
@@ -115,6 +120,52 @@ HOT void gather(const Tables *t, int64_t i) {
         }
         store_f64(link[1], value);
     }
+}
+
+/* A setter group of float64 scalars (one value per reference) that sends only what changed: its
+ * G_SENT array holds [0] whether the rest is valid, [1 .. count] the values last sent in this call
+ * of the kernel, [count + 1 .. 2 count] room for the changed values, and G_SENT_REFERENCES room for
+ * their references. An FMU input keeps the value last set (FMI 2.0 and 3.0: set before a step, held
+ * after), so setting a value again that is bit for bit the one it holds does nothing, and leaving it
+ * out changes nothing; the first set of each call of the kernel sends every value (between calls
+ * Python may have set the FMU's inputs, or restored its state). A failed call forgets what was sent. */
+HOT int64_t set_changed(const Tables *t, int64_t g, int64_t handle, int64_t version, int64_t values) {
+    int64_t count = GROUP(t, g, G_REFERENCE_COUNT);
+    double *sent = pointer(GROUP(t, g, G_SENT));
+    const uint64_t *now = pointer(values);
+    uint64_t *last = (uint64_t *)(sent + 1);
+    int64_t status;
+    if (sent[0] == 0.0) {
+        status = transfer(GROUP(t, g, G_FUNCTION), handle, GROUP(t, g, G_REFERENCES), count, values, count,
+                          version);
+        if (status <= 1) {
+            memcpy(last, now, sizeof(double) * (size_t)count);
+            sent[0] = 1.0;
+        }
+        return status;
+    }
+    const uint32_t *references = pointer(GROUP(t, g, G_REFERENCES));
+    uint32_t *changed_references = pointer(GROUP(t, g, G_SENT_REFERENCES));
+    uint64_t *changed = last + count;
+    int64_t m = 0;
+    for (int64_t j = 0; j < count; j++) {
+        uint64_t value = now[j];
+        if (value != last[j]) {
+            last[j] = value;
+            changed_references[m] = references[j];
+            changed[m] = value;
+            m += 1;
+        }
+    }
+    if (m == 0) {
+        return 0;
+    }
+    status = transfer(GROUP(t, g, G_FUNCTION), handle, (int64_t)(intptr_t)changed_references, m,
+                      (int64_t)(intptr_t)changed, m, version);
+    if (status > 1) {
+        sent[0] = 0.0;
+    }
+    return status;
 }
 
 /* Copy the inputs into the FMI value arrays (converting), then call the setters: the status of
@@ -154,9 +205,13 @@ HOT int64_t set_inputs(const Tables *t, int64_t i, int64_t *kind_out) {
                 }
             }
         }
-        int64_t status = transfer(GROUP(t, g, G_FUNCTION), handle, GROUP(t, g, G_REFERENCES),
-                                  GROUP(t, g, G_REFERENCE_COUNT), values, GROUP(t, g, G_VALUE_COUNT),
-                                  version);
+        int64_t status;
+        if (GROUP(t, g, G_SENT) != 0) {
+            status = set_changed(t, g, handle, version, values);
+        } else {
+            status = transfer(GROUP(t, g, G_FUNCTION), handle, GROUP(t, g, G_REFERENCES),
+                              GROUP(t, g, G_REFERENCE_COUNT), values, GROUP(t, g, G_VALUE_COUNT), version);
+        }
         if (status > 1) {
             *kind_out = kind;
             return status;
@@ -233,21 +288,20 @@ HOT int64_t check_outputs(const Tables *t, int64_t i) {
     return -1;
 }
 
-/* Keep the component's inputs then outputs as its next row. */
+/* Keep the component's inputs then outputs as its next row: of the inputs those from
+ * C_RECORD_IN_FIRST, C_RECORD_IN_COUNT of them (all, or the scalars: the other columns are left as
+ * they were). */
 HOT void record(const Tables *t, int64_t i) {
     if (COMPONENT(t, i, C_RECORD) == 0) {
         return;
     }
     int64_t n_in = COMPONENT(t, i, C_IN_COUNT), n_out = COMPONENT(t, i, C_OUT_COUNT);
+    int64_t in_first = COMPONENT(t, i, C_RECORD_IN_FIRST), in_count = COMPONENT(t, i, C_RECORD_IN_COUNT);
     double *row = t->history + COMPONENT(t, i, C_RECORD_OFFSET) + t->rows[i] * (n_in + n_out);
     const double *inputs = pointer(COMPONENT(t, i, C_IN_ADDRESS));
     const double *outputs = pointer(COMPONENT(t, i, C_OUT_ADDRESS));
-    for (int64_t j = 0; j < n_in; j++) {
-        row[j] = inputs[j];
-    }
-    for (int64_t j = 0; j < n_out; j++) {
-        row[n_in + j] = outputs[j];
-    }
+    memcpy(row + in_first, inputs + in_first, sizeof(double) * (size_t)in_count);
+    memcpy(row + n_in, outputs, sizeof(double) * (size_t)n_out);
     t->rows[i] += 1;
 }
 
@@ -341,6 +395,18 @@ int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_po
         local.components = components;
     }
     const Tables *t = &local;
+    /* What a change-only setter group sent is known within this call only (`set_changed`). */
+    for (int64_t i = 0; i < n; i++) {
+        int64_t first = COMPONENT(t, i, C_SET_FIRST), end = first + COMPONENT(t, i, C_SET_COUNT);
+        if (COMPONENT(t, i, C_KIND) != KIND_NATIVE) {
+            continue;
+        }
+        for (int64_t g = first; g < end; g++) {
+            if (GROUP(t, g, G_SENT) != 0) {
+                *(double *)pointer(GROUP(t, g, G_SENT)) = 0.0;
+            }
+        }
+    }
     int64_t k = first_step;
     int64_t position = first_position;
     int64_t end = first_step + steps;
@@ -570,6 +636,8 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_CONSTANT(C_OUT_COUNT);
     LAYOUT_CONSTANT(C_RECORD);
     LAYOUT_CONSTANT(C_RECORD_OFFSET);
+    LAYOUT_CONSTANT(C_RECORD_IN_FIRST);
+    LAYOUT_CONSTANT(C_RECORD_IN_COUNT);
     LAYOUT_CONSTANT(COMPONENT_COLUMNS);
     LAYOUT_CONSTANT(KIND_IDLE);
     LAYOUT_CONSTANT(KIND_NATIVE);
@@ -584,6 +652,8 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_CONSTANT(G_DIRECT);
     LAYOUT_CONSTANT(G_SLOT_FIRST);
     LAYOUT_CONSTANT(G_SLOT_COUNT);
+    LAYOUT_CONSTANT(G_SENT);
+    LAYOUT_CONSTANT(G_SENT_REFERENCES);
     LAYOUT_CONSTANT(GROUP_COLUMNS);
     LAYOUT_CONSTANT(KIND_REAL);
     LAYOUT_CONSTANT(KIND_INTEGER);
