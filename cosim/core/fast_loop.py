@@ -92,7 +92,9 @@ class KernelTables:
     its `kernel_sweep()` gives (C function address, its argument): then the kernel steps it by
     that call on its first three inputs (the lidar's sweep: `cosim.world.lidar.Lidar`).
     `python_rows` (with `record`): those components have rows too, which `run_blocks` writes
-    after their steps, so a stretch of steps goes on through them (see there).
+    after their steps, so a stretch of steps goes on through them (see there); one whose
+    `kernel_step()` gives (C function address, its state) is stepped by that call, which says
+    whether the step needs Python after all (then it is handed back: the replanning planner).
     `scalar_rows` (with `record`): a row keeps only the inputs `recorded_inputs` gives (the scalar
     ones: what a recording reads), not the elements of input arrays (a plan's waypoints, a scan's
     ranges), whose columns are left as they were; `row_inputs[i]` is component i's kept slice.
@@ -173,6 +175,14 @@ class KernelTables:
                 record_offset = self._reserve(record, component, period, block, record_offset, row)
                 continue
             if native is None:  # rows written by `run_blocks` with python_rows (C_RECORD stays 0)
+                # A Python component with a C step (`kernel_step`) that needs Python only at some
+                # steps: with python_rows the kernel steps it when it can (and writes those rows).
+                kernel_step = getattr(component, "kernel_step", None)
+                kernel_step = kernel_step() if record and python_rows and callable(kernel_step) else None
+                if kernel_step is not None:
+                    row[K.C_STEP], row[K.C_HANDLE] = kernel_step
+                    record_offset = self._reserve(True, component, period, block, record_offset, row)
+                    continue
                 record_offset = self._reserve(record and python_rows, component, period, block, record_offset)
                 continue
             row[K.C_VERSION] = native.fmi_version

@@ -221,6 +221,10 @@ class _RobotRun(SystemRun):
                 goals, built, self.monitor, recorder, lambda: self.recording.current_pose()
             )
         self.goal_steps = system.period_steps(planner) if self.goal_poll is not None and planner else 1
+        if self.goal_poll is not None and self.planner is not None:
+            # A goal polled after a planner step may replan at once: every step of the planner is
+            # Python's, so the kernel's block ends after it (`cut_after_python`).
+            self.planner.kernel_steps = False
         # Then the recording: the signal channels, the header, the first records.
         sensors = () if scenario.imu is None else (Imu(scenario.imu, scenario.macro_step),)
         self.recording = StepRecording(
@@ -303,10 +307,12 @@ class _RobotRun(SystemRun):
 
     def end_before_python(self, k: int) -> bool:
         """Whether a kernel block ends before the Python components of step k (a block goes on
-        through them otherwise): when a signal came, so the run stops where it always did."""
+        through them otherwise): when a signal came, so the run stops where it always did, and
+        while a topic has yet to get its first message (as `cut_after_python`: the planner's C
+        step hands no step back to be cut after)."""
         if self.signal is None:
             self.signal = interrupt.take()
-        return self.signal is not None
+        return self.signal is not None or not self.replay.fast.settled
 
     def cut_after_python(self, k: int) -> bool:
         """Whether a kernel block ends after step k, in which a Python component stepped: when the

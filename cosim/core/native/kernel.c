@@ -55,6 +55,10 @@ typedef int (*Transfer3)(void *, const void *, size_t, void *, size_t);
 /* A component stepped by one C call on its inputs x, y, theta (the lidar's sweep, `lidar_scan` of
  * cosim/world/native/world.c): (its struct, x, y, theta); it writes its own outputs. */
 typedef void (*Sweep)(const void *, double, double, double);
+/* A Python component's C step (C_STEP of a KIND_PYTHON row, 0: none): (its state, t) -> 0 when it
+ * stepped (the kernel records its row), 1 when it hands the step to Python (the kernel returns
+ * HAND_BACK there; its Python step goes on from where the C step stopped). */
+typedef int64_t (*PythonStep)(void *, double);
 /* fmi2DoStep(instance, t, h, noSetFMUStatePriorToCurrentPoint). */
 typedef int (*Step2)(void *, double, double, int);
 /* fmi3DoStep(instance, t, h, noSetFMUStatePriorToCurrentPoint, &eventHandlingNeeded,
@@ -444,7 +448,17 @@ int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_po
                 int64_t i = position;
                 if (COMPONENT(t, i, C_KIND) != KIND_IDLE && due(t, i, k)) {
                     if (COMPONENT(t, i, C_KIND) == KIND_PYTHON) {
-                        return finish(result, HAND_BACK, k, i, i, 0, 0, 0);
+                        if (COMPONENT(t, i, C_STEP) == 0) {
+                            return finish(result, HAND_BACK, k, i, i, 0, 0, 0);
+                        }
+                        gather(t, i);
+                        PythonStep python_step = (PythonStep)(intptr_t)COMPONENT(t, i, C_STEP);
+                        if (python_step(pointer(COMPONENT(t, i, C_HANDLE)), time) != 0) {
+                            return finish(result, HAND_BACK, k, i, i, 0, 0, 0);
+                        }
+                        record(t, i);
+                        position += 1;
+                        continue;
                     }
                     /* A polled sweep (C_FLAGS 1): the caller looks first, unless the call starts here. */
                     if (COMPONENT(t, i, C_KIND) == KIND_SWEEP && COMPONENT(t, i, C_FLAGS) == 1 &&
