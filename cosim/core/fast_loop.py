@@ -249,9 +249,16 @@ class KernelTables:
         self._keep = [entry.component for entry in plan]
         self._kernel = None
 
+    def forget_sent(self) -> None:
+        """The next set of each change-only setter group sends every value (kernel.c's
+        `set_changed`): call it whenever something besides the kernel may have set an FMU's inputs
+        or restored its state (`run_blocks` does at its start)."""
+        for sent, _ in self._sent:
+            sent[0] = 0.0
+
     def _change_only(self, count: int) -> tuple[int, int]:
         """The arrays of a setter group of `count` float64 scalars that sends only the values that
-        changed within a kernel call (kernel.c's `set_changed`): their addresses, kept alive here."""
+        changed since its last set (kernel.c's `set_changed`): their addresses, kept alive here."""
         sent = np.zeros(1 + 2 * count)
         references = np.zeros(count, dtype=np.uint32)
         self._sent.append((sent, references))

@@ -44,7 +44,7 @@ KIND_IDLE, KIND_NATIVE, KIND_PYTHON, KIND_SWEEP = 0, 1, 2, 3
 # Columns of the transfer-group table.
 G_KIND, G_FUNCTION, G_REFERENCES, G_REFERENCE_COUNT, G_VALUE_COUNT, G_VALUES, G_DIRECT = range(7)
 G_SLOT_FIRST, G_SLOT_COUNT = 7, 8
-# A setter group of float64 scalars may send only the values that changed within a kernel call:
+# A setter group of float64 scalars may send only the values that changed since its last set:
 # G_SENT the address of its float64 array (1 + 2 x count: valid flag, last sent, changed values),
 # G_SENT_REFERENCES of its uint32 array (count: changed references); 0: it sends every value.
 G_SENT, G_SENT_REFERENCES = 9, 10

@@ -119,6 +119,9 @@ def run_blocks(
     first = k = master.step_index
     position = 0
     rows[:] = 0
+    # Between the calls below only the kernel sets the FMUs' inputs (Python components step here);
+    # before them anyone may have (a Python loop, a restored state): each group sends all once.
+    tables.forget_sent()
     finish_step = False  # a Python component stepped: the kernel ends this step, then returns
 
     def deliver(first: int, k: int, clean: bool):

@@ -1,8 +1,8 @@
 """The compiled kernel's transfers: a plan's waypoints (2000 array inputs) reach Pure Pursuit as in
 the master's Python loop (the truth: `Master.run(compiled=False)`, which sets every input before
 each step), although the kernel copies runs of plain links at once, sends only the values that
-changed within a call (`set_changed` of kernel.c) and, with `scalar_rows`, keeps no array elements
-in the rows; a value set by Python between two kernel calls is sent again."""
+changed since their last set (`set_changed` of kernel.c) and, with `scalar_rows`, keeps no array
+elements in the rows; a value set by Python between two `run_blocks` calls is sent again."""
 
 from __future__ import annotations
 
@@ -130,7 +130,7 @@ def test_the_kernel_sends_a_plan_and_its_change_as_the_python_loop_does():
 
 
 @pytest.mark.parametrize("block", [7, 200])
-def test_a_value_set_between_kernel_calls_is_sent_again(block):
+def test_a_value_set_between_run_blocks_calls_is_sent_again(block):
     steps, meddle_at = 150, 23
     truth = _truth(steps, meddle_at)
     poses, _, _, _ = _kernel(steps, meddle_at, block)

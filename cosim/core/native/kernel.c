@@ -131,8 +131,9 @@ HOT void gather(const Tables *t, int64_t i) {
  * of the kernel, [count + 1 .. 2 count] room for the changed values, and G_SENT_REFERENCES room for
  * their references. An FMU input keeps the value last set (FMI 2.0 and 3.0: set before a step, held
  * after), so setting a value again that is bit for bit the one it holds does nothing, and leaving it
- * out changes nothing; the first set of each call of the kernel sends every value (between calls
- * Python may have set the FMU's inputs, or restored its state). A failed call forgets what was sent. */
+ * out changes nothing. The caller forgets what was sent (the flag to 0) whenever something else may
+ * have set the FMU's inputs or restored its state: `run_blocks` does at its start (between its
+ * kernel calls only Python components step). A failed call forgets what was sent. */
 HOT int64_t set_changed(const Tables *t, int64_t g, int64_t handle, int64_t version, int64_t values) {
     int64_t count = GROUP(t, g, G_REFERENCE_COUNT);
     double *sent = pointer(GROUP(t, g, G_SENT));
@@ -399,18 +400,6 @@ int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_po
         local.components = components;
     }
     const Tables *t = &local;
-    /* What a change-only setter group sent is known within this call only (`set_changed`). */
-    for (int64_t i = 0; i < n; i++) {
-        int64_t first = COMPONENT(t, i, C_SET_FIRST), end = first + COMPONENT(t, i, C_SET_COUNT);
-        if (COMPONENT(t, i, C_KIND) != KIND_NATIVE) {
-            continue;
-        }
-        for (int64_t g = first; g < end; g++) {
-            if (GROUP(t, g, G_SENT) != 0) {
-                *(double *)pointer(GROUP(t, g, G_SENT)) = 0.0;
-            }
-        }
-    }
     int64_t k = first_step;
     int64_t position = first_position;
     int64_t end = first_step + steps;
