@@ -45,25 +45,27 @@ MIN_RUN = 4  # plain links in a row that become one run
 
 def _runs(links: list, numbers: list) -> tuple[list, list]:
     """A component's links (source address, target address, kind) with each stretch of at least
-    `MIN_RUN` plain links from consecutive sources to consecutive targets made one run (kind
-    `RUN_LINK`, its length in the numbers' first column): one copy instead of one per value, the
-    same values."""
+    `MIN_RUN` plain links to consecutive targets from sources evenly apart (consecutive, or one
+    column of a row-major array: a plan's x or y) made one run (kind `RUN_LINK`; numbers: its
+    length, the sources' stride in values): one loop instead of one link per value, the same
+    values."""
     out_links, out_numbers = [], []
     j = 0
     while j < len(links):
         source, target, kind = links[j]
         end = j + 1
-        if kind == 0:
+        stride = links[j + 1][0] - source if j + 1 < len(links) else 0
+        if kind == 0 and stride > 0 and stride % 8 == 0:
             while (
                 end < len(links)
                 and links[end][2] == 0
-                and links[end][0] == source + 8 * (end - j)
+                and links[end][0] == source + stride * (end - j)
                 and links[end][1] == target + 8 * (end - j)
             ):
                 end += 1
         if end - j >= MIN_RUN:
             out_links.append((source, target, RUN_LINK))
-            out_numbers.append((float(end - j), 0.0))
+            out_numbers.append((float(end - j), float(stride // 8)))
         else:
             out_links += links[j:end]
             out_numbers += numbers[j:end]

@@ -144,7 +144,10 @@ def test_runs_of_plain_links_become_one_link():
     numbers = [(1.0, 0.0)] * 6 + [(2.0, 0.0), (1.0, 0.0)]
     got_links, got_numbers = fast_loop._runs(links, numbers)
     assert got_links == [(1000, 5000, fast_loop.RUN_LINK), (2000, 6000, 1), (3000, 7000, 0)]
-    assert got_numbers == [(6.0, 0.0), (2.0, 0.0), (1.0, 0.0)]
+    assert got_numbers == [(6.0, 1.0), (2.0, 0.0), (1.0, 0.0)]
+    # One column of a two-column array (sources two values apart) to consecutive targets.
+    column = [(1000 + 16 * j, 5000 + 8 * j, 0) for j in range(5)]
+    assert fast_loop._runs(column, [(1.0, 0.0)] * 5) == ([(1000, 5000, fast_loop.RUN_LINK)], [(5.0, 2.0)])
     short = [(1000 + 8 * j, 5000 + 8 * j, 0) for j in range(fast_loop.MIN_RUN - 1)]
     assert fast_loop._runs(short, [(1.0, 0.0)] * len(short)) == (short, [(1.0, 0.0)] * len(short))
     gap = [(1000, 5000, 0), (1008, 5008, 0), (1024, 5016, 0), (1032, 5024, 0)]  # source skips one

@@ -107,13 +107,23 @@ HOT int64_t transfer(int64_t function, int64_t handle, int64_t references, int64
 }
 
 /* Copy the component's connected inputs from their producers' outputs. A link of kind 3 is a run
- * of plain links (consecutive sources to consecutive targets): link_numbers[j * 2] values. */
+ * of plain links to consecutive targets, from sources link_numbers[j * 2 + 1] values apart (1:
+ * consecutive, 2: one column of a two-column array): link_numbers[j * 2] values. */
 HOT void gather(const Tables *t, int64_t i) {
     int64_t first = COMPONENT(t, i, C_LINK_FIRST), end = first + COMPONENT(t, i, C_LINK_COUNT);
     for (int64_t j = first; j < end; j++) {
         const int64_t *link = &t->link_addresses[j * 3];
         if (link[2] == 3) {
-            memcpy(pointer(link[1]), pointer(link[0]), sizeof(double) * (size_t)t->link_numbers[j * 2]);
+            int64_t count = (int64_t)t->link_numbers[j * 2], stride = (int64_t)t->link_numbers[j * 2 + 1];
+            double *target = pointer(link[1]);
+            const double *source = pointer(link[0]);
+            if (stride == 1) {
+                memcpy(target, source, sizeof(double) * (size_t)count);
+            } else {
+                for (int64_t m = 0; m < count; m++) {
+                    target[m] = source[m * stride];
+                }
+            }
             continue;
         }
         double value = load_f64(link[0]);
@@ -134,6 +144,8 @@ HOT void gather(const Tables *t, int64_t i) {
  * out changes nothing. The caller forgets what was sent (the flag to 0) whenever something else may
  * have set the FMU's inputs or restored its state: `run_blocks` does at its start (between its
  * kernel calls only Python components step). A failed call forgets what was sent. */
+#define SAME_RUN 32 /* values `set_changed` compares at once */
+
 HOT int64_t set_changed(const Tables *t, int64_t g, int64_t handle, int64_t version, int64_t values) {
     int64_t count = GROUP(t, g, G_REFERENCE_COUNT);
     double *sent = pointer(GROUP(t, g, G_SENT));
@@ -153,13 +165,19 @@ HOT int64_t set_changed(const Tables *t, int64_t g, int64_t handle, int64_t vers
     uint32_t *changed_references = pointer(GROUP(t, g, G_SENT_REFERENCES));
     uint64_t *changed = last + count;
     int64_t m = 0;
-    for (int64_t j = 0; j < count; j++) {
-        uint64_t value = now[j];
-        if (value != last[j]) {
-            last[j] = value;
-            changed_references[m] = references[j];
-            changed[m] = value;
-            m += 1;
+    for (int64_t from = 0; from < count; from += SAME_RUN) {
+        int64_t to = from + SAME_RUN < count ? from + SAME_RUN : count;
+        if (memcmp(now + from, last + from, sizeof(double) * (size_t)(to - from)) == 0) {
+            continue; /* the usual case for a plan's waypoints: one comparison of the whole run */
+        }
+        for (int64_t j = from; j < to; j++) {
+            uint64_t value = now[j];
+            if (value != last[j]) {
+                last[j] = value;
+                changed_references[m] = references[j];
+                changed[m] = value;
+                m += 1;
+            }
         }
     }
     if (m == 0) {
