@@ -250,6 +250,7 @@ class _RobotRun(SystemRun):
         self.reason: str | None = None  # why the loop stopped
         self.replay: BlockReplay | None = None
         self.signal: str | None = None  # a signal taken at a kernel hand-back, for `stop`
+        self.settled = False  # every topic had its first message (`BlockRecording.settled`)
 
     def finish_step(self, k: int) -> str | None:
         """Record what step k produced and check the outcome; why the run ends after it, or None."""
@@ -312,7 +313,11 @@ class _RobotRun(SystemRun):
         step hands no step back to be cut after)."""
         if self.signal is None:
             self.signal = interrupt.take()
-        return self.signal is not None or not self.replay.fast.settled
+        if self.signal is not None:
+            return True
+        if not self.settled:  # (once settled, always: a topic's channel stays)
+            self.settled = self.replay.fast.settled
+        return not self.settled
 
     def cut_after_python(self, k: int) -> bool:
         """Whether a kernel block ends after step k, in which a Python component stepped: when the
