@@ -48,7 +48,10 @@ def _runs(links: list, numbers: list) -> tuple[list, list]:
     `MIN_RUN` plain links to consecutive targets from sources evenly apart (consecutive, or one
     column of a row-major array: a plan's x or y) made one run (kind `RUN_LINK`; numbers: its
     length, the sources' stride in values): one loop instead of one link per value, the same
-    values."""
+    values. The links are taken in the order of their targets (each target has one link, and
+    no source is a target of the same component: any order copies the same values)."""
+    order = sorted(range(len(links)), key=lambda j: links[j][1])
+    links, numbers = [links[j] for j in order], [numbers[j] for j in order]
     out_links, out_numbers = [], []
     j = 0
     while j < len(links):

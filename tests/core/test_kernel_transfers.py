@@ -145,6 +145,11 @@ def test_runs_of_plain_links_become_one_link():
     got_links, got_numbers = fast_loop._runs(links, numbers)
     assert got_links == [(1000, 5000, fast_loop.RUN_LINK), (2000, 6000, 1), (3000, 7000, 0)]
     assert got_numbers == [(6.0, 1.0), (2.0, 0.0), (1.0, 0.0)]
+    # Taken in the order of their targets: two columns of a row-major array (x, y interleaved)
+    # to the x inputs, then the y inputs (as a plan reaches Pure Pursuit).
+    interleaved = [(1000 + 8 * j, 5000 + 8 * (j // 2) + 80 * (j % 2), 0) for j in range(20)]
+    got = fast_loop._runs(interleaved, [(1.0, 0.0)] * 20)
+    assert got == ([(1000, 5000, fast_loop.RUN_LINK), (1008, 5080, fast_loop.RUN_LINK)], [(10.0, 2.0)] * 2)
     # One column of a two-column array (sources two values apart) to consecutive targets.
     column = [(1000 + 16 * j, 5000 + 8 * j, 0) for j in range(5)]
     assert fast_loop._runs(column, [(1.0, 0.0)] * 5) == ([(1000, 5000, fast_loop.RUN_LINK)], [(5.0, 2.0)])
