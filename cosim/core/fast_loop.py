@@ -254,6 +254,21 @@ class KernelTables:
         self._keep = [entry.component for entry in plan]
         self._kernel = None
 
+    def poll_on_signals(self, fd: int) -> None:
+        """From the next kernel call on, the polled sweeps (which return before each of their
+        steps, so `run_blocks` can look for a signal there) return only when socket `fd` holds a
+        byte: a signal came (`cosim.core.interrupt.signal_socket`), or when the watched position
+        has used half of its free circle (`watch_numbers`: the caller's `before_block` draws a new
+        one, as `cosim.navigation.outcome.SafeCircle.watch` does then); fd < 0: nothing changes."""
+        from cosim.core import kernel as K
+
+        if fd < 0:
+            return
+        rows = self.components
+        polled = (rows[:, K.C_KIND] == K.KIND_SWEEP) & (rows[:, K.C_FLAGS] == 1)
+        rows[polled, K.C_FLAGS] = 2
+        rows[polled, K.C_LAST_TIME] = fd
+
     def forget_sent(self) -> None:
         """The next set of each change-only setter group sends every value (kernel.c's
         `set_changed`): call it whenever something besides the kernel may have set an FMU's inputs

@@ -317,6 +317,8 @@ class _RobotRun(SystemRun):
             return True
         if not self.settled:  # (once settled, always: a topic's channel stays)
             self.settled = self.replay.fast.settled
+            if self.settled:  # from now on only a signal ends a block here: the kernel sees it come
+                self.tables.poll_on_signals(interrupt.signal_socket())
         return not self.settled
 
     def cut_after_python(self, k: int) -> bool:

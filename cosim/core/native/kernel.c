@@ -12,6 +12,11 @@
 #include <stddef.h>
 #include <stdint.h>
 #include <string.h>
+#if !defined(_WIN32)
+#include <errno.h>
+#include <sys/socket.h>
+#include <sys/types.h>
+#endif
 #include "../../../planner/native/layout.h"
 
 /* Return codes (first element of the result). */
@@ -396,6 +401,33 @@ HOT void step_sweep(const Tables *t, int64_t i) {
     record(t, i);
 }
 
+/* Whether a signal came: the socket `fd` (Python's signal wakeup socket, `cosim.core.interrupt`)
+ * holds a byte, which stays for Python to take. A polled sweep with C_FLAGS 2 (its C_LAST_TIME the
+ * socket) returns only then: where a sweep with C_FLAGS 1 returns each time for the caller to look
+ * for a signal, and finds one exactly when the socket holds a byte. Without sockets: always. */
+static bool signal_came(int64_t fd) {
+#if defined(_WIN32)
+    (void)fd;
+    return true;
+#else
+    char byte;
+    return recv((int)fd, &byte, 1, MSG_PEEK | MSG_DONTWAIT) != -1 || (errno != EAGAIN && errno != EWOULDBLOCK);
+#endif
+}
+
+/* Whether the watched position has used half of the free circle (its centre's distance at least
+ * half the radius, or not finite), where the caller's look (`before_block` of `run_blocks`: the
+ * robot run's `SafeCircle.watch`) draws a new circle round it: a polled sweep with C_FLAGS 2
+ * returns then too, so the circle is drawn again where a sweep with C_FLAGS 1 had it drawn. */
+static bool circle_half_used(const Tables *t) {
+    if (t->watch_addresses[0] == 0) {
+        return false;
+    }
+    double dx = load_f64(t->watch_addresses[1]) - t->watch_numbers[3];
+    double dy = load_f64(t->watch_addresses[2]) - t->watch_numbers[4];
+    return !(4.0 * (dx * dx + dy * dy) < t->watch_numbers[5]);
+}
+
 /* Whether component i steps at step k (k % period == 0; a 64-bit division costs tens of cycles,
  * so not for the components stepped every step). */
 HOT bool due(const Tables *t, int64_t i, int64_t k) {
@@ -467,9 +499,12 @@ int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_po
                         position += 1;
                         continue;
                     }
-                    /* A polled sweep (C_FLAGS 1): the caller looks first, unless the call starts here. */
-                    if (COMPONENT(t, i, C_KIND) == KIND_SWEEP && COMPONENT(t, i, C_FLAGS) == 1 &&
-                        (k != first_step || i != first_position)) {
+                    /* A polled sweep (C_FLAGS 1; 2: only when a signal came): the caller looks
+                     * first, unless the call starts here. */
+                    if (COMPONENT(t, i, C_KIND) == KIND_SWEEP && COMPONENT(t, i, C_FLAGS) != 0 &&
+                        (k != first_step || i != first_position) &&
+                        (COMPONENT(t, i, C_FLAGS) == 1 || signal_came(COMPONENT(t, i, C_LAST_TIME)) ||
+                         circle_half_used(t))) {
                         return finish(result, POLL, k, i, i, 0, 0, 0);
                     }
                     gather(t, i);
