@@ -89,8 +89,10 @@ typedef struct {
 
 #if defined(__GNUC__)
 #define HOT static inline __attribute__((always_inline))
+#define APART static __attribute__((noinline))
 #else
 #define HOT static inline
+#define APART static
 #endif
 
 #define AT(table, row, columns, column) ((table)[(row) * (columns) + (column)])
@@ -111,6 +113,18 @@ HOT int64_t transfer(int64_t function, int64_t handle, int64_t references, int64
                                           pointer(values), (size_t)value_count);
 }
 
+/* A run of links (`gather`): count values to target, from source `stride` values apart. Not
+ * inlined: `gather` is, in three places, and the library is compiled on a first run. */
+APART void copy_run(double *target, const double *source, int64_t count, int64_t stride) {
+    if (stride == 1) {
+        memcpy(target, source, sizeof(double) * (size_t)count);
+        return;
+    }
+    for (int64_t m = 0; m < count; m++) {
+        target[m] = source[m * stride];
+    }
+}
+
 /* Copy the component's connected inputs from their producers' outputs. A link of kind 3 is a run
  * of plain links to consecutive targets, from sources link_numbers[j * 2 + 1] values apart (1:
  * consecutive, 2: one column of a two-column array): link_numbers[j * 2] values. */
@@ -119,16 +133,8 @@ HOT void gather(const Tables *t, int64_t i) {
     for (int64_t j = first; j < end; j++) {
         const int64_t *link = &t->link_addresses[j * 3];
         if (link[2] == 3) {
-            int64_t count = (int64_t)t->link_numbers[j * 2], stride = (int64_t)t->link_numbers[j * 2 + 1];
-            double *target = pointer(link[1]);
-            const double *source = pointer(link[0]);
-            if (stride == 1) {
-                memcpy(target, source, sizeof(double) * (size_t)count);
-            } else {
-                for (int64_t m = 0; m < count; m++) {
-                    target[m] = source[m * stride];
-                }
-            }
+            copy_run(pointer(link[1]), pointer(link[0]), (int64_t)t->link_numbers[j * 2],
+                     (int64_t)t->link_numbers[j * 2 + 1]);
             continue;
         }
         double value = load_f64(link[0]);
@@ -151,7 +157,8 @@ HOT void gather(const Tables *t, int64_t i) {
  * kernel calls only Python components step). A failed call forgets what was sent. */
 #define SAME_RUN 32 /* values `set_changed` compares at once */
 
-HOT int64_t set_changed(const Tables *t, int64_t g, int64_t handle, int64_t version, int64_t values) {
+/* Not inlined (see `copy_run`). */
+APART int64_t set_changed(const Tables *t, int64_t g, int64_t handle, int64_t version, int64_t values) {
     int64_t count = GROUP(t, g, G_REFERENCE_COUNT);
     double *sent = pointer(GROUP(t, g, G_SENT));
     const uint64_t *now = pointer(values);
@@ -196,6 +203,40 @@ HOT int64_t set_changed(const Tables *t, int64_t g, int64_t handle, int64_t vers
     return status;
 }
 
+/* A setter group's values into its FMI value array, converted (not inlined: `set_inputs` is, in
+ * two places, and the library is compiled on a first run). */
+APART void fill_values(const Tables *t, int64_t g, int64_t version) {
+    int64_t kind = GROUP(t, g, G_KIND), values = GROUP(t, g, G_VALUES);
+    int64_t first_slot = GROUP(t, g, G_SLOT_FIRST), count = GROUP(t, g, G_SLOT_COUNT);
+    for (int64_t position = 0; position < count; position++) {
+        int64_t s = first_slot + position;
+        double value = load_f64(t->slot_addresses[s]);
+        if (t->slot_scales[s] != 1.0) {
+            value = value * t->slot_scales[s];
+        }
+        void *array = pointer(values);
+        switch (kind) {
+        case KIND_REAL: ((double *)array)[position] = value; break;
+        case KIND_INTEGER: ((int32_t *)array)[position] = (int32_t)(int64_t)rint(value); break;
+        case KIND_BOOLEAN:
+            if (version == 2) {
+                ((int32_t *)array)[position] = value != 0.0 ? 1 : 0;
+            } else {
+                ((uint8_t *)array)[position] = value != 0.0 ? 1 : 0;
+            }
+            break;
+        case KIND_FLOAT32: ((float *)array)[position] = (float)value; break;
+        case KIND_INT8: ((int8_t *)array)[position] = (int8_t)(int64_t)rint(value); break;
+        case KIND_UINT8: ((uint8_t *)array)[position] = (uint8_t)(int64_t)rint(value); break;
+        case KIND_INT16: ((int16_t *)array)[position] = (int16_t)(int64_t)rint(value); break;
+        case KIND_UINT16: ((uint16_t *)array)[position] = (uint16_t)(int64_t)rint(value); break;
+        case KIND_UINT32: ((uint32_t *)array)[position] = (uint32_t)(int64_t)rint(value); break;
+        case KIND_INT64: ((int64_t *)array)[position] = (int64_t)rint(value); break;
+        default: ((uint64_t *)array)[position] = (uint64_t)rint(value); break;
+        }
+    }
+}
+
 /* Copy the inputs into the FMI value arrays (converting), then call the setters: the status of
  * the first failing call (> 1, its group's kind in *kind), or 0. */
 HOT int64_t set_inputs(const Tables *t, int64_t i, int64_t *kind_out) {
@@ -204,34 +245,7 @@ HOT int64_t set_inputs(const Tables *t, int64_t i, int64_t *kind_out) {
     for (int64_t g = first; g < end; g++) {
         int64_t kind = GROUP(t, g, G_KIND), values = GROUP(t, g, G_VALUES);
         if (GROUP(t, g, G_DIRECT) == 0) {
-            int64_t first_slot = GROUP(t, g, G_SLOT_FIRST), count = GROUP(t, g, G_SLOT_COUNT);
-            for (int64_t position = 0; position < count; position++) {
-                int64_t s = first_slot + position;
-                double value = load_f64(t->slot_addresses[s]);
-                if (t->slot_scales[s] != 1.0) {
-                    value = value * t->slot_scales[s];
-                }
-                void *array = pointer(values);
-                switch (kind) {
-                case KIND_REAL: ((double *)array)[position] = value; break;
-                case KIND_INTEGER: ((int32_t *)array)[position] = (int32_t)(int64_t)rint(value); break;
-                case KIND_BOOLEAN:
-                    if (version == 2) {
-                        ((int32_t *)array)[position] = value != 0.0 ? 1 : 0;
-                    } else {
-                        ((uint8_t *)array)[position] = value != 0.0 ? 1 : 0;
-                    }
-                    break;
-                case KIND_FLOAT32: ((float *)array)[position] = (float)value; break;
-                case KIND_INT8: ((int8_t *)array)[position] = (int8_t)(int64_t)rint(value); break;
-                case KIND_UINT8: ((uint8_t *)array)[position] = (uint8_t)(int64_t)rint(value); break;
-                case KIND_INT16: ((int16_t *)array)[position] = (int16_t)(int64_t)rint(value); break;
-                case KIND_UINT16: ((uint16_t *)array)[position] = (uint16_t)(int64_t)rint(value); break;
-                case KIND_UINT32: ((uint32_t *)array)[position] = (uint32_t)(int64_t)rint(value); break;
-                case KIND_INT64: ((int64_t *)array)[position] = (int64_t)rint(value); break;
-                default: ((uint64_t *)array)[position] = (uint64_t)rint(value); break;
-                }
-            }
+            fill_values(t, g, version);
         }
         int64_t status;
         if (GROUP(t, g, G_SENT) != 0) {
@@ -248,6 +262,46 @@ HOT int64_t set_inputs(const Tables *t, int64_t i, int64_t *kind_out) {
     return 0;
 }
 
+/* A getter group's FMI value array into the output buffer, converted (not inlined, as
+ * `fill_values`). */
+APART void read_values(const Tables *t, int64_t g, int64_t version) {
+    int64_t kind = GROUP(t, g, G_KIND), values = GROUP(t, g, G_VALUES);
+    int64_t first_slot = GROUP(t, g, G_SLOT_FIRST), count = GROUP(t, g, G_SLOT_COUNT);
+    for (int64_t position = 0; position < count; position++) {
+        int64_t s = first_slot + position;
+        double value;
+        const void *array = pointer(values);
+        switch (kind) {
+        case KIND_REAL: value = ((const double *)array)[position]; break;
+        case KIND_INTEGER: value = (double)((const int32_t *)array)[position]; break;
+        case KIND_BOOLEAN:
+            value = version == 2 ? (double)((const int32_t *)array)[position]
+                                 : (double)((const uint8_t *)array)[position];
+            break;
+        case KIND_FLOAT32: value = (double)((const float *)array)[position]; break;
+        case KIND_INT8: value = (double)((const int8_t *)array)[position]; break;
+        case KIND_UINT8: value = (double)((const uint8_t *)array)[position]; break;
+        case KIND_INT16: value = (double)((const int16_t *)array)[position]; break;
+        case KIND_UINT16: value = (double)((const uint16_t *)array)[position]; break;
+        case KIND_UINT32: value = (double)((const uint32_t *)array)[position]; break;
+        case KIND_INT64: {
+            int64_t number = ((const int64_t *)array)[position];
+            value = number > EXACT_INTEGER || number < -EXACT_INTEGER ? NAN : (double)number;
+            break;
+        }
+        default: {
+            uint64_t number = ((const uint64_t *)array)[position];
+            value = number > (uint64_t)EXACT_INTEGER ? NAN : (double)number;
+            break;
+        }
+        }
+        if (t->slot_scales[s] != 1.0) {
+            value = value * t->slot_scales[s];
+        }
+        store_f64(t->slot_addresses[s], value);
+    }
+}
+
 /* Call the getters, then copy the FMI value arrays into the output buffer (converting). */
 HOT int64_t get_outputs(const Tables *t, int64_t i, int64_t *kind_out) {
     int64_t handle = COMPONENT(t, i, C_HANDLE), version = COMPONENT(t, i, C_VERSION);
@@ -262,40 +316,7 @@ HOT int64_t get_outputs(const Tables *t, int64_t i, int64_t *kind_out) {
             return status;
         }
         if (GROUP(t, g, G_DIRECT) == 0) {
-            int64_t first_slot = GROUP(t, g, G_SLOT_FIRST), count = GROUP(t, g, G_SLOT_COUNT);
-            for (int64_t position = 0; position < count; position++) {
-                int64_t s = first_slot + position;
-                double value;
-                const void *array = pointer(values);
-                switch (kind) {
-                case KIND_REAL: value = ((const double *)array)[position]; break;
-                case KIND_INTEGER: value = (double)((const int32_t *)array)[position]; break;
-                case KIND_BOOLEAN:
-                    value = version == 2 ? (double)((const int32_t *)array)[position]
-                                         : (double)((const uint8_t *)array)[position];
-                    break;
-                case KIND_FLOAT32: value = (double)((const float *)array)[position]; break;
-                case KIND_INT8: value = (double)((const int8_t *)array)[position]; break;
-                case KIND_UINT8: value = (double)((const uint8_t *)array)[position]; break;
-                case KIND_INT16: value = (double)((const int16_t *)array)[position]; break;
-                case KIND_UINT16: value = (double)((const uint16_t *)array)[position]; break;
-                case KIND_UINT32: value = (double)((const uint32_t *)array)[position]; break;
-                case KIND_INT64: {
-                    int64_t number = ((const int64_t *)array)[position];
-                    value = number > EXACT_INTEGER || number < -EXACT_INTEGER ? NAN : (double)number;
-                    break;
-                }
-                default: {
-                    uint64_t number = ((const uint64_t *)array)[position];
-                    value = number > (uint64_t)EXACT_INTEGER ? NAN : (double)number;
-                    break;
-                }
-                }
-                if (t->slot_scales[s] != 1.0) {
-                    value = value * t->slot_scales[s];
-                }
-                store_f64(t->slot_addresses[s], value);
-            }
+            read_values(t, g, version);
         }
     }
     return 0;
@@ -428,6 +449,17 @@ static bool circle_half_used(const Tables *t) {
     return !(4.0 * (dx * dx + dy * dy) < t->watch_numbers[5]);
 }
 
+/* A Python component's C step (C_STEP): its inputs gathered, the call, its row when it stepped;
+ * the call's result (0: stepped, else Python's). */
+APART int64_t step_python(const Tables *t, int64_t i, double time) {
+    gather(t, i);
+    int64_t handed = ((PythonStep)(intptr_t)COMPONENT(t, i, C_STEP))(pointer(COMPONENT(t, i, C_HANDLE)), time);
+    if (handed == 0) {
+        record(t, i);
+    }
+    return handed;
+}
+
 /* Whether component i steps at step k (k % period == 0; a 64-bit division costs tens of cycles,
  * so not for the components stepped every step). */
 HOT bool due(const Tables *t, int64_t i, int64_t k) {
@@ -490,12 +522,9 @@ int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_po
                         if (COMPONENT(t, i, C_STEP) == 0) {
                             return finish(result, HAND_BACK, k, i, i, 0, 0, 0);
                         }
-                        gather(t, i);
-                        PythonStep python_step = (PythonStep)(intptr_t)COMPONENT(t, i, C_STEP);
-                        if (python_step(pointer(COMPONENT(t, i, C_HANDLE)), time) != 0) {
+                        if (step_python(t, i, time) != 0) {
                             return finish(result, HAND_BACK, k, i, i, 0, 0, 0);
                         }
-                        record(t, i);
                         position += 1;
                         continue;
                     }
