@@ -38,8 +38,10 @@ DONE, HAND_BACK, WATCH, FAILED, POLL = 0, 1, 2, 3, 4
     C_RECORD_IN_FIRST, C_RECORD_IN_COUNT,
 ) = range(23)  # fmt: skip
 COMPONENT_COLUMNS = 23
-# Never stepped (constant outputs), by FMI calls, by Python, by one C call on its inputs x, y, theta
-# (a sweep: the lidar's, `KernelTables`).
+# Never stepped (constant outputs), by FMI calls, by Python (or, with a C_STEP, by that C call on
+# its state until it hands a step to Python: the replanning planner's), by one C call on its inputs
+# x, y, theta (a sweep: the lidar's, `KernelTables`; C_FLAGS 1 returns POLL before it, 2 only when
+# a signal came or the watch needs a look: `KernelTables.poll_on_signals`).
 KIND_IDLE, KIND_NATIVE, KIND_PYTHON, KIND_SWEEP = 0, 1, 2, 3
 # Columns of the transfer-group table.
 G_KIND, G_FUNCTION, G_REFERENCES, G_REFERENCE_COUNT, G_VALUE_COUNT, G_VALUES, G_DIRECT = range(7)

@@ -15,14 +15,17 @@ at each replan (stamped with the start of the planner step that made it) and `/g
 given during the run.
 
 The loop: the FMUs step in the compiled kernel (`Master.run_blocks`, `cosim.core.kernel`), which
-keeps their buffers after each step, sweeps a noise-free lidar itself, and hands the Python
-components (planner, a noisy lidar) back where they are due; their rows are kept too
-(`python_rows`), so a block goes on through their steps, up to 1000 steps. It ends at the end of
-a step in which one stepped when that step has something to do (a new plan, no path, a goal poll)
-or while a topic awaits its first message (`cut_after_python`), before a Python component's step
-or a sweep when a signal came (`end_before_python`), and after any step whose position may end
-the run (not finite, near the goal, or outside the circle that the true obstacles cannot reach:
-`SafeCircle`).
+keeps their buffers after each step, sweeps a noise-free lidar itself, steps the replanning
+planner by its C step (`PlannerComponent.kernel_step`) while no replan can follow, and hands the
+Python components (a noisy lidar; the planner where a replan may follow; every planner step in a
+run that polls goals) back where they are due; their rows are kept too (`python_rows`), so a
+block goes on through their steps, up to 1000 steps. It ends at the end of a step in which one
+stepped when that step has something to do (a new plan, no path, a goal poll: `cut_after_python`),
+before a Python component's step or a sweep while a topic awaits its first message or when a
+signal came (`end_before_python`; once every topic had its first message the sweep returns only
+when a signal came, seen on `cosim.core.interrupt.signal_socket`, or the watch needs a new
+circle: `KernelTables.poll_on_signals`), and after any step whose position may end the run (not
+finite, near the goal, or outside the circle that the true obstacles cannot reach: `SafeCircle`).
 Each block goes to the recording (`cosim.record.replay`): recorded and checked from its rows
 (`cosim.record.blocks`: the positions of all its steps through `OutcomeMonitor.check_positions`,
 the rows turned into messages with NumPy every few chunk windows), or, when the rows cannot describe
