@@ -25,7 +25,10 @@ LIBRARIES = {
         {"World": "cosim.world.kernels:WorldArrays", "Lidar": "cosim.world.kernels:LidarArrays"},
         (),
     ),
-    "cosim/navigation/native/costmap.c": ({"Costmap": "cosim.navigation.costmap:_Arrays"}, ()),
+    "cosim/navigation/native/costmap.c": (
+        {"Costmap": "cosim.navigation.costmap:_Arrays", "PlannerStep": "cosim.navigation.planner:_StepState"},
+        ("cosim.navigation.planner",),
+    ),
     "planner/native/astar.c": (
         {"WorkState": "planner.astar:WorkState", "Query": "planner.astar:Query"},
         ("planner.astar", "planner.searchspace"),

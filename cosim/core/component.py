@@ -77,6 +77,9 @@ class Port:
     fmi_type: str = ""
     array_name: str | None = field(default=None, init=False, compare=False)
     array_index: tuple[int, ...] | None = field(default=None, init=False, compare=False)
+    # True for ports such as `ranges[3]` that are one element of an array signal (an attribute,
+    # not a property: a run's set-up reads it for each of ~10,000 ports).
+    is_array_element: bool = field(default=False, init=False, compare=False, repr=False)
 
     def __init__(
         self,
@@ -101,12 +104,8 @@ class Port:
             fmi_type=fmi_type,
             array_name=array_name,
             array_index=array_index,
+            is_array_element=array_name is not None,
         )
-
-    @property
-    def is_array_element(self) -> bool:
-        """True for ports such as `ranges[3]` that are one element of an array signal."""
-        return self.array_name is not None
 
 
 @functools.lru_cache(maxsize=1 << 16)
@@ -140,7 +139,7 @@ def _array_ports(base: str, count: int, columns: int, unit: str, start: float) -
         port = object.__new__(Port)
         port.__dict__.update(
             name=name, type="real", unit=unit, description="", start=start, fmi_type="",
-            array_name=base, array_index=index,
+            array_name=base, array_index=index, is_array_element=True,
         )  # fmt: skip
         ports.append(port)
     return tuple(ports)

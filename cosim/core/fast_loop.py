@@ -39,6 +39,55 @@ def transfer_expression(value: str, scale: float, offset: float) -> str:
     return expression if offset == 0.0 else f"{expression} + {offset!r}"
 
 
+RUN_LINK = 3  # a link table row that is a run of plain links (kernel.c's `gather`)
+MIN_RUN = 4  # plain links in a row that become one run
+
+
+def _runs(links: list, numbers: list) -> tuple[list, list]:
+    """A component's links (source address, target address, kind) with each stretch of at least
+    `MIN_RUN` plain links to consecutive targets from sources evenly apart (consecutive, or one
+    column of a row-major array: a plan's x or y) made one run (kind `RUN_LINK`; numbers: its
+    length, the sources' stride in values): one loop instead of one link per value, the same
+    values. The links are taken in the order of their targets (each target has one link, and
+    no source is a target of the same component: any order copies the same values)."""
+    order = sorted(range(len(links)), key=lambda j: links[j][1])
+    links, numbers = [links[j] for j in order], [numbers[j] for j in order]
+    out_links, out_numbers = [], []
+    j = 0
+    while j < len(links):
+        source, target, kind = links[j]
+        end = j + 1
+        stride = links[j + 1][0] - source if j + 1 < len(links) else 0
+        if kind == 0 and stride > 0 and stride % 8 == 0:
+            while (
+                end < len(links)
+                and links[end][2] == 0
+                and links[end][0] == source + stride * (end - j)
+                and links[end][1] == target + 8 * (end - j)
+            ):
+                end += 1
+        if end - j >= MIN_RUN:
+            out_links.append((source, target, RUN_LINK))
+            out_numbers.append((float(end - j), float(stride // 8)))
+        else:
+            out_links += links[j:end]
+            out_numbers += numbers[j:end]
+        j = end
+    return out_links, out_numbers
+
+
+def recorded_inputs(component: Component) -> slice:
+    """The inputs of `component` a recording reads from its rows, as one slice of the input
+    buffer: its scalar inputs (their run of slots; all inputs when array elements lie between
+    them; none without scalars). Array elements are never recorded (`cosim.record.steps`)."""
+    slots = [i for i, port in enumerate(component.inputs) if not port.is_array_element]
+    if not slots:
+        return slice(0, 0)
+    if slots == list(range(slots[0], slots[-1] + 1)):
+        return slice(slots[0], slots[-1] + 1)
+    return slice(0, len(component.inputs))
+
+
 class KernelTables:
     """The tables `cosim.core.kernel.step_kernel` reads for one master plan (see there).
 
@@ -48,7 +97,12 @@ class KernelTables:
     its `kernel_sweep()` gives (C function address, its argument): then the kernel steps it by
     that call on its first three inputs (the lidar's sweep: `cosim.world.lidar.Lidar`).
     `python_rows` (with `record`): those components have rows too, which `run_blocks` writes
-    after their steps, so a stretch of steps goes on through them (see there).
+    after their steps, so a stretch of steps goes on through them (see there); one whose
+    `kernel_step()` gives (C function address, its state) is stepped by that call, which says
+    whether the step needs Python after all (then it is handed back: the replanning planner).
+    `scalar_rows` (with `record`): a row keeps only the inputs `recorded_inputs` gives (the scalar
+    ones: what a recording reads), not the elements of input arrays (a plan's waypoints, a scan's
+    ranges), whose columns are left as they were; `row_inputs[i]` is component i's kept slice.
     """
 
     def __init__(
@@ -59,10 +113,12 @@ class KernelTables:
         record: bool,
         block: int,
         python_rows: bool = False,
+        scalar_rows: bool = False,
     ) -> None:
         from cosim.core import kernel as K
 
         n = len(plan)
+        self._sent: list[tuple[np.ndarray, np.ndarray]] = []  # `_change_only`
         components = np.zeros((n, K.COMPONENT_COLUMNS), dtype=np.int64)
         step_sizes = np.zeros(n)
         links, link_numbers, groups, slots, scales, checks = [], [], [], [], [], []
@@ -70,6 +126,10 @@ class KernelTables:
         record_offset = 0
         fed = system.links()
         self.record_shapes: list[tuple[int, int] | None] = []
+        self.row_inputs = [
+            recorded_inputs(component) if scalar_rows else slice(0, len(component.inputs))
+            for component, _, _ in plan
+        ]
         self.python: list[bool] = []  # whether each component is handed back to Python
         for i, (component, period, _) in enumerate(plan):
             native = component.native_step()
@@ -95,6 +155,8 @@ class KernelTables:
             row[K.C_IN_COUNT] = len(component.inputs)
             row[K.C_OUT_ADDRESS] = ctypes.addressof(component.output_cbuffer)
             row[K.C_OUT_COUNT] = len(component.outputs)
+            kept = self.row_inputs[i]
+            row[K.C_RECORD_IN_FIRST], row[K.C_RECORD_IN_COUNT] = kept.start, kept.stop - kept.start
             row[K.C_LINK_FIRST] = len(links)
             for connection, producer_name, source, target in fed.get(component.name, ()):
                 if producer_name in skip:
@@ -109,11 +171,23 @@ class KernelTables:
                     )
                 )
                 link_numbers.append((connection.scale, connection.offset))
-            row[K.C_LINK_COUNT] = len(links) - row[K.C_LINK_FIRST]
+            first_link = int(row[K.C_LINK_FIRST])
+            links[first_link:], link_numbers[first_link:] = _runs(
+                links[first_link:], link_numbers[first_link:]
+            )
+            row[K.C_LINK_COUNT] = len(links) - first_link
             if sweep is not None:
                 record_offset = self._reserve(record, component, period, block, record_offset, row)
                 continue
             if native is None:  # rows written by `run_blocks` with python_rows (C_RECORD stays 0)
+                # A Python component with a C step (`kernel_step`) that needs Python only at some
+                # steps: with python_rows the kernel steps it when it can (and writes those rows).
+                kernel_step = getattr(component, "kernel_step", None)
+                kernel_step = kernel_step() if record and python_rows and callable(kernel_step) else None
+                if kernel_step is not None:
+                    row[K.C_STEP], row[K.C_HANDLE] = kernel_step
+                    record_offset = self._reserve(True, component, period, block, record_offset, row)
+                    continue
                 record_offset = self._reserve(record and python_rows, component, period, block, record_offset)
                 continue
             row[K.C_VERSION] = native.fmi_version
@@ -142,11 +216,14 @@ class KernelTables:
                         call_slots,
                         call_scales,
                     ) = call
+                    sent = sent_references = 0
+                    if direction == "set" and kind == "real" and ref_count == value_count:
+                        sent, sent_references = self._change_only(ref_count)
                     groups.append(
                         (
                             K.KINDS.index(kind),
                             function, refs, ref_count, value_count, values, int(direct),
-                            len(slots), len(call_slots),
+                            len(slots), len(call_slots), sent, sent_references,
                         )
                     )  # fmt: skip
                     slots += [ctypes.addressof(buffer) + 8 * slot for slot in call_slots]
@@ -176,6 +253,36 @@ class KernelTables:
         # What the tables point into stays alive with them.
         self._keep = [entry.component for entry in plan]
         self._kernel = None
+
+    def poll_on_signals(self, fd: int) -> None:
+        """From the next kernel call on, the polled sweeps (which return before each of their
+        steps, so `run_blocks` can look for a signal there) return only when socket `fd` holds a
+        byte: a signal came (`cosim.core.interrupt.signal_socket`), or when the watched position
+        has used half of its free circle (`watch_numbers`: the caller's `before_block` draws a new
+        one, as `cosim.navigation.outcome.SafeCircle.watch` does then); fd < 0: nothing changes."""
+        from cosim.core import kernel as K
+
+        if fd < 0:
+            return
+        rows = self.components
+        polled = (rows[:, K.C_KIND] == K.KIND_SWEEP) & (rows[:, K.C_FLAGS] == 1)
+        rows[polled, K.C_FLAGS] = 2
+        rows[polled, K.C_LAST_TIME] = fd
+
+    def forget_sent(self) -> None:
+        """The next set of each change-only setter group sends every value (kernel.c's
+        `set_changed`): call it whenever something besides the kernel may have set an FMU's inputs
+        or restored its state (`run_blocks` does at its start)."""
+        for sent, _ in self._sent:
+            sent[0] = 0.0
+
+    def _change_only(self, count: int) -> tuple[int, int]:
+        """The arrays of a setter group of `count` float64 scalars that sends only the values that
+        changed since its last set (kernel.c's `set_changed`): their addresses, kept alive here."""
+        sent = np.zeros(1 + 2 * count)
+        references = np.zeros(count, dtype=np.uint32)
+        self._sent.append((sent, references))
+        return sent.ctypes.data, references.ctypes.data
 
     def _reserve(self, record: bool, component, period: int, block: int, offset: int, row=None) -> int:
         """Room for `component`'s rows (its inputs then outputs, once per step of a block) at

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 import sys
 import threading
 from collections.abc import Iterator
@@ -38,6 +39,10 @@ class _State:
     deferring = 0  # nesting of deferred()
     waiting = False  # in a wait that may be abandoned (for a child process's FMU call): raise there too
     pending: str | None = None  # a signal received while deferring, not yet taken
+    # Python's signal wakeup socket while inside catching_signals(): the interpreter writes a byte
+    # to `wakeup` the moment a signal comes (before any Python handler runs), so C code can see
+    # that one came (`signal_socket`); None when another wakeup fd was set (kept) or off the main thread.
+    wakeup: tuple[socket.socket, socket.socket] | None = None
 
 
 _state = _State()
@@ -83,12 +88,64 @@ def catching_signals(until_exit: bool = False) -> Iterator[None]:
         return
     previous = {number: signal.signal(number, _handle) for number in SIGNALS}
     _state.installed, _state.pending = True, None
+    _open_wakeup()
     try:
         yield
     finally:
         _state.installed = False
+        _close_wakeup()
         for number, handler in previous.items():
             signal.signal(number, _exit_now if until_exit else handler)
+
+
+def _open_wakeup() -> None:
+    """Python's signal wakeup fd to a socket of ours, unless one is set already (an event loop's)."""
+    try:
+        pair = socket.socketpair()
+    except OSError:
+        return
+    for end in pair:
+        end.setblocking(False)
+    try:
+        old = signal.set_wakeup_fd(pair[1].fileno(), warn_on_full_buffer=False)
+    except (ValueError, OSError):
+        old = None
+    if old != -1:  # someone else's (put it back), or none could be set
+        if old is not None:
+            signal.set_wakeup_fd(old)
+        for end in pair:
+            end.close()
+        return
+    _state.wakeup = pair
+
+
+def _close_wakeup() -> None:
+    if _state.wakeup is None:
+        return
+    signal.set_wakeup_fd(-1)
+    for end in _state.wakeup:
+        end.close()
+    _state.wakeup = None
+
+
+def signal_socket() -> int:
+    """The file descriptor of a socket that holds a byte from the moment a signal comes until
+    `take()` (C code can look without the interpreter: the compiled kernel's polled sweeps), or -1
+    when there is none (then nobody can tell without asking `pending`)."""
+    return -1 if _state.wakeup is None else _state.wakeup[0].fileno()
+
+
+def _drain() -> None:
+    """Empty the wakeup socket (its bytes are the signals `take` takes)."""
+    if _state.wakeup is None:
+        return
+    try:
+        while _state.wakeup[0].recv(64):
+            pass
+    except (BlockingIOError, InterruptedError):
+        pass
+    except OSError:
+        pass
 
 
 def _exit_now(number: int, frame) -> None:
@@ -115,6 +172,11 @@ def deferred() -> Iterator[None]:
 def take() -> str | None:
     """The name of a signal received while deferring ("SIGINT"/"SIGTERM"), once; None if none."""
     name, _state.pending = _state.pending, None
+    if name is not None:
+        # Its byte (and those of any signal before it) is taken with it; a byte whose handler has
+        # not run yet stays for the next look only if it came after this (rare: then that signal
+        # is noticed at the next block, not the next sweep).
+        _drain()
     return name
 
 

@@ -35,15 +35,22 @@ DONE, HAND_BACK, WATCH, FAILED, POLL = 0, 1, 2, 3, 4
     C_KIND, C_PERIOD, C_VERSION, C_HANDLE, C_STEP, C_FLAGS, C_LAST_TIME, C_LINK_FIRST, C_LINK_COUNT,
     C_SET_FIRST, C_SET_COUNT, C_GET_FIRST, C_GET_COUNT, C_CHECK_FIRST, C_CHECK_COUNT,
     C_IN_ADDRESS, C_IN_COUNT, C_OUT_ADDRESS, C_OUT_COUNT, C_RECORD, C_RECORD_OFFSET,
-) = range(21)  # fmt: skip
-COMPONENT_COLUMNS = 21
-# Never stepped (constant outputs), by FMI calls, by Python, by one C call on its inputs x, y, theta
-# (a sweep: the lidar's, `KernelTables`).
+    C_RECORD_IN_FIRST, C_RECORD_IN_COUNT,
+) = range(23)  # fmt: skip
+COMPONENT_COLUMNS = 23
+# Never stepped (constant outputs), by FMI calls, by Python (or, with a C_STEP, by that C call on
+# its state until it hands a step to Python: the replanning planner's), by one C call on its inputs
+# x, y, theta (a sweep: the lidar's, `KernelTables`; C_FLAGS 1 returns POLL before it, 2 only when
+# a signal came or the watch needs a look: `KernelTables.poll_on_signals`).
 KIND_IDLE, KIND_NATIVE, KIND_PYTHON, KIND_SWEEP = 0, 1, 2, 3
 # Columns of the transfer-group table.
 G_KIND, G_FUNCTION, G_REFERENCES, G_REFERENCE_COUNT, G_VALUE_COUNT, G_VALUES, G_DIRECT = range(7)
 G_SLOT_FIRST, G_SLOT_COUNT = 7, 8
-GROUP_COLUMNS = 9
+# A setter group of float64 scalars may send only the values that changed since its last set:
+# G_SENT the address of its float64 array (1 + 2 x count: valid flag, last sent, changed values),
+# G_SENT_REFERENCES of its uint32 array (count: changed references); 0: it sends every value.
+G_SENT, G_SENT_REFERENCES = 9, 10
+GROUP_COLUMNS = 11
 KIND_REAL, KIND_INTEGER, KIND_BOOLEAN = 0, 1, 2
 RESULT_SIZE = 7  # int64 elements of the result: code, step, position, component, call, status, kind
 R_STEP = 1  # the result's step: also written at the start of each step, so it is the step under way

@@ -24,15 +24,16 @@ from cosim.errors import CosimError
 
 
 def kernel_tables(
-    master, record: bool, block: int, python_rows: bool = False
+    master, record: bool, block: int, python_rows: bool = False, scalar_rows: bool = False
 ) -> fast_loop.KernelTables | None:
     """The tables of `run_blocks` for `master`'s plan, or None when the kernel cannot run the
     system: no component steps by C calls, Jacobi mode with a component that needs Python, or a
     delayed or iterated algebraic loop (those step in the Python loop). `python_rows`: the
-    components that need Python have rows too (`KernelTables`)."""
+    components that need Python have rows too; `scalar_rows`: rows keep no input array elements
+    (`KernelTables`)."""
     plan = master._plan
     skip = {entry.component.name for entry in plan if entry.component.constant_outputs}
-    tables = fast_loop.KernelTables(plan, master.system, skip, record, block, python_rows)
+    tables = fast_loop.KernelTables(plan, master.system, skip, record, block, python_rows, scalar_rows)
     stepped = [python for python, (c, _, _) in zip(tables.python, plan, strict=True) if c.name not in skip]
     if all(stepped):  # no component steps by C calls
         return None
@@ -113,10 +114,14 @@ def run_blocks(
     # Python components with rows (`python_rows`): their input counts, by plan position.
     python_rows = tables.python_rows
     input_counts = [len(entry.component.inputs) for entry in plan] if python_rows else []
+    row_inputs = tables.row_inputs  # the inputs a row keeps (all, or the scalars)
     end = master.step_index + steps
     first = k = master.step_index
     position = 0
     rows[:] = 0
+    # Between the calls below only the kernel sets the FMUs' inputs (Python components step here);
+    # before them anyone may have (a Python loop, a restored state): each group sends all once.
+    tables.forget_sent()
     finish_step = False  # a Python component stepped: the kernel ends this step, then returns
 
     def deliver(first: int, k: int, clean: bool):
@@ -209,7 +214,8 @@ def run_blocks(
                     if python_rows:  # its row: inputs, then outputs, after the step
                         at = rows.item(position)
                         history = blocks[position]
-                        history[at, : input_counts[position]] = component.input_buffer
+                        kept = row_inputs[position]
+                        history[at, kept] = component.input_buffer[kept]
                         history[at, input_counts[position] :] = component.output_buffer
                         rows[position] = at + 1
                     position += 1

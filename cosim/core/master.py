@@ -497,14 +497,20 @@ class Master:
         return steps
 
     def kernel_tables(
-        self, record: bool = False, block: int = KERNEL_BLOCK, python_rows: bool = False
+        self,
+        record: bool = False,
+        block: int = KERNEL_BLOCK,
+        python_rows: bool = False,
+        scalar_rows: bool = False,
     ) -> fast_loop.KernelTables | None:
         """The tables of `run_blocks` (`cosim.core.kernel`), or None when the kernel cannot run this
         system: no component steps by C calls, or Jacobi mode with a component that needs Python.
         `python_rows` (with `record`): the components that need Python have rows too, and the
-        stretches of `run_blocks` go on through their steps (`cosim.core.kernel_path`)."""
+        stretches of `run_blocks` go on through their steps (`cosim.core.kernel_path`).
+        `scalar_rows` (with `record`): the rows keep the scalar inputs only, not the elements of
+        input arrays (`cosim.core.fast_loop.recorded_inputs`: what a recording reads)."""
         self._check_running()
-        return kernel_path.kernel_tables(self, record, block, python_rows)
+        return kernel_path.kernel_tables(self, record, block, python_rows, scalar_rows)
 
     def run_blocks(
         self,

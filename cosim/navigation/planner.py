@@ -152,6 +152,42 @@ class Replan:
     inflation: float = field(default=math.nan)  # [m] the costmap was inflated by
 
 
+# The planner's C step (native/costmap.c's `planner_step`): where it hands over to Python, and why.
+PENDING_MARKS, PENDING_REPLAN = 1, 2
+REASON_NO_FREE_DIRECTION, REASON_STALLED, REASON_OBSTACLE_ON_PLAN = 1, 2, 3
+REASONS = (None, "no_free_direction", "stalled", "obstacle_on_plan")  # by REASON_* code
+
+_p, _i64, _f64 = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double
+
+
+class _StepState(ctypes.Structure):
+    """native/costmap.c's `PlannerStep`: what the planner's C step reads, and the replanning state
+    it shares with `PlannerComponent.step` (the component's attributes are these fields)."""
+
+    _fields_ = [
+        ("costmap", _p), ("scan", _p), ("inputs", _p), ("points", _p), ("arc", _p),
+        ("waypoint_count", _i64), ("marks_at_plan", _p),
+        ("replan_after", _f64), ("replan_stall_time", _f64), ("replan_horizon", _f64),
+        ("replan_interval", _f64), ("vehicle_radius", _f64), ("spacing", _f64), ("stall_distance", _f64),
+        ("resolves_obstacles", _i64), ("search_window", _i64), ("active", _i64), ("following", _i64),
+        ("segment", _i64), ("progress", _f64), ("blocked_since", _f64), ("mark_time", _f64),
+        ("mark_progress", _f64), ("obstacle_on_plan", _i64), ("last_replan", _f64),
+        ("pending", _i64), ("reason", _i64),
+    ]  # fmt: skip
+
+
+def _state_field(name: str, kind=float, doc: str = ""):
+    """A component attribute kept in its `_StepState` field `name` (read as `kind`)."""
+
+    def get(self):
+        return kind(getattr(self._state, name))
+
+    def set(self, value) -> None:
+        setattr(self._state, name, value)
+
+    return property(get, set, doc=doc)
+
+
 class PlannerComponent(PythonComponent):
     """Outputs `waypoints[k,1]` (x [m]) and `waypoints[k,2]` (y [m]), k = 1..1000, NaN padded.
 
@@ -197,17 +233,78 @@ class PlannerComponent(PythonComponent):
         self.goal = goal
         self.settings = settings
         self.replanning = replanning
+        self._state = _StepState(blocked_since=math.nan, last_replan=-math.inf)
         self.result = None
         self.waypoints = np.empty((0, 2))
         self.replans: list[Replan] = []
         self.no_path: str | None = None  # why the goal cannot be reached any more
         self.plan_version = 0  # counts the plans made (1 after plan_path)
-        self.following = False  # waypoints given from outside (`follow`): no replanning
+        self.following = False
+        self.kernel_steps = True  # the compiled kernel may step it (`kernel_step`)
         if replanning is not None:
             self.costmap = Costmap(grid, replanning.angles, replanning.range_min, replanning.range_max)
             self._path_progress = path_progress()
             self._nearest = ctypes.c_int64()  # the segment `path_progress` found
             self._nearest_ref = ctypes.byref(self._nearest)
+            state = self._state
+            state.costmap, state.scan = self.costmap._address, self.costmap._ranges.ctypes.data
+            state.inputs = ctypes.addressof(self.input_cbuffer)
+            state.replan_after = replanning.replan_after
+            state.replan_stall_time = replanning.replan_stall_time
+            state.replan_horizon = replanning.replan_horizon
+            state.replan_interval = replanning.replan_interval
+            state.vehicle_radius, state.spacing = replanning.vehicle_radius, self.grid.resolution / 2.0
+            state.stall_distance, state.search_window = STALL_DISTANCE, SEARCH_WINDOW
+            state.resolves_obstacles = int(replanning.resolves_obstacles)
+
+    # The replanning state, shared with the C step (`kernel_step`).
+    following = _state_field("following", bool, "waypoints given from outside (`follow`): no replanning")
+    _segment = _state_field("segment", int, "index of the plan segment the progress lies on")
+    _progress = _state_field("progress", float, "[m] along the plan")
+    _obstacle_on_plan = _state_field("obstacle_on_plan", bool)
+    _last_replan = _state_field("last_replan", float, "[s]")
+
+    @property
+    def no_path(self) -> str | None:
+        """Why the goal cannot be reached any more (the planner stops replanning), or None."""
+        return self._no_path
+
+    @no_path.setter
+    def no_path(self, why: str | None) -> None:
+        self._no_path = why
+        self._state.active = int(self.replanning is not None and why is None)
+
+    @property
+    def _blocked_since(self) -> float | None:
+        """[s] since when VFH has had no free direction; None: it has one."""
+        since = self._state.blocked_since
+        return None if math.isnan(since) else since
+
+    @_blocked_since.setter
+    def _blocked_since(self, since: float | None) -> None:
+        self._state.blocked_since = math.nan if since is None else since
+
+    @property
+    def _progress_mark(self) -> tuple[float, float]:
+        """(time [s], progress [m]) of the last real progress."""
+        return self._state.mark_time, self._state.mark_progress
+
+    @_progress_mark.setter
+    def _progress_mark(self, mark: tuple[float, float]) -> None:
+        self._state.mark_time, self._state.mark_progress = mark
+
+    def kernel_step(self) -> tuple[int, int] | None:
+        """The C step of the master's compiled kernel (`cosim.core.fast_loop.KernelTables`): (address
+        of native/costmap.c's `planner_step`, of its state). It does what `step` does while that
+        needs no Python (the scan into the costmap, the progress, the triggers) and hands the step
+        to Python where a replan may follow; then `step` goes on from where it stopped. None
+        without replanning, or when `kernel_steps` is False (every step in Python)."""
+        if self.replanning is None or not self.kernel_steps:
+            return None
+        from cosim.navigation.costmap import _kernels
+
+        function = ctypes.cast(_kernels().planner_step, ctypes.c_void_p).value
+        return function, ctypes.addressof(self._state)
 
     def plan_path(self):
         """Plan from start to goal; returns the `PlanResult`. Raises `CosimError` when there is no path."""
@@ -236,10 +333,15 @@ class PlannerComponent(PythonComponent):
         self.plan_version += 1
         self._arc = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(self.waypoints, axis=0).T))))
         self._plan_addresses = (self.waypoints.ctypes.data, self._arc.ctypes.data)  # for path_progress
-        self._segment = 0  # index of the plan segment the progress lies on
-        self._progress = 0.0  # [m] along the plan
+        state = self._state
+        state.points, state.arc = self._plan_addresses
+        state.waypoint_count = len(self.waypoints)
+        self._plan_arrays = (self.waypoints, self._arc)  # what the state points into, alive
+        self._segment = 0
+        self._progress = 0.0
         if self.replanning is not None:
             self._marks_at_plan = self.costmap.snapshot()
+            state.marks_at_plan = self._marks_at_plan.ctypes.data
             self._obstacle_on_plan = False
 
     def on_setup(self, t0: float, parameters) -> None:
@@ -253,6 +355,9 @@ class PlannerComponent(PythonComponent):
 
     def step(self, t: float, h: float) -> None:
         """Update the costmap and the progress from the inputs; replan when a trigger fires."""
+        if self._state.pending:
+            self._go_on(t)
+            return
         if self.replanning is None or self.no_path is not None:
             return
         inputs = self.input_buffer
@@ -264,6 +369,17 @@ class PlannerComponent(PythonComponent):
             return
         self._advance_progress(x, y)
         reason = self._trigger(t, steering, changed > 0)
+        if reason is not None and t - self._last_replan >= self.replanning.replan_interval:
+            self.replan(t, (x, y, theta), reason)
+
+    def _go_on(self, t: float) -> None:
+        """The rest of a step the C step (`kernel_step`) handed over: the look for new marks near
+        the plan ahead and what follows it in `_trigger`, or the replan it found due."""
+        state = self._state
+        pending, state.pending = state.pending, 0
+        inputs = self.input_buffer
+        x, y, theta = inputs.item(0), inputs.item(1), inputs.item(2)
+        reason = self._look_ahead() if pending == PENDING_MARKS else REASONS[state.reason]
         if reason is not None and t - self._last_replan >= self.replanning.replan_interval:
             self.replan(t, (x, y, theta), reason)
 
@@ -301,10 +417,15 @@ class PlannerComponent(PythonComponent):
             and settings.resolves_obstacles
             and self._marks_maybe_ahead()
         ):
-            ahead = self._plan_ahead(settings.replan_horizon)
-            self._obstacle_on_plan = self.costmap.new_marks_near(
-                ahead, settings.vehicle_radius, self._marks_at_plan
-            )
+            return self._look_ahead()
+        return "obstacle_on_plan" if self._obstacle_on_plan else None
+
+    def _look_ahead(self) -> str | None:
+        """Whether a new mark lies near the plan ahead (kept: `_obstacle_on_plan`); the trigger."""
+        settings = self.replanning
+        ahead = self._plan_ahead(settings.replan_horizon)
+        near = self.costmap.new_marks_near(ahead, settings.vehicle_radius, self._marks_at_plan)
+        self._obstacle_on_plan = near
         return "obstacle_on_plan" if self._obstacle_on_plan else None
 
     def _marks_maybe_ahead(self) -> bool:

@@ -15,14 +15,17 @@ at each replan (stamped with the start of the planner step that made it) and `/g
 given during the run.
 
 The loop: the FMUs step in the compiled kernel (`Master.run_blocks`, `cosim.core.kernel`), which
-keeps their buffers after each step, sweeps a noise-free lidar itself, and hands the Python
-components (planner, a noisy lidar) back where they are due; their rows are kept too
-(`python_rows`), so a block goes on through their steps, up to 1000 steps. It ends at the end of
-a step in which one stepped when that step has something to do (a new plan, no path, a goal poll)
-or while a topic awaits its first message (`cut_after_python`), before a Python component's step
-or a sweep when a signal came (`end_before_python`), and after any step whose position may end
-the run (not finite, near the goal, or outside the circle that the true obstacles cannot reach:
-`SafeCircle`).
+keeps their buffers after each step, sweeps a noise-free lidar itself, steps the replanning
+planner by its C step (`PlannerComponent.kernel_step`) while no replan can follow, and hands the
+Python components (a noisy lidar; the planner where a replan may follow; every planner step in a
+run that polls goals) back where they are due; their rows are kept too (`python_rows`), so a
+block goes on through their steps, up to 1000 steps. It ends at the end of a step in which one
+stepped when that step has something to do (a new plan, no path, a goal poll: `cut_after_python`),
+before a Python component's step or a sweep while a topic awaits its first message or when a
+signal came (`end_before_python`; once every topic had its first message the sweep returns only
+when a signal came, seen on `cosim.core.interrupt.signal_socket`, or the watch needs a new
+circle: `KernelTables.poll_on_signals`), and after any step whose position may end the run (not
+finite, near the goal, or outside the circle that the true obstacles cannot reach: `SafeCircle`).
 Each block goes to the recording (`cosim.record.replay`): recorded and checked from its rows
 (`cosim.record.blocks`: the positions of all its steps through `OutcomeMonitor.check_positions`,
 the rows turned into messages with NumPy every few chunk windows), or, when the rows cannot describe
@@ -221,6 +224,10 @@ class _RobotRun(SystemRun):
                 goals, built, self.monitor, recorder, lambda: self.recording.current_pose()
             )
         self.goal_steps = system.period_steps(planner) if self.goal_poll is not None and planner else 1
+        if self.goal_poll is not None and self.planner is not None:
+            # A goal polled after a planner step may replan at once: every step of the planner is
+            # Python's, so the kernel's block ends after it (`cut_after_python`).
+            self.planner.kernel_steps = False
         # Then the recording: the signal channels, the header, the first records.
         sensors = () if scenario.imu is None else (Imu(scenario.imu, scenario.macro_step),)
         self.recording = StepRecording(
@@ -235,7 +242,9 @@ class _RobotRun(SystemRun):
         # Build (or load) the C kernels that would first run inside the loop, so the real-time factor
         # measures the simulation, not a first run's compilation.
         self.monitor.world.distance(*scenario.start[:2])
-        self.tables = master.kernel_tables(record=True, python_rows=True) if _use_kernel() else None
+        self.tables = None
+        if _use_kernel():
+            self.tables = master.kernel_tables(record=True, python_rows=True, scalar_rows=True)
         if self.tables is not None:
             self.tables.warm_up()
         self.start_clock(scenario.stop_time if progress else None)
@@ -244,6 +253,7 @@ class _RobotRun(SystemRun):
         self.reason: str | None = None  # why the loop stopped
         self.replay: BlockReplay | None = None
         self.signal: str | None = None  # a signal taken at a kernel hand-back, for `stop`
+        self.settled = False  # every topic had its first message (`BlockRecording.settled`)
 
     def finish_step(self, k: int) -> str | None:
         """Record what step k produced and check the outcome; why the run ends after it, or None."""
@@ -301,10 +311,18 @@ class _RobotRun(SystemRun):
 
     def end_before_python(self, k: int) -> bool:
         """Whether a kernel block ends before the Python components of step k (a block goes on
-        through them otherwise): when a signal came, so the run stops where it always did."""
+        through them otherwise): when a signal came, so the run stops where it always did, and
+        while a topic has yet to get its first message (as `cut_after_python`: the planner's C
+        step hands no step back to be cut after)."""
         if self.signal is None:
             self.signal = interrupt.take()
-        return self.signal is not None
+        if self.signal is not None:
+            return True
+        if not self.settled:  # (once settled, always: a topic's channel stays)
+            self.settled = self.replay.fast.settled
+            if self.settled:  # from now on only a signal ends a block here: the kernel sees it come
+                self.tables.poll_on_signals(interrupt.signal_socket())
+        return not self.settled
 
     def cut_after_python(self, k: int) -> bool:
         """Whether a kernel block ends after step k, in which a Python component stepped: when the

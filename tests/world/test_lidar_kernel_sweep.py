@@ -112,3 +112,52 @@ def test_a_polled_sweep_returns_before_it_steps(rows):
     assert asked == sorted(asked)
     # (Step 0 starts the first call: a sweep where a call starts is stepped without a return.)
     assert [asked.count(k) for k in range(1, 50)] == [2 if k % LIDAR_PERIOD == 0 else 1 for k in range(1, 50)]
+
+
+def _asked(tables, master, steps: int) -> list[int]:
+    asked = []
+    master.run_blocks(
+        steps,
+        tables,
+        block=100,
+        end_before_python=lambda k: asked.append(k) or False,
+        cut_after_python=lambda k: False,
+    )
+    return asked
+
+
+def test_a_sweep_polled_on_signals_returns_when_a_signal_came_or_the_circle_is_half_used():
+    """`KernelTables.poll_on_signals(fd)`: the polled sweep returns only when socket fd holds a
+    byte (a signal came: `cosim.core.interrupt.signal_socket`) or the watched position has used
+    half of its free circle (where the caller draws a new one); the steps are the same."""
+    import ctypes
+    import socket
+
+    system, vehicle, _ = _system(0.0)
+    reader, writer = socket.socketpair()
+    reader.setblocking(False)
+    with reader, writer, Master(system) as master:
+        master.initialize()
+        tables = master.kernel_tables(record=True, block=100, python_rows=True)
+        tables.poll_on_signals(reader.fileno())
+        # No byte, no watch: asked at the drive's hand-backs only (every step), not before sweeps.
+        assert _asked(tables, master, 20) == list(range(20))
+        writer.send(b"\x02")  # a signal came (the byte stays until Python takes it)
+        asked = _asked(tables, master, 20)
+        # (A sweep where a call starts, step 20's, is stepped without a return.)
+        assert [asked.count(k) for k in range(20, 40)] == [
+            2 if k % LIDAR_PERIOD == 0 and k > 20 else 1 for k in range(20, 40)
+        ]
+        reader.recv(1)
+        assert _asked(tables, master, 10) == list(range(40, 50))
+        # A watch whose free circle the robot has used half of (but not left): before each sweep.
+        x, y = vehicle.output_buffer[0], vehicle.output_buffer[1]
+        address = ctypes.addressof(vehicle.output_cbuffer)
+        tables.watch_addresses[:] = (1, address, address + 8)
+        tables.watch_numbers[:] = (1e9, 1e9, 0.0, x + 100.0, y, 1.5e4)  # 100 m from a 122 m circle's centre
+        asked = _asked(tables, master, 10)
+        assert [asked.count(k) for k in range(50, 60)] == [
+            2 if k % LIDAR_PERIOD == 0 and k > 50 else 1 for k in range(50, 60)
+        ]
+        tables.watch_numbers[5] = 1e6  # a 1000 m circle: a tenth used
+        assert _asked(tables, master, 10) == list(range(60, 70))

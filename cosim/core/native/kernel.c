@@ -12,6 +12,11 @@
 #include <stddef.h>
 #include <stdint.h>
 #include <string.h>
+#if !defined(_WIN32)
+#include <errno.h>
+#include <sys/socket.h>
+#include <sys/types.h>
+#endif
 #include "../../../planner/native/layout.h"
 
 /* Return codes (first element of the result). */
@@ -22,14 +27,14 @@ enum {
     C_KIND, C_PERIOD, C_VERSION, C_HANDLE, C_STEP, C_FLAGS, C_LAST_TIME, C_LINK_FIRST, C_LINK_COUNT,
     C_SET_FIRST, C_SET_COUNT, C_GET_FIRST, C_GET_COUNT, C_CHECK_FIRST, C_CHECK_COUNT,
     C_IN_ADDRESS, C_IN_COUNT, C_OUT_ADDRESS, C_OUT_COUNT, C_RECORD, C_RECORD_OFFSET,
-    COMPONENT_COLUMNS
+    C_RECORD_IN_FIRST, C_RECORD_IN_COUNT, COMPONENT_COLUMNS
 };
 enum { KIND_IDLE = 0, KIND_NATIVE = 1, KIND_PYTHON = 2, KIND_SWEEP = 3 };
 
 /* Columns of the transfer-group table. */
 enum {
     G_KIND, G_FUNCTION, G_REFERENCES, G_REFERENCE_COUNT, G_VALUE_COUNT, G_VALUES, G_DIRECT,
-    G_SLOT_FIRST, G_SLOT_COUNT, GROUP_COLUMNS
+    G_SLOT_FIRST, G_SLOT_COUNT, G_SENT, G_SENT_REFERENCES, GROUP_COLUMNS
 };
 /* FMI value types of a group: REAL double, INTEGER int32, BOOLEAN int32 (FMI 2.0) or bool (FMI 3.0),
  * then FMI 3.0's other numeric types. An INT64/UINT64 value beyond 2^53, which a double may not hold,
@@ -55,6 +60,10 @@ typedef int (*Transfer3)(void *, const void *, size_t, void *, size_t);
 /* A component stepped by one C call on its inputs x, y, theta (the lidar's sweep, `lidar_scan` of
  * cosim/world/native/world.c): (its struct, x, y, theta); it writes its own outputs. */
 typedef void (*Sweep)(const void *, double, double, double);
+/* A Python component's C step (C_STEP of a KIND_PYTHON row, 0: none): (its state, t) -> 0 when it
+ * stepped (the kernel records its row), 1 when it hands the step to Python (the kernel returns
+ * HAND_BACK there; its Python step goes on from where the C step stopped). */
+typedef int64_t (*PythonStep)(void *, double);
 /* fmi2DoStep(instance, t, h, noSetFMUStatePriorToCurrentPoint). */
 typedef int (*Step2)(void *, double, double, int);
 /* fmi3DoStep(instance, t, h, noSetFMUStatePriorToCurrentPoint, &eventHandlingNeeded,
@@ -66,7 +75,7 @@ typedef struct {
     int64_t n;                       /* components (rows of `components`) */
     const int64_t *components;       /* n x COMPONENT_COLUMNS */
     const double *step_sizes;        /* n: each component's step [s] */
-    const int64_t *link_addresses;   /* links x 3: source address, target address, kind */
+    const int64_t *link_addresses;   /* links x 3: source address, target address, kind (`gather`) */
     const double *link_numbers;      /* links x 2: scale, offset */
     const int64_t *groups;           /* groups x GROUP_COLUMNS */
     const int64_t *slot_addresses;   /* slots: buffer address of each value of a group */
@@ -80,8 +89,10 @@ typedef struct {
 
 #if defined(__GNUC__)
 #define HOT static inline __attribute__((always_inline))
+#define APART static __attribute__((noinline))
 #else
 #define HOT static inline
+#define APART static
 #endif
 
 #define AT(table, row, columns, column) ((table)[(row) * (columns) + (column)])
@@ -102,11 +113,30 @@ HOT int64_t transfer(int64_t function, int64_t handle, int64_t references, int64
                                           pointer(values), (size_t)value_count);
 }
 
-/* Copy the component's connected inputs from their producers' outputs. */
+/* A run of links (`gather`): count values to target, from source `stride` values apart. Not
+ * inlined: `gather` is, in three places, and the library is compiled on a first run. */
+APART void copy_run(double *target, const double *source, int64_t count, int64_t stride) {
+    if (stride == 1) {
+        memcpy(target, source, sizeof(double) * (size_t)count);
+        return;
+    }
+    for (int64_t m = 0; m < count; m++) {
+        target[m] = source[m * stride];
+    }
+}
+
+/* Copy the component's connected inputs from their producers' outputs. A link of kind 3 is a run
+ * of plain links to consecutive targets, from sources link_numbers[j * 2 + 1] values apart (1:
+ * consecutive, 2: one column of a two-column array): link_numbers[j * 2] values. */
 HOT void gather(const Tables *t, int64_t i) {
     int64_t first = COMPONENT(t, i, C_LINK_FIRST), end = first + COMPONENT(t, i, C_LINK_COUNT);
     for (int64_t j = first; j < end; j++) {
         const int64_t *link = &t->link_addresses[j * 3];
+        if (link[2] == 3) {
+            copy_run(pointer(link[1]), pointer(link[0]), (int64_t)t->link_numbers[j * 2],
+                     (int64_t)t->link_numbers[j * 2 + 1]);
+            continue;
+        }
         double value = load_f64(link[0]);
         if (link[2] == 1) {
             value = value * t->link_numbers[j * 2];
@@ -114,6 +144,96 @@ HOT void gather(const Tables *t, int64_t i) {
             value = value * t->link_numbers[j * 2] + t->link_numbers[j * 2 + 1];
         }
         store_f64(link[1], value);
+    }
+}
+
+/* A setter group of float64 scalars (one value per reference) that sends only what changed: its
+ * G_SENT array holds [0] whether the rest is valid, [1 .. count] the values last sent in this call
+ * of the kernel, [count + 1 .. 2 count] room for the changed values, and G_SENT_REFERENCES room for
+ * their references. An FMU input keeps the value last set (FMI 2.0 and 3.0: set before a step, held
+ * after), so setting a value again that is bit for bit the one it holds does nothing, and leaving it
+ * out changes nothing. The caller forgets what was sent (the flag to 0) whenever something else may
+ * have set the FMU's inputs or restored its state: `run_blocks` does at its start (between its
+ * kernel calls only Python components step). A failed call forgets what was sent. */
+#define SAME_RUN 32 /* values `set_changed` compares at once */
+
+/* Not inlined (see `copy_run`). */
+APART int64_t set_changed(const Tables *t, int64_t g, int64_t handle, int64_t version, int64_t values) {
+    int64_t count = GROUP(t, g, G_REFERENCE_COUNT);
+    double *sent = pointer(GROUP(t, g, G_SENT));
+    const uint64_t *now = pointer(values);
+    uint64_t *last = (uint64_t *)(sent + 1);
+    int64_t status;
+    if (sent[0] == 0.0) {
+        status = transfer(GROUP(t, g, G_FUNCTION), handle, GROUP(t, g, G_REFERENCES), count, values, count,
+                          version);
+        if (status <= 1) {
+            memcpy(last, now, sizeof(double) * (size_t)count);
+            sent[0] = 1.0;
+        }
+        return status;
+    }
+    const uint32_t *references = pointer(GROUP(t, g, G_REFERENCES));
+    uint32_t *changed_references = pointer(GROUP(t, g, G_SENT_REFERENCES));
+    uint64_t *changed = last + count;
+    int64_t m = 0;
+    for (int64_t from = 0; from < count; from += SAME_RUN) {
+        int64_t to = from + SAME_RUN < count ? from + SAME_RUN : count;
+        if (memcmp(now + from, last + from, sizeof(double) * (size_t)(to - from)) == 0) {
+            continue; /* the usual case for a plan's waypoints: one comparison of the whole run */
+        }
+        for (int64_t j = from; j < to; j++) {
+            uint64_t value = now[j];
+            if (value != last[j]) {
+                last[j] = value;
+                changed_references[m] = references[j];
+                changed[m] = value;
+                m += 1;
+            }
+        }
+    }
+    if (m == 0) {
+        return 0;
+    }
+    status = transfer(GROUP(t, g, G_FUNCTION), handle, (int64_t)(intptr_t)changed_references, m,
+                      (int64_t)(intptr_t)changed, m, version);
+    if (status > 1) {
+        sent[0] = 0.0;
+    }
+    return status;
+}
+
+/* A setter group's values into its FMI value array, converted (not inlined: `set_inputs` is, in
+ * two places, and the library is compiled on a first run). */
+APART void fill_values(const Tables *t, int64_t g, int64_t version) {
+    int64_t kind = GROUP(t, g, G_KIND), values = GROUP(t, g, G_VALUES);
+    int64_t first_slot = GROUP(t, g, G_SLOT_FIRST), count = GROUP(t, g, G_SLOT_COUNT);
+    for (int64_t position = 0; position < count; position++) {
+        int64_t s = first_slot + position;
+        double value = load_f64(t->slot_addresses[s]);
+        if (t->slot_scales[s] != 1.0) {
+            value = value * t->slot_scales[s];
+        }
+        void *array = pointer(values);
+        switch (kind) {
+        case KIND_REAL: ((double *)array)[position] = value; break;
+        case KIND_INTEGER: ((int32_t *)array)[position] = (int32_t)(int64_t)rint(value); break;
+        case KIND_BOOLEAN:
+            if (version == 2) {
+                ((int32_t *)array)[position] = value != 0.0 ? 1 : 0;
+            } else {
+                ((uint8_t *)array)[position] = value != 0.0 ? 1 : 0;
+            }
+            break;
+        case KIND_FLOAT32: ((float *)array)[position] = (float)value; break;
+        case KIND_INT8: ((int8_t *)array)[position] = (int8_t)(int64_t)rint(value); break;
+        case KIND_UINT8: ((uint8_t *)array)[position] = (uint8_t)(int64_t)rint(value); break;
+        case KIND_INT16: ((int16_t *)array)[position] = (int16_t)(int64_t)rint(value); break;
+        case KIND_UINT16: ((uint16_t *)array)[position] = (uint16_t)(int64_t)rint(value); break;
+        case KIND_UINT32: ((uint32_t *)array)[position] = (uint32_t)(int64_t)rint(value); break;
+        case KIND_INT64: ((int64_t *)array)[position] = (int64_t)rint(value); break;
+        default: ((uint64_t *)array)[position] = (uint64_t)rint(value); break;
+        }
     }
 }
 
@@ -125,44 +245,61 @@ HOT int64_t set_inputs(const Tables *t, int64_t i, int64_t *kind_out) {
     for (int64_t g = first; g < end; g++) {
         int64_t kind = GROUP(t, g, G_KIND), values = GROUP(t, g, G_VALUES);
         if (GROUP(t, g, G_DIRECT) == 0) {
-            int64_t first_slot = GROUP(t, g, G_SLOT_FIRST), count = GROUP(t, g, G_SLOT_COUNT);
-            for (int64_t position = 0; position < count; position++) {
-                int64_t s = first_slot + position;
-                double value = load_f64(t->slot_addresses[s]);
-                if (t->slot_scales[s] != 1.0) {
-                    value = value * t->slot_scales[s];
-                }
-                void *array = pointer(values);
-                switch (kind) {
-                case KIND_REAL: ((double *)array)[position] = value; break;
-                case KIND_INTEGER: ((int32_t *)array)[position] = (int32_t)(int64_t)rint(value); break;
-                case KIND_BOOLEAN:
-                    if (version == 2) {
-                        ((int32_t *)array)[position] = value != 0.0 ? 1 : 0;
-                    } else {
-                        ((uint8_t *)array)[position] = value != 0.0 ? 1 : 0;
-                    }
-                    break;
-                case KIND_FLOAT32: ((float *)array)[position] = (float)value; break;
-                case KIND_INT8: ((int8_t *)array)[position] = (int8_t)(int64_t)rint(value); break;
-                case KIND_UINT8: ((uint8_t *)array)[position] = (uint8_t)(int64_t)rint(value); break;
-                case KIND_INT16: ((int16_t *)array)[position] = (int16_t)(int64_t)rint(value); break;
-                case KIND_UINT16: ((uint16_t *)array)[position] = (uint16_t)(int64_t)rint(value); break;
-                case KIND_UINT32: ((uint32_t *)array)[position] = (uint32_t)(int64_t)rint(value); break;
-                case KIND_INT64: ((int64_t *)array)[position] = (int64_t)rint(value); break;
-                default: ((uint64_t *)array)[position] = (uint64_t)rint(value); break;
-                }
-            }
+            fill_values(t, g, version);
         }
-        int64_t status = transfer(GROUP(t, g, G_FUNCTION), handle, GROUP(t, g, G_REFERENCES),
-                                  GROUP(t, g, G_REFERENCE_COUNT), values, GROUP(t, g, G_VALUE_COUNT),
-                                  version);
+        int64_t status;
+        if (GROUP(t, g, G_SENT) != 0) {
+            status = set_changed(t, g, handle, version, values);
+        } else {
+            status = transfer(GROUP(t, g, G_FUNCTION), handle, GROUP(t, g, G_REFERENCES),
+                              GROUP(t, g, G_REFERENCE_COUNT), values, GROUP(t, g, G_VALUE_COUNT), version);
+        }
         if (status > 1) {
             *kind_out = kind;
             return status;
         }
     }
     return 0;
+}
+
+/* A getter group's FMI value array into the output buffer, converted (not inlined, as
+ * `fill_values`). */
+APART void read_values(const Tables *t, int64_t g, int64_t version) {
+    int64_t kind = GROUP(t, g, G_KIND), values = GROUP(t, g, G_VALUES);
+    int64_t first_slot = GROUP(t, g, G_SLOT_FIRST), count = GROUP(t, g, G_SLOT_COUNT);
+    for (int64_t position = 0; position < count; position++) {
+        int64_t s = first_slot + position;
+        double value;
+        const void *array = pointer(values);
+        switch (kind) {
+        case KIND_REAL: value = ((const double *)array)[position]; break;
+        case KIND_INTEGER: value = (double)((const int32_t *)array)[position]; break;
+        case KIND_BOOLEAN:
+            value = version == 2 ? (double)((const int32_t *)array)[position]
+                                 : (double)((const uint8_t *)array)[position];
+            break;
+        case KIND_FLOAT32: value = (double)((const float *)array)[position]; break;
+        case KIND_INT8: value = (double)((const int8_t *)array)[position]; break;
+        case KIND_UINT8: value = (double)((const uint8_t *)array)[position]; break;
+        case KIND_INT16: value = (double)((const int16_t *)array)[position]; break;
+        case KIND_UINT16: value = (double)((const uint16_t *)array)[position]; break;
+        case KIND_UINT32: value = (double)((const uint32_t *)array)[position]; break;
+        case KIND_INT64: {
+            int64_t number = ((const int64_t *)array)[position];
+            value = number > EXACT_INTEGER || number < -EXACT_INTEGER ? NAN : (double)number;
+            break;
+        }
+        default: {
+            uint64_t number = ((const uint64_t *)array)[position];
+            value = number > (uint64_t)EXACT_INTEGER ? NAN : (double)number;
+            break;
+        }
+        }
+        if (t->slot_scales[s] != 1.0) {
+            value = value * t->slot_scales[s];
+        }
+        store_f64(t->slot_addresses[s], value);
+    }
 }
 
 /* Call the getters, then copy the FMI value arrays into the output buffer (converting). */
@@ -179,40 +316,7 @@ HOT int64_t get_outputs(const Tables *t, int64_t i, int64_t *kind_out) {
             return status;
         }
         if (GROUP(t, g, G_DIRECT) == 0) {
-            int64_t first_slot = GROUP(t, g, G_SLOT_FIRST), count = GROUP(t, g, G_SLOT_COUNT);
-            for (int64_t position = 0; position < count; position++) {
-                int64_t s = first_slot + position;
-                double value;
-                const void *array = pointer(values);
-                switch (kind) {
-                case KIND_REAL: value = ((const double *)array)[position]; break;
-                case KIND_INTEGER: value = (double)((const int32_t *)array)[position]; break;
-                case KIND_BOOLEAN:
-                    value = version == 2 ? (double)((const int32_t *)array)[position]
-                                         : (double)((const uint8_t *)array)[position];
-                    break;
-                case KIND_FLOAT32: value = (double)((const float *)array)[position]; break;
-                case KIND_INT8: value = (double)((const int8_t *)array)[position]; break;
-                case KIND_UINT8: value = (double)((const uint8_t *)array)[position]; break;
-                case KIND_INT16: value = (double)((const int16_t *)array)[position]; break;
-                case KIND_UINT16: value = (double)((const uint16_t *)array)[position]; break;
-                case KIND_UINT32: value = (double)((const uint32_t *)array)[position]; break;
-                case KIND_INT64: {
-                    int64_t number = ((const int64_t *)array)[position];
-                    value = number > EXACT_INTEGER || number < -EXACT_INTEGER ? NAN : (double)number;
-                    break;
-                }
-                default: {
-                    uint64_t number = ((const uint64_t *)array)[position];
-                    value = number > (uint64_t)EXACT_INTEGER ? NAN : (double)number;
-                    break;
-                }
-                }
-                if (t->slot_scales[s] != 1.0) {
-                    value = value * t->slot_scales[s];
-                }
-                store_f64(t->slot_addresses[s], value);
-            }
+            read_values(t, g, version);
         }
     }
     return 0;
@@ -233,21 +337,20 @@ HOT int64_t check_outputs(const Tables *t, int64_t i) {
     return -1;
 }
 
-/* Keep the component's inputs then outputs as its next row. */
+/* Keep the component's inputs then outputs as its next row: of the inputs those from
+ * C_RECORD_IN_FIRST, C_RECORD_IN_COUNT of them (all, or the scalars: the other columns are left as
+ * they were). */
 HOT void record(const Tables *t, int64_t i) {
     if (COMPONENT(t, i, C_RECORD) == 0) {
         return;
     }
     int64_t n_in = COMPONENT(t, i, C_IN_COUNT), n_out = COMPONENT(t, i, C_OUT_COUNT);
+    int64_t in_first = COMPONENT(t, i, C_RECORD_IN_FIRST), in_count = COMPONENT(t, i, C_RECORD_IN_COUNT);
     double *row = t->history + COMPONENT(t, i, C_RECORD_OFFSET) + t->rows[i] * (n_in + n_out);
     const double *inputs = pointer(COMPONENT(t, i, C_IN_ADDRESS));
     const double *outputs = pointer(COMPONENT(t, i, C_OUT_ADDRESS));
-    for (int64_t j = 0; j < n_in; j++) {
-        row[j] = inputs[j];
-    }
-    for (int64_t j = 0; j < n_out; j++) {
-        row[n_in + j] = outputs[j];
-    }
+    memcpy(row + in_first, inputs + in_first, sizeof(double) * (size_t)in_count);
+    memcpy(row + n_in, outputs, sizeof(double) * (size_t)n_out);
     t->rows[i] += 1;
 }
 
@@ -319,6 +422,44 @@ HOT void step_sweep(const Tables *t, int64_t i) {
     record(t, i);
 }
 
+/* Whether a signal came: the socket `fd` (Python's signal wakeup socket, `cosim.core.interrupt`)
+ * holds a byte, which stays for Python to take. A polled sweep with C_FLAGS 2 (its C_LAST_TIME the
+ * socket) returns only then: where a sweep with C_FLAGS 1 returns each time for the caller to look
+ * for a signal, and finds one exactly when the socket holds a byte. Without sockets: always. */
+static bool signal_came(int64_t fd) {
+#if defined(_WIN32)
+    (void)fd;
+    return true;
+#else
+    char byte;
+    return recv((int)fd, &byte, 1, MSG_PEEK | MSG_DONTWAIT) != -1 || (errno != EAGAIN && errno != EWOULDBLOCK);
+#endif
+}
+
+/* Whether the watched position has used half of the free circle (its centre's distance at least
+ * half the radius, or not finite), where the caller's look (`before_block` of `run_blocks`: the
+ * robot run's `SafeCircle.watch`) draws a new circle round it: a polled sweep with C_FLAGS 2
+ * returns then too, so the circle is drawn again where a sweep with C_FLAGS 1 had it drawn. */
+static bool circle_half_used(const Tables *t) {
+    if (t->watch_addresses[0] == 0) {
+        return false;
+    }
+    double dx = load_f64(t->watch_addresses[1]) - t->watch_numbers[3];
+    double dy = load_f64(t->watch_addresses[2]) - t->watch_numbers[4];
+    return !(4.0 * (dx * dx + dy * dy) < t->watch_numbers[5]);
+}
+
+/* A Python component's C step (C_STEP): its inputs gathered, the call, its row when it stepped;
+ * the call's result (0: stepped, else Python's). */
+APART int64_t step_python(const Tables *t, int64_t i, double time) {
+    gather(t, i);
+    int64_t handed = ((PythonStep)(intptr_t)COMPONENT(t, i, C_STEP))(pointer(COMPONENT(t, i, C_HANDLE)), time);
+    if (handed == 0) {
+        record(t, i);
+    }
+    return handed;
+}
+
 /* Whether component i steps at step k (k % period == 0; a 64-bit division costs tens of cycles,
  * so not for the components stepped every step). */
 HOT bool due(const Tables *t, int64_t i, int64_t k) {
@@ -378,11 +519,21 @@ int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_po
                 int64_t i = position;
                 if (COMPONENT(t, i, C_KIND) != KIND_IDLE && due(t, i, k)) {
                     if (COMPONENT(t, i, C_KIND) == KIND_PYTHON) {
-                        return finish(result, HAND_BACK, k, i, i, 0, 0, 0);
+                        if (COMPONENT(t, i, C_STEP) == 0) {
+                            return finish(result, HAND_BACK, k, i, i, 0, 0, 0);
+                        }
+                        if (step_python(t, i, time) != 0) {
+                            return finish(result, HAND_BACK, k, i, i, 0, 0, 0);
+                        }
+                        position += 1;
+                        continue;
                     }
-                    /* A polled sweep (C_FLAGS 1): the caller looks first, unless the call starts here. */
-                    if (COMPONENT(t, i, C_KIND) == KIND_SWEEP && COMPONENT(t, i, C_FLAGS) == 1 &&
-                        (k != first_step || i != first_position)) {
+                    /* A polled sweep (C_FLAGS 1; 2: only when a signal came): the caller looks
+                     * first, unless the call starts here. */
+                    if (COMPONENT(t, i, C_KIND) == KIND_SWEEP && COMPONENT(t, i, C_FLAGS) != 0 &&
+                        (k != first_step || i != first_position) &&
+                        (COMPONENT(t, i, C_FLAGS) == 1 || signal_came(COMPONENT(t, i, C_LAST_TIME)) ||
+                         circle_half_used(t))) {
                         return finish(result, POLL, k, i, i, 0, 0, 0);
                     }
                     gather(t, i);
@@ -570,6 +721,8 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_CONSTANT(C_OUT_COUNT);
     LAYOUT_CONSTANT(C_RECORD);
     LAYOUT_CONSTANT(C_RECORD_OFFSET);
+    LAYOUT_CONSTANT(C_RECORD_IN_FIRST);
+    LAYOUT_CONSTANT(C_RECORD_IN_COUNT);
     LAYOUT_CONSTANT(COMPONENT_COLUMNS);
     LAYOUT_CONSTANT(KIND_IDLE);
     LAYOUT_CONSTANT(KIND_NATIVE);
@@ -584,6 +737,8 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_CONSTANT(G_DIRECT);
     LAYOUT_CONSTANT(G_SLOT_FIRST);
     LAYOUT_CONSTANT(G_SLOT_COUNT);
+    LAYOUT_CONSTANT(G_SENT);
+    LAYOUT_CONSTANT(G_SENT_REFERENCES);
     LAYOUT_CONSTANT(GROUP_COLUMNS);
     LAYOUT_CONSTANT(KIND_REAL);
     LAYOUT_CONSTANT(KIND_INTEGER);

@@ -6,6 +6,7 @@
  * struct set up once by `Costmap` (its `ctypes.Structure` mirrors it field for field). */
 #include <math.h>
 #include <stdint.h>
+#include <string.h>
 
 #include "../../world/native/geometry.h" /* py_min, int_min, int_max */
 #include "../../../planner/native/layout.h"
@@ -491,11 +492,139 @@ double path_progress(const double *points, const double *arc, int64_t first, int
     return arc[best] + best_fraction * sqrt(best_length_sq);
 }
 
+/* ---- The replanning planner's step in C (`cosim.navigation.planner.PlannerComponent`) ----------
+ * What `PlannerComponent.step` does at a step that needs no Python, for the master's compiled
+ * kernel (a Python component's C step, `kernel_step`): the scan into the costmap, the progress
+ * along the plan, the replan triggers; the same operations in the same order. It returns 1 without
+ * finishing, `pending` set, where Python must go on: PENDING_MARKS, a new mark may lie near the
+ * plan ahead (Python makes the points and looks: the rest of `_trigger`), PENDING_REPLAN, a trigger
+ * fired (`reason`) and the interval allows a replan. The state is the component's own (its
+ * attributes read and write these fields), so its Python step and this one go on from each other. */
+typedef struct {
+    const Costmap *costmap;
+    double *scan;                 /* the costmap's scan buffer (costmap->count ranges) */
+    const double *inputs;         /* the component's inputs: x, y, theta, steering_dir, ranges */
+    const double *points;         /* the plan: waypoint_count x 2 [m] */
+    const double *arc;            /* its arc lengths [m] */
+    int64_t waypoint_count;
+    const uint8_t *marks_at_plan; /* the costmap's marks when the plan was made */
+    double replan_after, replan_stall_time, replan_horizon, replan_interval; /* [s], [s], [m], [s] */
+    double vehicle_radius, spacing, stall_distance; /* [m]; spacing: of the points ahead */
+    int64_t resolves_obstacles, search_window;
+    int64_t active;               /* 0: the step does nothing (no replanning, or no path) */
+    int64_t following;            /* waypoints given from outside: the costmap only */
+    int64_t segment;              /* of the plan, where the progress lies */
+    double progress;              /* [m] along the plan */
+    double blocked_since;         /* [s] since VFH has no free direction; NaN: it has one */
+    double mark_time, mark_progress; /* the last real progress: [s], [m] */
+    int64_t obstacle_on_plan;
+    double last_replan;           /* [s] */
+    int64_t pending, reason;
+} PlannerStep;
+
+enum { PENDING_NONE = 0, PENDING_MARKS = 1, PENDING_REPLAN = 2 };
+enum { REASON_NONE = 0, REASON_NO_FREE_DIRECTION = 1, REASON_STALLED = 2, REASON_OBSTACLE_ON_PLAN = 3 };
+
+int64_t planner_step(PlannerStep *s, double t)
+{
+    if (!s->active)
+        return 0;
+    const double *in = s->inputs;
+    double x = in[0], y = in[1], theta = in[2], steering = in[3];
+    if (!(isfinite(x) && isfinite(y) && isfinite(theta)))
+        return 0;
+    memcpy(s->scan, in + 4, sizeof(double) * (size_t)s->costmap->count);
+    int64_t changed = costmap_integrate_scan(s->costmap, x, y, theta);
+    if (s->following)
+        return 0;
+    int64_t first = s->segment;
+    int64_t stop = first + s->search_window < s->waypoint_count - 1 ? first + s->search_window
+                                                                     : s->waypoint_count - 1;
+    if (stop > first) {
+        int64_t nearest = first;
+        double progress = path_progress(s->points, s->arc, first, stop, x, y, &nearest);
+        if (progress > s->progress) {
+            s->segment = nearest;
+            s->progress = progress;
+        }
+    }
+    int64_t reason = REASON_NONE;
+    if (isnan(steering)) {
+        if (isnan(s->blocked_since))
+            s->blocked_since = t;
+        else if (t - s->blocked_since >= s->replan_after)
+            reason = REASON_NO_FREE_DIRECTION;
+    } else {
+        s->blocked_since = NAN;
+    }
+    if (reason == REASON_NONE) {
+        if (s->progress >= s->mark_progress + s->stall_distance) {
+            s->mark_time = t;
+            s->mark_progress = s->progress;
+        } else if (t - s->mark_time >= s->replan_stall_time) {
+            reason = REASON_STALLED;
+        }
+    }
+    if (reason == REASON_NONE) {
+        if (changed > 0 && !s->obstacle_on_plan && s->resolves_obstacles) {
+            double end = s->progress + s->replan_horizon, last = s->arc[s->waypoint_count - 1];
+            double high = (last < end ? last : end) + 2.0 * s->spacing;
+            if (costmap_new_marks_maybe_near(s->costmap, s->marks_at_plan, s->points, s->arc,
+                                             s->waypoint_count, s->segment, s->progress, high,
+                                             s->vehicle_radius)) {
+                s->pending = PENDING_MARKS;
+                return 1;
+            }
+        }
+        if (s->obstacle_on_plan)
+            reason = REASON_OBSTACLE_ON_PLAN;
+    }
+    if (reason != REASON_NONE && t - s->last_replan >= s->replan_interval) {
+        s->pending = PENDING_REPLAN;
+        s->reason = reason;
+        return 1;
+    }
+    return 0;
+}
+
 /* The tables Python mirrors (see layout.h). */
 int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
 {
     int64_t n = 0;
     LAYOUT_SIZE(Costmap);
+    LAYOUT_SIZE(PlannerStep);
+    LAYOUT_FIELD(PlannerStep, costmap);
+    LAYOUT_FIELD(PlannerStep, scan);
+    LAYOUT_FIELD(PlannerStep, inputs);
+    LAYOUT_FIELD(PlannerStep, points);
+    LAYOUT_FIELD(PlannerStep, arc);
+    LAYOUT_FIELD(PlannerStep, waypoint_count);
+    LAYOUT_FIELD(PlannerStep, marks_at_plan);
+    LAYOUT_FIELD(PlannerStep, replan_after);
+    LAYOUT_FIELD(PlannerStep, replan_stall_time);
+    LAYOUT_FIELD(PlannerStep, replan_horizon);
+    LAYOUT_FIELD(PlannerStep, replan_interval);
+    LAYOUT_FIELD(PlannerStep, vehicle_radius);
+    LAYOUT_FIELD(PlannerStep, spacing);
+    LAYOUT_FIELD(PlannerStep, stall_distance);
+    LAYOUT_FIELD(PlannerStep, resolves_obstacles);
+    LAYOUT_FIELD(PlannerStep, search_window);
+    LAYOUT_FIELD(PlannerStep, active);
+    LAYOUT_FIELD(PlannerStep, following);
+    LAYOUT_FIELD(PlannerStep, segment);
+    LAYOUT_FIELD(PlannerStep, progress);
+    LAYOUT_FIELD(PlannerStep, blocked_since);
+    LAYOUT_FIELD(PlannerStep, mark_time);
+    LAYOUT_FIELD(PlannerStep, mark_progress);
+    LAYOUT_FIELD(PlannerStep, obstacle_on_plan);
+    LAYOUT_FIELD(PlannerStep, last_replan);
+    LAYOUT_FIELD(PlannerStep, pending);
+    LAYOUT_FIELD(PlannerStep, reason);
+    LAYOUT_CONSTANT(PENDING_MARKS);
+    LAYOUT_CONSTANT(PENDING_REPLAN);
+    LAYOUT_CONSTANT(REASON_NO_FREE_DIRECTION);
+    LAYOUT_CONSTANT(REASON_STALLED);
+    LAYOUT_CONSTANT(REASON_OBSTACLE_ON_PLAN);
     LAYOUT_FIELD(Costmap, marked);
     LAYOUT_FIELD(Costmap, known);
     LAYOUT_FIELD(Costmap, rows);

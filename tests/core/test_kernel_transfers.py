@@ -1,0 +1,169 @@
+"""The compiled kernel's transfers: a plan's waypoints (2000 array inputs) reach Pure Pursuit as in
+the master's Python loop (the truth: `Master.run(compiled=False)`, which sets every input before
+each step), although the kernel copies runs of plain links at once, sends only the values that
+changed since their last set (`set_changed` of kernel.c) and, with `scalar_rows`, keeps no array
+elements in the rows; a value set by Python between two `run_blocks` calls is sent again."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cosim.core import fast_loop
+from cosim.core.component import PythonComponent, array_ports
+from cosim.core.master import Master
+from cosim.core.system import System
+from cosim.fmi.builtin import builtin_fmu
+from cosim.fmi.component import FmuComponent
+
+H = 0.01  # [s] macro step
+CAPACITY = 1000  # Pure Pursuit's waypoints
+SWITCH = 0.55  # [s] the route gives its second path from then on
+
+
+class Route(PythonComponent):
+    """A plan that changes once: straight east, then (from SWITCH) north-east."""
+
+    def __init__(self) -> None:
+        super().__init__("route", [], array_ports("waypoints", CAPACITY, columns=2, unit="m"), period=0.1)
+
+    def step(self, t: float, h: float) -> None:
+        end = (20.0, 0.0) if t < SWITCH else (15.0, 15.0)
+        path = np.linspace((0.0, 0.0), end, 30)
+        self.output_buffer[:] = np.nan
+        self.output_buffer[: path.size] = path.reshape(-1)
+
+
+def _system():
+    system = System(H)
+    route = system.add(Route())
+    pursuit = system.add(
+        FmuComponent(builtin_fmu("PurePursuit"), "pursuit", {"lookahead_distance": 2.0}, period=5 * H)
+    )
+    state = ("x", "y", "theta")
+    vehicle = system.add(
+        FmuComponent(builtin_fmu("DifferentialDrive"), "vehicle", feedthrough_override={n: [] for n in state})
+    )
+    for name in state:
+        system.connect(f"vehicle.{name}", f"pursuit.{name}")
+    for port in route.outputs:
+        system.connect(f"route.{port.name}", f"pursuit.{port.name}")
+    system.connect("pursuit.v", "vehicle.v")
+    system.connect("pursuit.omega", "vehicle.omega")
+    return system, pursuit, vehicle
+
+
+def _truth(steps: int, meddle_at: int | None = None, keep: bool = False) -> list[np.ndarray]:
+    """The vehicle's outputs after each step, in the Python loop (`_meddle` at step `meddle_at`;
+    `keep`: the route gives the wrong plan from then on, as if the FMU had kept it)."""
+    system, pursuit, vehicle = _system()
+    if keep:
+        route = system.components["route"]
+
+        def south(t: float, h: float) -> None:
+            route.output_buffer[:] = np.nan
+            route.output_buffer[: SOUTH.size] = SOUTH.reshape(-1)
+
+    poses = []
+    with Master(system) as master:
+        master.initialize()
+        first = steps if meddle_at is None else meddle_at
+        master.run(first, lambda m: poses.append(vehicle.output_buffer.copy()), compiled=False)
+        if meddle_at is not None:
+            _meddle(pursuit)
+            if keep:
+                route.step = south
+                south(0.0, 0.0)
+            master.run(steps - first, lambda m: poses.append(vehicle.output_buffer.copy()), compiled=False)
+    return poses
+
+
+SOUTH = np.linspace((0.0, 0.0), (0.0, -20.0), 30)  # a wrong plan
+
+
+def _meddle(pursuit) -> None:
+    """Set a wrong plan (SOUTH) in the FMU behind the master's back, and leave the buffer as it was."""
+    held = pursuit.input_buffer.copy()
+    waypoints = {port.name: slot for slot, port in enumerate(pursuit.inputs)}
+    for k, (x, y) in enumerate(SOUTH, start=1):
+        pursuit.input_buffer[waypoints[f"waypoints[{k},1]"]] = x
+        pursuit.input_buffer[waypoints[f"waypoints[{k},2]"]] = y
+    pursuit.push_inputs()
+    pursuit.input_buffer[:] = held
+
+
+def _kernel(steps: int, meddle_at: int | None = None, block: int = 200):
+    system, pursuit, vehicle = _system()
+    poses, pursuit_rows = [], []
+    with Master(system) as master:
+        master.initialize()
+        tables = master.kernel_tables(record=True, block=block, python_rows=True, scalar_rows=True)
+        assert tables is not None
+        names = [component.name for component in master.order]
+
+        def on_block(first, end, histories, clean):
+            poses.extend(histories[names.index("vehicle")][:, -len(vehicle.outputs) :].copy())
+            pursuit_rows.extend(histories[names.index("pursuit")].copy())
+
+        first = steps if meddle_at is None else meddle_at
+        master.run_blocks(first, tables, on_block, block=block, cut_after_python=lambda k: False)
+        if meddle_at is not None:
+            _meddle(pursuit)
+            master.run_blocks(steps - first, tables, on_block, block=block, cut_after_python=lambda k: False)
+    return poses, np.array(pursuit_rows), pursuit, tables
+
+
+def test_the_kernel_sends_a_plan_and_its_change_as_the_python_loop_does():
+    steps = 150
+    truth = _truth(steps)
+    poses, rows, pursuit, tables = _kernel(steps)
+    assert np.array_equal(np.array(poses), np.array(truth))
+    # It turned when the plan changed (the test sees a plan change, not one plan throughout).
+    assert truth[40][1] == 0.0 and truth[-1][1] > 0.01
+    # The rows keep the scalar inputs (x, y, theta) and the outputs, not the 2000 waypoints.
+    kept = tables.row_inputs[[c.name for c in tables._keep].index("pursuit")]
+    assert kept == slice(0, 3)
+    n_in = len(pursuit.inputs)
+    before = [np.zeros(3)] + [pose[:3] for pose in truth]  # the pose before each step
+    assert np.array_equal(rows[:, :3], np.array(before[:steps:5]))
+    assert not rows[:, 3:n_in].any()
+
+
+@pytest.mark.parametrize("block", [7, 200])
+def test_a_value_set_between_run_blocks_calls_is_sent_again(block):
+    steps, meddle_at = 150, 23
+    truth = _truth(steps, meddle_at)
+    poses, _, _, _ = _kernel(steps, meddle_at, block)
+    assert np.array_equal(np.array(poses), np.array(truth))
+    # The wrong plan, if the FMU kept it (not sent again), would change the run.
+    assert not np.array_equal(np.array(truth), np.array(_truth(steps, meddle_at, keep=True)))
+
+
+def test_runs_of_plain_links_become_one_link():
+    links = [(1000 + 8 * j, 5000 + 8 * j, 0) for j in range(6)] + [(2000, 6000, 1), (3000, 7000, 0)]
+    numbers = [(1.0, 0.0)] * 6 + [(2.0, 0.0), (1.0, 0.0)]
+    got_links, got_numbers = fast_loop._runs(links, numbers)
+    assert got_links == [(1000, 5000, fast_loop.RUN_LINK), (2000, 6000, 1), (3000, 7000, 0)]
+    assert got_numbers == [(6.0, 1.0), (2.0, 0.0), (1.0, 0.0)]
+    # Taken in the order of their targets: two columns of a row-major array (x, y interleaved)
+    # to the x inputs, then the y inputs (as a plan reaches Pure Pursuit).
+    interleaved = [(1000 + 8 * j, 5000 + 8 * (j // 2) + 80 * (j % 2), 0) for j in range(20)]
+    got = fast_loop._runs(interleaved, [(1.0, 0.0)] * 20)
+    assert got == ([(1000, 5000, fast_loop.RUN_LINK), (1008, 5080, fast_loop.RUN_LINK)], [(10.0, 2.0)] * 2)
+    # One column of a two-column array (sources two values apart) to consecutive targets.
+    column = [(1000 + 16 * j, 5000 + 8 * j, 0) for j in range(5)]
+    assert fast_loop._runs(column, [(1.0, 0.0)] * 5) == ([(1000, 5000, fast_loop.RUN_LINK)], [(5.0, 2.0)])
+    short = [(1000 + 8 * j, 5000 + 8 * j, 0) for j in range(fast_loop.MIN_RUN - 1)]
+    assert fast_loop._runs(short, [(1.0, 0.0)] * len(short)) == (short, [(1.0, 0.0)] * len(short))
+    gap = [(1000, 5000, 0), (1008, 5008, 0), (1024, 5016, 0), (1032, 5024, 0)]  # source skips one
+    assert fast_loop._runs(gap, [(1.0, 0.0)] * 4)[0] == gap
+
+
+def test_rows_keep_every_input_without_scalar_rows():
+    """Without `scalar_rows` a row keeps every input, as `Master.run_recorded` promises."""
+    system, _, _ = _system()
+    with Master(system) as master:
+        master.initialize()
+        tables = master.kernel_tables(record=True, block=50, python_rows=True)
+        kept = zip(tables.row_inputs, tables._keep, strict=True)
+        assert all(inputs == slice(0, len(component.inputs)) for inputs, component in kept)
