@@ -203,7 +203,6 @@ def _serve(listener, alive_r: int, request: dict, held: set) -> None:
     this process's exit handlers or teardown, nor back into the sweep's code whatever happens."""
     import gc
     import signal
-    import sys
     import threading
     from multiprocessing import forkserver
 
@@ -235,12 +234,7 @@ def _serve(listener, alive_r: int, request: dict, held: set) -> None:
         gc.enable()
         forkserver.main(listener_fd, alive_r, [])
     finally:
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                stream.flush()
-            except (AttributeError, OSError, ValueError):
-                pass
-        os._exit(0)
+        _exit_at_once()
 
 
 def stop_fork_server() -> None:
