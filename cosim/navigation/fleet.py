@@ -508,7 +508,7 @@ class _PythonSteps:
         for component, _, _ in self.steps:
             component.constant_outputs = True
         try:
-            tables = self.master.kernel_tables(record=True, block=block)
+            tables = self.master.kernel_tables(record=True, block=block, scalar_rows=True)
         finally:
             for component, _, _ in self.steps:
                 component.constant_outputs = False
@@ -770,7 +770,7 @@ def _tables(master: Master, block: int, previous: _PythonSteps | None = None) ->
     python = _PythonSteps.make(master, previous)
     tables = python.tables(block) if python is not None else None
     if tables is None:
-        return master.kernel_tables(record=True, block=block), None
+        return master.kernel_tables(record=True, block=block, scalar_rows=True), None
     return tables, python
 
 

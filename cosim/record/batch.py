@@ -296,7 +296,10 @@ class MessageBlock:
         self.pose: PoseStream | None = None
         self.pose_streams = (-1, -1, -1)
         self.raw: list[tuple[int, int, bytes]] = []  # (channel, t_ns, payload) of any other message
-        self.order: list[int] = []  # stream number of each message, in write order
+        # Stream number of each message, in write order: `order_parts` (arrays held at once, by
+        # `add_batch`, `add_signal_rows`), then `order` (held one at a time).
+        self.order: list[int] = []
+        self.order_parts: list[np.ndarray] = []
         self.count = 0  # messages held
         # Packs skipped (`add_batch`): the held messages before `mark` would have been packed, the
         # others form the current group, `group` messages, `group_sizes` per stream number (poses
@@ -467,7 +470,7 @@ class MessageBlock:
         all_times = np.concatenate([np.asarray(times, dtype=np.int64) for _, times, _ in blocks])
         position = np.repeat(np.arange(len(blocks)), counts)
         streams = np.array([self.stream_of[channel] for channel, _, _ in blocks], dtype=np.int64)
-        self.order.extend(streams[position[np.lexsort((position, all_times))]].tolist())
+        self._order_part(streams[position[np.lexsort((position, all_times))]])
         self.count += int(sum(counts))
 
     def end_steps(self, end_ns: int) -> None:
@@ -641,9 +644,16 @@ class MessageBlock:
                 at = cursors[number]
                 self.pose.add_rows(grouped[low : low + n], pose_rows[at : at + n])
                 cursors[number] = at + n
-        self.order.extend(part.tolist())
+        self._order_part(part.copy())  # (the caller's array)
         self.count += end - first
         self.group += end - first
+
+    def _order_part(self, part: np.ndarray) -> None:
+        """Messages of stream numbers `part` (int64, ours) held after those held so far."""
+        if self.order:
+            self.order_parts.append(np.array(self.order, dtype=np.int64))
+            self.order = []
+        self.order_parts.append(part)
 
     def _sequence(self, channel: int, count: int) -> int:
         first = self.sequences[channel]
@@ -655,7 +665,11 @@ class MessageBlock:
         self.settle()
         if self.count == 0:
             return
-        order = np.array(self.order, dtype=np.int64)
+        if self.order or not self.order_parts:
+            self.order_parts.append(np.array(self.order, dtype=np.int64))
+        parts = self.order_parts
+        order = parts[0] if len(parts) == 1 else np.concatenate(parts)
+        self.order_parts = []
         if self.native and len(self.streams) <= kernel.MAX_STREAMS:
             data, offsets, channels, times = self._records_native(order)
         else:

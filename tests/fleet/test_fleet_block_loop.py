@@ -2,8 +2,9 @@
 checked for a whole block (`FleetContacts.steps`) against `FleetContacts.step` per step; the bytes
 of /plan and of the fleet's pose messages patched into layouts against the serialised messages; and
 a fleet run (judged a robot at a time per block, its Python components stepped apart from the
-compiled kernel) against the same run judged step by step with the kernel handing each Python
-component back: the same outcome and the same log, message for message."""
+compiled kernel, the kernel's rows keeping only the scalar inputs) against the same run judged step
+by step with the kernel handing each Python component back and keeping whole rows: the same outcome
+and the same log, message for message."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
+from cosim.core.master import Master
 from cosim.navigation import fleet as fleet_module
 from cosim.navigation.fleet_log import outcome_record
 from cosim.record import recorder, rosmsg
@@ -164,7 +166,16 @@ def test_a_fleet_run_is_that_of_the_step_by_step_loop(tmp_path, monkeypatch):
         return made[-1]
 
     monkeypatch.setattr(fleet_module._PythonSteps, "make", classmethod(recorded))
+    tables = Master.kernel_tables
+    scalar = []
+
+    def kernel_tables(master, *args, **options):
+        scalar.append(options.get("scalar_rows", False))
+        return tables(master, *args, **options)
+
+    monkeypatch.setattr(Master, "kernel_tables", kernel_tables)
     fast = fleet_module.run_fleet(fleet, log_path=tmp_path / "fast.mcap")
+    assert scalar and all(scalar)  # rows without the plans' and scans' elements
     assert len(made) > 1 and None not in made  # stepped apart, also after robots were switched off
     assert all(each.snapshot is not None for each in made)  # lidars read the 10 vehicles' poses at once
 
@@ -172,6 +183,11 @@ def test_a_fleet_run_is_that_of_the_step_by_step_loop(tmp_path, monkeypatch):
     monkeypatch.setattr(fleet_module._FleetJudge, "make", classmethod(lambda *_: None))
     monkeypatch.setattr(fleet_module._PythonSteps, "make", classmethod(lambda *_: None))
     monkeypatch.setattr(FleetContacts, "steps", _contacts_step_by_step)
+    monkeypatch.setattr(  # whole rows: every input array's elements too
+        Master,
+        "kernel_tables",
+        lambda master, *args, **options: tables(master, *args, **options | {"scalar_rows": False}),
+    )
     fleet = load_scenario(SCENARIOS / "fleet_missions.toml", overrides, fleet=True)
     slow = fleet_module.run_fleet(fleet, log_path=tmp_path / "slow.mcap")
 
