@@ -18,10 +18,13 @@ the same bytes: a chunk ends when it holds more than `chunk_size` bytes of recor
 
 from __future__ import annotations
 
+import os
 import struct
+import threading
 import zlib
+from _queue import SimpleQueue
 from array import array
-from typing import TYPE_CHECKING
+from collections import deque
 
 import numpy as np
 import zstandard
@@ -42,9 +45,6 @@ from mcap.records import (
     SummaryOffset,
 )
 
-if TYPE_CHECKING:  # imported when the first large chunk is compressed: it imports logging (~2.5 ms)
-    from concurrent.futures import ThreadPoolExecutor
-
 from cosim.record.mcap_format import (
     CHUNK_HEAD,
     MAGIC,
@@ -56,9 +56,71 @@ from cosim.record.mcap_format import (
     OP_MESSAGE_INDEX,
 )
 
-# A chunk of fewer bytes is compressed inline: handing it to the thread and back (two wake-ups
-# and GIL hand-offs, ~0.15-0.2 ms) costs more than compressing it (~0.1 ms for 50 kB).
-THREADED_BYTES = 256 * 1024
+# With a second core, a chunk ended between messages is checksummed and compressed on a worker
+# thread (zlib and zstd release the GIL for such buffers) while the caller goes on; one of fewer
+# bytes is done inline: handing it over (~20-50 us) costs about what it takes (a 32 kB chunk ~50 us).
+THREADED_BYTES = 32 * 1024
+
+
+def _second_core() -> bool:
+    try:
+        return len(os.sched_getaffinity(0)) >= 2
+    except (AttributeError, OSError):
+        return False
+
+
+SECOND_CORE = _second_core()  # on one core the thread only adds its hand-offs
+# Chunks ended but not yet written at most: the worker gets the GIL back from the caller only when
+# the caller releases it (a blocking call, or after the switch interval, 5 ms), so a chunk may be
+# done a few chunks later; the caller waits only when this many are behind.
+PENDING_CHUNKS = 8
+
+
+class _Worker:
+    """One daemon thread per process computing (crc32, zstd) of ended chunks, in the order given.
+    A plain thread and a C queue: `concurrent.futures` would cost a warm run ~2.5 ms of imports
+    (it imports logging). Started when first needed, and again in a forked child (which has no
+    copy of its parent's threads)."""
+
+    _jobs: SimpleQueue | None = None
+    _pid = 0
+
+    @classmethod
+    def submit(cls, compressor, data: bytearray) -> tuple:
+        """A job for `data`: wait for it with `_Worker.result(job)`."""
+        if cls._jobs is None or cls._pid != os.getpid():
+            cls._jobs, cls._pid = SimpleQueue(), os.getpid()
+            threading.Thread(target=cls._work, args=(cls._jobs,), name="mcap-zstd", daemon=True).start()
+        done = threading.Lock()
+        done.acquire()
+        job = (compressor, data, done, [])
+        cls._jobs.put(job)
+        return job
+
+    @staticmethod
+    def done(job: tuple) -> bool:
+        return bool(job[3])
+
+    @staticmethod
+    def _work(jobs: SimpleQueue) -> None:
+        while True:
+            compressor, data, done, out = jobs.get()
+            try:
+                out.append((zlib.crc32(data), compressor.compress(data)))
+            except BaseException as error:  # raised again by `result` on the writer's thread
+                out.append(error)
+            finally:
+                done.release()
+            del compressor, data, done, out
+
+    @staticmethod
+    def result(job: tuple) -> tuple[int, bytes]:
+        """(crc32, compressed bytes) of a submitted job, once done."""
+        job[2].acquire()
+        result = job[3][0]
+        if isinstance(result, BaseException):
+            raise result
+        return result
 
 
 _INDEX_HEAD_DTYPE = np.dtype(
@@ -155,8 +217,9 @@ class ChunkWriter:
         self._attachment_indexes: list[AttachmentIndex] = []
         self._metadata_indexes: list[MetadataIndex] = []
         self._builder = RecordBuilder()
-        self._pool: ThreadPoolExecutor | None = None  # compresses the ended chunk (`_finish_chunk`)
-        self._pending: tuple | None = None  # that chunk, until written (`_drain`)
+        # The chunks ended but not yet written, oldest first: (worker job, chunk, index, start,
+        # end) each, written in order once compressed (`_write_done`, `_drain`).
+        self._pending: deque[tuple] = deque()
 
     # --- records outside chunks -----------------------------------------------------------
 
@@ -361,11 +424,13 @@ class ChunkWriter:
         self._start_time = min(self._start_time, first)
         self._end_time = max(self._end_time, last)
 
-    def _finish_chunk(self) -> None:
-        """End the open chunk. One of at least `THREADED_BYTES` is compressed on a worker thread
-        (zstd releases the GIL) while the caller goes on, and written, with its message indexes,
-        before anything else is written (`_drain`); a smaller one is compressed and written here.
-        One chunk at a time either way, so the file is the same bytes."""
+    def _finish_chunk(self, last: bool = False) -> None:
+        """End the open chunk. With a second core, one of at least `THREADED_BYTES` ended between
+        messages is checksummed and compressed on the worker thread (`_Worker`) while the caller
+        goes on, and written, with its message indexes, before anything else is written
+        (`_drain`); otherwise, or when it is the `last` before the file is flushed or finished
+        (waiting for the thread would only add its hand-offs), here. One chunk at a time either
+        way, so the file is the same bytes."""
         if self._chunk_messages == 0:
             return
         data = self._chunk  # never appended to again: the next chunk is a new bytearray
@@ -374,37 +439,42 @@ class ChunkWriter:
         self._index = {}
         self._runs = []
         self._chunk_messages = 0
-        self._drain()
-        if len(data) < THREADED_BYTES:
-            self._write_chunk(self._compressor.compress(data), *pending)
+        if last or not SECOND_CORE or len(data) < THREADED_BYTES:
+            self._drain()
+            self._write_chunk(zlib.crc32(data), self._compressor.compress(data), *pending)
             return
-        if self._pool is None:
-            from concurrent.futures import ThreadPoolExecutor
+        self._write_done()
+        self._pending.append((_Worker.submit(self._compressor, data), *pending))
 
-            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="mcap-zstd")
-        self._pending = (self._pool.submit(self._compressor.compress, data), *pending)
+    def _write_done(self) -> None:
+        """Write the oldest chunks the worker has compressed, without waiting (but for the oldest
+        when `PENDING_CHUNKS` wait)."""
+        pending = self._pending
+        while pending and (_Worker.done(pending[0][0]) or len(pending) >= PENDING_CHUNKS):
+            job, *chunk = pending.popleft()
+            self._write_chunk(*_Worker.result(job), *chunk)
 
     def _drain(self) -> None:
-        """Write the chunk being compressed, if any (then the file holds every ended chunk)."""
-        if self._pending is None:
-            return
-        future, *pending = self._pending
-        self._pending = None
-        self._write_chunk(future.result(), *pending)
+        """Write the chunks on the worker thread, if any (then the file holds every ended chunk)."""
+        pending = self._pending
+        while pending:
+            job, *chunk = pending.popleft()
+            self._write_chunk(*_Worker.result(job), *chunk)
 
     def _write_chunk(
         self,
+        crc: int,
         compressed: bytes,
         data: bytearray,
         index: tuple[dict[int, array], list],
         chunk_start: int,
         chunk_end: int,
     ) -> None:
-        """The Chunk record of `data` (compressed), then its message indexes."""
+        """The Chunk record of `data` (its `crc` and `compressed` bytes), then its message indexes."""
         stream = self._stream
         start = stream.tell()
         length = 8 + 8 + 8 + 4 + 4 + 4 + 8 + len(compressed)
-        stream.write(CHUNK_HEAD.pack(OP_CHUNK, length, chunk_start, chunk_end, len(data), zlib.crc32(data)))
+        stream.write(CHUNK_HEAD.pack(OP_CHUNK, length, chunk_start, chunk_end, len(data), crc))
         stream.write(struct.pack("<I4sQ", 4, b"zstd", len(compressed)))
         stream.write(compressed)
         by_channel, runs = index
@@ -487,7 +557,7 @@ class ChunkWriter:
     ) -> None:
         """Write a whole Chunk record (opcode to end) as it is, then message indexes from `index`
         (channel -> (n, 2) log time [ns], offset pairs); the open chunk is ended first."""
-        self._finish_chunk()
+        self._finish_chunk(last=True)
         self._drain()
         self.write_definitions()
         start = self._stream.tell()
@@ -503,7 +573,7 @@ class ChunkWriter:
 
     def flush(self) -> None:
         """End the open chunk (if it holds messages) and hand everything to the OS."""
-        self._finish_chunk()
+        self._finish_chunk(last=True)
         self._drain()
         self._stream.flush()
 
@@ -514,14 +584,11 @@ class ChunkWriter:
 
     def finish(self) -> None:
         """End the data section; write the summary, its offsets and the footer."""
-        self._finish_chunk()
+        self._finish_chunk(last=True)
         self._drain()
         for channel in np.flatnonzero(self._run_counts).tolist():  # the channels' counts of `_append`
             self._counts[channel] = self._counts.get(channel, 0) + int(self._run_counts[channel])
         self._run_counts = np.zeros(0, dtype=np.int64)
-        if self._pool is not None:
-            self._pool.shutdown()
-            self._pool = None
         self._write_record(DataEnd(data_section_crc=0))
         summary_start = self._stream.tell()
         builder = RecordBuilder()
