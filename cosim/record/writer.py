@@ -77,7 +77,8 @@ PENDING_CHUNKS = 8
 
 
 class _Worker:
-    """One daemon thread per process computing (crc32, zstd) of ended chunks, in the order given.
+    """One daemon thread per process doing jobs (calls), in the order given: `_chunk_parts` of
+    ended chunks.
     A plain thread and a C queue: `concurrent.futures` would cost a warm run ~2.5 ms of imports
     (it imports logging). Started when first needed, and again in a forked child (which has no
     copy of its parent's threads)."""
@@ -86,14 +87,14 @@ class _Worker:
     _pid = 0
 
     @classmethod
-    def submit(cls, compressor, data: bytearray) -> tuple:
-        """A job for `data`: wait for it with `_Worker.result(job)`."""
+    def submit(cls, function, *args) -> tuple:
+        """A job, `function(*args)`: wait for its result with `_Worker.result(job)`."""
         if cls._jobs is None or cls._pid != os.getpid():
             cls._jobs, cls._pid = SimpleQueue(), os.getpid()
             threading.Thread(target=cls._work, args=(cls._jobs,), name="mcap-zstd", daemon=True).start()
         done = threading.Lock()
         done.acquire()
-        job = (compressor, data, done, [])
+        job = (function, args, done, [])
         cls._jobs.put(job)
         return job
 
@@ -104,18 +105,18 @@ class _Worker:
     @staticmethod
     def _work(jobs: SimpleQueue) -> None:
         while True:
-            compressor, data, done, out = jobs.get()
+            function, args, done, out = jobs.get()
             try:
-                out.append((zlib.crc32(data), compressor.compress(data)))
+                out.append(function(*args))
             except BaseException as error:  # raised again by `result` on the writer's thread
                 out.append(error)
             finally:
                 done.release()
-            del compressor, data, done, out
+            del function, args, done, out
 
     @staticmethod
-    def result(job: tuple) -> tuple[int, bytes]:
-        """(crc32, compressed bytes) of a submitted job, once done."""
+    def result(job: tuple):
+        """The result of a submitted job, once done."""
         job[2].acquire()
         result = job[3][0]
         if isinstance(result, BaseException):
@@ -180,6 +181,41 @@ def _pair_rows(pairs) -> np.ndarray:
 
 def _concatenated(parts: list[np.ndarray]) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros((0, 2), dtype="<u8")
+
+
+def _message_indexes(index: dict, runs=()) -> tuple[list[int], np.ndarray, np.ndarray]:
+    """The MessageIndex records of a chunk (one per channel, in channel order; each channel's
+    (log time, offset) pairs in `index` as an (n, 2) array or a flat array("Q"), and in `runs`,
+    (channels, pairs) in write order, `ChunkWriter._append`): (channel ids, each record's start
+    within the bytes, the bytes). Built at once: every pair grouped by channel, the heads and the
+    pairs placed in one byte array."""
+    ids, counts, pairs = _grouped_pairs(index, runs)
+    if not ids:
+        return ids, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.uint8)
+    counts = np.asarray(counts, dtype=np.int64)
+    sizes = MESSAGE_INDEX_HEAD.size + 16 * counts
+    starts = np.zeros(len(ids), dtype=np.int64)
+    np.cumsum(sizes[:-1], out=starts[1:])
+    out = np.empty(int(starts[-1] + sizes[-1]), dtype=np.uint8)
+    heads = np.empty(len(ids), dtype=_INDEX_HEAD_DTYPE)
+    heads["opcode"] = OP_MESSAGE_INDEX
+    heads["length"] = 2 + 4 + 16 * counts
+    heads["channel"] = ids
+    heads["size"] = 16 * counts
+    _place(out, starts, heads.view(np.uint8).reshape(len(ids), MESSAGE_INDEX_HEAD.size))
+    # Pair j of a channel at its record's start + head + 16 j.
+    firsts = np.zeros(len(ids), dtype=np.int64)
+    np.cumsum(counts[:-1], out=firsts[1:])
+    rank = np.arange(len(pairs), dtype=np.int64) - np.repeat(firsts, counts)
+    places = np.repeat(starts + MESSAGE_INDEX_HEAD.size, counts) + 16 * rank
+    _place(out, places, pairs.view(np.uint8).reshape(len(pairs), 16))
+    return ids, starts, out
+
+
+def _chunk_parts(compressor, data: bytearray, index: dict, runs: list) -> tuple:
+    """What a Chunk record and its MessageIndex records need of an ended chunk: (crc32, compressed
+    bytes, `_message_indexes`)."""
+    return zlib.crc32(data), compressor.compress(data), _message_indexes(index, runs)
 
 
 class ChunkWriter:
@@ -384,7 +420,7 @@ class ChunkWriter:
         self, records: bytes, channels: np.ndarray, times: np.ndarray, offsets: np.ndarray, end: int
     ) -> None:
         """Records `offsets[0]:end` of `records` into the open chunk, with their index entries
-        (kept as a run, grouped by channel when the chunk ends: `_write_message_indexes`)."""
+        (kept as a run, grouped by channel when the chunk ends: `_message_indexes`)."""
         begin = int(offsets[0])
         base = len(self._chunk) - begin
         self._chunk += memoryview(records)[begin:end]
@@ -426,25 +462,26 @@ class ChunkWriter:
 
     def _finish_chunk(self, last: bool = False) -> None:
         """End the open chunk. With a second core, one of at least `THREADED_BYTES` ended between
-        messages is checksummed and compressed on the worker thread (`_Worker`) while the caller
-        goes on, and written, with its message indexes, before anything else is written
-        (`_drain`); otherwise, or when it is the `last` before the file is flushed or finished
-        (waiting for the thread would only add its hand-offs), here. One chunk at a time either
-        way, so the file is the same bytes."""
+        messages is checksummed and compressed and its message indexes built on the worker
+        thread (`_Worker`) while the caller goes on, and written before anything else is written
+        (`_write_done`, `_drain`); otherwise, or when it is the `last` before the file is flushed
+        or finished (waiting for the thread would only add its hand-offs), here. One chunk at a
+        time either way, in order, so the file is the same bytes."""
         if self._chunk_messages == 0:
             return
         data = self._chunk  # never appended to again: the next chunk is a new bytearray
-        pending = (data, (self._index, self._runs), self._chunk_start, self._chunk_end)
+        parts = (self._compressor, data, self._index, self._runs)
+        pending = (len(data), self._chunk_start, self._chunk_end)
         self._chunk = bytearray()
         self._index = {}
         self._runs = []
         self._chunk_messages = 0
         if last or not SECOND_CORE or len(data) < THREADED_BYTES:
             self._drain()
-            self._write_chunk(zlib.crc32(data), self._compressor.compress(data), *pending)
+            self._write_chunk(*_chunk_parts(*parts), *pending)
             return
         self._write_done()
-        self._pending.append((_Worker.submit(self._compressor, data), *pending))
+        self._pending.append((_Worker.submit(_chunk_parts, *parts), *pending))
 
     def _write_done(self) -> None:
         """Write the oldest chunks the worker has compressed, without waiting (but for the oldest
@@ -465,34 +502,26 @@ class ChunkWriter:
         self,
         crc: int,
         compressed: bytes,
-        data: bytearray,
-        index: tuple[dict[int, array], list],
+        indexes: tuple[list[int], np.ndarray, np.ndarray],
+        size: int,
         chunk_start: int,
         chunk_end: int,
     ) -> None:
-        """The Chunk record of `data` (its `crc` and `compressed` bytes), then its message indexes."""
+        """The Chunk record of `size` bytes of records (their `crc` and `compressed` bytes), then
+        its message `indexes` (`_message_indexes`)."""
         stream = self._stream
         start = stream.tell()
         length = 8 + 8 + 8 + 4 + 4 + 4 + 8 + len(compressed)
-        stream.write(CHUNK_HEAD.pack(OP_CHUNK, length, chunk_start, chunk_end, len(data), crc))
+        stream.write(CHUNK_HEAD.pack(OP_CHUNK, length, chunk_start, chunk_end, size, crc))
         stream.write(struct.pack("<I4sQ", 4, b"zstd", len(compressed)))
         stream.write(compressed)
-        by_channel, runs = index
         self._write_message_indexes(
-            by_channel,
-            start,
-            1 + 8 + length,
-            chunk_start,
-            chunk_end,
-            "zstd",
-            len(compressed),
-            len(data),
-            runs,
+            indexes, start, 1 + 8 + length, chunk_start, chunk_end, "zstd", len(compressed), size
         )
 
     def _write_message_indexes(
         self,
-        index: dict[int, np.ndarray | array],
+        records: tuple[list[int], np.ndarray, np.ndarray],
         start: int,
         chunk_length: int,
         start_time: int,
@@ -500,47 +529,21 @@ class ChunkWriter:
         compression: str,
         compressed_size: int,
         uncompressed_size: int,
-        runs: list[tuple[np.ndarray, np.ndarray]] = (),
     ) -> None:
-        """The MessageIndex records after the chunk at `start` (one per channel, in channel order;
-        each channel's (log time, offset) pairs in `index` as an (n, 2) array or a flat
-        array("Q"), and in `runs`, (channels, pairs) in write order, `_append`) and its ChunkIndex
-        for the summary. The records are built at once: every pair grouped by channel, the heads
-        and the pairs placed in one byte array."""
+        """The MessageIndex `records` (`_message_indexes`) after the chunk at `start`, and its
+        ChunkIndex for the summary."""
         stream = self._stream
         index_start = stream.tell()
-        ids, counts, pairs = _grouped_pairs(index, runs)
-        offsets = {}
-        position = index_start
-        if ids:
-            counts = np.asarray(counts, dtype=np.int64)
-            sizes = MESSAGE_INDEX_HEAD.size + 16 * counts
-            starts = np.zeros(len(ids), dtype=np.int64)
-            np.cumsum(sizes[:-1], out=starts[1:])
-            out = np.empty(int(starts[-1] + sizes[-1]), dtype=np.uint8)
-            heads = np.empty(len(ids), dtype=_INDEX_HEAD_DTYPE)
-            heads["opcode"] = OP_MESSAGE_INDEX
-            heads["length"] = 2 + 4 + 16 * counts
-            heads["channel"] = ids
-            heads["size"] = 16 * counts
-            _place(out, starts, heads.view(np.uint8).reshape(len(ids), MESSAGE_INDEX_HEAD.size))
-            # Pair j of a channel at its record's start + head + 16 j.
-            firsts = np.zeros(len(ids), dtype=np.int64)
-            np.cumsum(counts[:-1], out=firsts[1:])
-            rank = np.arange(len(pairs), dtype=np.int64) - np.repeat(firsts, counts)
-            places = np.repeat(starts + MESSAGE_INDEX_HEAD.size, counts) + 16 * rank
-            _place(out, places, pairs.view(np.uint8).reshape(len(pairs), 16))
-            stream.write(memoryview(out))
-            offsets = dict(zip(ids, (index_start + starts).tolist(), strict=True))
-            position = index_start + len(out)
+        ids, starts, out = records
+        stream.write(memoryview(out))
         self._chunk_indexes.append(
             ChunkIndex(
                 message_start_time=start_time,
                 message_end_time=end_time,
                 chunk_start_offset=start,
                 chunk_length=chunk_length,
-                message_index_offsets=offsets,
-                message_index_length=position - index_start,
+                message_index_offsets=dict(zip(ids, (index_start + starts).tolist(), strict=True)),
+                message_index_length=len(out),
                 compression=compression,
                 compressed_size=compressed_size,
                 uncompressed_size=uncompressed_size,
@@ -568,7 +571,14 @@ class ChunkWriter:
             if len(pairs):
                 self._count_file(channel, len(pairs), int(pairs[:, 0].min()), int(pairs[:, 0].max()))
         self._write_message_indexes(
-            index, start, len(record), start_time, end_time, compression, compressed_size, uncompressed_size
+            _message_indexes(index),
+            start,
+            len(record),
+            start_time,
+            end_time,
+            compression,
+            compressed_size,
+            uncompressed_size,
         )
 
     def flush(self) -> None:
