@@ -14,6 +14,10 @@ Chunk boundaries depend only on the messages, never on the wall clock, so the sa
 the same bytes: a chunk ends when it holds more than `chunk_size` bytes of records, and (with
 `chunk_duration_ns`) before the first message of a later window of log time, windows being
 [n D, (n + 1) D). `copy_chunk` writes a chunk read from another file as it is (`cosim log recover`).
+
+With a second core, an ended chunk's CRC, zstd compression and MessageIndex records are made on a
+worker thread while the run goes on, and the chunks are written in order once made (`_Worker`,
+`ChunkWriter._finish_chunk`): the same bytes as made inline.
 """
 
 from __future__ import annotations
@@ -427,7 +431,8 @@ class ChunkWriter:
         pairs = np.empty((len(times), 2), dtype="<u8")
         pairs[:, 0] = times
         pairs[:, 1] = offsets + base
-        channels = np.asarray(channels, dtype=np.int64)
+        # A copy: the worker thread may group the run after the caller has reused its array.
+        channels = np.array(channels, dtype=np.int64)
         self._runs.append((channels, pairs))
         counts = np.bincount(channels)
         if len(counts) > len(self._run_counts):

@@ -13,6 +13,7 @@ import pytest
 from mcap.reader import make_reader
 
 from cosim.record import writer as writer_module
+from cosim.record.mcap_format import MESSAGE_HEAD
 from cosim.record.writer import ChunkWriter
 
 
@@ -96,3 +97,38 @@ def test_a_forked_child_starts_its_own_worker(monkeypatch):
     finally:
         os.close(read)
         os.waitpid(child, 0)
+
+
+def _packed_file(monkeypatch, threaded: bool) -> bytes:
+    """Batches of 3 channels through `add_records`, the caller overwriting its arrays after each."""
+    monkeypatch.setattr(writer_module, "SECOND_CORE", threaded)
+    stream = io.BytesIO()
+    writer = ChunkWriter(stream, chunk_size=40_000)
+    writer._compressor = _Slow(writer._compressor, 0.002)
+    writer.start(profile="ros2", library="test")
+    schema = writer.register_schema("test/msg/Blob", "ros2msg", b"uint8[] data")
+    for k in (1, 2, 3):
+        writer.register_channel(f"/topic{k}", "cdr", schema, {})
+    channels = np.empty(300, dtype=np.int64)  # reused by every batch
+    for batch in range(40):
+        channels[:] = np.arange(300) % 3 + 1
+        times = 1_000_000 * (300 * batch + np.arange(300, dtype=np.uint64))
+        payload = bytes([batch % 7]) * 400
+        records = b"".join(
+            MESSAGE_HEAD.pack(5, 22 + len(payload), int(c), 300 * batch + j, int(t), int(t)) + payload
+            for j, (c, t) in enumerate(zip(channels, times, strict=True))
+        )
+        writer.add_records(
+            records, channels, times, np.arange(300, dtype=np.int64) * (MESSAGE_HEAD.size + len(payload))
+        )
+        channels[:] = 3  # the caller's next use of its array
+    writer.finish()
+    return stream.getvalue()
+
+
+def test_the_worker_does_not_read_the_callers_arrays(monkeypatch):
+    inline = _packed_file(monkeypatch, threaded=False)
+    assert _packed_file(monkeypatch, threaded=True) == inline
+    reader = make_reader(io.BytesIO(inline), validate_crcs=True)
+    read = [(channel.topic, message.log_time) for _, channel, message in reader.iter_messages()]
+    assert read == [(f"/topic{k % 3 + 1}", 1_000_000 * k) for k in range(12_000)]
