@@ -60,9 +60,11 @@ from cosim.record.mcap_format import (
     OP_MESSAGE_INDEX,
 )
 
-# With a second core, a chunk ended between messages is checksummed and compressed on a worker
-# thread (zlib and zstd release the GIL for such buffers) while the caller goes on; one of fewer
-# bytes is done inline: handing it over (~20-50 us) costs about what it takes (a 32 kB chunk ~50 us).
+# With a second core, a chunk ended between messages is checksummed, compressed and indexed on a
+# worker thread (zlib and zstd release the GIL for such buffers, the run's C calls release it)
+# while the caller goes on; one of fewer bytes is done inline: handing it over (~20-50 us) costs
+# about what it takes (a 32 kB chunk ~50 us). The thread is used whatever the load average: it
+# moves the same work off the caller's thread and adds none (unlike a forked helper process).
 THREADED_BYTES = 32 * 1024
 
 
