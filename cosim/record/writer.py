@@ -14,14 +14,21 @@ Chunk boundaries depend only on the messages, never on the wall clock, so the sa
 the same bytes: a chunk ends when it holds more than `chunk_size` bytes of records, and (with
 `chunk_duration_ns`) before the first message of a later window of log time, windows being
 [n D, (n + 1) D). `copy_chunk` writes a chunk read from another file as it is (`cosim log recover`).
+
+With a second core, an ended chunk's CRC, zstd compression and MessageIndex records are made on a
+worker thread while the run goes on, and the chunks are written in order once made (`_Worker`,
+`ChunkWriter._finish_chunk`): the same bytes as made inline.
 """
 
 from __future__ import annotations
 
+import os
 import struct
+import threading
 import zlib
+from _queue import SimpleQueue
 from array import array
-from typing import TYPE_CHECKING
+from collections import deque
 
 import numpy as np
 import zstandard
@@ -42,9 +49,6 @@ from mcap.records import (
     SummaryOffset,
 )
 
-if TYPE_CHECKING:  # imported when the first large chunk is compressed: it imports logging (~2.5 ms)
-    from concurrent.futures import ThreadPoolExecutor
-
 from cosim.record.mcap_format import (
     CHUNK_HEAD,
     MAGIC,
@@ -56,9 +60,74 @@ from cosim.record.mcap_format import (
     OP_MESSAGE_INDEX,
 )
 
-# A chunk of fewer bytes is compressed inline: handing it to the thread and back (two wake-ups
-# and GIL hand-offs, ~0.15-0.2 ms) costs more than compressing it (~0.1 ms for 50 kB).
-THREADED_BYTES = 256 * 1024
+# With a second core, a chunk ended between messages is checksummed, compressed and indexed on a
+# worker thread (zlib and zstd release the GIL for such buffers, the run's C calls release it)
+# while the caller goes on; one of fewer bytes is done inline: handing it over (~20-50 us) costs
+# about what it takes (a 32 kB chunk ~50 us). The thread is used whatever the load average: it
+# moves the same work off the caller's thread and adds none (unlike a forked helper process).
+THREADED_BYTES = 32 * 1024
+
+
+def _second_core() -> bool:
+    try:
+        return len(os.sched_getaffinity(0)) >= 2
+    except (AttributeError, OSError):
+        return False
+
+
+SECOND_CORE = _second_core()  # on one core the thread only adds its hand-offs
+# Chunks ended but not yet written at most: the worker gets the GIL back from the caller only when
+# the caller releases it (a blocking call, or after the switch interval, 5 ms), so a chunk may be
+# done a few chunks later; the caller waits only when this many are behind.
+PENDING_CHUNKS = 8
+
+
+class _Worker:
+    """One daemon thread per process doing jobs (calls), in the order given: `_chunk_parts` of
+    ended chunks.
+    A plain thread and a C queue: `concurrent.futures` would cost a warm run ~2.5 ms of imports
+    (it imports logging). Started when first needed, and again in a forked child (which has no
+    copy of its parent's threads)."""
+
+    _jobs: SimpleQueue | None = None
+    _pid = 0
+
+    @classmethod
+    def submit(cls, function, *args) -> tuple:
+        """A job, `function(*args)`: wait for its result with `_Worker.result(job)`."""
+        if cls._jobs is None or cls._pid != os.getpid():
+            cls._jobs, cls._pid = SimpleQueue(), os.getpid()
+            threading.Thread(target=cls._work, args=(cls._jobs,), name="mcap-zstd", daemon=True).start()
+        done = threading.Lock()
+        done.acquire()
+        job = (function, args, done, [])
+        cls._jobs.put(job)
+        return job
+
+    @staticmethod
+    def done(job: tuple) -> bool:
+        return bool(job[3])
+
+    @staticmethod
+    def _work(jobs: SimpleQueue) -> None:
+        while True:
+            function, args, done, out = jobs.get()
+            try:
+                out.append(function(*args))
+            except BaseException as error:  # raised again by `result` on the writer's thread
+                out.append(error)
+            finally:
+                done.release()
+            del function, args, done, out
+
+    @staticmethod
+    def result(job: tuple):
+        """The result of a submitted job, once done."""
+        job[2].acquire()
+        result = job[3][0]
+        if isinstance(result, BaseException):
+            raise result
+        return result
 
 
 _INDEX_HEAD_DTYPE = np.dtype(
@@ -120,6 +189,41 @@ def _concatenated(parts: list[np.ndarray]) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros((0, 2), dtype="<u8")
 
 
+def _message_indexes(index: dict, runs=()) -> tuple[list[int], np.ndarray, np.ndarray]:
+    """The MessageIndex records of a chunk (one per channel, in channel order; each channel's
+    (log time, offset) pairs in `index` as an (n, 2) array or a flat array("Q"), and in `runs`,
+    (channels, pairs) in write order, `ChunkWriter._append`): (channel ids, each record's start
+    within the bytes, the bytes). Built at once: every pair grouped by channel, the heads and the
+    pairs placed in one byte array."""
+    ids, counts, pairs = _grouped_pairs(index, runs)
+    if not ids:
+        return ids, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.uint8)
+    counts = np.asarray(counts, dtype=np.int64)
+    sizes = MESSAGE_INDEX_HEAD.size + 16 * counts
+    starts = np.zeros(len(ids), dtype=np.int64)
+    np.cumsum(sizes[:-1], out=starts[1:])
+    out = np.empty(int(starts[-1] + sizes[-1]), dtype=np.uint8)
+    heads = np.empty(len(ids), dtype=_INDEX_HEAD_DTYPE)
+    heads["opcode"] = OP_MESSAGE_INDEX
+    heads["length"] = 2 + 4 + 16 * counts
+    heads["channel"] = ids
+    heads["size"] = 16 * counts
+    _place(out, starts, heads.view(np.uint8).reshape(len(ids), MESSAGE_INDEX_HEAD.size))
+    # Pair j of a channel at its record's start + head + 16 j.
+    firsts = np.zeros(len(ids), dtype=np.int64)
+    np.cumsum(counts[:-1], out=firsts[1:])
+    rank = np.arange(len(pairs), dtype=np.int64) - np.repeat(firsts, counts)
+    places = np.repeat(starts + MESSAGE_INDEX_HEAD.size, counts) + 16 * rank
+    _place(out, places, pairs.view(np.uint8).reshape(len(pairs), 16))
+    return ids, starts, out
+
+
+def _chunk_parts(compressor, data: bytearray, index: dict, runs: list) -> tuple:
+    """What a Chunk record and its MessageIndex records need of an ended chunk: (crc32, compressed
+    bytes, `_message_indexes`)."""
+    return zlib.crc32(data), compressor.compress(data), _message_indexes(index, runs)
+
+
 class ChunkWriter:
     """Writes one MCAP file to a binary `stream` (not closed by `finish`)."""
 
@@ -155,8 +259,9 @@ class ChunkWriter:
         self._attachment_indexes: list[AttachmentIndex] = []
         self._metadata_indexes: list[MetadataIndex] = []
         self._builder = RecordBuilder()
-        self._pool: ThreadPoolExecutor | None = None  # compresses the ended chunk (`_finish_chunk`)
-        self._pending: tuple | None = None  # that chunk, until written (`_drain`)
+        # The chunks ended but not yet written, oldest first: (worker job, chunk, index, start,
+        # end) each, written in order once compressed (`_write_done`, `_drain`).
+        self._pending: deque[tuple] = deque()
 
     # --- records outside chunks -----------------------------------------------------------
 
@@ -321,14 +426,15 @@ class ChunkWriter:
         self, records: bytes, channels: np.ndarray, times: np.ndarray, offsets: np.ndarray, end: int
     ) -> None:
         """Records `offsets[0]:end` of `records` into the open chunk, with their index entries
-        (kept as a run, grouped by channel when the chunk ends: `_write_message_indexes`)."""
+        (kept as a run, grouped by channel when the chunk ends: `_message_indexes`)."""
         begin = int(offsets[0])
         base = len(self._chunk) - begin
         self._chunk += memoryview(records)[begin:end]
         pairs = np.empty((len(times), 2), dtype="<u8")
         pairs[:, 0] = times
         pairs[:, 1] = offsets + base
-        channels = np.asarray(channels, dtype=np.int64)
+        # A copy: the worker thread may group the run after the caller has reused its array.
+        channels = np.array(channels, dtype=np.int64)
         self._runs.append((channels, pairs))
         counts = np.bincount(channels)
         if len(counts) > len(self._run_counts):
@@ -361,68 +467,68 @@ class ChunkWriter:
         self._start_time = min(self._start_time, first)
         self._end_time = max(self._end_time, last)
 
-    def _finish_chunk(self) -> None:
-        """End the open chunk. One of at least `THREADED_BYTES` is compressed on a worker thread
-        (zstd releases the GIL) while the caller goes on, and written, with its message indexes,
-        before anything else is written (`_drain`); a smaller one is compressed and written here.
-        One chunk at a time either way, so the file is the same bytes."""
+    def _finish_chunk(self, last: bool = False) -> None:
+        """End the open chunk. With a second core, one of at least `THREADED_BYTES` ended between
+        messages is checksummed and compressed and its message indexes built on the worker
+        thread (`_Worker`) while the caller goes on, and written before anything else is written
+        (`_write_done`, `_drain`); otherwise, or when it is the `last` before the file is flushed
+        or finished (waiting for the thread would only add its hand-offs), here. One chunk at a
+        time either way, in order, so the file is the same bytes."""
         if self._chunk_messages == 0:
             return
         data = self._chunk  # never appended to again: the next chunk is a new bytearray
-        pending = (data, (self._index, self._runs), self._chunk_start, self._chunk_end)
+        parts = (self._compressor, data, self._index, self._runs)
+        pending = (len(data), self._chunk_start, self._chunk_end)
         self._chunk = bytearray()
         self._index = {}
         self._runs = []
         self._chunk_messages = 0
-        self._drain()
-        if len(data) < THREADED_BYTES:
-            self._write_chunk(self._compressor.compress(data), *pending)
+        if last or not SECOND_CORE or len(data) < THREADED_BYTES:
+            self._drain()
+            self._write_chunk(*_chunk_parts(*parts), *pending)
             return
-        if self._pool is None:
-            from concurrent.futures import ThreadPoolExecutor
+        self._write_done()
+        self._pending.append((_Worker.submit(_chunk_parts, *parts), *pending))
 
-            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="mcap-zstd")
-        self._pending = (self._pool.submit(self._compressor.compress, data), *pending)
+    def _write_done(self) -> None:
+        """Write the oldest chunks the worker has compressed, without waiting (but for the oldest
+        when `PENDING_CHUNKS` wait)."""
+        pending = self._pending
+        while pending and (_Worker.done(pending[0][0]) or len(pending) >= PENDING_CHUNKS):
+            job, *chunk = pending.popleft()
+            self._write_chunk(*_Worker.result(job), *chunk)
 
     def _drain(self) -> None:
-        """Write the chunk being compressed, if any (then the file holds every ended chunk)."""
-        if self._pending is None:
-            return
-        future, *pending = self._pending
-        self._pending = None
-        self._write_chunk(future.result(), *pending)
+        """Write the chunks on the worker thread, if any (then the file holds every ended chunk)."""
+        pending = self._pending
+        while pending:
+            job, *chunk = pending.popleft()
+            self._write_chunk(*_Worker.result(job), *chunk)
 
     def _write_chunk(
         self,
+        crc: int,
         compressed: bytes,
-        data: bytearray,
-        index: tuple[dict[int, array], list],
+        indexes: tuple[list[int], np.ndarray, np.ndarray],
+        size: int,
         chunk_start: int,
         chunk_end: int,
     ) -> None:
-        """The Chunk record of `data` (compressed), then its message indexes."""
+        """The Chunk record of `size` bytes of records (their `crc` and `compressed` bytes), then
+        its message `indexes` (`_message_indexes`)."""
         stream = self._stream
         start = stream.tell()
         length = 8 + 8 + 8 + 4 + 4 + 4 + 8 + len(compressed)
-        stream.write(CHUNK_HEAD.pack(OP_CHUNK, length, chunk_start, chunk_end, len(data), zlib.crc32(data)))
+        stream.write(CHUNK_HEAD.pack(OP_CHUNK, length, chunk_start, chunk_end, size, crc))
         stream.write(struct.pack("<I4sQ", 4, b"zstd", len(compressed)))
         stream.write(compressed)
-        by_channel, runs = index
         self._write_message_indexes(
-            by_channel,
-            start,
-            1 + 8 + length,
-            chunk_start,
-            chunk_end,
-            "zstd",
-            len(compressed),
-            len(data),
-            runs,
+            indexes, start, 1 + 8 + length, chunk_start, chunk_end, "zstd", len(compressed), size
         )
 
     def _write_message_indexes(
         self,
-        index: dict[int, np.ndarray | array],
+        records: tuple[list[int], np.ndarray, np.ndarray],
         start: int,
         chunk_length: int,
         start_time: int,
@@ -430,47 +536,21 @@ class ChunkWriter:
         compression: str,
         compressed_size: int,
         uncompressed_size: int,
-        runs: list[tuple[np.ndarray, np.ndarray]] = (),
     ) -> None:
-        """The MessageIndex records after the chunk at `start` (one per channel, in channel order;
-        each channel's (log time, offset) pairs in `index` as an (n, 2) array or a flat
-        array("Q"), and in `runs`, (channels, pairs) in write order, `_append`) and its ChunkIndex
-        for the summary. The records are built at once: every pair grouped by channel, the heads
-        and the pairs placed in one byte array."""
+        """The MessageIndex `records` (`_message_indexes`) after the chunk at `start`, and its
+        ChunkIndex for the summary."""
         stream = self._stream
         index_start = stream.tell()
-        ids, counts, pairs = _grouped_pairs(index, runs)
-        offsets = {}
-        position = index_start
-        if ids:
-            counts = np.asarray(counts, dtype=np.int64)
-            sizes = MESSAGE_INDEX_HEAD.size + 16 * counts
-            starts = np.zeros(len(ids), dtype=np.int64)
-            np.cumsum(sizes[:-1], out=starts[1:])
-            out = np.empty(int(starts[-1] + sizes[-1]), dtype=np.uint8)
-            heads = np.empty(len(ids), dtype=_INDEX_HEAD_DTYPE)
-            heads["opcode"] = OP_MESSAGE_INDEX
-            heads["length"] = 2 + 4 + 16 * counts
-            heads["channel"] = ids
-            heads["size"] = 16 * counts
-            _place(out, starts, heads.view(np.uint8).reshape(len(ids), MESSAGE_INDEX_HEAD.size))
-            # Pair j of a channel at its record's start + head + 16 j.
-            firsts = np.zeros(len(ids), dtype=np.int64)
-            np.cumsum(counts[:-1], out=firsts[1:])
-            rank = np.arange(len(pairs), dtype=np.int64) - np.repeat(firsts, counts)
-            places = np.repeat(starts + MESSAGE_INDEX_HEAD.size, counts) + 16 * rank
-            _place(out, places, pairs.view(np.uint8).reshape(len(pairs), 16))
-            stream.write(memoryview(out))
-            offsets = dict(zip(ids, (index_start + starts).tolist(), strict=True))
-            position = index_start + len(out)
+        ids, starts, out = records
+        stream.write(memoryview(out))
         self._chunk_indexes.append(
             ChunkIndex(
                 message_start_time=start_time,
                 message_end_time=end_time,
                 chunk_start_offset=start,
                 chunk_length=chunk_length,
-                message_index_offsets=offsets,
-                message_index_length=position - index_start,
+                message_index_offsets=dict(zip(ids, (index_start + starts).tolist(), strict=True)),
+                message_index_length=len(out),
                 compression=compression,
                 compressed_size=compressed_size,
                 uncompressed_size=uncompressed_size,
@@ -487,7 +567,7 @@ class ChunkWriter:
     ) -> None:
         """Write a whole Chunk record (opcode to end) as it is, then message indexes from `index`
         (channel -> (n, 2) log time [ns], offset pairs); the open chunk is ended first."""
-        self._finish_chunk()
+        self._finish_chunk(last=True)
         self._drain()
         self.write_definitions()
         start = self._stream.tell()
@@ -498,12 +578,19 @@ class ChunkWriter:
             if len(pairs):
                 self._count_file(channel, len(pairs), int(pairs[:, 0].min()), int(pairs[:, 0].max()))
         self._write_message_indexes(
-            index, start, len(record), start_time, end_time, compression, compressed_size, uncompressed_size
+            _message_indexes(index),
+            start,
+            len(record),
+            start_time,
+            end_time,
+            compression,
+            compressed_size,
+            uncompressed_size,
         )
 
     def flush(self) -> None:
         """End the open chunk (if it holds messages) and hand everything to the OS."""
-        self._finish_chunk()
+        self._finish_chunk(last=True)
         self._drain()
         self._stream.flush()
 
@@ -514,14 +601,11 @@ class ChunkWriter:
 
     def finish(self) -> None:
         """End the data section; write the summary, its offsets and the footer."""
-        self._finish_chunk()
+        self._finish_chunk(last=True)
         self._drain()
         for channel in np.flatnonzero(self._run_counts).tolist():  # the channels' counts of `_append`
             self._counts[channel] = self._counts.get(channel, 0) + int(self._run_counts[channel])
         self._run_counts = np.zeros(0, dtype=np.int64)
-        if self._pool is not None:
-            self._pool.shutdown()
-            self._pool = None
         self._write_record(DataEnd(data_section_crc=0))
         summary_start = self._stream.tell()
         builder = RecordBuilder()
