@@ -189,6 +189,7 @@ def _child(data_read: int, reply_write: int, scenario, drawer=None) -> None:
         drafted = None if scenario is None else draft(scenario)
         helper = None
         if drafted is not None and range(drafted.rows)[LOWER] and _free_core():
+            _warm(True, data_read)  # the helper's copy has these too
             helper = PanelHelper.start(drafted, (data_read, reply_write))
         with os.fdopen(data_read, "rb") as pipe:
             panels = _frame(pipe)
@@ -238,6 +239,24 @@ def _draw_run(panels, mapped, drafted, helper) -> None:
             drafted.write(Path(png_path))
         else:  # the helper failed, or the two parts overlap: drawn afresh
             draw(data, Path(png_path))
+
+
+def _warm(map_part: bool, data_read: int) -> None:
+    """Lay out the texts the map part (`map_part`) or the panels most likely hold
+    (`cosim.logs.plot.likely_texts`) while the run goes, until its data is there to read on
+    `data_read`: done ahead, laying out is a third of what drawing them costs after the run.
+    Only with a core to spare for it (the run keeps the other)."""
+    import select
+
+    from cosim.logs.plot import likely_texts, warm_text
+
+    def arrived() -> bool:
+        try:
+            return bool(select.select([data_read], [], [], 0)[0])
+        except (OSError, ValueError):
+            return True
+
+    warm_text(likely_texts(map_part), arrived)
 
 
 def _free_core() -> bool:
@@ -357,6 +376,7 @@ def _panels(drafted, data_read: int, done_write: int, shared) -> None:
     try:
         import numpy as np
 
+        _warm(False, data_read)
         with os.fdopen(data_read, "rb") as pipe:
             payload = pipe.read()
         if payload:

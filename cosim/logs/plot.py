@@ -469,6 +469,128 @@ def prepare_drawing() -> None:
         get_font(findfont(FontProperties()))
 
 
+# Text set in the same font, size and pixel density is laid out the same wherever it is drawn:
+# its size (`RendererAgg.get_text_width_height_descent`) and its glyphs and their offsets (the
+# layout `draw_text` makes) are kept here per (text, font, dpi, hinting), for every figure of the
+# process. Laying a text out is most of the time matplotlib spends on it (shaping, with fallback
+# fonts: ~15 us per character, twice per text: for its size and to draw it); a process that knows
+# which texts it will draw lays them out ahead (`warm_text`: the plot process, while the run goes).
+_TEXT_SIZES: dict = {}
+_TEXT_GLYPHS: dict = {}
+_CANVAS: list = []
+
+
+def _canvas_class():
+    """The Agg canvas of the run's figure: matplotlib's, whose renderer keeps each text's layout
+    (`_TEXT_SIZES`, `_TEXT_GLYPHS`) and draws it glyph by glyph as matplotlib's own `draw_text`
+    does (the same pixels). With a matplotlib that draws text otherwise (before 3.11: the whole
+    string as one bitmap), only the sizes are kept."""
+    if _CANVAS:
+        return _CANVAS[0]
+    from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg, get_hinting_flag
+
+    class Renderer(RendererAgg):
+        glyph_by_glyph = hasattr(RendererAgg, "_draw_text_glyphs_and_boxes")
+
+        def get_text_width_height_descent(self, s, prop, ismath):
+            if ismath:
+                return super().get_text_width_height_descent(s, prop, ismath)
+            key = (s, hash(prop), self.dpi, get_hinting_flag())  # FontProperties are equal by hash
+            size = _TEXT_SIZES.get(key)
+            if size is None:
+                size = _TEXT_SIZES[key] = super().get_text_width_height_descent(s, prop, ismath)
+            return size
+
+        def draw_text(self, gc, x, y, s, prop, angle, ismath=False, mtext=None):
+            if (
+                ismath
+                or not self.glyph_by_glyph
+                or (mtext is not None and (mtext.get_fontfeatures() or mtext.get_language()))
+            ):
+                return super().draw_text(gc, x, y, s, prop, angle, ismath, mtext)
+            glyphs = self.text_glyphs(s, prop)
+            size = prop.get_size_in_points()
+            self._draw_text_glyphs_and_boxes(
+                gc, x, y, angle, ((font, size, glyph, 0, 1, dx, dy) for font, glyph, dx, dy in glyphs), []
+            )
+
+        def text_glyphs(self, s, prop) -> list:
+            """(font, glyph index, x, y) of each glyph of `s` set in `prop`, as `draw_text` lays it out."""
+            flags = get_hinting_flag()
+            key = (s, hash(prop), self.dpi, flags)
+            glyphs = _TEXT_GLYPHS.get(key)
+            if glyphs is None:
+                items = self._prepare_font(prop)._layout(s, flags=flags, features=None, language=None)
+                glyphs = _TEXT_GLYPHS[key] = [
+                    (item.ft_object, item.glyph_index, item.x, item.y) for item in items
+                ]
+            return glyphs
+
+    class Canvas(FigureCanvasAgg):
+        def get_renderer(self):
+            w, h = self.get_width_height(physical=True)
+            key = w, h, self.figure.dpi
+            if self._lastKey != key:
+                self.renderer = Renderer(w, h, self.figure.dpi)
+                self._lastKey = key
+            return self.renderer
+
+    Canvas.renderer_class = Renderer
+    _CANVAS.append(Canvas)
+    return Canvas
+
+
+def warm_text(texts, stop=lambda: False, dpi: float = DPI) -> None:
+    """Lay out ahead each (text, font size [pt]) of `texts` (in the default font) as the run's
+    figure would (its size, and its glyphs where they are kept), until `stop()` is true (asked
+    before each)."""
+    from matplotlib.font_manager import FontProperties
+
+    renderer = _canvas_class().renderer_class(1, 1, dpi)
+    fonts: dict = {}
+    for text, size in texts:
+        if stop():
+            return
+        prop = fonts.get(size) or fonts.setdefault(size, FontProperties(size=size))
+        renderer.get_text_width_height_descent(text, prop, False)
+        if renderer.glyph_by_glyph:
+            renderer.text_glyphs(text, prop)
+
+
+def likely_texts(map_part: bool) -> list[tuple[str, float]]:
+    """The texts (text, font size [pt]) the part of a run's figure drawn after the run (`Draft`:
+    with `map_part` the map's legend, else the panels) most likely holds, the likeliest first, for
+    `warm_text`: the map's legend entries; the panels' units, names and tick labels (whole numbers,
+    and multiples of 0.1 and 0.05 as matplotlib's default formatter writes them). A text not
+    among them is laid out when drawn, as any other."""
+    if map_part:
+        legend = [
+            "inflated zone (planner)", "map: occupied", "unknown obstacles (lidar only)",
+            "moving obstacles: tracks (last pose drawn)", "plan", "earlier plans (older: fainter)",
+            "replanned here", "plan: reverse segments", "driven trajectory", "start (and heading)",
+            "goal (tolerance circle)", "goal at the end (tolerance circle)", "earlier goal", "earlier goals",
+            *(f"end: {reason}" for reason in ("collision", "stop_time", "no_path", "interrupted")),
+            *(mode_name(mode, avoider) for avoider in AVOIDERS.values() for mode in MODE_COLORS),
+            *(f"plan in force at the end (of {count})" for count in range(2, 13)),
+        ]  # fmt: skip
+        return [("lp", 8.0)] + [(text, 8.0) for text in legend]
+    names = [f"{component}.{name}" for component, name in SPEED + STEERING + TURNING]
+    names += [label.format(avoider=avoider) for _, _, label in DIRECTIONS for avoider in AVOIDERS.values()]
+    names += ["minimum lidar range (/scan)", "distance to the goal", "distance to the goal in force"]
+    names += [mode_name(mode, avoider) for avoider in AVOIDERS.values() for mode in MODE_COLORS]
+    labels = ["lp", "time [s]", "[m/s]", "[rad/s]", "[rad]", "[m]"]
+
+    def number(value: float, decimals: int) -> str:
+        return f"{value:.{decimals}f}".replace("-", "\N{MINUS SIGN}")
+
+    ticks = [number(value, 0) for value in range(101)]
+    ticks += [number(k / 4, 2) for k in range(-8, 9)] + [number(k / 2, 1) for k in range(-8, 9)]
+    ticks += [number(k / 10, 1) for k in range(-30, 31)] + [number(k / 20, 2) for k in range(-40, 41)]
+    ticks += [number(value, 0) for value in (*range(-20, 0), *range(101, 301))]
+    texts = [("lp", 8.0)] + [(name, 8.0) for name in names] + [(text, 10.0) for text in labels + ticks]
+    return list(dict.fromkeys(texts))
+
+
 def draw(data: PlotData | list[PlotData], png_path: str | Path, dpi: float = DPI, size=None) -> Path:
     """Render `data` (one run, or a list of runs to overlay) to a PNG (Agg, no pyplot, no display);
     `dpi` [pixels per inch]; `size` (width, height) [px], by default 15 in wide and as high as the
@@ -523,13 +645,12 @@ def _panels(runs: list[PlotData]) -> dict[str, list[tuple[int, Series]]]:
 def _new_figure(panels: int, title_lines: int, dpi: float, size):
     """An empty figure on an Agg canvas for a map and `panels` rows of panels, under a title of
     `title_lines` lines: (figure, grid spec: the map spans column 0, the panels column 1)."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     rows = max(panels, 1)
     width, height = figure_size(rows, size, dpi)
     figure = Figure(figsize=(width, height), dpi=dpi)
-    FigureCanvasAgg(figure)
+    _canvas_class()(figure)
     # Fixed margins [inches] instead of a layout engine: room for the title above, the map's
     # legend below it, and the panels' tick labels.
     grid = figure.add_gridspec(
