@@ -41,6 +41,7 @@ if TYPE_CHECKING:
 AVOIDERS = {"VectorFieldHistogram": "VFH", "ArtificialPotentialField": "APF"}
 DPI = 110
 GRID_ALPHA = 0.3  # the panels' grid lines
+TICKS_AHEAD = 8  # the ticks a drafted panel's axis makes ahead (`Draft`); its view holds 3 to 8
 
 # Where the default series come from, in order of preference (each must be in the trace's
 # `TRACE_SIGNALS`, so that the plot of a run's trace is the plot of its log).
@@ -704,6 +705,10 @@ class Draft:
             self.background = canvas.copy_from_bbox(self.figure.bbox)
             for axes in self.panel_axes:
                 axes.set_visible(True)
+                axes.grid(alpha=GRID_ALPHA)  # as `_draw_series` sets it, before the ticks are made
+            for axis in [axes.yaxis for axes in self.panel_axes] + [self.panel_axes[-1].xaxis]:
+                axis.get_major_ticks(TICKS_AHEAD)  # a tick is five artists: made here, not after the run
+                axis.get_minor_ticks(1)  # (an axis makes one even with none to draw)
 
     def fits(self, data: PlotData) -> bool:
         """Whether `data` has the drafted frame: the same map image and view, panel rows and title lines."""
