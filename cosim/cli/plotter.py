@@ -235,9 +235,11 @@ def _draw_run(panels, mapped, drafted, helper) -> None:
         drafted.finish(data, Path(png_path))
     else:
         drafted.draw_run(data, panels=TOP)
-        if helper.paste(drafted):
+        pasted = helper.paste(drafted)
+        if pasted:
             drafted.write(Path(png_path))
-        else:  # the helper failed, or the two parts overlap: drawn afresh
+        helper.cancel()  # reaped after the picture is written: its exit takes a few ms
+        if not pasted:  # the helper failed, or the two parts overlap: drawn afresh
             draw(data, Path(png_path))
 
 
@@ -335,8 +337,7 @@ class PanelHelper:
 
         with os.fdopen(self._done, "rb") as pipe:
             self._done = None
-            answer = pipe.read().decode(errors="replace").split()
-        self._reap()
+            answer = pipe.readline().decode(errors="replace").split()  # (not waiting for its exit)
         if len(answer) != 4:
             return False
         top, bottom, left, right = (int(value) for value in answer)
@@ -349,9 +350,9 @@ class PanelHelper:
         return True
 
     def cancel(self) -> None:
-        """No panels wanted: the helper is ended (it sees its pipe close, or is killed while it
-        draws) and reaped."""
-        if self._data is None and self.pid:
+        """No panels wanted (or no more: they were pasted): the helper is ended (it sees its pipe
+        close, or is killed while it draws) and reaped."""
+        if self._data is None and self._done is not None and self.pid:
             try:
                 os.kill(self.pid, signal.SIGKILL)
             except ProcessLookupError:
@@ -384,7 +385,7 @@ def _panels(drafted, data_read: int, done_write: int, shared) -> None:
             top, bottom, left, right = drafted.panels_box(LOWER)
             view = np.frombuffer(shared, dtype=np.uint8).reshape(drafted.pixels().shape)
             view[top:bottom, left:right] = drafted.pixels()[top:bottom, left:right]
-            answer = f"{top} {bottom} {left} {right}"
+            answer = f"{top} {bottom} {left} {right}\n"
     except Exception:  # noqa: BLE001 (no answer: the plot process draws the panels itself)
         answer = ""
     finally:

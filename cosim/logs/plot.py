@@ -24,6 +24,7 @@ matplotlib is imported when a plot is drawn, not with this module.
 
 from __future__ import annotations
 
+import os
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -479,6 +480,10 @@ def prepare_drawing() -> None:
 _TEXT_SIZES: dict = {}
 _TEXT_GLYPHS: dict = {}
 _CANVAS: list = []
+if hasattr(os, "register_at_fork"):
+    # The glyphs' fonts (FT2Font) must not be used in a forked process, which would read their
+    # files through the parent's file offsets: dropped there, as matplotlib drops its own fonts.
+    os.register_at_fork(after_in_child=_TEXT_GLYPHS.clear)
 
 
 def _canvas_class():

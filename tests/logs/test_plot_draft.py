@@ -122,6 +122,7 @@ def test_the_panel_helper_draws_the_panels_in_a_fork(run, tmp_path):
     drafted.draw_run(data, panels=plotter.TOP)
     assert helper.paste(drafted)
     assert np.array_equal(_pixels(drafted.write(tmp_path / "helped.png")), _drawn(data, tmp_path))
+    helper.cancel()  # after its pixels are pasted: it ends by itself
     with pytest.raises(ChildProcessError):
         os.waitpid(pid, os.WNOHANG)  # reaped
 
