@@ -479,6 +479,7 @@ def prepare_drawing() -> None:
 # which texts it will draw lays them out ahead (`warm_text`: the plot process, while the run goes).
 _TEXT_SIZES: dict = {}
 _TEXT_GLYPHS: dict = {}
+_FONT_HEIGHTS: dict = {}
 _CANVAS: list = []
 if hasattr(os, "register_at_fork"):
     # The glyphs' fonts (FT2Font) must not be used in a forked process, which would read their
@@ -511,6 +512,15 @@ def _canvas_class():
             if size is None:
                 size = _TEXT_SIZES[key] = super().get_text_width_height_descent(s, prop, ismath)
             return size
+
+        def _get_font_height_metrics(self, prop):
+            # matplotlib's Text asks its renderer for this first (else it reads the font's tables
+            # itself for every text it lays out): the same numbers, kept per font and dpi
+            key = (hash(prop), self.dpi)
+            heights = _FONT_HEIGHTS.get(key)
+            if heights is None:
+                heights = _FONT_HEIGHTS[key] = _font_height_metrics(prop, self.dpi)
+            return heights
 
         def draw_text(self, gc, x, y, s, prop, angle, ismath=False, mtext=None):
             if (
@@ -571,6 +581,28 @@ def _canvas_class():
     Canvas.renderer_class = Renderer
     _CANVAS.append(Canvas)
     return Canvas
+
+
+def _font_height_metrics(prop, dpi: float) -> tuple:
+    """(ascent, descent, line gap) [px] of the font of `prop`, as matplotlib's `Text` reads them
+    from the font's OS/2 or hhea table when its renderer does not give them; (None, None, None)
+    without those tables (it then measures the text "lp" instead)."""
+    from matplotlib.font_manager import fontManager, get_font
+
+    font = get_font(fontManager._find_fonts_by_props(prop))
+    possible = [
+        ("OS/2", "sTypoLineGap", "sTypoAscender", "sTypoDescender"),
+        ("hhea", "lineGap", "ascent", "descent"),
+    ]
+    for table_name, linegap_key, ascent_key, descent_key in possible:
+        table = font.get_sfnt_table(table_name)
+        if table is None:
+            continue
+        fontsize = prop.get_size_in_points()
+        units_per_em = font.get_sfnt_table("head")["unitsPerEm"]
+        scale = 1 / units_per_em * fontsize * dpi / 72
+        return table[ascent_key] * scale, -table[descent_key] * scale, table[linegap_key] * scale
+    return None, None, None
 
 
 def warm_text(texts, stop=lambda: False, dpi: float = DPI) -> None:
