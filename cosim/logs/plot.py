@@ -14,9 +14,10 @@ Two sources give the same picture: a log (`plot_run`, `plot_log`: `cosim log plo
 arrays drawn) by the same code; then `draw` makes the figure: matplotlib's Agg canvas without
 pyplot, fixed margins (no layout engine), and one artist per kind of thing (a single RGBA image for
 the map and its inflated zone, one collection for the obstacles, their tracks, each mode's shading),
-text boxes naming each panel's series (no legend per panel), ticks only inside the view, the upper
-panels' unlabelled time ticks as two lines (matplotlib's own pixels: tests/logs/test_plot_render.py), the
-cyclic garbage collector paused, and the PNG written straight from the canvas (`write_png`).
+text boxes naming each panel's series (no legend per panel), ticks only inside the view, the
+panels' grid lines and tick marks as two lines per axis (matplotlib's own pixels:
+tests/logs/test_plot_render.py), the cyclic garbage collector paused, and the PNG written
+straight from the canvas (`write_png`).
 `cosim run` drafts its figure while the run goes (`Draft`: the map frame drawn from the scenario,
 the run drawn over it after) and draws the map and the panels in two processes: the same pixels.
 matplotlib is imported when a plot is drawn, not with this module.
@@ -737,8 +738,7 @@ def _draw_panels(figure, grid, panels, runs: list[PlotData], made=None) -> list:
     panel_axes = _draw_series(figure, grid, panels, runs, made)
     for axes in panel_axes:
         _ticks_in_view(axes)
-    for axes in panel_axes[:-1]:  # the bottom panel labels the time axis they share
-        _unlabelled_x_ticks(axes)
+    _panel_ticks(panel_axes)
     return panel_axes
 
 
@@ -769,8 +769,8 @@ class Draft:
             self.background = canvas.copy_from_bbox(self.figure.bbox)
             for axes in self.panel_axes:
                 axes.set_visible(True)
-                axes.grid(alpha=GRID_ALPHA)  # as `_draw_series` sets it, before the ticks are made
             for axis in [axes.yaxis for axes in self.panel_axes] + [self.panel_axes[-1].xaxis]:
+                _tick_marks_off(axis)  # as `_panel_ticks` has them, before the ticks are made
                 axis.get_major_ticks(TICKS_AHEAD)  # a tick is five artists: made here, not after the run
                 axis.get_minor_ticks(1)  # (an axis makes one even with none to draw)
 
@@ -966,28 +966,50 @@ def _in_view(locations, limits) -> list[float]:
     return [float(loc) for loc in locations if low - slack <= loc <= high + slack]
 
 
-def _unlabelled_x_ticks(axes) -> None:
-    """Draw the x grid lines (the panels have their grid on) and tick marks of a panel whose time
-    axis has no labels as one line artist each, and hide its x axis: an axis builds five artists
-    per tick (two of them texts that would not be shown), and these were a third of the figure's
-    ticks. The same lines, styles, clipping and drawing order (an axis draws at zorder 1.5), so
-    the same pixels."""
+def _panel_ticks(panel_axes: list) -> None:
+    """The panels' grid (on, at `GRID_ALPHA`) and tick marks, drawn as two line artists per axis
+    (`_tick_lines`) instead of by their axes, which keep only their tick labels: the time axis of
+    the bottom panel, which labels the time axis they share, and every y axis; the other panels'
+    time axes are hidden (they would draw texts that are not shown). An axis builds five artists
+    per tick and draws two lines per tick: these were most of the panels' ticks' time. The same
+    lines, styles, clipping and drawing order (an axis draws at zorder 1.5; a panel's time axis
+    before its y axis), so the same pixels (tests/logs/test_plot_render.py)."""
+    for axes in panel_axes:
+        _tick_lines(axes, axes.xaxis)
+        _tick_lines(axes, axes.yaxis)
+        if axes is panel_axes[-1]:
+            _tick_marks_off(axes.xaxis)
+        else:
+            axes.xaxis.set_visible(False)
+        _tick_marks_off(axes.yaxis)
+
+
+def _tick_marks_off(axis) -> None:
+    """No tick marks drawn by `axis` (its labels stay): `_tick_lines` draws them. A no-op for an
+    axis whose ticks are so already (`Draft` makes its panels' ticks so)."""
+    if axis.majorTicks[0].tick1line.get_visible():
+        axis.set_tick_params(which="major", tick1On=False)
+
+
+def _tick_lines(axes, axis) -> None:
+    """Draw the grid lines and tick marks of `axis` (of `axes`: its x or y axis) at its ticks in
+    view as one line artist each, as the axis would draw them with its grid on (`GRID_ALPHA`)."""
     import matplotlib as mpl
-    from matplotlib.lines import TICKDOWN, TICKUP, Line2D
+    from matplotlib.lines import TICKDOWN, TICKLEFT, TICKRIGHT, TICKUP, Line2D
 
     rc = mpl.rcParams
-    locations = np.array(_in_view(axes.xaxis.get_majorticklocs(), axes.get_xlim()))
-    axes.xaxis.set_visible(False)
+    along_x = axis is axes.xaxis
+    locations = np.array(_in_view(axis.get_majorticklocs(), axes.get_xlim() if along_x else axes.get_ylim()))
     if not len(locations):
         return
-    grid_x = np.repeat(locations, 3)  # one path: x, x, NaN per grid line
-    grid_x[2::3] = np.nan
-    grid_y = np.tile([0.0, 1.0, np.nan], len(locations))
+    ends = np.tile([0.0, 1.0, np.nan], len(locations))  # one path: a grid line, then NaN, per tick
+    at = np.repeat(locations, 3)
+    at[2::3] = np.nan
+    transform = axes.get_xaxis_transform if along_x else axes.get_yaxis_transform
     axes.add_artist(
         Line2D(
-            grid_x,
-            grid_y,
-            transform=axes.get_xaxis_transform("grid"),
+            *((at, ends) if along_x else (ends, at)),
+            transform=transform("grid"),
             color=rc["grid.color"],
             alpha=GRID_ALPHA,
             linestyle=rc["grid.linestyle"],
@@ -995,18 +1017,19 @@ def _unlabelled_x_ticks(axes) -> None:
             zorder=1.5,
         )
     )
-    marker = {"out": TICKDOWN, "in": TICKUP, "inout": "|"}[rc["xtick.direction"]]
+    name = "xtick" if along_x else "ytick"
+    marks = {"out": (TICKDOWN, TICKLEFT), "in": (TICKUP, TICKRIGHT), "inout": ("|", "_")}
+    zeros = np.zeros(len(locations))
     axes.add_artist(
         Line2D(
-            locations,
-            np.zeros(len(locations)),
-            transform=axes.get_xaxis_transform("tick1"),
+            *((locations, zeros) if along_x else (zeros, locations)),
+            transform=transform("tick1"),
             linestyle="none",
-            marker=marker,
-            color=rc["xtick.color"],
-            markeredgecolor=rc["xtick.color"],
-            markersize=rc["xtick.major.size"],
-            markeredgewidth=rc["xtick.major.width"],
+            marker=marks[rc[f"{name}.direction"]][0 if along_x else 1],
+            color=rc[f"{name}.color"],
+            markeredgecolor=rc[f"{name}.color"],
+            markersize=rc[f"{name}.major.size"],
+            markeredgewidth=rc[f"{name}.major.width"],
             clip_on=False,
             zorder=1.5,
         )
@@ -1063,9 +1086,8 @@ def _draw_series(
                 entries += [(mode_name(mode, runs[0].avoider), "black", MODE_COLORS[mode]) for mode in shaded]
         unit = items[0][1].unit
         axes.set_ylabel(f"[{unit}]" if unit else "value")
-        _label_panel(axes, entries)
-        axes.grid(alpha=GRID_ALPHA)
-        if row == len(panels) - 1:  # the others draw their ticks unlabelled: `_unlabelled_x_ticks`
+        _label_panel(axes, entries)  # (its grid: `_panel_ticks`)
+        if row == len(panels) - 1:  # the others' time axes are hidden: `_panel_ticks`
             axes.set_xlabel("time [s]")
     if not panels:
         axes = figure.add_subplot(grid[0, 1])

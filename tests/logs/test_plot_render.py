@@ -1,5 +1,5 @@
 """How `cosim.logs.plot.draw` renders: the shortcuts it takes past matplotlib's axes (ticks only
-inside the view, the upper panels' unlabelled time ticks and grid lines drawn as two lines) must give
+inside the view, the panels' grid lines and tick marks drawn as two lines per axis) must give
 the pixels matplotlib's own axes give, and the PNG must show every part of the picture in its
 colour. matplotlib, drawing the same figure the plain way, is the truth."""
 
@@ -62,9 +62,17 @@ def _pixels(path) -> np.ndarray:
 @pytest.mark.parametrize("panels", [5, 2, 1])
 def test_the_shortcuts_draw_the_pixels_of_matplotlibs_own_axes(panels, tmp_path, monkeypatch):
     drawn = _pixels(plot.draw(_data(panels), tmp_path / "drawn.png"))
-    # matplotlib's way: its default locator, every panel's x axis with its labels hidden
+
+    # matplotlib's way: its default locator, its axes drawing their grid and tick marks, the
+    # upper panels' x axes with their labels hidden
+    def plain_ticks(panel_axes):
+        for axes in panel_axes:
+            axes.grid(alpha=plot.GRID_ALPHA)
+        for axes in panel_axes[:-1]:
+            axes.tick_params(labelbottom=False)
+
     monkeypatch.setattr(plot, "_ticks_in_view", lambda axes: None)
-    monkeypatch.setattr(plot, "_unlabelled_x_ticks", lambda axes: axes.tick_params(labelbottom=False))
+    monkeypatch.setattr(plot, "_panel_ticks", plain_ticks)
     plain = _pixels(plot.draw(_data(panels), tmp_path / "plain.png"))
     assert drawn.shape == plain.shape
     assert np.array_equal(drawn, plain)
