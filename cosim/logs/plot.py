@@ -501,6 +501,7 @@ def _canvas_class():
     from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg, get_hinting_flag
 
     RenderMode = getattr(ft2font, "RenderMode", None)
+    NORMAL, MONO = (RenderMode.NORMAL, RenderMode.MONO) if RenderMode is not None else (None, None)
 
     class Renderer(RendererAgg):
         glyph_by_glyph = RenderMode is not None and hasattr(RendererAgg, "_draw_text_glyphs_and_boxes")
@@ -533,34 +534,37 @@ def _canvas_class():
             # matplotlib's `_draw_text_glyphs_and_boxes` for a text without boxes, but each font's
             # size set once, not before each glyph (that doubled the time of each glyph's bitmap)
             cos, sin = math.cos(math.radians(angle)), math.sin(math.radians(angle))
-            matrix = (0x10000 * np.array([[cos, -sin], [sin, cos]])).round().astype(int)
+            matrix = (0x10000 * np.array([[cos, -sin], [sin, cos]])).round().astype(int).tolist()
             flags = get_hinting_flag()
-            mode = RenderMode.NORMAL if gc.get_antialiased() else RenderMode.MONO
+            mono = not gc.get_antialiased()
+            mode = MONO if mono else NORMAL
             size = prop.get_size_in_points()
             sized = set()
             height = self.height
-            for font, glyph, dx, dy in self.text_glyphs(s, prop):  # dy is upwards
+            top = int(height)
+            blend = self._renderer.draw_text_image
+            for font, glyph, dx, dy in self.text_glyphs(s, prop, flags):  # dy is upwards
                 if font not in sized:
                     font.set_size(size, self.dpi)
                     sized.add(font)
                 font._set_transform(
                     matrix,
-                    [
+                    (
                         round(0x40 * (x + dx * cos - dy * sin)),
                         round(0x40 * (height - y + dx * sin + dy * cos)),
-                    ],
+                    ),
                 )
                 bitmap = font._render_glyph(glyph, flags, mode)
                 buffer = bitmap.buffer
-                if mode is RenderMode.MONO:
+                if mono:
                     buffer *= 0xFF
-                self._renderer.draw_text_image(
-                    buffer, bitmap.left, int(height) - bitmap.top + buffer.shape[0], 0, gc
-                )
+                blend(buffer, bitmap.left, top - bitmap.top + buffer.shape[0], 0, gc)
 
-        def text_glyphs(self, s, prop) -> list:
-            """(font, glyph index, x, y) of each glyph of `s` set in `prop`, as `draw_text` lays it out."""
-            flags = get_hinting_flag()
+        def text_glyphs(self, s, prop, flags=None) -> list:
+            """(font, glyph index, x, y) of each glyph of `s` set in `prop`, as `draw_text` lays
+            it out (`flags`: the hinting flags, by default rcParams')."""
+            if flags is None:
+                flags = get_hinting_flag()
             key = (s, hash(prop), self.dpi, flags)
             glyphs = _TEXT_GLYPHS.get(key)
             if glyphs is None:
