@@ -234,10 +234,15 @@ def _draw_run(panels, mapped, drafted, helper) -> None:
     elif helper is None:
         drafted.finish(data, Path(png_path))
     else:
+        from cosim.logs.plot import png_rows
+
         drafted.draw_run(data, panels=TOP)
-        pasted = helper.paste(drafted)
+        # the PNG's rows made of this part while the helper draws (it then pastes into them),
+        # unless its pixels are there already: the two halves' threads make them faster then
+        rows = None if helper.answered() else png_rows(drafted.pixels())
+        pasted = helper.paste(drafted, rows)
         if pasted:
-            drafted.write(Path(png_path))
+            drafted.write(Path(png_path), rows)
         helper.cancel()  # reaped after the picture is written: its exit takes a few ms
         if not pasted:  # the helper failed, or the two parts overlap: drawn afresh
             draw(data, Path(png_path))
@@ -330,9 +335,19 @@ class PanelHelper:
         except OSError:
             pass
 
-    def paste(self, drafted) -> bool:
-        """Wait for the helper, and put its pixels into `drafted`'s canvas when they do not
-        overlap what it drew; whether they were."""
+    def answered(self) -> bool:
+        """Whether the helper has answered (or ended): `paste` will not wait."""
+        import select
+
+        try:
+            return self._done is None or bool(select.select([self._done], [], [], 0)[0])
+        except (OSError, ValueError):
+            return True
+
+    def paste(self, drafted, rows=None) -> bool:
+        """Wait for the helper, and put its pixels into `drafted`'s canvas (or into `rows`, the
+        canvas' `cosim.logs.plot.png_rows`, when given) when they do not overlap what it drew;
+        whether they were."""
         import numpy as np
 
         with os.fdopen(self._done, "rb") as pipe:
@@ -346,7 +361,11 @@ class PanelHelper:
             if top < below and above < bottom and left < east and west < right:
                 return False
         shared = np.frombuffer(self._shared, dtype=np.uint8).reshape(self._shape)
-        drafted.pixels()[top:bottom, left:right] = shared[top:bottom, left:right]
+        if rows is None:
+            drafted.pixels()[top:bottom, left:right] = shared[top:bottom, left:right]
+        else:
+            into = rows[top:bottom, 1 + 3 * left : 1 + 3 * right].reshape(bottom - top, right - left, 3)
+            into[:] = shared[top:bottom, left:right, :3]
         return True
 
     def cancel(self) -> None:

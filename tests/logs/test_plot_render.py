@@ -130,3 +130,38 @@ def test_write_png_is_read_back_by_pillow_as_written(shape, tmp_path):
         assert image.mode == "RGB" and image.size == (shape[1], shape[0])
         assert np.allclose(image.info["dpi"], (72.0, 72.0), atol=0.01)
         assert np.array_equal(np.asarray(image), pixels[:, ::-1])
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (2, 5), (7, 13), (301, 64)])
+@pytest.mark.parametrize("made_before", [False, True])
+def test_write_png_stream_decompresses_with_its_checksum(shape, made_before, tmp_path):
+    """zlib itself (which checks the stream's Adler-32, put together from the two halves') reads
+    the PNG's image data back as the rows: a filter byte 0 and the RGB bytes of each row."""
+    import struct
+    import zlib
+
+    pixels = np.random.default_rng(shape[0]).integers(0, 256, (*shape, 4), dtype=np.uint8)
+    path = tmp_path / "random.png"
+    plot.write_png(path, pixels, 72.0, plot.png_rows(pixels) if made_before else None)
+    data, chunks, at = path.read_bytes(), {}, 8
+    while at < len(data):
+        (length,) = struct.unpack(">I", data[at : at + 4])
+        chunks[data[at + 4 : at + 8]] = data[at + 8 : at + 8 + length]
+        at += 12 + length
+    rows = np.frombuffer(zlib.decompress(chunks[b"IDAT"]), dtype=np.uint8).reshape(shape[0], -1)
+    assert np.all(rows[:, 0] == 0)
+    assert np.array_equal(rows[:, 1:].reshape(*shape, 3), pixels[:, :, :3])
+
+
+@pytest.mark.parametrize("lengths", [(0, 0), (0, 9), (9, 0), (1, 1), (5552, 70000), (100_000, 3)])
+def test_adler32_of_two_strings_is_zlibs_of_both(lengths):
+    import zlib
+
+    rng = np.random.default_rng(sum(lengths))
+    first, second = (rng.integers(0, 256, n, dtype=np.uint8).tobytes() for n in lengths)
+    combined = plot._adler32_combine(zlib.adler32(first), zlib.adler32(second), len(second))
+    assert combined == zlib.adler32(first + second)
+    ones = b"\xff" * lengths[1]  # the largest bytes: the sums wrap most often
+    assert plot._adler32_combine(zlib.adler32(first), zlib.adler32(ones), len(ones)) == zlib.adler32(
+        first + ones
+    )
