@@ -183,14 +183,16 @@ def _child(data_read: int, reply_write: int, scenario, drawer=None) -> None:
     try:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        from cosim.logs.plot import prepare_drawing
+        from cosim.logs.plot import likely_texts, prepare_drawing
 
         prepare_drawing()
         drafted = None if scenario is None else draft(scenario)
         helper = None
         if drafted is not None and range(drafted.rows)[LOWER] and _free_core():
-            _warm(True, data_read)  # the helper's copy has these too
+            _warm(likely_texts(True), data_read)  # (the helper's copy has these too)
             helper = PanelHelper.start(drafted, (data_read, reply_write))
+        elif drafted is not None:  # it draws both parts, on a busy machine: the longest texts only
+            _warm(likely_texts(True) + likely_texts(False, numbers=False), data_read)
         with os.fdopen(data_read, "rb") as pipe:
             panels = _frame(pipe)
             if not panels:
@@ -248,14 +250,14 @@ def _draw_run(panels, mapped, drafted, helper) -> None:
             draw(data, Path(png_path))
 
 
-def _warm(map_part: bool, data_read: int) -> None:
-    """Lay out the texts the map part (`map_part`) or the panels most likely hold
-    (`cosim.logs.plot.likely_texts`) while the run goes, until its data is there to read on
-    `data_read`: done ahead, laying out is a third of what drawing them costs after the run.
-    Only with a core to spare for it (the run keeps the other)."""
+def _warm(texts: list, data_read: int) -> None:
+    """Lay out `texts` (`cosim.logs.plot.likely_texts`) while the run goes, until its data is
+    there to read on `data_read`: done ahead, laying out is a third of what drawing them costs
+    after the run. All of them with a core to spare for it (the run keeps the other), else a few
+    (~15 ms, beside the ~0.2 s of importing matplotlib)."""
     import select
 
-    from cosim.logs.plot import likely_texts, warm_text
+    from cosim.logs.plot import warm_text
 
     def arrived() -> bool:
         try:
@@ -263,7 +265,7 @@ def _warm(map_part: bool, data_read: int) -> None:
         except (OSError, ValueError):
             return True
 
-    warm_text(likely_texts(map_part), arrived)
+    warm_text(texts, arrived)
 
 
 def _free_core() -> bool:
@@ -396,7 +398,9 @@ def _panels(drafted, data_read: int, done_write: int, shared) -> None:
     try:
         import numpy as np
 
-        _warm(False, data_read)
+        from cosim.logs.plot import likely_texts
+
+        _warm(likely_texts(False), data_read)
         with os.fdopen(data_read, "rb") as pipe:
             payload = pipe.read()
         if payload:

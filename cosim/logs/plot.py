@@ -627,12 +627,12 @@ def warm_text(texts, stop=lambda: False, dpi: float = DPI) -> None:
             renderer.text_glyphs(text, prop)
 
 
-def likely_texts(map_part: bool) -> list[tuple[str, float]]:
+def likely_texts(map_part: bool, numbers: bool = True) -> list[tuple[str, float]]:
     """The texts (text, font size [pt]) the part of a run's figure drawn after the run (`Draft`:
     with `map_part` the map's legend, else the panels) most likely holds, the likeliest first, for
-    `warm_text`: the map's legend entries; the panels' units, names and tick labels (whole numbers,
-    and multiples of 0.1 and 0.05 as matplotlib's default formatter writes them). A text not
-    among them is laid out when drawn, as any other."""
+    `warm_text`: the map's legend entries; the panels' units, names and (with `numbers`) tick
+    labels (whole numbers, and multiples of 0.1 and 0.05 as matplotlib's default formatter writes
+    them). A text not among them is laid out when drawn, as any other."""
     if map_part:
         legend = [
             "inflated zone (planner)", "map: occupied", "unknown obstacles (lidar only)",
@@ -653,10 +653,11 @@ def likely_texts(map_part: bool) -> list[tuple[str, float]]:
     def number(value: float, decimals: int) -> str:
         return f"{value:.{decimals}f}".replace("-", "\N{MINUS SIGN}")
 
-    ticks = [number(value, 0) for value in range(101)]
-    ticks += [number(k / 4, 2) for k in range(-8, 9)] + [number(k / 2, 1) for k in range(-8, 9)]
-    ticks += [number(k / 10, 1) for k in range(-30, 31)] + [number(k / 20, 2) for k in range(-40, 41)]
-    ticks += [number(value, 0) for value in (*range(-20, 0), *range(101, 301))]
+    ticks = [number(value, 0) for value in range(101)] if numbers else []
+    if numbers:
+        ticks += [number(k / 4, 2) for k in range(-8, 9)] + [number(k / 2, 1) for k in range(-8, 9)]
+        ticks += [number(k / 10, 1) for k in range(-30, 31)] + [number(k / 20, 2) for k in range(-40, 41)]
+        ticks += [number(value, 0) for value in (*range(-20, 0), *range(101, 301))]
     texts = [("lp", 8.0)] + [(name, 8.0) for name in names] + [(text, 10.0) for text in labels + ticks]
     return list(dict.fromkeys(texts))
 
