@@ -95,14 +95,14 @@ class PlotProcess:
                     _send(pipe, (dataclasses.replace(data, series=[], modes=None), str(png_path)))
             with os.fdopen(self._reply, "rb") as pipe:
                 self._reply = None
-                answer = pipe.read().decode(errors="replace")
+                answer, whole = _answer(pipe)
         except OSError:
-            answer = ""
+            answer, whole = "", False
         except BaseException:  # interrupted while it draws: it is ended before the caller cleans up
             self._kill()
             self._reap()
             raise
-        self._reap()
+        self._reap(wait=not whole)  # a child that answered ends by itself: its exit is not waited for
         if answer == "ok":
             return None
         if answer.startswith("no plot: "):
@@ -135,14 +135,19 @@ class PlotProcess:
                 except ProcessLookupError:
                     pass
 
-    def _reap(self) -> None:
+    def _reap(self, wait: bool = True) -> None:
+        """Close the pipes and reap the child; without `wait`, only if it has ended already (one
+        that answered: it only exits, ~4 ms of freeing its memory, and the system reaps it once
+        this process ends; `exit_status` then stays None)."""
         for fd in (self._data, self._reply):
             if fd is not None:
                 os.close(fd)
         self._data = self._reply = None
         if self.pid:
             try:
-                self.exit_status = os.waitstatus_to_exitcode(os.waitpid(self.pid, 0)[1])
+                pid, status = os.waitpid(self.pid, 0 if wait else os.WNOHANG)
+                if pid:
+                    self.exit_status = os.waitstatus_to_exitcode(status)
             except ChildProcessError:
                 pass
             self.pid = 0
@@ -163,6 +168,18 @@ def _send(pipe, value) -> None:
     payload = pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
     pipe.write(struct.pack(">Q", len(payload)) + payload)
     pipe.flush()
+
+
+def _answer(pipe) -> tuple[str, bool]:
+    """The plot process's answer (its text, ended by a NUL byte) and whether it was whole: read up
+    to that byte, not to the pipe's end, which comes only once the process has exited."""
+    answer = b""
+    while b"\0" not in answer:
+        more = pipe.read1(4096)
+        if not more:
+            return answer.decode(errors="replace"), False
+        answer += more
+    return answer.partition(b"\0")[0].decode(errors="replace"), True
 
 
 def _frame(pipe) -> bytes:
@@ -217,7 +234,7 @@ def _child(data_read: int, reply_write: int, scenario, drawer=None) -> None:
         answer = f"no plot: {error}" if isinstance(error, CosimError) else f"failed: {error!r}"
     finally:
         try:
-            os.write(reply_write, answer.encode()[:4000])
+            os.write(reply_write, answer.encode()[:4000] + b"\0")
         finally:
             os._exit(0)
 
