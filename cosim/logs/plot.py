@@ -772,6 +772,7 @@ class Draft:
             canvas = self.figure.canvas
             canvas.draw()
             self.background = canvas.copy_from_bbox(self.figure.bbox)
+            self._drawn = False
             for axes in self.panel_axes:
                 axes.set_visible(True)
             for axis in [axes.yaxis for axes in self.panel_axes] + [self.panel_axes[-1].xaxis]:
@@ -811,7 +812,9 @@ class Draft:
             figure, axes = self.figure, self.map_axes
             canvas = figure.canvas
             renderer = canvas.get_renderer()
-            canvas.restore_region(self.background)
+            if self._drawn:  # (the canvas holds the frame until the first draw)
+                canvas.restore_region(self.background)
+            self._drawn = True
             if map_part:
                 drafted = set(axes.get_children())
                 draw_map_run(axes, data)
