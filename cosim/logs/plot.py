@@ -775,6 +775,9 @@ class Draft:
             self._drawn = False
             for axes in self.panel_axes:
                 axes.set_visible(True)
+                if axes.get_facecolor() == self.figure.get_facecolor() and axes.get_facecolor()[3] == 1.0:
+                    # its opaque background would cover the same colour of the frame: not drawn
+                    axes.patch.set_visible(False)
             for axis in [axes.yaxis for axes in self.panel_axes] + [self.panel_axes[-1].xaxis]:
                 _tick_marks_off(axis)  # as `_panel_ticks` has them, before the ticks are made
                 axis.get_major_ticks(TICKS_AHEAD)  # a tick is five artists: made here, not after the run
