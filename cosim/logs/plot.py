@@ -490,21 +490,26 @@ if hasattr(os, "register_at_fork"):
 
 def _canvas_class():
     """The Agg canvas of the run's figure: matplotlib's, whose renderer keeps each text's layout
-    (`_TEXT_SIZES`, `_TEXT_GLYPHS`) and draws it glyph by glyph as matplotlib's own `draw_text`
-    does (the same pixels). With a matplotlib that draws text otherwise (before 3.11: the whole
-    string as one bitmap), only the sizes are kept."""
+    (`_TEXT_SIZES`, `_TEXT_GLYPHS`) and each font's height metrics (`_FONT_HEIGHTS`), and draws a
+    text glyph by glyph as matplotlib's own `draw_text` does (the same pixels). These follow
+    matplotlib 3.11's private code (it draws text so since 3.11); with another version only the
+    sizes are kept, the rest is matplotlib's own."""
     if _CANVAS:
         return _CANVAS[0]
     import math
 
+    import matplotlib
     from matplotlib import ft2font
     from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg, get_hinting_flag
 
     RenderMode = getattr(ft2font, "RenderMode", None)
     NORMAL, MONO = (RenderMode.NORMAL, RenderMode.MONO) if RenderMode is not None else (None, None)
+    known = matplotlib.__version__.split(".")[:2] == ["3", "11"]  # the version this follows
 
     class Renderer(RendererAgg):
-        glyph_by_glyph = RenderMode is not None and hasattr(RendererAgg, "_draw_text_glyphs_and_boxes")
+        glyph_by_glyph = (
+            known and RenderMode is not None and hasattr(RendererAgg, "_draw_text_glyphs_and_boxes")
+        )
 
         def get_text_width_height_descent(self, s, prop, ismath):
             if ismath:
@@ -583,6 +588,8 @@ def _canvas_class():
                 self._lastKey = key
             return self.renderer
 
+    if not known:  # (Text uses this when its renderer has it)
+        del Renderer._get_font_height_metrics
     Canvas.renderer_class = Renderer
     _CANVAS.append(Canvas)
     return Canvas

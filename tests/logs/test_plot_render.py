@@ -165,3 +165,31 @@ def test_adler32_of_two_strings_is_zlibs_of_both(lengths):
     assert plot._adler32_combine(zlib.adler32(first), zlib.adler32(ones), len(ones)) == zlib.adler32(
         first + ones
     )
+
+
+def test_the_figures_renderer_draws_as_matplotlibs_own(monkeypatch):
+    """The run's figure's renderer (`plot._canvas_class`: texts laid out once per process, or
+    ahead by `warm_text`, each font's size set once per text, its height metrics kept) against
+    matplotlib's own Agg canvas: the same pixels, rotated texts (the y labels) included, and the
+    same again once every layout is kept."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    def pixels() -> np.ndarray:
+        return np.asarray(plot.build_figure(_data()).canvas.buffer_rgba()).copy()
+
+    kept = [dict(cache) for cache in (plot._TEXT_SIZES, plot._TEXT_GLYPHS, plot._FONT_HEIGHTS)]
+    try:
+        for cache in (plot._TEXT_SIZES, plot._TEXT_GLYPHS, plot._FONT_HEIGHTS):
+            cache.clear()
+        plot.warm_text(plot.likely_texts(False)[:40])
+        first, again = pixels(), pixels()
+    finally:
+        for cache, entries in zip(
+            (plot._TEXT_SIZES, plot._TEXT_GLYPHS, plot._FONT_HEIGHTS), kept, strict=True
+        ):
+            cache.clear()
+            cache.update(entries)
+    monkeypatch.setattr(plot, "_canvas_class", lambda: FigureCanvasAgg)
+    plain = pixels()
+    assert np.array_equal(first, plain)
+    assert np.array_equal(again, plain)
