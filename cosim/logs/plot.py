@@ -638,8 +638,9 @@ def likely_texts(map_part: bool, numbers: bool = True) -> list[tuple[str, float]
     """The texts (text, font size [pt]) the part of a run's figure drawn after the run (`Draft`:
     with `map_part` the map's legend, else the panels) most likely holds, the likeliest first, for
     `warm_text`: the map's legend entries; the panels' units, names and (with `numbers`) tick
-    labels (whole numbers, and multiples of 0.1 and 0.05 as matplotlib's default formatter writes
-    them). A text not among them is laid out when drawn, as any other."""
+    labels as matplotlib's default formatter writes them (~250: the whole numbers, halves,
+    quarters, tenths and twentieths the panels' views most often step by). A text not among them
+    is laid out when drawn, as any other."""
     if map_part:
         legend = [
             "inflated zone (planner)", "map: occupied", "unknown obstacles (lidar only)",
@@ -660,11 +661,13 @@ def likely_texts(map_part: bool, numbers: bool = True) -> list[tuple[str, float]
     def number(value: float, decimals: int) -> str:
         return f"{value:.{decimals}f}".replace("-", "\N{MINUS SIGN}")
 
-    ticks = [number(value, 0) for value in range(101)] if numbers else []
-    if numbers:
-        ticks += [number(k / 4, 2) for k in range(-8, 9)] + [number(k / 2, 1) for k in range(-8, 9)]
-        ticks += [number(k / 10, 1) for k in range(-30, 31)] + [number(k / 20, 2) for k in range(-40, 41)]
-        ticks += [number(value, 0) for value in (*range(-20, 0), *range(101, 301))]
+    ticks = []
+    if numbers:  # as the panels' views most often step (seconds, metres, m/s, radians)
+        ticks += [number(value, 0) for value in range(-10, 31)]
+        ticks += [number(value, 0) for value in range(30, 101) if value % 5 == 0 or value % 2 == 0]
+        ticks += [number(k / 2, 1) for k in range(-10, 11)] + [number(k / 4, 2) for k in range(-20, 21)]
+        ticks += [number(k / 10, 1) for k in range(-30, 31)] + [number(k / 20, 2) for k in range(-20, 21)]
+        ticks += [number(value, 0) for value in range(100, 301, 5) if value % 10 == 0 or value % 25 == 0]
     texts = [("lp", 8.0)] + [(name, 8.0) for name in names] + [(text, 10.0) for text in labels + ticks]
     return list(dict.fromkeys(texts))
 
