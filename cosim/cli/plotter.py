@@ -4,15 +4,18 @@ Importing matplotlib and loading its font (`cosim.logs.plot.prepare_drawing`, ~0
 does not depend on the run, so `cosim` forks a child for it before building the run: on a machine
 with a free core it is done by the time the run ends. The child then drafts the figure from the
 scenario (`preview`: the map as the run will log it, the view, the panels; `cosim.logs.plot.Draft`
-draws the map frame) and forks a helper (`PanelHelper`) that holds a copy of that draft. The run's
+draws the map frame), lays out the texts the legend most likely holds (`_warm`) and forks a helper
+(`PanelHelper`) that holds a copy of that draft and lays out the panels' likely texts. The run's
 `PlotData` (arrays: a few MB at most) then goes to the child through a pipe and on to the helper;
-the helper draws the panels while the child draws the run over the map, the legend and the title,
-the child takes the helper's pixels from memory the two share, writes the PNG and answers with one
-line; the parent waits for it. Whatever does not fit the draft, or a helper that failed, is drawn
-afresh by the child (`cosim.logs.plot.draw`): always the same picture. The child ignores SIGINT
-and SIGTERM (the parent decides), leaves with `os._exit` (no clean-up of the parent's objects it
-shares), and gives up when the pipe closes without data (the parent died: the helper then sees its
-own pipe close); a parent that will not plot ends it (`cancel`). Only where `os.fork` is safe and
+the helper draws the panels while the child draws the run over the map, the legend and the title
+and makes the PNG's rows of them, the child takes the helper's pixels from memory the two share,
+writes the PNG and answers with one NUL-ended text; the parent waits for it (not for the child's
+exit: it is reaped if it has ended, else by the system). Whatever does not fit the draft, or a
+helper that failed, is drawn afresh by the child (`cosim.logs.plot.draw`): always the same
+picture. The child ignores SIGINT and SIGTERM (the parent decides), leaves with `os._exit` (no
+clean-up of the parent's objects it shares), and gives up when the pipe closes without data (the
+parent died: the helper then sees its own pipe close); a parent that will not plot ends it
+(`cancel`). Only where `os.fork` is safe and
 cheap (Linux), and only in `cosim` itself, never in a process that calls `cosim.cli.main([...])`.
 """
 
