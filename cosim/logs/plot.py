@@ -16,10 +16,12 @@ pyplot, fixed margins (no layout engine), and one artist per kind of thing (a si
 the map and its inflated zone, one collection for the obstacles, their tracks, each mode's shading),
 text boxes naming each panel's series (no legend per panel), ticks only inside the view, the
 panels' grid lines and tick marks as two lines per axis (matplotlib's own pixels:
-tests/logs/test_plot_render.py), the cyclic garbage collector paused, and the PNG written
-straight from the canvas (`write_png`).
+tests/logs/test_plot_render.py), each text's layout kept in the process by the canvas' renderer
+(`_canvas_class`), the cyclic garbage collector paused, and the PNG written straight from the
+canvas (`write_png`).
 `cosim run` drafts its figure while the run goes (`Draft`: the map frame drawn from the scenario,
-the run drawn over it after) and draws the map and the panels in two processes: the same pixels.
+the panels' ticks made, the run drawn over it after), lays out its likely texts ahead
+(`likely_texts`, `warm_text`) and draws the map and the panels in two processes: the same pixels.
 matplotlib is imported when a plot is drawn, not with this module.
 """
 
