@@ -270,6 +270,14 @@ def _draw_run(panels, mapped, drafted, helper) -> None:
             draw(data, Path(png_path))
 
 
+def _touch(shared) -> None:
+    """Read a byte of each page of `shared` (memory shared with the helper): each page is mapped
+    into this process then (~1 ms for the picture), not while the helper's pixels are copied."""
+    import mmap
+
+    int(shared.reshape(-1)[:: mmap.PAGESIZE].sum())
+
+
 def _warm(texts: list, data_read: int) -> None:
     """Lay out `texts` (`cosim.logs.plot.likely_texts`) while the run goes, until its data is
     there to read on `data_read`: done ahead, laying out is a third of what drawing them costs
@@ -372,17 +380,20 @@ class PanelHelper:
         whether they were."""
         import numpy as np
 
+        # what it drew, and the shared memory's pages mapped here, while the helper still draws
+        boxes = drafted.map_boxes() + ([drafted.panels_box(TOP)] if range(drafted.rows)[TOP] else [])
+        shared = np.frombuffer(self._shared, dtype=np.uint8).reshape(self._shape)
+        if not self.answered():
+            _touch(shared)
         with os.fdopen(self._done, "rb") as pipe:
             self._done = None
             answer = pipe.readline().decode(errors="replace").split()  # (not waiting for its exit)
         if len(answer) != 4:
             return False
         top, bottom, left, right = (int(value) for value in answer)
-        boxes = drafted.map_boxes() + ([drafted.panels_box(TOP)] if range(drafted.rows)[TOP] else [])
         for above, below, west, east in boxes:
             if top < below and above < bottom and left < east and west < right:
                 return False
-        shared = np.frombuffer(self._shared, dtype=np.uint8).reshape(self._shape)
         if rows is None:
             drafted.pixels()[top:bottom, left:right] = shared[top:bottom, left:right]
         else:
@@ -416,17 +427,20 @@ class PanelHelper:
 def _panels(drafted, data_read: int, done_write: int, shared) -> None:
     answer = ""
     try:
+        import mmap
+
         import numpy as np
 
         from cosim.logs.plot import likely_texts
 
+        view = np.frombuffer(shared, dtype=np.uint8).reshape(drafted.pixels().shape)
+        view.reshape(-1)[:: mmap.PAGESIZE] = 0  # its pages made now, not when the panels are copied there
         _warm(likely_texts(False), data_read)
         with os.fdopen(data_read, "rb") as pipe:
             payload = pipe.read()
         if payload:
             drafted.draw_run(pickle.loads(payload), False, LOWER)
             top, bottom, left, right = drafted.panels_box(LOWER)
-            view = np.frombuffer(shared, dtype=np.uint8).reshape(drafted.pixels().shape)
             view[top:bottom, left:right] = drafted.pixels()[top:bottom, left:right]
             answer = f"{top} {bottom} {left} {right}\n"
     except Exception:  # noqa: BLE001 (no answer: the plot process draws the panels itself)
