@@ -598,25 +598,25 @@ def _canvas_class():
 
 
 def _font_height_metrics(prop, dpi: float) -> tuple:
-    """(ascent, descent, line gap) [px] of the font of `prop`, as matplotlib's `Text` reads them
-    from the font's OS/2 or hhea table when its renderer does not give them; (None, None, None)
-    without those tables (it then measures the text "lp" instead)."""
+    """(ascent, descent, line gap) [px] of the font of `prop`, the numbers matplotlib's `Text` lays a
+    line out with when its renderer does not give them: the font's typographic metrics of its OS/2
+    table, or where it has none its hhea table's, in font units scaled to pixels by
+    size [pt] * dpi / 72 / units per em (in that order of operations, so the floats are the same);
+    (None, None, None) without either table (it then measures the text "lp" instead)."""
     from matplotlib.font_manager import fontManager, get_font
 
     font = get_font(fontManager._find_fonts_by_props(prop))
-    possible = [
-        ("OS/2", "sTypoLineGap", "sTypoAscender", "sTypoDescender"),
-        ("hhea", "lineGap", "ascent", "descent"),
-    ]
-    for table_name, linegap_key, ascent_key, descent_key in possible:
-        table = font.get_sfnt_table(table_name)
-        if table is None:
-            continue
-        fontsize = prop.get_size_in_points()
-        units_per_em = font.get_sfnt_table("head")["unitsPerEm"]
-        scale = 1 / units_per_em * fontsize * dpi / 72
-        return table[ascent_key] * scale, -table[descent_key] * scale, table[linegap_key] * scale
-    return None, None, None
+    os2 = font.get_sfnt_table("OS/2")
+    if os2 is not None:
+        units = os2["sTypoAscender"], os2["sTypoDescender"], os2["sTypoLineGap"]
+    else:
+        hhea = font.get_sfnt_table("hhea")
+        if hhea is None:
+            return None, None, None
+        units = hhea["ascent"], hhea["descent"], hhea["lineGap"]
+    pixels = 1 / font.get_sfnt_table("head")["unitsPerEm"] * prop.get_size_in_points() * dpi / 72
+    ascent, descent, gap = units
+    return ascent * pixels, -descent * pixels, gap * pixels
 
 
 def warm_text(texts, stop=lambda: False, dpi: float = DPI) -> None:
