@@ -4,15 +4,18 @@ Importing matplotlib and loading its font (`cosim.logs.plot.prepare_drawing`, ~0
 does not depend on the run, so `cosim` forks a child for it before building the run: on a machine
 with a free core it is done by the time the run ends. The child then drafts the figure from the
 scenario (`preview`: the map as the run will log it, the view, the panels; `cosim.logs.plot.Draft`
-draws the map frame) and forks a helper (`PanelHelper`) that holds a copy of that draft. The run's
+draws the map frame), lays out the texts the legend most likely holds (`_warm`) and forks a helper
+(`PanelHelper`) that holds a copy of that draft and lays out the panels' likely texts. The run's
 `PlotData` (arrays: a few MB at most) then goes to the child through a pipe and on to the helper;
-the helper draws the panels while the child draws the run over the map, the legend and the title,
-the child takes the helper's pixels from memory the two share, writes the PNG and answers with one
-line; the parent waits for it. Whatever does not fit the draft, or a helper that failed, is drawn
-afresh by the child (`cosim.logs.plot.draw`): always the same picture. The child ignores SIGINT
-and SIGTERM (the parent decides), leaves with `os._exit` (no clean-up of the parent's objects it
-shares), and gives up when the pipe closes without data (the parent died: the helper then sees its
-own pipe close); a parent that will not plot ends it (`cancel`). Only where `os.fork` is safe and
+the helper draws the panels while the child draws the run over the map, the legend and the title
+and makes the PNG's rows of them, the child takes the helper's pixels from memory the two share,
+writes the PNG and answers with one NUL-ended text; the parent waits for it (not for the child's
+exit: it is reaped if it has ended, else by the system). Whatever does not fit the draft, or a
+helper that failed, is drawn afresh by the child (`cosim.logs.plot.draw`): always the same
+picture. The child ignores SIGINT and SIGTERM (the parent decides), leaves with `os._exit` (no
+clean-up of the parent's objects it shares), and gives up when the pipe closes without data (the
+parent died: the helper then sees its own pipe close); a parent that will not plot ends it
+(`cancel`). Only where `os.fork` is safe and
 cheap (Linux), and only in `cosim` itself, never in a process that calls `cosim.cli.main([...])`.
 """
 
@@ -43,6 +46,7 @@ class PlotProcess:
             reply_read, reply_write = os.pipe()
         except OSError:
             return None
+        _widen(data_write)
         for stream in (sys.stdout, sys.stderr):  # nothing buffered is written twice
             stream.flush()
         try:
@@ -95,14 +99,14 @@ class PlotProcess:
                     _send(pipe, (dataclasses.replace(data, series=[], modes=None), str(png_path)))
             with os.fdopen(self._reply, "rb") as pipe:
                 self._reply = None
-                answer = pipe.read().decode(errors="replace")
+                answer, whole = _answer(pipe)
         except OSError:
-            answer = ""
+            answer, whole = "", False
         except BaseException:  # interrupted while it draws: it is ended before the caller cleans up
             self._kill()
             self._reap()
             raise
-        self._reap()
+        self._reap(wait=not whole)  # a child that answered ends by itself: its exit is not waited for
         if answer == "ok":
             return None
         if answer.startswith("no plot: "):
@@ -135,17 +139,34 @@ class PlotProcess:
                 except ProcessLookupError:
                     pass
 
-    def _reap(self) -> None:
+    def _reap(self, wait: bool = True) -> None:
+        """Close the pipes and reap the child; without `wait`, only if it has ended already (one
+        that answered: it only exits, ~4 ms of freeing its memory, and the system reaps it once
+        this process ends; `exit_status` then stays None)."""
         for fd in (self._data, self._reply):
             if fd is not None:
                 os.close(fd)
         self._data = self._reply = None
         if self.pid:
             try:
-                self.exit_status = os.waitstatus_to_exitcode(os.waitpid(self.pid, 0)[1])
+                pid, status = os.waitpid(self.pid, 0 if wait else os.WNOHANG)
+                if pid:
+                    self.exit_status = os.waitstatus_to_exitcode(status)
             except ChildProcessError:
                 pass
             self.pid = 0
+
+
+def _widen(pipe: int) -> None:
+    """Make `pipe` hold a run's plot data (~0.6 MB) at once where Linux lets it (1 MB): the
+    writer then sends it without waiting for the reader to take each 64 kB, a few ms of going
+    back and forth between the two processes right after the run."""
+    import fcntl
+
+    try:
+        fcntl.fcntl(pipe, getattr(fcntl, "F_SETPIPE_SZ", 1031), 1 << 20)
+    except OSError:  # (a smaller limit: the pipe stays as it is)
+        pass
 
 
 def _own_group(pid: int = 0) -> None:
@@ -163,6 +184,18 @@ def _send(pipe, value) -> None:
     payload = pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
     pipe.write(struct.pack(">Q", len(payload)) + payload)
     pipe.flush()
+
+
+def _answer(pipe) -> tuple[str, bool]:
+    """The plot process's answer (its text, ended by a NUL byte) and whether it was whole: read up
+    to that byte, not to the pipe's end, which comes only once the process has exited."""
+    answer = b""
+    while b"\0" not in answer:
+        more = pipe.read1(4096)
+        if not more:
+            return answer.decode(errors="replace"), False
+        answer += more
+    return answer.partition(b"\0")[0].decode(errors="replace"), True
 
 
 def _frame(pipe) -> bytes:
@@ -183,13 +216,16 @@ def _child(data_read: int, reply_write: int, scenario, drawer=None) -> None:
     try:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        from cosim.logs.plot import prepare_drawing
+        from cosim.logs.plot import likely_texts, prepare_drawing
 
         prepare_drawing()
         drafted = None if scenario is None else draft(scenario)
         helper = None
         if drafted is not None and range(drafted.rows)[LOWER] and _free_core():
+            _warm(likely_texts(True), data_read)  # (the helper's copy has these too)
             helper = PanelHelper.start(drafted, (data_read, reply_write))
+        elif drafted is not None:  # it draws both parts, on a busy machine: the longest texts only
+            _warm(likely_texts(True) + likely_texts(False, numbers=False), data_read)
         with os.fdopen(data_read, "rb") as pipe:
             panels = _frame(pipe)
             if not panels:
@@ -214,7 +250,7 @@ def _child(data_read: int, reply_write: int, scenario, drawer=None) -> None:
         answer = f"no plot: {error}" if isinstance(error, CosimError) else f"failed: {error!r}"
     finally:
         try:
-            os.write(reply_write, answer.encode()[:4000])
+            os.write(reply_write, answer.encode()[:4000] + b"\0")
         finally:
             os._exit(0)
 
@@ -233,11 +269,44 @@ def _draw_run(panels, mapped, drafted, helper) -> None:
     elif helper is None:
         drafted.finish(data, Path(png_path))
     else:
+        from cosim.logs.plot import png_rows
+
         drafted.draw_run(data, panels=TOP)
-        if helper.paste(drafted):
-            drafted.write(Path(png_path))
-        else:  # the helper failed, or the two parts overlap: drawn afresh
+        # the PNG's rows made of this part while the helper draws (it then pastes into them),
+        # unless its pixels are there already: the two halves' threads make them faster then
+        rows = None if helper.answered() else png_rows(drafted.pixels())
+        pasted = helper.paste(drafted, rows)
+        if pasted:
+            drafted.write(Path(png_path), rows)
+        helper.cancel()  # reaped after the picture is written: its exit takes a few ms
+        if not pasted:  # the helper failed, or the two parts overlap: drawn afresh
             draw(data, Path(png_path))
+
+
+def _touch(shared) -> None:
+    """Read a byte of each page of `shared` (memory shared with the helper): each page is mapped
+    into this process then (~1 ms for the picture), not while the helper's pixels are copied."""
+    import mmap
+
+    int(shared.reshape(-1)[:: mmap.PAGESIZE].sum())
+
+
+def _warm(texts: list, data_read: int) -> None:
+    """Lay out `texts` (`cosim.logs.plot.likely_texts`) while the run goes, until its data is
+    there to read on `data_read`: done ahead, laying out is a third of what drawing them costs
+    after the run. All of them with a core to spare for it (the run keeps the other), else a few
+    (~15 ms, beside the ~0.2 s of importing matplotlib)."""
+    import select
+
+    from cosim.logs.plot import warm_text
+
+    def arrived() -> bool:
+        try:
+            return bool(select.select([data_read], [], [], 0)[0])
+        except (OSError, ValueError):
+            return True
+
+    warm_text(texts, arrived)
 
 
 def _free_core() -> bool:
@@ -278,6 +347,7 @@ class PanelHelper:
             done_read, done_write = os.pipe()
         except OSError:
             return None
+        _widen(data_write)
         try:
             pid = os.fork()
         except OSError:
@@ -309,30 +379,46 @@ class PanelHelper:
         except OSError:
             pass
 
-    def paste(self, drafted) -> bool:
-        """Wait for the helper, and put its pixels into `drafted`'s canvas when they do not
-        overlap what it drew; whether they were."""
+    def answered(self) -> bool:
+        """Whether the helper has answered (or ended): `paste` will not wait."""
+        import select
+
+        try:
+            return self._done is None or bool(select.select([self._done], [], [], 0)[0])
+        except (OSError, ValueError):
+            return True
+
+    def paste(self, drafted, rows=None) -> bool:
+        """Wait for the helper, and put its pixels into `drafted`'s canvas (or into `rows`, the
+        canvas' `cosim.logs.plot.png_rows`, when given) when they do not overlap what it drew;
+        whether they were."""
         import numpy as np
 
+        # what it drew, and the shared memory's pages mapped here, while the helper still draws
+        boxes = drafted.map_boxes() + ([drafted.panels_box(TOP)] if range(drafted.rows)[TOP] else [])
+        shared = np.frombuffer(self._shared, dtype=np.uint8).reshape(self._shape)
+        if not self.answered():
+            _touch(shared)
         with os.fdopen(self._done, "rb") as pipe:
             self._done = None
-            answer = pipe.read().decode(errors="replace").split()
-        self._reap()
+            answer = pipe.readline().decode(errors="replace").split()  # (not waiting for its exit)
         if len(answer) != 4:
             return False
         top, bottom, left, right = (int(value) for value in answer)
-        boxes = drafted.map_boxes() + ([drafted.panels_box(TOP)] if range(drafted.rows)[TOP] else [])
         for above, below, west, east in boxes:
             if top < below and above < bottom and left < east and west < right:
                 return False
-        shared = np.frombuffer(self._shared, dtype=np.uint8).reshape(self._shape)
-        drafted.pixels()[top:bottom, left:right] = shared[top:bottom, left:right]
+        if rows is None:
+            drafted.pixels()[top:bottom, left:right] = shared[top:bottom, left:right]
+        else:
+            into = rows[top:bottom, 1 + 3 * left : 1 + 3 * right].reshape(bottom - top, right - left, 3)
+            into[:] = shared[top:bottom, left:right, :3]
         return True
 
     def cancel(self) -> None:
-        """No panels wanted: the helper is ended (it sees its pipe close, or is killed while it
-        draws) and reaped."""
-        if self._data is None and self.pid:
+        """No panels wanted (or no more: they were pasted): the helper is ended (it sees its pipe
+        close, or is killed while it draws) and reaped."""
+        if self._data is None and self._done is not None and self.pid:
             try:
                 os.kill(self.pid, signal.SIGKILL)
             except ProcessLookupError:
@@ -355,16 +441,22 @@ class PanelHelper:
 def _panels(drafted, data_read: int, done_write: int, shared) -> None:
     answer = ""
     try:
+        import mmap
+
         import numpy as np
 
+        from cosim.logs.plot import likely_texts
+
+        view = np.frombuffer(shared, dtype=np.uint8).reshape(drafted.pixels().shape)
+        view.reshape(-1)[:: mmap.PAGESIZE] = 0  # its pages made now, not when the panels are copied there
+        _warm(likely_texts(False), data_read)
         with os.fdopen(data_read, "rb") as pipe:
             payload = pipe.read()
         if payload:
             drafted.draw_run(pickle.loads(payload), False, LOWER)
             top, bottom, left, right = drafted.panels_box(LOWER)
-            view = np.frombuffer(shared, dtype=np.uint8).reshape(drafted.pixels().shape)
             view[top:bottom, left:right] = drafted.pixels()[top:bottom, left:right]
-            answer = f"{top} {bottom} {left} {right}"
+            answer = f"{top} {bottom} {left} {right}\n"
     except Exception:  # noqa: BLE001 (no answer: the plot process draws the panels itself)
         answer = ""
     finally:

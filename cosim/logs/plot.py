@@ -14,16 +14,20 @@ Two sources give the same picture: a log (`plot_run`, `plot_log`: `cosim log plo
 arrays drawn) by the same code; then `draw` makes the figure: matplotlib's Agg canvas without
 pyplot, fixed margins (no layout engine), and one artist per kind of thing (a single RGBA image for
 the map and its inflated zone, one collection for the obstacles, their tracks, each mode's shading),
-text boxes naming each panel's series (no legend per panel), ticks only inside the view, the upper
-panels' unlabelled time ticks as two lines (matplotlib's own pixels: tests/logs/test_plot_render.py), the
-cyclic garbage collector paused, and the PNG written straight from the canvas (`write_png`).
+text boxes naming each panel's series (no legend per panel), ticks only inside the view, the
+panels' grid lines and tick marks as two lines per axis (matplotlib's own pixels:
+tests/logs/test_plot_render.py), each text's layout kept in the process by the canvas' renderer
+(`_canvas_class`), the cyclic garbage collector paused, and the PNG written straight from the
+canvas (`write_png`).
 `cosim run` drafts its figure while the run goes (`Draft`: the map frame drawn from the scenario,
-the run drawn over it after) and draws the map and the panels in two processes: the same pixels.
+the panels' ticks made, the run drawn over it after), lays out its likely texts ahead
+(`likely_texts`, `warm_text`) and draws the map and the panels in two processes: the same pixels.
 matplotlib is imported when a plot is drawn, not with this module.
 """
 
 from __future__ import annotations
 
+import os
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -41,6 +45,7 @@ if TYPE_CHECKING:
 AVOIDERS = {"VectorFieldHistogram": "VFH", "ArtificialPotentialField": "APF"}
 DPI = 110
 GRID_ALPHA = 0.3  # the panels' grid lines
+TICKS_AHEAD = 8  # the ticks a drafted panel's axis makes ahead (`Draft`); its view holds 3 to 8
 
 # Where the default series come from, in order of preference (each must be in the trace's
 # `TRACE_SIGNALS`, so that the plot of a run's trace is the plot of its log).
@@ -469,6 +474,206 @@ def prepare_drawing() -> None:
         get_font(findfont(FontProperties()))
 
 
+# Text set in the same font, size and pixel density is laid out the same wherever it is drawn:
+# its size (`RendererAgg.get_text_width_height_descent`) and its glyphs and their offsets (the
+# layout `draw_text` makes) are kept here per (text, font, dpi, hinting), for every figure of the
+# process. Laying a text out is most of the time matplotlib spends on it (shaping, with fallback
+# fonts: ~15 us per character, twice per text: for its size and to draw it); a process that knows
+# which texts it will draw lays them out ahead (`warm_text`: the plot process, while the run goes).
+_TEXT_SIZES: dict = {}
+_TEXT_GLYPHS: dict = {}
+_FONT_HEIGHTS: dict = {}
+_CANVAS: list = []
+if hasattr(os, "register_at_fork"):
+    # The glyphs' fonts (FT2Font) must not be used in a forked process, which would read their
+    # files through the parent's file offsets: dropped there, as matplotlib drops its own fonts.
+    os.register_at_fork(after_in_child=_TEXT_GLYPHS.clear)
+
+
+def _canvas_class():
+    """The Agg canvas of the run's figure: matplotlib's, whose renderer keeps each text's layout
+    (`_TEXT_SIZES`, `_TEXT_GLYPHS`) and each font's height metrics (`_FONT_HEIGHTS`), and draws a
+    text glyph by glyph as matplotlib's own `draw_text` does (the same pixels). These follow
+    matplotlib 3.11's private code (it draws text so since 3.11); with another version only the
+    sizes are kept, the rest is matplotlib's own."""
+    if _CANVAS:
+        return _CANVAS[0]
+    import math
+
+    import matplotlib
+    from matplotlib import ft2font
+    from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg, get_hinting_flag
+
+    RenderMode = getattr(ft2font, "RenderMode", None)
+    NORMAL, MONO = (RenderMode.NORMAL, RenderMode.MONO) if RenderMode is not None else (None, None)
+    known = matplotlib.__version__.split(".")[:2] == ["3", "11"]  # the version this follows
+
+    class Renderer(RendererAgg):
+        glyph_by_glyph = (
+            known and RenderMode is not None and hasattr(RendererAgg, "_draw_text_glyphs_and_boxes")
+        )
+
+        def get_text_width_height_descent(self, s, prop, ismath):
+            if ismath:
+                return super().get_text_width_height_descent(s, prop, ismath)
+            key = (s, hash(prop), self.dpi, get_hinting_flag())  # FontProperties are equal by hash
+            size = _TEXT_SIZES.get(key)
+            if size is None:
+                size = _TEXT_SIZES[key] = super().get_text_width_height_descent(s, prop, ismath)
+            return size
+
+        def _get_font_height_metrics(self, prop):
+            # matplotlib's Text asks its renderer for this first (else it reads the font's tables
+            # itself for every text it lays out): the same numbers, kept per font and dpi
+            key = (hash(prop), self.dpi)
+            heights = _FONT_HEIGHTS.get(key)
+            if heights is None:
+                heights = _FONT_HEIGHTS[key] = _font_height_metrics(prop, self.dpi)
+            return heights
+
+        def draw_text(self, gc, x, y, s, prop, angle, ismath=False, mtext=None):
+            if (
+                ismath
+                or not self.glyph_by_glyph
+                or (mtext is not None and (mtext.get_fontfeatures() or mtext.get_language()))
+            ):
+                return super().draw_text(gc, x, y, s, prop, angle, ismath, mtext)
+            # matplotlib's `_draw_text_glyphs_and_boxes` for a text without boxes, but each font's
+            # size set once, not before each glyph (that doubled the time of each glyph's bitmap)
+            cos, sin = math.cos(math.radians(angle)), math.sin(math.radians(angle))
+            matrix = (0x10000 * np.array([[cos, -sin], [sin, cos]])).round().astype(int).tolist()
+            flags = get_hinting_flag()
+            mono = not gc.get_antialiased()
+            mode = MONO if mono else NORMAL
+            size = prop.get_size_in_points()
+            sized = set()
+            height = self.height
+            top = int(height)
+            blend = self._renderer.draw_text_image
+            for font, glyph, dx, dy in self.text_glyphs(s, prop, flags):  # dy is upwards
+                if font not in sized:
+                    font.set_size(size, self.dpi)
+                    sized.add(font)
+                font._set_transform(
+                    matrix,
+                    (
+                        round(0x40 * (x + dx * cos - dy * sin)),
+                        round(0x40 * (height - y + dx * sin + dy * cos)),
+                    ),
+                )
+                bitmap = font._render_glyph(glyph, flags, mode)
+                buffer = bitmap.buffer
+                if mono:
+                    buffer *= 0xFF
+                blend(buffer, bitmap.left, top - bitmap.top + buffer.shape[0], 0, gc)
+
+        def text_glyphs(self, s, prop, flags=None) -> list:
+            """(font, glyph index, x, y) of each glyph of `s` set in `prop`, as `draw_text` lays
+            it out (`flags`: the hinting flags, by default rcParams')."""
+            if flags is None:
+                flags = get_hinting_flag()
+            key = (s, hash(prop), self.dpi, flags)
+            glyphs = _TEXT_GLYPHS.get(key)
+            if glyphs is None:
+                items = self._prepare_font(prop)._layout(s, flags=flags, features=None, language=None)
+                glyphs = _TEXT_GLYPHS[key] = [
+                    (item.ft_object, item.glyph_index, item.x, item.y) for item in items
+                ]
+            return glyphs
+
+    class Canvas(FigureCanvasAgg):
+        def get_renderer(self):
+            w, h = self.get_width_height(physical=True)
+            key = w, h, self.figure.dpi
+            if self._lastKey != key:
+                self.renderer = Renderer(w, h, self.figure.dpi)
+                self._lastKey = key
+            return self.renderer
+
+    if not known:  # (Text uses this when its renderer has it)
+        del Renderer._get_font_height_metrics
+    Canvas.renderer_class = Renderer
+    _CANVAS.append(Canvas)
+    return Canvas
+
+
+def _font_height_metrics(prop, dpi: float) -> tuple:
+    """(ascent, descent, line gap) [px] of the font of `prop`, the numbers matplotlib's `Text` lays a
+    line out with when its renderer does not give them: the font's typographic metrics of its OS/2
+    table, or where it has none its hhea table's, in font units scaled to pixels by
+    size [pt] * dpi / 72 / units per em (in that order of operations, so the floats are the same);
+    (None, None, None) without either table (it then measures the text "lp" instead)."""
+    from matplotlib.font_manager import fontManager, get_font
+
+    font = get_font(fontManager._find_fonts_by_props(prop))
+    os2 = font.get_sfnt_table("OS/2")
+    if os2 is not None:
+        units = os2["sTypoAscender"], os2["sTypoDescender"], os2["sTypoLineGap"]
+    else:
+        hhea = font.get_sfnt_table("hhea")
+        if hhea is None:
+            return None, None, None
+        units = hhea["ascent"], hhea["descent"], hhea["lineGap"]
+    pixels = 1 / font.get_sfnt_table("head")["unitsPerEm"] * prop.get_size_in_points() * dpi / 72
+    ascent, descent, gap = units
+    return ascent * pixels, -descent * pixels, gap * pixels
+
+
+def warm_text(texts, stop=lambda: False, dpi: float = DPI) -> None:
+    """Lay out ahead each (text, font size [pt]) of `texts` (in the default font) as the run's
+    figure would (its size, and its glyphs where they are kept), until `stop()` is true (asked
+    before each)."""
+    from matplotlib.font_manager import FontProperties
+
+    renderer = _canvas_class().renderer_class(1, 1, dpi)
+    fonts: dict = {}
+    for text, size in texts:
+        if stop():
+            return
+        prop = fonts.get(size) or fonts.setdefault(size, FontProperties(size=size))
+        renderer.get_text_width_height_descent(text, prop, False)
+        if renderer.glyph_by_glyph:
+            renderer.text_glyphs(text, prop)
+
+
+def likely_texts(map_part: bool, numbers: bool = True) -> list[tuple[str, float]]:
+    """The texts (text, font size [pt]) the part of a run's figure drawn after the run (`Draft`:
+    with `map_part` the map's legend, else the panels) most likely holds, the likeliest first, for
+    `warm_text`: the map's legend entries; the panels' units, names and (with `numbers`) tick
+    labels as matplotlib's default formatter writes them (~250: the whole numbers, halves,
+    quarters, tenths and twentieths the panels' views most often step by). A text not among them
+    is laid out when drawn, as any other."""
+    if map_part:
+        legend = [
+            "inflated zone (planner)", "map: occupied", "unknown obstacles (lidar only)",
+            "moving obstacles: tracks (last pose drawn)", "plan", "earlier plans (older: fainter)",
+            "replanned here", "plan: reverse segments", "driven trajectory", "start (and heading)",
+            "goal (tolerance circle)", "goal at the end (tolerance circle)", "earlier goal", "earlier goals",
+            *(f"end: {reason}" for reason in ("collision", "stop_time", "no_path", "interrupted")),
+            *(mode_name(mode, avoider) for avoider in AVOIDERS.values() for mode in MODE_COLORS),
+            *(f"plan in force at the end (of {count})" for count in range(2, 13)),
+        ]  # fmt: skip
+        return [("lp", 8.0)] + [(text, 8.0) for text in legend]
+    names = [f"{component}.{name}" for component, name in SPEED + STEERING + TURNING]
+    names += [label.format(avoider=avoider) for _, _, label in DIRECTIONS for avoider in AVOIDERS.values()]
+    names += ["minimum lidar range (/scan)", "distance to the goal", "distance to the goal in force"]
+    names += [mode_name(mode, avoider) for avoider in AVOIDERS.values() for mode in MODE_COLORS]
+    labels = ["lp", "time [s]", "[m/s]", "[rad/s]", "[rad]", "[m]"]
+
+    def number(value: float, decimals: int) -> str:
+        return f"{value:.{decimals}f}".replace("-", "\N{MINUS SIGN}")
+
+    ticks = []
+    if numbers:  # as the panels' views most often step (seconds, metres, m/s, radians)
+        ticks += [number(value, 0) for value in range(-10, 31)]
+        ticks += [number(value, 0) for value in range(30, 101) if value % 5 == 0 or value % 2 == 0]
+        ticks += [number(k / 2, 1) for k in range(-10, 11)] + [number(k / 4, 2) for k in range(-20, 21)]
+        ticks += [number(k / 10, 1) for k in range(-30, 31)] + [number(k / 20, 2) for k in range(-20, 21)]
+        ticks += [number(value, 0) for value in range(100, 301, 5) if value % 10 == 0 or value % 25 == 0]
+    texts = [("lp", 8.0)] + [(name, 8.0) for name in names] + [(text, 10.0) for text in labels + ticks]
+    return list(dict.fromkeys(texts))
+
+
 def draw(data: PlotData | list[PlotData], png_path: str | Path, dpi: float = DPI, size=None) -> Path:
     """Render `data` (one run, or a list of runs to overlay) to a PNG (Agg, no pyplot, no display);
     `dpi` [pixels per inch]; `size` (width, height) [px], by default 15 in wide and as high as the
@@ -523,13 +728,12 @@ def _panels(runs: list[PlotData]) -> dict[str, list[tuple[int, Series]]]:
 def _new_figure(panels: int, title_lines: int, dpi: float, size):
     """An empty figure on an Agg canvas for a map and `panels` rows of panels, under a title of
     `title_lines` lines: (figure, grid spec: the map spans column 0, the panels column 1)."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     rows = max(panels, 1)
     width, height = figure_size(rows, size, dpi)
     figure = Figure(figsize=(width, height), dpi=dpi)
-    FigureCanvasAgg(figure)
+    _canvas_class()(figure)
     # Fixed margins [inches] instead of a layout engine: room for the title above, the map's
     # legend below it, and the panels' tick labels.
     grid = figure.add_gridspec(
@@ -551,8 +755,7 @@ def _draw_panels(figure, grid, panels, runs: list[PlotData], made=None) -> list:
     panel_axes = _draw_series(figure, grid, panels, runs, made)
     for axes in panel_axes:
         _ticks_in_view(axes)
-    for axes in panel_axes[:-1]:  # the bottom panel labels the time axis they share
-        _unlabelled_x_ticks(axes)
+    _panel_ticks(panel_axes)
     return panel_axes
 
 
@@ -581,8 +784,16 @@ class Draft:
             canvas = self.figure.canvas
             canvas.draw()
             self.background = canvas.copy_from_bbox(self.figure.bbox)
+            self._drawn = False
             for axes in self.panel_axes:
                 axes.set_visible(True)
+                if axes.get_facecolor() == self.figure.get_facecolor() and axes.get_facecolor()[3] == 1.0:
+                    # its opaque background would cover the same colour of the frame: not drawn
+                    axes.patch.set_visible(False)
+            for axis in [axes.yaxis for axes in self.panel_axes] + [self.panel_axes[-1].xaxis]:
+                _tick_marks_off(axis)  # as `_panel_ticks` has them, before the ticks are made
+                axis.get_major_ticks(TICKS_AHEAD)  # a tick is five artists: made here, not after the run
+                axis.get_minor_ticks(1)  # (an axis makes one even with none to draw)
 
     def fits(self, data: PlotData) -> bool:
         """Whether `data` has the drafted frame: the same map image and view, panel rows and title lines."""
@@ -616,7 +827,9 @@ class Draft:
             figure, axes = self.figure, self.map_axes
             canvas = figure.canvas
             renderer = canvas.get_renderer()
-            canvas.restore_region(self.background)
+            if self._drawn:  # (the canvas holds the frame until the first draw)
+                canvas.restore_region(self.background)
+            self._drawn = True
             if map_part:
                 drafted = set(axes.get_children())
                 draw_map_run(axes, data)
@@ -687,11 +900,12 @@ class Draft:
         right = min(int(np.ceil(box.x1)) + margin, width)
         return top, bottom, left, right
 
-    def write(self, png_path: str | Path) -> Path:
-        """Write the canvas to a PNG at `png_path`; returns its path."""
+    def write(self, png_path: str | Path, rows: np.ndarray | None = None) -> Path:
+        """Write the canvas to a PNG at `png_path` (`rows`: its `png_rows`, made before); returns
+        its path."""
         png_path = Path(png_path)
         png_path.parent.mkdir(parents=True, exist_ok=True)
-        write_png(png_path, self.pixels(), self.dpi)
+        write_png(png_path, self.pixels(), self.dpi, rows)
         return png_path
 
 
@@ -713,34 +927,56 @@ def _overlay_title(runs: list[PlotData]) -> str:
     return "\n".join(lines)
 
 
-def write_png(path: Path, pixels: np.ndarray, dpi: float) -> None:
+def png_rows(pixels: np.ndarray) -> np.ndarray:
+    """The rows of a PNG of `pixels` (as `write_png` takes them) before compression: per row a
+    filter byte (0: none) and the RGB bytes (rows x (1 + 3 x columns))."""
+    height, width = pixels.shape[:2]
+    rows = np.empty((height, 1 + 3 * width), dtype=np.uint8)
+    rows[:, 0] = 0
+    rows[:, 1:].reshape(height, width, 3)[:] = pixels[:, :, :3]
+    return rows
+
+
+def write_png(path: Path, pixels: np.ndarray, dpi: float, rows: np.ndarray | None = None) -> None:
     """Write an 8-bit RGB image (rows x columns x 3, or x 4 whose 4th byte is left out; row 0 at
     the top) as a PNG: no filter on the rows and zlib level 1. A plot is mostly flat colour, so this
     is a quarter larger than Pillow's default (adaptive filters, level 6) in a tenth of its time,
     and a third of Pillow's time at level 1. The rows are compressed in two halves side by side
     (zlib lets other threads run): each half a raw deflate stream, the first ended on a byte
-    boundary without closing the stream (a sync flush), so the two are one stream, as pigz does.
-    The pixel density (`dpi`) is recorded as Pillow and matplotlib record it."""
+    boundary without closing the stream (a sync flush), so the two are one stream, as pigz does;
+    the stream's checksum is put together from the halves' (`_adler32_combine`). `rows`: the
+    image's `png_rows`, made before (then `pixels` only gives the size). The pixel density
+    (`dpi`) is recorded as Pillow and matplotlib record it."""
     import struct
+    import threading
     import zlib
-    from concurrent.futures import ThreadPoolExecutor
 
     height, width = pixels.shape[:2]
-    rows = np.empty((height, 1 + 3 * width), dtype=np.uint8)  # a filter byte (0: none) per row
+    copy = rows is None
+    if copy:
+        rows = np.empty((height, 1 + 3 * width), dtype=np.uint8)  # a filter byte (0: none) per row
     halves = ((0, height // 2), (height // 2, height))
+    done: list = [None, None]
 
-    def deflate(index: int) -> bytes:
+    def deflate(index: int) -> None:
         low, high = halves[index]
-        rows[low:high, 0] = 0
-        rows[low:high, 1:].reshape(high - low, width, 3)[:] = pixels[low:high, :, :3]
+        part = rows[low:high]
+        if copy:
+            part[:, 0] = 0
+            part[:, 1:].reshape(high - low, width, 3)[:] = pixels[low:high, :, :3]
         stream = zlib.compressobj(1, zlib.DEFLATED, -15)  # raw: no zlib header or checksum
-        body = stream.compress(rows[low:high])
-        return body + stream.flush(zlib.Z_FINISH if index == 1 else zlib.Z_SYNC_FLUSH)
+        body = stream.compress(part) + stream.flush(zlib.Z_FINISH if index == 1 else zlib.Z_SYNC_FLUSH)
+        done[index] = (body, zlib.adler32(part))
 
-    with ThreadPoolExecutor(2) as pool:
-        second = pool.submit(deflate, 1)
-        first = deflate(0)
-        compressed = b"\x78\x01" + first + second.result() + struct.pack(">I", zlib.adler32(rows))
+    second = threading.Thread(target=deflate, args=(1,))
+    second.start()
+    deflate(0)
+    second.join()
+    if done[1] is None:  # (the thread failed: its half again, here)
+        deflate(1)
+    (first, first_sum), (last, last_sum) = done
+    checksum = _adler32_combine(first_sum, last_sum, rows[halves[1][0] :].nbytes)
+    compressed = b"\x78\x01" + first + last + struct.pack(">I", checksum)
 
     def chunk(kind: bytes, body: bytes) -> bytes:
         return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
@@ -753,6 +989,17 @@ def write_png(path: Path, pixels: np.ndarray, dpi: float) -> None:
         + chunk(b"IDAT", compressed)
         + chunk(b"IEND", b"")
     )
+
+
+def _adler32_combine(first: int, second: int, second_length: int) -> int:
+    """The Adler-32 checksum of two byte strings one after the other, from each one's (`second`
+    of `second_length` bytes), as zlib's adler32_combine: the first sum (1 + the bytes, mod 65521)
+    adds up; the second (the sum of the first sums after each byte) gains the first string's
+    first sum minus 1 once per byte of the second."""
+    base = 65521
+    low = ((first & 0xFFFF) + (second & 0xFFFF) - 1) % base
+    high = ((first >> 16) + (second >> 16) + second_length * ((first & 0xFFFF) - 1)) % base
+    return (high << 16) | low
 
 
 def _ticks_in_view(axes) -> None:
@@ -776,28 +1023,50 @@ def _in_view(locations, limits) -> list[float]:
     return [float(loc) for loc in locations if low - slack <= loc <= high + slack]
 
 
-def _unlabelled_x_ticks(axes) -> None:
-    """Draw the x grid lines (the panels have their grid on) and tick marks of a panel whose time
-    axis has no labels as one line artist each, and hide its x axis: an axis builds five artists
-    per tick (two of them texts that would not be shown), and these were a third of the figure's
-    ticks. The same lines, styles, clipping and drawing order (an axis draws at zorder 1.5), so
-    the same pixels."""
+def _panel_ticks(panel_axes: list) -> None:
+    """The panels' grid (on, at `GRID_ALPHA`) and tick marks, drawn as two line artists per axis
+    (`_tick_lines`) instead of by their axes, which keep only their tick labels: the time axis of
+    the bottom panel, which labels the time axis they share, and every y axis; the other panels'
+    time axes are hidden (they would draw texts that are not shown). An axis builds five artists
+    per tick and draws two lines per tick: these were most of the panels' ticks' time. The same
+    lines, styles, clipping and drawing order (an axis draws at zorder 1.5; a panel's time axis
+    before its y axis), so the same pixels (tests/logs/test_plot_render.py)."""
+    for axes in panel_axes:
+        _tick_lines(axes, axes.xaxis)
+        _tick_lines(axes, axes.yaxis)
+        if axes is panel_axes[-1]:
+            _tick_marks_off(axes.xaxis)
+        else:
+            axes.xaxis.set_visible(False)
+        _tick_marks_off(axes.yaxis)
+
+
+def _tick_marks_off(axis) -> None:
+    """No tick marks drawn by `axis` (its labels stay): `_tick_lines` draws them. A no-op for an
+    axis whose ticks are so already (`Draft` makes its panels' ticks so)."""
+    if axis.majorTicks[0].tick1line.get_visible():
+        axis.set_tick_params(which="major", tick1On=False)
+
+
+def _tick_lines(axes, axis) -> None:
+    """Draw the grid lines and tick marks of `axis` (of `axes`: its x or y axis) at its ticks in
+    view as one line artist each, as the axis would draw them with its grid on (`GRID_ALPHA`)."""
     import matplotlib as mpl
-    from matplotlib.lines import TICKDOWN, TICKUP, Line2D
+    from matplotlib.lines import TICKDOWN, TICKLEFT, TICKRIGHT, TICKUP, Line2D
 
     rc = mpl.rcParams
-    locations = np.array(_in_view(axes.xaxis.get_majorticklocs(), axes.get_xlim()))
-    axes.xaxis.set_visible(False)
+    along_x = axis is axes.xaxis
+    locations = np.array(_in_view(axis.get_majorticklocs(), axes.get_xlim() if along_x else axes.get_ylim()))
     if not len(locations):
         return
-    grid_x = np.repeat(locations, 3)  # one path: x, x, NaN per grid line
-    grid_x[2::3] = np.nan
-    grid_y = np.tile([0.0, 1.0, np.nan], len(locations))
+    ends = np.tile([0.0, 1.0, np.nan], len(locations))  # one path: a grid line, then NaN, per tick
+    at = np.repeat(locations, 3)
+    at[2::3] = np.nan
+    transform = axes.get_xaxis_transform if along_x else axes.get_yaxis_transform
     axes.add_artist(
         Line2D(
-            grid_x,
-            grid_y,
-            transform=axes.get_xaxis_transform("grid"),
+            *((at, ends) if along_x else (ends, at)),
+            transform=transform("grid"),
             color=rc["grid.color"],
             alpha=GRID_ALPHA,
             linestyle=rc["grid.linestyle"],
@@ -805,18 +1074,19 @@ def _unlabelled_x_ticks(axes) -> None:
             zorder=1.5,
         )
     )
-    marker = {"out": TICKDOWN, "in": TICKUP, "inout": "|"}[rc["xtick.direction"]]
+    name = "xtick" if along_x else "ytick"
+    marks = {"out": (TICKDOWN, TICKLEFT), "in": (TICKUP, TICKRIGHT), "inout": ("|", "_")}
+    zeros = np.zeros(len(locations))
     axes.add_artist(
         Line2D(
-            locations,
-            np.zeros(len(locations)),
-            transform=axes.get_xaxis_transform("tick1"),
+            *((locations, zeros) if along_x else (zeros, locations)),
+            transform=transform("tick1"),
             linestyle="none",
-            marker=marker,
-            color=rc["xtick.color"],
-            markeredgecolor=rc["xtick.color"],
-            markersize=rc["xtick.major.size"],
-            markeredgewidth=rc["xtick.major.width"],
+            marker=marks[rc[f"{name}.direction"]][0 if along_x else 1],
+            color=rc[f"{name}.color"],
+            markeredgecolor=rc[f"{name}.color"],
+            markersize=rc[f"{name}.major.size"],
+            markeredgewidth=rc[f"{name}.major.width"],
             clip_on=False,
             zorder=1.5,
         )
@@ -873,9 +1143,8 @@ def _draw_series(
                 entries += [(mode_name(mode, runs[0].avoider), "black", MODE_COLORS[mode]) for mode in shaded]
         unit = items[0][1].unit
         axes.set_ylabel(f"[{unit}]" if unit else "value")
-        _label_panel(axes, entries)
-        axes.grid(alpha=GRID_ALPHA)
-        if row == len(panels) - 1:  # the others draw their ticks unlabelled: `_unlabelled_x_ticks`
+        _label_panel(axes, entries)  # (its grid: `_panel_ticks`)
+        if row == len(panels) - 1:  # the others' time axes are hidden: `_panel_ticks`
             axes.set_xlabel("time [s]")
     if not panels:
         axes = figure.add_subplot(grid[0, 1])

@@ -110,7 +110,8 @@ def test_the_two_parts_drawn_apart_and_put_together_are_the_picture(run, tmp_pat
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the helper is forked on Linux")
-def test_the_panel_helper_draws_the_panels_in_a_fork(run, tmp_path):
+@pytest.mark.parametrize("rows_first", [False, True], ids=["into the canvas", "into the PNG's rows"])
+def test_the_panel_helper_draws_the_panels_in_a_fork(run, tmp_path, rows_first):
     import os
     import pickle
 
@@ -120,8 +121,11 @@ def test_the_panel_helper_draws_the_panels_in_a_fork(run, tmp_path):
     pid = helper.pid
     helper.draw(pickle.dumps(data))
     drafted.draw_run(data, panels=plotter.TOP)
-    assert helper.paste(drafted)
-    assert np.array_equal(_pixels(drafted.write(tmp_path / "helped.png")), _drawn(data, tmp_path))
+    rows = plot.png_rows(drafted.pixels()) if rows_first else None  # as the plot process may
+    assert helper.paste(drafted, rows)
+    helped = drafted.write(tmp_path / "helped.png", rows)
+    assert np.array_equal(_pixels(helped), _drawn(data, tmp_path))
+    helper.cancel()  # after its pixels are pasted: it ends by itself
     with pytest.raises(ChildProcessError):
         os.waitpid(pid, os.WNOHANG)  # reaped
 

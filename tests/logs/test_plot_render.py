@@ -1,5 +1,5 @@
 """How `cosim.logs.plot.draw` renders: the shortcuts it takes past matplotlib's axes (ticks only
-inside the view, the upper panels' unlabelled time ticks and grid lines drawn as two lines) must give
+inside the view, the panels' grid lines and tick marks drawn as two lines per axis) must give
 the pixels matplotlib's own axes give, and the PNG must show every part of the picture in its
 colour. matplotlib, drawing the same figure the plain way, is the truth."""
 
@@ -62,9 +62,17 @@ def _pixels(path) -> np.ndarray:
 @pytest.mark.parametrize("panels", [5, 2, 1])
 def test_the_shortcuts_draw_the_pixels_of_matplotlibs_own_axes(panels, tmp_path, monkeypatch):
     drawn = _pixels(plot.draw(_data(panels), tmp_path / "drawn.png"))
-    # matplotlib's way: its default locator, every panel's x axis with its labels hidden
+
+    # matplotlib's way: its default locator, its axes drawing their grid and tick marks, the
+    # upper panels' x axes with their labels hidden
+    def plain_ticks(panel_axes):
+        for axes in panel_axes:
+            axes.grid(alpha=plot.GRID_ALPHA)
+        for axes in panel_axes[:-1]:
+            axes.tick_params(labelbottom=False)
+
     monkeypatch.setattr(plot, "_ticks_in_view", lambda axes: None)
-    monkeypatch.setattr(plot, "_unlabelled_x_ticks", lambda axes: axes.tick_params(labelbottom=False))
+    monkeypatch.setattr(plot, "_panel_ticks", plain_ticks)
     plain = _pixels(plot.draw(_data(panels), tmp_path / "plain.png"))
     assert drawn.shape == plain.shape
     assert np.array_equal(drawn, plain)
@@ -122,3 +130,66 @@ def test_write_png_is_read_back_by_pillow_as_written(shape, tmp_path):
         assert image.mode == "RGB" and image.size == (shape[1], shape[0])
         assert np.allclose(image.info["dpi"], (72.0, 72.0), atol=0.01)
         assert np.array_equal(np.asarray(image), pixels[:, ::-1])
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (2, 5), (7, 13), (301, 64)])
+@pytest.mark.parametrize("made_before", [False, True])
+def test_write_png_stream_decompresses_with_its_checksum(shape, made_before, tmp_path):
+    """zlib itself (which checks the stream's Adler-32, put together from the two halves') reads
+    the PNG's image data back as the rows: a filter byte 0 and the RGB bytes of each row."""
+    import struct
+    import zlib
+
+    pixels = np.random.default_rng(shape[0]).integers(0, 256, (*shape, 4), dtype=np.uint8)
+    path = tmp_path / "random.png"
+    plot.write_png(path, pixels, 72.0, plot.png_rows(pixels) if made_before else None)
+    data, chunks, at = path.read_bytes(), {}, 8
+    while at < len(data):
+        (length,) = struct.unpack(">I", data[at : at + 4])
+        chunks[data[at + 4 : at + 8]] = data[at + 8 : at + 8 + length]
+        at += 12 + length
+    rows = np.frombuffer(zlib.decompress(chunks[b"IDAT"]), dtype=np.uint8).reshape(shape[0], -1)
+    assert np.all(rows[:, 0] == 0)
+    assert np.array_equal(rows[:, 1:].reshape(*shape, 3), pixels[:, :, :3])
+
+
+@pytest.mark.parametrize("lengths", [(0, 0), (0, 9), (9, 0), (1, 1), (5552, 70000), (100_000, 3)])
+def test_adler32_of_two_strings_is_zlibs_of_both(lengths):
+    import zlib
+
+    rng = np.random.default_rng(sum(lengths))
+    first, second = (rng.integers(0, 256, n, dtype=np.uint8).tobytes() for n in lengths)
+    combined = plot._adler32_combine(zlib.adler32(first), zlib.adler32(second), len(second))
+    assert combined == zlib.adler32(first + second)
+    ones = b"\xff" * lengths[1]  # the largest bytes: the sums wrap most often
+    assert plot._adler32_combine(zlib.adler32(first), zlib.adler32(ones), len(ones)) == zlib.adler32(
+        first + ones
+    )
+
+
+def test_the_figures_renderer_draws_as_matplotlibs_own(monkeypatch):
+    """The run's figure's renderer (`plot._canvas_class`: texts laid out once per process, or
+    ahead by `warm_text`, each font's size set once per text, its height metrics kept) against
+    matplotlib's own Agg canvas: the same pixels, rotated texts (the y labels) included, and the
+    same again once every layout is kept."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    def pixels() -> np.ndarray:
+        return np.asarray(plot.build_figure(_data()).canvas.buffer_rgba()).copy()
+
+    kept = [dict(cache) for cache in (plot._TEXT_SIZES, plot._TEXT_GLYPHS, plot._FONT_HEIGHTS)]
+    try:
+        for cache in (plot._TEXT_SIZES, plot._TEXT_GLYPHS, plot._FONT_HEIGHTS):
+            cache.clear()
+        plot.warm_text(plot.likely_texts(False)[:40])
+        first, again = pixels(), pixels()
+    finally:
+        for cache, entries in zip(
+            (plot._TEXT_SIZES, plot._TEXT_GLYPHS, plot._FONT_HEIGHTS), kept, strict=True
+        ):
+            cache.clear()
+            cache.update(entries)
+    monkeypatch.setattr(plot, "_canvas_class", lambda: FigureCanvasAgg)
+    plain = pixels()
+    assert np.array_equal(first, plain)
+    assert np.array_equal(again, plain)
