@@ -14,7 +14,8 @@ ones to read on a busy machine:
 - `plot added`: the same run drawing its default PNG, minus the run without it. On Linux the PNG
   is drawn by a child forked before the run (`cosim.cli.plotter`), which imports matplotlib while
   the run goes: with a free core that is off the wall time, not off the CPU time (the child's
-  CPU is in the figure: `wait4` counts the children a process has reaped);
+  CPU is in the figure: this process adopts and reaps the children `cosim` leaves to end by
+  themselves, and adds their CPU time);
 - `first run, nothing built`: a fresh copy of the checkout (no `__pycache__`, `build/` or logs, so
   no bytecode, no built FMUs and no built C kernels): the first run of a fresh source checkout,
   which builds its 4 FMUs and 5 kernels (side by side since issue 23). The user's own caches are
@@ -73,18 +74,42 @@ GOALS = {
 SWEEP_POINTS = [(seed, noise) for seed in range(4) for noise in ("0.02", "0.05")]
 
 
+def _adopt_orphans() -> None:
+    """Make this process the one that reaps its descendants' orphans (Linux: PR_SET_CHILD_SUBREAPER),
+    so that a measured process's CPU time includes the children it leaves to end by themselves
+    (`wait4` counts only the children a process reaped)."""
+    if _ADOPTING or not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.prctl(36, 1, 0, 0, 0) == 0:  # PR_SET_CHILD_SUBREAPER
+        _ADOPTING.append(True)
+
+
+_ADOPTING: list[bool] = []
+
+
 def _timed(command: list[str], cwd: Path, env: dict[str, str]) -> tuple[float, float, float]:
     """Wall seconds, max RSS [MiB] and CPU seconds (user + system) of one fresh process (which must
     exit 0 or 1). CPU time hardly depends on other processes: the figure to trust on a busy machine."""
+    _adopt_orphans()
     started = time.perf_counter()
     process = subprocess.Popen(command, cwd=cwd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     _, status, usage = os.wait4(process.pid, 0)
     wall = time.perf_counter() - started
+    cpu = usage.ru_utime + usage.ru_stime
+    while True:  # its children it did not wait for (the plot process ends after answering)
+        try:
+            _, _, orphan = os.wait4(-1, 0)
+        except ChildProcessError:
+            break
+        cpu += orphan.ru_utime + orphan.ru_stime
     code = os.waitstatus_to_exitcode(status)
     if code not in (0, 1):
         error = process.stderr.read().decode(errors="replace").strip().splitlines()
         raise SystemExit(f"{' '.join(command)} in {cwd} exited {code}: {error[-1] if error else ''}")
-    return wall, usage.ru_maxrss / 1024, usage.ru_utime + usage.ru_stime
+    return wall, usage.ru_maxrss / 1024, cpu
 
 
 def _environment(checkout: Path) -> dict[str, str]:

@@ -41,6 +41,7 @@ class PlotProcess:
         PNG (sweep.png's `cosim.sweep.engine.draw_plot`), drawn from one frame, without a draft."""
         if not sys.platform.startswith("linux"):
             return None
+        _reap_ended()
         try:
             data_read, data_write = os.pipe()
             reply_read, reply_write = os.pipe()
@@ -152,9 +153,27 @@ class PlotProcess:
                 pid, status = os.waitpid(self.pid, 0 if wait else os.WNOHANG)
                 if pid:
                     self.exit_status = os.waitstatus_to_exitcode(status)
+                else:
+                    _ENDING.append(self.pid)
             except ChildProcessError:
                 pass
             self.pid = 0
+
+
+# Plot processes that answered but had not ended when their `PlotProcess` was done: reaped by the
+# next `PlotProcess.start` of this process (a script or notebook that plots run after run keeps at
+# most one such zombie, not one per run), or by the system once this process ends.
+_ENDING: list[int] = []
+
+
+def _reap_ended() -> None:
+    for pid in list(_ENDING):
+        try:
+            ended = os.waitpid(pid, os.WNOHANG)[0] != 0
+        except ChildProcessError:
+            ended = True
+        if ended:
+            _ENDING.remove(pid)
 
 
 def _widen(pipe: int) -> None:

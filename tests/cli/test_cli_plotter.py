@@ -82,6 +82,33 @@ def test_a_plot_process_draws_and_is_gone(cosim_run, tmp_path: Path):
 
 
 @pytest.mark.slow
+def test_a_plot_process_that_ended_unwaited_is_reaped_by_the_next_start(cosim_run, tmp_path: Path):
+    """A script that plots run after run keeps no zombie per run: the next `PlotProcess.start`
+    reaps the one the last draw did not wait for."""
+    from cosim.cli import plotter
+
+    process = PlotProcess.start()
+    pid = process.pid
+    assert process.draw(_data(cosim_run), tmp_path / "x.png") is None
+    assert pid in plotter._ENDING or _not_running(pid)  # left to end by itself, or ended already
+    deadline = time.monotonic() + 60
+    while Path(f"/proc/{pid}").exists() and _state(pid) != "Z" and time.monotonic() < deadline:
+        time.sleep(0.01)  # until it has exited (a zombie until someone reaps it)
+    following = PlotProcess.start()
+    following.cancel()
+    assert pid not in plotter._ENDING
+    with pytest.raises(ChildProcessError):
+        os.waitpid(pid, os.WNOHANG)  # reaped: not ours to wait for any more
+
+
+def _state(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return ""
+
+
+@pytest.mark.slow
 def test_a_problem_of_the_child_is_its_answer(cosim_run, tmp_path: Path):
     (tmp_path / "file").write_text("not a folder")
     data, png = _data(cosim_run), tmp_path / "file" / "x.png"
