@@ -9,6 +9,8 @@ The race is made certain here: the event loop is kept busy while the interrupt a
 import subprocess
 import sys
 
+import pytest
+
 SCRIPT = r"""
 import asyncio, logging, os, signal, sys, threading, time
 from distributed.utils import LoopRunner, sync
@@ -50,6 +52,7 @@ def _run(mode: str) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.slow  # two interpreters importing distributed
 def test_the_unbound_future_error_is_dropped_and_others_are_kept():
     plain = _run("plain")
     assert "interrupted" in plain.stdout
