@@ -13,7 +13,8 @@ components step only in a block's first step:
    inputs), so the master steps every lidar before any vehicle: each scan at t sees every robot
    where it stands at t, whatever the robots' order;
 2. the master steps the block (FMUs in the compiled kernel, `Master.run_blocks`; lidars and
-   planners in Python in its first step), keeping each step's rows of every component: every
+   planners in Python in its first step, a planner by its C step `PlannerComponent.kernel_step`
+   where that needs no Python), keeping each step's rows of every component: every
    Python component first, then every FMU through the whole block in one kernel call
    (`_PythonSteps`), when no FMU a Python component reads or feeds comes before it in the
    master's order (the same values as the kernel handing each back where it is due);
@@ -426,7 +427,9 @@ class _PythonSteps:
     def __init__(self, master: Master, steps: list, feeds: list, gathers: dict, snapshot=None) -> None:
         self.master = master
         self.snapshot = snapshot  # outputs of components not stepped here, read by many links (`make`)
-        self.steps = steps  # (component, period, gather of its inputs or None), in the master's order
+        # (component, period, gather of its inputs or None, its C step or None: `_c_step`), in the
+        # master's order.
+        self.steps = steps
         self.feeds = feeds  # copy of the Python components' outputs into each FMU that reads them
         self.gathers = gathers  # (consumer, its Python producers or None: all) -> gather, for `make`
 
@@ -495,7 +498,7 @@ class _PythonSteps:
 
             return both
 
-        steps = [(c, system.period_steps(c), step_gather(c)) for c in python]
+        steps = [(c, system.period_steps(c), step_gather(c), _c_step(c)) for c in python]
         order = sorted(consumers, key=place.__getitem__)
         feeds = [gather(name, frozenset(consumers[name])) for name in order]
         return cls(master, steps, feeds, gathers, snapshot)
@@ -505,12 +508,12 @@ class _PythonSteps:
         rest alone."""
         from cosim.core import kernel
 
-        for component, _, _ in self.steps:
+        for component, *_ in self.steps:
             component.constant_outputs = True
         try:
             tables = self.master.kernel_tables(record=True, block=block, scalar_rows=True)
         finally:
-            for component, _, _ in self.steps:
+            for component, *_ in self.steps:
                 component.constant_outputs = False
         if tables is None or (tables.components[:, kernel.C_KIND] == kernel.KIND_PYTHON).any():
             return None
@@ -522,20 +525,36 @@ class _PythonSteps:
         t = (master.start_time_ns + k * master.system.macro_step_ns) / NS_PER_S
         if self.snapshot is not None:  # (none of those components steps before the gathers)
             self.snapshot.take()
-        for component, period, gather in self.steps:
+        for component, period, gather, c_step in self.steps:
             if k % period:
                 continue
             try:
                 if gather is not None:
                     gather()
                     component.push_inputs()
-                component.do_step(t, master.step_seconds(k, period))
+                # A planner's C step does the step while it needs no Python (`_c_step`).
+                if c_step is None or c_step(t):
+                    component.do_step(t, master.step_seconds(k, period))
                 component.get_outputs()
             except CosimError as error:
                 master.failure = error
                 raise
         for feed in self.feeds:
             feed()
+
+
+def _c_step(component):
+    """The C step of a Python component (`PlannerComponent.kernel_step`: the scan into the costmap,
+    the progress, the triggers), as a call of t [s] that says whether the step needs Python after
+    all (then `do_step` goes on from where it stopped, as the compiled kernel hands it back); None
+    without one (every step in Python)."""
+    kernel_step = getattr(component, "kernel_step", None)
+    found = kernel_step() if callable(kernel_step) else None
+    if found is None:
+        return None
+    function, state = found
+    call = ctypes.CFUNCTYPE(ctypes.c_int64, ctypes.c_void_p, ctypes.c_double)(function)
+    return functools.partial(call, state)
 
 
 def _advance(

@@ -2,9 +2,10 @@
 checked for a whole block (`FleetContacts.steps`) against `FleetContacts.step` per step; the bytes
 of /plan and of the fleet's pose messages patched into layouts against the serialised messages; and
 a fleet run (judged a robot at a time per block, its Python components stepped apart from the
-compiled kernel, the kernel's rows keeping only the scalar inputs) against the same run judged step
-by step with the kernel handing each Python component back and keeping whole rows: the same outcome
-and the same log, message for message."""
+compiled kernel, its planners by their C step where that needs no Python, the kernel's rows keeping
+only the scalar inputs) against the same run judged step by step with the kernel handing each Python
+component back, the planners stepping in Python, and keeping whole rows: the same outcome and the
+same log, message for message."""
 
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ from mcap.reader import make_reader
 from cosim.core.master import Master
 from cosim.navigation import fleet as fleet_module
 from cosim.navigation.fleet_log import outcome_record
+from cosim.navigation.planner import PlannerComponent
 from cosim.record import recorder, rosmsg
 from cosim.record.fleet_steps import _Filled, _layout, _odometry, _pose_stamped, _Template, _tf
 from cosim.scenario.load import load_scenario
@@ -178,11 +180,14 @@ def test_a_fleet_run_is_that_of_the_step_by_step_loop(tmp_path, monkeypatch):
     assert scalar and all(scalar)  # rows without the plans' and scans' elements
     assert len(made) > 1 and None not in made  # stepped apart, also after robots were switched off
     assert all(each.snapshot is not None for each in made)  # lidars read the 10 vehicles' poses at once
+    # the planners stepped by their C step (`_c_step`) where that needs no Python
+    assert all(any(c_step is not None for *_, c_step in each.steps) for each in made)
 
     monkeypatch.setattr(fleet_module, "_judge_block", _judge_step_by_step)
     monkeypatch.setattr(fleet_module._FleetJudge, "make", classmethod(lambda *_: None))
     monkeypatch.setattr(fleet_module._PythonSteps, "make", classmethod(lambda *_: None))
     monkeypatch.setattr(FleetContacts, "steps", _contacts_step_by_step)
+    monkeypatch.setattr(PlannerComponent, "kernel_step", lambda _self: None)  # every step in Python
     monkeypatch.setattr(  # whole rows: every input array's elements too
         Master,
         "kernel_tables",
