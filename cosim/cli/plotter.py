@@ -42,20 +42,12 @@ class PlotProcess:
         if not sys.platform.startswith("linux"):
             return None
         _reap_ended()
-        try:
-            data_read, data_write = os.pipe()
-            reply_read, reply_write = os.pipe()
-        except OSError:
-            return None
-        _widen(data_write)
         for stream in (sys.stdout, sys.stderr):  # nothing buffered is written twice
             stream.flush()
-        try:
-            pid = os.fork()
-        except OSError:
-            for fd in (data_read, data_write, reply_read, reply_write):
-                os.close(fd)
+        forked = _fork_with_pipes()
+        if forked is None:
             return None
+        pid, (data_read, data_write), (reply_read, reply_write) = forked
         if pid == 0:
             os.close(data_write)
             os.close(reply_read)
@@ -144,19 +136,12 @@ class PlotProcess:
         """Close the pipes and reap the child; without `wait`, only if it has ended already (one
         that answered: it only exits, ~4 ms of freeing its memory, and the system reaps it once
         this process ends; `exit_status` then stays None)."""
-        for fd in (self._data, self._reply):
-            if fd is not None:
-                os.close(fd)
+        _close(self._data, self._reply)
         self._data = self._reply = None
         if self.pid:
-            try:
-                pid, status = os.waitpid(self.pid, 0 if wait else os.WNOHANG)
-                if pid:
-                    self.exit_status = os.waitstatus_to_exitcode(status)
-                else:
-                    _ENDING.append(self.pid)
-            except ChildProcessError:
-                pass
+            ended, self.exit_status = _reap_child(self.pid, wait)
+            if not ended:
+                _ENDING.append(self.pid)
             self.pid = 0
 
 
@@ -168,12 +153,40 @@ _ENDING: list[int] = []
 
 def _reap_ended() -> None:
     for pid in list(_ENDING):
-        try:
-            ended = os.waitpid(pid, os.WNOHANG)[0] != 0
-        except ChildProcessError:
-            ended = True
-        if ended:
+        if _reap_child(pid, wait=False)[0]:
             _ENDING.remove(pid)
+
+
+def _fork_with_pipes() -> tuple[int, tuple[int, int], tuple[int, int]] | None:
+    """Fork, with two new pipes both processes hold all ends of: (pid as `os.fork` gives it, the
+    data pipe (read, write), made to hold a run's data at once, the answer pipe (read, write)), or
+    None where a pipe or the fork cannot be made (nothing is left open)."""
+    pipes: list[tuple[int, int]] = []
+    try:
+        pipes.append(os.pipe())
+        pipes.append(os.pipe())
+        _widen(pipes[0][1])
+        pid = os.fork()
+    except OSError:
+        _close(*(fd for pipe in pipes for fd in pipe))
+        return None
+    return pid, pipes[0], pipes[1]
+
+
+def _close(*fds: int | None) -> None:
+    for fd in fds:
+        if fd is not None:
+            os.close(fd)
+
+
+def _reap_child(pid: int, wait: bool = True) -> tuple[bool, int | None]:
+    """Reap the child `pid`, waiting for it or only if it has ended: (whether it has ended, its exit
+    code, None where it had been reaped already or has not ended)."""
+    try:
+        reaped, status = os.waitpid(pid, 0 if wait else os.WNOHANG)
+    except ChildProcessError:
+        return True, None
+    return (True, os.waitstatus_to_exitcode(status)) if reaped else (False, None)
 
 
 def _widen(pipe: int) -> None:
@@ -362,17 +375,12 @@ class PanelHelper:
         shape = drafted.pixels().shape
         try:
             shared = mmap.mmap(-1, shape[0] * shape[1] * shape[2])
-            data_read, data_write = os.pipe()
-            done_read, done_write = os.pipe()
         except OSError:
             return None
-        _widen(data_write)
-        try:
-            pid = os.fork()
-        except OSError:
-            for fd in (data_read, data_write, done_read, done_write):
-                os.close(fd)
+        forked = _fork_with_pipes()
+        if forked is None:
             return None
+        pid, (data_read, data_write), (done_read, done_write) = forked
         if pid == 0:
             for fd in (data_write, done_read, *inherited):
                 os.close(fd)
@@ -445,15 +453,10 @@ class PanelHelper:
         self._reap()
 
     def _reap(self) -> None:
-        for fd in (self._data, self._done):
-            if fd is not None:
-                os.close(fd)
+        _close(self._data, self._done)
         self._data = self._done = None
         if self.pid:
-            try:
-                os.waitpid(self.pid, 0)
-            except ChildProcessError:
-                pass
+            _reap_child(self.pid)
             self.pid = 0
 
 
