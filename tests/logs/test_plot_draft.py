@@ -20,17 +20,10 @@ from cosim.logs import plot
 from cosim.logs.plot_data import PlotData
 from cosim.navigation.run import run_scenario
 from cosim.scenario.load import load_scenario
+from tests.logs.test_plot_trace import SCENARIOS  # the runs whose trace is drawn as their log
 
 REPO = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.slow  # three runs, each picture drawn a few times, forks
-SCENARIOS = {
-    # VFH takes over (the mode shading and its label), a replan
-    "one_obstacle": ("warehouse_diff_drive_one_obstacle.toml", ["simulation.stop_time=30"]),
-    # moving obstacles (tracks), stopped before the goal (the end marker)
-    "moving_short": ("warehouse_moving_crossing.toml", ["simulation.stop_time=12"]),
-    # the bicycle's steering panel
-    "bicycle_short": ("warehouse_bicycle_one_obstacle.toml", ["simulation.stop_time=8"]),
-}
 
 
 @pytest.fixture(scope="module", params=sorted(SCENARIOS))
