@@ -13,9 +13,10 @@ components step only in a block's first step:
    inputs), so the master steps every lidar before any vehicle: each scan at t sees every robot
    where it stands at t, whatever the robots' order;
 2. the master steps the block (FMUs in the compiled kernel, `Master.run_blocks`; lidars and
-   planners in Python in its first step, a planner by its C step `PlannerComponent.kernel_step`
-   where that needs no Python), keeping each step's rows of every component: every
-   Python component first, then every FMU through the whole block in one kernel call
+   planners in its first step, all in one C call (`_BlockProgram`: the sweeps, the planners' C
+   steps `PlannerComponent.kernel_step`) handing back what needs Python), keeping each step's
+   rows of every component: every Python component first, then every FMU through the whole block
+   in one kernel call
    (`_PythonSteps`), when no FMU a Python component reads or feeds comes before it in the
    master's order (the same values as the kernel handing each back where it is due);
 3. then, step by step through the block, the footprints are checked pairwise
@@ -422,7 +423,8 @@ class _PythonSteps:
     FMUs that read them (`feeds`, the master's arithmetic), and hold to the block's end as the
     kernel would have copied them. The same values as the kernel handing each back where it is due
     (`Master.run_blocks`), in fewer kernel calls, when no FMU a Python component reads or feeds
-    comes before it in the master's order (`make`: None otherwise)."""
+    comes before it in the master's order (`make`: None otherwise). Gathers, steps and feeds run in
+    one C call (`_BlockProgram`) where it can, which hands back the components that need Python."""
 
     def __init__(
         self, master: Master, steps: list, feeds: list, gathers: dict, snapshot=None, program=None
