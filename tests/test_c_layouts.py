@@ -22,8 +22,13 @@ REPO = Path(__file__).resolve().parents[1]
 LIBRARIES = {
     "cosim/core/native/kernel.c": ({"Tables": "cosim.core.kernel:_Tables"}, ("cosim.core.kernel",)),
     "cosim/world/native/world.c": (
-        {"World": "cosim.world.kernels:WorldArrays", "Lidar": "cosim.world.kernels:LidarArrays"},
-        (),
+        {
+            "World": "cosim.world.kernels:WorldArrays",
+            "Lidar": "cosim.world.kernels:LidarArrays",
+            "BlockStep": "cosim.world.kernels:BlockStepArrays",
+            "BlockCopy": "cosim.world.kernels:BlockCopyArrays",
+        },
+        ("cosim.world.kernels",),
     ),
     "cosim/navigation/native/costmap.c": (
         {"Costmap": "cosim.navigation.costmap:_Arrays", "PlannerStep": "cosim.navigation.planner:_StepState"},

@@ -70,6 +70,7 @@ def _kernels() -> ctypes.CDLL:
                     [_p, _p, _p, _p, _i64, _i64, _f64, _f64, _f64],
                 ),
                 "path_progress": (_f64, [_p, _p, _i64, _i64, _f64, _f64, ctypes.POINTER(_i64)]),
+                "planner_look_ahead": (_i64, [_p]),
                 "costmap_distance": (None, [_p, _p, _i64, _p]),
             },
         )

@@ -13,9 +13,10 @@ components step only in a block's first step:
    inputs), so the master steps every lidar before any vehicle: each scan at t sees every robot
    where it stands at t, whatever the robots' order;
 2. the master steps the block (FMUs in the compiled kernel, `Master.run_blocks`; lidars and
-   planners in Python in its first step, a planner by its C step `PlannerComponent.kernel_step`
-   where that needs no Python), keeping each step's rows of every component: every
-   Python component first, then every FMU through the whole block in one kernel call
+   planners in its first step, all in one C call (`_BlockProgram`: the sweeps, the planners' C
+   steps `PlannerComponent.kernel_step`) handing back what needs Python), keeping each step's
+   rows of every component: every Python component first, then every FMU through the whole block
+   in one kernel call
    (`_PythonSteps`), when no FMU a Python component reads or feeds comes before it in the
    master's order (the same values as the kernel handing each back where it is due);
 3. then, step by step through the block, the footprints are checked pairwise
@@ -422,9 +423,12 @@ class _PythonSteps:
     FMUs that read them (`feeds`, the master's arithmetic), and hold to the block's end as the
     kernel would have copied them. The same values as the kernel handing each back where it is due
     (`Master.run_blocks`), in fewer kernel calls, when no FMU a Python component reads or feeds
-    comes before it in the master's order (`make`: None otherwise)."""
+    comes before it in the master's order (`make`: None otherwise). Gathers, steps and feeds run in
+    one C call (`_BlockProgram`) where it can, which hands back the components that need Python."""
 
-    def __init__(self, master: Master, steps: list, feeds: list, gathers: dict, snapshot=None) -> None:
+    def __init__(
+        self, master: Master, steps: list, feeds: list, gathers: dict, snapshot=None, program=None
+    ) -> None:
         self.master = master
         self.snapshot = snapshot  # outputs of components not stepped here, read by many links (`make`)
         # (component, period, gather of its inputs or None, its C step or None: `_c_step`), in the
@@ -432,6 +436,9 @@ class _PythonSteps:
         self.steps = steps
         self.feeds = feeds  # copy of the Python components' outputs into each FMU that reads them
         self.gathers = gathers  # (consumer, its Python producers or None: all) -> gather, for `make`
+        # The same steps and feeds in one C call (`_BlockProgram`), handing back what needs Python;
+        # None: every step as above.
+        self.program = program
 
     @classmethod
     def make(cls, master: Master, previous: _PythonSteps | None = None) -> _PythonSteps | None:
@@ -501,7 +508,12 @@ class _PythonSteps:
         steps = [(c, system.period_steps(c), step_gather(c), _c_step(c)) for c in python]
         order = sorted(consumers, key=place.__getitem__)
         feeds = [gather(name, frozenset(consumers[name])) for name in order]
-        return cls(master, steps, feeds, gathers, snapshot)
+        fed = [
+            (system.components[name], [link for link in links[name] if link.producer in consumers[name]])
+            for name in order
+        ]
+        program = _BlockProgram.make(system, [(c, period) for c, period, *_ in steps], fed)
+        return cls(master, steps, feeds, gathers, snapshot, program)
 
     def tables(self, block: int):
         """The kernel's tables without the Python components; None when the kernel cannot step the
@@ -523,6 +535,10 @@ class _PythonSteps:
         """Step the Python components due at step k, then copy their outputs to the FMUs."""
         master = self.master
         t = (master.start_time_ns + k * master.system.macro_step_ns) / NS_PER_S
+        program = self.program
+        if program is not None:
+            self._step_program(program, k, t)
+            return
         if self.snapshot is not None:  # (none of those components steps before the gathers)
             self.snapshot.take()
         for component, period, gather, c_step in self.steps:
@@ -541,6 +557,193 @@ class _PythonSteps:
                 raise
         for feed in self.feeds:
             feed()
+
+    def _step_program(self, program: _BlockProgram, k: int, t: float) -> None:
+        """`step` by the C program: each component it hands back is stepped here, as `step` would,
+        from where the program stopped (its C step's hand-over: `do_step` goes on; a component
+        stepped by Python: all of it), then the program goes on after it."""
+        master, steps, snapshot = self.master, self.steps, self.snapshot
+        taken = False
+        end = len(steps) + 1  # (the feeds: the program's last entry, never handed back)
+        i = program.run(0, k, t)
+        while i < end:
+            component, period, gather, c_step = steps[i]
+            try:
+                if program.python[i]:
+                    if gather is not None:
+                        if snapshot is not None and not taken:  # (the producers have not stepped)
+                            snapshot.take()
+                            taken = True
+                        gather()
+                        component.push_inputs()
+                    if c_step is None or c_step(t):
+                        component.do_step(t, master.step_seconds(k, period))
+                else:  # gathered, its C step handed over
+                    component.do_step(t, master.step_seconds(k, period))
+                component.get_outputs()
+            except CosimError as error:
+                master.failure = error
+                raise
+            i = program.run(i + 1, k, t)
+
+
+class _BlockProgram:
+    """`_PythonSteps.step` in one C call a block (`fleet_python_block` of world.c), the same
+    operations in the same order: per component due, its gather as copies from the producers'
+    output buffers into its input buffer (the connection's arithmetic), then a lidar swept in C
+    (`Lidar.step`: the other robots' circles placed from its inputs; without noise or moving
+    obstacles) or a C step (`PlannerComponent.kernel_step`); last the copies into the FMUs that read
+    them (`_PythonSteps.feeds`). It hands a component back to Python (`run` returns its index) when
+    its C step says so, or before its gather when it has no step in C (`python`: then all of it is
+    Python's). The components' push_inputs and get_outputs, which the C steps skip, are those of
+    `PythonComponent` (a state check) and the components are stepping: checked by `make`."""
+
+    def __init__(self, entries: list, copies: list) -> None:
+        from cosim.world import kernels
+
+        self.function = kernels.library().fleet_python_block
+        self.steps = (kernels.BlockStepArrays * len(entries))(*entries)
+        self.copies = (kernels.BlockCopyArrays * max(1, len(copies)))(*copies)
+        self.count = len(entries)
+        self.python = [entry.kind == kernels.BLOCK_PYTHON for entry in entries]
+        self._steps_address = ctypes.addressof(self.steps)
+        self._copies_address = ctypes.addressof(self.copies)
+
+    def run(self, start: int, k: int, t: float) -> int:
+        """The components from `start` on at step k (t [s]); the index of the first handed back, or
+        the number of entries (the components and the feeds) when none is."""
+        return self.function(self._steps_address, self.count, start, k, t, self._copies_address)
+
+    @classmethod
+    def make(cls, system: System, steps: list, fed: list) -> _BlockProgram | None:
+        """The program of `steps` ((component, period) in the master's order) and `fed` ((FMU, its
+        links from those components) in the order of the feeds); None when it would step no
+        component in C, or a gather cannot be copied so (an input written by two links)."""
+        from cosim.core.component import PythonComponent, State
+        from cosim.world import kernels
+        from cosim.world.lidar import Lidar
+
+        links = system.links()
+        entries, copies = [], []
+
+        def gathered(consumer: Component, fed_links: list) -> tuple[int, int] | None:
+            found = _block_copies(system, consumer, fed_links)
+            if found is None:
+                return None
+            first = len(copies)
+            copies.extend(found)
+            return first, len(found)
+
+        def plain(c) -> bool:  # push_inputs and get_outputs only check the state
+            kind = type(c)
+            return (
+                c.state is State.STEPPING
+                and kind.push_inputs is PythonComponent.push_inputs
+                and kind.get_outputs is PythonComponent.get_outputs
+            )
+
+        stepped = 0
+        for c, period in steps:
+            entry = kernels.BlockStepArrays(period=period, kind=kernels.BLOCK_PYTHON)
+            kernel_step = getattr(c, "kernel_step", None)
+            found = kernel_step() if callable(kernel_step) else None
+            if plain(c) and isinstance(c, Lidar) and _sweeps_in_c(c):
+                entry.kind = kernels.BLOCK_LIDAR
+                entry.lidar, entry.inputs = c._address, ctypes.addressof(c.input_cbuffer)
+                entry.robots = len(c._robot_rows)
+                entry.robot_rows = c._robot_rows.ctypes.data if entry.robots else None
+            elif plain(c) and found is not None:
+                entry.kind = kernels.BLOCK_C_STEP
+                entry.c_step, entry.state = found
+            if entry.kind != kernels.BLOCK_PYTHON:
+                stretch = gathered(c, links.get(c.name, []))
+                if stretch is None:
+                    return None
+                entry.first_copy, entry.copies = stretch
+                stepped += 1
+            entries.append(entry)
+        if not stepped:
+            return None
+        feeds = kernels.BlockStepArrays(period=1, kind=kernels.BLOCK_COPIES, first_copy=len(copies))
+        for consumer, fed_links in fed:
+            if gathered(consumer, fed_links) is None:
+                return None
+        feeds.copies = len(copies) - feeds.first_copy
+        entries.append(feeds)
+        return cls(entries, copies)
+
+
+def _sweeps_in_c(lidar) -> bool:
+    """Whether `fleet_python_block` may step this lidar as `Lidar.step` does: that step, its scan
+    and placing of the robots are `Lidar`'s own, it draws no noise, no obstacle moves (`world.at`
+    does nothing) and its angles are written (they are from `on_initialize` on)."""
+    from cosim.core.component import PythonComponent
+    from cosim.world.lidar import Lidar
+
+    kind = type(lidar)
+    rows = lidar._robot_rows
+    return (
+        kind.step is Lidar.step
+        and kind.scan is Lidar.scan
+        and kind._place_robots is Lidar._place_robots
+        and kind.do_step is PythonComponent.do_step
+        and lidar.angle_noise == 0
+        and lidar.range_noise == 0
+        and not lidar.world.moving
+        and lidar._angles_written
+        and rows.flags.c_contiguous
+        and rows.flags.writeable
+    )
+
+
+def _block_copies(system: System, consumer: Component, links: list) -> list | None:
+    """`_BlockProgram`'s copies for `links` into `consumer` (of `System.links`): each stretch of
+    plain links from one producer into consecutive inputs from evenly spaced outputs one copy,
+    every other link a copy of its own; None when an input is written twice."""
+    from cosim.world import kernels
+
+    targets = [link.input for link in links]
+    if len(set(targets)) != len(targets):
+        return None
+    components = system.components
+    target_base = ctypes.addressof(consumer.input_cbuffer)
+    copies = []
+    run = None  # [producer, first link, stride, count, last output] of the stretch being made
+    for link in sorted(links, key=lambda link: link.input):
+        if run is not None and link.connection.is_plain:
+            producer, first, stride, count, last = run
+            if link.producer == producer and link.input == first.input + count:
+                if count == 1 or link.output - last == stride:
+                    run[2], run[3], run[4] = link.output - last, count + 1, link.output
+                    continue
+        if run is not None:
+            copies.append(_copy(components, target_base, *run[:4]))
+            run = None
+        if link.connection.is_plain:
+            run = [link.producer, link, 0, 1, link.output]
+            continue
+        scale, offset = link.connection.scale, link.connection.offset
+        source = ctypes.addressof(components[link.producer].output_cbuffer) + 8 * link.output
+        copies.append(
+            kernels.BlockCopyArrays(
+                source=source, target=target_base + 8 * link.input, count=1, stride=0,
+                multiply=int(scale != 1.0), add=int(offset != 0.0), scale=scale, offset=offset,
+            )
+        )  # fmt: skip
+    if run is not None:
+        copies.append(_copy(components, target_base, *run[:4]))
+    return copies
+
+
+def _copy(components: dict, target_base: int, producer: str, first, stride: int, count: int):
+    """A plain copy of `count` values from `producer`'s output `first.output` on, `stride` apart,
+    into the inputs from `first.input` on."""
+    from cosim.world import kernels
+
+    source = ctypes.addressof(components[producer].output_cbuffer) + 8 * first.output
+    return kernels.BlockCopyArrays(
+        source=source, target=target_base + 8 * first.input, count=count, stride=stride
+    )
 
 
 def _c_step(component):

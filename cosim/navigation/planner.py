@@ -55,6 +55,8 @@ from planner.grid import OccupancyGrid
 STALL_DISTANCE = 1.0  # [m] of progress along the plan that counts as progress
 COST_WEIGHT = 3.0  # of the cost gradient in a replan (planner.options cost_weight)
 SEARCH_WINDOW = 60  # plan segments searched ahead of the last progress for the closest point
+# Points ahead on the plan that the C step looks at itself (more: Python's `_look_ahead`).
+AHEAD_CAPACITY = 4096
 
 
 def downsample_path(path: np.ndarray, capacity: int = WAYPOINT_CAPACITY) -> np.ndarray:
@@ -172,7 +174,7 @@ class _StepState(ctypes.Structure):
         ("resolves_obstacles", _i64), ("search_window", _i64), ("active", _i64), ("following", _i64),
         ("segment", _i64), ("progress", _f64), ("blocked_since", _f64), ("mark_time", _f64),
         ("mark_progress", _f64), ("obstacle_on_plan", _i64), ("last_replan", _f64),
-        ("pending", _i64), ("reason", _i64),
+        ("pending", _i64), ("reason", _i64), ("ahead", _p), ("ahead_capacity", _i64),
     ]  # fmt: skip
 
 
@@ -256,6 +258,11 @@ class PlannerComponent(PythonComponent):
             state.vehicle_radius, state.spacing = replanning.vehicle_radius, self.grid.resolution / 2.0
             state.stall_distance, state.search_window = STALL_DISTANCE, SEARCH_WINDOW
             state.resolves_obstacles = int(replanning.resolves_obstacles)
+            # The C step's scratch for the points ahead (`_plan_ahead`): the arc lengths, then x, y.
+            spacing = self.grid.resolution / 2.0
+            capacity = min(AHEAD_CAPACITY, math.ceil(replanning.replan_horizon / spacing) + 4)
+            self._ahead = np.empty(3 * capacity)
+            state.ahead, state.ahead_capacity = self._ahead.ctypes.data, capacity
 
     # The replanning state, shared with the C step (`kernel_step`).
     following = _state_field("following", bool, "waypoints given from outside (`follow`): no replanning")
@@ -296,8 +303,10 @@ class PlannerComponent(PythonComponent):
     def kernel_step(self) -> tuple[int, int] | None:
         """The C step of the master's compiled kernel (`cosim.core.fast_loop.KernelTables`): (address
         of native/costmap.c's `planner_step`, of its state). It does what `step` does while that
-        needs no Python (the scan into the costmap, the progress, the triggers) and hands the step
-        to Python where a replan may follow; then `step` goes on from where it stopped. None
+        needs no Python (the scan into the costmap, the progress, the triggers, the look for new
+        marks near the plan ahead: `_look_ahead`, with the points of NumPy's arange and interp)
+        and hands the step to Python where a replan may follow (or the look needs more than
+        `AHEAD_CAPACITY` points); then `step` goes on from where it stopped. None
         without replanning, or when `kernel_steps` is False (every step in Python)."""
         if self.replanning is None or not self.kernel_steps:
             return None
@@ -374,7 +383,8 @@ class PlannerComponent(PythonComponent):
 
     def _go_on(self, t: float) -> None:
         """The rest of a step the C step (`kernel_step`) handed over: the look for new marks near
-        the plan ahead and what follows it in `_trigger`, or the replan it found due."""
+        the plan ahead (more points than its scratch holds) and what follows it in `_trigger`, or
+        the replan it found due."""
         state = self._state
         pending, state.pending = state.pending, 0
         inputs = self.input_buffer

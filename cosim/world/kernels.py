@@ -89,6 +89,35 @@ class JudgeArrays(ctypes.Structure):
     ]  # fmt: skip
 
 
+class BlockCopyArrays(ctypes.Structure):
+    """`BlockCopy` of world.c: one copy of `fleet_python_block`'s gathers, `count` values into
+    consecutive inputs from outputs `stride` values apart, times `scale` when `multiply`, plus
+    `offset` when `add`."""
+
+    _fields_ = [
+        ("source", _p), ("target", _p), ("count", _i64), ("stride", _i64),
+        ("multiply", _i64), ("add", _i64), ("scale", _f64), ("offset", _f64),
+    ]  # fmt: skip
+
+
+class BlockStepArrays(ctypes.Structure):
+    """`BlockStep` of world.c: one component of `fleet_python_block` (a fleet's Python components
+    stepped in one call a block): its period, kind (BLOCK_*), gather (a stretch of the copies),
+    and what steps it (a lidar's struct, inputs and the other robots' circles; a C step and its
+    state)."""
+
+    _fields_ = [
+        ("period", _i64), ("kind", _i64), ("first_copy", _i64), ("copies", _i64),
+        ("lidar", _p), ("inputs", _p), ("robot_rows", _p), ("robots", _i64),
+        ("c_step", _p), ("state", _p),
+    ]  # fmt: skip
+
+
+# `fleet_python_block`'s kinds of component: stepped by Python (handed back before its gather), a
+# lidar swept in C, a component with a C step (handed back when that says so), the copies only.
+BLOCK_PYTHON, BLOCK_LIDAR, BLOCK_C_STEP, BLOCK_COPIES = 0, 1, 2, 3
+
+
 # `world_check_positions`'s reasons: none (all steps checked), collision, goal reached, and a step
 # it leaves to Python (a cell off the grid).
 CHECK_GOING, CHECK_COLLISION, CHECK_GOAL, CHECK_PYTHON = 0, 1, 2, 3
@@ -153,6 +182,7 @@ def library() -> ctypes.CDLL:
                 "world_hypot": (_f64, [_f64, _f64]),
                 "world_check_positions": (_i64, [_p, _i64]),
                 "fleet_judge": (_i64, [_p, _i64, _p, _p, _p, _p, _p, _i64, _p]),
+                "fleet_python_block": (_i64, [_p, _i64, _i64, _i64, _f64, _p]),
             },
         )
     return _library

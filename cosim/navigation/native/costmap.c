@@ -495,10 +495,11 @@ double path_progress(const double *points, const double *arc, int64_t first, int
 /* ---- The replanning planner's step in C (`cosim.navigation.planner.PlannerComponent`) ----------
  * What `PlannerComponent.step` does at a step that needs no Python, for the master's compiled
  * kernel (a Python component's C step, `kernel_step`): the scan into the costmap, the progress
- * along the plan, the replan triggers; the same operations in the same order. It returns 1 without
- * finishing, `pending` set, where Python must go on: PENDING_MARKS, a new mark may lie near the
- * plan ahead (Python makes the points and looks: the rest of `_trigger`), PENDING_REPLAN, a trigger
- * fired (`reason`) and the interval allows a replan. The state is the component's own (its
+ * along the plan, the replan triggers (the look for new marks near the plan ahead too,
+ * `planner_look_ahead`); the same operations in the same order. It returns 1 without finishing,
+ * `pending` set, where Python must go on: PENDING_MARKS, a new mark may lie near the plan ahead and
+ * the look needs more points than the scratch holds (Python makes the points and looks: the rest
+ * of `_trigger`), PENDING_REPLAN, a trigger fired (`reason`) and the interval allows a replan. The state is the component's own (its
  * attributes read and write these fields), so its Python step and this one go on from each other. */
 typedef struct {
     const Costmap *costmap;
@@ -520,10 +521,95 @@ typedef struct {
     int64_t obstacle_on_plan;
     double last_replan;           /* [s] */
     int64_t pending, reason;
+    /* Scratch of the look for new marks ahead (`planner_look_ahead`): 3 x ahead_capacity values, the arc
+     * lengths then the points; a look that needs more is Python's (PENDING_MARKS). */
+    double *ahead;
+    int64_t ahead_capacity;
 } PlannerStep;
 
 enum { PENDING_NONE = 0, PENDING_MARKS = 1, PENDING_REPLAN = 2 };
 enum { REASON_NONE = 0, REASON_NO_FREE_DIRECTION = 1, REASON_STALLED = 2, REASON_OBSTACLE_ON_PLAN = 3 };
+
+/* NumPy's interp(x, xp, fp) at one x (not NaN) for xp (n >= 1, non-decreasing) and fp = values[2 k]
+ * (a column of an n x 2 array), both ends held: the last k with xp[k] <= x (its binary search),
+ * fp there at a knot or the last point, else the slope times the offset plus fp[k], tried from the
+ * segment's other end when that is NaN (and fp[k] when both ends are equal). */
+static double interp_like_numpy(double x, const double *xp, const double *values, int64_t n)
+{
+    if (n == 1)
+        return values[0];
+    if (x > xp[n - 1])
+        return values[2 * (n - 1)];
+    if (x < xp[0])
+        return values[0];
+    int64_t low = 0, high = n;
+    while (low < high) {
+        int64_t mid = low + ((high - low) >> 1);
+        if (x >= xp[mid])
+            low = mid + 1;
+        else
+            high = mid;
+    }
+    int64_t j = low - 1;
+    if (j == n - 1 || xp[j] == x)
+        return values[2 * j];
+    double slope = (values[2 * j + 2] - values[2 * j]) / (xp[j + 1] - xp[j]);
+    double value = slope * (x - xp[j]) + values[2 * j];
+    if (isnan(value)) {
+        value = slope * (x - xp[j + 1]) + values[2 * j + 2];
+        if (isnan(value) && values[2 * j] == values[2 * j + 2])
+            value = values[2 * j];
+    }
+    return value;
+}
+
+/* `PlannerComponent._look_ahead`: whether a new mark lies near the plan ahead, its points every
+ * `spacing` along the plan from the progress to `replan_horizon` further (`_plan_ahead`: NumPy's
+ * arange of the arc lengths, its length ceil((stop - start) / step), its values start, start +
+ * step, then start + i delta with delta the difference of those two; those up to the plan's end;
+ * interp of the points' x and y), then `costmap_new_marks_near`. -1 when the points would not fit
+ * the scratch (Python looks). The points are left in the scratch. */
+int64_t planner_look_ahead(const PlannerStep *s)
+{
+    int64_t n = s->waypoint_count;
+    const double *arc = s->arc;
+    double last = arc[n - 1], start = s->progress, spacing = s->spacing;
+    double end = start + s->replan_horizon;
+    double stop = py_min(end, last) + spacing;
+    double delta = stop - start, quotient = delta / spacing;
+    int64_t length;
+    if (quotient == 0.0 && delta != 0.0) {
+        length = signbit(quotient) ? 0 : 1;
+    } else {
+        double ceiling = ceil(quotient);
+        if (!(ceiling <= (double)s->ahead_capacity))
+            return -1;
+        length = (int64_t)ceiling;
+    }
+    if (length <= 0)
+        return 0;
+    if (length > s->ahead_capacity)
+        return -1;
+    double *along = s->ahead, *points = s->ahead + s->ahead_capacity;
+    along[0] = start;
+    if (length > 1) {
+        along[1] = start + spacing;
+        double step = along[1] - along[0];
+        for (int64_t i = 2; i < length; i++)
+            along[i] = start + (double)i * step;
+    }
+    int64_t count = 0;
+    for (int64_t i = 0; i < length; i++) {
+        if (!(along[i] <= last))
+            continue;
+        points[2 * count] = interp_like_numpy(along[i], arc, s->points, n);
+        points[2 * count + 1] = interp_like_numpy(along[i], arc, s->points + 1, n);
+        count++;
+    }
+    if (count == 0)
+        return 0;
+    return costmap_new_marks_near(s->costmap, s->marks_at_plan, points, count, s->vehicle_radius) != 0;
+}
 
 int64_t planner_step(PlannerStep *s, double t)
 {
@@ -572,8 +658,12 @@ int64_t planner_step(PlannerStep *s, double t)
             if (costmap_new_marks_maybe_near(s->costmap, s->marks_at_plan, s->points, s->arc,
                                              s->waypoint_count, s->segment, s->progress, high,
                                              s->vehicle_radius)) {
-                s->pending = PENDING_MARKS;
-                return 1;
+                int64_t near = planner_look_ahead(s); /* (`_look_ahead`, its finding the trigger) */
+                if (near < 0) {
+                    s->pending = PENDING_MARKS;
+                    return 1;
+                }
+                s->obstacle_on_plan = near;
             }
         }
         if (s->obstacle_on_plan)
@@ -620,6 +710,8 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_FIELD(PlannerStep, last_replan);
     LAYOUT_FIELD(PlannerStep, pending);
     LAYOUT_FIELD(PlannerStep, reason);
+    LAYOUT_FIELD(PlannerStep, ahead);
+    LAYOUT_FIELD(PlannerStep, ahead_capacity);
     LAYOUT_CONSTANT(PENDING_MARKS);
     LAYOUT_CONSTANT(PENDING_REPLAN);
     LAYOUT_CONSTANT(REASON_NO_FREE_DIRECTION);

@@ -610,6 +610,84 @@ int64_t fleet_judge(Judge *judges, int64_t robots, const double *starts, const d
     return count;
 }
 
+/* ------------------------------------ a fleet's Python components in one call a block (fleet.py) */
+
+/* One copy of a gather: `count` values into consecutive inputs from outputs `stride` values apart,
+ * each the connection's value: the output times `scale` when `multiply`, plus `offset` when `add`
+ * (the operations of fast_loop.py's `transfer_expression`, without its no-op terms). */
+typedef struct {
+    const double *source;
+    double *target;
+    int64_t count, stride;
+    int64_t multiply, add;
+    double scale, offset;
+} BlockCopy;
+
+/* One Python component of `_PythonSteps` (fleet.py), in the master's order, or the copies into
+ * the components that read them (BLOCK_COPIES, last): due at step k when k % period == 0, its
+ * inputs gathered by copies[first_copy .. first_copy + copies), then stepped by its kind. */
+typedef struct {
+    int64_t period;
+    int64_t kind; /* BLOCK_* */
+    int64_t first_copy, copies;
+    const Lidar *lidar;      /* BLOCK_LIDAR: its sweep's struct */
+    const double *inputs;    /* BLOCK_LIDAR: its inputs x, y, theta, robots_x[j], robots_y[j] */
+    double *robot_rows;      /* BLOCK_LIDAR: the other robots' circles (robots rows cx, cy, r) */
+    int64_t robots;
+    int64_t (*c_step)(void *, double); /* BLOCK_C_STEP: its C step (nonzero: Python goes on) */
+    void *state;
+} BlockStep;
+
+enum { BLOCK_PYTHON = 0, BLOCK_LIDAR = 1, BLOCK_C_STEP = 2, BLOCK_COPIES = 3 };
+
+/* The steps of `n` components due at step k (time t [s]) from `start` on: for each, its gather,
+ * then a lidar's step (`Lidar.step`: the other robots' circles at the positions on its inputs, a
+ * sweep from the pose on them) or a C step (`PlannerComponent.kernel_step`). Returns the first
+ * component Python must step (BLOCK_PYTHON: nothing of it done; BLOCK_C_STEP: gathered, its C step
+ * handed over), or n when all are done. */
+int64_t fleet_python_block(const BlockStep *steps, int64_t n, int64_t start, int64_t k, double t,
+                           const BlockCopy *copies)
+{
+    for (int64_t i = start; i < n; i++) {
+        const BlockStep *s = steps + i;
+        if (k % s->period)
+            continue;
+        if (s->kind == BLOCK_PYTHON)
+            return i;
+        for (int64_t c = s->first_copy; c < s->first_copy + s->copies; c++) {
+            const BlockCopy *copy = copies + c;
+            const double *source = copy->source;
+            double *target = copy->target;
+            int64_t stride = copy->stride;
+            if (!copy->multiply && !copy->add) {
+                for (int64_t j = 0; j < copy->count; j++)
+                    target[j] = source[j * stride];
+            } else {
+                for (int64_t j = 0; j < copy->count; j++) {
+                    double value = source[j * stride];
+                    if (copy->multiply)
+                        value = value * copy->scale;
+                    if (copy->add)
+                        value = value + copy->offset;
+                    target[j] = value;
+                }
+            }
+        }
+        if (s->kind == BLOCK_LIDAR) {
+            const double *in = s->inputs;
+            for (int64_t j = 0; j < s->robots; j++) {
+                s->robot_rows[3 * j] = in[3 + j];
+                s->robot_rows[3 * j + 1] = in[3 + s->robots + j];
+            }
+            lidar_scan(s->lidar, in[0], in[1], in[2]);
+        } else if (s->kind == BLOCK_C_STEP) {
+            if (s->c_step(s->state, t))
+                return i;
+        }
+    }
+    return n;
+}
+
 /* The tables Python mirrors (see layout.h). */
 int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
 {
@@ -700,5 +778,29 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_FIELD(Lidar, directions);
     LAYOUT_FIELD(Lidar, ranges);
     LAYOUT_FIELD(Lidar, clearance);
+    LAYOUT_SIZE(BlockCopy);
+    LAYOUT_FIELD(BlockCopy, source);
+    LAYOUT_FIELD(BlockCopy, target);
+    LAYOUT_FIELD(BlockCopy, count);
+    LAYOUT_FIELD(BlockCopy, stride);
+    LAYOUT_FIELD(BlockCopy, multiply);
+    LAYOUT_FIELD(BlockCopy, add);
+    LAYOUT_FIELD(BlockCopy, scale);
+    LAYOUT_FIELD(BlockCopy, offset);
+    LAYOUT_SIZE(BlockStep);
+    LAYOUT_FIELD(BlockStep, period);
+    LAYOUT_FIELD(BlockStep, kind);
+    LAYOUT_FIELD(BlockStep, first_copy);
+    LAYOUT_FIELD(BlockStep, copies);
+    LAYOUT_FIELD(BlockStep, lidar);
+    LAYOUT_FIELD(BlockStep, inputs);
+    LAYOUT_FIELD(BlockStep, robot_rows);
+    LAYOUT_FIELD(BlockStep, robots);
+    LAYOUT_FIELD(BlockStep, c_step);
+    LAYOUT_FIELD(BlockStep, state);
+    LAYOUT_CONSTANT(BLOCK_PYTHON);
+    LAYOUT_CONSTANT(BLOCK_LIDAR);
+    LAYOUT_CONSTANT(BLOCK_C_STEP);
+    LAYOUT_CONSTANT(BLOCK_COPIES);
     return n;
 }

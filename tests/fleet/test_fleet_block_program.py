@@ -1,0 +1,184 @@
+"""A fleet's Python components stepped in one C call a block (`_BlockProgram`, world.c's
+`fleet_python_block`) against `_PythonSteps.step`'s Python path, which gathers, steps and feeds
+each component in turn: the copies of its gathers against the connections applied link by link
+(input = output * scale + offset, a plain copy a copy, bit for bit), and a small fleet run block by
+block, one robot's lidar noisy (stepped by Python, handed back before its gather), the planners
+handing their C step back to Python where a look-ahead or replan follows: after every block's
+Python steps the same inputs and outputs of every component and the same planner states."""
+
+from __future__ import annotations
+
+import ctypes
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.core.component import Port, PythonComponent
+from cosim.core.system import System
+from cosim.navigation import fleet as fleet_module
+from cosim.navigation.planner import PlannerComponent
+from cosim.scenario.load import load_scenario
+from cosim.world import kernels
+from cosim.world.lidar import Lidar
+
+SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
+
+
+class Box(PythonComponent):
+    def __init__(self, name: str, inputs: int = 0, outputs: int = 0):
+        ins = [Port(f"in[{i + 1}]", start=-7.0) for i in range(inputs)]
+        outs = [Port(f"out[{i + 1}]") for i in range(outputs)]
+        super().__init__(name, inputs=ins, outputs=outs, feedthrough={p.name: [] for p in outs})
+
+    def step(self, t, h):
+        pass
+
+
+def _reference(system: System, consumer: Box) -> np.ndarray:
+    """The consumer's inputs after copying each link in order, in Python floats."""
+    values = consumer.input_buffer.tolist()
+    for link in system.links()[consumer.name]:
+        value = float(system.components[link.producer].output_buffer[link.output])
+        scale, offset = link.connection.scale, link.connection.offset
+        if scale != 1.0:
+            value = value * scale
+        if offset != 0.0:
+            value = value + offset
+        values[link.input] = value
+    return np.array(values)
+
+
+WIRINGS = {  # (producer, output, input)
+    "scalar": [("a", 0, 2), ("a", 1, 0)],
+    "interleaved_path": [("a", i, i) for i in range(3)]
+    + [("a", 3 + 2 * k, 3 + k) for k in range(40)]
+    + [("a", 4 + 2 * k, 43 + k) for k in range(40)],
+    "reversed": [("a", i, 19 - i) for i in range(20)],
+    "scattered": [("a", i, (7 * i) % 23) for i in range(23)],
+    "two_producers": [("a", i, i) for i in range(10)] + [("b", 2 * i, 10 + i) for i in range(10)],
+    "alternating_producers": [("a", i, 2 * i) for i in range(10)] + [("b", i, 2 * i + 1) for i in range(10)],
+    "one_output_to_many": [("a", 5, i) for i in range(6)] + [("b", i, 6 + i) for i in range(4)],
+}
+
+
+@pytest.mark.parametrize("wiring", sorted(WIRINGS))
+@pytest.mark.parametrize(
+    "scale_offset",
+    [(1.0, 0.0), (-0.5, 0.0), (1.0, 0.25), (2.0, 0.25)],
+    ids=["copy", "scaled", "offset", "affine"],
+)
+def test_block_copies_are_the_connections_applied_one_by_one(wiring, scale_offset):
+    triples = WIRINGS[wiring]
+    sizes = {name: max(o for p, o, _ in triples if p == name) + 1 for name in {p for p, *_ in triples}}
+    system = System(0.1)
+    producers = {name: system.add(Box(name, outputs=size)) for name, size in sizes.items()}
+    sink = system.add(Box("sink", inputs=max(i for *_, i in triples) + 3))  # two inputs unconnected
+    scale, offset = scale_offset
+    for number, (name, out, into) in enumerate(triples):
+        # every third link plain: plain stretches broken by links with arithmetic
+        plain = scale_offset != (1.0, 0.0) and number % 3 == 0
+        system.connect(
+            f"{name}.out[{out + 1}]", f"sink.in[{into + 1}]",
+            scale=1.0 if plain else scale, offset=0.0 if plain else offset,
+        )  # fmt: skip
+    rng = np.random.default_rng(len(triples))
+    for producer in producers.values():
+        size = len(producer.output_buffer)
+        producer.output_buffer[:] = rng.normal(size=size) * 10.0 ** rng.integers(-300, 300, size=size)
+        producer.output_buffer[0] = -0.0
+        producer.output_buffer[-1] = np.nan
+    copies = fleet_module._block_copies(system, sink, system.links()["sink"])
+    if scale_offset == (1.0, 0.0) and wiring in ("interleaved_path", "two_producers"):
+        assert len(copies) < len(triples) // 5  # stretches copied at once
+    program = fleet_module._BlockProgram(
+        [kernels.BlockStepArrays(period=1, kind=kernels.BLOCK_COPIES, first_copy=0, copies=len(copies))],
+        copies,
+    )
+    assert program.run(0, 0, 0.0) == 1
+    assert sink.input_buffer.tobytes() == _reference(system, sink).tobytes()
+
+
+def test_no_block_copies_when_an_input_is_written_twice():
+    system = System(0.1)
+    system.add(Box("a", outputs=2))
+    sink = system.add(Box("sink", inputs=1))
+    system.connect("a.out[1]", "sink.in[1]")
+    links = system.links()["sink"]
+    assert fleet_module._block_copies(system, sink, links + links) is None
+
+
+def _state(system) -> list[bytes]:
+    """Every component's inputs and outputs, and each planner's step state and costmap marks, as bytes."""
+    found = []
+    for component in system.components.values():
+        found += [component.input_buffer.tobytes(), component.output_buffer.tobytes()]
+        if isinstance(component, PlannerComponent):
+            state = component._state  # (its numbers: the addresses differ from run to run)
+            numbers = [getattr(state, name) for name, kind in state._fields_ if kind is not ctypes.c_void_p]
+            found.append(np.array(numbers, dtype=float).tobytes())
+            found.append(component.costmap._marked.tobytes())
+    return found
+
+
+def _run_blocks(monkeypatch, tmp_path: Path, program: bool) -> tuple[list, dict]:
+    """fleet_head_on, robot1's lidar noisy, for 8 s (the robots meet at ~7.4 s): the state after every
+    block's Python steps, and how the components were stepped."""
+    text = (SCENARIOS / "fleet_head_on.toml").read_text()
+    text = text.replace('name = "robot1"\n', 'name = "robot1"\nlidar = { noise = 0.02, seed = 3 }\n', 1)
+    text = text.replace('file = "maps/', f'file = "{SCENARIOS / "maps"}/')
+    path = tmp_path / "fleet.toml"
+    path.write_text(text)
+    fleet = load_scenario(path, ["simulation.stop_time=8"], fleet=True)
+    states, counts = [], {"python_lidar": 0, "handed": 0, "c_lidar": 0}
+    step = fleet_module._PythonSteps.step
+
+    def recorded(self, k):
+        step(self, k)
+        states.append((k, _state(self.master.system)))
+
+    monkeypatch.setattr(fleet_module._PythonSteps, "step", recorded)
+    if not program:
+        monkeypatch.setattr(fleet_module._BlockProgram, "make", classmethod(lambda *_: None))
+    lidar_step, planner_step = Lidar.step, PlannerComponent.step
+
+    def counted_lidar(self, t, h):
+        counts["python_lidar"] += 1
+        lidar_step(self, t, h)
+
+    def counted_planner(self, t, h):
+        counts["handed"] += self._state.pending != 0
+        planner_step(self, t, h)
+
+    monkeypatch.setattr(Lidar, "step", counted_lidar)
+    monkeypatch.setattr(PlannerComponent, "step", counted_planner)
+    outcome = fleet_module.run_fleet(fleet)
+    counts["time"] = outcome.time
+    return states, counts
+
+
+def test_the_c_block_steps_as_the_python_steps(monkeypatch, tmp_path):
+    made = []
+    make = fleet_module._BlockProgram.make.__func__
+
+    def recorded(cls, *args):
+        made.append(make(cls, *args))
+        return made[-1]
+
+    monkeypatch.setattr(fleet_module._BlockProgram, "make", classmethod(recorded))
+    with monkeypatch.context() as patched:
+        fast, fast_counts = _run_blocks(patched, tmp_path, program=True)
+    slow, slow_counts = _run_blocks(monkeypatch, tmp_path, program=False)
+    assert made and made[0] is not None
+    kinds = [entry.kind for entry in made[0].steps]
+    # robot1's noisy lidar stepped by Python, robot2's in C, both planners by their C step
+    assert kinds.count(kernels.BLOCK_PYTHON) == 1 and kinds.count(kernels.BLOCK_LIDAR) == 1
+    assert kinds.count(kernels.BLOCK_C_STEP) == 2 and kinds[-1] == kernels.BLOCK_COPIES
+    blocks = len(slow)
+    assert fast_counts["python_lidar"] == blocks and slow_counts["python_lidar"] == 2 * blocks
+    assert fast_counts["handed"] > 0 and fast_counts["handed"] == slow_counts["handed"]  # hand-backs
+    assert fast_counts["time"] == slow_counts["time"]
+    assert len(fast) == blocks
+    for (k, found), (k_slow, expected) in zip(fast, slow, strict=True):
+        assert k == k_slow
+        assert found == expected, f"block at step {k}"
