@@ -598,14 +598,10 @@ def _load_plotting(exits: bool) -> None:
 
 
 def draw_plot(arguments: dict, png_path: Path) -> Path | None:
-    """Draw sweep.png (`cosim.sweep.plot.plot_sweep` with `arguments`, its other arguments) with
-    the collector paused (a figure is ~10^5 young objects, in a process that holds Dask's), here
-    or in a plot process (`cosim.cli.plotter`, which `cosim sweep` starts); None when no row."""
-    from cosim.logs.plot import collector_paused
-    from cosim.sweep.plot import plot_sweep
+    """Draw sweep.png here (`cosim.sweep.plot.draw_png`); None when there is no row."""
+    from cosim.sweep.plot import draw_png
 
-    with collector_paused():
-        return plot_sweep(png_path=png_path, **arguments)
+    return draw_png(arguments, png_path)
 
 
 def check_options(options: SweepOptions) -> None:
@@ -628,9 +624,9 @@ def run_sweep(
     interrupt then carries a note saying which rows are kept and how to resume). `exits`: the
     process ends after the sweep (`cosim sweep`), so the plot may skip what only a later `help()`
     would use (`_load_plotting`). `plotter()`: a process that prepares to draw sweep.png while the
-    sweep runs, then draws it while the cluster closes (`cosim sweep` gives
-    `cosim.cli.plotter.PlotProcess` with `draw_plot`), called before this process has a thread;
-    None, or when it gives None: sweep.png is drawn here."""
+    sweep runs, then draws it while the cluster closes (`cosim sweep` gives the
+    `cosim.cli.plotter.PlotProcess` it started first, drawing with `cosim.sweep.plot.draw_png`),
+    called before this process has a thread; None, or when it gives None: sweep.png is drawn here."""
     from concurrent.futures import ThreadPoolExecutor
 
     from cosim.sweep.effect import outcome_warnings, seed_warnings
@@ -717,12 +713,12 @@ def run_sweep(
         try:
             with ThreadPoolExecutor(2) as pool:
                 if plot:
-                    # After Dask's import, which would share this process's interpreter lock with it
-                    # and so reach the cluster's start later; while the cluster waits for its workers.
-                    import distributed  # noqa: F401
-
                     child = plotter() if plotter is not None else None  # (no thread has started yet)
                     if child is None:  # its errors surface when `draw` imports it again
+                        # After Dask's import, which would share this process's interpreter lock
+                        # with it and so reach the cluster's start later.
+                        import distributed  # noqa: F401
+
                         pool.submit(_load_plotting, exits)
                 with connect(options.scheduler, options.workers, len(pending)) as (client, workers):
                     _execute(
