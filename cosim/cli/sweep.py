@@ -139,14 +139,9 @@ def _draw_png(arguments: dict, png_path: Path):
 
 def _sweep(args, child) -> int:
     from cosim.sweep import build
-    from cosim.sweep.warm import start_fork_server, stop_fork_server
 
-    # The local cluster's fork server starts next, before the sweep is even parsed (numpy is
-    # imported for that): it warms up while this process parses, plans and imports Dask. Given a
-    # sweep file, it reads the scenario and overrides the file names (`cosim.sweep.warm.warm_up`).
-    local = args.scheduler is None and not args.dry_run
-    if local:
-        start_fork_server(args.scenario, tuple(args.overrides), announce=not args.quiet)
+    # (The local cluster's fork server starts in `run_sweep`, before the sweep is planned: it warms
+    # up on the sweep's first run, which the parsed sweep names.)
     spec, options = build(
         args.scenario,
         args.vary,
@@ -163,8 +158,6 @@ def _sweep(args, child) -> int:
     )
     if args.dry_run:
         return _dry_run(spec, options)
-    if local and options.scheduler is not None:  # the sweep file names a scheduler: no local cluster
-        stop_fork_server()
     _freeze_at_exit()
     from cosim.sweep.engine import run_sweep
 
