@@ -80,7 +80,8 @@ def check_task(plugin_name: str, run: Run) -> str | None:
 
     The sweep checks its first run this way before it keeps any row, so what only a build can tell,
     such as a misspelt FMU parameter, stops the sweep (exit 2). On a worker, not on the client: the
-    workers load the run stage anyway, and the client then never has to."""
+    workers load the run stage anyway, and the client then never has to. (A local cluster's fork
+    server, warmed up on that run, may have found it builds already: `cosim.sweep.warm`.)"""
     plugin: BundlePlugin = get_worker().plugins[plugin_name]
     files = plugin.folder / "files"
     try:
