@@ -114,34 +114,8 @@ def resume_command(args, out_dir: Path) -> str:
 
 
 def _handler(args) -> int:
-    # `cosim` itself draws sweep.png in a plot process (`cosim.cli.plotter`), as `cosim run` draws
-    # its PNG, forked first of all: it imports matplotlib (~0.2 s of CPU) while this process imports
-    # Dask and the run stage on the other core, instead of later, beside the fork server's warm-up
-    # and the cluster's start, which the first runs wait for.
-    child = None
-    if getattr(args, "program", False) and not args.no_plot and not args.dry_run:
-        from cosim.cli.plotter import PlotProcess
-
-        child = PlotProcess.start(drawer=_draw_png)
-    try:
-        return _sweep(args, child)
-    finally:
-        if child is not None:  # no plot (an error, an interrupt, every run kept): it ends at once
-            child.cancel()
-
-
-def _draw_png(arguments: dict, png_path: Path):
-    """The plot process's drawer (`cosim.sweep.plot.draw_png`), imported there only when it draws."""
-    from cosim.sweep.plot import draw_png
-
-    return draw_png(arguments, png_path)
-
-
-def _sweep(args, child) -> int:
     from cosim.sweep import build
 
-    # (The local cluster's fork server starts in `run_sweep`, before the sweep is planned: it warms
-    # up on the sweep's first run, which the parsed sweep names.)
     spec, options = build(
         args.scenario,
         args.vary,
@@ -158,6 +132,32 @@ def _sweep(args, child) -> int:
     )
     if args.dry_run:
         return _dry_run(spec, options)
+    # `cosim` itself draws sweep.png in a plot process (`cosim.cli.plotter`), as `cosim run` draws
+    # its PNG, forked as soon as the sweep is parsed (numpy imported, which it shares): it imports
+    # matplotlib (~0.2 s of CPU) while this process imports Dask and the run stage on the other
+    # core, instead of later, beside the fork server's warm-up and the cluster's start, which the
+    # first runs wait for. (The local cluster's fork server starts in `run_sweep`, before the sweep
+    # is planned: it warms up on the sweep's first run.)
+    child = None
+    if getattr(args, "program", False) and not args.no_plot:
+        from cosim.cli.plotter import PlotProcess
+
+        child = PlotProcess.start(drawer=_draw_png)
+    try:
+        return _sweep(args, spec, options, child)
+    finally:
+        if child is not None:  # no plot (an error, an interrupt, every run kept): it ends at once
+            child.cancel()
+
+
+def _draw_png(arguments: dict, png_path: Path):
+    """The plot process's drawer (`cosim.sweep.plot.draw_png`), imported there only when it draws."""
+    from cosim.sweep.plot import draw_png
+
+    return draw_png(arguments, png_path)
+
+
+def _sweep(args, spec, options, child) -> int:
     _freeze_at_exit()
     from cosim.sweep.engine import run_sweep
 

@@ -1,6 +1,7 @@
-"""`cosim sweep` forks its plot process first of all (`cosim.cli.sweep`): a sweep refused before it
-runs anything (a key the scenario does not have) ends and reaps that process before it exits
-itself, so it never outlives the command as an orphan."""
+"""`cosim sweep` forks its plot process as soon as the sweep is parsed (`cosim.cli.sweep`), before it
+is planned: a sweep refused then (a key the scenario does not have, found when the sweep is
+planned) ends and reaps that process before it exits itself, so it never outlives the command as
+an orphan."""
 
 from __future__ import annotations
 
