@@ -16,7 +16,7 @@ from native.load import NativeBuildError, build_folder
 
 COMMANDS = ("fmu", "plan", "run", "system", "log", "ssp", "sweep")
 # Commands whose process ends without the interpreter's teardown (`exit_program`).
-QUICK_EXIT = ("run",)
+QUICK_EXIT = ("run", "sweep")
 _quick_exit = [False]
 
 

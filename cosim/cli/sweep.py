@@ -12,7 +12,6 @@ from __future__ import annotations
 import atexit
 import gc
 import sys
-from functools import partial
 from pathlib import Path
 
 _exit_registered = False
@@ -116,14 +115,7 @@ def resume_command(args, out_dir: Path) -> str:
 
 def _handler(args) -> int:
     from cosim.sweep import build
-    from cosim.sweep.warm import start_fork_server, stop_fork_server
 
-    # The local cluster's fork server starts first, before the sweep is even parsed (numpy is
-    # imported for that): it warms up while this process parses, plans and imports Dask. Given a
-    # sweep file, it reads the scenario and overrides the file names (`cosim.sweep.warm.warm_up`).
-    local = args.scheduler is None and not args.dry_run
-    if local:
-        start_fork_server(args.scenario, tuple(args.overrides), announce=not args.quiet)
     spec, options = build(
         args.scenario,
         args.vary,
@@ -140,19 +132,43 @@ def _handler(args) -> int:
     )
     if args.dry_run:
         return _dry_run(spec, options)
-    if local and options.scheduler is not None:  # the sweep file names a scheduler: no local cluster
-        stop_fork_server()
-    _freeze_at_exit()
-    from cosim.sweep.engine import draw_plot, run_sweep
-
-    plotter = None
-    if getattr(args, "program", False) and not args.no_plot:  # `cosim` itself, as `cosim run`'s plot
+    # `cosim` itself draws sweep.png in a plot process (`cosim.cli.plotter`), as `cosim run` draws
+    # its PNG, forked as soon as the sweep is parsed (numpy imported, which it shares): it imports
+    # matplotlib (~0.2 s of CPU) while this process imports Dask and the run stage on the other
+    # core, instead of later, beside the fork server's warm-up and the cluster's start, which the
+    # first runs wait for. (The local cluster's fork server starts in `run_sweep`, before the sweep
+    # is planned: it warms up on the sweep's first run.)
+    child = None
+    if getattr(args, "program", False) and not args.no_plot:
         from cosim.cli.plotter import PlotProcess
 
-        plotter = partial(PlotProcess.start, drawer=draw_plot)
+        child = PlotProcess.start(drawer=_draw_png)
+    try:
+        return _sweep(args, spec, options, child)
+    finally:
+        if child is not None:  # no plot (an error, an interrupt, every run kept): it ends at once
+            child.cancel()
+
+
+def _draw_png(arguments: dict, png_path: Path):
+    """The plot process's drawer (`cosim.sweep.plot.draw_png`), imported there only when it draws."""
+    from cosim.sweep.plot import draw_png
+
+    return draw_png(arguments, png_path)
+
+
+def _sweep(args, spec, options, child) -> int:
+    _freeze_at_exit()
+    from cosim.sweep.engine import run_sweep
+
     try:
         result = run_sweep(
-            spec, options, progress=not args.quiet, plot=not args.no_plot, exits=True, plotter=plotter
+            spec,
+            options,
+            progress=not args.quiet,
+            plot=not args.no_plot,
+            exits=True,
+            plotter=None if child is None else lambda: child,
         )
     except KeyboardInterrupt as interrupt:
         kept = getattr(interrupt, "sweep_kept", None)

@@ -49,7 +49,7 @@ from cosim.sweep.spec import (
     sample_points,
     toml_value,
 )
-from cosim.sweep.warm import WORKER_PRELOAD, start_fork_server, stop_fork_server
+from cosim.sweep.warm import WORKER_PRELOAD, first_run_checked, start_fork_server, stop_fork_server
 
 CONNECT_TIMEOUT = 5.0  # [s] to reach a scheduler
 WORKER_WAIT = 30.0  # [s] for a reached scheduler to have at least one worker
@@ -146,9 +146,18 @@ def plan(spec: SweepSpec) -> tuple[Bundle, list[Run], str]:
             except CosimError as error:
                 raise CosimError(f"--replicates {spec.replicates}: {_without_set(str(error))}") from None
     builder = BundleBuilder(spec.scenario)
+    for count, (values, overrides, point) in enumerate(_run_points(spec)):
+        builder.add_run(count, values, overrides, point)
+    bundle, runs = builder.finish()
+    return bundle, runs, base.name
+
+
+def _run_points(spec: SweepSpec) -> Iterator[tuple[tuple, tuple[str, ...], int]]:
+    """(values, overrides, point) of each run of `spec` in sweep order: the base overrides, then the
+    point's varied keys (and with replicates the replicate's seed keys) sorted by key; a point drawn
+    twice (a random draw from a list) is one run."""
     seen: set[tuple[str, ...]] = set()
     by_key = lambda text: text.partition("=")[0]  # noqa: E731
-    count = 0
     for values in sample_points(spec):
         varied = tuple(
             sorted(
@@ -159,16 +168,26 @@ def plan(spec: SweepSpec) -> tuple[Bundle, list[Run], str]:
             continue
         seen.add(varied)
         if spec.replicates == 1:
-            builder.add_run(count, values, (*spec.overrides, *varied), len(seen) - 1)
-            count += 1
+            yield values, (*spec.overrides, *varied), len(seen) - 1
             continue
         for replicate, seed in enumerate(replicate_seeds(varied, spec.replicates)):
             seeded = sorted([*varied, *(f"{key}={seed}" for key in spec.seed_keys)], key=by_key)
             point_values = (*values, replicate, *(seed for _ in spec.seed_keys))
-            builder.add_run(count, point_values, (*spec.overrides, *seeded), len(seen) - 1)
-            count += 1
-    bundle, runs = builder.finish()
-    return bundle, runs, base.name
+            yield point_values, (*spec.overrides, *seeded), len(seen) - 1
+
+
+def first_run(spec: SweepSpec) -> tuple[Bundle, Run] | None:
+    """The first run `plan(spec)` lists (the one the sweep checks) and a bundle of its own files,
+    made without validating the sweep: what the local cluster's fork server warms up on
+    (`cosim.sweep.warm.start_fork_server`); None where it cannot be made (`plan` says why)."""
+    try:
+        values, overrides, point = next(iter(_run_points(spec)))
+        builder = BundleBuilder(spec.scenario)
+        builder.add_run(0, values, overrides, point)
+        bundle, runs = builder.finish()
+    except Exception:  # noqa: BLE001 - a sweep that `plan` refuses, with its own message
+        return None
+    return bundle, runs[0]
 
 
 def _checked_values(dimension) -> list:
@@ -446,10 +465,13 @@ def _execute(
     checked,
     keep_logs: str,
     local: bool = False,
+    checked_first: bool = False,
 ):
     """Check `first` on a worker, then run `pending`, writing each row as it comes. `checked()` is
-    called once the check passed, before any row is kept; a failed check raises `CosimError`. The
-    workers send the logs that `keep_logs` keeps. `local`: the cluster is this sweep's own and
+    called once the check passed, before any row is kept; a failed check raises `CosimError`.
+    `checked_first`: the local cluster's fork server built `first` already
+    (`cosim.sweep.warm.first_run_checked`), so no worker checks it. The workers send the logs that
+    `keep_logs` keeps. `local`: the cluster is this sweep's own and
     closes next, its workers with it: each removes the bundle's files as it closes
     (`BundlePlugin.teardown`), so the plugin is not unregistered first (a round trip to every
     worker); the workers of a scheduler stay, and it is."""
@@ -462,9 +484,11 @@ def _execute(
     token = secrets.token_hex(4)
     # The check goes first (a higher priority); the runs start on the other workers meanwhile, and
     # their results wait in memory until the check passed.
-    check = client.submit(
-        check_task, plugin.name, first, key=f"navcosim-check-{token}", pure=False, priority=1
-    )
+    check = None
+    if not checked_first:
+        check = client.submit(
+            check_task, plugin.name, first, key=f"navcosim-check-{token}", pure=False, priority=1
+        )
     futures = {
         client.submit(
             run_task, plugin.name, run, keep_logs, key=f"navcosim-{run.run_id}-{token}", pure=False
@@ -475,7 +499,7 @@ def _execute(
     failed = 0
     try:
         try:
-            error = check.result()
+            error = None if check is None else check.result()
         except Exception as failure:  # the worker died while building
             error = f"the worker failed: {type(failure).__name__}: {' '.join(str(failure).split())}"
         if error is not None:
@@ -504,7 +528,8 @@ def _execute(
     finally:
         if bar is not None:
             bar.close()
-        check.cancel()
+        if check is not None:
+            check.cancel()
         for future in futures:
             future.cancel()
         try:
@@ -598,14 +623,10 @@ def _load_plotting(exits: bool) -> None:
 
 
 def draw_plot(arguments: dict, png_path: Path) -> Path | None:
-    """Draw sweep.png (`cosim.sweep.plot.plot_sweep` with `arguments`, its other arguments) with
-    the collector paused (a figure is ~10^5 young objects, in a process that holds Dask's), here
-    or in a plot process (`cosim.cli.plotter`, which `cosim sweep` starts); None when no row."""
-    from cosim.logs.plot import collector_paused
-    from cosim.sweep.plot import plot_sweep
+    """Draw sweep.png here (`cosim.sweep.plot.draw_png`); None when there is no row."""
+    from cosim.sweep.plot import draw_png
 
-    with collector_paused():
-        return plot_sweep(png_path=png_path, **arguments)
+    return draw_png(arguments, png_path)
 
 
 def check_options(options: SweepOptions) -> None:
@@ -628,17 +649,18 @@ def run_sweep(
     interrupt then carries a note saying which rows are kept and how to resume). `exits`: the
     process ends after the sweep (`cosim sweep`), so the plot may skip what only a later `help()`
     would use (`_load_plotting`). `plotter()`: a process that prepares to draw sweep.png while the
-    sweep runs, then draws it while the cluster closes (`cosim sweep` gives
-    `cosim.cli.plotter.PlotProcess` with `draw_plot`), called before this process has a thread;
-    None, or when it gives None: sweep.png is drawn here."""
+    sweep runs, then draws it while the cluster closes (`cosim sweep` gives the
+    `cosim.cli.plotter.PlotProcess` it started first, drawing with `cosim.sweep.plot.draw_png`),
+    called before this process has a thread; None, or when it gives None: sweep.png is drawn here."""
     from concurrent.futures import ThreadPoolExecutor
 
     from cosim.sweep.effect import outcome_warnings, seed_warnings
 
     check_options(options)
     if options.scheduler is None:
-        # The local cluster's fork server warms up while the sweep is planned and Dask imported.
-        start_fork_server(spec.scenario, spec.overrides)
+        # The local cluster's fork server warms up while the sweep is planned and Dask imported, on
+        # the sweep's first run: when that builds there, no worker checks it again (`_execute`).
+        start_fork_server(spec.scenario, spec.overrides, announce=exits and progress, first=first_run(spec))
     bundle, runs, name = plan(spec)
     warnings = seed_warnings(
         spec, adapter.noise_levels(adapter.load(spec.scenario, spec.overrides, check_world=False))
@@ -717,14 +739,15 @@ def run_sweep(
         try:
             with ThreadPoolExecutor(2) as pool:
                 if plot:
-                    # After Dask's import, which would share this process's interpreter lock with it
-                    # and so reach the cluster's start later; while the cluster waits for its workers.
-                    import distributed  # noqa: F401
-
                     child = plotter() if plotter is not None else None  # (no thread has started yet)
                     if child is None:  # its errors surface when `draw` imports it again
+                        # After Dask's import, which would share this process's interpreter lock
+                        # with it and so reach the cluster's start later.
+                        import distributed  # noqa: F401
+
                         pool.submit(_load_plotting, exits)
                 with connect(options.scheduler, options.workers, len(pending)) as (client, workers):
+                    local = options.scheduler is None
                     _execute(
                         client,
                         bundle,
@@ -738,7 +761,8 @@ def run_sweep(
                         len(runs),
                         checked,
                         options.keep_logs,
-                        local=options.scheduler is None,
+                        local=local,
+                        checked_first=local and first_run_checked(runs[0].run_id),
                     )
                     finish_tables()
                     if plot:  # drawn while the cluster closes

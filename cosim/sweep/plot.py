@@ -133,6 +133,16 @@ def plot_sweep(
     return png_path
 
 
+def draw_png(arguments: dict, png_path: Path) -> Path | None:
+    """`plot_sweep(png_path=png_path, **arguments)` with the collector paused (a figure is ~10^5
+    young objects, in a process that may hold Dask's): how `cosim.sweep.engine` draws sweep.png,
+    here or in a plot process (`cosim.cli.plotter`, which `cosim sweep` starts); None when no row."""
+    from cosim.logs.plot import collector_paused
+
+    with collector_paused():
+        return plot_sweep(png_path=png_path, **arguments)
+
+
 def sweep_figure(
     rows: list[dict[str, str]],
     keys: Sequence[str],

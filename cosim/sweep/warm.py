@@ -13,6 +13,11 @@ imports the whole run stage, loads every C kernel the run uses (building any tha
 loads the FMUs' descriptions. Each forked worker inherits all of that, so the work is done once per
 sweep, while the client plans and starts the cluster, instead of once per worker in its first run.
 
+A forked server warms up on the sweep's first run itself, laid out from its bundle as a worker lays
+it out, and tells the sweep whether that run builds (`first_run_checked`): the sweep checks its
+first run before it keeps any row, and when the warm-up built it no worker builds it again for that
+(a build is ~0.05 s of a worker's time, on the critical path of a short sweep).
+
 Best effort: whatever goes wrong here is swallowed (the sweep's check of its first run, on a
 worker, reports a bad scenario with its own message), and nothing is printed.
 """
@@ -39,12 +44,18 @@ WORKER_PRELOAD = [
 WARM_STOP_TIME = 0.5  # [s] of simulated time: a few lidar, controller and pose steps
 
 
-def warm_up(scenario: str, overrides: list[str], announce: bool = False) -> None:
+def warm_up(scenario: str, overrides: list[str], announce: bool = False, first=None) -> bool:
     """Run `scenario` with `overrides` for `WARM_STOP_TIME` s into a scratch folder, then remove it.
     `scenario` may be a sweep file: then its scenario, with its `set` overrides before `overrides`
     (as `cosim.sweep.build` merges them). `announce`: say on stderr what the first use builds
     (`cosim.fmi.builtin.prepare`: one line per kind of build, as `cosim run` does; the workers
-    forked later find it built)."""
+    forked later find it built).
+
+    `first`: (bundle, run), the sweep's first run (`cosim.sweep.engine.first_run`), run instead,
+    from the bundle's files laid out in the scratch folder as a worker lays them out, with its own
+    overrides and the stop time cut. Returns whether that run builds as the sweep's check of it on a
+    worker finds (`cosim.sweep.worker.check_task`): its overrides load as they are, and the cut run
+    was built and started (the build does not read the stop time); False without `first`."""
     import contextlib
     import shutil
     import tempfile
@@ -53,7 +64,7 @@ def warm_up(scenario: str, overrides: list[str], announce: bool = False) -> None
     from cosim.sweep.spec import is_sweep_file, read_sweep_file
 
     path = Path(scenario)
-    if path.suffix == ".toml" and is_sweep_file(path):
+    if first is None and path.suffix == ".toml" and is_sweep_file(path):
         fields, _ = read_sweep_file(path)
         path, overrides = Path(fields["scenario"]), [*fields["overrides"], *overrides]
     folder = tempfile.mkdtemp(prefix="navcosim-warm-")
@@ -63,6 +74,14 @@ def warm_up(scenario: str, overrides: list[str], announce: bool = False) -> None
             contextlib.redirect_stdout(sink),
             contextlib.redirect_stderr(sink),
         ):
+            if first is not None:
+                from cosim.sweep.worker import redirects
+
+                bundle, run = first
+                files = Path(folder) / "files"
+                bundle.materialize(files)
+                path, overrides = files / bundle.scenario, [*run.overrides, *redirects(run, files)]
+                adapter.load(path, overrides)  # as the check loads it (the stop time as it is)
             loaded = adapter.load(path, [*overrides, f"simulation.stop_time={WARM_STOP_TIME}"])
         if announce:
             import sys
@@ -81,11 +100,13 @@ def warm_up(scenario: str, overrides: list[str], announce: bool = False) -> None
             adapter.run(loaded, Path(folder) / "warm.mcap")
     finally:
         shutil.rmtree(folder, ignore_errors=True)
+    return first is not None
 
 
-def start_fork_server(scenario: Path, overrides: tuple[str, ...], announce: bool = False) -> None:
+def start_fork_server(scenario: Path, overrides: tuple[str, ...], announce: bool = False, first=None) -> None:
     """Start the local cluster's fork server now, warming it up on `scenario` with `overrides`
-    (`announce`: saying what a first use builds, `warm_up`).
+    (`announce`: saying what a first use builds, `warm_up`); given `first` (bundle, run: the sweep's
+    first run), on that run, and the server then tells whether it builds (`first_run_checked`).
 
     The server has `WORKER_PRELOAD` imported (here, before this process forks it; or by itself, a
     fresh interpreter) and makes a short run while this process goes on planning; the workers
@@ -101,8 +122,9 @@ def start_fork_server(scenario: Path, overrides: tuple[str, ...], announce: bool
 
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload(WORKER_PRELOAD)
+    _forget_check()
     fields = {"scenario": str(Path(scenario).resolve()), "overrides": list(overrides), "announce": announce}
-    if _fork_server_here(fields):
+    if _fork_server_here(fields, first):
         return
     request = json.dumps(fields)
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -118,7 +140,7 @@ def start_fork_server(scenario: Path, overrides: tuple[str, ...], announce: bool
             os.environ[WARM_ENV] = saved
 
 
-def _fork_server_here(request: dict) -> bool:
+def _fork_server_here(request: dict, first=None) -> bool:
     """Start the fork server as a fork of this process, once it has imported what the server
     preloads (Dask and the run stage, `WORKER_PRELOAD`); False (nothing done) where that is not
     safe, and `start_fork_server` then starts a fresh interpreter as multiprocessing does.
@@ -128,9 +150,11 @@ def _fork_server_here(request: dict) -> bool:
     the server only warms up (`warm_up`) and then serves: multiprocessing's own server loop
     (`multiprocessing.forkserver.main`), set up as `ForkServer.ensure_running` sets up the one it
     starts (a listening socket, an "alive" pipe whose end stays here), so Dask's nannies ask it for
-    their workers as they would ask that one. Only with one thread here (forking a process with
-    others can leave their locks held in the child: `cosim.sweep(...)` from a notebook gets the
-    fresh interpreter), and only with the CPython server this was written against (3.11-3.13)."""
+    their workers as they would ask that one; with `first` (`start_fork_server`) it warms up on that
+    run and writes whether it builds into a pipe whose other end stays here. Only with one thread
+    here (forking a process with others can leave their locks held in the child: `cosim.sweep(...)`
+    from a notebook gets the fresh interpreter), and only with the CPython server this was written
+    against (3.11-3.13)."""
     import importlib
     import inspect
     import signal
@@ -168,6 +192,7 @@ def _fork_server_here(request: dict) -> bool:
         os.chmod(address, 0o600)
     listener.listen()
     alive_r, alive_w = os.pipe()
+    check_r, check_w = os.pipe() if first is not None else (None, None)
     for stream in (sys.stdout, sys.stderr):  # nothing buffered is written twice
         stream.flush()
     # The signals this process handles (SIGINT and SIGTERM raise `Interrupted` in `cosim`) wait
@@ -178,29 +203,64 @@ def _fork_server_here(request: dict) -> bool:
     try:
         pid = os.fork()
         if pid == 0:
-            _serve(listener, alive_r, request, held)  # never returns
+            _serve(listener, alive_r, request, held, first, check_w)  # never returns
     except OSError:  # no fork: a fresh interpreter then
         pid = None
     finally:
         signal.pthread_sigmask(signal.SIG_UNBLOCK, held)
     os.close(alive_r)
     listener.close()
+    if check_w is not None:
+        os.close(check_w)
     if pid is None:
         os.close(alive_w)
+        if check_r is not None:
+            os.close(check_r)
         return False
     with server._lock:
         server._forkserver_address = address
         server._forkserver_alive_fd = alive_w
         server._forkserver_pid = pid
+    if check_r is not None:
+        _CHECK.append((check_r, first[1].run_id))
     return True
 
 
-def _serve(listener, alive_r: int, request: dict, held: set) -> None:
+# The fork server's answer about the sweep's first run: (the pipe's end it writes to, the run's id).
+_CHECK: list[tuple[int, str]] = []
+
+
+def first_run_checked(run_id: str) -> bool:
+    """Whether the fork server, warmed up on the sweep's first run `run_id` (`start_fork_server`
+    with `first`), found that it builds; read once, without waiting: False when it has not said so
+    (another run, no such server, a fresh interpreter, an answer not there yet). The server answers
+    before it forks any worker, so once the local cluster has started its answer is there."""
+    import select
+
+    answer = b""
+    for fd, checked in _CHECK:
+        try:
+            if checked == run_id and select.select([fd], [], [], 0)[0]:
+                answer = os.read(fd, 1)
+        except OSError:
+            pass
+    _forget_check()
+    return answer == b"1"
+
+
+def _forget_check() -> None:
+    while _CHECK:
+        os.close(_CHECK.pop()[0])
+
+
+def _serve(listener, alive_r: int, request: dict, held: set, first=None, check_w: int | None = None) -> None:
     """The forked fork server: the sweep's signal handlers undone (SIGINT ignored, as in the
     workers it forks: `start_fork_server`; `held`, the signals blocked over the fork, let through
     then), a warm-up with the collector off, the heap frozen (`_from_environment`), then
     multiprocessing's server loop until the alive pipe closes; out by `os._exit`, never through
-    this process's exit handlers or teardown, nor back into the sweep's code whatever happens."""
+    this process's exit handlers or teardown, nor back into the sweep's code whatever happens.
+    Given `first` (`start_fork_server`), the warm-up is that run, and whether it builds is written
+    to `check_w` ("1" or "0") before the server forks any worker."""
     import gc
     import signal
     import threading
@@ -219,16 +279,27 @@ def _serve(listener, alive_r: int, request: dict, held: set) -> None:
         signal.pthread_sigmask(signal.SIG_UNBLOCK, held)
         forkserver._forkserver._lock = threading.Lock()  # (held by no thread here)
         listener_fd = listener.detach()
-        # The descriptors this process holds besides the server's two (a caller's files and pipes)
-        # are not the server's, as a fresh one's are not: whoever reads a pipe to its end would
-        # wait for the server and its workers too.
-        low, high = sorted((listener_fd, alive_r))
-        for start, stop in ((3, low), (low + 1, high), (high + 1, os.sysconf("SC_OPEN_MAX"))):
+        # The descriptors this process holds besides the server's own (its socket, the alive pipe
+        # and the pipe of its answer about the first run) are not the server's, as a fresh one's
+        # are not (a caller's files and pipes): whoever reads a pipe to its end would wait for the
+        # server and its workers too.
+        kept = sorted(fd for fd in (listener_fd, alive_r, check_w) if fd is not None)
+        starts, stops = [3, *(fd + 1 for fd in kept)], [*kept, os.sysconf("SC_OPEN_MAX")]
+        for start, stop in zip(starts, stops, strict=True):
             os.closerange(start, stop)
+        built = False
         try:
-            warm_up(str(request["scenario"]), list(request["overrides"]), bool(request["announce"]))
+            built = warm_up(
+                str(request["scenario"]), list(request["overrides"]), bool(request["announce"]), first
+            )
         except BaseException:  # noqa: BLE001 - a warm-up must never stop the fork server
             pass
+        if check_w is not None:
+            try:
+                os.write(check_w, b"1" if built else b"0")
+                os.close(check_w)
+            except OSError:
+                pass
         gc.freeze()
         gc.set_threshold(20_000, 20, 10)
         gc.enable()
@@ -248,6 +319,7 @@ def stop_fork_server() -> None:
     """
     from multiprocessing import forkserver
 
+    _forget_check()
     stop = getattr(getattr(forkserver, "_forkserver", None), "_stop", None)
     if stop is None:
         return

@@ -57,7 +57,7 @@ class BundlePlugin(WorkerPlugin):
             self.folder = None
 
 
-def _redirects(run: Run, files: Path) -> list[str]:
+def redirects(run: Run, files: Path) -> list[str]:
     """Overrides that point absolute file names at the bundle's copy, where this machine has no
     identical file at that path (on the client's machine, the names stay as written)."""
     overrides = []
@@ -80,12 +80,13 @@ def check_task(plugin_name: str, run: Run) -> str | None:
 
     The sweep checks its first run this way before it keeps any row, so what only a build can tell,
     such as a misspelt FMU parameter, stops the sweep (exit 2). On a worker, not on the client: the
-    workers load the run stage anyway, and the client then never has to."""
+    workers load the run stage anyway, and the client then never has to. (A local cluster's fork
+    server, warmed up on that run, may have found it builds already: `cosim.sweep.warm`.)"""
     plugin: BundlePlugin = get_worker().plugins[plugin_name]
     files = plugin.folder / "files"
     try:
         adapter.check_builds(
-            adapter.load(files / plugin.bundle.scenario, [*run.overrides, *_redirects(run, files)])
+            adapter.load(files / plugin.bundle.scenario, [*run.overrides, *redirects(run, files)])
         )
     except CosimError as error:
         return str(error).replace(str(files), plugin.bundle.root)
@@ -112,7 +113,7 @@ def run_task(plugin_name: str, run: Run, keep_logs: str = "all") -> TaskResult:
     started = time.perf_counter()
     outcome, error = None, None
     try:
-        scenario = adapter.load(files / plugin.bundle.scenario, [*run.overrides, *_redirects(run, files)])
+        scenario = adapter.load(files / plugin.bundle.scenario, [*run.overrides, *redirects(run, files)])
         output = adapter.run(scenario, log_path)
         outcome, error = output.outcome, output.failure
     except CosimError as failure:

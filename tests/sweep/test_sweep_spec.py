@@ -231,7 +231,7 @@ def test_local_cluster_starts_before_the_sweep_is_planned(tmp_path, monkeypatch)
     """The fork server of the local cluster (Dask's start-up: its imports and a warm-up run) starts
     first, so it warms up while the sweep is validated; a sweep on a scheduler starts none."""
     calls = []
-    monkeypatch.setattr(engine, "start_fork_server", lambda scenario, overrides: calls.append("fork server"))
+    monkeypatch.setattr(engine, "start_fork_server", lambda *args, **named: calls.append("fork server"))
     planned = engine.plan
     monkeypatch.setattr(engine, "plan", lambda spec: calls.append("plan") or planned(spec))
     spec, options = build(
