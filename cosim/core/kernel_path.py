@@ -120,8 +120,9 @@ def run_blocks(
     position = 0
     rows[:] = 0
     # Between the calls below only the kernel sets the FMUs' inputs (Python components step here);
-    # before them anyone may have (a Python loop, a restored state): each group sends all once.
-    tables.forget_sent()
+    # before them anyone may have (a Python loop, a restored state): each group sends all once
+    # (unless the caller holds that nobody did since its last call: `KernelTables.sent_kept`).
+    tables.start_run()
     finish_step = False  # a Python component stepped: the kernel ends this step, then returns
 
     def deliver(first: int, k: int, clean: bool):
