@@ -63,6 +63,12 @@ struct ModelData {
     bool angles_changed;
     double reading_angle[VFH_MAX_READINGS], reading_cos[VFH_MAX_READINGS], reading_sin[VFH_MAX_READINGS];
     double reading_position[VFH_MAX_READINGS]; /* (angle - first mid-point) in sector widths */
+    /* The ranges the valid readings, the densities and the binary and masked histograms were last
+     * built from (when `histograms_built`): a step whose ranges, angles and parameters are those
+     * builds the same again (the hysteresis of the binary histogram applied twice to the same
+     * densities changes nothing), so it keeps them; a scan that holds for ten steps is built once. */
+    bool histograms_built;
+    double built_ranges[VFH_MAX_READINGS];
     double obstacle_density[VFH_MAX_SECTORS];
     /* Density changes from sector k-1 to k in fixed point (exact sums, O(1) per reading). */
     long long density_change[VFH_MAX_SECTORS + 1];

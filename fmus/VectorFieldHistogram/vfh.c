@@ -18,6 +18,7 @@
 
 #include <float.h>
 #include <math.h>
+#include <string.h>
 
 /* MATLAB's tolerance for "the same" angle or cost. */
 static double tolerance(void) { return sqrt(DBL_EPSILON); }
@@ -247,11 +248,19 @@ static int collect_candidates(ModelData *data, double target, double previous) {
 }
 
 void vfh_step(ModelData *data) {
-    if (data->angles_changed) update_reading_angles(data);
-    collect_valid_readings(data);
-    build_obstacle_density(data);
-    build_binary_histogram(data);
-    build_masked_histogram(data);
+    if (data->angles_changed) {
+        update_reading_angles(data);
+        data->histograms_built = false;
+    }
+    /* Bit for bit the ranges of the last build (config.h: `histograms_built`): the same histograms. */
+    if (!data->histograms_built || memcmp(data->ranges, data->built_ranges, sizeof data->ranges) != 0) {
+        collect_valid_readings(data);
+        build_obstacle_density(data);
+        build_binary_histogram(data);
+        build_masked_histogram(data);
+        memcpy(data->built_ranges, data->ranges, sizeof data->ranges);
+        data->histograms_built = true;
+    }
 
     const double target = isnan(data->target_dir) ? 0.0 : wrap_to_pi(data->target_dir);
     const double previous = isnan(data->previous_direction) ? 0.0 : data->previous_direction;
