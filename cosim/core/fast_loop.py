@@ -39,6 +39,21 @@ def transfer_expression(value: str, scale: float, offset: float) -> str:
     return expression if offset == 0.0 else f"{expression} + {offset!r}"
 
 
+class StretchPlan(NamedTuple):
+    """What `cosim.core.kernel_path.run_blocks` reads of a plan and its tables at each call
+    (`KernelTables.stretch_plan`)."""
+
+    periods: list[int]  # per plan position [macro steps]
+    whole: list[float]  # a component's whole step [s] (`Master.step_seconds` where no step is cut)
+    stepping: list[int]  # positions of the components the master steps (not idle)
+    # Per position, the stepping components before it are stepping[: split[position]].
+    split: list[int]
+    recorded: np.ndarray  # positions of the components with rows
+    recorded_periods: np.ndarray  # their periods
+
+
+_DELIVERIES = 16  # row counts whose views `KernelTables.delivered` keeps
+
 RUN_LINK = 3  # a link table row that is a run of plain links (kernel.c's `gather`)
 MIN_RUN = 4  # plain links in a row that become one run
 
@@ -262,6 +277,8 @@ class KernelTables:
         # False: it forgets at each call.
         self.sent_kept = False
         self._started = False
+        self._stretches: tuple | None = None  # `stretch_plan`: (plan, h_ns, the plan)
+        self._deliveries: dict[bytes, list] = {}  # `delivered`: rows per component, by row counts
         # What the tables point into stays alive with them.
         self._keep = [entry.component for entry in plan]
         self._kernel = None
@@ -293,6 +310,48 @@ class KernelTables:
         if not (self.sent_kept and self._started):
             self.forget_sent()
         self._started = True
+
+    def stretch_plan(self, plan: list[PlanEntry], h_ns: int) -> StretchPlan:
+        """What `run_blocks` reads of `plan` and these tables at each call (`StretchPlan`), made once
+        (a fleet calls it once per block of 10 steps, with ~300 components)."""
+        cached = self._stretches
+        if cached is not None and cached[0] is plan and cached[1] == h_ns:
+            return cached[2]
+        import bisect
+
+        from cosim.core import kernel as K
+        from cosim.core.timebase import NS_PER_S
+
+        periods = [entry.period for entry in plan]
+        stepping = np.flatnonzero(self.components[: len(periods), K.C_KIND] != K.KIND_IDLE).tolist()
+        recorded = [i for i, block in enumerate(self.row_arrays()) if block is not None]
+        stretches = StretchPlan(
+            periods=periods,
+            whole=[period * h_ns / NS_PER_S for period in periods],
+            stepping=stepping,
+            split=[bisect.bisect_left(stepping, position) for position in range(len(plan) + 1)],
+            recorded=np.array(recorded, dtype=np.int64),
+            recorded_periods=np.array([periods[i] for i in recorded], dtype=np.int64),
+        )
+        self._stretches = (plan, h_ns, stretches)
+        self._deliveries.clear()
+        return stretches
+
+    def delivered(self, counts: np.ndarray) -> list[np.ndarray | None]:
+        """Per component, its first rows (`counts`: how many, per recorded component in the order
+        of `StretchPlan.recorded`) as a view of its row array, None when not recorded: the same
+        list (copy it to keep it) and views for the same counts, which a fleet's blocks repeat."""
+        key = counts.tobytes()
+        found = self._deliveries.get(key)
+        if found is None:
+            blocks = self.row_arrays()
+            found = [None] * len(blocks)
+            for i, n in zip(self._stretches[2].recorded.tolist(), counts.tolist(), strict=True):
+                found[i] = blocks[i][:n]
+            if len(self._deliveries) >= _DELIVERIES:
+                self._deliveries.clear()
+            self._deliveries[key] = found
+        return found
 
     def _change_only(self, count: int, producers: list[int]) -> tuple[int, int, int]:
         """The arrays of a setter group of `count` float64 scalars that sends only the values that
