@@ -39,6 +39,21 @@ def transfer_expression(value: str, scale: float, offset: float) -> str:
     return expression if offset == 0.0 else f"{expression} + {offset!r}"
 
 
+class StretchPlan(NamedTuple):
+    """What `cosim.core.kernel_path.run_blocks` reads of a plan and its tables at each call
+    (`KernelTables.stretch_plan`)."""
+
+    periods: list[int]  # per plan position [macro steps]
+    whole: list[float]  # a component's whole step [s] (`Master.step_seconds` where no step is cut)
+    stepping: list[int]  # positions of the components the master steps (not idle)
+    # Per position, the stepping components before it are stepping[: split[position]].
+    split: list[int]
+    recorded: np.ndarray  # positions of the components with rows
+    recorded_periods: np.ndarray  # their periods
+
+
+_DELIVERIES = 16  # row counts whose views `KernelTables.delivered` keeps
+
 RUN_LINK = 3  # a link table row that is a run of plain links (kernel.c's `gather`)
 MIN_RUN = 4  # plain links in a row that become one run
 
@@ -131,6 +146,7 @@ class KernelTables:
             for component, _, _ in plan
         ]
         self.python: list[bool] = []  # whether each component is handed back to Python
+        place = {entry.component.name: i for i, entry in enumerate(plan)}
         for i, (component, period, _) in enumerate(plan):
             native = component.native_step()
             self.native.append(native)
@@ -158,9 +174,11 @@ class KernelTables:
             kept = self.row_inputs[i]
             row[K.C_RECORD_IN_FIRST], row[K.C_RECORD_IN_COUNT] = kept.start, kept.stop - kept.start
             row[K.C_LINK_FIRST] = len(links)
+            producers = {}  # input slot -> the plan position of the producer the kernel copies it from
             for connection, producer_name, source, target in fed.get(component.name, ()):
                 if producer_name in skip:
                     continue
+                producers[target] = place[producer_name]
                 producer = system.components[producer_name]
                 kind = 0 if connection.is_plain else (1 if connection.offset == 0.0 else 2)
                 links.append(
@@ -216,14 +234,16 @@ class KernelTables:
                         call_slots,
                         call_scales,
                     ) = call
-                    sent = sent_references = 0
+                    sent = sent_references = runs = 0
                     if direction == "set" and kind == "real" and ref_count == value_count:
-                        sent, sent_references = self._change_only(ref_count)
+                        sent, sent_references, runs = self._change_only(
+                            ref_count, [producers.get(slot, -1) for slot in call_slots]
+                        )
                     groups.append(
                         (
                             K.KINDS.index(kind),
                             function, refs, ref_count, value_count, values, int(direct),
-                            len(slots), len(call_slots), sent, sent_references,
+                            len(slots), len(call_slots), sent, sent_references, runs,
                         )
                     )  # fmt: skip
                     slots += [ctypes.addressof(buffer) + 8 * slot for slot in call_slots]
@@ -250,6 +270,15 @@ class KernelTables:
         self._blocks: list[np.ndarray | None] | None = None
         self.watch_addresses = np.zeros(3, dtype=np.int64)
         self.watch_numbers = np.zeros(6)
+        self.stamps = np.zeros(n + 1, dtype=np.int64)  # kernel calls, steps per component (`_change_only`)
+        # `run_blocks` keeps what the change-only groups sent from one of its calls to the next
+        # (`forget_sent` only at the first) when its caller holds that between them nothing but this
+        # kernel on these tables sets these FMUs' inputs or restores their state (a fleet's loop);
+        # False: it forgets at each call.
+        self.sent_kept = False
+        self._started = False
+        self._stretches: tuple | None = None  # `stretch_plan`: (plan, h_ns, the plan)
+        self._deliveries: dict[bytes, list] = {}  # `delivered`: rows per component, by row counts
         # What the tables point into stays alive with them.
         self._keep = [entry.component for entry in plan]
         self._kernel = None
@@ -272,17 +301,76 @@ class KernelTables:
     def forget_sent(self) -> None:
         """The next set of each change-only setter group sends every value (kernel.c's
         `set_changed`): call it whenever something besides the kernel may have set an FMU's inputs
-        or restored its state (`run_blocks` does at its start)."""
-        for sent, _ in self._sent:
+        or restored its state (`run_blocks` does at its start: `start_run`)."""
+        for sent, *_ in self._sent:
             sent[0] = 0.0
 
-    def _change_only(self, count: int) -> tuple[int, int]:
+    def start_run(self) -> None:
+        """`run_blocks` starts on these tables: `forget_sent`, unless `sent_kept` and they ran before."""
+        if not (self.sent_kept and self._started):
+            self.forget_sent()
+        self._started = True
+
+    def stretch_plan(self, plan: list[PlanEntry], h_ns: int) -> StretchPlan:
+        """What `run_blocks` reads of `plan` and these tables at each call (`StretchPlan`), made once
+        (a fleet calls it once per block of 10 steps, with ~300 components)."""
+        cached = self._stretches
+        if cached is not None and cached[0] is plan and cached[1] == h_ns:
+            return cached[2]
+        import bisect
+
+        from cosim.core import kernel as K
+        from cosim.core.timebase import NS_PER_S
+
+        periods = [entry.period for entry in plan]
+        stepping = np.flatnonzero(self.components[: len(periods), K.C_KIND] != K.KIND_IDLE).tolist()
+        recorded = [i for i, block in enumerate(self.row_arrays()) if block is not None]
+        stretches = StretchPlan(
+            periods=periods,
+            whole=[period * h_ns / NS_PER_S for period in periods],
+            stepping=stepping,
+            split=[bisect.bisect_left(stepping, position) for position in range(len(plan) + 1)],
+            recorded=np.array(recorded, dtype=np.int64),
+            recorded_periods=np.array([periods[i] for i in recorded], dtype=np.int64),
+        )
+        self._stretches = (plan, h_ns, stretches)
+        self._deliveries.clear()
+        return stretches
+
+    def delivered(self, counts: np.ndarray) -> list[np.ndarray | None]:
+        """Per component, its first rows (`counts`: how many, per recorded component in the order
+        of `StretchPlan.recorded`) as a view of its row array, None when not recorded: the same
+        list (copy it to keep it) and views for the same counts, which a fleet's blocks repeat."""
+        key = counts.tobytes()
+        found = self._deliveries.get(key)
+        if found is None:
+            blocks = self.row_arrays()
+            found = [None] * len(blocks)
+            for i, n in zip(self._stretches[2].recorded.tolist(), counts.tolist(), strict=True):
+                found[i] = blocks[i][:n]
+            if len(self._deliveries) >= _DELIVERIES:
+                self._deliveries.clear()
+            self._deliveries[key] = found
+        return found
+
+    def _change_only(self, count: int, producers: list[int]) -> tuple[int, int, int]:
         """The arrays of a setter group of `count` float64 scalars that sends only the values that
-        changed since its last set (kernel.c's `set_changed`): their addresses, kept alive here."""
+        changed since its last set (kernel.c's `set_changed`), `producers` the plan position of the
+        component each value is copied from in the kernel (-1: none), made runs of the same
+        producer: their addresses, kept alive here."""
+        from cosim.core import kernel as K
+
         sent = np.zeros(1 + 2 * count)
         references = np.zeros(count, dtype=np.uint32)
-        self._sent.append((sent, references))
-        return sent.ctypes.data, references.ctypes.data
+        starts = [j for j in range(count) if j == 0 or producers[j] != producers[j - 1]]
+        runs = np.zeros(1 + K.RUN_COLUMNS * len(starts), dtype=np.int64)
+        runs[0] = len(starts)
+        table = runs[1:].reshape(-1, K.RUN_COLUMNS)
+        table[:, K.RUN_FROM] = starts
+        table[:, K.RUN_TO] = starts[1:] + [count]
+        table[:, K.RUN_PRODUCER] = [producers[j] for j in starts]
+        self._sent.append((sent, references, runs))
+        return sent.ctypes.data, references.ctypes.data, runs.ctypes.data
 
     def _reserve(self, record: bool, component, period: int, block: int, offset: int, row=None) -> int:
         """Room for `component`'s rows (its inputs then outputs, once per step of a block) at
@@ -330,7 +418,7 @@ class KernelTables:
             self._kernel = Kernel(
                 self.components, self.step_sizes, self.link_addresses, self.link_numbers, self.groups,
                 self.slot_addresses, self.slot_scales, self.checks, self.history, self.rows,
-                self.watch_addresses, self.watch_numbers,
+                self.watch_addresses, self.watch_numbers, self.stamps,
             )  # fmt: skip
         return self._kernel
 

@@ -50,7 +50,14 @@ G_SLOT_FIRST, G_SLOT_COUNT = 7, 8
 # G_SENT the address of its float64 array (1 + 2 x count: valid flag, last sent, changed values),
 # G_SENT_REFERENCES of its uint32 array (count: changed references); 0: it sends every value.
 G_SENT, G_SENT_REFERENCES = 9, 10
-GROUP_COLUMNS = 11
+# G_RUNS: the address of its run table (int64: the count of runs, then RUN_COLUMNS per run: first
+# position, end, producer, the producer's stamp when last compared), by which it compares after a
+# kernel call's first set only the runs whose producer stepped since (kernel.c's `set_changed`);
+# 0: every value at every set.
+G_RUNS = 11
+GROUP_COLUMNS = 12
+RUN_FROM, RUN_TO, RUN_PRODUCER, RUN_SEEN = range(4)
+RUN_COLUMNS = 4
 KIND_REAL, KIND_INTEGER, KIND_BOOLEAN = 0, 1, 2
 RESULT_SIZE = 7  # int64 elements of the result: code, step, position, component, call, status, kind
 R_STEP = 1  # the result's step: also written at the start of each step, so it is the step under way
@@ -107,7 +114,7 @@ class _Tables(ctypes.Structure):
             (name, _POINTER)
             for name in (
                 "components", "step_sizes", "link_addresses", "link_numbers", "groups", "slot_addresses",
-                "slot_scales", "checks", "history", "rows", "watch_addresses", "watch_numbers",
+                "slot_scales", "checks", "history", "rows", "watch_addresses", "watch_numbers", "stamps",
             )
         ],
     ]  # fmt: skip
@@ -127,6 +134,7 @@ _ARRAYS = (
     ("rows", np.int64, 0),
     ("watch_addresses", np.int64, 0),
     ("watch_numbers", np.float64, 0),
+    ("stamps", np.int64, 0),  # [0] kernel calls so far, [1 + i] steps component i took in the kernel
 )
 _LENGTHS = {"watch_addresses": 3, "watch_numbers": 6}
 _function = None
@@ -169,6 +177,7 @@ class Kernel:
                     f"step_kernel: {name} must have shape ({'n, ' + str(columns) if columns else 'n,'})"
                 )
             needed = _LENGTHS.get(name, len(arrays[0]) if name in ("step_sizes", "rows") else 0)
+            needed = len(arrays[0]) + 1 if name == "stamps" else needed
             if len(array) < needed:
                 raise TypeError(f"step_kernel: {name} needs at least {needed} elements")
             pointers.append(array.ctypes.data)
@@ -186,7 +195,7 @@ class Kernel:
 def step_kernel(
     first_step, steps, first_position, start_ns, h_ns, jacobi,
     components, step_sizes, link_addresses, link_numbers, groups, slot_addresses, slot_scales,
-    checks, history, rows, watch_addresses, watch_numbers,
+    checks, history, rows, watch_addresses, watch_numbers, stamps,
 ):  # fmt: skip
     """Step from component `first_position` of step `first_step` up to the end of step
     `first_step + steps - 1`. Returns (code, step, position, component, call, status, kind):
@@ -199,7 +208,7 @@ def step_kernel(
     For repeated calls on the same tables, `Kernel(tables...)(first_step, ...)` skips the checks."""
     kernel = Kernel(
         components, step_sizes, link_addresses, link_numbers, groups, slot_addresses, slot_scales,
-        checks, history, rows, watch_addresses, watch_numbers,
+        checks, history, rows, watch_addresses, watch_numbers, stamps,
     )  # fmt: skip
     return kernel(first_step, steps, first_position, start_ns, h_ns, jacobi)
 

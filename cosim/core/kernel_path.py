@@ -12,7 +12,6 @@ where a watched position needs a look; after each stretch the caller's `on_block
 
 from __future__ import annotations
 
-import bisect
 import itertools
 from collections.abc import Callable
 
@@ -97,18 +96,14 @@ def run_blocks(
     h_ns, start_ns = master.system.macro_step_ns, master.start_time_ns
     jacobi = master.system.mode == "jacobi"
     tail_from = master._tail_from
-    periods = [entry.period for entry in plan]
-    # A component's whole step [s]: `Master.step_seconds` before `tail_from`, where no step is cut.
-    whole = [period * h_ns / NS_PER_S for period in periods]
-    stepping = np.flatnonzero(tables.components[: len(periods), kernel.C_KIND] != kernel.KIND_IDLE).tolist()
-    # Per position of the plan, the stepping components before it are stepping[: split[position]],
-    # those from it on stepping[split[position] :] (a fleet calls this once per block: no lists of
-    # lists of every position, which cost ~1.5 ms a call at 50 robots).
-    split = [bisect.bisect_left(stepping, position) for position in range(len(plan) + 1)]
-    # The recorded components: (index, period, all their rows' array); rows so far in `tables.rows`.
+    # Periods, whole steps [s], the stepping components and, per position of the plan, the
+    # stepping components before it (stepping[: split[position]]; those from it on
+    # stepping[split[position] :]): made once per tables (a fleet calls this once per block).
+    stretches = tables.stretch_plan(plan, h_ns)
+    periods, whole, stepping, split = stretches.periods, stretches.whole, stretches.stepping, stretches.split
+    # The recorded components (positions, periods); rows so far in `tables.rows`.
     blocks = tables.row_arrays()
-    recorded = [(i, periods[i], block) for i, block in enumerate(blocks) if block is not None]
-    unrecorded = [None] * len(blocks)
+    recorded, recorded_periods = stretches.recorded, stretches.recorded_periods
     rows = tables.rows
     step = tables.run
     # Python components with rows (`python_rows`): their input counts, by plan position.
@@ -120,29 +115,26 @@ def run_blocks(
     position = 0
     rows[:] = 0
     # Between the calls below only the kernel sets the FMUs' inputs (Python components step here);
-    # before them anyone may have (a Python loop, a restored state): each group sends all once.
-    tables.forget_sent()
+    # before them anyone may have (a Python loop, a restored state): each group sends all once
+    # (unless the caller holds that nobody did since its last call: `KernelTables.sent_kept`).
+    tables.start_run()
     finish_step = False  # a Python component stepped: the kernel ends this step, then returns
 
     def deliver(first: int, k: int, clean: bool):
         """`on_block` with each recorded component's rows of the steps [first, k); rows of step
         k already taken (components before the kernel's position) are kept for the next stretch."""
-        taken = rows.tolist()
-        delivered = unrecorded.copy()
-        kept = []
-        for i, period, history in recorded:
-            held = taken[i]
-            n = min((k + period - 1) // period - (first + period - 1) // period, held)
-            delivered[i] = history[:n]
-            kept.append((i, n, held))
+        held = rows[recorded]
+        p = recorded_periods  # the steps of each in [first, k), at most the rows it has
+        counts = np.minimum((k + p - 1) // p - (first + p - 1) // p, held)
         master.step_index = k
+        delivered = tables.delivered(counts).copy()
         stop = on_block(first, k, delivered, clean) if on_block is not None else False
-        for i, n, held in kept:
-            extra = held - n
-            if extra:
-                history = blocks[i]
-                history[:extra] = history[n:held].copy()
-            rows[i] = extra
+        extra = held - counts
+        if extra.any():
+            for j in np.flatnonzero(extra).tolist():
+                history, n = blocks[int(recorded[j])], int(counts[j])
+                history[: int(extra[j])] = history[n : int(held[j])].copy()
+        rows[recorded] = extra
         return stop
 
     def deliver_pending() -> None:

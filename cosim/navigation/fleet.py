@@ -859,6 +859,8 @@ def _run(
     block = _block_steps(master)
     stop_on_collision = settings.on_collision == "stop"
     tables, python = _tables(master, block)
+    if tables is not None:  # between the blocks' kernel calls nothing else sets the FMUs' inputs
+        tables.sent_kept = True
     judge = _FleetJudge.make(robots) if not stop_on_collision else None
     if coordination is not None:  # the released cells (and halts) for the first block
         coordination.before_block(0.0)
@@ -936,6 +938,8 @@ def _run(
             if tables is not None and reason is None:
                 if any(each.outcome.status == "collision" and not each.halted for each in robots):
                     tables, python = _halt(master, robots, log, block, python)
+                    if tables is not None:
+                        tables.sent_kept = True
             for each in robots:  # a new mission goal: given at the end of the block
                 if each.pending_goal and each.judged:
                     _next_goal(each, outcome.time, coordination)

@@ -77,6 +77,23 @@ class Contact:
         )
 
 
+_contacts = None
+
+
+def _contacts_function():
+    """`fleet_contacts` of native/world.c, typed (once per process)."""
+    global _contacts
+    if _contacts is None:
+        import ctypes
+
+        function = kernels.library().fleet_contacts
+        function.restype = ctypes.c_int64
+        pointer, count = ctypes.c_void_p, ctypes.c_int64
+        function.argtypes = [pointer, count, count, pointer, pointer, count] + [pointer] * 5
+        _contacts = function
+    return _contacts
+
+
 class FleetContacts:
     """Contacts and clearances between the robots' footprints, step by step (module docstring)."""
 
@@ -91,6 +108,8 @@ class FleetContacts:
         self.touching = np.zeros(len(self.first), dtype=bool)  # pairs in contact at the last check
         self.min_clearance = np.full(n, math.inf)  # [m] footprint to footprint, per robot
         self.contacts: list[Contact] = []
+        self._floor = np.empty(n)  # scratch of `steps`
+        self._began = np.empty((0, 2), dtype=np.int64)  # (step, pair) of the contacts `steps` found
 
     def start(self, positions) -> list[Contact]:
         """The positions (N x 2) at the start: contacts there are reported at time 0 (a scenario's
@@ -100,21 +119,22 @@ class FleetContacts:
     def steps(self, starts: Sequence[float], lengths: Sequence[float], positions) -> list[list[Contact]]:
         """`step` for consecutive steps at once: step s from starts[s] to starts[s] + lengths[s]
         [s], the robots moving from positions[s] to positions[s + 1] (S + 1 x N x 2 positions [m]);
-        the contacts that began in each step. The same arithmetic as `step`, a step per row."""
+        the contacts that began in each step. The same arithmetic as `step`, a step per row, in one
+        C call (`fleet_contacts` of native/world.c: the gaps, the minimum clearances, the steps in
+        which contacts began)."""
         positions = np.ascontiguousarray(positions, dtype=float)
-        i, j = self.first, self.second
-        gap, end_gap = self._gaps(positions)
-        closest = gap.min(axis=0)
-        np.minimum.at(self.min_clearance, i, closest)
-        np.minimum.at(self.min_clearance, j, closest)
-        end_touching = end_gap <= 0.0
-        previous = np.vstack((self.touching[None, :], end_touching[:-1]))
-        began: list[list[Contact]] = [[] for _ in range(len(gap))]
-        for step, pair in zip(*np.nonzero((gap <= 0.0) & ~previous), strict=True):
-            began[step].append(
-                self._contact(int(pair), starts[step], lengths[step], positions[step], positions[step + 1])
-            )
-        self.touching = end_touching[-1] if len(gap) else self.touching
+        count, pairs = len(positions) - 1, len(self.first)
+        if len(self._began) < count * pairs:
+            self._began = np.empty((count * pairs, 2), dtype=np.int64)
+        began_at = _contacts_function()(
+            positions.ctypes.data, count, positions.shape[1], self.first.ctypes.data, self.second.ctypes.data,
+            pairs, self.reach.ctypes.data, self.min_clearance.ctypes.data, self._floor.ctypes.data,
+            self.touching.ctypes.data, self._began.ctypes.data,
+        )  # fmt: skip
+        began: list[list[Contact]] = [[] for _ in range(count)]
+        for step, pair in self._began[:began_at].tolist():
+            before, after = positions[step], positions[step + 1]
+            began[step].append(self._contact(pair, starts[step], lengths[step], before, after))
         for contacts in began:
             self.contacts += contacts
         return began

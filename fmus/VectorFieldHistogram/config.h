@@ -63,6 +63,13 @@ struct ModelData {
     bool angles_changed;
     double reading_angle[VFH_MAX_READINGS], reading_cos[VFH_MAX_READINGS], reading_sin[VFH_MAX_READINGS];
     double reading_position[VFH_MAX_READINGS]; /* (angle - first mid-point) in sector widths */
+    /* The ranges the valid readings, the densities, the binary and masked histograms and the
+     * valleys' candidates were last built from (when `histograms_built`): a step whose ranges,
+     * angles and parameters are those builds the same again (the hysteresis of the binary
+     * histogram applied twice to the same densities changes nothing), so it keeps them; a scan
+     * that holds for ten steps is built once. */
+    bool histograms_built;
+    double built_ranges[VFH_MAX_READINGS];
     double obstacle_density[VFH_MAX_SECTORS];
     /* Density changes from sector k-1 to k in fixed point (exact sums, O(1) per reading). */
     long long density_change[VFH_MAX_SECTORS + 1];
@@ -72,6 +79,10 @@ struct ModelData {
     bool masked_histogram[VFH_MAX_SECTORS];   /* true = blocked */
     double candidates[VFH_MAX_CANDIDATES];
     double candidate_costs[VFH_MAX_CANDIDATES];
+    /* The first `valley_candidates` candidates come from the masked histogram's valleys and, with
+     * whether each is free, are built with the histograms (and kept with them). */
+    int valley_candidates;
+    bool candidate_free[VFH_MAX_CANDIDATES];
 };
 
 #endif

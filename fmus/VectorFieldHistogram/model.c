@@ -29,6 +29,7 @@ void model_set_start_values(ModelData *data) {
     memset(data->binary_histogram, 0, sizeof data->binary_histogram);
     data->previous_direction = 0.0;
     data->angles_changed = true;
+    data->histograms_built = false;
 }
 
 /* Logs and fails when `ok` is false; the message names the parameter. */
@@ -73,6 +74,7 @@ ModelStatus model_initialize(ModelInstance *comp, ModelData *data) {
     vfh_step(data);
     memcpy(data->binary_histogram, binary_histogram, sizeof binary_histogram);
     data->previous_direction = previous_direction;
+    data->histograms_built = false; /* built on the histogram memory just put back */
     return MODEL_OK;
 }
 

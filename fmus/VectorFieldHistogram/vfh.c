@@ -18,6 +18,7 @@
 
 #include <float.h>
 #include <math.h>
+#include <string.h>
 
 /* MATLAB's tolerance for "the same" angle or cost. */
 static double tolerance(void) { return sqrt(DBL_EPSILON); }
@@ -217,9 +218,9 @@ static double direction_cost(const ModelData *data, double candidate, double tar
     return weighted / 3.0 * total;
 }
 
-/* Eqs (12)-(14): candidates from the valleys of the masked histogram (not circular), plus the
- * target, the current (0) and the previous direction. Returns how many. */
-static int collect_candidates(ModelData *data, double target, double previous) {
+/* Eqs (12)-(14): candidates from the valleys of the masked histogram (not circular), with whether
+ * each is free; how many in valley_candidates, the valleys and free sectors in the outputs. */
+static void collect_valley_candidates(ModelData *data) {
     const int sectors = data->num_angular_sectors;
     const double *midpoints = data->sector_midpoints;
     const double half_opening = data->narrow_opening_threshold / 2.0;
@@ -238,25 +239,44 @@ static int collect_candidates(ModelData *data, double target, double previous) {
         }
         start = end + 1;
     }
+    for (int c = 0; c < count; c++) data->candidate_free[c] = direction_is_free(data, data->candidates[c]);
+    data->valley_candidates = count;
     data->num_valleys = valleys;
     data->free_sectors = free_sectors;
+}
+
+/* The valleys' candidates, then the target, the current (0) and the previous direction, with
+ * whether each is free. Returns how many. */
+static int collect_candidates(ModelData *data, double target, double previous) {
+    int count = data->valley_candidates;
     data->candidates[count++] = target;
     data->candidates[count++] = 0.0;
     data->candidates[count++] = previous;
+    for (int c = data->valley_candidates; c < count; c++)
+        data->candidate_free[c] = direction_is_free(data, data->candidates[c]);
     return count;
 }
 
 void vfh_step(ModelData *data) {
-    if (data->angles_changed) update_reading_angles(data);
-    collect_valid_readings(data);
-    build_obstacle_density(data);
-    build_binary_histogram(data);
-    build_masked_histogram(data);
+    if (data->angles_changed) {
+        update_reading_angles(data);
+        data->histograms_built = false;
+    }
+    /* Bit for bit the ranges of the last build (config.h: `histograms_built`): the same histograms. */
+    if (!data->histograms_built || memcmp(data->ranges, data->built_ranges, sizeof data->ranges) != 0) {
+        collect_valid_readings(data);
+        build_obstacle_density(data);
+        build_binary_histogram(data);
+        build_masked_histogram(data);
+        collect_valley_candidates(data);
+        memcpy(data->built_ranges, data->ranges, sizeof data->ranges);
+        data->histograms_built = true;
+    }
 
     const double target = isnan(data->target_dir) ? 0.0 : wrap_to_pi(data->target_dir);
     const double previous = isnan(data->previous_direction) ? 0.0 : data->previous_direction;
     const int count = collect_candidates(data, target, previous);
-    data->target_dir_free = data->free_sectors > 0 && direction_is_free(data, target);
+    data->target_dir_free = data->free_sectors > 0 && data->candidate_free[count - 3];
     if (data->free_sectors == 0) {
         data->steering_dir = data->previous_direction = NAN;
         return;
@@ -265,7 +285,7 @@ void vfh_step(ModelData *data) {
     double lowest_cost = INFINITY;
     for (int c = 0; c < count; c++) {
         double cost = INFINITY;
-        if (direction_is_free(data, data->candidates[c]))
+        if (data->candidate_free[c])
             cost = direction_cost(data, data->candidates[c], target, previous);
         data->candidate_costs[c] = cost;
         if (cost < lowest_cost) lowest_cost = cost;

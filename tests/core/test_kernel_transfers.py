@@ -6,6 +6,8 @@ elements in the rows; a value set by Python between two `run_blocks` calls is se
 
 from __future__ import annotations
 
+import ctypes
+
 import numpy as np
 import pytest
 
@@ -167,3 +169,56 @@ def test_rows_keep_every_input_without_scalar_rows():
         tables = master.kernel_tables(record=True, block=50, python_rows=True)
         kept = zip(tables.row_inputs, tables._keep, strict=True)
         assert all(inputs == slice(0, len(component.inputs)) for inputs, component in kept)
+
+
+# fmi2SetReal(instance, value references, count, values)
+_SET_REAL = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p)
+
+
+def _counted_sets(tables, index: int, counts: list[int]):
+    """Route component `index`'s float64 setter group through a counter: each call's value count
+    into `counts`, then the FMU's own fmi2SetReal. Returns the callback (keep it alive)."""
+    from cosim.core import kernel as K
+
+    row = tables.components[index]
+    first = int(row[K.C_SET_FIRST])
+    (group,) = [g for g in range(first, first + int(row[K.C_SET_COUNT])) if tables.groups[g, K.G_SENT] != 0]
+    real = _SET_REAL(int(tables.groups[group, K.G_FUNCTION]))
+
+    def counted(instance, references, count, values):
+        counts.append(count)
+        return real(instance, references, count, values)
+
+    callback = _SET_REAL(counted)
+    tables.groups[group, K.G_FUNCTION] = ctypes.cast(callback, ctypes.c_void_p).value
+    return callback
+
+
+@pytest.mark.parametrize("kept", [False, True])
+def test_sent_values_kept_from_call_to_call_when_the_caller_holds_nothing_else_sets_them(kept):
+    # A fleet's loop: one run_blocks call per block of 10 steps, nothing but the kernel setting the
+    # FMUs' inputs between them. With `sent_kept` the plan's 2003 values are sent once (and the
+    # values that change: the pose, the new plan), not again at each call; the run is the same.
+    steps, block = 150, 10
+    truth = _truth(steps)
+    system, pursuit, vehicle = _system()
+    poses, counts = [], []
+    with Master(system) as master:
+        master.initialize()
+        tables = master.kernel_tables(record=True, block=block, python_rows=True, scalar_rows=True)
+        tables.sent_kept = kept
+        names = [component.name for component in master.order]
+        callback = _counted_sets(tables, names.index("pursuit"), counts)
+
+        def on_block(first, end, histories, clean):
+            poses.extend(histories[names.index("vehicle")][:, -len(vehicle.outputs) :].copy())
+
+        for _ in range(steps // block):
+            master.run_blocks(block, tables, on_block, block=block, cut_after_python=lambda k: False)
+        del callback
+    assert np.array_equal(np.array(poses), np.array(truth))
+    whole = len(pursuit.inputs)  # x, y, theta and 2000 waypoints
+    full_sends = sum(count == whole for count in counts)
+    assert full_sends == (1 if kept else steps // block)
+    # Besides those: the pose at each of Pursuit's steps (every 5th), the new plan once.
+    assert sum(count for count in counts if count != whole) <= 3 * steps // 5 + whole

@@ -149,3 +149,34 @@ def test_the_gaps_are_the_numpy_descriptions_bit_for_bit():
     above = np.maximum(np.maximum(floor[contacts.first], floor[contacts.second]), 0.0)
     assert (expected_gap[skipped] > np.broadcast_to(above, gap.shape)[skipped]).all()
     assert (expected_end[skipped] > 0).all()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_steps_at_once_report_what_step_by_step_reports(seed):
+    """`FleetContacts.steps` (one C pass over a block's steps) against `step` called for each step
+    (the gaps, then NumPy): the same contacts, in the same order, the same clearances and touching
+    pairs, over blocks in which pairs touch, separate and touch again."""
+    rng = np.random.default_rng(seed)
+    n, blocks, count, h = 7, 6, 10, 0.1
+    radii = rng.uniform(0.2, 0.6, n)
+    start = rng.uniform(0.0, 3.0, (1, n, 2))
+    moves = rng.normal(0.0, 0.25, (blocks * count, n, 2))
+    positions = np.concatenate((start, start + np.cumsum(moves, axis=0)))
+    at_once = FleetContacts([f"r{k}" for k in range(n)], radii)
+    one_by_one = FleetContacts([f"r{k}" for k in range(n)], radii)
+    for contacts in (at_once, one_by_one):
+        contacts.start(positions[0])
+    for b in range(blocks):
+        first = b * count
+        starts = [(first + i) * h for i in range(count)]
+        began = at_once.steps(starts, [h] * count, positions[first : first + count + 1])
+        expected = [
+            one_by_one.step(starts[i], h, positions[first + i], positions[first + i + 1])
+            for i in range(count)
+        ]
+        assert began == expected
+        assert np.array_equal(at_once.min_clearance, one_by_one.min_clearance)
+        assert np.array_equal(at_once.touching, one_by_one.touching)
+    assert at_once.contacts == one_by_one.contacts
+    # Pairs began touching in several blocks, some more than once (the test sees contacts begin).
+    assert len({(c.first, c.second) for c in at_once.contacts}) < len(at_once.contacts)

@@ -263,3 +263,85 @@ def test_a_reading_whose_enlargement_falls_between_two_midpoints_adds_to_no_sect
         out = run(fmu, [1.0], target_dir=angle, angles=[angle])
     reference = ReferenceVfh({**DEFAULTS, **parameters}).step(np.array([1.0]), np.array([angle]), angle)
     assert out["free_sectors"] == reference[1] == 180
+
+
+def _held_scans(seed: int, count: int):
+    """`count` random scans (ranges, angles), each to be held for several steps."""
+    rng = np.random.default_rng(seed)
+    angles = np.linspace(-math.pi, math.pi, 360, endpoint=False)
+    scans = []
+    for _ in range(count):
+        ranges = np.full(angles.size, np.nan)
+        for _obstacle in range(int(rng.integers(1, 6))):
+            start, length = int(rng.integers(0, angles.size)), int(rng.integers(5, 90))
+            ranges[start : start + length] = rng.uniform(0.15, 2.5)
+        scans.append(ranges)
+    targets = rng.uniform(-math.pi, math.pi, 4 * count)
+    return angles, scans, targets
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_scan_held_for_several_steps_gives_what_each_step_computed_anew_gives(seed):
+    # The FMU builds its histograms once per scan (a lidar at 10 Hz, VFH stepped at 100 Hz) and
+    # keeps them while the ranges are bit for bit the same; the reference builds them at every
+    # step, with the hysteresis applied again each time. Thresholds near the densities make the
+    # hysteresis matter; the targets change at every step, so the previous direction does too.
+    parameters = {**DEFAULTS, "histogram_threshold_low": 2.0, "histogram_threshold_high": 4.0}
+    angles, scans, targets = _held_scans(seed, 6)
+    reference = ReferenceVfh(parameters)
+    with vfh(**parameters) as fmu:
+        for step, target in enumerate(targets):
+            ranges = scans[step // 4]
+            out = run(fmu, ranges, float(target), angles)
+            expected = reference.step(ranges, angles, float(target))
+            assert (out["free_sectors"], out["num_valleys"], bool(out["target_dir_free"])) == expected[1:]
+            if math.isnan(expected[0]):
+                assert math.isnan(out["steering_dir"])
+            else:
+                assert out["steering_dir"] == pytest.approx(expected[0], abs=1e-12)
+
+
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_a_restored_state_steps_as_it_would_have_with_a_held_scan(fmi_version):
+    # A state saved while a scan is held, restored after other scans were stepped: the next steps
+    # (the same held scan, then a new one) give bit for bit what they gave without the detour
+    # (what the FMU keeps of the scan it built its histograms from is part of its state).
+    angles, scans, targets = _held_scans(7, 4)
+    padding = np.full(CAPACITY - angles.size, np.nan)
+    with FmuInstance("VectorFieldHistogram", fmi_version).initialize() as fmu:
+        fmu.set_array("angles", np.concatenate([angles, padding]))
+
+        def step(scan: int, target: float) -> dict:
+            fmu.set_array("ranges", np.concatenate([scans[scan], padding]))
+            fmu.set({"target_dir": target})
+            fmu.step()
+            return fmu.outputs()
+
+        step(0, float(targets[0]))
+        state = fmu.fmu.getFMUState()
+        after = [step(0, float(targets[1])), step(1, float(targets[2]))]
+        step(2, float(targets[3]))
+        step(3, float(targets[4]))
+        fmu.fmu.setFMUState(state)
+        again = [step(0, float(targets[1])), step(1, float(targets[2]))]
+        fmu.fmu.freeFMUState(state)
+    assert after[0] != after[1]  # the scans differ: the test sees a change of scan
+    for got, expected in zip(again, after, strict=True):
+        assert got.keys() == expected.keys()
+        for name in got:
+            assert np.array_equal(got[name], expected[name], equal_nan=True), name
+
+
+def test_a_scan_given_during_initialisation_and_held_starts_the_histogram_memory():
+    # Initialisation computes the first outputs from the scan given then without touching the
+    # histogram memory; the first step, on the same scan, starts that memory as a step on a new
+    # scan would: the sector occupied then stays occupied when its density drops between the
+    # thresholds (as in the hysteresis test above: one reading at the sector's mid-point).
+    sector_midpoint = math.radians(1.0)
+    inputs = {"ranges[1]": 5.0, "angles[1]": sector_midpoint, "target_dir": sector_midpoint}
+    with vfh(distance_limit_max=20.0, **inputs) as fmu:
+        assert not fmu.outputs()["target_dir_free"]  # density 15 > 10: occupied
+        fmu.step()
+        assert not fmu.outputs()["target_dir_free"]
+        out = run(fmu, [15.0], target_dir=sector_midpoint, angles=[sector_midpoint])
+        assert not out["target_dir_free"]  # density 5, between 3 and 10: stays occupied

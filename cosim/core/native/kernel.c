@@ -34,8 +34,12 @@ enum { KIND_IDLE = 0, KIND_NATIVE = 1, KIND_PYTHON = 2, KIND_SWEEP = 3 };
 /* Columns of the transfer-group table. */
 enum {
     G_KIND, G_FUNCTION, G_REFERENCES, G_REFERENCE_COUNT, G_VALUE_COUNT, G_VALUES, G_DIRECT,
-    G_SLOT_FIRST, G_SLOT_COUNT, G_SENT, G_SENT_REFERENCES, GROUP_COLUMNS
+    G_SLOT_FIRST, G_SLOT_COUNT, G_SENT, G_SENT_REFERENCES, G_RUNS, GROUP_COLUMNS
 };
+/* Columns of a change-only group's run table (G_RUNS): after its count, per run of its values the
+ * first position, the end, the producer (component whose steps change them; -1: none in the kernel)
+ * and that producer's stamp when the run was last compared. */
+enum { RUN_FROM, RUN_TO, RUN_PRODUCER, RUN_SEEN, RUN_COLUMNS };
 /* FMI value types of a group: REAL double, INTEGER int32, BOOLEAN int32 (FMI 2.0) or bool (FMI 3.0),
  * then FMI 3.0's other numeric types. An INT64/UINT64 value beyond 2^53, which a double may not hold,
  * is read as NaN: the output check (which covers those outputs) stops there and Python names it. */
@@ -85,6 +89,7 @@ typedef struct {
     int64_t *rows;                   /* n: rows recorded so far */
     const int64_t *watch_addresses;  /* 3: nonzero = watching; address of x; address of y */
     const double *watch_numbers;     /* 6: goal x, y, radius^2; free zone x, y, radius^2 */
+    int64_t *stamps;                 /* n + 1: [0] kernel calls so far; [1 + i] steps of component i */
 } Tables;
 
 #if defined(__GNUC__)
@@ -148,19 +153,59 @@ HOT void gather(const Tables *t, int64_t i) {
 }
 
 /* A setter group of float64 scalars (one value per reference) that sends only what changed: its
- * G_SENT array holds [0] whether the rest is valid, [1 .. count] the values last sent in this call
- * of the kernel, [count + 1 .. 2 count] room for the changed values, and G_SENT_REFERENCES room for
- * their references. An FMU input keeps the value last set (FMI 2.0 and 3.0: set before a step, held
- * after), so setting a value again that is bit for bit the one it holds does nothing, and leaving it
- * out changes nothing. The caller forgets what was sent (the flag to 0) whenever something else may
- * have set the FMU's inputs or restored its state: `run_blocks` does at its start (between its
- * kernel calls only Python components step). A failed call forgets what was sent. */
+ * G_SENT array holds [0] the kernel call (t->stamps[0]) of its last comparison of every value, 0:
+ * the rest is not valid, [1 .. count] the values last sent, [count + 1 .. 2 count] room for the
+ * changed values, and G_SENT_REFERENCES room for their references. An FMU input keeps the value
+ * last set (FMI 2.0 and 3.0: set before a step, held after), so setting a value again that is bit
+ * for bit the one it holds does nothing, and leaving it out changes nothing. The caller forgets what
+ * was sent (the flag to 0) whenever something else may have set the FMU's inputs or restored its
+ * state: `run_blocks` does at its start, unless its caller says nothing else does (between its
+ * kernel calls only Python components step). A failed call forgets what was sent.
+ *
+ * Within one kernel call a value changes only where the kernel's links copy a producer's output
+ * that changed, which it does only when the producer steps: with a run table (G_RUNS, see
+ * RUN_COLUMNS) the group compares every value at its first set of a call, then at each later set
+ * only the runs whose producer stepped since they were last compared (t->stamps[1 + producer]):
+ * a plan's 2000 waypoints from a planner stepped at 10 Hz, a scan's ranges between scans, values
+ * no link of the kernel feeds, are not compared at each of an FMU's steps. */
 #define SAME_RUN 32 /* values `set_changed` compares at once */
+
+/* Compare the values [from, to) with the last sent: the changed ones (into `last` too) appended at
+ * `m` to the changed values and their references; returns the new count. */
+APART int64_t note_changes(const uint64_t *now, uint64_t *last, const uint32_t *references, int64_t from,
+                           int64_t to, uint64_t *changed, uint32_t *changed_references, int64_t m) {
+    for (int64_t start = from; start < to; start += SAME_RUN) {
+        int64_t end = start + SAME_RUN < to ? start + SAME_RUN : to;
+        if (memcmp(now + start, last + start, sizeof(double) * (size_t)(end - start)) == 0) {
+            continue; /* the usual case for a plan's waypoints: one comparison of the whole run */
+        }
+        for (int64_t j = start; j < end; j++) {
+            uint64_t value = now[j];
+            if (value != last[j]) {
+                last[j] = value;
+                changed_references[m] = references[j];
+                changed[m] = value;
+                m += 1;
+            }
+        }
+    }
+    return m;
+}
+
+/* Every run's producer stamp as seen now (its values are compared, or sent, at this set). */
+static inline void note_seen(const Tables *t, int64_t *runs) {
+    for (int64_t r = 0; runs != NULL && r < runs[0]; r++) {
+        int64_t *run = runs + 1 + r * RUN_COLUMNS;
+        run[RUN_SEEN] = run[RUN_PRODUCER] >= 0 ? t->stamps[1 + run[RUN_PRODUCER]] : 0;
+    }
+}
 
 /* Not inlined (see `copy_run`). */
 APART int64_t set_changed(const Tables *t, int64_t g, int64_t handle, int64_t version, int64_t values) {
     int64_t count = GROUP(t, g, G_REFERENCE_COUNT);
     double *sent = pointer(GROUP(t, g, G_SENT));
+    int64_t *runs = GROUP(t, g, G_RUNS) != 0 ? pointer(GROUP(t, g, G_RUNS)) : NULL;
+    double call = (double)t->stamps[0];
     const uint64_t *now = pointer(values);
     uint64_t *last = (uint64_t *)(sent + 1);
     int64_t status;
@@ -169,7 +214,8 @@ APART int64_t set_changed(const Tables *t, int64_t g, int64_t handle, int64_t ve
                           version);
         if (status <= 1) {
             memcpy(last, now, sizeof(double) * (size_t)count);
-            sent[0] = 1.0;
+            sent[0] = call;
+            note_seen(t, runs);
         }
         return status;
     }
@@ -177,19 +223,18 @@ APART int64_t set_changed(const Tables *t, int64_t g, int64_t handle, int64_t ve
     uint32_t *changed_references = pointer(GROUP(t, g, G_SENT_REFERENCES));
     uint64_t *changed = last + count;
     int64_t m = 0;
-    for (int64_t from = 0; from < count; from += SAME_RUN) {
-        int64_t to = from + SAME_RUN < count ? from + SAME_RUN : count;
-        if (memcmp(now + from, last + from, sizeof(double) * (size_t)(to - from)) == 0) {
-            continue; /* the usual case for a plan's waypoints: one comparison of the whole run */
-        }
-        for (int64_t j = from; j < to; j++) {
-            uint64_t value = now[j];
-            if (value != last[j]) {
-                last[j] = value;
-                changed_references[m] = references[j];
-                changed[m] = value;
-                m += 1;
+    if (runs == NULL || sent[0] != call) { /* every value: no run table, or the call's first set */
+        m = note_changes(now, last, references, 0, count, changed, changed_references, 0);
+        sent[0] = call;
+        note_seen(t, runs);
+    } else {
+        for (int64_t r = 0; r < runs[0]; r++) {
+            int64_t *run = runs + 1 + r * RUN_COLUMNS;
+            if (run[RUN_PRODUCER] < 0 || t->stamps[1 + run[RUN_PRODUCER]] == run[RUN_SEEN]) {
+                continue;
             }
+            run[RUN_SEEN] = t->stamps[1 + run[RUN_PRODUCER]];
+            m = note_changes(now, last, references, run[RUN_FROM], run[RUN_TO], changed, changed_references, m);
         }
     }
     if (m == 0) {
@@ -411,6 +456,7 @@ HOT int64_t step_native(const Tables *t, int64_t i, int64_t k, double time, int6
     if (slot >= 0) {
         return finish(result, FAILED, k, i, i, 4, slot, 0);
     }
+    t->stamps[1 + i] += 1;
     record(t, i);
     return DONE;
 }
@@ -419,6 +465,7 @@ HOT int64_t step_native(const Tables *t, int64_t i, int64_t k, double time, int6
 HOT void step_sweep(const Tables *t, int64_t i) {
     const double *inputs = pointer(COMPONENT(t, i, C_IN_ADDRESS));
     ((Sweep)(intptr_t)COMPONENT(t, i, C_STEP))(pointer(COMPONENT(t, i, C_HANDLE)), inputs[0], inputs[1], inputs[2]);
+    t->stamps[1 + i] += 1;
     record(t, i);
 }
 
@@ -454,6 +501,7 @@ static bool circle_half_used(const Tables *t) {
 APART int64_t step_python(const Tables *t, int64_t i, double time) {
     gather(t, i);
     int64_t handed = ((PythonStep)(intptr_t)COMPONENT(t, i, C_STEP))(pointer(COMPONENT(t, i, C_HANDLE)), time);
+    t->stamps[1 + i] += 1; /* its outputs may have changed (handed back or not) */
     if (handed == 0) {
         record(t, i);
     }
@@ -482,6 +530,7 @@ int64_t navcosim_step_kernel(int64_t first_step, int64_t steps, int64_t first_po
         local.components = components;
     }
     const Tables *t = &local;
+    t->stamps[0] += 1; /* a new call: each change-only group compares every value once (`set_changed`) */
     int64_t k = first_step;
     int64_t position = first_position;
     int64_t end = first_step + steps;
@@ -695,6 +744,7 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_FIELD(Tables, rows);
     LAYOUT_FIELD(Tables, watch_addresses);
     LAYOUT_FIELD(Tables, watch_numbers);
+    LAYOUT_FIELD(Tables, stamps);
     LAYOUT_CONSTANT(DONE);
     LAYOUT_CONSTANT(HAND_BACK);
     LAYOUT_CONSTANT(WATCH);
@@ -739,6 +789,12 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_CONSTANT(G_SLOT_COUNT);
     LAYOUT_CONSTANT(G_SENT);
     LAYOUT_CONSTANT(G_SENT_REFERENCES);
+    LAYOUT_CONSTANT(G_RUNS);
+    LAYOUT_CONSTANT(RUN_FROM);
+    LAYOUT_CONSTANT(RUN_TO);
+    LAYOUT_CONSTANT(RUN_PRODUCER);
+    LAYOUT_CONSTANT(RUN_SEEN);
+    LAYOUT_CONSTANT(RUN_COLUMNS);
     LAYOUT_CONSTANT(GROUP_COLUMNS);
     LAYOUT_CONSTANT(KIND_REAL);
     LAYOUT_CONSTANT(KIND_INTEGER);

@@ -474,6 +474,35 @@ void lidar_scan(const Lidar *s, double x, double y, double theta)
  * any contact): on each axis the offset stays at least the smaller of its magnitudes at the ends
  * when it keeps its sign, and the distance is at least the larger axis's bound (taken 1e-12
  * relative low, far more than the rounding). */
+/* The gap over the step and at its end of the robots a and b moving from before to after (the
+ * rows of `fleet_gaps`), +inf both when certainly farther apart than floor_a, floor_b and 0. */
+static inline void pair_gaps(const double *before, const double *after, int64_t a, int64_t b, double reach,
+                             double floor_a, double floor_b, double *gap, double *end_gap)
+{
+    double d0x = before[2 * b] - before[2 * a], d0y = before[2 * b + 1] - before[2 * a + 1];
+    double d1x = after[2 * b] - after[2 * a], d1y = after[2 * b + 1] - after[2 * a + 1];
+    double low_x = d0x * d1x > 0.0 ? py_min(fabs(d0x), fabs(d1x)) : 0.0;
+    double low_y = d0y * d1y > 0.0 ? py_min(fabs(d0y), fabs(d1y)) : 0.0;
+    double low = py_max(low_x, low_y) * (1.0 - 1e-12) - reach;
+    if (low > 0.0 && low > floor_a && low > floor_b) {
+        *gap = INFINITY;
+        *end_gap = INFINITY;
+        return;
+    }
+    double wx = d1x - d0x, wy = d1y - d0y;
+    double ww = wx * wx + wy * wy;
+    double dw = d0x * wx + d0y * wy;
+    double s_star = 0.0;
+    if (ww > 0.0)
+        s_star = -dw / ww;
+    if (s_star < 0.0)
+        s_star = 0.0;
+    else if (s_star > 1.0)
+        s_star = 1.0;
+    *gap = hypot(d0x + s_star * wx, d0y + s_star * wy) - reach;
+    *end_gap = hypot(d1x, d1y) - reach;
+}
+
 void fleet_gaps(const double *positions, int64_t steps, int64_t n, const int64_t *first, const int64_t *second,
                 int64_t pairs, const double *reach, const double *floor_, double *gap, double *end_gap)
 {
@@ -481,30 +510,48 @@ void fleet_gaps(const double *positions, int64_t steps, int64_t n, const int64_t
         const double *before = positions + 2 * n * k, *after = positions + 2 * n * (k + 1);
         for (int64_t p = 0; p < pairs; p++) {
             int64_t a = first[p], b = second[p];
-            double d0x = before[2 * b] - before[2 * a], d0y = before[2 * b + 1] - before[2 * a + 1];
-            double d1x = after[2 * b] - after[2 * a], d1y = after[2 * b + 1] - after[2 * a + 1];
-            double low_x = d0x * d1x > 0.0 ? py_min(fabs(d0x), fabs(d1x)) : 0.0;
-            double low_y = d0y * d1y > 0.0 ? py_min(fabs(d0y), fabs(d1y)) : 0.0;
-            double low = py_max(low_x, low_y) * (1.0 - 1e-12) - reach[p];
-            if (low > 0.0 && low > floor_[a] && low > floor_[b]) {
-                gap[k * pairs + p] = INFINITY;
-                end_gap[k * pairs + p] = INFINITY;
-                continue;
-            }
-            double wx = d1x - d0x, wy = d1y - d0y;
-            double ww = wx * wx + wy * wy;
-            double dw = d0x * wx + d0y * wy;
-            double s_star = 0.0;
-            if (ww > 0.0)
-                s_star = -dw / ww;
-            if (s_star < 0.0)
-                s_star = 0.0;
-            else if (s_star > 1.0)
-                s_star = 1.0;
-            gap[k * pairs + p] = hypot(d0x + s_star * wx, d0y + s_star * wy) - reach[p];
-            end_gap[k * pairs + p] = hypot(d1x, d1y) - reach[p];
+            pair_gaps(before, after, a, b, reach[p], floor_[a], floor_[b], &gap[k * pairs + p],
+                      &end_gap[k * pairs + p]);
         }
     }
+}
+
+/* NumPy's minimum: NaN when either is. */
+static inline double nan_min(double a, double b)
+{
+    return isnan(a) || isnan(b) ? NAN : (b < a ? b : a);
+}
+
+/* `FleetContacts.steps` of fleet.py, the NumPy steps it replaced in one pass: `fleet_gaps` of the
+ * steps (floors: the minimum clearances at the call), each pair's least gap into both robots'
+ * min_clearance (NumPy's minimum), and the steps in which a contact began -- a gap <= 0 while the
+ * pair was not touching (touching[p], 0 or 1, updated to whether its gap at each step's end is
+ * <= 0) -- into began, (step, pair) in NumPy's nonzero order (by step, then pair). `floor_` is
+ * scratch of n. Returns how many began (at most steps x pairs). */
+int64_t fleet_contacts(const double *positions, int64_t steps, int64_t n, const int64_t *first,
+                       const int64_t *second, int64_t pairs, const double *reach, double *min_clearance,
+                       double *floor_, uint8_t *touching, int64_t *began)
+{
+    int64_t count = 0;
+    for (int64_t r = 0; r < n; r++)
+        floor_[r] = min_clearance[r];
+    for (int64_t k = 0; k < steps; k++) {
+        const double *before = positions + 2 * n * k, *after = positions + 2 * n * (k + 1);
+        for (int64_t p = 0; p < pairs; p++) {
+            int64_t a = first[p], b = second[p];
+            double gap, end_gap;
+            pair_gaps(before, after, a, b, reach[p], floor_[a], floor_[b], &gap, &end_gap);
+            min_clearance[a] = nan_min(min_clearance[a], gap);
+            min_clearance[b] = nan_min(min_clearance[b], gap);
+            if (gap <= 0.0 && !touching[p]) {
+                began[2 * count] = k;
+                began[2 * count + 1] = p;
+                count++;
+            }
+            touching[p] = end_gap <= 0.0;
+        }
+    }
+    return count;
 }
 
 /* ------------------------------------------------------- judging a fleet's robots (fleet.py) */
