@@ -38,6 +38,46 @@ typedef struct {
     double offset, field;
 } World;
 
+/* Row r's part of `world_distance`: the squared distance from (x, y) to the nearest occupied
+ * square of the row among columns c_first .. c_stop - 1 into *nearest_sq when smaller. The point
+ * lies in column col: the squares left of it have their centres at least half a cell left of the
+ * point, so the higher their column the nearer (monotonic in the computed values too), and those
+ * right of it the lower their column; so besides col's own square (rounding may put it a hair
+ * farther than its neighbour when the point is on their common side) the first occupied one each
+ * way from col is the row's nearest on that side. Returns 0 when no square of the row can be
+ * nearer than *nearest_sq (dx * dx + dy * dy >= dy * dy, rounded as well). */
+static inline int nearest_in_row(const World *w, int64_t r, double x, double y, double half, int64_t col,
+                                 int64_t c_first, int64_t c_stop, double *nearest_sq)
+{
+    double resolution = w->resolution;
+    double centre_y = w->y_min + ((double)(w->rows - 1 - r) + 0.5) * resolution;
+    double dy = py_max(fabs(centre_y - y) - half, 0.0);
+    double dy_sq = dy * dy;
+    if (!(dy_sq < *nearest_sq))
+        return 0;
+    const uint8_t *line = w->occupied + r * w->cols;
+    if (line[col]) {
+        double centre_x = w->x_min + ((double)col + 0.5) * resolution;
+        double dx = py_max(fabs(centre_x - x) - half, 0.0);
+        *nearest_sq = py_min(*nearest_sq, dx * dx + dy_sq);
+    }
+    for (int64_t c = col - 1; c >= c_first; c--)
+        if (line[c]) {
+            double centre_x = w->x_min + ((double)c + 0.5) * resolution;
+            double dx = py_max(fabs(centre_x - x) - half, 0.0);
+            *nearest_sq = py_min(*nearest_sq, dx * dx + dy_sq);
+            break;
+        }
+    for (int64_t c = col + 1; c < c_stop; c++)
+        if (line[c]) {
+            double centre_x = w->x_min + ((double)c + 0.5) * resolution;
+            double dx = py_max(fabs(centre_x - x) - half, 0.0);
+            *nearest_sq = py_min(*nearest_sq, dx * dx + dy_sq);
+            break;
+        }
+    return 1;
+}
+
 /* `WorldDistance.distance` for a point inside the map (the query of `w`). */
 double world_distance(const World *w)
 {
@@ -54,19 +94,21 @@ double world_distance(const World *w)
         double reach = py_min(best, field + offset) + sqrt(2.0) * half;
         int64_t k = (int64_t)ceil(reach / resolution);
         double nearest_sq = INFINITY;
-        int64_t r_stop = int_min(row + k + 1, rows), c_stop = int_min(col + k + 1, cols);
-        for (int64_t r = int_max(row - k, 0); r < r_stop; r++) {
-            double centre_y = w->y_min + ((double)(rows - 1 - r) + 0.5) * resolution;
-            double dy = py_max(fabs(centre_y - y) - half, 0.0);
-            const uint8_t *line = w->occupied + r * cols;
-            for (int64_t c = int_max(col - k, 0); c < c_stop; c++) {
-                if (line[c]) {
-                    double centre_x = w->x_min + ((double)c + 0.5) * resolution;
-                    double dx = py_max(fabs(centre_x - x) - half, 0.0);
-                    nearest_sq = py_min(nearest_sq, dx * dx + dy * dy);
-                }
-            }
-        }
+        int64_t r_first = int_max(row - k, 0), r_stop = int_min(row + k + 1, rows);
+        int64_t c_first = int_max(col - k, 0), c_stop = int_min(col + k + 1, cols);
+        /* The window's rows outward from the point's, up then down: the rows above it have their
+         * centres at least half a cell above the point, so their distance dy grows the farther
+         * the row (the computed one too: each operation is monotonic), and likewise below; once
+         * a row's dy * dy >= nearest_sq no farther row on that side can lower it. The point's own
+         * row (dy about 0, a hair more than a neighbour's by rounding on their common side)
+         * stops neither side. */
+        nearest_in_row(w, row, x, y, half, col, c_first, c_stop, &nearest_sq);
+        for (int64_t r = row - 1; r >= r_first; r--)
+            if (!nearest_in_row(w, r, x, y, half, col, c_first, c_stop, &nearest_sq))
+                break;
+        for (int64_t r = row + 1; r < r_stop; r++)
+            if (!nearest_in_row(w, r, x, y, half, col, c_first, c_stop, &nearest_sq))
+                break;
         best = py_min(best, sqrt(nearest_sq));
     }
     for (int64_t index = 0; index < w->n_circles; index++) {
