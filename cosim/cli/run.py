@@ -183,7 +183,7 @@ def _handler(args) -> int:
         from cosim import hold_collector
 
         hold_collector()  # until the run's loop starts (`cosim.release_collector`)
-    plotter = _plot_process(args) if program and not args.no_plot else None
+    plotter = _plot_process() if program and not args.no_plot else None
     try:
         return _run_scenario(args, plotter)
     finally:
@@ -191,7 +191,7 @@ def _handler(args) -> int:
             plotter.cancel()  # a no-op after it drew
 
 
-def _plot_process(args):
+def _plot_process():
     """The plot process (`cosim.cli.plotter`), forked as early as it can be: before the run's
     modules are imported, its kernels and FMUs built (whose threads import modules: the child then
     holds none of their threads or locks) and the live view's server started, so that matplotlib
