@@ -254,6 +254,7 @@ def test_a_drafted_picture_is_the_picture_of_the_log(cosim_run, tmp_path: Path, 
     from cosim.scenario.load import load_scenario
 
     monkeypatch.setattr(plotter, "_free_core", lambda: helped)
+    monkeypatch.setattr(plotter, "_run_ended", lambda data_read: False)  # (however slow this machine)
     _counting_afresh(monkeypatch, tmp_path / "afresh")
     scenario = load_scenario(EXAMPLE, ["simulation.stop_time=3"])
     if later:
@@ -283,6 +284,29 @@ def test_a_child_whose_scenario_never_came_draws_afresh(cosim_run, tmp_path: Pat
     assert (tmp_path / "afresh").exists()
     assert (tmp_path / "x.png").read_bytes() == plot.plot_run(cosim_run, tmp_path / "y.png").read_bytes()
     assert _ends_by_itself(pid)
+
+
+@pytest.mark.slow
+def test_a_child_that_was_ready_after_the_run_draws_afresh(cosim_run, tmp_path: Path, monkeypatch):
+    """The run's data came before matplotlib was ready (a busy machine): no draft, drawn afresh
+    at once, the log's picture."""
+    from cosim.logs.reader import open_log
+    from cosim.scenario.load import load_scenario
+
+    prepare = plot.prepare_drawing
+
+    def slowly():  # (in the child) until the parent has sent the data
+        time.sleep(1.0)
+        prepare()
+
+    monkeypatch.setattr(plot, "prepare_drawing", slowly)
+    _counting_afresh(monkeypatch, tmp_path / "afresh")
+    process = PlotProcess.start(outline_follows=True)
+    process.outline(load_scenario(EXAMPLE, ["simulation.stop_time=3"]))
+    with open_log(cosim_run) as log:
+        assert process.draw_source(log, tmp_path / "x.png") is None
+    assert (tmp_path / "afresh").exists()
+    assert (tmp_path / "x.png").read_bytes() == plot.plot_run(cosim_run, tmp_path / "y.png").read_bytes()
 
 
 def test_a_child_waiting_for_its_scenario_is_ended_at_once():
