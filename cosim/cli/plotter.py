@@ -1,11 +1,13 @@
 """The PNG of `cosim run`, drawn by a child process that prepares while the run goes.
 
 Importing matplotlib and loading its font (`cosim.logs.plot.prepare_drawing`, ~0.15 s of CPU)
-does not depend on the run, so `cosim` forks a child for it before building the run: on a machine
-with a free core it is done by the time the run ends. The child then drafts the figure from the
-scenario (`preview`: the map as the run will log it, the view, the panels; `cosim.logs.plot.Draft`
-draws the map frame), lays out the texts the legend most likely holds (`_warm`) and forks a helper
-(`PanelHelper`) that holds a copy of that draft and lays out the panels' likely texts. The run's
+does not depend on the run, so `cosim run` forks a child for it as soon as it knows it will plot,
+before it loads the scenario and builds the run (`PlotProcess.start` with `outline_follows`; the
+scenario follows, `PlotProcess.outline`): on a machine with a free core it is done by the time the
+run ends. The child then drafts the figure from the scenario (`preview`: the map as the run will
+log it, the view, the panels; `cosim.logs.plot.Draft` draws the map frame), lays out the texts
+the legend most likely holds (`_warm`) and forks a helper (`PanelHelper`) that holds a copy of
+that draft and lays out the panels' likely texts. The run's
 `PlotData` (arrays: a few MB at most) then goes to the child through a pipe and on to the helper;
 the helper draws the panels while the child draws the run over the map, the legend and the title
 and makes the PNG's rows of them, the child takes the helper's pixels from memory the two share,
@@ -28,17 +30,20 @@ import signal
 import struct
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 
 class PlotProcess:
     """A forked child that has imported matplotlib and waits for the data of one plot."""
 
     @classmethod
-    def start(cls, scenario=None, drawer=None) -> PlotProcess | None:
+    def start(cls, scenario=None, drawer=None, outline_follows: bool = False) -> PlotProcess | None:
         """The child, or None where there is none (no fork, or it failed): then draw in-process.
         Given the run's `scenario` (`cosim.scenario.load.Scenario`), the child also drafts the
-        figure while the run goes (`draft`). `drawer(data, png_path)`: another picture than a run's
-        PNG (sweep.png's `cosim.sweep.engine.draw_plot`), drawn from one frame, without a draft."""
+        figure while the run goes (`draft`). With `outline_follows`, the scenario comes later
+        (`outline`): `cosim run` forks before it has loaded it, so that importing matplotlib
+        starts ~0.1 s sooner. `drawer(data, png_path)`: another picture than a run's PNG
+        (sweep.png's `cosim.sweep.engine.draw_plot`), drawn from one frame, without a draft."""
         if not sys.platform.startswith("linux"):
             return None
         _reap_ended()
@@ -52,18 +57,34 @@ class PlotProcess:
             os.close(data_write)
             os.close(reply_read)
             _own_group()
-            _child(data_read, reply_write, scenario, drawer)  # never returns
+            _child(data_read, reply_write, _FOLLOWS if outline_follows else scenario, drawer)  # never returns
         _own_group(pid)  # here too: whichever runs first, the group exists when `_kill` ends it
         os.close(data_read)
         os.close(reply_write)
-        return cls(pid, data_write, reply_read, drawer)
+        process = cls(pid, data_write, reply_read, drawer)
+        process._outline_due = outline_follows
+        return process
 
     def __init__(self, pid: int, data_write: int, reply_read: int, drawer=None) -> None:
         self.pid = pid
         self._drawer = drawer
+        self._outline_due = False  # started with `outline_follows`, and not sent it yet
         self.exit_status: int | None = None  # the child's, once reaped (negative: killed by a signal)
         self._data = data_write
         self._reply = reply_read
+
+    def outline(self, scenario) -> None:
+        """Send the run's `scenario` to a child started with `outline_follows`: what `preview`
+        reads of it (`_outline`), from which the child drafts the figure once matplotlib is
+        imported. None: no draft (the data is drawn afresh)."""
+        if self._data is None or not self._outline_due:
+            return
+        self._outline_due = False
+        payload = pickle.dumps(scenario and _outline(scenario), protocol=pickle.HIGHEST_PROTOCOL)
+        try:
+            _write_all(self._data, struct.pack(">Q", len(payload)) + payload)
+        except OSError:  # (the child is gone: `draw_source` finds it so and draws here)
+            pass
 
     def draw(self, data, png_path: Path) -> str | None:
         """Have the child draw `data` (a `cosim.logs.plot.PlotData`) to `png_path`; None when it
@@ -79,6 +100,7 @@ class PlotProcess:
         if data is None:
             data = collect_signals(source)
         mapped = source is None
+        self.outline(None)  # (a child waiting for the scenario gets none: no draft)
         try:
             with os.fdopen(self._data, "wb") as pipe:
                 self._data = None
@@ -211,6 +233,12 @@ def _own_group(pid: int = 0) -> None:
         pass
 
 
+def _write_all(fd: int, payload: bytes) -> None:
+    view = memoryview(payload)
+    while view:
+        view = view[os.write(fd, view) :]
+
+
 def _send(pipe, value) -> None:
     """One frame of the pipe to the plot process: its length (8 bytes) and `value` pickled."""
     payload = pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
@@ -238,6 +266,44 @@ def _frame(pipe) -> bytes:
     return pipe.read(struct.unpack(">Q", head)[0])
 
 
+def _frame_from(fd: int) -> bytes:
+    """As `_frame`, read from the descriptor `fd` itself (the pipe's later frames are read through
+    a buffered file over it: nothing of them is read here)."""
+
+    def read(count: int) -> bytes:
+        parts = []
+        while count:
+            part = os.read(fd, count)
+            if not part:
+                return b""
+            parts.append(part)
+            count -= len(part)
+        return b"".join(parts)
+
+    head = read(8)
+    return read(struct.unpack(">Q", head)[0]) if len(head) == 8 else b""
+
+
+_FOLLOWS = object()  # the child's scenario: not known yet, sent by `PlotProcess.outline`
+
+
+def _outline(scenario) -> SimpleNamespace:
+    """What `preview` reads of `scenario`, as plain values: the plot process unpickles it without
+    importing the scenario's own modules (`cosim.scenario`, ~25 ms there)."""
+    return SimpleNamespace(
+        source=scenario.source,
+        name=scenario.name,
+        map_file=scenario.map_file,
+        map_resolution=scenario.map_resolution,
+        map_origin=scenario.map_origin,
+        start=tuple(scenario.start),
+        goal=tuple(scenario.goal),
+        planner=SimpleNamespace(expansion_distance=scenario.planner.expansion_distance),
+        vehicle_type=scenario.vehicle_type,
+        components=list(scenario.components),
+    )
+
+
 def _panels_part(data):
     """What the panels of `data` (a `PlotData`) need: the series, the mixer's modes, the avoider."""
     return type(data)("", series=data.series, modes=data.modes, avoider=data.avoider)
@@ -251,6 +317,13 @@ def _child(data_read: int, reply_write: int, scenario, drawer=None) -> None:
         from cosim.logs.plot import likely_texts, prepare_drawing
 
         prepare_drawing()
+        if scenario is _FOLLOWS:  # (the parent sends it once loaded: `PlotProcess.outline`)
+            outline = _frame_from(data_read)
+            if not outline:
+                os._exit(0)
+            scenario = pickle.loads(outline)
+        if scenario is not None and _run_ended(data_read):
+            scenario = None  # drawn afresh
         drafted = None if scenario is None else draft(scenario)
         helper = None
         if drafted is not None and range(drafted.rows)[LOWER] and _free_core():
@@ -328,17 +401,26 @@ def _warm(texts: list, data_read: int) -> None:
     there to read on `data_read`: done ahead, laying out is a third of what drawing them costs
     after the run. All of them with a core to spare for it (the run keeps the other), else a few
     (~15 ms, beside the ~0.2 s of importing matplotlib)."""
-    import select
-
     from cosim.logs.plot import warm_text
 
-    def arrived() -> bool:
-        try:
-            return bool(select.select([data_read], [], [], 0)[0])
-        except (OSError, ValueError):
-            return True
+    warm_text(texts, lambda: _readable(data_read))
 
-    warm_text(texts, arrived)
+
+def _run_ended(data_read: int) -> bool:
+    """Whether the run's data is there already (on `data_read`) once matplotlib is ready (a busy
+    machine): then its picture is drawn afresh at once, ~10% less work than drafting it and
+    finishing the draft."""
+    return _readable(data_read)
+
+
+def _readable(fd: int) -> bool:
+    """Whether there is something to read on `fd` (or it is closed, or not a descriptor)."""
+    import select
+
+    try:
+        return bool(select.select([fd], [], [], 0)[0])
+    except (OSError, ValueError):
+        return True
 
 
 def _free_core() -> bool:

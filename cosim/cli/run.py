@@ -178,10 +178,34 @@ def _handler(args) -> int:
         _tqdm_version_without_metadata()
     if args.scenario.suffix.lower() == ".ssp":
         return _run_ssp(args)
-    if getattr(args, "program", False):
+    program = getattr(args, "program", False)
+    if program:
         from cosim import hold_collector
 
         hold_collector()  # until the run's loop starts (`cosim.release_collector`)
+    plotter = _plot_process() if program and not args.no_plot else None
+    try:
+        return _run_scenario(args, plotter)
+    finally:
+        if plotter is not None:
+            plotter.cancel()  # a no-op after it drew
+
+
+def _plot_process():
+    """The plot process (`cosim.cli.plotter`), forked as early as it can be: before the run's
+    modules are imported, its kernels and FMUs built (whose threads import modules: the child then
+    holds none of their threads or locks) and the live view's server started, so that matplotlib
+    is imported and the figure drafted while all that and the run go. numpy is imported first:
+    both processes use it, and the child then inherits it. The scenario follows once loaded
+    (`PlotProcess.outline`)."""
+    import numpy  # noqa: F401
+
+    from cosim.cli.plotter import PlotProcess
+
+    return PlotProcess.start(outline_follows=True)
+
+
+def _run_scenario(args, plotter) -> int:
     from cosim.fmi.builtin import prepare
 
     announce = None if args.quiet else _announce
@@ -194,6 +218,11 @@ def _handler(args) -> int:
     # The FMUs the file names start building before the start and goal are checked (which loads
     # kernels that may still be compiling).
     scenario = load_scenario(args.scenario, overrides, check_world=False, fleet=True)
+    if plotter is not None and (hasattr(scenario, "robots") or not scenario.plot):
+        plotter.cancel()  # a fleet's plot is drawn here (`_plot_fleet`); or no plot
+        plotter = None
+    elif plotter is not None:
+        plotter.outline(scenario)
     if hasattr(scenario, "robots"):  # a fleet ([[robots]]): cosim.navigation.fleet
         by_version: dict[int, list[str]] = {}  # the robots' project FMUs, built side by side
         for robot in scenario.robots:
@@ -217,25 +246,12 @@ def _handler(args) -> int:
         finally:
             if args.live:
                 sink.stop()
-    plotter = None
-    if scenario.plot and not args.no_plot and getattr(args, "program", False):
-        from cosim.cli.plotter import PlotProcess
+    prepare(scenario.project_fmus, scenario.fmi_version, kernels=(), announce=announce)
+    check_scenario_world(scenario)
+    from cosim.navigation.outcome import avoider_name, format_summary
+    from cosim.navigation.run import run_scenario
 
-        # Forked before the live view's server starts and before the FMU builds (whose threads
-        # import modules), so the child holds none of their threads, sockets or locks. It prepares
-        # the plot while the run goes.
-        plotter = PlotProcess.start(scenario)
-    try:
-        prepare(scenario.project_fmus, scenario.fmi_version, kernels=(), announce=announce)
-        check_scenario_world(scenario)
-        from cosim.navigation.outcome import avoider_name, format_summary
-        from cosim.navigation.run import run_scenario
-
-        sink = _live_sink(args, scenario.macro_step)
-    except BaseException:
-        if plotter is not None:
-            plotter.cancel()
-        raise
+    sink = _live_sink(args, scenario.macro_step)
     try:
         goals = sink if args.live else None  # a client's /goal_pose, the control services
         result = run_scenario(
@@ -268,8 +284,6 @@ def _handler(args) -> int:
             sink.linger(args.linger)
         return result.exit_code
     finally:
-        if plotter is not None:
-            plotter.cancel()  # a no-op after it drew
         if args.live:
             sink.stop()
 

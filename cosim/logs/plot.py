@@ -447,7 +447,10 @@ def collector_paused():
 def skip_matplotlib_docstrings() -> None:
     """For a process that draws and exits (`cosim run`): before matplotlib is imported, have it skip
     writing the property list into each artist class's `set()` docstring (matplotlib builds them
-    at import for `help()`: about 0.15 s of the plot's time). Drawing is unaffected; a no-op when
+    at import for `help()`: about 0.15 s of the plot's time), and the keyword signature of each
+    artist class's `set()` (for `help()` and `inspect.signature`; made from the names of the
+    class's setters at import, ~20 ms of CPU): each class's `set()` then is its parent's, which
+    takes the same keywords the same way (`Artist.set`). Drawing is unaffected; a no-op when
     matplotlib is already imported or has no such step."""
     import sys
 
@@ -458,20 +461,49 @@ def skip_matplotlib_docstrings() -> None:
 
     if callable(getattr(matplotlib.artist, "kwdoc", None)):
         matplotlib.artist.kwdoc = lambda artist: ""
+    artist = getattr(matplotlib.artist, "Artist", None)
+    if callable(getattr(artist, "_update_set_signature_and_docstring", None)):
+        artist._update_set_signature_and_docstring = classmethod(lambda cls: None)
 
 
 def prepare_drawing() -> None:
     """Import what `draw` uses and load the font its texts are set in: the work of a plot that
-    does not depend on the data (`cosim.cli.plotter` does it while the run goes)."""
+    does not depend on the data (`cosim.cli.plotter` does it while the run goes). For a process
+    that draws the run's figures and exits (`skip_matplotlib_docstrings`), and draws no 3-D axes:
+    matplotlib's projections are registered without the 3-D one (`_without_3d_axes`)."""
     import importlib
 
     skip_matplotlib_docstrings()
-    with collector_paused():
+    with collector_paused(), _without_3d_axes():
         for module in ("backends.backend_agg", "figure", "collections", "lines", "patches", "ticker"):
             importlib.import_module(f"matplotlib.{module}")
         from matplotlib.font_manager import FontProperties, findfont, get_font
 
         get_font(findfont(FontProperties()))
+
+
+@contextmanager
+def _without_3d_axes():
+    """While matplotlib's projections are first imported (`matplotlib.projections`, which every
+    figure imports): `mpl_toolkits.mplot3d` is a module without `Axes3D`, as matplotlib takes it
+    where that cannot be imported, so the 3-D projection (~5-10 ms of CPU to import) is not
+    registered. The real package is imported if anything asks for it afterwards. A no-op when the
+    projections or the 3-D toolkit are imported already."""
+    import sys
+    from types import ModuleType
+
+    name = "mpl_toolkits.mplot3d"
+    if "matplotlib.projections" in sys.modules or name in sys.modules:
+        yield
+        return
+    placeholder = ModuleType(name, "A stand-in without Axes3D: no 3-D projection (cosim.logs.plot).")
+    placeholder.Axes3D = None
+    sys.modules[name] = placeholder
+    try:
+        yield
+    finally:
+        if sys.modules.get(name) is placeholder:
+            del sys.modules[name]
 
 
 # Text set in the same font, size and pixel density is laid out the same wherever it is drawn:

@@ -244,22 +244,96 @@ def _counting_afresh(monkeypatch, marker: Path) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("helped", [True, False], ids=["helper", "alone"])
-def test_a_drafted_picture_is_the_picture_of_the_log(cosim_run, tmp_path: Path, monkeypatch, helped):
-    """The child drafts from the scenario, gets the panels' part first and the map's after
-    (`draw_source`), with or without its helper: the log's own picture, and not drawn afresh."""
+@pytest.mark.parametrize("later", [False, True], ids=["given", "sent later"])
+def test_a_drafted_picture_is_the_picture_of_the_log(cosim_run, tmp_path: Path, monkeypatch, helped, later):
+    """The child drafts from the scenario (given when it starts, or sent once loaded, as `cosim
+    run` does), gets the panels' part first and the map's after (`draw_source`), with or without
+    its helper: the log's own picture, and not drawn afresh."""
     from cosim.cli import plotter
     from cosim.logs.reader import open_log
     from cosim.scenario.load import load_scenario
 
     monkeypatch.setattr(plotter, "_free_core", lambda: helped)
+    monkeypatch.setattr(plotter, "_run_ended", lambda data_read: False)  # (however slow this machine)
     _counting_afresh(monkeypatch, tmp_path / "afresh")
-    process = PlotProcess.start(load_scenario(EXAMPLE, ["simulation.stop_time=3"]))
+    scenario = load_scenario(EXAMPLE, ["simulation.stop_time=3"])
+    if later:
+        process = PlotProcess.start(outline_follows=True)
+        process.outline(scenario)
+    else:
+        process = PlotProcess.start(scenario)
     pid = process.pid
     with open_log(cosim_run) as log:
         assert process.draw_source(log, tmp_path / "x.png") is None
     assert not (tmp_path / "afresh").exists()
     assert (tmp_path / "x.png").read_bytes() == plot.plot_run(cosim_run, tmp_path / "y.png").read_bytes()
     assert _ends_by_itself(pid)
+
+
+@pytest.mark.slow
+def test_a_child_whose_scenario_never_came_draws_afresh(cosim_run, tmp_path: Path, monkeypatch):
+    """Started to wait for the scenario (`outline_follows`) and given the data without it: no
+    draft, the picture drawn afresh, the log's picture."""
+    from cosim.logs.reader import open_log
+
+    _counting_afresh(monkeypatch, tmp_path / "afresh")
+    process = PlotProcess.start(outline_follows=True)
+    pid = process.pid
+    with open_log(cosim_run) as log:
+        assert process.draw_source(log, tmp_path / "x.png") is None
+    assert (tmp_path / "afresh").exists()
+    assert (tmp_path / "x.png").read_bytes() == plot.plot_run(cosim_run, tmp_path / "y.png").read_bytes()
+    assert _ends_by_itself(pid)
+
+
+@pytest.mark.slow
+def test_a_child_that_was_ready_after_the_run_draws_afresh(cosim_run, tmp_path: Path, monkeypatch):
+    """The run's data came before matplotlib was ready (a busy machine): no draft, drawn afresh
+    at once, the log's picture."""
+    from cosim.logs.reader import open_log
+    from cosim.scenario.load import load_scenario
+
+    prepare = plot.prepare_drawing
+
+    def slowly():  # (in the child) until the parent has sent the data
+        time.sleep(1.0)
+        prepare()
+
+    monkeypatch.setattr(plot, "prepare_drawing", slowly)
+    _counting_afresh(monkeypatch, tmp_path / "afresh")
+    process = PlotProcess.start(outline_follows=True)
+    process.outline(load_scenario(EXAMPLE, ["simulation.stop_time=3"]))
+    with open_log(cosim_run) as log:
+        assert process.draw_source(log, tmp_path / "x.png") is None
+    assert (tmp_path / "afresh").exists()
+    assert (tmp_path / "x.png").read_bytes() == plot.plot_run(cosim_run, tmp_path / "y.png").read_bytes()
+
+
+def test_a_child_waiting_for_its_scenario_is_ended_at_once():
+    """A run that will not plot after all (a fleet, `[output] plot = false`, a failure while
+    loading) ends the child that waits for the scenario, wherever it is."""
+    process = PlotProcess.start(outline_follows=True)
+    pid = process.pid
+    process.cancel()
+    assert process.exit_status == -signal.SIGKILL
+    assert _not_running(pid)
+
+
+@pytest.mark.slow
+def test_a_run_without_plot_in_its_scenario_leaves_no_child(tmp_path: Path):
+    """`[output] plot = false`: the child forked before the scenario was read is ended; no PNG."""
+    log = tmp_path / "unplotted.mcap"
+    completed = subprocess.run(
+        [sys.executable, "-m", "cosim", "run", str(EXAMPLE), "--out", str(log), *SHORT]
+        + ["--set", "output.plot=false"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+    )
+    assert completed.returncode in (0, 1), completed.stderr
+    assert "plot:" not in completed.stdout and "Traceback" not in completed.stderr
+    assert log.exists() and not log.with_suffix(".png").exists()
+    assert _processes_naming(str(log)) == []
 
 
 @pytest.mark.slow
@@ -325,3 +399,27 @@ def test_a_cancelled_child_ends_its_helper_too(monkeypatch):
             break
         time.sleep(0.05)
     assert _gone(helpers[0])
+
+
+@pytest.mark.slow
+def test_the_plot_process_registers_no_3d_axes_and_sets_as_matplotlib_does():
+    """`cosim.logs.plot.prepare_drawing` (the plot process) imports matplotlib without its 3-D
+    toolkit and without each artist class's `set()` signature: the toolkit stays importable, and
+    `set()` sets what matplotlib's own does (the pixels: `test_the_child_draws_what_this_process_draws`)."""
+    code = (
+        "import sys\n"
+        "from cosim.logs import plot\n"
+        "plot.prepare_drawing()\n"
+        "import matplotlib.projections as projections\n"
+        "print('3d' in projections.get_projection_names(), 'mpl_toolkits.mplot3d' in sys.modules)\n"
+        "from mpl_toolkits.mplot3d import Axes3D\n"
+        "print(Axes3D.name)\n"
+        "from matplotlib.lines import Line2D\n"
+        "line = Line2D([0], [0])\n"
+        "line.set(color='red', lw=3, zorder=4)\n"
+        "print(line.get_color(), line.get_linewidth(), line.get_zorder())\n"
+    )
+    completed = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO)
+    assert completed.returncode == 0, completed.stderr
+    assert completed.stdout.split("\n")[:3] == ["False False", "3d", "red 3.0 4"]
+    assert "Warning" not in completed.stderr

@@ -53,6 +53,25 @@ def test_the_scenario_gives_the_frame_of_its_run(run):
     assert drafted.rows == len({series.panel for series in data.series}) == 5
 
 
+def test_the_outline_sent_to_the_plot_process_previews_as_the_scenario(run):
+    """`cosim run` sends the plot process only what `preview` reads of the scenario (`_outline`,
+    plain values): the same preview as from the scenario itself, picklable without its classes."""
+    import pickle
+
+    scenario, _ = run
+    outline = pickle.loads(pickle.dumps(plotter._outline(scenario)))
+    assert "cosim.scenario" not in pickle.dumps(plotter._outline(scenario)).decode("latin-1")
+    expected, got = preview(scenario), preview(outline)
+    for field in dataclasses.fields(PlotData):
+        a, b = getattr(expected, field.name), getattr(got, field.name)
+        if field.name == "series":
+            assert [(s.panel, s.unit, s.label) for s in a] == [(s.panel, s.unit, s.label) for s in b]
+        elif isinstance(a, np.ndarray):
+            assert np.array_equal(a, b)
+        else:
+            assert a == b, field.name
+
+
 def test_a_draft_that_fits_draws_the_picture_of_draw(run, tmp_path):
     scenario, data = run
     drafted = plot.Draft(preview(scenario))
