@@ -18,6 +18,7 @@ two messages lands where it would have.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import struct
 from typing import NamedTuple
@@ -65,13 +66,19 @@ def _scatter(out: np.ndarray, starts: np.ndarray, records: np.ndarray) -> None:
 
 def _record_dtype(payload_fields: dict[str, tuple], payload_size: int) -> np.dtype:
     """A packed structured dtype of one MCAP message record: head fields, then payload fields at
-    their byte offsets within the payload (shifted by the head size)."""
+    their byte offsets within the payload (shifted by the head size). Made once per layout (a
+    fleet's robots have the same layouts: their /cmd_vel, their /scan)."""
+    return _layout_dtype(tuple(payload_fields.items()), payload_size)
+
+
+@functools.lru_cache(maxsize=256)
+def _layout_dtype(payload_fields: tuple, payload_size: int) -> np.dtype:
     names, formats, offsets = [], [], []
     for name, (fmt, offset) in _HEAD_FIELDS.items():
         names.append(name)
         formats.append(fmt)
         offsets.append(offset)
-    for name, (fmt, offset) in payload_fields.items():
+    for name, (fmt, offset) in payload_fields:
         names.append(name)
         formats.append(fmt)
         offsets.append(MESSAGE_HEAD_SIZE + offset)
@@ -313,6 +320,7 @@ class MessageBlock:
         self.clock_due = None  # () -> True when held messages are to reach the file now (wall clock)
         # Records built in C (`cosim.core.kernel.pack_records`); False: with NumPy (`_records_numpy`).
         self.native = True
+        self._out: bytearray | None = None  # the buffer packs write their records into
         # Steps collected outside the block (`Recorder.collect`): its `flush()` hands them over
         # (through `add_batch`), called before any other message is held, packed or registered.
         self.collector = None
@@ -788,7 +796,12 @@ class MessageBlock:
             size += MESSAGE_HEAD_SIZE * len(self.raw) + len(blob)
             self.raw = []
         table = np.array(fields, dtype=np.int64).reshape(-1, kernel.FIELD_COLUMNS)
-        packed = kernel.pack_records(order, streams, table, raw_table, blob, size)
+        # Into the last pack's buffer, grown when too small: its pages are already the process's
+        # (a new one of a pack's megabytes costs about as much as packing it). The writer copies
+        # the records out (`ChunkWriter.add_records`) before the next pack.
+        if self._out is None or len(self._out) < size:
+            self._out = bytearray(size + size // 4)
+        packed = kernel.pack_records(order, streams, table, raw_table, blob, size, self._out)
         for stream in carried:
             stream.carry()
         return packed

@@ -87,6 +87,7 @@ class _Robot:
         )  # after the last step handed over
         self.halted = False  # no longer stepped (`FleetSteps.halt`)
         self.cmd_channel: int | None = None  # its /cmd_vel (`Recorder.fixed_channel`), on first use
+        self.scan_channel: int | None = None  # its /scan (`Recorder.scan_channel`), on first use
         self.commands: list[tuple[np.ndarray, np.ndarray]] = []  # read from live buffers: (steps, v omega)
         self.sweeps: list[tuple[int, np.ndarray]] = []  # (step, ranges) of its lidar's collected sweeps
         self.odom_frame = f"{name}/{rosmsg.ODOM_FRAME}"
@@ -299,7 +300,10 @@ class FleetSteps:
         due: dict[int, np.ndarray] = {}  # period -> its steps in the block
         for number, robot, scan, python in robots:
             if scan is not None and first % scan.period == 0:  # a lidar steps in a block's first step
-                robot.view.scan_channel(scan.angles, scan.range_min, scan.range_max, scan.scan_time)
+                if robot.scan_channel is None:  # its layout is the run's: registered once
+                    robot.scan_channel = robot.view.scan_channel(
+                        scan.angles, scan.range_min, scan.range_max, scan.scan_time
+                    )
                 sweeps.append((robot, scan.current().copy()))
             if python is None:
                 continue
@@ -443,7 +447,7 @@ class FleetSteps:
                 )
                 robot.sweeps = []
                 keys = steps * per_step + 2 * (self.scan_slot + 2 * number)
-                signals.append((view.scan_channel(scan.angles, *limits), keys, times, sweep_rows))
+                signals.append((robot.scan_channel, keys, times, sweep_rows))
             slot = 2 * (self.scan_slot + 2 * number + 1)
             if number in deferred:
                 period, ports = robot.command

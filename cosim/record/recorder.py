@@ -286,6 +286,7 @@ class Recorder:
         self._sequences: dict[int, int] = {}
         self._signal_sizes: dict[int, int] = {}
         self._scan_layouts: dict[tuple, tuple] = {}  # (angles, limits) -> `_scan_template`
+        self._scan_grids: dict[bytes, tuple] = {}  # angles -> `scan_layout` (shared by the views)
         self._obstacle_markers = ObstacleMarkers(str(self.path))
         # Signals, poses, commands and scans are held for a block of steps and packed at once
         # (`cosim.record.batch`); any other write, a flush and close pack the block first.
@@ -896,7 +897,10 @@ class Recorder:
     ) -> tuple:
         """(bins, NaN-filled float32 ranges to fill, CDR head, CDR tail) of a LaserScan layout;
         bins None when beam i is bin i."""
-        angle_min, increment, bins, description = scan_layout(angles)
+        grid = self._scan_grids.get(angles.tobytes())
+        if grid is None:
+            grid = self._scan_grids[angles.tobytes()] = scan_layout(angles)
+        angle_min, increment, bins, description = grid
         if "/scan" not in self._channels:
             self._channel("/scan", {SCAN_LAYOUT_KEY: description})
         binned = np.full(int(bins[-1]) + 1 if len(bins) else 0, np.nan, dtype=np.float32)
