@@ -75,6 +75,45 @@ class _Port(NamedTuple):
     kept: int = 0  # its column in the flush's kept columns (`FleetSteps._kept`)
 
 
+class _Live:
+    """The entries of components stepped by Python of one period (`period` [steps]), recorded from
+    their live buffers with one copy of all their records side by side: `parts` the buffers'
+    views in that order (after the `gathers` of gathered records), `places` slot -> the columns
+    of its record."""
+
+    def __init__(self, period: int) -> None:
+        self.period = period
+        self.parts: list[np.ndarray] = []
+        self.gathers: list = []
+        self.places: dict[int, slice] = {}
+        self.width = 0
+
+    def add(self, slot: int, entry: SignalEntry) -> None:
+        if entry.gather is not None:
+            self.gathers.append(entry.gather)
+        parts = (entry.first,) if entry.second is None else (entry.first, entry.second)
+        width = sum(len(part) for part in parts)
+        self.parts += parts
+        self.places[slot] = slice(self.width, self.width + width)
+        self.width += width
+
+    @staticmethod
+    def records(blocks: list) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """slot -> (steps, records) of the collected blocks' (`FleetSteps.live`)."""
+        taken: dict[_Live, tuple[list, list]] = {}
+        for group, k, row in blocks:
+            steps, rows = taken.setdefault(group, ([], []))
+            steps.append(k)
+            rows.append(row)
+        out = {}
+        for group, (steps, rows) in taken.items():
+            steps = np.array(steps, dtype=np.int64)
+            matrix = np.array(rows)
+            for slot, columns in group.places.items():
+                out[slot] = (steps, matrix[:, columns])
+        return out
+
+
 class _Robot:
     def __init__(self, name: str, view, recording: StepRecording, entries: list[_Entry], command) -> None:
         self.name = name
@@ -154,7 +193,9 @@ class FleetSteps:
         self.collected: list[list] = []  # each block's histories
         # (key, t_ns, channel, payload); keys doubled (`flush`): odd, written between two blocks
         self.others: list[tuple] = []
-        self.live: dict[int, list] = {}  # slot -> [(k, record)] of a component stepped by Python
+        # The records of the components stepped by Python: (`_Live` group, step k, every record of
+        # the group at k, side by side) per block in which the group stepped.
+        self.live: list[tuple[_Live, int, np.ndarray]] = []
         self.poses: list[tuple] = []  # (k, t_ns, `_odometry` rows)
         self.deferred: set[int] = set()  # robots whose commands are read from the rows at the flush
         self.planned: tuple | None = None  # (kinds, `_plan`)
@@ -338,9 +379,11 @@ class FleetSteps:
             self.deferred.add(number)
         for robot, ranges in sweeps:
             robot.sweeps.append((first, ranges))
-        for slot, entry in live:  # stepped by Python: their live buffers
-            if first % entry.period == 0:
-                self.live.setdefault(slot, []).append((first, entry.record()))
+        for group in live:  # stepped by Python: their live buffers, a group's in one copy
+            if first % group.period == 0:
+                for gather in group.gathers:
+                    gather.take()
+                self.live.append((group, first, np.concatenate(group.parts)))
         self.others += [(2 * key, t_ns, channel, payload) for key, t_ns, channel, payload in others]
         self.poses += taken
         t_last = start_ns + (end - 1) * h_ns
@@ -370,9 +413,9 @@ class FleetSteps:
         """What a block records of the robots still stepped, for components stepped by Python where
         `kinds` says (made again when that or a robot's halt changes it): per robot (its number,
         the robot, its scan ports or None, whether a command port is stepped by Python or None: no
-        command), and (slot, entry) of each entry stepped by Python."""
+        command), and the entries stepped by Python, grouped by period (`_Live`)."""
         if self.planned is None or self.planned[0] != kinds:
-            robots, live = [], []
+            robots, groups = [], {}
             for number, robot in enumerate(self.robots):
                 if robot.halted:
                     continue
@@ -380,8 +423,12 @@ class FleetSteps:
                 if robot.command is not None:
                     python = any(kinds[port.index] for port in robot.command[1])
                 robots.append((number, robot, robot.recording.scan, python))
-                live += [(entry.slot, entry.entry) for entry in robot.entries if kinds[entry.index]]
-            self.planned = (kinds, (robots, live))
+                for entry in robot.entries:
+                    if kinds[entry.index]:
+                        groups.setdefault(entry.entry.period, _Live(entry.entry.period)).add(
+                            entry.slot, entry.entry
+                        )
+            self.planned = (kinds, (robots, list(groups.values())))
         return self.planned[1]
 
     def written(self, channel: int, t_ns: int, payload: bytes) -> bool:
@@ -399,12 +446,13 @@ class FleetSteps:
         first, end, kinds, collected = self.first, self.end, self.kinds, self.collected
         others, live, taken, deferred = self.others, self.live, self.poses, self.deferred
         self.first = self.end = None
-        self.collected, self.others, self.live, self.poses, self.deferred = [], [], {}, [], set()
+        self.collected, self.others, self.live, self.poses, self.deferred = [], [], [], [], set()
         self.handed = time.monotonic()
         start_ns, h_ns = self.start_ns, self.h_ns
         # Keys doubled: a message written between two blocks (`written`) sorts between them (odd key).
         per_step = 2 * self.per_step
         rows_of: dict[int, np.ndarray] = {}
+        live = _Live.records(live)
 
         def rows(index: int) -> np.ndarray:
             found = rows_of.get(index)
@@ -422,9 +470,8 @@ class FleetSteps:
             for slot, index, _, entry, columns in robot.entries:
                 if kinds[index]:  # stepped by Python: in a block's first step at most
                     records = live.get(slot)
-                    if records:
-                        steps = np.array([k for k, _ in records], dtype=np.int64)
-                        values = np.array([row for _, row in records])
+                    if records is not None:
+                        steps, values = records
                         signals.append(
                             (entry.channel, steps * per_step + 2 * slot, start_ns + steps * h_ns, values)
                         )
