@@ -321,6 +321,7 @@ class MessageBlock:
         # Records built in C (`cosim.core.kernel.pack_records`); False: with NumPy (`_records_numpy`).
         self.native = True
         self._out: bytearray | None = None  # the buffer packs write their records into
+        self._signal_table_cache: dict[tuple, tuple] = {}  # `_signal_tables`
         # Steps collected outside the block (`Recorder.collect`): its `flush()` hands them over
         # (through `add_batch`), called before any other message is held, packed or registered.
         self.collector = None
@@ -550,6 +551,18 @@ class MessageBlock:
         cursors = dict.fromkeys(signal_rows, 0)
         cursors[RAW_STREAM] = 0
         cursors[self.pose_streams[0]] = 0
+        # Each stream's stamps in write order, at once (a stream's next messages are its next
+        # stamps: `cursors`): one stable sort by stream number (a radix sort on 16 bits).
+        numbers = order.astype(np.uint16) if len(self.streams) <= 1 << 16 else order
+        by_stream = np.argsort(numbers, kind="stable")
+        grouped = times[by_stream]
+        counts = np.bincount(order, minlength=len(self.streams))
+        bounds = np.cumsum(counts).tolist()
+        stamps = {
+            number: grouped[bounds[number] - n : bounds[number]]
+            for number, n in enumerate(counts.tolist())
+            if n
+        }
         count = len(order)
         window = self.window_ns
         i = 0
@@ -570,7 +583,7 @@ class MessageBlock:
                     end, full = stop, True
             if full and order[end - 1] == self.pose_streams[0]:
                 end += 2  # a pose's three messages are held together
-            self._hold_batch(order, times, i, end, signal_rows, pose_rows, raw, cursors)
+            self._hold_batch(order, times, i, end, stamps, signal_rows, pose_rows, raw, cursors)
             if full:
                 self.skip_pack()
             i = end
@@ -595,26 +608,19 @@ class MessageBlock:
                 stop = candidate if stop is None else min(stop, candidate)
         return stop
 
-    def _hold_batch(self, order, times, first, end, signal_rows, pose_rows, raw, cursors) -> None:
-        """Hold messages order[first:end] (no pack)."""
+    def _hold_batch(self, order, times, first, end, stamps, signal_rows, pose_rows, raw, cursors) -> None:
+        """Hold messages order[first:end] (no pack); `stamps`: each stream's stamps in write
+        order, from its cursor on."""
         if first >= end:
             return
         part = order[first:end]
-        stamps = times[first:end]
         if self.group == 0 and self.window_ns:
-            self.deadline = self._window_end(int(stamps[0]))
-        counts = np.bincount(part, minlength=len(self.streams))
-        # Each stream's stamps in held order: one stable sort instead of a mask per stream.
-        by_stream = np.argsort(part, kind="stable")
-        grouped = stamps[by_stream]
-        grouped_list = grouped.tolist()
-        bounds = np.cumsum(counts).tolist()
-        counts = counts.tolist()
+            self.deadline = self._window_end(int(times[first]))
+        counts = np.bincount(part, minlength=len(self.streams)).tolist()
         sizes, streams = self.group_sizes, self.streams
         for number in np.flatnonzero(counts).tolist():
             n = counts[number]
             stream = streams[number]
-            low = bounds[number] - n
             if type(stream) is SignalStream:  # the most messages: tested first
                 sizes[number] = sizes.get(number, 0) + n
                 at = cursors[number]
@@ -622,8 +628,8 @@ class MessageBlock:
                 if at or n != len(rows):
                     rows = rows[at : at + n]
                 cursors[number] = at + n
-                times = stream.times
-                held = len(times)
+                held_times = stream.times
+                held = len(held_times)
                 if held + n + 1 > len(stream.rows):
                     self._grow(stream, held + n)
                 split = stream.split
@@ -634,7 +640,7 @@ class MessageBlock:
                         raise CosimError(f"signal channel {stream.records.channel}: a step after end_steps")
                     stream.rows[held : held + n, :split] = rows[:, :split]
                     stream.rows[held + 1 : held + n + 1, split:] = rows[:, split:]
-                times += grouped_list[low : low + n]
+                held_times += stamps[number][at : at + n].tolist()
                 continue
             if number == self.pose_streams[1] or number == self.pose_streams[2]:
                 continue
@@ -644,13 +650,13 @@ class MessageBlock:
                 self.raw += [
                     (channel, t_ns, payload)
                     for (channel, payload), t_ns in zip(
-                        raw[at : at + n], grouped_list[low : low + n], strict=True
+                        raw[at : at + n], stamps[RAW_STREAM][at : at + n].tolist(), strict=True
                     )
                 ]
                 cursors[RAW_STREAM] = at + n
             elif number == self.pose_streams[0]:
                 at = cursors[number]
-                self.pose.add_rows(grouped[low : low + n], pose_rows[at : at + n])
+                self.pose.add_rows(stamps[number][at : at + n], pose_rows[at : at + n])
                 cursors[number] = at + n
         self._order_part(part.copy())  # (the caller's array)
         self.count += end - first
@@ -725,6 +731,7 @@ class MessageBlock:
         fields: list[tuple[int, int, int]] = []
         alive: list[np.ndarray] = []  # arrays the tables point into, alive until the C call returns
         carried: list[SignalStream] = []
+        signal_fields = None
         size = 0
 
         def fixed(number: int, records: _Records, times: np.ndarray, matrix: np.ndarray, parts) -> int:
@@ -740,7 +747,7 @@ class MessageBlock:
             row[kernel.P_MATRIX_COLUMNS] = matrix.shape[1]
             row[kernel.P_STAMP_COUNT] = len(records.stamps)
             row[kernel.P_STAMP_FIRST : kernel.P_STAMP_FIRST + len(records.stamps)] = records.stamps
-            row[kernel.P_FIELD_FIRST] = len(fields)
+            row[kernel.P_FIELD_FIRST] = len(fields) + (0 if signal_fields is None else len(signal_fields))
             row[kernel.P_FIELD_COUNT] = len(parts)
             fields.extend((records.offset(name), column, width) for name, column, width in parts)
             alive.extend((times, matrix))
@@ -757,19 +764,18 @@ class MessageBlock:
             alive.append(times)
             starts = np.zeros(len(counts), dtype=np.int64)
             np.cumsum(counts[:-1], out=starts[1:])
-            rows = np.array([stream.table for stream in carried])
-            rows[:, kernel.P_SEQUENCE] = [
-                self._sequence(stream.records.channel, count)
-                for stream, count in zip(carried, counts, strict=True)
-            ]
+            table, signal_fields, channels = self._signal_tables(numbers, carried)
+            rows = table.copy()
+            sequences = self.sequences
+            firsts = [sequences[channel] for channel in channels]
+            for channel, count in zip(channels, counts, strict=True):
+                sequences[channel] += count
+            rows[:, kernel.P_SEQUENCE] = firsts
             rows[:, kernel.P_TIMES] = times.ctypes.data + 8 * starts
             # rows: float64, C-contiguous (made by `SignalStream`, `_grow`)
             rows[:, kernel.P_MATRIX] = [stream.address() for stream in carried]
             alive += [stream.rows for stream in carried]
-            field_counts = rows[:, kernel.P_FIELD_COUNT]
-            rows[:, kernel.P_FIELD_FIRST] = np.cumsum(field_counts) - field_counts
             streams[numbers] = rows
-            fields += itertools.chain.from_iterable(stream.fields for stream in carried)
             sizes = rows[:, kernel.P_SIZE]
             size += int(np.dot(sizes, counts))
         if self.pose is not None and self.pose.count:
@@ -796,6 +802,8 @@ class MessageBlock:
             size += MESSAGE_HEAD_SIZE * len(self.raw) + len(blob)
             self.raw = []
         table = np.array(fields, dtype=np.int64).reshape(-1, kernel.FIELD_COLUMNS)
+        if signal_fields is not None:  # the signal streams' fields first (their P_FIELD_FIRST)
+            table = np.concatenate((signal_fields, table)) if len(table) else signal_fields
         # Into the last pack's buffer, grown when too small: its pages are already the process's
         # (a new one of a pack's megabytes costs about as much as packing it). The writer copies
         # the records out (`ChunkWriter.add_records`) before the next pack.
@@ -805,6 +813,26 @@ class MessageBlock:
         for stream in carried:
             stream.carry()
         return packed
+
+    def _signal_tables(self, numbers: list[int], carried: list[SignalStream]) -> tuple:
+        """The fixed part of the stream table's rows of signal streams `numbers` (`carried`) packed
+        together (`SignalStream.table`, each one's first field in the field table, which they begin),
+        their field table, and their channels; made once per set of streams (a run packs the same
+        streams again and again)."""
+        key = tuple(numbers)
+        found = self._signal_table_cache.get(key)
+        if found is None:
+            rows = np.array([stream.table for stream in carried])
+            field_counts = rows[:, kernel.P_FIELD_COUNT]
+            rows[:, kernel.P_FIELD_FIRST] = np.cumsum(field_counts) - field_counts
+            fields = np.array(
+                list(itertools.chain.from_iterable(stream.fields for stream in carried)), dtype=np.int64
+            ).reshape(-1, kernel.FIELD_COLUMNS)
+            found = (rows, fields, [stream.records.channel for stream in carried])
+            if len(self._signal_table_cache) >= 16:
+                self._signal_table_cache.clear()
+            self._signal_table_cache[key] = found
+        return found
 
     def _records_numpy(self, order: np.ndarray) -> tuple[bytes, np.ndarray, np.ndarray, np.ndarray]:
         """The held messages' records built with NumPy (the reference for `_records_native`, and
