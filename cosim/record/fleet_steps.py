@@ -196,9 +196,10 @@ class FleetSteps:
         # The records of the components stepped by Python: (`_Live` group, step k, every record of
         # the group at k, side by side) per block in which the group stepped.
         self.live: list[tuple[_Live, int, np.ndarray]] = []
-        self.poses: list[tuple] = []  # (k, t_ns, `_odometry` rows)
+        self.poses: list[tuple] = []  # (k, t_ns, `_given` rows)
         self.deferred: set[int] = set()  # robots whose commands are read from the rows at the flush
         self.planned: tuple | None = None  # (kinds, `_plan`)
+        self._compacting: tuple | None = None  # (kinds, (component index, kept columns) to copy)
         self.handed = time.monotonic()  # [s] wall clock of the last flush
         self.window_ns = recorder.window_ns
         self.windows = self.WINDOWS if recorder.batching else 1
@@ -270,7 +271,7 @@ class FleetSteps:
         """Every robot's pose messages at t_ns (`rows`: x, y, theta [m, m, rad], v, omega [m/s,
         rad/s] per robot, in fleet order)."""
         self.flush()
-        signals, tf = self._pose_messages([(0, t_ns, self._odometry(rows))], 0, 2 * len(self.robots))
+        signals, tf = self._pose_messages([(0, t_ns, _given(rows))], 0, 2 * len(self.robots))
         self.recorder.hold_steps(signals, None, tf)
 
     def _pose_channels(self) -> list[int]:
@@ -291,36 +292,41 @@ class FleetSteps:
         return self._channels
 
     @staticmethod
-    def _odometry(rows) -> np.ndarray:
-        """Per robot x, y, qz, qw, v, omega of its /odom (`rows`: x, y, theta, v, omega per robot);
-        the quaternion as `rosmsg.quaternion` computes it."""
-        given = np.array(rows, dtype=np.float64).reshape(-1, 5)
+    def _odometry(rows: np.ndarray) -> np.ndarray:
+        """Per row x, y, qz, qw, v, omega of a robot's /odom (`rows`: x, y, theta, v, omega, any
+        leading shape); the quaternion as `rosmsg.quaternion` computes it."""
+        given = rows.reshape(-1, 5)
         halves = (given[:, 2] / 2.0).tolist()
         values = np.empty((len(given), 6))
         values[:, :2] = given[:, :2]
-        values[:, 2] = [math.sin(half) for half in halves]
-        values[:, 3] = [math.cos(half) for half in halves]
+        values[:, 2] = list(map(math.sin, halves))
+        values[:, 3] = list(map(math.cos, halves))
         values[:, 4:] = given[:, 3:]
-        return values
+        return values.reshape(*rows.shape[:-1], 6)
 
     def _pose_messages(self, taken: list, per_step: int, slot: int) -> tuple[list, tuple | None]:
-        """The pose messages of `taken` ((step k, t_ns, `_odometry` rows) per pose time): the rows of
-        every robot's /odom and /pose (keys k * per_step + slot + 2 r, + 1) for `hold_steps`'
-        signals, and the /tf messages (key k * per_step + slot + 2 N) as its others."""
+        """The pose messages of `taken` ((step k, t_ns, rows as `write_poses` takes them, float64)
+        per pose time): the rows of every robot's /odom and /pose (keys k * per_step + slot + 2 r,
+        + 1) for `hold_steps`' signals, and the /tf messages (key k * per_step + slot + 2 N) as its
+        others."""
         channels = self._pose_channels()
         if not taken:
             return [], None
         count = len(self.robots)
         steps = np.array([k for k, _, _ in taken], dtype=np.int64)
         times = np.array([t_ns for _, t_ns, _ in taken], dtype=np.int64)
-        values = np.stack([rows for _, _, rows in taken])  # pose time, robot, column
+        # pose time, robot, column (`_odometry`): every pose time's at once
+        values = self._odometry(np.stack([rows for _, _, rows in taken]))
         base = steps * per_step + slot
         signals = []
         for number in range(count):
             signals.append((channels[number], base + 2 * number, times, values[:, number]))
             signals.append((channels[count + number], base + 2 * number + 1, times, values[:, number, :4]))
         tf = self._tf
-        payloads = [(channels[-1], tf.fill(t_ns, rows[:, :4])) for (_, t_ns, rows) in taken]
+        payloads = [
+            (channels[-1], tf.fill(t_ns, rows[:, :4]))
+            for t_ns, rows in zip(times.tolist(), values, strict=True)
+        ]
         return signals, (base + 2 * count, times, payloads)
 
     def block(self, first: int, end: int, histories, poses=()) -> None:
@@ -366,7 +372,7 @@ class FleetSteps:
             others.append(
                 (k * per_step + self.obstacle_slot, t_ns, self.recorder.channel("/obstacles"), payload)
             )
-        taken = [(k, t_ns, self._odometry(rows)) for k, t_ns, rows in poses]
+        taken = [(k, t_ns, _given(rows)) for k, t_ns, rows in poses]
         if taken:
             self._pose_channels()
         # Then the block joins the collected steps.
@@ -374,7 +380,7 @@ class FleetSteps:
             self.first, self.kinds = first, kinds
             self.flush_at = ((start_ns + first * h_ns) // self.window_ns + self.windows) * self.window_ns
         self.end = end
-        self.collected.append(self._compact(histories))
+        self.collected.append(self._compact(histories, kinds))
         for number in commands:
             self.deferred.add(number)
         for robot, ranges in sweeps:
@@ -392,21 +398,25 @@ class FleetSteps:
         elif time.monotonic() - self.handed >= self.recorder.flush_interval:
             self.flush()  # a killed run loses no more wall time of steps than the recorder's flushes
 
-    def _compact(self, histories) -> list:
+    def _compact(self, histories, kinds: tuple[bool, ...]) -> list:
         """A block's rows as the flush reads them: of a component with `kept` columns only those,
         in their compact order (a copy); the others as they are when they own their data, else a
         copy (the caller's buffers may be refilled)."""
-        taken = self.taken
-        out = []
-        for index, rows in enumerate(histories):
-            if rows is None:
-                out.append(None)
-                continue
-            columns = taken.get(index)
-            if columns is not None:
-                out.append(rows[:, columns] if not isinstance(columns, slice) else rows[:, columns].copy())
+        if self._compacting is None or self._compacting[0] != kinds:
+            taken = self.taken
+            self._compacting = (
+                kinds,
+                [(index, taken.get(index)) for index, python in enumerate(kinds) if not python],
+            )
+        out = [None] * len(histories)
+        for index, columns in self._compacting[1]:
+            rows = histories[index]
+            if columns is None:
+                out[index] = rows if rows.base is None else rows.copy()
+            elif type(columns) is slice:
+                out[index] = rows[:, columns].copy()
             else:
-                out.append(rows if rows.base is None else rows.copy())
+                out[index] = rows.take(columns, axis=1)
         return out
 
     def _plan(self, kinds: tuple[bool, ...]) -> tuple[list, list]:
@@ -537,6 +547,12 @@ class FleetSteps:
         column = rows[: len(range(due, end, port.period)), port.column]
         at = (steps - due) // port.period
         return [float(column[j]) if j >= 0 else last for j in at.tolist()]
+
+
+def _given(rows) -> np.ndarray:
+    """Poses as `FleetSteps.write_poses` takes them (x, y, theta, v, omega per robot): a float64
+    copy, robot by robot (the caller may reuse its buffers)."""
+    return np.array(rows, dtype=np.float64).reshape(-1, 5)
 
 
 def _latest(column: np.ndarray, first: int, period: int, steps: np.ndarray, last: float) -> np.ndarray:
