@@ -323,10 +323,7 @@ class FleetSteps:
             signals.append((channels[number], base + 2 * number, times, values[:, number]))
             signals.append((channels[count + number], base + 2 * number + 1, times, values[:, number, :4]))
         tf = self._tf
-        payloads = [
-            (channels[-1], tf.fill(t_ns, rows[:, :4]))
-            for t_ns, rows in zip(times.tolist(), values, strict=True)
-        ]
+        payloads = [(channels[-1], payload) for payload in tf.fill_all(times.tolist(), values[:, :, :4])]
         return signals, (base + 2 * count, times, payloads)
 
     def block(self, first: int, end: int, histories, poses=()) -> None:
@@ -581,8 +578,9 @@ def _layout(build, count: int) -> FixedLayout:
 
 
 class _Filled:
-    """A `_Template`'s bytes for a time and values by two fancy-index assignments (the /tf message of
-    every robot: `fill(t_ns, values)`, values an array of the template's float64 fields)."""
+    """A `_Template`'s bytes for a time and values by fancy-index assignments (the /tf message of
+    every robot: `fill(t_ns, values)`, values an array of the template's float64 fields), or for
+    many at once (`fill_all`)."""
 
     def __init__(self, template: _Template) -> None:
         self.data = np.frombuffer(bytes(template.data), np.uint8).copy()
@@ -591,10 +589,20 @@ class _Filled:
         self.stamps = len(template.stamps)
 
     def fill(self, t_ns: int, values: np.ndarray) -> bytes:
-        stamp = np.frombuffer(_STAMP.pack(*divmod(int(t_ns), NS_PER_S)), np.uint8)
-        self.data[self.stamp_bytes] = np.tile(stamp, self.stamps)
-        self.data[self.field_bytes] = np.ascontiguousarray(values, dtype="<f8").reshape(-1).view(np.uint8)
-        return self.data.tobytes()
+        return self.fill_all([t_ns], np.asarray(values)[None])[0]
+
+    def fill_all(self, times: list[int], values: np.ndarray) -> list[bytes]:
+        """The messages at `times` [ns] (`values`: the fields of each time, first axis the times)."""
+        count = len(times)
+        data = np.empty((count, len(self.data)), np.uint8)
+        data[:] = self.data
+        stamps = np.empty(count, dtype=[("sec", "<i4"), ("nanosec", "<u4")])
+        for row, t_ns in enumerate(times):  # as _STAMP packs them (int32 seconds: checked)
+            stamps[row] = divmod(int(t_ns), NS_PER_S)
+        data[:, self.stamp_bytes] = np.tile(stamps.view(np.uint8).reshape(count, 8), self.stamps)
+        fields = np.ascontiguousarray(values, dtype="<f8").reshape(count, -1)
+        data[:, self.field_bytes] = fields.view(np.uint8)
+        return [row.tobytes() for row in data]
 
 
 class _Template:
