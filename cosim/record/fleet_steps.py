@@ -332,7 +332,7 @@ class FleetSteps:
         of `histories` that own their data (base None) are kept until the steps are flushed: the
         caller must not change them after (the others are copied)."""
         start_ns, h_ns, per_step = self.start_ns, self.h_ns, self.per_step
-        kinds = tuple(rows is None for rows in histories)
+        kinds = tuple([rows is None for rows in histories])
         if self.first is not None and (kinds != self.kinds or end - self.first > self.STEPS):
             self.flush()
         robots, live = self._plan(kinds)
