@@ -335,17 +335,17 @@ class MessageBlock:
         self.group_sizes[number] = size
         return size == self.capacity
 
-    def skip_pack(self) -> None:
+    def skip_pack(self, definitions: bool) -> bool:
         """Where a pack was due (a stream's block full, a window passed): the held messages count
-        as packed for what follows, and are packed when enough are held (`batch_limit`) or a
-        pack is asked for."""
+        as packed for what follows, and are to be packed (True) when enough are held
+        (`batch_limit`), `definitions` (schemas or channels) wait to be written or the wall clock
+        asks for it (`clock_due`); the caller packs them (`add_batch`)."""
         self.mark = self.count
         self.group = 0
         self.group_sizes = {}
-        if self.count >= self.batch_limit or self.writer.has_definitions():
-            self.pack()
-        elif self.clock_due is not None and self.clock_due():
-            self.pack()
+        if self.count >= self.batch_limit or definitions:
+            return True
+        return self.clock_due is not None and self.clock_due()
 
     def registered(self) -> None:
         """After a schema or channel was registered: it goes before the current group."""
@@ -544,7 +544,13 @@ class MessageBlock:
         `pose_stream`, one after the other); `times` [ns]: each message's stamp, never decreasing;
         `signal_rows`: per signal stream number, its rows in order (a step stream's row: the
         step's inputs, then its end outputs); `pose_rows`: per pose, x, y, theta, v, omega;
-        `raw`: per RAW_STREAM message, (channel, payload)."""
+        `raw`: per RAW_STREAM message, (channel, payload).
+
+        The places where one message at a time would have packed or skipped a pack are found
+        first (`_account`); the messages are then held a stream at a time up to the last pack and
+        after it (`_hold_batch`), with one pack there: the packs skipped before it would have
+        written the same records (nothing registers a schema or channel meanwhile), and the block
+        is left as it would have been."""
         self.settle()
         order = np.asarray(order, dtype=np.int64)
         times = np.asarray(times, dtype=np.int64)
@@ -565,6 +571,9 @@ class MessageBlock:
         }
         count = len(order)
         window = self.window_ns
+        held = self.count
+        last_pack = None  # the end of the messages packed last, where one was due
+        definitions = self.writer.has_definitions()  # written by the first pack
         i = 0
         while i < count:
             end, full = count, False
@@ -583,10 +592,18 @@ class MessageBlock:
                     end, full = stop, True
             if full and order[end - 1] == self.pose_streams[0]:
                 end += 2  # a pose's three messages are held together
-            self._hold_batch(order, times, i, end, stamps, signal_rows, pose_rows, raw, cursors)
-            if full:
-                self.skip_pack()
+            self._account(order, times, i, end)
+            if full and self.skip_pack(definitions):
+                last_pack, definitions = end, False
+                self.count = self.mark = 0  # as after the pack (`pack`)
             i = end
+        state = (self.count, self.mark, self.group, self.group_sizes, self.deadline)
+        self.count = held
+        if last_pack is not None:
+            self._hold_batch(order, 0, last_pack, stamps, signal_rows, pose_rows, raw, cursors)
+            self.pack()
+        self._hold_batch(order, last_pack or 0, count, stamps, signal_rows, pose_rows, raw, cursors)
+        self.count, self.mark, self.group, self.group_sizes, self.deadline = state
 
     def _room(self) -> int:
         """Messages that can be held before some stream's block is full, at least."""
@@ -608,21 +625,33 @@ class MessageBlock:
                 stop = candidate if stop is None else min(stop, candidate)
         return stop
 
-    def _hold_batch(self, order, times, first, end, stamps, signal_rows, pose_rows, raw, cursors) -> None:
-        """Hold messages order[first:end] (no pack); `stamps`: each stream's stamps in write
-        order, from its cursor on."""
+    def _account(self, order: np.ndarray, times: np.ndarray, first: int, end: int) -> None:
+        """Count messages order[first:end] in the group as holding them would (`_grouped`)."""
+        if first >= end:
+            return
+        if self.group == 0 and self.window_ns:
+            self.deadline = self._window_end(int(times[first]))
+        counts = np.bincount(order[first:end], minlength=len(self.streams)).tolist()
+        sizes = self.group_sizes
+        skipped = self.pose_streams[1:]  # poses counted once, at the /odom stream
+        for number in np.flatnonzero(counts).tolist():
+            if number not in skipped:
+                sizes[number] = sizes.get(number, 0) + counts[number]
+        self.count += end - first
+        self.group += end - first
+
+    def _hold_batch(self, order, first, end, stamps, signal_rows, pose_rows, raw, cursors) -> None:
+        """Hold messages order[first:end] (no pack, no group counted: `_account`); `stamps`: each
+        stream's stamps in write order, from its cursor on."""
         if first >= end:
             return
         part = order[first:end]
-        if self.group == 0 and self.window_ns:
-            self.deadline = self._window_end(int(times[first]))
         counts = np.bincount(part, minlength=len(self.streams)).tolist()
-        sizes, streams = self.group_sizes, self.streams
+        streams = self.streams
         for number in np.flatnonzero(counts).tolist():
             n = counts[number]
             stream = streams[number]
             if type(stream) is SignalStream:  # the most messages: tested first
-                sizes[number] = sizes.get(number, 0) + n
                 at = cursors[number]
                 rows = signal_rows[number]
                 if at or n != len(rows):
@@ -644,7 +673,6 @@ class MessageBlock:
                 continue
             if number == self.pose_streams[1] or number == self.pose_streams[2]:
                 continue
-            sizes[number] = sizes.get(number, 0) + n
             if number == RAW_STREAM:
                 at = cursors[RAW_STREAM]
                 self.raw += [
@@ -660,7 +688,6 @@ class MessageBlock:
                 cursors[number] = at + n
         self._order_part(part.copy())  # (the caller's array)
         self.count += end - first
-        self.group += end - first
 
     def _order_part(self, part: np.ndarray) -> None:
         """Messages of stream numbers `part` (int64, ours) held after those held so far."""
