@@ -11,9 +11,10 @@ them to `ChunkWriter.add_records`. The bytes are exactly what the per-message pa
 tests hold the C build to, and the stand-in past `kernel.MAX_STREAMS` streams).
 
 `MessageBlock.add_batch` takes the messages of many steps at once (arrays in write order) and
-packs exactly where holding them one at a time would have packed (a stream's block full, or a
-message past the first held message's chunk window), so a schema or channel registered between
-two messages lands where it would have.
+leaves the block as holding them one at a time would have (the places a pack was due: a stream's
+block full, or a message past the first held message's chunk window), so a schema or channel
+registered between two messages lands where it would have; of the packs due within the batch
+it does the last only, which writes the records the others would have.
 """
 
 from __future__ import annotations
