@@ -24,7 +24,8 @@ at those components' periods) and collects them; `flush()` hands their messages 
 every robot's signal records, every robot's scan and command, the obstacles, then the poses of the
 step's end). Per-stream work (hundreds of streams at N = 50) is done once per flush, not per
 block: steps are flushed every `WINDOWS` chunk windows of simulated time or the recorder's
-`flush_interval` of wall time, whichever comes first (as `cosim.record.blocks` does for one robot),
+`flush_interval` of wall time since the first of them was collected (not since the last flush: a
+slow set-up flushes no lone first block), whichever comes first (as `cosim.record.blocks` does),
 before a robot halts, and before anything else reaches the recorder (`Recorder.collect`: a schema or
 channel registered, metadata, the end), except a message written meanwhile (a plan, a goal), which
 is held after the collected steps and before the next block's. Every robot's /scan, /cmd_vel,
@@ -200,7 +201,7 @@ class FleetSteps:
         self.deferred: set[int] = set()  # robots whose commands are read from the rows at the flush
         self.planned: tuple | None = None  # (kinds, `_plan`)
         self._compacting: tuple | None = None  # (kinds, (component index, kept columns) to copy)
-        self.handed = time.monotonic()  # [s] wall clock of the last flush
+        self.handed = time.monotonic()  # [s] wall clock when the steps held began to be collected
         self.window_ns = recorder.window_ns
         self.windows = self.WINDOWS if recorder.batching else 1
         self.flush_at = 0
@@ -373,8 +374,9 @@ class FleetSteps:
         if taken:
             self._pose_channels()
         # Then the block joins the collected steps.
-        if self.first is None:
+        if self.first is None:  # the first steps held: their wall time counts from now
             self.first, self.kinds = first, kinds
+            self.handed = time.monotonic()
             self.flush_at = ((start_ns + first * h_ns) // self.window_ns + self.windows) * self.window_ns
         self.end = end
         self.collected.append(self._compact(histories, kinds))
@@ -454,7 +456,6 @@ class FleetSteps:
         others, live, taken, deferred = self.others, self.live, self.poses, self.deferred
         self.first = self.end = None
         self.collected, self.others, self.live, self.poses, self.deferred = [], [], [], [], set()
-        self.handed = time.monotonic()
         start_ns, h_ns = self.start_ns, self.h_ns
         # Keys doubled: a message written between two blocks (`written`) sorts between them (odd key).
         per_step = 2 * self.per_step

@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -123,3 +124,45 @@ def test_records_packed_into_a_kept_buffer_are_those_of_a_fresh_one():
         assert record[0] == 5 and int.from_bytes(record[1:9], "little") == 22 + len(payload)
         assert record[31:] == payload
         head += 31 + len(payload)
+
+
+def test_a_fleets_steps_are_flushed_by_the_wall_time_of_their_own_collection(tmp_path, monkeypatch):
+    # The recorder's flush_interval counts from when the steps held began to be collected: a slow
+    # set-up (the clock far on at the first block) flushes nothing early; a block that comes after
+    # flush_interval of collection does flush, and the log is the same either way.
+    from types import SimpleNamespace
+
+    from cosim.navigation.fleet import run_fleet
+    from cosim.record import fleet_steps
+    from cosim.scenario.load import parse_scenario
+
+    scenarios = Path(__file__).resolve().parents[2] / "scenarios"
+    text = (scenarios / "fleet_head_on.toml").read_text()
+    reference = tmp_path / "reference.mcap"
+    run_fleet(parse_scenario(text, "head_on.toml", scenarios), log_path=reference)
+
+    clock = [0.0]
+    monkeypatch.setattr(fleet_steps, "time", SimpleNamespace(monotonic=lambda: clock[0]))
+    flushed: list[tuple[int, int]] = []
+    blocks: list[tuple[int, int]] = []
+    block, flush = fleet_steps.FleetSteps.block, fleet_steps.FleetSteps.flush
+
+    def timed_block(self, first, end, *args, **kwargs):
+        clock[0] += 100.0 if not blocks else 0.0  # the set-up took long
+        if len(blocks) == 3:
+            clock[0] += 100.0  # the 4th block comes long after the collection began
+        blocks.append((first, end))
+        block(self, first, end, *args, **kwargs)
+
+    def recorded_flush(self):
+        if self.first is not None:
+            flushed.append((self.first, self.end))
+        flush(self)
+
+    monkeypatch.setattr(fleet_steps.FleetSteps, "block", timed_block)
+    monkeypatch.setattr(fleet_steps.FleetSteps, "flush", recorded_flush)
+    timed = tmp_path / "timed.mcap"
+    run_fleet(parse_scenario(text, "head_on.toml", scenarios), log_path=timed)
+    assert len(blocks) > 5
+    assert flushed[0] == (blocks[0][0], blocks[3][1])  # at the 4th block, not at the first
+    assert timed.read_bytes() == reference.read_bytes()
