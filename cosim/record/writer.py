@@ -16,9 +16,8 @@ the same bytes: a chunk ends when it holds more than `chunk_size` bytes of recor
 [n D, (n + 1) D). `copy_chunk` writes a chunk read from another file as it is (`cosim log recover`).
 
 With a second core, an ended chunk's CRC, zstd compression and MessageIndex records are made on a
-worker thread while the run goes on, and written to the file there, in order (the caller writes
-only once the thread is done with every chunk: `_Worker`, `ChunkWriter._finish_chunk`): the same
-bytes as made inline.
+worker thread while the run goes on, and the chunks are written in order once made (`_Worker`,
+`ChunkWriter._finish_chunk`): the same bytes as made inline.
 """
 
 from __future__ import annotations
@@ -260,8 +259,8 @@ class ChunkWriter:
         self._attachment_indexes: list[AttachmentIndex] = []
         self._metadata_indexes: list[MetadataIndex] = []
         self._builder = RecordBuilder()
-        # The chunks ended but not yet written, oldest first: the worker's job of each, which
-        # makes and writes it (`_made_chunk`; `_write_done`, `_drain` wait for them).
+        # The chunks ended but not yet written, oldest first: (worker job, chunk, index, start,
+        # end) each, written in order once compressed (`_write_done`, `_drain`).
         self._pending: deque[tuple] = deque()
 
     # --- records outside chunks -----------------------------------------------------------
@@ -471,8 +470,8 @@ class ChunkWriter:
     def _finish_chunk(self, last: bool = False) -> None:
         """End the open chunk. With a second core, one of at least `THREADED_BYTES` ended between
         messages is checksummed and compressed and its message indexes built on the worker
-        thread (`_Worker`) while the caller goes on, and written there, before anything else is
-        written (`_made_chunk`, `_drain`); otherwise, or when it is the `last` before the file is flushed
+        thread (`_Worker`) while the caller goes on, and written before anything else is written
+        (`_write_done`, `_drain`); otherwise, or when it is the `last` before the file is flushed
         or finished (waiting for the thread would only add its hand-offs), here. One chunk at a
         time either way, in order, so the file is the same bytes."""
         if self._chunk_messages == 0:
@@ -489,27 +488,22 @@ class ChunkWriter:
             self._write_chunk(*_chunk_parts(*parts), *pending)
             return
         self._write_done()
-        self._pending.append(_Worker.submit(self._made_chunk, parts, pending))
-
-    def _made_chunk(self, parts: tuple, pending: tuple) -> None:
-        """On the worker thread: an ended chunk made (`_chunk_parts`) and written. The jobs run one
-        at a time in the order given, and this thread writes to the file only while the caller's
-        thread does not (it waits for every pending chunk, `_drain`, before writing itself)."""
-        self._write_chunk(*_chunk_parts(*parts), *pending)
+        self._pending.append((_Worker.submit(_chunk_parts, *parts), *pending))
 
     def _write_done(self) -> None:
-        """Forget the oldest chunks the worker has written, without waiting (but for the oldest
-        when `PENDING_CHUNKS` wait); an error of the worker is raised here."""
+        """Write the oldest chunks the worker has compressed, without waiting (but for the oldest
+        when `PENDING_CHUNKS` wait)."""
         pending = self._pending
-        while pending and (_Worker.done(pending[0]) or len(pending) >= PENDING_CHUNKS):
-            _Worker.result(pending.popleft())
+        while pending and (_Worker.done(pending[0][0]) or len(pending) >= PENDING_CHUNKS):
+            job, *chunk = pending.popleft()
+            self._write_chunk(*_Worker.result(job), *chunk)
 
     def _drain(self) -> None:
-        """Wait for the chunks on the worker thread, if any (then the file holds every ended
-        chunk, and only the caller's thread writes to it)."""
+        """Write the chunks on the worker thread, if any (then the file holds every ended chunk)."""
         pending = self._pending
         while pending:
-            _Worker.result(pending.popleft())
+            job, *chunk = pending.popleft()
+            self._write_chunk(*_Worker.result(job), *chunk)
 
     def _write_chunk(
         self,
