@@ -214,8 +214,14 @@ def step_kernel(
 
 
 def pack_records(
-    order: np.ndarray, streams: np.ndarray, fields: np.ndarray, raw: np.ndarray, blob: bytes, size: int
-) -> tuple[bytearray, np.ndarray, np.ndarray, np.ndarray]:
+    order: np.ndarray,
+    streams: np.ndarray,
+    fields: np.ndarray,
+    raw: np.ndarray,
+    blob: bytes,
+    size: int,
+    out: bytearray | None = None,
+) -> tuple[bytearray | memoryview, np.ndarray, np.ndarray, np.ndarray]:
     """MCAP Message records of held messages, in write order, built in C (kernel.c's
     `navcosim_pack_records`): `order` (int64) the stream number of each message; `streams` the
     stream table (int64, STREAM_COLUMNS per stream number: a fixed-layout stream's template record
@@ -223,13 +229,17 @@ def pack_records(
     STREAM_RAW); `fields` the field table (FIELD_COLUMNS); `raw` the raw messages' table
     (RAW_COLUMNS, in their order) with their payloads in `blob`; `size` the records' total bytes.
     Returns (records, offsets, channels, times) as `ChunkWriter.add_records` takes them. The
-    addresses in the tables must point at live arrays of the right length (the caller's)."""
+    addresses in the tables must point at live arrays of the right length (the caller's). `out`:
+    a buffer of at least `size` bytes to write the records into (records is then a view of its
+    first `size` bytes: a caller packing again and again skips allocating and zeroing them)."""
     _kernel()
     count = len(order)
     if len(streams) > MAX_STREAMS:
         raise ValueError(f"pack_records: {len(streams)} streams, at most {MAX_STREAMS}")
     tables = [np.ascontiguousarray(table, dtype=np.int64) for table in (order, streams, fields, raw)]
-    out = bytearray(size)
+    if out is None or len(out) < size:
+        out = bytearray(size)
+    records = out if len(out) == size else memoryview(out)[:size]
     offsets = np.empty(count, dtype=np.int64)
     channels = np.empty(count, dtype=np.int64)
     times = np.empty(count, dtype=np.uint64)
@@ -249,7 +259,7 @@ def pack_records(
     )
     if written != size:
         raise ValueError(f"pack_records: the records are {written} bytes, not the {size} expected")
-    return out, offsets, channels, times
+    return records, offsets, channels, times
 
 
 def warm_up() -> None:

@@ -11,13 +11,15 @@ them to `ChunkWriter.add_records`. The bytes are exactly what the per-message pa
 tests hold the C build to, and the stand-in past `kernel.MAX_STREAMS` streams).
 
 `MessageBlock.add_batch` takes the messages of many steps at once (arrays in write order) and
-packs exactly where holding them one at a time would have packed (a stream's block full, or a
-message past the first held message's chunk window), so a schema or channel registered between
-two messages lands where it would have.
+leaves the block as holding them one at a time would have (the places a pack was due: a stream's
+block full, or a message past the first held message's chunk window), so a schema or channel
+registered between two messages lands where it would have; of the packs due within the batch
+it does the last only, which writes the records the others would have.
 """
 
 from __future__ import annotations
 
+import functools
 import itertools
 import struct
 from typing import NamedTuple
@@ -65,13 +67,19 @@ def _scatter(out: np.ndarray, starts: np.ndarray, records: np.ndarray) -> None:
 
 def _record_dtype(payload_fields: dict[str, tuple], payload_size: int) -> np.dtype:
     """A packed structured dtype of one MCAP message record: head fields, then payload fields at
-    their byte offsets within the payload (shifted by the head size)."""
+    their byte offsets within the payload (shifted by the head size). Made once per layout (a
+    fleet's robots have the same layouts: their /cmd_vel, their /scan)."""
+    return _layout_dtype(tuple(payload_fields.items()), payload_size)
+
+
+@functools.lru_cache(maxsize=256)
+def _layout_dtype(payload_fields: tuple, payload_size: int) -> np.dtype:
     names, formats, offsets = [], [], []
     for name, (fmt, offset) in _HEAD_FIELDS.items():
         names.append(name)
         formats.append(fmt)
         offsets.append(offset)
-    for name, (fmt, offset) in payload_fields.items():
+    for name, (fmt, offset) in payload_fields:
         names.append(name)
         formats.append(fmt)
         offsets.append(MESSAGE_HEAD_SIZE + offset)
@@ -313,6 +321,8 @@ class MessageBlock:
         self.clock_due = None  # () -> True when held messages are to reach the file now (wall clock)
         # Records built in C (`cosim.core.kernel.pack_records`); False: with NumPy (`_records_numpy`).
         self.native = True
+        self._out: bytearray | None = None  # the buffer packs write their records into
+        self._signal_table_cache: dict[tuple, tuple] = {}  # `_signal_tables`
         # Steps collected outside the block (`Recorder.collect`): its `flush()` hands them over
         # (through `add_batch`), called before any other message is held, packed or registered.
         self.collector = None
@@ -326,17 +336,17 @@ class MessageBlock:
         self.group_sizes[number] = size
         return size == self.capacity
 
-    def skip_pack(self) -> None:
+    def skip_pack(self, definitions: bool) -> bool:
         """Where a pack was due (a stream's block full, a window passed): the held messages count
-        as packed for what follows, and are packed when enough are held (`batch_limit`) or a
-        pack is asked for."""
+        as packed for what follows, and are to be packed (True) when enough are held
+        (`batch_limit`), `definitions` (schemas or channels) wait to be written or the wall clock
+        asks for it (`clock_due`); the caller packs them (`add_batch`)."""
         self.mark = self.count
         self.group = 0
         self.group_sizes = {}
-        if self.count >= self.batch_limit or self.writer.has_definitions():
-            self.pack()
-        elif self.clock_due is not None and self.clock_due():
-            self.pack()
+        if self.count >= self.batch_limit or definitions:
+            return True
+        return self.clock_due is not None and self.clock_due()
 
     def registered(self) -> None:
         """After a schema or channel was registered: it goes before the current group."""
@@ -535,15 +545,36 @@ class MessageBlock:
         `pose_stream`, one after the other); `times` [ns]: each message's stamp, never decreasing;
         `signal_rows`: per signal stream number, its rows in order (a step stream's row: the
         step's inputs, then its end outputs); `pose_rows`: per pose, x, y, theta, v, omega;
-        `raw`: per RAW_STREAM message, (channel, payload)."""
+        `raw`: per RAW_STREAM message, (channel, payload).
+
+        The places where one message at a time would have packed or skipped a pack are found
+        first (`_account`); the messages are then held a stream at a time up to the last pack and
+        after it (`_hold_batch`), with one pack there: the packs skipped before it would have
+        written the same records (nothing registers a schema or channel meanwhile), and the block
+        is left as it would have been."""
         self.settle()
         order = np.asarray(order, dtype=np.int64)
         times = np.asarray(times, dtype=np.int64)
         cursors = dict.fromkeys(signal_rows, 0)
         cursors[RAW_STREAM] = 0
         cursors[self.pose_streams[0]] = 0
+        # Each stream's stamps in write order, at once (a stream's next messages are its next
+        # stamps: `cursors`): one stable sort by stream number (a radix sort on 16 bits).
+        numbers = order.astype(np.uint16) if len(self.streams) <= 1 << 16 else order
+        by_stream = np.argsort(numbers, kind="stable")
+        grouped = times[by_stream]
+        counts = np.bincount(order, minlength=len(self.streams))
+        bounds = np.cumsum(counts).tolist()
+        stamps = {
+            number: grouped[bounds[number] - n : bounds[number]]
+            for number, n in enumerate(counts.tolist())
+            if n
+        }
         count = len(order)
         window = self.window_ns
+        held = self.count
+        last_pack = None  # the end of the messages packed last, where one was due
+        definitions = self.writer.has_definitions()  # written by the first pack
         i = 0
         while i < count:
             end, full = count, False
@@ -562,10 +593,18 @@ class MessageBlock:
                     end, full = stop, True
             if full and order[end - 1] == self.pose_streams[0]:
                 end += 2  # a pose's three messages are held together
-            self._hold_batch(order, times, i, end, signal_rows, pose_rows, raw, cursors)
-            if full:
-                self.skip_pack()
+            self._account(order, times, i, end)
+            if full and self.skip_pack(definitions):
+                last_pack, definitions = end, False
+                self.count = self.mark = 0  # as after the pack (`pack`)
             i = end
+        state = (self.count, self.mark, self.group, self.group_sizes, self.deadline)
+        self.count = held
+        if last_pack is not None:
+            self._hold_batch(order, 0, last_pack, stamps, signal_rows, pose_rows, raw, cursors)
+            self.pack()
+        self._hold_batch(order, last_pack or 0, count, stamps, signal_rows, pose_rows, raw, cursors)
+        self.count, self.mark, self.group, self.group_sizes, self.deadline = state
 
     def _room(self) -> int:
         """Messages that can be held before some stream's block is full, at least."""
@@ -587,35 +626,40 @@ class MessageBlock:
                 stop = candidate if stop is None else min(stop, candidate)
         return stop
 
-    def _hold_batch(self, order, times, first, end, signal_rows, pose_rows, raw, cursors) -> None:
-        """Hold messages order[first:end] (no pack)."""
+    def _account(self, order: np.ndarray, times: np.ndarray, first: int, end: int) -> None:
+        """Count messages order[first:end] in the group as holding them would (`_grouped`)."""
+        if first >= end:
+            return
+        if self.group == 0 and self.window_ns:
+            self.deadline = self._window_end(int(times[first]))
+        counts = np.bincount(order[first:end], minlength=len(self.streams)).tolist()
+        sizes = self.group_sizes
+        skipped = self.pose_streams[1:]  # poses counted once, at the /odom stream
+        for number in np.flatnonzero(counts).tolist():
+            if number not in skipped:
+                sizes[number] = sizes.get(number, 0) + counts[number]
+        self.count += end - first
+        self.group += end - first
+
+    def _hold_batch(self, order, first, end, stamps, signal_rows, pose_rows, raw, cursors) -> None:
+        """Hold messages order[first:end] (no pack, no group counted: `_account`); `stamps`: each
+        stream's stamps in write order, from its cursor on."""
         if first >= end:
             return
         part = order[first:end]
-        stamps = times[first:end]
-        if self.group == 0 and self.window_ns:
-            self.deadline = self._window_end(int(stamps[0]))
-        counts = np.bincount(part, minlength=len(self.streams))
-        # Each stream's stamps in held order: one stable sort instead of a mask per stream.
-        by_stream = np.argsort(part, kind="stable")
-        grouped = stamps[by_stream]
-        grouped_list = grouped.tolist()
-        bounds = np.cumsum(counts).tolist()
-        counts = counts.tolist()
-        sizes, streams = self.group_sizes, self.streams
+        counts = np.bincount(part, minlength=len(self.streams)).tolist()
+        streams = self.streams
         for number in np.flatnonzero(counts).tolist():
             n = counts[number]
             stream = streams[number]
-            low = bounds[number] - n
             if type(stream) is SignalStream:  # the most messages: tested first
-                sizes[number] = sizes.get(number, 0) + n
                 at = cursors[number]
                 rows = signal_rows[number]
                 if at or n != len(rows):
                     rows = rows[at : at + n]
                 cursors[number] = at + n
-                times = stream.times
-                held = len(times)
+                held_times = stream.times
+                held = len(held_times)
                 if held + n + 1 > len(stream.rows):
                     self._grow(stream, held + n)
                 split = stream.split
@@ -626,27 +670,25 @@ class MessageBlock:
                         raise CosimError(f"signal channel {stream.records.channel}: a step after end_steps")
                     stream.rows[held : held + n, :split] = rows[:, :split]
                     stream.rows[held + 1 : held + n + 1, split:] = rows[:, split:]
-                times += grouped_list[low : low + n]
+                held_times += stamps[number][at : at + n].tolist()
                 continue
             if number == self.pose_streams[1] or number == self.pose_streams[2]:
                 continue
-            sizes[number] = sizes.get(number, 0) + n
             if number == RAW_STREAM:
                 at = cursors[RAW_STREAM]
                 self.raw += [
                     (channel, t_ns, payload)
                     for (channel, payload), t_ns in zip(
-                        raw[at : at + n], grouped_list[low : low + n], strict=True
+                        raw[at : at + n], stamps[RAW_STREAM][at : at + n].tolist(), strict=True
                     )
                 ]
                 cursors[RAW_STREAM] = at + n
             elif number == self.pose_streams[0]:
                 at = cursors[number]
-                self.pose.add_rows(grouped[low : low + n], pose_rows[at : at + n])
+                self.pose.add_rows(stamps[number][at : at + n], pose_rows[at : at + n])
                 cursors[number] = at + n
         self._order_part(part.copy())  # (the caller's array)
         self.count += end - first
-        self.group += end - first
 
     def _order_part(self, part: np.ndarray) -> None:
         """Messages of stream numbers `part` (int64, ours) held after those held so far."""
@@ -717,6 +759,7 @@ class MessageBlock:
         fields: list[tuple[int, int, int]] = []
         alive: list[np.ndarray] = []  # arrays the tables point into, alive until the C call returns
         carried: list[SignalStream] = []
+        signal_fields = None
         size = 0
 
         def fixed(number: int, records: _Records, times: np.ndarray, matrix: np.ndarray, parts) -> int:
@@ -732,7 +775,7 @@ class MessageBlock:
             row[kernel.P_MATRIX_COLUMNS] = matrix.shape[1]
             row[kernel.P_STAMP_COUNT] = len(records.stamps)
             row[kernel.P_STAMP_FIRST : kernel.P_STAMP_FIRST + len(records.stamps)] = records.stamps
-            row[kernel.P_FIELD_FIRST] = len(fields)
+            row[kernel.P_FIELD_FIRST] = len(fields) + (0 if signal_fields is None else len(signal_fields))
             row[kernel.P_FIELD_COUNT] = len(parts)
             fields.extend((records.offset(name), column, width) for name, column, width in parts)
             alive.extend((times, matrix))
@@ -749,19 +792,18 @@ class MessageBlock:
             alive.append(times)
             starts = np.zeros(len(counts), dtype=np.int64)
             np.cumsum(counts[:-1], out=starts[1:])
-            rows = np.array([stream.table for stream in carried])
-            rows[:, kernel.P_SEQUENCE] = [
-                self._sequence(stream.records.channel, count)
-                for stream, count in zip(carried, counts, strict=True)
-            ]
+            table, signal_fields, channels = self._signal_tables(numbers, carried)
+            rows = table.copy()
+            sequences = self.sequences
+            firsts = [sequences[channel] for channel in channels]
+            for channel, count in zip(channels, counts, strict=True):
+                sequences[channel] += count
+            rows[:, kernel.P_SEQUENCE] = firsts
             rows[:, kernel.P_TIMES] = times.ctypes.data + 8 * starts
             # rows: float64, C-contiguous (made by `SignalStream`, `_grow`)
             rows[:, kernel.P_MATRIX] = [stream.address() for stream in carried]
             alive += [stream.rows for stream in carried]
-            field_counts = rows[:, kernel.P_FIELD_COUNT]
-            rows[:, kernel.P_FIELD_FIRST] = np.cumsum(field_counts) - field_counts
             streams[numbers] = rows
-            fields += itertools.chain.from_iterable(stream.fields for stream in carried)
             sizes = rows[:, kernel.P_SIZE]
             size += int(np.dot(sizes, counts))
         if self.pose is not None and self.pose.count:
@@ -788,10 +830,37 @@ class MessageBlock:
             size += MESSAGE_HEAD_SIZE * len(self.raw) + len(blob)
             self.raw = []
         table = np.array(fields, dtype=np.int64).reshape(-1, kernel.FIELD_COLUMNS)
-        packed = kernel.pack_records(order, streams, table, raw_table, blob, size)
+        if signal_fields is not None:  # the signal streams' fields first (their P_FIELD_FIRST)
+            table = np.concatenate((signal_fields, table)) if len(table) else signal_fields
+        # Into the last pack's buffer, grown when too small: its pages are already the process's
+        # (a new one of a pack's megabytes costs about as much as packing it). The writer copies
+        # the records out (`ChunkWriter.add_records`) before the next pack.
+        if self._out is None or len(self._out) < size:
+            self._out = bytearray(size + size // 4)
+        packed = kernel.pack_records(order, streams, table, raw_table, blob, size, self._out)
         for stream in carried:
             stream.carry()
         return packed
+
+    def _signal_tables(self, numbers: list[int], carried: list[SignalStream]) -> tuple:
+        """The fixed part of the stream table's rows of signal streams `numbers` (`carried`) packed
+        together (`SignalStream.table`, each one's first field in the field table, which they begin),
+        their field table, and their channels; made once per set of streams (a run packs the same
+        streams again and again)."""
+        key = tuple(numbers)
+        found = self._signal_table_cache.get(key)
+        if found is None:
+            rows = np.array([stream.table for stream in carried])
+            field_counts = rows[:, kernel.P_FIELD_COUNT]
+            rows[:, kernel.P_FIELD_FIRST] = np.cumsum(field_counts) - field_counts
+            fields = np.array(
+                list(itertools.chain.from_iterable(stream.fields for stream in carried)), dtype=np.int64
+            ).reshape(-1, kernel.FIELD_COLUMNS)
+            found = (rows, fields, [stream.records.channel for stream in carried])
+            if len(self._signal_table_cache) >= 16:
+                self._signal_table_cache.clear()
+            self._signal_table_cache[key] = found
+        return found
 
     def _records_numpy(self, order: np.ndarray) -> tuple[bytes, np.ndarray, np.ndarray, np.ndarray]:
         """The held messages' records built with NumPy (the reference for `_records_native`, and

@@ -24,7 +24,8 @@ at those components' periods) and collects them; `flush()` hands their messages 
 every robot's signal records, every robot's scan and command, the obstacles, then the poses of the
 step's end). Per-stream work (hundreds of streams at N = 50) is done once per flush, not per
 block: steps are flushed every `WINDOWS` chunk windows of simulated time or the recorder's
-`flush_interval` of wall time, whichever comes first (as `cosim.record.blocks` does for one robot),
+`flush_interval` of wall time since the first of them was collected (not since the last flush: a
+slow set-up flushes no lone first block), whichever comes first (as `cosim.record.blocks` does),
 before a robot halts, and before anything else reaches the recorder (`Recorder.collect`: a schema or
 channel registered, metadata, the end), except a message written meanwhile (a plan, a goal), which
 is held after the collected steps and before the next block's. Every robot's /scan, /cmd_vel,
@@ -75,6 +76,45 @@ class _Port(NamedTuple):
     kept: int = 0  # its column in the flush's kept columns (`FleetSteps._kept`)
 
 
+class _Live:
+    """The entries of components stepped by Python of one period (`period` [steps]), recorded from
+    their live buffers with one copy of all their records side by side: `parts` the buffers'
+    views in that order (after the `gathers` of gathered records), `places` slot -> the columns
+    of its record."""
+
+    def __init__(self, period: int) -> None:
+        self.period = period
+        self.parts: list[np.ndarray] = []
+        self.gathers: list = []
+        self.places: dict[int, slice] = {}
+        self.width = 0
+
+    def add(self, slot: int, entry: SignalEntry) -> None:
+        if entry.gather is not None:
+            self.gathers.append(entry.gather)
+        parts = (entry.first,) if entry.second is None else (entry.first, entry.second)
+        width = sum(len(part) for part in parts)
+        self.parts += parts
+        self.places[slot] = slice(self.width, self.width + width)
+        self.width += width
+
+    @staticmethod
+    def records(blocks: list) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """slot -> (steps, records) of the collected blocks' (`FleetSteps.live`)."""
+        taken: dict[_Live, tuple[list, list]] = {}
+        for group, k, row in blocks:
+            steps, rows = taken.setdefault(group, ([], []))
+            steps.append(k)
+            rows.append(row)
+        out = {}
+        for group, (steps, rows) in taken.items():
+            steps = np.array(steps, dtype=np.int64)
+            matrix = np.array(rows)
+            for slot, columns in group.places.items():
+                out[slot] = (steps, matrix[:, columns])
+        return out
+
+
 class _Robot:
     def __init__(self, name: str, view, recording: StepRecording, entries: list[_Entry], command) -> None:
         self.name = name
@@ -87,6 +127,7 @@ class _Robot:
         )  # after the last step handed over
         self.halted = False  # no longer stepped (`FleetSteps.halt`)
         self.cmd_channel: int | None = None  # its /cmd_vel (`Recorder.fixed_channel`), on first use
+        self.scan_channel: int | None = None  # its /scan (`Recorder.scan_channel`), on first use
         self.commands: list[tuple[np.ndarray, np.ndarray]] = []  # read from live buffers: (steps, v omega)
         self.sweeps: list[tuple[int, np.ndarray]] = []  # (step, ranges) of its lidar's collected sweeps
         self.odom_frame = f"{name}/{rosmsg.ODOM_FRAME}"
@@ -153,11 +194,14 @@ class FleetSteps:
         self.collected: list[list] = []  # each block's histories
         # (key, t_ns, channel, payload); keys doubled (`flush`): odd, written between two blocks
         self.others: list[tuple] = []
-        self.live: dict[int, list] = {}  # slot -> [(k, record)] of a component stepped by Python
-        self.poses: list[tuple] = []  # (k, t_ns, `_odometry` rows)
+        # The records of the components stepped by Python: (`_Live` group, step k, every record of
+        # the group at k, side by side) per block in which the group stepped.
+        self.live: list[tuple[_Live, int, np.ndarray]] = []
+        self.poses: list[tuple] = []  # (k, t_ns, `_given` rows)
         self.deferred: set[int] = set()  # robots whose commands are read from the rows at the flush
         self.planned: tuple | None = None  # (kinds, `_plan`)
-        self.handed = time.monotonic()  # [s] wall clock of the last flush
+        self._compacting: tuple | None = None  # (kinds, (component index, kept columns) to copy)
+        self.handed = time.monotonic()  # [s] wall clock when the steps held began to be collected
         self.window_ns = recorder.window_ns
         self.windows = self.WINDOWS if recorder.batching else 1
         self.flush_at = 0
@@ -228,7 +272,7 @@ class FleetSteps:
         """Every robot's pose messages at t_ns (`rows`: x, y, theta [m, m, rad], v, omega [m/s,
         rad/s] per robot, in fleet order)."""
         self.flush()
-        signals, tf = self._pose_messages([(0, t_ns, self._odometry(rows))], 0, 2 * len(self.robots))
+        signals, tf = self._pose_messages([(0, t_ns, _given(rows))], 0, 2 * len(self.robots))
         self.recorder.hold_steps(signals, None, tf)
 
     def _pose_channels(self) -> list[int]:
@@ -249,36 +293,38 @@ class FleetSteps:
         return self._channels
 
     @staticmethod
-    def _odometry(rows) -> np.ndarray:
-        """Per robot x, y, qz, qw, v, omega of its /odom (`rows`: x, y, theta, v, omega per robot);
-        the quaternion as `rosmsg.quaternion` computes it."""
-        given = np.array(rows, dtype=np.float64).reshape(-1, 5)
+    def _odometry(rows: np.ndarray) -> np.ndarray:
+        """Per row x, y, qz, qw, v, omega of a robot's /odom (`rows`: x, y, theta, v, omega, any
+        leading shape); the quaternion as `rosmsg.quaternion` computes it."""
+        given = rows.reshape(-1, 5)
         halves = (given[:, 2] / 2.0).tolist()
         values = np.empty((len(given), 6))
         values[:, :2] = given[:, :2]
-        values[:, 2] = [math.sin(half) for half in halves]
-        values[:, 3] = [math.cos(half) for half in halves]
+        values[:, 2] = list(map(math.sin, halves))
+        values[:, 3] = list(map(math.cos, halves))
         values[:, 4:] = given[:, 3:]
-        return values
+        return values.reshape(*rows.shape[:-1], 6)
 
     def _pose_messages(self, taken: list, per_step: int, slot: int) -> tuple[list, tuple | None]:
-        """The pose messages of `taken` ((step k, t_ns, `_odometry` rows) per pose time): the rows of
-        every robot's /odom and /pose (keys k * per_step + slot + 2 r, + 1) for `hold_steps`'
-        signals, and the /tf messages (key k * per_step + slot + 2 N) as its others."""
+        """The pose messages of `taken` ((step k, t_ns, rows as `write_poses` takes them, float64)
+        per pose time): the rows of every robot's /odom and /pose (keys k * per_step + slot + 2 r,
+        + 1) for `hold_steps`' signals, and the /tf messages (key k * per_step + slot + 2 N) as its
+        others."""
         channels = self._pose_channels()
         if not taken:
             return [], None
         count = len(self.robots)
         steps = np.array([k for k, _, _ in taken], dtype=np.int64)
         times = np.array([t_ns for _, t_ns, _ in taken], dtype=np.int64)
-        values = np.stack([rows for _, _, rows in taken])  # pose time, robot, column
+        # pose time, robot, column (`_odometry`): every pose time's at once
+        values = self._odometry(np.stack([rows for _, _, rows in taken]))
         base = steps * per_step + slot
         signals = []
         for number in range(count):
             signals.append((channels[number], base + 2 * number, times, values[:, number]))
             signals.append((channels[count + number], base + 2 * number + 1, times, values[:, number, :4]))
         tf = self._tf
-        payloads = [(channels[-1], tf.fill(t_ns, rows[:, :4])) for (_, t_ns, rows) in taken]
+        payloads = [(channels[-1], payload) for payload in tf.fill_all(times.tolist(), values[:, :, :4])]
         return signals, (base + 2 * count, times, payloads)
 
     def block(self, first: int, end: int, histories, poses=()) -> None:
@@ -287,7 +333,7 @@ class FleetSteps:
         of `histories` that own their data (base None) are kept until the steps are flushed: the
         caller must not change them after (the others are copied)."""
         start_ns, h_ns, per_step = self.start_ns, self.h_ns, self.per_step
-        kinds = tuple(rows is None for rows in histories)
+        kinds = tuple([rows is None for rows in histories])
         if self.first is not None and (kinds != self.kinds or end - self.first > self.STEPS):
             self.flush()
         robots, live = self._plan(kinds)
@@ -299,7 +345,10 @@ class FleetSteps:
         due: dict[int, np.ndarray] = {}  # period -> its steps in the block
         for number, robot, scan, python in robots:
             if scan is not None and first % scan.period == 0:  # a lidar steps in a block's first step
-                robot.view.scan_channel(scan.angles, scan.range_min, scan.range_max, scan.scan_time)
+                if robot.scan_channel is None:  # its layout is the run's: registered once
+                    robot.scan_channel = robot.view.scan_channel(
+                        scan.angles, scan.range_min, scan.range_max, scan.scan_time
+                    )
                 sweeps.append((robot, scan.current().copy()))
             if python is None:
                 continue
@@ -321,22 +370,25 @@ class FleetSteps:
             others.append(
                 (k * per_step + self.obstacle_slot, t_ns, self.recorder.channel("/obstacles"), payload)
             )
-        taken = [(k, t_ns, self._odometry(rows)) for k, t_ns, rows in poses]
+        taken = [(k, t_ns, _given(rows)) for k, t_ns, rows in poses]
         if taken:
             self._pose_channels()
         # Then the block joins the collected steps.
-        if self.first is None:
+        if self.first is None:  # the first steps held: their wall time counts from now
             self.first, self.kinds = first, kinds
+            self.handed = time.monotonic()
             self.flush_at = ((start_ns + first * h_ns) // self.window_ns + self.windows) * self.window_ns
         self.end = end
-        self.collected.append(self._compact(histories))
+        self.collected.append(self._compact(histories, kinds))
         for number in commands:
             self.deferred.add(number)
         for robot, ranges in sweeps:
             robot.sweeps.append((first, ranges))
-        for slot, entry in live:  # stepped by Python: their live buffers
-            if first % entry.period == 0:
-                self.live.setdefault(slot, []).append((first, entry.record()))
+        for group in live:  # stepped by Python: their live buffers, a group's in one copy
+            if first % group.period == 0:
+                for gather in group.gathers:
+                    gather.take()
+                self.live.append((group, first, np.concatenate(group.parts)))
         self.others += [(2 * key, t_ns, channel, payload) for key, t_ns, channel, payload in others]
         self.poses += taken
         t_last = start_ns + (end - 1) * h_ns
@@ -345,30 +397,34 @@ class FleetSteps:
         elif time.monotonic() - self.handed >= self.recorder.flush_interval:
             self.flush()  # a killed run loses no more wall time of steps than the recorder's flushes
 
-    def _compact(self, histories) -> list:
+    def _compact(self, histories, kinds: tuple[bool, ...]) -> list:
         """A block's rows as the flush reads them: of a component with `kept` columns only those,
         in their compact order (a copy); the others as they are when they own their data, else a
         copy (the caller's buffers may be refilled)."""
-        taken = self.taken
-        out = []
-        for index, rows in enumerate(histories):
-            if rows is None:
-                out.append(None)
-                continue
-            columns = taken.get(index)
-            if columns is not None:
-                out.append(rows[:, columns] if not isinstance(columns, slice) else rows[:, columns].copy())
+        if self._compacting is None or self._compacting[0] != kinds:
+            taken = self.taken
+            self._compacting = (
+                kinds,
+                [(index, taken.get(index)) for index, python in enumerate(kinds) if not python],
+            )
+        out = [None] * len(histories)
+        for index, columns in self._compacting[1]:
+            rows = histories[index]
+            if columns is None:
+                out[index] = rows if rows.base is None else rows.copy()
+            elif type(columns) is slice:
+                out[index] = rows[:, columns].copy()
             else:
-                out.append(rows if rows.base is None else rows.copy())
+                out[index] = rows.take(columns, axis=1)
         return out
 
     def _plan(self, kinds: tuple[bool, ...]) -> tuple[list, list]:
         """What a block records of the robots still stepped, for components stepped by Python where
         `kinds` says (made again when that or a robot's halt changes it): per robot (its number,
         the robot, its scan ports or None, whether a command port is stepped by Python or None: no
-        command), and (slot, entry) of each entry stepped by Python."""
+        command), and the entries stepped by Python, grouped by period (`_Live`)."""
         if self.planned is None or self.planned[0] != kinds:
-            robots, live = [], []
+            robots, groups = [], {}
             for number, robot in enumerate(self.robots):
                 if robot.halted:
                     continue
@@ -376,8 +432,12 @@ class FleetSteps:
                 if robot.command is not None:
                     python = any(kinds[port.index] for port in robot.command[1])
                 robots.append((number, robot, robot.recording.scan, python))
-                live += [(entry.slot, entry.entry) for entry in robot.entries if kinds[entry.index]]
-            self.planned = (kinds, (robots, live))
+                for entry in robot.entries:
+                    if kinds[entry.index]:
+                        groups.setdefault(entry.entry.period, _Live(entry.entry.period)).add(
+                            entry.slot, entry.entry
+                        )
+            self.planned = (kinds, (robots, list(groups.values())))
         return self.planned[1]
 
     def written(self, channel: int, t_ns: int, payload: bytes) -> bool:
@@ -395,12 +455,12 @@ class FleetSteps:
         first, end, kinds, collected = self.first, self.end, self.kinds, self.collected
         others, live, taken, deferred = self.others, self.live, self.poses, self.deferred
         self.first = self.end = None
-        self.collected, self.others, self.live, self.poses, self.deferred = [], [], {}, [], set()
-        self.handed = time.monotonic()
+        self.collected, self.others, self.live, self.poses, self.deferred = [], [], [], [], set()
         start_ns, h_ns = self.start_ns, self.h_ns
         # Keys doubled: a message written between two blocks (`written`) sorts between them (odd key).
         per_step = 2 * self.per_step
         rows_of: dict[int, np.ndarray] = {}
+        live = _Live.records(live)
 
         def rows(index: int) -> np.ndarray:
             found = rows_of.get(index)
@@ -418,9 +478,8 @@ class FleetSteps:
             for slot, index, _, entry, columns in robot.entries:
                 if kinds[index]:  # stepped by Python: in a block's first step at most
                     records = live.get(slot)
-                    if records:
-                        steps = np.array([k for k, _ in records], dtype=np.int64)
-                        values = np.array([row for _, row in records])
+                    if records is not None:
+                        steps, values = records
                         signals.append(
                             (entry.channel, steps * per_step + 2 * slot, start_ns + steps * h_ns, values)
                         )
@@ -443,7 +502,7 @@ class FleetSteps:
                 )
                 robot.sweeps = []
                 keys = steps * per_step + 2 * (self.scan_slot + 2 * number)
-                signals.append((view.scan_channel(scan.angles, *limits), keys, times, sweep_rows))
+                signals.append((robot.scan_channel, keys, times, sweep_rows))
             slot = 2 * (self.scan_slot + 2 * number + 1)
             if number in deferred:
                 period, ports = robot.command
@@ -488,6 +547,12 @@ class FleetSteps:
         return [float(column[j]) if j >= 0 else last for j in at.tolist()]
 
 
+def _given(rows) -> np.ndarray:
+    """Poses as `FleetSteps.write_poses` takes them (x, y, theta, v, omega per robot): a float64
+    copy, robot by robot (the caller may reuse its buffers)."""
+    return np.array(rows, dtype=np.float64).reshape(-1, 5)
+
+
 def _latest(column: np.ndarray, first: int, period: int, steps: np.ndarray, last: float) -> np.ndarray:
     """The value of a column of a component's rows from step `first` on (one row per step k with
     k % period == 0) after each of `steps`: its latest row at or before the step (`last` before
@@ -514,8 +579,9 @@ def _layout(build, count: int) -> FixedLayout:
 
 
 class _Filled:
-    """A `_Template`'s bytes for a time and values by two fancy-index assignments (the /tf message of
-    every robot: `fill(t_ns, values)`, values an array of the template's float64 fields)."""
+    """A `_Template`'s bytes for a time and values by fancy-index assignments (the /tf message of
+    every robot: `fill(t_ns, values)`, values an array of the template's float64 fields), or for
+    many at once (`fill_all`)."""
 
     def __init__(self, template: _Template) -> None:
         self.data = np.frombuffer(bytes(template.data), np.uint8).copy()
@@ -524,10 +590,20 @@ class _Filled:
         self.stamps = len(template.stamps)
 
     def fill(self, t_ns: int, values: np.ndarray) -> bytes:
-        stamp = np.frombuffer(_STAMP.pack(*divmod(int(t_ns), NS_PER_S)), np.uint8)
-        self.data[self.stamp_bytes] = np.tile(stamp, self.stamps)
-        self.data[self.field_bytes] = np.ascontiguousarray(values, dtype="<f8").reshape(-1).view(np.uint8)
-        return self.data.tobytes()
+        return self.fill_all([t_ns], np.asarray(values)[None])[0]
+
+    def fill_all(self, times: list[int], values: np.ndarray) -> list[bytes]:
+        """The messages at `times` [ns] (`values`: the fields of each time, first axis the times)."""
+        count = len(times)
+        data = np.empty((count, len(self.data)), np.uint8)
+        data[:] = self.data
+        stamps = np.empty(count, dtype=[("sec", "<i4"), ("nanosec", "<u4")])
+        for row, t_ns in enumerate(times):  # as _STAMP packs them (int32 seconds: checked)
+            stamps[row] = divmod(int(t_ns), NS_PER_S)
+        data[:, self.stamp_bytes] = np.tile(stamps.view(np.uint8).reshape(count, 8), self.stamps)
+        fields = np.ascontiguousarray(values, dtype="<f8").reshape(count, -1)
+        data[:, self.field_bytes] = fields.view(np.uint8)
+        return [row.tobytes() for row in data]
 
 
 class _Template:
