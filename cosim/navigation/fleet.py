@@ -598,11 +598,12 @@ class _BlockProgram:
     Python's). The components' push_inputs and get_outputs, which the C steps skip, are those of
     `PythonComponent` (a state check) and the components are stepping: checked by `make`."""
 
-    # The threads of a step (None: one for each CPU this process may use), and the fewest robots'
-    # chains due in a stretch that it takes to use more than one (fewer: one thread, no hand-over
-    # costs; measured at ~30 us a robot's lidar and planner, ~20 us a hand-over to another thread).
+    # The threads of a step (None: one for each CPU this process may use), and the fewest chains
+    # (robots) due in a stretch that use more than one: with 2 CPUs, fleet_fifty's first 5 robots
+    # take ~0.7 ms less of the calling thread a simulated second on two threads, 6 robots ~1.2 ms,
+    # 2 to 4 none measurable, for ~0.3-0.5 ms more CPU in all (waking the other thread).
     threads: int | None = None
-    MIN_CHAINS = 4
+    MIN_CHAINS = 5
 
     def __init__(self, entries: list, copies: list, chains: list[list[int]] | None = None) -> None:
         from cosim.world import kernels
