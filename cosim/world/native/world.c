@@ -6,7 +6,12 @@
  * those of the numba kernels these replaced, bit for bit. The long-lived arrays and constants of
  * a lidar or a world come in one struct set up once in Python (the `ctypes.Structure`s of
  * cosim/world/kernels.py mirror them field for field); a call passes its address and the pose. */
+#ifdef __linux__
+#define _GNU_SOURCE /* sched_getcpu, pthread_setaffinity_np (and POSIX's pthreads under -std=c99) */
+#include <sched.h>
+#else
 #define _POSIX_C_SOURCE 200809L /* pthreads and getpid under -std=c99 */
+#endif
 #include <math.h>
 #include <pthread.h>
 #include <stdint.h>
@@ -765,6 +770,7 @@ struct BlockPool {
     BlockProgram *job;
     int64_t due_count, taken, done; /* the job's chains: p->due[0 .. due_count) */
     pid_t pid;                      /* the process of the threads (a forked child has none) */
+    int64_t away_from;              /* Linux: the CPU the workers are kept off (-1: none) */
 };
 
 /* Step the job's chains left; called with the lock held, returns with it held. */
@@ -817,6 +823,7 @@ BlockPool *block_pool_new(int64_t workers)
     pthread_cond_init(&pool->wake, NULL);
     pthread_cond_init(&pool->finished, NULL);
     pool->pid = getpid();
+    pool->away_from = -1;
     for (int64_t w = 0; w < workers; w++) {
         if (pthread_create(pool->threads + w, NULL, block_worker, pool) != 0)
             break;
@@ -871,6 +878,20 @@ static void block_stretch(BlockProgram *p)
             p->cursor[p->due[d]] = block_chain(p, p->due[d], p->start);
         return;
     }
+#ifdef __linux__
+    /* The workers kept off the calling thread's CPU: woken where it runs they would wait for it
+     * (the scheduler places a woken thread beside its waker when no CPU is idle). */
+    int cpu = sched_getcpu();
+    if (cpu >= 0 && cpu != pool->away_from) {
+        cpu_set_t allowed;
+        if (sched_getaffinity(0, sizeof allowed, &allowed) == 0 && CPU_COUNT(&allowed) > 1) {
+            CPU_CLR(cpu, &allowed);
+            for (int64_t w = 0; w < pool->count; w++)
+                pthread_setaffinity_np(pool->threads[w], sizeof allowed, &allowed);
+        }
+        pool->away_from = cpu;
+    }
+#endif
     pthread_mutex_lock(&pool->lock);
     pool->job = p;
     pool->due_count = due;
