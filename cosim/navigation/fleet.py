@@ -599,11 +599,12 @@ class _BlockProgram:
     `PythonComponent` (a state check) and the components are stepping: checked by `make`."""
 
     # The threads of a step (None: one for each CPU this process may use), and the fewest chains
-    # (robots) due in a stretch that use more than one: with 2 CPUs, fleet_fifty's first 5 robots
-    # take ~0.7 ms less of the calling thread a simulated second on two threads, 6 robots ~1.2 ms,
-    # 2 to 4 none measurable, for ~0.3-0.5 ms more CPU in all (waking the other thread).
+    # (robots) due in a stretch that use more than one. Measured with 2 CPUs under a load of ~5
+    # (fleet_fifty's first N robots, unlogged, ms a simulated second, wall / CPU, one thread -> two):
+    # N = 5: 5.3 / 5.3 -> 6.5 / 6.5; N = 12: 11.7 / 11.8 -> 12.8 / 13.4; N = 20: 20.3 / 20.1 ->
+    # 20.5 / 21.7; N = 50: 52 / 52 -> 48 / 55.6 (the other thread's cold caches and wake-ups).
     threads: int | None = None
-    MIN_CHAINS = 5
+    MIN_CHAINS = 20
 
     def __init__(self, entries: list, copies: list, chains: list[list[int]] | None = None) -> None:
         from cosim.world import kernels
