@@ -27,6 +27,7 @@ LIBRARIES = {
             "Lidar": "cosim.world.kernels:LidarArrays",
             "BlockStep": "cosim.world.kernels:BlockStepArrays",
             "BlockCopy": "cosim.world.kernels:BlockCopyArrays",
+            "BlockProgram": "cosim.world.kernels:BlockProgramArrays",
         },
         ("cosim.world.kernels",),
     ),

@@ -113,6 +113,19 @@ class BlockStepArrays(ctypes.Structure):
     ]  # fmt: skip
 
 
+class BlockProgramArrays(ctypes.Structure):
+    """`BlockProgram` of world.c: `fleet_python_block_threads`'s program, its steps and copies, the
+    chained entries chain by chain (`members`, chain c from `firsts[c]` to `firsts[c + 1]`), two
+    scratch arrays of one value a chain, the thread pool (`block_pool_new`; NULL: one thread) and
+    the fewest chains due that use it, and the state of the step under way (the kernel's)."""
+
+    _fields_ = [
+        ("steps", _p), ("n", _i64), ("copies", _p), ("members", _p), ("firsts", _p), ("chains", _i64),
+        ("cursor", _p), ("due", _p), ("pool", _p), ("min_chains", _i64),
+        ("open", _i64), ("k", _i64), ("start", _i64), ("end", _i64), ("t", _f64),
+    ]  # fmt: skip
+
+
 # `fleet_python_block`'s kinds of component: stepped by Python (handed back before its gather), a
 # lidar swept in C, a component with a C step (handed back when that says so), the copies only.
 BLOCK_PYTHON, BLOCK_LIDAR, BLOCK_C_STEP, BLOCK_COPIES = 0, 1, 2, 3
@@ -183,6 +196,9 @@ def library() -> ctypes.CDLL:
                 "world_check_positions": (_i64, [_p, _i64]),
                 "fleet_judge": (_i64, [_p, _i64, _p, _p, _p, _p, _p, _i64, _p]),
                 "fleet_python_block": (_i64, [_p, _i64, _i64, _i64, _f64, _p]),
+                "fleet_python_block_threads": (_i64, [_p, _i64, _i64, _f64]),
+                "block_pool_new": (_p, [_i64]),
+                "block_pool_free": (None, [_p]),
             },
         )
     return _library

@@ -182,3 +182,96 @@ def test_the_c_block_steps_as_the_python_steps(monkeypatch, tmp_path):
     for (k, found), (k_slow, expected) in zip(fast, slow, strict=True):
         assert k == k_slow
         assert found == expected, f"block at step {k}"
+
+
+def _threads(monkeypatch, threads: int) -> None:
+    """Programs made from here on step on `threads` threads, already from two robots' chains."""
+    monkeypatch.setattr(fleet_module._BlockProgram, "threads", threads)
+    monkeypatch.setattr(fleet_module._BlockProgram, "MIN_CHAINS", 2)
+
+
+def _made(monkeypatch) -> list:
+    made = []
+    make = fleet_module._BlockProgram.make.__func__
+
+    def recorded(cls, *args):
+        made.append(make(cls, *args))
+        return made[-1]
+
+    monkeypatch.setattr(fleet_module._BlockProgram, "make", classmethod(recorded))
+    return made
+
+
+def test_the_threaded_block_steps_as_the_one_thread_block(monkeypatch, tmp_path):
+    """fleet_head_on, robot1's lidar stepped by Python (a component every chain waits for or
+    follows), the planners handing back: the chains side by side on two threads leave the same
+    bytes after every block as the one-thread call, and hand back the same components."""
+    with monkeypatch.context() as patched:
+        _threads(patched, 2)
+        made = _made(patched)
+        threaded, threaded_counts = _run_blocks(patched, tmp_path, program=True)
+    with monkeypatch.context() as patched:
+        _threads(patched, 1)
+        single_made = _made(patched)
+        single, single_counts = _run_blocks(patched, tmp_path, program=True)
+    assert made[0].program is not None and single_made[0].program is None
+    # robot2's lidar and planner, robot1's planner alone
+    assert made[0]._firsts.tolist() == [0, 2, 3]
+    assert threaded_counts == single_counts and threaded_counts["handed"] > 0
+    assert len(threaded) == len(single)
+    for (k, found), (k_single, expected) in zip(threaded, single, strict=True):
+        assert k == k_single
+        assert found == expected, f"block at step {k}"
+
+
+def test_ten_robots_on_three_threads_as_on_one(monkeypatch, tmp_path):
+    """fleet_missions (ten robots, every lidar and planner in C) for 6 s on three threads, its
+    chains taken by whichever thread is free: every component's inputs, outputs and planner state
+    after each block are the one-thread call's."""
+    text = (SCENARIOS / "fleet_missions.toml").read_text()
+    text = text.replace('file = "maps/', f'file = "{SCENARIOS / "maps"}/')
+    path = tmp_path / "fleet.toml"
+    path.write_text(text)
+
+    def run(threads: int) -> tuple[list, list]:
+        states = []
+        with monkeypatch.context() as patched:
+            _threads(patched, threads)
+            made = _made(patched)
+            step = fleet_module._PythonSteps.step
+
+            def recorded(self, k):
+                step(self, k)
+                states.append((k, _state(self.master.system)))
+
+            patched.setattr(fleet_module._PythonSteps, "step", recorded)
+            fleet_module.run_fleet(load_scenario(path, ["simulation.stop_time=6"], fleet=True))
+        return states, made
+
+    threaded, made = run(3)
+    single, single_made = run(1)
+    assert made[0].program is not None and len(made[0]._firsts) - 1 == 10
+    assert single_made[0].program is None
+    assert len(threaded) == len(single) > 0
+    for (k, found), (k_single, expected) in zip(threaded, single, strict=True):
+        assert k == k_single
+        assert found == expected, f"block at step {k}"
+
+
+def test_chains_join_the_components_reading_each_other():
+    """A component joins the chain of each one stepped in C whose outputs it reads (before or after
+    it in the order); a producer stepped by Python or an FMU (not in `chained`) joins nothing."""
+
+    class Link:
+        def __init__(self, producer):
+            self.producer = producer
+
+    chained = {"lidar1": 0, "lidar2": 1, "lidar3": 2, "planner1": 3, "planner2": 4, "planner3": 5}
+    links = {
+        "planner1": [Link("lidar1"), Link("vehicle1")],
+        "planner2": [Link("lidar2"), Link("noisy")],
+        "planner3": [Link("lidar3")],
+        "lidar3": [Link("planner2")],  # (an output of the last step)
+    }
+    assert fleet_module._chains(chained, links) == [[0, 3], [1, 2, 4, 5]]
+    assert fleet_module._chains(chained, {}) == [[i] for i in range(6)]

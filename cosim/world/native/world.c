@@ -6,8 +6,17 @@
  * those of the numba kernels these replaced, bit for bit. The long-lived arrays and constants of
  * a lidar or a world come in one struct set up once in Python (the `ctypes.Structure`s of
  * cosim/world/kernels.py mirror them field for field); a call passes its address and the pose. */
+#ifdef __linux__
+#define _GNU_SOURCE /* sched_getcpu, pthread_setaffinity_np (and POSIX's pthreads under -std=c99) */
+#include <sched.h>
+#else
+#define _POSIX_C_SOURCE 200809L /* pthreads and getpid under -std=c99 */
+#endif
 #include <math.h>
+#include <pthread.h>
 #include <stdint.h>
+#include <stdlib.h>
+#include <unistd.h>
 
 #include "geometry.h"
 #include "pyhypot.h"
@@ -729,6 +738,42 @@ typedef struct {
 
 enum { BLOCK_PYTHON = 0, BLOCK_LIDAR = 1, BLOCK_C_STEP = 2, BLOCK_COPIES = 3 };
 
+/* One due component's gather, then its lidar sweep or C step; nonzero when its C step hands it to
+ * Python. */
+static int64_t block_step(const BlockStep *s, const BlockCopy *copies, double t)
+{
+    for (int64_t c = s->first_copy; c < s->first_copy + s->copies; c++) {
+        const BlockCopy *copy = copies + c;
+        const double *source = copy->source;
+        double *target = copy->target;
+        int64_t stride = copy->stride;
+        if (!copy->multiply && !copy->add) {
+            for (int64_t j = 0; j < copy->count; j++)
+                target[j] = source[j * stride];
+        } else {
+            for (int64_t j = 0; j < copy->count; j++) {
+                double value = source[j * stride];
+                if (copy->multiply)
+                    value = value * copy->scale;
+                if (copy->add)
+                    value = value + copy->offset;
+                target[j] = value;
+            }
+        }
+    }
+    if (s->kind == BLOCK_LIDAR) {
+        const double *in = s->inputs;
+        for (int64_t j = 0; j < s->robots; j++) {
+            s->robot_rows[3 * j] = in[3 + j];
+            s->robot_rows[3 * j + 1] = in[3 + s->robots + j];
+        }
+        lidar_scan(s->lidar, in[0], in[1], in[2]);
+    } else if (s->kind == BLOCK_C_STEP) {
+        return s->c_step(s->state, t) != 0;
+    }
+    return 0;
+}
+
 /* The steps of `n` components due at step k (time t [s]) from `start` on: for each, its gather,
  * then a lidar's step (`Lidar.step`: the other robots' circles at the positions on its inputs, a
  * sweep from the pose on them) or a C step (`PlannerComponent.kernel_step`). Returns the first
@@ -743,37 +788,264 @@ int64_t fleet_python_block(const BlockStep *steps, int64_t n, int64_t start, int
             continue;
         if (s->kind == BLOCK_PYTHON)
             return i;
-        for (int64_t c = s->first_copy; c < s->first_copy + s->copies; c++) {
-            const BlockCopy *copy = copies + c;
-            const double *source = copy->source;
-            double *target = copy->target;
-            int64_t stride = copy->stride;
-            if (!copy->multiply && !copy->add) {
-                for (int64_t j = 0; j < copy->count; j++)
-                    target[j] = source[j * stride];
-            } else {
-                for (int64_t j = 0; j < copy->count; j++) {
-                    double value = source[j * stride];
-                    if (copy->multiply)
-                        value = value * copy->scale;
-                    if (copy->add)
-                        value = value + copy->offset;
-                    target[j] = value;
-                }
+        if (block_step(s, copies, t))
+            return i;
+    }
+    return n;
+}
+
+
+/* ------------------------------- the same on the machine's cores (a fleet's robots side by side) */
+
+/* Within one step k the due components fall into chains (`_BlockProgram.make`): a chain's
+ * components read (through their gathers) only outputs of the FMUs, which no step of this call
+ * writes, and of components of the same chain; each writes only its own inputs, outputs and state
+ * (a lidar's circles, scratch and ranges; a planner's costmap, its scratch and step state); the
+ * maps they share are read-only. So the chains may step side by side, each in the master's order on
+ * one thread, up to its first component handed to Python. The hand-backs are returned one at a
+ * time in the master's order, and a chain goes on after Python has stepped the one it handed back.
+ * No two chains touch the same memory: each component's operations, and so its results, are those
+ * of `fleet_python_block`, bit for bit. A component stepped by Python only (BLOCK_PYTHON) may read
+ * anything: the chains before it are done before it is handed back, those after it start after. */
+
+typedef struct BlockPool BlockPool;
+
+/* `_BlockProgram`'s steps in chains, and the stretch of a step under way. */
+typedef struct {
+    const BlockStep *steps; /* n entries: the components in the master's order, the feeds last */
+    int64_t n;
+    const BlockCopy *copies;
+    const int64_t *members; /* the chained entries (neither BLOCK_PYTHON nor the feeds), chain by chain */
+    const int64_t *firsts;  /* chains + 1: chain c is members[firsts[c] .. firsts[c + 1]), in order */
+    int64_t chains;
+    int64_t *cursor;        /* chains, scratch: where each chain stopped (a hand-back, or `end`) */
+    int64_t *due;           /* chains, scratch: the chains with a component due in the stretch */
+    BlockPool *pool;        /* NULL: one thread */
+    int64_t min_chains;     /* fewer chains due in a stretch: all stepped on the calling thread */
+    /* The stretch under way (`open`): step k at t, the components up to `end` (a BLOCK_PYTHON
+     * component due, or the feeds), the chains from `start` on. */
+    int64_t open, k, start, end;
+    double t;
+} BlockProgram;
+
+/* Chain c's due components from `from` up to the stretch's end: the first handed to Python, or
+ * the end. */
+static int64_t block_chain(const BlockProgram *p, int64_t c, int64_t from)
+{
+    for (int64_t m = p->firsts[c]; m < p->firsts[c + 1]; m++) {
+        int64_t i = p->members[m];
+        if (i < from)
+            continue;
+        if (i >= p->end)
+            break;
+        const BlockStep *s = p->steps + i;
+        if (p->k % s->period)
+            continue;
+        if (block_step(s, p->copies, p->t))
+            return i;
+    }
+    return p->end;
+}
+
+/* Worker threads (the calling thread is one more): a job is a program's due chains of a stretch,
+ * each taken by whichever thread is free. Every field is read and written under `lock`. */
+struct BlockPool {
+    pthread_mutex_t lock;
+    pthread_cond_t wake, finished;
+    pthread_t *threads;
+    int64_t count;      /* the workers started */
+    int64_t generation; /* counts the jobs: a worker sleeps until it changes, or `stop` */
+    int stop;
+    BlockProgram *job;
+    int64_t due_count, front, back, done; /* the job's chains p->due[0 .. due_count): those left, done */
+    pid_t pid;                      /* the process of the threads (a forked child has none) */
+    int64_t away_from;              /* Linux: the CPU the workers are kept off (-1: none) */
+};
+
+/* Step the job's chains left, the calling thread from the first on, the workers from the last back
+ * (each robot's memory mostly stays in one CPU's cache from step to step); called with the lock
+ * held, returns with it held. */
+static void block_pool_take(BlockPool *pool, int caller)
+{
+    BlockProgram *p = pool->job;
+    while (pool->front < pool->back) {
+        int64_t c = p->due[caller ? pool->front++ : --pool->back];
+        pthread_mutex_unlock(&pool->lock);
+        p->cursor[c] = block_chain(p, c, p->start);
+        pthread_mutex_lock(&pool->lock);
+        if (++pool->done == pool->due_count)
+            pthread_cond_signal(&pool->finished);
+    }
+}
+
+static void *block_worker(void *argument)
+{
+    BlockPool *pool = argument;
+    pthread_mutex_lock(&pool->lock);
+    int64_t seen = pool->generation;
+    for (;;) {
+        while (pool->generation == seen && !pool->stop)
+            pthread_cond_wait(&pool->wake, &pool->lock);
+        if (pool->stop)
+            break;
+        seen = pool->generation;
+        block_pool_take(pool, 0);
+    }
+    pthread_mutex_unlock(&pool->lock);
+    return NULL;
+}
+
+void block_pool_free(BlockPool *pool);
+
+/* A pool of `workers` threads; NULL when none could be started. */
+BlockPool *block_pool_new(int64_t workers)
+{
+    if (workers < 1)
+        return NULL;
+    BlockPool *pool = calloc(1, sizeof(BlockPool));
+    if (!pool)
+        return NULL;
+    pool->threads = calloc((size_t)workers, sizeof(pthread_t));
+    if (!pool->threads) {
+        free(pool);
+        return NULL;
+    }
+    pthread_mutex_init(&pool->lock, NULL);
+    pthread_cond_init(&pool->wake, NULL);
+    pthread_cond_init(&pool->finished, NULL);
+    pool->pid = getpid();
+    pool->away_from = -1;
+    for (int64_t w = 0; w < workers; w++) {
+        if (pthread_create(pool->threads + w, NULL, block_worker, pool) != 0)
+            break;
+        pool->count++;
+    }
+    if (!pool->count) {
+        block_pool_free(pool);
+        return NULL;
+    }
+    return pool;
+}
+
+/* Stops and joins the pool's threads (none in a forked child: only its memory is freed). */
+void block_pool_free(BlockPool *pool)
+{
+    if (!pool)
+        return;
+    if (pool->pid == getpid()) {
+        pthread_mutex_lock(&pool->lock);
+        pool->stop = 1;
+        pthread_cond_broadcast(&pool->wake);
+        pthread_mutex_unlock(&pool->lock);
+        for (int64_t w = 0; w < pool->count; w++)
+            pthread_join(pool->threads[w], NULL);
+        pthread_mutex_destroy(&pool->lock);
+        pthread_cond_destroy(&pool->wake);
+        pthread_cond_destroy(&pool->finished);
+    }
+    free(pool->threads);
+    free(pool);
+}
+
+/* The chains of the stretch from p->start: the due ones on the pool's threads and this one (on this
+ * one alone with fewer than p->min_chains, or no pool of this process), each to its first
+ * hand-back. */
+static void block_stretch(BlockProgram *p)
+{
+    int64_t due = 0;
+    for (int64_t c = 0; c < p->chains; c++) {
+        p->cursor[c] = p->end;
+        for (int64_t m = p->firsts[c]; m < p->firsts[c + 1]; m++) {
+            int64_t i = p->members[m];
+            if (i >= p->start && i < p->end && !(p->k % p->steps[i].period)) {
+                p->due[due++] = c;
+                break;
             }
-        }
-        if (s->kind == BLOCK_LIDAR) {
-            const double *in = s->inputs;
-            for (int64_t j = 0; j < s->robots; j++) {
-                s->robot_rows[3 * j] = in[3 + j];
-                s->robot_rows[3 * j + 1] = in[3 + s->robots + j];
-            }
-            lidar_scan(s->lidar, in[0], in[1], in[2]);
-        } else if (s->kind == BLOCK_C_STEP) {
-            if (s->c_step(s->state, t))
-                return i;
         }
     }
+    BlockPool *pool = p->pool;
+    if (!pool || due < p->min_chains || due < 2 || pool->pid != getpid()) {
+        for (int64_t d = 0; d < due; d++)
+            p->cursor[p->due[d]] = block_chain(p, p->due[d], p->start);
+        return;
+    }
+#ifdef __linux__
+    /* The workers kept off the calling thread's CPU: woken where it runs they would wait for it
+     * (the scheduler places a woken thread beside its waker when no CPU is idle). */
+    int cpu = sched_getcpu();
+    if (cpu >= 0 && cpu != pool->away_from) {
+        cpu_set_t allowed;
+        if (sched_getaffinity(0, sizeof allowed, &allowed) == 0 && CPU_COUNT(&allowed) > 1) {
+            CPU_CLR(cpu, &allowed);
+            for (int64_t w = 0; w < pool->count; w++)
+                pthread_setaffinity_np(pool->threads[w], sizeof allowed, &allowed);
+        }
+        pool->away_from = cpu;
+    }
+#endif
+    pthread_mutex_lock(&pool->lock);
+    pool->job = p;
+    pool->due_count = due;
+    pool->front = pool->done = 0;
+    pool->back = due;
+    pool->generation++;
+    pthread_cond_broadcast(&pool->wake);
+    block_pool_take(pool, 1);
+    while (pool->done < pool->due_count)
+        pthread_cond_wait(&pool->finished, &pool->lock);
+    pool->job = NULL;
+    pthread_mutex_unlock(&pool->lock);
+}
+
+/* The first chain's stop before the stretch's end (the next hand-back, in the master's order), or
+ * the end. */
+static int64_t block_next_hand_back(const BlockProgram *p)
+{
+    int64_t first = p->end;
+    for (int64_t c = 0; c < p->chains; c++)
+        if (p->cursor[c] < first)
+            first = p->cursor[c];
+    return first;
+}
+
+/* `fleet_python_block` for the program `p`, its chains side by side: the same returns (the index of
+ * the next component Python must step, or n), the same calls from Python (`start` 0, then the
+ * index after each returned). A chain that handed back the component before `start` goes on from
+ * `start` (on this thread); the others' cursors stand. */
+int64_t fleet_python_block_threads(BlockProgram *p, int64_t start, int64_t k, double t)
+{
+    int64_t n = p->n;
+    if (start == 0 || p->k != k || p->t != t)
+        p->open = 0;
+    if (p->open) {
+        for (int64_t c = 0; c < p->chains; c++)
+            if (p->cursor[c] == start - 1)
+                p->cursor[c] = block_chain(p, c, start);
+    }
+    for (;;) {
+        if (p->open) {
+            int64_t next = block_next_hand_back(p);
+            if (next < p->end)
+                return next;
+            p->open = 0;
+            start = p->end;
+            if (start >= n - 1)
+                break;
+            return start; /* (a BLOCK_PYTHON component due: its index) */
+        }
+        int64_t end = start;
+        while (end < n - 1 && !(p->steps[end].kind == BLOCK_PYTHON && !(k % p->steps[end].period)))
+            end++;
+        p->k = k;
+        p->t = t;
+        p->start = start;
+        p->end = end;
+        p->open = 1;
+        block_stretch(p);
+    }
+    /* The feeds (the last entry, never handed back). */
+    if (start < n && !(k % p->steps[n - 1].period))
+        block_step(p->steps + n - 1, p->copies, t);
     return n;
 }
 
@@ -887,6 +1159,22 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_FIELD(BlockStep, robots);
     LAYOUT_FIELD(BlockStep, c_step);
     LAYOUT_FIELD(BlockStep, state);
+    LAYOUT_SIZE(BlockProgram);
+    LAYOUT_FIELD(BlockProgram, steps);
+    LAYOUT_FIELD(BlockProgram, n);
+    LAYOUT_FIELD(BlockProgram, copies);
+    LAYOUT_FIELD(BlockProgram, members);
+    LAYOUT_FIELD(BlockProgram, firsts);
+    LAYOUT_FIELD(BlockProgram, chains);
+    LAYOUT_FIELD(BlockProgram, cursor);
+    LAYOUT_FIELD(BlockProgram, due);
+    LAYOUT_FIELD(BlockProgram, pool);
+    LAYOUT_FIELD(BlockProgram, min_chains);
+    LAYOUT_FIELD(BlockProgram, open);
+    LAYOUT_FIELD(BlockProgram, k);
+    LAYOUT_FIELD(BlockProgram, start);
+    LAYOUT_FIELD(BlockProgram, end);
+    LAYOUT_FIELD(BlockProgram, t);
     LAYOUT_CONSTANT(BLOCK_PYTHON);
     LAYOUT_CONSTANT(BLOCK_LIDAR);
     LAYOUT_CONSTANT(BLOCK_C_STEP);
