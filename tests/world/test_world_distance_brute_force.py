@@ -15,7 +15,6 @@ from cosim.world.distance import WorldDistance, distance_to_obstacle
 from cosim.world.shapes import Circle, Rectangle
 from planner.grid import OccupancyGrid
 
-
 # The C library's hypot, which world.c's circle distance calls (Python's math.hypot differs from it
 # in the last bit for about one pair in 200).
 _LIBM = ctypes.CDLL(ctypes.util.find_library("m"))
