@@ -7,34 +7,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from fixtures.links import Box, linked_inputs
 
-from cosim.core.component import Port, PythonComponent
 from cosim.core.gather import Snapshot, _runs, make_gather
 from cosim.core.system import System
-
-
-class Box(PythonComponent):
-    def __init__(self, name: str, inputs: int = 0, outputs: int = 0):
-        ins = [Port(f"in[{i + 1}]", start=-7.0) for i in range(inputs)]
-        outs = [Port(f"out[{i + 1}]") for i in range(outputs)]
-        super().__init__(name, inputs=ins, outputs=outs, feedthrough={p.name: [] for p in outs})
-
-    def step(self, t, h):
-        pass
-
-
-def _reference(system: System, consumer: Box) -> np.ndarray:
-    """The consumer's inputs after copying each link in order, in Python floats."""
-    values = consumer.input_buffer.tolist()
-    for link in system.links()[consumer.name]:
-        value = float(system.components[link.producer].output_buffer[link.output])
-        scale, offset = link.connection.scale, link.connection.offset
-        if scale != 1.0:
-            value = value * scale
-        if offset != 0.0:
-            value = value + offset
-        values[link.input] = value
-    return np.array(values)
 
 
 def _interleaved(n: int) -> list[tuple[int, int]]:
@@ -81,7 +57,7 @@ def test_gather_matches_the_connections_copied_one_by_one(wiring, scale_offset):
     gather = make_gather(system, sink)
     assert gather is not None
     for _ in range(2):  # again after the outputs changed: the gather reads the buffers anew
-        expected = _reference(system, sink)
+        expected = linked_inputs(system, sink)
         gather()
         assert sink.input_buffer.tobytes() == expected.tobytes()
         source.output_buffer[:] = source.output_buffer[::-1] * 3.0

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fixtures.links import Box, linked_inputs
 
-from cosim.core.component import Port, PythonComponent
 from cosim.core.system import System
 from cosim.navigation import fleet as fleet_module
 from cosim.navigation.planner import PlannerComponent
@@ -23,30 +23,6 @@ from cosim.world import kernels
 from cosim.world.lidar import Lidar
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
-
-
-class Box(PythonComponent):
-    def __init__(self, name: str, inputs: int = 0, outputs: int = 0):
-        ins = [Port(f"in[{i + 1}]", start=-7.0) for i in range(inputs)]
-        outs = [Port(f"out[{i + 1}]") for i in range(outputs)]
-        super().__init__(name, inputs=ins, outputs=outs, feedthrough={p.name: [] for p in outs})
-
-    def step(self, t, h):
-        pass
-
-
-def _reference(system: System, consumer: Box) -> np.ndarray:
-    """The consumer's inputs after copying each link in order, in Python floats."""
-    values = consumer.input_buffer.tolist()
-    for link in system.links()[consumer.name]:
-        value = float(system.components[link.producer].output_buffer[link.output])
-        scale, offset = link.connection.scale, link.connection.offset
-        if scale != 1.0:
-            value = value * scale
-        if offset != 0.0:
-            value = value + offset
-        values[link.input] = value
-    return np.array(values)
 
 
 WIRINGS = {  # (producer, output, input)
@@ -96,7 +72,7 @@ def test_block_copies_are_the_connections_applied_one_by_one(wiring, scale_offse
         copies,
     )
     assert program.run(0, 0, 0.0) == 1
-    assert sink.input_buffer.tobytes() == _reference(system, sink).tobytes()
+    assert sink.input_buffer.tobytes() == linked_inputs(system, sink).tobytes()
 
 
 def test_no_block_copies_when_an_input_is_written_twice():
@@ -158,14 +134,7 @@ def _run_blocks(monkeypatch, tmp_path: Path, program: bool) -> tuple[list, dict]
 
 
 def test_the_c_block_steps_as_the_python_steps(monkeypatch, tmp_path):
-    made = []
-    make = fleet_module._BlockProgram.make.__func__
-
-    def recorded(cls, *args):
-        made.append(make(cls, *args))
-        return made[-1]
-
-    monkeypatch.setattr(fleet_module._BlockProgram, "make", classmethod(recorded))
+    made = _made(monkeypatch)
     with monkeypatch.context() as patched:
         fast, fast_counts = _run_blocks(patched, tmp_path, program=True)
     slow, slow_counts = _run_blocks(monkeypatch, tmp_path, program=False)
