@@ -629,6 +629,9 @@ def _canvas_class():
     return Canvas
 
 
+canvas_class = _canvas_class  # public: the canvas other figures (sweep.png) draw with too
+
+
 def _font_height_metrics(prop, dpi: float) -> tuple:
     """(ascent, descent, line gap) [px] of the font of `prop`, the numbers matplotlib's `Text` lays a
     line out with when its renderer does not give them: the font's typographic metrics of its OS/2

@@ -340,6 +340,7 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
 
     import dask
     import distributed.utils
+    from distributed import versions
     from distributed.nanny import WorkerProcess
 
     count = max(1, min(workers or os.cpu_count() or 1, pending))
@@ -355,6 +356,11 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
         forkserver.ensure_running()
     finally:
         signal.signal(signal.SIGINT, previous)
+    # The scheduler reads its host's and packages' versions when the first worker registers
+    # (`distributed.versions.get_versions`: `uname -p` run as a subprocess, a dozen packages'
+    # metadata read, the metadata parser imported: 10-20 ms), on the way to the cluster's start.
+    # Read now, while the workers wait for the fork server to warm up, the answer is kept then.
+    versions.get_versions()
     # A Ctrl-C while the cluster starts (most of a second: its workers wait for the fork server to
     # warm up) is held until it has started, then the cluster is closed and the interrupt goes on.
     # Ignored, as it was over the whole start, the sweep went on as if no key had been pressed;

@@ -68,3 +68,18 @@ def test_sweep_png_has_the_pixels_savefig_writes(case, tmp_path):
 def test_no_rows_no_png(tmp_path):
     assert plot_sweep([], KEYS, OUTCOME, tmp_path / "sweep.png", grid=True) is None
     assert not (tmp_path / "sweep.png").exists()
+
+
+# Three figures drawn (~1.5 s).
+@pytest.mark.slow
+def test_sweep_png_has_the_same_bytes_drawn_again_after_another(tmp_path):
+    """sweep.png's canvas keeps each text's layout for the process (`cosim.logs.plot.canvas_class`):
+    a figure drawn again, after another one whose texts differ, with all of its own texts then laid
+    out ahead, has the very bytes it had when drawn first."""
+    make_rows, keys, grid, replicates = CASES["grid"]
+    rows = make_rows()
+    first = plot_sweep(rows, keys, OUTCOME, tmp_path / "first.png", grid, "grid: sweep", replicates)
+    other_rows, other_keys, other_grid, other_replicates = CASES["one key with replicates"]
+    plot_sweep(other_rows(), other_keys, OUTCOME, tmp_path / "other.png", other_grid, "", other_replicates)
+    again = plot_sweep(rows, keys, OUTCOME, tmp_path / "again.png", grid, "grid: sweep", replicates)
+    assert first.read_bytes() == again.read_bytes()
