@@ -520,8 +520,9 @@ class PanelHelper:
         if rows is None:
             drafted.pixels()[top:bottom, left:right] = shared[top:bottom, left:right]
         else:
-            into = rows[top:bottom, 1 + 3 * left : 1 + 3 * right].reshape(bottom - top, right - left, 3)
-            into[:] = shared[top:bottom, left:right, :3]
+            from cosim.logs.plot import copy_rgb
+
+            copy_rgb(rows[top:bottom, 1 + 3 * left : 1 + 3 * right], shared[top:bottom, left:right])
         return True
 
     def cancel(self) -> None:

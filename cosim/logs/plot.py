@@ -965,8 +965,17 @@ def png_rows(pixels: np.ndarray) -> np.ndarray:
     height, width = pixels.shape[:2]
     rows = np.empty((height, 1 + 3 * width), dtype=np.uint8)
     rows[:, 0] = 0
-    rows[:, 1:].reshape(height, width, 3)[:] = pixels[:, :, :3]
+    copy_rgb(rows[:, 1:], pixels)
     return rows
+
+
+def copy_rgb(rows: np.ndarray, pixels: np.ndarray) -> None:
+    """Copy the RGB bytes of `pixels` (rows x columns x 3 or 4) into `rows` (rows x 3 columns), one
+    colour at a time: numpy copies 3 bytes of each pixel at once several times slower (~13 ms for
+    a run's picture here, ~2 ms so)."""
+    into = rows.reshape(pixels.shape[0], pixels.shape[1], 3)
+    for colour in range(3):
+        into[:, :, colour] = pixels[:, :, colour]
 
 
 def write_png(path: Path, pixels: np.ndarray, dpi: float, rows: np.ndarray | None = None) -> None:
@@ -995,7 +1004,7 @@ def write_png(path: Path, pixels: np.ndarray, dpi: float, rows: np.ndarray | Non
         part = rows[low:high]
         if copy:
             part[:, 0] = 0
-            part[:, 1:].reshape(high - low, width, 3)[:] = pixels[low:high, :, :3]
+            copy_rgb(part[:, 1:], pixels[low:high])
         stream = zlib.compressobj(1, zlib.DEFLATED, -15)  # raw: no zlib header or checksum
         body = stream.compress(part) + stream.flush(zlib.Z_FINISH if index == 1 else zlib.Z_SYNC_FLUSH)
         done[index] = (body, zlib.adler32(part))

@@ -153,6 +153,20 @@ def test_write_png_stream_decompresses_with_its_checksum(shape, made_before, tmp
     assert np.array_equal(rows[:, 1:].reshape(*shape, 3), pixels[:, :, :3])
 
 
+def test_copy_rgb_fills_a_window_of_png_rows_pixel_by_pixel():
+    """As the plot process pastes its helper's panels into the PNG's rows: a window of columns of
+    some rows gets each pixel's R, G, B bytes (the 4th byte left out), the rest is untouched."""
+    rng = np.random.default_rng(3)
+    rows = rng.integers(0, 256, (20, 1 + 3 * 30), dtype=np.uint8)
+    pixels = rng.integers(0, 256, (20, 30, 4), dtype=np.uint8)
+    expected = rows.copy()
+    for row in range(4, 15):
+        for column in range(7, 25):
+            expected[row, 1 + 3 * column : 4 + 3 * column] = pixels[row, column, :3]
+    plot.copy_rgb(rows[4:15, 1 + 3 * 7 : 1 + 3 * 25], pixels[4:15, 7:25])
+    assert np.array_equal(rows, expected)
+
+
 @pytest.mark.parametrize("lengths", [(0, 0), (0, 9), (9, 0), (1, 1), (5552, 70000), (100_000, 3)])
 def test_adler32_of_two_strings_is_zlibs_of_both(lengths):
     import zlib
