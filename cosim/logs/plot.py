@@ -30,6 +30,7 @@ from __future__ import annotations
 import os
 from contextlib import contextmanager
 from pathlib import Path
+from types import ModuleType
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -470,16 +471,68 @@ def prepare_drawing() -> None:
     """Import what `draw` uses and load the font its texts are set in: the work of a plot that
     does not depend on the data (`cosim.cli.plotter` does it while the run goes). For a process
     that draws the run's figures and exits (`skip_matplotlib_docstrings`), and draws no 3-D axes:
-    matplotlib's projections are registered without the 3-D one (`_without_3d_axes`)."""
+    matplotlib's projections are registered without the 3-D one (`_without_3d_axes`); nor, most
+    likely, usetex text: the glyph names only it reads run when first used (`_glyph_names_when_used`)."""
     import importlib
 
     skip_matplotlib_docstrings()
+    _glyph_names_when_used()
     with collector_paused(), _without_3d_axes():
         for module in ("backends.backend_agg", "figure", "collections", "lines", "patches", "ticker"):
             importlib.import_module(f"matplotlib.{module}")
         from matplotlib.font_manager import FontProperties, findfont, get_font
 
         get_font(findfont(FontProperties()))
+
+
+def _glyph_names_when_used() -> None:
+    """Before matplotlib's text modules are first imported: `fontTools.agl` (Adobe's glyph names,
+    which `matplotlib.dviread` imports and reads only for text drawn with usetex; importing it
+    builds its tables, ~10 ms of CPU) is put in place as a module that runs when first used."""
+    runs_when_used("fontTools.agl")
+
+
+def runs_when_used(name: str) -> ModuleType | None:
+    """Put the module `name` (of a package: "package.module") in place without running its code,
+    which runs when a name it does not hold yet is first looked up in it (`_RunsWhenUsed`); it is
+    bound in its package as an import binds it. The module, or None (and nothing done) when it
+    is imported already or cannot be found."""
+    import importlib.util
+    import sys
+
+    if name in sys.modules:
+        return None
+    try:
+        spec = importlib.util.find_spec(name)
+    except ImportError:  # (no such package: its importer then says so)
+        return None
+    if spec is None or spec.loader is None or not hasattr(spec.loader, "exec_module"):
+        return None
+    module = importlib.util.module_from_spec(spec)
+    module.__class__ = _RunsWhenUsed
+    sys.modules[name] = module
+    package, _, child = name.rpartition(".")
+    if package:
+        setattr(sys.modules[package], child, module)
+    return module
+
+
+class _RunsWhenUsed(ModuleType):
+    """A module whose code has not run yet: it runs (its loader's `exec_module`) when a name it does
+    not hold yet is looked up, which is then looked up in the module as it is made. Its import
+    attributes (`__spec__`, `__name__`, ...) are there before: an import of it, which reads them,
+    does not run it."""
+
+    def __getattr__(self, name: str):
+        import sys
+
+        self.__class__ = ModuleType
+        try:
+            self.__spec__.loader.exec_module(self)
+        except BaseException:
+            sys.modules.pop(self.__name__, None)  # as a failed import leaves it: imported anew next time
+            raise
+        return getattr(self, name)
 
 
 @contextmanager
