@@ -46,7 +46,11 @@ if TYPE_CHECKING:
 AVOIDERS = {"VectorFieldHistogram": "VFH", "ArtificialPotentialField": "APF"}
 DPI = 110
 GRID_ALPHA = 0.3  # the panels' grid lines
-TICKS_AHEAD = 8  # the ticks a drafted panel's axis makes ahead (`Draft`); its view holds 3 to 8
+# The ticks a drafted panel's axis makes ahead (`Draft`: a tick is five artists, ~1 ms of CPU): its
+# view holds 3 to 8, a panel's y axis mostly 3 to 5, the time axis mostly 6 to 8. Each y axis makes
+# the first few with the draft, the rest while the run goes, when there is time (`Draft.more_ticks`).
+TICKS_AHEAD = 8
+Y_TICKS_DRAFTED = 4
 
 # Where the default series come from, in order of preference (each must be in the trace's
 # `TRACE_SIGNALS`, so that the plot of a run's trace is the plot of its log).
@@ -877,8 +881,22 @@ class Draft:
                     axes.patch.set_visible(False)
             for axis in [axes.yaxis for axes in self.panel_axes] + [self.panel_axes[-1].xaxis]:
                 _tick_marks_off(axis)  # as `_panel_ticks` has them, before the ticks are made
-                axis.get_major_ticks(TICKS_AHEAD)  # a tick is five artists: made here, not after the run
+                # made here, not after the run; a y axis' likely further ones by `more_ticks`
+                axis.get_major_ticks(TICKS_AHEAD if axis is self.panel_axes[-1].xaxis else Y_TICKS_DRAFTED)
                 axis.get_minor_ticks(1)  # (an axis makes one even with none to draw)
+
+    def more_ticks(self, stop=lambda: False) -> None:
+        """Make the panels' y axes' ticks up to `TICKS_AHEAD` each, one round of one more tick per
+        axis at a time, until `stop()` is true (asked before each round): the ticks a panel is
+        less likely to draw, made while the run goes when there is time for them (a tick made
+        ahead or when drawn: the same)."""
+        axes = [panel.yaxis for panel in self.panel_axes]
+        for count in range(Y_TICKS_DRAFTED + 1, TICKS_AHEAD + 1):
+            if stop():
+                return
+            with collector_paused():
+                for axis in axes:
+                    axis.get_major_ticks(count)
 
     def fits(self, data: PlotData) -> bool:
         """Whether `data` has the drafted frame: the same map image and view, panel rows and title lines."""
