@@ -1126,6 +1126,46 @@ def _ticks_in_view(axes) -> None:
         locations = _in_view(axis.get_majorticklocs(), limits)
         if len(locations) >= 2:
             axis.set_major_locator(FixedLocator(locations))
+        _label_boxes_once(axis)
+
+
+def _label_boxes_once(axis) -> None:
+    """Have `axis` place its label, when drawn, from the boxes of the tick labels it has just
+    measured for itself. matplotlib 3.11's `Axis.draw` updates its ticks and measures their labels
+    (`_get_ticklabel_bboxes`), draws the ticks, then places the axis label from the boxes of the
+    tick labels of the axis and of the axes it is aligned with (`_get_tick_boxes_siblings`), which
+    updates and measures the same ticks again when it is aligned with none (nothing changed
+    them in between: the same boxes, the same label position). With another version, or a figure
+    that aligns labels, matplotlib's own steps. A no-op for an axis so already."""
+    import matplotlib
+
+    if "_get_tick_boxes_siblings" in vars(axis) or matplotlib.__version__.split(".")[:2] != ["3", "11"]:
+        return
+    measured: list = []
+    measure, siblings = axis._get_ticklabel_bboxes, axis._get_tick_boxes_siblings
+
+    def get_ticklabel_bboxes(ticks, renderer=None):
+        boxes = measure(ticks, renderer)
+        measured[:] = [boxes]
+        return boxes
+
+    def get_tick_boxes_siblings(renderer):
+        name = axis._get_axis_name()
+        groups = axis.get_figure(root=False)._align_label_groups
+        if measured and name in groups and groups[name].get_siblings(axis.axes) == [axis.axes]:
+            return measured[0]
+        return siblings(renderer)
+
+    def draw(renderer):
+        measured.clear()  # (only what this draw measures)
+        try:
+            return type(axis).draw(axis, renderer)
+        finally:
+            measured.clear()
+
+    axis._get_ticklabel_bboxes = get_ticklabel_bboxes
+    axis._get_tick_boxes_siblings = get_tick_boxes_siblings
+    axis.draw = draw
 
 
 def _in_view(locations, limits) -> list[float]:

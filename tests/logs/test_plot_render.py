@@ -78,6 +78,19 @@ def test_the_shortcuts_draw_the_pixels_of_matplotlibs_own_axes(panels, tmp_path,
     assert np.array_equal(drawn, plain)
 
 
+@pytest.mark.parametrize("panels", [5, 1])
+def test_axis_labels_placed_from_the_tick_labels_measured_once_are_where_matplotlib_puts_them(
+    panels, tmp_path, monkeypatch
+):
+    """An axis places its label from the boxes its draw measured (`_label_boxes_once`), not
+    measured again: the same pixels as matplotlib's own steps (every axis label of the map and
+    the panels; the panels' y labels sit left of tick labels of different widths)."""
+    drawn = _pixels(plot.draw(_data(panels), tmp_path / "drawn.png"))
+    monkeypatch.setattr(plot, "_label_boxes_once", lambda axis: None)
+    plain = _pixels(plot.draw(_data(panels), tmp_path / "plain.png"))
+    assert np.array_equal(drawn, plain)
+
+
 def _has(pixels: np.ndarray, colour: str, at_least: int = 4) -> bool:
     rgb = np.array([int(colour[i : i + 2], 16) for i in (1, 3, 5)])
     return int(np.all(pixels == rgb, axis=2).sum()) >= at_least
