@@ -331,6 +331,7 @@ def _child(data_read: int, reply_write: int, scenario, drawer=None) -> None:
             helper = PanelHelper.start(drafted, (data_read, reply_write))
         elif drafted is not None:  # it draws both parts, on a busy machine: the longest texts only
             _warm(likely_texts(True) + likely_texts(False, numbers=False), data_read)
+            drafted.more_ticks(lambda: _readable(data_read))
         with os.fdopen(data_read, "rb") as pipe:
             panels = _frame(pipe)
             if not panels:
@@ -520,8 +521,9 @@ class PanelHelper:
         if rows is None:
             drafted.pixels()[top:bottom, left:right] = shared[top:bottom, left:right]
         else:
-            into = rows[top:bottom, 1 + 3 * left : 1 + 3 * right].reshape(bottom - top, right - left, 3)
-            into[:] = shared[top:bottom, left:right, :3]
+            from cosim.logs.plot import copy_rgb
+
+            copy_rgb(rows[top:bottom, 1 + 3 * left : 1 + 3 * right], shared[top:bottom, left:right])
         return True
 
     def cancel(self) -> None:
@@ -554,6 +556,7 @@ def _panels(drafted, data_read: int, done_write: int, shared) -> None:
         view = np.frombuffer(shared, dtype=np.uint8).reshape(drafted.pixels().shape)
         view.reshape(-1)[:: mmap.PAGESIZE] = 0  # its pages made now, not when the panels are copied there
         _warm(likely_texts(False), data_read)
+        drafted.more_ticks(lambda: _readable(data_read))
         with os.fdopen(data_read, "rb") as pipe:
             payload = pipe.read()
         if payload:

@@ -30,6 +30,7 @@ from __future__ import annotations
 import os
 from contextlib import contextmanager
 from pathlib import Path
+from types import ModuleType
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -45,7 +46,11 @@ if TYPE_CHECKING:
 AVOIDERS = {"VectorFieldHistogram": "VFH", "ArtificialPotentialField": "APF"}
 DPI = 110
 GRID_ALPHA = 0.3  # the panels' grid lines
-TICKS_AHEAD = 8  # the ticks a drafted panel's axis makes ahead (`Draft`); its view holds 3 to 8
+# The ticks a drafted panel's axis makes ahead (`Draft`: a tick is five artists, ~1 ms of CPU): its
+# view holds 3 to 8, a panel's y axis mostly 3 to 5, the time axis mostly 6 to 8. Each y axis makes
+# the first few with the draft, the rest while the run goes, when there is time (`Draft.more_ticks`).
+TICKS_AHEAD = 8
+Y_TICKS_DRAFTED = 4
 
 # Where the default series come from, in order of preference (each must be in the trace's
 # `TRACE_SIGNALS`, so that the plot of a run's trace is the plot of its log).
@@ -470,16 +475,68 @@ def prepare_drawing() -> None:
     """Import what `draw` uses and load the font its texts are set in: the work of a plot that
     does not depend on the data (`cosim.cli.plotter` does it while the run goes). For a process
     that draws the run's figures and exits (`skip_matplotlib_docstrings`), and draws no 3-D axes:
-    matplotlib's projections are registered without the 3-D one (`_without_3d_axes`)."""
+    matplotlib's projections are registered without the 3-D one (`_without_3d_axes`); nor, most
+    likely, usetex text: the glyph names only it reads run when first used (`_glyph_names_when_used`)."""
     import importlib
 
     skip_matplotlib_docstrings()
+    _glyph_names_when_used()
     with collector_paused(), _without_3d_axes():
         for module in ("backends.backend_agg", "figure", "collections", "lines", "patches", "ticker"):
             importlib.import_module(f"matplotlib.{module}")
         from matplotlib.font_manager import FontProperties, findfont, get_font
 
         get_font(findfont(FontProperties()))
+
+
+def _glyph_names_when_used() -> None:
+    """Before matplotlib's text modules are first imported: `fontTools.agl` (Adobe's glyph names,
+    which `matplotlib.dviread` imports and reads only for text drawn with usetex; importing it
+    builds its tables, ~10 ms of CPU) is put in place as a module that runs when first used."""
+    runs_when_used("fontTools.agl")
+
+
+def runs_when_used(name: str) -> ModuleType | None:
+    """Put the module `name` (of a package: "package.module") in place without running its code,
+    which runs when a name it does not hold yet is first looked up in it (`_RunsWhenUsed`); it is
+    bound in its package as an import binds it. The module, or None (and nothing done) when it
+    is imported already or cannot be found."""
+    import importlib.util
+    import sys
+
+    if name in sys.modules:
+        return None
+    try:
+        spec = importlib.util.find_spec(name)
+    except ImportError:  # (no such package: its importer then says so)
+        return None
+    if spec is None or spec.loader is None or not hasattr(spec.loader, "exec_module"):
+        return None
+    module = importlib.util.module_from_spec(spec)
+    module.__class__ = _RunsWhenUsed
+    sys.modules[name] = module
+    package, _, child = name.rpartition(".")
+    if package:
+        setattr(sys.modules[package], child, module)
+    return module
+
+
+class _RunsWhenUsed(ModuleType):
+    """A module whose code has not run yet: it runs (its loader's `exec_module`) when a name it does
+    not hold yet is looked up, which is then looked up in the module as it is made. Its import
+    attributes (`__spec__`, `__name__`, ...) are there before: an import of it, which reads them,
+    does not run it."""
+
+    def __getattr__(self, name: str):
+        import sys
+
+        self.__class__ = ModuleType
+        try:
+            self.__spec__.loader.exec_module(self)
+        except BaseException:
+            sys.modules.pop(self.__name__, None)  # as a failed import leaves it: imported anew next time
+            raise
+        return getattr(self, name)
 
 
 @contextmanager
@@ -827,8 +884,22 @@ class Draft:
                     axes.patch.set_visible(False)
             for axis in [axes.yaxis for axes in self.panel_axes] + [self.panel_axes[-1].xaxis]:
                 _tick_marks_off(axis)  # as `_panel_ticks` has them, before the ticks are made
-                axis.get_major_ticks(TICKS_AHEAD)  # a tick is five artists: made here, not after the run
+                # made here, not after the run; a y axis' likely further ones by `more_ticks`
+                axis.get_major_ticks(TICKS_AHEAD if axis is self.panel_axes[-1].xaxis else Y_TICKS_DRAFTED)
                 axis.get_minor_ticks(1)  # (an axis makes one even with none to draw)
+
+    def more_ticks(self, stop=lambda: False) -> None:
+        """Make the panels' y axes' ticks up to `TICKS_AHEAD` each, one round of one more tick per
+        axis at a time, until `stop()` is true (asked before each round): the ticks a panel is
+        less likely to draw, made while the run goes when there is time for them (a tick made
+        ahead or when drawn: the same)."""
+        axes = [panel.yaxis for panel in self.panel_axes]
+        for count in range(Y_TICKS_DRAFTED + 1, TICKS_AHEAD + 1):
+            if stop():
+                return
+            with collector_paused():
+                for axis in axes:
+                    axis.get_major_ticks(count)
 
     def fits(self, data: PlotData) -> bool:
         """Whether `data` has the drafted frame: the same map image and view, panel rows and title lines."""
@@ -968,8 +1039,17 @@ def png_rows(pixels: np.ndarray) -> np.ndarray:
     height, width = pixels.shape[:2]
     rows = np.empty((height, 1 + 3 * width), dtype=np.uint8)
     rows[:, 0] = 0
-    rows[:, 1:].reshape(height, width, 3)[:] = pixels[:, :, :3]
+    copy_rgb(rows[:, 1:], pixels)
     return rows
+
+
+def copy_rgb(rows: np.ndarray, pixels: np.ndarray) -> None:
+    """Copy the RGB bytes of `pixels` (rows x columns x 3 or 4) into `rows` (rows x 3 columns), one
+    colour at a time: numpy copies 3 bytes of each pixel at once several times slower (~13 ms for
+    a run's picture here, ~2 ms so)."""
+    into = rows.reshape(pixels.shape[0], pixels.shape[1], 3)
+    for colour in range(3):
+        into[:, :, colour] = pixels[:, :, colour]
 
 
 def write_png(path: Path, pixels: np.ndarray, dpi: float, rows: np.ndarray | None = None) -> None:
@@ -998,7 +1078,7 @@ def write_png(path: Path, pixels: np.ndarray, dpi: float, rows: np.ndarray | Non
         part = rows[low:high]
         if copy:
             part[:, 0] = 0
-            part[:, 1:].reshape(high - low, width, 3)[:] = pixels[low:high, :, :3]
+            copy_rgb(part[:, 1:], pixels[low:high])
         stream = zlib.compressobj(1, zlib.DEFLATED, -15)  # raw: no zlib header or checksum
         body = stream.compress(part) + stream.flush(zlib.Z_FINISH if index == 1 else zlib.Z_SYNC_FLUSH)
         done[index] = (body, zlib.adler32(part))
@@ -1049,6 +1129,46 @@ def _ticks_in_view(axes) -> None:
         locations = _in_view(axis.get_majorticklocs(), limits)
         if len(locations) >= 2:
             axis.set_major_locator(FixedLocator(locations))
+        _label_boxes_once(axis)
+
+
+def _label_boxes_once(axis) -> None:
+    """Have `axis` place its label, when drawn, from the boxes of the tick labels it has just
+    measured for itself. matplotlib 3.11's `Axis.draw` updates its ticks and measures their labels
+    (`_get_ticklabel_bboxes`), draws the ticks, then places the axis label from the boxes of the
+    tick labels of the axis and of the axes it is aligned with (`_get_tick_boxes_siblings`), which
+    updates and measures the same ticks again when it is aligned with none (nothing changed
+    them in between: the same boxes, the same label position). With another version, or a figure
+    that aligns labels, matplotlib's own steps. A no-op for an axis so already."""
+    import matplotlib
+
+    if "_get_tick_boxes_siblings" in vars(axis) or matplotlib.__version__.split(".")[:2] != ["3", "11"]:
+        return
+    measured: list = []
+    measure, siblings = axis._get_ticklabel_bboxes, axis._get_tick_boxes_siblings
+
+    def get_ticklabel_bboxes(ticks, renderer=None):
+        boxes = measure(ticks, renderer)
+        measured[:] = [boxes]
+        return boxes
+
+    def get_tick_boxes_siblings(renderer):
+        name = axis._get_axis_name()
+        groups = axis.get_figure(root=False)._align_label_groups
+        if measured and name in groups and groups[name].get_siblings(axis.axes) == [axis.axes]:
+            return measured[0]
+        return siblings(renderer)
+
+    def draw(renderer):
+        measured.clear()  # (only what this draw measures)
+        try:
+            return type(axis).draw(axis, renderer)
+        finally:
+            measured.clear()
+
+    axis._get_ticklabel_bboxes = get_ticklabel_bboxes
+    axis._get_tick_boxes_siblings = get_tick_boxes_siblings
+    axis.draw = draw
 
 
 def _in_view(locations, limits) -> list[float]:

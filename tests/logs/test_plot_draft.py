@@ -80,6 +80,26 @@ def test_a_draft_that_fits_draws_the_picture_of_draw(run, tmp_path):
     assert np.array_equal(finished, _drawn(data, tmp_path))
 
 
+@pytest.mark.parametrize("rounds", [0, 1, None], ids=["drafted", "one more", "all"])
+def test_ticks_made_ahead_while_the_run_goes_draw_the_same_picture(run, tmp_path, rounds):
+    """A y axis of a panel makes `Y_TICKS_DRAFTED` ticks with the draft, then one more per round of
+    `more_ticks` until it stops (`rounds` rounds: None, every one): however many were made
+    ahead, the picture is `draw`'s."""
+    scenario, data = run
+    drafted = plot.Draft(preview(scenario))
+    asked = []
+
+    def stop() -> bool:
+        asked.append(True)
+        return rounds is not None and len(asked) > rounds
+
+    drafted.more_ticks(stop)
+    made = plot.TICKS_AHEAD if rounds is None else plot.Y_TICKS_DRAFTED + rounds
+    assert [len(axes.yaxis.majorTicks) for axes in drafted.panel_axes] == [made] * drafted.rows
+    assert len(drafted.panel_axes[-1].xaxis.majorTicks) == plot.TICKS_AHEAD
+    assert np.array_equal(_pixels(drafted.finish(data, tmp_path / "draft.png")), _drawn(data, tmp_path))
+
+
 def test_a_draft_that_does_not_fit_draws_afresh(run, tmp_path):
     """A run that left the drafted view (here: a view half as wide), or has another number of
     panels: the picture is still `draw`'s."""

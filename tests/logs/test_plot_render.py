@@ -78,6 +78,19 @@ def test_the_shortcuts_draw_the_pixels_of_matplotlibs_own_axes(panels, tmp_path,
     assert np.array_equal(drawn, plain)
 
 
+@pytest.mark.parametrize("panels", [5, 1])
+def test_axis_labels_placed_from_the_tick_labels_measured_once_are_where_matplotlib_puts_them(
+    panels, tmp_path, monkeypatch
+):
+    """An axis places its label from the boxes its draw measured (`_label_boxes_once`), not
+    measured again: the same pixels as matplotlib's own steps (every axis label of the map and
+    the panels; the panels' y labels sit left of tick labels of different widths)."""
+    drawn = _pixels(plot.draw(_data(panels), tmp_path / "drawn.png"))
+    monkeypatch.setattr(plot, "_label_boxes_once", lambda axis: None)
+    plain = _pixels(plot.draw(_data(panels), tmp_path / "plain.png"))
+    assert np.array_equal(drawn, plain)
+
+
 def _has(pixels: np.ndarray, colour: str, at_least: int = 4) -> bool:
     rgb = np.array([int(colour[i : i + 2], 16) for i in (1, 3, 5)])
     return int(np.all(pixels == rgb, axis=2).sum()) >= at_least
@@ -151,6 +164,20 @@ def test_write_png_stream_decompresses_with_its_checksum(shape, made_before, tmp
     rows = np.frombuffer(zlib.decompress(chunks[b"IDAT"]), dtype=np.uint8).reshape(shape[0], -1)
     assert np.all(rows[:, 0] == 0)
     assert np.array_equal(rows[:, 1:].reshape(*shape, 3), pixels[:, :, :3])
+
+
+def test_copy_rgb_fills_a_window_of_png_rows_pixel_by_pixel():
+    """As the plot process pastes its helper's panels into the PNG's rows: a window of columns of
+    some rows gets each pixel's R, G, B bytes (the 4th byte left out), the rest is untouched."""
+    rng = np.random.default_rng(3)
+    rows = rng.integers(0, 256, (20, 1 + 3 * 30), dtype=np.uint8)
+    pixels = rng.integers(0, 256, (20, 30, 4), dtype=np.uint8)
+    expected = rows.copy()
+    for row in range(4, 15):
+        for column in range(7, 25):
+            expected[row, 1 + 3 * column : 4 + 3 * column] = pixels[row, column, :3]
+    plot.copy_rgb(rows[4:15, 1 + 3 * 7 : 1 + 3 * 25], pixels[4:15, 7:25])
+    assert np.array_equal(rows, expected)
 
 
 @pytest.mark.parametrize("lengths", [(0, 0), (0, 9), (9, 0), (1, 1), (5552, 70000), (100_000, 3)])
