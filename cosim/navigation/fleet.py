@@ -931,6 +931,9 @@ def _run(
     tables, python = _tables(master, block)
     if tables is not None:  # between the blocks' kernel calls nothing else sets the FMUs' inputs
         tables.sent_kept = True
+        _warm_up(master, tables)
+    if log is not None and steps > 0:  # the channels the first block registers, now, in its order
+        log.steps.register_step_channels(0, min(block, steps))  # (the loop starts at k = 0)
     judge = _FleetJudge.make(robots) if not stop_on_collision else None
     if coordination is not None:  # the released cells (and halts) for the first block
         coordination.before_block(0.0)
@@ -1042,6 +1045,14 @@ def _run(
             "failures": coordinator.failures,
             "planning_time": coordinator.solve_time,
         }
+
+
+def _warm_up(master: Master, tables) -> None:
+    """What the kernel's first block would make or bring in first, before the loop: the kernel
+    bound, its record buffer's pages mapped (`KernelTables.warm_up`), the plan of its stretches
+    (`KernelTables.stretch_plan`): ~3 ms of the first block at N = 50."""
+    tables.warm_up()
+    tables.stretch_plan(master._plan, master.system.macro_step_ns)
 
 
 def _halt(master: Master, robots: list[_Robot], log: FleetLog | None, block: int, python=None):
