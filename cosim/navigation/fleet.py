@@ -246,6 +246,8 @@ class _Robot:
     def take(self, histories: list[np.ndarray], first: int, count: int) -> None:
         """Keep, from the rows of the block of `count` steps from step `first`, for each step the
         pose at its end, the command applied in it and the avoidance mode."""
+        if self._last is None:  # after a block taken by `_BlockRows` (arrays of their own)
+            self._last = (self.poses[-1], self.commands_now[-1], self.modes[-1])
         last_pose, last_command, last_mode = self._last
         if self.halted:  # not stepped: where it stopped, commanding nothing
             self.poses = np.tile(last_pose, (count, 1))
@@ -831,14 +833,23 @@ def _c_step(component):
 
 
 def _advance(
-    master: Master, robots: list[_Robot], count: int, tables, python: _PythonSteps | None = None
+    master: Master,
+    robots: list[_Robot],
+    count: int,
+    tables,
+    python: _PythonSteps | None = None,
+    rows: _BlockRows | None = None,
 ) -> list:
     """Step the fleet's system `count` steps, hand every robot its rows and return them (per
     component of the master's order, its inputs and outputs after each of its steps; None for one
     stepped by Python), valid until the next call (views of the kernel's buffers). `python`: the
-    Python components, stepped before the kernel steps the rest (`tables` then without them)."""
+    Python components, stepped before the kernel steps the rest (`tables` then without them);
+    `rows`: every robot's rows taken at once (`_BlockRows`, of `tables`) where it can."""
     first = master.step_index
+    if rows is not None:
+        rows.pose_rows = rows.modes_now = None
     kept: list[list[np.ndarray]] = []
+    views = [True]  # the rows kept are the kernel's buffers (one clean stretch), not copies
     if python is not None:
         python.step(first)
     if tables is not None:
@@ -852,20 +863,25 @@ def _advance(
             for part in kept:
                 part[:] = [r if r is None or r.base is None else r.copy() for r in part]
 
+        def keep(_first: int, _end: int, delivered: list, clean: bool) -> None:
+            views[0] = views[0] and clean
+            kept.append(list(delivered) if clean else [None if r is None else r.copy() for r in delivered])
+
         master.run_blocks(
             count,
             tables,
-            lambda _first, _end, rows, clean: kept.append(
-                list(rows) if clean else [None if r is None else r.copy() for r in rows]
-            ),
+            keep,
             block=count,
             before_block=copy_kept,
             cut_after_python=lambda _k: False,
         )
     else:
-        master.run_recorded(count, lambda _first, _count, rows: kept.append(rows), block=count)
+        rows = None
+        master.run_recorded(count, lambda _first, _count, delivered: kept.append(delivered), block=count)
     if len(kept) == 1:
         histories = kept[0]
+        if rows is not None and views[0] and rows.take(histories, first, count):
+            return histories
     else:
         histories = [
             np.concatenate([part[i] for part in kept if part[i] is not None])
@@ -876,6 +892,97 @@ def _advance(
     for each in robots:
         each.take(histories, first, count)
     return histories
+
+
+class _BlockRows:
+    """Every robot's poses, commands and modes of a block (`_Robot.take`) in one gather from the
+    kernel's record buffer, where the robots' vehicles and mode components have their rows, rather
+    than robot by robot: the same values, in arrays of their own; a robot switched off (`_halt`)
+    where it stopped, commanding nothing, its mode NaN, as `_Robot.take` has it. `take` leaves the
+    robots to `_Robot.take` when the block's rows are not one stretch of every step in that buffer."""
+
+    def __init__(self, robots: list[_Robot], tables, block: int) -> None:
+        self.tables = tables
+        self.robots = robots
+        stepped = [r for r, each in enumerate(robots) if not each.halted]
+        self.vehicle_rows = [robots[r].vehicle_row for r in stepped]
+        self.mode_rows = [(robots[r].mode_row[0], robots[r].mode_row[2]) for r in stepped]
+        self.halted = [r for r, each in enumerate(robots) if each.halted]
+        shapes = tables.record_shapes
+        # [step, robot, x y theta v omega] and [step, robot] indices into tables.history (a halted
+        # robot's: the buffer's first value, overwritten)
+        steps = np.arange(block, dtype=np.intp)[:, None]
+        self.columns = np.zeros((block, len(robots), 5), dtype=np.intp)
+        self.modes = np.zeros((block, len(robots)), dtype=np.intp)
+        for r in stepped:
+            each = robots[r]
+            offset, _, width = shapes[each.vehicle_row]
+            taken = [*_column_list(each.pose_columns), *_column_list(each.command_columns)]
+            self.columns[:, r] = offset + steps * width + np.array(taken, dtype=np.intp)
+            row, column, period = each.mode_row
+            offset, _, width = shapes[row]
+            # step j's mode: the row of the component's latest step <= j (`_held`; its first step
+            # the block's first, checked by `take`)
+            self.modes[:, r] = offset + (steps[:, 0] // period) * width + column
+        self.block = block
+        self.pose_rows: np.ndarray | None = None  # [step, robot, x y theta v omega] of the last `take`
+        self.modes_now: np.ndarray | None = None  # [step, robot] modes of the last `take`
+
+    @classmethod
+    def make(cls, robots: list[_Robot], tables, block: int) -> _BlockRows | None:
+        """None unless every robot still stepped has its vehicle stepped every step and its mode
+        component rows in the kernel's buffer, its command columns those of its vehicle."""
+        if tables is None:
+            return None
+        shapes = tables.record_shapes
+        for each in robots:
+            if each.halted:
+                continue
+            if (
+                each.vehicle_period != 1
+                or each.command_columns is None
+                or each.mode_row is None
+                or shapes[each.vehicle_row] is None
+                or shapes[each.mode_row[0]] is None
+                or shapes[each.vehicle_row][1] < block
+                or shapes[each.mode_row[0]][1] < -(-block // each.mode_row[2])
+            ):
+                return None
+        return cls(robots, tables, block)
+
+    def take(self, histories: list, first: int, count: int) -> bool:
+        """`_Robot.take` of every robot for the block of `count` steps from step `first` whose rows
+        `histories` are, as views of the kernel's buffer (one stretch); False (nothing taken) when
+        a robot's vehicle has not `count` rows there, or its mode component does not step in the
+        block's first step (its mode before that is the last block's) or has not its rows."""
+        if count > self.block or any(len(histories[row]) != count for row in self.vehicle_rows):
+            return False
+        for row, period in self.mode_rows:
+            if first % period or len(histories[row]) != -(-count // period):
+                return False
+        history = self.tables.history
+        rows = history.take(self.columns[:count])
+        modes = history.take(self.modes[:count])
+        robots = self.robots
+        for r in self.halted:  # not stepped: where it stopped, commanding nothing
+            each = robots[r]
+            if each._last is None:
+                each._last = (each.poses[-1], each.commands_now[-1], each.modes[-1])
+            rows[:, r, :3] = each._last[0]
+            rows[:, r, 3:] = 0.0
+            modes[:, r] = math.nan
+        self.pose_rows, self.modes_now = rows, modes
+        for r, each in enumerate(robots):
+            each.poses = rows[:, r, :3]
+            each.commands_now = rows[:, r, 3:]
+            each.modes = modes[:, r]
+            each._last = None
+        return True
+
+
+def _column_list(columns) -> list[int]:
+    """`_columns`' slice or list as the list of its columns."""
+    return list(range(columns.start, columns.stop)) if isinstance(columns, slice) else list(columns)
 
 
 def _log_plans(log: FleetLog, robots: list[_Robot], t_ns: int) -> None:
@@ -934,6 +1041,7 @@ def _run(
         _warm_up(master, tables)
     if log is not None and steps > 0:  # the channels the first block registers, now, in its order
         log.steps.register_step_channels(0, min(block, steps))  # (the loop starts at k = 0)
+    block_rows = _BlockRows.make(robots, tables, block)
     judge = _FleetJudge.make(robots) if not stop_on_collision else None
     if coordination is not None:  # the released cells (and halts) for the first block
         coordination.before_block(0.0)
@@ -944,7 +1052,9 @@ def _run(
     try:
         while k < steps and reason is None:
             count = min(block, steps - k)
-            histories = _advance(master, robots, count, tables, python)
+            histories = _advance(master, robots, count, tables, python, block_rows)
+            # [step, robot, x y theta v omega] when `_BlockRows` took them
+            taken = block_rows.pose_rows if block_rows is not None else None
             if log is not None:
                 _log_plans(log, robots, k * h_ns)
             poses = []  # the poses logged in the block: (step, t_ns, per robot x, y, theta, v, omega)
@@ -956,11 +1066,15 @@ def _run(
             starts = [(k + i) * h_ns / NS_PER_S for i in range(count)]
             lengths = [end - start for start, end in zip(starts, ends, strict=True)]
             last = count - 1
-            stacked = np.stack([each.poses[:, :2] for each in robots], axis=1)  # step, robot, x y
+            if taken is not None:
+                stacked = taken[:, :, :2].copy()  # step, robot, x y
+            else:
+                stacked = np.stack([each.poses[:, :2] for each in robots], axis=1)
             # Nothing ends the run but the robots' own ends: judged a robot at a time.
             if not stop_on_collision:
                 if judge is not None:
-                    ended = judge.block(robots, ends, lengths, positions, stacked)
+                    modes = block_rows.modes_now if taken is not None else None
+                    ended = judge.block(robots, ends, lengths, positions, stacked, modes)
                 else:
                     ended = [_judge_block(each, ends, lengths, positions[r]) for r, each in enumerate(robots)]
                 if all(not each.judged for each in robots):  # ends with the step in which the last one ended
@@ -985,7 +1099,9 @@ def _run(
                 if trace is not None:
                     trace.append((t_next, after))
                 if log is not None and (k + i + 1) % pose_steps == 0:
-                    if pose_rows is None:  # per step, robot: x, y, theta, v, omega
+                    if pose_rows is None and taken is not None:
+                        pose_rows = taken
+                    elif pose_rows is None:  # per step, robot: x, y, theta, v, omega
                         pose_rows = np.concatenate(
                             (
                                 np.stack([each.poses for each in robots], axis=1),
@@ -1013,6 +1129,7 @@ def _run(
                     tables, python = _halt(master, robots, log, block, python)
                     if tables is not None:
                         tables.sent_kept = True
+                    block_rows = _BlockRows.make(robots, tables, block)
             for each in robots:  # a new mission goal: given at the end of the block
                 if each.pending_goal and each.judged:
                     _next_goal(each, outcome.time, coordination)
@@ -1301,9 +1418,10 @@ class _FleetJudge:
                 self.release(r, each)
 
     def block(self, robots: list[_Robot], ends: list[float], lengths: list[float], starts: np.ndarray,
-              positions: np.ndarray) -> list[int | None]:  # fmt: skip
+              positions: np.ndarray, modes: np.ndarray | None = None) -> list[int | None]:  # fmt: skip
         """`_judge_block` of every robot (`starts`: N x 2 before the block's first step,
-        `positions`: steps x N x 2 after each); per robot the step in which it stopped being judged."""
+        `positions`: steps x N x 2 after each; `modes`: steps x N, the robots' `modes` side by side,
+        when at hand); per robot the step in which it stopped being judged."""
         count = len(ends)
         held, compiled = self.held, self.compiled
         for r, each in enumerate(robots):
@@ -1322,7 +1440,8 @@ class _FleetJudge:
         ended: list[int | None] = [None] * len(robots)
         python = [r for r in range(len(robots)) if not held[r]]
         if len(python) < len(robots):
-            modes = np.stack([each.modes for each in robots], axis=1)
+            if modes is None:
+                modes = np.stack([each.modes for each in robots], axis=1)
             starts = np.ascontiguousarray(starts, dtype=np.float64)
             times, steps = np.array(ends), np.array(lengths)
             events = self.function(
