@@ -839,12 +839,14 @@ def _advance(
     tables,
     python: _PythonSteps | None = None,
     rows: _BlockRows | None = None,
+    split: _SplitKernel | None = None,
 ) -> list:
     """Step the fleet's system `count` steps, hand every robot its rows and return them (per
     component of the master's order, its inputs and outputs after each of its steps; None for one
     stepped by Python), valid until the next call (views of the kernel's buffers). `python`: the
     Python components, stepped before the kernel steps the rest (`tables` then without them);
-    `rows`: every robot's rows taken at once (`_BlockRows`, of `tables`) where it can."""
+    `rows`: every robot's rows taken at once (`_BlockRows`, of `tables`) where it can; `split`: the
+    kernel's block as two calls side by side (`_SplitKernel`) where it fits."""
     first = master.step_index
     if rows is not None:
         rows.pose_rows = rows.modes_now = None
@@ -852,6 +854,24 @@ def _advance(
     views = [True]  # the rows kept are the kernel's buffers (one clean stretch), not copies
     if python is not None:
         python.step(first)
+    if split is not None and split.fits(first, count):
+        if not split.active:  # the one set of tables ran last: the halves send every value first
+            for part in split.halves:
+                part.forget_sent()
+            split.active = True
+        histories = split.run(first, count)
+        if split.rows is not None:
+            split.rows.pose_rows = split.rows.modes_now = None
+            if split.rows.take(histories, first, count):
+                if rows is not None:
+                    rows.pose_rows, rows.modes_now = split.rows.pose_rows, split.rows.modes_now
+                return histories
+        for each in robots:
+            each.take(histories, first, count)
+        return histories
+    if split is not None and split.active and tables is not None:
+        tables.forget_sent()  # the halves ran last
+        split.active = False
     if tables is not None:
         # FMUs in the compiled kernel; the lidars and planners (Python) step in the block's first
         # step and hold their outputs to its end (the block is cut only at their periods). The
@@ -896,54 +916,60 @@ def _advance(
 
 class _BlockRows:
     """Every robot's poses, commands and modes of a block (`_Robot.take`) in one gather from the
-    kernel's record buffer, where the robots' vehicles and mode components have their rows, rather
-    than robot by robot: the same values, in arrays of their own; a robot switched off (`_halt`)
-    where it stopped, commanding nothing, its mode NaN, as `_Robot.take` has it. `take` leaves the
-    robots to `_Robot.take` when the block's rows are not one stretch of every step in that buffer."""
+    kernel's record buffer (of each set of `tables` that steps robots: `_SplitKernel`'s halves),
+    where the robots' vehicles and mode components have their rows, rather than robot by robot: the
+    same values, in arrays of their own; a robot switched off (`_halt`) where it stopped,
+    commanding nothing, its mode NaN, as `_Robot.take` has it. `take` leaves the robots to
+    `_Robot.take` when the block's rows are not one stretch of every step in those buffers."""
 
-    def __init__(self, robots: list[_Robot], tables, block: int) -> None:
-        self.tables = tables
+    def __init__(self, robots: list[_Robot], tables: list, block: int) -> None:
         self.robots = robots
         stepped = [r for r, each in enumerate(robots) if not each.halted]
         self.vehicle_rows = [robots[r].vehicle_row for r in stepped]
         self.mode_rows = [(robots[r].mode_row[0], robots[r].mode_row[2]) for r in stepped]
         self.halted = [r for r, each in enumerate(robots) if each.halted]
-        shapes = tables.record_shapes
-        # [step, robot, x y theta v omega] and [step, robot] indices into tables.history (a halted
-        # robot's: the buffer's first value, overwritten)
+        # per set of tables: its history, its robots and their [step, robot, x y theta v omega] and
+        # [step, robot] indices into it
+        self.parts = []
         steps = np.arange(block, dtype=np.intp)[:, None]
-        self.columns = np.zeros((block, len(robots), 5), dtype=np.intp)
-        self.modes = np.zeros((block, len(robots)), dtype=np.intp)
-        for r in stepped:
-            each = robots[r]
-            offset, _, width = shapes[each.vehicle_row]
-            taken = [*_column_list(each.pose_columns), *_column_list(each.command_columns)]
-            self.columns[:, r] = offset + steps * width + np.array(taken, dtype=np.intp)
-            row, column, period = each.mode_row
-            offset, _, width = shapes[row]
-            # step j's mode: the row of the component's latest step <= j (`_held`; its first step
-            # the block's first, checked by `take`)
-            self.modes[:, r] = offset + (steps[:, 0] // period) * width + column
+        for part in tables:
+            shapes = part.record_shapes
+            mine = [r for r in stepped if shapes[robots[r].vehicle_row] is not None]
+            columns = np.zeros((block, len(mine), 5), dtype=np.intp)
+            modes = np.zeros((block, len(mine)), dtype=np.intp)
+            for at, r in enumerate(mine):
+                each = robots[r]
+                offset, _, width = shapes[each.vehicle_row]
+                taken = [*_column_list(each.pose_columns), *_column_list(each.command_columns)]
+                columns[:, at] = offset + steps * width + np.array(taken, dtype=np.intp)
+                row, column, period = each.mode_row
+                offset, _, width = shapes[row]
+                # step j's mode: the row of the component's latest step <= j (`_held`; its first
+                # step the block's first, checked by `take`)
+                modes[:, at] = offset + (steps[:, 0] // period) * width + column
+            if mine:
+                self.parts.append((part.history, np.array(mine, dtype=np.intp), columns, modes))
         self.block = block
         self.pose_rows: np.ndarray | None = None  # [step, robot, x y theta v omega] of the last `take`
         self.modes_now: np.ndarray | None = None  # [step, robot] modes of the last `take`
 
     @classmethod
-    def make(cls, robots: list[_Robot], tables, block: int) -> _BlockRows | None:
-        """None unless every robot still stepped has its vehicle stepped every step and its mode
-        component rows in the kernel's buffer, its command columns those of its vehicle."""
-        if tables is None:
+    def make(cls, robots: list[_Robot], tables: list, block: int) -> _BlockRows | None:
+        """None unless every robot still stepped has its vehicle stepped every step and it and its
+        mode component rows in one of the kernel's buffers, its command columns its vehicle's."""
+        if not tables or any(part is None for part in tables):
             return None
-        shapes = tables.record_shapes
         for each in robots:
             if each.halted:
                 continue
+            if each.vehicle_period != 1 or each.command_columns is None or each.mode_row is None:
+                return None
+            found = [part.record_shapes for part in tables if part.record_shapes[each.vehicle_row]]
+            if len(found) != 1:
+                return None
+            shapes = found[0]
             if (
-                each.vehicle_period != 1
-                or each.command_columns is None
-                or each.mode_row is None
-                or shapes[each.vehicle_row] is None
-                or shapes[each.mode_row[0]] is None
+                shapes[each.mode_row[0]] is None
                 or shapes[each.vehicle_row][1] < block
                 or shapes[each.mode_row[0]][1] < -(-block // each.mode_row[2])
             ):
@@ -952,7 +978,7 @@ class _BlockRows:
 
     def take(self, histories: list, first: int, count: int) -> bool:
         """`_Robot.take` of every robot for the block of `count` steps from step `first` whose rows
-        `histories` are, as views of the kernel's buffer (one stretch); False (nothing taken) when
+        `histories` are, as views of the kernel's buffers (one stretch); False (nothing taken) when
         a robot's vehicle has not `count` rows there, or its mode component does not step in the
         block's first step (its mode before that is the last block's) or has not its rows."""
         if count > self.block or any(len(histories[row]) != count for row in self.vehicle_rows):
@@ -960,10 +986,16 @@ class _BlockRows:
         for row, period in self.mode_rows:
             if first % period or len(histories[row]) != -(-count // period):
                 return False
-        history = self.tables.history
-        rows = history.take(self.columns[:count])
-        modes = history.take(self.modes[:count])
         robots = self.robots
+        if len(self.parts) == 1 and not self.halted:
+            history, _, columns, modes = self.parts[0]
+            rows, modes = history.take(columns[:count]), history.take(modes[:count])
+        else:
+            rows = np.empty((count, len(robots), 5))
+            modes = np.empty((count, len(robots)))
+            for history, mine, columns, indices in self.parts:
+                rows[:, mine] = history.take(columns[:count])
+                modes[:, mine] = history.take(indices[:count])
         for r in self.halted:  # not stepped: where it stopped, commanding nothing
             each = robots[r]
             if each._last is None:
@@ -978,6 +1010,171 @@ class _BlockRows:
             each.modes = modes[:, r]
             each._last = None
         return True
+
+
+class _SplitKernel:
+    """The kernel's block of a fleet's FMUs as `PARTS` calls side by side on the pool of the block
+    program's threads (`block_pool_kernels` of world.c: each call taken by whichever thread is
+    free, so a worker woken late leaves the caller no more to do than alone), each on tables of
+    a part of the robots (the other parts' components left out as constant outputs, as the Python
+    components are), instead of one call on all: no FMU reads an output of another robot's FMU
+    (`make` checks every link), so each FMU is set, stepped and read with the same values in the
+    same order as in the one call, its rows the same. Only the project's FMUs (no global state:
+    instances apart are independent) step so. The calls run whole blocks of full steps (`fits`);
+    a failed FMU raises the error of the first failure in the one call's order (step, then
+    position), the other parts' FMUs maybe having stepped further (the run ends there)."""
+
+    PARTS = 4
+
+    def __init__(self, master: Master, halves: list, pool: int, block: int) -> None:
+        from cosim.core import kernel
+        from cosim.world import kernels
+
+        self.master = master
+        self.halves = halves
+        self.pool = pool
+        self.block = block
+        self.function = kernels.library().block_pool_kernels
+        address = ctypes.cast(kernel._kernel(), ctypes.c_void_p).value
+        bound = [part._bound() for part in halves]
+        self.results = [part._result for part in bound]
+        self.jobs = (kernels.KernelJobArrays * len(halves))(
+            *(
+                kernels.KernelJobArrays(
+                    function=address,
+                    start_ns=master.start_time_ns,
+                    h_ns=master.system.macro_step_ns,
+                    tables=ctypes.addressof(part._tables),
+                    result=ctypes.addressof(part._result),
+                )  # fmt: skip
+                for part in bound
+            )
+        )
+        self.plans = [part.stretch_plan(master._plan, master.system.macro_step_ns) for part in halves]
+        self.active = False  # the last block ran here (else on the one set of tables)
+        self.rows: _BlockRows | None = None  # `_BlockRows` of the halves
+
+    @classmethod
+    def make(cls, master: Master, robots: list[_Robot], python: _PythonSteps | None, block: int):
+        """The split of the robots still stepped into two halves (fleet order), or None: without a
+        pool of threads (`_BlockProgram`), fewer than `_BlockProgram.MIN_CHAINS` robots, a component
+        that is not one of the project's FMUs stepped by the kernel, or a link between two robots'
+        FMUs."""
+        from cosim.core.component import Component
+        from cosim.fmi.builtin import GENERATION_TOOL
+
+        program = python.program if python is not None else None
+        if program is None or program.program is None or master.system.mode == "jacobi":
+            return None
+        stepped = [each for each in robots if not each.halted]
+        if len(stepped) < max(2, _BlockProgram.MIN_CHAINS):
+            return None
+        python_components = [component for component, *_ in python.steps]
+        parts = min(cls.PARTS, len(stepped))
+        half_of: dict[str, int] = {}
+        halves_components: list[list] = [[] for _ in range(parts)]
+        for number, each in enumerate(stepped):
+            half = number * parts // len(stepped)
+            for component in each.built.system.components.values():
+                if component.constant_outputs or any(component is c for c in python_components):
+                    continue
+                if type(component).native_step is Component.native_step:
+                    return None  # a component the kernel would hand back
+                description = getattr(component, "model_description", None)
+                if description is None or not (description.generationTool or "").startswith(GENERATION_TOOL):
+                    return None
+                half_of[component.name] = half
+                halves_components[half].append(component)
+        for component in master.order:  # every component the kernel steps is one robot's
+            if component.constant_outputs or any(component is c for c in python_components):
+                continue
+            if component.name not in half_of:
+                return None
+        for consumer, fed in master.system.links().items():
+            for link in fed:
+                producer = half_of.get(link.producer)
+                if producer is not None and half_of.get(consumer, producer) != producer:
+                    return None
+        halves = []
+        for half in range(parts):
+            others = [*python_components]
+            for other in range(parts):
+                if other != half:
+                    others += halves_components[other]
+            for component in others:
+                component.constant_outputs = True
+            try:
+                tables = master.kernel_tables(record=True, block=block, scalar_rows=True)
+            finally:
+                for component in others:
+                    component.constant_outputs = False
+            from cosim.core import kernel
+
+            if tables is None or (tables.components[:, kernel.C_KIND] == kernel.KIND_PYTHON).any():
+                return None
+            tables.sent_kept = True
+            tables.warm_up()
+            halves.append(tables)
+        split = cls(master, halves, program.program.pool, block)
+        split.rows = _BlockRows.make(robots, halves, block)
+        return split
+
+    def fits(self, first: int, count: int) -> bool:
+        """Whether the block of `count` steps from `first` is whole steps of the macro step (none
+        cut at the stop time: those go through `Master.run_blocks`)."""
+        tail_from = self.master._tail_from
+        return 0 < count <= self.block and (tail_from is None or first + count <= tail_from)
+
+    def run(self, first: int, count: int) -> list:
+        """Step the block; the rows of every component (as `Master.run_blocks` hands them over)."""
+        from cosim.core import kernel
+
+        master = self.master
+        master._check_running()
+        master._check_steps(count)
+        for part in self.halves:
+            part.rows[:] = 0
+            part.start_run()
+        for job in self.jobs:
+            job.first_step, job.steps = first, count
+        self.function(self.pool, ctypes.addressof(self.jobs), len(self.jobs))
+        end = first + count
+        results = [tuple(result) for result in self.results]
+        if any(result[0] != kernel.DONE or result[1] != end for result in results):
+            self._failed(results)
+        histories = None
+        for part, plan in zip(self.halves, self.plans, strict=True):
+            p = plan.recorded_periods
+            counts = np.minimum((end + p - 1) // p - (first + p - 1) // p, part.rows[plan.recorded])
+            delivered = part.delivered(counts)
+            if histories is None:
+                histories = list(delivered)
+            else:
+                histories = [a if a is not None else b for a, b in zip(histories, delivered, strict=True)]
+        master.step_index = end
+        return histories
+
+    def _failed(self, results: list) -> None:
+        """Raise the error of the first failure (step, then position) as `Master.run_blocks` would."""
+        from cosim.core import kernel
+
+        master = self.master
+        failures = [(r[1], r[2], i) for i, r in enumerate(results) if r[0] == kernel.FAILED]
+        if not failures:
+            raise CosimError(f"the fleet's kernel stopped unexpectedly (codes {[r[0] for r in results]})")
+        k, _, i = min(failures)
+        code, k, position, failed, call, status, kind = results[i]
+        master.step_index = k
+        plan = master._plan
+        h_ns, start_ns = master.system.macro_step_ns, master.start_time_ns
+        try:
+            native = self.halves[i].native[failed]
+            at = None if call in (0, 2) else (start_ns + k * h_ns) / NS_PER_S
+            native.fail(call, status, at, kernel.KINDS[kind])
+        except CosimError as error:
+            master.failure = error
+            raise
+        raise CosimError(f"component '{plan[failed].component.name}' failed at step {k}")
 
 
 def _column_list(columns) -> list[int]:
@@ -1041,7 +1238,8 @@ def _run(
         _warm_up(master, tables)
     if log is not None and steps > 0:  # the channels the first block registers, now, in its order
         log.steps.register_step_channels(0, min(block, steps))  # (the loop starts at k = 0)
-    block_rows = _BlockRows.make(robots, tables, block)
+    block_rows = _BlockRows.make(robots, [tables], block)
+    split = _SplitKernel.make(master, robots, python, block) if tables is not None else None
     judge = _FleetJudge.make(robots) if not stop_on_collision else None
     if coordination is not None:  # the released cells (and halts) for the first block
         coordination.before_block(0.0)
@@ -1052,7 +1250,7 @@ def _run(
     try:
         while k < steps and reason is None:
             count = min(block, steps - k)
-            histories = _advance(master, robots, count, tables, python, block_rows)
+            histories = _advance(master, robots, count, tables, python, block_rows, split)
             # [step, robot, x y theta v omega] when `_BlockRows` took them
             taken = block_rows.pose_rows if block_rows is not None else None
             if log is not None:
@@ -1129,7 +1327,8 @@ def _run(
                     tables, python = _halt(master, robots, log, block, python)
                     if tables is not None:
                         tables.sent_kept = True
-                    block_rows = _BlockRows.make(robots, tables, block)
+                    block_rows = _BlockRows.make(robots, [tables], block)
+                    split = _SplitKernel.make(master, robots, python, block) if tables is not None else None
             for each in robots:  # a new mission goal: given at the end of the block
                 if each.pending_goal and each.judged:
                     _next_goal(each, outcome.time, coordination)

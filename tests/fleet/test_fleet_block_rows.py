@@ -9,6 +9,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 from mcap.reader import make_reader
 
 from cosim.navigation import fleet as fleet_module
@@ -32,8 +33,9 @@ def _run(monkeypatch, fleet, log: Path, batched: bool) -> tuple:
     blocks: list = []
     advance = fleet_module._advance
 
-    def recorded(master, robots, count, tables, python=None, rows=None):
-        histories = advance(master, robots, count, tables, python, rows)
+    def recorded(master, robots, count, tables, *args):
+        histories = advance(master, robots, count, tables, *args)
+        rows = args[1] if len(args) > 1 else None
         arrays = [
             (np.asarray(each.poses, float).tobytes(), np.asarray(each.commands_now, float).tobytes(),
              np.asarray(each.modes, float).tobytes(), each.halted)
@@ -76,6 +78,7 @@ def test_rows_gathered_at_once_are_each_robots_own(tmp_path, monkeypatch):
     assert _messages(tmp_path / "fast.mcap") == _messages(tmp_path / "slow.mcap")
 
 
+@pytest.mark.slow
 def test_rows_gathered_at_once_through_goals_dwells_and_a_cut_last_block(tmp_path, monkeypatch):
     # fleet_missions (ten robots, a mode component stepped every 5 steps) to 7.55 s: the last
     # block is cut at the stop time (its steps one at a time: each robot takes its own).
