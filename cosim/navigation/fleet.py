@@ -246,6 +246,8 @@ class _Robot:
     def take(self, histories: list[np.ndarray], first: int, count: int) -> None:
         """Keep, from the rows of the block of `count` steps from step `first`, for each step the
         pose at its end, the command applied in it and the avoidance mode."""
+        if self._last is None:  # after a block taken by `_BlockRows` (arrays of their own)
+            self._last = (self.poses[-1], self.commands_now[-1], self.modes[-1])
         last_pose, last_command, last_mode = self._last
         if self.halted:  # not stepped: where it stopped, commanding nothing
             self.poses = np.tile(last_pose, (count, 1))
@@ -831,16 +833,45 @@ def _c_step(component):
 
 
 def _advance(
-    master: Master, robots: list[_Robot], count: int, tables, python: _PythonSteps | None = None
+    master: Master,
+    robots: list[_Robot],
+    count: int,
+    tables,
+    python: _PythonSteps | None = None,
+    rows: _BlockRows | None = None,
+    split: _SplitKernel | None = None,
 ) -> list:
     """Step the fleet's system `count` steps, hand every robot its rows and return them (per
     component of the master's order, its inputs and outputs after each of its steps; None for one
     stepped by Python), valid until the next call (views of the kernel's buffers). `python`: the
-    Python components, stepped before the kernel steps the rest (`tables` then without them)."""
+    Python components, stepped before the kernel steps the rest (`tables` then without them);
+    `rows`: every robot's rows taken at once (`_BlockRows`, of `tables`) where it can; `split`: the
+    kernel's block as two calls side by side (`_SplitKernel`) where it fits."""
     first = master.step_index
+    if rows is not None:
+        rows.pose_rows = rows.modes_now = None
     kept: list[list[np.ndarray]] = []
+    views = [True]  # the rows kept are the kernel's buffers (one clean stretch), not copies
     if python is not None:
         python.step(first)
+    if split is not None and split.fits(first, count):
+        if not split.active:  # the one set of tables ran last: the halves send every value first
+            for part in split.halves:
+                part.forget_sent()
+            split.active = True
+        histories = split.run(first, count)
+        if split.rows is not None:
+            split.rows.pose_rows = split.rows.modes_now = None
+            if split.rows.take(histories, first, count):
+                if rows is not None:
+                    rows.pose_rows, rows.modes_now = split.rows.pose_rows, split.rows.modes_now
+                return histories
+        for each in robots:
+            each.take(histories, first, count)
+        return histories
+    if split is not None and split.active and tables is not None:
+        tables.forget_sent()  # the halves ran last
+        split.active = False
     if tables is not None:
         # FMUs in the compiled kernel; the lidars and planners (Python) step in the block's first
         # step and hold their outputs to its end (the block is cut only at their periods). The
@@ -852,20 +883,25 @@ def _advance(
             for part in kept:
                 part[:] = [r if r is None or r.base is None else r.copy() for r in part]
 
+        def keep(_first: int, _end: int, delivered: list, clean: bool) -> None:
+            views[0] = views[0] and clean
+            kept.append(list(delivered) if clean else [None if r is None else r.copy() for r in delivered])
+
         master.run_blocks(
             count,
             tables,
-            lambda _first, _end, rows, clean: kept.append(
-                list(rows) if clean else [None if r is None else r.copy() for r in rows]
-            ),
+            keep,
             block=count,
             before_block=copy_kept,
             cut_after_python=lambda _k: False,
         )
     else:
-        master.run_recorded(count, lambda _first, _count, rows: kept.append(rows), block=count)
+        rows = None
+        master.run_recorded(count, lambda _first, _count, delivered: kept.append(delivered), block=count)
     if len(kept) == 1:
         histories = kept[0]
+        if rows is not None and views[0] and rows.take(histories, first, count):
+            return histories
     else:
         histories = [
             np.concatenate([part[i] for part in kept if part[i] is not None])
@@ -876,6 +912,274 @@ def _advance(
     for each in robots:
         each.take(histories, first, count)
     return histories
+
+
+class _BlockRows:
+    """Every robot's poses, commands and modes of a block (`_Robot.take`) in one gather from the
+    kernel's record buffer (of each set of `tables` that steps robots: `_SplitKernel`'s halves),
+    where the robots' vehicles and mode components have their rows, rather than robot by robot: the
+    same values, in arrays of their own; a robot switched off (`_halt`) where it stopped,
+    commanding nothing, its mode NaN, as `_Robot.take` has it. `take` leaves the robots to
+    `_Robot.take` when the block's rows are not one stretch of every step in those buffers."""
+
+    def __init__(self, robots: list[_Robot], tables: list, block: int) -> None:
+        self.robots = robots
+        stepped = [r for r, each in enumerate(robots) if not each.halted]
+        self.vehicle_rows = [robots[r].vehicle_row for r in stepped]
+        self.mode_rows = [(robots[r].mode_row[0], robots[r].mode_row[2]) for r in stepped]
+        self.halted = [r for r, each in enumerate(robots) if each.halted]
+        # per set of tables: its history, its robots and their [step, robot, x y theta v omega] and
+        # [step, robot] indices into it
+        self.parts = []
+        steps = np.arange(block, dtype=np.intp)[:, None]
+        for part in tables:
+            shapes = part.record_shapes
+            mine = [r for r in stepped if shapes[robots[r].vehicle_row] is not None]
+            columns = np.zeros((block, len(mine), 5), dtype=np.intp)
+            modes = np.zeros((block, len(mine)), dtype=np.intp)
+            for at, r in enumerate(mine):
+                each = robots[r]
+                offset, _, width = shapes[each.vehicle_row]
+                taken = [*_column_list(each.pose_columns), *_column_list(each.command_columns)]
+                columns[:, at] = offset + steps * width + np.array(taken, dtype=np.intp)
+                row, column, period = each.mode_row
+                offset, _, width = shapes[row]
+                # step j's mode: the row of the component's latest step <= j (`_held`; its first
+                # step the block's first, checked by `take`)
+                modes[:, at] = offset + (steps[:, 0] // period) * width + column
+            if mine:
+                self.parts.append((part.history, np.array(mine, dtype=np.intp), columns, modes))
+        self.block = block
+        self.pose_rows: np.ndarray | None = None  # [step, robot, x y theta v omega] of the last `take`
+        self.modes_now: np.ndarray | None = None  # [step, robot] modes of the last `take`
+
+    @classmethod
+    def make(cls, robots: list[_Robot], tables: list, block: int) -> _BlockRows | None:
+        """None unless every robot still stepped has its vehicle stepped every step and it and its
+        mode component rows in one of the kernel's buffers, its command columns its vehicle's."""
+        if not tables or any(part is None for part in tables):
+            return None
+        for each in robots:
+            if each.halted:
+                continue
+            if each.vehicle_period != 1 or each.command_columns is None or each.mode_row is None:
+                return None
+            found = [part.record_shapes for part in tables if part.record_shapes[each.vehicle_row]]
+            if len(found) != 1:
+                return None
+            shapes = found[0]
+            if (
+                shapes[each.mode_row[0]] is None
+                or shapes[each.vehicle_row][1] < block
+                or shapes[each.mode_row[0]][1] < -(-block // each.mode_row[2])
+            ):
+                return None
+        return cls(robots, tables, block)
+
+    def take(self, histories: list, first: int, count: int) -> bool:
+        """`_Robot.take` of every robot for the block of `count` steps from step `first` whose rows
+        `histories` are, as views of the kernel's buffers (one stretch); False (nothing taken) when
+        a robot's vehicle has not `count` rows there, or its mode component does not step in the
+        block's first step (its mode before that is the last block's) or has not its rows."""
+        if count > self.block or any(len(histories[row]) != count for row in self.vehicle_rows):
+            return False
+        for row, period in self.mode_rows:
+            if first % period or len(histories[row]) != -(-count // period):
+                return False
+        robots = self.robots
+        if len(self.parts) == 1 and not self.halted:
+            history, _, columns, modes = self.parts[0]
+            rows, modes = history.take(columns[:count]), history.take(modes[:count])
+        else:
+            rows = np.empty((count, len(robots), 5))
+            modes = np.empty((count, len(robots)))
+            for history, mine, columns, indices in self.parts:
+                rows[:, mine] = history.take(columns[:count])
+                modes[:, mine] = history.take(indices[:count])
+        for r in self.halted:  # not stepped: where it stopped, commanding nothing
+            each = robots[r]
+            if each._last is None:
+                each._last = (each.poses[-1], each.commands_now[-1], each.modes[-1])
+            rows[:, r, :3] = each._last[0]
+            rows[:, r, 3:] = 0.0
+            modes[:, r] = math.nan
+        self.pose_rows, self.modes_now = rows, modes
+        for r, each in enumerate(robots):
+            each.poses = rows[:, r, :3]
+            each.commands_now = rows[:, r, 3:]
+            each.modes = modes[:, r]
+            each._last = None
+        return True
+
+
+class _SplitKernel:
+    """The kernel's block of a fleet's FMUs as `PARTS` calls side by side on the pool of the block
+    program's threads (`block_pool_kernels` of world.c: each call taken by whichever thread is
+    free, so a worker woken late leaves the caller no more to do than alone), each on tables of
+    a part of the robots (the other parts' components left out as constant outputs, as the Python
+    components are), instead of one call on all: no FMU reads an output of another robot's FMU
+    (`make` checks every link), so each FMU is set, stepped and read with the same values in the
+    same order as in the one call, its rows the same. Only the project's FMUs (no global state:
+    instances apart are independent) step so. The calls run whole blocks of full steps (`fits`);
+    a failed FMU raises the error of the first failure in the one call's order (step, then
+    position), the other parts' FMUs maybe having stepped further (the run ends there)."""
+
+    PARTS = 4
+
+    def __init__(self, master: Master, halves: list, pool: int, block: int) -> None:
+        from cosim.core import kernel
+        from cosim.world import kernels
+
+        self.master = master
+        self.halves = halves
+        self.pool = pool
+        self.block = block
+        self.function = kernels.library().block_pool_kernels
+        address = ctypes.cast(kernel._kernel(), ctypes.c_void_p).value
+        bound = [part._bound() for part in halves]
+        self.results = [part._result for part in bound]
+        self.jobs = (kernels.KernelJobArrays * len(halves))(
+            *(
+                kernels.KernelJobArrays(
+                    function=address,
+                    start_ns=master.start_time_ns,
+                    h_ns=master.system.macro_step_ns,
+                    tables=ctypes.addressof(part._tables),
+                    result=ctypes.addressof(part._result),
+                )  # fmt: skip
+                for part in bound
+            )
+        )
+        self.plans = [part.stretch_plan(master._plan, master.system.macro_step_ns) for part in halves]
+        self.active = False  # the last block ran here (else on the one set of tables)
+        self.rows: _BlockRows | None = None  # `_BlockRows` of the halves
+
+    @classmethod
+    def make(cls, master: Master, robots: list[_Robot], python: _PythonSteps | None, block: int):
+        """The split of the robots still stepped into two halves (fleet order), or None: without a
+        pool of threads (`_BlockProgram`), fewer than `_BlockProgram.MIN_CHAINS` robots, a component
+        that is not one of the project's FMUs stepped by the kernel, or a link between two robots'
+        FMUs."""
+        from cosim.core.component import Component
+        from cosim.fmi.builtin import GENERATION_TOOL
+
+        program = python.program if python is not None else None
+        if program is None or program.program is None or master.system.mode == "jacobi":
+            return None
+        stepped = [each for each in robots if not each.halted]
+        if len(stepped) < max(2, _BlockProgram.MIN_CHAINS):
+            return None
+        python_components = [component for component, *_ in python.steps]
+        parts = min(cls.PARTS, len(stepped))
+        half_of: dict[str, int] = {}
+        halves_components: list[list] = [[] for _ in range(parts)]
+        for number, each in enumerate(stepped):
+            half = number * parts // len(stepped)
+            for component in each.built.system.components.values():
+                if component.constant_outputs or any(component is c for c in python_components):
+                    continue
+                if type(component).native_step is Component.native_step:
+                    return None  # a component the kernel would hand back
+                description = getattr(component, "model_description", None)
+                if description is None or not (description.generationTool or "").startswith(GENERATION_TOOL):
+                    return None
+                half_of[component.name] = half
+                halves_components[half].append(component)
+        for component in master.order:  # every component the kernel steps is one robot's
+            if component.constant_outputs or any(component is c for c in python_components):
+                continue
+            if component.name not in half_of:
+                return None
+        for consumer, fed in master.system.links().items():
+            for link in fed:
+                producer = half_of.get(link.producer)
+                if producer is not None and half_of.get(consumer, producer) != producer:
+                    return None
+        halves = []
+        for half in range(parts):
+            others = [*python_components]
+            for other in range(parts):
+                if other != half:
+                    others += halves_components[other]
+            for component in others:
+                component.constant_outputs = True
+            try:
+                tables = master.kernel_tables(record=True, block=block, scalar_rows=True)
+            finally:
+                for component in others:
+                    component.constant_outputs = False
+            from cosim.core import kernel
+
+            if tables is None or (tables.components[:, kernel.C_KIND] == kernel.KIND_PYTHON).any():
+                return None
+            tables.sent_kept = True
+            tables.warm_up()
+            halves.append(tables)
+        split = cls(master, halves, program.program.pool, block)
+        split.rows = _BlockRows.make(robots, halves, block)
+        return split
+
+    def fits(self, first: int, count: int) -> bool:
+        """Whether the block of `count` steps from `first` is whole steps of the macro step (none
+        cut at the stop time: those go through `Master.run_blocks`)."""
+        tail_from = self.master._tail_from
+        return 0 < count <= self.block and (tail_from is None or first + count <= tail_from)
+
+    def run(self, first: int, count: int) -> list:
+        """Step the block; the rows of every component (as `Master.run_blocks` hands them over)."""
+        from cosim.core import kernel
+
+        master = self.master
+        master._check_running()
+        master._check_steps(count)
+        for part in self.halves:
+            part.rows[:] = 0
+            part.start_run()
+        for job in self.jobs:
+            job.first_step, job.steps = first, count
+        self.function(self.pool, ctypes.addressof(self.jobs), len(self.jobs))
+        end = first + count
+        results = [tuple(result) for result in self.results]
+        if any(result[0] != kernel.DONE or result[1] != end for result in results):
+            self._failed(results)
+        histories = None
+        for part, plan in zip(self.halves, self.plans, strict=True):
+            p = plan.recorded_periods
+            counts = np.minimum((end + p - 1) // p - (first + p - 1) // p, part.rows[plan.recorded])
+            delivered = part.delivered(counts)
+            if histories is None:
+                histories = list(delivered)
+            else:
+                histories = [a if a is not None else b for a, b in zip(histories, delivered, strict=True)]
+        master.step_index = end
+        return histories
+
+    def _failed(self, results: list) -> None:
+        """Raise the error of the first failure (step, then position) as `Master.run_blocks` would."""
+        from cosim.core import kernel
+
+        master = self.master
+        failures = [(r[1], r[2], i) for i, r in enumerate(results) if r[0] == kernel.FAILED]
+        if not failures:
+            raise CosimError(f"the fleet's kernel stopped unexpectedly (codes {[r[0] for r in results]})")
+        k, _, i = min(failures)
+        code, k, position, failed, call, status, kind = results[i]
+        master.step_index = k
+        plan = master._plan
+        h_ns, start_ns = master.system.macro_step_ns, master.start_time_ns
+        try:
+            native = self.halves[i].native[failed]
+            at = None if call in (0, 2) else (start_ns + k * h_ns) / NS_PER_S
+            native.fail(call, status, at, kernel.KINDS[kind])
+        except CosimError as error:
+            master.failure = error
+            raise
+        raise CosimError(f"component '{plan[failed].component.name}' failed at step {k}")
+
+
+def _column_list(columns) -> list[int]:
+    """`_columns`' slice or list as the list of its columns."""
+    return list(range(columns.start, columns.stop)) if isinstance(columns, slice) else list(columns)
 
 
 def _log_plans(log: FleetLog, robots: list[_Robot], t_ns: int) -> None:
@@ -931,6 +1235,11 @@ def _run(
     tables, python = _tables(master, block)
     if tables is not None:  # between the blocks' kernel calls nothing else sets the FMUs' inputs
         tables.sent_kept = True
+        _warm_up(master, tables)
+    if log is not None and steps > 0:  # the channels the first block registers, now, in its order
+        log.steps.register_step_channels(0, min(block, steps))  # (the loop starts at k = 0)
+    block_rows = _BlockRows.make(robots, [tables], block)
+    split = _SplitKernel.make(master, robots, python, block) if tables is not None else None
     judge = _FleetJudge.make(robots) if not stop_on_collision else None
     if coordination is not None:  # the released cells (and halts) for the first block
         coordination.before_block(0.0)
@@ -941,7 +1250,9 @@ def _run(
     try:
         while k < steps and reason is None:
             count = min(block, steps - k)
-            histories = _advance(master, robots, count, tables, python)
+            histories = _advance(master, robots, count, tables, python, block_rows, split)
+            # [step, robot, x y theta v omega] when `_BlockRows` took them
+            taken = block_rows.pose_rows if block_rows is not None else None
             if log is not None:
                 _log_plans(log, robots, k * h_ns)
             poses = []  # the poses logged in the block: (step, t_ns, per robot x, y, theta, v, omega)
@@ -953,11 +1264,15 @@ def _run(
             starts = [(k + i) * h_ns / NS_PER_S for i in range(count)]
             lengths = [end - start for start, end in zip(starts, ends, strict=True)]
             last = count - 1
-            stacked = np.stack([each.poses[:, :2] for each in robots], axis=1)  # step, robot, x y
+            if taken is not None:
+                stacked = taken[:, :, :2].copy()  # step, robot, x y
+            else:
+                stacked = np.stack([each.poses[:, :2] for each in robots], axis=1)
             # Nothing ends the run but the robots' own ends: judged a robot at a time.
             if not stop_on_collision:
                 if judge is not None:
-                    ended = judge.block(robots, ends, lengths, positions, stacked)
+                    modes = block_rows.modes_now if taken is not None else None
+                    ended = judge.block(robots, ends, lengths, positions, stacked, modes)
                 else:
                     ended = [_judge_block(each, ends, lengths, positions[r]) for r, each in enumerate(robots)]
                 if all(not each.judged for each in robots):  # ends with the step in which the last one ended
@@ -982,7 +1297,9 @@ def _run(
                 if trace is not None:
                     trace.append((t_next, after))
                 if log is not None and (k + i + 1) % pose_steps == 0:
-                    if pose_rows is None:  # per step, robot: x, y, theta, v, omega
+                    if pose_rows is None and taken is not None:
+                        pose_rows = taken
+                    elif pose_rows is None:  # per step, robot: x, y, theta, v, omega
                         pose_rows = np.concatenate(
                             (
                                 np.stack([each.poses for each in robots], axis=1),
@@ -1010,6 +1327,8 @@ def _run(
                     tables, python = _halt(master, robots, log, block, python)
                     if tables is not None:
                         tables.sent_kept = True
+                    block_rows = _BlockRows.make(robots, [tables], block)
+                    split = _SplitKernel.make(master, robots, python, block) if tables is not None else None
             for each in robots:  # a new mission goal: given at the end of the block
                 if each.pending_goal and each.judged:
                     _next_goal(each, outcome.time, coordination)
@@ -1042,6 +1361,14 @@ def _run(
             "failures": coordinator.failures,
             "planning_time": coordinator.solve_time,
         }
+
+
+def _warm_up(master: Master, tables) -> None:
+    """What the kernel's first block would make or bring in first, before the loop: the kernel
+    bound, its record buffer's pages mapped (`KernelTables.warm_up`), the plan of its stretches
+    (`KernelTables.stretch_plan`): ~3 ms of the first block at N = 50."""
+    tables.warm_up()
+    tables.stretch_plan(master._plan, master.system.macro_step_ns)
 
 
 def _halt(master: Master, robots: list[_Robot], log: FleetLog | None, block: int, python=None):
@@ -1290,9 +1617,10 @@ class _FleetJudge:
                 self.release(r, each)
 
     def block(self, robots: list[_Robot], ends: list[float], lengths: list[float], starts: np.ndarray,
-              positions: np.ndarray) -> list[int | None]:  # fmt: skip
+              positions: np.ndarray, modes: np.ndarray | None = None) -> list[int | None]:  # fmt: skip
         """`_judge_block` of every robot (`starts`: N x 2 before the block's first step,
-        `positions`: steps x N x 2 after each); per robot the step in which it stopped being judged."""
+        `positions`: steps x N x 2 after each; `modes`: steps x N, the robots' `modes` side by side,
+        when at hand); per robot the step in which it stopped being judged."""
         count = len(ends)
         held, compiled = self.held, self.compiled
         for r, each in enumerate(robots):
@@ -1311,7 +1639,8 @@ class _FleetJudge:
         ended: list[int | None] = [None] * len(robots)
         python = [r for r in range(len(robots)) if not held[r]]
         if len(python) < len(robots):
-            modes = np.stack([each.modes for each in robots], axis=1)
+            if modes is None:
+                modes = np.stack([each.modes for each in robots], axis=1)
             starts = np.ascontiguousarray(starts, dtype=np.float64)
             times, steps = np.array(ends), np.array(lengths)
             events = self.function(

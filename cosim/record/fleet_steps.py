@@ -263,6 +263,24 @@ class FleetSteps:
         next(robot for robot in self.robots if robot.name == name).halted = True
         self.planned = None
 
+    def register_step_channels(self, first: int, end: int) -> None:
+        """Register now the channels that `block` of the steps [first, end) would register first
+        (each robot's /scan, then its /cmd_vel, robot after robot, those due in the block), as it
+        would: the same channels in the same order (~0.1 ms a robot, a fleet's first block's time
+        else). Call it where nothing is written to the recorder before that block but its plans
+        (which then follow the channels' records instead of preceding them)."""
+        for robot in self.robots:
+            if robot.halted:
+                continue
+            scan = robot.recording.scan
+            if scan is not None and first % scan.period == 0 and robot.scan_channel is None:
+                robot.scan_channel = robot.view.scan_channel(
+                    scan.angles, scan.range_min, scan.range_max, scan.scan_time
+                )
+            if robot.command is not None and robot.cmd_channel is None:
+                if due_from(first, robot.command[0]) < end:
+                    robot.cmd_channel = robot.view.cmd_vel_channel()
+
     def write_constant(self, t_ns: int) -> None:
         """The records of the components whose outputs are fixed for the run."""
         for robot in self.robots:

@@ -126,6 +126,17 @@ class BlockProgramArrays(ctypes.Structure):
     ]  # fmt: skip
 
 
+class KernelJobArrays(ctypes.Structure):
+    """`KernelJob` of world.c: one call of the master's stepping kernel (`navcosim_step_kernel`, by
+    its address) from `first_step` for `steps` steps on one set of its tables (`Kernel`'s struct)
+    into its result (`block_pool_kernels`)."""
+
+    _fields_ = [
+        ("function", _p), ("first_step", _i64), ("steps", _i64), ("start_ns", _i64), ("h_ns", _i64),
+        ("tables", _p), ("result", _p),
+    ]  # fmt: skip
+
+
 # `fleet_python_block`'s kinds of component: stepped by Python (handed back before its gather), a
 # lidar swept in C, a component with a C step (handed back when that says so), the copies only.
 BLOCK_PYTHON, BLOCK_LIDAR, BLOCK_C_STEP, BLOCK_COPIES = 0, 1, 2, 3
@@ -199,6 +210,7 @@ def library() -> ctypes.CDLL:
                 "fleet_python_block_threads": (_i64, [_p, _i64, _i64, _f64]),
                 "block_pool_new": (_p, [_i64]),
                 "block_pool_free": (None, [_p]),
+                "block_pool_kernels": (None, [_p, _p, _i64]),
             },
         )
     return _library

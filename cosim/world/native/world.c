@@ -847,8 +847,20 @@ static int64_t block_chain(const BlockProgram *p, int64_t c, int64_t from)
     return p->end;
 }
 
+/* A call of the master's stepping kernel (`navcosim_step_kernel` of cosim/core/native/kernel.c,
+ * reached through its address) on one set of its tables: `block_pool_kernels` runs a fleet's
+ * kernel split by robots (fleet.py's `_SplitKernel`) on the pool's threads. */
+typedef int64_t (*KernelCall)(int64_t, int64_t, int64_t, int64_t, int64_t, int64_t, const void *, int64_t *);
+typedef struct {
+    KernelCall function;
+    int64_t first_step, steps, start_ns, h_ns;
+    const void *tables;
+    int64_t *result;
+} KernelJob;
+
 /* Worker threads (the calling thread is one more): a job is a program's due chains of a stretch,
- * each taken by whichever thread is free. Every field is read and written under `lock`. */
+ * each taken by whichever thread is free, or kernel calls (`kernels`, each taken so). Every field
+ * is read and written under `lock`. */
 struct BlockPool {
     pthread_mutex_t lock;
     pthread_cond_t wake, finished;
@@ -857,6 +869,7 @@ struct BlockPool {
     int64_t generation; /* counts the jobs: a worker sleeps until it changes, or `stop` */
     int stop;
     BlockProgram *job;
+    KernelJob *kernels; /* a job of kernel calls (`block_pool_kernels`) instead of chains */
     int64_t due_count, front, back, done; /* the job's chains p->due[0 .. due_count): those left, done */
     pid_t pid;                      /* the process of the threads (a forked child has none) */
     int64_t away_from;              /* Linux: the CPU the workers are kept off (-1: none) */
@@ -867,6 +880,18 @@ struct BlockPool {
  * held, returns with it held. */
 static void block_pool_take(BlockPool *pool, int caller)
 {
+    if (pool->kernels) {
+        while (pool->front < pool->back) {
+            KernelJob *call = pool->kernels + (caller ? pool->front++ : --pool->back);
+            pthread_mutex_unlock(&pool->lock);
+            call->function(call->first_step, call->steps, 0, call->start_ns, call->h_ns, 0, call->tables,
+                           call->result);
+            pthread_mutex_lock(&pool->lock);
+            if (++pool->done == pool->due_count)
+                pthread_cond_signal(&pool->finished);
+        }
+        return;
+    }
     BlockProgram *p = pool->job;
     while (pool->front < pool->back) {
         int64_t c = p->due[caller ? pool->front++ : --pool->back];
@@ -947,6 +972,52 @@ void block_pool_free(BlockPool *pool)
     free(pool);
 }
 
+/* The workers kept off the calling thread's CPU: woken where it runs they would wait for it (the
+ * scheduler places a woken thread beside its waker when no CPU is idle). */
+static void block_pool_place(BlockPool *pool)
+{
+#ifdef __linux__
+    int cpu = sched_getcpu();
+    if (cpu >= 0 && cpu != pool->away_from) {
+        cpu_set_t allowed;
+        if (sched_getaffinity(0, sizeof allowed, &allowed) == 0 && CPU_COUNT(&allowed) > 1) {
+            CPU_CLR(cpu, &allowed);
+            for (int64_t w = 0; w < pool->count; w++)
+                pthread_setaffinity_np(pool->threads[w], sizeof allowed, &allowed);
+        }
+        pool->away_from = cpu;
+    }
+#else
+    (void)pool;
+#endif
+}
+
+/* The `n` kernel calls side by side, this thread taking them from the first on, the pool's workers
+ * from the last back (all on this thread without a pool of this process); each call's result in
+ * its own `result`. The calls must touch disjoint memory (tables, buffers, FMU instances). */
+void block_pool_kernels(BlockPool *pool, KernelJob *calls, int64_t n)
+{
+    if (!pool || n < 2 || pool->pid != getpid()) {
+        for (int64_t j = 0; j < n; j++)
+            calls[j].function(calls[j].first_step, calls[j].steps, 0, calls[j].start_ns, calls[j].h_ns, 0,
+                              calls[j].tables, calls[j].result);
+        return;
+    }
+    block_pool_place(pool);
+    pthread_mutex_lock(&pool->lock);
+    pool->kernels = calls;
+    pool->due_count = n;
+    pool->front = pool->done = 0;
+    pool->back = n;
+    pool->generation++;
+    pthread_cond_broadcast(&pool->wake);
+    block_pool_take(pool, 1);
+    while (pool->done < pool->due_count)
+        pthread_cond_wait(&pool->finished, &pool->lock);
+    pool->kernels = NULL;
+    pthread_mutex_unlock(&pool->lock);
+}
+
 /* The chains of the stretch from p->start: the due ones on the pool's threads and this one (on this
  * one alone with fewer than p->min_chains, or no pool of this process), each to its first
  * hand-back. */
@@ -969,20 +1040,7 @@ static void block_stretch(BlockProgram *p)
             p->cursor[p->due[d]] = block_chain(p, p->due[d], p->start);
         return;
     }
-#ifdef __linux__
-    /* The workers kept off the calling thread's CPU: woken where it runs they would wait for it
-     * (the scheduler places a woken thread beside its waker when no CPU is idle). */
-    int cpu = sched_getcpu();
-    if (cpu >= 0 && cpu != pool->away_from) {
-        cpu_set_t allowed;
-        if (sched_getaffinity(0, sizeof allowed, &allowed) == 0 && CPU_COUNT(&allowed) > 1) {
-            CPU_CLR(cpu, &allowed);
-            for (int64_t w = 0; w < pool->count; w++)
-                pthread_setaffinity_np(pool->threads[w], sizeof allowed, &allowed);
-        }
-        pool->away_from = cpu;
-    }
-#endif
+    block_pool_place(pool);
     pthread_mutex_lock(&pool->lock);
     pool->job = p;
     pool->due_count = due;
