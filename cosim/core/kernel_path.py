@@ -52,6 +52,21 @@ def all_native_tables(master, record: bool, block: int) -> fast_loop.KernelTable
     return tables
 
 
+def raise_failure(master, native, name: str, k: int, call: int, status: int, kind: int) -> None:
+    """Raise the error of the kernel's report that component `name` (its native handle `native`)
+    failed in call `call` (0, 2: set-up, no time; else at step k's time) with FMI status `status`
+    of the function kind `kind`; kept as the master's failure."""
+    from cosim.core import kernel
+
+    at = None if call in (0, 2) else (master.start_time_ns + k * master.system.macro_step_ns) / NS_PER_S
+    try:
+        native.fail(call, status, at, kernel.KINDS[kind])
+    except CosimError as error:
+        master.failure = error
+        raise
+    raise CosimError(f"component '{name}' failed at step {k}")
+
+
 def run_blocks(
     master,
     steps: int,
@@ -178,14 +193,9 @@ def run_blocks(
                     break
             master.step_index = k
             if code == kernel.FAILED:
-                try:
-                    native = tables.native[failed]
-                    at = None if call in (0, 2) else (start_ns + k * h_ns) / NS_PER_S
-                    native.fail(call, status, at, kernel.KINDS[kind])
-                except CosimError as error:
-                    master.failure = error
-                    raise
-                raise CosimError(f"component '{plan[failed].component.name}' failed at step {k}")
+                raise_failure(
+                    master, tables.native[failed], plan[failed].component.name, k, call, status, kind
+                )
             if code == kernel.HAND_BACK:
                 # This component, and the next ones due in this step while they need Python too.
                 while True:

@@ -1157,6 +1157,7 @@ class _SplitKernel:
     def _failed(self, results: list) -> None:
         """Raise the error of the first failure (step, then position) as `Master.run_blocks` would."""
         from cosim.core import kernel
+        from cosim.core.kernel_path import raise_failure
 
         master = self.master
         failures = [(r[1], r[2], i) for i, r in enumerate(results) if r[0] == kernel.FAILED]
@@ -1165,16 +1166,9 @@ class _SplitKernel:
         k, _, i = min(failures)
         code, k, position, failed, call, status, kind = results[i]
         master.step_index = k
-        plan = master._plan
-        h_ns, start_ns = master.system.macro_step_ns, master.start_time_ns
-        try:
-            native = self.halves[i].native[failed]
-            at = None if call in (0, 2) else (start_ns + k * h_ns) / NS_PER_S
-            native.fail(call, status, at, kernel.KINDS[kind])
-        except CosimError as error:
-            master.failure = error
-            raise
-        raise CosimError(f"component '{plan[failed].component.name}' failed at step {k}")
+        raise_failure(
+            master, self.halves[i].native[failed], master._plan[failed].component.name, k, call, status, kind
+        )
 
 
 def _column_list(columns) -> list[int]:

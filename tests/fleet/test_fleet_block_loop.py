@@ -15,6 +15,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from fixtures.mcap_messages import logged_messages
 from mcap.reader import make_reader
 
 from cosim.core.master import Master
@@ -146,14 +147,6 @@ def _contacts_step_by_step(self, starts, lengths, positions):
     ]
 
 
-def _messages(path: Path) -> list:
-    with open(path, "rb") as stream:
-        return [
-            (channel.topic, message.sequence, message.log_time, message.data)
-            for _, channel, message in make_reader(stream).iter_messages(log_time_order=False)
-        ]
-
-
 @pytest.mark.slow
 def test_a_fleet_run_is_that_of_the_step_by_step_loop(tmp_path, monkeypatch):
     """fleet_missions for 40 s: contacts at once, robots hitting racks (halted), goals reached and
@@ -199,4 +192,4 @@ def test_a_fleet_run_is_that_of_the_step_by_step_loop(tmp_path, monkeypatch):
     assert fast.collisions and any(robot.collision for robot in fast.robots)
     assert any(robot.goals_reached for robot in fast.robots)
     assert outcome_record(fast) == outcome_record(slow)
-    assert _messages(tmp_path / "fast.mcap") == _messages(tmp_path / "slow.mcap")
+    assert logged_messages(tmp_path / "fast.mcap") == logged_messages(tmp_path / "slow.mcap")

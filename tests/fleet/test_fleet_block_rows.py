@@ -10,21 +10,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mcap.reader import make_reader
+from fixtures.mcap_messages import logged_messages
 
 from cosim.navigation import fleet as fleet_module
 from cosim.navigation.fleet_log import outcome_record
 from cosim.scenario.load import load_scenario, parse_scenario
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
-
-
-def _messages(path: Path) -> list:
-    with open(path, "rb") as stream:
-        return [
-            (channel.topic, message.sequence, message.log_time, bytes(message.data))
-            for _, channel, message in make_reader(stream).iter_messages(log_time_order=False)
-        ]
 
 
 def _run(monkeypatch, fleet, log: Path, batched: bool) -> tuple:
@@ -75,7 +67,7 @@ def test_rows_gathered_at_once_are_each_robots_own(tmp_path, monkeypatch):
     assert not any(taken for _, _, taken in slow_blocks)
     assert [(k, arrays) for k, arrays, _ in fast_blocks] == [(k, arrays) for k, arrays, _ in slow_blocks]
     assert outcome_record(fast) == outcome_record(slow)
-    assert _messages(tmp_path / "fast.mcap") == _messages(tmp_path / "slow.mcap")
+    assert logged_messages(tmp_path / "fast.mcap") == logged_messages(tmp_path / "slow.mcap")
 
 
 @pytest.mark.slow
@@ -96,4 +88,4 @@ def test_rows_gathered_at_once_through_goals_dwells_and_a_cut_last_block(tmp_pat
     assert sum(gathered) >= len(gathered) - 1
     assert [(k, arrays) for k, arrays, _ in fast_blocks] == [(k, arrays) for k, arrays, _ in slow_blocks]
     assert outcome_record(fast) == outcome_record(slow)
-    assert _messages(tmp_path / "fast.mcap") == _messages(tmp_path / "slow.mcap")
+    assert logged_messages(tmp_path / "fast.mcap") == logged_messages(tmp_path / "slow.mcap")

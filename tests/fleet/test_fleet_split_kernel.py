@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 from types import SimpleNamespace
 
-from mcap.reader import make_reader
+from fixtures.mcap_messages import logged_messages
 
 from cosim.core.system import System
 from cosim.navigation import fleet as fleet_module
@@ -17,14 +17,6 @@ from cosim.navigation.fleet_log import outcome_record
 from cosim.scenario.load import load_scenario
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
-
-
-def _messages(path: Path) -> list:
-    with open(path, "rb") as stream:
-        return [
-            (channel.topic, message.sequence, message.log_time, bytes(message.data))
-            for _, channel, message in make_reader(stream).iter_messages(log_time_order=False)
-        ]
 
 
 def _threads(patched) -> None:
@@ -70,7 +62,7 @@ def test_split_kernel_steps_as_the_one_call(tmp_path, monkeypatch):
     assert not any(on for _, _, on in slow_blocks)
     assert [(k, state) for k, state, _ in fast_blocks] == [(k, state) for k, state, _ in slow_blocks]
     assert outcome_record(fast) == outcome_record(slow)
-    assert _messages(tmp_path / "split.mcap") == _messages(tmp_path / "one.mcap")
+    assert logged_messages(tmp_path / "split.mcap") == logged_messages(tmp_path / "one.mcap")
 
 
 def test_no_split_where_an_fmu_reads_another_robots(monkeypatch):

@@ -992,6 +992,27 @@ static void block_pool_place(BlockPool *pool)
 #endif
 }
 
+/* The pool's `n` tasks (the due chains of `job`, or the kernel calls `kernels`) on its workers and
+ * this thread, returning once all are done. */
+static void block_pool_run(BlockPool *pool, BlockProgram *job, KernelJob *kernels, int64_t n)
+{
+    block_pool_place(pool);
+    pthread_mutex_lock(&pool->lock);
+    pool->job = job;
+    pool->kernels = kernels;
+    pool->due_count = n;
+    pool->front = pool->done = 0;
+    pool->back = n;
+    pool->generation++;
+    pthread_cond_broadcast(&pool->wake);
+    block_pool_take(pool, 1);
+    while (pool->done < pool->due_count)
+        pthread_cond_wait(&pool->finished, &pool->lock);
+    pool->job = NULL;
+    pool->kernels = NULL;
+    pthread_mutex_unlock(&pool->lock);
+}
+
 /* The `n` kernel calls side by side, this thread taking them from the first on, the pool's workers
  * from the last back (all on this thread without a pool of this process); each call's result in
  * its own `result`. The calls must touch disjoint memory (tables, buffers, FMU instances). */
@@ -1003,19 +1024,7 @@ void block_pool_kernels(BlockPool *pool, KernelJob *calls, int64_t n)
                               calls[j].tables, calls[j].result);
         return;
     }
-    block_pool_place(pool);
-    pthread_mutex_lock(&pool->lock);
-    pool->kernels = calls;
-    pool->due_count = n;
-    pool->front = pool->done = 0;
-    pool->back = n;
-    pool->generation++;
-    pthread_cond_broadcast(&pool->wake);
-    block_pool_take(pool, 1);
-    while (pool->done < pool->due_count)
-        pthread_cond_wait(&pool->finished, &pool->lock);
-    pool->kernels = NULL;
-    pthread_mutex_unlock(&pool->lock);
+    block_pool_run(pool, NULL, calls, n);
 }
 
 /* The chains of the stretch from p->start: the due ones on the pool's threads and this one (on this
@@ -1040,19 +1049,7 @@ static void block_stretch(BlockProgram *p)
             p->cursor[p->due[d]] = block_chain(p, p->due[d], p->start);
         return;
     }
-    block_pool_place(pool);
-    pthread_mutex_lock(&pool->lock);
-    pool->job = p;
-    pool->due_count = due;
-    pool->front = pool->done = 0;
-    pool->back = due;
-    pool->generation++;
-    pthread_cond_broadcast(&pool->wake);
-    block_pool_take(pool, 1);
-    while (pool->done < pool->due_count)
-        pthread_cond_wait(&pool->finished, &pool->lock);
-    pool->job = NULL;
-    pthread_mutex_unlock(&pool->lock);
+    block_pool_run(pool, p, NULL, due);
 }
 
 /* The first chain's stop before the stretch's end (the next hand-back, in the master's order), or
