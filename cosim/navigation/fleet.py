@@ -1056,7 +1056,7 @@ class _SplitKernel:
 
     @classmethod
     def make(cls, master: Master, robots: list[_Robot], python: _PythonSteps | None, block: int):
-        """The split of the robots still stepped into two halves (fleet order), or None: without a
+        """The split of the robots still stepped into `PARTS` parts (fleet order), or None: without a
         pool of threads (`_BlockProgram`), fewer than `_BlockProgram.MIN_CHAINS` robots, a component
         that is not one of the project's FMUs stepped by the kernel, or a link between two robots'
         FMUs."""
