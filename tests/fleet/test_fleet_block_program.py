@@ -193,6 +193,7 @@ def test_the_threaded_block_steps_as_the_one_thread_block(monkeypatch, tmp_path)
         assert found == expected, f"block at step {k}"
 
 
+@pytest.mark.slow  # a fleet run of several seconds
 def test_ten_robots_on_three_threads_as_on_one(monkeypatch, tmp_path):
     """fleet_missions (ten robots, every lidar and planner in C) for 6 s on three threads, its
     chains taken by whichever thread is free: every component's inputs, outputs and planner state

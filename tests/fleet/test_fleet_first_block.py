@@ -8,6 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 from mcap.records import Channel, Message
 from mcap.stream_reader import StreamReader
 
@@ -34,6 +35,7 @@ def _chunk_records(path: Path) -> list:
     return found
 
 
+@pytest.mark.slow  # a fleet run of several seconds
 def test_channels_and_kernel_made_before_the_loop_leave_the_same_log(tmp_path, monkeypatch):
     overrides = ["simulation.stop_time=1.5"]
     fleet = load_scenario(SCENARIOS / "fleet_missions.toml", overrides, fleet=True)

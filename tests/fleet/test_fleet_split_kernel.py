@@ -9,6 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 from types import SimpleNamespace
 
+import pytest
 from fixtures.mcap_messages import logged_messages
 
 from cosim.core.system import System
@@ -53,6 +54,7 @@ def _run(monkeypatch, log: Path, split: bool) -> tuple:
     return outcome, blocks, made
 
 
+@pytest.mark.slow  # a fleet run of several seconds
 def test_split_kernel_steps_as_the_one_call(tmp_path, monkeypatch):
     fast, fast_blocks, made = _run(monkeypatch, tmp_path / "split.mcap", split=True)
     slow, slow_blocks, _ = _run(monkeypatch, tmp_path / "one.mcap", split=False)
