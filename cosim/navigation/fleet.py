@@ -520,18 +520,7 @@ class _PythonSteps:
     def tables(self, block: int):
         """The kernel's tables without the Python components; None when the kernel cannot step the
         rest alone."""
-        from cosim.core import kernel
-
-        for component, *_ in self.steps:
-            component.constant_outputs = True
-        try:
-            tables = self.master.kernel_tables(record=True, block=block, scalar_rows=True)
-        finally:
-            for component, *_ in self.steps:
-                component.constant_outputs = False
-        if tables is None or (tables.components[:, kernel.C_KIND] == kernel.KIND_PYTHON).any():
-            return None
-        return tables
+        return _tables_without(self.master, [component for component, *_ in self.steps], block)
 
     def step(self, k: int) -> None:
         """Step the Python components due at step k, then copy their outputs to the FMUs."""
@@ -846,7 +835,7 @@ def _advance(
     stepped by Python), valid until the next call (views of the kernel's buffers). `python`: the
     Python components, stepped before the kernel steps the rest (`tables` then without them);
     `rows`: every robot's rows taken at once (`_BlockRows`, of `tables`) where it can; `split`: the
-    kernel's block as two calls side by side (`_SplitKernel`) where it fits."""
+    kernel's block as calls side by side (`_SplitKernel`) where it fits."""
     first = master.step_index
     if rows is not None:
         rows.pose_rows = rows.modes_now = None
@@ -855,8 +844,8 @@ def _advance(
     if python is not None:
         python.step(first)
     if split is not None and split.fits(first, count):
-        if not split.active:  # the one set of tables ran last: the halves send every value first
-            for part in split.halves:
+        if not split.active:  # the one set of tables ran last: the parts send every value first
+            for part in split.parts:
                 part.forget_sent()
             split.active = True
         histories = split.run(first, count)
@@ -870,7 +859,7 @@ def _advance(
             each.take(histories, first, count)
         return histories
     if split is not None and split.active and tables is not None:
-        tables.forget_sent()  # the halves ran last
+        tables.forget_sent()  # the parts ran last
         split.active = False
     if tables is not None:
         # FMUs in the compiled kernel; the lidars and planners (Python) step in the block's first
@@ -916,7 +905,7 @@ def _advance(
 
 class _BlockRows:
     """Every robot's poses, commands and modes of a block (`_Robot.take`) in one gather from the
-    kernel's record buffer (of each set of `tables` that steps robots: `_SplitKernel`'s halves),
+    kernel's record buffer (of each set of `tables` that steps robots: `_SplitKernel`'s parts),
     where the robots' vehicles and mode components have their rows, rather than robot by robot: the
     same values, in arrays of their own; a robot switched off (`_halt`) where it stopped,
     commanding nothing, its mode NaN, as `_Robot.take` has it. `take` leaves the robots to
@@ -1026,19 +1015,19 @@ class _SplitKernel:
 
     PARTS = 4
 
-    def __init__(self, master: Master, halves: list, pool: int, block: int) -> None:
+    def __init__(self, master: Master, parts: list, pool: int, block: int) -> None:
         from cosim.core import kernel
         from cosim.world import kernels
 
         self.master = master
-        self.halves = halves
+        self.parts = parts  # the tables of each part
         self.pool = pool
         self.block = block
         self.function = kernels.library().block_pool_kernels
         address = ctypes.cast(kernel._kernel(), ctypes.c_void_p).value
-        bound = [part._bound() for part in halves]
+        bound = [part._bound() for part in parts]
         self.results = [part._result for part in bound]
-        self.jobs = (kernels.KernelJobArrays * len(halves))(
+        self.jobs = (kernels.KernelJobArrays * len(parts))(
             *(
                 kernels.KernelJobArrays(
                     function=address,
@@ -1050,9 +1039,9 @@ class _SplitKernel:
                 for part in bound
             )
         )
-        self.plans = [part.stretch_plan(master._plan, master.system.macro_step_ns) for part in halves]
+        self.plans = [part.stretch_plan(master._plan, master.system.macro_step_ns) for part in parts]
         self.active = False  # the last block ran here (else on the one set of tables)
-        self.rows: _BlockRows | None = None  # `_BlockRows` of the halves
+        self.rows: _BlockRows | None = None  # `_BlockRows` of the parts
 
     @classmethod
     def make(cls, master: Master, robots: list[_Robot], python: _PythonSteps | None, block: int):
@@ -1071,10 +1060,10 @@ class _SplitKernel:
             return None
         python_components = [component for component, *_ in python.steps]
         parts = min(cls.PARTS, len(stepped))
-        half_of: dict[str, int] = {}
-        halves_components: list[list] = [[] for _ in range(parts)]
+        part_of: dict[str, int] = {}
+        parts_components: list[list] = [[] for _ in range(parts)]
         for number, each in enumerate(stepped):
-            half = number * parts // len(stepped)
+            part = number * parts // len(stepped)
             for component in each.built.system.components.values():
                 if component.constant_outputs or any(component is c for c in python_components):
                     continue
@@ -1083,40 +1072,32 @@ class _SplitKernel:
                 description = getattr(component, "model_description", None)
                 if description is None or not (description.generationTool or "").startswith(GENERATION_TOOL):
                     return None
-                half_of[component.name] = half
-                halves_components[half].append(component)
+                part_of[component.name] = part
+                parts_components[part].append(component)
         for component in master.order:  # every component the kernel steps is one robot's
             if component.constant_outputs or any(component is c for c in python_components):
                 continue
-            if component.name not in half_of:
+            if component.name not in part_of:
                 return None
         for consumer, fed in master.system.links().items():
             for link in fed:
-                producer = half_of.get(link.producer)
-                if producer is not None and half_of.get(consumer, producer) != producer:
+                producer = part_of.get(link.producer)
+                if producer is not None and part_of.get(consumer, producer) != producer:
                     return None
-        halves = []
-        for half in range(parts):
+        tables_of_parts = []
+        for part in range(parts):
             others = [*python_components]
             for other in range(parts):
-                if other != half:
-                    others += halves_components[other]
-            for component in others:
-                component.constant_outputs = True
-            try:
-                tables = master.kernel_tables(record=True, block=block, scalar_rows=True)
-            finally:
-                for component in others:
-                    component.constant_outputs = False
-            from cosim.core import kernel
-
-            if tables is None or (tables.components[:, kernel.C_KIND] == kernel.KIND_PYTHON).any():
+                if other != part:
+                    others += parts_components[other]
+            tables = _tables_without(master, others, block)
+            if tables is None:
                 return None
             tables.sent_kept = True
             tables.warm_up()
-            halves.append(tables)
-        split = cls(master, halves, program.program.pool, block)
-        split.rows = _BlockRows.make(robots, halves, block)
+            tables_of_parts.append(tables)
+        split = cls(master, tables_of_parts, program.program.pool, block)
+        split.rows = _BlockRows.make(robots, tables_of_parts, block)
         return split
 
     def fits(self, first: int, count: int) -> bool:
@@ -1132,7 +1113,7 @@ class _SplitKernel:
         master = self.master
         master._check_running()
         master._check_steps(count)
-        for part in self.halves:
+        for part in self.parts:
             part.rows[:] = 0
             part.start_run()
         for job in self.jobs:
@@ -1143,7 +1124,7 @@ class _SplitKernel:
         if any(result[0] != kernel.DONE or result[1] != end for result in results):
             self._failed(results)
         histories = None
-        for part, plan in zip(self.halves, self.plans, strict=True):
+        for part, plan in zip(self.parts, self.plans, strict=True):
             p = plan.recorded_periods
             counts = np.minimum((end + p - 1) // p - (first + p - 1) // p, part.rows[plan.recorded])
             delivered = part.delivered(counts)
@@ -1167,8 +1148,25 @@ class _SplitKernel:
         code, k, position, failed, call, status, kind = results[i]
         master.step_index = k
         raise_failure(
-            master, self.halves[i].native[failed], master._plan[failed].component.name, k, call, status, kind
+            master, self.parts[i].native[failed], master._plan[failed].component.name, k, call, status, kind
         )
+
+
+def _tables_without(master: Master, components: list, block: int):
+    """The kernel's tables of the master's components but `components` (left out as constant
+    outputs while they are made); None when the kernel cannot step the rest alone."""
+    from cosim.core import kernel
+
+    for component in components:
+        component.constant_outputs = True
+    try:
+        tables = master.kernel_tables(record=True, block=block, scalar_rows=True)
+    finally:
+        for component in components:
+            component.constant_outputs = False
+    if tables is None or (tables.components[:, kernel.C_KIND] == kernel.KIND_PYTHON).any():
+        return None
+    return tables
 
 
 def _column_list(columns) -> list[int]:

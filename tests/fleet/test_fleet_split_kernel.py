@@ -58,7 +58,7 @@ def _run(monkeypatch, log: Path, split: bool) -> tuple:
 def test_split_kernel_steps_as_the_one_call(tmp_path, monkeypatch):
     fast, fast_blocks, made = _run(monkeypatch, tmp_path / "split.mcap", split=True)
     slow, slow_blocks, _ = _run(monkeypatch, tmp_path / "one.mcap", split=False)
-    assert made and made[0] is not None and len(made[0].halves) == fleet_module._SplitKernel.PARTS
+    assert made and made[0] is not None and len(made[0].parts) == fleet_module._SplitKernel.PARTS
     active = [on for _, _, on in fast_blocks]
     assert all(active[:-1]) and not active[-1]  # the cut last block: the one call
     assert not any(on for _, _, on in slow_blocks)
