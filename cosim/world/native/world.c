@@ -55,6 +55,16 @@ typedef struct {
  * farther than its neighbour when the point is on their common side) the first occupied one each
  * way from col is the row's nearest on that side. Returns 0 when no square of the row can be
  * nearer than *nearest_sq (dx * dx + dy * dy >= dy * dy, rounded as well). */
+/* The squared distance from x to the occupied square of column c of a row whose vertical gap
+ * squared is dy_sq, into *nearest_sq when smaller. */
+static inline void nearest_in_column(const World *w, int64_t c, double x, double half, double dy_sq,
+                                     double *nearest_sq)
+{
+    double centre_x = w->x_min + ((double)c + 0.5) * w->resolution;
+    double dx = py_max(fabs(centre_x - x) - half, 0.0);
+    *nearest_sq = py_min(*nearest_sq, dx * dx + dy_sq);
+}
+
 static inline int nearest_in_row(const World *w, int64_t r, double x, double y, double half, int64_t col,
                                  int64_t c_first, int64_t c_stop, double *nearest_sq)
 {
@@ -65,23 +75,16 @@ static inline int nearest_in_row(const World *w, int64_t r, double x, double y, 
     if (!(dy_sq < *nearest_sq))
         return 0;
     const uint8_t *line = w->occupied + r * w->cols;
-    if (line[col]) {
-        double centre_x = w->x_min + ((double)col + 0.5) * resolution;
-        double dx = py_max(fabs(centre_x - x) - half, 0.0);
-        *nearest_sq = py_min(*nearest_sq, dx * dx + dy_sq);
-    }
+    if (line[col])
+        nearest_in_column(w, col, x, half, dy_sq, nearest_sq);
     for (int64_t c = col - 1; c >= c_first; c--)
         if (line[c]) {
-            double centre_x = w->x_min + ((double)c + 0.5) * resolution;
-            double dx = py_max(fabs(centre_x - x) - half, 0.0);
-            *nearest_sq = py_min(*nearest_sq, dx * dx + dy_sq);
+            nearest_in_column(w, c, x, half, dy_sq, nearest_sq);
             break;
         }
     for (int64_t c = col + 1; c < c_stop; c++)
         if (line[c]) {
-            double centre_x = w->x_min + ((double)c + 0.5) * resolution;
-            double dx = py_max(fabs(centre_x - x) - half, 0.0);
-            *nearest_sq = py_min(*nearest_sq, dx * dx + dy_sq);
+            nearest_in_column(w, c, x, half, dy_sq, nearest_sq);
             break;
         }
     return 1;
@@ -878,25 +881,23 @@ struct BlockPool {
 /* Step the job's chains left, the calling thread from the first on, the workers from the last back
  * (each robot's memory mostly stays in one CPU's cache from step to step); called with the lock
  * held, returns with it held. */
+/* One kernel call of `block_pool_kernels`. */
+static void run_kernel_job(const KernelJob *call)
+{
+    call->function(call->first_step, call->steps, 0, call->start_ns, call->h_ns, 0, call->tables, call->result);
+}
+
 static void block_pool_take(BlockPool *pool, int caller)
 {
-    if (pool->kernels) {
-        while (pool->front < pool->back) {
-            KernelJob *call = pool->kernels + (caller ? pool->front++ : --pool->back);
-            pthread_mutex_unlock(&pool->lock);
-            call->function(call->first_step, call->steps, 0, call->start_ns, call->h_ns, 0, call->tables,
-                           call->result);
-            pthread_mutex_lock(&pool->lock);
-            if (++pool->done == pool->due_count)
-                pthread_cond_signal(&pool->finished);
-        }
-        return;
-    }
     BlockProgram *p = pool->job;
     while (pool->front < pool->back) {
-        int64_t c = p->due[caller ? pool->front++ : --pool->back];
+        int64_t task = caller ? pool->front++ : --pool->back;
+        KernelJob *kernels = pool->kernels;
         pthread_mutex_unlock(&pool->lock);
-        p->cursor[c] = block_chain(p, c, p->start);
+        if (kernels)
+            run_kernel_job(kernels + task);
+        else
+            p->cursor[p->due[task]] = block_chain(p, p->due[task], p->start);
         pthread_mutex_lock(&pool->lock);
         if (++pool->done == pool->due_count)
             pthread_cond_signal(&pool->finished);
@@ -1020,8 +1021,7 @@ void block_pool_kernels(BlockPool *pool, KernelJob *calls, int64_t n)
 {
     if (!pool || n < 2 || pool->pid != getpid()) {
         for (int64_t j = 0; j < n; j++)
-            calls[j].function(calls[j].first_step, calls[j].steps, 0, calls[j].start_ns, calls[j].h_ns, 0,
-                              calls[j].tables, calls[j].result);
+            run_kernel_job(calls + j);
         return;
     }
     block_pool_run(pool, NULL, calls, n);
