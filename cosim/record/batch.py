@@ -794,11 +794,8 @@ class MessageBlock:
             np.cumsum(counts[:-1], out=starts[1:])
             table, signal_fields, channels = self._signal_tables(numbers, carried)
             rows = table.copy()
-            sequences = self.sequences
-            firsts = [sequences[channel] for channel in channels]
-            for channel, count in zip(channels, counts, strict=True):
-                sequences[channel] += count
-            rows[:, kernel.P_SEQUENCE] = firsts
+            sequence = self._sequence
+            rows[:, kernel.P_SEQUENCE] = [sequence(c, n) for c, n in zip(channels, counts, strict=True)]
             rows[:, kernel.P_TIMES] = times.ctypes.data + 8 * starts
             # rows: float64, C-contiguous (made by `SignalStream`, `_grow`)
             rows[:, kernel.P_MATRIX] = [stream.address() for stream in carried]

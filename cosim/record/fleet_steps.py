@@ -133,6 +133,18 @@ class _Robot:
         self.odom_frame = f"{name}/{rosmsg.ODOM_FRAME}"
         self.base_frame = f"{name}/{rosmsg.ROBOT_FRAME}"
 
+    def register_scan(self, scan) -> None:
+        """Its /scan channel, registered on first use (the layout of `scan`, its lidar's: the run's)."""
+        if self.scan_channel is None:
+            self.scan_channel = self.view.scan_channel(
+                scan.angles, scan.range_min, scan.range_max, scan.scan_time
+            )
+
+    def register_command(self) -> None:
+        """Its /cmd_vel channel, registered on first use."""
+        if self.cmd_channel is None:
+            self.cmd_channel = self.view.cmd_vel_channel()
+
 
 class FleetSteps:
     """Records a fleet's robots (module docstring). `robots`: (name, system, observed, scenario) of
@@ -273,13 +285,10 @@ class FleetSteps:
             if robot.halted:
                 continue
             scan = robot.recording.scan
-            if scan is not None and first % scan.period == 0 and robot.scan_channel is None:
-                robot.scan_channel = robot.view.scan_channel(
-                    scan.angles, scan.range_min, scan.range_max, scan.scan_time
-                )
-            if robot.command is not None and robot.cmd_channel is None:
-                if due_from(first, robot.command[0]) < end:
-                    robot.cmd_channel = robot.view.cmd_vel_channel()
+            if scan is not None and first % scan.period == 0:
+                robot.register_scan(scan)
+            if robot.command is not None and due_from(first, robot.command[0]) < end:
+                robot.register_command()
 
     def write_constant(self, t_ns: int) -> None:
         """The records of the components whose outputs are fixed for the run."""
@@ -363,10 +372,7 @@ class FleetSteps:
         due: dict[int, np.ndarray] = {}  # period -> its steps in the block
         for number, robot, scan, python in robots:
             if scan is not None and first % scan.period == 0:  # a lidar steps in a block's first step
-                if robot.scan_channel is None:  # its layout is the run's: registered once
-                    robot.scan_channel = robot.view.scan_channel(
-                        scan.angles, scan.range_min, scan.range_max, scan.scan_time
-                    )
+                robot.register_scan(scan)
                 sweeps.append((robot, scan.current().copy()))
             if python is None:
                 continue
@@ -375,8 +381,7 @@ class FleetSteps:
             if steps is None:
                 steps = due[period] = np.arange(due_from(first, period), end, period, dtype=np.int64)
             if len(steps):
-                if robot.cmd_channel is None:
-                    robot.cmd_channel = robot.view.cmd_vel_channel()
+                robot.register_command()
                 if python:  # read now, from live buffers
                     values = [self._held(histories, port, first, end, steps, last)
                               for port, last in zip(ports, robot.last_command, strict=True)]  # fmt: skip
