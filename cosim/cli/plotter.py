@@ -43,7 +43,7 @@ class PlotProcess:
         figure while the run goes (`draft`). With `outline_follows`, the scenario comes later
         (`outline`): `cosim run` forks before it has loaded it, so that importing matplotlib
         starts ~0.1 s sooner. `drawer(data, png_path)`: another picture than a run's PNG
-        (sweep.png's `cosim.sweep.engine.draw_plot`), drawn from one frame, without a draft."""
+        (sweep.png's `cosim.sweep.plot.draw_png`), drawn from one frame, without a draft."""
         if not sys.platform.startswith("linux"):
             return None
         _reap_ended()
@@ -491,12 +491,7 @@ class PanelHelper:
 
     def answered(self) -> bool:
         """Whether the helper has answered (or ended): `paste` will not wait."""
-        import select
-
-        try:
-            return self._done is None or bool(select.select([self._done], [], [], 0)[0])
-        except (OSError, ValueError):
-            return True
+        return self._done is None or _readable(self._done)
 
     def paste(self, drafted, rows=None) -> bool:
         """Wait for the helper, and put its pixels into `drafted`'s canvas (or into `rows`, the

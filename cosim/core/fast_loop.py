@@ -133,7 +133,7 @@ class KernelTables:
         from cosim.core import kernel as K
 
         n = len(plan)
-        self._sent: list[tuple[np.ndarray, np.ndarray]] = []  # `_change_only`
+        self._sent: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # `_change_only`'s
         components = np.zeros((n, K.COMPONENT_COLUMNS), dtype=np.int64)
         step_sizes = np.zeros(n)
         links, link_numbers, groups, slots, scales, checks = [], [], [], [], [], []

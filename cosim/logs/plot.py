@@ -547,7 +547,6 @@ def _without_3d_axes():
     registered. The real package is imported if anything asks for it afterwards. A no-op when the
     projections or the 3-D toolkit are imported already."""
     import sys
-    from types import ModuleType
 
     name = "mpl_toolkits.mplot3d"
     if "matplotlib.projections" in sys.modules or name in sys.modules:

@@ -628,13 +628,6 @@ def _load_plotting(exits: bool) -> None:
         import cosim.sweep.plot  # noqa: F401
 
 
-def draw_plot(arguments: dict, png_path: Path) -> Path | None:
-    """Draw sweep.png here (`cosim.sweep.plot.draw_png`); None when there is no row."""
-    from cosim.sweep.plot import draw_png
-
-    return draw_png(arguments, png_path)
-
-
 def check_options(options: SweepOptions) -> None:
     """`CosimError` (one line) on options that exclude each other or are out of range."""
     if options.workers is not None and options.scheduler is not None:
@@ -715,7 +708,10 @@ def run_sweep(
         }
 
     def draw() -> Path | None:
-        return draw_plot(plot_arguments(), out_dir / PLOT_FILE)
+        """Draw sweep.png here; None when there is no row."""
+        from cosim.sweep.plot import draw_png
+
+        return draw_png(plot_arguments(), out_dir / PLOT_FILE)
 
     def draw_in(child) -> Path | None:
         """Have the plot process draw; when it cannot (it says why), draw here, as without one."""
