@@ -14,6 +14,7 @@ exit(), a hang) the host can say which one it was.
 from __future__ import annotations
 
 import ctypes
+import errno
 import json
 import mmap
 import os
@@ -106,6 +107,11 @@ def serve(fd: int, memory: mmap.mmap) -> int:
         write(fd, _error(None, str(error)))
         return 0
     except MemoryError:
+        write(fd, _out_of_memory(None, protocol.CALL_LOAD))
+        return 0
+    except OSError as error:  # ENOMEM from a system call (an import listing a folder) under the limit
+        if error.errno != errno.ENOMEM or _limited[0] is None:
+            raise
         write(fd, _out_of_memory(None, protocol.CALL_LOAD))
         return 0
     protocol.bind_buffers(component, memory)
