@@ -327,8 +327,9 @@ def _child(data_read: int, reply_write: int, scenario, drawer=None) -> None:
         drafted = None if scenario is None else draft(scenario)
         helper = None
         if drafted is not None and range(drafted.rows)[LOWER] and _free_core():
-            _warm(likely_texts(True), data_read)  # (the helper's copy has these too)
+            # forked first: the panels are the longer part after the run, their texts laid out first
             helper = PanelHelper.start(drafted, (data_read, reply_write))
+            _warm(likely_texts(True), data_read)
         elif drafted is not None:  # it draws both parts, on a busy machine: the longest texts only
             _warm(likely_texts(True) + likely_texts(False, numbers=False), data_read)
             drafted.more_ticks(lambda: _readable(data_read))
