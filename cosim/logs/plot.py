@@ -733,9 +733,9 @@ def likely_texts(map_part: bool, numbers: bool = True) -> list[tuple[str, float]
     `warm_text`: the map's legend entries; the panels' units, names and (with `numbers`) tick
     labels as matplotlib's default formatter writes them (~250: the whole numbers, halves,
     quarters, tenths and twentieths the panels' views most often step by). In the order the runs
-    of the shipped scenarios use them: with the first ~45 laid out, 2 of their ~30 panel texts
-    per run are not (12 in the order of kind). A text not among them is laid out when drawn, as
-    any other."""
+    of the shipped scenarios use them: with the first 45 laid out, 2 of their ~30 panel texts per
+    run are not (12 with the names first and the numbers by step). A text not among them is laid
+    out when drawn, as any other."""
     if map_part:
         legend = [  # what the runs of the shipped scenarios show first (one replan, VFH), then the rest
             "inflated zone (planner)", "map: occupied", "unknown obstacles (lidar only)",
