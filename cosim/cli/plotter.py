@@ -5,9 +5,9 @@ does not depend on the run, so `cosim run` forks a child for it as soon as it kn
 before it loads the scenario and builds the run (`PlotProcess.start` with `outline_follows`; the
 scenario follows, `PlotProcess.outline`): on a machine with a free core it is done by the time the
 run ends. The child then drafts the figure from the scenario (`preview`: the map as the run will
-log it, the view, the panels; `cosim.logs.plot.Draft` draws the map frame), lays out the texts
-the legend most likely holds (`_warm`) and forks a helper (`PanelHelper`) that holds a copy of
-that draft and lays out the panels' likely texts. The run's
+log it, the view, the panels; `cosim.logs.plot.Draft` draws the map frame), forks a helper
+(`PanelHelper`) that holds a copy of that draft and lays out the panels' likely texts, and lays
+out the texts the legend most likely holds (`_warm`) meanwhile. The run's
 `PlotData` (arrays: a few MB at most) then goes to the child through a pipe and on to the helper;
 the helper draws the panels while the child draws the run over the map, the legend and the title
 and makes the PNG's rows of them, the child takes the helper's pixels from memory the two share,
