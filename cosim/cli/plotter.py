@@ -5,9 +5,9 @@ does not depend on the run, so `cosim run` forks a child for it as soon as it kn
 before it loads the scenario and builds the run (`PlotProcess.start` with `outline_follows`; the
 scenario follows, `PlotProcess.outline`): on a machine with a free core it is done by the time the
 run ends. The child then drafts the figure from the scenario (`preview`: the map as the run will
-log it, the view, the panels; `cosim.logs.plot.Draft` draws the map frame), lays out the texts
-the legend most likely holds (`_warm`) and forks a helper (`PanelHelper`) that holds a copy of
-that draft and lays out the panels' likely texts. The run's
+log it, the view, the panels; `cosim.logs.plot.Draft` draws the map frame), forks a helper
+(`PanelHelper`) that holds a copy of that draft and lays out the panels' likely texts, and lays
+out the texts the legend most likely holds (`_warm`) meanwhile. The run's
 `PlotData` (arrays: a few MB at most) then goes to the child through a pipe and on to the helper;
 the helper draws the panels while the child draws the run over the map, the legend and the title
 and makes the PNG's rows of them, the child takes the helper's pixels from memory the two share,
@@ -327,8 +327,9 @@ def _child(data_read: int, reply_write: int, scenario, drawer=None) -> None:
         drafted = None if scenario is None else draft(scenario)
         helper = None
         if drafted is not None and range(drafted.rows)[LOWER] and _free_core():
-            _warm(likely_texts(True), data_read)  # (the helper's copy has these too)
+            # forked first: the panels are the longer part after the run, their texts laid out first
             helper = PanelHelper.start(drafted, (data_read, reply_write))
+            _warm(likely_texts(True), data_read)
         elif drafted is not None:  # it draws both parts, on a busy machine: the longest texts only
             _warm(likely_texts(True) + likely_texts(False, numbers=False), data_read)
             drafted.more_ticks(lambda: _readable(data_read))

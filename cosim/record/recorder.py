@@ -191,6 +191,26 @@ class RunTrace:
         self.scan_t_ns.append(int(t_ns))
         self.scan_minima.append(shortest)
 
+    def add_scans(self, t_ns: list[int], rows: np.ndarray, range_min: float, range_max: float) -> None:
+        """`add_scan` of each row of `rows` (one sweep's float32 ranges a row) at `t_ns`, the rows'
+        shortest ranges found at once: the least range >= range_min of each row (NaN fails the
+        comparison), then as `add_scan` takes it (a row whose least is infinite with an infinite
+        range_max, or that has none, row by row)."""
+        if self.dropped or not len(t_ns) or not self._count(2 * len(t_ns)):
+            return
+        low = np.float32(range_min)
+        above = rows >= low
+        least = np.where(above, rows, np.float32(np.inf)).min(axis=1)
+        within = (least <= np.float32(range_max)).tolist()
+        plain = (above.any(axis=1) & np.isfinite(least)).tolist()
+        for t, row, shortest, inside, simple in zip(t_ns, rows, least.tolist(), within, plain, strict=True):
+            if simple:
+                self.scan_t_ns.append(int(t))
+                self.scan_minima.append(shortest if inside else math.nan)
+            else:  # (counted above)
+                self._values -= 2
+                self.add_scan(t, row, range_min, range_max)
+
     def add_obstacles(self, t_ns: int, obstacles: list) -> None:
         """The obstacles of an /obstacles message: each marker's centre as the reader takes it from
         the message (a polygon's vertex mean, else the marker's position), and the last frame."""
@@ -868,8 +888,7 @@ class Recorder:
             beams = np.asarray(ranges, dtype=np.float32)
             out[:, bins] = np.where(np.isnan(beams), np.float32(np.inf), beams)
         if self.trace is not None:
-            for t, row in zip(np.asarray(t_ns).tolist(), out, strict=True):
-                self.trace.add_scan(t, row[:count], range_min, range_max)
+            self.trace.add_scans(np.asarray(t_ns).tolist(), out[:, :count], range_min, range_max)
         return out.view(np.float64)
 
     def _scan_layout(self, angles, range_min: float, range_max: float, scan_time: float) -> tuple:

@@ -80,6 +80,16 @@ def test_a_draft_that_fits_draws_the_picture_of_draw(run, tmp_path):
     assert np.array_equal(finished, _drawn(data, tmp_path))
 
 
+def test_a_draft_is_drawn_over_once(run, tmp_path):
+    """The frame's pixels are drawn over (no copy of them is kept): a second picture from the same
+    draft is refused, not drawn over the first one's."""
+    scenario, data = run
+    drafted = plot.Draft(preview(scenario))
+    drafted.draw_run(data, True, plotter.TOP)
+    with pytest.raises(RuntimeError, match="drawn over once"):
+        drafted.draw_run(data, False, plotter.LOWER)
+
+
 @pytest.mark.parametrize("rounds", [0, 1, None], ids=["drafted", "one more", "all"])
 def test_ticks_made_ahead_while_the_run_goes_draw_the_same_picture(run, tmp_path, rounds):
     """A y axis of a panel makes `Y_TICKS_DRAFTED` ticks with the draft, then one more per round of

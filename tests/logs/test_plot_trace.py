@@ -137,3 +137,28 @@ def test_obstacle_shapes_and_tracks_of_every_kind_match_the_log(tmp_path):
             [np.asarray(s.polygon()) for s in shapes],
             "shapes",
         )
+
+
+@pytest.mark.parametrize("range_max", [10.0, float("inf")], ids=["finite range_max", "infinite range_max"])
+def test_a_batch_of_sweeps_keeps_the_shortest_ranges_of_each_sweep_kept_alone(range_max):
+    """`RunTrace.add_scans` (the rows `scan_rows` holds) against `add_scan` of each row: every
+    kind of row (NaN bins, beams without a return, ranges below range_min or past range_max, a
+    row without any range at or above range_min) gives the same shortest range, bit for bit."""
+    rng = np.random.default_rng(7)
+    rows = rng.uniform(0.05, 12.0, (40, 16)).astype(np.float32)
+    rows[rng.random(rows.shape) < 0.2] = np.nan
+    rows[rng.random(rows.shape) < 0.2] = np.inf
+    rows[3] = np.inf  # no return at all
+    rows[4] = np.nan  # no measurement at all
+    rows[5] = 0.01  # every range below range_min
+    rows[6] = 11.5  # every range past a finite range_max
+    rows[7, :8], rows[7, 8:] = 0.01, np.inf
+    times = list(range(1000, 1000 + len(rows)))
+    batch, alone = recorder.RunTrace(Path("batch.mcap")), recorder.RunTrace(Path("alone.mcap"))
+    batch.add_scans(times, rows, 0.1, range_max)
+    for t, row in zip(times, rows, strict=True):
+        alone.add_scan(t, row, 0.1, range_max)
+    assert batch.scan_t_ns == alone.scan_t_ns
+    assert np.array_equal(np.array(batch.scan_minima), np.array(alone.scan_minima), equal_nan=True)
+    assert [type(value) for value in batch.scan_minima] == [type(value) for value in alone.scan_minima]
+    assert batch._values == alone._values
