@@ -69,8 +69,8 @@ HEAP_SLACK = 3
 # The cost argument of a search without a cost gradient (cost_weight 0: never read).
 NO_COST = np.zeros(1)
 
-# Status codes of astar_search / astar_plan. NO_GENERAL: settings other than the defaults before
-# astar_general.c's library was registered (`_register_general`, which every entry here calls first).
+# Status codes of astar_search / astar_plan. NO_GENERAL: settings that astar_general.c's library
+# searches, before it was registered (`_register_general`, which every entry here calls first).
 FOUND, NO_PATH, HEAP_FULL, ROUTE_FULL, BAD_START, BAD_GOAL, NO_GENERAL = 1, 0, -1, -2, -3, -4, -5
 
 
@@ -133,15 +133,16 @@ CALL_OUT = 40
 bidirectional_kernel = _KERNELS.navcosim_bidirectional_search
 join_count_kernel = _KERNELS.navcosim_join_count
 join_paths_kernel = _KERNELS.navcosim_join_paths
-# astar.c searches the default settings (the ones a scenario run uses); astar_general.c, every other
-# setting: a library of its own, built (~0.5 s of CPU) and loaded the first time a search needs it.
+# astar.c searches with the settings of a scenario's planner (the thesis's heuristic; any with a
+# cost gradient) and planner.plan's defaults; astar_general.c with every other setting: a library of its own, built (~0.5 s of CPU) and
+# loaded the first time a search needs it.
 _general: ctypes.CDLL | None = None
 
 
 def _register_general(parameters: np.ndarray) -> None:
     """Load astar_general.c's library (building it the first time) and register its search with
-    astar.c's, when `parameters` (a C-contiguous float64 PARAMETERS array) are not the defaults and
-    it is not loaded yet."""
+    astar.c's, when `parameters` (a C-contiguous float64 PARAMETERS array) need it (astar.c's
+    navcosim_astar_needs_general) and it is not loaded yet."""
     global _general
     if _general is None and _KERNELS.navcosim_astar_needs_general(
         address(parameters, np.float64, "parameters")

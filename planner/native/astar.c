@@ -2,11 +2,12 @@
  * the bidirectional search of planner.bidirectional. Loaded with native.load; the Python side
  * (planner/astar.py) documents the data layout, the heap keys and the status codes.
  *
- * The search loop (astar_search.h) is compiled here for the default settings only, the ones a
- * scenario run uses; every other setting is searched by astar_general.c's library, which
- * planner.astar builds and loads the first time such settings are asked for (it compiles the loop
- * seven more times, most of what building this file would cost) and registers here
- * (navcosim_astar_set_general).
+ * The search loop (astar_search.h) is compiled here for the settings of a scenario's planner (the
+ * thesis's heuristic; any with a cost gradient) and planner.plan's defaults only; every other
+ * setting is searched by
+ * astar_general.c's library, which planner.astar builds and loads the first time such settings are
+ * asked for (it compiles the loop seven times, most of what building both files costs) and
+ * registers here (navcosim_astar_set_general).
  */
 #include "astar_search.h"
 #include "layout.h"
@@ -17,17 +18,20 @@ double navcosim_heuristic_cells(int64_t row_offset, int64_t col_offset, int64_t 
 
 int64_t navcosim_heap_key_of(double f, double h, int64_t tie_breaker) { return heap_key_of(f, h, tie_breaker); }
 
-/* The search of every setting but the defaults: astar_general.c's, once planner.astar has loaded it. */
+/* The search of the settings needs_general names: astar_general.c's, once planner.astar has loaded it. */
 static SearchFunction general_search = NULL;
 
 void navcosim_astar_set_general(SearchFunction function) { general_search = function; }
 
-/* Whether `parameters` need the general search: not the defaults (octile with 8 neighbours or
- * Manhattan with 4, the low_h tie breaker, decrease-key, h_scale 1, no cost gradient). */
+/* Whether `parameters` need the general search: not the settings of astar.c's own loops, those a
+ * scenario's planner searches with (the thesis's heuristic of the "modified" configuration, and any
+ * heuristic with a cost gradient, as its replanning does) and planner.plan's defaults (octile with 8
+ * neighbours or Manhattan with 4, the low_h tie breaker, decrease-key, h_scale 1). */
 static inline int needs_general(const double *parameters) {
     double heuristic = parameters[P_HEURISTIC];
-    return !(parameters[P_COST_WEIGHT] == 0.0 && parameters[P_TIE] == 2.0 && parameters[P_DECREASE] != 0.0 &&
-             parameters[P_H_SCALE] == 1.0 && (heuristic == 3.0 || heuristic == 0.0));
+    if (parameters[P_COST_WEIGHT] != 0.0 || heuristic == 4.0) return 0;
+    return !(parameters[P_TIE] == 2.0 && parameters[P_DECREASE] != 0.0 && parameters[P_H_SCALE] == 1.0 &&
+             (heuristic == 3.0 || heuristic == 0.0));
 }
 
 int64_t navcosim_astar_needs_general(const double *parameters) { return needs_general(parameters); }
@@ -38,9 +42,16 @@ static int64_t search(const uint8_t *moves, const double *cost, const double *pa
     if (needs_general(parameters)) /* NO_GENERAL until planner.astar has registered it */
         return general_search != NULL ? general_search(moves, cost, parameters, start, goal, generation, work, searched)
                                       : NO_GENERAL;
+    int64_t heuristic = (int64_t)parameters[P_HEURISTIC];
+    if (parameters[P_COST_WEIGHT] != 0.0) /* the cost gradient, every other setting as given */
+        return search_loop(moves, cost, width, heuristic, (int64_t)parameters[P_TIE], parameters[P_DECREASE] != 0.0,
+                           parameters[P_H_SCALE], parameters[P_COST_WEIGHT], 1, start, goal, generation, work, searched);
+    if (heuristic == 4) /* the thesis's heuristic, its other settings as given */
+        return search_loop(moves, cost, width, 4, (int64_t)parameters[P_TIE], parameters[P_DECREASE] != 0.0,
+                           parameters[P_H_SCALE], 0.0, 0, start, goal, generation, work, searched);
     /* the defaults with every setting a constant; h * 1.0 is h, so the product is left out without
      * changing a bit */
-    if ((int64_t)parameters[P_HEURISTIC] == 3)
+    if (heuristic == 3)
         return search_loop(moves, cost, width, 3, 2, 1, 1.0, 0.0, 0, start, goal, generation, work, searched);
     return search_loop(moves, cost, width, 0, 2, 1, 1.0, 0.0, 0, start, goal, generation, work, searched);
 }

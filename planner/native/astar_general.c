@@ -1,4 +1,5 @@
-/* The grid A* of planner.astar for every setting but the defaults (astar.c searches those): the
+/* The grid A* of planner.astar for the settings astar.c does not search itself (its needs_general:
+ * all but planner.plan's defaults, the thesis's heuristic and those with a cost gradient): the
  * search loop of astar_search.h specialised for each heuristic, and for the cost gradient. A
  * library of its own, built and loaded by planner.astar the first time such settings are asked
  * for, which registers navcosim_astar_general_search with astar.c's library. */
