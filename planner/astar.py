@@ -134,8 +134,8 @@ bidirectional_kernel = _KERNELS.navcosim_bidirectional_search
 join_count_kernel = _KERNELS.navcosim_join_count
 join_paths_kernel = _KERNELS.navcosim_join_paths
 # astar.c searches with the settings of a scenario's planner (the thesis's heuristic; any with a
-# cost gradient) and planner.plan's defaults; astar_general.c with every other setting: a library of its own, built (~0.5 s of CPU) and
-# loaded the first time a search needs it.
+# cost gradient) and planner.plan's defaults; astar_general.c with every other setting: a library of
+# its own, built (~0.5 s of CPU) and loaded the first time a search needs it.
 _general: ctypes.CDLL | None = None
 
 
