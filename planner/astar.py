@@ -110,11 +110,6 @@ _SIGNATURES = {  # name (after navcosim_): restype, argtypes
     "astar_call": (None, ()),
     "astar_needs_general": (_I, (_P,)),
     "astar_set_general": (None, (_P,)),
-    "bidirectional_search": (
-        _I, (_P, _P, _P, _I, _I, _I, _P, _P, _I, _P, _P, _I, _P, _P, _I, _P, _P, _I, _P, _P),
-    ),
-    "join_count": (_I, (_P, _P, _I, _I, _I, _I)),
-    "join_paths": (_D, (_P, _P, _I, _I, _I, _I, _P, _P, _P)),
 }  # fmt: skip
 _KERNELS = bind(_LIBRARY, {"navcosim_" + name: typed for name, typed in _SIGNATURES.items()}, hold_gil=True)
 _heuristic_cells = _KERNELS.navcosim_heuristic_cells
@@ -130,9 +125,6 @@ call_io = (ctypes.c_char * 72).in_dll(_KERNELS, "navcosim_astar_io")
 call_in = struct.Struct("=q4d").pack_into
 call_out = struct.Struct("=qqqd").unpack_from
 CALL_OUT = 40
-bidirectional_kernel = _KERNELS.navcosim_bidirectional_search
-join_count_kernel = _KERNELS.navcosim_join_count
-join_paths_kernel = _KERNELS.navcosim_join_paths
 # astar.c searches with the settings of a scenario's planner (the thesis's heuristic; any with a
 # cost gradient) and planner.plan's defaults; astar_general.c with every other setting: a library of
 # its own, built (~0.5 s of CPU) and loaded the first time a search needs it.
