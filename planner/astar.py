@@ -69,8 +69,9 @@ HEAP_SLACK = 3
 # The cost argument of a search without a cost gradient (cost_weight 0: never read).
 NO_COST = np.zeros(1)
 
-# Status codes of astar_search / astar_plan.
-FOUND, NO_PATH, HEAP_FULL, ROUTE_FULL, BAD_START, BAD_GOAL = 1, 0, -1, -2, -3, -4
+# Status codes of astar_search / astar_plan. NO_GENERAL: settings that astar_general.c's library
+# searches, before it was registered (`_register_general`, which every entry here calls first).
+FOUND, NO_PATH, HEAP_FULL, ROUTE_FULL, BAD_START, BAD_GOAL, NO_GENERAL = 1, 0, -1, -2, -3, -4, -5
 
 
 def search_parameters(
@@ -93,7 +94,8 @@ def search_parameters(
     )  # fmt: skip
 
 
-_LIBRARY = load(Path(__file__).parent / "native" / "astar.c")
+_NATIVE = Path(__file__).parent / "native"
+_LIBRARY = load(_NATIVE / "astar.c")
 # PyDLL: the kernels hold the GIL, as the compiled searches always did, so the shared work arrays
 # (planner.searchspace.workspace) are never used by two threads at once.
 _P = ctypes.c_void_p
@@ -106,11 +108,8 @@ _SIGNATURES = {  # name (after navcosim_): restype, argtypes
     "astar_search": (_I, (_P, _P, _P, _I, _I, _I, _P, _P, _I, _P, _I, _P)),
     "astar_plan": (_I, (_P, _D, _D, _D, _D)),  # (Query *, start_x, start_y, goal_x, goal_y)
     "astar_call": (None, ()),
-    "bidirectional_search": (
-        _I, (_P, _P, _P, _I, _I, _I, _P, _P, _I, _P, _P, _I, _P, _P, _I, _P, _P, _I, _P, _P),
-    ),
-    "join_count": (_I, (_P, _P, _I, _I, _I, _I)),
-    "join_paths": (_D, (_P, _P, _I, _I, _I, _I, _P, _P, _P)),
+    "astar_needs_general": (_I, (_P,)),
+    "astar_set_general": (None, (_P,)),
 }  # fmt: skip
 _KERNELS = bind(_LIBRARY, {"navcosim_" + name: typed for name, typed in _SIGNATURES.items()}, hold_gil=True)
 _heuristic_cells = _KERNELS.navcosim_heuristic_cells
@@ -126,9 +125,23 @@ call_io = (ctypes.c_char * 72).in_dll(_KERNELS, "navcosim_astar_io")
 call_in = struct.Struct("=q4d").pack_into
 call_out = struct.Struct("=qqqd").unpack_from
 CALL_OUT = 40
-bidirectional_kernel = _KERNELS.navcosim_bidirectional_search
-join_count_kernel = _KERNELS.navcosim_join_count
-join_paths_kernel = _KERNELS.navcosim_join_paths
+# astar.c searches with the settings of a scenario's planner (the thesis's heuristic; any with a
+# cost gradient) and planner.plan's defaults; astar_general.c with every other setting: a library of
+# its own, built (~0.5 s of CPU) and loaded the first time a search needs it.
+_general: ctypes.CDLL | None = None
+
+
+def _register_general(parameters: np.ndarray) -> None:
+    """Load astar_general.c's library (building it the first time) and register its search with
+    astar.c's, when `parameters` (a C-contiguous float64 PARAMETERS array) need it (astar.c's
+    navcosim_astar_needs_general) and it is not loaded yet."""
+    global _general
+    if _general is None and _KERNELS.navcosim_astar_needs_general(
+        address(parameters, np.float64, "parameters")
+    ):
+        library = load(_NATIVE / "astar_general.c")
+        _KERNELS.navcosim_astar_set_general(ctypes.cast(library.navcosim_astar_general_search, _P))
+        _general = library
 
 
 class WorkState(ctypes.Structure):
@@ -177,6 +190,7 @@ def query(
     """A Query over these arrays (the caller keeps them alive as long as the query)."""
     if len(moves) < int(parameters[P_ROWS] + 2) * int(parameters[P_WIDTH]) or len(blocked) != len(moves):
         raise ValueError("moves and blocked must cover the padded map of the parameters")
+    _register_general(parameters)
     return Query(
         address(moves, np.uint8, "moves"),
         address(blocked, np.uint8, "blocked"),
@@ -239,6 +253,7 @@ def astar_search(moves, cost, parameters, start, goal, generation, g, nodes, hea
         raise ValueError("astar_search needs moves [size], g [size], nodes [3, size] and heap [2, capacity]")
     if not (0 <= start < size and -1 <= goal < size):
         raise ValueError(f"start {start} or goal {goal} is not a node of the padded map")
+    _register_general(parameters)
     searched = ctypes.c_int64()
     status = _astar_search(
         address(moves, np.uint8, "moves"), address(cost, np.float64, "cost"),

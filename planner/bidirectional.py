@@ -7,24 +7,38 @@ smallest f in OPEN is >= mu: any path not yet seen must leave that side's OPEN t
 at least that f, so with an admissible, consistent heuristic (octile, Manhattan with 4 neighbours)
 mu is the optimal cost. Options and costs are those of planner.astar; with the cost gradient the
 cost of an edge is charged on the cell it enters in the start -> goal direction, on both sides.
-The search is C (planner/native/astar.c, navcosim_bidirectional_search).
+The search is C (planner/native/bidirectional.c, navcosim_bidirectional_search).
 """
 
 from __future__ import annotations
 
 import ctypes
 import time
+from pathlib import Path
 
 import numpy as np
 
-from planner.astar import (
-    address,
-    bidirectional_kernel,
-    join_count_kernel,
-    join_paths_kernel,
-    search_parameters,
-)
+from native.load import bind, load
+from planner.astar import address, search_parameters
 from planner.searchspace import SearchMap, workspace
+
+# native/bidirectional.c: a library of its own (the one-way grid A* is astar.c's); PyDLL, as astar.c's
+# kernels: they hold the GIL while they use the shared work arrays.
+_P, _I, _D = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double
+_KERNELS = bind(
+    load(Path(__file__).parent / "native" / "bidirectional.c"),
+    {
+        "navcosim_bidirectional_search": (
+            _I, (_P, _P, _P, _I, _I, _I, _P, _P, _I, _P, _P, _I, _P, _P, _I, _P, _P, _I, _P, _P),
+        ),
+        "navcosim_join_count": (_I, (_P, _P, _I, _I, _I, _I)),
+        "navcosim_join_paths": (_D, (_P, _P, _I, _I, _I, _I, _P, _P, _P)),
+    },
+    hold_gil=True,
+)  # fmt: skip
+bidirectional_kernel = _KERNELS.navcosim_bidirectional_search
+join_count_kernel = _KERNELS.navcosim_join_count
+join_paths_kernel = _KERNELS.navcosim_join_paths
 
 
 def bidirectional_search(

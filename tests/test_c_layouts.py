@@ -25,6 +25,13 @@ LIBRARIES = {
         {
             "World": "cosim.world.kernels:WorldArrays",
             "Lidar": "cosim.world.kernels:LidarArrays",
+            "Monitor": "cosim.world.kernels:MonitorArrays",
+        },
+        ("cosim.world.kernels",),
+    ),
+    "cosim/world/native/fleet.c": (
+        {
+            "Judge": "cosim.world.kernels:JudgeArrays",
             "BlockStep": "cosim.world.kernels:BlockStepArrays",
             "BlockCopy": "cosim.world.kernels:BlockCopyArrays",
             "BlockProgram": "cosim.world.kernels:BlockProgramArrays",

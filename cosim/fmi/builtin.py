@@ -45,8 +45,9 @@ SOURCE_ROOT = PACKAGE_DIR.parent / "fmus"
 # The compiled kernels every scenario run loads (tests/fmi/test_fmu_build.py holds this list to what a
 # run loads), in the order a first run starts their builds (`prepare`): the planner's distance
 # transform and the world's distances, which check the scenario's start and goal before its FMUs are
-# read; the planner's grid search, loaded right after the FMUs and the longest to compile (~0.55 s of
-# CPU, as long as two FMUs: started before them, it ends with them); those three before the FMUs
+# read; the planner's grid search, loaded right after the FMUs (~0.42 s of CPU: the settings of a
+# scenario's planner and planner.plan's defaults only, planner/native/astar_general.c has the
+# others); those three before the FMUs
 # (`BEFORE_FMUS`). After the FMUs, the costmap, loaded with the grid search, and the master's
 # stepping kernel, loaded last when the run starts (compiled while the run sets up).
 BEFORE_FMUS = (

@@ -579,7 +579,7 @@ class _PythonSteps:
 
 
 class _BlockProgram:
-    """`_PythonSteps.step` in one C call a block (`fleet_python_block` of world.c), the same
+    """`_PythonSteps.step` in one C call a block (`fleet_python_block` of fleet.c), the same
     operations in the same order: per component due, its gather as copies from the producers'
     output buffers into its input buffer (the connection's arithmetic), then a lidar swept in C
     (`Lidar.step`: the other robots' circles placed from its inputs; without noise or moving
@@ -600,7 +600,7 @@ class _BlockProgram:
     def __init__(self, entries: list, copies: list, chains: list[list[int]] | None = None) -> None:
         from cosim.world import kernels
 
-        library = kernels.library()
+        library = kernels.fleet_library()
         self.function = library.fleet_python_block
         self.steps = (kernels.BlockStepArrays * len(entries))(*entries)
         self.copies = (kernels.BlockCopyArrays * max(1, len(copies)))(*copies)
@@ -1003,7 +1003,7 @@ class _BlockRows:
 
 class _SplitKernel:
     """The kernel's block of a fleet's FMUs as `PARTS` calls side by side on the pool of the block
-    program's threads (`block_pool_kernels` of world.c: each call taken by whichever thread is
+    program's threads (`block_pool_kernels` of fleet.c: each call taken by whichever thread is
     free, so a worker woken late leaves the caller no more to do than alone), each on tables of
     a part of the robots (the other parts' components left out as constant outputs, as the Python
     components are), instead of one call on all: no FMU reads an output of another robot's FMU
@@ -1023,7 +1023,7 @@ class _SplitKernel:
         self.parts = parts  # the tables of each part
         self.pool = pool
         self.block = block
-        self.function = kernels.library().block_pool_kernels
+        self.function = kernels.fleet_library().block_pool_kernels
         address = ctypes.cast(kernel._kernel(), ctypes.c_void_p).value
         bound = [part._bound() for part in parts]
         self.results = [part._result for part in bound]
@@ -1535,7 +1535,7 @@ def _judge_block(each: _Robot, ends: list[float], lengths: list[float], start, d
 
 
 class _FleetJudge:
-    """`_judge_block` of every robot in one C call a block (`fleet_judge` of world.c: the same
+    """`_judge_block` of every robot in one C call a block (`fleet_judge` of fleet.c: the same
     operations in the same order), for the robots whose checks are compiled (a static world:
     `OutcomeMonitor`'s `_CompiledChecks`) and that neither dwell nor wait for their next goal.
     Such a robot's numbers (its outcome's distance, stopped and recovery times, deadlock; its
@@ -1552,7 +1552,7 @@ class _FleetJudge:
         from cosim.world import kernels
 
         self.kernels = kernels
-        self.function = kernels.library().fleet_judge
+        self.function = kernels.fleet_library().fleet_judge
         self.judges = (kernels.JudgeArrays * len(robots))()
         self.address = ctypes.addressof(self.judges)
         size = ctypes.sizeof(kernels.JudgeArrays)

@@ -10,7 +10,7 @@ first contact is its smaller root when it lies in [0, 1] (`first_contact`). The 
 within the step is at s* = -d0.w / w.w, clamped to [0, 1] (`closest_approach`).
 
 `FleetContacts` checks every pair of robots each step (the gaps in C, `fleet_gaps` of
-native/world.c), reports a contact once when it begins (`Contact`: both names, the time, both
+native/fleet.c), reports a contact once when it begins (`Contact`: both names, the time, both
 centres and radii at that time), and keeps each robot's minimum clearance to the other robots
 (footprint to footprint).
 """
@@ -81,12 +81,12 @@ _contacts = None
 
 
 def _contacts_function():
-    """`fleet_contacts` of native/world.c, typed (once per process)."""
+    """`fleet_contacts` of native/fleet.c, typed (once per process)."""
     global _contacts
     if _contacts is None:
         import ctypes
 
-        function = kernels.library().fleet_contacts
+        function = kernels.fleet_library().fleet_contacts
         function.restype = ctypes.c_int64
         pointer, count = ctypes.c_void_p, ctypes.c_int64
         function.argtypes = [pointer, count, count, pointer, pointer, count] + [pointer] * 5
@@ -120,7 +120,7 @@ class FleetContacts:
         """`step` for consecutive steps at once: step s from starts[s] to starts[s] + lengths[s]
         [s], the robots moving from positions[s] to positions[s + 1] (S + 1 x N x 2 positions [m]);
         the contacts that began in each step. The same arithmetic as `step`, a step per row, in one
-        C call (`fleet_contacts` of native/world.c: the gaps, the minimum clearances, the steps in
+        C call (`fleet_contacts` of native/fleet.c: the gaps, the minimum clearances, the steps in
         which contacts began)."""
         positions = np.ascontiguousarray(positions, dtype=float)
         count, pairs = len(positions) - 1, len(self.first)
@@ -143,13 +143,13 @@ class FleetContacts:
         """For each step k (robots from positions[k] to positions[k + 1], S + 1 x N x 2 [m],
         C-contiguous float64) and pair: the least gap [m] over the step (the distance at the
         closest approach of the linearly moving offset, minus the pair's reach) and the gap at the
-        step's end; S x pairs each (`fleet_gaps` of native/world.c). Both are +inf for a pair
+        step's end; S x pairs each (`fleet_gaps` of native/fleet.c). Both are +inf for a pair
         certainly farther apart than 0 and both robots' `floor` (N, default: the minimum
         clearances; inf: every gap exact)."""
         count, pairs = len(positions) - 1, len(self.first)
         gap, end_gap = np.empty((count, pairs)), np.empty((count, pairs))
         floor = self.min_clearance if floor is None else np.ascontiguousarray(floor, dtype=float)
-        kernels.library().fleet_gaps(
+        kernels.fleet_library().fleet_gaps(
             positions.ctypes.data, count, positions.shape[1], self.first.ctypes.data, self.second.ctypes.data,
             pairs, self.reach.ctypes.data, floor.ctypes.data, gap.ctypes.data, end_gap.ctypes.data,
         )  # fmt: skip

@@ -1,6 +1,8 @@
-"""The C kernels of `cosim.world` (native/world.c), loaded with `native.load` on first use.
+"""The C kernels of `cosim.world` (native/world.c, and a fleet's native/fleet.c), loaded with
+`native.load` on first use.
 
-`library()` returns the loaded library with every function's `argtypes`/`restype` set once.
+`library()` returns world.c's loaded library with every function's `argtypes`/`restype` set once;
+`fleet_library()` fleet.c's (contacts, judging, a fleet's Python components a block).
 `LidarArrays` and `WorldArrays` mirror the structs of world.c: the long-lived arrays (as cached
 addresses) and constants of one lidar or one world, filled once, so a call passes the struct's
 address and a few numbers (a world's query is packed into the struct: a call of one argument;
@@ -19,7 +21,9 @@ import numpy as np
 from native.load import bind, load
 
 SOURCE = Path(__file__).parent / "native" / "world.c"
+FLEET_SOURCE = Path(__file__).parent / "native" / "fleet.c"
 _library: ctypes.CDLL | None = None
+_fleet_library: ctypes.CDLL | None = None
 
 _p = ctypes.c_void_p
 _i64 = ctypes.c_int64
@@ -59,10 +63,11 @@ class LidarArrays(ctypes.Structure):
 
 
 class MonitorArrays(ctypes.Structure):
-    """`Monitor` of world.c: a static world's position checks (`OutcomeMonitor.check_positions`):
-    the world's struct, its centre field and the polygons' bounding circles, the vehicle and goal,
-    the monitor's state (read and written back by each call), why the last call stopped, and the
-    positions and times of a call (rows x, y, t of a 3 x capacity array)."""
+    """`Monitor` of world.h (world.c's, shared with fleet.c): a static world's position checks
+    (`OutcomeMonitor.check_positions`): the world's struct, its centre field and the polygons'
+    bounding circles, the vehicle and goal, the monitor's state (read and written back by each
+    call), why the last call stopped, and the positions and times of a call (rows x, y, t of a
+    3 x capacity array)."""
 
     _fields_ = [
         ("world", _p), ("centre_field", _p), ("bounds", _p), ("n_bounds", _i64),
@@ -74,7 +79,7 @@ class MonitorArrays(ctypes.Structure):
 
 
 class JudgeArrays(ctypes.Structure):
-    """`Judge` of world.c: one robot of `fleet_judge` (a fleet's block of steps judged in C): its
+    """`Judge` of fleet.c: one robot of `fleet_judge` (a fleet's block of steps judged in C): its
     monitor's struct, whether it is judged there, the numbers of its outcome, deadlock rule and
     monitor that the judging changes (kept in the struct while it is), the rule's constants, and
     the step and reason that ended it."""
@@ -90,7 +95,7 @@ class JudgeArrays(ctypes.Structure):
 
 
 class BlockCopyArrays(ctypes.Structure):
-    """`BlockCopy` of world.c: one copy of `fleet_python_block`'s gathers, `count` values into
+    """`BlockCopy` of fleet.c: one copy of `fleet_python_block`'s gathers, `count` values into
     consecutive inputs from outputs `stride` values apart, times `scale` when `multiply`, plus
     `offset` when `add`."""
 
@@ -101,7 +106,7 @@ class BlockCopyArrays(ctypes.Structure):
 
 
 class BlockStepArrays(ctypes.Structure):
-    """`BlockStep` of world.c: one component of `fleet_python_block` (a fleet's Python components
+    """`BlockStep` of fleet.c: one component of `fleet_python_block` (a fleet's Python components
     stepped in one call a block): its period, kind (BLOCK_*), gather (a stretch of the copies),
     and what steps it (a lidar's struct, inputs and the other robots' circles; a C step and its
     state)."""
@@ -114,7 +119,7 @@ class BlockStepArrays(ctypes.Structure):
 
 
 class BlockProgramArrays(ctypes.Structure):
-    """`BlockProgram` of world.c: `fleet_python_block_threads`'s program, its steps and copies, the
+    """`BlockProgram` of fleet.c: `fleet_python_block_threads`'s program, its steps and copies, the
     chained entries chain by chain (`members`, chain c from `firsts[c]` to `firsts[c + 1]`), two
     scratch arrays of one value a chain, the thread pool (`block_pool_new`; NULL: one thread) and
     the fewest chains due that use it, and the state of the step under way (the kernel's)."""
@@ -127,7 +132,7 @@ class BlockProgramArrays(ctypes.Structure):
 
 
 class KernelJobArrays(ctypes.Structure):
-    """`KernelJob` of world.c: one call of the master's stepping kernel (`navcosim_step_kernel`, by
+    """`KernelJob` of fleet.c: one call of the master's stepping kernel (`navcosim_step_kernel`, by
     its address) from `first_step` for `steps` steps on one set of its tables (`Kernel`'s struct)
     into its result (`block_pool_kernels`)."""
 
@@ -202,9 +207,25 @@ def library() -> ctypes.CDLL:
                 "lidar_measure": (None, [_p, _f64, _f64, _p, _i64, _p]),
                 "lidar_scan": (None, [_p, _f64, _f64, _f64]),
                 "lidar_clearance": (None, [_p, _i64, _i64, _p]),
-                "fleet_gaps": (None, [_p, _i64, _i64, _p, _p, _i64, _p, _p, _p, _p]),
                 "world_hypot": (_f64, [_f64, _f64]),
                 "world_check_positions": (_i64, [_p, _i64]),
+            },
+        )
+    return _library
+
+
+def fleet_library() -> ctypes.CDLL:
+    """fleet.c (a fleet's kernels, a library of their own: a run without a fleet never compiles
+    them) built (if needed) and loaded, its functions typed, world.c's position checks and lidar
+    sweep (`library()`) registered with it; once per process."""
+    global _fleet_library
+    if _fleet_library is None:
+        world = library()
+        fleet = bind(
+            load(FLEET_SOURCE),
+            {
+                "fleet_use_world": (None, [_p, _p]),
+                "fleet_gaps": (None, [_p, _i64, _i64, _p, _p, _i64, _p, _p, _p, _p]),
                 "fleet_judge": (_i64, [_p, _i64, _p, _p, _p, _p, _p, _i64, _p]),
                 "fleet_python_block": (_i64, [_p, _i64, _i64, _i64, _f64, _p]),
                 "fleet_python_block_threads": (_i64, [_p, _i64, _i64, _f64]),
@@ -213,4 +234,6 @@ def library() -> ctypes.CDLL:
                 "block_pool_kernels": (None, [_p, _p, _i64]),
             },
         )
-    return _library
+        fleet.fleet_use_world(ctypes.cast(world.world_check_positions, _p), ctypes.cast(world.lidar_scan, _p))
+        _fleet_library = fleet
+    return _fleet_library

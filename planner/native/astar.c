@@ -2,322 +2,60 @@
  * the bidirectional search of planner.bidirectional. Loaded with native.load; the Python side
  * (planner/astar.py) documents the data layout, the heap keys and the status codes.
  *
- * Every floating-point operation is the one planner/astar.py's documented search does, in its order
- * (the library is built with -ffp-contract=off, no fast-math), so plans are bit-identical to it; the
- * 4-ary heap pops equal keys in the same order, so the same nodes are expanded.
+ * The bidirectional search is bidirectional.c's, a library planner.bidirectional loads.
+ *
+ * The search loop (astar_search.h) is compiled here for the settings of a scenario's planner (the
+ * thesis's heuristic; any with a cost gradient) and planner.plan's defaults only; every other
+ * setting is searched by
+ * astar_general.c's library, which planner.astar builds and loads the first time such settings are
+ * asked for (it compiles the loop seven times, most of what building both files costs) and
+ * registers here (navcosim_astar_set_general).
  */
-#include <math.h>
-#include <stddef.h>
-#include <stdint.h>
+#include "astar_search.h"
 #include "layout.h"
-
-#define SQRT2 1.4142135623730951 /* math.sqrt(2.0) */
-
-enum { NO_PATH = 0, FOUND = 1, HEAP_FULL = -1, ROUTE_FULL = -2, BAD_START = -3, BAD_GOAL = -4 };
-enum { BLOCKED = 1 };
-/* Heap keys pack f (2^-24 cell steps) over h (quarter cells, saturating at 2^16 - 1). */
-#define H_BITS 16
-#define F_SCALE 16777216.0
-#define H_SCALE 4.0
-#define H_MAX 65535
-/* Indices of the parameters array (planner.astar.PARAMETERS). */
-enum { P_WIDTH, P_HEURISTIC, P_TIE, P_DECREASE, P_H_SCALE, P_COST_WEIGHT, P_ROWS, P_COLS, P_RESOLUTION,
-       P_ORIGIN_X, P_ORIGIN_Y };
-
-/* (row, col) steps of the 8 moves, in the bit order of the move masks (planner.searchspace.MOVES). */
-static const int64_t ROW_STEPS[8] = {-1, 1, 0, 0, -1, -1, 1, 1};
-static const int64_t COL_STEPS[8] = {0, 0, -1, 1, -1, 1, -1, 1};
-#define ALL_MOVES 0xFFu
-
-/* The work arrays of one search direction (planner.searchspace.Workspace). */
-typedef struct {
-    double *g;        /* [size] g in cells */
-    int32_t *parent;  /* nodes[0] */
-    int32_t *stamp;   /* nodes[1]: generation = OPEN, generation + 1 = CLOSED */
-    int32_t *expanded;/* nodes[2]: expanded nodes in closing order */
-    int64_t *heap_key;
-    int64_t *heap_node;
-    int64_t capacity; /* entries the heap holds: its arrays' length - HEAP_SLACK */
-} Work;
-
-static inline int64_t absolute(int64_t value) { return value < 0 ? -value : value; }
-static inline int64_t larger(int64_t a, int64_t b) { return a > b ? a : b; }
-
-/* h in cells for a (row, col) offset to the goal; kind: planner.astar.HEURISTICS. */
-static inline double heuristic_cells(int64_t row_offset, int64_t col_offset, int64_t kind) {
-    int64_t dr = absolute(row_offset);
-    int64_t dc = absolute(col_offset);
-    if (kind == 3) { /* the longer offset plus (sqrt 2 - 1) times the shorter, selected without a branch */
-        int64_t longer = dr > dc ? dr : dc, shorter = dr > dc ? dc : dr;
-        return (double)longer + (SQRT2 - 1.0) * (double)shorter;
-    }
-    if (kind == 0) return (double)(dr + dc);
-    if (kind == 1) return sqrt((double)(dr * dr + dc * dc));
-    if (kind == 2) return (double)larger(dr, dc);
-    if (kind == 4) return sqrt((double)(dr * dr + dc * dc)) + 2.0 * (double)larger(dr, dc);
-    return 0.0;
-}
 
 double navcosim_heuristic_cells(int64_t row_offset, int64_t col_offset, int64_t kind) {
     return heuristic_cells(row_offset, col_offset, kind);
 }
 
-/* One int64 key: f on a 2^-24 cell grid in the high bits, h (quarter cells) below for low_h ties. */
-static inline int64_t heap_key_of(double f, double h, int64_t tie_breaker) {
-    int64_t key = (int64_t)((uint64_t)(int64_t)(f * F_SCALE + 0.5) << H_BITS);
-    if (tie_breaker == 2) {
-        int64_t low = (int64_t)(h * H_SCALE + 0.5);
-        key += low < H_MAX ? low : H_MAX;
-    }
-    return key;
-}
-
 int64_t navcosim_heap_key_of(double f, double h, int64_t tie_breaker) { return heap_key_of(f, h, tie_breaker); }
 
-/* OPEN is a 4-ary min-heap of keys and nodes (two arrays) that keeps NO_KEY in the HEAP_SLACK slots
- * after its last entry: every entry with a child then has four, the missing ones never the smallest,
- * so a pop compares four keys per level without a branch (a branch on how many children there are
- * is mispredicted at the bottom of the heap). A heap buffer of c entries holds c - HEAP_SLACK. */
-#define NO_KEY INT64_MAX
-#define HEAP_SLACK 3
+/* The search of the settings needs_general names: astar_general.c's, once planner.astar has loaded it. */
+static SearchFunction general_search = NULL;
 
-/* An empty heap: NO_KEY in its first HEAP_SLACK slots. */
-static inline void heap_clear(int64_t *heap_key) {
-    for (int slot = 0; slot < HEAP_SLACK; slot++) heap_key[slot] = NO_KEY;
+void navcosim_astar_set_general(SearchFunction function) { general_search = function; }
+
+/* Whether `parameters` need the general search: not the settings of astar.c's own loops, those a
+ * scenario's planner searches with (the thesis's heuristic of the "modified" configuration, and any
+ * heuristic with a cost gradient, as its replanning does) and planner.plan's defaults (octile with 8
+ * neighbours or Manhattan with 4, the low_h tie breaker, decrease-key, h_scale 1). */
+static inline int needs_general(const double *parameters) {
+    double heuristic = parameters[P_HEURISTIC];
+    if (parameters[P_COST_WEIGHT] != 0.0 || heuristic == 4.0) return 0;
+    return !(parameters[P_TIE] == 2.0 && parameters[P_DECREASE] != 0.0 && parameters[P_H_SCALE] == 1.0 &&
+             (heuristic == 3.0 || heuristic == 0.0));
 }
 
-/* Push (the caller checks the capacity); the new size. */
-static inline int64_t heap_push(int64_t *restrict heap_key, int64_t *restrict heap_node, int64_t size, int64_t key,
-                                int64_t node) {
-    heap_key[size + HEAP_SLACK] = NO_KEY;
-    int64_t index = size;
-    while (index > 0) {
-        int64_t parent = (index - 1) >> 2;
-        if (heap_key[parent] <= key) break;
-        heap_key[index] = heap_key[parent];
-        heap_node[index] = heap_node[parent];
-        index = parent;
-    }
-    heap_key[index] = key;
-    heap_node[index] = node;
-    return size + 1;
-}
-
-/* Remove the top; *size shrinks by one. The hole sinks along the smallest children (the first of
- * equal ones, by a branch-free tournament), then the last entry rises into it. */
-static inline __attribute__((always_inline)) int64_t heap_pop(int64_t *restrict heap_key, int64_t *restrict heap_node,
-                                                              int64_t *size_io) {
-    int64_t top = heap_node[0];
-    int64_t size = *size_io - 1;
-    *size_io = size;
-    int64_t key = heap_key[size];
-    int64_t node = heap_node[size];
-    heap_key[size] = NO_KEY;
-    if (size == 0) return top; /* the top was the last entry */
-    int64_t index = 0;
-    for (int64_t first = 1; first < size; first = 4 * index + 1) {
-        int64_t key0 = heap_key[first], key1 = heap_key[first + 1];
-        int64_t key2 = heap_key[first + 2], key3 = heap_key[first + 3];
-        int64_t child_a = key1 < key0 ? first + 1 : first;
-        int64_t key_a = key1 < key0 ? key1 : key0;
-        int64_t child_b = key3 < key2 ? first + 3 : first + 2;
-        int64_t key_b = key3 < key2 ? key3 : key2;
-        int64_t child = key_b < key_a ? child_b : child_a;
-        heap_key[index] = key_b < key_a ? key_b : key_a;
-        heap_node[index] = heap_node[child];
-        index = child;
-    }
-    while (index > 0) {
-        int64_t parent = (index - 1) >> 2;
-        int64_t parent_key = heap_key[parent];
-        if (parent_key < key) break;
-        heap_key[index] = parent_key;
-        heap_node[index] = heap_node[parent];
-        index = parent;
-    }
-    heap_key[index] = key;
-    heap_node[index] = node;
-    return top;
-}
-
-/* A reached neighbour (its g and parent set) into OPEN: as the candidate that skips the heap when its
- * key is <= every key in OPEN (NO_KEY when OPEN is empty) and no candidate is waiting, else into the
- * heap (the smaller of it and the candidate stays the candidate). Returns 0 when the heap is full. */
-static inline __attribute__((always_inline)) int enter_open(int64_t neighbour, int64_t key, int64_t *next_node,
-                                                            int64_t *next_key, int64_t *restrict heap_key,
-                                                            int64_t *restrict heap_node, int64_t *size,
-                                                            int64_t capacity) {
-    if (*next_node < 0) {
-        if (key <= heap_key[0]) {
-            *next_node = neighbour;
-            *next_key = key;
-            return 1;
-        }
-    } else if (key < *next_key) {
-        int64_t swap_key = key, swap_node = neighbour;
-        key = *next_key;
-        neighbour = *next_node;
-        *next_key = swap_key;
-        *next_node = swap_node;
-    }
-    if (*size == capacity) return 0;
-    *size = heap_push(heap_key, heap_node, *size, key, neighbour);
-    return 1;
-}
-
-/* The search loop, specialised by the compiler for each (heuristic, weighted) pair it is inlined with. */
-static inline __attribute__((always_inline)) int64_t search_loop(
-    const uint8_t *restrict moves, const double *restrict cost, int64_t width, int64_t heuristic,
-    int64_t tie_breaker, int decrease_key, double h_scale, double cost_weight, int weighted, int64_t start,
-    int64_t goal, int32_t generation, const Work *work, int64_t *searched_out) {
-    double *restrict g = work->g;
-    int32_t *restrict parent = work->parent;
-    int32_t *restrict stamp = work->stamp;
-    int32_t *restrict expanded = work->expanded;
-    int64_t *restrict heap_key = work->heap_key;
-    int64_t *restrict heap_node = work->heap_node;
-    const int64_t capacity = work->capacity;
-    int64_t offsets[8];
-    double steps[8];
-    for (int k = 0; k < 8; k++) {
-        offsets[k] = ROW_STEPS[k] * width + COL_STEPS[k];
-        steps[k] = ROW_STEPS[k] != 0 && COL_STEPS[k] != 0 ? SQRT2 : 1.0;
-    }
-    int64_t goal_row = goal >= 0 ? goal / width : 0;
-    int64_t goal_col = goal >= 0 ? goal % width : 0;
-    const int32_t closed = generation + 1;
-
-    g[start] = 0.0;
-    parent[start] = (int32_t)start;
-    stamp[start] = generation;
-    int64_t size = 0;
-    heap_clear(heap_key);
-    int64_t next_node = start; /* the candidate that skips the heap; -1 = none */
-    int64_t next_key = 0;
-    int64_t searched = 0;
-/* Open `neighbour`, move k of `node`, at g_new (both passes below): its stamp, g and parent, and
- * its OPEN entry; the search ends with HEAP_FULL when OPEN cannot take it. */
-#define OPEN_NEIGHBOUR(neighbour, k, g_new)                                                                 \
-    do {                                                                                                    \
-        stamp[neighbour] = generation;                                                                      \
-        g[neighbour] = (g_new);                                                                             \
-        parent[neighbour] = (int32_t)node;                                                                  \
-        double h_ = heuristic_cells(row_offset + ROW_STEPS[k], col_offset + COL_STEPS[k], heuristic) * h_scale; \
-        if (!enter_open(neighbour, heap_key_of((g_new) + h_, h_, tie_breaker), &next_node, &next_key, heap_key, \
-                        heap_node, &size, capacity)) {                                                      \
-            *searched_out = searched;                                                                       \
-            return HEAP_FULL;                                                                               \
-        }                                                                                                   \
-    } while (0)
-    for (;;) {
-        int64_t node;
-        if (next_node >= 0) {
-            node = next_node;
-            next_node = -1;
-        } else if (size > 0) {
-            node = heap_pop(heap_key, heap_node, &size);
-            if (stamp[node] == closed) continue; /* a stale entry left behind by a decrease-key */
-        } else {
-            *searched_out = searched;
-            return NO_PATH;
-        }
-        stamp[node] = closed;
-        expanded[searched] = (int32_t)node;
-        searched++;
-        if (node == goal) {
-            *searched_out = searched;
-            return FOUND;
-        }
-        double g_node = g[node];
-        /* 32-bit division (nodes and width are < 2^31): a 64-bit one costs several times more */
-        int64_t row = (uint32_t)node / (uint32_t)width;
-        int64_t row_offset = row - goal_row;
-        int64_t col_offset = node - row * width - goal_col;
-        unsigned allowed = moves[node];
-        if (allowed == ALL_MOVES) {
-            /* Open ground: which neighbours are CLOSED, in OPEN or new follows a pattern here that
-             * the branch predictor learns, so a branch per neighbour is the cheaper way. */
-            for (unsigned bits = allowed; bits; bits &= bits - 1) { /* lowest first: table order */
-                int k = __builtin_ctz(bits);
-                int64_t neighbour = node + offsets[k];
-                int32_t seen = stamp[neighbour];
-                if (seen == closed) continue;
-                double step = steps[k];
-                if (weighted) step *= 1.0 + cost_weight * cost[neighbour];
-                double g_new = g_node + step;
-                if (seen == generation) {
-                    if (g_new >= g[neighbour]) continue;
-                    if (!decrease_key) { /* plannerAStarGrid: the key in OPEN does not change */
-                        g[neighbour] = g_new;
-                        parent[neighbour] = (int32_t)node;
-                        continue;
-                    }
-                }
-                OPEN_NEIGHBOUR(neighbour, k, g_new);
-            }
-            continue;
-        }
-        /* Among walls (corridors, doorways) that pattern is irregular: first decide for every move,
-         * without a branch, whether it improves its neighbour (not CLOSED, and new or with a lower g
-         * than in OPEN), then walk the improving ones only. The same neighbours in the same order as
-         * above, so the same search. */
-        unsigned improving = 0;
-        double g_news[8];
-        for (unsigned bits = allowed; bits; bits &= bits - 1) {
-            int k = __builtin_ctz(bits);
-            int64_t neighbour = node + offsets[k];
-            int32_t seen = stamp[neighbour];
-            double step = steps[k];
-            if (weighted) step *= 1.0 + cost_weight * cost[neighbour];
-            double g_new = g_node + step;
-            g_news[k] = g_new;
-            /* g of a node not in OPEN is read but not used */
-            unsigned better = (seen != closed) & ((seen != generation) | !(g_new >= g[neighbour]));
-            improving |= better << k;
-        }
-        for (; improving; improving &= improving - 1) {
-            int k = __builtin_ctz(improving);
-            int64_t neighbour = node + offsets[k];
-            double g_new = g_news[k];
-            if (!decrease_key && stamp[neighbour] == generation) {
-                g[neighbour] = g_new;
-                parent[neighbour] = (int32_t)node;
-                continue;
-            }
-            OPEN_NEIGHBOUR(neighbour, k, g_new);
-        }
-    }
-#undef OPEN_NEIGHBOUR
-}
-
-#define SEARCH(H, W)                                                                                          \
-    search_loop(moves, cost, width, H, tie_breaker, decrease_key, h_scale, cost_weight, W, start, goal,       \
-                generation, work, searched)
+int64_t navcosim_astar_needs_general(const double *parameters) { return needs_general(parameters); }
 
 static int64_t search(const uint8_t *moves, const double *cost, const double *parameters, int64_t start,
                       int64_t goal, int32_t generation, const Work *work, int64_t *searched) {
     int64_t width = (int64_t)parameters[P_WIDTH];
+    if (needs_general(parameters)) /* NO_GENERAL until planner.astar has registered it */
+        return general_search != NULL ? general_search(moves, cost, parameters, start, goal, generation, work, searched)
+                                      : NO_GENERAL;
     int64_t heuristic = (int64_t)parameters[P_HEURISTIC];
-    int64_t tie_breaker = (int64_t)parameters[P_TIE];
-    int decrease_key = parameters[P_DECREASE] != 0.0;
-    double h_scale = parameters[P_H_SCALE];
-    double cost_weight = parameters[P_COST_WEIGHT];
-    if (cost_weight != 0.0) return SEARCH(heuristic, 1);
-    if (tie_breaker == 2 && decrease_key && h_scale == 1.0 && (heuristic == 3 || heuristic == 0)) {
-        /* the defaults (octile with 8 neighbours, Manhattan with 4) with every setting a constant;
-         * h * 1.0 is h, so the product is left out without changing a bit */
-        if (heuristic == 3)
-            return search_loop(moves, cost, width, 3, 2, 1, 1.0, 0.0, 0, start, goal, generation, work, searched);
-        return search_loop(moves, cost, width, 0, 2, 1, 1.0, 0.0, 0, start, goal, generation, work, searched);
-    }
-    switch (heuristic) { /* constant heuristics: the compiler drops the others' code from the loop */
-    case 3: return SEARCH(3, 0);
-    case 0: return SEARCH(0, 0);
-    case 1: return SEARCH(1, 0);
-    case 2: return SEARCH(2, 0);
-    case 4: return SEARCH(4, 0);
-    default: return SEARCH(5, 0);
-    }
+    if (parameters[P_COST_WEIGHT] != 0.0) /* the cost gradient, every other setting as given */
+        return search_loop(moves, cost, width, heuristic, (int64_t)parameters[P_TIE], parameters[P_DECREASE] != 0.0,
+                           parameters[P_H_SCALE], parameters[P_COST_WEIGHT], 1, start, goal, generation, work, searched);
+    if (heuristic == 4) /* the thesis's heuristic, its other settings as given */
+        return search_loop(moves, cost, width, 4, (int64_t)parameters[P_TIE], parameters[P_DECREASE] != 0.0,
+                           parameters[P_H_SCALE], 0.0, 0, start, goal, generation, work, searched);
+    /* the defaults with every setting a constant; h * 1.0 is h, so the product is left out without
+     * changing a bit */
+    if (heuristic == 3)
+        return search_loop(moves, cost, width, 3, 2, 1, 1.0, 0.0, 0, start, goal, generation, work, searched);
+    return search_loop(moves, cost, width, 0, 2, 1, 1.0, 0.0, 0, start, goal, generation, work, searched);
 }
 
 /* planner.astar.astar_search: A* (or Dijkstra with heuristic 5 and goal -1) on a padded flat grid.
@@ -439,216 +177,6 @@ int64_t navcosim_astar_plan(Query *q, double start_x, double start_y, double goa
     return FOUND;
 }
 
-/* ---- bidirectional A* (planner.bidirectional) ---- */
-
-typedef struct {
-    Work work;
-    int32_t generation;
-    int64_t size;
-    int64_t searched;
-} Side;
-
-/* best: mu [cells]; meet[1] forward, meet[2] backward meeting nodes. */
-typedef struct {
-    double mu;
-    int64_t meet[3];
-} Best;
-
-/* Pop and expand one node of one side; -1 = heap full, 0 = popped a stale entry or expanded, 1 = empty. */
-static int64_t expand(const uint8_t *moves, int64_t width, int64_t target, int backward, int64_t heuristic,
-                      double h_scale, int64_t tie_breaker, int decrease_key, const double *cost,
-                      double cost_weight, Side *side, const Side *other_side, Best *best, int mine) {
-    double *g = side->work.g;
-    int32_t *parent = side->work.parent;
-    int32_t *stamp = side->work.stamp;
-    const double *other_g = other_side->work.g;
-    const int32_t *other_stamp = other_side->work.stamp;
-    const int32_t other_generation = other_side->generation;
-    const int32_t generation = side->generation;
-    const int32_t closed = generation + 1;
-    if (side->size == 0) return 1;
-    int64_t node = heap_pop(side->work.heap_key, side->work.heap_node, &side->size);
-    if (stamp[node] == closed) return 0;
-    stamp[node] = closed;
-    side->work.expanded[side->searched] = (int32_t)node;
-    side->searched++;
-    double g_node = g[node];
-    int64_t row_offset = node / width - target / width;
-    int64_t col_offset = node % width - target % width;
-    unsigned allowed = moves[node];
-    for (int k = 0; k < 8; k++) {
-        if (!((allowed >> k) & 1u)) continue;
-        int64_t offset = ROW_STEPS[k] * width + COL_STEPS[k];
-        int64_t neighbour = node + offset;
-        int32_t seen = stamp[neighbour];
-        if (seen == closed) continue;
-        double step = ROW_STEPS[k] != 0 && COL_STEPS[k] != 0 ? SQRT2 : 1.0;
-        if (cost_weight != 0.0) step *= 1.0 + cost_weight * cost[backward ? node : neighbour];
-        double g_new = g_node + step;
-        int32_t other = other_stamp[neighbour];
-        int reached_by_other = other == other_generation || other == other_generation + 1;
-        if (reached_by_other && g_new + other_g[neighbour] < best->mu) {
-            best->mu = g_new + other_g[neighbour];
-            best->meet[mine] = node;
-            best->meet[3 - mine] = neighbour;
-        }
-        if (seen == generation) {
-            if (g_new >= g[neighbour]) continue;
-            g[neighbour] = g_new;
-            parent[neighbour] = (int32_t)node;
-            if (!decrease_key) continue;
-        } else {
-            stamp[neighbour] = generation;
-            g[neighbour] = g_new;
-            parent[neighbour] = (int32_t)node;
-        }
-        if (side->size == side->work.capacity) return -1;
-        double h = heuristic_cells(row_offset + ROW_STEPS[k], col_offset + COL_STEPS[k], heuristic) * h_scale;
-        side->size =
-            heap_push(side->work.heap_key, side->work.heap_node, side->size, heap_key_of(g_new + h, h, tie_breaker),
-                      neighbour);
-    }
-    return 0;
-}
-
-static void root(int64_t width, int64_t node, int64_t target, int64_t heuristic, double h_scale,
-                 int64_t tie_breaker, Side *side) {
-    side->work.g[node] = 0.0;
-    side->work.parent[node] = (int32_t)node;
-    side->work.stamp[node] = side->generation;
-    heap_clear(side->work.heap_key);
-    double h = heuristic_cells(node / width - target / width, node % width - target % width, heuristic) * h_scale;
-    side->size = heap_push(side->work.heap_key, side->work.heap_node, 0, heap_key_of(h, h, tie_breaker), node);
-}
-
-/* planner.bidirectional.bidirectional_search. out: searched forward, searched backward, meet forward,
- * meet backward; *mu [cells]. Each side's heap: keys and nodes of `capacity` entries (capacity -
- * HEAP_SLACK in use). Returns 1 found, 0 none, -1 a heap is full (enlarge both, search again). */
-int64_t navcosim_bidirectional_search(const uint8_t *moves, const double *cost, const double *parameters,
-                                      int64_t start, int64_t goal, int64_t size, double *g_forward,
-                                      int32_t *nodes_forward, int64_t generation_forward,
-                                      int64_t *heap_key_forward, int64_t *heap_node_forward,
-                                      int64_t capacity_forward, double *g_backward, int32_t *nodes_backward,
-                                      int64_t generation_backward, int64_t *heap_key_backward,
-                                      int64_t *heap_node_backward, int64_t capacity_backward, int64_t *out,
-                                      double *mu) {
-    int64_t width = (int64_t)parameters[P_WIDTH];
-    int64_t heuristic = (int64_t)parameters[P_HEURISTIC];
-    int64_t tie_breaker = (int64_t)parameters[P_TIE];
-    int decrease_key = parameters[P_DECREASE] != 0.0;
-    double h_scale = parameters[P_H_SCALE];
-    double cost_weight = parameters[P_COST_WEIGHT];
-    Side forward = {{g_forward, nodes_forward, nodes_forward + size, nodes_forward + 2 * size, heap_key_forward,
-                     heap_node_forward, capacity_forward - HEAP_SLACK},
-                    (int32_t)generation_forward, 0, 0};
-    Side backward = {{g_backward, nodes_backward, nodes_backward + size, nodes_backward + 2 * size,
-                      heap_key_backward, heap_node_backward, capacity_backward - HEAP_SLACK},
-                     (int32_t)generation_backward, 0, 0};
-    Best best = {INFINITY, {0, -1, -1}};
-    out[0] = out[1] = 0;
-    out[2] = out[3] = -1;
-    *mu = 0.0;
-    if (forward.work.capacity <= 0 || backward.work.capacity <= 0) return -1;
-    root(width, start, goal, heuristic, h_scale, tie_breaker, &forward);
-    root(width, goal, start, heuristic, h_scale, tie_breaker, &backward);
-    if (start == goal) {
-        forward.work.expanded[0] = (int32_t)start;
-        out[0] = 1;
-        out[2] = start;
-        return 1;
-    }
-    while (forward.size > 0 && backward.size > 0) {
-        double top_forward = (double)(forward.work.heap_key[0] >> H_BITS) / F_SCALE;
-        double top_backward = (double)(backward.work.heap_key[0] >> H_BITS) / F_SCALE;
-        if (top_forward >= best.mu || top_backward >= best.mu) break;
-        int64_t status;
-        if (forward.size > backward.size)
-            status = expand(moves, width, start, 1, heuristic, h_scale, tie_breaker, decrease_key, cost, cost_weight,
-                            &backward, &forward, &best, 2);
-        else
-            status = expand(moves, width, goal, 0, heuristic, h_scale, tie_breaker, decrease_key, cost, cost_weight,
-                            &forward, &backward, &best, 1);
-        if (status < 0) {
-            out[0] = forward.searched;
-            out[1] = backward.searched;
-            return -1;
-        }
-    }
-    out[0] = forward.searched;
-    out[1] = backward.searched;
-    if (best.mu == INFINITY) return 0;
-    out[2] = best.meet[1];
-    out[3] = best.meet[2];
-    *mu = best.mu;
-    return 1;
-}
-
-/* planner.bidirectional.join_paths, given the node count: fills cells [count, 2], path [count, 2] [m];
- * returns the length [m]. count: navcosim_join_count. */
-int64_t navcosim_join_count(const int32_t *parent_forward, const int32_t *parent_backward, int64_t start,
-                            int64_t goal, int64_t meet_forward, int64_t meet_backward) {
-    int64_t forward_count = 1;
-    int64_t node = meet_forward;
-    while (node != start) {
-        node = parent_forward[node];
-        forward_count++;
-    }
-    int64_t backward_count = 0;
-    if (meet_backward >= 0) {
-        backward_count = 1;
-        node = meet_backward;
-        while (node != goal) {
-            node = parent_backward[node];
-            backward_count++;
-        }
-    }
-    return forward_count + backward_count;
-}
-
-double navcosim_join_paths(const int32_t *parent_forward, const int32_t *parent_backward, int64_t start,
-                           int64_t meet_forward, int64_t meet_backward, int64_t count, const double *parameters,
-                           int64_t *cells, double *path) {
-    int64_t forward_count = 1;
-    int64_t node = meet_forward;
-    while (node != start) {
-        node = parent_forward[node];
-        forward_count++;
-    }
-    /* cells' first column holds the node sequence until the second pass converts it */
-    node = meet_forward;
-    for (int64_t index = forward_count - 1; index >= 0; index--) {
-        cells[2 * index] = node;
-        node = parent_forward[node];
-    }
-    node = meet_backward;
-    for (int64_t index = forward_count; index < count; index++) {
-        cells[2 * index] = node;
-        node = parent_backward[node];
-    }
-    int64_t width = (int64_t)parameters[P_WIDTH];
-    double rows = parameters[P_ROWS];
-    double resolution = parameters[P_RESOLUTION];
-    double origin_x = parameters[P_ORIGIN_X];
-    double origin_y = parameters[P_ORIGIN_Y];
-    double length = 0.0;
-    int64_t previous = 0;
-    for (int64_t index = 0; index < count; index++) {
-        node = cells[2 * index];
-        int64_t row = node / width - 1;
-        int64_t col = node % width - 1;
-        cells[2 * index] = row;
-        cells[2 * index + 1] = col;
-        path[2 * index] = origin_x + ((double)col + 0.5) * resolution;
-        path[2 * index + 1] = origin_y + ((rows - 1.0 - (double)row) + 0.5) * resolution;
-        if (index > 0) {
-            int64_t difference = absolute(node - previous);
-            length += difference == 1 || difference == width ? resolution : SQRT2 * resolution;
-        }
-        previous = node;
-    }
-    return length;
-}
-
 /* The thin call of planner.planning.GridSearch: ctypes converts each argument at some cost (a call
  * of five arguments costs about three times one of none), so the query's address and endpoints
  * go in, and the answer comes out, through this block, packed and unpacked by one struct call
@@ -702,6 +230,7 @@ int64_t navcosim_layout(const char **names, int64_t *values, int64_t capacity)
     LAYOUT_CONSTANT(ROUTE_FULL);
     LAYOUT_CONSTANT(BAD_START);
     LAYOUT_CONSTANT(BAD_GOAL);
+    LAYOUT_CONSTANT(NO_GENERAL);
     LAYOUT_CONSTANT(BLOCKED);
     LAYOUT_CONSTANT(H_BITS);
     LAYOUT_CONSTANT(F_SCALE);

@@ -1,4 +1,4 @@
-"""A fleet's Python components stepped in one C call a block (`_BlockProgram`, world.c's
+"""A fleet's Python components stepped in one C call a block (`_BlockProgram`, fleet.c's
 `fleet_python_block`) against `_PythonSteps.step`'s Python path, which gathers, steps and feeds
 each component in turn: the copies of its gathers against the connections applied link by link
 (input = output * scale + offset, a plain copy a copy, bit for bit), and a small fleet run block by

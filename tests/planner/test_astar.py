@@ -1,6 +1,7 @@
 """Grid A* against a second implementation (scipy's csgraph Dijkstra on an explicitly built grid
 graph), the thesis's switches, and every user error."""
 
+import ctypes
 import math
 
 import numpy as np
@@ -354,3 +355,39 @@ def test_an_open_list_that_outgrows_the_heap_grows_it(search):
     assert np.array_equal(tight.cells, roomy.cells) and tight.length == roomy.length
     assert tight.searched_nodes == roomy.searched_nodes
     assert np.array_equal(tight.explored, roomy.explored)
+
+
+def test_settings_other_than_the_defaults_search_with_the_general_library():
+    """astar.c searches the default settings only; any other one is searched by astar_general.c's
+    library, which planner.astar registers before the first such search. Without it registered the
+    kernel answers NO_GENERAL instead of searching. Its plans keep the optimal length (scipy's)."""
+    from planner import astar
+    from planner.searchspace import search_map, workspace
+
+    occupied = _random_map(7)
+    grid = OccupancyGrid(occupied)
+    free = np.argwhere(~occupied)
+    start, goal = tuple(free[0]), tuple(free[-1])
+    lengths = dijkstra(grid_graph(occupied), indices=start[0] * occupied.shape[1] + start[1])
+    optimal = lengths[goal[0] * occupied.shape[1] + goal[1]]
+    for options in ({"heuristic": "euclidean"}, {"tie_breaker": "none"}, {"heuristic": "chebyshev"}):
+        result = planner.plan(grid, grid.cell_to_world(start), grid.cell_to_world(goal), **options)
+        assert result.length == pytest.approx(optimal, rel=1e-12), options
+    assert astar._general is not None
+    space = search_map(grid, 0.0)
+    moves = space.moves(8, False, False)
+    parameters = astar.search_parameters(space.width, astar.HEURISTICS["euclidean"], 2, True, 1.0, 0.0)
+    work = workspace(len(space.blocked))
+    arguments = (moves, astar.NO_COST, parameters, space.node(*start), space.node(*goal))
+    astar._KERNELS.navcosim_astar_set_general(None)
+    try:
+        status, searched = astar.astar_search(
+            *arguments, work.next_generation(), work.g, work.nodes, work.heap
+        )
+        assert (status, searched) == (astar.NO_GENERAL, 0)
+    finally:
+        astar._KERNELS.navcosim_astar_set_general(
+            ctypes.cast(astar._general.navcosim_astar_general_search, ctypes.c_void_p)
+        )
+    status, searched = astar.astar_search(*arguments, work.next_generation(), work.g, work.nodes, work.heap)
+    assert status == astar.FOUND and searched > 0

@@ -149,12 +149,16 @@ def test_a_cell_rounded_off_the_grid_is_left_to_python():
 
 
 @pytest.mark.parametrize(
-    ("struct", "mirror"), [("Monitor", kernels.MonitorArrays), ("Judge", kernels.JudgeArrays)]
+    ("struct", "mirror", "source"),
+    [
+        ("Monitor", kernels.MonitorArrays, kernels.SOURCE),
+        ("Judge", kernels.JudgeArrays, kernels.FLEET_SOURCE),
+    ],
 )
-def test_the_monitor_struct_mirrors_the_c_struct(struct, mirror):
+def test_the_monitor_struct_mirrors_the_c_struct(struct, mirror, source):
     from native import load as native
 
-    library = native.load(kernels.SOURCE)
+    library = native.load(source)
     function = library.navcosim_layout
     function.restype = ctypes.c_int64
     function.argtypes = [ctypes.POINTER(ctypes.c_char_p), ctypes.POINTER(ctypes.c_int64), ctypes.c_int64]
