@@ -19,7 +19,9 @@ first run before it keeps any row, and when the warm-up built it no worker build
 (a build is ~0.05 s of a worker's time, on the critical path of a short sweep).
 
 Best effort: whatever goes wrong here is swallowed (the sweep's check of its first run, on a
-worker, reports a bad scenario with its own message), and nothing is printed.
+worker, reports a bad scenario with its own message), and nothing is printed; but a TMPDIR too long
+a path for the server's socket is a one-line error (`_check_socket_path`): no local worker could
+start.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ import json
 import os
 from pathlib import Path
 
+from cosim.errors import CosimError
 from cosim.sweep.hold import WARM_ENV
 
 # Imported once by the local cluster's fork server, so its workers start with them loaded; the last
@@ -103,6 +106,26 @@ def warm_up(scenario: str, overrides: list[str], announce: bool = False, first=N
     return first is not None
 
 
+# The fork server listens on an AF_UNIX socket at <multiprocessing's folder under TMPDIR>/listener-
+# and 8 characters; such a path holds at most 107 bytes (108 with its NUL).
+SOCKET_PATH_MAX = 107
+_LISTENER = len("/listener-12345678")
+
+
+def _check_socket_path() -> None:
+    """A one-line CosimError when TMPDIR is too long a path for the fork server's socket (binding it
+    would fail with "AF_UNIX path too long", here or in multiprocessing's own server)."""
+    from multiprocessing import util
+
+    folder = util.get_temp_dir()
+    if len(os.fsencode(folder)) + _LISTENER > SOCKET_PATH_MAX:
+        raise CosimError(
+            f"a local sweep starts its workers through a socket in {folder}, a path too long for one "
+            f"({len(os.fsencode(folder))} bytes, at most {SOCKET_PATH_MAX - _LISTENER}): set TMPDIR to a "
+            "shorter folder (e.g. TMPDIR=/tmp)"
+        )
+
+
 def start_fork_server(scenario: Path, overrides: tuple[str, ...], announce: bool = False, first=None) -> None:
     """Start the local cluster's fork server now, warming it up on `scenario` with `overrides`
     (`announce`: saying what a first use builds, `warm_up`); given `first` (bundle, run: the sweep's
@@ -120,6 +143,7 @@ def start_fork_server(scenario: Path, overrides: tuple[str, ...], announce: bool
     import signal
     from multiprocessing import forkserver
 
+    _check_socket_path()
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload(WORKER_PRELOAD)
     _forget_check()
