@@ -30,7 +30,10 @@ CODE = (
     ("words", "kernels"),
     [
         (["plan", MAP, "--start", "6,6", "--goal", "40,40"], ["astar", "distance"]),
-        (["plan", "compare", MAP, "--start", "6,6", "--goal", "40,40"], ["hybrid", "astar", "distance"]),
+        (
+            ["plan", "compare", MAP, "--start", "6,6", "--goal", "40,40"],
+            ["hybrid", "astar_general", "astar", "distance"],
+        ),
     ],
 )
 def test_a_first_plan_says_what_it_compiles(tmp_path, words, kernels):
