@@ -151,26 +151,13 @@ int64_t navcosim_astar_plan(Query *q, double start_x, double start_y, double goa
     q->count = count;
     if (count > state->path_rows) return ROUTE_FULL;
     int64_t width = (int64_t)parameters[P_WIDTH];
-    double rows = parameters[P_ROWS];
     double resolution = parameters[P_RESOLUTION];
-    double origin_x = parameters[P_ORIGIN_X];
-    double origin_y = parameters[P_ORIGIN_Y];
     double length = 0.0;
-    double *path = state->path;
-    int64_t *cells = state->cells;
     node = goal;
     for (int64_t index = count - 1; index >= 0; index--) {
-        int64_t row = node / width - 1;
-        int64_t col = node % width - 1;
-        path[2 * index] = origin_x + ((double)col + 0.5) * resolution;
-        path[2 * index + 1] = origin_y + ((rows - 1.0 - (double)row) + 0.5) * resolution;
-        cells[2 * index] = row;
-        cells[2 * index + 1] = col;
+        node_cell_and_point(node, parameters, state->cells + 2 * index, state->path + 2 * index);
         int64_t previous = parent[node];
-        if (node != start) {
-            int64_t difference = absolute(previous - node);
-            length += difference == 1 || difference == width ? resolution : SQRT2 * resolution;
-        }
+        if (node != start) length += move_length(previous, node, width, resolution);
         node = previous;
     }
     q->length = length;

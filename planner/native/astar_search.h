@@ -45,6 +45,25 @@ typedef struct {
 static inline int64_t absolute(int64_t value) { return value < 0 ? -value : value; }
 static inline int64_t larger(int64_t a, int64_t b) { return a > b ? a : b; }
 
+/* A path's padded node as its cell (row, col) into cell[0..1] and the cell's centre [m] into
+ * point[0..1] (the map's row 0 at the top, y up). */
+static inline void node_cell_and_point(int64_t node, const double *parameters, int64_t *cell, double *point) {
+    int64_t width = (int64_t)parameters[P_WIDTH];
+    double resolution = parameters[P_RESOLUTION];
+    int64_t row = node / width - 1;
+    int64_t col = node % width - 1;
+    cell[0] = row;
+    cell[1] = col;
+    point[0] = parameters[P_ORIGIN_X] + ((double)col + 0.5) * resolution;
+    point[1] = parameters[P_ORIGIN_Y] + ((parameters[P_ROWS] - 1.0 - (double)row) + 0.5) * resolution;
+}
+
+/* The length [m] of one move between neighbouring padded nodes: a side or a diagonal of a cell. */
+static inline double move_length(int64_t node, int64_t other, int64_t width, double resolution) {
+    int64_t difference = absolute(node - other);
+    return difference == 1 || difference == width ? resolution : SQRT2 * resolution;
+}
+
 /* h in cells for a (row, col) offset to the goal; kind: planner.astar.HEURISTICS. */
 static inline double heuristic_cells(int64_t row_offset, int64_t col_offset, int64_t kind) {
     int64_t dr = absolute(row_offset);

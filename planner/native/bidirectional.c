@@ -188,24 +188,13 @@ double navcosim_join_paths(const int32_t *parent_forward, const int32_t *parent_
         node = parent_backward[node];
     }
     int64_t width = (int64_t)parameters[P_WIDTH];
-    double rows = parameters[P_ROWS];
     double resolution = parameters[P_RESOLUTION];
-    double origin_x = parameters[P_ORIGIN_X];
-    double origin_y = parameters[P_ORIGIN_Y];
     double length = 0.0;
     int64_t previous = 0;
     for (int64_t index = 0; index < count; index++) {
         node = cells[2 * index];
-        int64_t row = node / width - 1;
-        int64_t col = node % width - 1;
-        cells[2 * index] = row;
-        cells[2 * index + 1] = col;
-        path[2 * index] = origin_x + ((double)col + 0.5) * resolution;
-        path[2 * index + 1] = origin_y + ((rows - 1.0 - (double)row) + 0.5) * resolution;
-        if (index > 0) {
-            int64_t difference = absolute(node - previous);
-            length += difference == 1 || difference == width ? resolution : SQRT2 * resolution;
-        }
+        node_cell_and_point(node, parameters, cells + 2 * index, path + 2 * index);
+        if (index > 0) length += move_length(node, previous, width, resolution);
         previous = node;
     }
     return length;
