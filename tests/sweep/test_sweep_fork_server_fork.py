@@ -113,6 +113,19 @@ def test_a_ctrl_c_while_the_local_cluster_starts_is_not_lost():
     assert "Traceback" not in stderr
 
 
+def _sweep(tmpdir: Path, out: Path, *options: str) -> subprocess.CompletedProcess:
+    """`cosim sweep` of SCENARIO over two lidar noises into `out` (no plot, quiet), TMPDIR `tmpdir`."""
+    command = [sys.executable, "-m", "cosim", "sweep", str(SCENARIO), "--vary", "lidar.noise=0.0,0.1"]
+    return subprocess.run(
+        [*command, *options, "--out", str(out), "--no-plot", "--quiet"],
+        cwd=REPO,
+        env={**os.environ, "TMPDIR": str(tmpdir)},
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+
+
 @pytest.mark.slow
 def test_a_local_sweep_leaves_no_files_of_its_workers_behind(tmp_path):
     # Each worker lays the bundle out in a folder of its own under TMPDIR (`BundlePlugin.setup`)
@@ -120,41 +133,20 @@ def test_a_local_sweep_leaves_no_files_of_its_workers_behind(tmp_path):
     # TMPDIR a short path, as the fork server's socket is made there (tmp_path may be too long).
     scratch = Path(tempfile.mkdtemp(prefix="navcosim-test-", dir="/tmp"))
     try:
-        _sweep_in(scratch, tmp_path)
+        result = _sweep(scratch, tmp_path / "out", "--set", "simulation.stop_time=4", "--workers", "2")
+        assert result.returncode == 0, result.stderr
+        assert len(list((tmp_path / "out" / "runs").glob("*.mcap"))) == 2
+        left = sorted(path.name for path in scratch.iterdir() if path.name.startswith("navcosim-"))
+        assert left == []
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
-
-
-def _sweep_in(scratch: Path, tmp_path: Path) -> None:
-    command = [sys.executable, "-m", "cosim", "sweep", str(SCENARIO), "--set", "simulation.stop_time=4"]
-    command += ["--vary", "lidar.noise=0.0,0.1", "--workers", "2", "--out", str(tmp_path / "out")]
-    result = subprocess.run(
-        [*command, "--no-plot", "--quiet"],
-        cwd=REPO,
-        env={**os.environ, "TMPDIR": str(scratch)},
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert result.returncode == 0, result.stderr
-    assert len(list((tmp_path / "out" / "runs").glob("*.mcap"))) == 2
-    left = sorted(path.name for path in scratch.iterdir() if path.name.startswith("navcosim-"))
-    assert left == []
 
 
 @pytest.mark.slow
 def test_a_tmpdir_too_long_for_the_servers_socket_is_one_line(tmp_path):
     scratch = tmp_path / ("d" * 90)
     scratch.mkdir()
-    command = [sys.executable, "-m", "cosim", "sweep", str(SCENARIO), "--vary", "lidar.noise=0.0,0.1"]
-    result = subprocess.run(
-        [*command, "--out", str(tmp_path / "out"), "--no-plot", "--quiet"],
-        cwd=REPO,
-        env={**os.environ, "TMPDIR": str(scratch)},
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
+    result = _sweep(scratch, tmp_path / "out")
     assert result.returncode == 2, result.stderr
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "a path too long for one" in lines[0] and "set TMPDIR" in lines[0], lines
