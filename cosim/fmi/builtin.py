@@ -47,9 +47,9 @@ SOURCE_ROOT = PACKAGE_DIR.parent / "fmus"
 # transform and the world's distances, which check the scenario's start and goal before its FMUs are
 # read; the planner's grid search, loaded right after the FMUs (~0.42 s of CPU: the settings of a
 # scenario's planner and planner.plan's defaults only, planner/native/astar_general.c has the
-# others); those three before the FMUs
-# (`BEFORE_FMUS`). After the FMUs, the costmap, loaded with the grid search, and the master's
-# stepping kernel, loaded last when the run starts (compiled while the run sets up).
+# others); those three before the FMUs (`BEFORE_FMUS`). After the FMUs, the costmap, loaded with
+# the grid search, and the master's stepping kernel, loaded last when the run starts (compiled
+# while the run sets up).
 BEFORE_FMUS = (
     Path(planner.__file__).parent / "native" / "distance.c",
     PACKAGE_DIR / "world" / "native" / "world.c",
