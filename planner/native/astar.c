@@ -1,15 +1,13 @@
-/* Grid A* of chapter 3 (planner.astar): heuristics 3.1-3.4 and 3.6, the thesis's improvements, and
- * the bidirectional search of planner.bidirectional. Loaded with native.load; the Python side
- * (planner/astar.py) documents the data layout, the heap keys and the status codes.
- *
- * The bidirectional search is bidirectional.c's, a library planner.bidirectional loads.
+/* Grid A* of chapter 3 (planner.astar): heuristics 3.1-3.4 and 3.6 and the thesis's improvements.
+ * Loaded with native.load; the Python side (planner/astar.py) documents the data layout, the heap
+ * keys and the status codes. (The bidirectional search is bidirectional.c's, a library
+ * planner.bidirectional loads.)
  *
  * The search loop (astar_search.h) is compiled here for the settings of a scenario's planner (the
  * thesis's heuristic; any with a cost gradient) and planner.plan's defaults only; every other
- * setting is searched by
- * astar_general.c's library, which planner.astar builds and loads the first time such settings are
- * asked for (it compiles the loop seven times, most of what building both files costs) and
- * registers here (navcosim_astar_set_general).
+ * setting is searched by astar_general.c's library, which planner.astar builds and loads the first
+ * time such settings are asked for (it compiles the loop seven times, most of what building both
+ * files costs) and registers here (navcosim_astar_set_general).
  */
 #include "astar_search.h"
 #include "layout.h"

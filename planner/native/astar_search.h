@@ -1,6 +1,7 @@
-/* The grid A* search of planner.astar shared by astar.c (the default settings) and astar_general.c
- * (every other setting): the constants, the heuristics, the heap keys, the 4-ary heap and the search
- * loop, all static inline, so each library specialises the loop for the settings it handles.
+/* The grid A* search of planner.astar shared by astar.c (the default settings), astar_general.c
+ * (every other setting) and bidirectional.c: the constants, the heuristics, the heap keys, the
+ * 4-ary heap, the search loop and a path's cells and lengths, all static inline, so each library
+ * specialises the loop for the settings it handles.
  *
  * Every floating-point operation is the one planner/astar.py's documented search does, in its order
  * (the libraries are built with -ffp-contract=off, no fast-math), so plans are bit-identical to it;
