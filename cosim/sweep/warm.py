@@ -303,14 +303,7 @@ def _serve(listener, alive_r: int, request: dict, held: set, first=None, check_w
         signal.pthread_sigmask(signal.SIG_UNBLOCK, held)
         forkserver._forkserver._lock = threading.Lock()  # (held by no thread here)
         listener_fd = listener.detach()
-        # The descriptors this process holds besides the server's own (its socket, the alive pipe
-        # and the pipe of its answer about the first run) are not the server's, as a fresh one's
-        # are not (a caller's files and pipes): whoever reads a pipe to its end would wait for the
-        # server and its workers too.
-        kept = sorted(fd for fd in (listener_fd, alive_r, check_w) if fd is not None)
-        starts, stops = [3, *(fd + 1 for fd in kept)], [*kept, os.sysconf("SC_OPEN_MAX")]
-        for start, stop in zip(starts, stops, strict=True):
-            os.closerange(start, stop)
+        sever_descriptors({fd for fd in (listener_fd, alive_r, check_w) if fd is not None})
         built = False
         try:
             built = warm_up(
@@ -330,6 +323,34 @@ def _serve(listener, alive_r: int, request: dict, held: set, first=None, check_w
         forkserver.main(listener_fd, alive_r, [])
     finally:
         _exit_at_once()
+
+
+def sever_descriptors(kept: set[int]) -> None:
+    """Point every descriptor of this process from 3 on, but `kept`, at /dev/null.
+
+    The forked fork server inherits the sweep process's descriptors (a caller's files and pipes),
+    which a fresh server would not hold: whoever reads such a pipe to its end would wait for the
+    server and its workers too. Closed, their numbers would be free for the sockets the server's
+    workers open, while the objects inherited with them still write there: a logging handler of
+    the caller (a file, pytest's own) then wrote its lines into a worker's connection to the
+    scheduler, which read "INFO    " as a frame's length and failed the sweep on a 2 EiB
+    allocation. On /dev/null, each number stays taken and whatever writes to it is dropped."""
+    try:
+        numbers = sorted(int(name) for name in os.listdir("/proc/self/fd"))
+    except OSError:  # no procfs: every number the process may hold
+        numbers = range(3, os.sysconf("SC_OPEN_MAX"))
+    null = os.open(os.devnull, os.O_RDWR)
+    try:
+        for fd in numbers:
+            if fd < 3 or fd == null or fd in kept:
+                continue
+            try:
+                os.fstat(fd)  # (the listing's own descriptor, closed since, is not made anew)
+            except OSError:
+                continue
+            os.dup2(null, fd)
+    finally:
+        os.close(null)
 
 
 def stop_fork_server() -> None:

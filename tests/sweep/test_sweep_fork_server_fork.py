@@ -150,3 +150,45 @@ def test_a_tmpdir_too_long_for_the_servers_socket_is_one_line(tmp_path):
     assert result.returncode == 2, result.stderr
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "a path too long for one" in lines[0] and "set TMPDIR" in lines[0], lines
+
+
+LOGGING_CALLER = """
+import logging, os, sys
+from pathlib import Path
+logging.basicConfig(filename=sys.argv[1], level=logging.DEBUG)  # a caller's file, held open
+from multiprocessing import forkserver
+from cosim.cli import main
+from cosim.sweep import warm
+stop = warm.stop_fork_server
+def looked_at():  # the server's view of the caller's log file, before it stops
+    handler = logging.getLogger().handlers[0]
+    server = forkserver._forkserver._forkserver_pid
+    print("server sees", os.readlink(f"/proc/{server}/fd/{handler.stream.fileno()}"))
+    stop()
+warm.stop_fork_server = looked_at
+import cosim.sweep.engine as engine
+engine.stop_fork_server = looked_at
+code = main(["sweep", sys.argv[2], "--vary", "lidar.noise=0.0,0.1", "--set", "simulation.stop_time=2",
+             "--out", sys.argv[3], "--no-plot", "--quiet", "--workers", "2"])
+print("exit", code)
+"""
+
+
+@pytest.mark.slow
+def test_a_callers_log_file_is_dev_null_in_the_fork_server_not_a_free_number(tmp_path):
+    # The server once closed the caller's descriptors: the workers' Dask logging then failed on a
+    # closed descriptor ("--- Logging error ---" on stderr), or wrote into a socket that had taken
+    # its number, and the scheduler read "INFO    " as a frame's length (a 2 EiB allocation).
+    result = subprocess.run(
+        [sys.executable, "-c", LOGGING_CALLER, str(tmp_path / "caller.log"), str(SCENARIO)]
+        + [str(tmp_path / "out")],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=REPO,
+        env={**os.environ, "TMPDIR": "/tmp"},  # (the server's socket path must be short)
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines() == ["server sees /dev/null", "exit 0"]
+    assert "Logging error" not in result.stderr and "Traceback" not in result.stderr, result.stderr
+    assert len(list((tmp_path / "out" / "runs").glob("*.mcap"))) == 2
