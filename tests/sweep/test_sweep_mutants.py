@@ -64,7 +64,7 @@ hostile_text = st.one_of(
 
 
 def near_miss(key: str, choice: int) -> str:
-    i = choice % len(key)
+    i = choice % max(len(key), 1)  # (a key an earlier mutation emptied: no character to drop)
     variants = [key[:i] + key[i + 1 :], key + "s", key.upper(), key.replace(".", "_"), "nosuch." + key,
                 key.split(".")[0], "." + key, key + ".", key.replace("_", "-")]  # fmt: skip
     return variants[choice % len(variants)]
