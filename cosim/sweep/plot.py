@@ -199,7 +199,7 @@ def _legend(axis, points: list[Point]) -> None:
 # The figure is laid out here, not by a layout engine: each panel has a cell of the figure (lines
 # and columns of equal cells under the heading) and its axes are placed in it with room for what
 # is drawn around them (title, ticks and their labels, axis labels, colour bar), measured by the
-# canvas's renderer. A panel's ticks and colour bar are drawn as lines, texts and an image of the
+# canvas's renderer. A panel's ticks and colour bar are drawn as lines, texts and bands of the
 # figure, not by matplotlib's axis and colour bar machinery, which lays out and measures each tick
 # label several times over (that layout was two thirds of the plot's time). Sizes in points.
 PAD = 5.0  # inside each cell's edges, and at the figure's top
@@ -230,9 +230,11 @@ class _Panel:
     """A panel's axes (matplotlib's own ticks off), and what `_place` draws around them."""
 
     def __init__(self, figure, title: str, xlabel: str = "", ylabel: str = "") -> None:
-        self.axis = axis = figure.add_axes((0.0, 0.0, 1.0, 1.0))
+        self.axis = axis = figure.add_axes((0.0, 0.0, 1.0, 1.0), axes_class=_axes_class())
         axis.xaxis.set_major_locator(ticker.NullLocator())
         axis.yaxis.set_major_locator(ticker.NullLocator())
+        for spine in axis.spines.values():  # (matplotlib places them as it makes the first ticks)
+            spine.set_position(("outward", 0.0))
         axis.set_title(title, fontsize=TITLE_SIZE, y=1.0)  # (placed: no search for a free place)
         if xlabel:
             axis.set_xlabel(xlabel, fontsize=LABEL_SIZE)
@@ -242,6 +244,51 @@ class _Panel:
         self.colours = None  # (colour map, norm) of a colour bar at the right
         self.bar = _Ticks()  # of the colour bar
         self.grid = False
+
+
+_AXES: list = []
+
+
+def _axes_class():
+    """matplotlib's Axes whose two axes make no tick ahead of need (matplotlib's make one each,
+    major and minor, when the axes are made: half the time of making them); here none is ever
+    needed, the ticks being drawn by `_place`. (Axis.majorTicks and minorTicks, lazy lists of
+    ticks, start empty; matplotlib's axes add to them as they need ticks.)"""
+    if _AXES:
+        return _AXES[0]
+    from matplotlib.axes import Axes
+    from matplotlib.axis import XAxis, YAxis
+
+    class NoTicksAhead:
+        def __set_name__(self, owner, name: str) -> None:
+            self.name = name
+
+        def __get__(self, instance, owner):
+            if instance is None:
+                return self
+            ticks: list = []
+            setattr(instance, self.name, ticks)  # until the axis is cleared
+            return ticks
+
+    class PanelXAxis(XAxis):
+        majorTicks = NoTicksAhead()
+        minorTicks = NoTicksAhead()
+
+    class PanelYAxis(YAxis):
+        majorTicks = NoTicksAhead()
+        minorTicks = NoTicksAhead()
+
+    class PanelAxes(Axes):
+        def _init_axis(self) -> None:  # matplotlib's, with the axes above
+            self.xaxis = PanelXAxis(self, clear=False)
+            self.spines.bottom.register_axis(self.xaxis)
+            self.spines.top.register_axis(self.xaxis)
+            self.yaxis = PanelYAxis(self, clear=False)
+            self.spines.left.register_axis(self.yaxis)
+            self.spines.right.register_axis(self.yaxis)
+
+    _AXES.append(PanelAxes)
+    return PanelAxes
 
 
 def _numbers(low: float, high: float, length: float, factor: float) -> tuple[np.ndarray, list[str]]:
@@ -442,28 +489,29 @@ def _side(figure, ticks: _Ticks, limits, transform, which: str, grid_axis) -> No
 
 def _colour_bar(figure, panel: _Panel, width: float) -> None:
     """The colour bar right of a map: its colours from bottom to top, framed, the values ticked."""
+    from matplotlib.collections import QuadMesh
     from matplotlib.colors import Normalize
-    from matplotlib.image import BboxImage
     from matplotlib.lines import Line2D
     from matplotlib.markers import TICKRIGHT
     from matplotlib.patches import Rectangle
     from matplotlib.text import Text
-    from matplotlib.transforms import Bbox, TransformedBbox
 
     colours, norm = panel.colours
     box = panel.axis.get_position()
     bar_width = panel.height / BAR_ASPECT / width
     left, bottom, top = box.x1 + BAR_PAD / width, box.y0, box.y1
-    bar = Bbox.from_extents(left, bottom, left + bar_width, top)
-    image = BboxImage(
-        TransformedBbox(bar, figure.transFigure),
+    # a band per colour of the map, bottom to top (as matplotlib's colour bar draws it)
+    heights = np.linspace(bottom, top, colours.N + 1)
+    corners = np.stack(np.broadcast_arrays(*np.meshgrid([left, left + bar_width], heights)), axis=-1)
+    bands = QuadMesh(
+        corners,
+        array=(np.arange(colours.N) + 0.5) / colours.N,
         cmap=colours,
         norm=Normalize(0.0, 1.0),
-        interpolation="nearest",
-        origin="lower",
+        antialiased=False,
+        transform=figure.transFigure,
     )
-    image.set_data(((np.arange(colours.N) + 0.5) / colours.N)[:, np.newaxis])  # each colour once
-    figure.add_artist(image)
+    figure.add_artist(bands)
     figure.add_artist(
         Rectangle(
             (left, bottom),
@@ -637,9 +685,12 @@ def _maps(data: _Data, keys: Sequence[str], names: list[str], grid: bool, replic
             columns, lines = np.searchsorted(xs, x), np.searchsorted(ys, y)
             cells = np.full((len(ys), len(xs)), np.nan)
             cells[lines, columns] = values  # a grid has one point per cell
-            axis.imshow(cells, origin="lower", aspect="auto", cmap=colours, norm=norm)
+            # the cells as quadrilaterals (matplotlib draws them at once, an image is resampled)
+            axis.pcolormesh(
+                np.arange(len(xs) + 1) - 0.5, np.arange(len(ys) + 1) - 0.5, cells, cmap=colours, norm=norm
+            )
             if cells.size <= 64:  # small grids: the value in each cell too
-                _cell_texts(axis, data, name, columns, lines, replicates)
+                _cell_texts(axis, data, name, columns, lines, replicates, colours, norm)
             panel.x = _Ticks(range(len(xs)), x_labels or [f"{v:g}" for v in xs], VALUE_SIZE, 30.0)
             panel.y = _Ticks(range(len(ys)), y_labels or [f"{v:g}" for v in ys], VALUE_SIZE)
             mark_x, mark_y = columns + 0.3, lines + 0.3
@@ -679,7 +730,10 @@ def _value_range(values: np.ndarray) -> tuple[float, float]:
     return low, high
 
 
-def _cell_texts(axis, data: _Data, panel: str, columns, lines, replicates: int) -> None:
+def _cell_texts(axis, data: _Data, panel: str, columns, lines, replicates: int, colours, norm) -> None:
+    """The value of each cell, in black on a light cell and white on a dark one."""
+    red, green, blue, _ = colours(norm(data.values(panel))).T
+    light = 0.2126 * red + 0.7152 * green + 0.0722 * blue > 0.45  # (their luminance)
     for column, line, index in zip(columns, lines, range(len(data.points)), strict=True):
         point = data.points[index]
         if panel == OUTCOME_PANEL:
@@ -691,4 +745,5 @@ def _cell_texts(axis, data: _Data, panel: str, columns, lines, replicates: int) 
             if not np.isfinite(mean):
                 continue
             text = f"{mean:.3g}" + (f"\n± {std:.2g}" if replicates > 1 and np.isfinite(std) else "")
-        axis.text(column, line, text, ha="center", va="center", fontsize=7, color="black", path_effects=HALO)
+        colour = "black" if light[index] else "white"
+        axis.text(column, line, text, ha="center", va="center", fontsize=7, color=colour)

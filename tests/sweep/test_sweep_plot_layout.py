@@ -68,6 +68,22 @@ def test_no_label_is_cut_or_over_another_or_over_a_panel(case):
         assert overlap_x <= 0.5 or overlap_y <= 0.5, text.get_text()
 
 
+@pytest.mark.parametrize("case", CASES)
+def test_each_panel_is_framed_at_its_edges(case):
+    figure, renderer, _, _ = _drawn(case)
+    for axis in (axis for axis in figure.axes if axis.get_title()):
+        box = axis.get_window_extent(renderer)
+        for side, spine in axis.spines.items():
+            line = spine.get_window_extent(renderer)
+            edge = {"left": box.x0, "right": box.x1, "bottom": box.y0, "top": box.y1}[side]
+            if side in ("bottom", "top"):
+                along, across, ends = (line.x0, line.x1), (line.y0, line.y1), (box.x0, box.x1)
+            else:
+                along, across, ends = (line.y0, line.y1), (line.x0, line.x1), (box.y0, box.y1)
+            assert spine.get_visible() and across == pytest.approx((edge, edge), abs=1), side
+            assert along == pytest.approx(ends, abs=1), side
+
+
 def _tick_labels(texts, panel, side: str):
     """Texts under a panel (side x) or left of it (side y), within its extent along that side."""
     found = []
