@@ -394,7 +394,8 @@ def _place(figure, places: list[list[_Panel | None]], heading: str) -> None:
                 panel.y.positions, panel.y.labels = _numbers(*panel.ylim, panel.height, 2)
             if panel.colours is not None:
                 norm = panel.colours[1]
-                panel.bar.positions, panel.bar.labels = _numbers(norm.vmin, norm.vmax, panel.height, 2)
+                # (a colour bar's labels as sparse as an x axis's: 4 to 6 on a map's height)
+                panel.bar.positions, panel.bar.labels = _numbers(norm.vmin, norm.vmax, panel.height, 3)
     # Widths: each column of cells has room at its left for the tick labels and the axis label
     # beside them, at its right for a colour bar and its labels; and room enough for what is
     # centred under or over the axes (the tick labels on their ticks, title and axis label).
