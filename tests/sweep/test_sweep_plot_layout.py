@@ -7,16 +7,55 @@ Checked on the drawn figure and its pixels, in every layout the sweep draws."""
 from __future__ import annotations
 
 import itertools
+import random
 
 import numpy as np
 import pytest
 from matplotlib import colormaps
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.text import Text
-from test_sweep_png_pixels import CASES
-from test_sweep_report import OUTCOME
+from test_sweep_png_pixels import CASES as PIXEL_CASES
+from test_sweep_report import KEYS, OUTCOME, _rows
 
 from cosim.sweep.plot import sweep_figure
+
+
+def _all_failed() -> list[dict[str, str]]:
+    return _rows(seed=1, reasons=("failed",))
+
+
+def _big_grid() -> list[dict[str, str]]:
+    """A 10 x 10 grid (no values in the cells) of large and of small signed metrics."""
+    rng, rows = random.Random(3), []
+    for count in range(90, 390, 30):
+        for stop in range(1000, 11000, 1000):
+            row = _rows(seed=0)[0] | {"lidar.count": str(count), "simulation.stop_time": str(stop)}
+            row.update(time=f"{rng.uniform(1e5, 3e6):.3f}", distance=f"{rng.uniform(-0.002, 0.001):.6f}")
+            rows.append(
+                row | {"run_id": f"{len(rows):016x}", "status": "completed", "reason": "goal_reached"}
+            )
+    return rows
+
+
+def _scattered() -> list[dict[str, str]]:
+    """30 points at random in the plane of two keys (as a random or LHS sweep draws them)."""
+    rng, rows = random.Random(4), []
+    for row in _rows(replicates=4, seed=8)[:30]:
+        rows.append(row | {KEYS[0]: f"{rng.uniform(0, 1):.4f}", KEYS[1]: f"{rng.uniform(10, 20):.3f}"})
+    return rows
+
+
+def _one_key_categories() -> list[dict[str, str]]:
+    names = ("maps/warehouse_with_a_long_name.yaml", "maps/b.yaml", "maps/c.yaml")
+    return [row | {"map": name} for row, name in zip(_rows(seed=7)[:3], names, strict=True)]
+
+
+CASES = PIXEL_CASES | {
+    "all failed": (_all_failed, KEYS, True, 1),
+    "10 x 10 grid": (_big_grid, ("lidar.count", "simulation.stop_time"), True, 1),
+    "30 random points": (_scattered, KEYS, False, 1),
+    "one key, categories": (_one_key_categories, ["map"], True, 1),
+}
 
 
 def _drawn(case: str):
@@ -41,6 +80,29 @@ def _frame_texts(figure, renderer) -> list[tuple[Text, object]]:
     ]
 
 
+def _overlap(one: Text, a, other: Text, b, renderer) -> bool:
+    """Whether two texts' boxes overlap (by more than half a pixel): texts turned by the same angle
+    as the rectangles they are (centred on their boxes), others as their upright boxes."""
+    rotation = one.get_rotation()
+    if rotation == other.get_rotation() != 0:
+        angle = np.radians(rotation)
+        sizes = []
+        for text in (one, other):
+            text.set_rotation(0)
+            box = text.get_window_extent(renderer)
+            text.set_rotation(rotation)
+            sizes.append((box.width, box.height))
+        dx, dy = (b.x0 + b.x1 - a.x0 - a.x1) / 2, (b.y0 + b.y1 - a.y0 - a.y1) / 2
+        along, across = dx * np.cos(angle) + dy * np.sin(angle), -dx * np.sin(angle) + dy * np.cos(angle)
+        return (
+            abs(along) < (sizes[0][0] + sizes[1][0]) / 2 - 0.5
+            and abs(across) < (sizes[0][1] + sizes[1][1]) / 2 - 0.5
+        )
+    overlap_x = min(a.x1, b.x1) - max(a.x0, b.x0)
+    overlap_y = min(a.y1, b.y1) - max(a.y0, b.y0)
+    return overlap_x > 0.5 and overlap_y > 0.5
+
+
 def _number(text: str) -> float | None:
     try:
         return float(text.replace("\N{MINUS SIGN}", "-"))
@@ -58,9 +120,7 @@ def test_no_label_is_cut_or_over_another_or_over_a_panel(case):
     for text, box in texts:
         assert box.x0 >= 0 and box.y0 >= 0 and box.x1 <= width and box.y1 <= height, text.get_text()
     for (one, a), (other, b) in itertools.combinations(texts, 2):
-        overlap_x = min(a.x1, b.x1) - max(a.x0, b.x0)
-        overlap_y = min(a.y1, b.y1) - max(a.y0, b.y0)
-        assert overlap_x <= 0.5 or overlap_y <= 0.5, (one.get_text(), other.get_text())
+        assert not _overlap(one, a, other, b, renderer), (one.get_text(), other.get_text())
     panels = [axis.get_window_extent(renderer) for axis in figure.axes if axis.get_title() in titles]
     for (text, box), panel in itertools.product(texts, panels):
         overlap_x = min(box.x1, panel.x1) - max(box.x0, panel.x0)
@@ -112,7 +172,10 @@ def test_each_tick_label_sits_at_its_value(case):
             assert labels, (axis.get_title(), side)
             # A key on a grid map or with category values: ticks at the cells, in sweep order or
             # sorted by value; otherwise numbers at their own value.
-            key = keys[1 if side == "x" else 0] if len(keys) == 2 else None
+            if len(keys) == 2:
+                key = keys[1 if side == "x" else 0]
+            else:  # one key: along x; more: numbers here
+                key = keys[0] if len(keys) == 1 and side == "x" else None
             values = list(dict.fromkeys(row[key] for row in rows)) if key else []
             numeric = not values or all(_number(value) is not None for value in values)
             if key and numeric:
@@ -120,16 +183,15 @@ def test_each_tick_label_sits_at_its_value(case):
             for text, at in labels:
                 if key and not numeric:  # categories, in sweep order
                     position = values.index(text)
-                elif key and grid:  # a grid map's cells: the values sorted
+                elif key and grid and len(keys) == 2:  # a grid map's cells: the values sorted
                     position = [f"{float(value):g}" for value in values].index(text)
                 else:
                     position = _number(text)
                     assert position is not None, text
                 point = (position, 0.0) if side == "x" else (0.0, position)
                 drawn_at = axis.transData.transform(point)[0 if side == "x" else 1]
-                assert drawn_at == pytest.approx(
-                    at, abs=3
-                )  # (centred on the digits, not the box), (axis.get_title(), side, text)
+                # (a label is centred on its digits, not on its box: up to 2 px apart)
+                assert drawn_at == pytest.approx(at, abs=3), (axis.get_title(), side, text)
                 checked += 1
     assert checked >= 4 * len([axis for axis in figure.axes if axis.get_title()])
 
