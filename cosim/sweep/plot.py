@@ -200,8 +200,8 @@ def _legend(axis, points: list[Point]) -> None:
 # and columns of equal cells under the heading) and its axes are placed in it with room for what
 # is drawn around them (title, ticks and their labels, axis labels, colour bar), measured by the
 # canvas's renderer. A panel's ticks and colour bar are drawn as lines, texts and bands of the
-# figure, not by matplotlib's axis and colour bar machinery, which lays out and measures each tick
-# label several times over (that layout was two thirds of the plot's time). Sizes in points.
+# figure, not by matplotlib's axis and colour bar machinery (which makes 5 artists a tick, and whose
+# constrained layout measures each tick label several times over). Sizes in points.
 PAD = 5.0  # inside each cell's edges, and at the figure's top
 TICK, TICK_PAD, LABEL_PAD, TITLE_PAD = 3.5, 3.5, 4.0, 6.0  # matplotlib's defaults
 TICK_WIDTH = 0.8
@@ -385,11 +385,9 @@ def _place(figure, places: list[list[_Panel | None]], heading: str) -> None:
         label = max(measure(panel.axis.get_xlabel(), LABEL_SIZE)[1] for panel in here)
         below = ticks + (LABEL_PAD + label if label else 0.0)
         for panel in here:
-            panel.height, panel.below, panel.label_below = (
-                cell_height - above - below,
-                below,
-                ticks + LABEL_PAD,
-            )
+            # (labels too long for the cell leave the panel a fifth of it: they then overlap)
+            panel.height = max(cell_height - above - below, cell_height / 5)
+            panel.below, panel.label_below = below, ticks + LABEL_PAD
             if panel.y.numbers:
                 panel.y.positions, panel.y.labels = _numbers(*panel.ylim, panel.height, 2)
             if panel.colours is not None:
@@ -411,7 +409,7 @@ def _place(figure, places: list[list[_Panel | None]], heading: str) -> None:
             for panel in here
         )
         for _ in range(3):  # the labels under the axes depend on its width, and it on them
-            span = cell_width - left - right
+            span = max(cell_width - left - right, cell_width / 5)
             centred = []  # (distance from the axes' left, half width) of each
             for panel in here:
                 if panel.x.numbers:
