@@ -165,14 +165,63 @@ def _stamp_is_fresh(stamp: Path, target: Path, lines: list[str], environment: st
     return newest < stamp_ns - RACY_SECONDS * 1e9
 
 
+# The FMUs found fresh in this process, by (name, source root, cache folder, FMI version): the
+# environment line then, the paths that check depended on (every folder whose listing gives the
+# source files, every source file, the stamp, the FMU) and their `_path_status` read before it. A
+# sweep's worker checks the same four FMUs for every run; when nothing of that changed (no file
+# added, removed, renamed or written: each changes a folder's or the file's time, size or inode), the
+# answer is the same and the check (listing the folders, reading the stamp) is skipped.
+_SEEN_FRESH: dict[tuple[str, Path, Path, int], tuple[str, tuple[str, ...], tuple]] = {}
+
+
+def _path_status(paths: tuple[str, ...]) -> tuple | None:
+    """(modification time [ns], size, inode) of each path; None when one cannot be read."""
+    status = []
+    for path in paths:
+        try:
+            found = os.stat(path)
+        except OSError:
+            return None
+        status.append((found.st_mtime_ns, found.st_size, found.st_ino))
+    return tuple(status)
+
+
+def _source_folders(model_dir: Path) -> list[str]:
+    """The folders whose listings `source_files` reads: the model's and `common/`, with their subfolders."""
+    folders = []
+    for top in (model_dir, model_dir.parent / "common"):
+        folders.append(str(top))
+        folders.extend(str(path) for path in sorted(top.rglob("*")) if path.is_dir())
+    return folders
+
+
 def _is_fresh(name: str, source_root: Path, folder: Path, fmi_version: int) -> bool:
     """Whether the FMU in `folder` (the cache's folder of `fmi_version`) is that of the sources, by
-    its stamp's times and sizes (`_stamp_is_fresh`); False when that cannot tell."""
+    its stamp's times and sizes (`_stamp_is_fresh`); False when that cannot tell. An FMU found
+    fresh before in this process, with nothing it depends on changed since, is (`_SEEN_FRESH`)."""
     model_dir = source_root / name
-    files = _build_module(source_root).source_files(model_dir, fmi_version)
-    lines = _stat_lines(files, source_root)
     environment = _environment_line(model_dir, fmi_version)
-    return _stamp_is_fresh(folder / f"{name}.stamp", folder / f"{name}.fmu", lines, environment)
+    key = (name, source_root, folder, fmi_version)
+    seen = _SEEN_FRESH.get(key)
+    if (
+        seen is not None
+        and seen[0] == environment
+        and seen[2] is not None
+        and _path_status(seen[1]) == seen[2]
+    ):
+        return True
+    stamp, target = folder / f"{name}.stamp", folder / f"{name}.fmu"
+    files = _build_module(source_root).source_files(model_dir, fmi_version)
+    # Read before the check: a change after this shows as a different status next time.
+    paths = (*_source_folders(model_dir), *map(str, files), str(stamp), str(target))
+    status = _path_status(paths)
+    lines = _stat_lines(files, source_root)
+    fresh = _stamp_is_fresh(stamp, target, lines, environment)
+    if fresh and status is not None:
+        _SEEN_FRESH[key] = (environment, paths, status)
+    else:
+        _SEEN_FRESH.pop(key, None)
+    return fresh
 
 
 def build_if_stale(name: str, source_root: Path, cache_dir: Path, fmi_version: int = 2) -> Path:
