@@ -43,9 +43,12 @@ An output `P.o` is *direct* when it depends directly on at least one of P's inpu
 from __future__ import annotations
 
 import heapq
+import itertools
 import math
-from collections.abc import Iterable
+from array import array
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from operator import attrgetter, itemgetter
 from typing import TYPE_CHECKING, NamedTuple
 
 from cosim.core.component import Component, Port, closest_names
@@ -144,6 +147,11 @@ class System:
         # What the system computes once for its graph as it is (`_cached`): the resolved links, whether
         # it has an algebraic loop.
         self._cache: dict[str, tuple[tuple, object]] = {}
+        # The graph shared with the systems of the same structure made before in this process
+        # (`connect_many`), and the `_version` it holds for: its facts serve this system while the
+        # system has nothing added since.
+        self._graph: _Graph | None = None
+        self._graph_version: tuple | None = None
 
     def handle_loops(
         self,
@@ -226,10 +234,28 @@ class System:
         """`connect` each (source, target, scale, offset) in turn: the same checks, the same error at
         the first that fails (those before it made); the type conversion is checked once per pair of
         port types (a system of a 2000-waypoint path makes ~3,100)."""
+        connections = tuple(connections)
+        key = None
+        if not self.connections and not self.text_connections and not self._targets:
+            try:
+                key = _graph_key(self.components, self.mode, self.loops, connections)
+                graph = _GRAPHS.get(key)
+            except (TypeError, ValueError, AttributeError):  # not (str, str, number, number): said below
+                key = graph = None
+            if graph is not None:  # the same ports and connections: the same connections made
+                self.connections = list(graph.connections)
+                self._targets = set(graph.targets)
+                self._graph, self._graph_version = graph, self._version()
+                return
         converts: dict[tuple[str, str, str, str], bool] = {}
         for source, target, scale, offset in connections:
             if self._connect_usual(source, target, scale, offset, converts) is None:
                 self.connect(source, target, scale, offset)  # the rest, and every error, as it says them
+        if key is not None and not self.text_connections:  # (a text connection feeds its consumer)
+            if len(_GRAPHS) >= _GRAPHS_KEPT:
+                _GRAPHS.pop(next(iter(_GRAPHS)))
+            graph = _GRAPHS[key] = _Graph(tuple(self.connections), frozenset(self._targets))
+            self._graph, self._graph_version = graph, self._version()
 
     def _connect_usual(
         self, source: str, target: str, scale: float, offset: float, converts: dict
@@ -327,15 +353,38 @@ class System:
     def _cached(self, name: str):
         """The value cached under `name` for the system as it is now (`_version`), or None."""
         version, value = self._cache.get(name, (None, None))
-        if version is None:
-            return None
-        now = self._version()
-        same = version[0] == now[0] and version[1] == now[1] and version[2] is now[2]
-        return value if same else None
+        if version is not None:
+            now = self._version()
+            if version[0] == now[0] and version[1] == now[1] and version[2] is now[2]:
+                return value
+        shared = self._shared_facts()
+        return None if shared is None else shared.get((name, self.mode, self.loops))
 
     def _keep(self, name: str, value):
         self._cache[name] = (self._version(), value)
+        shared = self._shared_facts()
+        if shared is not None:
+            shared[(name, self.mode, self.loops)] = value
         return value
+
+    def _shared_facts(self) -> dict | None:
+        """The facts of the shared graph (`connect_many`), when the system is still that graph."""
+        if self._graph is None:
+            return None
+        now, then = self._version(), self._graph_version
+        if now[0] == then[0] and now[1] == then[1] and now[2] is then[2]:
+            return self._graph.facts
+        return None
+
+    def _names_cached(self, name: str, compute: Callable[[], list[Component]]) -> list[Component]:
+        """The components `compute()` gives, remembered by name for the graph as it is and the mode
+        and loop handling (`handle_loops` may change it)."""
+        key = (name, self.mode, self.loops)
+        names = self._cached(key)
+        if names is None:
+            names = self._keep(key, tuple(component.name for component in compute()))
+        components = self.components
+        return [components[name] for name in names]
 
     def links(self) -> dict[str, list[Link]]:
         """The connections into each component (by name, in connection order), their ends resolved:
@@ -528,6 +577,8 @@ class System:
     def loop_connections(self) -> list[Connection]:
         """The connections on an algebraic loop (both ends in one strongly connected set of ports)."""
         ports = self._loop_ports()
+        if not ports:
+            return []
         return [c for c in self.connections if c.source in ports and ports[c.source] == ports.get(c.target)]
 
     def delayed_links(self) -> set[tuple[str, str]]:
@@ -569,6 +620,9 @@ class System:
         when `loops == "error"`."""
         if self.mode == "gauss-seidel" and self.loops == "error":
             self.check_algebraic_loops()
+        return self._names_cached("order", self._order)
+
+    def _order(self) -> list[Component]:
         loop_links = {(c.source_component, c.target_component) for c in self.loop_connections()}
         edges = self._direct_edges() - loop_links
         order = self._topological(edges)
@@ -595,6 +649,9 @@ class System:
         as its component is initialised, so a feedback loop through it orders its producer first
         (the vehicle before the controllers, whose commands only reach its unconnected outputs).
         """
+        return self._names_cached("initialization order", self._initialization_order)
+
+    def _initialization_order(self) -> list[Component]:
         consumed = {c.source for c in self.connections}
         # Per consumer, the inputs some connected output depends on directly (one pass over the
         # feedthrough; a planner's 2000 waypoints feed every output of a path follower).
@@ -625,6 +682,10 @@ class System:
         once more after every component is initialised and reads their outputs again, so every
         output at the start time reflects its connected inputs (within an algebraic loop, after
         one pass in this fixed order)."""
+        names = tuple(component.name for component in order)
+        return self._names_cached(("initialized early", names), lambda: self._initialized_early(order))
+
+    def _initialized_early(self, order: list[Component]) -> list[Component]:
         position = {component.name: number for number, component in enumerate(order)}
         early = {
             c.target_component
@@ -639,3 +700,71 @@ class System:
                 if position[link.producer] >= position[name] and component.inputs[link.input].name in direct:
                     early.add(name)
         return [component for component in order if component.name in early]
+
+
+class _Graph:
+    """The connections `System.connect_many` made between components of one structure, with what the
+    system works out from them (`facts`: links, acyclicity, orders; by (name, mode, loops)), shared by
+    every system of that structure in this process. Everything here is read-only: the connections
+    are frozen, the facts are tuples, booleans and the links, which nothing changes."""
+
+    __slots__ = ("connections", "targets", "facts")
+
+    def __init__(self, connections: tuple[Connection, ...], targets: frozenset[str]) -> None:
+        self.connections = connections
+        self.targets = targets
+        self.facts: dict = {}
+
+
+# Graphs by `_graph_key`: a sweep's worker builds the same system for every run (~3,100 connections
+# made, their ends resolved and the graph ordered: ~17 ms each time). A few kept.
+_GRAPHS: dict[tuple, _Graph] = {}
+_GRAPHS_KEPT = 4
+_TYPES = attrgetter("type")
+_FMI_TYPES = attrgetter("fmi_type")
+_SCALE_OFFSET = itemgetter(2, 3)
+
+
+def _graph_key(
+    components: dict[str, Component], mode: str, loops: str, connections: tuple[tuple, ...]
+) -> tuple:
+    """Everything the connections made of `connections` and the facts worked out from them depend
+    on: per component (in the order added) its name and class, its input and output names with
+    their types (what `connection_problem` reads), whether each is a text port
+    (`Component.text_port`; asked only of a class that has text ports) and its feedthrough (which
+    outputs share a tuple of inputs, and those inputs); the mode and loop handling; the connections
+    (and the bits of each scale and offset: -0.0 equals 0.0 but adds differently)."""
+    parts = []
+    for name, component in components.items():
+        inputs, outputs = component.inputs, component.outputs
+        text = None
+        if type(component).text_port is not Component.text_port:
+            text_port = component.text_port
+            text = (
+                tuple(map(text_port, component.input_index, itertools.repeat("input"))),
+                tuple(map(text_port, component.output_index, itertools.repeat("output"))),
+            )
+        groups: dict[int, int] = {}
+        shared: dict[int, tuple[str, ...]] = {}
+        for depends in component.feedthrough.values():
+            if id(depends) not in groups:
+                groups[id(depends)] = len(groups)
+                shared[id(depends)] = tuple(depends)
+        parts.append(
+            (
+                name,
+                type(component),
+                tuple(component.input_index),
+                tuple(component.output_index),
+                tuple(map(_TYPES, inputs)),
+                tuple(map(_FMI_TYPES, inputs)),
+                tuple(map(_TYPES, outputs)),
+                tuple(map(_FMI_TYPES, outputs)),
+                text,
+                tuple(component.feedthrough),
+                tuple([groups[id(depends)] for depends in component.feedthrough.values()]),
+                tuple(shared.values()),
+            )
+        )
+    numbers = array("d", itertools.chain.from_iterable(map(_SCALE_OFFSET, connections))).tobytes()
+    return tuple(parts), mode, loops, connections, numbers
