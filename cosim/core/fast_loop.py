@@ -147,6 +147,7 @@ class KernelTables:
         ]
         self.python: list[bool] = []  # whether each component is handed back to Python
         place = {entry.component.name: i for i, entry in enumerate(plan)}
+        output_bases: dict[str, int] = {}  # producer -> address of its output buffer
         for i, (component, period, _) in enumerate(plan):
             native = component.native_step()
             self.native.append(native)
@@ -175,20 +176,19 @@ class KernelTables:
             row[K.C_RECORD_IN_FIRST], row[K.C_RECORD_IN_COUNT] = kept.start, kept.stop - kept.start
             row[K.C_LINK_FIRST] = len(links)
             producers = {}  # input slot -> the plan position of the producer the kernel copies it from
+            input_base = ctypes.addressof(component.input_cbuffer)
             for connection, producer_name, source, target in fed.get(component.name, ()):
                 if producer_name in skip:
                     continue
                 producers[target] = place[producer_name]
-                producer = system.components[producer_name]
-                kind = 0 if connection.is_plain else (1 if connection.offset == 0.0 else 2)
-                links.append(
-                    (
-                        ctypes.addressof(producer.output_cbuffer) + 8 * source,
-                        ctypes.addressof(component.input_cbuffer) + 8 * target,
-                        kind,
-                    )
-                )
-                link_numbers.append((connection.scale, connection.offset))
+                output_base = output_bases.get(producer_name)
+                if output_base is None:
+                    producer = system.components[producer_name]
+                    output_base = output_bases[producer_name] = ctypes.addressof(producer.output_cbuffer)
+                scale, offset = connection.scale, connection.offset
+                kind = 0 if scale == 1.0 and offset == 0.0 else (1 if offset == 0.0 else 2)  # (`is_plain`)
+                links.append((output_base + 8 * source, input_base + 8 * target, kind))
+                link_numbers.append((scale, offset))
             first_link = int(row[K.C_LINK_FIRST])
             links[first_link:], link_numbers[first_link:] = _runs(
                 links[first_link:], link_numbers[first_link:]
