@@ -408,6 +408,26 @@ class System:
             self._keep("links", incoming)
         return incoming
 
+    def unfed_inputs(self) -> dict[str, tuple[int, ...]]:
+        """Component name -> the indices of its inputs (numeric: `Component.inputs`) that no
+        connection feeds, for every component in the order added; worked out once for the graph
+        (read-only)."""
+        unfed = self._cached("unfed inputs")
+        if unfed is None:
+            fed = self._targets
+            unfed = self._keep(
+                "unfed inputs",
+                {
+                    name: tuple(
+                        index
+                        for index, port in enumerate(component.inputs)
+                        if f"{name}.{port.name}" not in fed
+                    )
+                    for name, component in self.components.items()
+                },
+            )
+        return unfed
+
     def period_steps(self, component: Component) -> int:
         """The component's period as a whole number of macro steps (>= 1)."""
         if component.period == 0:
