@@ -28,6 +28,7 @@ infinite. A 64-bit integer output a float64 cannot hold exactly is an error too 
 from __future__ import annotations
 
 import ctypes
+import functools
 import math
 from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass
@@ -168,11 +169,18 @@ def step_functions(component: Component) -> dict[str, Callable]:
         names.update(do_step_flags=component._do_step_flags, step_flags=component._step_flags)
         names["asked_to_terminate"] = component._asked_to_terminate
     names[do_step] = component._raw_do_step
-    exec("\n".join(push + pull + step), names)  # noqa: S102 - generated from our own templates
+    exec(_compiled("\n".join(push + pull + step)), names)  # noqa: S102 - generated from our own templates
     compiled = {method: names[method] for method in ("push_inputs", "get_outputs", "do_step")}
     if component.text_inputs or component.text_outputs:  # text beside the numbers (`cosim.fmi.text`)
         compiled.update(_with_text(component, compiled["do_step"], compiled["get_outputs"]))
     return compiled
+
+
+@functools.lru_cache(maxsize=64)
+def _compiled(source: str):
+    """`source` compiled (a code object is immutable: every component with the same code shares it;
+    a sweep's worker generates the same four FMUs' code for every run)."""
+    return compile(source, "<string>", "exec")
 
 
 def _copy_lines(io: str, prefix: str, kind: str, slots: list[int], scales: list[float]) -> list[str]:
