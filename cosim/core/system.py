@@ -236,26 +236,31 @@ class System:
         port types (a system of a 2000-waypoint path makes ~3,100)."""
         connections = tuple(connections)
         key = None
-        if not self.connections and not self.text_connections and not self._targets:
-            try:
-                key = _graph_key(self.components, self.mode, self.loops, connections)
-                graph = _GRAPHS.get(key)
-            except (TypeError, ValueError, AttributeError):  # not (str, str, number, number): said below
-                key = graph = None
-            if graph is not None:  # the same ports and connections: the same connections made
-                self.connections = list(graph.connections)
-                self._targets = set(graph.targets)
-                self._graph, self._graph_version = graph, self._version()
-                return
+        fresh = not self.connections and not self.text_connections and not self._targets
+        if fresh:
+            _settle_pending()
+            if _GRAPHS:  # (a process's first graph is kept without a key: `_PENDING`)
+                try:
+                    key = _graph_key(self.components, self.mode, self.loops, connections)
+                    graph = _GRAPHS.get(key)
+                except (TypeError, ValueError, AttributeError):  # not (str, str, number, number): below
+                    key = graph = None
+                if graph is not None:  # the same ports and connections: the same connections made
+                    self.connections = list(graph.connections)
+                    self._targets = set(graph.targets)
+                    self._graph, self._graph_version = graph, self._version()
+                    return
         converts: dict[tuple[str, str, str, str], bool] = {}
         for source, target, scale, offset in connections:
             if self._connect_usual(source, target, scale, offset, converts) is None:
                 self.connect(source, target, scale, offset)  # the rest, and every error, as it says them
-        if key is not None and not self.text_connections:  # (a text connection feeds its consumer)
-            if len(_GRAPHS) >= _GRAPHS_KEPT:
-                _GRAPHS.pop(next(iter(_GRAPHS)))
-            graph = _GRAPHS[key] = _Graph(tuple(self.connections), frozenset(self._targets))
+        if fresh and not self.text_connections:  # (a text connection feeds its consumer)
+            graph = _Graph(tuple(self.connections), frozenset(self._targets))
             self._graph, self._graph_version = graph, self._version()
+            if key is not None:
+                _keep_graph(key, graph)
+            elif not _GRAPHS:
+                _PENDING[:] = [(dict(self.components), self.mode, self.loops, connections, graph)]
 
     def _connect_usual(
         self, source: str, target: str, scale: float, offset: float, converts: dict
@@ -740,6 +745,30 @@ class _Graph:
 # made, their ends resolved and the graph ordered: ~17 ms each time). A few kept.
 _GRAPHS: dict[tuple, _Graph] = {}
 _GRAPHS_KEPT = 4
+# The first graph of a process, with what its key is worked out from (the components as added, mode,
+# loop handling, connections; none of them changes once connected): its key (~3 ms) is worked out when
+# a second system is connected, so a process that runs one scenario (`cosim run`) never does.
+_PENDING: list[tuple[dict[str, Component], str, str, tuple, _Graph]] = []
+
+
+def _keep_graph(key: tuple, graph: _Graph) -> None:
+    if len(_GRAPHS) >= _GRAPHS_KEPT:
+        _GRAPHS.pop(next(iter(_GRAPHS)))
+    _GRAPHS[key] = graph
+
+
+def _settle_pending() -> None:
+    """Keep the pending graph (`_PENDING`) under its key."""
+    if not _PENDING:
+        return
+    components, mode, loops, connections, graph = _PENDING.pop()
+    try:
+        key = _graph_key(components, mode, loops, connections)
+    except (TypeError, ValueError, AttributeError):
+        return
+    _keep_graph(key, graph)
+
+
 _TYPES = attrgetter("type")
 _FMI_TYPES = attrgetter("fmi_type")
 _SCALE_OFFSET = itemgetter(2, 3)

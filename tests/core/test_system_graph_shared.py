@@ -64,10 +64,16 @@ def _facts(system: System):
     )
 
 
+def _forget():
+    """As in a fresh process: no graph kept, none pending."""
+    system_module._GRAPHS.clear()
+    system_module._PENDING.clear()
+
+
 def _unshared(**given):
-    system_module._GRAPHS.clear()
+    _forget()
     facts = _facts(_system(**given))
-    system_module._GRAPHS.clear()
+    _forget()
     return facts
 
 
@@ -84,7 +90,7 @@ def test_a_second_system_of_the_same_structure_shares_the_graph_and_its_facts():
 
 
 def test_connect_many_makes_what_connect_makes_one_by_one():
-    system_module._GRAPHS.clear()
+    _forget()
     one_by_one = _system(connections=[])
     for connection in CONNECTIONS:
         one_by_one.connect(*connection)
@@ -99,9 +105,9 @@ def _grown(system: System) -> System:
 
 
 def test_a_system_changed_after_connecting_works_its_facts_out_again():
-    system_module._GRAPHS.clear()
+    _forget()
     truth = _facts(_grown(_system()))
-    system_module._GRAPHS.clear()
+    _forget()
     first = _system()
     _facts(first)  # the shared graph's facts worked out
     grown = _grown(_system())
@@ -139,13 +145,27 @@ def test_a_port_type_that_refuses_the_connection_is_refused_again():
 
 
 def test_the_order_follows_a_change_of_loop_handling():
-    system_module._GRAPHS.clear()
+    _forget()
     truth = {}
     for loops in ("delay", "iterate"):
         alone = _system(feedthrough={"u": ["e"]}, loops=loops)
         truth[loops] = [c.name for c in alone.order()]
-        system_module._GRAPHS.clear()
+        _forget()
     system = _system()
     assert [c.name for c in system.order()] == truth["delay"]
     system.handle_loops("iterate")
     assert [c.name for c in system.order()] == truth["iterate"]
+
+
+def test_the_first_graph_of_a_process_works_out_no_key_until_a_second_system_comes(monkeypatch):
+    _forget()
+
+    def refuse(*_args):
+        raise AssertionError("a key worked out for the first graph")
+
+    monkeypatch.setattr(system_module, "_graph_key", refuse)
+    first = _system()
+    assert first._graph is not None and not system_module._GRAPHS
+    monkeypatch.undo()
+    second = _system()
+    assert second._graph is first._graph and len(system_module._GRAPHS) == 1

@@ -23,6 +23,7 @@ SHORT = "simulation.stop_time=3"
 
 def _forget() -> None:
     system_module._GRAPHS.clear()
+    system_module._PENDING.clear()
     template._TEMPLATES.clear()
     builtin._SEEN_FRESH.clear()
 
