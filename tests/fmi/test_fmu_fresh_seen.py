@@ -53,9 +53,12 @@ def _counting(monkeypatch, sources: Path) -> list[int]:
 def test_a_second_check_reads_no_listing_and_an_edit_is_seen(built, monkeypatch):
     sources, cache_dir = built
     calls = _counting(monkeypatch, sources)
+    assert fmus._is_fresh(NAME, sources, cache_dir, 2)  # the first check, as without keeping
+    assert fmus._SEEN_FRESH[(NAME, sources, cache_dir, 2)] is None
+    assert fmus._is_fresh(NAME, sources, cache_dir, 2)  # asked again: checked, what it read kept
     assert fmus._is_fresh(NAME, sources, cache_dir, 2)
     assert fmus._is_fresh(NAME, sources, cache_dir, 2)
-    assert len(calls) == 1  # the second answer is the first one kept
+    assert len(calls) == 2  # the third and fourth answers are the second one kept
     first = (cache_dir / f"{NAME}.fmu").read_bytes()
     model = sources / NAME / "model.c"
     text = model.read_text()
@@ -67,7 +70,7 @@ def test_a_second_check_reads_no_listing_and_an_edit_is_seen(built, monkeypatch)
 
 def test_a_new_source_file_is_seen(built, monkeypatch):
     sources, cache_dir = built
-    assert fmus._is_fresh(NAME, sources, cache_dir, 2)
+    assert fmus._is_fresh(NAME, sources, cache_dir, 2) and fmus._is_fresh(NAME, sources, cache_dir, 2)
     calls = _counting(monkeypatch, sources)
     (sources / NAME / "extra.h").write_text("/* a new header */\n")
     assert not fmus._is_fresh(NAME, sources, cache_dir, 2)  # its line is not in the stamp
@@ -78,6 +81,14 @@ def test_a_new_source_file_is_seen(built, monkeypatch):
 
 def test_another_environment_checks_again(built, monkeypatch):
     sources, cache_dir = built
-    assert fmus._is_fresh(NAME, sources, cache_dir, 2)
+    assert fmus._is_fresh(NAME, sources, cache_dir, 2) and fmus._is_fresh(NAME, sources, cache_dir, 2)
     monkeypatch.setenv("CC", "another-compiler")
     assert not fmus._is_fresh(NAME, sources, cache_dir, 2)  # the stamp names the compiler
+
+
+OTHER_NAMES = ["Nope", ".hidden", "", "common", "../fmus/Bicycle", "Bi*"]
+
+
+@pytest.mark.parametrize("name", [*fmus.known_names(), *OTHER_NAMES])
+def test_a_known_name_is_told_as_the_listing_tells_it(name):
+    assert fmus._is_known(name) == (name in fmus.known_names())
