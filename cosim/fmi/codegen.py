@@ -295,7 +295,7 @@ def native_step(component: Component) -> NativeStep | None:
                     direction, kind, address(functions[group.fmi_type]), ctypes.addressof(group.references),
                     len(group.references), len(group.slots),
                     ctypes.addressof(buffer if direct else group.values), direct,
-                    tuple(group.slots), tuple(float(scale) for scale in group.scales),
+                    tuple(group.slots), tuple(map(float, group.scales)),
                 )
             )  # fmt: skip
     finite_outputs, nan_outputs = component._checked_outputs()

@@ -1,6 +1,7 @@
 """Later runs in one process (a sweep's worker) take what earlier ones kept: the template's
 connections (`cosim.scenario.template._TEMPLATES`), the connection graph and its facts
-(`cosim.core.system._GRAPHS`), the project FMUs found up to date (`cosim.fmi.builtin._SEEN_FRESH`).
+(`cosim.core.system._GRAPHS`), the project FMUs found up to date (`cosim.fmi.builtin._SEEN_FRESH`),
+the kernel's record buffer (`cosim.core.fast_loop._SPARE`).
 They write the same bytes as a run with nothing kept, and a scenario of another structure is not
 served what the first one kept.
 
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cosim.core.fast_loop as fast_loop
 import cosim.core.system as system_module
 import cosim.fmi.builtin as builtin
 import cosim.scenario.template as template
@@ -26,6 +28,7 @@ def _forget() -> None:
     system_module._PENDING.clear()
     template._TEMPLATES.clear()
     builtin._SEEN_FRESH.clear()
+    fast_loop._SPARE.clear()
 
 
 def _log(folder: Path, name: str, overrides: list[str]) -> bytes:
