@@ -169,3 +169,13 @@ def test_the_first_graph_of_a_process_works_out_no_key_until_a_second_system_com
     monkeypatch.undo()
     second = _system()
     assert second._graph is first._graph and len(system_module._GRAPHS) == 1
+
+
+def test_port_types_in_the_key_compare_by_type_and_fmi_type():
+    ports = [Port("a"), Port("b", "integer", fmi_type="Int32")]
+    same = system_module._PortTypes(ports)
+    assert same == system_module._PortTypes(ports)  # the same port objects
+    assert same == system_module._PortTypes([Port("a"), Port("b", "integer", fmi_type="Int32")])
+    assert same != system_module._PortTypes([Port("a"), Port("b", "integer", fmi_type="Int64")])
+    assert same != system_module._PortTypes([Port("a"), Port("b", "boolean")])
+    assert same != system_module._PortTypes(ports[:1])
