@@ -190,9 +190,18 @@ def template_connections(scenario: Scenario) -> list[ConnectionDescription]:
     )
 
 
-# The template's connections by what they depend on (replanning, beams, vehicle type): a sweep's
-# worker describes the same system for every run (~3,100 connections, ~5 ms each time). A few kept.
-_TEMPLATES: dict[tuple[bool, int, str], tuple[ConnectionDescription, ...]] = {}
+def template_ends(scenario: Scenario) -> tuple[tuple[str, str, str, str], ...]:
+    """(source component, output, target component, input) of each of `template_connections`, in
+    its order (read-only)."""
+    key = (bool(scenario.planner.replan), len(scenario.lidar.angles), scenario.vehicle_type)
+    _template_connections(*key)
+    return _TEMPLATES[key][1]
+
+
+# The template's connections by what they depend on (replanning, beams, vehicle type), with their
+# ends split into component and port: a sweep's worker describes the same system for every run
+# (~3,100 connections, ~5 ms each time). A few kept.
+_TEMPLATES: dict[tuple[bool, int, str], tuple[tuple[ConnectionDescription, ...], tuple]] = {}
 _TEMPLATES_KEPT = 8
 
 
@@ -200,11 +209,12 @@ def _template_connections(replan: bool, beams: int, vehicle_type: str) -> tuple[
     key = (replan, beams, vehicle_type)
     made = _TEMPLATES.get(key)
     if made is None:
-        made = tuple(_make_template_connections(replan, beams, vehicle_type))
+        connections = tuple(_make_template_connections(replan, beams, vehicle_type))
+        ends = tuple((*c.source.partition(".")[::2], *c.target.partition(".")[::2]) for c in connections)
         if len(_TEMPLATES) >= _TEMPLATES_KEPT:
             _TEMPLATES.pop(next(iter(_TEMPLATES)))
-        _TEMPLATES[key] = made
-    return made
+        made = _TEMPLATES[key] = (connections, ends)
+    return made[0]
 
 
 def _make_template_connections(replan: bool, beams: int, vehicle_type: str) -> list[ConnectionDescription]:
