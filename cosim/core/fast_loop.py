@@ -13,6 +13,7 @@ every loop gives bit-identical results.
 from __future__ import annotations
 
 import ctypes
+import sys
 from collections.abc import Callable
 from typing import NamedTuple
 
@@ -58,37 +59,71 @@ RUN_LINK = 3  # a link table row that is a run of plain links (kernel.c's `gathe
 MIN_RUN = 4  # plain links in a row that become one run
 
 
-def _runs(links: list, numbers: list) -> tuple[list, list]:
-    """A component's links (source address, target address, kind) with each stretch of at least
-    `MIN_RUN` plain links to consecutive targets from sources evenly apart (consecutive, or one
-    column of a row-major array: a plan's x or y) made one run (kind `RUN_LINK`; numbers: its
-    length, the sources' stride in values): one loop instead of one link per value, the same
-    values. The links are taken in the order of their targets (each target has one link, and
-    no source is a target of the same component: any order copies the same values)."""
-    order = sorted(range(len(links)), key=lambda j: links[j][1])
-    links, numbers = [links[j] for j in order], [numbers[j] for j in order]
-    out_links, out_numbers = [], []
+# Record buffers (`KernelTables.history`) of tables released after their run, by size, for the next
+# tables of that size in this process: a sweep's worker makes the same ~8 MB every run, and a new
+# buffer's pages are mapped at their first writes (`warm_up`: ~1.5-6 ms of system time for 8 MB); a
+# kept one is mapped already and only zeroed (~0.25 ms). A few kept.
+_SPARE: dict[int, np.ndarray] = {}
+_SPARE_KEPT = 2
+_SPARE_MIN_BYTES = 1 << 20
+
+
+def _record_buffer(size: int) -> tuple[np.ndarray, bool]:
+    """A record buffer of `size` zeros, and whether its pages are mapped (a kept one: `_SPARE`)."""
+    spare = _SPARE.pop(size, None)
+    if spare is None:
+        return np.zeros(size), False
+    spare.fill(0.0)
+    return spare, True
+
+
+def _link_plan(system, fed: dict, name: str, skip: set[str]) -> tuple[tuple, tuple, tuple]:
+    """The links into component `name` from producers not in `skip`, by port indices: (entries
+    (producer, output index, input index, kind), numbers (scale, offset), the fed slots (input
+    index, producer)), in the order of their inputs (each input has one link: any order copies the
+    same values), with each stretch of at least `MIN_RUN` plain links from one producer to
+    consecutive inputs from outputs evenly apart (consecutive, or one column of a row-major array:
+    a plan's x or y) made one run (kind `RUN_LINK`; numbers: its length, the outputs' stride): one
+    loop in the kernel instead of one link per value, the same values. Worked out once for the
+    system's graph (`System._cached`: shared by the systems of one structure), read-only;
+    `KernelTables` places it at the buffers."""
+    key = ("kernel links", name, frozenset(skip))
+    plan = system._cached(key)
+    if plan is not None:
+        return plan
+    chosen = [link for link in fed.get(name, ()) if link.producer not in skip]
+    chosen.sort(key=lambda link: link.input)  # (each input has one link: any order copies the same)
+    entries, numbers = [], []
     j = 0
-    while j < len(links):
-        source, target, kind = links[j]
+    while j < len(chosen):
+        connection, producer, source, target = chosen[j]
+        plain = connection.scale == 1.0 and connection.offset == 0.0
         end = j + 1
-        stride = links[j + 1][0] - source if j + 1 < len(links) else 0
-        if kind == 0 and stride > 0 and stride % 8 == 0:
-            while (
-                end < len(links)
-                and links[end][2] == 0
-                and links[end][0] == source + stride * (end - j)
-                and links[end][1] == target + 8 * (end - j)
-            ):
+        stride = chosen[j + 1].output - source if j + 1 < len(chosen) else 0
+        if plain and stride > 0 and chosen[j + 1].producer == producer:
+            while end < len(chosen):
+                link = chosen[end]
+                if not (
+                    link.producer == producer
+                    and link.connection.scale == 1.0
+                    and link.connection.offset == 0.0
+                    and link.output == source + stride * (end - j)
+                    and link.input == target + (end - j)
+                ):
+                    break
                 end += 1
         if end - j >= MIN_RUN:
-            out_links.append((source, target, RUN_LINK))
-            out_numbers.append((float(end - j), float(stride // 8)))
+            entries.append((producer, source, target, RUN_LINK))
+            numbers.append((float(end - j), float(stride)))
         else:
-            out_links += links[j:end]
-            out_numbers += numbers[j:end]
+            for connection, producer, source, target in chosen[j:end]:
+                scale, offset = connection.scale, connection.offset
+                kind = 0 if scale == 1.0 and offset == 0.0 else (1 if offset == 0.0 else 2)
+                entries.append((producer, source, target, kind))
+                numbers.append((scale, offset))
         j = end
-    return out_links, out_numbers
+    fed_slots = tuple((link.input, link.producer) for link in chosen)
+    return system._keep(key, (tuple(entries), tuple(numbers), fed_slots))
 
 
 def recorded_inputs(component: Component) -> slice:
@@ -147,6 +182,7 @@ class KernelTables:
         ]
         self.python: list[bool] = []  # whether each component is handed back to Python
         place = {entry.component.name: i for i, entry in enumerate(plan)}
+        output_bases: dict[str, int] = {}  # producer -> address of its output buffer
         for i, (component, period, _) in enumerate(plan):
             native = component.native_step()
             self.native.append(native)
@@ -173,26 +209,20 @@ class KernelTables:
             row[K.C_OUT_COUNT] = len(component.outputs)
             kept = self.row_inputs[i]
             row[K.C_RECORD_IN_FIRST], row[K.C_RECORD_IN_COUNT] = kept.start, kept.stop - kept.start
-            row[K.C_LINK_FIRST] = len(links)
-            producers = {}  # input slot -> the plan position of the producer the kernel copies it from
-            for connection, producer_name, source, target in fed.get(component.name, ()):
-                if producer_name in skip:
-                    continue
-                producers[target] = place[producer_name]
-                producer = system.components[producer_name]
-                kind = 0 if connection.is_plain else (1 if connection.offset == 0.0 else 2)
-                links.append(
-                    (
-                        ctypes.addressof(producer.output_cbuffer) + 8 * source,
-                        ctypes.addressof(component.input_cbuffer) + 8 * target,
-                        kind,
-                    )
-                )
-                link_numbers.append((connection.scale, connection.offset))
-            first_link = int(row[K.C_LINK_FIRST])
-            links[first_link:], link_numbers[first_link:] = _runs(
-                links[first_link:], link_numbers[first_link:]
-            )
+            row[K.C_LINK_FIRST] = first_link = len(links)
+            # The links by port indices, runs made (`_link_plan`, worked out once per graph), here
+            # placed at this system's buffers.
+            entries, numbers, fed_slots = _link_plan(system, fed, component.name, skip)
+            # input slot -> the plan position of the producer the kernel copies it from
+            producers = {slot: place[producer_name] for slot, producer_name in fed_slots}
+            input_base = ctypes.addressof(component.input_cbuffer)
+            for producer_name, source, target, kind in entries:
+                output_base = output_bases.get(producer_name)
+                if output_base is None:
+                    producer = system.components[producer_name]
+                    output_base = output_bases[producer_name] = ctypes.addressof(producer.output_cbuffer)
+                links.append((output_base + 8 * source, input_base + 8 * target, kind))
+            link_numbers += numbers
             row[K.C_LINK_COUNT] = len(links) - first_link
             if sweep is not None:
                 record_offset = self._reserve(record, component, period, block, record_offset, row)
@@ -246,7 +276,8 @@ class KernelTables:
                             len(slots), len(call_slots), sent, sent_references, runs,
                         )
                     )  # fmt: skip
-                    slots += [ctypes.addressof(buffer) + 8 * slot for slot in call_slots]
+                    base = ctypes.addressof(buffer)
+                    slots += [base + 8 * slot for slot in call_slots]
                     scales += list(call_scales)
                 row[count_column] = len(groups) - row[first_column]
             row[K.C_CHECK_FIRST] = len(checks)
@@ -263,7 +294,7 @@ class KernelTables:
         self.slot_addresses = np.array(slots, dtype=np.int64)
         self.slot_scales = np.array(scales, dtype=np.float64)
         self.checks = np.array(checks, dtype=np.int64).reshape(-1, 3)
-        self.history = np.zeros(max(1, record_offset))
+        self.history, self._mapped = _record_buffer(max(1, record_offset))
         self.record_block = block if record else None  # the most steps per kernel call the rows hold
         self.python_rows = bool(record and python_rows)
         self.rows = np.zeros(n, dtype=np.int64)
@@ -282,6 +313,7 @@ class KernelTables:
         # What the tables point into stays alive with them.
         self._keep = [entry.component for entry in plan]
         self._kernel = None
+        self._released = False
 
     def poll_on_signals(self, fd: int) -> None:
         """From the next kernel call on, the polled sweeps (which return before each of their
@@ -412,11 +444,30 @@ class KernelTables:
         bring the record buffer's pages in: `np.zeros` leaves them to be mapped at the kernel's
         first writes, ~1 ms a few megabytes (a fleet's: 5.6 MB at N = 50) in its first call (before
         any call: the buffer holds its zeros)."""
-        if self._kernel is None:
+        if self._released:
+            raise RuntimeError("kernel tables used after `release`")
+        if self._kernel is None and not self._mapped:
             self.history.fill(0.0)
         self._bound()
 
+    def release(self) -> None:
+        """The run is over: these tables are used no more (the kernel is unbound, `_bound` refuses),
+        and their record buffer, when nothing else holds it (no view of it is left: a view holds its
+        base array), is kept for the next tables of its size in this process (`_SPARE`)."""
+        history = self.history
+        self._released = True
+        self._kernel = self._blocks = self.history = None
+        self._deliveries = {}
+        self._stretches = None
+        # References: `history` here and getrefcount's argument; any other is a holder still using it.
+        if history is not None and sys.getrefcount(history) == 2 and history.nbytes >= _SPARE_MIN_BYTES:
+            if len(_SPARE) >= _SPARE_KEPT:
+                _SPARE.pop(next(iter(_SPARE)))
+            _SPARE[history.size] = history
+
     def _bound(self):
+        if self._released:
+            raise RuntimeError("kernel tables used after `release`")
         if self._kernel is None:
             from cosim.core.kernel import Kernel
 

@@ -73,22 +73,42 @@ def make_gather(
     from one producer), because it runs for every component on every step. None when the
     consumer has no connected input (from `producers`, when given). `delayed` maps producers
     whose values come from a copy of their outputs taken before the step (`System.delayed_links`).
+    The code and its index arrays depend on the links alone: they are worked out once for the
+    system's graph (`System._cached`, shared by the systems of one structure), the buffers bound
+    at each call.
     """
+    key = ("gather", consumer.name, None if producers is None else frozenset(producers))
+    plan = system._cached(key)
+    if plan is None:
+        plan = system._keep(key, _gather_plan(system, consumer, producers))
+    if not plan:
+        return None
+    code, producer_names, arrays = plan
+    names: dict[str, object] = {"target": consumer.input_cbuffer, "target_array": consumer.input_buffer}
+    for number, producer_name in enumerate(producer_names):
+        if delayed is not None and producer_name in delayed:
+            names[f"source{number}"] = names[f"source_array{number}"] = delayed[producer_name]
+        else:
+            producer = system.components[producer_name]
+            names[f"source{number}"] = producer.output_cbuffer
+            names[f"source_array{number}"] = producer.output_buffer
+    names.update(arrays)
+    exec(code, names)  # noqa: S102 - generated from our own templates
+    return names["gather"]
+
+
+def _gather_plan(system: System, consumer: Component, producers: set[str] | None) -> tuple:
+    """What `make_gather` generates for the consumer's links: (the compiled `gather`, the producer
+    bound to each `source<n>`, the index and scale arrays it reads, read-only); () without links."""
     groups: dict[str, list[Link]] = {}
     for link in system.links().get(consumer.name, ()):
         if producers is None or link.producer in producers:
             groups.setdefault(link.producer, []).append(link)
     if not groups:
-        return None
-    names: dict[str, object] = {"target": consumer.input_cbuffer, "target_array": consumer.input_buffer}
+        return ()
+    arrays: dict[str, np.ndarray] = {}
     lines = ["def gather():"]
-    for number, (producer_name, links) in enumerate(groups.items()):
-        producer = system.components[producer_name]
-        if delayed is not None and producer_name in delayed:
-            names[f"source{number}"] = names[f"source_array{number}"] = delayed[producer_name]
-        else:
-            names[f"source{number}"] = producer.output_cbuffer
-            names[f"source_array{number}"] = producer.output_buffer
+    for number, links in enumerate(groups.values()):
         if len(links) <= _SCALAR_COPY_LIMIT:
             for link in links:
                 scale, offset = link.connection.scale, link.connection.offset
@@ -118,16 +138,17 @@ def make_gather(
                             f"source_array{number}[{source}:{source + (length - 1) * stride + 1}{step}]"
                         )
                     continue
-            names[f"sources{key}"] = sources[chosen]
-            names[f"targets{key}"] = targets[chosen]
-            names[f"scales{key}"] = scales[chosen]
-            names[f"offsets{key}"] = offsets[chosen]
+            arrays[f"sources{key}"] = sources[chosen]
+            arrays[f"targets{key}"] = targets[chosen]
+            arrays[f"scales{key}"] = scales[chosen]
+            arrays[f"offsets{key}"] = offsets[chosen]
             value = f"source_array{number}[sources{key}]"
             if kind != "copy":
                 value += f" * scales{key}" + (f" + offsets{key}" if kind == "affine" else "")
             lines.append(f"    target_array[targets{key}] = {value}")
-    exec("\n".join(lines), names)  # noqa: S102 - generated from our own templates
-    return names["gather"]
+    for array in arrays.values():
+        array.flags.writeable = False  # shared by the gathers of every system of this graph
+    return compile("\n".join(lines), "<string>", "exec"), tuple(groups), arrays
 
 
 class Snapshot:

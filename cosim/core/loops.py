@@ -185,23 +185,24 @@ def find_algebraic_loop(
     """
     pairs = tuple((source, target) for source, target in connections)
     dependencies = tuple(
-        (component, tuple((output, tuple(depends)) for output, depends in outputs.items()))
+        (component, tuple(zip(outputs.keys(), map(tuple, outputs.values()), strict=True)))
         for component, outputs in feedthrough.items()
     )
     key = (pairs, dependencies)
-    if key not in _LOOPS:
+    loop = _LOOPS.get(key, _UNKNOWN)  # (one look-up: hashing and comparing the key is most of the cost)
+    if loop is _UNKNOWN:
         if len(_LOOPS) >= _LOOPS_KEPT:
             _LOOPS.pop(next(iter(_LOOPS)))
         acyclic = _has_cycle(pairs, dependencies) is False
-        loop = None if acyclic else _search_algebraic_loop(pairs, dependencies)
-        _LOOPS[key] = None if loop is None else tuple(loop)
-    loop = _LOOPS[key]
+        found = None if acyclic else _search_algebraic_loop(pairs, dependencies)
+        loop = _LOOPS[key] = None if found is None else tuple(found)
     return None if loop is None else list(loop)
 
 
 # `find_algebraic_loop` of the last few graphs, keyed by the graph itself (the connection pairs and
 # every component's feedthrough, in order: the order decides which loop is named).
 _LOOPS: dict[tuple, tuple[str, ...] | None] = {}
+_UNKNOWN = object()
 _LOOPS_KEPT = 8
 
 

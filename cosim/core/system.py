@@ -43,9 +43,13 @@ An output `P.o` is *direct* when it depends directly on at least one of P's inpu
 from __future__ import annotations
 
 import heapq
+import itertools
 import math
-from collections.abc import Iterable
+import operator
+from array import array
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from operator import attrgetter, itemgetter
 from typing import TYPE_CHECKING, NamedTuple
 
 from cosim.core.component import Component, Port, closest_names
@@ -144,6 +148,11 @@ class System:
         # What the system computes once for its graph as it is (`_cached`): the resolved links, whether
         # it has an algebraic loop.
         self._cache: dict[str, tuple[tuple, object]] = {}
+        # The graph shared with the systems of the same structure made before in this process
+        # (`connect_many`), and the `_version` it holds for: its facts serve this system while the
+        # system has nothing added since.
+        self._graph: _Graph | None = None
+        self._graph_version: tuple | None = None
 
     def handle_loops(
         self,
@@ -226,10 +235,33 @@ class System:
         """`connect` each (source, target, scale, offset) in turn: the same checks, the same error at
         the first that fails (those before it made); the type conversion is checked once per pair of
         port types (a system of a 2000-waypoint path makes ~3,100)."""
+        connections = tuple(connections)
+        key = None
+        fresh = not self.connections and not self.text_connections and not self._targets
+        if fresh:
+            _settle_pending()
+            if _GRAPHS:  # (a process's first graph is kept without a key: `_PENDING`)
+                try:
+                    key = _graph_key(self.components, self.mode, self.loops, connections)
+                    graph = _GRAPHS.get(key)
+                except (TypeError, ValueError, AttributeError):  # not (str, str, number, number): below
+                    key = graph = None
+                if graph is not None:  # the same ports and connections: the same connections made
+                    self.connections = list(graph.connections)
+                    self._targets = set(graph.targets)
+                    self._graph, self._graph_version = graph, self._version()
+                    return
         converts: dict[tuple[str, str, str, str], bool] = {}
         for source, target, scale, offset in connections:
             if self._connect_usual(source, target, scale, offset, converts) is None:
                 self.connect(source, target, scale, offset)  # the rest, and every error, as it says them
+        if fresh and not self.text_connections:  # (a text connection feeds its consumer)
+            graph = _Graph(tuple(self.connections), frozenset(self._targets))
+            self._graph, self._graph_version = graph, self._version()
+            if key is not None:
+                _keep_graph(key, graph)
+            elif not _GRAPHS:
+                _PENDING[:] = [(dict(self.components), self.mode, self.loops, connections, graph)]
 
     def _connect_usual(
         self, source: str, target: str, scale: float, offset: float, converts: dict
@@ -327,15 +359,38 @@ class System:
     def _cached(self, name: str):
         """The value cached under `name` for the system as it is now (`_version`), or None."""
         version, value = self._cache.get(name, (None, None))
-        if version is None:
-            return None
-        now = self._version()
-        same = version[0] == now[0] and version[1] == now[1] and version[2] is now[2]
-        return value if same else None
+        if version is not None:
+            now = self._version()
+            if version[0] == now[0] and version[1] == now[1] and version[2] is now[2]:
+                return value
+        shared = self._shared_facts()
+        return None if shared is None else shared.get((name, self.mode, self.loops))
 
     def _keep(self, name: str, value):
         self._cache[name] = (self._version(), value)
+        shared = self._shared_facts()
+        if shared is not None:
+            shared[(name, self.mode, self.loops)] = value
         return value
+
+    def _shared_facts(self) -> dict | None:
+        """The facts of the shared graph (`connect_many`), when the system is still that graph."""
+        if self._graph is None:
+            return None
+        now, then = self._version(), self._graph_version
+        if now[0] == then[0] and now[1] == then[1] and now[2] is then[2]:
+            return self._graph.facts
+        return None
+
+    def _names_cached(self, name: str, compute: Callable[[], list[Component]]) -> list[Component]:
+        """The components `compute()` gives, remembered by name for the graph as it is and the mode
+        and loop handling (`handle_loops` may change it)."""
+        key = (name, self.mode, self.loops)
+        names = self._cached(key)
+        if names is None:
+            names = self._keep(key, tuple(component.name for component in compute()))
+        components = self.components
+        return [components[name] for name in names]
 
     def links(self) -> dict[str, list[Link]]:
         """The connections into each component (by name, in connection order), their ends resolved:
@@ -358,6 +413,26 @@ class System:
                     incoming[target_name] = [link]
             self._keep("links", incoming)
         return incoming
+
+    def unfed_inputs(self) -> dict[str, tuple[int, ...]]:
+        """Component name -> the indices of its inputs (numeric: `Component.inputs`) that no
+        connection feeds, for every component in the order added; worked out once for the graph
+        (read-only)."""
+        unfed = self._cached("unfed inputs")
+        if unfed is None:
+            fed = self._targets
+            unfed = self._keep(
+                "unfed inputs",
+                {
+                    name: tuple(
+                        index
+                        for index, port in enumerate(component.inputs)
+                        if f"{name}.{port.name}" not in fed
+                    )
+                    for name, component in self.components.items()
+                },
+            )
+        return unfed
 
     def period_steps(self, component: Component) -> int:
         """The component's period as a whole number of macro steps (>= 1)."""
@@ -528,6 +603,8 @@ class System:
     def loop_connections(self) -> list[Connection]:
         """The connections on an algebraic loop (both ends in one strongly connected set of ports)."""
         ports = self._loop_ports()
+        if not ports:
+            return []
         return [c for c in self.connections if c.source in ports and ports[c.source] == ports.get(c.target)]
 
     def delayed_links(self) -> set[tuple[str, str]]:
@@ -569,6 +646,9 @@ class System:
         when `loops == "error"`."""
         if self.mode == "gauss-seidel" and self.loops == "error":
             self.check_algebraic_loops()
+        return self._names_cached("order", self._order)
+
+    def _order(self) -> list[Component]:
         loop_links = {(c.source_component, c.target_component) for c in self.loop_connections()}
         edges = self._direct_edges() - loop_links
         order = self._topological(edges)
@@ -595,6 +675,9 @@ class System:
         as its component is initialised, so a feedback loop through it orders its producer first
         (the vehicle before the controllers, whose commands only reach its unconnected outputs).
         """
+        return self._names_cached("initialization order", self._initialization_order)
+
+    def _initialization_order(self) -> list[Component]:
         consumed = {c.source for c in self.connections}
         # Per consumer, the inputs some connected output depends on directly (one pass over the
         # feedthrough; a planner's 2000 waypoints feed every output of a path follower).
@@ -625,6 +708,10 @@ class System:
         once more after every component is initialised and reads their outputs again, so every
         output at the start time reflects its connected inputs (within an algebraic loop, after
         one pass in this fixed order)."""
+        names = tuple(component.name for component in order)
+        return self._names_cached(("initialized early", names), lambda: self._initialized_early(order))
+
+    def _initialized_early(self, order: list[Component]) -> list[Component]:
         position = {component.name: number for number, component in enumerate(order)}
         early = {
             c.target_component
@@ -639,3 +726,119 @@ class System:
                 if position[link.producer] >= position[name] and component.inputs[link.input].name in direct:
                     early.add(name)
         return [component for component in order if component.name in early]
+
+
+class _Graph:
+    """The connections `System.connect_many` made between components of one structure, with what the
+    system works out from them (`facts`: links, acyclicity, orders; by (name, mode, loops)), shared by
+    every system of that structure in this process. Everything here is read-only: the connections
+    are frozen, the facts are tuples, booleans and the links, which nothing changes."""
+
+    __slots__ = ("connections", "targets", "facts")
+
+    def __init__(self, connections: tuple[Connection, ...], targets: frozenset[str]) -> None:
+        self.connections = connections
+        self.targets = targets
+        self.facts: dict = {}
+
+
+# Graphs by `_graph_key`: a sweep's worker builds the same system for every run (~3,100 connections
+# made, their ends resolved and the graph ordered: ~17 ms each time). A few kept.
+_GRAPHS: dict[tuple, _Graph] = {}
+_GRAPHS_KEPT = 4
+# The first graph of a process, with what its key is worked out from (the components as added, mode,
+# loop handling, connections; none of them changes once connected): its key (~3 ms) is worked out when
+# a second system is connected, so a process that runs one scenario (`cosim run`) never does.
+_PENDING: list[tuple[dict[str, Component], str, str, tuple, _Graph]] = []
+
+
+def _keep_graph(key: tuple, graph: _Graph) -> None:
+    if len(_GRAPHS) >= _GRAPHS_KEPT:
+        _GRAPHS.pop(next(iter(_GRAPHS)))
+    _GRAPHS[key] = graph
+
+
+def _settle_pending() -> None:
+    """Keep the pending graph (`_PENDING`) under its key."""
+    if not _PENDING:
+        return
+    components, mode, loops, connections, graph = _PENDING.pop()
+    try:
+        key = _graph_key(components, mode, loops, connections)
+    except (TypeError, ValueError, AttributeError):
+        return
+    _keep_graph(key, graph)
+
+
+_TYPES = attrgetter("type")
+_FMI_TYPES = attrgetter("fmi_type")
+_SCALE_OFFSET = itemgetter(2, 3)
+
+
+class _PortTypes:
+    """A component's ports in a `_graph_key`, as far as connecting reads them: each port's `type`
+    and `fmi_type`. Equal when the ports are the same objects (a project FMU's and an array's ports
+    are kept by what makes them, and a port never changes) or have the same types; hashed as one
+    (the key hashes the ports' names beside it)."""
+
+    __slots__ = ("ports",)
+
+    def __init__(self, ports) -> None:
+        self.ports = tuple(ports)
+
+    def __hash__(self) -> int:
+        return 0
+
+    def __eq__(self, other) -> bool:
+        if not isinstance(other, _PortTypes):
+            return NotImplemented
+        mine, theirs = self.ports, other.ports
+        if len(mine) != len(theirs):
+            return False
+        if all(map(operator.is_, mine, theirs)):
+            return True
+        same = list(map(_TYPES, mine)) == list(map(_TYPES, theirs))
+        return same and list(map(_FMI_TYPES, mine)) == list(map(_FMI_TYPES, theirs))
+
+
+def _graph_key(
+    components: dict[str, Component], mode: str, loops: str, connections: tuple[tuple, ...]
+) -> tuple:
+    """Everything the connections made of `connections` and the facts worked out from them depend
+    on: per component (in the order added) its name and class, its input and output names with
+    their types (what `connection_problem` reads), whether each is a text port
+    (`Component.text_port`; asked only of a class that has text ports) and its feedthrough (which
+    outputs share a tuple of inputs, and those inputs); the mode and loop handling; the connections
+    (and the bits of each scale and offset: -0.0 equals 0.0 but adds differently)."""
+    parts = []
+    for name, component in components.items():
+        inputs, outputs = component.inputs, component.outputs
+        text = None
+        if type(component).text_port is not Component.text_port:
+            text_port = component.text_port
+            text = (
+                tuple(map(text_port, component.input_index, itertools.repeat("input"))),
+                tuple(map(text_port, component.output_index, itertools.repeat("output"))),
+            )
+        groups: dict[int, int] = {}
+        shared: dict[int, tuple[str, ...]] = {}
+        for depends in component.feedthrough.values():
+            if id(depends) not in groups:
+                groups[id(depends)] = len(groups)
+                shared[id(depends)] = tuple(depends)
+        parts.append(
+            (
+                name,
+                type(component),
+                tuple(component.input_index),
+                tuple(component.output_index),
+                _PortTypes(inputs),
+                _PortTypes(outputs),
+                text,
+                tuple(component.feedthrough),
+                tuple([groups[id(depends)] for depends in component.feedthrough.values()]),
+                tuple(shared.values()),
+            )
+        )
+    numbers = array("d", itertools.chain.from_iterable(map(_SCALE_OFFSET, connections))).tobytes()
+    return tuple(parts), mode, loops, connections, numbers

@@ -105,6 +105,16 @@ def known_names(source_root: Path = SOURCE_ROOT) -> list[str]:
     return sorted(p.stem for p in SHIPPED_DIR.glob("*.fmu"))
 
 
+def _is_known(name: str) -> bool:
+    """`name in known_names()`; a source folder's name is told by one look at its
+    modelDescription.xml (the listing of every folder is read only for another name)."""
+    plain = isinstance(name, str) and name and "/" not in name and "\0" not in name
+    if plain and not name.startswith(".") and _has_sources(SOURCE_ROOT):
+        if (SOURCE_ROOT / name / "modelDescription.xml").is_file():
+            return True
+    return name in known_names()
+
+
 FMI_VERSIONS = (2, 3)
 
 
@@ -165,14 +175,65 @@ def _stamp_is_fresh(stamp: Path, target: Path, lines: list[str], environment: st
     return newest < stamp_ns - RACY_SECONDS * 1e9
 
 
-def _is_fresh(name: str, source_root: Path, folder: Path, fmi_version: int) -> bool:
+# The FMUs found fresh in this process, by (name, source root, cache folder, FMI version): None after
+# the first check (which reads no more than it must), then the environment line, the paths the check
+# depended on (every folder whose listing gives the source files, every source file, the stamp, the
+# FMU) and their `_path_status` read before it. A sweep's worker checks the same four FMUs for every
+# run; when nothing of that changed (no file added, removed, renamed or written: each changes a
+# folder's or the file's time, size or inode), the answer is the same and the check (listing the
+# folders, reading the stamp) is skipped.
+_SEEN_FRESH: dict[tuple[str, Path, Path, int], tuple[str, tuple[str, ...], tuple] | None] = {}
+
+
+def _path_status(paths: tuple[str, ...]) -> tuple | None:
+    """(modification time [ns], size, inode) of each path; None when one cannot be read."""
+    status = []
+    for path in paths:
+        try:
+            found = os.stat(path)
+        except OSError:
+            return None
+        status.append((found.st_mtime_ns, found.st_size, found.st_ino))
+    return tuple(status)
+
+
+def _source_folders(model_dir: Path) -> list[str]:
+    """The folders whose listings `source_files` reads: the model's and `common/`, with their subfolders."""
+    folders = []
+    for top in (model_dir, model_dir.parent / "common"):
+        folders.append(str(top))
+        folders.extend(str(path) for path in sorted(top.rglob("*")) if path.is_dir())
+    return folders
+
+
+def _is_fresh(
+    name: str, source_root: Path, folder: Path, fmi_version: int, environment: str | None = None
+) -> bool:
     """Whether the FMU in `folder` (the cache's folder of `fmi_version`) is that of the sources, by
-    its stamp's times and sizes (`_stamp_is_fresh`); False when that cannot tell."""
+    its stamp's times and sizes (`_stamp_is_fresh`); False when that cannot tell. An FMU found
+    fresh before in this process, with nothing it depends on changed since, is (`_SEEN_FRESH`).
+    `environment`: `_environment_line` when the caller has it."""
     model_dir = source_root / name
+    if environment is None:
+        environment = _environment_line(model_dir, fmi_version)
+    key = (name, source_root, folder, fmi_version)
+    seen = _SEEN_FRESH.get(key)
+    if seen is not None and seen[0] == environment and _path_status(seen[1]) == seen[2]:
+        return True
+    stamp, target = folder / f"{name}.stamp", folder / f"{name}.fmu"
     files = _build_module(source_root).source_files(model_dir, fmi_version)
+    paths = status = None
+    if key in _SEEN_FRESH:  # found fresh before: asked again, so worth keeping (a first check reads no more)
+        # Read before the check: a change after this shows as a different status next time.
+        paths = (*_source_folders(model_dir), *map(str, files), str(stamp), str(target))
+        status = _path_status(paths)
     lines = _stat_lines(files, source_root)
-    environment = _environment_line(model_dir, fmi_version)
-    return _stamp_is_fresh(folder / f"{name}.stamp", folder / f"{name}.fmu", lines, environment)
+    fresh = _stamp_is_fresh(stamp, target, lines, environment)
+    if fresh:
+        _SEEN_FRESH[key] = None if paths is None or status is None else (environment, paths, status)
+    else:
+        _SEEN_FRESH.pop(key, None)
+    return fresh
 
 
 def build_if_stale(name: str, source_root: Path, cache_dir: Path, fmi_version: int = 2) -> Path:
@@ -193,7 +254,7 @@ def build_if_stale(name: str, source_root: Path, cache_dir: Path, fmi_version: i
     target, stamp = cache_dir / f"{name}.fmu", cache_dir / f"{name}.stamp"
     try:
         environment = _environment_line(model_dir, fmi_version)
-        if _is_fresh(name, source_root, cache_dir, fmi_version):
+        if _is_fresh(name, source_root, cache_dir, fmi_version, environment):
             return target
         cache_dir.mkdir(parents=True, exist_ok=True)
         with open(cache_dir / f"{name}.lock", "w") as lock:
@@ -224,8 +285,8 @@ def builtin_fmu(name: str, fmi_version: int = 2) -> Path:
     build.
     """
     fmi_version = _check_version(fmi_version)
-    names = known_names()
-    if name not in names:
+    if not _is_known(name):
+        names = known_names()
         raise CosimError(f"unknown project FMU {shorten(name)!r}; known: {', '.join(names) or '(none)'}")
     if _has_sources(SOURCE_ROOT):
         cache_dir = default_cache_dir()

@@ -28,7 +28,9 @@ infinite. A 64-bit integer output a float64 cannot hold exactly is an error too 
 from __future__ import annotations
 
 import ctypes
+import functools
 import math
+from array import array
 from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass
 
@@ -75,26 +77,45 @@ def transfer_groups(
             i for i, p in enumerate(ports) if p.name in elements and variables[p.name].variable.name in arrays
         }
     by_type: dict[str, list[int]] = {}  # (one pass over the ports: a path follower has 2003 inputs)
-    for i, p in enumerate(ports):
-        if only is None or i in only:
-            if p.fmi_type in by_type:
-                by_type[p.fmi_type].append(i)
-            else:
-                by_type[p.fmi_type] = [i]
+    kinds = {p.fmi_type for p in ports} if only is None else ()
+    if len(kinds) == 1:  # (the usual FMU: every port of one type)
+        by_type[next(iter(kinds))] = list(range(len(ports)))
+    else:
+        for i, p in enumerate(ports):
+            if only is None or i in only:
+                if p.fmi_type in by_type:
+                    by_type[p.fmi_type].append(i)
+                else:
+                    by_type[p.fmi_type] = [i]
     groups = []
     for kind in TRANSFER_TYPES[fmi_version]:
         slots = by_type.get(kind)
         if slots:
-            references = [
-                variables[ports[i].name].variable.valueReference
-                for i in slots
-                if elements.get(ports[i].name, 0) == 0
-            ]
-            scales = [variables[ports[i].name].scale for i in slots]
+            mapped = [variables[ports[i].name] for i in slots]
+            if elements:
+                first = [elements.get(ports[i].name, 0) == 0 for i in slots]
+                pairs = zip(mapped, first, strict=True)
+                references = [m.variable.valueReference for m, kept in pairs if kept]
+            else:  # (no array: every port has its own reference)
+                references = [m.variable.valueReference for m in mapped]
+            scales = [m.scale for m in mapped]
             values = (C_TYPES[fmi_version][kind] * len(slots))()
-            array = (ctypes.c_uint32 * len(references))(*references)
+            array = _references(references)
             groups.append(TransferGroup(kind, slots, array, values, scales))
     return groups
+
+
+def _references(references: list[int]) -> ctypes.Array:
+    """A ctypes array of the value references, as `(c_uint32 * n)(*references)` makes it; copied from
+    an `array("I")` (~10x faster for 2000) where every reference fits in 32 unsigned bits."""
+    kind = ctypes.c_uint32 * len(references)
+    try:
+        packed = array("I", references)
+    except (OverflowError, TypeError):
+        return kind(*references)
+    if packed.itemsize != ctypes.sizeof(ctypes.c_uint32):
+        return kind(*references)
+    return kind.from_buffer_copy(packed)
 
 
 def _is_buffer(group: TransferGroup, groups: list[TransferGroup], fmi_version: int) -> bool:
@@ -168,11 +189,18 @@ def step_functions(component: Component) -> dict[str, Callable]:
         names.update(do_step_flags=component._do_step_flags, step_flags=component._step_flags)
         names["asked_to_terminate"] = component._asked_to_terminate
     names[do_step] = component._raw_do_step
-    exec("\n".join(push + pull + step), names)  # noqa: S102 - generated from our own templates
+    exec(_compiled("\n".join(push + pull + step)), names)  # noqa: S102 - generated from our own templates
     compiled = {method: names[method] for method in ("push_inputs", "get_outputs", "do_step")}
     if component.text_inputs or component.text_outputs:  # text beside the numbers (`cosim.fmi.text`)
         compiled.update(_with_text(component, compiled["do_step"], compiled["get_outputs"]))
     return compiled
+
+
+@functools.lru_cache(maxsize=64)
+def _compiled(source: str):
+    """`source` compiled (a code object is immutable: every component with the same code shares it;
+    a sweep's worker generates the same four FMUs' code for every run)."""
+    return compile(source, "<string>", "exec")
 
 
 def _copy_lines(io: str, prefix: str, kind: str, slots: list[int], scales: list[float]) -> list[str]:
@@ -267,7 +295,7 @@ def native_step(component: Component) -> NativeStep | None:
                     direction, kind, address(functions[group.fmi_type]), ctypes.addressof(group.references),
                     len(group.references), len(group.slots),
                     ctypes.addressof(buffer if direct else group.values), direct,
-                    tuple(group.slots), tuple(float(scale) for scale in group.scales),
+                    tuple(group.slots), tuple(map(float, group.scales)),
                 )
             )  # fmt: skip
     finite_outputs, nan_outputs = component._checked_outputs()

@@ -380,7 +380,11 @@ class _RobotRun(SystemRun):
             self.reason = "fmu_terminated"  # the run ends cleanly; the outcome rules judge it
         elif end.interrupted:
             self.reason = "interrupted"
-        return self.finish(end.failure, end.ended)
+        result = self.finish(end.failure, end.ended)
+        if self.tables is not None:  # the loop is over: its record buffer may serve the next run
+            self.replay = None
+            self.tables.release()
+        return result
 
     def flush(self) -> None:
         """Hand the steps the block recording holds to the log."""

@@ -17,14 +17,18 @@ METADATA_NAME = "unconnected_inputs"
 def unconnected_inputs(system) -> dict[str, dict[str, object]]:
     """Component name -> {input port -> the value it keeps} of every input (numeric and text) that
     no connection of `system` (a `cosim.core.system.System`) feeds, in the components' order."""
-    fed = {connection.target for connection in (*system.connections, *system.text_connections)}
+    unfed = system.unfed_inputs()  # (the numeric ones: worked out once for the graph)
+    fed = None
     kept: dict[str, dict[str, object]] = {}
     for name, component in system.components.items():
         values: dict[str, object] = {}
-        for index, port in enumerate(component.inputs):
-            if f"{name}.{port.name}" not in fed:
-                values[port.name] = _typed(port.type, component.input_buffer.item(index))
+        inputs, buffer = component.inputs, component.input_buffer
+        for index in unfed[name]:
+            port = inputs[index]
+            values[port.name] = _typed(port.type, buffer.item(index))
         for port in getattr(component, "text_inputs", ()):
+            if fed is None:
+                fed = {connection.target for connection in (*system.connections, *system.text_connections)}
             if f"{name}.{port.name}" not in fed:
                 values[port.name] = component.text_values.get(port.name, port.start)
         if values:

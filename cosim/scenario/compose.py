@@ -29,6 +29,7 @@ where a name is close to a known one:
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -51,6 +52,7 @@ from cosim.scenario.template import (
     ROLE_PORTS,
     template_components,
     template_connections,
+    template_ends,
     template_observed,
 )
 
@@ -112,6 +114,7 @@ class _Composer:
         self.scenario = scenario
         self.problems = Problems(scenario.source)
         self.template = template_connections(scenario)
+        self.template_ends = template_ends(scenario)  # (source component, output, target, input) of each
         self.components: dict[str, ComponentDescription] = {}
         self.broken: set[str] = set()  # components whose FMU did not load: reported once
         self.missing: dict[str, list[str]] = {}  # role component -> ports the template needs, absent
@@ -392,9 +395,8 @@ class _Composer:
         unusual = set(self.removed) | self.replacing | self.broken
         outputs_of = {name: sets["outputs"] for name, sets in ports.items() if name not in unusual}
         inputs_of = {name: sets["inputs"] for name, sets in ports.items() if name not in unusual}
-        for connection in self.template:
-            source_name, _, source_port = connection.source.partition(".")
-            target_name, _, target_port = connection.target.partition(".")
+        for connection, ends in zip(self.template, self.template_ends, strict=True):
+            source_name, source_port, target_name, target_port = ends
             if (
                 source_port in outputs_of.get(source_name, ())
                 and target_port in inputs_of.get(target_name, ())
@@ -577,7 +579,7 @@ class _Composer:
     def _check_loops(self, connections: list[ConnectionDescription], handling: str) -> list[str] | None:
         """The algebraic loop (ports), if any; a problem when `handling` is "error"."""
         feedthrough = {name: component.feedthrough for name, component in self.components.items()}
-        loop = _algebraic_loop([(c.source, c.target) for c in connections], feedthrough)
+        loop = _algebraic_loop(((c.source, c.target) for c in connections), feedthrough)
         if loop is None or handling != "error":
             return loop
         names = list(dict.fromkeys(reference.split(".", 1)[0] for reference in loop))
@@ -683,7 +685,7 @@ def _variables(description) -> tuple[dict, dict[str, list[str]], set[str]]:
     return variables, own, declared
 
 
-def _algebraic_loop(pairs: list[tuple[str, str]], feedthrough: dict) -> list[str] | None:
+def _algebraic_loop(pairs: Iterable[tuple[str, str]], feedthrough: dict) -> list[str] | None:
     """`find_algebraic_loop(pairs, feedthrough)` (which remembers the last few graphs: a sweep's
     worker describes the same system for every run, and building it checks the same graph again)."""
     return find_algebraic_loop(pairs, feedthrough)

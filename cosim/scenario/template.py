@@ -181,18 +181,52 @@ def template_components(scenario: Scenario) -> list[ComponentDescription]:
 
 
 def template_connections(scenario: Scenario) -> list[ConnectionDescription]:
-    """The template's connections, in the order listed in the module docstring."""
+    """The template's connections, in the order listed in the module docstring (a new list; the
+    connections themselves are frozen and shared)."""
+    return list(
+        _template_connections(
+            bool(scenario.planner.replan), len(scenario.lidar.angles), scenario.vehicle_type
+        )
+    )
+
+
+def template_ends(scenario: Scenario) -> tuple[tuple[str, str, str, str], ...]:
+    """(source component, output, target component, input) of each of `template_connections`, in
+    its order (read-only)."""
+    key = (bool(scenario.planner.replan), len(scenario.lidar.angles), scenario.vehicle_type)
+    _template_connections(*key)
+    return _TEMPLATES[key][1]
+
+
+# The template's connections by what they depend on (replanning, beams, vehicle type), with their
+# ends split into component and port: a sweep's worker describes the same system for every run
+# (~3,100 connections, ~5 ms each time). A few kept.
+_TEMPLATES: dict[tuple[bool, int, str], tuple[tuple[ConnectionDescription, ...], tuple]] = {}
+_TEMPLATES_KEPT = 8
+
+
+def _template_connections(replan: bool, beams: int, vehicle_type: str) -> tuple[ConnectionDescription, ...]:
+    key = (replan, beams, vehicle_type)
+    made = _TEMPLATES.get(key)
+    if made is None:
+        connections = tuple(_make_template_connections(replan, beams, vehicle_type))
+        ends = tuple((*c.source.partition(".")[::2], *c.target.partition(".")[::2]) for c in connections)
+        if len(_TEMPLATES) >= _TEMPLATES_KEPT:
+            _TEMPLATES.pop(next(iter(_TEMPLATES)))
+        made = _TEMPLATES[key] = (connections, ends)
+    return made[0]
+
+
+def _make_template_connections(replan: bool, beams: int, vehicle_type: str) -> list[ConnectionDescription]:
     pairs: list[tuple[str, str]] = []
     for axis in POSE:
         pairs += [(f"vehicle.{axis}", f"pure_pursuit.{axis}"), (f"vehicle.{axis}", f"lidar.{axis}")]
     pairs += [(f"planner.{name}", f"pure_pursuit.{name}") for name in planner_outputs()]
-    if scenario.planner.replan:
+    if replan:
         pairs += [(f"vehicle.{axis}", f"planner.{axis}") for axis in POSE]
-        pairs += [
-            (f"lidar.ranges[{k}]", f"planner.ranges[{k}]") for k in range(1, len(scenario.lidar.angles) + 1)
-        ]
+        pairs += [(f"lidar.ranges[{k}]", f"planner.ranges[{k}]") for k in range(1, beams + 1)]
         pairs += [("vfh.steering_dir", "planner.steering_dir")]
-    for k in range(1, len(scenario.lidar.angles) + 1):
+    for k in range(1, beams + 1):
         pairs += [(f"lidar.{signal}[{k}]", f"vfh.{signal}[{k}]") for signal in ("ranges", "angles")]
     pairs += [
         ("pure_pursuit.target_dir", "vfh.target_dir"),
@@ -202,7 +236,7 @@ def template_connections(scenario: Scenario) -> list[ConnectionDescription]:
         ("pure_pursuit.goal_reached", "mixer.goal_reached"),
         ("vfh.steering_dir", "mixer.steering_dir"),
     ]
-    pairs += [(f"mixer.{port}", f"vehicle.{port}") for port in VEHICLE_INPUTS[scenario.vehicle_type]]
+    pairs += [(f"mixer.{port}", f"vehicle.{port}") for port in VEHICLE_INPUTS[vehicle_type]]
     return [ConnectionDescription(source, target, where=TEMPLATE) for source, target in pairs]
 
 

@@ -141,24 +141,47 @@ def test_a_value_set_between_run_blocks_calls_is_sent_again(block):
     assert not np.array_equal(np.array(truth), np.array(_truth(steps, meddle_at, keep=True)))
 
 
+class _Ports(PythonComponent):
+    def __init__(self, name, inputs=0, outputs=0):
+        super().__init__(name, array_ports("u", inputs), array_ports("y", outputs), feedthrough={})
+
+    def step(self, t, h):
+        pass
+
+
+def _plan(connections, producers=("p",)):
+    """`fast_loop._link_plan` of consumer `c` (40 inputs) fed by `connections` (producer, output,
+    input, scale) from producers of 40 outputs each."""
+    system = System(0.1)
+    for name in producers:
+        system.add(_Ports(name, outputs=40))
+    system.add(_Ports("c", inputs=40))
+    for producer, output, input_, scale in connections:
+        system.connect(f"{producer}.y[{output + 1}]", f"c.u[{input_ + 1}]", scale)
+    entries, numbers, _ = fast_loop._link_plan(system, system.links(), "c", set())
+    return list(entries), list(numbers)
+
+
 def test_runs_of_plain_links_become_one_link():
-    links = [(1000 + 8 * j, 5000 + 8 * j, 0) for j in range(6)] + [(2000, 6000, 1), (3000, 7000, 0)]
-    numbers = [(1.0, 0.0)] * 6 + [(2.0, 0.0), (1.0, 0.0)]
-    got_links, got_numbers = fast_loop._runs(links, numbers)
-    assert got_links == [(1000, 5000, fast_loop.RUN_LINK), (2000, 6000, 1), (3000, 7000, 0)]
-    assert got_numbers == [(6.0, 1.0), (2.0, 0.0), (1.0, 0.0)]
+    run = fast_loop.RUN_LINK
+    six = [("p", j, j, 1.0) for j in range(6)] + [("q", 0, 6, 2.0), ("q", 5, 7, 1.0)]
+    assert _plan(six, ("p", "q")) == (
+        [("p", 0, 0, run), ("q", 0, 6, 1), ("q", 5, 7, 0)],
+        [(6.0, 1.0), (2.0, 0.0), (1.0, 0.0)],
+    )
     # Taken in the order of their targets: two columns of a row-major array (x, y interleaved)
     # to the x inputs, then the y inputs (as a plan reaches Pure Pursuit).
-    interleaved = [(1000 + 8 * j, 5000 + 8 * (j // 2) + 80 * (j % 2), 0) for j in range(20)]
-    got = fast_loop._runs(interleaved, [(1.0, 0.0)] * 20)
-    assert got == ([(1000, 5000, fast_loop.RUN_LINK), (1008, 5080, fast_loop.RUN_LINK)], [(10.0, 2.0)] * 2)
+    interleaved = [("p", j, j // 2 + 10 * (j % 2), 1.0) for j in range(20)]
+    assert _plan(interleaved) == ([("p", 0, 0, run), ("p", 1, 10, run)], [(10.0, 2.0)] * 2)
     # One column of a two-column array (sources two values apart) to consecutive targets.
-    column = [(1000 + 16 * j, 5000 + 8 * j, 0) for j in range(5)]
-    assert fast_loop._runs(column, [(1.0, 0.0)] * 5) == ([(1000, 5000, fast_loop.RUN_LINK)], [(5.0, 2.0)])
-    short = [(1000 + 8 * j, 5000 + 8 * j, 0) for j in range(fast_loop.MIN_RUN - 1)]
-    assert fast_loop._runs(short, [(1.0, 0.0)] * len(short)) == (short, [(1.0, 0.0)] * len(short))
-    gap = [(1000, 5000, 0), (1008, 5008, 0), (1024, 5016, 0), (1032, 5024, 0)]  # source skips one
-    assert fast_loop._runs(gap, [(1.0, 0.0)] * 4)[0] == gap
+    assert _plan([("p", 2 * j, j, 1.0) for j in range(5)]) == ([("p", 0, 0, run)], [(5.0, 2.0)])
+    short = [("p", j, j, 1.0) for j in range(fast_loop.MIN_RUN - 1)]
+    assert _plan(short) == ([("p", j, j, 0) for j in range(len(short))], [(1.0, 0.0)] * len(short))
+    gap = [("p", 0, 0, 1.0), ("p", 1, 1, 1.0), ("p", 3, 2, 1.0), ("p", 4, 3, 1.0)]  # source skips one
+    assert _plan(gap)[0] == [("p", j, t, 0) for _, j, t, _ in gap]
+    # A stretch from two producers is no run, wherever their buffers lie.
+    two = [("p", 0, 0, 1.0), ("p", 1, 1, 1.0), ("q", 2, 2, 1.0), ("q", 3, 3, 1.0)]
+    assert _plan(two, ("p", "q"))[0] == [(name, j, t, 0) for name, j, t, _ in two]
 
 
 def test_rows_keep_every_input_without_scalar_rows():
