@@ -95,9 +95,13 @@ class PlotProcess:
         """As `draw`, of the data `cosim.logs.plot.collect` gathers from `source` (a log or a
         `TraceSource`): the panels' part (`collect_signals`) is sent first, so that they are drawn
         while this process gathers the map's (`collect_map`: the plans, ~10 ms)."""
-        from cosim.logs.plot import collect_map, collect_signals
+        from cosim.logs.plot import TraceSource, collect, collect_map, collect_signals, trace_parts
 
-        if data is None:
+        # a run's trace goes as it is, in two parts: the plot process gathers its data (`_plot_data`)
+        traced = data is None and self._drawer is None and isinstance(source, TraceSource)
+        if traced:
+            parts = trace_parts(source.trace)
+        elif data is None:
             data = collect_signals(source)
         mapped = source is None
         self.outline(None)  # (a child waiting for the scenario gets none: no draft)
@@ -106,6 +110,9 @@ class PlotProcess:
                 self._data = None
                 if self._drawer is not None:  # another picture: one frame
                     _send(pipe, (data, str(png_path)))
+                elif traced:
+                    _send(pipe, parts[0])
+                    _send(pipe, (parts[1], str(png_path)))
                 else:
                     _send(pipe, _panels_part(data))
                     if not mapped:
@@ -131,6 +138,8 @@ class PlotProcess:
         if self._drawer is not None:
             self._drawer(data, png_path)
             return None
+        if traced:
+            data, mapped = collect(source), True
         if not mapped:
             collect_map(data, source)
         draw(data, png_path)
@@ -317,6 +326,8 @@ def _child(data_read: int, reply_write: int, scenario, drawer=None) -> None:
         from cosim.logs.plot import likely_texts, prepare_drawing
 
         prepare_drawing()
+        if drawer is None:  # (a run's trace is read here, by `TraceSource`: `_plot_data`)
+            import cosim.logs.reader  # noqa: F401
         if scenario is _FOLLOWS:  # (the parent sends it once loaded: `PlotProcess.outline`)
             outline = _frame_from(data_read)
             if not outline:
@@ -330,6 +341,8 @@ def _child(data_read: int, reply_write: int, scenario, drawer=None) -> None:
             # forked first: the panels are the longer part after the run, their texts laid out first
             helper = PanelHelper.start(drafted, (data_read, reply_write))
             _warm(likely_texts(True), data_read)
+            if helper is not None and not _readable(data_read):
+                _own_pages(drafted.pixels())
         elif drafted is not None:  # it draws both parts, on a busy machine: the longest texts only
             _warm(likely_texts(True) + likely_texts(False, numbers=False), data_read)
             drafted.more_ticks(lambda: _readable(data_read))
@@ -368,7 +381,7 @@ def _draw_run(panels, mapped, drafted, helper) -> None:
     from cosim.logs.plot import draw
 
     data, png_path = mapped
-    data = dataclasses.replace(data, series=panels.series, modes=panels.modes)
+    data = _plot_data(panels, data)
     if drafted is None or not drafted.fits(data):
         if helper is not None:
             helper.cancel()
@@ -390,12 +403,43 @@ def _draw_run(panels, mapped, drafted, helper) -> None:
             draw(data, Path(png_path))
 
 
+def _plot_data(panels, mapped=None):
+    """The run's `PlotData` from the parts `PlotProcess.draw_source` sent: the panels' `PlotData`
+    (`_panels_part`) and the rest of it (`mapped`), or the two parts of its trace
+    (`cosim.logs.plot.trace_parts`), gathered here as the parent would have; without `mapped`,
+    what the panels need only."""
+    from cosim.logs.plot import TraceSource, collect, collect_signals, joined_trace
+    from cosim.logs.plot_data import PlotData
+
+    if isinstance(panels, PlotData):
+        return (
+            panels
+            if mapped is None
+            else dataclasses.replace(mapped, series=panels.series, modes=panels.modes)
+        )
+    if mapped is None:
+        return collect_signals(TraceSource(joined_trace(panels)))
+    return collect(TraceSource(joined_trace(panels, mapped)))
+
+
 def _touch(shared) -> None:
     """Read a byte of each page of `shared` (memory shared with the helper): each page is mapped
     into this process then (~1 ms for the picture), not while the helper's pixels are copied."""
     import mmap
 
     int(shared.reshape(-1)[:: mmap.PAGESIZE].sum())
+
+
+def _own_pages(pixels) -> None:
+    """Write each page of `pixels` (the canvas) with the bytes it holds. After the helper's fork the
+    two processes share the canvas' pages until one writes to a page, which is then copied for it
+    (~2.6 us a page here, ~1700 pages): done while the run goes, not page by page as the run's
+    picture is drawn over them (the helper's panels ~4 ms, the map ~2 ms)."""
+    import mmap
+
+    flat = pixels.reshape(-1)
+    for every in (flat[:: mmap.PAGESIZE], flat[-1:]):
+        every[...] = every.copy()  # (a copy: numpy skips assigning an array to itself)
 
 
 def _warm(texts: list, data_read: int) -> None:
@@ -551,12 +595,13 @@ def _panels(drafted, data_read: int, done_write: int, shared) -> None:
 
         view = np.frombuffer(shared, dtype=np.uint8).reshape(drafted.pixels().shape)
         view.reshape(-1)[:: mmap.PAGESIZE] = 0  # its pages made now, not when the panels are copied there
+        _own_pages(drafted.pixels())
         _warm(likely_texts(False), data_read)
         drafted.more_ticks(lambda: _readable(data_read))
         with os.fdopen(data_read, "rb") as pipe:
             payload = pipe.read()
         if payload:
-            drafted.draw_run(pickle.loads(payload), False, LOWER)
+            drafted.draw_run(_plot_data(pickle.loads(payload)), False, LOWER)
             top, bottom, left, right = drafted.panels_box(LOWER)
             view[top:bottom, left:right] = drafted.pixels()[top:bottom, left:right]
             answer = f"{top} {bottom} {left} {right}\n"

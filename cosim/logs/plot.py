@@ -30,7 +30,7 @@ from __future__ import annotations
 import os
 from contextlib import contextmanager
 from pathlib import Path
-from types import ModuleType
+from types import ModuleType, SimpleNamespace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -161,6 +161,9 @@ class TraceSource:
     def plans(self) -> list[tuple[float, np.ndarray]]:
         from cosim.logs.reader import path_poses
 
+        decoded = getattr(self.trace, "plan_poses", None)  # (`joined_trace`: decoded already)
+        if decoded is not None:
+            return [(t_ns / 1e9, poses) for t_ns, poses in decoded]
         return [(t_ns / 1e9, path_poses(message)) for t_ns, message in self.trace.plans]
 
     def goals(self) -> list[tuple[float, float, float]]:
@@ -211,6 +214,53 @@ class TraceSource:
         if not self.trace.scan_t_ns:
             return None
         return np.array(self.trace.scan_t_ns) / 1e9, np.array(self.trace.scan_minima)
+
+
+# What of a `RunTrace` its plot reads: the panels' part (`collect_signals`: the signals, scans,
+# poses and goals, the title's metadata) and the map's (`collect_map`: the grids, plans, obstacles).
+TRACE_PANEL_PARTS = (
+    "path", "metadata", "complete", "dropped", "components", "columns", "signal_blocks", "poses",
+    "scan_t_ns", "scan_minima", "goals",
+)  # fmt: skip
+TRACE_MAP_PARTS = ("grids", "obstacle_markers")
+
+
+def trace_parts(trace) -> tuple[SimpleNamespace, SimpleNamespace]:
+    """The parts of `trace` (a `RunTrace`) the plot reads, as plain values that pickle without the
+    trace's own modules: (the panels' part, the map's part, which holds the last /obstacles message
+    as `obstacles`, and each plan's poses as `plan_poses`: (t [ns], N x 3 array) each, which pickle
+    ten times faster than the messages). `cosim run` sends them to its plot process, which gathers
+    the `PlotData` itself (`TraceSource` of `joined_trace`), so that this process need not import
+    the log reader (~5 ms) once the run has ended."""
+    panels = SimpleNamespace(**{name: getattr(trace, name) for name in TRACE_PANEL_PARTS})
+    mapped = SimpleNamespace(**{name: getattr(trace, name) for name in TRACE_MAP_PARTS})
+    mapped.obstacles = trace.obstacles_message()
+    mapped.plan_poses = [(t_ns, _path_poses(message)) for t_ns, message in trace.plans]
+    return panels, mapped
+
+
+def _path_poses(message) -> np.ndarray:
+    """A nav_msgs/Path's poses as N x 3 (x, y [m], heading [rad]), computed as
+    `cosim.logs.reader.path_poses` computes them from the log (the same floats:
+    tests/logs/test_plot_trace.py), without importing the reader."""
+    from cosim.record.rosmsg import yaw_of
+
+    return np.array(
+        [(p.pose.position.x, p.pose.position.y, yaw_of(p.pose.orientation)) for p in message.poses],
+        dtype=float,
+    ).reshape(-1, 3)
+
+
+def joined_trace(panels: SimpleNamespace, mapped: SimpleNamespace | None = None) -> SimpleNamespace:
+    """A trace `TraceSource` reads from the two parts of `trace_parts` (without the map's part:
+    the panels' only, no obstacles, grids or plans)."""
+    joined = SimpleNamespace(**vars(panels), grids={}, plans=[], obstacle_markers=[])
+    obstacles = None
+    if mapped is not None:
+        vars(joined).update((name, value) for name, value in vars(mapped).items() if name != "obstacles")
+        obstacles = mapped.obstacles
+    joined.obstacles_message = lambda: obstacles
+    return joined
 
 
 # --- what is drawn ----------------------------------------------------------------------------

@@ -230,16 +230,28 @@ def test_an_interrupt_while_the_child_draws_ends_the_child(cosim_run, tmp_path: 
 
 
 def _counting_afresh(monkeypatch, marker: Path) -> None:
-    """`plot.draw` in a forked process leaves `marker`: the picture was drawn afresh, not drafted."""
+    """`plot.draw` in a forked process leaves `marker`: the picture was drawn afresh, not drafted;
+    in this process, `marker` with the suffix ".here": the child failed."""
     parent = os.getpid()
     draw = plot.draw
 
     def counted(data, png_path, *options):
-        if os.getpid() != parent:
-            marker.touch()
+        (marker if os.getpid() != parent else marker.with_suffix(".here")).touch()
         return draw(data, png_path, *options)
 
     monkeypatch.setattr(plot, "draw", counted)
+
+
+@pytest.fixture(scope="module")
+def traced_run(tmp_path_factory):
+    """A run of the same scenario in this process: its in-memory trace and its log."""
+    from cosim.navigation.run import run_scenario
+    from cosim.scenario.load import load_scenario
+
+    scenario = load_scenario(EXAMPLE, ["simulation.stop_time=3"])
+    result = run_scenario(scenario, tmp_path_factory.mktemp("traced") / "run.mcap")
+    assert result.trace is not None and not result.trace.dropped
+    return result
 
 
 @pytest.mark.slow
@@ -249,8 +261,25 @@ def test_a_drafted_picture_is_the_picture_of_the_log(cosim_run, tmp_path: Path, 
     """The child drafts from the scenario (given when it starts, or sent once loaded, as `cosim
     run` does), gets the panels' part first and the map's after (`draw_source`), with or without
     its helper: the log's own picture, and not drawn afresh."""
-    from cosim.cli import plotter
     from cosim.logs.reader import open_log
+
+    with open_log(cosim_run) as log:
+        _draw_drafted(log, cosim_run, tmp_path, monkeypatch, helped, later)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("helped", [True, False], ids=["helper", "alone"])
+def test_a_drafted_picture_of_a_trace_is_the_picture_of_its_log(
+    traced_run, tmp_path: Path, monkeypatch, helped
+):
+    """As `cosim run` draws it: from the run's trace, sent as its two parts (`trace_parts`), of
+    which the child and its helper gather the data themselves: the log's own picture."""
+    source = plot.TraceSource(traced_run.trace)
+    _draw_drafted(source, traced_run.log_path, tmp_path, monkeypatch, helped, True)
+
+
+def _draw_drafted(source, log: Path, tmp_path: Path, monkeypatch, helped: bool, later: bool) -> None:
+    from cosim.cli import plotter
     from cosim.scenario.load import load_scenario
 
     monkeypatch.setattr(plotter, "_free_core", lambda: helped)
@@ -263,10 +292,9 @@ def test_a_drafted_picture_is_the_picture_of_the_log(cosim_run, tmp_path: Path, 
     else:
         process = PlotProcess.start(scenario)
     pid = process.pid
-    with open_log(cosim_run) as log:
-        assert process.draw_source(log, tmp_path / "x.png") is None
-    assert not (tmp_path / "afresh").exists()
-    assert (tmp_path / "x.png").read_bytes() == plot.plot_run(cosim_run, tmp_path / "y.png").read_bytes()
+    assert process.draw_source(source, tmp_path / "x.png") is None
+    assert not (tmp_path / "afresh").exists() and not (tmp_path / "afresh.here").exists()
+    assert (tmp_path / "x.png").read_bytes() == plot.plot_run(log, tmp_path / "y.png").read_bytes()
     assert _ends_by_itself(pid)
 
 
