@@ -953,15 +953,16 @@ class Draft:
 
     def more_ticks(self, stop=lambda: False) -> None:
         """Make the panels' y axes' ticks up to `TICKS_AHEAD` each, one round of one more tick per
-        axis at a time, until `stop()` is true (asked before each round): the ticks a panel is
-        less likely to draw, made while the run goes when there is time for them (a tick made
-        ahead or when drawn: the same)."""
+        axis at a time, until `stop()` is true (asked before each tick, ~1 ms, not each round of
+        them: the run's data waits no longer than a tick): the ticks a panel is less likely to
+        draw, made while the run goes when there is time for them (a tick made ahead or when
+        drawn: the same)."""
         axes = [panel.yaxis for panel in self.panel_axes]
         for count in range(Y_TICKS_DRAFTED + 1, TICKS_AHEAD + 1):
-            if stop():
-                return
-            with collector_paused():
-                for axis in axes:
+            for axis in axes:
+                if stop():
+                    return
+                with collector_paused():
                     axis.get_major_ticks(count)
 
     def fits(self, data: PlotData) -> bool:

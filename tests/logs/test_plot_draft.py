@@ -90,22 +90,26 @@ def test_a_draft_is_drawn_over_once(run, tmp_path):
         drafted.draw_run(data, False, plotter.LOWER)
 
 
-@pytest.mark.parametrize("rounds", [0, 1, None], ids=["drafted", "one more", "all"])
-def test_ticks_made_ahead_while_the_run_goes_draw_the_same_picture(run, tmp_path, rounds):
-    """A y axis of a panel makes `Y_TICKS_DRAFTED` ticks with the draft, then one more per round of
-    `more_ticks` until it stops (`rounds` rounds: None, every one): however many were made
-    ahead, the picture is `draw`'s."""
+@pytest.mark.parametrize("ahead", [0, 1, 7, None], ids=["drafted", "one more", "mid-round", "all"])
+def test_ticks_made_ahead_while_the_run_goes_draw_the_same_picture(run, tmp_path, ahead):
+    """A y axis of a panel makes `Y_TICKS_DRAFTED` ticks with the draft, then `more_ticks` makes
+    one more per axis and round, asking `stop` before each tick, until it stops (after `ahead`
+    ticks: None, every one): however many were made ahead, the picture is `draw`'s."""
     scenario, data = run
     drafted = plot.Draft(preview(scenario))
     asked = []
 
     def stop() -> bool:
         asked.append(True)
-        return rounds is not None and len(asked) > rounds
+        return ahead is not None and len(asked) > ahead
 
     drafted.more_ticks(stop)
-    made = plot.TICKS_AHEAD if rounds is None else plot.Y_TICKS_DRAFTED + rounds
-    assert [len(axes.yaxis.majorTicks) for axes in drafted.panel_axes] == [made] * drafted.rows
+    rows = drafted.rows
+    if ahead is None:
+        made = [plot.TICKS_AHEAD] * rows
+    else:
+        made = [plot.Y_TICKS_DRAFTED + ahead // rows + (row < ahead % rows) for row in range(rows)]
+    assert [len(axes.yaxis.majorTicks) for axes in drafted.panel_axes] == made
     assert len(drafted.panel_axes[-1].xaxis.majorTicks) == plot.TICKS_AHEAD
     assert np.array_equal(_pixels(drafted.finish(data, tmp_path / "draft.png")), _drawn(data, tmp_path))
 
