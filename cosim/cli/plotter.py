@@ -341,8 +341,8 @@ def _child(data_read: int, reply_write: int, scenario, drawer=None) -> None:
             # forked first: the panels are the longer part after the run, their texts laid out first
             helper = PanelHelper.start(drafted, (data_read, reply_write))
             _warm(likely_texts(True), data_read)
-            if helper is not None and not _readable(data_read):
-                _own_pages(drafted.pixels())
+            if helper is not None:
+                _own_pages(drafted.pixels(), lambda: _readable(data_read))
         elif drafted is not None:  # it draws both parts, on a busy machine: the longest texts only
             _warm(likely_texts(True) + likely_texts(False, numbers=False), data_read)
             drafted.more_ticks(lambda: _readable(data_read))
@@ -430,16 +430,23 @@ def _touch(shared) -> None:
     int(shared.reshape(-1)[:: mmap.PAGESIZE].sum())
 
 
-def _own_pages(pixels) -> None:
-    """Write each page of `pixels` (the canvas) with the bytes it holds. After the helper's fork the
-    two processes share the canvas' pages until one writes to a page, which is then copied for it
-    (~2.6 us a page here, ~1700 pages): done while the run goes, not page by page as the run's
-    picture is drawn over them (the helper's panels ~4 ms, the map ~2 ms)."""
+def _own_pages(pixels, stop=lambda: False) -> None:
+    """Write each page of `pixels` (the canvas) with the bytes it holds, a few hundred at a time
+    until `stop()` is true (asked before each). After the helper's fork the two processes share
+    the canvas' pages until one writes to a page, which is then copied for it (~2.6 us a page
+    here, ~1700 pages): done while the run goes, not page by page as the run's picture is drawn
+    over them (the helper's panels ~4 ms, the map ~2 ms)."""
     import mmap
 
+    import numpy as np
+
     flat = pixels.reshape(-1)
-    for every in (flat[:: mmap.PAGESIZE], flat[-1:]):
-        every[...] = every.copy()  # (a copy: numpy skips assigning an array to itself)
+    every = np.concatenate((np.arange(0, flat.size, mmap.PAGESIZE), [flat.size - 1]))
+    for start in range(0, every.size, 256):
+        if stop():
+            return
+        at = every[start : start + 256]
+        flat[at] = flat[at]  # (fancy indexing: a copy is read, then written back)
 
 
 def _warm(texts: list, data_read: int) -> None:
@@ -595,8 +602,8 @@ def _panels(drafted, data_read: int, done_write: int, shared) -> None:
 
         view = np.frombuffer(shared, dtype=np.uint8).reshape(drafted.pixels().shape)
         view.reshape(-1)[:: mmap.PAGESIZE] = 0  # its pages made now, not when the panels are copied there
-        _own_pages(drafted.pixels())
         _warm(likely_texts(False), data_read)
+        _own_pages(drafted.pixels(), lambda: _readable(data_read))
         drafted.more_ticks(lambda: _readable(data_read))
         with os.fdopen(data_read, "rb") as pipe:
             payload = pipe.read()

@@ -451,3 +451,38 @@ def test_the_plot_process_registers_no_3d_axes_and_sets_as_matplotlib_does():
     assert completed.returncode == 0, completed.stderr
     assert completed.stdout.split("\n")[:3] == ["False False", "3d", "red 3.0 4"]
     assert "Warning" not in completed.stderr
+
+
+def test_owning_the_canvas_pages_ahead_keeps_its_pixels_and_stops_when_asked():
+    """`_own_pages` writes each page of the canvas with its own bytes: in a forked process (whose
+    pages the parent shares until written), drawing over them afterwards copies no more pages;
+    the pixels are unchanged; it stops when asked (before each few hundred pages)."""
+    import resource
+
+    import numpy as np
+
+    from cosim.cli import plotter
+
+    pixels = np.random.default_rng(1).integers(0, 256, (1045, 1650, 4), dtype=np.uint8)
+    kept = pixels.copy()
+    asked = []
+    plotter._own_pages(pixels, lambda: asked.append(True) or len(asked) > 2)
+    assert len(asked) == 3 and np.array_equal(pixels, kept)
+    read, write = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # (the child: counts the pages copied when the whole canvas is drawn over)
+        try:
+            plotter._own_pages(pixels)
+            same = np.array_equal(pixels, kept)
+            before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+            pixels[...] = 9
+            copied = resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
+            os.write(write, f"{int(same)} {copied}".encode())
+        finally:
+            os._exit(0)
+    os.close(write)
+    with os.fdopen(read) as answer:
+        same, copied = answer.read().split()
+    os.waitpid(pid, 0)
+    assert same == "1" and int(copied) < 50  # (~1700 pages without)
+    assert np.array_equal(pixels, kept)  # the parent's own pages untouched
