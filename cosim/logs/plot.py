@@ -1071,12 +1071,12 @@ class Draft:
         right = min(int(np.ceil(box.x1)) + margin, width)
         return top, bottom, left, right
 
-    def write(self, png_path: str | Path, rows: np.ndarray | None = None) -> Path:
-        """Write the canvas to a PNG at `png_path` (`rows`: its `png_rows`, made before); returns
-        its path."""
+    def write(self, png_path: str | Path, rows: np.ndarray | None = None, last_half=None) -> Path:
+        """Write the canvas to a PNG at `png_path` (`rows`: its `png_rows`, made before;
+        `last_half`: the second half of them compressed: `write_png`); returns its path."""
         png_path = Path(png_path)
         png_path.parent.mkdir(parents=True, exist_ok=True)
-        write_png(png_path, self.pixels(), self.dpi, rows)
+        write_png(png_path, self.pixels(), self.dpi, rows, last_half)
         return png_path
 
 
@@ -1102,11 +1102,12 @@ def _overlay_title(runs: list[PlotData]) -> str:
     return "\n".join(lines)
 
 
-def png_rows(pixels: np.ndarray) -> np.ndarray:
+def png_rows(pixels: np.ndarray, into: np.ndarray | None = None) -> np.ndarray:
     """The rows of a PNG of `pixels` (as `write_png` takes them) before compression: per row a
-    filter byte (0: none) and the RGB bytes (rows x (1 + 3 x columns))."""
+    filter byte (0: none) and the RGB bytes (rows x (1 + 3 x columns)); written `into` that
+    array when given (e.g. memory shared with another process)."""
     height, width = pixels.shape[:2]
-    rows = np.empty((height, 1 + 3 * width), dtype=np.uint8)
+    rows = np.empty((height, 1 + 3 * width), dtype=np.uint8) if into is None else into
     rows[:, 0] = 0
     copy_rgb(rows[:, 1:], pixels)
     return rows
@@ -1121,7 +1122,25 @@ def copy_rgb(rows: np.ndarray, pixels: np.ndarray) -> None:
         into[:, :, colour] = pixels[:, :, colour]
 
 
-def write_png(path: Path, pixels: np.ndarray, dpi: float, rows: np.ndarray | None = None) -> None:
+def png_halves(height: int) -> tuple[tuple[int, int], tuple[int, int]]:
+    """The two halves of a PNG's rows (`write_png`) as (first row, end row) each."""
+    return (0, height // 2), (height // 2, height)
+
+
+def deflate_half(part: np.ndarray, last: bool) -> tuple[bytes, int]:
+    """A half of a PNG's rows (`png_halves`) compressed as `write_png` does it: a raw deflate
+    stream at level 1, the first half ended on a byte boundary (a sync flush), the `last` one
+    closed; and the half's Adler-32 checksum."""
+    import zlib
+
+    stream = zlib.compressobj(1, zlib.DEFLATED, -15)  # raw: no zlib header or checksum
+    body = stream.compress(part) + stream.flush(zlib.Z_FINISH if last else zlib.Z_SYNC_FLUSH)
+    return body, zlib.adler32(part)
+
+
+def write_png(
+    path: Path, pixels: np.ndarray, dpi: float, rows: np.ndarray | None = None, last_half=None
+) -> None:
     """Write an 8-bit RGB image (rows x columns x 3, or x 4 whose 4th byte is left out; row 0 at
     the top) as a PNG: no filter on the rows and zlib level 1. A plot is mostly flat colour, so this
     is a quarter larger than Pillow's default (adaptive filters, level 6) in a tenth of its time,
@@ -1129,8 +1148,10 @@ def write_png(path: Path, pixels: np.ndarray, dpi: float, rows: np.ndarray | Non
     (zlib lets other threads run): each half a raw deflate stream, the first ended on a byte
     boundary without closing the stream (a sync flush), so the two are one stream, as pigz does;
     the stream's checksum is put together from the halves' (`_adler32_combine`). `rows`: the
-    image's `png_rows`, made before (then `pixels` only gives the size). The pixel density
-    (`dpi`) is recorded as Pillow and matplotlib record it."""
+    image's `png_rows`, made before (then `pixels` only gives the size); `last_half`: a function
+    that gives their second half compressed (`deflate_half`: another process compresses it, and
+    is asked once the first half is done here), or None where it could not (then it is done
+    here). The pixel density (`dpi`) is recorded as Pillow and matplotlib record it."""
     import struct
     import threading
     import zlib
@@ -1139,7 +1160,7 @@ def write_png(path: Path, pixels: np.ndarray, dpi: float, rows: np.ndarray | Non
     copy = rows is None
     if copy:
         rows = np.empty((height, 1 + 3 * width), dtype=np.uint8)  # a filter byte (0: none) per row
-    halves = ((0, height // 2), (height // 2, height))
+    halves = png_halves(height)
     done: list = [None, None]
 
     def deflate(index: int) -> None:
@@ -1148,15 +1169,17 @@ def write_png(path: Path, pixels: np.ndarray, dpi: float, rows: np.ndarray | Non
         if copy:
             part[:, 0] = 0
             copy_rgb(part[:, 1:], pixels[low:high])
-        stream = zlib.compressobj(1, zlib.DEFLATED, -15)  # raw: no zlib header or checksum
-        body = stream.compress(part) + stream.flush(zlib.Z_FINISH if index == 1 else zlib.Z_SYNC_FLUSH)
-        done[index] = (body, zlib.adler32(part))
+        done[index] = deflate_half(part, index == 1)
 
-    second = threading.Thread(target=deflate, args=(1,))
-    second.start()
-    deflate(0)
-    second.join()
-    if done[1] is None:  # (the thread failed: its half again, here)
+    if last_half is None:
+        second = threading.Thread(target=deflate, args=(1,))
+        second.start()
+        deflate(0)
+        second.join()
+    else:
+        deflate(0)
+        done[1] = last_half()
+    if done[1] is None:  # (the thread or the other process failed: its half again, here)
         deflate(1)
     (first, first_sum), (last, last_sum) = done
     checksum = _adler32_combine(first_sum, last_sum, rows[halves[1][0] :].nbytes)
