@@ -328,8 +328,6 @@ def _child(data_read: int, reply_write: int, scenario, drawer=None) -> None:
         from cosim.logs.plot import likely_texts, prepare_drawing
 
         prepare_drawing()
-        if drawer is None:  # (a run's trace is read here, by `TraceSource`: `_plot_data`)
-            import cosim.logs.reader  # noqa: F401
         if scenario is _FOLLOWS:  # (the parent sends it once loaded: `PlotProcess.outline`)
             outline = _frame_from(data_read)
             if not outline:
@@ -343,10 +341,12 @@ def _child(data_read: int, reply_write: int, scenario, drawer=None) -> None:
             # forked first: the panels are the longer part after the run, their texts laid out first
             helper = PanelHelper.start(drafted, (data_read, reply_write))
             _warm(likely_texts(True), data_read)
+            _trace_reader()
             if helper is not None:
                 _own_pages(drafted.pixels(), lambda: _readable(data_read))
                 helper.own_rows(lambda: _readable(data_read))
         elif drafted is not None:  # it draws both parts, on a busy machine: the longest texts only
+            _trace_reader()
             _warm(likely_texts(True) + likely_texts(False, numbers=False), data_read)
             drafted.more_ticks(lambda: _readable(data_read))
         with os.fdopen(data_read, "rb") as pipe:
@@ -425,6 +425,12 @@ def _plot_data(panels, mapped=None):
     if mapped is None:
         return collect_signals(TraceSource(joined_trace(panels)))
     return collect(TraceSource(joined_trace(panels, mapped)))
+
+
+def _trace_reader() -> None:
+    """Import what gathers the data from a run's trace (`_plot_data`: `cosim.logs.reader`, ~6 ms),
+    once the draft is made (not before: the draft is the longer wait), while the run goes."""
+    import cosim.logs.reader  # noqa: F401
 
 
 def _touch(shared) -> None:
@@ -630,6 +636,7 @@ def _panels(drafted, data_read: int, done_write: int, rows) -> None:
         from cosim.logs.plot import copy_rgb, deflate_half, likely_texts, png_halves
 
         _widen(done_write)  # (the compressed half, ~0.1 MB, written at once)
+        _trace_reader()
         _warm(likely_texts(False), data_read)
         _own_pages(drafted.pixels(), lambda: _readable(data_read))
         _touch(rows)  # the shared pages mapped here too (read only: the plot process writes them first)
