@@ -341,10 +341,11 @@ def _child(data_read: int, reply_write: int, scenario, drawer=None) -> None:
             # forked first: the panels are the longer part after the run, their texts laid out first
             helper = PanelHelper.start(drafted, (data_read, reply_write))
             _warm(likely_texts(True), data_read)
-            _trace_reader()
             if helper is not None:
                 _own_pages(drafted.pixels(), lambda: _readable(data_read))
                 helper.own_rows(lambda: _readable(data_read))
+            if not _readable(data_read):  # (last: the helper's data waits for none of it)
+                _trace_reader()
         elif drafted is not None:  # it draws both parts, on a busy machine: the longest texts only
             _trace_reader()
             _warm(likely_texts(True) + likely_texts(False, numbers=False), data_read)
