@@ -88,6 +88,10 @@ class PlotProcess:
         except OSError:  # (the child is gone: `draw_source` finds it so and draws here)
             pass
 
+    def ready(self) -> bool:
+        """Whether the child is ready for a run's trace (`READY`), or has answered (or ended)."""
+        return self._reply is not None and _readable(self._reply)
+
     def draw(self, data, png_path: Path) -> str | None:
         """Have the child draw `data` (a `cosim.logs.plot.PlotData`) to `png_path`; None when it
         did, else why not. A child that died without answering is drawn for in this process."""
@@ -99,8 +103,9 @@ class PlotProcess:
         while this process gathers the map's (`collect_map`: the plans, ~10 ms)."""
         from cosim.logs.plot import TraceSource, collect, collect_map, collect_signals, trace_parts
 
-        # a run's trace goes as it is, in two parts: the plot process gathers its data (`_plot_data`)
-        traced = data is None and self._drawer is None and isinstance(source, TraceSource)
+        # a run's trace goes as it is, in two parts, to a plot process ready for it (`READY`): it
+        # gathers the data (`_plot_data`)
+        traced = data is None and self._drawer is None and isinstance(source, TraceSource) and self.ready()
         if traced:
             parts = trace_parts(source.trace)
         elif data is None:
@@ -264,9 +269,9 @@ def _answer(pipe) -> tuple[str, bool]:
     while b"\0" not in answer:
         more = pipe.read1(4096)
         if not more:
-            return answer.decode(errors="replace"), False
+            return answer.lstrip(READY).decode(errors="replace"), False
         answer += more
-    return answer.partition(b"\0")[0].decode(errors="replace"), True
+    return answer.partition(b"\0")[0].lstrip(READY).decode(errors="replace"), True
 
 
 def _frame(pipe) -> bytes:
@@ -336,6 +341,9 @@ def _child(data_read: int, reply_write: int, scenario, drawer=None) -> None:
         if scenario is not None and _run_ended(data_read):
             scenario = None  # drawn afresh
         drafted = None if scenario is None else draft(scenario)
+        if drafted is not None and not _readable(data_read):
+            _trace_reader()  # (before the helper's fork: it has it too)
+            os.write(reply_write, READY)  # the run's trace is welcome: `PlotProcess.draw_source`
         helper = None
         if drafted is not None and range(drafted.rows)[LOWER] and _free_core():
             # forked first: the panels are the longer part after the run, their texts laid out first
@@ -344,10 +352,7 @@ def _child(data_read: int, reply_write: int, scenario, drawer=None) -> None:
             if helper is not None:
                 _own_pages(drafted.pixels(), lambda: _readable(data_read))
                 helper.own_rows(lambda: _readable(data_read))
-            if not _readable(data_read):  # (last: the helper's data waits for none of it)
-                _trace_reader()
         elif drafted is not None:  # it draws both parts, on a busy machine: the longest texts only
-            _trace_reader()
             _warm(likely_texts(True) + likely_texts(False, numbers=False), data_read)
             drafted.more_ticks(lambda: _readable(data_read))
         with os.fdopen(data_read, "rb") as pipe:
@@ -432,6 +437,13 @@ def _trace_reader() -> None:
     """Import what gathers the data from a run's trace (`_plot_data`: `cosim.logs.reader`, ~6 ms),
     once the draft is made (not before: the draft is the longer wait), while the run goes."""
     import cosim.logs.reader  # noqa: F401
+
+
+# The plot process's first byte on its answer pipe, before the answer, once it is ready for the
+# run's trace (`_child`: drafted, the log reader imported): then the parent sends the trace's parts
+# and the plot process gathers the data; before, the parent gathers it itself (while the plot
+# process still drafts, a busy machine) and sends the `PlotData`.
+READY = b"\x01"
 
 
 def _touch(shared) -> None:
@@ -637,7 +649,6 @@ def _panels(drafted, data_read: int, done_write: int, rows) -> None:
         from cosim.logs.plot import copy_rgb, deflate_half, likely_texts, png_halves
 
         _widen(done_write)  # (the compressed half, ~0.1 MB, written at once)
-        _trace_reader()
         _warm(likely_texts(False), data_read)
         _own_pages(drafted.pixels(), lambda: _readable(data_read))
         _touch(rows)  # the shared pages mapped here too (read only: the plot process writes them first)

@@ -274,11 +274,22 @@ def test_a_drafted_picture_of_a_trace_is_the_picture_of_its_log(
 ):
     """As `cosim run` draws it: from the run's trace, sent as its two parts (`trace_parts`), of
     which the child and its helper gather the data themselves: the log's own picture."""
+    parent = os.getpid()
+    gather = plot.collect_signals
+
+    def gathered_here_not(source, *args, **options):
+        if isinstance(source, plot.TraceSource):  # (the log's picture is drawn here to compare)
+            assert os.getpid() != parent, "the parent gathered the trace's data: the child was not ready"
+        return gather(source, *args, **options)
+
+    monkeypatch.setattr(plot, "collect_signals", gathered_here_not)
     source = plot.TraceSource(traced_run.trace)
-    _draw_drafted(source, traced_run.log_path, tmp_path, monkeypatch, helped, True)
+    _draw_drafted(source, traced_run.log_path, tmp_path, monkeypatch, helped, True, wait_ready=True)
 
 
-def _draw_drafted(source, log: Path, tmp_path: Path, monkeypatch, helped: bool, later: bool) -> None:
+def _draw_drafted(
+    source, log: Path, tmp_path: Path, monkeypatch, helped: bool, later: bool, wait_ready: bool = False
+) -> None:
     from cosim.cli import plotter
     from cosim.scenario.load import load_scenario
 
@@ -292,6 +303,9 @@ def _draw_drafted(source, log: Path, tmp_path: Path, monkeypatch, helped: bool, 
     else:
         process = PlotProcess.start(scenario)
     pid = process.pid
+    waited = time.monotonic()
+    while wait_ready and not process.ready() and time.monotonic() - waited < 60:
+        time.sleep(0.01)  # (as after a run: the child has drafted while it went)
     assert process.draw_source(source, tmp_path / "x.png") is None
     assert not (tmp_path / "afresh").exists() and not (tmp_path / "afresh.here").exists()
     assert (tmp_path / "x.png").read_bytes() == plot.plot_run(log, tmp_path / "y.png").read_bytes()
