@@ -651,7 +651,8 @@ def _panels(drafted, data_read: int, done_write: int, rows) -> None:
         _widen(done_write)  # (the compressed half, ~0.1 MB, written at once)
         _warm(likely_texts(False), data_read)
         _own_pages(drafted.pixels(), lambda: _readable(data_read))
-        _touch(rows)  # the shared pages mapped here too (read only: the plot process writes them first)
+        if not _readable(data_read):  # the shared pages mapped here too (read only: the plot
+            _touch(rows)  # process writes them first), while the run goes
         drafted.more_ticks(lambda: _readable(data_read))
         with os.fdopen(data_read, "rb") as pipe:
             payload = _frame(pipe)
