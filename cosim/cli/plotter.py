@@ -409,8 +409,9 @@ def _draw_run(panels, mapped, drafted, helper) -> None:
         pasted = helper.paste(drafted)
         if pasted:
             drafted.write(Path(png_path), helper.rows, helper.last_half)
-        helper.cancel(wait=not pasted)  # once the picture is written, its exit is not waited for
-        if not pasted:  # the helper failed, or the two parts overlap: drawn afresh
+            helper.leave()  # it ends after this process (its exit not waited for)
+        else:  # the helper failed, or the two parts overlap: drawn afresh
+            helper.cancel()
             draw(data, Path(png_path))
 
 
@@ -587,8 +588,16 @@ class PanelHelper:
             _write_all(self._data, b"r")
         except OSError:
             pass
-        _close(self._data)
-        self._data = None
+
+    def leave(self) -> None:
+        """Leave the helper, which has answered, to end once this process has ended (its pipe
+        closes then): freeing its memory (a few ms of a core) then takes no core from this
+        process' last steps, nor from the parent's once it has the answer."""
+        if self._answers is not None:
+            self._answers.close()
+            self._answers = self._done = None
+        self._data = None  # (left open: closed as this process ends)
+        self.pid = 0
 
     def paste(self, drafted) -> bool:
         """Wait for the helper to have copied its panels into `rows`, and check that their box
@@ -654,20 +663,21 @@ def _panels(drafted, data_read: int, done_write: int, rows) -> None:
         if not _readable(data_read):  # the shared pages mapped here too (read only: the plot
             _touch(rows)  # process writes them first), while the run goes
         drafted.more_ticks(lambda: _readable(data_read))
-        with os.fdopen(data_read, "rb") as pipe:
-            payload = _frame(pipe)
-            if not payload:
-                return
-            drafted.draw_run(_plot_data(pickle.loads(payload)), False, LOWER)
-            top, bottom, left, right = drafted.panels_box(LOWER)
-            if pipe.read(1) != b"r":  # (the plot process draws afresh, or ended)
-                return
+        pipe = os.fdopen(data_read, "rb")
+        payload = _frame(pipe)
+        if not payload:
+            return
+        drafted.draw_run(_plot_data(pickle.loads(payload)), False, LOWER)
+        top, bottom, left, right = drafted.panels_box(LOWER)
+        if pipe.read(1) != b"r":  # (the plot process draws afresh, or ended)
+            return
         copy_rgb(rows[top:bottom, 1 + 3 * left : 1 + 3 * right], drafted.pixels()[top:bottom, left:right])
         _write_all(done_write, f"{top} {bottom} {left} {right}\n".encode())
         answered = True
         low, high = png_halves(len(rows))[1]
         body, checksum = deflate_half(rows[low:high], True)
         _write_all(done_write, f"{len(body)} {checksum}\n".encode() + body)
+        pipe.read(1)  # until the plot process has ended (`PanelHelper.leave`), or kills this one
     except Exception:  # noqa: BLE001 (no answer: the plot process draws the panels itself)
         if not answered:
             try:
