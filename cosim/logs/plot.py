@@ -30,7 +30,7 @@ from __future__ import annotations
 import os
 from contextlib import contextmanager
 from pathlib import Path
-from types import ModuleType
+from types import ModuleType, SimpleNamespace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -161,6 +161,9 @@ class TraceSource:
     def plans(self) -> list[tuple[float, np.ndarray]]:
         from cosim.logs.reader import path_poses
 
+        decoded = getattr(self.trace, "plan_poses", None)  # (`joined_trace`: decoded already)
+        if decoded is not None:
+            return [(t_ns / 1e9, poses) for t_ns, poses in decoded]
         return [(t_ns / 1e9, path_poses(message)) for t_ns, message in self.trace.plans]
 
     def goals(self) -> list[tuple[float, float, float]]:
@@ -211,6 +214,53 @@ class TraceSource:
         if not self.trace.scan_t_ns:
             return None
         return np.array(self.trace.scan_t_ns) / 1e9, np.array(self.trace.scan_minima)
+
+
+# What of a `RunTrace` its plot reads: the panels' part (`collect_signals`: the signals, scans,
+# poses and goals, the title's metadata) and the map's (`collect_map`: the grids, plans, obstacles).
+TRACE_PANEL_PARTS = (
+    "path", "metadata", "complete", "dropped", "components", "columns", "signal_blocks", "poses",
+    "scan_t_ns", "scan_minima", "goals",
+)  # fmt: skip
+TRACE_MAP_PARTS = ("grids", "obstacle_markers")
+
+
+def trace_parts(trace) -> tuple[SimpleNamespace, SimpleNamespace]:
+    """The parts of `trace` (a `RunTrace`) the plot reads, as plain values that pickle without the
+    trace's own modules: (the panels' part, the map's part, which holds the last /obstacles message
+    as `obstacles`, and each plan's poses as `plan_poses`: (t [ns], N x 3 array) each, which pickle
+    ten times faster than the messages). `cosim run` sends them to its plot process, which gathers
+    the `PlotData` itself (`TraceSource` of `joined_trace`), so that this process need not import
+    the log reader (~5 ms) once the run has ended."""
+    panels = SimpleNamespace(**{name: getattr(trace, name) for name in TRACE_PANEL_PARTS})
+    mapped = SimpleNamespace(**{name: getattr(trace, name) for name in TRACE_MAP_PARTS})
+    mapped.obstacles = trace.obstacles_message()
+    mapped.plan_poses = [(t_ns, _path_poses(message)) for t_ns, message in trace.plans]
+    return panels, mapped
+
+
+def _path_poses(message) -> np.ndarray:
+    """A nav_msgs/Path's poses as N x 3 (x, y [m], heading [rad]), computed as
+    `cosim.logs.reader.path_poses` computes them from the log (the same floats:
+    tests/logs/test_plot_trace.py), without importing the reader."""
+    from cosim.record.rosmsg import yaw_of
+
+    return np.array(
+        [(p.pose.position.x, p.pose.position.y, yaw_of(p.pose.orientation)) for p in message.poses],
+        dtype=float,
+    ).reshape(-1, 3)
+
+
+def joined_trace(panels: SimpleNamespace, mapped: SimpleNamespace | None = None) -> SimpleNamespace:
+    """A trace `TraceSource` reads from the two parts of `trace_parts` (without the map's part:
+    the panels' only, no obstacles, grids or plans)."""
+    joined = SimpleNamespace(**vars(panels), grids={}, plans=[], obstacle_markers=[])
+    obstacles = None
+    if mapped is not None:
+        vars(joined).update((name, value) for name, value in vars(mapped).items() if name != "obstacles")
+        obstacles = mapped.obstacles
+    joined.obstacles_message = lambda: obstacles
+    return joined
 
 
 # --- what is drawn ----------------------------------------------------------------------------
@@ -903,15 +953,16 @@ class Draft:
 
     def more_ticks(self, stop=lambda: False) -> None:
         """Make the panels' y axes' ticks up to `TICKS_AHEAD` each, one round of one more tick per
-        axis at a time, until `stop()` is true (asked before each round): the ticks a panel is
-        less likely to draw, made while the run goes when there is time for them (a tick made
-        ahead or when drawn: the same)."""
+        axis at a time, until `stop()` is true (asked before each tick, ~1 ms, not each round of
+        them: the run's data waits no longer than a tick): the ticks a panel is less likely to
+        draw, made while the run goes when there is time for them (a tick made ahead or when
+        drawn: the same)."""
         axes = [panel.yaxis for panel in self.panel_axes]
         for count in range(Y_TICKS_DRAFTED + 1, TICKS_AHEAD + 1):
-            if stop():
-                return
-            with collector_paused():
-                for axis in axes:
+            for axis in axes:
+                if stop():
+                    return
+                with collector_paused():
                     axis.get_major_ticks(count)
 
     def fits(self, data: PlotData) -> bool:
@@ -1020,17 +1071,21 @@ class Draft:
         right = min(int(np.ceil(box.x1)) + margin, width)
         return top, bottom, left, right
 
-    def write(self, png_path: str | Path, rows: np.ndarray | None = None) -> Path:
-        """Write the canvas to a PNG at `png_path` (`rows`: its `png_rows`, made before); returns
-        its path."""
+    def write(self, png_path: str | Path, rows: np.ndarray | None = None, last_half=None) -> Path:
+        """Write the canvas to a PNG at `png_path` (`rows`: its `png_rows`, made before;
+        `last_half`: the second half of them compressed: `write_png`); returns its path."""
         png_path = Path(png_path)
         png_path.parent.mkdir(parents=True, exist_ok=True)
-        write_png(png_path, self.pixels(), self.dpi, rows)
+        write_png(png_path, self.pixels(), self.dpi, rows, last_half)
         return png_path
 
 
 def _tick_label_boxes(axis, limits, renderer) -> list:
-    """The window boxes of the tick labels `axis` draws for a view of `limits`."""
+    """The window boxes of the tick labels `axis` draws for a view of `limits`: as its last draw
+    measured them (`_label_boxes_once`: the same boxes, ~70 us a label less), else measured here."""
+    drawn = getattr(axis, "_drawn_label_boxes", None)
+    if drawn is not None:
+        return drawn
     low, high = sorted(limits)
     return [
         tick.label1.get_window_extent(renderer)
@@ -1047,11 +1102,12 @@ def _overlay_title(runs: list[PlotData]) -> str:
     return "\n".join(lines)
 
 
-def png_rows(pixels: np.ndarray) -> np.ndarray:
+def png_rows(pixels: np.ndarray, into: np.ndarray | None = None) -> np.ndarray:
     """The rows of a PNG of `pixels` (as `write_png` takes them) before compression: per row a
-    filter byte (0: none) and the RGB bytes (rows x (1 + 3 x columns))."""
+    filter byte (0: none) and the RGB bytes (rows x (1 + 3 x columns)); written `into` that
+    array when given (e.g. memory shared with another process)."""
     height, width = pixels.shape[:2]
-    rows = np.empty((height, 1 + 3 * width), dtype=np.uint8)
+    rows = np.empty((height, 1 + 3 * width), dtype=np.uint8) if into is None else into
     rows[:, 0] = 0
     copy_rgb(rows[:, 1:], pixels)
     return rows
@@ -1066,7 +1122,25 @@ def copy_rgb(rows: np.ndarray, pixels: np.ndarray) -> None:
         into[:, :, colour] = pixels[:, :, colour]
 
 
-def write_png(path: Path, pixels: np.ndarray, dpi: float, rows: np.ndarray | None = None) -> None:
+def png_halves(height: int) -> tuple[tuple[int, int], tuple[int, int]]:
+    """The two halves of a PNG's rows (`write_png`) as (first row, end row) each."""
+    return (0, height // 2), (height // 2, height)
+
+
+def deflate_half(part: np.ndarray, last: bool) -> tuple[bytes, int]:
+    """A half of a PNG's rows (`png_halves`) compressed as `write_png` does it: a raw deflate
+    stream at level 1, the first half ended on a byte boundary (a sync flush), the `last` one
+    closed; and the half's Adler-32 checksum."""
+    import zlib
+
+    stream = zlib.compressobj(1, zlib.DEFLATED, -15)  # raw: no zlib header or checksum
+    body = stream.compress(part) + stream.flush(zlib.Z_FINISH if last else zlib.Z_SYNC_FLUSH)
+    return body, zlib.adler32(part)
+
+
+def write_png(
+    path: Path, pixels: np.ndarray, dpi: float, rows: np.ndarray | None = None, last_half=None
+) -> None:
     """Write an 8-bit RGB image (rows x columns x 3, or x 4 whose 4th byte is left out; row 0 at
     the top) as a PNG: no filter on the rows and zlib level 1. A plot is mostly flat colour, so this
     is a quarter larger than Pillow's default (adaptive filters, level 6) in a tenth of its time,
@@ -1074,8 +1148,10 @@ def write_png(path: Path, pixels: np.ndarray, dpi: float, rows: np.ndarray | Non
     (zlib lets other threads run): each half a raw deflate stream, the first ended on a byte
     boundary without closing the stream (a sync flush), so the two are one stream, as pigz does;
     the stream's checksum is put together from the halves' (`_adler32_combine`). `rows`: the
-    image's `png_rows`, made before (then `pixels` only gives the size). The pixel density
-    (`dpi`) is recorded as Pillow and matplotlib record it."""
+    image's `png_rows`, made before (then `pixels` only gives the size); `last_half`: a function
+    that gives their second half compressed (`deflate_half`: another process compresses it, and
+    is asked once the first half is done here), or None where it could not (then it is done
+    here). The pixel density (`dpi`) is recorded as Pillow and matplotlib record it."""
     import struct
     import threading
     import zlib
@@ -1084,7 +1160,7 @@ def write_png(path: Path, pixels: np.ndarray, dpi: float, rows: np.ndarray | Non
     copy = rows is None
     if copy:
         rows = np.empty((height, 1 + 3 * width), dtype=np.uint8)  # a filter byte (0: none) per row
-    halves = ((0, height // 2), (height // 2, height))
+    halves = png_halves(height)
     done: list = [None, None]
 
     def deflate(index: int) -> None:
@@ -1093,15 +1169,17 @@ def write_png(path: Path, pixels: np.ndarray, dpi: float, rows: np.ndarray | Non
         if copy:
             part[:, 0] = 0
             copy_rgb(part[:, 1:], pixels[low:high])
-        stream = zlib.compressobj(1, zlib.DEFLATED, -15)  # raw: no zlib header or checksum
-        body = stream.compress(part) + stream.flush(zlib.Z_FINISH if index == 1 else zlib.Z_SYNC_FLUSH)
-        done[index] = (body, zlib.adler32(part))
+        done[index] = deflate_half(part, index == 1)
 
-    second = threading.Thread(target=deflate, args=(1,))
-    second.start()
-    deflate(0)
-    second.join()
-    if done[1] is None:  # (the thread failed: its half again, here)
+    if last_half is None:
+        second = threading.Thread(target=deflate, args=(1,))
+        second.start()
+        deflate(0)
+        second.join()
+    else:
+        deflate(0)
+        done[1] = last_half()
+    if done[1] is None:  # (the thread or the other process failed: its half again, here)
         deflate(1)
     (first, first_sum), (last, last_sum) = done
     checksum = _adler32_combine(first_sum, last_sum, rows[halves[1][0] :].nbytes)
@@ -1178,6 +1256,8 @@ def _label_boxes_once(axis) -> None:
         try:
             return type(axis).draw(axis, renderer)
         finally:
+            # the boxes of the tick labels it drew, for `Draft.panels_box` (`_tick_label_boxes`)
+            axis._drawn_label_boxes = measured[0][0] if measured else None
             measured.clear()
 
     axis._get_ticklabel_bboxes = get_ticklabel_bboxes

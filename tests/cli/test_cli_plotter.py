@@ -230,16 +230,28 @@ def test_an_interrupt_while_the_child_draws_ends_the_child(cosim_run, tmp_path: 
 
 
 def _counting_afresh(monkeypatch, marker: Path) -> None:
-    """`plot.draw` in a forked process leaves `marker`: the picture was drawn afresh, not drafted."""
+    """`plot.draw` in a forked process leaves `marker`: the picture was drawn afresh, not drafted;
+    in this process, `marker` with the suffix ".here": the child failed."""
     parent = os.getpid()
     draw = plot.draw
 
     def counted(data, png_path, *options):
-        if os.getpid() != parent:
-            marker.touch()
+        (marker if os.getpid() != parent else marker.with_suffix(".here")).touch()
         return draw(data, png_path, *options)
 
     monkeypatch.setattr(plot, "draw", counted)
+
+
+@pytest.fixture(scope="module")
+def traced_run(tmp_path_factory):
+    """A run of the same scenario in this process: its in-memory trace and its log."""
+    from cosim.navigation.run import run_scenario
+    from cosim.scenario.load import load_scenario
+
+    scenario = load_scenario(EXAMPLE, ["simulation.stop_time=3"])
+    result = run_scenario(scenario, tmp_path_factory.mktemp("traced") / "run.mcap")
+    assert result.trace is not None and not result.trace.dropped
+    return result
 
 
 @pytest.mark.slow
@@ -249,8 +261,36 @@ def test_a_drafted_picture_is_the_picture_of_the_log(cosim_run, tmp_path: Path, 
     """The child drafts from the scenario (given when it starts, or sent once loaded, as `cosim
     run` does), gets the panels' part first and the map's after (`draw_source`), with or without
     its helper: the log's own picture, and not drawn afresh."""
-    from cosim.cli import plotter
     from cosim.logs.reader import open_log
+
+    with open_log(cosim_run) as log:
+        _draw_drafted(log, cosim_run, tmp_path, monkeypatch, helped, later)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("helped", [True, False], ids=["helper", "alone"])
+def test_a_drafted_picture_of_a_trace_is_the_picture_of_its_log(
+    traced_run, tmp_path: Path, monkeypatch, helped
+):
+    """As `cosim run` draws it: from the run's trace, sent as its two parts (`trace_parts`), of
+    which the child and its helper gather the data themselves: the log's own picture."""
+    parent = os.getpid()
+    gather = plot.collect_signals
+
+    def gathered_here_not(source, *args, **options):
+        if isinstance(source, plot.TraceSource):  # (the log's picture is drawn here to compare)
+            assert os.getpid() != parent, "the parent gathered the trace's data: the child was not ready"
+        return gather(source, *args, **options)
+
+    monkeypatch.setattr(plot, "collect_signals", gathered_here_not)
+    source = plot.TraceSource(traced_run.trace)
+    _draw_drafted(source, traced_run.log_path, tmp_path, monkeypatch, helped, True, wait_ready=True)
+
+
+def _draw_drafted(
+    source, log: Path, tmp_path: Path, monkeypatch, helped: bool, later: bool, wait_ready: bool = False
+) -> None:
+    from cosim.cli import plotter
     from cosim.scenario.load import load_scenario
 
     monkeypatch.setattr(plotter, "_free_core", lambda: helped)
@@ -263,10 +303,12 @@ def test_a_drafted_picture_is_the_picture_of_the_log(cosim_run, tmp_path: Path, 
     else:
         process = PlotProcess.start(scenario)
     pid = process.pid
-    with open_log(cosim_run) as log:
-        assert process.draw_source(log, tmp_path / "x.png") is None
-    assert not (tmp_path / "afresh").exists()
-    assert (tmp_path / "x.png").read_bytes() == plot.plot_run(cosim_run, tmp_path / "y.png").read_bytes()
+    waited = time.monotonic()
+    while wait_ready and not process.ready() and time.monotonic() - waited < 60:
+        time.sleep(0.01)  # (as after a run: the child has drafted while it went)
+    assert process.draw_source(source, tmp_path / "x.png") is None
+    assert not (tmp_path / "afresh").exists() and not (tmp_path / "afresh.here").exists()
+    assert (tmp_path / "x.png").read_bytes() == plot.plot_run(log, tmp_path / "y.png").read_bytes()
     assert _ends_by_itself(pid)
 
 
@@ -423,3 +465,38 @@ def test_the_plot_process_registers_no_3d_axes_and_sets_as_matplotlib_does():
     assert completed.returncode == 0, completed.stderr
     assert completed.stdout.split("\n")[:3] == ["False False", "3d", "red 3.0 4"]
     assert "Warning" not in completed.stderr
+
+
+def test_owning_the_canvas_pages_ahead_keeps_its_pixels_and_stops_when_asked():
+    """`_own_pages` writes each page of the canvas with its own bytes: in a forked process (whose
+    pages the parent shares until written), drawing over them afterwards copies no more pages;
+    the pixels are unchanged; it stops when asked (before each few hundred pages)."""
+    import resource
+
+    import numpy as np
+
+    from cosim.cli import plotter
+
+    pixels = np.random.default_rng(1).integers(0, 256, (1045, 1650, 4), dtype=np.uint8)
+    kept = pixels.copy()
+    asked = []
+    plotter._own_pages(pixels, lambda: asked.append(True) or len(asked) > 2)
+    assert len(asked) == 3 and np.array_equal(pixels, kept)
+    read, write = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # (the child: counts the pages copied when the whole canvas is drawn over)
+        try:
+            plotter._own_pages(pixels)
+            same = np.array_equal(pixels, kept)
+            before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+            pixels[...] = 9
+            copied = resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
+            os.write(write, f"{int(same)} {copied}".encode())
+        finally:
+            os._exit(0)
+    os.close(write)
+    with os.fdopen(read) as answer:
+        same, copied = answer.read().split()
+    os.waitpid(pid, 0)
+    assert same == "1" and int(copied) < 50  # (~1700 pages without)
+    assert np.array_equal(pixels, kept)  # the parent's own pages untouched

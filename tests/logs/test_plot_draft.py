@@ -90,22 +90,26 @@ def test_a_draft_is_drawn_over_once(run, tmp_path):
         drafted.draw_run(data, False, plotter.LOWER)
 
 
-@pytest.mark.parametrize("rounds", [0, 1, None], ids=["drafted", "one more", "all"])
-def test_ticks_made_ahead_while_the_run_goes_draw_the_same_picture(run, tmp_path, rounds):
-    """A y axis of a panel makes `Y_TICKS_DRAFTED` ticks with the draft, then one more per round of
-    `more_ticks` until it stops (`rounds` rounds: None, every one): however many were made
-    ahead, the picture is `draw`'s."""
+@pytest.mark.parametrize("ahead", [0, 1, 7, None], ids=["drafted", "one more", "mid-round", "all"])
+def test_ticks_made_ahead_while_the_run_goes_draw_the_same_picture(run, tmp_path, ahead):
+    """A y axis of a panel makes `Y_TICKS_DRAFTED` ticks with the draft, then `more_ticks` makes
+    one more per axis and round, asking `stop` before each tick, until it stops (after `ahead`
+    ticks: None, every one): however many were made ahead, the picture is `draw`'s."""
     scenario, data = run
     drafted = plot.Draft(preview(scenario))
     asked = []
 
     def stop() -> bool:
         asked.append(True)
-        return rounds is not None and len(asked) > rounds
+        return ahead is not None and len(asked) > ahead
 
     drafted.more_ticks(stop)
-    made = plot.TICKS_AHEAD if rounds is None else plot.Y_TICKS_DRAFTED + rounds
-    assert [len(axes.yaxis.majorTicks) for axes in drafted.panel_axes] == [made] * drafted.rows
+    rows = drafted.rows
+    if ahead is None:
+        made = [plot.TICKS_AHEAD] * rows
+    else:
+        made = [plot.Y_TICKS_DRAFTED + ahead // rows + (row < ahead % rows) for row in range(rows)]
+    assert [len(axes.yaxis.majorTicks) for axes in drafted.panel_axes] == made
     assert len(drafted.panel_axes[-1].xaxis.majorTicks) == plot.TICKS_AHEAD
     assert np.array_equal(_pixels(drafted.finish(data, tmp_path / "draft.png")), _drawn(data, tmp_path))
 
@@ -152,8 +156,12 @@ def test_the_two_parts_drawn_apart_and_put_together_are_the_picture(run, tmp_pat
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the helper is forked on Linux")
-@pytest.mark.parametrize("rows_first", [False, True], ids=["into the canvas", "into the PNG's rows"])
-def test_the_panel_helper_draws_the_panels_in_a_fork(run, tmp_path, rows_first):
+@pytest.mark.parametrize("its_half", [True, False], ids=["its half compressed", "both halves here"])
+def test_the_panel_helper_draws_the_panels_in_a_fork(run, tmp_path, its_half):
+    """As the plot process has it: the helper draws the panels while this process draws the map
+    part and makes the PNG's rows of it in the memory they share; the helper copies its panels
+    into them and compresses their second half (or, here, it is compressed again in this
+    process): the PNG `draw` writes, byte for byte."""
     import os
     import pickle
 
@@ -163,11 +171,15 @@ def test_the_panel_helper_draws_the_panels_in_a_fork(run, tmp_path, rows_first):
     pid = helper.pid
     helper.draw(pickle.dumps(data))
     drafted.draw_run(data, panels=plotter.TOP)
-    rows = plot.png_rows(drafted.pixels()) if rows_first else None  # as the plot process may
-    assert helper.paste(drafted, rows)
-    helped = drafted.write(tmp_path / "helped.png", rows)
-    assert np.array_equal(_pixels(helped), _drawn(data, tmp_path))
-    helper.cancel()  # after its pixels are pasted: it ends by itself
+    plot.png_rows(drafted.pixels(), into=helper.rows)
+    helper.rows_made()
+    assert helper.paste(drafted)
+    compressed = helper.last_half()
+    assert compressed is not None
+    helped = drafted.write(tmp_path / "helped.png", helper.rows, lambda: compressed if its_half else None)
+    drawn = plot.draw(data, tmp_path / "drawn.png")
+    assert helped.read_bytes() == drawn.read_bytes()
+    helper.cancel()  # after its answers: it ends by itself
     with pytest.raises(ChildProcessError):
         os.waitpid(pid, os.WNOHANG)  # reaped
 
@@ -197,4 +209,8 @@ def test_a_helper_that_died_gives_no_pixels(run):
     os.kill(helper.pid, signal.SIGKILL)
     helper.draw(pickle.dumps(data))  # into a closed pipe: no error
     drafted.draw_run(data, panels=plotter.TOP)
+    plot.png_rows(drafted.pixels(), into=helper.rows)
+    helper.rows_made()  # (no error either)
     assert not helper.paste(drafted)
+    assert helper.last_half() is None
+    helper.cancel()

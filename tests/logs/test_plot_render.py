@@ -166,6 +166,24 @@ def test_write_png_stream_decompresses_with_its_checksum(shape, made_before, tmp
     assert np.array_equal(rows[:, 1:].reshape(*shape, 3), pixels[:, :, :3])
 
 
+def test_a_png_whose_second_half_was_compressed_elsewhere_is_the_same_file(tmp_path):
+    """`write_png` given its rows' second half compressed (`deflate_half`, as the panel helper
+    sends it), or a function that gives None (the helper failed: compressed here): the same bytes
+    as compressed here in two threads."""
+    pixels = np.random.default_rng(3).integers(0, 256, (101, 37, 4), dtype=np.uint8)
+    pixels[20:70] = 255  # (flat rows, as a plot mostly is)
+    rows = plot.png_rows(pixels)
+    low, high = plot.png_halves(len(rows))[1]
+    half = plot.deflate_half(rows[low:high], True)
+    written = []
+    for name, last_half in (("here", None), ("given", lambda: half), ("failed", lambda: None)):
+        path = tmp_path / f"{name}.png"
+        plot.write_png(path, pixels, 72.0, rows, last_half)
+        written.append(path.read_bytes())
+    assert written[0] == written[1] == written[2]
+    assert np.array_equal(np.asarray(Image.open(tmp_path / "given.png")), pixels[:, :, :3])
+
+
 def test_copy_rgb_fills_a_window_of_png_rows_pixel_by_pixel():
     """As the plot process pastes its helper's panels into the PNG's rows: a window of columns of
     some rows gets each pixel's R, G, B bytes (the 4th byte left out), the rest is untouched."""

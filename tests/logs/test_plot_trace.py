@@ -78,6 +78,20 @@ def test_trace_gives_the_arrays_the_log_gives(run):
         assert any(series.unit == "rad" and "steering" in series.label for series in from_log.series)
 
 
+def test_the_trace_parts_a_plot_process_gets_give_the_arrays_the_log_gives(run):
+    """`cosim run` pickles its trace's two parts to its plot process, which gathers the data from
+    them (`trace_parts`, `joined_trace`): the panels' part alone, and both."""
+    import pickle
+
+    panels, mapped = (pickle.loads(pickle.dumps(part, protocol=5)) for part in plot.trace_parts(run.trace))
+    with open_log(run.log_path) as log:
+        from_log = plot.collect(log)
+        signals_only = plot.collect_signals(log)
+    _same(plot.collect(plot.TraceSource(plot.joined_trace(panels, mapped))), from_log, "parts")
+    _same(plot.collect_signals(plot.TraceSource(plot.joined_trace(panels))), signals_only, "panels' part")
+    assert from_log.plans and from_log.series
+
+
 def test_trace_and_log_draw_the_same_pixels(run, tmp_path):
     from matplotlib.image import imread
 
