@@ -159,7 +159,7 @@ class TraceSource:
         return OccupancyGrid(occupied, resolution, origin)
 
     def plans(self) -> list[tuple[float, np.ndarray]]:
-        from cosim.logs.reader import path_poses
+        from cosim.record.rosmsg import path_poses
 
         decoded = getattr(self.trace, "plan_poses", None)  # (`joined_trace`: decoded already)
         if decoded is not None:
@@ -232,23 +232,13 @@ def trace_parts(trace) -> tuple[SimpleNamespace, SimpleNamespace]:
     ten times faster than the messages). `cosim run` sends them to its plot process, which gathers
     the `PlotData` itself (`TraceSource` of `joined_trace`), so that this process need not import
     the log reader (~5 ms) once the run has ended."""
+    from cosim.record.rosmsg import path_poses
+
     panels = SimpleNamespace(**{name: getattr(trace, name) for name in TRACE_PANEL_PARTS})
     mapped = SimpleNamespace(**{name: getattr(trace, name) for name in TRACE_MAP_PARTS})
     mapped.obstacles = trace.obstacles_message()
-    mapped.plan_poses = [(t_ns, _path_poses(message)) for t_ns, message in trace.plans]
+    mapped.plan_poses = [(t_ns, path_poses(message)) for t_ns, message in trace.plans]
     return panels, mapped
-
-
-def _path_poses(message) -> np.ndarray:
-    """A nav_msgs/Path's poses as N x 3 (x, y [m], heading [rad]), computed as
-    `cosim.logs.reader.path_poses` computes them from the log (the same floats:
-    tests/logs/test_plot_trace.py), without importing the reader."""
-    from cosim.record.rosmsg import yaw_of
-
-    return np.array(
-        [(p.pose.position.x, p.pose.position.y, yaw_of(p.pose.orientation)) for p in message.poses],
-        dtype=float,
-    ).reshape(-1, 3)
 
 
 def joined_trace(panels: SimpleNamespace, mapped: SimpleNamespace | None = None) -> SimpleNamespace:

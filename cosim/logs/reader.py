@@ -25,7 +25,7 @@ import numpy as np
 import cosim.logs.index as log_index
 from cosim.errors import CosimError
 from cosim.record import rosmsg
-from cosim.record.rosmsg import COMPONENT_KEY, SIGNAL_NAMES_KEY, SIGNAL_UNITS_KEY
+from cosim.record.rosmsg import COMPONENT_KEY, SIGNAL_NAMES_KEY, SIGNAL_UNITS_KEY, path_poses
 from cosim.world.shapes import Circle, Polygon, Rectangle
 
 
@@ -543,16 +543,6 @@ def final_goal(metadata: dict, goals) -> tuple[float, float] | None:
         return goal[0], goal[1]
     given = goals()
     return (given[-1][1], given[-1][2]) if given else metadata_goal(metadata)
-
-
-def path_poses(message) -> np.ndarray:
-    """A nav_msgs/Path's poses as N x 3: x, y [m] and heading [rad] (the yaw of each orientation).
-    A run writes a grid planner's path with each pose facing the next one and a Hybrid A* path with
-    the vehicle's heading, which points backwards along the path where the car reverses."""
-    return np.array(
-        [(p.pose.position.x, p.pose.position.y, rosmsg.yaw_of(p.pose.orientation)) for p in message.poses],
-        dtype=float,
-    ).reshape(-1, 3)
 
 
 def start_pose(metadata: dict, trajectory) -> tuple[float, float, float] | None:

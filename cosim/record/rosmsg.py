@@ -541,6 +541,16 @@ def yaw_of(orientation) -> float:
     return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
 
+def path_poses(message) -> np.ndarray:
+    """A nav_msgs/Path's poses as N x 3: x, y [m] and heading [rad] (the yaw of each orientation).
+    A run writes a grid planner's path with each pose facing the next one and a Hybrid A* path with
+    the vehicle's heading, which points backwards along the path where the car reverses."""
+    return np.array(
+        [(p.pose.position.x, p.pose.position.y, yaw_of(p.pose.orientation)) for p in message.poses],
+        dtype=float,
+    ).reshape(-1, 3)
+
+
 def point(x: float, y: float, z: float = 0.0):
     return _types["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=float(z))
 
