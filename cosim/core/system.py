@@ -356,13 +356,18 @@ class System:
         connections = self.connections
         return len(self.components), len(connections), connections[-1] if connections else None
 
+    def _is_current(self, version: tuple | None) -> bool:
+        """Whether `version` (a `_version` taken before) is the system's graph as it is now."""
+        if version is None:
+            return False
+        now = self._version()
+        return version[0] == now[0] and version[1] == now[1] and version[2] is now[2]
+
     def _cached(self, name: str):
         """The value cached under `name` for the system as it is now (`_version`), or None."""
         version, value = self._cache.get(name, (None, None))
-        if version is not None:
-            now = self._version()
-            if version[0] == now[0] and version[1] == now[1] and version[2] is now[2]:
-                return value
+        if self._is_current(version):
+            return value
         shared = self._shared_facts()
         return None if shared is None else shared.get((name, self.mode, self.loops))
 
@@ -375,10 +380,7 @@ class System:
 
     def _shared_facts(self) -> dict | None:
         """The facts of the shared graph (`connect_many`), when the system is still that graph."""
-        if self._graph is None:
-            return None
-        now, then = self._version(), self._graph_version
-        if now[0] == then[0] and now[1] == then[1] and now[2] is then[2]:
+        if self._graph is not None and self._is_current(self._graph_version):
             return self._graph.facts
         return None
 
