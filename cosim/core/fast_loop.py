@@ -97,16 +97,14 @@ def _link_plan(system, fed: dict, name: str, skip: set[str]) -> tuple[tuple, tup
     j = 0
     while j < len(chosen):
         connection, producer, source, target = chosen[j]
-        plain = connection.scale == 1.0 and connection.offset == 0.0
         end = j + 1
         stride = chosen[j + 1].output - source if j + 1 < len(chosen) else 0
-        if plain and stride > 0 and chosen[j + 1].producer == producer:
+        if connection.is_plain and stride > 0 and chosen[j + 1].producer == producer:
             while end < len(chosen):
                 link = chosen[end]
                 if not (
                     link.producer == producer
-                    and link.connection.scale == 1.0
-                    and link.connection.offset == 0.0
+                    and link.connection.is_plain
                     and link.output == source + stride * (end - j)
                     and link.input == target + (end - j)
                 ):
@@ -117,10 +115,9 @@ def _link_plan(system, fed: dict, name: str, skip: set[str]) -> tuple[tuple, tup
             numbers.append((float(end - j), float(stride)))
         else:
             for connection, producer, source, target in chosen[j:end]:
-                scale, offset = connection.scale, connection.offset
-                kind = 0 if scale == 1.0 and offset == 0.0 else (1 if offset == 0.0 else 2)
+                kind = 0 if connection.is_plain else (1 if connection.offset == 0.0 else 2)
                 entries.append((producer, source, target, kind))
-                numbers.append((scale, offset))
+                numbers.append((connection.scale, connection.offset))
         j = end
     fed_slots = tuple((link.input, link.producer) for link in chosen)
     return system._keep(key, (tuple(entries), tuple(numbers), fed_slots))
