@@ -287,10 +287,13 @@ class ChunkWriter:
 
     def _write_record(self, record) -> tuple[int, int]:
         """Write one `mcap.records` record at the end of the file; returns (offset, length)."""
+        record.write(self._builder)
+        return self._write_bytes(self._builder.end())
+
+    def _write_bytes(self, data: bytes) -> tuple[int, int]:
+        """Write a record's bytes at the end of the file; returns (offset, length)."""
         self._drain()
         offset = self._stream.tell()
-        record.write(self._builder)
-        data = self._builder.end()
         self._stream.write(data)
         return offset, len(data)
 
@@ -351,11 +354,8 @@ class ChunkWriter:
         self._unwritten.clear()
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
-        self._drain()
-        offset = self._stream.tell()
-        record = metadata_record(name, data)
-        self._stream.write(record)
-        self._metadata_indexes.append(MetadataIndex(offset=offset, length=len(record), name=name))
+        offset, length = self._write_bytes(metadata_record(name, data))
+        self._metadata_indexes.append(MetadataIndex(offset=offset, length=length, name=name))
 
     def add_attachment(
         self, create_time: int, log_time: int, name: str, media_type: str, data: bytes
