@@ -632,6 +632,8 @@ def _canvas_class():
     from matplotlib import ft2font
     from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg, get_hinting_flag
 
+    from cosim.logs import kept_text
+
     RenderMode = getattr(ft2font, "RenderMode", None)
     NORMAL, MONO = (RenderMode.NORMAL, RenderMode.MONO) if RenderMode is not None else (None, None)
     known = matplotlib.__version__.split(".")[:2] == ["3", "11"]  # the version this follows
@@ -644,10 +646,15 @@ def _canvas_class():
         def get_text_width_height_descent(self, s, prop, ismath):
             if ismath:
                 return super().get_text_width_height_descent(s, prop, ismath)
-            key = (s, hash(prop), self.dpi, get_hinting_flag())  # FontProperties are equal by hash
+            flags = get_hinting_flag()
+            key = (s, hash(prop), self.dpi, flags)  # FontProperties are equal by hash
             size = _TEXT_SIZES.get(key)
             if size is None:
-                size = _TEXT_SIZES[key] = super().get_text_width_height_descent(s, prop, ismath)
+                size = kept_text.size_of(s, prop, self.dpi, flags)  # laid out by an earlier process
+                if size is None:
+                    size = super().get_text_width_height_descent(s, prop, ismath)
+                    kept_text.remember_size(s, prop, self.dpi, flags, size)
+                _TEXT_SIZES[key] = size
             return size
 
         def _get_font_height_metrics(self, prop):
@@ -703,10 +710,16 @@ def _canvas_class():
             key = (s, hash(prop), self.dpi, flags)
             glyphs = _TEXT_GLYPHS.get(key)
             if glyphs is None:
-                items = self._prepare_font(prop)._layout(s, flags=flags, features=None, language=None)
-                glyphs = _TEXT_GLYPHS[key] = [
-                    (item.ft_object, item.glyph_index, item.x, item.y) for item in items
-                ]
+                font = self._prepare_font(prop)
+                kept = kept_text.glyphs_of(s, prop, self.dpi, flags)  # laid out by an earlier process
+                if kept is not None:
+                    glyphs = [(font, glyph, x, y) for glyph, x, y in kept]
+                else:
+                    items = font._layout(s, flags=flags, features=None, language=None)
+                    glyphs = [(item.ft_object, item.glyph_index, item.x, item.y) for item in items]
+                    if all(item.ft_object is font for item in items):  # (no fallback font: kept)
+                        kept_text.remember_glyphs(s, prop, self.dpi, flags, [glyph[1:] for glyph in glyphs])
+                _TEXT_GLYPHS[key] = glyphs
             return glyphs
 
     class Canvas(FigureCanvasAgg):
