@@ -17,8 +17,8 @@ the map and its inflated zone, one collection for the obstacles, their tracks, e
 text boxes naming each panel's series (no legend per panel), ticks only inside the view, the
 panels' grid lines and tick marks as two lines per axis (matplotlib's own pixels:
 tests/logs/test_plot_render.py), each text's layout kept in the process by the canvas' renderer
-(`_canvas_class`), the cyclic garbage collector paused, and the PNG written straight from the
-canvas (`write_png`).
+(`_canvas_class`) and from one process to the next (`cosim.logs.kept_text`), the cyclic garbage
+collector paused, and the PNG written straight from the canvas (`write_png`).
 `cosim run` drafts its figure while the run goes (`Draft`: the map frame drawn from the scenario,
 the panels' ticks made, the run drawn over it after), lays out its likely texts ahead
 (`likely_texts`, `warm_text`) and draws the map and the panels in two processes: the same pixels.
@@ -608,6 +608,8 @@ def _without_3d_axes():
 # process. Laying a text out is most of the time matplotlib spends on it (shaping, with fallback
 # fonts: ~15 us per character, twice per text: for its size and to draw it); a process that knows
 # which texts it will draw lays them out ahead (`warm_text`: the plot process, while the run goes).
+# What an earlier process laid out is read from the file `cosim.logs.kept_text` keeps, before a
+# text is laid out here (a run's ~300 texts: most of them the same from run to run).
 _TEXT_SIZES: dict = {}
 _TEXT_GLYPHS: dict = {}
 _FONT_HEIGHTS: dict = {}
