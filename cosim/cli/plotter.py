@@ -380,8 +380,20 @@ def _child(data_read: int, reply_write: int, scenario, drawer=None) -> None:
     finally:
         try:
             os.write(reply_write, answer.encode()[:4000] + b"\0")
+            _keep_text()  # (answered: the parent does not wait for it)
         finally:
             os._exit(0)
+
+
+def _keep_text() -> None:
+    """Add the texts this process laid out to those kept for the next one (`cosim.logs.kept_text`),
+    where it imported that (it drew): it leaves with `os._exit`, without the exit handler."""
+    kept_text = sys.modules.get("cosim.logs.kept_text")
+    if kept_text is not None:
+        try:
+            kept_text.keep()
+        except Exception:  # noqa: BLE001 (not kept: laid out again next time)
+            pass
 
 
 def _draw_run(panels, mapped, drafted, helper) -> None:
@@ -677,6 +689,7 @@ def _panels(drafted, data_read: int, done_write: int, rows) -> None:
         low, high = png_halves(len(rows))[1]
         body, checksum = deflate_half(rows[low:high], True)
         _write_all(done_write, f"{len(body)} {checksum}\n".encode() + body)
+        _keep_text()  # (its part sent: the picture does not wait for it)
         pipe.read(1)  # until the plot process has ended (`PanelHelper.leave`), or kills this one
     except Exception:  # noqa: BLE001 (no answer: the plot process draws the panels itself)
         if not answered:

@@ -17,8 +17,8 @@ the map and its inflated zone, one collection for the obstacles, their tracks, e
 text boxes naming each panel's series (no legend per panel), ticks only inside the view, the
 panels' grid lines and tick marks as two lines per axis (matplotlib's own pixels:
 tests/logs/test_plot_render.py), each text's layout kept in the process by the canvas' renderer
-(`_canvas_class`), the cyclic garbage collector paused, and the PNG written straight from the
-canvas (`write_png`).
+(`_canvas_class`) and from one process to the next (`cosim.logs.kept_text`), the cyclic garbage
+collector paused, and the PNG written straight from the canvas (`write_png`).
 `cosim run` drafts its figure while the run goes (`Draft`: the map frame drawn from the scenario,
 the panels' ticks made, the run drawn over it after), lays out its likely texts ahead
 (`likely_texts`, `warm_text`) and draws the map and the panels in two processes: the same pixels.
@@ -608,6 +608,8 @@ def _without_3d_axes():
 # process. Laying a text out is most of the time matplotlib spends on it (shaping, with fallback
 # fonts: ~15 us per character, twice per text: for its size and to draw it); a process that knows
 # which texts it will draw lays them out ahead (`warm_text`: the plot process, while the run goes).
+# What an earlier process laid out is read from the file `cosim.logs.kept_text` keeps, before a
+# text is laid out here (a run's ~300 texts: most of them the same from run to run).
 _TEXT_SIZES: dict = {}
 _TEXT_GLYPHS: dict = {}
 _FONT_HEIGHTS: dict = {}
@@ -632,6 +634,8 @@ def _canvas_class():
     from matplotlib import ft2font
     from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg, get_hinting_flag
 
+    from cosim.logs import kept_text
+
     RenderMode = getattr(ft2font, "RenderMode", None)
     NORMAL, MONO = (RenderMode.NORMAL, RenderMode.MONO) if RenderMode is not None else (None, None)
     known = matplotlib.__version__.split(".")[:2] == ["3", "11"]  # the version this follows
@@ -644,10 +648,15 @@ def _canvas_class():
         def get_text_width_height_descent(self, s, prop, ismath):
             if ismath:
                 return super().get_text_width_height_descent(s, prop, ismath)
-            key = (s, hash(prop), self.dpi, get_hinting_flag())  # FontProperties are equal by hash
+            flags = get_hinting_flag()
+            key = (s, hash(prop), self.dpi, flags)  # FontProperties are equal by hash
             size = _TEXT_SIZES.get(key)
             if size is None:
-                size = _TEXT_SIZES[key] = super().get_text_width_height_descent(s, prop, ismath)
+                size = kept_text.size_of(s, prop, self.dpi, flags)  # laid out by an earlier process
+                if size is None:
+                    size = super().get_text_width_height_descent(s, prop, ismath)
+                    kept_text.remember_size(s, prop, self.dpi, flags, size)
+                _TEXT_SIZES[key] = size
             return size
 
         def _get_font_height_metrics(self, prop):
@@ -703,10 +712,16 @@ def _canvas_class():
             key = (s, hash(prop), self.dpi, flags)
             glyphs = _TEXT_GLYPHS.get(key)
             if glyphs is None:
-                items = self._prepare_font(prop)._layout(s, flags=flags, features=None, language=None)
-                glyphs = _TEXT_GLYPHS[key] = [
-                    (item.ft_object, item.glyph_index, item.x, item.y) for item in items
-                ]
+                font = self._prepare_font(prop)
+                kept = kept_text.glyphs_of(s, prop, self.dpi, flags)  # laid out by an earlier process
+                if kept is not None:
+                    glyphs = [(font, glyph, x, y) for glyph, x, y in kept]
+                else:
+                    items = font._layout(s, flags=flags, features=None, language=None)
+                    glyphs = [(item.ft_object, item.glyph_index, item.x, item.y) for item in items]
+                    if all(item.ft_object is font for item in items):  # (no fallback font: kept)
+                        kept_text.remember_glyphs(s, prop, self.dpi, flags, [glyph[1:] for glyph in glyphs])
+                _TEXT_GLYPHS[key] = glyphs
             return glyphs
 
     class Canvas(FigureCanvasAgg):

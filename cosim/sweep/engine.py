@@ -49,7 +49,13 @@ from cosim.sweep.spec import (
     sample_points,
     toml_value,
 )
-from cosim.sweep.warm import WORKER_PRELOAD, first_run_checked, start_fork_server, stop_fork_server
+from cosim.sweep.warm import (
+    WORKER_PRELOAD,
+    first_run_checked,
+    import_dask,
+    start_fork_server,
+    stop_fork_server,
+)
 
 CONNECT_TIMEOUT = 5.0  # [s] to reach a scheduler
 WORKER_WAIT = 30.0  # [s] for a reached scheduler to have at least one worker
@@ -310,6 +316,7 @@ _SYNC_FILTER = _UnboundSyncFuture()
 def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterator[tuple[object, int]]:
     """A client on `scheduler`, or on a new LocalCluster of `workers` processes (default: one per
     core, never more than there are runs); yields (client, number of workers)."""
+    import_dask()
     from distributed import Client, LocalCluster
 
     logging.getLogger("tornado.application").addFilter(_SYNC_FILTER)  # once: filters are a set
@@ -745,7 +752,7 @@ def run_sweep(
                     if child is None:  # its errors surface when `draw` imports it again
                         # After Dask's import, which would share this process's interpreter lock
                         # with it and so reach the cluster's start later.
-                        import distributed  # noqa: F401
+                        import_dask()
 
                         pool.submit(_load_plotting, exits)
                 with connect(options.scheduler, options.workers, len(pending)) as (client, workers):

@@ -1,5 +1,6 @@
 """The CLI's frame: every sub-command is registered, user errors exit 2 with one line."""
 
+import os
 import subprocess
 import sys
 
@@ -130,3 +131,24 @@ def test_a_run_under_a_profiler_exits_as_python_does(monkeypatch):
     finally:
         sys.setprofile(None)
     assert done.value.code == 1
+
+
+@pytest.mark.slow
+def test_the_program_has_openblas_threads_sleep_at_once_unless_told_otherwise():
+    """`cosim` sets OPENBLAS_THREAD_TIMEOUT=4 before numpy is imported (OpenBLAS reads it when
+    numpy loads it: its threads then sleep at once instead of spinning ~50 ms of a core); a value
+    the user set stays."""
+    script = (
+        "import os, sys\n"
+        "import cosim.__main__\n"
+        "assert 'numpy' not in sys.modules\n"
+        "print(os.environ['OPENBLAS_THREAD_TIMEOUT'])\n"
+    )
+    for given, expected in ((None, "4"), ("12", "12")):
+        env = {key: value for key, value in os.environ.items() if key != "OPENBLAS_THREAD_TIMEOUT"}
+        if given is not None:
+            env["OPENBLAS_THREAD_TIMEOUT"] = given
+        done = subprocess.run(
+            [sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=120
+        )
+        assert (done.returncode, done.stdout, done.stderr) == (0, f"{expected}\n", "")

@@ -238,3 +238,114 @@ def test_the_figures_renderer_draws_as_matplotlibs_own(monkeypatch):
     plain = pixels()
     assert np.array_equal(first, plain)
     assert np.array_equal(again, plain)
+
+
+@pytest.fixture
+def kept_file(tmp_path, monkeypatch):
+    """Text layouts kept in a file of `tmp_path` (not the build folder's), this process's layouts
+    (kept and in the renderer's caches) dropped before and after."""
+    from cosim.logs import kept_text
+
+    caches = (plot._TEXT_SIZES, plot._TEXT_GLYPHS, plot._FONT_HEIGHTS)
+    saved = [dict(cache) for cache in caches]
+    path = tmp_path / "text-layouts.pickle"
+    monkeypatch.setattr(kept_text, "kept_path", lambda: path)
+    kept_text.forget()
+    for cache in caches:
+        cache.clear()
+    yield path
+    kept_text.forget()
+    for cache, entries in zip(caches, saved, strict=True):
+        cache.clear()
+        cache.update(entries)
+
+
+def test_texts_laid_out_by_an_earlier_process_draw_matplotlibs_pixels(kept_file, monkeypatch):
+    """A figure drawn with every text's size and glyphs read from the kept file (as a later
+    process reads what an earlier one laid out: this process's own layouts dropped) has the
+    pixels of matplotlib's own Agg canvas, the y labels' rotated texts included."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from cosim.logs import kept_text
+
+    def pixels() -> np.ndarray:
+        return np.asarray(plot.build_figure(_data()).canvas.buffer_rgba()).copy()
+
+    laid_out = pixels()
+    kept_text.keep()
+    assert kept_file.exists()
+    kept_text.forget()
+    for cache in (plot._TEXT_SIZES, plot._TEXT_GLYPHS):
+        cache.clear()
+    found = {"sizes": 0, "glyphs": 0}
+    sizes, glyphs = kept_text.size_of, kept_text.glyphs_of
+
+    def size_of(*args):
+        size = sizes(*args)
+        found["sizes"] += size is not None
+        return size
+
+    def glyphs_of(*args):
+        kept = glyphs(*args)
+        found["glyphs"] += kept is not None
+        return kept
+
+    monkeypatch.setattr(kept_text, "size_of", size_of)
+    monkeypatch.setattr(kept_text, "glyphs_of", glyphs_of)
+    from_file = pixels()
+    assert found["sizes"] > 20 and found["glyphs"] > 20  # (the ticks' labels, legend, panel texts)
+    monkeypatch.setattr(plot, "_canvas_class", lambda: FigureCanvasAgg)
+    plain = pixels()
+    assert np.array_equal(laid_out, plain)
+    assert np.array_equal(from_file, plain)
+
+
+def test_kept_text_layouts_are_merged_capped_and_refused_when_stale(kept_file, monkeypatch):
+    """The file holds what two processes added (the second reads the first's), the newest
+    `KEPT` texts; one of another format, a broken one, or a layout kept for another version of
+    the font file (its size or time changed) is not used."""
+    import os
+    import pickle
+
+    from matplotlib.backends.backend_agg import get_hinting_flag
+    from matplotlib.font_manager import FontProperties
+
+    from cosim.logs import kept_text
+
+    prop, flags = FontProperties(size=9.0), get_hinting_flag()
+    kept_text.remember_size("first", prop, 110, flags, (30.0, 11.0, 2.0))
+    kept_text.keep()
+    kept_text.forget()  # another process
+    assert kept_text.size_of("first", prop, 110, flags) == (30.0, 11.0, 2.0)
+    kept_text.remember_size("second", prop, 110, flags, (40.0, 11.0, 2.0))
+    kept_text.remember_glyphs("second", prop, 110, flags, [(3, 0.0, 0.0), (4, 6.5, 0.0)])
+    kept_text.keep()
+    kept_text.forget()
+    assert kept_text.size_of("first", prop, 110, flags) == (30.0, 11.0, 2.0)
+    assert kept_text.glyphs_of("second", prop, 110, flags) == ((3, 0.0, 0.0), (4, 6.5, 0.0))
+    assert kept_text.size_of("second", prop, 110.5, flags) is None  # another dpi
+
+    monkeypatch.setattr(kept_text, "KEPT", 3)
+    for number in range(5):
+        kept_text.remember_size(f"text {number}", prop, 110, flags, (float(number), 1.0, 0.0))
+    kept_text.keep()
+    kept_text.forget()
+    held = [text for text in ["first", "second", *(f"text {n}" for n in range(5))]
+            if kept_text.size_of(text, prop, 110, flags) is not None]  # fmt: skip
+    assert held == ["text 2", "text 3", "text 4"]
+
+    header, entries = pickle.loads(kept_file.read_bytes())
+    (font,) = entries
+    older = tuple((path, face, size, mtime - 1) for path, face, size, mtime in font)  # the font changed since
+    kept_file.write_bytes(pickle.dumps((header, {older: entries[font]})))
+    kept_text.forget()
+    assert kept_text.size_of("text 4", prop, 110, flags) is None
+    for payload in (pickle.dumps((("another format", None, None), entries)), b"\x80\x05broken"):
+        kept_file.write_bytes(payload)
+        kept_text.forget()
+        assert kept_text.size_of("text 4", prop, 110, flags) is None
+    kept_text.remember_size("after", prop, 110, flags, (1.0, 1.0, 0.0))  # written afresh over it
+    kept_text.keep()
+    kept_text.forget()
+    assert kept_text.size_of("after", prop, 110, flags) == (1.0, 1.0, 0.0)
+    assert not [name for name in os.listdir(kept_file.parent) if name.startswith(".")]  # no partial left

@@ -1,0 +1,181 @@
+"""Text layouts kept from one process to the next, for the renderer of the run's figure and of
+sweep.png (`cosim.logs.plot._canvas_class`).
+
+Laying a text out (FreeType shaping each character, once for the text's size and once for its
+glyphs' places) is most of what matplotlib spends on a text, ~15 us a character; a run's figure
+holds ~100 texts, most of them the same from run to run (legend entries, units, tick labels), and a
+run's plot process has only the run's time to lay them out ahead. So what a process measured and
+laid out is kept in a file beside the built kernels, read by the next process that draws: per text,
+its font files, size [pt], dpi and hinting flags, the text's width, height and descent [px] and,
+when every glyph is the first font's (no fallback font), its glyphs (index and offset).
+
+A font file is known by its path, size and modification time, so a changed font lays its texts out
+afresh; the file is named by matplotlib's and FreeType's versions, and holds the rcParams that change
+a layout (text.hinting_factor, text.kerning_factor). At most `KEPT` texts are kept (the oldest go
+first). A process adds what it laid out when it is done drawing (`keep`: a plot process after it
+has answered, any other at exit). Whatever goes wrong reading or writing the file only means the
+texts are laid out again.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+from pathlib import Path
+
+FORMAT = "navcosim text layouts 1"
+KEPT = 2000  # texts: the file stays under ~0.2 MB, read in under ~3 ms
+
+# font id (the font files' (path, face, size, mtime) tuple) -> {(text, size [pt], dpi, flags):
+# [(width, height, descent) | None, ((glyph, x, y), ...) | None]}
+_kept: dict | None = None
+_added = [0]  # entries this process laid out, not yet written
+_font_ids: dict = {}  # hash(FontProperties) -> font id (or None: not kept), in this process
+_stats: dict = {}  # font file path -> (size, mtime) | None, in this process
+_exit_registered = [False]
+
+
+def kept_path() -> Path:
+    """The file, beside the built kernels (`native.load.build_folder`), named by the versions of
+    matplotlib and FreeType."""
+    import matplotlib
+    from matplotlib import ft2font
+
+    from native.load import build_folder
+
+    versions = f"{matplotlib.__version__}-{ft2font.__freetype_version__}"
+    return build_folder(Path(__file__)) / f"text-layouts-{versions}.pickle"
+
+
+def _settings() -> tuple:
+    """What besides the font, size, dpi and hinting flags changes a layout: the file's header."""
+    import matplotlib
+
+    return (FORMAT, matplotlib.rcParams["text.hinting_factor"], matplotlib.rcParams["text.kerning_factor"])
+
+
+def _read(path: Path) -> dict:
+    try:
+        with open(path, "rb") as stream:
+            header, entries = pickle.load(stream)
+    except Exception:  # noqa: BLE001 - none, unreadable or another format: laid out afresh
+        return {}
+    return entries if header == _settings() and isinstance(entries, dict) else {}
+
+
+def _entries() -> dict:
+    global _kept
+    if _kept is None:
+        _kept = _read(kept_path())
+        if not _exit_registered[0]:
+            import atexit
+
+            atexit.register(keep)  # (a forked plot process leaves with os._exit: it calls `keep`)
+            _exit_registered[0] = True
+    return _kept
+
+
+def _font_id(prop) -> tuple | None:
+    """The files of the fonts `prop` sets its text in (the first one and its fallbacks), each as
+    (path, face index, size, modification time); None when one cannot be read."""
+    key = hash(prop)  # (FontProperties are equal by hash, as the renderer's own caches take them)
+    found = _font_ids.get(key, 0)
+    if found != 0:
+        return found
+    from matplotlib.font_manager import fontManager
+
+    parts = []
+    for font in fontManager._find_fonts_by_props(prop):
+        path = str(getattr(font, "path", font))  # (matplotlib's FontPath: the path and the face)
+        status = _stats.get(path, 0)
+        if status == 0:
+            try:
+                stat = os.stat(path)
+                status = _stats[path] = (stat.st_size, stat.st_mtime_ns)
+            except OSError:
+                status = _stats[path] = None
+        if status is None:
+            parts = None
+            break
+        parts.append((path, getattr(font, "face_index", 0), *status))
+    found = _font_ids[key] = None if not parts else tuple(parts)
+    return found
+
+
+def _entry(s: str, prop, dpi: float, flags, create: bool = False) -> list | None:
+    font = _font_id(prop)
+    if font is None:
+        return None
+    entries = _entries()
+    texts = entries.get(font)
+    key = (s, prop.get_size_in_points(), float(dpi), int(getattr(flags, "value", flags)))
+    entry = None if texts is None else texts.get(key)
+    if entry is None and create:
+        if texts is None:
+            texts = entries[font] = {}
+        entry = texts[key] = [None, None]
+    return entry
+
+
+def size_of(s: str, prop, dpi: float, flags) -> tuple | None:
+    """The kept (width, height, descent) [px] of `s` set in `prop` at `dpi` with `flags`, or None."""
+    entry = _entry(s, prop, dpi, flags)
+    return None if entry is None else entry[0]
+
+
+def glyphs_of(s: str, prop, dpi: float, flags) -> tuple | None:
+    """The kept glyphs of `s` (glyph index, x, y: the layout's), all of the first font of `prop`."""
+    entry = _entry(s, prop, dpi, flags)
+    return None if entry is None else entry[1]
+
+
+def remember_size(s: str, prop, dpi: float, flags, size: tuple) -> None:
+    entry = _entry(s, prop, dpi, flags, create=True)
+    if entry is not None and entry[0] is None:
+        entry[0] = tuple(float(number) for number in size)
+        _added[0] += 1
+
+
+def remember_glyphs(s: str, prop, dpi: float, flags, glyphs) -> None:
+    """Keep the layout `glyphs` ((glyph index, x, y) of each glyph, all of the first font)."""
+    entry = _entry(s, prop, dpi, flags, create=True)
+    if entry is not None and entry[1] is None:
+        entry[1] = tuple((int(glyph), float(x), float(y)) for glyph, x, y in glyphs)
+        _added[0] += 1
+
+
+def keep() -> None:
+    """Add what this process laid out to the file (with what other processes added meanwhile), the
+    oldest texts dropped beyond `KEPT`; nothing when it laid nothing out."""
+    if not _added[0] or _kept is None:
+        return
+    _added[0] = 0
+    path = kept_path()
+    merged = _read(path)
+    for font, texts in _kept.items():
+        merged.setdefault(font, {}).update(texts)
+    count = sum(len(texts) for texts in merged.values())
+    for texts in merged.values():  # the oldest go first: the file's, then this process's
+        while count > KEPT and texts:
+            del texts[next(iter(texts))]
+            count -= 1
+    partial = path.with_name(f".{path.name}.{os.getpid()}")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(partial, "wb") as stream:
+            pickle.dump((_settings(), merged), stream, protocol=pickle.HIGHEST_PROTOCOL)
+        os.replace(partial, path)
+    except Exception:  # noqa: BLE001 - not kept: the next process lays them out again
+        try:
+            partial.unlink(missing_ok=True)
+        except OSError:
+            pass
+
+
+def forget() -> None:
+    """Drop what this process read or laid out (tests; a process whose fonts changed)."""
+    global _kept
+    _kept = None
+    _added[0] = 0
+    _font_ids.clear()
+    _stats.clear()
