@@ -84,8 +84,12 @@ def _font_id(prop) -> tuple | None:
         return found
     from matplotlib.font_manager import fontManager
 
+    try:  # (matplotlib's own look-up for a text's fonts, as `RendererAgg._prepare_font` does it)
+        fonts = fontManager._find_fonts_by_props(prop)
+    except Exception:  # noqa: BLE001 - another matplotlib, or no font: nothing kept for it
+        fonts = []
     parts = []
-    for font in fontManager._find_fonts_by_props(prop):
+    for font in fonts:
         path = str(getattr(font, "path", font))  # (matplotlib's FontPath: the path and the face)
         status = _stats.get(path, 0)
         if status == 0:
