@@ -163,9 +163,10 @@ def keep() -> None:
         while count > KEPT and texts:
             del texts[next(iter(texts))]
             count -= 1
+    if not path.parent.is_dir():  # (no kernels built there: nothing of navcosim's to write beside;
+        return  # and a folder removed meanwhile, by a test or the user, is not made again)
     partial = path.with_name(f".{path.name}.{os.getpid()}")
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
         with open(partial, "wb") as stream:
             pickle.dump((_settings(), merged), stream, protocol=pickle.HIGHEST_PROTOCOL)
         os.replace(partial, path)

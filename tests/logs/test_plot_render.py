@@ -349,3 +349,9 @@ def test_kept_text_layouts_are_merged_capped_and_refused_when_stale(kept_file, m
     kept_text.forget()
     assert kept_text.size_of("after", prop, 110, flags) == (1.0, 1.0, 0.0)
     assert not [name for name in os.listdir(kept_file.parent) if name.startswith(".")]  # no partial left
+
+    gone = kept_file.parent / "removed" / "native" / kept_file.name  # (a build folder removed meanwhile)
+    monkeypatch.setattr(kept_text, "kept_path", lambda: gone)
+    kept_text.remember_size("not written", prop, 110, flags, (1.0, 1.0, 0.0))
+    kept_text.keep()
+    assert not gone.parent.parent.exists()
