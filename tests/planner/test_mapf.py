@@ -150,7 +150,10 @@ def test_a_dense_warehouse_of_long_aisles(seed):
     agents = int(0.3 * len(free))
     starts = free[rng.choice(len(free), agents, replace=False)]
     goals = free[rng.choice(len(free), agents, replace=False)]
-    result = solve(grid, starts, goals, time_limit=5.0, seed=seed)
+    # The first solutions come at ~0.25, ~3.6 and ~0.65 s on an idle core of the 2-core machine; the
+    # search's slices are timed, so a core shared with the rest of the suite stretches that (seed 1
+    # once took over 5 s there): 10 s, which the solver then spends improving.
+    result = solve(grid, starts, goals, time_limit=10.0, seed=seed)
     assert result.solved
     check(grid.occupied.tolist(), starts, goals, result)
     assert result.sum_of_costs >= result.lower_bound == lower_bound(grid.occupied.tolist(), starts, goals)
