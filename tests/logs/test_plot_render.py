@@ -301,9 +301,9 @@ def test_texts_laid_out_by_an_earlier_process_draw_matplotlibs_pixels(kept_file,
 
 
 def test_kept_text_layouts_are_merged_capped_and_refused_when_stale(kept_file, monkeypatch):
-    """The file holds what two processes added (the second reads the first's), the newest
-    `KEPT` texts; one of another format, a broken one, or a layout kept for another version of
-    the font file (its size or time changed) is not used."""
+    """The file holds what two processes added (the second reads the first's), at most `KEPT`
+    texts, those no process used for longest dropped first; one of another format, a broken one,
+    or a layout kept for another version of the font file (its size or time changed) is not used."""
     import os
     import pickle
 
@@ -334,21 +334,30 @@ def test_kept_text_layouts_are_merged_capped_and_refused_when_stale(kept_file, m
             if kept_text.size_of(text, prop, 110, flags) is not None]  # fmt: skip
     assert held == ["text 2", "text 3", "text 4"]
 
+    kept_text.forget()  # another process, which uses text 2: kept longer than text 3 then
+    kept_text.size_of("text 2", prop, 110, flags)
+    kept_text.remember_size("text 5", prop, 110, flags, (5.0, 1.0, 0.0))
+    kept_text.keep()
+    kept_text.forget()
+    held = [text for text in (f"text {n}" for n in range(6)) if kept_text.size_of(text, prop, 110, flags)]
+    assert held == ["text 2", "text 4", "text 5"]
+
     header, entries = pickle.loads(kept_file.read_bytes())
     (font,) = entries
     older = tuple((path, face, size, mtime - 1) for path, face, size, mtime in font)  # the font changed since
     kept_file.write_bytes(pickle.dumps((header, {older: entries[font]})))
     kept_text.forget()
-    assert kept_text.size_of("text 4", prop, 110, flags) is None
+    assert kept_text.size_of("text 5", prop, 110, flags) is None
     for payload in (pickle.dumps((("another format", None, None), entries)), b"\x80\x05broken"):
         kept_file.write_bytes(payload)
         kept_text.forget()
-        assert kept_text.size_of("text 4", prop, 110, flags) is None
+        assert kept_text.size_of("text 5", prop, 110, flags) is None
     kept_text.remember_size("after", prop, 110, flags, (1.0, 1.0, 0.0))  # written afresh over it
     kept_text.keep()
     kept_text.forget()
     assert kept_text.size_of("after", prop, 110, flags) == (1.0, 1.0, 0.0)
-    assert not [name for name in os.listdir(kept_file.parent) if name.startswith(".")]  # no partial left
+    partials = [name for name in os.listdir(kept_file.parent) if name.startswith(f".{kept_file.name}.")]
+    assert partials == [f".{kept_file.name}.lock"]  # (the writers' lock; no partial file left)
 
     gone = kept_file.parent / "removed" / "native" / kept_file.name  # (a build folder removed meanwhile)
     monkeypatch.setattr(kept_text, "kept_path", lambda: gone)
