@@ -21,6 +21,7 @@ means the texts are laid out again.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import os
 import pickle
@@ -37,8 +38,6 @@ _kept: dict | None = None
 _added = [0]  # entries this process laid out, not yet written
 _used: set = set()  # (font id, key) of the kept texts this process used
 _font_ids: dict = {}  # hash(FontProperties) -> font id (or None: not kept), in this process
-_stats: dict = {}  # font file path -> (size, mtime) | None, in this process
-_exit_registered = [False]
 
 
 def kept_path() -> Path:
@@ -73,11 +72,6 @@ def _entries() -> dict:
     global _kept
     if _kept is None:
         _kept = _read(kept_path())
-        if not _exit_registered[0]:
-            import atexit
-
-            atexit.register(keep)  # (a forked plot process leaves with os._exit: it calls `keep`)
-            _exit_registered[0] = True
     return _kept
 
 
@@ -97,17 +91,12 @@ def _font_id(prop) -> tuple | None:
     parts = []
     for font in fonts:
         path = str(getattr(font, "path", font))  # (matplotlib's FontPath: the path and the face)
-        status = _stats.get(path, 0)
-        if status == 0:
-            try:
-                stat = os.stat(path)
-                status = _stats[path] = (stat.st_size, stat.st_mtime_ns)
-            except OSError:
-                status = _stats[path] = None
-        if status is None:
+        try:
+            stat = os.stat(path)
+        except OSError:
             parts = None
             break
-        parts.append((path, getattr(font, "face_index", 0), *status))
+        parts.append((path, getattr(font, "face_index", 0), stat.st_size, stat.st_mtime_ns))
     found = _font_ids[key] = None if not parts else tuple(parts)
     return found
 
@@ -211,6 +200,9 @@ def _write_merged(path: Path) -> None:
             pass
 
 
+atexit.register(keep)  # (a forked plot process leaves with os._exit: it calls `keep` itself)
+
+
 def forget() -> None:
     """Drop what this process read or laid out (tests; a process whose fonts changed)."""
     global _kept
@@ -218,4 +210,3 @@ def forget() -> None:
     _added[0] = 0
     _used.clear()
     _font_ids.clear()
-    _stats.clear()
