@@ -51,6 +51,7 @@ from cosim.sweep.spec import (
 )
 from cosim.sweep.warm import (
     WORKER_PRELOAD,
+    first_run_answered,
     first_run_checked,
     import_dask,
     start_fork_server,
@@ -313,9 +314,10 @@ _SYNC_FILTER = _UnboundSyncFuture()
 
 
 @contextmanager
-def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterator[tuple[object, int]]:
+def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterator[tuple[object, int, object]]:
     """A client on `scheduler`, or on a new LocalCluster of `workers` processes (default: one per
-    core, never more than there are runs); yields (client, number of workers)."""
+    core, never more than there are runs); yields (client, number of workers, `grow`): `grow()`
+    starts a local cluster's workers, once the sweep's tasks are in (None for a scheduler's)."""
     import_dask()
     from distributed import Client, LocalCluster
 
@@ -339,16 +341,14 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
                     f"--scheduler {scheduler}: the scheduler has no workers (waited {WORKER_WAIT:g} s); "
                     f"start some with `dask worker {scheduler}`"
                 ) from None
-            yield client, len(client.scheduler_info()["workers"])
+            yield client, len(client.scheduler_info()["workers"]), None
         finally:
             client.close()
         return
     from multiprocessing import forkserver, get_context
 
-    import dask
     import distributed.utils
     from distributed import versions
-    from distributed.nanny import WorkerProcess
 
     count = max(1, min(workers or os.cpu_count() or 1, pending))
     # The workers fork from the fork server (`start_fork_server`), which ignores SIGINT, as they do;
@@ -366,64 +366,86 @@ def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterato
     # The scheduler reads its host's and packages' versions when the first worker registers
     # (`distributed.versions.get_versions`: `uname -p` run as a subprocess, a dozen packages'
     # metadata read, the metadata parser imported: 10-20 ms), on the way to the cluster's start.
-    # Read now, while the workers wait for the fork server to warm up, the answer is kept then.
+    # Read now, while the fork server warms up, the answer is kept then.
     versions.get_versions()
-    # A Ctrl-C while the cluster starts (most of a second: its workers wait for the fork server to
-    # warm up) is held until it has started, then the cluster is closed and the interrupt goes on.
-    # Ignored, as it was over the whole start, the sweep went on as if no key had been pressed;
-    # raised inside Dask's start, it would cut that short midway, with no cluster here to close.
+    settings = {
+        "distributed.worker.profile.enabled": False,
+        "distributed.worker.multiprocessing-method": "forkserver",
+        # Each server (the scheduler and the nannies here, each worker) checks that its event
+        # loop is responsive every 20 ms and samples its host's CPU, memory, network and disk
+        # every 0.5 s, for warnings and dashboards that a sweep silences or never opens: 5 %
+        # of a sweep's CPU time (sampled: 0.1 s in this process, 0.07 s a worker for 8 runs),
+        # and each wake-up takes the GIL from the run or the plot. The memory limits still
+        # read the process's memory afresh every 0.1 s.
+        "distributed.admin.tick.interval": "1s",
+        "distributed.admin.system-monitor.interval": "5s",
+        "distributed.admin.system-monitor.disk": False,
+    }
+    if hasattr(distributed.utils, "_forkserver_preload_set"):
+        distributed.utils._forkserver_preload_set = True
+    # The scheduler first, alone (no worker to wait for): the sweep's plugin and tasks are in before
+    # any worker is (`_execute`), and each worker runs as soon as it has registered.
     interrupts: list[int] = []
-    previous = signal.signal(signal.SIGINT, lambda number, frame: interrupts.append(number))
-    polling = None
+    with _starting(settings, interrupts):
+        cluster = LocalCluster(
+            n_workers=0,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address=None,
+            # No dashboard, but the scheduler serves HTTP anyway, by default on port 8787: where
+            # that port is taken (another Dask, a second sweep) it warned on stderr, even under
+            # --quiet, and bound another. A free port of 127.0.0.1 from the start.
+            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+            silence_logs=logging.CRITICAL,
+        )
+
+    def grow() -> None:
+        """Start the `count` workers and return once they have (their fork server serves them when
+        it has warmed up); as Dask's `LocalCluster` starts the workers it is given."""
+        with _starting(settings, interrupts):
+            while len(cluster.worker_spec) < count:
+                cluster.worker_spec.update(cluster.new_worker_spec())
+            cluster.sync(cluster._correct_state)
+        if interrupts:  # to the handler held before (`Interrupted`, KeyboardInterrupt); then closed
+            signal.raise_signal(signal.SIGINT)
+
     try:
-        settings = {
-            "distributed.worker.profile.enabled": False,
-            "distributed.worker.multiprocessing-method": "forkserver",
-            # Each server (the scheduler and the nannies here, each worker) checks that its event
-            # loop is responsive every 20 ms and samples its host's CPU, memory, network and disk
-            # every 0.5 s, for warnings and dashboards that a sweep silences or never opens: 5 %
-            # of a sweep's CPU time (sampled: 0.1 s in this process, 0.07 s a worker for 8 runs),
-            # and each wake-up takes the GIL from the run or the plot. The memory limits still
-            # read the process's memory afresh every 0.1 s.
-            "distributed.admin.tick.interval": "1s",
-            "distributed.admin.system-monitor.interval": "5s",
-            "distributed.admin.system-monitor.disk": False,
-        }
-        if hasattr(distributed.utils, "_forkserver_preload_set"):
-            distributed.utils._forkserver_preload_set = True
-        # A nanny looks for its new worker's "started" message every 50 ms (Dask's default): a
-        # worker that is up waits 25 ms on average, the last of them up to 50, before the cluster
-        # counts it. Every 5 ms instead while this cluster starts (~40 polls of a queue: nothing).
-        polling = getattr(WorkerProcess, "_init_msg_interval", None)
-        if polling is not None:
-            WorkerProcess._init_msg_interval = min(polling, 0.005)
-        with dask.config.set(settings):
-            cluster = LocalCluster(
-                n_workers=count,
-                threads_per_worker=1,
-                processes=True,
-                host="127.0.0.1",
-                dashboard_address=None,
-                # No dashboard, but the scheduler serves HTTP anyway, by default on port 8787: where
-                # that port is taken (another Dask, a second sweep) it warned on stderr, even under
-                # --quiet, and bound another. A free port of 127.0.0.1 from the start.
-                scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
-                silence_logs=logging.CRITICAL,
-            )
-    finally:
-        signal.signal(signal.SIGINT, previous)
-        if polling is not None:
-            WorkerProcess._init_msg_interval = polling
-    try:
-        if interrupts:  # to the handler held before (`Interrupted`, KeyboardInterrupt), the cluster closed
+        if interrupts:
             signal.raise_signal(signal.SIGINT)
         client = Client(cluster, set_as_default=False)
         try:
-            yield client, count
+            yield client, count, grow
         finally:
             client.close()
     finally:
         cluster.close()
+
+
+@contextmanager
+def _starting(settings: dict, interrupts: list[int]) -> Iterator[None]:
+    """Dask's `settings` in force, and a Ctrl-C held (appended to `interrupts`), while part of a
+    local cluster starts (its scheduler, then its workers, which wait for the fork server to warm
+    up: most of a second). Held, the interrupt goes on once that part has started, and the
+    cluster is closed; ignored, the sweep went on as if no key had been pressed; raised inside
+    Dask's start, it would cut that short midway, with nothing here to close.
+    A nanny looks for its new worker's "started" message every 50 ms (Dask's default): a worker
+    that is up waits 25 ms on average, the last of them up to 50, before the cluster counts it.
+    Every 5 ms instead meanwhile (~40 polls of a queue: nothing)."""
+    import dask
+    from distributed.nanny import WorkerProcess
+
+    previous = signal.signal(signal.SIGINT, lambda number, frame: interrupts.append(number))
+    polling = getattr(WorkerProcess, "_init_msg_interval", None)
+    try:
+        if polling is not None:
+            WorkerProcess._init_msg_interval = min(polling, 0.005)
+        with dask.config.set(settings):
+            yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if polling is not None:
+            WorkerProcess._init_msg_interval = polling
 
 
 RECORD_SUFFIX = ".outcome.json"
@@ -477,17 +499,17 @@ def _execute(
     total,
     checked,
     keep_logs: str,
-    local: bool = False,
-    checked_first: bool = False,
+    grow=None,
 ):
     """Check `first` on a worker, then run `pending`, writing each row as it comes. `checked()` is
     called once the check passed, before any row is kept; a failed check raises `CosimError`.
-    `checked_first`: the local cluster's fork server built `first` already
-    (`cosim.sweep.warm.first_run_checked`), so no worker checks it. The workers send the logs that
-    `keep_logs` keeps. `local`: the cluster is this sweep's own and
-    closes next, its workers with it: each removes the bundle's files as it closes
-    (`BundlePlugin.teardown`), so the plugin is not unregistered first (a round trip to every
-    worker); the workers of a scheduler stay, and it is."""
+    The workers send the logs that `keep_logs` keeps.
+    `grow`: the sweep's own local cluster (`connect`), whose workers start once the plugin and the
+    tasks are in. Its fork server may have built `first` already, warmed up on it
+    (`cosim.sweep.warm.first_run_checked`): then no worker checks it. The cluster closes next,
+    its workers with it: each removes the bundle's files as it closes (`BundlePlugin.teardown`),
+    so the plugin is not unregistered first (a round trip to every worker); the workers of a
+    scheduler stay, and it is."""
     from distributed import as_completed
 
     from cosim.sweep.worker import BundlePlugin, TaskResult, check_task, run_task
@@ -495,13 +517,17 @@ def _execute(
     plugin = BundlePlugin(bundle)
     client.register_plugin(plugin, name=plugin.name)
     token = secrets.token_hex(4)
-    # The check goes first (a higher priority); the runs start on the other workers meanwhile, and
-    # their results wait in memory until the check passed.
-    check = None
-    if not checked_first:
-        check = client.submit(
-            check_task, plugin.name, first, key=f"navcosim-check-{token}", pure=False, priority=1
+
+    def submit_check(priority: int):  # (a higher priority than the runs: it goes first)
+        return client.submit(
+            check_task, plugin.name, first, key=f"navcosim-check-{token}", pure=False, priority=priority
         )
+
+    # The check goes first; the runs start on the other workers meanwhile, and their results wait in
+    # memory until the check passed. The fork server's answer comes when it has warmed up, before
+    # it serves the first worker: the check is submitted then only if that run did not build there.
+    answers = grow is not None and first_run_answered(first.run_id)
+    check = None if answers else submit_check(1)
     futures = {
         client.submit(
             run_task, plugin.name, run, keep_logs, key=f"navcosim-{run.run_id}-{token}", pure=False
@@ -511,6 +537,10 @@ def _execute(
     bar = None
     failed = 0
     try:
+        if grow is not None:
+            grow()
+            if answers and not first_run_checked(first.run_id):
+                check = submit_check(2)
         try:
             error = None if check is None else check.result()
         except Exception as failure:  # the worker died while building
@@ -546,7 +576,7 @@ def _execute(
         for future in futures:
             future.cancel()
         try:
-            if not local:
+            if grow is None:
                 client.unregister_worker_plugin(plugin.name)
         except Exception:  # the cluster is going away anyway; its workers drop the plugin then
             pass
@@ -755,8 +785,7 @@ def run_sweep(
                         import_dask()
 
                         pool.submit(_load_plotting, exits)
-                with connect(options.scheduler, options.workers, len(pending)) as (client, workers):
-                    local = options.scheduler is None
+                with connect(options.scheduler, options.workers, len(pending)) as (client, workers, grow):
                     _execute(
                         client,
                         bundle,
@@ -770,8 +799,7 @@ def run_sweep(
                         len(runs),
                         checked,
                         options.keep_logs,
-                        local=local,
-                        checked_first=local and first_run_checked(runs[0].run_id),
+                        grow,
                     )
                     finish_tables()
                     if plot:  # drawn while the cluster closes

@@ -289,11 +289,18 @@ def _fork_server_here(request: dict, first=None) -> bool:
 _CHECK: list[tuple[int, str]] = []
 
 
+def first_run_answered(run_id: str) -> bool:
+    """Whether the fork server will say if the sweep's run `run_id` builds (`first_run_checked`): it
+    was forked from this process, warming up on that run."""
+    return any(checked == run_id for _, checked in _CHECK)
+
+
 def first_run_checked(run_id: str) -> bool:
     """Whether the fork server, warmed up on the sweep's first run `run_id` (`start_fork_server`
     with `first`), found that it builds; read once, without waiting: False when it has not said so
     (another run, no such server, a fresh interpreter, an answer not there yet). The server answers
-    before it forks any worker, so once the local cluster has started its answer is there."""
+    before it forks any worker, so once a worker of the local cluster has started its answer is
+    there."""
     import select
 
     answer = b""

@@ -106,3 +106,21 @@ def test_the_fork_server_answers_once_for_its_own_first_run():
     )
     assert result.returncode == 0, result.stderr
     assert result.stdout.splitlines() == ["good True", "another run False then False", "bad False"]
+
+
+@pytest.mark.slow
+def test_a_first_run_the_fork_server_could_not_build_is_checked_on_a_worker(tmp_path):
+    """`cosim sweep` forks its fork server, which finds that the first run does not build: the
+    workers start with the runs already queued, and the check then made on a worker stops the
+    sweep with its own one-line error (exit 2), before any row is kept."""
+    out = tmp_path / "out"
+    result = subprocess.run(
+        [sys.executable, "-m", "cosim", "sweep", str(SCENARIO), "--vary", *BAD, "--out", str(out), "--quiet"],
+        capture_output=True, text=True, timeout=300, cwd=REPO,
+    )  # fmt: skip
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("cosim: error: "), result.stderr
+    assert "no parameter 'robot_radus' (did you mean 'robot_radius'?)" in lines[0]
+    assert lines[0].endswith("(checked on the run with vfh.robot_radus=0.4)")
+    assert not out.exists(), "a refused sweep leaves nothing behind"
