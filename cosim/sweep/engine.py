@@ -684,7 +684,8 @@ def run_sweep(
     """Run the sweep; the rows of finished runs are in DIR even when this is interrupted (the
     interrupt then carries a note saying which rows are kept and how to resume). `exits`: the
     process ends after the sweep (`cosim sweep`), so the plot may skip what only a later `help()`
-    would use (`_load_plotting`). `plotter()`: a process that prepares to draw sweep.png while the
+    would use (`_load_plotting`), and Dask what only a notebook's HTML would
+    (`cosim.sweep.warm.import_dask`). `plotter()`: a process that prepares to draw sweep.png while the
     sweep runs, then draws it while the cluster closes (`cosim sweep` gives the
     `cosim.cli.plotter.PlotProcess` it started first, drawing with `cosim.sweep.plot.draw_png`),
     called before this process has a thread; None, or when it gives None: sweep.png is drawn here."""
@@ -696,7 +697,7 @@ def run_sweep(
     if options.scheduler is None:
         # The local cluster's fork server warms up while the sweep is planned and Dask imported, on
         # the sweep's first run: when that builds there, no worker checks it again (`_execute`).
-        start_fork_server(spec.scenario, spec.overrides, announce=exits and progress, first=first_run(spec))
+        start_fork_server(spec.scenario, spec.overrides, exits and progress, first_run(spec), html=not exits)
     bundle, runs, name = plan(spec)
     warnings = seed_warnings(
         spec, adapter.noise_levels(adapter.load(spec.scenario, spec.overrides, check_world=False))
@@ -782,9 +783,10 @@ def run_sweep(
                     if child is None:  # its errors surface when `draw` imports it again
                         # After Dask's import, which would share this process's interpreter lock
                         # with it and so reach the cluster's start later.
-                        import_dask()
+                        import_dask(html=not exits)
 
                         pool.submit(_load_plotting, exits)
+                import_dask(html=not exits)  # (done already, but for a scheduler's sweep with a plot)
                 with connect(options.scheduler, options.workers, len(pending)) as (client, workers, grow):
                     _execute(
                         client,

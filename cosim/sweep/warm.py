@@ -107,16 +107,29 @@ def warm_up(scenario: str, overrides: list[str], announce: bool = False, first=N
     return first is not None
 
 
-def import_dask() -> None:
+def import_dask(html: bool = True) -> None:
     """Import Dask (`distributed`), its configuration files (~1,200 lines of YAML: Dask's and
     distributed's defaults, and a user's own) read with libyaml's parser where PyYAML has it
-    (`yaml_parsed_in_c`): ~3 ms of CPU instead of ~29 ms on the way to the local cluster's start."""
+    (`yaml_parsed_in_c`): ~3 ms of CPU instead of ~29 ms on the way to the local cluster's start.
+
+    Without `html` (the `cosim` program, which shows no HTML): Dask's templates engine, jinja2, is
+    not imported with it (~30 ms of the import's ~0.3 s, on the way to the cluster's start too).
+    Dask takes jinja2 as optional (`dask.widgets` falls back to functions that raise ImportError,
+    called only for the HTML that a notebook shows of a client or a cluster); it is seen as missing
+    while Dask is imported, and importable afterwards by anyone else."""
     import sys
 
     if "distributed" in sys.modules:
         return
-    with yaml_parsed_in_c():
-        import distributed  # noqa: F401
+    hidden = not html and "jinja2" not in sys.modules
+    if hidden:
+        sys.modules["jinja2"] = None  # (an import of it raises ImportError)
+    try:
+        with yaml_parsed_in_c():
+            import distributed  # noqa: F401
+    finally:
+        if hidden:
+            del sys.modules["jinja2"]
 
 
 @contextlib.contextmanager
@@ -160,10 +173,13 @@ def _check_socket_path() -> None:
         )
 
 
-def start_fork_server(scenario: Path, overrides: tuple[str, ...], announce: bool = False, first=None) -> None:
+def start_fork_server(
+    scenario: Path, overrides: tuple[str, ...], announce: bool = False, first=None, html: bool = True
+) -> None:
     """Start the local cluster's fork server now, warming it up on `scenario` with `overrides`
     (`announce`: saying what a first use builds, `warm_up`); given `first` (bundle, run: the sweep's
     first run), on that run, and the server then tells whether it builds (`first_run_checked`).
+    `html`: as `import_dask`, when this process imports Dask here.
 
     The server has `WORKER_PRELOAD` imported (here, before this process forks it; or by itself, a
     fresh interpreter) and makes a short run while this process goes on planning; the workers
@@ -182,7 +198,7 @@ def start_fork_server(scenario: Path, overrides: tuple[str, ...], announce: bool
     context.set_forkserver_preload(WORKER_PRELOAD)
     _forget_check()
     fields = {"scenario": str(Path(scenario).resolve()), "overrides": list(overrides), "announce": announce}
-    if _fork_server_here(fields, first):
+    if _fork_server_here(fields, first, html):
         return
     request = json.dumps(fields)
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -198,7 +214,7 @@ def start_fork_server(scenario: Path, overrides: tuple[str, ...], announce: bool
             os.environ[WARM_ENV] = saved
 
 
-def _fork_server_here(request: dict, first=None) -> bool:
+def _fork_server_here(request: dict, first=None, html: bool = True) -> bool:
     """Start the fork server as a fork of this process, once it has imported what the server
     preloads (Dask and the run stage, `WORKER_PRELOAD`); False (nothing done) where that is not
     safe, and `start_fork_server` then starts a fresh interpreter as multiprocessing does.
@@ -238,7 +254,7 @@ def _fork_server_here(request: dict, first=None) -> bool:
     with server._lock:
         if server._forkserver_pid is not None:  # one runs already; one that ended is started afresh
             return os.waitpid(server._forkserver_pid, os.WNOHANG)[0] == 0
-    import_dask()
+    import_dask(html)
     for name in WORKER_PRELOAD:
         if name not in ("cosim.sweep.hold", "cosim.sweep.warm"):  # (they act on a request only)
             importlib.import_module(name)
