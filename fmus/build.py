@@ -358,7 +358,9 @@ _glue_guard = threading.Lock()
 _glue_folder: list[tuple[int, str]] = []  # (pid, folder) of this process's compiled glue objects
 
 
-def _remove_glue_folder() -> None:
+def remove_glue_folder() -> None:
+    """Remove this process's compiled glue objects (at its exit; or before, by a process that ends
+    without its exit handlers: `cosim.fmi.builtin.remove_build_scratch`)."""
     for pid, folder in _glue_folder:
         if pid == os.getpid():  # not from a forked child: the parent still links the objects
             shutil.rmtree(folder, ignore_errors=True)
@@ -383,7 +385,7 @@ def _glue_objects_of(
         with _glue_guard:
             if not _glue_folder or _glue_folder[0][0] != os.getpid():
                 if not _glue_folder:
-                    atexit.register(_remove_glue_folder)
+                    atexit.register(remove_glue_folder)
                 _glue_folder[:] = [(os.getpid(), tempfile.mkdtemp(prefix="navcosim-glue-"))]
             folder = Path(_glue_folder[0][1]) / key
         folder.mkdir()

@@ -88,6 +88,17 @@ def _build_module(source_root: Path) -> ModuleType:
     return module
 
 
+def remove_build_scratch() -> None:
+    """Remove the temporary folder in which this process compiled the FMUs' shared C code (kept for
+    its further builds, and removed at its exit): for a process that ends with `os._exit`, without
+    its exit handlers (the sweep's fork server, which builds what its warm-up run needs), which
+    would otherwise leave the folder behind. Nothing when it built nothing."""
+    if _build_module.cache_info().currsize and _has_sources(SOURCE_ROOT):
+        remove = getattr(_build_module(SOURCE_ROOT), "remove_glue_folder", None)
+        if remove is not None:
+            remove()
+
+
 def _has_sources(source_root: Path) -> bool:
     return (source_root / "build.py").is_file() and (source_root / "common").is_dir()
 

@@ -437,8 +437,17 @@ def _exit_at_once() -> None:
     first): its streams flushed, then `os._exit`. An ordinary interpreter exit tears down every
     module and object the warm-up left (distributed, numpy, scipy, the run stage: 0.1-0.5 s on a
     busy 2-core machine), which the sweep waits for (`stop_fork_server`). The workers it forked
-    never run it: they leave through `os._exit` too (multiprocessing's forkserver)."""
+    never run it: they leave through `os._exit` too (multiprocessing's forkserver). What building
+    the warm-up's FMUs left in the temporary folder, which an exit handler would remove, goes first
+    (`cosim.fmi.builtin.remove_build_scratch`)."""
     import sys
+
+    builtin = sys.modules.get("cosim.fmi.builtin")
+    if builtin is not None:
+        try:
+            builtin.remove_build_scratch()
+        except Exception:  # noqa: BLE001 (a folder left in the temporary folder, as before)
+            pass
 
     for stream in (sys.stdout, sys.stderr):
         try:

@@ -113,3 +113,27 @@ def test_a_sweep_file_warms_up_its_scenario_with_its_overrides_first(tmp_path, m
     with pytest.raises(CosimError, match="stop_tme"):  # and the command line's
         warm_up(str(sweep_file), ["simulation.stop_tme=2"])
     assert list(scratch.iterdir()) == []
+
+
+@pytest.mark.slow
+def test_a_sweep_that_builds_its_fmus_leaves_no_build_folder(tmp_path):
+    """The fork server builds the FMUs its warm-up run needs (a fresh FMU cache here), compiling
+    their shared C code in a temporary folder that an exit handler removes; it leaves with
+    `os._exit`, so it removes that folder itself first. Nothing of navcosim's stays in TMPDIR."""
+    import shutil
+    import tempfile
+
+    scratch = Path(tempfile.mkdtemp(prefix="nc-"))  # (short: the fork server's socket is in there)
+    environment = {**os.environ, "TMPDIR": str(scratch), "NAVCOSIM_FMU_CACHE": str(tmp_path / "fmus")}
+    environment.pop(WARM_ENV, None)
+    try:
+        result = subprocess.run(
+            [sys.executable, "-m", "cosim", "sweep", str(SCENARIO), "--vary", "lidar.seed=0,1", "--set",
+             "simulation.stop_time=2", "--out", str(tmp_path / "out"), "--quiet", "--no-plot"],
+            capture_output=True, text=True, env=environment, timeout=300, cwd=SCENARIO.parents[1],
+        )  # fmt: skip
+        assert result.returncode == 0, result.stderr
+        assert len(list((tmp_path / "fmus").glob("*.fmu"))) == 4  # built afresh, by the fork server
+        assert [path.name for path in scratch.iterdir() if path.name.startswith("navcosim")] == []
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
