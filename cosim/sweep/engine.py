@@ -786,7 +786,8 @@ def run_sweep(
                         import_dask(html=not exits)
 
                         pool.submit(_load_plotting, exits)
-                import_dask(html=not exits)  # (done already, but for a scheduler's sweep with a plot)
+                # (a local sweep imported Dask as it forked its fork server; a scheduler's sweep, here)
+                import_dask(html=not exits)
                 with connect(options.scheduler, options.workers, len(pending)) as (client, workers, grow):
                     _execute(
                         client,
