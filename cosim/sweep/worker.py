@@ -4,7 +4,8 @@ A worker process keeps running between tasks, so what a first run compiles or bu
 next ones: the C kernels (loaded, and built once into their cache), the project FMUs built from
 their sources (in the FMU cache), the imported modules. The bundle arrives once per worker, with
 the plugin (`Client.register_plugin` sends it to every worker, present or joining later), and its
-files are removed when the plugin is unregistered or the worker stops.
+files are removed when the plugin is unregistered or the worker stops (with what building an FMU
+there left in the temporary folder).
 """
 
 from __future__ import annotations
@@ -55,6 +56,12 @@ class BundlePlugin(WorkerPlugin):
         if self.folder is not None:
             shutil.rmtree(self.folder, ignore_errors=True)
             self.folder = None
+        # What building an FMU a run needed left in the temporary folder (the C code the FMUs share,
+        # compiled once): a worker process ends through `os._exit`, without the exit handler that
+        # removes it.
+        from cosim.fmi.builtin import remove_build_scratch
+
+        remove_build_scratch()
 
 
 def redirects(run: Run, files: Path) -> list[str]:
