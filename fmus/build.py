@@ -356,14 +356,21 @@ _glue_objects: dict[str, list[Path]] = {}  # by process id and source digest
 _glue_locks: dict[str, threading.Lock] = {}
 _glue_guard = threading.Lock()
 _glue_folder: list[tuple[int, str]] = []  # (pid, folder) of this process's compiled glue objects
+_glue_exit: list[bool] = []  # the exit handler that removes them, once registered
 
 
 def remove_glue_folder() -> None:
-    """Remove this process's compiled glue objects (at its exit; or before, by a process that ends
-    without its exit handlers: `cosim.fmi.builtin.remove_build_scratch`)."""
-    for pid, folder in _glue_folder:
-        if pid == os.getpid():  # not from a forked child: the parent still links the objects
-            shutil.rmtree(folder, ignore_errors=True)
+    """Remove this process's compiled glue objects, and forget them: a later build compiles them
+    again (at its exit; or before, by a process that ends without its exit handlers:
+    `cosim.fmi.builtin.remove_build_scratch`)."""
+    pid = os.getpid()
+    with _glue_guard:
+        for owner, folder in _glue_folder:
+            if owner == pid:  # not from a forked child: the parent still links the objects
+                shutil.rmtree(folder, ignore_errors=True)
+        _glue_folder[:] = [entry for entry in _glue_folder if entry[0] != pid]
+        for key in [key for key in _glue_objects if key.startswith(f"{pid}-")]:
+            del _glue_objects[key]
 
 
 def _glue_objects_of(
@@ -384,8 +391,9 @@ def _glue_objects_of(
             return _glue_objects[key]
         with _glue_guard:
             if not _glue_folder or _glue_folder[0][0] != os.getpid():
-                if not _glue_folder:
+                if not _glue_exit:  # (a forked child has its parent's)
                     atexit.register(remove_glue_folder)
+                    _glue_exit.append(True)
                 _glue_folder[:] = [(os.getpid(), tempfile.mkdtemp(prefix="navcosim-glue-"))]
             folder = Path(_glue_folder[0][1]) / key
         folder.mkdir()

@@ -189,6 +189,34 @@ def test_fmi2_glue_is_compiled_once_without_any_model_and_linked_into_each_fmu(t
         assert result[output][-1] == pytest.approx(expected, abs=1e-12)
 
 
+def test_glue_objects_removed_are_compiled_again_for_the_next_build(tmp_path):
+    """A process that removes its compiled glue objects (`remove_glue_folder`: at its exit, or
+    before it ends with `os._exit`, as the sweep's fork server and workers do) forgets them: the next
+    build compiles them again into a new folder and makes a working FMU."""
+    import fmpy
+
+    sources = copy_sources(REPO / "fmus", tmp_path / "fmus")
+    glue = sources / "common" / "fmi2_glue.c"
+    glue.write_text(glue.read_text() + f"/* {tmp_path.name} */\n")  # not the process's compiled glue
+    build = _build_module(sources)
+    folders: list[Path] = []
+
+    def run_compiler(command, cwd=None):
+        if str(glue) in command:
+            folders.append(Path(cwd))
+        return subprocess.run(command, capture_output=True, text=True, cwd=cwd)
+
+    build.build_fmu(sources / "Bicycle", tmp_path / "first", run_compiler=run_compiler)
+    assert len(folders) == 1 and folders[0].is_dir()
+    build.remove_glue_folder()
+    assert not folders[0].exists()
+    path = build.build_fmu(sources / "Bicycle", tmp_path / "second", run_compiler=run_compiler)
+    assert len(folders) == 2 and folders[1].is_dir() and folders[1].parent != folders[0].parent
+    result = fmpy.simulate_fmu(str(path), start_values={"v": 2.0}, stop_time=1.0)
+    assert result["x"][-1] == pytest.approx(2.0, abs=1e-12)  # 1 s straight at 2 m/s
+    build.remove_glue_folder()
+
+
 def test_build_error_is_one_line(tmp_path):
     sources = copy_sources(REPO / "fmus", tmp_path / "fmus")
     model = sources / "Bicycle" / "model.c"
