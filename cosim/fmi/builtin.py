@@ -94,9 +94,7 @@ def remove_build_scratch() -> None:
     its exit handlers (the sweep's fork server, which builds what its warm-up run needs), which
     would otherwise leave the folder behind. Nothing when it built nothing."""
     if _build_module.cache_info().currsize and _has_sources(SOURCE_ROOT):
-        remove = getattr(_build_module(SOURCE_ROOT), "remove_glue_folder", None)
-        if remove is not None:
-            remove()
+        _build_module(SOURCE_ROOT).remove_glue_folder()
 
 
 def _has_sources(source_root: Path) -> bool:

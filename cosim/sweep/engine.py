@@ -314,11 +314,14 @@ _SYNC_FILTER = _UnboundSyncFuture()
 
 
 @contextmanager
-def connect(scheduler: str | None, workers: int | None, pending: int) -> Iterator[tuple[object, int, object]]:
+def connect(
+    scheduler: str | None, workers: int | None, pending: int, html: bool = True
+) -> Iterator[tuple[object, int, object]]:
     """A client on `scheduler`, or on a new LocalCluster of `workers` processes (default: one per
     core, never more than there are runs); yields (client, number of workers, `grow`): `grow()`
-    starts a local cluster's workers, once the sweep's tasks are in (None for a scheduler's)."""
-    import_dask()
+    starts a local cluster's workers, once the sweep's tasks are in (None for a scheduler's).
+    `html`: as `cosim.sweep.warm.import_dask`, when Dask is imported here."""
+    import_dask(html)
     from distributed import Client, LocalCluster
 
     logging.getLogger("tornado.application").addFilter(_SYNC_FILTER)  # once: filters are a set
@@ -518,16 +521,16 @@ def _execute(
     client.register_plugin(plugin, name=plugin.name)
     token = secrets.token_hex(4)
 
-    def submit_check(priority: int):  # (a higher priority than the runs: it goes first)
+    def submit_check():  # (a higher priority than the runs: it goes first)
         return client.submit(
-            check_task, plugin.name, first, key=f"navcosim-check-{token}", pure=False, priority=priority
+            check_task, plugin.name, first, key=f"navcosim-check-{token}", pure=False, priority=1
         )
 
     # The check goes first; the runs start on the other workers meanwhile, and their results wait in
     # memory until the check passed. The fork server's answer comes when it has warmed up, before
     # it serves the first worker: the check is submitted then only if that run did not build there.
     answers = grow is not None and first_run_answered(first.run_id)
-    check = None if answers else submit_check(1)
+    check = None if answers else submit_check()
     futures = {
         client.submit(
             run_task, plugin.name, run, keep_logs, key=f"navcosim-{run.run_id}-{token}", pure=False
@@ -540,7 +543,7 @@ def _execute(
         if grow is not None:
             grow()
             if answers and not first_run_checked(first.run_id):
-                check = submit_check(2)
+                check = submit_check()
         try:
             error = None if check is None else check.result()
         except Exception as failure:  # the worker died while building
@@ -786,9 +789,8 @@ def run_sweep(
                         import_dask(html=not exits)
 
                         pool.submit(_load_plotting, exits)
-                # (a local sweep imported Dask as it forked its fork server; a scheduler's sweep, here)
-                import_dask(html=not exits)
-                with connect(options.scheduler, options.workers, len(pending)) as (client, workers, grow):
+                cluster = connect(options.scheduler, options.workers, len(pending), html=not exits)
+                with cluster as (client, workers, grow):
                     _execute(
                         client,
                         bundle,
