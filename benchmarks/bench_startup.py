@@ -24,8 +24,11 @@ ones to read on a busy machine:
 - `hybrid first call, cold`: `planner.plan(..., planner="hybrid")` in such a copy, in seconds;
 - `sweep of 8 / 8 runs`: `cosim sweep SCENARIO --vary lidar.seed=0:3:4 --vary lidar.noise=0.02,0.05`
   (a local cluster, one worker per core, drawing its sweep.png) against the same 8 points as 8
-  sequential `cosim run --no-plot` processes, wall time; the ratio is to those 8 runs, not to the
-  floor;
+  sequential `cosim run --no-plot` processes (the row `8 sequential runs`); the ratios are to those
+  8 runs' wall and CPU time, not to the floor's. The CPU time is that of all of the sweep's
+  processes. Spread over the machine's cores with none ever idle, it is the least wall time the
+  sweep can take, printed under the table: a sweep that uses as much CPU as the 8 runs cannot be
+  faster than 1 / cores of them;
 - `sweep of 8 --no-plot / 8 runs`: the same sweep without its sweep.png, in the same rounds (what
   the plot adds to the sweep is the difference of the two rows).
 
@@ -204,17 +207,22 @@ def measure(
     return _best(floor), results
 
 
-def _sequential(scenario: str, scratch: Path, checkout: Path, env: dict[str, str]) -> float:
-    """Wall seconds of the sweep's 8 points as 8 `cosim run --no-plot` processes, one after the other."""
+def _sequential(scenario: str, scratch: Path, checkout: Path, env: dict[str, str]) -> tuple[float, float]:
+    """Wall seconds of the sweep's 8 points as 8 `cosim run --no-plot` processes, one after the other,
+    and their CPU seconds."""
     started = time.perf_counter()
+    cpu = 0.0
     for seed, noise in SWEEP_POINTS:
         points = ["--set", f"lidar.seed={seed}", "--set", f"lidar.noise={noise}", "--no-plot", "--force"]
-        _timed(_cosim_run(scenario, *points)(scratch), checkout, env)
-    return time.perf_counter() - started
+        cpu += _timed(_cosim_run(scenario, *points)(scratch), checkout, env)[2]
+    return time.perf_counter() - started, cpu
 
 
-def _sweep(scenario: str, scratch: Path, checkout: Path, env: dict[str, str], *extra: str) -> float:
-    """Wall seconds of `cosim sweep` over the same 8 points on a local cluster (into a new folder)."""
+def _sweep(scenario: str, scratch: Path, checkout: Path, env: dict[str, str], *extra: str) -> tuple[float, float]:
+    """Wall and CPU seconds of `cosim sweep` over the same 8 points on a local cluster (into a new
+    folder). The CPU time is that of every process of the sweep (its fork server, workers, plot
+    process and multiprocessing's resource tracker: each is reaped by its parent or, orphaned, by
+    this process)."""
     out = Path(tempfile.mkdtemp(dir=scratch))
     vary = ["--vary", "lidar.seed=0:3:4", "--vary", "lidar.noise=0.02,0.05"]
     command = [
@@ -229,19 +237,19 @@ def _sweep(scenario: str, scratch: Path, checkout: Path, env: dict[str, str], *e
         "--quiet",
         *extra,
     ]
-    wall = _timed(command, checkout, env)[0]
+    wall, _, cpu = _timed(command, checkout, env)
     shutil.rmtree(out)
-    return wall
+    return wall, cpu
 
 
 def measure_sweep(
     checkouts: dict[str, Path], scenario: str, repeat: int
-) -> dict[str, tuple[float, float, float]]:
-    """Per checkout the fastest wall seconds of 8 sequential runs, of the 8-run local sweep and of
+) -> dict[str, tuple[tuple[float, float], ...]]:
+    """Per checkout (wall seconds, CPU seconds) of 8 sequential runs, of the 8-run local sweep and of
     the same sweep with --no-plot, in rounds (sequential, sweep, sweep --no-plot, for each
-    checkout in turn)."""
+    checkout in turn): the fastest wall, the least CPU."""
     envs = {name: _environment(path) for name, path in checkouts.items()}
-    walls: dict[str, tuple[list[float], ...]] = {name: ([], [], []) for name in checkouts}
+    walls: dict[str, tuple[list[tuple[float, float]], ...]] = {name: ([], [], []) for name in checkouts}
     with tempfile.TemporaryDirectory() as scratch:
         scratch = Path(scratch)
         for _ in range(repeat):
@@ -249,7 +257,10 @@ def measure_sweep(
                 walls[name][0].append(_sequential(scenario, scratch, path, envs[name]))
                 walls[name][1].append(_sweep(scenario, scratch, path, envs[name]))
                 walls[name][2].append(_sweep(scenario, scratch, path, envs[name], "--no-plot"))
-    return {name: tuple(min(figures) for figures in rounds) for name, rounds in walls.items()}
+    return {
+        name: tuple((min(wall for wall, _ in figures), min(cpu for _, cpu in figures)) for figures in rounds)
+        for name, rounds in walls.items()
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -285,12 +296,25 @@ def main(argv: list[str] | None = None) -> int:
         print(row + f"{ISSUE_BEFORE[what]:>14}{GOALS[what]:>9}")
     if args.sweep_repeat > 0:
         sweeps = measure_sweep(checkouts, args.scenario, args.sweep_repeat)
+        # (the sweep rows: ratios to the 8 sequential runs' wall and CPU, not to the floor's)
+        row = f"{'8 sequential runs':<30}"
+        for figures in sweeps.values():
+            (wall, cpu) = figures[0]
+            row += f"{wall:>13.3f}s{1.0:>7.2f}x{cpu:>7.3f}s{1.0:>7.2f}x{'':>6}"
+        print(row)
         for what, column in (("sweep of 8 / 8 runs", 1), ("sweep of 8 --no-plot / 8 runs", 2)):
             row = f"{what:<30}"
             for figures in sweeps.values():
-                sequential, sweep = figures[0], figures[column]
-                row += f"{sweep:>13.3f}s{sweep / sequential:>7.2f}x{'8 runs':>8}{sequential:>7.2f}s{'':>6}"
+                (sequential, sequential_cpu), (sweep, cpu) = figures[0], figures[column]
+                row += f"{sweep:>13.3f}s{sweep / sequential:>7.2f}x{cpu:>7.3f}s{cpu / sequential_cpu:>7.2f}x{'':>6}"
             print(row + f"{ISSUE_BEFORE[what]:>14}{GOALS[what]:>9}")
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+        for name, figures in sweeps.items():
+            (sequential, _), (_, cpu) = figures[0], figures[1]
+            print(
+                f"{name}: the sweep's CPU time spread over {cores} cores, no core ever idle: "
+                f"{cpu / cores:.3f} s, {cpu / cores / sequential:.2f}x the 8 sequential runs (its wall time is no less)"
+            )
     print(f"load average at the end {os.getloadavg()[0]:.2f}")
     return 0
 
