@@ -39,6 +39,7 @@ class _State:
     deferring = 0  # nesting of deferred()
     waiting = False  # in a wait that may be abandoned (for a child process's FMU call): raise there too
     pending: str | None = None  # a signal received while deferring, not yet taken
+    raised: str | None = None  # the signal whose `Interrupted` `_handle` raised last (`raise_swallowed`)
     # Python's signal wakeup socket while inside catching_signals(): the interpreter writes a byte
     # to `wakeup` the moment a signal comes (before any Python handler runs), so C code can see
     # that one came (`signal_socket`); None when another wakeup fd was set (kept) or off the main thread.
@@ -54,7 +55,46 @@ def _handle(number: int, frame) -> None:
         _state.pending = _state.pending or name
         if not _state.waiting:
             return
+    _state.raised = name
     raise Interrupted(name)
+
+
+def raise_swallowed() -> None:
+    """Raise `Interrupted` again for a signal whose `Interrupted` was raised where nothing passes an
+    exception on, so that the program went on as if no key had been pressed: Python prints and
+    drops an exception raised in a weakref callback, a finalizer or a garbage collection callback
+    ("Exception ignored in ..."), which the main thread runs between any two of its steps (the
+    import machinery's module locks have such a callback: a Ctrl-C while Dask was imported was lost
+    so). Called at points the program reaches only if every `Interrupted` raised so far was
+    swallowed (the `cosim` command ends on one that reaches it): `deferred` on entry, a sweep as it
+    starts and between its results. Nothing to do outside `catching_signals`, or when none was
+    raised since it was entered."""
+    if _state.installed and _state.raised is not None:
+        raise Interrupted(_state.raised)
+
+
+@contextmanager
+def sigint_blocked() -> Iterator[None]:
+    """SIGINT blocked in this thread while a process is started that a Ctrl-C must not end (the
+    local cluster's fork server, whose workers the sweep ends itself: Ctrl-C in a terminal reaches
+    the whole process group): a process inherits the blocked signal across fork and exec, and is
+    deaf to SIGINT until it sets its own disposition (the fork server ignores it, as its workers
+    then do). This process's handler stays as it is: a Ctrl-C meanwhile reaches it through another
+    thread at once, or through this one when the block ends. (Ignoring SIGINT here instead, the
+    disposition being the whole process's, dropped a Ctrl-C that came during a start.) Inside,
+    nothing may unblock SIGINT: multiprocessing's resource tracker, which blocks and then unblocks
+    it around its own start, is started before (`multiprocessing.resource_tracker.ensure_running`).
+    Where signals cannot be blocked (not POSIX), nothing is done."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    held = {signal.SIGINT}
+    blocked = signal.SIGINT in signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        if not blocked:  # (blocked already: left so)
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, held)
 
 
 class _Abandonable:
@@ -87,7 +127,7 @@ def catching_signals(until_exit: bool = False) -> Iterator[None]:
         yield  # already routed by an outer block, or not ours to route
         return
     previous = {number: signal.signal(number, _handle) for number in SIGNALS}
-    _state.installed, _state.pending = True, None
+    _state.installed, _state.pending, _state.raised = True, None, None
     _open_wakeup()
     try:
         yield
@@ -159,7 +199,10 @@ def _exit_now(number: int, frame) -> None:
 
 @contextmanager
 def deferred() -> Iterator[None]:
-    """Inside, a signal is only recorded (see `take`); a signal nobody took is raised at the end."""
+    """Inside, a signal is only recorded (see `take`); a signal nobody took is raised at the end.
+    One whose `Interrupted` was swallowed before is raised again on entry (`raise_swallowed`)."""
+    if not _state.deferring:
+        raise_swallowed()
     _state.deferring += 1
     try:
         yield

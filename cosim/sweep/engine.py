@@ -24,6 +24,7 @@ from datetime import datetime
 from pathlib import Path
 
 import cosim.sweep.adapter as adapter
+from cosim.core.interrupt import raise_swallowed
 from cosim.errors import CosimError
 from cosim.sweep.bundle import Bundle, BundleBuilder, Run
 from cosim.sweep.results import (
@@ -51,6 +52,7 @@ from cosim.sweep.spec import (
 )
 from cosim.sweep.warm import (
     WORKER_PRELOAD,
+    ensure_fork_server,
     first_run_answered,
     first_run_checked,
     import_dask,
@@ -348,24 +350,20 @@ def connect(
         finally:
             client.close()
         return
-    from multiprocessing import forkserver, get_context
+    from multiprocessing import get_context
 
     import distributed.utils
     from distributed import versions
 
     count = max(1, min(workers or os.cpu_count() or 1, pending))
     # The workers fork from the fork server (`start_fork_server`), which ignores SIGINT, as they do;
-    # one that is not running (the sweep did not start it, or it ended) starts here, with SIGINT
-    # ignored too, before the cluster would start it. Distributed's sampling profiler is off: it
-    # costs a run about a sixth more CPU time and nobody reads it here. Distributed would import its
-    # optional packages here (pandas: most of a second) only to name them as the server's preload,
-    # which `start_fork_server` set already.
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        get_context("forkserver").set_forkserver_preload(WORKER_PRELOAD)  # if not started yet
-        forkserver.ensure_running()
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    # one that is not running (the sweep did not start it, or it ended) starts here, ignoring it
+    # too (`ensure_fork_server`), before the cluster would start it. Distributed's sampling
+    # profiler is off: it costs a run about a sixth more CPU time and nobody reads it here.
+    # Distributed would import its optional packages here (pandas: most of a second) only to name
+    # them as the server's preload, which `start_fork_server` set already.
+    get_context("forkserver").set_forkserver_preload(WORKER_PRELOAD)  # if not started yet
+    ensure_fork_server()
     # The scheduler reads its host's and packages' versions when the first worker registers
     # (`distributed.versions.get_versions`: `uname -p` run as a subprocess, a dozen packages'
     # metadata read, the metadata parser imported: 10-20 ms), on the way to the cluster's start.
@@ -517,6 +515,7 @@ def _execute(
 
     from cosim.sweep.worker import BundlePlugin, TaskResult, check_task, run_task
 
+    raise_swallowed()  # (a Ctrl-C whose `Interrupted` was dropped while Dask or the cluster started)
     plugin = BundlePlugin(bundle)
     client.register_plugin(plugin, name=plugin.name)
     token = secrets.token_hex(4)
@@ -542,6 +541,7 @@ def _execute(
     try:
         if grow is not None:
             grow()
+            raise_swallowed()
             if answers and not first_run_checked(first.run_id):
                 check = submit_check()
         try:
@@ -556,6 +556,7 @@ def _execute(
 
             bar = tqdm(total=total, initial=total - len(pending), unit="run", desc="sweep")
         for future in as_completed(list(futures), loop=client.loop):
+            raise_swallowed()
             run = futures.pop(future)
             try:
                 result = future.result()

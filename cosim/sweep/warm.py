@@ -183,15 +183,12 @@ def start_fork_server(
 
     The server has `WORKER_PRELOAD` imported (here, before this process forks it; or by itself, a
     fresh interpreter) and makes a short run while this process goes on planning; the workers
-    forked from it later start warm. It ignores SIGINT (a fresh one inherits the disposition, the
-    only one that survives exec), and so do the workers it forks: Ctrl-C in a terminal reaches the
-    whole process group, and the interrupt must end the sweep here, which then closes them, instead
-    of each one printing its own traceback. Does nothing when the server already runs (an earlier
-    sweep of this process started it).
+    forked from it later start warm. It ignores SIGINT, and so do the workers it forks: Ctrl-C in a
+    terminal reaches the whole process group, and the interrupt must end the sweep here, which
+    then closes them, instead of each one printing its own traceback. Does nothing when the server
+    already runs (an earlier sweep of this process started it).
     """
     import multiprocessing
-    import signal
-    from multiprocessing import forkserver
 
     _check_socket_path()
     context = multiprocessing.get_context("forkserver")
@@ -200,14 +197,28 @@ def start_fork_server(
     fields = {"scenario": str(Path(scenario).resolve()), "overrides": list(overrides), "announce": announce}
     if _fork_server_here(fields, first, html):
         return
-    request = json.dumps(fields)
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    ensure_fork_server(json.dumps(fields))
+
+
+def ensure_fork_server(request: str = "") -> None:
+    """Start the local cluster's fork server as multiprocessing starts it, a fresh interpreter,
+    unless one runs; `request`: the warm-up it makes (`WARM_ENV`; "" for none). It ignores SIGINT
+    from its start on: it starts with SIGINT blocked (`cosim.core.interrupt.sigint_blocked`, which
+    leaves a Ctrl-C meanwhile to this process), and the first module it imports ignores it
+    (`cosim.sweep.hold`, given `WARM_ENV`), before multiprocessing's server keeps that for the
+    workers it forks. multiprocessing's resource tracker, which this starts too, is started first:
+    it unblocks SIGINT once it has started."""
+    from multiprocessing import forkserver, resource_tracker
+
+    from cosim.core.interrupt import sigint_blocked
+
+    resource_tracker.ensure_running()
     saved = os.environ.get(WARM_ENV)
     os.environ[WARM_ENV] = request
     try:
-        forkserver.ensure_running()
+        with sigint_blocked():
+            forkserver.ensure_running()
     finally:
-        signal.signal(signal.SIGINT, previous)
         if saved is None:
             os.environ.pop(WARM_ENV, None)
         else:

@@ -40,9 +40,10 @@ with open(f"/proc/{server}/cmdline", "rb") as theirs, open("/proc/self/cmdline",
     print("fork" if theirs.read() == mine.read() else "fresh")
 os.close(write_end)
 print("pipe closed", bool(select.select([read_end], [], [], 20)[0]) and os.read(read_end, 1) == b"")
-print("server ignores SIGINT", ignores_sigint(server), "here", ignores_sigint(os.getpid()))
 worker = get_context("forkserver").Process(target=time.sleep, args=(30,))
 worker.start()
+# (once it serves: a fresh server starts with SIGINT blocked, and ignores it from its first module)
+print("server ignores SIGINT", ignores_sigint(server), "here", ignores_sigint(os.getpid()))
 with open(f"/proc/{worker.pid}/status") as status:
     parent = next(int(line.split()[1]) for line in status if line.startswith("PPid:"))
 print("worker of the server", parent == server, "ignores SIGINT", ignores_sigint(worker.pid))
