@@ -18,10 +18,12 @@ os.environ.setdefault("OPENBLAS_THREAD_TIMEOUT", "4")
 def run() -> None:
     try:
         from cosim.cli import exit_program, main
+
+        code = main()  # (it handles signals once it has set up: before, its imports may be interrupted)
     except KeyboardInterrupt:
         print("cosim: interrupted (SIGINT)", file=sys.stderr)
         sys.exit(1)
-    exit_program(main())
+    exit_program(code)
 
 
 if __name__ == "__main__":

@@ -65,8 +65,10 @@ def test_closed_pipe_ends_quietly():
 
 
 @pytest.mark.slow
-def test_an_interrupt_while_the_cli_imports_is_one_line():
-    """Ctrl-C before `main` handles signals (during the CLI's imports): one line, exit 1."""
+@pytest.mark.parametrize("module", ["cosim.cli", "cosim.core.interrupt", "dataclasses"])
+def test_an_interrupt_while_the_cli_imports_is_one_line(module):
+    """Ctrl-C before `main` handles signals (during the CLI's imports, and those `main` makes
+    before it handles them): one line, exit 1."""
     import subprocess
     import sys
 
@@ -74,7 +76,7 @@ def test_an_interrupt_while_the_cli_imports_is_one_line():
         "import sys\n"
         "class Interrupting:\n"
         "    def find_spec(self, name, path=None, target=None):\n"
-        "        if name == 'cosim.cli':\n"
+        f"        if name == {module!r}:\n"
         "            raise KeyboardInterrupt\n"
         "sys.meta_path.insert(0, Interrupting())\n"
         "from cosim.__main__ import run\n"
