@@ -262,17 +262,17 @@ def measure_sweep(
     the same sweep with --no-plot, in rounds (sequential, sweep, sweep --no-plot, for each
     checkout in turn): the fastest wall, the least CPU."""
     envs = {name: _environment(path) for name, path in checkouts.items()}
-    walls: dict[str, tuple[list[tuple[float, float]], ...]] = {name: ([], [], []) for name in checkouts}
+    timings: dict[str, tuple[list[tuple[float, float]], ...]] = {name: ([], [], []) for name in checkouts}
     with tempfile.TemporaryDirectory() as scratch:
         scratch = Path(scratch)
         for _ in range(repeat):
             for name, path in checkouts.items():
-                walls[name][0].append(_sequential(scenario, scratch, path, envs[name]))
-                walls[name][1].append(_sweep(scenario, scratch, path, envs[name]))
-                walls[name][2].append(_sweep(scenario, scratch, path, envs[name], "--no-plot"))
+                timings[name][0].append(_sequential(scenario, scratch, path, envs[name]))
+                timings[name][1].append(_sweep(scenario, scratch, path, envs[name]))
+                timings[name][2].append(_sweep(scenario, scratch, path, envs[name], "--no-plot"))
     return {
         name: tuple((min(wall for wall, _ in figures), min(cpu for _, cpu in figures)) for figures in rounds)
-        for name, rounds in walls.items()
+        for name, rounds in timings.items()
     }
 
 
