@@ -231,7 +231,9 @@ def _sequential(scenario: str, scratch: Path, checkout: Path, env: dict[str, str
     return time.perf_counter() - started, cpu
 
 
-def _sweep(scenario: str, scratch: Path, checkout: Path, env: dict[str, str], *extra: str) -> tuple[float, float]:
+def _sweep(
+    scenario: str, scratch: Path, checkout: Path, env: dict[str, str], *extra: str
+) -> tuple[float, float]:
     """Wall and CPU seconds of `cosim sweep` over the same 8 points on a local cluster (into a new
     folder). The CPU time is that of every process of the sweep (its fork server, workers, plot
     process and multiprocessing's resource tracker: each is reaped by its parent or, orphaned, by
@@ -319,14 +321,16 @@ def main(argv: list[str] | None = None) -> int:
             row = f"{what:<30}"
             for figures in sweeps.values():
                 (sequential, sequential_cpu), (sweep, cpu) = figures[0], figures[column]
-                row += f"{sweep:>13.3f}s{sweep / sequential:>7.2f}x{cpu:>7.3f}s{cpu / sequential_cpu:>7.2f}x{'':>6}"
+                row += f"{sweep:>13.3f}s{sweep / sequential:>7.2f}x"
+                row += f"{cpu:>7.3f}s{cpu / sequential_cpu:>7.2f}x{'':>6}"
             print(row + f"{ISSUE_BEFORE[what]:>14}{GOALS[what]:>9}")
         cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
         for name, figures in sweeps.items():
             (sequential, _), (_, cpu) = figures[0], figures[1]
             print(
                 f"{name}: the sweep's CPU time spread over {cores} cores, no core ever idle: "
-                f"{cpu / cores:.3f} s, {cpu / cores / sequential:.2f}x the 8 sequential runs (its wall time is no less)"
+                f"{cpu / cores:.3f} s, {cpu / cores / sequential:.2f}x the 8 sequential runs "
+                "(its wall time is no less)"
             )
     print(f"load average at the end {os.getloadavg()[0]:.2f}")
     return 0
