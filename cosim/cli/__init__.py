@@ -61,22 +61,32 @@ def main(argv: list[str] | None = None) -> int:
     SIGINT and SIGTERM at any moment exit 1 with one line (`cosim.core.interrupt`): a run that
     has opened its log finalises it first; before that nothing has been written.
     """
-    from cosim.core.interrupt import Interrupted, catching_signals
+    from cosim.core.interrupt import Interrupted, catching_signals, raised
 
     if argv is None:
         _collect_young_objects_rarely()
         _dataclass_code(_command(sys.argv[1:])).install()
     try:
-        # Called without arguments, main() is the program (`cosim`, `python -m cosim`): signals stay
-        # handled until the process exits. Called with a list (tests, scripts), they are given back.
-        with catching_signals(until_exit=argv is None):
-            arguments = sys.argv[1:] if argv is None else argv
-            command = _command(arguments)
-            parser = build_parser(command) if command else build_parser()
-            args = parser.parse_args(argv)
-            args.program = argv is None  # this process is `cosim`: it ends when the command does
-            _quick_exit[0] = args.program and args.command in QUICK_EXIT
-            return int(args.handler(args) or 0)
+        try:
+            # Called without arguments, main() is the program (`cosim`, `python -m cosim`): signals
+            # stay handled until the process exits. Called with a list (tests, scripts), they are
+            # given back.
+            with catching_signals(until_exit=argv is None):
+                arguments = sys.argv[1:] if argv is None else argv
+                command = _command(arguments)
+                parser = build_parser(command) if command else build_parser()
+                args = parser.parse_args(argv)
+                args.program = argv is None  # this process is `cosim`: it ends when the command does
+                _quick_exit[0] = args.program and args.command in QUICK_EXIT
+                return int(args.handler(args) or 0)
+        except Exception as error:
+            # An error after an interrupt was raised is that interrupt, turned into another error by
+            # code it went through: C code that imports does so (a Ctrl-C while numpy was imported
+            # became numpy's ImportError, its advice on a broken install, and a traceback).
+            name = raised()
+            if name is None or isinstance(error, BrokenPipeError):
+                raise
+            raise Interrupted(name) from error
     except NavcosimError as error:
         for line in str(error).splitlines() or [""]:  # a scenario's problems come all at once
             print(f"cosim: error: {line}", file=sys.stderr)

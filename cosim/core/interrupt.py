@@ -73,6 +73,12 @@ def raise_swallowed() -> None:
         raise Interrupted(_state.raised)
 
 
+def raised() -> str | None:
+    """The signal whose `Interrupted` `_handle` raised last since `catching_signals` was last entered
+    ("SIGINT"/"SIGTERM"), whatever became of it; None if none was."""
+    return _state.raised
+
+
 @contextmanager
 def sigint_blocked() -> Iterator[None]:
     """SIGINT blocked in this thread while a process is started that a Ctrl-C must not end (the

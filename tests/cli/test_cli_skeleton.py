@@ -154,3 +154,37 @@ def test_the_program_has_openblas_threads_sleep_at_once_unless_told_otherwise():
             [sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=120
         )
         assert (done.returncode, done.stdout, done.stderr) == (0, f"{expected}\n", "")
+
+
+def _converting(error: Exception | None):
+    """A `cosim run` handler that is interrupted (SIGINT), where code it goes through turns the
+    interrupt into `error` (as C code that imports does: a Ctrl-C while numpy is imported becomes
+    numpy's ImportError); with `error` None, only `ImportError` is raised, no interrupt."""
+    import signal
+
+    def handler(args):
+        if error is None:
+            raise ImportError("not an interrupt")
+        try:
+            signal.raise_signal(signal.SIGINT)
+        except KeyboardInterrupt:
+            raise error from None
+
+    return handler
+
+
+@pytest.mark.parametrize("error", [ImportError("numpy: broken install?"), RuntimeError("a callback failed")])
+def test_an_error_that_an_interrupt_became_is_reported_as_the_interrupt(error, monkeypatch, capsys):
+    from cosim.cli import run as run_command
+
+    monkeypatch.setattr(run_command, "_handler", _converting(error))
+    assert main(["run", "scenarios/warehouse_diff_drive_one_obstacle.toml"]) == 1
+    assert capsys.readouterr().err == "cosim: interrupted (SIGINT)\n"
+
+
+def test_an_error_without_an_interrupt_is_not_reported_as_one(monkeypatch):
+    from cosim.cli import run as run_command
+
+    monkeypatch.setattr(run_command, "_handler", _converting(None))
+    with pytest.raises(ImportError, match="not an interrupt"):
+        main(["run", "scenarios/warehouse_diff_drive_one_obstacle.toml"])
