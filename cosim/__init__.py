@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from cosim.errors import CosimError
-
 if TYPE_CHECKING:
     from pathlib import Path
+
+    from cosim.errors import CosimError
 
 __all__ = ["CosimError", "builtin_fmu", "sweep"]
 
@@ -54,4 +54,11 @@ def __getattr__(name: str):
         import importlib
 
         return importlib.import_module("cosim.sweep")
+    # `cosim.CosimError` too: importing the package runs no import of its own, so a Ctrl-C as the
+    # `cosim` program starts comes inside its handling (`cosim.__main__.run`), not before it with a
+    # traceback (the package is imported first, by the program's script and by `python -m`).
+    if name == "CosimError":
+        from cosim.errors import CosimError
+
+        return CosimError
     raise AttributeError(f"module 'cosim' has no attribute {name!r}")

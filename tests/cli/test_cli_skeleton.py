@@ -65,10 +65,11 @@ def test_closed_pipe_ends_quietly():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("module", ["cosim.cli", "cosim.core.interrupt", "dataclasses"])
+@pytest.mark.parametrize("module", ["cosim.errors", "cosim.cli", "cosim.core.interrupt", "dataclasses"])
 def test_an_interrupt_while_the_cli_imports_is_one_line(module):
-    """Ctrl-C before `main` handles signals (during the CLI's imports, and those `main` makes
-    before it handles them): one line, exit 1."""
+    """Ctrl-C before `main` handles signals (during the CLI's imports, the first of them made by
+    importing the `cosim` package before the program runs, and those `main` makes before it handles
+    them): one line, exit 1."""
     import subprocess
     import sys
 
