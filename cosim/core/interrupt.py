@@ -59,6 +59,19 @@ def _handle(number: int, frame) -> None:
     raise Interrupted(name)
 
 
+def _unraisable(hook):
+    """Python's hook for an exception it cannot raise (in a weakref callback, a finalizer), which
+    prints it: `hook`, but for an `Interrupted` (`_handle` raised it there), which is raised again
+    where the program goes on (`raise_swallowed`) or reported by the `cosim` command (`raised`):
+    no "Exception ignored in ..." traceback before the one line that says so."""
+
+    def unraisable(information) -> None:
+        if not isinstance(information.exc_value, Interrupted):
+            hook(information)
+
+    return unraisable
+
+
 def raise_swallowed() -> None:
     """Raise `Interrupted` again for a signal whose `Interrupted` was raised where nothing passes an
     exception on, so that the program went on as if no key had been pressed: Python prints and
@@ -80,27 +93,27 @@ def raised() -> str | None:
 
 
 @contextmanager
-def sigint_blocked() -> Iterator[None]:
-    """SIGINT blocked in this thread while a process is started that a Ctrl-C must not end (the
-    local cluster's fork server, whose workers the sweep ends itself: Ctrl-C in a terminal reaches
-    the whole process group): a process inherits the blocked signal across fork and exec, and is
-    deaf to SIGINT until it sets its own disposition (the fork server ignores it, as its workers
-    then do). This process's handler stays as it is: a Ctrl-C meanwhile reaches it through another
-    thread at once, or through this one when the block ends. (Ignoring SIGINT here instead, the
-    disposition being the whole process's, dropped a Ctrl-C that came during a start.) Inside,
-    nothing may unblock SIGINT: multiprocessing's resource tracker, which blocks and then unblocks
-    it around its own start, is started before (`multiprocessing.resource_tracker.ensure_running`).
-    Where signals cannot be blocked (not POSIX), nothing is done."""
+def interrupts_blocked() -> Iterator[None]:
+    """SIGINT and SIGTERM blocked in this thread while a process is started that they must not end
+    (the local cluster's fork server, whose workers the sweep ends itself: a Ctrl-C in a terminal,
+    or a SIGTERM to the process group, reaches them too): a process inherits the blocked signals
+    across fork and exec, and is deaf to them until it sets its own dispositions (the fork server
+    ignores them, as its workers then do). This process's handlers stay as they are: a signal
+    meanwhile reaches them through another thread at once, or through this one when the block
+    ends. (Ignoring SIGINT here instead, the disposition being the whole process's, dropped a
+    Ctrl-C that came during a start.) Inside, nothing may unblock them: multiprocessing's resource
+    tracker, which blocks and then unblocks them around its own start, is started before
+    (`multiprocessing.resource_tracker.ensure_running`). Where signals cannot be blocked (not
+    POSIX), nothing is done."""
     if not hasattr(signal, "pthread_sigmask"):
         yield
         return
-    held = {signal.SIGINT}
-    blocked = signal.SIGINT in signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    held = set(SIGNALS)
+    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, held)
     try:
         yield
     finally:
-        if not blocked:  # (blocked already: left so)
-            signal.pthread_sigmask(signal.SIG_UNBLOCK, held)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, held - set(blocked))  # (blocked already: left so)
 
 
 class _Abandonable:
@@ -135,10 +148,13 @@ def catching_signals(until_exit: bool = False) -> Iterator[None]:
     previous = {number: signal.signal(number, _handle) for number in SIGNALS}
     _state.installed, _state.pending, _state.raised = True, None, None
     _open_wakeup()
+    unraisable = sys.unraisablehook
+    sys.unraisablehook = _unraisable(unraisable)
     try:
         yield
     finally:
         _state.installed = False
+        sys.unraisablehook = unraisable
         _close_wakeup()
         for number, handler in previous.items():
             signal.signal(number, _exit_now if until_exit else handler)

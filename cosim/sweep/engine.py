@@ -315,6 +315,27 @@ class _UnboundSyncFuture(logging.Filter):
 _SYNC_FILTER = _UnboundSyncFuture()
 
 
+class _InterruptedStart(logging.Filter):
+    """Drops the error asyncio logs for a worker's start that an interrupt cut short: a SIGTERM to
+    the sweep's process group ends the fork server as the workers start, the interrupt ends the
+    sweep, and the nanny's start task, which nobody waits for then, fails ("Nanny failed to
+    start"); asyncio logs it with its traceback when the task is freed ("Task exception was never
+    retrieved"), before the one line that says the sweep was interrupted. Only once an interrupt
+    was raised (`cosim.core.interrupt.raised`): a worker that fails to start otherwise is still
+    told."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        from cosim.core.interrupt import raised
+
+        error = (record.exc_info or (None, None, None))[1]
+        if not isinstance(error, RuntimeError) or str(error) != "Nanny failed to start.":
+            return True
+        return raised() is None
+
+
+_START_FILTER = _InterruptedStart()
+
+
 @contextmanager
 def connect(
     scheduler: str | None, workers: int | None, pending: int, html: bool = True
@@ -327,6 +348,7 @@ def connect(
     from distributed import Client, LocalCluster
 
     logging.getLogger("tornado.application").addFilter(_SYNC_FILTER)  # once: filters are a set
+    logging.getLogger("asyncio").addFilter(_START_FILTER)
 
     if scheduler is not None:
         probe_scheduler(scheduler, CONNECT_TIMEOUT)
@@ -404,16 +426,22 @@ def connect(
     def grow() -> None:
         """Start the `count` workers and return once they have (their fork server serves them when
         it has warmed up); as Dask's `LocalCluster` starts the workers it is given."""
-        with _starting(settings, interrupts):
-            while len(cluster.worker_spec) < count:
-                cluster.worker_spec.update(cluster.new_worker_spec())
-            cluster.sync(cluster._correct_state)
+        try:
+            with _starting(settings, interrupts):
+                while len(cluster.worker_spec) < count:
+                    cluster.worker_spec.update(cluster.new_worker_spec())
+                cluster.sync(cluster._correct_state)
+        except Exception:
+            if not interrupts:
+                raise
+            # (an interrupt held meanwhile ended the start: a SIGTERM to the process group stops
+            # the workers as they start, and Dask's start fails with "Nanny failed to start")
         if interrupts:  # to the handler held before (`Interrupted`, KeyboardInterrupt); then closed
-            signal.raise_signal(signal.SIGINT)
+            signal.raise_signal(interrupts[0])
 
     try:
         if interrupts:
-            signal.raise_signal(signal.SIGINT)
+            signal.raise_signal(interrupts[0])
         client = Client(cluster, set_as_default=False)
         try:
             yield client, count, grow
@@ -425,18 +453,22 @@ def connect(
 
 @contextmanager
 def _starting(settings: dict, interrupts: list[int]) -> Iterator[None]:
-    """Dask's `settings` in force, and a Ctrl-C held (appended to `interrupts`), while part of a
-    local cluster starts (its scheduler, then its workers, which wait for the fork server to warm
-    up: most of a second). Held, the interrupt goes on once that part has started, and the
+    """Dask's `settings` in force, and a Ctrl-C or SIGTERM held (appended to `interrupts`), while
+    part of a local cluster starts (its scheduler, then its workers, which wait for the fork server
+    to warm up: most of a second). Held, the interrupt goes on once that part has started, and the
     cluster is closed; ignored, the sweep went on as if no key had been pressed; raised inside
-    Dask's start, it would cut that short midway, with nothing here to close.
+    Dask's start, it cuts that short midway, with nothing here to close (a SIGTERM, not held
+    before, left Dask's "Nanny failed to start" and its traceback on stderr).
     A nanny looks for its new worker's "started" message every 50 ms (Dask's default): a worker
     that is up waits 25 ms on average, the last of them up to 50, before the cluster counts it.
     Every 5 ms instead meanwhile (~40 polls of a queue: nothing)."""
     import dask
     from distributed.nanny import WorkerProcess
 
-    previous = signal.signal(signal.SIGINT, lambda number, frame: interrupts.append(number))
+    held = (signal.SIGINT, signal.SIGTERM)
+    previous = {
+        number: signal.signal(number, lambda number, frame: interrupts.append(number)) for number in held
+    }
     polling = getattr(WorkerProcess, "_init_msg_interval", None)
     try:
         if polling is not None:
@@ -444,7 +476,8 @@ def _starting(settings: dict, interrupts: list[int]) -> Iterator[None]:
         with dask.config.set(settings):
             yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for number, handler in previous.items():
+            signal.signal(number, handler)
         if polling is not None:
             WorkerProcess._init_msg_interval = polling
 

@@ -183,9 +183,11 @@ def start_fork_server(
 
     The server has `WORKER_PRELOAD` imported (here, before this process forks it; or by itself, a
     fresh interpreter) and makes a short run while this process goes on planning; the workers
-    forked from it later start warm. It ignores SIGINT, and so do the workers it forks: Ctrl-C in a
-    terminal reaches the whole process group, and the interrupt must end the sweep here, which
-    then closes them, instead of each one printing its own traceback. Does nothing when the server
+    forked from it later start warm. It ignores SIGINT and SIGTERM, and so do the workers it forks:
+    a Ctrl-C in a terminal (or a SIGTERM to the process group) reaches the whole group, and the
+    interrupt must end the sweep here, which then closes them, instead of each one printing its own
+    traceback, or its workers dying as the cluster starts or closes (Dask's start then failed, its
+    close waited ~10 s and printed "Nanny failed to start"). Does nothing when the server
     already runs (an earlier sweep of this process started it).
     """
     import multiprocessing
@@ -203,20 +205,20 @@ def start_fork_server(
 def ensure_fork_server(request: str = "") -> None:
     """Start the local cluster's fork server as multiprocessing starts it, a fresh interpreter,
     unless one runs; `request`: the warm-up it makes (`WARM_ENV`; "" for none). It ignores SIGINT
-    from its start on: it starts with SIGINT blocked (`cosim.core.interrupt.sigint_blocked`, which
-    leaves a Ctrl-C meanwhile to this process), and the first module it imports ignores it
-    (`cosim.sweep.hold`, given `WARM_ENV`), before multiprocessing's server keeps that for the
-    workers it forks. multiprocessing's resource tracker, which this starts too, is started first:
-    it unblocks SIGINT once it has started."""
+    and SIGTERM from its start on: it starts with them blocked
+    (`cosim.core.interrupt.interrupts_blocked`, which leaves one meanwhile to this process), and the
+    first module it imports ignores them (`cosim.sweep.hold`, given `WARM_ENV`); the workers it forks
+    inherit that. multiprocessing's resource tracker, which this starts too, is started first: it
+    unblocks them once it has started."""
     from multiprocessing import forkserver, resource_tracker
 
-    from cosim.core.interrupt import sigint_blocked
+    from cosim.core.interrupt import interrupts_blocked
 
     resource_tracker.ensure_running()
     saved = os.environ.get(WARM_ENV)
     os.environ[WARM_ENV] = request
     try:
-        with sigint_blocked():
+        with interrupts_blocked():
             forkserver.ensure_running()
     finally:
         if saved is None:
@@ -347,8 +349,8 @@ def _forget_check() -> None:
 
 
 def _serve(listener, alive_r: int, request: dict, held: set, first=None, check_w: int | None = None) -> None:
-    """The forked fork server: the sweep's signal handlers undone (SIGINT ignored, as in the
-    workers it forks: `start_fork_server`; `held`, the signals blocked over the fork, let through
+    """The forked fork server: the sweep's signal handlers undone (SIGINT and SIGTERM ignored, as in
+    the workers it forks: `start_fork_server`; `held`, the signals blocked over the fork, let through
     then), a warm-up with the collector off, the heap frozen (`_from_environment`), then
     multiprocessing's server loop until the alive pipe closes; out by `os._exit`, never through
     this process's exit handlers or teardown, nor back into the sweep's code whatever happens.
@@ -369,6 +371,7 @@ def _serve(listener, alive_r: int, request: dict, held: set, first=None, check_w
             except (OSError, ValueError):
                 pass
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
         signal.pthread_sigmask(signal.SIG_UNBLOCK, held)
         forkserver._forkserver._lock = threading.Lock()  # (held by no thread here)
         listener_fd = listener.detach()
