@@ -10,7 +10,11 @@ that arrives inside `deferred()` after the loop stopped polling is raised when t
 For the `cosim` command the handlers stay in place until the process exits (`until_exit`).
 
 `Interrupted` derives from `KeyboardInterrupt`, so `except Exception` in any library on the way
-up does not swallow it; the CLI turns it into one line on stderr and exit code 1.
+up does not swallow it; the CLI turns it into one line on stderr and exit code 1. Where it is
+swallowed nonetheless (raised in a weakref callback or a finalizer, which Python drops) it is
+raised again at the next point that asks (`raise_swallowed`), and an error that follows it (C code
+that turned it into its own) is reported as the interrupt (`raised`). A process started that
+neither signal may end (the sweep's fork server) starts with both blocked (`interrupts_blocked`).
 """
 
 from __future__ import annotations
