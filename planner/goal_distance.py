@@ -55,4 +55,6 @@ def distance_to_goal(
     inner = (slice(1, -1), slice(1, -1))
     g = work.g.reshape(padded)[inner]
     closed = work.nodes[1].reshape(padded)[inner] == generation + 1
-    return np.where(closed, g * grid.resolution, np.inf)
+    # (masked before scaling: an open cell's g is whatever an earlier search left, NaN included,
+    # and NumPy warned "invalid value encountered in multiply" for it)
+    return np.where(closed, g, np.inf) * grid.resolution
