@@ -24,7 +24,7 @@ from datetime import datetime
 from pathlib import Path
 
 import cosim.sweep.adapter as adapter
-from cosim.core.interrupt import raise_swallowed
+from cosim.core.interrupt import raise_swallowed, raised
 from cosim.errors import CosimError
 from cosim.sweep.bundle import Bundle, BundleBuilder, Run
 from cosim.sweep.results import (
@@ -51,7 +51,6 @@ from cosim.sweep.spec import (
     toml_value,
 )
 from cosim.sweep.warm import (
-    WORKER_PRELOAD,
     ensure_fork_server,
     first_run_answered,
     first_run_checked,
@@ -325,8 +324,6 @@ class _InterruptedStart(logging.Filter):
     told."""
 
     def filter(self, record: logging.LogRecord) -> bool:
-        from cosim.core.interrupt import raised
-
         error = (record.exc_info or (None, None, None))[1]
         if not isinstance(error, RuntimeError) or str(error) != "Nanny failed to start.":
             return True
@@ -372,8 +369,6 @@ def connect(
         finally:
             client.close()
         return
-    from multiprocessing import get_context
-
     import distributed.utils
     from distributed import versions
 
@@ -384,7 +379,6 @@ def connect(
     # profiler is off: it costs a run about a sixth more CPU time and nobody reads it here.
     # Distributed would import its optional packages here (pandas: most of a second) only to name
     # them as the server's preload, which `start_fork_server` set already.
-    get_context("forkserver").set_forkserver_preload(WORKER_PRELOAD)  # if not started yet
     ensure_fork_server()
     # The scheduler reads its host's and packages' versions when the first worker registers
     # (`distributed.versions.get_versions`: `uname -p` run as a subprocess, a dozen packages'

@@ -190,11 +190,7 @@ def start_fork_server(
     close waited ~10 s and printed "Nanny failed to start"). Does nothing when the server
     already runs (an earlier sweep of this process started it).
     """
-    import multiprocessing
-
     _check_socket_path()
-    context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload(WORKER_PRELOAD)
     _forget_check()
     fields = {"scenario": str(Path(scenario).resolve()), "overrides": list(overrides), "announce": announce}
     if _fork_server_here(fields, first, html):
@@ -204,16 +200,20 @@ def start_fork_server(
 
 def ensure_fork_server(request: str = "") -> None:
     """Start the local cluster's fork server as multiprocessing starts it, a fresh interpreter,
-    unless one runs; `request`: the warm-up it makes (`WARM_ENV`; "" for none). It ignores SIGINT
+    unless one runs; `request`: the warm-up it makes (`WARM_ENV`; "" for none). Its preload is
+    `WORKER_PRELOAD`, whoever starts it (multiprocessing starts one afresh when a worker is asked
+    of a server that ended; Dask, told the preload is set, leaves it). It ignores SIGINT
     and SIGTERM from its start on: it starts with them blocked
     (`cosim.core.interrupt.interrupts_blocked`, which leaves one meanwhile to this process), and the
     first module it imports ignores them (`cosim.sweep.hold`, given `WARM_ENV`); the workers it forks
     inherit that. multiprocessing's resource tracker, which this starts too, is started first: it
     unblocks them once it has started."""
+    import multiprocessing
     from multiprocessing import forkserver, resource_tracker
 
     from cosim.core.interrupt import interrupts_blocked
 
+    multiprocessing.get_context("forkserver").set_forkserver_preload(WORKER_PRELOAD)
     resource_tracker.ensure_running()
     saved = os.environ.get(WARM_ENV)
     os.environ[WARM_ENV] = request
@@ -244,11 +244,12 @@ def _fork_server_here(request: dict, first=None, html: bool = True) -> bool:
     against (3.11-3.13)."""
     import importlib
     import inspect
-    import signal
     import socket
     import sys
     import threading
     from multiprocessing import connection, forkserver, util
+
+    from cosim.core.interrupt import SIGNALS, interrupts_blocked
 
     server = getattr(forkserver, "_forkserver", None)
     expected = ["listener_fd", "alive_r", "preload", "main_path", "sys_path"]
@@ -286,16 +287,13 @@ def _fork_server_here(request: dict, first=None, html: bool = True) -> bool:
     # The signals this process handles (SIGINT and SIGTERM raise `Interrupted` in `cosim`) wait
     # while it forks: the server sets its own dispositions first, and one that came meanwhile is
     # then ignored there or ends it, and is taken here as ever.
-    held = {signal.SIGINT, signal.SIGTERM}
-    signal.pthread_sigmask(signal.SIG_BLOCK, held)
     try:
-        pid = os.fork()
-        if pid == 0:
-            _serve(listener, alive_r, request, held, first, check_w)  # never returns
+        with interrupts_blocked():
+            pid = os.fork()
+            if pid == 0:
+                _serve(listener, alive_r, request, set(SIGNALS), first, check_w)  # never returns
     except OSError:  # no fork: a fresh interpreter then
         pid = None
-    finally:
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, held)
     os.close(alive_r)
     listener.close()
     if check_w is not None:

@@ -112,7 +112,6 @@ def ignored_and_blocked(pid):
     return int(fields["SigIgn"], 16) & bits == bits, int(fields["SigBlk"], 16) & bits == bits
 
 context = multiprocessing.get_context("forkserver")
-context.set_forkserver_preload(["cosim.sweep.hold"])
 with interrupt.catching_signals():
     ensure_fork_server()  # (no request: no warm-up)
     worker = context.Process(target=time.sleep, args=(30,))
